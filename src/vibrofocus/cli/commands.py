@@ -1,0 +1,3 @@
+"""Explicit list of the command modules; importing each registers its commands on ``app``."""
+
+# One import per command module, in the order ``--help`` should list them.

@@ -1,0 +1,29 @@
+"""Defaults of the reference setup (SPEC §1-§2), in SI units.
+
+Everything here is a default, not a constant: each is a parameter of the object that
+uses it.
+"""
+
+from __future__ import annotations
+
+#: Sample rate of drives and recordings, Hz.
+FS_HZ = 10_000.0
+#: Calibrated band, Hz.
+BAND_HZ = (10.0, 1000.0)
+#: Drive limit at the actuator, V peak (1 V DAQ output through a 20 dB amplifier).
+DRIVE_LIMIT_V = 10.0
+#: Ricker spread sigma of the base stimulus, s.
+SIGMA_S = 1e-3
+#: Peak displacement asked of the target point by the inverse filter, m.
+TARGET_PEAK_M = 2e-6
+#: Funneling amplitude A, V.
+FUNNELING_AMPLITUDE_V = 10.0
+#: Length of a rendering window, samples (0.4096 s at 10 kHz).
+N_SAMPLES = 4096
+#: Where the target waveform sits in the window, as a fraction of its length: late enough
+#: that the acausal part of an inverse-filter drive (its pre-ringing) fits before it.
+TARGET_FRACTION = 0.5
+#: Rendering methods of SPEC §2.
+METHODS = ("funneling", "inverse", "combination", "time_reversal")
+#: Methods compared in the localization studies (SPEC §6).
+STUDY_METHODS = ("funneling", "inverse", "combination")

@@ -1,0 +1,40 @@
+"""Smooth band-limiting taper shared by the designs and the deconvolution."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["band_taper"]
+
+
+def band_taper(freqs: np.ndarray, band: tuple[float, float], taper_octaves: float = 0.5) -> np.ndarray:
+    """Weights in [0, 1]: 1 inside ``band``, a raised-cosine roll-off over ``taper_octaves``
+    octaves outside each edge, 0 beyond.
+
+    Tapering outside rather than inside keeps the full calibrated band at unit gain while
+    avoiding the long time-domain ringing of a brick-wall band limit.
+
+    Parameters
+    ----------
+    freqs : ndarray, shape (n_freqs,)
+        Frequencies, Hz (>= 0).
+    band : (float, float)
+        Pass band ``(low, high)``, Hz.
+    taper_octaves : float
+        Roll-off width, octaves; 0 gives a brick wall.
+
+    Returns
+    -------
+    ndarray, shape (n_freqs,)
+    """
+    f = np.asarray(freqs, dtype=float)
+    low, high = band
+    w = ((f >= low) & (f <= high)).astype(float)
+    if taper_octaves > 0:
+        with np.errstate(divide="ignore"):
+            octaves_below = np.log2(low / np.maximum(f, np.finfo(float).tiny))
+        octaves_above = np.log2(np.maximum(f, np.finfo(float).tiny) / high)
+        for dist in (octaves_below, octaves_above):
+            ramp = (dist > 0) & (dist < taper_octaves)
+            w[ramp] = 0.5 + 0.5 * np.cos(np.pi * dist[ramp] / taper_octaves)
+    return w

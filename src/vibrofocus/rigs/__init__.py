@@ -1,0 +1,6 @@
+"""Rigs: one interface for the simulated forearm and real hardware, one safety layer."""
+
+from .base import Rig
+from .safety import SafetyLimits, check_drive
+
+__all__ = ["Rig", "SafetyLimits", "check_drive"]
