@@ -1,0 +1,112 @@
+"""The trials file: the CSV contract between the studies and the analysis (SPEC §6).
+
+One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that order:
+``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``
+(1-based within the phase), ``method``, ``target`` (1-9), ``response`` (the chosen
+locations, ascending, separated by spaces: ``5``, ``4 5``), ``rt_s`` (seconds).
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import tempfile
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import StudyError
+
+__all__ = ["TRIALS_COLUMNS", "write_trials_csv", "read_trials_csv"]
+
+#: Columns of the trials file, in order.
+TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
+
+
+def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike) -> int:
+    """Write trial rows to ``path`` (atomically: a reader never sees half a file).
+
+    Parameters
+    ----------
+    rows : iterable of mapping
+        Each with at least the keys of :data:`TRIALS_COLUMNS`; others are ignored.
+        ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
+    path : path-like
+        Destination CSV file; its folder must exist.
+
+    Returns
+    -------
+    int
+        Number of rows written.
+    """
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    n = 0
+    try:
+        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh, lineterminator="\n")
+            writer.writerow(TRIALS_COLUMNS)
+            for row in rows:
+                response = row["response"]
+                if not isinstance(response, str):
+                    response = " ".join(str(int(x)) for x in sorted(response))
+                # repr keeps every digit of the stored float: the file round-trips exactly.
+                writer.writerow([
+                    row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
+                    row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
+                ])
+                n += 1
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except OSError as exc:
+        _silent_unlink(tmp)
+        raise StudyError(f"cannot write the trials file {path}: {exc.strerror or exc}") from exc
+    except BaseException:
+        _silent_unlink(tmp)
+        raise
+    return n
+
+
+def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """Read a trials file back, checking the header; values typed as written.
+
+    Returns
+    -------
+    list of dict
+        ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
+        tuple of int; the rest as str.
+    """
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            if header is None or tuple(header) != TRIALS_COLUMNS:
+                raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
+            out = []
+            for line_no, rec in enumerate(reader, start=2):
+                if len(rec) != len(TRIALS_COLUMNS):
+                    raise StudyError(f"{path}:{line_no}: expected {len(TRIALS_COLUMNS)} fields, got {len(rec)}")
+                row = dict(zip(TRIALS_COLUMNS, rec))
+                try:
+                    row["study"] = int(row["study"])
+                    row["trial"] = int(row["trial"])
+                    row["target"] = int(row["target"])
+                    row["rt_s"] = float(row["rt_s"])
+                    row["response"] = tuple(int(x) for x in row["response"].split())
+                except ValueError as exc:
+                    raise StudyError(f"{path}:{line_no}: {exc}") from None
+                out.append(row)
+            return out
+    except OSError as exc:
+        raise StudyError(f"cannot read the trials file {path}: {exc.strerror or exc}") from exc
+
+
+def _silent_unlink(path: str) -> None:
+    try:
+        os.unlink(path)
+    except OSError:
+        pass

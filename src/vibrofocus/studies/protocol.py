@@ -1,0 +1,274 @@
+"""Planning of the localization studies (SPEC §6): designs, trial lists, response rules.
+
+A session's whole trial list is planned up front from a stored seed, so that the order a
+participant saw can be reproduced and a crashed session resumes on the very same plan.
+
+Study 1 ("performance") asks for exactly one location per trial; Study 2 ("confidence")
+allows one or more distinct locations. Both use the same design: every method at every
+location, repeated, in random order, after a few training trials.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+from ..defaults import METHODS, STUDY_METHODS
+from ..errors import StudyError
+
+__all__ = [
+    "STUDIES",
+    "PHASES",
+    "StudyDesign",
+    "PlannedTrial",
+    "plan_trials",
+    "parse_response",
+    "format_response",
+]
+
+#: Study numbers: 1 = one location per trial, 2 = several locations allowed.
+STUDIES = (1, 2)
+#: Phases of a session, in the order they are run.
+PHASES = ("training", "main")
+
+
+@dataclass(frozen=True)
+class StudyDesign:
+    """The design of one localization study.
+
+    Parameters
+    ----------
+    study : {1, 2}
+        1: the participant answers exactly one location; 2: one or more.
+    methods : tuple of str
+        Rendering methods compared (default: funneling, inverse, combination).
+    locations : tuple of int
+        Location numbers (1-based) used as targets and accepted as answers.
+    repetitions : int
+        Times each (method, location) condition appears in the main phase.
+    n_training : int
+        Training trials before the main phase, drawn from the same conditions.
+    """
+
+    study: int = 1
+    methods: tuple[str, ...] = STUDY_METHODS
+    locations: tuple[int, ...] = tuple(range(1, 10))
+    repetitions: int = 3
+    n_training: int = 5
+
+    def __post_init__(self) -> None:
+        if isinstance(self.study, bool) or self.study not in STUDIES:
+            raise StudyError(f"study must be 1 or 2, got {self.study!r}")
+        methods = tuple(self.methods)
+        if not methods:
+            raise StudyError("a study needs at least one method, got none")
+        for m in methods:
+            if m not in METHODS:
+                raise StudyError(f"unknown method {m!r} in the study design; known: {', '.join(METHODS)}")
+        if len(set(methods)) != len(methods):
+            raise StudyError(f"methods are repeated in the study design: {methods}")
+        locations = tuple(self.locations)
+        if not locations or any(isinstance(x, bool) or not isinstance(x, (int, np.integer)) or x < 1 for x in locations):
+            raise StudyError(f"locations must be location numbers >= 1, got {locations!r}")
+        if len(set(locations)) != len(locations):
+            raise StudyError(f"locations are repeated in the study design: {locations}")
+        for name in ("repetitions", "n_training"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 0:
+                raise StudyError(f"{name} must be an integer >= 0, got {value!r}")
+        if self.repetitions < 1:
+            raise StudyError(f"repetitions must be >= 1, got {self.repetitions}")
+        object.__setattr__(self, "methods", methods)
+        object.__setattr__(self, "locations", tuple(int(x) for x in locations))
+        object.__setattr__(self, "study", int(self.study))
+
+    @property
+    def multi_select(self) -> bool:
+        """Whether a trial accepts several locations (Study 2)."""
+        return self.study == 2
+
+    @property
+    def n_main(self) -> int:
+        """Number of main trials: methods x locations x repetitions."""
+        return len(self.methods) * len(self.locations) * self.repetitions
+
+    @property
+    def n_trials(self) -> int:
+        """All trials of a session, training included."""
+        return self.n_training + self.n_main
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-serialisable form, stored in the session's config."""
+        d = asdict(self)
+        d["methods"] = list(self.methods)
+        d["locations"] = list(self.locations)
+        return d
+
+    @classmethod
+    def from_config(cls, study: int, config: Mapping[str, Any] | None) -> "StudyDesign":
+        """The design of ``study`` with the design keys found in ``config`` applied.
+
+        Keys other than ``methods``, ``locations``, ``repetitions`` and ``n_training``
+        are ignored here (they are stored with the session as they are).
+        """
+        config = dict(config or {})
+        kwargs: dict[str, Any] = {}
+        for key in ("methods", "locations", "repetitions", "n_training"):
+            if key in config:
+                value = config[key]
+                kwargs[key] = tuple(value) if key in ("methods", "locations") else value
+        return cls(study=study, **kwargs)
+
+
+@dataclass(frozen=True)
+class PlannedTrial:
+    """One planned trial of a session.
+
+    Attributes
+    ----------
+    session_id : int
+        The session it belongs to (0 before it is stored).
+    trial_index : int
+        0-based position in the session, training trials first.
+    phase : {"training", "main"}
+        Which part of the session.
+    trial : int
+        1-based number within its phase (the ``trial`` column of the export).
+    method : str
+        Rendering method.
+    target : int
+        Target location number (1-based).
+    """
+
+    session_id: int
+    trial_index: int
+    phase: str
+    trial: int
+    method: str
+    target: int
+
+    def condition(self) -> tuple[str, int]:
+        """``(method, target)``."""
+        return self.method, self.target
+
+
+def plan_trials(design: StudyDesign, seed: int, *, session_id: int = 0) -> list[PlannedTrial]:
+    """The full trial list of a session: training trials, then the shuffled main trials.
+
+    Parameters
+    ----------
+    design : StudyDesign
+        What to plan.
+    seed : int
+        Seed of the randomization (``numpy.random.default_rng``); stored with the
+        session so that the order can be reproduced.
+    session_id : int
+        Copied into each trial.
+
+    Returns
+    -------
+    list of PlannedTrial
+        ``design.n_trials`` trials. Every (method, location) condition appears exactly
+        ``design.repetitions`` times in the main phase. Training trials are distinct
+        conditions drawn at random (repeating only when there are more training trials
+        than conditions).
+    """
+    seed = _check_seed(seed)
+    rng = np.random.default_rng(seed)
+    conditions = [(m, loc) for m in design.methods for loc in design.locations]
+    n_cond = len(conditions)
+    # Training: distinct conditions where possible, so a participant meets variety early.
+    picks: list[int] = []
+    while len(picks) < design.n_training:
+        take = min(n_cond, design.n_training - len(picks))
+        picks.extend(rng.choice(n_cond, size=take, replace=False).tolist())
+    main = np.repeat(np.arange(n_cond), design.repetitions)
+    main = rng.permutation(main)
+    trials = []
+    for k, c in enumerate(picks):
+        m, loc = conditions[c]
+        trials.append(PlannedTrial(session_id, k, "training", k + 1, m, loc))
+    for k, c in enumerate(main.tolist()):
+        m, loc = conditions[c]
+        trials.append(PlannedTrial(session_id, design.n_training + k, "main", k + 1, m, loc))
+    return trials
+
+
+_SPLIT = re.compile(r"[\s,;]+")
+
+
+def parse_response(response: Any, design: StudyDesign) -> tuple[int, ...]:
+    """Validate an answer and return its locations, sorted.
+
+    Parameters
+    ----------
+    response : int, str or iterable of int
+        ``5``, ``"5"``, ``"4 5"``, ``"45"`` (keypad digits typed together, allowed while
+        every location number is a single digit), ``[4, 5]``.
+    design : StudyDesign
+        Study 1 needs exactly one location; Study 2 one or more distinct ones. Every
+        location must be one of the design's locations.
+
+    Returns
+    -------
+    tuple of int
+        The locations, ascending.
+
+    Raises
+    ------
+    StudyError
+        Empty, non-numeric, out-of-range, repeated, or (Study 1) more than one location.
+    """
+    valid = design.locations
+    lo, hi = min(valid), max(valid)
+    if isinstance(response, bool):
+        raise StudyError(f"response must be location numbers {lo}-{hi}, got {response!r}")
+    if isinstance(response, (int, np.integer)):
+        items: list[Any] = [int(response)]
+    elif isinstance(response, str):
+        text = response.strip()
+        tokens = [t for t in _SPLIT.split(text) if t]
+        # Keypad digits typed together ("45") mean several single-digit locations.
+        if len(tokens) == 1 and len(tokens[0]) > 1 and tokens[0].isdigit() and hi <= 9:
+            tokens = list(tokens[0])
+        items = tokens
+    elif isinstance(response, Iterable):
+        items = list(response)
+    else:
+        raise StudyError(f"response must be location numbers {lo}-{hi}, got {type(response).__name__}")
+    if not items:
+        raise StudyError(f"response is empty; answer at least one location {lo}-{hi}")
+    locations: list[int] = []
+    for item in items:
+        try:
+            if isinstance(item, bool):
+                raise ValueError
+            if isinstance(item, (float, np.floating)) and not float(item).is_integer():
+                raise ValueError
+            value = int(item)
+        except (TypeError, ValueError):
+            raise StudyError(f"response must be location numbers {lo}-{hi}, got {item!r}") from None
+        if value not in valid:
+            raise StudyError(f"response location {value} is outside the study's locations {lo}-{hi}")
+        locations.append(value)
+    if len(set(locations)) != len(locations):
+        raise StudyError(f"response names a location more than once: {locations}")
+    if not design.multi_select and len(locations) != 1:
+        raise StudyError(f"Study 1 takes exactly one location per trial, got {len(locations)}: {locations}")
+    return tuple(sorted(locations))
+
+
+def format_response(locations: Sequence[int]) -> str:
+    """Locations as the export writes them: ascending, separated by spaces (``"4 5"``)."""
+    return " ".join(str(int(x)) for x in sorted(locations))
+
+
+def _check_seed(seed: Any) -> int:
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or not 0 <= int(seed) < 2**63:
+        raise StudyError(f"seed must be an integer in [0, 2**63), got {seed!r}")
+    return int(seed)
+

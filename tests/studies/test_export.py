@@ -1,0 +1,36 @@
+"""The trials file contract (SPEC §6)."""
+
+import pytest
+
+from vibrofocus.errors import StudyError
+from vibrofocus.studies import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
+
+
+def test_columns_are_the_contract_in_order():
+    assert TRIALS_COLUMNS == ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
+
+
+def test_write_read_round_trip_keeps_every_value(tmp_path):
+    rows = [
+        {"participant": "p1", "study": 1, "phase": "training", "trial": 1, "method": "inverse",
+         "target": 5, "response": (5,), "rt_s": 1.0 / 3.0},
+        {"participant": "p1", "study": 2, "phase": "main", "trial": 1, "method": "funneling",
+         "target": 4, "response": [5, 4], "rt_s": 0.75, "extra": "ignored"},
+    ]
+    out = tmp_path / "trials.csv"
+    assert write_trials_csv(rows, out) == 2
+    lines = out.read_text().splitlines()
+    assert lines[0] == ",".join(TRIALS_COLUMNS)
+    assert lines[2] == "p1,2,main,1,funneling,4,4 5,0.75"
+    back = read_trials_csv(out)
+    assert back[0]["rt_s"] == 1.0 / 3.0  # exact round trip
+    assert back[1]["response"] == (4, 5)
+
+
+def test_missing_folder_and_foreign_file_are_refused(tmp_path):
+    with pytest.raises(StudyError, match="does not exist"):
+        write_trials_csv([], tmp_path / "nope" / "t.csv")
+    foreign = tmp_path / "f.csv"
+    foreign.write_text("a,b\n1,2\n")
+    with pytest.raises(StudyError, match="not a trials file"):
+        read_trials_csv(foreign)
