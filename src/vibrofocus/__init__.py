@@ -25,12 +25,14 @@ from .errors import (
 from .layout import ArrayLayout
 from .rigs import Rig, SafetyLimits
 from .signals import exponential_sweep, linear_sweep, ricker
+from .skin import SimulatedForearm
 
 __all__ = [
     "__version__",
     "ArrayLayout",
     "Rig",
     "SafetyLimits",
+    "SimulatedForearm",
     "ricker",
     "linear_sweep",
     "exponential_sweep",

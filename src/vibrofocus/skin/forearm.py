@@ -1,0 +1,403 @@
+"""The simulated forearm: a physically based rig that needs no hardware (SPEC §3).
+
+Model, per actuator ``q`` and skin point ``p`` (NumPy's ``exp(+i omega t)`` convention):
+
+``H_pq(f) = K g_q c_q E_q(f) sum_m G(k(f), d_pqm, a_q)``
+
+with ``K`` the drive sensitivity (so that 10 V of the base Ricker on one nominal
+actuator gives 2 µm peak 6 mm away), ``g_q`` the actuator's gain, ``c_q`` its contact
+(coupling), ``E_q`` the inertial-exciter resonance, ``G`` the finite-contact surface
+Green's function with the complex dispersive wavenumber ``k(f)`` and ``d_pqm`` the
+surface path lengths on the tapered cylinder, the short way and ``m`` times around
+(see :mod:`.parameters`, :mod:`.geometry`, :mod:`.propagation`).
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+from functools import lru_cache
+
+import numpy as np
+from scipy import fft as sp_fft
+from scipy import signal as sp_signal
+
+from .._validation import as_array, check_band, check_positive
+from ..defaults import BAND_HZ, FS_HZ, SIGMA_S
+from ..errors import ValidationError
+from ..layout import ArrayLayout
+from ..rigs.base import Rig
+from ..rigs.safety import SafetyLimits
+from .geometry import ForearmGeometry
+from .parameters import ForearmParameters
+from .propagation import exciter_response, surface_green, wavenumber
+
+__all__ = ["SimulatedForearm", "drive_sensitivity"]
+
+#: Peak displacement 6 mm from one nominal actuator driven by a 10 V Ricker (SPEC §3).
+_REFERENCE_PEAK_M = 2e-6
+_REFERENCE_DRIVE_V = 10.0
+_REFERENCE_DISTANCE_M = 6e-3
+# Impulse responses kept per point set by play_and_record (calibration aims at a few
+# points at a time, so a small cache avoids recomputing the model for every repeat).
+_IR_CACHE_SIZE = 32
+
+
+def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmParameters) -> np.ndarray:
+    """Transfer without the drive sensitivity K, shape (n_freqs, n_points, n_actuators).
+
+    ``distances`` has shape (n_points, n_actuators, n_images); DC gives 0 (an inertial
+    exciter exerts no static force).
+    """
+    f = np.asarray(freqs, dtype=float)
+    out = np.zeros((f.size, distances.shape[0], distances.shape[1]), dtype=complex)
+    pos = f > 0
+    if not pos.any():
+        return out
+    fp = f[pos]
+    k = wavenumber(fp, params.c250_m_s, params.beta, params.alpha250_np_m)
+    radius = params.contact_radius_m * np.sqrt(params.contact)
+    green = np.zeros((fp.size, distances.shape[0], distances.shape[1]), dtype=complex)
+    for m in range(distances.shape[2]):  # a handful of images; frequencies stay vectorized
+        green += surface_green(k, distances[:, :, m], radius)
+    source = exciter_response(fp, params.f0_hz, params.q) * (params.gains * params.contact)[None, :]
+    out[pos] = green * source[:, None, :]
+    return out
+
+
+@lru_cache(maxsize=16)
+def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S) -> float:
+    """Drive sensitivity ``K`` of the model, m/V per unit Green's function.
+
+    Chosen so that a 10 V peak Ricker (spread ``sigma``) on one nominal, fully coupled
+    actuator gives 2 µm peak displacement 6 mm from its centre on a flat arm (SPEC §3:
+    "10 V on one actuator gives about 2 µm next to it"), the order of displacement
+    that small inertial exciters produce on the forearm.
+    """
+    n = 4096
+    params = ForearmParameters.nominal(1)
+    freqs = np.fft.rfftfreq(n, 1 / fs)
+    h = _unit_transfer(freqs, np.full((1, 1, 1), _REFERENCE_DISTANCE_M), params)[:, 0, 0]
+    t = np.arange(n) / fs - 0.1
+    pulse = _REFERENCE_DRIVE_V * (1 - t**2 / sigma**2) * np.exp(-(t**2) / (2 * sigma**2))
+    response = np.fft.irfft(np.fft.rfft(pulse) * h, n)
+    return _REFERENCE_PEAK_M / float(np.abs(response).max())
+
+
+class SimulatedForearm(Rig):
+    """A simulated participant's forearm with the actuator array and a vibrometer.
+
+    Parameters
+    ----------
+    seed : int
+        Participant seed: draws the participant (:meth:`ForearmParameters.draw`) and
+        seeds the measurement noise. Same seed, same calls: identical results.
+    layout : ArrayLayout, optional
+        The array; default the reference setup (SPEC §1).
+    fs : float
+        Sample rate, Hz.
+    limits : SafetyLimits, optional
+        Drive limits of the safety layer.
+    noise_m : float
+        Vibrometer noise, m RMS within ``noise_band``. White Gaussian noise over the
+        whole recording bandwidth, scaled so its in-band RMS is ``noise_m`` (its total
+        RMS is larger by ``sqrt((fs/2) / bandwidth)``). Default 1 nm: a laser-Doppler
+        vibrometer on skin with a retro-reflective patch resolves displacements of that
+        order in a 1 kHz band (SPEC §3). 0 turns noise off.
+    dropout_rate : float
+        Expected vibrometer dropouts per second of recording per point (speckle or
+        signal loss of a laser vibrometer). Samples lost in a dropout are ``NaN`` in
+        the recording, and :attr:`last_dropout_mask` marks them. Calibration must check
+        for NaN and repeat the affected recording (or leave it out of its averages); it
+        must never interpolate across a dropout. Default 0.005 /s (rare); 0 turns
+        dropouts off.
+    dropout_duration_s : (float, float)
+        Range of dropout durations, s (uniform).
+    participant : ForearmParameters, optional
+        Explicit parameters instead of drawing them from ``seed`` (for controlled
+        experiments, e.g. ``ForearmParameters.nominal(4)``).
+    geometry : {"cylinder", "plane"}
+        ``"cylinder"`` (default): the tapered forearm, waves come back around it.
+        ``"plane"``: an unbounded flat skin, for checks of the propagation law.
+    n_images : int
+        Turns around the arm summed in each direction (cylinder only).
+    ir_duration_s : float
+        Length of the impulse responses used for playback, s. Playback is the linear
+        convolution of the drive with these responses; they are the inverse FFT of
+        :meth:`transfer` computed over twice this length (so nothing wraps into the
+        kept part) with the last 10 % faded out.
+    latency_s : float
+        Fixed delay between drive and recording, s: converter, amplifier and
+        vibrometer-decoder delays of a real rig. It also keeps the model causal in
+        practice: the prescribed dispersion law is not Kramers-Kronig consistent with
+        the attenuation law, which gives the response next to an actuator a precursor
+        about 1 ms long before the drive; with the default 2 ms the part still before
+        time zero holds about 1e-5 of the response energy and is dropped by playback.
+    noise_band : (float, float)
+        Band in which ``noise_m`` is specified, Hz.
+
+    Attributes
+    ----------
+    participant : ForearmParameters
+        This participant's parameters.
+    geometry : ForearmGeometry
+    last_drive : ndarray or None
+        The last drive played (after the safety layer's fades), shape
+        (n_actuators, n_samples), V; None until something plays.
+    n_played : int
+        Number of drives played so far.
+    outputs_v : ndarray, shape (n_actuators,)
+        Voltage now at each actuator; zero whenever the rig is idle.
+    last_dropout_mask : ndarray of bool or None
+        Dropout samples of the last recording, shape (n_points, n_samples).
+    """
+
+    kind = "simulated"
+    max_points_per_recording = None
+
+    def __init__(
+        self,
+        seed: int = 0,
+        layout: ArrayLayout | None = None,
+        fs: float = FS_HZ,
+        limits: SafetyLimits | None = None,
+        noise_m: float = 1e-9,
+        dropout_rate: float = 0.005,
+        *,
+        dropout_duration_s: tuple[float, float] = (1e-3, 10e-3),
+        participant: ForearmParameters | None = None,
+        geometry: str = "cylinder",
+        n_images: int = 2,
+        ir_duration_s: float = 0.4096,
+        latency_s: float = 2e-3,
+        noise_band: tuple[float, float] = BAND_HZ,
+    ) -> None:
+        super().__init__(layout=layout, fs=fs, limits=limits)
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValidationError(f"seed must be a non-negative integer, got {seed!r}")
+        self.seed = int(seed)
+        if participant is None:
+            participant = ForearmParameters.draw(self.seed, self.layout)
+        elif not isinstance(participant, ForearmParameters):
+            raise ValidationError(f"participant must be a ForearmParameters, got {type(participant).__name__}")
+        if participant.n_actuators != self.layout.n_actuators:
+            raise ValidationError(
+                f"participant describes {participant.n_actuators} actuators but the layout has {self.layout.n_actuators}"
+            )
+        self.participant = participant
+        self.geometry = ForearmGeometry.from_parameters(participant, kind=geometry, n_images=n_images)
+        self.noise_m = check_positive(noise_m, "noise_m", allow_zero=True)
+        self.dropout_rate = check_positive(dropout_rate, "dropout_rate", allow_zero=True)
+        lo, hi = (check_positive(v, "dropout_duration_s") for v in dropout_duration_s)
+        if hi < lo:
+            raise ValidationError(f"dropout_duration_s must be (shortest, longest), got {dropout_duration_s!r}")
+        self.dropout_duration_s = (lo, hi)
+        self.noise_band = check_band(noise_band, self.fs, "noise_band")
+        self.n_ir = int(round(check_positive(ir_duration_s, "ir_duration_s") * self.fs))
+        if self.n_ir < 16:
+            raise ValidationError(f"ir_duration_s must cover at least 16 samples, got {self.n_ir}")
+        self.latency_s = check_positive(latency_s, "latency_s", allow_zero=True)
+        self.sensitivity = drive_sensitivity(self.fs)
+        self._rng = np.random.default_rng([self.seed, 0xD0])
+        self._ir_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
+        self.last_drive: np.ndarray | None = None
+        self.n_played = 0
+        self.outputs_v = np.zeros(self.layout.n_actuators)
+        self.last_dropout_mask: np.ndarray | None = None
+
+    # ------------------------------------------------------------------ the model
+    def transfer(self, points_xy: np.ndarray, freqs: np.ndarray) -> np.ndarray:
+        """The true transfer from every actuator's voltage to displacement at points.
+
+        Parameters
+        ----------
+        points_xy : ndarray, shape (n_points, 2)
+            Skin points in the layout frame, m.
+        freqs : ndarray, shape (n_freqs,)
+            Frequencies, Hz, >= 0 (e.g. ``numpy.fft.rfftfreq(n, 1 / fs)``).
+
+        Returns
+        -------
+        ndarray, complex, shape (n_freqs, n_points, n_actuators)
+            m/V, NumPy's FFT sign convention (a delay is ``exp(-2j pi f tau)``).
+        """
+        points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
+        f = as_array(freqs, "freqs", ndim=1)
+        if np.any(f < 0):
+            raise ValidationError(f"freqs must be >= 0 Hz, got a minimum of {f.min():g} Hz")
+        d = self.geometry.path_lengths(points, self.layout.actuators_xy)
+        delay = np.exp(-2j * np.pi * f * self.latency_s)[:, None, None]
+        return (self.sensitivity * delay) * _unit_transfer(f, d, self.participant)
+
+    def impulse_responses(self, points_xy: np.ndarray) -> np.ndarray:
+        """Impulse responses used for playback, shape (n_points, n_actuators, n_ir), m/V per sample.
+
+        The model is evaluated on ``rfftfreq(2 n_ir)``; the first ``n_ir`` samples of
+        its inverse FFT are kept and the last 10 % of them faded out with a half Hann
+        window, so the responses are finite and playback is an exact linear
+        convolution.
+        """
+        points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
+        key = points.tobytes()
+        if key in self._ir_cache:
+            self._ir_cache.move_to_end(key)
+            return self._ir_cache[key]
+        n_fft = 2 * self.n_ir
+        h = self.transfer(points, np.fft.rfftfreq(n_fft, 1 / self.fs))
+        ir = np.fft.irfft(h, n_fft, axis=0)[: self.n_ir]
+        n_fade = max(self.n_ir // 10, 1)
+        ir[-n_fade:] *= np.hanning(2 * n_fade)[n_fade:, None, None]
+        ir = np.ascontiguousarray(np.moveaxis(ir, 0, -1))
+        ir.setflags(write=False)
+        self._ir_cache[key] = ir
+        if len(self._ir_cache) > _IR_CACHE_SIZE:
+            self._ir_cache.popitem(last=False)
+        return ir
+
+    def field(
+        self,
+        drive: np.ndarray,
+        grid_xy: np.ndarray,
+        times: np.ndarray | None = None,
+        *,
+        tail_s: float = 0.05,
+        rtol: float = 1e-7,
+        block: int = 512,
+    ) -> np.ndarray:
+        """Noise-free displacement over many points, for pictures and simulated people.
+
+        Evaluates the model only at frequencies where the drive has energy (spectral
+        magnitude above ``rtol`` times its peak) and, for a few requested instants,
+        sums the spectrum directly instead of transforming every sample; points are
+        processed in blocks to bound memory.
+
+        Parameters
+        ----------
+        drive : ndarray, shape (n_actuators, n_samples)
+            Voltages, V. Not played: no safety check beyond validation.
+        grid_xy : ndarray, shape (n_grid, 2)
+            Points, m.
+        times : ndarray, shape (n_times,), optional
+            Instants, s, from the start of the drive (0 <= t). Default: every sample of
+            the drive and ``tail_s`` after it.
+        tail_s : float
+            Extra time after the drive when ``times`` is None, s.
+        rtol : float
+            Frequencies where ``|drive spectrum|`` is below ``rtol`` times its maximum
+            (over actuators) are left out.
+        block : int
+            Points per block.
+
+        Returns
+        -------
+        ndarray, shape (n_grid, n_times)
+            Displacement, m; the same, up to the faded end of the impulse responses,
+            as a noise-free :meth:`play_and_record` of the same (faded) drive.
+        """
+        d = as_array(drive, "drive", ndim=2, shape=(self.layout.n_actuators, None))
+        grid = as_array(grid_xy, "grid_xy", ndim=2, shape=(None, 2))
+        n = d.shape[1]
+        if n == 0:
+            raise ValidationError("drive holds no samples")
+        n_tail = int(round(check_positive(tail_s, "tail_s", allow_zero=True) * self.fs))
+        if times is None:
+            t_idx = None
+            n_out = n + n_tail
+        else:
+            t = as_array(times, "times", ndim=1)
+            if np.any(t < 0):
+                raise ValidationError(f"times must be >= 0 s, got a minimum of {t.min():g} s")
+            t_idx = t
+            n_out = int(np.ceil(t.max() * self.fs)) + 1 if t.size else 1
+        n_fft = sp_fft.next_fast_len(max(n_out, n) + self.n_ir, real=True)
+        spectrum = np.fft.rfft(d, n_fft, axis=1)
+        freqs = np.fft.rfftfreq(n_fft, 1 / self.fs)
+        mag = np.abs(spectrum).max(axis=0)
+        keep = np.flatnonzero(mag > rtol * mag.max()) if mag.max() > 0 else np.zeros(0, int)
+        n_times = n_out if t_idx is None else t_idx.size
+        out = np.zeros((len(grid), n_times))
+        if keep.size == 0:
+            return out
+        fk = freqs[keep]
+        sk = spectrum[:, keep]
+        # Weights of a real inverse DFT restricted to the kept bins (DC and Nyquist once).
+        weight = np.full(keep.size, 2.0)
+        weight[(keep == 0) | ((n_fft % 2 == 0) & (keep == n_fft // 2))] = 1.0
+        if t_idx is not None:
+            phasor = np.exp(2j * np.pi * fk[:, None] * t_idx[None, :]) * (weight / n_fft)[:, None]
+        for start in range(0, len(grid), max(int(block), 1)):
+            pts = grid[start:start + block]
+            h = self.transfer(pts, fk)  # (n_keep, n_pts, n_act)
+            u = np.einsum("fpq,qf->pf", h, sk)
+            if t_idx is None:
+                full = np.zeros((len(pts), n_fft // 2 + 1), dtype=complex)
+                full[:, keep] = u
+                out[start:start + len(pts)] = np.fft.irfft(full, n_fft, axis=1)[:, :n_out]
+            else:
+                out[start:start + len(pts)] = (u @ phasor).real
+        return out
+
+    # ------------------------------------------------------------------ Rig backend
+    def _play(self, drive: np.ndarray) -> None:
+        self.last_drive = np.array(drive, copy=True)
+        self.n_played += 1
+        # The outputs hold the drive's last value until the safety layer zeroes them.
+        self.outputs_v = self.last_drive[:, -1].copy()
+
+    def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
+        self._play(drive)
+        points = self.layout.points_xy if points_xy is None else points_xy
+        ir = self.impulse_responses(points)  # (n_points, n_act, n_ir)
+        n = drive.shape[1]
+        n_out = n + n_tail
+        # Linear convolution, zero-padded: the response of a drive played once from
+        # silence, with its tail after the drive, never wrapped to the start.
+        conv = sp_signal.fftconvolve(ir, drive[None, :, :], axes=2)  # (n_points, n_act, n + n_ir - 1)
+        rec = conv.sum(axis=1)
+        out = np.zeros((len(points), n_out))
+        m = min(n_out, rec.shape[1])
+        out[:, :m] = rec[:, :m]
+        return self._measure(out)
+
+    def _measure(self, clean: np.ndarray) -> np.ndarray:
+        """Add vibrometer noise and dropouts to a clean recording."""
+        out = clean.copy()
+        if self.noise_m > 0:
+            lo, hi = self.noise_band
+            white_rms = self.noise_m * np.sqrt((self.fs / 2) / (hi - lo))
+            out += white_rms * self._rng.standard_normal(out.shape)
+        mask = np.zeros(out.shape, dtype=bool)
+        if self.dropout_rate > 0:
+            duration = out.shape[1] / self.fs
+            counts = self._rng.poisson(self.dropout_rate * duration, size=out.shape[0])
+            for p in np.flatnonzero(counts):  # rare events: a loop over them is cheap
+                for _ in range(counts[p]):
+                    length = int(round(self._rng.uniform(*self.dropout_duration_s) * self.fs))
+                    start = int(self._rng.integers(0, out.shape[1]))
+                    mask[p, start:start + max(length, 1)] = True
+            out[mask] = np.nan
+        self.last_dropout_mask = mask
+        return out
+
+    def _zero_outputs(self) -> None:
+        self.outputs_v = np.zeros(self.layout.n_actuators)
+
+    def describe(self) -> dict:
+        out = super().describe()
+        out.update(
+            seed=self.seed,
+            participant=self.participant.to_dict(),
+            geometry=self.geometry.kind,
+            n_images=self.geometry.n_images,
+            noise_m=self.noise_m,
+            dropout_rate=self.dropout_rate,
+            ir_duration_s=self.n_ir / self.fs,
+            latency_s=self.latency_s,
+        )
+        return out
+
+    def __repr__(self) -> str:
+        p = self.participant
+        return (
+            f"SimulatedForearm(seed={self.seed}, c250={p.c250_m_s:.2f} m/s, alpha250={p.alpha250_np_m:.1f} Np/m, "
+            f"contact={np.round(p.contact, 2).tolist()}, geometry={self.geometry.kind!r})"
+        )

@@ -1,0 +1,120 @@
+"""Frequency-domain building blocks of the skin model: wavenumber, source, exciter.
+
+Sign convention. The physics is written, as usual for waves, with ``exp(-i omega t)``
+time dependence, where an outgoing, decaying wave is ``H0^(1)(k r)`` with
+``k = 2 pi f / c(f) + i alpha(f)`` (SPEC §3). NumPy's FFT uses ``exp(+i omega t)``, in
+which a delay is ``exp(-i omega tau)``; :func:`surface_green` returns the complex
+conjugate so that everything handed out is in NumPy's convention.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy import special
+
+__all__ = ["wavenumber", "surface_green", "exciter_response"]
+
+# Beyond this many nepers of decay an image path adds less than exp(-40) ~ 4e-18 of the
+# direct wave and is skipped.
+_MAX_NEPERS = 40.0
+
+
+def wavenumber(freqs: np.ndarray, c250_m_s: float, beta: float, alpha250_np_m: float) -> np.ndarray:
+    """Complex wavenumber ``k(f) = 2 pi f / c(f) + i alpha(f)`` (physics convention).
+
+    Parameters
+    ----------
+    freqs : ndarray
+        Frequencies, Hz, > 0.
+    c250_m_s, beta, alpha250_np_m : float
+        ``c(f) = c250 (f/250)^beta`` in m/s and ``alpha(f) = alpha250 f/250`` in Np/m.
+
+    Returns
+    -------
+    ndarray, complex, same shape as ``freqs``
+        rad/m (real part) and Np/m (imaginary part).
+    """
+    f = np.asarray(freqs, dtype=float)
+    c = c250_m_s * (f / 250.0) ** beta
+    return 2 * np.pi * f / c + 1j * alpha250_np_m * f / 250.0
+
+
+def _disc_factor(ka: np.ndarray) -> np.ndarray:
+    # 2 J1(ka) / (ka): the Graf addition theorem turns the area average of H0(k|r - r'|)
+    # over a uniform disc into H0(k r) times this factor for r outside the disc.
+    return 2 * special.jv(1, ka) / ka
+
+
+def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray) -> np.ndarray:
+    """2-D Green's function of a uniform disc source, in NumPy's sign convention.
+
+    The out-of-plane displacement of a membrane-like skin layer under a unit force
+    spread evenly over a disc of radius ``a`` is the area average of the point-source
+    Green's function ``(i/4) H0^(1)(k |r - r'|)``:
+
+    - outside the disc (``d >= a``): ``(i/4) H0(k d) * 2 J1(k a) / (k a)``;
+    - inside (``d < a``): ``(i/4) (2 / (k a^2)) [2i / (pi k) + a J0(k d) H1(k a)]``,
+
+    which follow from Graf's addition theorem and the Wronskian
+    ``J1 H0 - J0 H1 = 2i / (pi z)``; they meet continuously at ``d = a`` and the
+    inside form stays finite at the centre (a finite contact has no singularity).
+    Far away, ``|H0(k d)| ~ sqrt(2 / (pi |k| d)) exp(-alpha d)``: cylindrical spreading
+    (-3 dB per doubling of distance) times attenuation.
+
+    Parameters
+    ----------
+    k : ndarray, complex, shape (n_freqs,)
+        Wavenumbers (physics convention, ``Im k > 0``), rad/m; none zero.
+    distance : ndarray, shape (n_points, n_sources)
+        Path lengths, m.
+    radius : ndarray, shape (n_sources,)
+        Contact radius of each source, m.
+
+    Returns
+    -------
+    ndarray, complex, shape (n_freqs, n_points, n_sources)
+        Displacement per unit force and unit membrane tension (dimensionless), NumPy
+        convention (the conjugate of the physics expression).
+    """
+    k = np.asarray(k, dtype=complex)[:, None, None]
+    d = np.asarray(distance, dtype=float)
+    a = np.asarray(radius, dtype=float)
+    ka = k * a[None, None, :]
+    out = np.zeros((k.shape[0],) + d.shape, dtype=complex)
+    # Skip frequency/path pairs attenuated beyond _MAX_NEPERS: their Hankel values
+    # underflow anyway, and this keeps dense grids with far images cheap.
+    live = (k.imag * d[None]) < _MAX_NEPERS
+    outside = d[None] >= a[None, None, :]
+    sel = live & outside
+    if sel.any():
+        kd = (k * d[None])[sel]
+        out[sel] = 0.25j * special.hankel1(0, kd) * np.broadcast_to(_disc_factor(ka), out.shape)[sel]
+    inside = np.broadcast_to(~outside, out.shape)
+    if inside.any():
+        kk = np.broadcast_to(k, out.shape)[inside]
+        dd = np.broadcast_to(d[None], out.shape)[inside]
+        aa = np.broadcast_to(a[None, None, :], out.shape)[inside]
+        out[inside] = 0.25j * (2 / (kk * aa**2)) * (2j / (np.pi * kk) + aa * special.jv(0, kk * dd) * special.hankel1(1, kk * aa))
+    return np.conj(out)
+
+
+def exciter_response(freqs: np.ndarray, f0_hz: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Force of an inertial exciter per unit drive, normalised to 1 far above resonance.
+
+    A voice coil drives a suspended mass; the force on the skin is the mass times its
+    acceleration, a second-order high-pass:
+    ``E(f) = -(f/f0)^2 / (1 - (f/f0)^2 + i (f/f0) / Q)`` (NumPy convention, causal).
+
+    Parameters
+    ----------
+    freqs : ndarray, shape (n_freqs,)
+        Hz, >= 0.
+    f0_hz, q : ndarray, shape (n_actuators,)
+        Loaded resonance frequency (Hz) and quality factor of each exciter.
+
+    Returns
+    -------
+    ndarray, complex, shape (n_freqs, n_actuators)
+    """
+    r = np.asarray(freqs, dtype=float)[:, None] / np.asarray(f0_hz, dtype=float)[None, :]
+    return -(r**2) / (1 - r**2 + 1j * r / np.asarray(q, dtype=float)[None, :])
