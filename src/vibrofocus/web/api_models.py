@@ -1,0 +1,102 @@
+"""Pydantic models of every request body and of the main responses of the web API.
+
+The models refuse what is malformed on its own (a location outside 1-9, a negative
+reaction time, an unknown method); checks that need the database (is this the current
+trial? does the study allow several locations?) live in the routes.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+__all__ = [
+    "N_LOCATIONS",
+    "AnswerIn",
+    "AnswerReceipt",
+    "ParticipantIn",
+    "CalibrationIn",
+    "SessionIn",
+    "AnalysisIn",
+]
+
+#: Locations a participant can name (SPEC §1): the 3 x 3 grid of the reference setup.
+N_LOCATIONS = 9
+
+Location = Annotated[int, Field(ge=1, le=N_LOCATIONS, strict=True)]
+# Ids end up in file names and URLs; keep them to a safe, readable alphabet.
+ParticipantId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")]
+
+
+class _Strict(BaseModel):
+    # Unknown fields are refused: a typo in a client must not pass silently.
+    model_config = ConfigDict(extra="forbid")
+
+
+class AnswerIn(_Strict):
+    """One answer of the participant page.
+
+    ``answer_id`` is made by the page when the participant answers and sent again
+    unchanged on every retry, so that the server can tell a re-send from a new answer.
+    """
+
+    session_id: int = Field(ge=1, strict=True)
+    trial_index: int = Field(ge=0, strict=True)
+    response: list[Location] = Field(min_length=1, max_length=N_LOCATIONS)
+    rt_s: float = Field(ge=0.0, le=3600.0, allow_inf_nan=False)
+    answer_id: str = Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
+
+    @field_validator("response")
+    @classmethod
+    def _distinct(cls, value: list[int]) -> list[int]:
+        if len(set(value)) != len(value):
+            raise ValueError(f"response names a location twice: {value}")
+        return sorted(value)
+
+
+class AnswerReceipt(BaseModel):
+    """What the server sends back once an answer is committed to the database."""
+
+    session_id: int
+    trial_index: int
+    answer_id: str
+    response: list[int]
+    committed: bool = True
+    duplicate: bool = False
+    next_trial_index: int | None
+
+
+class ParticipantIn(_Strict):
+    """Create a participant."""
+
+    participant_id: ParticipantId
+    simulated: bool = False
+
+
+class CalibrationIn(_Strict):
+    """Start a calibration of a participant on a rig."""
+
+    participant_id: ParticipantId
+    rig: str = Field(default="simulated", min_length=1, max_length=32)
+    seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
+
+
+class SessionIn(_Strict):
+    """Plan a study session (the full trial list is written to the database)."""
+
+    participant_id: ParticipantId
+    study: Literal[1, 2]
+    seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
+    calibration_id: int | None = Field(default=None, ge=1)
+    rig: str = Field(default="simulated", min_length=1, max_length=32)
+    rig_seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
+    # Shorter designs for pilots and demonstrations; the defaults are SPEC §6's.
+    repetitions: int | None = Field(default=None, ge=1, le=10)
+    n_training: int | None = Field(default=None, ge=0, le=30)
+
+
+class AnalysisIn(_Strict):
+    """Run the analysis on the current export."""
+
+    study: Literal[1, 2] | None = None

@@ -1,0 +1,344 @@
+"""The FastAPI application: one factory, the shared state, and the access checks.
+
+Two kinds of client talk to the app:
+
+- the experimenter page, which holds the experimenter token (printed by ``vibrofocus
+  serve``; sent as the ``X-Vibrofocus-Token`` header or the ``vf_token`` cookie);
+- the participant page of one session, which holds that session's participant key
+  (in its URL; sent as the ``X-Participant-Key`` header). The key is an HMAC of the
+  session id under a secret kept next to the database, so a participant link keeps
+  working after a server restart and cannot be guessed from the session id. The key
+  lets the page read its state and answer, nothing else; the token cannot answer.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import logging
+import os
+import secrets
+import threading
+from contextlib import asynccontextmanager
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fastapi import FastAPI, HTTPException, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import JSONResponse
+from fastapi.staticfiles import StaticFiles
+
+from ..errors import StudyError, VibrofocusError
+from .session_runner import PACES, Pace, SessionRunner
+
+__all__ = ["create_app", "render_template", "WebState", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
+
+log = logging.getLogger(__name__)
+
+TOKEN_HEADER = "X-Vibrofocus-Token"
+TOKEN_COOKIE = "vf_token"
+KEY_HEADER = "X-Participant-Key"
+
+_HERE = Path(__file__).parent
+
+
+@dataclass
+class CalibrationJob:
+    """A calibration running in a background thread, as the experimenter page sees it."""
+
+    job_id: str
+    participant_id: str
+    rig: str
+    status: str = "running"  # running | done | failed
+    progress: float = 0.0
+    message: str = "starting"
+    calibration_id: int | None = None
+    error: str | None = None
+
+
+@dataclass
+class WebState:
+    """Everything the routes share; one per app.
+
+    Attributes
+    ----------
+    store : StudyStore
+        The study database. SQLite connections are not shared between threads safely,
+        so every use goes through ``db`` (a lock): request handlers run in a thread pool
+        and each running session has its own thread.
+    """
+
+    store: Any
+    db_path: Path
+    token: str
+    secret: bytes
+    rig_kind: str
+    pace: Pace
+    rig_factory: Any = None
+    db: threading.RLock = field(default_factory=threading.RLock)
+    runners: dict[int, SessionRunner] = field(default_factory=dict)
+    calibrations: dict[int, Any] = field(default_factory=dict)
+    banks: dict[int, Any] = field(default_factory=dict)
+    jobs: dict[str, CalibrationJob] = field(default_factory=dict)
+    rigs: dict[tuple[str, int], Any] = field(default_factory=dict)
+    planned: dict[int, list] = field(default_factory=dict)
+    analyses: dict[str, dict] = field(default_factory=dict)
+    lock: threading.RLock = field(default_factory=threading.RLock)
+
+    # ------------------------------------------------------------------ paths
+    @property
+    def data_dir(self) -> Path:
+        """Folder for calibrations, exports and reports, beside the database."""
+        d = self.db_path.parent / f"{self.db_path.stem}-files"
+        d.mkdir(parents=True, exist_ok=True)
+        return d
+
+    # ------------------------------------------------------------------ access
+    def participant_key(self, session_id: int) -> str:
+        """The participant key of a session (URL-safe, 22 characters)."""
+        mac = hmac.new(self.secret, f"participant-session:{int(session_id)}".encode(), hashlib.sha256).digest()
+        return base64.urlsafe_b64encode(mac[:16]).decode().rstrip("=")
+
+    def check_key(self, session_id: int, key: str | None) -> None:
+        """Raise 403 unless ``key`` is the participant key of ``session_id``."""
+        if not key or not hmac.compare_digest(key, self.participant_key(session_id)):
+            raise HTTPException(403, detail=f"missing or wrong participant key for session {session_id}; open the participant link the experimenter page gives")
+
+    def check_token(self, request: Request) -> None:
+        """Raise 401 unless the request carries the experimenter token."""
+        given = request.headers.get(TOKEN_HEADER) or request.cookies.get(TOKEN_COOKIE)
+        if not given or not hmac.compare_digest(given, self.token):
+            raise HTTPException(401, detail=f"missing or wrong experimenter token (send the {TOKEN_HEADER} header, or open the URL printed by 'vibrofocus serve')")
+
+    # ------------------------------------------------------------------ store helpers
+    def session(self, session_id: int) -> dict[str, Any]:
+        """The session's row as a dict; 404 if there is no such session."""
+        with self.db:
+            try:
+                info = self.store.session(int(session_id))
+            except StudyError:
+                info = None
+        if info is None:
+            raise HTTPException(404, detail=f"unknown session {session_id}")
+        return _as_dict(info)
+
+    def make_rig(self, kind: str, seed: int | None):
+        """A rig by kind and seed, made once and reused (a hardware rig holds a device)."""
+        key = (kind, -1 if seed is None else int(seed))
+        with self.lock:
+            if key not in self.rigs:
+                factory = self.rig_factory
+                if factory is None:
+                    from ..rigs import make_rig as factory
+                try:
+                    self.rigs[key] = factory(kind, seed=seed)
+                except NotImplementedError as exc:
+                    raise HTTPException(400, detail=str(exc)) from None
+                except VibrofocusError as exc:
+                    raise HTTPException(400, detail=str(exc)) from None
+            return self.rigs[key]
+
+    def calibration(self, calibration_id: int):
+        """A calibration by id: from memory or loaded from its file; 404 if unknown."""
+        with self.lock:
+            if calibration_id in self.calibrations:
+                return self.calibrations[calibration_id]
+        with self.db:
+            try:
+                self.store.calibration(calibration_id)
+            except StudyError:
+                raise HTTPException(404, detail=f"unknown calibration {calibration_id}") from None
+            # Checks the file still has the hash it was registered with.
+            path = self.store.verify_calibration(calibration_id)
+        from ..calibration import load_calibration
+
+        try:
+            cal = load_calibration(path)
+        except VibrofocusError as exc:
+            raise HTTPException(409, detail=f"calibration {calibration_id} cannot be loaded: {exc}") from None
+        with self.lock:
+            self.calibrations[calibration_id] = cal
+        return cal
+
+    def bank(self, calibration_id: int, limit_v: float | None = None):
+        """The stimulus bank (cached renderings) of a calibration."""
+        from .stimuli import StimulusBank
+
+        with self.lock:
+            bank = self.banks.get(calibration_id)
+        if bank is None:
+            bank = StimulusBank(self.calibration(calibration_id), limit_v=limit_v)
+            with self.lock:
+                bank = self.banks.setdefault(calibration_id, bank)
+        return bank
+
+    def runner(self, session_id: int, *, create: bool = False) -> SessionRunner | None:
+        """The runner of a session; with ``create``, build it from the stored session."""
+        with self.lock:
+            runner = self.runners.get(session_id)
+            if runner is not None or not create:
+                return runner
+        info = self.session(session_id)
+        config = info.get("config") or {}
+        stimulus = rig = None
+        cal_id = info.get("calibration_id")
+        if cal_id is not None:
+            rig = self.make_rig(config.get("rig", self.rig_kind), config.get("rig_seed"))
+            bank = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None))
+            stimulus = bank.drives_for
+        runner = SessionRunner(self.store, session_id, stimulus=stimulus, rig=rig, pace=self.pace, store_lock=self.db)
+        with self.lock:
+            return self.runners.setdefault(session_id, runner)
+
+    def resume_running_sessions(self) -> list[int]:
+        """After a restart: start a runner for every session stored as running."""
+        with self.db:
+            rows = [_as_dict(s) for s in self.store.sessions()]
+        started = []
+        for row in rows:
+            if row.get("status") == "running":
+                sid = int(row["session_id"])
+                try:
+                    runner = self.runner(sid, create=True)
+                    runner.start()
+                    with self.db:
+                        self.store.log_event(sid, "resumed_after_restart", None)
+                    started.append(sid)
+                except Exception:  # noqa: BLE001 - one broken session must not stop the server
+                    log.exception("could not resume session %s", sid)
+        return started
+
+    def shutdown(self) -> None:
+        """Stop every runner (their sessions stay 'running' in the store, to resume)."""
+        with self.lock:
+            runners = list(self.runners.values())
+        for runner in runners:
+            runner.stop(timeout=2.0)
+
+
+def render_template(name: str, **values: Any) -> str:
+    """Fill ``web/templates/<name>`` (``string.Template`` placeholders, HTML-escaped values).
+
+    The pages are static apart from a few ids, so plain ``$name`` substitution is enough
+    and spares a template-engine dependency.
+    """
+    import html
+    from string import Template
+
+    text = (_HERE / "templates" / name).read_text(encoding="utf-8")
+    return Template(text).substitute({k: html.escape(str(v), quote=True) for k, v in values.items()})
+
+
+def _as_dict(obj: Any) -> dict[str, Any]:
+    if isinstance(obj, dict):
+        return obj
+    if hasattr(obj, "_asdict"):
+        return obj._asdict()
+    if hasattr(obj, "__dataclass_fields__"):
+        import dataclasses
+
+        return dataclasses.asdict(obj)
+    return dict(obj)
+
+
+def load_or_make_secret(db_path: Path) -> bytes:
+    """The HMAC secret of participant keys, kept beside the database (mode 0600)."""
+    path = db_path.with_name(db_path.name + ".web-secret")
+    if path.exists():
+        return bytes.fromhex(path.read_text().strip())
+    secret = secrets.token_bytes(32)
+    # O_EXCL: two servers starting at once must not each write their own secret.
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        return bytes.fromhex(path.read_text().strip())
+    with os.fdopen(fd, "w") as fh:
+        fh.write(secret.hex())
+    return secret
+
+
+def create_app(
+    db_path: str | os.PathLike,
+    *,
+    token: str,
+    rig: str = "simulated",
+    pace: str | Pace = "normal",
+    rig_factory: Any = None,
+    resume: bool = True,
+) -> FastAPI:
+    """Build the web app.
+
+    Parameters
+    ----------
+    db_path : path-like
+        The study database (SQLite), created if missing.
+    token : str
+        The experimenter token; at least 16 characters.
+    rig : str
+        Default rig kind offered on the experimenter page (``simulated``, ``audio``,
+        ``nidaq``).
+    pace : {"normal", "fast"} or Pace
+        Trial timing; ``fast`` for tests and demonstrations.
+    rig_factory : callable, optional
+        ``rig_factory(kind, seed=...) -> Rig``; default :func:`vibrofocus.rigs.make_rig`.
+    resume : bool
+        Restart the sessions stored as running when the app starts.
+
+    Returns
+    -------
+    FastAPI
+        With ``app.state.web`` the :class:`WebState`.
+    """
+    from ..studies import StudyStore
+
+    if not isinstance(token, str) or len(token) < 16:
+        raise ValueError("token must be a string of at least 16 characters")
+    if isinstance(pace, str):
+        if pace not in PACES:
+            raise ValueError(f"pace must be one of {', '.join(PACES)}, got {pace!r}")
+        pace = PACES[pace]
+    db_path = Path(db_path).resolve()
+    db_path.parent.mkdir(parents=True, exist_ok=True)
+    store = StudyStore(db_path)
+    state = WebState(
+        store=store, db_path=db_path, token=token, secret=load_or_make_secret(db_path),
+        rig_kind=rig, pace=pace, rig_factory=rig_factory,
+    )
+
+    @asynccontextmanager
+    async def lifespan(app: FastAPI):
+        if resume:
+            started = state.resume_running_sessions()
+            if started:
+                log.warning("resumed sessions %s at their first unanswered trial", started)
+        yield
+        state.shutdown()
+        close = getattr(store, "close", None)
+        if close is not None:
+            close()
+
+    app = FastAPI(title="vibrofocus", lifespan=lifespan, docs_url=None, redoc_url=None)
+    app.state.web = state
+    app.mount("/static", StaticFiles(directory=str(_HERE / "static")), name="static")
+
+    @app.exception_handler(RequestValidationError)
+    async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
+        # One readable sentence per problem ("body.response.0: Input should be less than
+        # or equal to 9") instead of pydantic's nested structure.
+        problems = []
+        for err in exc.errors():
+            where = ".".join(str(p) for p in err.get("loc", ()))
+            problems.append(f"{where}: {err.get('msg')}")
+        return JSONResponse(status_code=422, content={"detail": "; ".join(problems) or "invalid request"})
+
+    @app.exception_handler(StudyError)
+    async def _study_error(request: Request, exc: StudyError) -> JSONResponse:
+        return JSONResponse(status_code=409, content={"detail": str(exc)})
+
+    from . import routes_experimenter, routes_participant
+
+    app.include_router(routes_participant.router)
+    app.include_router(routes_experimenter.router)
+    return app

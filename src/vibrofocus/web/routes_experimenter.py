@@ -1,0 +1,356 @@
+"""Routes of the experimenter page: participants, calibration, preview, sessions, export.
+
+Everything here needs the experimenter token (``X-Vibrofocus-Token`` header or the
+``vf_token`` cookie set when the page is opened with ``?token=``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import secrets
+import subprocess
+import sys
+import threading
+import time
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
+
+from ..errors import StudyError, VibrofocusError
+from .api_models import AnalysisIn, CalibrationIn, ParticipantIn, SessionIn
+from .app import TOKEN_COOKIE, CalibrationJob, WebState, render_template
+
+router = APIRouter()
+
+
+def _web(request: Request) -> WebState:
+    return request.app.state.web
+
+
+def require_token(request: Request) -> WebState:
+    """Dependency: the app state, after checking the experimenter token."""
+    web = _web(request)
+    web.check_token(request)
+    return web
+
+
+def _study_error(exc: StudyError, status: int = 409) -> HTTPException:
+    return HTTPException(status, detail=str(exc))
+
+
+# ---------------------------------------------------------------------- page
+@router.get("/", response_class=HTMLResponse, include_in_schema=False)
+def experimenter_page(request: Request, token: str | None = Query(None, max_length=128)) -> Response:
+    """The experimenter page; ``?token=`` logs in (sets a cookie) and is dropped from the URL."""
+    web = _web(request)
+    if token is not None:
+        if not secrets.compare_digest(token, web.token):
+            return HTMLResponse(render_template("login.html", message="That token is not the one this server printed."), status_code=401)
+        resp = RedirectResponse("/", status_code=303)
+        # HttpOnly + SameSite=Strict: scripts and other sites cannot read or send it.
+        resp.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict")
+        return resp
+    try:
+        web.check_token(request)
+    except HTTPException:
+        return HTMLResponse(render_template("login.html", message=""), status_code=401)
+    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind))
+
+
+# ---------------------------------------------------------------------- participants and rigs
+@router.get("/api/participants")
+def list_participants(web: WebState = Depends(require_token)) -> list[dict[str, Any]]:
+    """All participants with their calibrations and sessions."""
+    with web.db:
+        people = web.store.participants()
+        out = []
+        for p in people:
+            cals = web.store.calibrations(p.participant_id)
+            out.append({
+                **dataclasses.asdict(p),
+                "calibrations": [{"calibration_id": c.calibration_id, "created_at": c.created_at} for c in cals],
+            })
+    return out
+
+
+@router.post("/api/participants", status_code=201)
+def add_participant(body: ParticipantIn, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Register a participant (returns the existing one if the id is known)."""
+    try:
+        with web.db:
+            info = web.store.add_participant(body.participant_id, simulated=body.simulated)
+    except StudyError as exc:
+        raise _study_error(exc) from None
+    return dataclasses.asdict(info)
+
+
+@router.get("/api/rigs")
+def list_rigs(web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Rig kinds and the server's default."""
+    from ..rigs import RIG_KINDS
+
+    return {"kinds": list(RIG_KINDS), "default": web.rig_kind}
+
+
+def _check_participant(web: WebState, participant_id: str) -> None:
+    with web.db:
+        try:
+            web.store.participant(participant_id)
+        except StudyError:
+            raise HTTPException(404, detail=f"unknown participant {participant_id!r}; add the participant first") from None
+
+
+# ---------------------------------------------------------------------- calibration
+@router.post("/api/calibrations", status_code=202)
+def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Calibrate a participant on a rig in the background; poll the returned job."""
+    _check_participant(web, body.participant_id)
+    rig = web.make_rig(body.rig, body.seed)
+    job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
+    with web.lock:
+        busy = [j for j in web.jobs.values() if j.status == "running"]
+        if busy:
+            raise HTTPException(409, detail=f"calibration {busy[0].job_id} of {busy[0].participant_id} is still running; wait for it")
+        web.jobs[job.job_id] = job
+    threading.Thread(target=_calibrate, args=(web, job, rig), name=f"calibration-{job.job_id}", daemon=True).start()
+    return {"job_id": job.job_id}
+
+
+def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
+    from ..calibration import calibrate, save_calibration
+
+    def progress(*args: Any, **kwargs: Any) -> None:
+        # Accept the callback in the forms a long task usually reports: a fraction, a
+        # (done, total) pair, and an optional message.
+        nums = [a for a in args if isinstance(a, (int, float)) and not isinstance(a, bool)]
+        texts = [a for a in args if isinstance(a, str)] + [v for v in kwargs.values() if isinstance(v, str)]
+        if len(nums) >= 2 and nums[1]:
+            job.progress = float(nums[0]) / float(nums[1])
+        elif nums:
+            job.progress = float(nums[0])
+        if texts:
+            job.message = texts[0]
+
+    try:
+        cal = calibrate(rig, participant_id=job.participant_id, progress=progress)
+        folder = web.data_dir / "calibrations"
+        folder.mkdir(exist_ok=True)
+        path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
+        save_calibration(cal, path)
+        with web.db:
+            cal_id = web.store.add_calibration(job.participant_id, path)
+        with web.lock:
+            web.calibrations[cal_id] = cal
+        job.calibration_id = cal_id
+        job.progress = 1.0
+        job.message = "done"
+        job.status = "done"
+    except Exception as exc:  # noqa: BLE001 - shown on the experimenter page
+        job.status = "failed"
+        job.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, VibrofocusError) else str(exc)
+        job.message = "failed"
+
+
+@router.get("/api/calibrations/jobs/{job_id}")
+def calibration_job(job_id: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Progress of a calibration job."""
+    job = web.jobs.get(job_id)
+    if job is None:
+        raise HTTPException(404, detail=f"unknown calibration job {job_id!r}")
+    return dataclasses.asdict(job)
+
+
+@router.get("/api/calibrations/{calibration_id}/figure.png")
+def calibration_figure(calibration_id: int, web: WebState = Depends(require_token)) -> Response:
+    """|H| and coherence of a calibration (PNG)."""
+    from .figures import calibration_png
+
+    return Response(calibration_png(web.calibration(calibration_id)), media_type="image/png")
+
+
+@router.get("/api/preview.png")
+def preview(
+    calibration_id: int = Query(..., ge=1),
+    method: str = Query(..., min_length=1, max_length=32),
+    location: int = Query(..., ge=1),
+    web: WebState = Depends(require_token),
+) -> Response:
+    """Drive signals and predicted field of one method at one location (PNG)."""
+    from ..defaults import METHODS
+    from .figures import preview_png
+
+    if method not in METHODS:
+        raise HTTPException(422, detail=f"unknown method {method!r}; known: {', '.join(METHODS)}")
+    cal = web.calibration(calibration_id)
+    n_loc = cal.layout.n_locations
+    if location > n_loc:
+        raise HTTPException(422, detail=f"location {location} is outside the calibrated locations 1-{n_loc}")
+    try:
+        rendering = web.bank(calibration_id).rendering(method, location)
+    except VibrofocusError as exc:
+        raise HTTPException(422, detail=str(exc)) from None
+    return Response(preview_png(rendering, cal.layout, cal.fs, method=method, location=location), media_type="image/png")
+
+
+# ---------------------------------------------------------------------- sessions
+def _session_out(web: WebState, session_id: int) -> dict[str, Any]:
+    info = web.session(session_id)
+    runner = web.runner(session_id)
+    info["live"] = runner.snapshot() if runner is not None else None
+    info["participant_url"] = f"/participant/{session_id}?key={web.participant_key(session_id)}"
+    return info
+
+
+@router.get("/api/sessions")
+def list_sessions(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> list[dict[str, Any]]:
+    """Sessions (of one participant, if given), with progress and participant link."""
+    try:
+        with web.db:
+            ids = [s.session_id for s in web.store.sessions(participant_id)]
+    except StudyError as exc:
+        raise HTTPException(404, detail=str(exc)) from None
+    return [_session_out(web, sid) for sid in ids]
+
+
+@router.post("/api/sessions", status_code=201)
+def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Plan a session: the full trial list is stored; it starts with ``/start``."""
+    _check_participant(web, body.participant_id)
+    if body.calibration_id is not None:
+        web.calibration(body.calibration_id)  # 404 / 409 before anything is written
+    config: dict[str, Any] = {"rig": body.rig, "rig_seed": body.rig_seed}
+    if body.repetitions is not None:
+        config["repetitions"] = body.repetitions
+    if body.n_training is not None:
+        config["n_training"] = body.n_training
+    seed = body.seed if body.seed is not None else secrets.randbelow(2**31)
+    try:
+        with web.db:
+            sid = web.store.create_session(body.participant_id, body.study, seed=seed, calibration_id=body.calibration_id, config=config)
+    except StudyError as exc:
+        raise _study_error(exc) from None
+    return _session_out(web, sid)
+
+
+@router.get("/api/sessions/{session_id}")
+def get_session(session_id: int, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """A session with its live state and its answers so far."""
+    out = _session_out(web, session_id)
+    with web.db:
+        trials = web.store.planned_trials(session_id)
+        answers = web.store.answers(session_id)
+    out["answers"] = [
+        {
+            "trial_index": a.trial_index, "phase": trials[a.trial_index].phase, "trial": trials[a.trial_index].trial,
+            "method": trials[a.trial_index].method, "target": trials[a.trial_index].target,
+            "response": list(a.response), "rt_s": a.rt_s, "recorded_at": a.recorded_at,
+        }
+        for a in answers
+    ]
+    return out
+
+
+@router.post("/api/sessions/{session_id}/{action}")
+def session_action(session_id: int, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """``start``, ``pause``, ``resume`` or ``stop`` a session."""
+    if action not in ("start", "pause", "resume", "stop"):
+        raise HTTPException(404, detail=f"unknown session action {action!r}; use start, pause, resume or stop")
+    info = web.session(session_id)
+    status = info["status"]
+    if status == "completed":
+        raise HTTPException(409, detail=f"session {session_id} is completed")
+    try:
+        if action in ("start", "resume"):
+            if action == "start" and status != "planned":
+                raise HTTPException(409, detail=f"session {session_id} is {status}, not planned; use resume")
+            if action == "resume" and status == "planned":
+                raise HTTPException(409, detail=f"session {session_id} has not started; use start")
+            runner = web.runner(session_id, create=True)
+            with web.db:
+                web.store.set_status(session_id, "running")
+            runner.resume()
+            runner.start()
+        elif action == "pause":
+            if status != "running":
+                raise HTTPException(409, detail=f"session {session_id} is {status}; only a running session can pause")
+            with web.db:
+                web.store.set_status(session_id, "paused")
+            runner = web.runner(session_id)
+            if runner is not None:
+                runner.pause()
+        else:
+            if status == "planned":
+                raise HTTPException(409, detail=f"session {session_id} has not started")
+            with web.db:
+                web.store.set_status(session_id, "aborted")
+            with web.lock:
+                runner = web.runners.pop(session_id, None)
+            if runner is not None:
+                runner.stop()
+    except StudyError as exc:
+        raise _study_error(exc) from None
+    return _session_out(web, session_id)
+
+
+# ---------------------------------------------------------------------- export and analysis
+@router.get("/api/export/trials.csv")
+def export_trials(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> FileResponse:
+    """Every answered trial as the SPEC §6 trials file."""
+    folder = web.data_dir / "exports"
+    folder.mkdir(exist_ok=True)
+    path = folder / f"trials-{time.strftime('%Y%m%d-%H%M%S')}.csv"
+    try:
+        with web.db:
+            web.store.export_trials_csv(path, participant_id=participant_id)
+    except StudyError as exc:
+        raise HTTPException(404 if "unknown participant" in str(exc) else 409, detail=str(exc)) from None
+    return FileResponse(path, media_type="text/csv", filename="trials.csv")
+
+
+@router.post("/api/analysis", status_code=202)
+def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Export the trials and run ``vibrofocus analyze`` on them in the background."""
+    name = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
+    out = web.data_dir / "reports" / name
+    out.mkdir(parents=True)
+    trials = out / "trials.csv"
+    with web.db:
+        n = web.store.export_trials_csv(trials)
+    if n == 0:
+        raise HTTPException(409, detail="no answered trials yet: nothing to analyse")
+    job = {"name": name, "status": "running", "rows": n, "url": f"/reports/{name}/report.html", "log": ""}
+    web.analyses[name] = job
+
+    def work() -> None:
+        # Through the command line: the analysis runs in its own process (pingouin,
+        # matplotlib) and the report is exactly what `vibrofocus analyze` writes.
+        proc = subprocess.run(
+            [sys.executable, "-m", "vibrofocus", "analyze", str(trials), "--out", str(out)],
+            capture_output=True, text=True, timeout=600,
+        )
+        job["log"] = (proc.stdout + proc.stderr)[-4000:]
+        job["status"] = "done" if proc.returncode == 0 and (out / "report.html").exists() else "failed"
+
+    threading.Thread(target=work, name=f"analysis-{name}", daemon=True).start()
+    return job
+
+
+@router.get("/api/analysis/{name}")
+def analysis_job(name: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """State of an analysis run."""
+    job = web.analyses.get(name)
+    if job is None:
+        raise HTTPException(404, detail=f"unknown analysis {name!r}")
+    return job
+
+
+@router.get("/reports/{name}/{file_path:path}", include_in_schema=False)
+def report_file(name: str, file_path: str, web: WebState = Depends(require_token)) -> FileResponse:
+    """Files of an analysis report (HTML, PNG, JSON)."""
+    root = (web.data_dir / "reports").resolve()
+    target = (root / name / file_path).resolve()
+    # Refuse anything that resolves outside the reports folder (../ tricks).
+    if root not in target.parents or not target.is_file():
+        raise HTTPException(404, detail=f"no report file {name}/{file_path}")
+    return FileResponse(target)

@@ -1,0 +1,176 @@
+"""Routes of the participant page: the page itself, its state (long-poll) and answers.
+
+Every route needs the session's participant key; nothing here accepts the experimenter
+token, so answers can only come from a participant page.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from typing import Any
+
+from fastapi import APIRouter, Header, HTTPException, Query, Request
+from fastapi.concurrency import run_in_threadpool
+from fastapi.responses import HTMLResponse
+
+from .api_models import AnswerIn, AnswerReceipt
+from .app import KEY_HEADER, WebState, render_template
+
+router = APIRouter()
+
+#: Longest a state request waits for a change, s (the page asks again at once).
+MAX_WAIT_S = 10.0
+
+
+def _web(request: Request) -> WebState:
+    return request.app.state.web
+
+
+def planned(web: WebState, session_id: int) -> list[Any]:
+    """The planned trials of a session (immutable once written, so cached)."""
+    cache = web.planned
+    if session_id not in cache:
+        with web.db:
+            cache[session_id] = list(web.store.planned_trials(session_id))
+    return cache[session_id]
+
+
+def answered(web: WebState, session_id: int) -> dict[int, Any]:
+    """Stored answers of a session by trial index."""
+    with web.db:
+        rows = web.store.answers(session_id)
+    return {int(row.trial_index): row for row in rows}
+
+
+def _live_runner(web: WebState, session_id: int, status: str):
+    """The runner of a session the store calls running or paused, built after a restart if needed."""
+    runner = web.runner(session_id)
+    if runner is None and status in ("running", "paused"):
+        runner = web.runner(session_id, create=True)
+        if status == "paused":
+            runner.pause()
+        runner.start()
+    return runner
+
+
+def _state(web: WebState, session_id: int) -> dict[str, Any]:
+    info = web.session(session_id)
+    status = info["status"]
+    runner = _live_runner(web, session_id, status)
+    snap = runner.snapshot() if runner is not None else {"state": "idle", "trial_index": None, "seq": 0, "paused": False}
+    trials = planned(web, session_id)
+    index = snap.get("trial_index")
+    trial = trials[index] if index is not None and 0 <= index < len(trials) else None
+    state = snap["state"]
+    if status in ("aborted", "completed"):
+        state = "done" if status == "completed" else "stopped"
+    elif status == "planned" or runner is None:
+        state = "waiting"
+    n_training = sum(1 for t in trials if t.phase == "training")
+    return {
+        "session_id": session_id,
+        "study": int(info["study"]),
+        "multi_select": int(info["study"]) == 2,
+        "status": status,
+        "state": state,
+        "seq": snap.get("seq", 0),
+        "paused": bool(snap.get("paused")),
+        "trial_index": index,
+        "phase": trial.phase if trial is not None else None,
+        "trial": trial.trial if trial is not None else None,
+        "n_in_phase": (n_training if trial.phase == "training" else len(trials) - n_training) if trial is not None else None,
+        "n_trials": len(trials),
+        "n_answered": int(info["n_answered"]),
+        "error": snap.get("error"),
+    }
+
+
+@router.get("/participant/{session_id}", response_class=HTMLResponse, include_in_schema=False)
+def participant_page(request: Request, session_id: int, key: str = Query("", max_length=64)) -> HTMLResponse:
+    """The full-screen participant page of a session (needs ``?key=``)."""
+    web = _web(request)
+    web.check_key(session_id, key)
+    info = web.session(session_id)
+    return HTMLResponse(render_template("participant.html", session_id=session_id, study=int(info["study"])))
+
+
+@router.get("/api/participant/{session_id}/state")
+async def participant_state(
+    request: Request,
+    session_id: int,
+    after: int = Query(-1, description="return as soon as seq differs from this"),
+    wait: float = Query(0.0, ge=0.0, le=MAX_WAIT_S, description="longest wait for a change, s"),
+    key: str | None = Header(None, alias=KEY_HEADER),
+) -> dict[str, Any]:
+    """State of the session as the page shows it; long-polls up to ``wait`` s for a change."""
+    web = _web(request)
+    web.check_key(session_id, key)
+    state = await run_in_threadpool(_state, web, session_id)
+    deadline = time.monotonic() + wait
+    # The runner's seq changes on every step of a trial; polling the in-memory runner
+    # every 40 ms keeps the beep within a frame or two of the cue without a thread per client.
+    while state["seq"] == after and time.monotonic() < deadline:
+        await asyncio.sleep(0.04)
+        runner = web.runner(session_id)
+        if runner is not None and runner.snapshot()["seq"] != after:
+            state = await run_in_threadpool(_state, web, session_id)
+            break
+        if await request.is_disconnected():
+            break
+    return state
+
+
+@router.post("/api/participant/{session_id}/answer", response_model=AnswerReceipt)
+def participant_answer(
+    request: Request,
+    session_id: int,
+    body: AnswerIn,
+    key: str | None = Header(None, alias=KEY_HEADER),
+) -> AnswerReceipt:
+    """Commit one answer; idempotent on ``answer_id`` (a re-send gets the same receipt)."""
+    web = _web(request)
+    web.check_key(session_id, key)
+    if body.session_id != session_id:
+        raise HTTPException(422, detail=f"body.session_id {body.session_id} does not match the session {session_id} of the URL")
+    info = web.session(session_id)
+    study = int(info["study"])
+    if study == 1 and len(body.response) != 1:
+        raise HTTPException(422, detail=f"Study 1 takes exactly one location per trial, got {len(body.response)}: {body.response}")
+    trials = planned(web, session_id)
+    if body.trial_index >= len(trials):
+        raise HTTPException(422, detail=f"trial_index {body.trial_index} is out of range: session {session_id} has {len(trials)} trials")
+    # One lock around check-and-commit: a re-send racing the original must not both pass.
+    with web.db:
+        done = answered(web, session_id)
+        prior = done.get(body.trial_index)
+        if prior is not None:
+            if prior.answer_id != body.answer_id or list(prior.response) != body.response:
+                raise HTTPException(409, detail=f"trial {body.trial_index} of session {session_id} is already answered (answer_id {prior.answer_id}); a different answer is refused")
+            nxt = web.store.next_trial(session_id)
+            return AnswerReceipt(
+                session_id=session_id, trial_index=body.trial_index, answer_id=body.answer_id,
+                response=body.response, duplicate=True, next_trial_index=None if nxt is None else nxt.trial_index,
+            )
+        status = info["status"]
+        # An answer to a stimulus felt just before a pause or a stop is data (it may
+        # arrive late, from the page's store); a session never started has played nothing.
+        if status not in ("running", "paused", "aborted"):
+            raise HTTPException(409, detail=f"session {session_id} is {status}; it takes no answers")
+        nxt = web.store.next_trial(session_id)
+        if nxt is None or nxt.trial_index != body.trial_index:
+            current = "none (all trials answered)" if nxt is None else str(nxt.trial_index)
+            raise HTTPException(409, detail=f"trial_index {body.trial_index} is not the current trial of session {session_id} (current: {current})")
+        runner = web.runner(session_id)
+        sha = runner.drive_sha_for(body.trial_index) if runner is not None else None
+        web.store.record_answer(
+            session_id, body.trial_index, list(body.response), float(body.rt_s),
+            answer_id=body.answer_id, drive_sha256=sha,
+        )
+        nxt = web.store.next_trial(session_id)
+    if runner is not None:
+        runner.notify_answer(body.trial_index)
+    return AnswerReceipt(
+        session_id=session_id, trial_index=body.trial_index, answer_id=body.answer_id,
+        response=body.response, next_trial_index=None if nxt is None else nxt.trial_index,
+    )

@@ -1,0 +1,262 @@
+"""The background trial loop of one running study session.
+
+One thread per running session walks the planned trials in the store: for the first
+unanswered trial it shows "get ready", sets the state to ``cue`` (the participant page
+plays the beep), waits, plays the stimulus on the rig, sets ``respond`` and waits until
+the answer is committed by the answer route. The database is the only memory of progress:
+a restarted server builds a new runner that starts again at the first unanswered trial.
+
+The participant page learns about state changes by long-polling :meth:`SessionRunner.snapshot`;
+each change increments ``seq`` so the page can tell a new cue from the same one seen again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import logging
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Pace", "PACES", "SessionRunner", "drive_sha256"]
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class Pace:
+    """Timing of one trial, s.
+
+    Attributes
+    ----------
+    ready_s : float
+        "Get ready" shown before the cue.
+    cue_to_stimulus_s : float
+        From the start of the beep to the stimulus; long enough for the page to learn
+        of the cue (one long-poll round trip) and play a 150 ms beep.
+    after_answer_s : float
+        The "taken" feedback stays this long before the next trial.
+    """
+
+    ready_s: float = 1.0
+    cue_to_stimulus_s: float = 0.7
+    after_answer_s: float = 0.8
+
+
+#: Named paces: ``normal`` for people, ``fast`` for tests and demonstrations.
+PACES = {"normal": Pace(), "fast": Pace(ready_s=0.1, cue_to_stimulus_s=0.25, after_answer_s=0.05)}
+
+
+def drive_sha256(drives: np.ndarray) -> str:
+    """SHA-256 of a drive array (float64, C order, shape included), hex."""
+    arr = np.ascontiguousarray(np.asarray(drives, dtype=np.float64))
+    digest = hashlib.sha256(repr(arr.shape).encode())
+    digest.update(arr.tobytes())
+    return digest.hexdigest()
+
+
+class SessionRunner:
+    """Run the trials of one session in a background thread.
+
+    Parameters
+    ----------
+    store : StudyStore
+        The study database; every progress decision is read from it.
+    session_id : int
+        The session to run.
+    stimulus : callable, optional
+        ``stimulus(trial) -> drives`` with drives of shape (n_actuators, n_samples), V,
+        or ``None`` for a dry run (no calibration: the cue and answers still work, but
+        nothing is played).
+    rig : Rig, optional
+        Where the drives play. Required when ``stimulus`` is given.
+    pace : Pace
+        Trial timing.
+    store_lock : threading.Lock, optional
+        Serialises database access shared with the request handlers.
+    """
+
+    def __init__(
+        self,
+        store: Any,
+        session_id: int,
+        *,
+        stimulus: Callable[[Any], np.ndarray] | None = None,
+        rig: Any = None,
+        pace: Pace = PACES["normal"],
+        store_lock: threading.Lock | None = None,
+    ) -> None:
+        if stimulus is not None and rig is None:
+            raise ValueError("a runner with a stimulus needs a rig to play it on")
+        self.store = store
+        self.session_id = int(session_id)
+        self.stimulus = stimulus
+        self.rig = rig
+        self.pace = pace
+        self._db = store_lock if store_lock is not None else threading.Lock()
+        self._cond = threading.Condition()
+        self._paused = False
+        self._stopping = False
+        self._answered: set[int] = set()
+        self._drive_sha: dict[int, str] = {}
+        self._state: dict[str, Any] = {"state": "idle", "trial_index": None, "phase": None, "seq": 0, "error": None}
+        self._thread: threading.Thread | None = None
+
+    # ------------------------------------------------------------------ control
+    def start(self) -> None:
+        """Start the trial loop (no effect if it already runs)."""
+        with self._cond:
+            if self._thread is not None and self._thread.is_alive():
+                return
+            self._stopping = False
+            self._thread = threading.Thread(target=self._run, name=f"session-{self.session_id}", daemon=True)
+            self._thread.start()
+
+    def pause(self) -> None:
+        """Pause before the next stimulus; an answer to a stimulus already felt is still taken."""
+        with self._cond:
+            self._paused = True
+            self._cond.notify_all()
+
+    def resume(self) -> None:
+        """Resume after :meth:`pause`."""
+        with self._cond:
+            self._paused = False
+            self._cond.notify_all()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        """End the loop, leave the rig silent, and wait for the thread."""
+        with self._cond:
+            self._stopping = True
+            self._cond.notify_all()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout)
+        if self.rig is not None:
+            try:
+                self.rig.stop()
+            except Exception:  # noqa: BLE001 - stopping must never raise
+                log.exception("rig.stop failed")
+
+    @property
+    def paused(self) -> bool:
+        return self._paused
+
+    @property
+    def running(self) -> bool:
+        return self._thread is not None and self._thread.is_alive()
+
+    def notify_answer(self, trial_index: int) -> None:
+        """Tell the loop that the answer to ``trial_index`` is committed."""
+        with self._cond:
+            self._answered.add(int(trial_index))
+            self._cond.notify_all()
+
+    def drive_sha_for(self, trial_index: int) -> str | None:
+        """Hash of the drive played for ``trial_index`` in this run, if one was played."""
+        with self._cond:
+            return self._drive_sha.get(int(trial_index))
+
+    def snapshot(self) -> dict[str, Any]:
+        """A copy of the current state (``state``, ``trial_index``, ``phase``, ``seq``, ...)."""
+        with self._cond:
+            snap = dict(self._state)
+            snap["paused"] = self._paused
+            return snap
+
+    # ------------------------------------------------------------------ loop
+    def _set(self, state: str, **fields: Any) -> None:
+        with self._cond:
+            self._state.update(fields)
+            self._state["state"] = state
+            self._state["seq"] += 1
+            self._state["since"] = time.time()
+            self._cond.notify_all()
+
+    def _wait(self, seconds: float, trial_index: int | None = None) -> bool:
+        """Sleep ``seconds``; return False early on stop or when the trial got its answer."""
+        deadline = time.monotonic() + seconds
+        with self._cond:
+            while True:
+                if self._stopping or (trial_index is not None and trial_index in self._answered):
+                    return False
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return True
+                self._cond.wait(left)
+
+    def _log(self, kind: str, payload: dict[str, Any]) -> None:
+        with self._db:
+            self.store.log_event(self.session_id, kind, payload)
+
+    def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # noqa: BLE001 - reported to the experimenter page
+            log.exception("session %s failed", self.session_id)
+            self._set("error", error=f"{type(exc).__name__}: {exc}")
+            try:
+                self._log("error", {"message": str(exc)})
+            except Exception:  # noqa: BLE001
+                log.exception("could not log the error of session %s", self.session_id)
+        finally:
+            if self.rig is not None:
+                try:
+                    self.rig.stop()
+                except Exception:  # noqa: BLE001
+                    log.exception("rig.stop failed")
+
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                if self._stopping:
+                    self._set("stopped", trial_index=None)
+                    return
+                if self._paused:
+                    if self._state["state"] != "paused":
+                        self._set("paused")
+                    self._cond.wait(0.5)
+                    continue
+            with self._db:
+                trial = self.store.next_trial(self.session_id)
+            if trial is None:
+                with self._db:
+                    self.store.set_status(self.session_id, "completed")
+                self._set("done", trial_index=None)
+                return
+            index = int(trial.trial_index)
+            phase = getattr(trial, "phase", None)
+            self._set("ready", trial_index=index, phase=phase)
+            if not self._wait(self.pace.ready_s, index):
+                continue
+            if self._paused:
+                continue  # the trial starts again from "get ready" after resume
+            self._set("cue", trial_index=index, phase=phase)
+            self._log("cue", {"trial_index": index})
+            if not self._wait(self.pace.cue_to_stimulus_s, index):
+                continue
+            if self._paused:
+                continue
+            payload: dict[str, Any] = {"trial_index": index, "played": False}
+            if self.stimulus is not None:
+                drives = self.stimulus(trial)
+                sha = drive_sha256(drives)
+                with self._cond:
+                    self._drive_sha[index] = sha
+                payload.update(played=True, drive_sha256=sha)
+                self._log("stimulus_onset", payload)
+                self.rig.play(drives)
+            else:
+                self._log("stimulus_onset", payload)
+            self._set("respond", trial_index=index, phase=phase)
+            with self._cond:
+                while not self._stopping and index not in self._answered:
+                    self._cond.wait(1.0)
+            if self._stopping:
+                continue
+            self._set("taken", trial_index=index, phase=phase)
+            self._wait(self.pace.after_answer_s)

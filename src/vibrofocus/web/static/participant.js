@@ -1,0 +1,271 @@
+// Participant page: shows the session state, plays the cue beep, takes answers.
+//
+// The rule this file is built around: an answer the participant gave is never lost.
+// It is written to localStorage (with its answer id) before it is sent, it stays there
+// until the server confirms the database commit, and it is re-sent with backoff after a
+// lost connection or a reload. The server is idempotent on the answer id, so a re-send
+// of an answer that did reach it is harmless.
+"use strict";
+
+(() => {
+  const body = document.body;
+  const sessionId = Number(body.dataset.session);
+  const multi = Number(body.dataset.study) === 2;
+  const key = new URLSearchParams(location.search).get("key") || "";
+  const pendingKey = `vibrofocus.pending.${sessionId}`;
+  const $ = (id) => document.getElementById(id);
+  const cells = Array.from(document.querySelectorAll(".cell"));
+
+  let seq = -1;               // last state seq seen (long-poll cursor)
+  let state = null;           // last state object from the server
+  let respondSince = null;    // performance.now() when the grid became answerable
+  let selected = new Set();   // Study 2 selection
+  let sentFor = null;         // trial index answered on this page (waiting or confirmed)
+  let confirmedFor = null;    // trial index whose answer the server confirmed
+  let lastBeep = null;        // "trial:seq" of the last cue played, to beep once per cue
+  let audio = null;
+  let online = true;
+  window.vfBeeps = 0;         // count of beeps played (read by the browser tests)
+
+  // ---------------------------------------------------------------- storage
+  function loadPending() {
+    try { return JSON.parse(localStorage.getItem(pendingKey) || "[]"); } catch { return []; }
+  }
+  function savePending(list) { localStorage.setItem(pendingKey, JSON.stringify(list)); }
+  function dropPending(answerId) { savePending(loadPending().filter((a) => a.answer_id !== answerId)); }
+
+  function newAnswerId() {
+    if (crypto.randomUUID) return crypto.randomUUID().replace(/-/g, "");
+    const b = new Uint8Array(16);
+    crypto.getRandomValues(b);
+    return Array.from(b, (x) => x.toString(16).padStart(2, "0")).join("");
+  }
+
+  // ---------------------------------------------------------------- network
+  const headers = { "Content-Type": "application/json", "X-Participant-Key": key };
+  const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
+
+  let sending = false;
+  async function flushPending() {
+    // One sender at a time; retries until every stored answer has a verdict.
+    if (sending) return;
+    sending = true;
+    let delay = 250;
+    try {
+      for (;;) {
+        const list = loadPending();
+        if (!list.length) return;
+        const answer = list[0];
+        let res;
+        try {
+          res = await fetch(`/api/participant/${sessionId}/answer`, {
+            method: "POST", headers, body: JSON.stringify(answer), cache: "no-store",
+          });
+        } catch {
+          setOnline(false);
+          await sleep(delay);
+          delay = Math.min(delay * 2, 4000);
+          continue;
+        }
+        setOnline(true);
+        if (res.ok) {
+          dropPending(answer.answer_id);
+          confirmedFor = answer.trial_index;
+          if (sentFor === answer.trial_index) showTaken();
+          delay = 250;
+        } else if (res.status >= 400 && res.status < 500) {
+          // Refused for good (e.g. the trial was answered differently, the session
+          // stopped): retrying cannot succeed, so it is dropped and logged.
+          const detail = await res.json().catch(() => ({}));
+          console.warn("answer refused", res.status, detail.detail);
+          dropPending(answer.answer_id);
+          if (sentFor === answer.trial_index) sentFor = null;
+        } else {
+          await sleep(delay);
+          delay = Math.min(delay * 2, 4000);
+        }
+      }
+    } finally {
+      sending = false;
+    }
+  }
+
+  async function pollLoop() {
+    let delay = 250;
+    for (;;) {
+      try {
+        const res = await fetch(
+          `/api/participant/${sessionId}/state?after=${seq}&wait=8`,
+          { headers: { "X-Participant-Key": key }, cache: "no-store" });
+        if (!res.ok) {
+          const detail = await res.json().catch(() => ({}));
+          setMessage(detail.detail || `The server refused this page (${res.status}).`);
+          body.dataset.state = "refused";
+          if (res.status === 403 || res.status === 404) return;
+          throw new Error(String(res.status));
+        }
+        setOnline(true);
+        delay = 250;
+        const next = await res.json();
+        if (loadPending().length) flushPending();
+        render(next);
+      } catch {
+        setOnline(false);
+        await sleep(delay);
+        delay = Math.min(delay * 2, 4000);
+      }
+    }
+  }
+
+  function setOnline(value) {
+    if (online === value) return;
+    online = value;
+    body.classList.toggle("offline", !value);
+    if (state) render(state);
+  }
+
+  // ---------------------------------------------------------------- audio
+  function beep() {
+    if (!audio) return;
+    // 1 kHz, 150 ms, with 10 ms ramps so the beep does not click.
+    const t = audio.currentTime + 0.01;
+    const osc = audio.createOscillator();
+    const gain = audio.createGain();
+    osc.frequency.value = 1000;
+    gain.gain.setValueAtTime(0, t);
+    gain.gain.linearRampToValueAtTime(0.3, t + 0.01);
+    gain.gain.setValueAtTime(0.3, t + 0.14);
+    gain.gain.linearRampToValueAtTime(0, t + 0.15);
+    osc.connect(gain).connect(audio.destination);
+    osc.start(t);
+    osc.stop(t + 0.16);
+    window.vfBeeps += 1;
+  }
+
+  // ---------------------------------------------------------------- rendering
+  function setMessage(text) { $("message").textContent = text; }
+
+  function render(next) {
+    const previous = state;
+    state = next;
+    seq = next.seq;
+    body.dataset.state = next.state;
+    body.dataset.trial = next.trial_index ?? "";
+    const newTrial = !previous || previous.trial_index !== next.trial_index;
+    if (newTrial) { selected = new Set(); }
+    if (next.state === "cue") {
+      const tag = `${next.trial_index}:${next.seq}`;
+      if (tag !== lastBeep) { lastBeep = tag; beep(); }
+    }
+    if (next.state === "respond" && respondSince === null) respondSince = performance.now();
+    if (next.state !== "respond") respondSince = null;
+
+    const phase = next.phase === "training" ? "Training" : "Trial";
+    $("progress").textContent = next.trial ? `${phase} ${next.trial} of ${next.n_in_phase}` : "";
+
+    const answerable = next.state === "respond" && sentFor !== next.trial_index
+      && !loadPending().some((a) => a.trial_index === next.trial_index);
+    body.classList.toggle("answerable", answerable);
+    const waitingForServer = sentFor === next.trial_index && confirmedFor !== next.trial_index;
+    $("confirm").hidden = !(multi && answerable);
+    for (const c of cells) c.classList.toggle("selected", selected.has(Number(c.dataset.loc)));
+    $("hint").textContent = "";
+
+    if (!online && loadPending().length) {
+      setMessage("Answer saved on this computer — reconnecting…");
+      return;
+    }
+    if (!online) { setMessage("Connection lost — reconnecting…"); return; }
+    switch (next.state) {
+      case "waiting": setMessage("Please wait — the experimenter will start the session."); break;
+      case "paused": setMessage("Short break. Please wait."); break;
+      case "ready": setMessage("Get ready"); break;
+      case "cue": setMessage("●"); break;
+      case "respond":
+        if (waitingForServer) setMessage("Sending…");
+        else if (confirmedFor === next.trial_index) showTaken();
+        else {
+          setMessage(multi ? "Where did you feel it? Select every location, then press Enter."
+                           : "Where did you feel it most?");
+        }
+        break;
+      case "taken": showTaken(); break;
+      case "done": setMessage("Thank you! The session is complete."); break;
+      case "stopped": setMessage("The session has ended."); break;
+      case "error": setMessage("Please wait — the experimenter has been notified."); break;
+      default: setMessage("Please wait.");
+    }
+  }
+
+  function showTaken() {
+    body.dataset.taken = "1";
+    setMessage("✓ Answer taken");
+    body.classList.add("taken");
+    setTimeout(() => { body.classList.remove("taken"); delete body.dataset.taken; }, 600);
+  }
+
+  // ---------------------------------------------------------------- answering
+  function canAnswer() {
+    return state && state.state === "respond" && sentFor !== state.trial_index
+      && !loadPending().some((a) => a.trial_index === state.trial_index);
+  }
+
+  function submit(locations) {
+    if (!canAnswer()) return;
+    if (!locations.length) { $("hint").textContent = "Select at least one location."; return; }
+    const rt = respondSince === null ? 0 : (performance.now() - respondSince) / 1000;
+    const answer = {
+      session_id: sessionId,
+      trial_index: state.trial_index,
+      response: [...locations].sort((a, b) => a - b),
+      rt_s: Math.round(rt * 1e4) / 1e4,
+      answer_id: newAnswerId(),
+    };
+    // Stored before the first send: a crash or reload from here on cannot lose it.
+    savePending([...loadPending(), answer]);
+    sentFor = state.trial_index;
+    for (const c of cells) c.classList.toggle("selected", answer.response.includes(Number(c.dataset.loc)));
+    body.classList.remove("answerable");
+    $("confirm").hidden = true;
+    setMessage("Sending…");
+    flushPending();
+  }
+
+  function choose(loc) {
+    if (!canAnswer()) return;
+    if (!multi) { submit([loc]); return; }
+    if (selected.has(loc)) selected.delete(loc); else selected.add(loc);
+    for (const c of cells) c.classList.toggle("selected", selected.has(Number(c.dataset.loc)));
+    $("hint").textContent = "";
+  }
+
+  document.addEventListener("keydown", (ev) => {
+    // Top-row digits and the keypad with NumLock give ev.key "1".."9"; the keypad
+    // without NumLock gives navigation keys, so its ev.code is read as well.
+    let loc = null;
+    if (/^[1-9]$/.test(ev.key)) loc = Number(ev.key);
+    else if (/^Numpad[1-9]$/.test(ev.code)) loc = Number(ev.code.slice(6));
+    if (loc !== null) { ev.preventDefault(); choose(loc); return; }
+    if (ev.key === "Enter" && multi) { ev.preventDefault(); submit([...selected]); return; }
+    if ((ev.key === "Backspace" || ev.key === "Escape" || ev.key === "Delete") && multi) {
+      selected = new Set();
+      for (const c of cells) c.classList.remove("selected");
+    }
+  });
+  for (const c of cells) c.addEventListener("click", () => choose(Number(c.dataset.loc)));
+  $("confirm").addEventListener("click", () => submit([...selected]));
+
+  $("begin").addEventListener("click", async () => {
+    // Browsers start audio only after a gesture on the page: this click is it.
+    try {
+      audio = new (window.AudioContext || window.webkitAudioContext)();
+      await audio.resume();
+    } catch (e) { console.warn("no audio", e); }
+    try { await document.documentElement.requestFullscreen(); } catch { /* headless or refused */ }
+    $("overlay").hidden = true;
+  });
+
+  window.addEventListener("online", () => flushPending());
+  flushPending();
+  pollLoop();
+})();
