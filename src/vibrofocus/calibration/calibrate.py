@@ -1,0 +1,380 @@
+"""Measure the skin's transfer matrix on a rig: :func:`calibrate` and :class:`Calibration`."""
+
+from __future__ import annotations
+
+import datetime as _dt
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validation import check_band, check_choice
+from ..defaults import BAND_HZ, N_SAMPLES
+from ..errors import ValidationError, VibrofocusError
+from ..layout import ArrayLayout
+from ..rendering.taper import band_taper
+from ..rigs.base import Rig
+from .estimate import estimate_repeats, h1_average, noise_and_snr, resize_impulse_response
+from .excitation import METHODS, SweepSettings, default_settings, make_excitation
+from .quality import QualityReport, QualityThresholds, assess_quality, detect_clipping
+
+__all__ = ["SCHEMA_VERSION", "Calibration", "calibrate"]
+
+#: Version of the calibration data model and of its file layout (:mod:`.io`).
+SCHEMA_VERSION = 1
+
+#: Extra recordings tried for a point whose every repeat had a dropout.
+MAX_RETRIES = 3
+
+PromptFn = Callable[[str, np.ndarray], None]
+ProgressFn = Callable[[int, int, str], None]
+
+
+@dataclass(eq=False)
+class Calibration:
+    """A measured transfer matrix with everything needed to trust and reproduce it.
+
+    Attributes
+    ----------
+    H : ndarray, complex, shape (n_freqs, n_points, n_actuators)
+        Transfer matrix, m/V, on ``freqs``; point ``i`` is ``layout.points_xy[i]``.
+    freqs : ndarray, shape (n_freqs,)
+        ``numpy.fft.rfftfreq(n_fft, 1 / fs)``, Hz.
+    fs : float
+        Sample rate, Hz.
+    coherence : ndarray, shape (n_freqs, n_points, n_actuators)
+        Coherence over repeats, in [0, 1]; NaN where not assessable (one repeat).
+    layout : ArrayLayout
+        The actuators and points calibrated.
+    band : (float, float)
+        Calibrated band, Hz; outside it ``H`` is not to be trusted.
+    participant_id : str
+    method : {"h1", "paper"}
+    quality : QualityReport
+    drives : ndarray, shape (n_actuators, n_drive)
+        Voltage on actuator ``a``'s channel while ``a`` was measured (all other channels
+        were zero), as played after the rig's fades, V.
+    recordings : ndarray, float32, shape (n_actuators, n_repeats, n_points, n_rec)
+        Raw displacement for each actuator, repeat and point, m; NaN marks a dropout.
+        Stored in single precision (about 0.1 ppm of the signal, far below sensor noise).
+    rig : dict
+        ``rig.describe()`` at calibration time.
+    sweep : SweepSettings
+    created : str
+        ISO 8601 time (UTC) of the calibration.
+    software_version : str
+        ``vibrofocus.__version__`` that measured it.
+    schema_version : int
+    """
+
+    H: np.ndarray
+    freqs: np.ndarray
+    fs: float
+    coherence: np.ndarray
+    layout: ArrayLayout
+    band: tuple[float, float]
+    participant_id: str
+    method: str
+    quality: QualityReport
+    drives: np.ndarray
+    recordings: np.ndarray
+    rig: dict
+    sweep: SweepSettings
+    created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
+    software_version: str = field(default_factory=lambda: _software_version())
+    schema_version: int = SCHEMA_VERSION
+
+    @property
+    def n_fft(self) -> int:
+        """Length of the time window whose real-FFT grid ``freqs`` is."""
+        return 2 * (len(self.freqs) - 1)
+
+    @property
+    def n_points(self) -> int:
+        return self.H.shape[1]
+
+    @property
+    def n_actuators(self) -> int:
+        return self.H.shape[2]
+
+    def impulse_responses(self) -> np.ndarray:
+        """Impulse responses of ``H``, m/V per sample, time zero at index 0 (negative times
+        wrap to the end), shape (n_points, n_actuators, n_fft)."""
+        return np.fft.irfft(np.moveaxis(self.H, 0, -1), self.n_fft, axis=-1)
+
+    def transfer_for(self, n: int, *, taper_octaves: float = 1.0) -> np.ndarray:
+        """The transfer matrix on the design grid ``rfftfreq(n, 1 / fs)``.
+
+        The stored ``H`` (on ``rfftfreq(n_fft, 1/fs)``) is taken to the time domain; its
+        impulse responses are zero-padded (``n > n_fft``) or cut with half-Hann fades
+        (``n < n_fft``), keeping the causal part at the start and a short acausal part
+        (1/16 of the window) at the end (:func:`.estimate.resize_impulse_response`), and
+        transformed back. Outside the calibrated band, where nothing was measured
+        reliably, the values are tapered to zero with a raised cosine over
+        ``taper_octaves`` octaves beyond each band edge (the designs band-limit to the
+        calibrated band anyway); beyond the taper they are exactly zero.
+
+        Parameters
+        ----------
+        n : int
+            Window length, samples (even, >= 16).
+        taper_octaves : float
+            Width of the out-of-band taper, octaves.
+
+        Returns
+        -------
+        ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+            m/V.
+        """
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 16 or n % 2:
+            raise ValidationError(f"n must be an even integer >= 16 (samples), got {n!r}")
+        n = int(n)
+        if n == self.n_fft:
+            H = self.H.copy()
+        else:
+            h = resize_impulse_response(self.impulse_responses(), n)
+            H = np.moveaxis(np.fft.rfft(h, axis=-1), -1, 0)
+        freqs = np.fft.rfftfreq(n, 1 / self.fs)
+        with np.errstate(over="ignore", divide="ignore"):  # band_taper at 0 Hz
+            taper = band_taper(freqs, self.band, taper_octaves)
+        return H * taper[:, None, None]
+
+    def summary_table(self, title: str | None = None):
+        """Rich table with a verdict per point and actuator (see :class:`QualityReport`)."""
+        title = title or f"Calibration of {self.participant_id} ({self.method}, {self.band[0]:g}-{self.band[1]:g} Hz)"
+        return self.quality.table(self.layout, title=title)
+
+    def __repr__(self) -> str:
+        return (
+            f"Calibration(participant_id={self.participant_id!r}, method={self.method!r}, "
+            f"n_points={self.n_points}, n_actuators={self.n_actuators}, n_fft={self.n_fft}, "
+            f"fs={self.fs:g}, band={self.band}, quality_ok={self.quality.ok})"
+        )
+
+
+def _software_version() -> str:
+    from .. import __version__
+
+    return __version__
+
+
+def _sub_layout(layout: ArrayLayout, points: Sequence[int] | None, actuators: Sequence[int] | None):
+    """The layout restricted to chosen point and actuator indices (order kept)."""
+    p_idx = _indices(points, layout.n_points, "points", "points of the layout")
+    a_idx = _indices(actuators, layout.n_actuators, "actuators", "actuators of the layout")
+    if points is None and actuators is None:
+        return layout, p_idx, a_idx
+    loc = p_idx[p_idx < layout.n_locations]
+    grd = p_idx[p_idx >= layout.n_locations] - layout.n_locations
+    if loc.size == 0:
+        raise ValidationError("points must include at least one location (not only guard points)")
+    sub = ArrayLayout(
+        layout.actuators_xy[a_idx], layout.locations_xy[loc], layout.guards_xy[grd],
+        spacing_xy=layout.spacing_xy, actuator_names=tuple(layout.actuator_names[i] for i in a_idx),
+        guard_names=tuple(layout.guard_names[i] for i in grd), name=f"{layout.name} (subset)",
+    )
+    # Locations come first in a layout, so keep that order for the recordings too.
+    return sub, np.concatenate([loc, grd + layout.n_locations]), a_idx
+
+
+def _indices(sel: Sequence[int] | None, n: int, name: str, what: str) -> np.ndarray:
+    if sel is None:
+        return np.arange(n)
+    idx = np.asarray(list(sel))
+    if idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+        raise ValidationError(f"{name} must be a non-empty sequence of integer indices, got {sel!r}")
+    if idx.min() < 0 or idx.max() >= n:
+        raise ValidationError(f"{name} holds an index outside the {n} {what} (valid: 0..{n - 1}): {sel!r}")
+    if len(np.unique(idx)) != idx.size:
+        raise ValidationError(f"{name} lists an index twice: {sel!r}")
+    return np.sort(idx)
+
+
+def calibrate(
+    rig: Rig,
+    *,
+    participant_id: str,
+    method: str = "h1",
+    points: Sequence[int] | None = None,
+    actuators: Sequence[int] | None = None,
+    band: tuple[float, float] = BAND_HZ,
+    sweep_s: float | None = None,
+    repeats: int | None = None,
+    amplitude_v: float = 5.0,
+    n_fft: int = N_SAMPLES,
+    prompt: PromptFn | None = None,
+    progress: ProgressFn | None = None,
+    thresholds: QualityThresholds | None = None,
+) -> Calibration:
+    """Measure the transfer matrix from every actuator to every skin point.
+
+    One actuator plays at a time (all other channels at zero) while the skin is
+    recorded. A rig that records any number of points at once (the simulated forearm)
+    records all points in each take; a single-spot vibrometer
+    (``rig.max_points_per_recording == 1``) is aimed by the operator at each point in
+    turn, after ``prompt(point_label, point_xy)`` returns.
+
+    Parameters
+    ----------
+    rig : Rig
+        The rig; its ``layout`` and ``fs`` define the points, actuators and sample rate.
+    participant_id : str
+        Who is calibrated; stored in the result.
+    method : {"h1", "paper"}
+        ``"h1"`` (default): exponential sweep with half an octave of margin beyond the
+        band, repeated, H1 estimate and coherence. ``"paper"``: one linear sweep over the
+        band, FFT of the response over FFT of the drive. See
+        :mod:`vibrofocus.calibration.excitation` and :mod:`.estimate`.
+    points : sequence of int, optional
+        Indices into ``rig.layout.points_xy`` to calibrate; default all. The result's
+        layout then holds only these points (locations renumbered 1..k in order).
+    actuators : sequence of int, optional
+        Indices of the actuators to calibrate; default all.
+    band : (float, float)
+        Calibrated band, Hz.
+    sweep_s : float, optional
+        Sweep length, s; default 2 s (``h1``) or 4 s (``paper``).
+    repeats : int, optional
+        Recordings per point and actuator; default 4 (``h1``) or 1 (``paper``).
+    amplitude_v : float
+        Sweep peak, V (default 5 V: under the default 4 V RMS limit).
+    n_fft : int
+        Length of the design grid: ``H`` is stored on ``rfftfreq(n_fft, 1/fs)``.
+    prompt : callable ``(point_label: str, point_xy: ndarray (2,) in m) -> None``, optional
+        Called before each point on a rig that must be aimed; it returns when the sensor
+        is on the point. Required for such rigs.
+    progress : callable ``(done: int, total: int, message: str) -> None``, optional
+        Called after every recording.
+    thresholds : QualityThresholds, optional
+        Thresholds of the quality verdicts.
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    ValidationError
+        Bad arguments, or a single-spot rig without ``prompt``.
+    SafetyError
+        The sweep breaks the rig's limits (nothing is played).
+    VibrofocusError
+        A point kept dropping out in every recording.
+    """
+    if not isinstance(rig, Rig):
+        raise ValidationError(f"rig must be a vibrofocus Rig, got {type(rig).__name__}")
+    if not isinstance(participant_id, str) or not participant_id.strip():
+        raise ValidationError(f"participant_id must be a non-empty string, got {participant_id!r}")
+    check_choice(method, "method", METHODS)
+    fs = rig.fs
+    band = check_band(band, fs)
+    if isinstance(n_fft, bool) or not isinstance(n_fft, (int, np.integer)) or n_fft < 256 or n_fft % 2:
+        raise ValidationError(f"n_fft must be an even integer >= 256, got {n_fft!r}")
+    if fs / n_fft > band[0]:
+        raise ValidationError(
+            f"n_fft={n_fft} gives a frequency step of {fs / n_fft:.3g} Hz, coarser than the band's low "
+            f"edge {band[0]:g} Hz; use n_fft >= {int(np.ceil(fs / band[0]))}"
+        )
+    settings = default_settings(method, fs, band, sweep_s=sweep_s, repeats=repeats, amplitude_v=amplitude_v)
+    layout, p_idx, a_idx = _sub_layout(rig.layout, points, actuators)
+    excitation = make_excitation(settings)
+    # Refuse an unsafe sweep before the first recording, not halfway through.
+    probe = np.zeros((rig.layout.n_actuators, excitation.size))
+    probe[a_idx[0]] = excitation
+    played = rig.check(probe)[a_idx[0]]
+
+    points_xy = rig.layout.points_xy[p_idx]
+    labels = layout.point_labels
+    limit = rig.max_points_per_recording
+    if limit is None:
+        groups = [np.arange(len(p_idx))]
+    else:
+        if prompt is None:
+            raise ValidationError(
+                f"the {rig.kind} rig records {limit} point(s) at a time and its sensor must be aimed at each "
+                "point: pass prompt=callable(point_label, point_xy) (the CLI asks on the terminal)"
+            )
+        groups = [np.arange(s, min(s + limit, len(p_idx))) for s in range(0, len(p_idx), limit)]
+
+    n_p, n_a, n_r = len(p_idx), len(a_idx), settings.repeats
+    n_rec = settings.n_drive + settings.n_tail
+    recordings = np.full((n_a, n_r, n_p, n_rec), np.nan)
+    dropouts = np.zeros((n_p, n_a), dtype=int)
+    total, done = len(groups) * n_a * n_r, 0
+
+    def record(drive: np.ndarray, group: np.ndarray) -> np.ndarray:
+        y = rig.play_and_record(drive, points_xy[group] if limit is not None else points_xy,
+                                tail_s=settings.tail_s)
+        if y.shape != (len(group), n_rec):
+            raise VibrofocusError(
+                f"the {rig.kind} rig returned a recording of shape {y.shape}, expected {(len(group), n_rec)}"
+            )
+        return y
+
+    for group in groups:
+        if limit is not None:
+            for p in group:
+                prompt(labels[p], points_xy[p].copy())
+        for a, channel in enumerate(a_idx):
+            drive = np.zeros((rig.layout.n_actuators, excitation.size))
+            drive[channel] = excitation
+            for r in range(n_r):
+                recordings[a, r, group] = record(drive, group)
+                done += 1
+                if progress is not None:
+                    where = "all points" if limit is None else "point " + ", ".join(labels[p] for p in group)
+                    progress(done, total, f"{layout.actuator_names[a]}, {where}, take {r + 1}/{n_r}")
+            bad = ~np.isfinite(recordings[a][:, group]).all(axis=-1)  # (R, len(group))
+            dropouts[group, a] = bad.sum(axis=0)
+            # A point that dropped out in every take is re-recorded into its first slot.
+            for _ in range(MAX_RETRIES):
+                lost = group[bad.all(axis=0)]
+                if lost.size == 0:
+                    break
+                y = record(drive, group)
+                ok_now = np.isfinite(y).all(axis=-1)
+                fill = bad.all(axis=0) & ok_now
+                recordings[a, 0, group[fill]] = y[fill]
+                bad[0, fill] = False
+            lost = group[bad.all(axis=0)]
+            if lost.size:
+                raise VibrofocusError(
+                    f"the vibrometer dropped out in every recording of point(s) "
+                    f"{', '.join(labels[p] for p in lost)} with actuator {layout.actuator_names[a]} "
+                    f"({n_r + MAX_RETRIES} tries); check its aim and signal level"
+                )
+
+    # Estimation, one actuator at a time (a handful), vectorised over repeats, points
+    # and frequencies.
+    sweep_band = (settings.f_start, settings.f_stop)
+    H_rep, valid, noise, snr = [], [], [], []
+    for a in range(n_a):
+        Hr, ok = estimate_repeats(recordings[a], played, fs, sweep_band, n_fft)
+        H_rep.append(Hr)
+        valid.append(ok)
+        nz, sn = noise_and_snr(recordings[a], ok, settings.n_pre, fs, band)
+        noise.append(nz)
+        snr.append(sn)
+    H_rep = np.stack(H_rep, axis=2)  # (R, P, A, F)
+    valid = np.stack(valid, axis=2)  # (R, P, A)
+    H, coherence, n_used = h1_average(H_rep, valid)
+    H = np.moveaxis(H, -1, 0)
+    coherence = np.moveaxis(coherence, -1, 0)
+    freqs = np.fft.rfftfreq(n_fft, 1 / fs)
+
+    sensor_range = getattr(rig, "sensor_range_m", None)
+    clipped = detect_clipping(recordings, clip_samples=(thresholds or QualityThresholds()).clip_samples,
+                              sensor_range_m=sensor_range).any(axis=1).T  # (P, A)
+    quality = assess_quality(
+        H, coherence, freqs, band, layout,
+        snr_db=np.stack(snr, axis=1), noise_rms_m=np.stack(noise, axis=1), clipped=clipped,
+        repeats_used=n_used, dropouts=dropouts, drive_peak_v=float(np.abs(played).max()),
+        peak_limit_v=rig.limits.peak_v, thresholds=thresholds,
+    )
+    drives = np.repeat(played[None, :], n_a, axis=0)
+    return Calibration(
+        H=H, freqs=freqs, fs=fs, coherence=coherence, layout=layout, band=band,
+        participant_id=participant_id, method=method, quality=quality, drives=drives,
+        recordings=recordings.astype(np.float32), rig=rig.describe(), sweep=settings,
+    )
+

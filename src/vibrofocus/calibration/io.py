@@ -1,0 +1,330 @@
+"""One self-describing netCDF4/HDF5 file per calibration (xarray + h5netcdf).
+
+File layout (schema version 1), readable by any netCDF4 or HDF5 reader:
+
+Dimensions
+    ``frequency`` (n_fft/2 + 1), ``point``, ``actuator``, ``repeat``, ``drive_sample``,
+    ``record_sample``.
+Coordinates
+    ``frequency`` (Hz), ``point`` (labels ``"1".."9"``, ``"G1"``..), ``point_x``,
+    ``point_y`` (m, on ``point``), ``point_kind`` (``location``/``guard``), ``actuator``
+    (names), ``actuator_x``, ``actuator_y`` (m).
+Variables
+    ``H_real``, ``H_imag`` (frequency, point, actuator), m/V: the complex transfer matrix
+    as two real variables (plain netCDF4 has no complex type; this is what CF-minded
+    readers expect); ``coherence`` (same dims, 1; NaN where not assessable);
+    ``drive`` (actuator, drive_sample), V; ``recording`` (actuator, repeat, point,
+    record_sample), m, float32, NaN marks a dropout; quality figures ``snr_db``,
+    ``noise_rms``, ``band_gain``, ``low_coherence_share``, ``clipped``, ``repeats_used``,
+    ``dropouts`` (point, actuator) and ``polarity`` (actuator).
+Attributes
+    ``file_kind = "vibrofocus calibration"``, ``schema_version``, ``software``,
+    ``software_version``, ``participant_id``, ``method``, ``fs`` (Hz), ``band_low``,
+    ``band_high`` (Hz), ``n_fft``, ``created``, and JSON strings ``layout``, ``rig``,
+    ``sweep``, ``quality_issues``, ``quality_thresholds``.
+
+:func:`load_calibration` checks all of it and raises
+:class:`~vibrofocus.errors.CalibrationFileError` naming the file and what is wrong.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import CalibrationFileError, ValidationError
+from ..layout import ArrayLayout
+from .calibrate import SCHEMA_VERSION, Calibration
+from .excitation import SweepSettings
+from .quality import QualityIssue, QualityReport, QualityThresholds
+
+__all__ = ["save_calibration", "load_calibration"]
+
+FILE_KIND = "vibrofocus calibration"
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+_QUALITY_VARS = {
+    "snr_db": ("dB", "in-band signal-to-noise ratio"),
+    "noise_rms": ("m", "in-band noise floor from the pre-sweep silence"),
+    "band_gain": ("m/V", "RMS of |H| over the calibrated band"),
+    "low_coherence_share": ("1", "share of band frequencies with low coherence"),
+    "clipped": ("1", "1 if any recording of the pair was clipped"),
+    "repeats_used": ("1", "recordings kept after excluding dropouts"),
+    "dropouts": ("1", "recordings left out because of dropouts"),
+}
+_REQUIRED_VARS = ("H_real", "H_imag", "coherence", "drive", "recording", *_QUALITY_VARS, "polarity")
+_REQUIRED_ATTRS = ("schema_version", "participant_id", "method", "fs", "band_low", "band_high", "n_fft",
+                   "created", "software_version", "layout", "rig", "sweep", "quality_issues",
+                   "quality_thresholds")
+
+
+def _to_dataset(cal: Calibration):
+    import xarray as xr
+
+    lay = cal.layout
+    pts = lay.points_xy
+    kinds = ["location"] * lay.n_locations + ["guard"] * lay.n_guards
+    q = cal.quality
+    pa = ("point", "actuator")
+    data_vars = {
+        "H_real": (("frequency", *pa), cal.H.real, {"units": "m/V", "long_name": "transfer matrix, real part"}),
+        "H_imag": (("frequency", *pa), cal.H.imag, {"units": "m/V", "long_name": "transfer matrix, imaginary part"}),
+        "coherence": (("frequency", *pa), cal.coherence,
+                      {"units": "1", "long_name": "coherence over repeats (NaN: not assessable)"}),
+        "drive": (("actuator", "drive_sample"), cal.drives,
+                  {"units": "V", "long_name": "voltage on the measured actuator's channel (others zero)"}),
+        "recording": (("actuator", "repeat", "point", "record_sample"), cal.recordings,
+                      {"units": "m", "long_name": "raw displacement (NaN: dropout)"}),
+        "polarity": (("actuator",), q.polarity.astype(np.int8),
+                     {"units": "1", "long_name": "relative polarity (+1/-1, 0 not judged)"}),
+    }
+    figures = {"snr_db": q.snr_db, "noise_rms": q.noise_rms_m, "band_gain": q.band_gain,
+               "low_coherence_share": q.low_coherence_share, "clipped": q.clipped.astype(np.int8),
+               "repeats_used": q.repeats_used.astype(np.int32), "dropouts": q.dropouts.astype(np.int32)}
+    for name, values in figures.items():
+        units, long_name = _QUALITY_VARS[name]
+        data_vars[name] = (pa, values, {"units": units, "long_name": long_name})
+    coords = {
+        "frequency": ("frequency", cal.freqs, {"units": "Hz"}),
+        "point": ("point", list(lay.point_labels)),
+        "point_x": ("point", pts[:, 0], {"units": "m", "long_name": "x, across the arm toward the thumb"}),
+        "point_y": ("point", pts[:, 1], {"units": "m", "long_name": "y, along the arm toward the wrist"}),
+        "point_kind": ("point", kinds),
+        "actuator": ("actuator", list(lay.actuator_names)),
+        "actuator_x": ("actuator", lay.actuators_xy[:, 0], {"units": "m"}),
+        "actuator_y": ("actuator", lay.actuators_xy[:, 1], {"units": "m"}),
+    }
+    attrs = {
+        "title": f"vibrofocus calibration of {cal.participant_id}",
+        "file_kind": FILE_KIND,
+        "schema_version": np.int32(cal.schema_version),
+        "software": "vibrofocus",
+        "software_version": cal.software_version,
+        "participant_id": cal.participant_id,
+        "method": cal.method,
+        "fs": float(cal.fs),
+        "band_low": float(cal.band[0]),
+        "band_high": float(cal.band[1]),
+        "n_fft": np.int32(cal.n_fft),
+        "created": cal.created,
+        "layout": json.dumps(lay.to_dict()),
+        "rig": json.dumps(cal.rig, default=_json_default),
+        "sweep": json.dumps(cal.sweep.to_dict()),
+        "quality_issues": json.dumps([i.to_dict() for i in q.issues]),
+        "quality_thresholds": json.dumps(q.thresholds.to_dict()),
+    }
+    return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return str(obj)
+
+
+def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
+    """Write a calibration to one netCDF4/HDF5 file (see the module docstring).
+
+    The file is written next to its destination and then renamed, so an interrupted
+    save never leaves a half-written calibration under ``path``.
+
+    Parameters
+    ----------
+    cal : Calibration
+    path : str or PathLike
+        Destination, conventionally ``*.nc``.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
+    if not isinstance(cal, Calibration):
+        raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
+    path = Path(path)
+    if not path.parent.exists():
+        raise CalibrationFileError(f"{path}: the folder {path.parent} does not exist")
+    ds = _to_dataset(cal)
+    encoding = {"recording": {"zlib": True, "complevel": 4, "dtype": "float32"}}
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        ds.to_netcdf(tmp, engine="h5netcdf", encoding=encoding)
+        os.replace(tmp, path)
+    except OSError as exc:
+        raise CalibrationFileError(f"{path}: cannot write the calibration ({exc})") from exc
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return path
+
+
+def _fail(path: Path, what: str) -> CalibrationFileError:
+    return CalibrationFileError(f"{path}: {what}")
+
+
+def load_calibration(path: str | os.PathLike) -> Calibration:
+    """Read and validate a calibration file.
+
+    Parameters
+    ----------
+    path : str or PathLike
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    CalibrationFileError
+        Missing or unreadable file; not HDF5 (foreign file); truncated or corrupt HDF5;
+        not a vibrofocus calibration; unknown schema version; missing variables or
+        attributes; inconsistent dimensions, shapes or dtypes; NaN/Inf in the transfer
+        matrix (named with its frequency, point and actuator); a bad band; points or
+        actuators that do not match the layout. The message names the file.
+    """
+    import xarray as xr
+
+    path = Path(path)
+    if not path.exists():
+        raise _fail(path, "no such calibration file")
+    if not path.is_file():
+        raise _fail(path, "is not a file")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError as exc:
+        raise _fail(path, f"cannot be read ({exc.strerror or exc})") from exc
+    if head != _HDF5_SIGNATURE:
+        what = "it is empty" if not head else f"it starts with {head!r}"
+        raise _fail(path, f"is not a netCDF4/HDF5 calibration file ({what}, not the HDF5 signature)")
+    try:
+        with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False) as ds:
+            ds = ds.load()
+    except Exception as exc:  # h5py reports truncation as OSError, others as ValueError/KeyError
+        raise _fail(path, f"is truncated or corrupt: the HDF5 library could not read it ({exc})") from exc
+    return _from_dataset(ds, path)
+
+
+def _from_dataset(ds, path: Path) -> Calibration:
+    attrs = ds.attrs
+    if attrs.get("file_kind") != FILE_KIND:
+        raise _fail(path, f"is an HDF5/netCDF file but not a vibrofocus calibration (file_kind is "
+                          f"{attrs.get('file_kind')!r}, expected {FILE_KIND!r})")
+    version = attrs.get("schema_version")
+    try:
+        version = int(np.asarray(version).item())
+    except (TypeError, ValueError):
+        raise _fail(path, f"has no valid schema_version (got {version!r})") from None
+    if version > SCHEMA_VERSION:
+        raise _fail(path, f"has schema version {version}, newer than this vibrofocus reads "
+                          f"({SCHEMA_VERSION}); it was written by vibrofocus {attrs.get('software_version', '?')}; "
+                          "upgrade vibrofocus")
+    if version < 1:
+        raise _fail(path, f"has schema version {version}, which no vibrofocus release wrote "
+                          f"(this version reads {SCHEMA_VERSION})")
+    missing = [a for a in _REQUIRED_ATTRS if a not in attrs]
+    if missing:
+        raise _fail(path, f"lacks the attribute(s) {', '.join(missing)}")
+    missing = [v for v in _REQUIRED_VARS if v not in ds.variables]
+    if missing:
+        raise _fail(path, f"lacks the variable(s) {', '.join(missing)}")
+
+    try:
+        layout = ArrayLayout.from_dict(json.loads(attrs["layout"]))
+        rig = json.loads(attrs["rig"])
+        sweep = SweepSettings.from_dict(json.loads(attrs["sweep"]))
+        issues = [QualityIssue.from_dict(d) for d in json.loads(attrs["quality_issues"])]
+        thresholds = QualityThresholds(**json.loads(attrs["quality_thresholds"]))
+    except (ValueError, TypeError, KeyError) as exc:  # JSONDecodeError is a ValueError
+        raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
+
+    fs = float(attrs["fs"])
+    n_fft = int(attrs["n_fft"])
+    if not np.isfinite(fs) or fs <= 0:
+        raise _fail(path, f"has an invalid sample rate fs={fs!r}")
+    band = (float(attrs["band_low"]), float(attrs["band_high"]))
+    if not (0 < band[0] < band[1] <= fs / 2):
+        raise _fail(path, f"has an invalid band {band[0]:g}-{band[1]:g} Hz (needs 0 < low < high <= fs/2 = "
+                          f"{fs / 2:g} Hz)")
+
+    # Dimensions, shapes and dtypes.
+    expected_dims = {
+        "H_real": ("frequency", "point", "actuator"), "H_imag": ("frequency", "point", "actuator"),
+        "coherence": ("frequency", "point", "actuator"), "drive": ("actuator", "drive_sample"),
+        "recording": ("actuator", "repeat", "point", "record_sample"), "polarity": ("actuator",),
+        **{name: ("point", "actuator") for name in _QUALITY_VARS},
+    }
+    for name, dims in expected_dims.items():
+        if ds[name].dims != dims:
+            raise _fail(path, f"variable {name} has dimensions {ds[name].dims}, expected {dims}")
+        if not np.issubdtype(ds[name].dtype, np.number):
+            raise _fail(path, f"variable {name} has dtype {ds[name].dtype}, expected a numeric type")
+    for name in ("H_real", "H_imag", "coherence", "drive", "recording"):
+        if not np.issubdtype(ds[name].dtype, np.floating):
+            raise _fail(path, f"variable {name} has dtype {ds[name].dtype}, expected floating point")
+    n_f = ds.sizes["frequency"]
+    if n_f != n_fft // 2 + 1:
+        raise _fail(path, f"has {n_f} frequencies but n_fft={n_fft} needs {n_fft // 2 + 1}")
+    freqs = np.asarray(ds["frequency"].values, float)
+    if not np.allclose(freqs, np.fft.rfftfreq(n_fft, 1 / fs), rtol=1e-9, atol=1e-9):
+        raise _fail(path, f"its frequency axis is not rfftfreq({n_fft}, 1/{fs:g})")
+
+    # Points and actuators against the layout.
+    labels = [str(v) for v in ds["point"].values]
+    if labels != list(layout.point_labels):
+        absent = [lab for lab in layout.point_labels if lab not in labels]
+        extra = [lab for lab in labels if lab not in layout.point_labels]
+        detail = []
+        if absent:
+            detail.append(f"point(s) {', '.join(absent)} of the layout are missing from the data")
+        if extra:
+            detail.append(f"point(s) {', '.join(extra)} are not in the layout")
+        raise _fail(path, "points do not match the layout: " + ("; ".join(detail) or
+                    f"order {labels} differs from {list(layout.point_labels)}"))
+    pts = np.stack([ds["point_x"].values, ds["point_y"].values], axis=1).astype(float)
+    if not np.allclose(pts, layout.points_xy, atol=1e-9):
+        raise _fail(path, "point positions (point_x, point_y) differ from the layout's")
+    names = [str(v) for v in ds["actuator"].values]
+    if names != list(layout.actuator_names):
+        raise _fail(path, f"actuators {names} do not match the layout's {list(layout.actuator_names)}")
+    act = np.stack([ds["actuator_x"].values, ds["actuator_y"].values], axis=1).astype(float)
+    if not np.allclose(act, layout.actuators_xy, atol=1e-9):
+        raise _fail(path, "actuator positions (actuator_x, actuator_y) differ from the layout's")
+    if ds.sizes["record_sample"] < ds.sizes["drive_sample"]:
+        raise _fail(path, "recordings are shorter than the drives")
+
+    # Values.
+    H_real, H_imag = ds["H_real"].values, ds["H_imag"].values
+    for name, arr in (("H_real", H_real), ("H_imag", H_imag)):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            f, p, a = np.argwhere(bad)[0]
+            raise _fail(path, f"variable {name} holds {int(bad.sum())} NaN/Inf value(s); first at "
+                              f"{freqs[f]:g} Hz, point {labels[p]}, actuator {names[a]}")
+    coherence = ds["coherence"].values.astype(float)
+    finite = np.isfinite(coherence)
+    if (coherence[finite] < -1e-9).any() or (coherence[finite] > 1 + 1e-9).any():
+        raise _fail(path, "variable coherence holds values outside [0, 1]")
+    drive = ds["drive"].values
+    if not np.isfinite(drive).all():
+        raise _fail(path, "variable drive holds NaN/Inf")
+
+    quality = QualityReport(
+        issues=issues, snr_db=ds["snr_db"].values, noise_rms_m=ds["noise_rms"].values,
+        band_gain=ds["band_gain"].values, low_coherence_share=ds["low_coherence_share"].values,
+        clipped=ds["clipped"].values.astype(bool), repeats_used=ds["repeats_used"].values.astype(int),
+        dropouts=ds["dropouts"].values.astype(int), polarity=ds["polarity"].values.astype(int),
+        thresholds=thresholds,
+    )
+    return Calibration(
+        H=H_real.astype(float) + 1j * H_imag.astype(float), freqs=freqs, fs=fs, coherence=coherence,
+        layout=layout, band=band, participant_id=str(attrs["participant_id"]), method=str(attrs["method"]),
+        quality=quality, drives=drive, recordings=ds["recording"].values, rig=rig, sweep=sweep,
+        created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
+    )
