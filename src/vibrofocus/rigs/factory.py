@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from .._validation import check_choice
+from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .base import Rig
 
@@ -21,9 +24,11 @@ def make_rig(
     ----------
     kind : {"simulated", "audio", "nidaq"}
         Which backend.
-    config : path or config object, optional
-        Hardware settings (devices, channels, amplifier gain, vibrometer); ignored by the
-        simulated rig.
+    config : str, Path, dict or RigConfig, optional
+        Hardware settings (device, channels, amplifier gain, vibrometer, limits): a
+        ``.toml``/``.json`` file (see ``examples/rigs/``), a mapping of the same content,
+        or a loaded :class:`~vibrofocus.rigs.config.RigConfig`. Required by ``audio`` and
+        ``nidaq``, whose ``kind`` it must match; ignored by the simulated rig.
     seed : int, optional
         Participant seed of the simulated forearm (default 0).
     layout : ArrayLayout, optional
@@ -34,4 +39,25 @@ def make_rig(
         from ..skin import SimulatedForearm  # imported here: the model is not needed for hardware
 
         return SimulatedForearm(seed=0 if seed is None else seed, layout=layout)
-    raise NotImplementedError(f"the {kind} rig is not available yet")
+    from .config import RigConfig, load_rig_config, parse_rig_config
+
+    if config is None:
+        raise ValidationError(
+            f"the {kind} rig needs a rig config file (device, channels, amplifier gain, vibrometer); "
+            f"see examples/rigs/{kind}.toml"
+        )
+    if isinstance(config, (str, Path)):
+        cfg = load_rig_config(config)
+    elif isinstance(config, (dict, RigConfig)):
+        cfg = parse_rig_config(config)
+    else:
+        raise ValidationError(f"config must be a path, a mapping or a RigConfig, got {type(config).__name__}")
+    if cfg.kind != kind:
+        raise ValidationError(f"the rig config is for a {cfg.kind!r} rig, but --rig asks for {kind!r}")
+    if kind == "audio":
+        from .audio import AudioRig
+
+        return AudioRig(cfg, layout=layout)
+    from .nidaq import NidaqRig
+
+    return NidaqRig(cfg, layout=layout)

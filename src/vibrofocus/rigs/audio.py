@@ -1,0 +1,308 @@
+"""The ``audio`` rig: a multichannel audio interface through sounddevice (PortAudio).
+
+Many tactile labs drive their actuators from the line outputs of a multichannel audio
+interface through a power amplifier and record the vibrometer decoder on one of its
+inputs. This rig plays and records full-duplex in one PortAudio stream
+(:func:`sounddevice.playrec`), so input and output share the interface's sample clock.
+
+Signal chain
+------------
+Drives are volts at the actuator. The interface puts out ``drive / amplifier_gain`` V,
+i.e. a digital sample of ``drive / (amplifier_gain * volts_full_scale)``; an input sample
+``s`` is ``s * input_volts_full_scale`` V at the input. When the device runs at another
+rate than the rig's ``fs`` (most interfaces offer only 44.1/48/96 kHz), drives are
+resampled up and recordings back down with :func:`scipy.signal.resample_poly`, a
+linear-phase filter that adds no delay.
+
+Latency
+-------
+The round trip from a digital output sample to the input sample that records it (the
+converters' filters plus the driver's buffers) is not known in advance. When a loopback
+is wired (a spare output cabled to a spare input), every recording plays a copy of its
+strongest actuator drive on that output and the latency is the lag of the largest
+cross-correlation between what was sent and what came back, in device samples; the
+vibrometer recording is shifted by it. Without a loopback the rig uses
+``latency_samples`` from the configuration, measured once at setup.
+
+Audio interfaces are AC-coupled, so this rig cannot read strap force sensors.
+"""
+
+from __future__ import annotations
+
+import logging
+from fractions import Fraction
+
+import numpy as np
+import scipy.fft
+import scipy.signal
+
+from ..errors import ValidationError
+from ..layout import ArrayLayout
+from .base import Rig
+from .config import AudioRigConfig
+from .devices import DeviceError
+
+__all__ = ["AudioRig", "resolve_audio_device"]
+
+log = logging.getLogger(__name__)
+
+#: A loopback whose normalised cross-correlation peak falls below this did not receive
+#: the copy sent to it (cable unplugged, wrong channel).
+MIN_LOOPBACK_CORRELATION = 0.5
+
+
+def _sounddevice():
+    try:
+        import sounddevice as sd
+    except OSError as exc:  # the PortAudio shared library is missing
+        raise DeviceError(f"PortAudio is not installed ({exc}); install libportaudio2") from None
+    return sd
+
+
+def resolve_audio_device(name: str | int | None, hostapi: str | None = None, *, inputs: int = 0,
+                         outputs: int = 0) -> int:
+    """Find a PortAudio device by index or name and check it has enough channels.
+
+    Parameters
+    ----------
+    name : str, int or None
+        Device index, a case-insensitive substring of its name, or None for the default
+        device (of ``hostapi`` when given).
+    hostapi : str, optional
+        Case-insensitive substring of the host API name ("JACK", "ASIO", ...).
+    inputs, outputs : int
+        Highest 1-based input / output channel the rig uses.
+
+    Returns
+    -------
+    int
+        The PortAudio device index.
+
+    Raises
+    ------
+    DeviceError
+        No such device, an ambiguous name, or too few channels; the message lists the
+        devices there are.
+    """
+    sd = _sounddevice()
+    devices = sd.query_devices()
+    apis = sd.query_hostapis()
+
+    def api_name(dev) -> str:
+        return apis[dev["hostapi"]]["name"]
+
+    listing = "; ".join(f"{d['index']}: {d['name']} ({api_name(d)})" for d in devices) or "none"
+    pool = [d for d in devices if hostapi is None or hostapi.lower() in api_name(d).lower()]
+    if hostapi is not None and not pool:
+        raise DeviceError(f"no audio device on a host API matching {hostapi!r}; devices: {listing}")
+    if name is None:
+        if hostapi is None:
+            idx = sd.default.device[1 if outputs else 0]
+            if idx is None or idx < 0:
+                raise DeviceError(f"there is no default audio device; name one of: {listing}")
+        else:
+            api = apis[pool[0]["hostapi"]]
+            idx = api["default_output_device"] if outputs else api["default_input_device"]
+        dev = devices[idx]
+    elif isinstance(name, int):
+        matches = [d for d in pool if d["index"] == name]
+        if not matches:
+            raise DeviceError(f"no audio device with index {name}"
+                              f"{' on ' + repr(hostapi) if hostapi else ''}; devices: {listing}")
+        dev = matches[0]
+    else:
+        exact = [d for d in pool if d["name"].lower() == name.lower()]
+        matches = exact or [d for d in pool if name.lower() in d["name"].lower()]
+        if not matches:
+            raise DeviceError(f"no audio device named like {name!r}; devices: {listing}")
+        if len(matches) > 1:
+            names = ", ".join(f"{d['index']}: {d['name']} ({api_name(d)})" for d in matches)
+            raise DeviceError(f"audio device name {name!r} is ambiguous ({names}); give its index or a hostapi")
+        dev = matches[0]
+    if dev["max_output_channels"] < outputs or dev["max_input_channels"] < inputs:
+        raise DeviceError(
+            f"audio device {dev['index']}: {dev['name']} has {dev['max_output_channels']} outputs and "
+            f"{dev['max_input_channels']} inputs; the rig uses output channels up to {outputs} and input "
+            f"channels up to {inputs}"
+        )
+    return int(dev["index"])
+
+
+class AudioRig(Rig):
+    """Actuators on the outputs of an audio interface, the vibrometer on one of its inputs.
+
+    Parameters
+    ----------
+    config : AudioRigConfig
+        Device, channel map, gain chain, vibrometer and limits.
+    layout : ArrayLayout, optional
+        The array; must have as many actuators as ``config.channels.actuators``.
+
+    Attributes
+    ----------
+    device_index : int
+        The PortAudio device.
+    device_fs : float
+        Rate the device runs at, Hz.
+    last_latency_samples : int or None
+        Round trip used to align the last recording, device samples.
+
+    Notes
+    -----
+    A single-spot vibrometer: ``max_points_per_recording = 1``.
+    """
+
+    kind = "audio"
+    max_points_per_recording = 1
+
+    def __init__(self, config: AudioRigConfig, layout: ArrayLayout | None = None):
+        if not isinstance(config, AudioRigConfig):
+            raise ValidationError(f"config must be an AudioRigConfig, got {type(config).__name__}")
+        layout = layout if layout is not None else ArrayLayout.reference()
+        if layout.n_actuators != config.n_actuators:
+            raise ValidationError(
+                f"the rig config maps {config.n_actuators} actuator channel(s) but the layout has "
+                f"{layout.n_actuators} actuators"
+            )
+        super().__init__(layout, fs=config.fs, limits=config.limits.build())
+        self.config = config
+        self.vibrometer = config.vibrometer.build()
+        self.device_fs = float(config.device.samplerate or config.fs)
+        ratio = Fraction(self.device_fs / self.fs).limit_denominator(1000)
+        if abs(float(ratio) - self.device_fs / self.fs) > 1e-9 * self.device_fs / self.fs:
+            raise ValidationError(
+                f"device samplerate {self.device_fs:g} Hz / rig fs {self.fs:g} Hz is not a simple ratio; "
+                "choose rates with a ratio of small integers (e.g. 48000 / 10000 = 24/5)"
+            )
+        self._up, self._down = ratio.numerator, ratio.denominator
+        ch = config.channels
+        self._out_channels = list(ch.actuators) + ([ch.loopback_output] if ch.loopback_output else [])
+        self._in_channels = [ch.vibrometer] + ([ch.loopback_input] if ch.loopback_input else [])
+        self.device_index = resolve_audio_device(
+            config.device.name, config.device.hostapi, inputs=max(self._in_channels), outputs=max(self._out_channels)
+        )
+        sd = _sounddevice()
+        try:
+            sd.check_output_settings(self.device_index, channels=max(self._out_channels), samplerate=self.device_fs)
+            sd.check_input_settings(self.device_index, channels=max(self._in_channels), samplerate=self.device_fs)
+        except sd.PortAudioError as exc:
+            raise DeviceError(f"audio device {self.device_index} refuses {self.device_fs:g} Hz: {exc}; set "
+                              "device.samplerate to a rate it supports") from None
+        self.last_latency_samples: int | None = None
+
+    # ------------------------------------------------------------------ scaling
+    @property
+    def _digital_peak(self) -> float:
+        # Digital level of the actuator limit: the hard ceiling of every sample sent.
+        return self.config.output_peak_v / self.config.volts_full_scale
+
+    def _to_device(self, drive: np.ndarray, n_tail: int) -> np.ndarray:
+        """Checked actuator volts (n_act, n) -> device block (n_dev, n_out) float32."""
+        total = np.pad(drive, ((0, 0), (0, n_tail)))
+        digital = total / (self.config.amplifier_gain * self.config.volts_full_scale)
+        if (self._up, self._down) != (1, 1):
+            digital = scipy.signal.resample_poly(digital, self._up, self._down, axis=1)
+        ceiling = self._digital_peak
+        over = np.abs(digital).max(initial=0.0)
+        if over > ceiling:
+            # Resampling can overshoot between the original samples; the limit still holds.
+            log.warning("resampled drive peaks %.4g%% over the limit; clipped to it", 100 * (over / ceiling - 1))
+            digital = np.clip(digital, -ceiling, ceiling)
+        columns = [digital]
+        if self.config.channels.loopback_output:
+            strongest = int(np.argmax(np.sum(digital**2, axis=1)))
+            columns.append(digital[strongest:strongest + 1])
+        return np.ascontiguousarray(np.concatenate(columns).T, dtype=np.float32)
+
+    def _from_device(self, recorded: np.ndarray, n_total: int) -> np.ndarray:
+        """Aligned input samples (n_dev,) -> vibrometer volts at fs (n_total,)."""
+        x = recorded.astype(float)
+        if (self._up, self._down) != (1, 1):
+            x = scipy.signal.resample_poly(x, self._down, self._up)
+        if len(x) < n_total:
+            x = np.pad(x, (0, n_total - len(x)))
+        return x[:n_total] * self.config.input_volts_full_scale
+
+    # ------------------------------------------------------------------ latency
+    def _measure_latency(self, sent: np.ndarray, received: np.ndarray, max_lag: int) -> int:
+        energy = float(np.dot(sent, sent))
+        if energy == 0.0:
+            # Nothing was sent to correlate with: keep the last or configured round trip.
+            fallback = self.last_latency_samples if self.last_latency_samples is not None else (
+                self.config.latency_samples or 0)
+            return int(fallback)
+        n = scipy.fft.next_fast_len(len(sent) + len(received), real=True)
+        corr = scipy.fft.irfft(scipy.fft.rfft(received, n) * np.conj(scipy.fft.rfft(sent, n)), n)[: max_lag + 1]
+        lag = int(np.argmax(corr))
+        norm = np.sqrt(energy * float(np.dot(received, received)))
+        quality = corr[lag] / norm if norm > 0 else 0.0
+        if quality < MIN_LOOPBACK_CORRELATION:
+            raise DeviceError(
+                f"loopback input {self.config.channels.loopback_input} did not receive what output "
+                f"{self.config.channels.loopback_output} sent (normalised correlation {quality:.2f} < "
+                f"{MIN_LOOPBACK_CORRELATION}); check the loopback cable and channel numbers"
+            )
+        return lag
+
+    # ------------------------------------------------------------------ backend
+    def _check_status(self, status, what: str) -> None:
+        if not status:
+            return
+        problems = [flag.replace("_", " ") for flag in
+                    ("input_overflow", "input_underflow", "output_overflow", "output_underflow")
+                    if getattr(status, flag, False)]
+        if problems:
+            log.error("audio stream reported %s while %s", ", ".join(problems), what)
+            raise DeviceError(
+                f"the audio stream reported {', '.join(problems)} while {what}: samples were lost, so the "
+                "result is discarded (outputs are at zero); retry, or raise the device's buffer size"
+            )
+
+    def _play(self, drive: np.ndarray) -> None:
+        sd = _sounddevice()
+        block = self._to_device(drive, n_tail=0)
+        sd.play(block, samplerate=self.device_fs, device=self.device_index, mapping=self._out_channels,
+                blocking=False)
+        self._check_status(sd.wait(), "playing")
+
+    def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
+        has_loopback = self.config.channels.loopback_output is not None
+        if not has_loopback and self.config.latency_samples is None:
+            raise DeviceError(
+                "the audio rig cannot align recordings: wire a loopback (channels.loopback_output and "
+                "channels.loopback_input) or set latency_samples measured at setup"
+            )
+        sd = _sounddevice()
+        n_total = drive.shape[1] + n_tail
+        block = self._to_device(drive, n_tail)
+        n_dev = len(block)
+        max_lag = int(np.ceil(self.config.max_latency_s * self.device_fs))
+        padded = np.concatenate([block, np.zeros((max_lag, block.shape[1]), np.float32)])
+        recorded = sd.playrec(padded, samplerate=self.device_fs, device=self.device_index,
+                              input_mapping=self._in_channels, output_mapping=self._out_channels,
+                              dtype="float32", blocking=False)
+        self._check_status(sd.wait(), "recording")
+        recorded = np.asarray(recorded, dtype=float)
+        if has_loopback:
+            lag = self._measure_latency(padded[:, -1].astype(float), recorded[:, 1], max_lag)
+        else:
+            lag = int(self.config.latency_samples)
+            if lag > max_lag:
+                raise DeviceError(f"latency_samples = {lag} is longer than max_latency_s allows ({max_lag})")
+        self.last_latency_samples = lag
+        volts = self._from_device(recorded[lag:lag + n_dev, 0], n_total)
+        return self.vibrometer.to_displacement(volts, self.fs)[None, :]
+
+    def _zero_outputs(self) -> None:
+        # Stopping the stream leaves the interface's outputs silent; sounddevice keeps the
+        # one stream it started, so this also ends a play interrupted half-way.
+        sd = _sounddevice()
+        sd.stop()
+
+    def describe(self) -> dict:
+        """Settings to store beside a calibration (JSON-serialisable)."""
+        out = super().describe()
+        out.update(config=self.config.model_dump(mode="json"), device_index=self.device_index,
+                   device_fs=self.device_fs, last_latency_samples=self.last_latency_samples,
+                   vibrometer=self.vibrometer.describe())
+        return out
