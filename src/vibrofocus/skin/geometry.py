@@ -74,9 +74,10 @@ class ForearmGeometry:
 
         On the cylinder, a point's angle around the arm is ``x / r(y)``; the
         circumferential path between a source and a point is measured at the radius
-        midway between theirs (the unrolled, slowly tapering cone), so the distance is
-        symmetric in source and point:
-        ``d_m = sqrt(((phi_p - phi_s) r_mid + m C_mid)^2 + (y_p - y_s)^2)``.
+        midway between theirs and the along-arm path follows the cone's slope (the
+        unrolled, slowly tapering cone), so the distance is symmetric in source and
+        point and never shorter than the straight line through the arm:
+        ``d_m = sqrt(((phi_p - phi_s) r_mid + m C_mid)^2 + (y_p - y_s)^2 + (r_p - r_s)^2)``.
 
         Parameters
         ----------
@@ -103,7 +104,8 @@ class ForearmGeometry:
         arc = (p[:, None, 0] / r_p[:, None] - s[None, :, 0] / r_s[None, :]) * r_mid
         m = self.image_orders
         arc_m = arc[..., None] + m * (2 * np.pi * r_mid)[..., None]
-        return np.hypot(arc_m, dy[..., None])
+        along = np.hypot(dy, r_p[:, None] - r_s[None, :])
+        return np.hypot(arc_m, along[..., None])
 
     def to_3d(self, points_xy: np.ndarray) -> np.ndarray:
         """Positions in space of surface points, m.

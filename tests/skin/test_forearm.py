@@ -1,0 +1,230 @@
+"""Tests of the simulated forearm rig: physics recovered from its recordings, linearity,
+reproducibility and playback."""
+
+import numpy as np
+import pytest
+from scipy import optimize, signal
+
+from vibrofocus import ArrayLayout, SimulatedForearm, ricker
+from vibrofocus.errors import ValidationError
+from vibrofocus.skin import ForearmParameters
+
+FS = 10_000.0
+
+
+def _quiet(**kwargs) -> SimulatedForearm:
+    """A noise-free, dropout-free forearm."""
+    kwargs.setdefault("seed", 0)
+    return SimulatedForearm(noise_m=0.0, dropout_rate=0.0, **kwargs)
+
+
+def _single_actuator_drive(n_act: int, q: int, duration: float = 0.2, t0: float = 0.02, amp: float = 10.0,
+                           sigma: float = 0.5e-3):
+    pulse = ricker(FS, sigma=sigma, duration=duration, t0=t0, amplitude=amp)
+    drive = np.zeros((n_act, pulse.size))
+    drive[q] = pulse
+    return drive
+
+
+def _speed_and_attenuation(rig, src, direction, d1, d2, freqs, q=0):
+    """Phase speed (m/s) and attenuation (Np/m) recovered from two recordings."""
+    drive = _single_actuator_drive(rig.layout.n_actuators, q, duration=0.8)
+    pts = np.array([src + d1 * direction, src + d2 * direction])
+    rec = rig.play_and_record(drive, pts, tail_s=0.0)
+    spec = np.fft.rfft(rec, axis=1)
+    f = np.fft.rfftfreq(rec.shape[1], 1 / FS)
+    # From the first bin above DC (phase there is a fraction of a radian, so unwrapping
+    # upward from it counts the whole turns) to well above the band.
+    use = (f > 0) & (f < 1500)
+    f, ratio = f[use], spec[1, use] / spec[0, use]
+    # NumPy convention: the farther point lags by k_r (d2 - d1) radians.
+    phase = -np.unwrap(np.angle(ratio))
+    k_r = np.interp(freqs, f, phase) / (d2 - d1)
+    speed = 2 * np.pi * np.asarray(freqs) / k_r
+    mag = np.interp(freqs, f, np.abs(ratio))
+    alpha = -np.log(mag * np.sqrt(d2 / d1)) / (d2 - d1)  # undo cylindrical spreading
+    return speed, alpha
+
+
+def test_flat_arm_recovers_the_configured_dispersion_and_attenuation():
+    params = ForearmParameters.nominal(4, c250_m_s=3.0, alpha250_np_m=80.0, beta=0.4)
+    rig = _quiet(participant=params, geometry="plane")
+    src = rig.layout.actuators_xy[2]
+    freqs = np.array([100.0, 250.0, 500.0])
+    speed, alpha = _speed_and_attenuation(rig, src, np.array([0.0, -1.0]), 0.02, 0.04, freqs, q=2)
+    np.testing.assert_allclose(speed, 3.0 * (freqs / 250) ** 0.4, rtol=0.05)
+    np.testing.assert_allclose(alpha, 80.0 * freqs / 250, rtol=0.05)
+
+
+def test_default_participant_speed_is_plausible_and_dispersive():
+    rig = _quiet()
+    src = rig.layout.actuators_xy[2]  # elbow side, toward the elbow: far from any image
+    freqs = np.array([100.0, 250.0, 500.0])
+    speed, alpha = _speed_and_attenuation(rig, src, np.array([0.0, -1.0]), 0.02, 0.04, freqs, q=2)
+    p = rig.participant
+    assert 2.0 <= speed[1] <= 7.0
+    assert speed[0] < speed[1] < speed[2]  # low frequencies travel slower
+    np.testing.assert_allclose(speed, p.phase_speed(freqs), rtol=0.05)
+    np.testing.assert_allclose(alpha, p.attenuation(freqs), rtol=0.05)
+
+
+def test_default_participant_loses_20_to_30_db_by_35_mm():
+    rig = _quiet()
+    src = rig.layout.actuators_xy[2]
+    drive = _single_actuator_drive(4, 2, amp=10.0, sigma=1e-3)  # the base stimulus
+    down = np.array([0.0, -1.0])
+    rec = rig.play_and_record(drive, np.array([src + 6e-3 * down, src + 35e-3 * down]))
+    peaks = np.abs(rec).max(axis=1)
+    loss_db = 20 * np.log10(peaks[0] / peaks[1])
+    assert 20.0 <= loss_db <= 30.0
+
+
+def test_ten_volts_give_about_two_micrometres_next_to_a_nominal_actuator():
+    rig = _quiet(participant=ForearmParameters.nominal(4))
+    src = rig.layout.actuators_xy[3]
+    drive = np.zeros((4, 2000))
+    drive[3] = ricker(FS, duration=0.2, t0=0.02, amplitude=10.0)
+    rec = rig.play_and_record(drive, src[None] + [[0.0, -6e-3]])
+    np.testing.assert_allclose(np.abs(rec).max(), 2e-6, rtol=0.05)
+
+
+def test_superposition_holds_to_numerical_precision(rng):
+    rig = _quiet(seed=4)
+    n = 1500
+    sos = signal.butter(4, [20, 900], btype="band", fs=FS, output="sos")
+    d1, d2 = (signal.sosfilt(sos, rng.standard_normal((4, n))) for _ in range(2))
+    d1, d2 = (np.pad(d / np.abs(d).max(), ((0, 0), (50, 50))) for d in (d1, d2))
+    a, b = 2.5, -1.5
+    pts = rng.uniform(-0.04, 0.04, (5, 2))
+    r1 = rig.play_and_record(d1, pts)
+    r2 = rig.play_and_record(d2, pts)
+    r12 = rig.play_and_record(a * d1 + b * d2, pts)
+    np.testing.assert_allclose(r12, a * r1 + b * r2, rtol=0, atol=1e-10 * np.abs(r12).max())
+
+
+def test_time_invariance_holds_to_numerical_precision():
+    rig = _quiet(seed=2)
+    shift = 137
+    base = _single_actuator_drive(4, 1, duration=0.1)
+    base[0] = -0.5 * base[1]
+    early = np.pad(base, ((0, 0), (0, shift)))
+    late = np.pad(base, ((0, 0), (shift, 0)))
+    r_early = rig.play_and_record(early)
+    r_late = rig.play_and_record(late)
+    np.testing.assert_allclose(r_late[:, shift:], r_early[:, :-shift], rtol=0, atol=1e-12 * np.abs(r_early).max())
+    np.testing.assert_allclose(r_late[:, :shift], 0.0, atol=1e-12 * np.abs(r_early).max())
+
+
+def test_reciprocity_between_identical_actuators_on_the_tapered_arm():
+    a, b = np.array([-0.01, 0.03]), np.array([0.025, -0.02])
+    layout = ArrayLayout(np.array([a, b]), np.array([a, b]))
+    rig = _quiet(layout=layout, participant=ForearmParameters.nominal(2))
+    f = np.linspace(10, 1000, 200)
+    h = rig.transfer(np.array([a, b]), f)
+    np.testing.assert_allclose(h[:, 1, 0], h[:, 0, 1], rtol=1e-10)  # source A at B == source B at A
+    # With unequal contact the symmetry is broken: the test can tell.
+    p = ForearmParameters(contact=[1.0, 0.5], gains=[1.0, 1.0], f0_hz=[500.0, 500.0], q=[1.0, 1.0])
+    h2 = _quiet(layout=layout, participant=p).transfer(np.array([a, b]), f)
+    assert np.max(np.abs(h2[:, 1, 0] - h2[:, 0, 1])) > 0.1 * np.max(np.abs(h2[:, 1, 0]))
+
+
+def test_far_side_of_the_arm_hears_later_than_a_near_point_at_the_same_chord():
+    layout = ArrayLayout(np.array([[0.0, 0.0]]), np.array([[0.0, 0.01]]))
+    rig = _quiet(layout=layout, participant=ForearmParameters.nominal(1))
+    geo = rig.geometry
+    far = np.array([float(geo.circumference(0.0)) / 2, 0.0])  # opposite side of the arm
+    chord = np.linalg.norm(np.diff(geo.to_3d(np.array([[0.0, 0.0], far])), axis=0))
+
+    def chord_minus(y):
+        return np.linalg.norm(np.diff(geo.to_3d(np.array([[0.0, 0.0], [0.0, y]])), axis=0)) - chord
+
+    near = np.array([0.0, optimize.brentq(chord_minus, 0.01, 0.12)])
+    drive = _single_actuator_drive(1, 0, duration=0.2)
+    rec = rig.play_and_record(drive, np.array([near, far]))
+    envelope = np.abs(signal.hilbert(rec, axis=1))
+    t_near, t_far = envelope.argmax(axis=1) / FS
+    assert t_far > t_near + 5e-3  # the far side is reached over the surface, not through the arm
+
+
+def test_same_seed_reproduces_everything_and_seeds_differ():
+    drive = _single_actuator_drive(4, 0, duration=0.3)
+    a = SimulatedForearm(seed=11, dropout_rate=20.0).play_and_record(drive)
+    b = SimulatedForearm(seed=11, dropout_rate=20.0).play_and_record(drive)
+    np.testing.assert_array_equal(a, b)  # noise and dropouts included (NaN compares equal here)
+    c = SimulatedForearm(seed=12, dropout_rate=20.0).play_and_record(drive)
+    assert not np.allclose(np.nan_to_num(a), np.nan_to_num(c))
+
+
+def test_playback_is_linear_not_circular():
+    rig = _quiet(participant=ForearmParameters.nominal(4))
+    # 20 ms drive; the point is 60 mm away, so the wave arrives after the drive has ended.
+    drive = _single_actuator_drive(4, 0, duration=0.02, t0=0.01)
+    pt = rig.layout.actuators_xy[0][None] + [[0.0, -0.06]]
+    rec = rig.play_and_record(drive, pt, tail_s=0.15)[0]
+    n = drive.shape[1]
+    assert np.abs(rec[:n]).max() < 0.05 * np.abs(rec).max()  # nothing wrapped to the start
+    # Independent reference: direct (non-FFT) linear convolution with the rig's responses.
+    ir = rig.impulse_responses(pt)[0]
+    ref = sum(np.convolve(rig.last_drive[q], ir[q]) for q in range(4))[: rec.size]
+    np.testing.assert_allclose(rec, ref, rtol=0, atol=1e-9 * np.abs(ref).max())
+
+
+def test_impulse_responses_agree_with_the_transfer():
+    rig = _quiet(seed=5)
+    pts = rig.layout.points_xy[:3]
+    ir = rig.impulse_responses(pts)
+    f = np.fft.rfftfreq(rig.n_ir, 1 / FS)
+    h = rig.transfer(pts, f)
+    band = (f > 10) & (f < 1000)
+    err = np.abs(np.moveaxis(np.fft.rfft(ir, axis=2), 2, 0) - h)[band]
+    assert err.max() < 0.02 * np.abs(h[band]).max()
+
+
+def test_field_matches_noise_free_recordings_and_instants():
+    rig = _quiet(seed=6)
+    drive = _single_actuator_drive(4, 0, duration=0.1)
+    drive[3] = -0.7 * np.roll(drive[0], 40)
+    pts = rig.layout.points_xy
+    rec = rig.play_and_record(drive, pts, tail_s=0.05)
+    full = rig.field(rig.last_drive, pts, tail_s=0.05)
+    assert full.shape == rec.shape
+    # Playback drops the model's short precursor before time zero (see latency_s); the
+    # field keeps it. It is a few tenths of a percent of the peak next to an actuator.
+    np.testing.assert_allclose(full, rec, rtol=0, atol=1e-2 * np.abs(rec).max())
+    idx = np.array([0, 100, 321, 999])
+    some = rig.field(rig.last_drive, pts, times=idx / FS)
+    np.testing.assert_allclose(some, full[:, idx], rtol=0, atol=1e-9 * np.abs(full).max())
+
+
+def test_noise_has_the_documented_in_band_rms():
+    rig = SimulatedForearm(seed=1, noise_m=1e-9, dropout_rate=0.0)
+    rec = rig.play_and_record(np.zeros((4, 40_000)), np.zeros((1, 2)), tail_s=0.0)[0]
+    sos = signal.butter(8, [10, 1000], btype="band", fs=FS, output="sos")
+    in_band = signal.sosfiltfilt(sos, rec)[2000:-2000]
+    np.testing.assert_allclose(np.sqrt(np.mean(in_band**2)), 1e-9, rtol=0.1)
+
+
+def test_dropouts_are_nan_and_flagged():
+    rig = SimulatedForearm(seed=3, dropout_rate=5.0)
+    rec = rig.play_and_record(np.zeros((4, 10_000)))
+    assert np.isnan(rec).any()
+    np.testing.assert_array_equal(np.isnan(rec), rig.last_dropout_mask)
+    clean = SimulatedForearm(seed=3, dropout_rate=0.0).play_and_record(np.zeros((4, 10_000)))
+    assert not np.isnan(clean).any()
+
+
+def test_transfer_shape_dc_and_bad_input():
+    rig = _quiet()
+    h = rig.transfer(rig.layout.points_xy, np.array([0.0, 100.0, 250.0]))
+    assert h.shape == (3, 13, 4) and h.dtype == complex
+    np.testing.assert_array_equal(h[0], 0)  # an inertial exciter exerts no static force
+    with pytest.raises(ValidationError, match="freqs"):
+        rig.transfer(rig.layout.points_xy, [-1.0, 10.0])
+    with pytest.raises(ValidationError, match="points_xy"):
+        rig.transfer(np.zeros((3, 3)), [10.0])
+    with pytest.raises(ValidationError, match="drive"):
+        rig.field(np.zeros((3, 10)), np.zeros((1, 2)))
+    with pytest.raises(ValidationError, match="participant"):
+        SimulatedForearm(participant=ForearmParameters.nominal(2))
+    with pytest.raises(ValidationError, match="noise_m"):
+        SimulatedForearm(noise_m=-1.0)

@@ -1,0 +1,69 @@
+"""Tests of the per-participant parameters and their random draw."""
+
+import numpy as np
+import pytest
+
+from vibrofocus import ArrayLayout
+from vibrofocus.errors import ValidationError
+from vibrofocus.skin import ForearmParameters
+from vibrofocus.skin import parameters as P
+
+
+def test_same_seed_same_participant_and_different_seeds_differ(reference_layout):
+    a = ForearmParameters.draw(7, reference_layout)
+    b = ForearmParameters.draw(7, reference_layout)
+    c = ForearmParameters.draw(8, reference_layout)
+    assert a.to_dict() == b.to_dict()
+    assert a.c250_m_s != c.c250_m_s
+    assert not np.array_equal(a.contact, c.contact)
+
+
+def test_draws_stay_within_and_fill_the_documented_spreads(reference_layout):
+    people = [ForearmParameters.draw(s, reference_layout) for s in range(300)]
+    speed = np.array([p.c250_m_s for p in people]) / 3.5 - 1
+    atten = np.array([p.alpha250_np_m for p in people]) / 60.0 - 1
+    gains = np.array([p.gains for p in people]) - 1
+    f0 = np.array([p.f0_hz for p in people]) / 500.0 - 1
+    q = np.array([p.q for p in people])
+    contact = np.array([p.contact for p in people])
+    wrist = reference_layout.actuators_xy[:, 1] > 0
+    for values, half in ((speed, 0.15), (atten, 0.25), (gains, 0.10), (f0, 0.10)):
+        assert np.abs(values).max() <= half
+        assert np.abs(values).max() > 0.9 * half  # the spread is used, not collapsed
+    assert q.min() >= P.Q_RANGE[0] and q.max() <= P.Q_RANGE[1]
+    assert contact[:, wrist].min() >= 0.4 and contact[:, wrist].min() < 0.45
+    assert contact[:, ~wrist].min() >= P.ELBOW_CONTACT_RANGE[0]
+    assert contact.max() <= 1.0
+    # Wrist-side actuators are worse coupled on average (partial contact).
+    assert contact[:, wrist].mean() < contact[:, ~wrist].mean() - 0.1
+
+
+def test_nominal_participant_has_identical_actuators():
+    p = ForearmParameters.nominal(3, c250_m_s=5.0)
+    assert p.c250_m_s == 5.0
+    for name in ("contact", "gains", "f0_hz", "q"):
+        assert np.ptp(getattr(p, name)) == 0
+
+
+def test_laws_give_spec_values_at_250_hz_and_grow_with_frequency():
+    p = ForearmParameters.nominal(1)
+    np.testing.assert_allclose(p.phase_speed([250.0]), [3.5])
+    np.testing.assert_allclose(p.attenuation([250.0, 500.0]), [60.0, 120.0])
+    assert p.phase_speed([100.0])[0] < p.phase_speed([500.0])[0]
+
+
+@pytest.mark.parametrize("seed", [-1, 1.5, "a", True])
+def test_bad_seed_is_refused(seed):
+    with pytest.raises(ValidationError, match="seed"):
+        ForearmParameters.draw(seed, ArrayLayout.reference())
+
+
+def test_bad_values_are_refused():
+    with pytest.raises(ValidationError, match="contact"):
+        ForearmParameters(contact=[1.2], gains=[1.0], f0_hz=[500.0], q=[1.0])
+    with pytest.raises(ValidationError, match="gains"):
+        ForearmParameters(contact=[1.0], gains=[1.0, 1.0], f0_hz=[500.0], q=[1.0])
+    with pytest.raises(ValidationError, match="c250_m_s"):
+        ForearmParameters.nominal(1, c250_m_s=-3.0)
+    with pytest.raises(ValidationError, match="wrist_y_m"):
+        ForearmParameters.nominal(1, wrist_y_m=-0.2)

@@ -1,0 +1,96 @@
+"""Tests of the skin model's building blocks against independent references."""
+
+import numpy as np
+import pytest
+from scipy import integrate, special
+
+from vibrofocus.skin import exciter_response, surface_green, wavenumber
+
+
+def _k(f):
+    return wavenumber(np.atleast_1d(f), 3.5, 0.3, 60.0)
+
+
+def _disc_average_reference(k, d, a):
+    """Area average of the point-source Green's function over a disc, by quadrature.
+
+    Physics convention; valid for a field point outside the disc (smooth integrand).
+    """
+    xs, ws = np.polynomial.legendre.leggauss(60)
+    r = 0.5 * a * (xs + 1)
+    wr = 0.5 * a * ws
+    th = np.linspace(0, 2 * np.pi, 256, endpoint=False)
+    R, TH = np.meshgrid(r, th, indexing="ij")
+    dist = np.sqrt(d**2 + R**2 - 2 * d * R * np.cos(TH))
+    vals = 0.25j * special.hankel1(0, k * dist)
+    return (vals * R * wr[:, None]).sum() * (2 * np.pi / th.size) / (np.pi * a**2)
+
+
+@pytest.mark.parametrize("f, d", [(50.0, 0.004), (250.0, 0.01), (800.0, 0.02)])
+def test_disc_source_outside_matches_quadrature(f, d):
+    a = 3e-3
+    k = _k(f)
+    got = surface_green(k, np.array([[d]]), np.array([a]))[0, 0, 0]
+    ref = np.conj(_disc_average_reference(k[0], d, a))
+    np.testing.assert_allclose(got, ref, rtol=1e-6)
+
+
+@pytest.mark.parametrize("f", [20.0, 250.0, 900.0])
+def test_disc_source_centre_matches_radial_integral(f):
+    # At the centre the disc average is (2/a^2) int_0^a r (i/4) H0(k r) dr, a 1-D
+    # integral with an integrable log singularity, evaluated here by adaptive quadrature.
+    a = 3e-3
+    k = _k(f)[0]
+
+    def part(fun):
+        return integrate.quad(lambda r: fun(r * 0.25j * special.hankel1(0, k * r)), 0, a, limit=400, epsabs=0, epsrel=1e-11)[0]
+
+    ref = (2 / a**2) * (part(np.real) + 1j * part(np.imag))
+    got = surface_green(np.array([k]), np.array([[0.0]]), np.array([a]))[0, 0, 0]
+    np.testing.assert_allclose(got, np.conj(ref), rtol=1e-6)
+
+
+def test_disc_source_is_continuous_at_the_rim():
+    a = 3e-3
+    k = _k(np.array([30.0, 250.0, 1000.0]))
+    d = np.array([[a * (1 - 1e-9), a * (1 + 1e-9)]])
+    g = surface_green(k, d.T, np.array([a]))  # shape (3, 2, 1)
+    np.testing.assert_allclose(g[:, 0, 0], g[:, 1, 0], rtol=1e-6)
+
+
+def test_far_field_is_cylindrical_spreading_times_attenuation():
+    f = np.array([250.0])
+    k = _k(f)[0]
+    d1, d2 = 0.05, 0.1
+    g = surface_green(np.array([k]), np.array([[d1], [d2]]), np.array([3e-3]))[0, :, 0]
+    ratio = abs(g[1] / g[0])
+    expected = np.sqrt(d1 / d2) * np.exp(-60.0 * (d2 - d1))
+    np.testing.assert_allclose(ratio, expected, rtol=0.01)
+    # NumPy convention: the farther point lags, i.e. its phase is smaller by k_r (d2 - d1).
+    lag = -np.angle(g[1] / g[0])
+    expected_lag = np.mod(k.real * (d2 - d1) + np.pi, 2 * np.pi) - np.pi
+    np.testing.assert_allclose(lag, expected_lag, atol=0.02)
+
+
+def test_exciter_resonance_shape():
+    f0, q = 500.0, 1.0
+    f = np.array([5.0, f0, 50_000.0])
+    e = exciter_response(f, np.array([f0]), np.array([q]))[:, 0]
+    np.testing.assert_allclose(abs(e[0]), (5.0 / f0) ** 2, rtol=1e-3)  # mass-controlled low end
+    np.testing.assert_allclose(abs(e[1]), q, rtol=1e-12)  # |E(f0)| = Q
+    np.testing.assert_allclose(abs(e[2]), 1.0, rtol=1e-3)  # flat far above resonance
+
+
+def test_exciter_response_is_the_causal_analog_high_pass():
+    # scipy.signal.freqs evaluates b(s)/a(s) at s = j omega, the same sign convention as
+    # NumPy's FFT; the system s^2 / (s^2 + s w0/Q + w0^2) has its poles in the left half
+    # plane, so it is causal, and the model must match it.
+    from scipy import signal
+
+    f0, q = 470.0, 0.9
+    w0 = 2 * np.pi * f0
+    f = np.linspace(1.0, 3000.0, 500)
+    _, ref = signal.freqs([1.0, 0.0, 0.0], [1.0, w0 / q, w0**2], worN=2 * np.pi * f)
+    got = exciter_response(f, np.array([f0]), np.array([q]))[:, 0]
+    np.testing.assert_allclose(got, ref, rtol=1e-10)
+    assert np.all(np.roots([1.0, w0 / q, w0**2]).real < 0)
