@@ -25,6 +25,7 @@ from .errors import (
 from .layout import ArrayLayout
 from .rigs import Rig, SafetyLimits
 from .signals import exponential_sweep, linear_sweep, ricker
+from .rendering import InverseOperator, Rendering, focus_metrics, funneling_gains, inverse_filter, render
 from .skin import SimulatedForearm
 
 __all__ = [
@@ -34,6 +35,12 @@ __all__ = [
     "SafetyLimits",
     "SimulatedForearm",
     "ricker",
+    "funneling_gains",
+    "inverse_filter",
+    "InverseOperator",
+    "focus_metrics",
+    "render",
+    "Rendering",
     "linear_sweep",
     "exponential_sweep",
     "VibrofocusError",

@@ -1,5 +1,30 @@
-"""Rendering methods of SPEC §2: funneling, inverse filter, combination, time reversal."""
+"""Rendering methods of SPEC §2: funneling, inverse filter, combination, time reversal,
+the wrap-around check, focus metrics and the high-level :func:`render`."""
 
+from .causality import CausalityWarning, check_wraparound, wraparound_fraction
+from .combination import combination_target
+from .funneling import funneling_gains, funneling_weights
+from .inverse import DesignReport, DriveScaledWarning, InverseOperator, inverse_filter, predict_response
+from .metrics import focus_metrics
+from .render import Rendering, render
 from .taper import band_taper
+from .time_reversal import time_reversal_drives
 
-__all__ = ["band_taper"]
+__all__ = [
+    "band_taper",
+    "funneling_gains",
+    "funneling_weights",
+    "inverse_filter",
+    "InverseOperator",
+    "DesignReport",
+    "DriveScaledWarning",
+    "predict_response",
+    "combination_target",
+    "time_reversal_drives",
+    "wraparound_fraction",
+    "check_wraparound",
+    "CausalityWarning",
+    "focus_metrics",
+    "render",
+    "Rendering",
+]

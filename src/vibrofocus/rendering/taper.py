@@ -31,9 +31,11 @@ def band_taper(freqs: np.ndarray, band: tuple[float, float], taper_octaves: floa
     low, high = band
     w = ((f >= low) & (f <= high)).astype(float)
     if taper_octaves > 0:
+        # log2(0) = -inf puts DC infinitely many octaves below the band (weight 0).
         with np.errstate(divide="ignore"):
-            octaves_below = np.log2(low / np.maximum(f, np.finfo(float).tiny))
-        octaves_above = np.log2(np.maximum(f, np.finfo(float).tiny) / high)
+            log_f = np.log2(f)
+        octaves_below = np.log2(low) - log_f
+        octaves_above = log_f - np.log2(high)
         for dist in (octaves_below, octaves_above):
             ramp = (dist > 0) & (dist < taper_octaves)
             w[ramp] = 0.5 + 0.5 * np.cos(np.pi * dist[ramp] / taper_octaves)

@@ -1,0 +1,83 @@
+"""Validation shared by the rendering functions (built on vibrofocus._validation)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_array, check_choice, check_in_range, check_positive
+from ..errors import ValidationError
+from ._pinv import REGULARIZATIONS
+
+__all__ = ["as_transfer", "samples_for", "check_regularization", "check_grid", "as_indices"]
+
+#: Default ``reg_param`` of the regularized designs (relative to the largest singular value).
+DEFAULT_REG_PARAM = {"tikhonov": 1e-2, "tsvd": 1e-2}
+
+
+def as_transfer(H: Any, name: str = "H") -> np.ndarray:
+    """Complex transfer matrix, shape (n_freqs, n_points, n_actuators), finite, non-zero."""
+    arr = as_array(H, name, ndim=3, dtype="complex")
+    if arr.size == 0:
+        raise ValidationError(f"{name} is empty (shape {arr.shape}); a transfer matrix needs frequencies, points and actuators")
+    if arr.shape[0] < 2:
+        raise ValidationError(f"{name} must hold at least 2 frequencies (n // 2 + 1 with n >= 2), got shape {arr.shape}")
+    if not np.any(arr):
+        raise ValidationError(f"{name} is all zero: no actuator reaches any point (singular transfer matrix)")
+    return arr
+
+
+def samples_for(n_freqs: int, n_samples: Any, name: str = "n_samples") -> int:
+    """Window length ``n`` of a transfer matrix with ``n_freqs = n // 2 + 1`` bins.
+
+    ``None`` gives the even length ``2 (n_freqs - 1)``; an explicit length must match.
+    """
+    if n_samples is None:
+        return 2 * (n_freqs - 1)
+    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 2:
+        raise ValidationError(f"{name} must be an integer >= 2, got {n_samples!r}")
+    check_grid(n_freqs, int(n_samples), name)
+    return int(n_samples)
+
+
+def check_grid(n_freqs: int, n: int, what: str) -> None:
+    """Raise unless ``n_freqs == n // 2 + 1``."""
+    if n_freqs != n // 2 + 1:
+        raise ValidationError(
+            f"H has {n_freqs} frequencies but {what} implies n = {n} samples, which needs n // 2 + 1 = {n // 2 + 1} "
+            f"(H must be on numpy.fft.rfftfreq(n, 1 / fs))"
+        )
+
+
+def check_regularization(regularization: Any, reg_param: Any) -> tuple[str | None, float | None]:
+    """Validate the regularization choice and its parameter; fill the default parameter."""
+    check_choice(regularization, "regularization", REGULARIZATIONS)
+    if regularization is None:
+        if reg_param is not None:
+            raise ValidationError(
+                f"reg_param={reg_param!r} is only used with regularization='tikhonov' or 'tsvd'; "
+                "the plain pseudo-inverse (regularization=None) takes none"
+            )
+        return None, None
+    if reg_param is None:
+        return regularization, DEFAULT_REG_PARAM[regularization]
+    if regularization == "tikhonov":
+        value = check_positive(reg_param, "reg_param")
+    else:
+        value = check_in_range(reg_param, "reg_param", 0.0, 1.0)
+        if value == 0.0:
+            raise ValidationError("reg_param must be > 0 for regularization='tsvd' (relative truncation level), got 0")
+    return regularization, value
+
+
+def as_indices(indices: Any, name: str, n: int) -> np.ndarray:
+    """Unique integer indices in ``0..n-1`` (1-D array)."""
+    arr = np.atleast_1d(np.asarray(indices))
+    if arr.size == 0 or arr.ndim != 1 or not np.issubdtype(arr.dtype, np.integer):
+        raise ValidationError(f"{name} must be a non-empty sequence of integer point indices, got {indices!r}")
+    if arr.min() < 0 or arr.max() >= n:
+        raise ValidationError(f"{name} holds indices outside the {n} points of H (valid: 0..{n - 1}): {arr.tolist()}")
+    if np.unique(arr).size != arr.size:
+        raise ValidationError(f"{name} holds repeated point indices: {arr.tolist()}")
+    return arr.astype(int)

@@ -1,0 +1,75 @@
+"""The combination method of SPEC §2: an inverse filter whose target waveform is what
+funneling would produce at the target, predicted through ``H``."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_array, check_band, check_index, check_positive
+from ..defaults import BAND_HZ
+from ..errors import ValidationError
+from ._checks import as_transfer, check_grid
+from .taper import band_taper
+
+__all__ = ["combination_target"]
+
+
+def combination_target(
+    H: Any,
+    target_index: int,
+    gains: Any,
+    stimulus: Any,
+    fs: float,
+    *,
+    band: tuple[float, float] = BAND_HZ,
+    taper_octaves: float = 0.5,
+) -> np.ndarray:
+    """Band-limited displacement funneling would produce at one point.
+
+    ``u_t = irfft(T(f) sum_q H_tq(f) A_q S(f))`` with ``S`` the spectrum of the stimulus
+    every actuator plays (scaled by its gain ``A_q``) and ``T`` the band taper. Use it
+    as the target row of an inverse filter, with zeros at the guards.
+
+    Parameters
+    ----------
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    target_index : int
+        Row of ``H`` of the target point.
+    gains : ndarray, shape (n_actuators,)
+        Funneling amplitudes ``A_q``, V (see :func:`funneling_gains`).
+    stimulus : ndarray, shape (n,)
+        Base stimulus, unit peak (see :func:`~vibrofocus.signals.ricker`).
+    fs : float
+        Sample rate, Hz.
+    band, taper_octaves
+        As in :func:`inverse_filter`.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Target displacement, m.
+
+    Raises
+    ------
+    ValidationError
+        If the predicted funneling displacement at the target is zero (nothing to render).
+    """
+    H = as_transfer(H)
+    fs = check_positive(fs, "fs")
+    target_index = check_index(target_index, "target_index", H.shape[1], what="points of H")
+    gains = as_array(gains, "gains", ndim=1, shape=(H.shape[2],))
+    stimulus = as_array(stimulus, "stimulus", ndim=1)
+    check_grid(H.shape[0], stimulus.size, "stimulus (n,)")
+    taper = band_taper(np.fft.rfftfreq(stimulus.size, 1 / fs), check_band(band, fs),
+                       check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+    spectrum = (H[:, target_index, :] @ gains) * np.fft.rfft(stimulus) * taper
+    target = np.fft.irfft(spectrum, stimulus.size)
+    if not np.any(np.abs(target) > 0):
+        raise ValidationError(
+            f"funneling predicts no displacement at point {target_index} inside the band "
+            "(zero gains, silent stimulus or H zero there): the combination has no target waveform"
+        )
+    return target
