@@ -2,3 +2,4 @@
 
 # One import per command module, in the order ``--help`` should list them.
 from . import serve  # noqa: E402,F401
+from . import analyze  # noqa: F401

@@ -1,0 +1,255 @@
+"""The whole analysis of a trials table: both studies, with exclusions accounted for."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import pandas as pd
+
+from ..errors import ValidationError
+from ..layout import ArrayLayout
+from .study1 import localization_summary, shapiro_tests, study1_anova, study1_errors, study1_posthoc
+from .study2 import friedman_tests, study2_counts, wilcoxon_posthoc
+from .trials import check_design, method_order
+
+__all__ = ["Study1Result", "Study2Counts", "Study2Result", "AnalysisResult", "analyze"]
+
+
+@dataclass
+class Study1Result:
+    """Results of study 1 (performance); every table is a DataFrame.
+
+    Attributes
+    ----------
+    participants : list of str
+        Participants analysed (complete main phase).
+    methods, locations : list
+        Levels of the two factors.
+    trials : DataFrame
+        The analysed trials with perceived positions and errors (mm).
+    positions : DataFrame
+        Mean perceived position and 1-SD ellipse per target and method
+        (:func:`~vibrofocus.analysis.localization_summary`).
+    errors : DataFrame
+        Mean error (mm) per participant and condition.
+    cell_means : DataFrame
+        Mean and SD over participants of ``errors`` per condition.
+    shapiro : DataFrame
+        Shapiro–Wilk per condition.
+    anova : DataFrame
+        Two-way RM-ANOVA with Mauchly and Greenhouse–Geisser.
+    posthoc_method, posthoc_interaction : DataFrame
+        Bonferroni-corrected paired t-tests.
+    """
+
+    participants: list[str]
+    methods: list[str]
+    locations: list[int]
+    trials: pd.DataFrame
+    positions: pd.DataFrame
+    errors: pd.DataFrame
+    cell_means: pd.DataFrame
+    shapiro: pd.DataFrame
+    anova: pd.DataFrame
+    posthoc_method: pd.DataFrame
+    posthoc_interaction: pd.DataFrame
+
+
+@dataclass
+class Study2Counts:
+    """Counts of selected locations and their tests, on all trials or on target-containing ones."""
+
+    participants: list[str]
+    counts: pd.DataFrame
+    cell_means: pd.DataFrame
+    friedman: pd.DataFrame | None
+    wilcoxon: dict[str, pd.DataFrame]
+    excluded: list[dict] = field(default_factory=list)
+    unavailable: str | None = None
+
+
+@dataclass
+class Study2Result:
+    """Results of study 2 (confidence): all trials and trials containing the target."""
+
+    participants: list[str]
+    methods: list[str]
+    locations: list[int]
+    all_trials: Study2Counts
+    contains_target: Study2Counts
+
+
+@dataclass
+class AnalysisResult:
+    """Everything :func:`analyze` found.
+
+    Attributes
+    ----------
+    source : str
+        Where the trials came from.
+    n_trials : int
+        Rows of the table (both phases, after row-level exclusions).
+    study1, study2 : Study1Result or Study2Result or None
+        None where the study has no usable data; the reason is in ``unavailable``.
+    exclusions : DataFrame
+        ``participant``, ``study`` (None: the whole file), ``reason``.
+    warnings : list of str
+        Remarks that exclude no one.
+    unavailable : dict
+        ``{"study1": reason, ...}`` for the studies that could not be analysed.
+    alpha : float
+        Significance level used in sentences and flags.
+    layout : ArrayLayout or None
+        Layout the locations refer to (None: the reference layout).
+    """
+
+    source: str
+    n_trials: int
+    study1: Study1Result | None
+    study2: Study2Result | None
+    exclusions: pd.DataFrame
+    warnings: list[str]
+    unavailable: dict[str, str]
+    alpha: float = 0.05
+    layout: ArrayLayout | None = None
+
+
+def _cell_means(df: pd.DataFrame, dv: str) -> pd.DataFrame:
+    from .study1 import _sort
+
+    out = df.groupby(["location", "method"], sort=False)[dv].agg(["mean", "std", "median", "count"]).reset_index()
+    out = out.rename(columns={"std": "sd", "count": "n"})
+    return _sort(out)
+
+
+def _study_levels(data: pd.DataFrame) -> tuple[list[str], list[int]]:
+    return method_order(data["method"].unique()), sorted(int(t) for t in data["target"].unique())
+
+
+def _usable(data: pd.DataFrame, study: int) -> str | None:
+    """Reason why the complete-participant trials of a study cannot be analysed, or None."""
+    if data.empty:
+        return None  # caller words this
+    n = data["participant"].nunique()
+    methods, locations = _study_levels(data)
+    if n < 2:
+        return f"study {study}: only {n} participant with complete data; the repeated-measures tests need at least 2"
+    if len(methods) < 2:
+        return f"study {study}: only one method ({methods[0]}); nothing to compare"
+    if len(locations) < 2:
+        return f"study {study}: only one location ({locations[0]}); nothing to compare"
+    return None
+
+
+def _analyze_study1(data: pd.DataFrame, layout: ArrayLayout) -> Study1Result:
+    errors = study1_errors(data, layout)
+    main, inter = study1_posthoc(errors)
+    from .study1 import perceived_positions
+
+    methods, locations = _study_levels(data)
+    return Study1Result(
+        participants=sorted(map(str, data["participant"].unique())),
+        methods=methods,
+        locations=locations,
+        trials=perceived_positions(data, layout),
+        positions=localization_summary(data, layout),
+        errors=errors,
+        cell_means=_cell_means(errors, "error_mm"),
+        shapiro=shapiro_tests(errors),
+        anova=study1_anova(errors),
+        posthoc_method=main,
+        posthoc_interaction=inter,
+    )
+
+
+def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
+    counts, excluded = study2_counts(data, contains_target=contains_target)
+    participants = sorted(map(str, counts["participant"].unique())) if len(counts) else []
+    if len(participants) < 2:
+        why = (
+            f"only {len(participants)} participant(s) left with a target-containing trial in every condition"
+            if contains_target
+            else f"only {len(participants)} participant(s)"
+        )
+        return Study2Counts(participants, counts, pd.DataFrame(), None, {}, excluded, why)
+    friedman = friedman_tests(counts)
+    wilcoxon = {factor: wilcoxon_posthoc(counts, factor) for factor in ("location", "method")}
+    return Study2Counts(participants, counts, _cell_means(counts, "n_selected"), friedman, wilcoxon, excluded)
+
+
+def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: float = 0.05) -> AnalysisResult:
+    """Analyse both studies of a trials table (SPEC §7).
+
+    Training rows are left out. Per study, participants missing a condition are excluded
+    and reported; a study without usable data is reported as unavailable while the other
+    is still analysed.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        Output of :func:`~vibrofocus.analysis.load_trials` (its ``attrs["exclusions"]``
+        are carried into the result).
+    layout : ArrayLayout, optional
+        Location coordinates (m); default the reference layout.
+    alpha : float
+        Significance level for flags and sentences.
+
+    Returns
+    -------
+    AnalysisResult
+
+    Raises
+    ------
+    ValidationError
+        If neither study has usable data.
+    """
+    if not isinstance(trials, pd.DataFrame) or "selection" not in trials.columns:
+        raise ValidationError("analyze() takes the table returned by load_trials(path)")
+    layout = ArrayLayout.reference() if layout is None else layout
+    exclusions: list[dict] = list(trials.attrs.get("exclusions", []))
+    warnings: list[str] = []
+    unavailable: dict[str, str] = {}
+    results: dict[int, object] = {}
+    for study in (1, 2):
+        complete, excl, warn = check_design(trials, study)
+        exclusions += excl
+        warnings += warn
+        in_file = (trials["study"] == study).any()
+        if complete.empty:
+            if not in_file:
+                reason = f"study {study}: the trials file has no rows for this study"
+            elif not ((trials["study"] == study) & (trials["phase"] == "main")).any():
+                reason = f"study {study}: only training trials; no main-phase trials to analyse"
+            else:
+                reason = f"study {study}: no participant completed every condition"
+            unavailable[f"study{study}"] = reason
+            continue
+        reason = _usable(complete, study)
+        if reason is not None:
+            unavailable[f"study{study}"] = reason
+            continue
+        if study == 1:
+            results[1] = _analyze_study1(complete, layout)
+        else:
+            methods, locations = _study_levels(complete)
+            results[2] = Study2Result(
+                participants=sorted(map(str, complete["participant"].unique())),
+                methods=methods,
+                locations=locations,
+                all_trials=_study2_part(complete, False),
+                contains_target=_study2_part(complete, True),
+            )
+    if not results:
+        raise ValidationError("no usable data in either study: " + "; ".join(unavailable.values()))
+    excl_df = pd.DataFrame.from_records(exclusions, columns=["participant", "study", "reason"])
+    return AnalysisResult(
+        source=str(trials.attrs.get("source", "<DataFrame>")),
+        n_trials=len(trials),
+        study1=results.get(1),
+        study2=results.get(2),
+        exclusions=excl_df,
+        warnings=warnings,
+        unavailable=unavailable,
+        alpha=alpha,
+        layout=layout,
+    )

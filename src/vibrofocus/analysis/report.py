@@ -1,0 +1,443 @@
+"""report.json (SPEC §7 contract), results sentences, PNG figures and a readable HTML page."""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import math
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from .pipeline import AnalysisResult, Study1Result, Study2Counts, Study2Result
+
+__all__ = ["report_dict", "results_sentences", "format_p", "write_report"]
+
+#: Columns of ``study1.anova`` that the SPEC §7 contract requires.
+ANOVA_CONTRACT = ("effect", "F", "ddof1", "ddof2", "p_unc", "p_gg", "eps")
+
+
+# --------------------------------------------------------------------------- helpers
+def _clean(value: Any) -> Any:
+    """Make ``value`` JSON-safe: numpy scalars to Python, NaN/Inf to None, recursively."""
+    if isinstance(value, dict):
+        return {str(k): _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    if isinstance(value, pd.DataFrame):
+        return [_clean(r) for r in value.to_dict(orient="records")]
+    if isinstance(value, (np.bool_, bool)):
+        return bool(value)
+    if isinstance(value, (np.integer,)):
+        return int(value)
+    if isinstance(value, (np.floating, float)):
+        v = float(value)
+        return v if math.isfinite(v) else None
+    if value is None or value is pd.NA or value is pd.NaT:
+        return None
+    return value
+
+
+def format_p(p: float) -> str:
+    """APA-like p: ``"p < 0.0001"``, ``"p = 0.0003"`` or ``"p = 0.012"``."""
+    if p is None or not np.isfinite(p):
+        return "p = n/a"
+    if p < 1e-4:
+        return "p < 0.0001"
+    if p < 1e-3:
+        return f"p = {p:.4f}"
+    return f"p = {p:.3f}"
+
+
+def _dof(x: float) -> str:
+    return f"{x:.0f}" if float(x).is_integer() else f"{x:.2f}"
+
+
+def _effect_name(effect: str) -> str:
+    return effect.replace(" * ", " × ")
+
+
+# --------------------------------------------------------------------------- sentences
+def _anova_uses_gg(row) -> bool:
+    """GG correction is reported where Mauchly rejects sphericity or cannot be computed."""
+    return row.ddof1 > 1 and (row.sphericity_violated is None or bool(row.sphericity_violated))
+
+
+def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
+    n = len(s1.participants)
+    out = [
+        f"Localization error was the Euclidean distance between the perceived and the target location, averaged "
+        f"per participant and condition (N = {n} participants, {len(s1.locations)} locations × "
+        f"{len(s1.methods)} methods: {', '.join(s1.methods)}); it was analysed with a two-way repeated-measures "
+        f"ANOVA (location × method)."
+    ]
+    sh = s1.shapiro.dropna(subset=["p"])
+    if len(sh):
+        n_bad = int((sh["p"] < alpha).sum())
+        out.append(
+            f"Shapiro–Wilk tests rejected normality of the participant averages in {n_bad} of {len(sh)} conditions "
+            f"(p < {alpha:g})."
+        )
+    for row in s1.anova.itertuples(index=False):
+        if row.ddof1 == 1:
+            continue
+        name = _effect_name(row.effect)
+        if not row.mauchly_defined:
+            out.append(
+                f"Mauchly's test is undefined for {name} with N = {n} (it needs at least {row.ddof1 + 1} "
+                f"participants); the Greenhouse–Geisser correction was applied (ε = {row.eps:.2f})."
+            )
+        elif row.sphericity_violated:
+            out.append(
+                f"Mauchly's test indicated a violation of sphericity for {name} (W = {row.W_mauchly:.3f}, "
+                f"{format_p(row.p_mauchly)}); the Greenhouse–Geisser correction was applied (ε = {row.eps:.2f})."
+            )
+        else:
+            out.append(
+                f"Mauchly's test did not indicate a violation of sphericity for {name} (W = {row.W_mauchly:.3f}, "
+                f"{format_p(row.p_mauchly)})."
+            )
+    for row in s1.anova.itertuples(index=False):
+        gg = _anova_uses_gg(row)
+        d1, d2, p = (row.ddof1_gg, row.ddof2_gg, row.p_gg) if gg else (row.ddof1, row.ddof2, row.p_unc)
+        kind = "interaction" if "*" in row.effect else "main effect"
+        verdict = "was significant" if p < alpha else "was not significant"
+        out.append(
+            f"The {kind} of {_effect_name(row.effect)} {verdict}, F({_dof(d1)}, {_dof(d2)}) = {row.F:.2f}, "
+            f"{format_p(p)}, η²G = {row.ng2:.3f}{' (Greenhouse–Geisser corrected)' if gg else ''}."
+        )
+    parts = []
+    for r in s1.posthoc_method.itertuples(index=False):
+        parts.append(
+            f"{r.A} (M = {r.mean_A:.2f} mm) vs {r.B} (M = {r.mean_B:.2f} mm), t({_dof(r.dof)}) = {r.T:.2f}, "
+            f"{format_p(r.p_bonf)}"
+        )
+    if parts:
+        out.append("Post hoc paired t-tests between methods (Bonferroni-corrected): " + "; ".join(parts) + ".")
+    inter = s1.posthoc_interaction
+    if len(inter):
+        sig = inter[inter["p_bonf"] < alpha]
+        if len(sig):
+            by_loc = [
+                f"location {loc}: " + ", ".join(
+                    f"{r.A} vs {r.B} ({format_p(r.p_bonf)})" for r in g.itertuples(index=False)
+                )
+                for loc, g in sig.groupby("location", sort=True)
+            ]
+            out.append(
+                "Within each location (paired t-tests, Bonferroni-corrected per location), methods differed at "
+                + "; ".join(by_loc) + "."
+            )
+        else:
+            out.append("Within each location, no pair of methods differed after Bonferroni correction.")
+    return out
+
+
+def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str]:
+    if part.friedman is None:
+        return [f"Friedman tests {label} were not computed: {part.unavailable}."]
+    n = int(part.friedman["n"].iloc[0])
+    bits = []
+    for factor, r in part.friedman.iterrows():
+        verdict = "a significant" if r["p"] < alpha else "no significant"
+        bits.append(
+            f"{verdict} effect of {factor}, χ²({int(r['dof'])}) = {r['chi2']:.2f}, {format_p(r['p'])}, "
+            f"Kendall's W = {r['kendall_w']:.2f}"
+        )
+    out = [
+        f"Friedman tests on the mean number of selected locations per participant {label} (N = {n}) showed "
+        + "; and ".join(bits) + "."
+    ]
+    for factor, table in part.wilcoxon.items():
+        sig = table[table["p_bonf"] < alpha]
+        if len(sig):
+            out.append(
+                f"Pairwise Wilcoxon signed-rank tests on {factor} (Bonferroni-corrected) found differences between "
+                + "; ".join(
+                    f"{r.A} (Mdn = {r.median_A:.2f}) and {r.B} (Mdn = {r.median_B:.2f}), W = {r.W:.1f}, "
+                    f"{format_p(r.p_bonf)}"
+                    for r in sig.itertuples(index=False)
+                )
+                + "."
+            )
+        else:
+            out.append(f"Pairwise Wilcoxon signed-rank tests on {factor} found no difference after Bonferroni correction.")
+    return out
+
+
+def _study2_sentences(s2: Study2Result, alpha: float) -> list[str]:
+    out = _friedman_sentence(s2.all_trials, "(all trials)", alpha)
+    ct = s2.contains_target
+    label = "(only trials whose selection contains the target)"
+    if ct.excluded:
+        out.append(
+            f"For the trials whose selection contains the target, {len(ct.excluded)} participant(s) had no such "
+            f"trial in some condition and were left out of that analysis."
+        )
+    out += _friedman_sentence(ct, label, alpha)
+    return out
+
+
+def results_sentences(result: AnalysisResult) -> dict[str, list[str]]:
+    """Results sentences as a methods/results section would write them.
+
+    Degrees of freedom are Greenhouse–Geisser corrected where Mauchly's test rejects
+    sphericity (or is undefined for the sample size).
+
+    Returns
+    -------
+    dict
+        ``{"study1": [...], "study2": [...]}``; a study without data gets one sentence
+        saying why.
+    """
+    out: dict[str, list[str]] = {}
+    out["study1"] = (
+        _study1_sentences(result.study1, result.alpha)
+        if result.study1 is not None
+        else [f"Study 1 was not analysed: {result.unavailable.get('study1', 'no data')}."]
+    )
+    out["study2"] = (
+        _study2_sentences(result.study2, result.alpha)
+        if result.study2 is not None
+        else [f"Study 2 was not analysed: {result.unavailable.get('study2', 'no data')}."]
+    )
+    return out
+
+
+# --------------------------------------------------------------------------- report.json
+def _study2_part_dict(part: Study2Counts) -> dict:
+    d: dict[str, Any] = {
+        "available": part.friedman is not None,
+        "n_participants": len(part.participants),
+        "participants": part.participants,
+        "excluded": part.excluded,
+    }
+    if part.friedman is None:
+        d["reason"] = part.unavailable
+        d["friedman"] = {}
+        return d
+    d["friedman"] = {
+        factor: {"chi2": r["chi2"], "dof": int(r["dof"]), "p": r["p"], "kendall_w": r["kendall_w"], "n": int(r["n"])}
+        for factor, r in part.friedman.iterrows()
+    }
+    d["wilcoxon"] = {factor: table for factor, table in part.wilcoxon.items()}
+    d["cell_means"] = part.cell_means
+    d["counts"] = part.counts
+    return d
+
+
+def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None) -> dict:
+    """The content of report.json (SPEC §7 contract plus details), JSON-safe.
+
+    ``study1.anova`` is a list of rows with ``effect`` (``location``, ``method``,
+    ``location * method``), ``F``, ``ddof1``, ``ddof2``, ``p_unc``, ``p_gg``, ``eps`` and
+    more; ``study2.friedman`` has ``location`` and ``method``, each with ``chi2``,
+    ``dof``, ``p``. A study without usable data has ``available: false`` and a
+    ``reason`` (and an empty ``anova`` / ``friedman``).
+    """
+    from .. import __version__
+
+    sentences = results_sentences(result)
+    d: dict[str, Any] = {
+        "generator": f"vibrofocus {__version__}",
+        "source": result.source,
+        "n_trials": result.n_trials,
+        "alpha": result.alpha,
+        "exclusions": result.exclusions,
+        "warnings": result.warnings,
+        "unavailable": result.unavailable,
+    }
+    s1 = result.study1
+    if s1 is None:
+        d["study1"] = {"available": False, "reason": result.unavailable.get("study1"), "anova": []}
+    else:
+        anova = s1.anova.copy()
+        d["study1"] = {
+            "available": True,
+            "n_participants": len(s1.participants),
+            "participants": s1.participants,
+            "methods": s1.methods,
+            "locations": s1.locations,
+            "dv": "mean Euclidean error per participant and condition (mm)",
+            "anova": anova,
+            "mauchly": anova[["effect", "W_mauchly", "p_mauchly", "mauchly_defined", "sphericity_violated", "eps"]],
+            "shapiro": s1.shapiro,
+            "posthoc": {"method": s1.posthoc_method, "location_method": s1.posthoc_interaction},
+            "cell_means": s1.cell_means,
+            "positions": s1.positions,
+            "errors": s1.errors,
+            "sentences": sentences["study1"],
+        }
+    s2 = result.study2
+    if s2 is None:
+        d["study2"] = {"available": False, "reason": result.unavailable.get("study2"), "friedman": {}}
+    else:
+        all_trials = _study2_part_dict(s2.all_trials)
+        d["study2"] = {
+            "available": True,
+            "n_participants": len(s2.participants),
+            "participants": s2.participants,
+            "methods": s2.methods,
+            "locations": s2.locations,
+            "dv": "mean number of selected locations per participant and condition",
+            **{k: v for k, v in all_trials.items() if k not in ("participants", "n_participants", "excluded")},
+            "contains_target": _study2_part_dict(s2.contains_target),
+            "sentences": sentences["study2"],
+        }
+    d["figures"] = figures or {}
+    return _clean(d)
+
+
+# --------------------------------------------------------------------------- HTML
+_CSS = """
+body{font-family:system-ui,-apple-system,Segoe UI,Helvetica,Arial,sans-serif;max-width:1100px;margin:2em auto;
+padding:0 1em;color:#222;line-height:1.45}
+h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.8em}
+table{border-collapse:collapse;margin:.6em 0 1.2em;font-size:.88em}
+th,td{border:1px solid #ddd;padding:.25em .55em;text-align:right}th{background:#f3f3f3}
+td:first-child,th:first-child{text-align:left}
+.results p{background:#f8f8fb;border-left:3px solid #0072B2;padding:.4em .8em;margin:.5em 0}
+.warn{color:#8a4b00}img{max-width:100%;border:1px solid #eee}details{margin:.5em 0}
+summary{cursor:pointer;font-weight:600}.small{color:#666;font-size:.85em}
+"""
+
+
+def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
+    if df is None or len(df) == 0:
+        return "<p class='small'>(empty)</p>"
+    shown = df if max_rows is None else df.head(max_rows)
+
+    def fmt(x):
+        if isinstance(x, (float, np.floating)):
+            if not np.isfinite(x):
+                return ""
+            return f"{x:.3g}" if abs(x) < 1e-3 and x != 0 else f"{x:.4f}".rstrip("0").rstrip(".")
+        return html.escape(str(x))
+
+    body = shown.to_html(index=False, escape=False, formatters={c: fmt for c in shown.columns}, border=0)
+    note = f"<p class='small'>first {max_rows} of {len(df)} rows</p>" if max_rows and len(df) > max_rows else ""
+    return body + note
+
+
+def _img(path: Path) -> str:
+    data = base64.b64encode(path.read_bytes()).decode("ascii")
+    return f"<p><img alt='{html.escape(path.stem)}' src='data:image/png;base64,{data}'></p>"
+
+
+def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
+    from .. import __version__
+
+    sentences = results_sentences(result)
+    parts = [
+        "<!DOCTYPE html><html lang='en'><head><meta charset='utf-8'>",
+        "<title>vibrofocus localization report</title>",
+        f"<style>{_CSS}</style></head><body>",
+        "<h1>Localization studies: analysis report</h1>",
+        f"<p class='small'>Source: {html.escape(result.source)} · {result.n_trials} trial rows (training rows not "
+        f"analysed) · α = {result.alpha:g} · vibrofocus {html.escape(__version__)}</p>",
+    ]
+    parts.append("<h2>Participants and exclusions</h2>")
+    if len(result.exclusions):
+        parts.append("<p class='warn'>Some participants were excluded from an analysis:</p>")
+        parts.append(_table(result.exclusions.fillna("all")))
+    else:
+        parts.append("<p>No participant was excluded.</p>")
+    for w in result.warnings:
+        parts.append(f"<p class='warn'>Note: {html.escape(w)}</p>")
+    for reason in result.unavailable.values():
+        parts.append(f"<p class='warn'><b>{html.escape(reason)}</b></p>")
+
+    parts.append("<h2>Study 1: localization performance</h2>")
+    s1 = result.study1
+    parts.append("<div class='results'>" + "".join(f"<p>{html.escape(s)}</p>" for s in sentences["study1"]) + "</div>")
+    if s1 is not None:
+        for key in ("localization", "errors"):
+            if key in figures:
+                parts.append(_img(figures[key]))
+        anova = s1.anova.copy()
+        anova["effect"] = anova["effect"].map(_effect_name)
+        parts.append("<h3>Two-way repeated-measures ANOVA (location × method)</h3>")
+        parts.append(_table(anova.drop(columns=["SS", "MS"])))
+        parts.append("<h3>Post hoc: methods (paired t-tests, Bonferroni)</h3>")
+        parts.append(_table(s1.posthoc_method))
+        parts.append("<details><summary>Post hoc per location (interaction)</summary>")
+        parts.append(_table(s1.posthoc_interaction) + "</details>")
+        parts.append("<details><summary>Mean error per condition (mm)</summary>")
+        parts.append(_table(s1.cell_means) + "</details>")
+        parts.append("<details><summary>Shapiro–Wilk per condition</summary>")
+        parts.append(_table(s1.shapiro) + "</details>")
+        parts.append("<details><summary>Mean perceived positions and 1-SD ellipses (mm)</summary>")
+        parts.append(_table(s1.positions) + "</details>")
+
+    parts.append("<h2>Study 2: number of selected locations</h2>")
+    s2 = result.study2
+    parts.append("<div class='results'>" + "".join(f"<p>{html.escape(s)}</p>" for s in sentences["study2"]) + "</div>")
+    if s2 is not None:
+        if "counts" in figures:
+            parts.append(_img(figures["counts"]))
+        for label, part in (("all trials", s2.all_trials), ("trials whose selection contains the target", s2.contains_target)):
+            parts.append(f"<h3>Friedman tests ({label})</h3>")
+            if part.friedman is None:
+                parts.append(f"<p class='warn'>Not computed: {html.escape(str(part.unavailable))}</p>")
+                continue
+            parts.append(_table(part.friedman.reset_index()))
+            for factor, table in part.wilcoxon.items():
+                parts.append(f"<details><summary>Pairwise Wilcoxon on {factor} ({label}, Bonferroni)</summary>")
+                parts.append(_table(table) + "</details>")
+            parts.append(f"<details><summary>Mean count per condition ({label})</summary>")
+            parts.append(_table(part.cell_means) + "</details>")
+            if part.excluded:
+                parts.append(_table(pd.DataFrame(part.excluded)))
+    parts.append(
+        "<h2>Methods</h2><p class='small'>Two-way repeated-measures ANOVA, Mauchly's test and Greenhouse–Geisser "
+        "correction, paired t-tests, Friedman and Wilcoxon signed-rank tests with pingouin; Shapiro–Wilk with SciPy. "
+        "The Greenhouse–Geisser correction is reported where Mauchly's test rejects sphericity or is undefined "
+        "(fewer participants than levels of the effect). Figures: mean perceived position with the 1-SD ellipse of "
+        "the pooled perceived positions per target and method; box plots of per-participant means.</p>"
+    )
+    parts.append("</body></html>")
+    return "\n".join(parts)
+
+
+# --------------------------------------------------------------------------- writer
+def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str, Path]:
+    """Write report.json, PNG figures and a self-contained report.html into ``out_dir``.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        Output of :func:`~vibrofocus.analysis.analyze`.
+    out_dir : path
+        Created if needed; existing files of the same names are replaced.
+
+    Returns
+    -------
+    dict of str to Path
+        ``"json"``, ``"html"`` and one entry per figure (``"localization"``,
+        ``"errors"``, ``"counts"``).
+    """
+    from .figures import plot_counts, plot_errors, plot_localization, save_figure
+
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    figures: dict[str, Path] = {}
+    if result.study1 is not None:
+        figures["localization"] = save_figure(
+            plot_localization(result.study1.positions, result.layout), out / "study1_localization.png"
+        )
+        figures["errors"] = save_figure(plot_errors(result.study1.errors), out / "study1_errors.png")
+    if result.study2 is not None:
+        hit = result.study2.contains_target.counts if result.study2.contains_target.friedman is not None else None
+        figures["counts"] = save_figure(plot_counts(result.study2.all_trials.counts, hit), out / "study2_counts.png")
+    report = report_dict(result, figures={k: p.name for k, p in figures.items()})
+    json_path = out / "report.json"
+    tmp = json_path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False), encoding="utf-8")
+    os.replace(tmp, json_path)
+    html_path = out / "report.html"
+    html_path.write_text(_html(result, figures), encoding="utf-8")
+    return {"json": json_path, "html": html_path, **figures}

@@ -1,0 +1,343 @@
+"""Study 1 (performance): perceived positions, localization error and its statistics.
+
+Each trial of study 1 names one location. Its *perceived position* is that location's
+coordinate; its *error* is the Euclidean distance (mm) between the perceived and the
+target position. Errors are averaged per participant and condition (location × method)
+before the statistics: Shapiro–Wilk per condition, a two-way repeated-measures ANOVA
+with Mauchly's test and the Greenhouse–Geisser correction (pingouin), and Bonferroni
+corrected paired t-tests for the method effect and, per location, for the interaction.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..errors import ValidationError
+from ..layout import ArrayLayout
+from .trials import method_order
+
+__all__ = [
+    "perceived_positions",
+    "localization_summary",
+    "study1_errors",
+    "shapiro_tests",
+    "study1_anova",
+    "study1_posthoc",
+]
+
+_M_TO_MM = 1e3
+
+
+def _layout(layout: ArrayLayout | None) -> ArrayLayout:
+    return ArrayLayout.reference() if layout is None else layout
+
+
+def _require(df: pd.DataFrame, columns: Sequence[str], what: str) -> None:
+    missing = [c for c in columns if c not in df.columns]
+    if missing:
+        raise ValidationError(f"{what} is missing the column(s) {', '.join(missing)}")
+
+
+def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
+    """Add the target and perceived positions (mm) and the error (mm) to study-1 trials.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        Study-1 trials with ``target`` and ``selection`` (one location per trial), as
+        from :func:`vibrofocus.analysis.check_design`.
+    layout : ArrayLayout, optional
+        Location coordinates (m); default the reference layout.
+
+    Returns
+    -------
+    DataFrame
+        ``trials`` plus ``target_x_mm``, ``target_y_mm``, ``response_location``,
+        ``perceived_x_mm``, ``perceived_y_mm`` and ``error_mm`` (Euclidean distance, mm).
+    """
+    _require(trials, ("target", "selection"), "study-1 trials")
+    xy_mm = np.asarray(_layout(layout).locations_xy) * _M_TO_MM
+    out = trials.copy()
+    if out.empty:
+        for col in ("target_x_mm", "target_y_mm", "perceived_x_mm", "perceived_y_mm", "error_mm"):
+            out[col] = pd.Series(dtype=float)
+        out["response_location"] = pd.Series(dtype=int)
+        return out
+    if (out["selection"].map(len) != 1).any():
+        raise ValidationError("study-1 trials must each name exactly one location")
+    response = out["selection"].map(lambda s: s[0]).to_numpy(dtype=int)
+    target = out["target"].to_numpy(dtype=int)
+    if target.min() < 1 or max(target.max(), response.max()) > len(xy_mm) or response.min() < 1:
+        raise ValidationError(f"targets and responses must be location numbers 1..{len(xy_mm)}")
+    out["response_location"] = response
+    out["target_x_mm"], out["target_y_mm"] = xy_mm[target - 1].T
+    out["perceived_x_mm"], out["perceived_y_mm"] = xy_mm[response - 1].T
+    out["error_mm"] = np.hypot(out["perceived_x_mm"] - out["target_x_mm"], out["perceived_y_mm"] - out["target_y_mm"])
+    return out
+
+
+def localization_summary(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
+    """Mean perceived position and its 1-SD covariance ellipse per target and method.
+
+    Trials of all participants are pooled.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        Study-1 trials (see :func:`perceived_positions`).
+    layout : ArrayLayout, optional
+        Location coordinates; default the reference layout.
+
+    Returns
+    -------
+    DataFrame
+        One row per (``location`` = target, ``method``): ``n`` trials, ``target_x_mm``,
+        ``target_y_mm``, ``mean_x_mm``, ``mean_y_mm``, the sample covariance
+        ``cov_xx_mm2``, ``cov_xy_mm2``, ``cov_yy_mm2`` (ddof 1), the ellipse full axes
+        ``ellipse_width_mm`` (major) and ``ellipse_height_mm`` (minor), i.e. twice the
+        standard deviations along the principal axes, ``ellipse_angle_deg`` (major axis,
+        counter-clockwise from +x), ``bias_mm`` (mean position to target) and
+        ``mean_error_mm``.
+    """
+    pos = perceived_positions(trials, layout)
+    rows = []
+    for (location, method), g in pos.groupby(["target", "method"], sort=False):
+        xy = g[["perceived_x_mm", "perceived_y_mm"]].to_numpy()
+        mean = xy.mean(axis=0)
+        if len(xy) > 1:
+            cov = np.cov(xy, rowvar=False, ddof=1)
+            evals, evecs = np.linalg.eigh(cov)  # ascending
+            evals = np.clip(evals, 0.0, None)
+            width, height = 2 * np.sqrt(evals[1]), 2 * np.sqrt(evals[0])
+            angle = float(np.degrees(np.arctan2(evecs[1, 1], evecs[0, 1]))) % 180.0
+        else:
+            cov = np.full((2, 2), np.nan)
+            width = height = angle = np.nan
+        tx, ty = g["target_x_mm"].iloc[0], g["target_y_mm"].iloc[0]
+        rows.append(
+            {
+                "location": int(location),
+                "method": method,
+                "n": len(xy),
+                "target_x_mm": tx,
+                "target_y_mm": ty,
+                "mean_x_mm": mean[0],
+                "mean_y_mm": mean[1],
+                "cov_xx_mm2": cov[0, 0],
+                "cov_xy_mm2": cov[0, 1],
+                "cov_yy_mm2": cov[1, 1],
+                "ellipse_width_mm": width,
+                "ellipse_height_mm": height,
+                "ellipse_angle_deg": angle,
+                "bias_mm": float(np.hypot(mean[0] - tx, mean[1] - ty)),
+                "mean_error_mm": g["error_mm"].mean(),
+            }
+        )
+    out = pd.DataFrame(rows)
+    if out.empty:
+        return out
+    return _sort(out)
+
+
+def _sort(df: pd.DataFrame, by: Sequence[str] = ("location", "method")) -> pd.DataFrame:
+    order = {m: i for i, m in enumerate(method_order(df["method"].unique()))}
+    keys = {c: (df[c].map(order) if c == "method" else df[c]) for c in by}
+    idx = pd.DataFrame(keys).sort_values(list(by), kind="stable").index
+    return df.loc[idx].reset_index(drop=True)
+
+
+def study1_errors(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
+    """Euclidean localization error averaged per participant and condition.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        Study-1 main-phase trials of complete participants.
+    layout : ArrayLayout, optional
+        Location coordinates; default the reference layout.
+
+    Returns
+    -------
+    DataFrame
+        ``participant``, ``location`` (the target), ``method``, ``error_mm`` (mean
+        Euclidean error, mm), ``n_trials``, ``rt_s`` (mean response time, s).
+    """
+    pos = perceived_positions(trials, layout)
+    grouped = pos.groupby(["participant", "target", "method"], sort=False)
+    out = grouped.agg(error_mm=("error_mm", "mean"), n_trials=("error_mm", "size"), rt_s=("rt_s", "mean"))
+    out = out.reset_index().rename(columns={"target": "location"})
+    if out.empty:
+        return out
+    return _sort(out, ("participant", "location", "method"))
+
+
+def shapiro_tests(
+    errors: pd.DataFrame, *, dv: str = "error_mm", by: Sequence[str] = ("location", "method")
+) -> pd.DataFrame:
+    """Shapiro–Wilk test of the per-participant averages in each condition.
+
+    Parameters
+    ----------
+    errors : DataFrame
+        One row per participant and condition (see :func:`study1_errors`).
+    dv : str
+        Column tested.
+    by : sequence of str
+        Columns defining a condition.
+
+    Returns
+    -------
+    DataFrame
+        The ``by`` columns, ``n``, ``W``, ``p`` and ``normal`` (``p >= 0.05``); ``W``
+        and ``p`` are NaN where fewer than 3 values or all equal.
+    """
+    from scipy import stats
+
+    _require(errors, (dv, *by), "errors")
+    rows = []
+    for key, g in errors.groupby(list(by), sort=False):
+        values = g[dv].to_numpy(dtype=float)
+        if len(values) >= 3 and np.ptp(values) > 0:
+            w, p = stats.shapiro(values)
+        else:
+            w = p = np.nan
+        row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
+        row.update(n=len(values), W=float(w), p=float(p), normal=bool(p >= 0.05) if np.isfinite(p) else None)
+        rows.append(row)
+    out = pd.DataFrame(rows)
+    return _sort(out, tuple(by)) if "method" in by and not out.empty else out
+
+
+def study1_anova(
+    errors: pd.DataFrame,
+    *,
+    dv: str = "error_mm",
+    within: tuple[str, str] = ("location", "method"),
+    subject: str = "participant",
+) -> pd.DataFrame:
+    """Two-way repeated-measures ANOVA with Mauchly's test and Greenhouse–Geisser.
+
+    Wraps :func:`pingouin.rm_anova` (``correction=True``) and renames its columns to the
+    report contract.
+
+    Parameters
+    ----------
+    errors : DataFrame
+        Long table, one row per subject and cell of the two within factors.
+    dv : str
+        Dependent variable (default the mean error, mm).
+    within : (str, str)
+        The two within-subject factors.
+    subject : str
+        Subject identifier column.
+
+    Returns
+    -------
+    DataFrame
+        One row per effect (``within[0]``, ``within[1]``, ``"within[0] * within[1]"``):
+        ``effect``, ``SS``, ``MS``, ``F``, ``ddof1``, ``ddof2``, ``p_unc``, ``eps``
+        (Greenhouse–Geisser epsilon), ``p_gg`` (GG-corrected p), ``ddof1_gg`` and
+        ``ddof2_gg`` (dofs multiplied by epsilon), ``ng2`` (generalized eta squared),
+        ``W_mauchly``, ``p_mauchly``, ``sphericity_violated`` (Mauchly ``p < 0.05``; None
+        where Mauchly's test is undefined) and ``mauchly_defined``. Mauchly's test
+        needs at least as many subjects as the effect has levels (contrasts + 1);
+        otherwise its statistic is NaN and, conservatively, the GG correction is used.
+
+    Raises
+    ------
+    ValidationError
+        Missing columns, fewer than two subjects, or a subject without every cell.
+    """
+    import pingouin as pg
+
+    a, b = within
+    _require(errors, (dv, a, b, subject), "errors")
+    cells = errors.groupby([subject, a, b]).size()
+    n_a, n_b = errors[a].nunique(), errors[b].nunique()
+    per_subject = cells.groupby(level=subject).size()
+    if (per_subject != n_a * n_b).any() or (cells != 1).any():
+        bad = sorted(map(str, per_subject[per_subject != n_a * n_b].index))
+        raise ValidationError(
+            f"the ANOVA needs exactly one {dv} per {subject} and cell of {a} × {b}; "
+            f"incomplete or duplicated for {subject}(s) {', '.join(bad) or '(duplicates)'}"
+        )
+    n = len(per_subject)
+    if n < 2:
+        raise ValidationError(f"the repeated-measures ANOVA needs at least 2 {subject}s, got {n}")
+    if n_a < 2 or n_b < 2:
+        raise ValidationError(f"the two-way ANOVA needs at least 2 levels of {a} and of {b}, got {n_a} and {n_b}")
+    aov = pg.rm_anova(data=errors, dv=dv, within=[a, b], subject=subject, correction=True, detailed=True)
+    aov = aov.rename(columns={"Source": "effect", "p_GG_corr": "p_gg", "W_spher": "W_mauchly", "p_spher": "p_mauchly"})
+    aov = aov[aov["effect"].isin([a, b, f"{a} * {b}"])].reset_index(drop=True)
+    aov["ddof1_gg"] = aov["eps"] * aov["ddof1"]
+    aov["ddof2_gg"] = aov["eps"] * aov["ddof2"]
+    # Mauchly's W is defined when the sample covariance of the effect's contrasts is
+    # non-singular: n - 1 >= number of contrasts (= ddof1). Two levels: always spherical.
+    defined = (aov["ddof1"] == 1) | (n - 1 >= aov["ddof1"])
+    aov["mauchly_defined"] = defined
+    aov.loc[aov["ddof1"] == 1, ["W_mauchly", "p_mauchly"]] = [np.nan, 1.0]
+    aov.loc[~defined, ["W_mauchly", "p_mauchly"]] = np.nan
+    aov["sphericity_violated"] = [
+        (bool(p < 0.05) if ok else None) for p, ok in zip(aov["p_mauchly"], defined)
+    ]
+    cols = ["effect", "SS", "MS", "F", "ddof1", "ddof2", "p_unc", "p_gg", "eps", "ddof1_gg", "ddof2_gg", "ng2",
+            "W_mauchly", "p_mauchly", "sphericity_violated", "mauchly_defined"]  # fmt: skip
+    out = aov[cols].copy()
+    out["ddof1"] = out["ddof1"].astype(int)
+    out["ddof2"] = out["ddof2"].astype(int)
+    out.attrs["n_subjects"] = n
+    return out
+
+
+def study1_posthoc(
+    errors: pd.DataFrame,
+    *,
+    dv: str = "error_mm",
+    factor: str = "method",
+    by: str = "location",
+    subject: str = "participant",
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Bonferroni-corrected paired t-tests between methods, overall and per location.
+
+    Parameters
+    ----------
+    errors : DataFrame
+        One row per subject and condition (see :func:`study1_errors`).
+    dv, factor, by, subject : str
+        Dependent variable, the compared factor, the factor within whose levels the
+        interaction comparisons are made, and the subject column.
+
+    Returns
+    -------
+    main : DataFrame
+        Paired t-tests between the levels of ``factor`` on each subject's mean over
+        ``by`` (Bonferroni over these comparisons): ``A``, ``B``, ``mean_A``, ``mean_B``,
+        ``T``, ``dof``, ``p_unc``, ``p_bonf``, ``hedges``.
+    interaction : DataFrame
+        The same within each level of ``by`` (one column ``by``), Bonferroni-corrected
+        within each level's family of comparisons.
+    """
+    import pingouin as pg
+
+    _require(errors, (dv, factor, by, subject), "errors")
+
+    def pairs(data: pd.DataFrame) -> pd.DataFrame:
+        res = pg.pairwise_tests(data=data, dv=dv, within=factor, subject=subject, padjust="bonf")
+        means = data.groupby(factor)[dv].mean()
+        res = res.rename(columns={"p_corr": "p_bonf"})
+        res["mean_A"] = res["A"].map(means)
+        res["mean_B"] = res["B"].map(means)
+        return res[["A", "B", "mean_A", "mean_B", "T", "dof", "p_unc", "p_bonf", "hedges"]]
+
+    per_subject = errors.groupby([subject, factor], as_index=False)[dv].mean()
+    main = pairs(per_subject)
+    parts = []
+    for level, g in errors.groupby(by, sort=True):
+        res = pairs(g)
+        res.insert(0, by, level)
+        parts.append(res)
+    interaction = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame()
+    return main, interaction

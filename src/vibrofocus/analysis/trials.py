@@ -1,0 +1,376 @@
+"""Read and validate a trials file (SPEC §6), and check each study's design.
+
+A trials file has one row per trial with the columns ``participant, study, phase, trial,
+method, target, response, rt_s``. :func:`load_trials` reads it, types every column and
+refuses (or, on request, excludes) rows that break the contract, always saying which
+line, which column and why. :func:`check_design` then finds, per study, the participants
+whose main phase misses a condition (target × method), so they can be left out of the
+statistics *and reported*, never silently.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from typing import Literal
+
+import numpy as np
+import pandas as pd
+
+from .._validation import check_choice
+from ..errors import ValidationError
+from ..layout import ArrayLayout
+
+__all__ = [
+    "REQUIRED_COLUMNS",
+    "KNOWN_METHODS",
+    "PHASES",
+    "STUDIES",
+    "load_trials",
+    "trial_problems",
+    "check_design",
+    "method_order",
+    "main_trials",
+]
+
+#: Columns a trials file must have (SPEC §6).
+REQUIRED_COLUMNS: tuple[str, ...] = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
+#: Rendering methods in the order tables and figures list them; others follow alphabetically.
+KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal")
+#: Valid phases.
+PHASES: tuple[str, ...] = ("training", "main")
+#: Valid study numbers.
+STUDIES: tuple[int, ...] = (1, 2)
+
+_MAX_LISTED = 5  # problems quoted in one error message
+
+
+def method_order(methods: Iterable[str]) -> list[str]:
+    """Sort method names: the known methods first (in :data:`KNOWN_METHODS` order), then the rest."""
+    methods = set(methods)
+    known = [m for m in KNOWN_METHODS if m in methods]
+    return known + sorted(methods - set(known))
+
+
+def _parse_int(text: str) -> int | None:
+    """Return ``text`` as int if it is an integer (``"3"``, ``"3.0"``), else None."""
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    if not np.isfinite(value) or value != int(value):
+        return None
+    return int(value)
+
+
+def _parse_selection(text: str, n_locations: int) -> tuple[tuple[int, ...] | None, str | None]:
+    """Parse a response such as ``"4 5"``; return ``(selection, None)`` or ``(None, reason)``."""
+    tokens = text.replace(",", " ").split()
+    if not tokens:
+        return None, "is empty: no location was chosen"
+    numbers = []
+    for token in tokens:
+        value = _parse_int(token)
+        if value is None:
+            return None, f"{text!r} is not a list of location numbers separated by spaces"
+        if not 1 <= value <= n_locations:
+            return None, f"{text!r} names location {value}, outside 1..{n_locations}"
+        numbers.append(value)
+    if len(set(numbers)) != len(numbers):
+        return None, f"{text!r} names the same location more than once"
+    return tuple(sorted(numbers)), None
+
+
+def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Type the columns of a raw trials table and list every row that breaks the contract.
+
+    Parameters
+    ----------
+    raw : DataFrame
+        The trials as read from CSV, every cell a string (see :func:`load_trials`). A
+        ``line`` column (1-based line in the file) is used in messages when present.
+    layout : ArrayLayout, optional
+        Gives the number of locations (valid targets and responses are ``1..N``).
+        Default :meth:`ArrayLayout.reference` (nine locations).
+
+    Returns
+    -------
+    trials : DataFrame
+        The rows that passed, typed: ``participant`` (str), ``study`` (int), ``phase``
+        (str), ``trial`` (int), ``method`` (str), ``target`` (int), ``response`` (str),
+        ``selection`` (tuple of int, sorted), ``n_selected`` (int), ``rt_s`` (float, s;
+        NaN when empty), ``line`` (int).
+    problems : DataFrame
+        One row per problem: ``line``, ``participant``, ``study``, ``column``, ``value``,
+        ``reason``.
+
+    Raises
+    ------
+    ValidationError
+        If a required column is missing.
+    """
+    layout = ArrayLayout.reference() if layout is None else layout
+    n_locations = len(layout.locations_xy)
+    missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
+    if missing:
+        raise ValidationError(
+            f"trials file is missing the column(s) {', '.join(missing)}; "
+            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (SPEC §6), got {', '.join(map(str, raw.columns))}"
+        )
+    df = raw.copy()
+    if "line" not in df.columns:
+        df["line"] = np.arange(2, len(df) + 2)  # header is line 1
+    for col in REQUIRED_COLUMNS:
+        df[col] = df[col].astype(str).str.strip()
+
+    problems: list[dict] = []
+    records: list[dict] = []
+    for row in df.itertuples(index=False):
+        row_problems: list[tuple[str, str, str]] = []
+        participant = row.participant
+        if participant == "" or participant.lower() == "nan":
+            row_problems.append(("participant", participant, "is empty"))
+        study = _parse_int(row.study)
+        if study not in STUDIES:
+            row_problems.append(("study", row.study, f"must be 1 or 2, got {row.study!r}"))
+        phase = row.phase.lower()
+        if phase not in PHASES:
+            row_problems.append(("phase", row.phase, f"must be 'training' or 'main', got {row.phase!r}"))
+        trial = _parse_int(row.trial)
+        if trial is None:
+            row_problems.append(("trial", row.trial, f"must be an integer trial number, got {row.trial!r}"))
+        method = row.method
+        if method == "" or method.lower() == "nan":
+            row_problems.append(("method", method, "is empty"))
+        target = _parse_int(row.target)
+        if target is None or not 1 <= target <= n_locations:
+            row_problems.append(("target", row.target, f"must be a location number 1..{n_locations}, got {row.target!r}"))
+        selection, reason = _parse_selection(row.response, n_locations)
+        if reason is not None:
+            row_problems.append(("response", row.response, reason))
+        elif study == 1 and len(selection) != 1:
+            row_problems.append(
+                ("response", row.response, f"study 1 takes exactly one location per trial, got {len(selection)}")
+            )
+        rt_text = row.rt_s
+        if rt_text == "" or rt_text.lower() == "nan":
+            rt = float("nan")
+        else:
+            try:
+                rt = float(rt_text)
+            except ValueError:
+                rt = None
+            if rt is None or not np.isfinite(rt) or rt < 0:
+                row_problems.append(("rt_s", rt_text, f"must be a time >= 0 in seconds (or empty), got {rt_text!r}"))
+        for column, value, why in row_problems:
+            problems.append(
+                {
+                    "line": int(row.line),
+                    "participant": participant,
+                    "study": study,
+                    "column": column,
+                    "value": value,
+                    "reason": f"{column} {why}",
+                }
+            )
+        if not row_problems:
+            records.append(
+                {
+                    "participant": participant,
+                    "study": study,
+                    "phase": phase,
+                    "trial": trial,
+                    "method": method,
+                    "target": target,
+                    "response": row.response,
+                    "selection": selection,
+                    "n_selected": len(selection),
+                    "rt_s": rt,
+                    "line": int(row.line),
+                }
+            )
+    columns = ["participant", "study", "phase", "trial", "method", "target", "response", "selection",
+               "n_selected", "rt_s", "line"]  # fmt: skip
+    trials = pd.DataFrame.from_records(records, columns=columns)
+    if len(trials):
+        trials = trials.astype(
+            {"study": int, "trial": int, "target": int, "n_selected": int, "rt_s": float, "line": int}
+        )
+        key = ["participant", "study", "phase", "trial"]
+        dup = trials.duplicated(key, keep="first")
+        for row in trials[dup].itertuples(index=False):
+            problems.append(
+                {
+                    "line": int(row.line),
+                    "participant": row.participant,
+                    "study": int(row.study),
+                    "column": "trial",
+                    "value": str(row.trial),
+                    "reason": f"trial {row.trial} of the {row.phase} phase of study {row.study} appears twice",
+                }
+            )
+        trials = trials[~dup].reset_index(drop=True)
+    problems_df = pd.DataFrame.from_records(
+        problems, columns=["line", "participant", "study", "column", "value", "reason"]
+    )
+    return trials, problems_df
+
+
+def load_trials(
+    source: str | os.PathLike | pd.DataFrame,
+    *,
+    layout: ArrayLayout | None = None,
+    on_invalid: Literal["raise", "exclude"] = "raise",
+) -> pd.DataFrame:
+    """Read a trials CSV file (SPEC §6) and validate every row.
+
+    Parameters
+    ----------
+    source : path or DataFrame
+        The CSV file, or a table with the same columns.
+    layout : ArrayLayout, optional
+        Layout whose locations the targets and responses refer to; default the
+        reference layout (locations 1–9).
+    on_invalid : {"raise", "exclude"}
+        What to do with rows that break the contract (a response or target outside the
+        locations, an unparsable response, an unknown study or phase, a duplicated
+        trial, ...): ``"raise"`` refuses the file, quoting the first problems;
+        ``"exclude"`` drops *all* rows of each participant with a bad row and records
+        why in ``trials.attrs["exclusions"]`` (a list of dicts with ``participant``,
+        ``study`` and ``reason``), which :func:`vibrofocus.analysis.analyze` reports.
+
+    Returns
+    -------
+    DataFrame
+        Typed trials, both phases (see :func:`trial_problems` for the columns), sorted
+        by participant, study, phase and trial. ``attrs["exclusions"]`` lists the
+        excluded participants (empty with ``on_invalid="raise"``) and
+        ``attrs["source"]`` names the file.
+
+    Raises
+    ------
+    ValidationError
+        Unreadable or empty file, a missing column, or (``on_invalid="raise"``) any
+        invalid row.
+    """
+    check_choice(on_invalid, "on_invalid", ("raise", "exclude"))
+    if isinstance(source, pd.DataFrame):
+        raw = source.astype(str).reset_index(drop=True)
+        name = "<DataFrame>"
+        if "line" not in raw.columns:
+            raw["line"] = np.arange(2, len(raw) + 2)
+    else:
+        name = os.fspath(source)
+        if not os.path.isfile(name):
+            raise ValidationError(f"trials file {name!r} does not exist or is not a file")
+        try:
+            raw = pd.read_csv(name, dtype=str, keep_default_na=False, skipinitialspace=True)
+        except pd.errors.EmptyDataError:
+            raise ValidationError(f"trials file {name!r} is empty: expected a header line and one row per trial") from None
+        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+            raise ValidationError(f"trials file {name!r} is not a readable CSV file: {exc}") from None
+        raw.columns = [str(c).strip() for c in raw.columns]
+        raw["line"] = np.arange(2, len(raw) + 2)
+    trials, problems = trial_problems(raw, layout=layout)
+    if len(raw) == 0:
+        raise ValidationError(f"trials file {name!r} has a header but no trials")
+    exclusions: list[dict] = []
+    if len(problems):
+        if on_invalid == "raise":
+            listed = "; ".join(f"line {p.line}: {p.reason}" for p in problems.head(_MAX_LISTED).itertuples())
+            more = f" (and {len(problems) - _MAX_LISTED} more)" if len(problems) > _MAX_LISTED else ""
+            raise ValidationError(
+                f"trials file {name!r} has {len(problems)} invalid value(s): {listed}{more}. "
+                "Fix the file, or exclude the participants concerned (on_invalid='exclude', CLI --exclude-invalid)"
+            )
+        for participant, group in problems.groupby("participant", sort=True):
+            first = group.iloc[0]
+            extra = f" (and {len(group) - 1} more problem(s))" if len(group) > 1 else ""
+            exclusions.append(
+                {
+                    "participant": str(participant),
+                    "study": None,
+                    "reason": f"invalid row(s) in the trials file: line {first.line}: {first.reason}{extra}",
+                }
+            )
+        trials = trials[~trials["participant"].isin(problems["participant"])].reset_index(drop=True)
+    trials = trials.sort_values(["participant", "study", "phase", "trial"], kind="stable").reset_index(drop=True)
+    trials.attrs["exclusions"] = exclusions
+    trials.attrs["source"] = name
+    return trials
+
+
+def main_trials(trials: pd.DataFrame, study: int) -> pd.DataFrame:
+    """Return the main-phase rows of one study (training rows are never analysed)."""
+    check_choice(study, "study", STUDIES)
+    missing = [c for c in ("study", "phase", "participant", "method", "target", "selection") if c not in trials.columns]
+    if missing:
+        raise ValidationError(
+            f"trials must be the table returned by load_trials; missing column(s) {', '.join(missing)}"
+        )
+    return trials[(trials["study"] == study) & (trials["phase"] == "main")].reset_index(drop=True)
+
+
+def check_design(trials: pd.DataFrame, study: int) -> tuple[pd.DataFrame, list[dict], list[str]]:
+    """Keep the participants who completed every condition of one study.
+
+    The conditions are all (target, method) pairs seen in the study's main phase. A
+    participant missing any of them cannot enter the repeated-measures statistics and
+    is excluded with the reason; unequal numbers of repetitions are kept (trials are
+    averaged per condition) and returned as warnings.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        Output of :func:`load_trials`.
+    study : {1, 2}
+        Which study.
+
+    Returns
+    -------
+    complete : DataFrame
+        Main-phase trials of the complete participants.
+    exclusions : list of dict
+        ``participant``, ``study``, ``reason`` for each excluded participant.
+    warnings : list of str
+        Remarks that do not exclude anyone (unequal repetitions).
+    """
+    main = main_trials(trials, study)
+    exclusions: list[dict] = []
+    warnings: list[str] = []
+    in_study = trials.loc[trials["study"] == study, "participant"].unique()
+    for participant in sorted(set(in_study) - set(main["participant"])):
+        exclusions.append(
+            {"participant": str(participant), "study": study, "reason": f"no main-phase trials in study {study}"}
+        )
+    if main.empty:
+        return main, exclusions, warnings
+    conditions = main[["target", "method"]].drop_duplicates()
+    all_conditions = set(map(tuple, conditions.to_numpy().tolist()))
+    counts = main.groupby(["participant", "target", "method"]).size()
+    complete = []
+    for participant, sub in counts.groupby(level="participant", sort=True):
+        have = {(t, m) for _, t, m in sub.index}
+        lacking = sorted(all_conditions - have, key=lambda c: (c[1], c[0]))
+        if lacking:
+            shown = ", ".join(f"location {t} × {m}" for t, m in lacking[:_MAX_LISTED])
+            more = f" and {len(lacking) - _MAX_LISTED} more" if len(lacking) > _MAX_LISTED else ""
+            exclusions.append(
+                {
+                    "participant": str(participant),
+                    "study": study,
+                    "reason": (
+                        f"incomplete: no main-phase trial for {len(lacking)} of the {len(all_conditions)} "
+                        f"conditions in study {study} ({shown}{more})"
+                    ),
+                }
+            )
+            continue
+        complete.append(participant)
+        reps = sub.to_numpy()
+        if reps.min() != reps.max():
+            warnings.append(
+                f"participant {participant}, study {study}: unequal repetitions per condition "
+                f"({reps.min()} to {reps.max()} trials); conditions are averaged"
+            )
+    return main[main["participant"].isin(complete)].reset_index(drop=True), exclusions, warnings

@@ -1,0 +1,104 @@
+"""``vibrofocus analyze``: statistics, figures and reports from a trials file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.console import Console
+from rich.table import Table
+
+from ._errors import user_errors
+from .main import app
+
+console = Console()
+
+
+def _p(p: float) -> str:
+    """A p-value for a table cell: ``< 0.0001`` or ``0.012``."""
+    from ..analysis.report import format_p
+
+    return format_p(p).removeprefix("p = ").removeprefix("p ")
+
+
+@app.command(
+    "analyze",
+    epilog=(
+        "Example: vibrofocus analyze trials.csv --out report/  "
+        "(then open report/report.html). Training rows are never analysed."
+    ),
+)
+def analyze_command(
+    trials: Path = typer.Argument(
+        ...,
+        help="Trials CSV (SPEC §6): participant, study, phase, trial, method, target, response, rt_s.",
+        show_default=False,
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output folder for report.json, report.html and the PNG figures (created).",
+        show_default=False,
+    ),
+    exclude_invalid: bool = typer.Option(
+        False,
+        "--exclude-invalid",
+        help="Exclude (and report) participants with invalid rows instead of refusing the file.",
+    ),
+    alpha: float = typer.Option(0.05, "--alpha", help="Significance level for the results sentences."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the paths written."),
+) -> None:
+    """Analyse localization studies 1 and 2 from a trials file.
+
+    Study 1: Euclidean error (mm) per participant and condition; Shapiro-Wilk; two-way RM-ANOVA (location x method) with Mauchly and Greenhouse-Geisser; Bonferroni paired t-tests; localization ellipses.
+
+    Study 2: number of selected locations; Friedman tests for location and method; pairwise Wilcoxon (Bonferroni); the same on trials whose selection contains the target.
+
+    Participants missing a condition are excluded and listed, never dropped silently.
+    """  # noqa: E501
+    with user_errors():
+        from .._validation import check_in_range
+        from ..analysis import analyze, load_trials, write_report
+
+        check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
+        data = load_trials(trials, on_invalid="exclude" if exclude_invalid else "raise")
+        result = analyze(data, alpha=alpha)
+        paths = write_report(result, out)
+
+    if quiet:
+        for p in paths.values():
+            console.print(str(p))
+        return
+    console.print(f"[bold]vibrofocus analyze[/] {trials} ({result.n_trials} rows)")
+    for row in result.exclusions.itertuples(index=False):
+        where = f"study {row.study}" if row.study is not None and row.study == row.study else "all studies"
+        console.print(f"[yellow]excluded[/] {row.participant} ({where}): {row.reason}")
+    for w in result.warnings:
+        console.print(f"[yellow]note[/] {w}")
+    for reason in result.unavailable.values():
+        console.print(f"[bold yellow]{reason}[/]")
+    s1 = result.study1
+    if s1 is not None:
+        table = Table(title=f"Study 1: error (mm), RM-ANOVA, N = {len(s1.participants)}")
+        for col in ("effect", "F", "ddof1", "ddof2", "p_unc", "eps", "p_gg", "Mauchly p"):
+            table.add_column(col, justify="left" if col == "effect" else "right")
+        for r in s1.anova.itertuples(index=False):
+            mauchly = "n/a" if r.p_mauchly != r.p_mauchly else f"{r.p_mauchly:.3g}"
+            table.add_row(
+                r.effect.replace(" * ", " × "), f"{r.F:.2f}", str(r.ddof1), str(r.ddof2),
+                _p(r.p_unc), f"{r.eps:.3f}", _p(r.p_gg), mauchly,
+            )  # fmt: skip
+        console.print(table)
+        means = s1.errors.groupby("method")["error_mm"].mean()
+        console.print("mean error: " + ", ".join(f"{m} {means[m]:.2f} mm" for m in s1.methods))
+    s2 = result.study2
+    if s2 is not None:
+        for label, part in (("all trials", s2.all_trials), ("contains target", s2.contains_target)):
+            if part.friedman is None:
+                console.print(f"[yellow]Study 2 ({label}): not computed: {part.unavailable}[/]")
+                continue
+            table = Table(title=f"Study 2: selected locations, Friedman ({label}), N = {len(part.participants)}")
+            for col in ("factor", "chi2", "dof", "p", "Kendall W"):
+                table.add_column(col, justify="left" if col == "factor" else "right")
+            for factor, r in part.friedman.iterrows():
+                table.add_row(factor, f"{r['chi2']:.2f}", str(int(r["dof"])), _p(r["p"]), f"{r['kendall_w']:.2f}")
+            console.print(table)
+    console.print(f"wrote {paths['json']}, {paths['html']} and {len(paths) - 2} figure(s) in {out}")
