@@ -101,12 +101,28 @@ async def participant_state(
     session_id: int,
     after: int = Query(-1, description="return as soon as seq differs from this"),
     wait: float = Query(0.0, ge=0.0, le=MAX_WAIT_S, description="longest wait for a change, s"),
+    ready: bool = Query(False, description="the page can play the beep (its audio is started)"),
     key: str | None = Header(None, alias=KEY_HEADER),
 ) -> dict[str, Any]:
-    """State of the session as the page shows it; long-polls up to ``wait`` s for a change."""
+    """State of the session as the page shows it; long-polls up to ``wait`` s for a change.
+
+    A page that says it is ``ready`` (audio started) counts as present while its
+    request is open: the runner holds the next cue until one is.
+    """
     web = _web(request)
     web.check_key(session_id, key)
     state = await run_in_threadpool(_state, web, session_id)
+    runner = web.runner(session_id)
+    if ready and runner is not None:
+        runner.page_attach()
+    try:
+        return await _wait_change(request, web, session_id, state, after, wait)
+    finally:
+        if ready and runner is not None:
+            runner.page_detach()
+
+
+async def _wait_change(request: Request, web: WebState, session_id: int, state: dict[str, Any], after: int, wait: float) -> dict[str, Any]:
     deadline = time.monotonic() + wait
     # The runner's seq changes on every step of a trial; polling the in-memory runner
     # every 40 ms keeps the beep within a frame or two of the cue without a thread per client.

@@ -78,6 +78,10 @@ class SessionRunner:
         Trial timing.
     store_lock : threading.Lock, optional
         Serialises database access shared with the request handlers.
+    require_page : bool
+        Hold each cue until a participant page that can play the beep is connected, so
+        that no stimulus is played to nobody (the experimenter may press Start before
+        the participant page is open, or the page may have been closed).
     """
 
     def __init__(
@@ -89,6 +93,7 @@ class SessionRunner:
         rig: Any = None,
         pace: Pace = PACES["normal"],
         store_lock: threading.Lock | None = None,
+        require_page: bool = True,
     ) -> None:
         if stimulus is not None and rig is None:
             raise ValueError("a runner with a stimulus needs a rig to play it on")
@@ -105,6 +110,9 @@ class SessionRunner:
         self._drive_sha: dict[int, str] = {}
         self._state: dict[str, Any] = {"state": "idle", "trial_index": None, "phase": None, "seq": 0, "error": None}
         self._thread: threading.Thread | None = None
+        self.require_page = bool(require_page)
+        self._pages = 0
+        self._page_seen = float("-inf")
 
     # ------------------------------------------------------------------ control
     def start(self) -> None:
@@ -155,6 +163,23 @@ class SessionRunner:
         with self._cond:
             self._answered.add(int(trial_index))
             self._cond.notify_all()
+
+    def page_attach(self) -> None:
+        """A participant page (ready to play the beep) is asking for the state."""
+        with self._cond:
+            self._pages += 1
+            self._page_seen = time.monotonic()
+            self._cond.notify_all()
+
+    def page_detach(self) -> None:
+        """That page's request has ended."""
+        with self._cond:
+            self._pages = max(self._pages - 1, 0)
+            self._page_seen = time.monotonic()
+
+    def _page_present(self) -> bool:
+        # Between two long-polls no request is open; a page seen a moment ago still counts.
+        return not self.require_page or self._pages > 0 or time.monotonic() - self._page_seen < 1.5
 
     def drive_sha_for(self, trial_index: int) -> str | None:
         """Hash of the drive played for ``trial_index`` in this run, if one was played."""
@@ -230,11 +255,19 @@ class SessionRunner:
                 return
             index = int(trial.trial_index)
             phase = getattr(trial, "phase", None)
-            self._set("ready", trial_index=index, phase=phase)
+            self._set("ready", trial_index=index, phase=phase, waiting_for_page=False)
             if not self._wait(self.pace.ready_s, index):
                 continue
             if self._paused:
                 continue  # the trial starts again from "get ready" after resume
+            with self._cond:
+                while not self._page_present() and not self._stopping and not self._paused:
+                    if not self._state.get("waiting_for_page"):
+                        self._set("ready", trial_index=index, phase=phase, waiting_for_page=True)
+                    self._cond.wait(0.2)
+                if self._stopping or self._paused:
+                    continue
+                self._state["waiting_for_page"] = False
             self._set("cue", trial_index=index, phase=phase)
             self._log("cue", {"trial_index": index})
             if not self._wait(self.pace.cue_to_stimulus_s, index):

@@ -164,7 +164,7 @@
       if (s.status === "running") act("Pause", "pause");
       if (s.status === "paused" || s.status === "aborted") act("Resume", "resume");
       if (s.status === "running" || s.status === "paused") act("Stop", "stop");
-      const live = s.live ? `${s.live.state}${s.live.trial_index !== null && s.live.trial_index !== undefined ? " · trial " + s.live.trial_index : ""}` : "—";
+      const live = s.live && s.live.waiting_for_page ? "waiting for the participant page" : s.live ? `${s.live.state}${s.live.trial_index !== null && s.live.trial_index !== undefined ? " · trial " + s.live.trial_index : ""}` : "—";
       const tr = el("tr", { "data-session": s.session_id, class: s.session_id === selectedSession ? "selected" : "" },
         el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
         el("td", { class: `status ${s.status}` }, s.status), el("td", {}, `${s.n_answered} / ${s.n_trials}`),

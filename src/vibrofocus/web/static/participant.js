@@ -24,6 +24,7 @@
   let confirmedFor = null;    // trial index whose answer the server confirmed
   let lastBeep = null;        // "trial:seq" of the last cue played, to beep once per cue
   let audio = null;
+  let audioReady = false;    // the begin click started audio: cues may play
   let online = true;
   window.vfBeeps = 0;         // count of beeps played (read by the browser tests)
 
@@ -63,6 +64,7 @@
           });
         } catch {
           setOnline(false);
+          if (state) render(state);  // say that the answer is kept here
           await sleep(delay);
           delay = Math.min(delay * 2, 4000);
           continue;
@@ -90,13 +92,26 @@
     }
   }
 
+  let pollAbort = null;
+  function wakePoll() {
+    // End the open long-poll so that the next one goes out at once (with ready=1).
+    if (pollAbort) pollAbort.abort();
+  }
+
   async function pollLoop() {
     let delay = 250;
     for (;;) {
       try {
-        const res = await fetch(
-          `/api/participant/${sessionId}/state?after=${seq}&wait=8`,
-          { headers: { "X-Participant-Key": key }, cache: "no-store" });
+        pollAbort = new AbortController();
+        let res;
+        try {
+          res = await fetch(
+            `/api/participant/${sessionId}/state?after=${seq}&wait=8&ready=${audioReady ? 1 : 0}`,
+            { headers: { "X-Participant-Key": key }, cache: "no-store", signal: pollAbort.signal });
+        } catch (e) {
+          if (e.name === "AbortError") continue;
+          throw e;
+        }
         if (!res.ok) {
           const detail = await res.json().catch(() => ({}));
           setMessage(detail.detail || `The server refused this page (${res.status}).`);
@@ -263,6 +278,8 @@
     } catch (e) { console.warn("no audio", e); }
     try { await document.documentElement.requestFullscreen(); } catch { /* headless or refused */ }
     $("overlay").hidden = true;
+    audioReady = true;
+    wakePoll();
   });
 
   window.addEventListener("online", () => flushPending());

@@ -1,0 +1,141 @@
+"""Fixtures of the web tests: a real ``vibrofocus serve`` in a subprocess, a real chromium.
+
+The server binds 127.0.0.1 on a free port with a temporary database and the ``fast``
+pace, and is always stopped. Browser tests use Debian's chromium through Playwright's
+Python API (never a downloaded browser) and are skipped when it is missing.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import sqlite3
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import httpx
+import pytest
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--autoplay-policy=no-user-gesture-required",
+]
+TOKEN = "test-token-" + "x" * 20
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class Server:
+    """``vibrofocus serve`` in a subprocess; can be killed (SIGKILL) and started again."""
+
+    def __init__(self, db: Path, port: int, log: Path) -> None:
+        self.db = db
+        self.port = port
+        self.log = log
+        self.proc: subprocess.Popen | None = None
+        self.base_url = f"http://127.0.0.1:{port}"
+        self.token = TOKEN
+
+    def start(self) -> None:
+        env = dict(os.environ, VIBROFOCUS_TOKEN=self.token, PYTHONUNBUFFERED="1")
+        with open(self.log, "ab") as fh:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", "vibrofocus", "serve", "--db", str(self.db), "--port", str(self.port),
+                 "--no-browser", "--pace", "fast"],
+                stdout=fh, stderr=subprocess.STDOUT, env=env,
+            )
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"server exited with {self.proc.returncode}:\n{self.log.read_text()}")
+            try:
+                if httpx.get(f"{self.base_url}/api/rigs", headers=self.headers, timeout=1).status_code == 200:
+                    return
+            except httpx.HTTPError:
+                pass
+            time.sleep(0.1)
+        raise RuntimeError(f"server did not start:\n{self.log.read_text()}")
+
+    def kill(self) -> None:
+        """SIGKILL: no shutdown handler runs, as in a crash."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+            self.proc.wait(10)
+
+    def stop(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(10)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait(10)
+
+    @property
+    def headers(self) -> dict[str, str]:
+        return {"X-Vibrofocus-Token": self.token}
+
+    # ------------------------------------------------------------------ helpers
+    def api(self, method: str, path: str, **kwargs) -> httpx.Response:
+        return httpx.request(method, self.base_url + path, headers=self.headers, timeout=30, **kwargs)
+
+    def plan(self, participant: str, study: int, *, n_training: int = 2, repetitions: int = 1, seed: int = 7) -> dict:
+        """Add a participant and plan a session; returns the session (with participant_url)."""
+        assert self.api("POST", "/api/participants", json={"participant_id": participant}).status_code == 201
+        r = self.api("POST", "/api/sessions", json={
+            "participant_id": participant, "study": study, "seed": seed,
+            "n_training": n_training, "repetitions": repetitions,
+        })
+        assert r.status_code == 201, r.text
+        return r.json()
+
+    def rows(self, sql: str, *args) -> list[tuple]:
+        """Read the database directly (a second connection, as another program would)."""
+        con = sqlite3.connect(self.db)
+        try:
+            return con.execute(sql, args).fetchall()
+        finally:
+            con.close()
+
+
+@pytest.fixture
+def server(tmp_path):
+    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log")
+    srv.start()
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    if not CHROMIUM.exists():
+        pytest.skip("Debian's chromium is not installed (apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+@pytest.fixture
+def page(chromium):
+    context = chromium.new_context(viewport={"width": 1280, "height": 800})
+    pg = context.new_page()
+    pg.set_default_timeout(15_000)
+    try:
+        yield pg
+    finally:
+        context.close()
