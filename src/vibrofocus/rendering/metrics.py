@@ -25,6 +25,7 @@ def focus_metrics(
     band: tuple[float, float] | None = None,
     drives: Any = None,
     taper_octaves: float = 0.5,
+    compare_indices: Any = None,
 ) -> dict[str, float]:
     """How well a response focuses a tap at one point.
 
@@ -49,6 +50,9 @@ def focus_metrics(
         Drives that produced the response, V; for ``peak_drive_v``.
     taper_octaves : float
         Taper width used with ``band``.
+    compare_indices : sequence of int, optional
+        Rows of ``response`` the contrast compares the target against (the target itself
+        is skipped if listed); default every other row.
 
     Returns
     -------
@@ -56,7 +60,7 @@ def focus_metrics(
         ``fidelity``: zero-lag normalized correlation of the target displacement with
         the band-limited desired waveform, in [-1, 1] (NaN if either is silent).
         ``contrast_db``: 20 log10 of the peak ``|u|`` at the target over the largest peak
-        at any other point (inf if all others are silent, NaN with one point or silence).
+        at any other (compared) point (inf if all others are silent, NaN with one point or silence).
         ``peak_drive_v``: peak ``|drives|`` (NaN without drives).
         ``target_peak_m``: peak ``|u|`` at the target.
         ``compactness``: share of the target's energy within ``t0 +- 2 sigma`` (NaN if silent).
@@ -89,7 +93,16 @@ def focus_metrics(
     achieved = response[target_index]
     peaks = np.max(np.abs(response), axis=1)
     target_peak = float(peaks[target_index])
-    others = np.delete(peaks, target_index)
+    if compare_indices is None:
+        compare = np.delete(np.arange(n_points), target_index)
+    else:
+        compare = np.atleast_1d(np.asarray(compare_indices))
+        if compare.ndim != 1 or (compare.size and not np.issubdtype(compare.dtype, np.integer)):
+            raise ValidationError(f"compare_indices must be a sequence of integer point indices, got {compare_indices!r}")
+        if compare.size and (compare.min() < 0 or compare.max() >= n_points):
+            raise ValidationError(f"compare_indices holds indices outside the {n_points} points of response")
+        compare = compare[compare != target_index]
+    others = peaks[compare]
     if others.size == 0 or target_peak == 0:
         contrast = float("nan")
     elif others.max() == 0:

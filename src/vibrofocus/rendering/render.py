@@ -82,6 +82,8 @@ class Rendering:
         (NaN if not checked).
     gains : ndarray, shape (n_actuators,) or None
         Funneling amplitudes, V ("funneling" and "combination").
+    layout : ArrayLayout or None
+        The layout rendered on.
     """
 
     method: str
@@ -101,6 +103,7 @@ class Rendering:
     control_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     wraparound_fraction: float = float("nan")
     gains: np.ndarray | None = None
+    layout: ArrayLayout | None = None
 
     @property
     def n_samples(self) -> int:
@@ -111,11 +114,26 @@ class Rendering:
         """ndarray, shape (n,): sample times, s."""
         return np.arange(self.n_samples) / self.fs
 
-    def metrics(self, *, against: str = "desired") -> dict[str, float]:
-        """:func:`focus_metrics` of the prediction, against ``desired`` or ``reference``."""
+    def metrics(self, *, against: str = "desired", contrast_over: str = "locations") -> dict[str, float]:
+        """:func:`focus_metrics` of the prediction.
+
+        Parameters
+        ----------
+        against : {"desired", "reference"}
+            Waveform the fidelity compares with (``t0`` is its peak).
+        contrast_over : {"locations", "points"}
+            The contrast compares the target with the other skin locations (the grid a
+            participant names; default) or with every other calibrated point, guards
+            included.
+        """
         check_choice(against, "against", ("desired", "reference"))
+        check_choice(contrast_over, "contrast_over", ("locations", "points"))
         wanted = self.desired if against == "desired" else self.reference
-        return focus_metrics(self.predicted, self.target_index, wanted, self.fs, sigma=self.sigma, drives=self.drives)
+        compare = None
+        if contrast_over == "locations" and self.layout is not None:
+            compare = np.arange(self.layout.n_locations)
+        return focus_metrics(self.predicted, self.target_index, wanted, self.fs, sigma=self.sigma,
+                             drives=self.drives, compare_indices=compare)
 
 
 def render(
@@ -267,4 +285,5 @@ def render(
         control_indices=control_indices,
         wraparound_fraction=fraction,
         gains=gains,
+        layout=layout,
     )
