@@ -255,7 +255,8 @@ class AudioRig(Rig):
             log.error("audio stream reported %s while %s", ", ".join(problems), what)
             raise DeviceError(
                 f"the audio stream reported {', '.join(problems)} while {what}: samples were lost, so the "
-                "result is discarded (outputs are at zero); retry, or raise the device's buffer size"
+                "result is discarded (outputs are at zero); retry, close other programs, or raise the "
+                "device's buffer size"
             )
 
     def _play(self, drive: np.ndarray) -> None:
@@ -278,10 +279,18 @@ class AudioRig(Rig):
         n_dev = len(block)
         max_lag = int(np.ceil(self.config.max_latency_s * self.device_fs))
         padded = np.concatenate([block, np.zeros((max_lag, block.shape[1]), np.float32)])
-        recorded = sd.playrec(padded, samplerate=self.device_fs, device=self.device_index,
-                              input_mapping=self._in_channels, output_mapping=self._out_channels,
-                              dtype="float32", blocking=False)
-        self._check_status(sd.wait(), "recording")
+        for attempt in range(self.config.xrun_retries + 1):
+            recorded = sd.playrec(padded, samplerate=self.device_fs, device=self.device_index,
+                                  input_mapping=self._in_channels, output_mapping=self._out_channels,
+                                  dtype="float32", blocking=False)
+            try:
+                self._check_status(sd.wait(), "recording")
+                break
+            except DeviceError:
+                if attempt == self.config.xrun_retries:
+                    raise
+                log.warning("recording %d of %d lost samples; taking it again", attempt + 1,
+                            self.config.xrun_retries + 1)
         recorded = np.asarray(recorded, dtype=float)
         if has_loopback:
             lag = self._measure_latency(padded[:, -1].astype(float), recorded[:, 1], max_lag)

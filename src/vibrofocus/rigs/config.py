@@ -267,6 +267,10 @@ class AudioRigConfig(RigConfig):
         no loopback channel is wired (the loopback measurement wins when there is one).
     max_latency_s : float
         Longest round trip searched for, s; the recording runs this much longer.
+    xrun_retries : int
+        A recording during which the stream lost samples (an input overflow or output
+        underflow) is discarded and taken again up to this many times before the rig
+        raises. A participant stimulus (``play``) is never repeated.
     """
 
     kind: Literal["audio"]
@@ -276,6 +280,7 @@ class AudioRigConfig(RigConfig):
     input_volts_full_scale: PositiveFloat = 1.0
     latency_samples: int | None = Field(None, ge=0)
     max_latency_s: PositiveFloat = 0.25
+    xrun_retries: int = Field(2, ge=0, le=10)
 
     @model_validator(mode="after")
     def _check_level(self) -> "AudioRigConfig":

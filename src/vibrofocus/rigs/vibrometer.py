@@ -40,7 +40,7 @@ class Vibrometer:
         (m/s)/V for a velocity decoder, m/V for a displacement decoder.
     highpass_hz : float or None
         Corner of the zero-phase high-pass, Hz (see module notes); None disables it
-        (then a velocity recording is integrated with only its mean removed).
+        (then a velocity recording is integrated with only its DC bin removed).
     """
 
     decoder: str
@@ -66,7 +66,10 @@ class Vibrometer:
     def _filter(self, x: np.ndarray, fs: float, integrate: bool) -> np.ndarray:
         n = x.shape[-1]
         nfft = scipy.fft.next_fast_len(2 * n, real=True)
-        spec = scipy.fft.rfft(x - x.mean(axis=-1, keepdims=True), nfft, axis=-1)
+        # No mean removal in the time domain: subtracting the mean of a finite record leaks
+        # into the lowest bins of the band (10-50 Hz) whenever the drive has DC content
+        # (a sweep starting at a few Hz has); the high-pass removes DC on its own.
+        spec = scipy.fft.rfft(x, nfft, axis=-1)
         freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
         resp = self._highpass(freqs).astype(complex)
         if integrate:
@@ -87,7 +90,8 @@ class Vibrometer:
         Returns
         -------
         ndarray, shape (..., n_samples)
-            Displacement, m, with its mean (and drift below ``highpass_hz``) removed.
+            Displacement, m; DC and drift below ``highpass_hz`` removed (a
+            displacement decoder with ``highpass_hz=None`` is only scaled).
         """
         v = as_array(volts, "volts")
         fs = check_positive(fs, "fs")
@@ -97,7 +101,7 @@ class Vibrometer:
         if self.decoder == "velocity":
             return self._filter(scaled, fs, integrate=True)
         if self.highpass_hz is None:
-            return scaled - scaled.mean(axis=-1, keepdims=True)
+            return scaled
         return self._filter(scaled, fs, integrate=False)
 
     def describe(self) -> dict:
