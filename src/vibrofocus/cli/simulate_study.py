@@ -1,0 +1,74 @@
+"""``vibrofocus simulate-study``: simulated participants through both studies."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._errors import user_errors
+from .main import app
+
+
+@app.command("simulate-study")
+def simulate_study(
+    participants: int = typer.Option(3, "--participants", "-n", min=1, help="Number of simulated participants."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the whole simulation (participants, trial orders, answers)."),
+    db: Path = typer.Option(..., "--db", help="Study database (SQLite); an unfinished one is resumed."),
+    pace: float = typer.Option(0.0, "--pace", min=0.0, help="Wait this long after each answer, s."),
+    trials_csv: Path | None = typer.Option(None, "--trials-csv", help="Also write the trials file here."),
+    calibration_dir: Path | None = typer.Option(
+        None, "--calibration-dir", help="Where calibration files go (default: <db>.calibrations/ beside the database)."
+    ),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Calibrate N simulated participants and run Study 1 and Study 2 with each.
+
+    Answers come from a documented perceptual MODEL of the simulated skin field, not from
+    people. Running the same command again on an unfinished database resumes it: the same
+    participants and plans, from the first unanswered trial.
+    """
+    with user_errors():
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.table import Table
+
+        from ..studies.participants import MODEL_NOTICE
+        from ..studies.simulate import simulate_studies, summarize_simulation
+
+        console = Console(stderr=True)
+        console.print(f"[yellow]{MODEL_NOTICE}[/]")
+        with Progress(
+            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            console=console, disable=quiet, transient=False,
+        ) as bar:
+            task = bar.add_task("trials", total=None)
+
+            def progress(what: str, done: int, total: int) -> None:
+                bar.update(task, description=what, completed=done, total=total)
+
+            result = simulate_studies(
+                db, n_participants=participants, seed=seed, pace_s=pace,
+                calibration_dir=calibration_dir, progress=progress,
+            )
+        summary = summarize_simulation(db)
+        table = Table(title="Simulated participants (model output, not data): main trials")
+        for col in ("study", "method", "trials", "mean error (mm)", "correct (%)", "locations selected"):
+            table.add_column(col, justify="right" if col != "method" else "left")
+        for row in summary:
+            table.add_row(
+                str(row["study"]), row["method"], str(row["n"]), f"{row['mean_error_mm']:.1f}",
+                f"{100 * row['correct']:.0f}", f"{row['mean_n_selected']:.2f}",
+            )
+        Console().print(table)
+        console.print(
+            f"{result['n_answered']} answers stored in {db} "
+            f"({result['n_new']} new this run) for {participants} simulated participant(s)."
+        )
+        if trials_csv is not None:
+            from ..studies import StudyStore
+
+            with StudyStore(db) as store:
+                n = store.export_trials_csv(trials_csv)
+            console.print(f"wrote {n} trials to {trials_csv}")
+        console.print(f"[yellow]{MODEL_NOTICE}[/]")

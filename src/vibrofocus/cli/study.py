@@ -1,0 +1,110 @@
+"""``vibrofocus study``: run a participant from the terminal, export the trials file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._errors import user_errors
+from .main import app
+
+study_app = typer.Typer(
+    name="study", help="Localization studies: run a participant at the terminal, export trials.",
+    no_args_is_help=True,
+)
+app.add_typer(study_app, name="study")
+
+
+@study_app.command("export")
+def export(
+    db: Path = typer.Option(..., "--db", help="Study database."),
+    out: Path = typer.Option(..., "--out", help="Trials CSV to write (SPEC §6 columns)."),
+    participant: str | None = typer.Option(None, "--participant", help="Only this participant."),
+) -> None:
+    """Write every answered trial as ``participant,study,phase,trial,method,target,response,rt_s``."""
+    with user_errors():
+        from ..errors import StudyError
+        from ..studies import StudyStore
+
+        if not db.is_file():
+            raise StudyError(f"no study database at {db}")
+        with StudyStore(db) as store:
+            n = store.export_trials_csv(out, participant_id=participant)
+        typer.echo(f"wrote {n} trials to {out}")
+
+
+@study_app.command("run")
+def run(
+    participant: str = typer.Option(..., "--participant", help="Participant id (letters, digits, _ . -)."),
+    study: int = typer.Option(..., "--study", min=1, max=2, help="1: one location per trial; 2: several."),
+    db: Path = typer.Option(..., "--db", help="Study database; an unfinished session of this participant and study is resumed."),
+    calibration: Path = typer.Option(..., "--calibration", help="The participant's calibration file (netCDF)."),
+    rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Seed of the trial order (default: random, stored)."),
+    beep: bool = typer.Option(True, "--beep/--no-beep", help="Beep before each stimulus (bell or sound card)."),
+) -> None:
+    """Run a real participant: each trial beeps, plays the stimulus, then waits for the
+    answer on the keypad — digits then Enter (Study 2: several digits, e.g. ``45``);
+    ``p`` then Enter pauses, ``q`` then Enter aborts. Each answer is committed to the
+    database before the next trial; running the command again resumes."""
+    with user_errors():
+        import secrets
+
+        from rich.console import Console
+
+        from ..calibration import load_calibration
+        from ..errors import StudyError
+        from ..rigs import make_rig
+        from ..studies import StudyStore
+        from ..studies.engine import StudyEngine, terminal_beep
+        from ..studies.terminal import TerminalResponder
+
+        console = Console()
+        cal = load_calibration(calibration)
+        if getattr(cal, "participant_id", participant) != participant:
+            raise StudyError(
+                f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {participant!r}"
+            )
+        with StudyStore(db) as store:
+            store.add_participant(participant, simulated=False)
+            cid = store.add_calibration(participant, calibration)
+            open_sessions = [s for s in store.sessions(participant, study=study) if not s.finished]
+            if open_sessions:
+                info = open_sessions[-1]
+                if info.calibration_id != cid:
+                    raise StudyError(
+                        f"session {info.session_id} of {participant} (study {study}) was started with calibration "
+                        f"{info.calibration_id} ({store.calibration(info.calibration_id).path}); resume it with that file"
+                    )
+                sid = info.session_id
+                console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
+            else:
+                sid = store.create_session(
+                    participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
+                    calibration_id=cid, config={"rig": rig},
+                )
+                console.print(f"new session {sid} for {participant}, study {study}")
+            the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
+            with the_rig:
+                cue = terminal_beep if beep and rig != "simulated" else (_bell if beep else None)
+                engine = StudyEngine(store, sid, the_rig, cal, cue=cue)
+                responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
+                try:
+                    summary = engine.run(responder)
+                except KeyboardInterrupt:
+                    store.set_status(sid, "paused")
+                    console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
+                    raise typer.Exit(code=130) from None
+            console.print(
+                f"session {sid}: {summary.status}, {summary.n_answered} of {summary.n_trials} trials answered"
+            )
+
+
+def _bell() -> None:
+    # The simulated rig has no headphones: the terminal bell stands in for the beep.
+    import sys
+
+    sys.stdout.write("\a")
+    sys.stdout.flush()

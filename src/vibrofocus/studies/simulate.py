@@ -1,0 +1,226 @@
+"""Whole simulated studies: calibrate simulated participants and run both studies.
+
+Everything is derived from one seed, and everything decided is stored first (the
+participant, the calibration file and its hash, the sessions with their plans), so
+running again on the same database resumes exactly where a killed run stopped.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import StudyError
+from .storage import StudyStore
+
+__all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
+
+#: Ids of simulated participants: ``sim-001``, ``sim-002``, ...
+SIMULATED_PREFIX = "sim-"
+
+ProgressFn = Callable[[str, int, int], None]
+
+
+def participant_seeds(seed: int, k: int) -> tuple[int, int, int]:
+    """Seeds of simulated participant ``k`` (1-based) of a simulation seeded with ``seed``.
+
+    Returns
+    -------
+    (participant_seed, study1_seed, study2_seed) : tuple of int
+        The participant seed drives the simulated forearm and the perceptual model; the
+        study seeds the trial orders. Independent streams of ``numpy.random.SeedSequence``.
+    """
+    state = np.random.SeedSequence([int(seed), int(k)]).generate_state(3, dtype=np.uint32)
+    return int(state[0]), int(state[1]), int(state[2])
+
+
+def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tuple[int, Any]:
+    """The participant's registered calibration, or a new one (file written before it is registered)."""
+    from ..calibration import calibrate, load_calibration, save_calibration
+
+    for rec in reversed(store.calibrations(pid)):
+        try:
+            path = store.verify_calibration(rec.calibration_id)
+        except StudyError:
+            continue  # file gone or changed: calibrate again rather than trust it
+        return rec.calibration_id, load_calibration(path)
+    cal = calibrate(rig, participant_id=pid)
+    cal_dir.mkdir(parents=True, exist_ok=True)
+    final = cal_dir / f"{pid}.nc"
+    tmp = cal_dir / f".{pid}.nc.tmp"
+    save_calibration(cal, tmp)
+    os.replace(tmp, final)  # a kill mid-write leaves no half file under the final name
+    return store.add_calibration(pid, final), cal
+
+
+def simulate_studies(
+    db: str | os.PathLike,
+    *,
+    n_participants: int,
+    seed: int = 0,
+    pace_s: float = 0.0,
+    calibration_dir: str | os.PathLike | None = None,
+    studies: tuple[int, ...] = (1, 2),
+    config: dict[str, Any] | None = None,
+    progress: ProgressFn | None = None,
+) -> dict[str, int]:
+    """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
+
+    Parameters
+    ----------
+    db : path-like
+        Study database; created if missing, resumed if it holds an unfinished simulation
+        with the same ``seed``.
+    n_participants : int
+        Participants ``sim-001`` ... ``sim-NNN``.
+    seed : int
+        Seed of the simulation (see :func:`participant_seeds`).
+    pace_s : float
+        Wait after each answer, s.
+    calibration_dir : path-like, optional
+        Where calibration files are written; default ``<db>.calibrations`` beside it.
+    studies : tuple of int
+        Which studies to run, in order.
+    config : dict, optional
+        Extra session config (design keys such as ``repetitions`` change the design).
+    progress : callable, optional
+        ``progress(description, n_answered, n_total)`` after each answer.
+
+    Returns
+    -------
+    dict
+        ``n_answered`` (all answers in the simulated sessions), ``n_total`` (planned
+        trials), ``n_new`` (answers added by this call).
+
+    Notes
+    -----
+    The answers come from :class:`SimulatedParticipant`, a perceptual model, not data.
+    """
+    from ..rigs import make_rig
+    from .engine import StudyEngine, calibration_renderer
+    from .participants import SimulatedParticipant
+
+    if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
+        raise StudyError(f"n_participants must be an integer >= 1, got {n_participants!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise StudyError(f"seed must be a non-negative integer, got {seed!r}")
+    if not np.isfinite(pace_s) or pace_s < 0:
+        raise StudyError(f"pace must be >= 0 s, got {pace_s!r}")
+    db = Path(db)
+    cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
+    with StudyStore(db) as store:
+        n_sessions = n_participants * len(studies)
+        design_trials: int | None = None
+        n_new = 0
+        answered = 0
+        for k in range(1, n_participants + 1):
+            pid = f"{SIMULATED_PREFIX}{k:03d}"
+            pseed, *study_seeds = participant_seeds(seed, k)
+            store.add_participant(pid, simulated=True)
+            for info in store.sessions(pid):
+                if info.config.get("simulation_seed") != seed:
+                    raise StudyError(
+                        f"{db} holds participant {pid} from a simulation with seed "
+                        f"{info.config.get('simulation_seed')!r}, not {seed}; use that seed or another database"
+                    )
+            # Built lazily, once per participant and shared by both studies: the rig, the
+            # perceptual model (its grid transfer) and the rendered drives per condition.
+            shared: dict[str, Any] = {}
+
+            def participant_parts(cid: int | None, _pid: str = pid, _pseed: int = pseed) -> dict[str, Any]:
+                if "rig" not in shared:
+                    shared["rig"] = make_rig("simulated", seed=_pseed)
+                if cid is None:
+                    cid, cal = _calibration_for(store, _pid, shared["rig"], cal_dir)
+                    shared["cal"] = (cid, cal)
+                if shared.get("cal", (None,))[0] != cid:
+                    from ..calibration import load_calibration
+
+                    shared["cal"] = (cid, load_calibration(store.verify_calibration(cid)))
+                    shared.pop("renderer", None)
+                if "renderer" not in shared:
+                    shared["renderer"] = functools.lru_cache(maxsize=None)(calibration_renderer(shared["cal"][1]))
+                if "participant" not in shared:
+                    shared["participant"] = SimulatedParticipant(shared["rig"], _pseed)
+                return shared
+
+            for study in studies:
+                existing = store.sessions(pid, study=study)
+                if existing and existing[-1].finished:
+                    answered += existing[-1].n_answered
+                    continue
+                if existing:
+                    info = existing[-1]
+                    if info.calibration_id is None:
+                        raise StudyError(f"session {info.session_id} of {pid} has no calibration to render from")
+                    parts = participant_parts(info.calibration_id)
+                    sid = info.session_id
+                else:
+                    parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
+                    session_config = dict(config or {})
+                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed)
+                    sid = store.create_session(
+                        pid, study, seed=study_seeds[study - 1], calibration_id=parts["cal"][0], config=session_config,
+                    )
+                info = store.session(sid)
+                answered += info.n_answered
+                # Later participants have no sessions yet: every session has the same design,
+                # so the total is the number of sessions times one session's trials.
+                design_trials = design_trials or info.n_trials
+                total_est = design_trials * n_sessions
+                label = f"{pid} study {study}"
+
+                def on_answer(trial: Any, receipt: Any, _label: str = label, _total: int = total_est) -> None:
+                    nonlocal answered, n_new
+                    answered += 1
+                    n_new += 1
+                    if progress is not None:
+                        progress(_label, answered, _total)
+
+                if progress is not None:
+                    progress(label, answered, total_est)
+                engine = StudyEngine(store, sid, parts["rig"], renderer=parts["renderer"])
+                engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
+        answered = total = 0
+        for info in store.sessions():
+            if info.config.get("simulation_seed") is not None:
+                answered += info.n_answered
+                total += info.n_trials
+        return {"n_answered": answered, "n_total": total, "n_new": n_new}
+
+
+def summarize_simulation(db: str | os.PathLike) -> list[dict[str, Any]]:
+    """Per study and method, over main trials: mean localization error, share correct and
+    mean number of selected locations.
+
+    The error of a trial is the distance, mm, from the target to the answered location
+    (Study 2: to the centroid of the selected locations), on the reference layout's
+    location coordinates stored in each participant's calibration layout (reference
+    layout assumed when unavailable).
+    """
+    from ..layout import ArrayLayout
+
+    locations = ArrayLayout.reference().locations_xy * 1e3
+    with StudyStore(db) as store:
+        rows = [r for r in store.trial_rows() if r["phase"] == "main"]
+    out: list[dict[str, Any]] = []
+    keys = sorted({(r["study"], r["method"]) for r in rows})
+    for study, method in keys:
+        sel = [r for r in rows if r["study"] == study and r["method"] == method]
+        errs, correct, counts = [], [], []
+        for r in sel:
+            resp = [int(x) for x in r["response"].split()]
+            perceived = locations[np.asarray(resp) - 1].mean(axis=0)
+            errs.append(float(np.linalg.norm(perceived - locations[r["target"] - 1])))
+            correct.append(r["target"] in resp if study == 2 else resp == [r["target"]])
+            counts.append(len(resp))
+        out.append({
+            "study": study, "method": method, "n": len(sel), "mean_error_mm": float(np.mean(errs)),
+            "correct": float(np.mean(correct)), "mean_n_selected": float(np.mean(counts)),
+        })
+    return out

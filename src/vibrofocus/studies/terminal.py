@@ -1,0 +1,74 @@
+"""A participant answering at the terminal on a numeric keypad."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+from ..errors import StudyError
+from .engine import ABORT, PAUSE, Presentation, Response
+from .protocol import parse_response
+
+__all__ = ["TerminalResponder"]
+
+
+class TerminalResponder:
+    """Read answers typed on a keypad: digits then Enter; ``p`` pauses, ``q`` aborts.
+
+    Parameters
+    ----------
+    console : rich.console.Console, optional
+        Where prompts go.
+    input_fn : callable, optional
+        Reads one line (default :func:`input`); end of input aborts.
+    n_trials : int, optional
+        Shown in the prompt.
+
+    Notes
+    -----
+    The response time runs from the stimulus onset to the Enter key of a valid answer,
+    s. An invalid answer is explained and asked again; it is never stored.
+    """
+
+    def __init__(self, console: Any = None, input_fn: Callable[[str], str] | None = None, n_trials: int | None = None):
+        if console is None:
+            from rich.console import Console
+
+            console = Console()
+        self.console = console
+        self.input_fn = input_fn if input_fn is not None else input
+        self.n_trials = n_trials
+
+    def _read(self, prompt: str) -> str | None:
+        self.console.print(prompt, end="")
+        try:
+            return self.input_fn("")
+        except EOFError:
+            return None
+
+    def respond(self, presentation: Presentation) -> Response | str:
+        t = presentation.trial
+        of = f"/{self.n_trials}" if self.n_trials else ""
+        several = "one or more locations, e.g. 45" if presentation.design.multi_select else "one location"
+        prompt = f"[bold]trial {t.trial_index + 1}{of}[/] ({t.phase}) — where did you feel it? {several}, Enter (p pause, q abort): "
+        while True:
+            line = self._read(prompt)
+            rt = time.monotonic() - presentation.onset_s
+            if line is None:
+                return ABORT
+            text = line.strip().lower()
+            if text == "p":
+                return PAUSE
+            if text == "q":
+                return ABORT
+            try:
+                locations = parse_response(text, presentation.design)
+            except StudyError as exc:
+                self.console.print(f"[red]{exc}[/] — try again")
+                continue
+            return Response(locations, rt)
+
+    def wait_resume(self) -> bool:
+        line = self._read("[yellow]paused[/] — Enter to resume (the trial is played again), q to abort: ")
+        return line is not None and line.strip().lower() != "q"
