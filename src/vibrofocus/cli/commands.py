@@ -3,3 +3,5 @@
 # One import per command module, in the order ``--help`` should list them.
 from . import serve  # noqa: E402,F401
 from . import analyze  # noqa: F401
+from . import study  # noqa: F401
+from . import simulate_study  # noqa: F401
