@@ -86,7 +86,7 @@ def preview_png(rendering: Any, layout: Any, fs: float, *, method: str, location
     drives = np.asarray(rendering.drives)
     predicted = np.asarray(rendering.predicted)
     t_ms = np.arange(drives.shape[1]) / fs * 1e3
-    fig = _figure(figsize=(10, 4.2), layout="constrained")
+    fig = _figure(figsize=(11, 4.2), layout="constrained")
     ax_d, ax_u, ax_map = fig.subplots(1, 3, width_ratios=(1.4, 1.4, 1))
     # Show the part of the window where something happens, not 400 ms of near silence.
     energy = np.abs(drives).max(axis=0) + np.abs(predicted).max(axis=0) / max(np.abs(predicted).max(), 1e-30) * np.abs(drives).max()
@@ -110,22 +110,24 @@ def preview_png(rendering: Any, layout: Any, fs: float, *, method: str, location
     ax_u.set_xlim(lo, hi)
     ax_u.set_xlabel("time (ms)")
     ax_u.set_ylabel("predicted displacement (µm)")
-    ax_u.set_title("target (red) and other points (grey)")
+    ax_u.set_title("target (red), other points (grey)", fontsize=10)
     ax_u.legend(fontsize=8)
     peaks_um = np.abs(predicted).max(axis=1) * 1e6
     loc_xy = np.asarray(layout.locations_xy) * 1e3
     act_xy = np.asarray(layout.actuators_xy) * 1e3
-    sc = ax_map.scatter(loc_xy[:, 0], loc_xy[:, 1], c=peaks_um[:n_loc], s=500, cmap="viridis", vmin=0)
+    # One colour scale for locations and guards, so a loud guard shows as loud.
+    norm = {"cmap": "viridis", "vmin": 0.0, "vmax": float(peaks_um.max()) or 1.0}
+    sc = ax_map.scatter(loc_xy[:, 0], loc_xy[:, 1], c=peaks_um[:n_loc], s=500, **norm)
     for k, (x, y) in enumerate(loc_xy):
         ax_map.annotate(str(k + 1), (x, y), ha="center", va="center", color="w" if k != target else "r", fontsize=10, weight="bold")
     ax_map.scatter(act_xy[:, 0], act_xy[:, 1], marker="s", s=120, color="k")
     guards = np.asarray(layout.guards_xy) * 1e3
     if len(guards):
-        ax_map.scatter(guards[:, 0], guards[:, 1], c=peaks_um[n_loc:n_loc + len(guards)], s=80, marker="^", cmap="viridis", vmin=0, vmax=peaks_um.max())
+        ax_map.scatter(guards[:, 0], guards[:, 1], c=peaks_um[n_loc:n_loc + len(guards)], s=80, marker="^", **norm)
     fig.colorbar(sc, ax=ax_map, label="peak |u| (µm)")
     ax_map.set_aspect("equal")
     ax_map.set_xlabel("x (mm, thumb side →)")
     ax_map.set_ylabel("y (mm, wrist ↑)")
-    ax_map.set_title("predicted peak, squares = actuators")
+    ax_map.set_title("peak |u|: ■ actuators, ▲ guards", fontsize=10)
     fig.suptitle(f"{method} at location {location}")
     return _png(fig)

@@ -145,36 +145,51 @@
     let sessions = [];
     try { sessions = await api(`/api/sessions${pid ? `?participant_id=${encodeURIComponent(pid)}` : ""}`); }
     catch (e) { flash(e.message, true); return; }
+    // Rows are updated in place and rebuilt only when a status changes, so that the
+    // control buttons do not move or vanish under the experimenter's pointer.
+    const tbody = $("sessions").querySelector("tbody");
+    const existing = new Map(Array.from(tbody.children, (tr) => [tr.dataset.session, tr]));
     const rows = sessions.slice().reverse().map((s) => {
-      const link = el("a", { href: s.participant_url, target: "_blank", rel: "noopener" }, "open");
-      const copy = el("button", { class: "small", onclick: () => {
-        navigator.clipboard?.writeText(new URL(s.participant_url, location.href).href);
-        flash("Participant link copied.");
-      } }, "copy");
-      const controls = el("span", { class: "controls" });
-      const act = (label, action) => controls.append(el("button", { class: "small", "data-action": action,
-        onclick: async (ev) => {
-          ev.stopPropagation();
-          try { await api(`/api/sessions/${s.session_id}/${action}`, { method: "POST" }); flash(`Session ${s.session_id}: ${action}.`); }
-          catch (e) { flash(e.message, true); }
-          selectedSession = s.session_id;
-          loadSessions();
-        } }, label));
-      if (s.status === "planned") act("Start", "start");
-      if (s.status === "running") act("Pause", "pause");
-      if (s.status === "paused" || s.status === "aborted") act("Resume", "resume");
-      if (s.status === "running" || s.status === "paused") act("Stop", "stop");
-      const live = s.live && s.live.waiting_for_page ? "waiting for the participant page" : s.live ? `${s.live.state}${s.live.trial_index !== null && s.live.trial_index !== undefined ? " · trial " + s.live.trial_index : ""}` : "—";
-      const tr = el("tr", { "data-session": s.session_id, class: s.session_id === selectedSession ? "selected" : "" },
-        el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
-        el("td", { class: `status ${s.status}` }, s.status), el("td", {}, `${s.n_answered} / ${s.n_trials}`),
-        el("td", {}, live), el("td", {}, link, " ", copy), el("td", {}, controls));
-      tr.addEventListener("click", () => { selectedSession = s.session_id; loadSessions(); });
+      const live = s.live && s.live.waiting_for_page ? "waiting for the participant page"
+        : s.live ? `${s.live.state}${s.live.trial_index !== null && s.live.trial_index !== undefined ? " · trial " + s.live.trial_index : ""}` : "—";
+      let tr = existing.get(String(s.session_id));
+      if (!tr || tr.dataset.status !== s.status) tr = sessionRow(s);
+      tr.querySelector(".progress").textContent = `${s.n_answered} / ${s.n_trials}`;
+      tr.querySelector(".live").textContent = live;
+      tr.classList.toggle("selected", s.session_id === selectedSession);
       return tr;
     });
-    $("sessions").querySelector("tbody").replaceChildren(...rows);
+    if (rows.length !== tbody.children.length || rows.some((tr, i) => tbody.children[i] !== tr)) tbody.replaceChildren(...rows);
     if (selectedSession === null && sessions.length) selectedSession = sessions[sessions.length - 1].session_id;
     loadLive();
+  }
+
+  function sessionRow(s) {
+    const link = el("a", { href: s.participant_url, target: "_blank", rel: "noopener" }, "open");
+    const copy = el("button", { class: "small", onclick: (ev) => {
+      ev.stopPropagation();
+      navigator.clipboard?.writeText(new URL(s.participant_url, location.href).href);
+      flash("Participant link copied.");
+    } }, "copy");
+    const controls = el("span", { class: "controls" });
+    const act = (label, action) => controls.append(el("button", { class: "small", "data-action": action,
+      onclick: async (ev) => {
+        ev.stopPropagation();
+        try { await api(`/api/sessions/${s.session_id}/${action}`, { method: "POST" }); flash(`Session ${s.session_id}: ${action}.`); }
+        catch (e) { flash(e.message, true); }
+        selectedSession = s.session_id;
+        loadSessions();
+      } }, label));
+    if (s.status === "planned") act("Start", "start");
+    if (s.status === "running") act("Pause", "pause");
+    if (s.status === "paused" || s.status === "aborted") act("Resume", "resume");
+    if (s.status === "running" || s.status === "paused") act("Stop", "stop");
+    const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
+      el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
+      el("td", { class: `status ${s.status}` }, s.status), el("td", { class: "progress" }), el("td", { class: "live" }),
+      el("td", {}, link, " ", copy), el("td", {}, controls));
+    tr.addEventListener("click", () => { selectedSession = s.session_id; loadSessions(); });
+    return tr;
   }
 
   $("new-session").addEventListener("submit", async (ev) => {

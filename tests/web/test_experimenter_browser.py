@@ -1,0 +1,79 @@
+"""The experimenter page in a real chromium: log in, plan, start, pause, resume, stop, export."""
+
+from __future__ import annotations
+
+import pytest
+
+from .test_participant_browser import wait_answers, wait_respond
+
+pytestmark = pytest.mark.browser
+
+
+def session_status(server, sid: int) -> str:
+    return server.rows("SELECT status FROM sessions WHERE session_id = ?", sid)[0][0]
+
+
+def test_experimenter_runs_a_session_from_the_page(server, chromium):
+    context = chromium.new_context(viewport={"width": 1280, "height": 900})
+    context.set_default_timeout(15_000)
+    try:
+        exp = context.new_page()
+        r = exp.goto(f"{server.base_url}/?token=wrong-token-wrong")
+        assert r.status == 401 and "not the one this server printed" in exp.inner_text("body")
+        exp.goto(f"{server.base_url}/?token={server.token}")
+        assert exp.url == server.base_url + "/", "the token is dropped from the address bar"
+        exp.fill("#new-participant-id", "P10")
+        exp.click("#new-participant button")
+        exp.wait_for_function("document.getElementById('participant').value === 'P10'")
+        exp.fill("#repetitions", "1")
+        exp.fill("#n-training", "1")
+        exp.select_option("#study", "1")
+        exp.click("#new-session button")
+        row = exp.locator("#sessions tbody tr").first
+        row.locator("text=planned").wait_for()
+        sid = int(row.get_attribute("data-session"))
+        assert server.rows("SELECT participant_id, study, status FROM sessions") == [("P10", 1, "planned")]
+        assert server.rows("SELECT COUNT(*) FROM planned_trials") == [(1 + 27,)]
+
+        href = row.locator("a").get_attribute("href")
+        exp.click("#sessions button[data-action=start]")
+        exp.locator("#sessions td.status.running").wait_for()
+
+        part = context.new_page()
+        part.goto(server.base_url + href)
+        part.click("#begin")
+        for i, key in enumerate(("5", "6")):
+            wait_respond(part, i)
+            part.keyboard.press(key)
+        wait_answers(server, sid, 2)
+        exp.wait_for_function("document.querySelectorAll('#answers tbody tr').length === 2")
+        assert "training" in exp.inner_text("#answers")
+
+        # Pause while trial 2 waits: its answer is still taken, then the page shows the break.
+        wait_respond(part, 2)
+        exp.click("#sessions button[data-action=pause]")
+        exp.locator("#sessions td.status.paused").wait_for()
+        assert session_status(server, sid) == "paused"
+        part.keyboard.press("7")
+        part.wait_for_function("document.body.dataset.state === 'paused'")
+        assert "break" in part.inner_text("#message").lower()
+        assert [r[1] for r in wait_answers(server, sid, 3)] == ["5", "6", "7"]
+        part.wait_for_timeout(500)
+        assert server.rows("SELECT COUNT(*) FROM answers") == [(3,)], "nothing runs while paused"
+
+        exp.click("#sessions button[data-action=resume]")
+        wait_respond(part, 3)
+        exp.click("#sessions button[data-action=stop]")
+        exp.locator("#sessions td.status.aborted").wait_for()
+        part.wait_for_function("document.body.dataset.state === 'stopped'")
+        assert session_status(server, sid) == "aborted"
+
+        csv = exp.request.get(f"{server.base_url}/api/export/trials.csv")  # the login cookie
+        assert csv.status == 200
+        lines = csv.text().strip().splitlines()
+        assert len(lines) == 1 + 3 and lines[1].startswith("P10,1,training,1,")
+        kinds = [k for (k,) in server.rows("SELECT kind FROM events WHERE session_id = ? ORDER BY event_id", sid)]
+        for kind in ("start", "pause", "resume", "abort"):
+            assert kind in kinds
+    finally:
+        context.close()
