@@ -27,3 +27,11 @@ def random_fir_taps(rng: np.random.Generator, n_points: int, n_actuators: int, l
     return taps
 
 
+
+
+def layout_medium(layout, n: int, fs: float, speed_m_s: float = 10.0, latency_s: float = 2e-3) -> np.ndarray:
+    """Distance-dependent delay and 1/(1 + r/1 cm) gain from every actuator to every point
+    of ``layout`` (m/V), rows in ``layout.points_xy`` order."""
+    r = np.linalg.norm(layout.points_xy[:, None, :] - layout.actuators_xy[None], axis=-1)
+    delays = (latency_s + r / speed_m_s) * fs
+    return delay_gain_medium(n, fs, delays, 1e-6 / (1 + r / 0.01))

@@ -23,7 +23,7 @@ def combination_target(
     stimulus: Any,
     fs: float,
     *,
-    band: tuple[float, float] = BAND_HZ,
+    band: tuple[float, float] | None = BAND_HZ,
     taper_octaves: float = 0.5,
 ) -> np.ndarray:
     """Band-limited displacement funneling would produce at one point.
@@ -45,7 +45,8 @@ def combination_target(
     fs : float
         Sample rate, Hz.
     band, taper_octaves
-        As in :func:`inverse_filter`.
+        As in :func:`inverse_filter`; ``band=None`` skips the band limit (``T = 1``), for
+        callers whose design applies the taper itself (:class:`InverseOperator` does).
 
     Returns
     -------
@@ -63,8 +64,11 @@ def combination_target(
     gains = as_array(gains, "gains", ndim=1, shape=(H.shape[2],))
     stimulus = as_array(stimulus, "stimulus", ndim=1)
     check_grid(H.shape[0], stimulus.size, "stimulus (n,)")
-    taper = band_taper(np.fft.rfftfreq(stimulus.size, 1 / fs), check_band(band, fs),
-                       check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+    if band is None:
+        taper = 1.0
+    else:
+        taper = band_taper(np.fft.rfftfreq(stimulus.size, 1 / fs), check_band(band, fs),
+                           check_positive(taper_octaves, "taper_octaves", allow_zero=True))
     spectrum = (H[:, target_index, :] @ gains) * np.fft.rfft(stimulus) * taper
     target = np.fft.irfft(spectrum, stimulus.size)
     if not np.any(np.abs(target) > 0):

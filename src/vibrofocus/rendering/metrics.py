@@ -114,8 +114,9 @@ def focus_metrics(
     norm_desired = float(np.linalg.norm(desired))
     silent = norm_achieved == 0 or norm_desired == 0
     fidelity = float("nan") if silent else float(np.dot(achieved, desired) / (norm_achieved * norm_desired))
-    times = np.arange(n) / fs
-    window = np.abs(times - t0) <= 2 * sigma
+    # In samples, with a little slack so that a window edge falling on a sample is kept
+    # whatever the rounding of t0 * fs.
+    window = np.abs(np.arange(n) - t0 * fs) <= 2 * sigma * fs * (1 + 1e-9)
     energy = float(np.sum(achieved**2))
     compactness = float(np.sum(achieved[window] ** 2) / energy) if energy > 0 else float("nan")
     peak_time = float(np.argmax(np.abs(achieved))) / fs

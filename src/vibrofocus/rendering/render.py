@@ -258,9 +258,13 @@ def render(
     else:
         operator = InverseOperator(H, fs, n_samples=n, control=control_indices, band=band,
                                    regularization=regularization, reg_param=reg_param, taper_octaves=taper_octaves)
+        # The operator applies the band taper itself: hand it the raw target waveform.
         if method == "combination":
-            desired = combination_target(H, target_index, gains, stimulus, fs, band=band, taper_octaves=taper_octaves)
-        drives = operator.drives_for_point(target_index, desired)
+            raw_target = combination_target(H, target_index, gains, stimulus, fs, band=None)
+            desired = operator.band_limit(raw_target)
+        else:
+            raw_target = target_peak_m * stimulus
+        drives = operator.drives_for_point(target_index, raw_target)
 
     fraction = float("nan")
     if check_wraparound:

@@ -1,0 +1,152 @@
+"""render(): every method on analytic media, drive limits, causality and bad input."""
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from vibrofocus import ArrayLayout, Rendering, funneling_gains, render, ricker
+from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
+from vibrofocus.rendering import band_taper
+
+from _media import FS, layout_medium
+
+N = 4096
+REF = ArrayLayout.reference()
+# The reference array with three guards: target + guards is a square 4 x 4 system, so the
+# inverse designs meet their targets exactly and the prediction can be checked analytically.
+SQUARE = ArrayLayout(REF.actuators_xy, REF.locations_xy, REF.guards_xy[:3], spacing_xy=REF.spacing_xy)
+
+
+def band_limited(x):
+    return np.fft.irfft(np.fft.rfft(x) * band_taper(np.fft.rfftfreq(len(x), 1 / FS), (10.0, 1000.0)), len(x))
+
+
+def respond(H, drives):
+    return np.fft.irfft(np.einsum("fpq,qf->pf", H, np.fft.rfft(drives, axis=-1)), drives.shape[1], axis=-1)
+
+
+@pytest.fixture(scope="module")
+def H_square():
+    return layout_medium(SQUARE, N, FS)
+
+
+@pytest.fixture(scope="module")
+def H_ref():
+    return layout_medium(REF, N, FS)
+
+
+@pytest.mark.parametrize("location", [1, 5, 9])
+def test_inverse_meets_target_and_silences_guards(H_square, location):
+    r = render("inverse", H_square, FS, SQUARE, location, limit_v=1e3)
+    assert isinstance(r, Rendering)
+    ideal = band_limited(2e-6 * ricker(FS, 1e-3, N / FS))
+    assert_allclose(r.desired, ideal, atol=1e-15)
+    assert_allclose(r.predicted, respond(H_square, r.drives), atol=1e-15)
+    assert_allclose(r.predicted[location - 1], ideal, atol=1e-6 * 2e-6)
+    assert np.abs(r.predicted[SQUARE.guard_indices]).max() < 1e-6 * 2e-6
+    assert r.scale == 1.0 and r.target_index == location - 1
+    assert_allclose(r.reached_peak_m, 2e-6, rtol=1e-3)
+    m = r.metrics()
+    assert m["fidelity"] > 1 - 1e-9
+    assert_allclose(r.t0, N / 2 / FS)
+
+
+def test_funneling_drives_are_gains_times_ricker(H_ref):
+    r = render("funneling", H_ref, FS, REF, 1)
+    gains = funneling_gains(REF.actuators_xy, REF.locations_xy[0])
+    assert_allclose(r.drives, gains[:, None] * ricker(FS, 1e-3, N / FS)[None], rtol=1e-12, atol=1e-15)
+    assert_allclose(r.predicted, respond(H_ref, r.drives), atol=1e-18)
+    assert r.control_indices.size == 0 and r.scale == 1.0
+
+
+def test_combination_targets_the_funneling_prediction(H_square):
+    r = render("combination", H_square, FS, SQUARE, 2, limit_v=1e3)
+    funnel = render("funneling", H_square, FS, SQUARE, 2, limit_v=1e3)
+    assert_allclose(r.desired, band_limited(funnel.predicted[1]), atol=1e-9 * np.abs(r.desired).max())
+    assert_allclose(r.predicted[1], r.desired, atol=1e-6 * np.abs(r.desired).max())
+    assert np.abs(r.predicted[SQUARE.guard_indices]).max() < 1e-6 * np.abs(r.desired).max()
+
+
+def test_time_reversal_is_conjugate_transfer_normalized_to_limit(H_ref):
+    r = render("time_reversal", H_ref, FS, REF, 5, limit_v=8.0)
+    assert_allclose(np.abs(r.drives).max(), 8.0, rtol=1e-12)
+    # Single non-zero target: each actuator plays conj(H_tq) U_t.
+    spectrum = np.conj(H_ref[:, 4, :]).T * np.fft.rfft(band_limited(ricker(FS, 1e-3, N / FS)))
+    expected = np.fft.irfft(spectrum, N, axis=-1)
+    assert_allclose(r.drives, expected * 8.0 / np.abs(expected).max(), atol=1e-9)
+
+
+def test_limit_scales_or_refuses(H_square):
+    free = render("inverse", H_square, FS, SQUARE, 5, limit_v=1e3)
+    limit = 0.25 * free.needed_peak_v
+    scaled = render("inverse", H_square, FS, SQUARE, 5, limit_v=limit)
+    assert_allclose(scaled.scale, 0.25, rtol=1e-12)
+    assert_allclose(np.abs(scaled.drives).max(), limit, rtol=1e-12)
+    assert_allclose(scaled.reached_peak_m, 0.25 * free.reached_peak_m, rtol=1e-12)
+    with pytest.raises(DriveLimitError, match="location 5 needs .* peak drive, over the limit"):
+        render("inverse", H_square, FS, SQUARE, 5, limit_v=limit, on_limit="refuse")
+    funnel = render("funneling", H_square, FS, SQUARE, 5, limit_v=1.0)  # 2.5 V per actuator needed
+    assert_allclose(funnel.scale, 1.0 / 2.5, rtol=1e-12)
+
+
+def test_reference_layout_least_squares_design_is_consistent(H_ref):
+    # 5 control points (target + 4 guards), 4 actuators: the least-squares design.
+    r = render("inverse", H_ref, FS, REF, 5, regularization="tikhonov")
+    assert list(r.control_indices) == [4, 9, 10, 11, 12]
+    assert np.abs(r.drives).max() <= 10.0 * (1 + 1e-12)
+    assert r.metrics()["fidelity"] > 0.5
+    all_points = render("inverse", H_ref, FS, REF, 5, control="all", regularization="tikhonov")
+    assert list(all_points.control_indices) == [4, 0, 1, 2, 3, 5, 6, 7, 8, 9, 10, 11, 12]
+
+
+def test_window_too_short_raises_causality_error():
+    # 120 ms of latency in a 2048-sample window whose target sits at 102 ms: the drive
+    # would have to start before the window.
+    H = layout_medium(REF, 2048, FS, latency_s=0.12)
+    with pytest.raises(CausalityError, match="too short"):
+        render("inverse", H, FS, REF, 5, regularization="tikhonov")
+    later = render("inverse", H, FS, REF, 5, regularization="tikhonov", t0=0.16)
+    assert later.wraparound_fraction < 1e-3
+
+
+def test_sleeve_of_32_actuators_through_the_same_code():
+    n = 2048
+    # Without guards the only control point is the target: 1 x 32, met exactly.
+    sleeve = ArrayLayout.sleeve()
+    assert sleeve.n_actuators == 32 and sleeve.n_points == 108
+    H = layout_medium(sleeve, n, FS, speed_m_s=20.0)
+    r = render("inverse", H, FS, sleeve, 50, n_samples=n, limit_v=1e3)
+    assert r.drives.shape == (32, n) and r.predicted.shape == (108, n)
+    assert_allclose(r.predicted[49], r.desired, atol=1e-6 * 2e-6)
+    # With a guard by every actuator: 33 control points, the least-squares design.
+    guarded = ArrayLayout.grid((8, 4), (0.21 / 8, 0.045), (9, 12), 0.01, guard_offset_m=0.006, name="sleeve")
+    H = layout_medium(guarded, n, FS, speed_m_s=20.0)
+    for method in ("funneling", "inverse", "combination", "time_reversal"):
+        r = render(method, H, FS, guarded, 50, regularization="tikhonov")
+        assert r.drives.shape == (32, n) and r.predicted.shape == (140, n)
+        assert np.abs(r.drives).max() <= 10.0 * (1 + 1e-12)
+
+
+def test_bad_input(H_ref):
+    with pytest.raises(ValidationError, match="location 10 is outside the layout's locations 1..9"):
+        render("inverse", H_ref, FS, REF, 10)
+    with pytest.raises(ValidationError, match="location must be an integer"):
+        render("inverse", H_ref, FS, REF, 2.5)
+    with pytest.raises(ValidationError, match="method must be one of"):
+        render("beamforming", H_ref, FS, REF, 1)
+    with pytest.raises(ValidationError, match=r"H must have shape \(n_freqs, 13, 4\)"):
+        render("inverse", H_ref[:, :9], FS, REF, 1)
+    with pytest.raises(ValidationError, match="layout must be an ArrayLayout"):
+        render("inverse", H_ref, FS, "reference", 1)
+    with pytest.raises(ValidationError, match="band must satisfy"):
+        render("inverse", H_ref, FS, REF, 1, band=(10, 8000))
+    with pytest.raises(ValidationError, match="n_samples implies n = 4000"):
+        render("inverse", H_ref, FS, REF, 1, n_samples=4000)
+    bad = H_ref.copy()
+    bad[3, 2, 1] = np.nan
+    with pytest.raises(ValidationError, match="H contains 1 non-finite"):
+        render("inverse", bad, FS, REF, 1)
+    with pytest.raises(ValidationError, match="H is all zero"):
+        render("inverse", np.zeros_like(H_ref), FS, REF, 1)
+    with pytest.raises(ValidationError, match="control must be one of"):
+        render("inverse", H_ref, FS, REF, 1, control="none")
