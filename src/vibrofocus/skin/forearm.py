@@ -42,7 +42,8 @@ _REFERENCE_DISTANCE_M = 6e-3
 _IR_CACHE_SIZE = 32
 
 
-def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmParameters) -> np.ndarray:
+def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmParameters,
+                   max_nepers: float = 40.0) -> np.ndarray:
     """Transfer without the drive sensitivity K, shape (n_freqs, n_points, n_actuators).
 
     ``distances`` has shape (n_points, n_actuators, n_images); DC gives 0 (an inertial
@@ -58,7 +59,7 @@ def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmPara
     radius = params.contact_radius_m * np.sqrt(params.contact)
     green = np.zeros((fp.size, distances.shape[0], distances.shape[1]), dtype=complex)
     for m in range(distances.shape[2]):  # a handful of images; frequencies stay vectorized
-        green += surface_green(k, distances[:, :, m], radius)
+        green += surface_green(k, distances[:, :, m], radius, max_nepers=max_nepers)
     source = exciter_response(fp, params.f0_hz, params.q) * (params.gains * params.contact)[None, :]
     out[pos] = green * source[:, None, :]
     return out
@@ -224,9 +225,12 @@ class SimulatedForearm(Rig):
         f = as_array(freqs, "freqs", ndim=1)
         if np.any(f < 0):
             raise ValidationError(f"freqs must be >= 0 Hz, got a minimum of {f.min():g} Hz")
+        return self._transfer(points, f)
+
+    def _transfer(self, points: np.ndarray, f: np.ndarray, max_nepers: float = 40.0) -> np.ndarray:
         d = self.geometry.path_lengths(points, self.layout.actuators_xy)
         delay = np.exp(-2j * np.pi * f * self.latency_s)[:, None, None]
-        return (self.sensitivity * delay) * _unit_transfer(f, d, self.participant)
+        return (self.sensitivity * delay) * _unit_transfer(f, d, self.participant, max_nepers)
 
     def impulse_responses(self, points_xy: np.ndarray) -> np.ndarray:
         """Impulse responses used for playback, shape (n_points, n_actuators, n_ir), m/V per sample.
@@ -283,7 +287,8 @@ class SimulatedForearm(Rig):
             Extra time after the drive when ``times`` is None, s.
         rtol : float
             Frequencies where ``|drive spectrum|`` is below ``rtol`` times its maximum
-            (over actuators) are left out.
+            (over actuators) are left out, and so are wave paths attenuated below
+            ``rtol / 100`` (``alpha d > ln(100 / rtol)``).
         block : int
             Points per block.
 
@@ -319,6 +324,7 @@ class SimulatedForearm(Rig):
             return out
         fk = freqs[keep]
         sk = spectrum[:, keep]
+        max_nepers = float(np.log(100.0 / check_positive(rtol, "rtol")))
         # Weights of a real inverse DFT restricted to the kept bins (DC and Nyquist once).
         weight = np.full(keep.size, 2.0)
         weight[(keep == 0) | ((n_fft % 2 == 0) & (keep == n_fft // 2))] = 1.0
@@ -326,7 +332,7 @@ class SimulatedForearm(Rig):
             phasor = np.exp(2j * np.pi * fk[:, None] * t_idx[None, :]) * (weight / n_fft)[:, None]
         for start in range(0, len(grid), max(int(block), 1)):
             pts = grid[start:start + block]
-            h = self.transfer(pts, fk)  # (n_keep, n_pts, n_act)
+            h = self._transfer(pts, fk, max_nepers)  # (n_keep, n_pts, n_act)
             u = np.einsum("fpq,qf->pf", h, sk)
             if t_idx is None:
                 full = np.zeros((len(pts), n_fft // 2 + 1), dtype=complex)

@@ -1,0 +1,172 @@
+"""Figures of the demo (matplotlib, Agg backend; files only, no windows)."""
+
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..defaults import N_SAMPLES, SIGMA_S, TARGET_PEAK_M
+from ..signals.ricker import ricker
+from .run import DemoResult, record_clean
+
+__all__ = ["propagation_figure", "field_figure", "metrics_figure", "write_figures"]
+
+_METHOD_COLORS = {"funneling": "tab:orange", "inverse": "tab:blue", "combination": "tab:green",
+                  "time_reversal": "tab:purple"}
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=True)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def propagation_figure(rig, path: Path, *, actuator: int | None = None,
+                       distances_m: tuple[float, ...] = (0.006, 0.015, 0.025, 0.035, 0.045),
+                       n: int = N_SAMPLES) -> Path:
+    """A tap from one actuator at growing distance, plain and inverse filtered.
+
+    Left: the actuator plays the Ricker; the wave spreads, slows at low frequencies
+    (dispersion) and loses its high frequencies (attenuation) as it travels. Right:
+    for each point, a single-actuator inverse filter (designed on the rig's transfer at
+    that point, kept within 90 % of the drive limit) restores the Ricker there. Traces
+    are recorded (noise on) and normalised to their peak, which is printed beside them.
+    """
+    from ..rendering import inverse_filter
+
+    plt = _pyplot()
+    layout = rig.layout
+    if actuator is None:  # an elbow-side actuator, fully coupled, waves going away from the array
+        actuator = int(np.argmin(layout.actuators_xy[:, 1]))
+    src = layout.actuators_xy[actuator]
+    away = np.array([0.0, -1.0]) if src[1] <= 0 else np.array([0.0, 1.0])
+    fs = rig.fs
+    t0 = n / (2 * fs)
+    stimulus = ricker(fs, SIGMA_S, n / fs, t0)
+    freqs = np.fft.rfftfreq(n, 1 / fs)
+    time_ms = (np.arange(n) / fs - t0) * 1e3
+    view = (time_ms > -15) & (time_ms < 45)
+    limit = 0.9 * rig.limits.peak_v
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 5.5), sharey=True)
+    for i, dist in enumerate(distances_m):
+        point = (src + dist * away)[None]
+        plain = np.zeros((layout.n_actuators, n))
+        plain[actuator] = limit * stimulus
+        rec_plain, _ = record_clean(rig, plain, point)
+        h = rig.transfer(point, freqs)[:, :, [actuator]]
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # scaling to the limit is intended here
+            single = inverse_filter(h, TARGET_PEAK_M * stimulus[None], fs, max_drive=limit, on_limit="scale")
+        corrected = np.zeros((layout.n_actuators, n))
+        corrected[actuator] = single[0]
+        rec_corr, _ = record_clean(rig, corrected, point)
+        for ax, rec in ((axes[0], rec_plain[0, :n]), (axes[1], rec_corr[0, :n])):
+            peak = np.nanmax(np.abs(rec))
+            ax.plot(time_ms[view], rec[view] / peak * 0.45 + i, color="k", lw=1)
+            ax.text(time_ms[view][-1], i + 0.15, f"{peak * 1e6:.3g} µm", ha="right", fontsize=8)
+    ref = stimulus[view] / np.abs(stimulus).max() * 0.45
+    for i in range(len(distances_m)):
+        axes[1].plot(time_ms[view], ref + i, color="tab:red", lw=0.8, ls="--", zorder=0)
+    axes[0].set_yticks(range(len(distances_m)), [f"{d * 1e3:.0f} mm" for d in distances_m])
+    axes[0].set_ylabel("distance from the actuator")
+    axes[0].set_title(f"{layout.actuator_names[actuator]} plays a {limit:g} V Ricker")
+    axes[1].set_title("inverse filtered at each point (red: desired Ricker)")
+    for ax in axes:
+        ax.set_xlabel("time from the stimulus centre (ms)")
+        ax.grid(alpha=0.3)
+    fig.suptitle("Propagation on the simulated forearm: dispersion and attenuation, and their correction")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def field_figure(result: DemoResult, path: Path, *, location: int = 5,
+                 methods: tuple[str, ...] = ("funneling", "inverse"),
+                 offsets_ms: tuple[float, ...] = (-3.0, 0.0, 3.0, 6.0),
+                 half_width_m: float = 0.035, n_grid: int = 31) -> Path:
+    """Displacement around the array at a few instants around each method's tap.
+
+    The instants are relative to the time of the largest recorded displacement at the
+    target, so every method is shown at its own focus.
+    """
+    plt = _pyplot()
+    rig = result.rig
+    layout = rig.layout
+    methods = tuple(m for m in methods if (location, m) in result.renderings)
+    axis = np.linspace(-half_width_m, half_width_m, n_grid)
+    gx, gy = np.meshgrid(axis, axis)
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    fig, axes = plt.subplots(len(methods), len(offsets_ms), figsize=(2.6 * len(offsets_ms), 2.6 * len(methods)),
+                             squeeze=False, sharex=True, sharey=True)
+    for row, method in enumerate(methods):
+        rendering = result.renderings[(location, method)]
+        rec = result.recordings[(location, method)][rendering.target_index]
+        t_peak = float(np.nanargmax(np.abs(rec))) / rig.fs
+        times = np.clip(t_peak + np.array(offsets_ms) * 1e-3, 0, None)
+        u = rig.field(rendering.drives, grid, times=times, rtol=1e-5)
+        # Scale to the tap, not to the skin right under the actuators (which saturates).
+        scale = 1.2 * np.nanmax(np.abs(rec)) * 1e6
+        for col, t in enumerate(times):
+            ax = axes[row, col]
+            img = u[:, col].reshape(n_grid, n_grid) * 1e6
+            im = ax.imshow(img, origin="lower", cmap="RdBu_r", vmin=-scale, vmax=scale, interpolation="bilinear",
+                           extent=np.array([-1, 1, -1, 1]) * half_width_m * 1e3)
+            ax.plot(*(layout.actuators_xy.T * 1e3), "ks", ms=5, mfc="none")
+            ax.plot(*(layout.locations_xy.T * 1e3), "k.", ms=2)
+            ax.plot(*(layout.locations_xy[location - 1] * 1e3), "o", ms=7, mfc="none", mec="gold")
+            ax.set_title(f"{method}, t{(t - t_peak) * 1e3:+.0f} ms", fontsize=9)
+            if col == 0:
+                ax.set_ylabel("y (mm, to wrist)")
+            if row == len(methods) - 1:
+                ax.set_xlabel("x (mm)")
+        fig.colorbar(im, ax=axes[row, :].tolist(), shrink=0.8, label="µm")
+    fig.suptitle(f"Field around location {location} on the simulated forearm (seed {getattr(rig, 'seed', '?')})")
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def metrics_figure(result: DemoResult, path: Path) -> Path:
+    """Fidelity, contrast and target peak per location, one bar per method."""
+    plt = _pyplot()
+    rows = result.rows
+    methods = list(dict.fromkeys(r["method"] for r in rows))
+    locations = sorted({r["location"] for r in rows})
+    width = 0.8 / max(len(methods), 1)
+    fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
+    keys = (("fidelity", "fidelity", 1.0), ("contrast_db", "contrast (dB)", 1.0), ("target_peak_m", "target peak (µm)", 1e6))
+    for ax, (key, label, factor) in zip(axes, keys):
+        for j, method in enumerate(methods):
+            vals = [next((r[key] for r in rows if r["location"] == loc and r["method"] == method), np.nan)
+                    for loc in locations]
+            ax.bar(np.arange(len(locations)) + (j - (len(methods) - 1) / 2) * width, np.array(vals) * factor,
+                   width, label=method, color=_METHOD_COLORS.get(method))
+        ax.set_ylabel(label)
+        ax.axhline(0, color="k", lw=0.5)
+        ax.grid(axis="y", alpha=0.3)
+    axes[0].legend(ncol=len(methods), fontsize=8, loc="lower right")
+    axes[-1].set_xticks(range(len(locations)), [str(loc) for loc in locations])
+    axes[-1].set_xlabel("location")
+    fig.suptitle("Focus metrics measured on the simulated forearm")
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return path
+
+
+def write_figures(result: DemoResult, out_dir: Path, *, location: int = 5) -> list[Path]:
+    """Write the three demo figures into ``out_dir`` (created if needed)."""
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    return [
+        propagation_figure(result.rig, out_dir / "propagation.png"),
+        field_figure(result, out_dir / "focused_field.png", location=location),
+        metrics_figure(result, out_dir / "metrics.png"),
+    ]

@@ -1,0 +1,179 @@
+"""The demo: every rendering method at every location, played on the simulated forearm.
+
+The transfer matrix used for the designs comes from one function,
+:func:`design_transfer`; it is the simulator's true transfer for now, and a measured
+calibration replaces it without touching the rest.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .._validation import check_choice
+from ..defaults import METHODS, N_SAMPLES
+from ..errors import ValidationError
+from ..rigs.base import Rig
+
+__all__ = ["DemoResult", "design_transfer", "run_demo", "record_clean", "summarize"]
+
+#: Metrics every result row carries (SPEC §8 contract of ``--json``).
+ROW_KEYS = ("location", "method", "fidelity", "contrast_db", "peak_drive_v", "target_peak_m")
+
+
+def design_transfer(rig: Rig, n: int) -> np.ndarray:
+    """The transfer matrix the demo designs with, on ``rfftfreq(n, 1 / rig.fs)``.
+
+    Parameters
+    ----------
+    rig : Rig
+        A rig with a ``transfer(points_xy, freqs)`` method (the simulated forearm).
+    n : int
+        Window length, samples.
+
+    Returns
+    -------
+    ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+        m/V at ``rig.layout.points_xy``.
+
+    Notes
+    -----
+    This is the one place where the demo obtains ``H``. It is the simulator's exact
+    transfer here; a measured calibration (``Calibration.transfer_for(n)``) drops in.
+    """
+    transfer = getattr(rig, "transfer", None)
+    if transfer is None:
+        raise ValidationError(f"the {rig.kind} rig has no model transfer; calibrate it first")
+    return transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
+
+
+def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: float = 0.0,
+                 max_tries: int = 3) -> tuple[np.ndarray, int]:
+    """Play and record, repeating a recording spoiled by vibrometer dropouts (NaN).
+
+    A careful operator repeats a measurement whose sensor dropped out rather than
+    patching it; so does the demo.
+
+    Returns
+    -------
+    recording : ndarray, shape (n_points, n_samples + n_tail)
+        m; may still hold NaN if every try dropped out.
+    repeats : int
+        How many times the recording was repeated.
+    """
+    for attempt in range(max_tries):
+        rec = rig.play_and_record(drive, points_xy, tail_s=tail_s)
+        if not np.isnan(rec).any():
+            return rec, attempt
+    return rec, max_tries - 1
+
+
+@dataclass
+class DemoResult:
+    """What :func:`run_demo` measured.
+
+    Attributes
+    ----------
+    rows : list of dict
+        One per (location, method), with at least the keys of ``ROW_KEYS``.
+    renderings : dict
+        ``(location, method) -> Rendering``.
+    recordings : dict
+        ``(location, method) -> ndarray (n_points, n)``, recorded displacement, m.
+    rig : Rig
+    H : ndarray
+        The transfer matrix used for design.
+    """
+
+    rows: list[dict]
+    renderings: dict = field(repr=False)
+    recordings: dict = field(repr=False)
+    rig: Rig = field(repr=False)
+    H: np.ndarray = field(repr=False)
+
+
+def run_demo(
+    rig: Rig,
+    *,
+    methods: Sequence[str] = METHODS,
+    locations: Sequence[int] | None = None,
+    n_samples: int = N_SAMPLES,
+    transfer: Callable[[Rig, int], np.ndarray] = design_transfer,
+    progress: Callable[[str], None] | None = None,
+) -> DemoResult:
+    """Render every method at every location, play it and measure how well it focuses.
+
+    Parameters
+    ----------
+    rig : Rig
+        Where to play (the simulated forearm).
+    methods : sequence of str
+        Rendering methods (SPEC §2).
+    locations : sequence of int, optional
+        1-based locations; default all of the layout's.
+    n_samples : int
+        Design window, samples.
+    transfer : callable
+        ``transfer(rig, n) -> H``; default :func:`design_transfer`.
+    progress : callable, optional
+        Called with a short label after each (location, method).
+
+    Returns
+    -------
+    DemoResult
+    """
+    from ..rendering import focus_metrics, render
+
+    for m in methods:
+        check_choice(m, "method", METHODS)
+    layout = rig.layout
+    locations = list(layout.location_numbers if locations is None else locations)
+    for loc in locations:
+        layout.location_index(loc)
+    H = transfer(rig, n_samples)
+    points = layout.points_xy
+    rows, renderings, recordings = [], {}, {}
+    for loc in locations:
+        for method in methods:
+            with warnings.catch_warnings():
+                # Designs over the drive limit are scaled down on purpose; the row reports it.
+                warnings.simplefilter("ignore")
+                rendering = render(method, H, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale")
+            rec, repeats = record_clean(rig, rendering.drives, points)
+            # Contrast against the other locations (the grid a participant names), as
+            # Rendering.metrics does; the guards are reported separately.
+            measured = focus_metrics(rec, rendering.target_index, rendering.desired, rig.fs, sigma=rendering.sigma,
+                                     drives=rendering.drives, compare_indices=np.arange(layout.n_locations))
+            every = focus_metrics(rec, rendering.target_index, rendering.desired, rig.fs, sigma=rendering.sigma)
+            predicted = rendering.metrics()
+            row = {"location": int(loc), "method": method}
+            row.update({k: float(measured[k]) for k in ("fidelity", "contrast_db", "peak_drive_v", "target_peak_m")})
+            row.update(
+                compactness=float(measured.get("compactness", np.nan)),
+                contrast_all_points_db=float(every["contrast_db"]),
+                predicted_fidelity=float(predicted["fidelity"]),
+                predicted_contrast_db=float(predicted["contrast_db"]),
+                scale=float(rendering.scale),
+                repeats=int(repeats),
+            )
+            rows.append(row)
+            renderings[(loc, method)] = rendering
+            recordings[(loc, method)] = rec
+            if progress is not None:
+                progress(f"location {loc}, {method}")
+    return DemoResult(rows=rows, renderings=renderings, recordings=recordings, rig=rig, H=H)
+
+
+def summarize(rows: Sequence[dict]) -> dict[str, dict[str, float]]:
+    """Median fidelity, contrast, target peak and peak drive per method."""
+    out: dict[str, dict[str, float]] = {}
+    for method in dict.fromkeys(r["method"] for r in rows):
+        sub = [r for r in rows if r["method"] == method]
+        out[method] = {
+            key: float(np.nanmedian([r[key] for r in sub]))
+            for key in ("fidelity", "contrast_db", "target_peak_m", "peak_drive_v")
+        }
+    return out
