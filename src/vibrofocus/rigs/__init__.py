@@ -1,7 +1,7 @@
 """Rigs: one interface for the simulated forearm and real hardware, one safety layer."""
 
 from .base import Rig
-from .config import AudioRigConfig, NidaqRigConfig, RigConfig, load_rig_config
+from .config import AudioRigConfig, NidaqRigConfig, RigConfig, load_rig_config, parse_rig_config
 from .devices import DeviceError, list_audio_devices, list_nidaq_devices
 from .factory import RIG_KINDS, make_rig
 from .force import ForceCurve, StrapReading, StrapSensors, check_straps, evaluate_straps
@@ -12,7 +12,7 @@ from .vibrometer import Vibrometer
 # so importing vibrofocus does not load PortAudio or the NI driver.
 __all__ = [
     "Rig", "SafetyLimits", "check_drive", "make_rig", "RIG_KINDS",
-    "RigConfig", "AudioRigConfig", "NidaqRigConfig", "load_rig_config",
+    "RigConfig", "AudioRigConfig", "NidaqRigConfig", "load_rig_config", "parse_rig_config",
     "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps",
     "DeviceError", "list_audio_devices", "list_nidaq_devices",
 ]

@@ -48,6 +48,7 @@ __all__ = [
     "ForceSensorsConfig",
     "LimitsConfig",
     "load_rig_config",
+    "parse_rig_config",
 ]
 
 

@@ -4,14 +4,15 @@ A vibrometer decoder puts out a voltage proportional to the velocity (most decod
 the displacement of the spot. Both hardware rigs record that voltage and hand it to
 :meth:`Vibrometer.to_displacement`.
 
-Velocity is integrated in the frequency domain: the spectrum of the (zero-padded)
-recording is divided by ``j 2 pi f`` and multiplied by the magnitude of a 4th-order
-Butterworth high-pass at ``highpass_hz``. Using the magnitude only makes the high-pass
+Velocity is integrated in the frequency domain: the mean of the recording is removed
+(a decoder offset), the spectrum of the zero-padded recording is divided by ``j 2 pi f``
+and multiplied by the magnitude of a 4th-order Butterworth high-pass at ``highpass_hz``. Using the magnitude only makes the high-pass
 zero-phase, so the phase of a transfer function estimated from the result is that of the
 skin, not of the filter; the high-pass removes the DC offset and low-frequency drift that
 plain integration would turn into a ramp (at 3 Hz it changes the magnitude at 10 Hz by
 less than 1e-4). Zero-padding to twice the length keeps the circular wrap of the
-integration away from the samples returned.
+integration away from the samples returned. A recording should start and end at rest
+(the rigs record a tail after every drive for that).
 """
 
 from __future__ import annotations
@@ -66,10 +67,9 @@ class Vibrometer:
     def _filter(self, x: np.ndarray, fs: float, integrate: bool) -> np.ndarray:
         n = x.shape[-1]
         nfft = scipy.fft.next_fast_len(2 * n, real=True)
-        # No mean removal in the time domain: subtracting the mean of a finite record leaks
-        # into the lowest bins of the band (10-50 Hz) whenever the drive has DC content
-        # (a sweep starting at a few Hz has); the high-pass removes DC on its own.
-        spec = scipy.fft.rfft(x, nfft, axis=-1)
+        # The mean goes first: a decoder offset would otherwise be a step at the ends of
+        # the zero-padded record, which leaks into the band and integrates into a ramp.
+        spec = scipy.fft.rfft(x - x.mean(axis=-1, keepdims=True), nfft, axis=-1)
         freqs = np.fft.rfftfreq(nfft, 1.0 / fs)
         resp = self._highpass(freqs).astype(complex)
         if integrate:
