@@ -9,20 +9,28 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.fft
+import scipy.signal
 
 from vibrofocus import ArrayLayout
 from vibrofocus.rigs.base import Rig
 
 
 def analytic_firs(layout: ArrayLayout, fs: float, length: int = 1024) -> np.ndarray:
-    """Impulse responses ``h[p, a, k]`` (m/V per sample): a damped 300 Hz resonance,
-    delayed by the travel time at 5 m/s and attenuated with distance (e-folding 30 mm)."""
+    """Impulse responses ``h[p, a, k]`` (m/V per sample), exactly ``length`` long.
+
+    Each is the impulse response of a 2nd-order Butterworth band-pass (60-600 Hz: like
+    an inertial exciter on skin, no static response), delayed by the travel time at
+    5 m/s (whole samples) and attenuated with distance (e-folding length 30 mm).
+    """
     r = np.linalg.norm(layout.points_xy[:, None, :] - layout.actuators_xy[None, :, :], axis=-1)
-    delay = r / 5.0 * fs  # samples, fractional
-    k = np.arange(length)
-    t = (k[None, None, :] - delay[..., None]) / fs
-    gain = 1e-7 * np.exp(-r / 0.03)[..., None]
-    h = np.where(t >= 0, gain * np.exp(-t / 4e-3) * np.sin(2 * np.pi * 300 * t), 0.0)
+    delay = np.round(r / 5.0 * fs).astype(int)
+    b, a = scipy.signal.butter(2, (60.0, 600.0), btype="bandpass", fs=fs)
+    impulse = np.zeros(length)
+    impulse[0] = 1.0
+    base = scipy.signal.lfilter(b, a, impulse)
+    h = np.zeros(r.shape + (length,))
+    for (p, q), d in np.ndenumerate(delay):  # a few dozen pairs: building the fixture only
+        h[p, q, d:] = 1e-6 * np.exp(-r[p, q] / 0.03) * base[: length - d]
     return h
 
 
@@ -76,8 +84,13 @@ class FIRRig(Rig):
         self.n_recordings += 1
         if self.max_points_per_recording == 1:
             idx = np.array([self.aimed])
-        else:
+        elif points_xy is None:
             idx = np.arange(self.layout.n_points)
+        else:  # a medium known only at the layout's points
+            d = np.linalg.norm(points_xy[:, None, :] - self.layout.points_xy[None], axis=-1)
+            idx = d.argmin(axis=1)
+            assert np.all(d.min(axis=1) < 1e-12), "the FIR rig knows only the layout's points"
+
         n_out = drive.shape[1] + n_tail
         n = scipy.fft.next_fast_len(n_out + self.h.shape[-1])
         # Linear convolution, summed over actuators.

@@ -233,9 +233,9 @@ def calibrate(
     band : (float, float)
         Calibrated band, Hz.
     sweep_s : float, optional
-        Sweep length, s; default 2 s (``h1``) or 4 s (``paper``).
+        Sweep length, s; default 2 s.
     repeats : int, optional
-        Recordings per point and actuator; default 4 (``h1``) or 1 (``paper``).
+        Recordings per point and actuator; default 8 (``h1``) or 1 (``paper``).
     amplitude_v : float
         Sweep peak, V (default 5 V: under the default 4 V RMS limit).
     n_fft : int

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.fft
-import scipy.signal
 
 from .._validation import as_array, check_band, check_positive
 from ..signals import spectral_inverse
@@ -179,9 +178,9 @@ def noise_and_snr(
 ) -> tuple[np.ndarray, np.ndarray]:
     """In-band noise floor (from the pre-sweep silence) and SNR of each recording set.
 
-    Both the silence ``[0, n_pre)`` and the response ``[n_pre, n_rec)`` are band-passed to
-    the calibrated band (4th-order Butterworth, zero phase) so out-of-band sensor noise
-    does not count against the signal.
+    Both the silence ``[0, n_pre)`` and the response ``[n_pre, n_rec)`` are measured in
+    the calibrated band only (mean power from the FFT bins in the band, by Parseval), so
+    out-of-band sensor noise does not count against the signal.
 
     Parameters
     ----------
@@ -200,15 +199,16 @@ def noise_and_snr(
     noise_rms : ndarray, shape (n_points,)
         In-band RMS of the silence, m (NaN where no repeat is valid).
     snr_db : ndarray, shape (n_points,)
-        ``10 log10((P_response - P_noise) / P_noise)``, dB, floored at -60 dB and capped at 300 dB.
+        ``10 log10((P_response - P_noise) / P_noise)``, dB, floored at -60 dB and capped
+        at 300 dB.
     """
     y = np.where(np.isfinite(recordings), recordings, 0.0)
-    sos = scipy.signal.butter(4, band, btype="bandpass", fs=fs, output="sos")
-    y = scipy.signal.sosfiltfilt(sos, y, axis=-1)
+    p_noise_each = _band_power(y[..., :n_pre], fs, band)
+    p_total_each = _band_power(y[..., n_pre:], fs, band)
     w = np.asarray(valid, dtype=float)
     n_used = w.sum(axis=0)
-    p_noise = (w * np.mean(y[..., :n_pre] ** 2, axis=-1)).sum(axis=0)
-    p_total = (w * np.mean(y[..., n_pre:] ** 2, axis=-1)).sum(axis=0)
+    p_noise = (w * p_noise_each).sum(axis=0)
+    p_total = (w * p_total_each).sum(axis=0)
     has = n_used > 0
     p_noise = np.divide(p_noise, n_used, out=np.full(n_used.shape, np.nan), where=has)
     p_total = np.divide(p_total, n_used, out=np.full(n_used.shape, np.nan), where=has)
@@ -221,3 +221,12 @@ def noise_and_snr(
     # the figure stays a finite number in files and tables.
     snr_db = np.minimum(10.0 * snr_db, 300.0)
     return np.sqrt(p_noise), snr_db
+
+
+def _band_power(y: np.ndarray, fs: float, band: tuple[float, float]) -> np.ndarray:
+    """Mean power of ``y`` (..., n) within ``band``: ``2 sum_band |Y_k|^2 / n^2``."""
+    n = y.shape[-1]
+    freqs = scipy.fft.rfftfreq(n, 1 / fs)
+    keep = (freqs >= band[0]) & (freqs <= band[1])
+    spectrum = scipy.fft.rfft(y, axis=-1)[..., keep]
+    return 2.0 * np.sum(np.abs(spectrum) ** 2, axis=-1) / n**2

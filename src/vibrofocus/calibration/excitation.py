@@ -122,9 +122,9 @@ def default_settings(
     band : (float, float)
         Calibrated band, Hz.
     sweep_s : float, optional
-        Sweep duration, s. Default 2 s (``h1``) or 4 s (``paper``, one sweep).
+        Sweep duration, s. Default 2 s for both methods.
     repeats : int, optional
-        Default 4 (``h1``) or 1 (``paper``).
+        Default 8 (``h1``) or 1 (``paper``: one sweep, as in the paper).
     amplitude_v : float
         Sweep peak, V. The default 5 V stays under the default RMS limit of 4 V
         (a sine of 5 V peak is 3.5 V RMS).
@@ -145,10 +145,10 @@ def default_settings(
         f_stop = max(f_stop, high)
         kind = "exponential"
         sweep_s = 2.0 if sweep_s is None else sweep_s
-        repeats = 4 if repeats is None else repeats
+        repeats = 8 if repeats is None else repeats
     else:
         f_start, f_stop, kind = low, high, "linear"
-        sweep_s = 4.0 if sweep_s is None else sweep_s
+        sweep_s = 2.0 if sweep_s is None else sweep_s
         repeats = 1 if repeats is None else repeats
     sweep_s = check_positive(sweep_s, "sweep_s")
     if isinstance(repeats, bool) or not isinstance(repeats, (int, np.integer)) or repeats < 1:

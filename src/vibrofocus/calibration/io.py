@@ -150,7 +150,8 @@ def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
     if not path.parent.exists():
         raise CalibrationFileError(f"{path}: the folder {path.parent} does not exist")
     ds = _to_dataset(cal)
-    encoding = {"recording": {"zlib": True, "complevel": 4, "dtype": "float32"}}
+    # Raw recordings are mostly sensor noise, which hardly compresses: light, fast zlib.
+    encoding = {"recording": {"zlib": True, "complevel": 1, "dtype": "float32"}}
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:

@@ -232,11 +232,19 @@ def detect_clipping(recordings: np.ndarray, *, clip_samples: int = 4, sensor_ran
     return clipped
 
 
-def _ranges(freqs: np.ndarray, mask: np.ndarray) -> list[tuple[float, float]]:
-    """Contiguous runs of True in ``mask`` as (first, last) frequency pairs."""
+def _ranges(freqs: np.ndarray, mask: np.ndarray, min_gap: int = 1) -> list[tuple[float, float]]:
+    """Runs of True in ``mask`` as (first, last) frequency pairs; runs separated by fewer
+    than ``min_gap`` False bins are merged (scattered dips read as one range)."""
     padded = np.concatenate([[False], mask, [False]])
     edges = np.flatnonzero(np.diff(padded.astype(int)))
-    return [(float(freqs[s]), float(freqs[e - 1])) for s, e in zip(edges[::2], edges[1::2])]
+    runs = [[s, e] for s, e in zip(edges[::2], edges[1::2])]
+    merged: list[list[int]] = []
+    for run in runs:
+        if merged and run[0] - merged[-1][1] < min_gap:
+            merged[-1][1] = run[1]
+        else:
+            merged.append(run)
+    return [(float(freqs[s]), float(freqs[e - 1])) for s, e in merged]
 
 
 def _format_ranges(ranges: list[tuple[float, float]], limit: int = 4) -> str:
@@ -400,15 +408,19 @@ def assess_quality(
     assessable = np.isfinite(coh).all(axis=0)
     low_mask = np.where(np.isfinite(coh), coh < t.coherence_min, False)
     share = np.where(assessable, low_mask.mean(axis=0), np.nan)
-    for p, a in np.argwhere(assessable & (share >= t.coherence_share)):
-        if dead[a]:
-            continue
-        ranges = _ranges(f_band, low_mask[:, p, a])
+    flagged = assessable & (share >= t.coherence_share) & ~dead[None, :]
+    for a in np.flatnonzero(flagged.any(axis=0)):
+        parts = []
+        for p in np.flatnonzero(flagged[:, a]):
+            ranges = _ranges(f_band, low_mask[:, p, a], min_gap=max(3, int(0.02 * f_band.size)))
+            parts.append(f"{labels[p]} ({share[p, a]:.0%}: {_format_ranges(ranges)})")
         issues.append(QualityIssue(
             "low_coherence", "warning",
-            f"point {labels[p]} / {names[a]}: coherence below {t.coherence_min:g} over {share[p, a]:.0%} "
-            f"of the band ({_format_ranges(ranges)})",
-            point=int(p), actuator=int(a)))
+            f"actuator {names[a]}: coherence below {t.coherence_min:g} over at least "
+            f"{t.coherence_share:.0%} of the band at point(s) {'; '.join(parts)}. Expected far from the "
+            "actuator where the skin damps high frequencies below the sensor noise; elsewhere check "
+            "the contact and the vibrometer signal",
+            actuator=int(a)))
 
     # Dropouts.
     missing = np.asarray(dropouts, int)

@@ -1,0 +1,35 @@
+"""Fixtures of the calibration tests: an analytic FIR rig and one simulated calibration."""
+
+import numpy as np
+import pytest
+
+from vibrofocus import ArrayLayout
+from vibrofocus.calibration import calibrate
+
+from .firrig import FIRRig, analytic_firs
+
+
+@pytest.fixture(scope="module")
+def layout() -> ArrayLayout:
+    return ArrayLayout.reference()
+
+
+@pytest.fixture(scope="module")
+def firs(layout) -> np.ndarray:
+    return analytic_firs(layout, 10_000.0)
+
+
+@pytest.fixture(scope="module")
+def fir_calibration(layout, firs):
+    """A quick noise-free calibration of the FIR rig (2 repeats of a 1 s sweep)."""
+    rig = FIRRig(firs, layout)
+    return rig, calibrate(rig, participant_id="FIR", sweep_s=1.0, repeats=2)
+
+
+@pytest.fixture(scope="module")
+def forearm_calibration():
+    """The default calibration of simulated participant 0 (noise and dropouts on)."""
+    from vibrofocus.skin import SimulatedForearm
+
+    rig = SimulatedForearm(seed=0)
+    return rig, calibrate(rig, participant_id="S00")

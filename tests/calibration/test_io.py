@@ -1,0 +1,155 @@
+import json
+
+import h5py
+import numpy as np
+import pytest
+import xarray as xr
+
+from vibrofocus.calibration import SCHEMA_VERSION, load_calibration, save_calibration
+from vibrofocus.errors import CalibrationFileError
+
+
+@pytest.fixture(scope="module")
+def saved(fir_calibration, tmp_path_factory):
+    path = tmp_path_factory.mktemp("cal") / "P01.nc"
+    save_calibration(fir_calibration[1], path)
+    return path
+
+
+def _rewrite(src, dst, edit):
+    """Load the file with xarray, change it, write it back as netCDF4."""
+    with xr.open_dataset(src, engine="h5netcdf") as ds:
+        ds = edit(ds.load())
+    ds.to_netcdf(dst, engine="h5netcdf")
+    return dst
+
+
+def test_round_trip_is_identical(fir_calibration, saved):
+    cal = fir_calibration[1]
+    back = load_calibration(saved)
+    for name in ("H", "freqs", "coherence", "drives", "recordings"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(cal, name), err_msg=name)
+        assert getattr(back, name).dtype == getattr(cal, name).dtype, name
+    for name in ("fs", "band", "participant_id", "method", "rig", "sweep", "created", "software_version",
+                 "schema_version", "layout"):
+        assert getattr(back, name) == getattr(cal, name), name
+    assert back.layout.point_labels == cal.layout.point_labels
+    q, qb = cal.quality, back.quality
+    assert qb.issues == q.issues and qb.thresholds == q.thresholds
+    for name in ("snr_db", "noise_rms_m", "band_gain", "low_coherence_share", "clipped", "repeats_used",
+                 "dropouts", "polarity"):
+        np.testing.assert_array_equal(getattr(qb, name), getattr(q, name), err_msg=name)
+
+
+def test_the_file_is_self_describing_for_plain_readers(saved):
+    with h5py.File(saved, "r") as f:  # plain HDF5, no vibrofocus
+        assert f.attrs["file_kind"] == "vibrofocus calibration"
+        assert f["H_real"].attrs["units"] == b"m/V" or f["H_real"].attrs["units"] == "m/V"
+        assert f["H_real"].shape == (2049, 13, 4)
+    with xr.open_dataset(saved, engine="h5netcdf") as ds:
+        assert ds["H_imag"].dims == ("frequency", "point", "actuator")
+        assert list(ds["point"].values[[0, 8, 9]]) == ["1", "9", "G1"]
+        assert ds["point_x"].attrs["units"] == "m" and ds["frequency"].attrs["units"] == "Hz"
+        assert json.loads(ds.attrs["sweep"])["kind"] == "exponential"
+        assert int(ds.attrs["schema_version"]) == SCHEMA_VERSION
+
+
+def test_quality_issues_survive_the_round_trip(layout, firs, tmp_path):
+    from vibrofocus.calibration import calibrate
+
+    from .firrig import FIRRig
+
+    h = firs.copy()
+    h[:, 3] *= -1
+    cal = calibrate(FIRRig(h, layout), participant_id="P", sweep_s=0.5, repeats=2)
+    back = load_calibration(save_calibration(cal, tmp_path / "rev.nc"))
+    assert [i.check for i in back.quality.issues] == ["reversed_actuator"]
+    assert back.quality.issues[0].actuator == 3
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(CalibrationFileError, match="no such calibration file"):
+        load_calibration(tmp_path / "nope.nc")
+
+
+def test_truncated_file(saved, tmp_path):
+    data = saved.read_bytes()
+    bad = tmp_path / "truncated.nc"
+    bad.write_bytes(data[: len(data) // 3])
+    with pytest.raises(CalibrationFileError, match="truncated.nc: is truncated or corrupt"):
+        load_calibration(bad)
+
+
+@pytest.mark.parametrize("content, what", [(b"participant,study\n1,2\n", "starts with"), (b"", "empty")])
+def test_foreign_non_hdf5_file(tmp_path, content, what):
+    bad = tmp_path / "trials.csv"
+    bad.write_bytes(content)
+    with pytest.raises(CalibrationFileError, match=f"trials.csv: is not a netCDF4/HDF5 calibration file.*{what}"):
+        load_calibration(bad)
+
+
+def test_foreign_netcdf_file(tmp_path):
+    other = tmp_path / "weather.nc"
+    xr.Dataset({"t": ("x", np.arange(3.0))}, attrs={"title": "temperatures"}).to_netcdf(other, engine="h5netcdf")
+    with pytest.raises(CalibrationFileError, match="weather.nc: is an HDF5/netCDF file but not a vibrofocus"):
+        load_calibration(other)
+
+
+@pytest.mark.parametrize("version, match", [(SCHEMA_VERSION + 1, "newer than this vibrofocus reads"),
+                                            (0, "no vibrofocus release wrote")])
+def test_unknown_schema_version(saved, tmp_path, version, match):
+    def edit(ds):
+        ds.attrs["schema_version"] = np.int32(version)
+        return ds
+
+    bad = _rewrite(saved, tmp_path / "v.nc", edit)
+    with pytest.raises(CalibrationFileError, match=f"schema version {version}.*{match}"):
+        load_calibration(bad)
+
+
+def test_nan_in_stored_matrix_is_named_with_its_location(saved, tmp_path):
+    def edit(ds):
+        ds["H_imag"][100, 4, 2] = np.nan
+        return ds
+
+    bad = _rewrite(saved, tmp_path / "nan.nc", edit)
+    f = np.fft.rfftfreq(4096, 1e-4)[100]
+    with pytest.raises(CalibrationFileError, match=rf"H_imag holds 1 NaN/Inf.*{f:g} Hz, point 5, actuator A3"):
+        load_calibration(bad)
+
+
+def test_point_missing_from_the_data(saved, tmp_path):
+    bad = _rewrite(saved, tmp_path / "missing.nc", lambda ds: ds.drop_sel(point="G2"))
+    with pytest.raises(CalibrationFileError, match="point.s. G2 of the layout are missing from the data"):
+        load_calibration(bad)
+
+
+def test_point_moved(saved, tmp_path):
+    def edit(ds):
+        ds["point_x"][0] = ds["point_x"][0] + 1e-3
+        return ds
+
+    with pytest.raises(CalibrationFileError, match="point positions"):
+        load_calibration(_rewrite(saved, tmp_path / "moved.nc", edit))
+
+
+@pytest.mark.parametrize(
+    "edit, match",
+    [
+        (lambda ds: ds.drop_vars("coherence"), "lacks the variable.s. coherence"),
+        (lambda ds: ds.assign(H_real=ds["H_real"].transpose("point", "frequency", "actuator")),
+         "H_real has dimensions"),
+        (lambda ds: ds.isel(frequency=slice(0, -1)), "frequencies but n_fft=4096"),
+        (lambda ds: ds.assign_attrs(band_high=6000.0), "invalid band"),
+        (lambda ds: ds.assign_attrs(layout="{not json"), "unreadable description"),
+        (lambda ds: ds.assign(coherence=ds["coherence"] * 2), r"outside \[0, 1\]"),
+    ],
+)
+def test_inconsistent_contents_are_refused(saved, tmp_path, edit, match):
+    with pytest.raises(CalibrationFileError, match=match):
+        load_calibration(_rewrite(saved, tmp_path / "bad.nc", edit))
+
+
+def test_save_into_a_missing_folder_is_refused(fir_calibration, tmp_path):
+    with pytest.raises(CalibrationFileError, match="does not exist"):
+        save_calibration(fir_calibration[1], tmp_path / "no" / "P.nc")
