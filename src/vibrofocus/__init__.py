@@ -27,6 +27,7 @@ from .rigs import Rig, SafetyLimits
 from .signals import exponential_sweep, linear_sweep, ricker
 from .rendering import InverseOperator, Rendering, focus_metrics, funneling_gains, inverse_filter, render
 from .skin import SimulatedForearm
+from .calibration import Calibration, calibrate, load_calibration, save_calibration
 
 __all__ = [
     "__version__",
@@ -41,6 +42,10 @@ __all__ = [
     "focus_metrics",
     "render",
     "Rendering",
+    "calibrate",
+    "Calibration",
+    "load_calibration",
+    "save_calibration",
     "linear_sweep",
     "exponential_sweep",
     "VibrofocusError",
