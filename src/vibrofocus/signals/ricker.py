@@ -6,6 +6,7 @@ import numpy as np
 
 from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import N_SAMPLES, SIGMA_S, TARGET_FRACTION
+from ..errors import ValidationError
 
 __all__ = ["ricker", "time_axis"]
 
@@ -57,7 +58,7 @@ def ricker(
     duration = N_SAMPLES / fs if duration is None else check_positive(duration, "duration")
     n = int(round(duration * fs))
     if n < 1:
-        raise ValueError  # pragma: no cover - check_positive makes this impossible at fs > 0
+        raise ValidationError(f"duration={duration!r} s is shorter than one sample at fs={fs:g} Hz")
     t0 = TARGET_FRACTION * duration if t0 is None else check_in_range(t0, "t0", 0.0, duration)
     amplitude = float(as_array(amplitude, "amplitude", ndim=0))
     tau2 = (time_axis(n, fs) - t0) ** 2 / sigma**2

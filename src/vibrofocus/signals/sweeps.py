@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from .._validation import as_array, check_band, check_positive
+from ..errors import ValidationError
 from ..rendering.taper import band_taper
 
 __all__ = [
@@ -160,9 +161,12 @@ def spectral_inverse(
     ndarray, complex, shape (n_fft // 2 + 1,)
     """
     x = as_array(excitation, "excitation", ndim=1)
+    fs = check_positive(fs, "fs")
     band = check_band(band, fs)
-    if n_fft < x.size:
-        raise ValueError(f"n_fft={n_fft} must be >= the excitation length {x.size}")
+    if isinstance(n_fft, bool) or not isinstance(n_fft, (int, np.integer)) or n_fft < x.size:
+        raise ValidationError(f"n_fft={n_fft!r} must be an integer >= the excitation length {x.size}")
+    regularization = check_positive(regularization, "regularization", allow_zero=True)
+    taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     spectrum = np.fft.rfft(x, n_fft)
     power = np.abs(spectrum) ** 2
     freqs = np.fft.rfftfreq(n_fft, 1 / fs)
