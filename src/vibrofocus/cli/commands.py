@@ -6,3 +6,5 @@ from . import serve  # noqa: E402,F401
 from . import analyze  # noqa: F401
 from . import study  # noqa: F401
 from . import simulate_study  # noqa: F401
+from . import play  # noqa: F401
+from . import devices  # noqa: F401

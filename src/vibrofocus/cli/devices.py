@@ -1,0 +1,85 @@
+"""``vibrofocus devices`` (what hardware is present) and ``vibrofocus straps`` (strap forces)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+from ._errors import user_errors
+from .main import app
+
+
+@app.command("devices")
+def devices(
+    as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
+) -> None:
+    """List audio interfaces (PortAudio) and NI-DAQmx devices, with their channels."""
+    with user_errors():
+        from rich.console import Console
+        from rich.table import Table
+
+        from ..rigs import list_audio_devices, list_nidaq_devices
+
+        audio, nidaq = list_audio_devices(), list_nidaq_devices()
+        if as_json:
+            typer.echo(json.dumps({"audio": {"devices": audio.devices, "note": audio.note},
+                                   "nidaq": {"devices": nidaq.devices, "note": nidaq.note}}, indent=2))
+            return
+        console = Console()
+        table = Table(title="Audio devices (use the index or name in a rig config's \\[device] table)")
+        for col in ("index", "name", "host API", "inputs", "outputs", "default rate (Hz)"):
+            table.add_column(col, justify="right" if col in ("index", "inputs", "outputs") else "left")
+        for d in audio.devices:
+            table.add_row(str(d["index"]), d["name"], d["hostapi"], str(d["inputs"]), str(d["outputs"]),
+                          f"{d['default_samplerate']:g}")
+        console.print(table)
+        if audio.note:
+            console.print(f"[yellow]audio:[/] {audio.note}")
+        if nidaq.devices:
+            ni = Table(title="NI-DAQmx devices")
+            for col in ("name", "product", "analog outputs", "analog inputs"):
+                ni.add_column(col)
+            for d in nidaq.devices:
+                ni.add_row(d["name"], d["product_type"], ", ".join(d["ao"]), ", ".join(d["ai"]))
+            console.print(ni)
+        if nidaq.note:
+            console.print(f"[yellow]NI-DAQmx:[/] {nidaq.note}")
+
+
+@app.command("straps")
+def straps(
+    rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Participant seed of the simulated forearm."),
+    target: float | None = typer.Option(None, "--target-n", help="Target strap force, N (default from the config, 1 N)."),
+    tolerance: float | None = typer.Option(None, "--tolerance-n", help="Accepted deviation, N."),
+    as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
+) -> None:
+    """Read the strap force sensors before a calibration and say whether to tighten or loosen.
+
+    Exits with code 1 when a strap is off target."""
+    with user_errors():
+        from rich.console import Console
+        from rich.table import Table
+
+        from ..rigs import check_straps, make_rig
+
+        with make_rig(rig, config=rig_config, seed=seed) as r:
+            reading = check_straps(r, target_n=target, tolerance_n=tolerance)
+        if as_json:
+            typer.echo(json.dumps(reading.to_dict(), indent=2))
+        else:
+            colour = {"ok": "green", "too loose": "yellow", "too tight": "red", "out of range": "red"}
+            table = Table(title=f"Strap forces (target {reading.target_n:g} ± {reading.tolerance_n:g} N)"
+                                + (" — simulated" if reading.simulated else ""))
+            for col in ("strap", "force (N)", "verdict"):
+                table.add_column(col, justify="right" if col == "force (N)" else "left")
+            for name, f, v in zip(reading.names, reading.forces_n, reading.verdicts):
+                table.add_row(name, "—" if f != f else f"{f:.2f}", f"[{colour[v]}]{v}[/]")
+            console = Console()
+            console.print(table)
+            console.print(reading.message)
+        if not reading.ok:
+            raise typer.Exit(code=1)

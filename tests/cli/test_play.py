@@ -1,0 +1,80 @@
+"""``vibrofocus play``: a drives file through the safety layer onto a rig."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from vibrofocus.cli.main import app
+from vibrofocus.signals import ricker
+
+FS = 10_000.0
+runner = CliRunner()
+
+
+def write_drives(path, amplitude=2.0, fs=FS, **extra):
+    drives = np.zeros((4, 2000))
+    drives[2] = amplitude * ricker(FS, duration=0.2, t0=0.05)
+    np.savez(path, drives=drives, fs=fs, **extra)
+    return drives
+
+
+def test_plays_on_the_simulated_rig(tmp_path):
+    path = tmp_path / "tap.npz"
+    write_drives(path)
+    result = runner.invoke(app, ["play", str(path), "--rig", "simulated", "--json"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    assert out["played"] and out["duration_s"] == pytest.approx(0.2)
+    np.testing.assert_allclose(out["peak_v"], [0, 0, 2.0, 0], atol=1e-6)
+
+
+def test_dry_run_checks_without_playing(tmp_path):
+    path = tmp_path / "tap.npz"
+    write_drives(path)
+    result = runner.invoke(app, ["play", str(path), "--dry-run"])
+    assert result.exit_code == 0, result.output
+    assert "checked (not played)" in result.output
+
+
+@pytest.mark.parametrize(
+    "kwargs, message",
+    [
+        (dict(amplitude=12.0), "over the limit of 10 V"),
+        (dict(fs=48_000.0), "is at 48000 Hz but the simulated rig runs at 10000 Hz"),
+    ],
+)
+def test_unsafe_or_foreign_drives_are_refused(tmp_path, kwargs, message):
+    path = tmp_path / "bad.npz"
+    write_drives(path, **kwargs)
+    result = runner.invoke(app, ["play", str(path)])
+    assert result.exit_code == 2
+    assert message in " ".join(result.output.split())
+
+
+def flat(result) -> str:
+    return " ".join(result.output.split())  # rich wraps long messages
+
+
+def test_bad_files_are_named(tmp_path):
+    result = runner.invoke(app, ["play", str(tmp_path / "none.npz")])
+    assert result.exit_code == 2 and "no such file" in flat(result)
+    path = tmp_path / "nofs.npz"
+    np.savez(path, drives=np.zeros((4, 10)))
+    result = runner.invoke(app, ["play", str(path)])
+    assert result.exit_code == 2 and "missing array(s) fs (it holds drives)" in flat(result)
+    junk = tmp_path / "junk.npz"
+    junk.write_text("not a zip")
+    result = runner.invoke(app, ["play", str(junk)])
+    assert result.exit_code == 2 and "not a readable .npz file" in " ".join(result.output.split())
+
+
+def test_hardware_rig_without_config_is_refused(tmp_path):
+    path = tmp_path / "tap.npz"
+    write_drives(path)
+    result = runner.invoke(app, ["play", str(path), "--rig", "audio"])
+    assert result.exit_code == 2
+    assert "needs a rig config file" in " ".join(result.output.split())
