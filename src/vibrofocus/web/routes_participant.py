@@ -124,12 +124,14 @@ async def participant_state(
 
 async def _wait_change(request: Request, web: WebState, session_id: int, state: dict[str, Any], after: int, wait: float) -> dict[str, Any]:
     deadline = time.monotonic() + wait
+    first = web.runner(session_id)
     # The runner's seq changes on every step of a trial; polling the in-memory runner
     # every 40 ms keeps the beep within a frame or two of the cue without a thread per client.
     while state["seq"] == after and time.monotonic() < deadline:
         await asyncio.sleep(0.04)
         runner = web.runner(session_id)
-        if runner is not None and runner.snapshot()["seq"] != after:
+        if runner is not first or (runner is not None and runner.snapshot()["seq"] != after):
+            # A stop (runner gone) or a restart (new runner) is news too.
             state = await run_in_threadpool(_state, web, session_id)
             break
         if await request.is_disconnected():

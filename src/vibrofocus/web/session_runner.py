@@ -108,7 +108,12 @@ class SessionRunner:
         self._stopping = False
         self._answered: set[int] = set()
         self._drive_sha: dict[int, str] = {}
-        self._state: dict[str, Any] = {"state": "idle", "trial_index": None, "phase": None, "seq": 0, "error": None}
+        # seq starts at the clock in ms, so that a page that saw an earlier runner of this
+        # session (before a stop or a server restart) never mistakes a new state for one
+        # it has already seen.
+        self._state: dict[str, Any] = {
+            "state": "idle", "trial_index": None, "phase": None, "seq": int(time.time() * 1000), "error": None,
+        }
         self._thread: threading.Thread | None = None
         self.require_page = bool(require_page)
         self._pages = 0

@@ -200,7 +200,7 @@
         if (waitingForServer) setMessage("Sending…");
         else if (confirmedFor === next.trial_index) showTaken();
         else {
-          setMessage(multi ? "Where did you feel it? Select every location, then press Enter."
+          setMessage(multi ? "Where did you feel it? Select, then Enter."
                            : "Where did you feel it most?");
         }
         break;
