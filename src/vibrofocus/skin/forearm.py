@@ -29,7 +29,7 @@ from ..rigs.base import Rig
 from ..rigs.safety import SafetyLimits
 from .geometry import ForearmGeometry
 from .parameters import ForearmParameters
-from .propagation import exciter_response, surface_green, wavenumber
+from .propagation import _disc_factor, exciter_response, surface_green, wavenumber
 
 __all__ = ["SimulatedForearm", "drive_sensitivity"]
 
@@ -58,8 +58,9 @@ def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmPara
     k = wavenumber(fp, params.c250_m_s, params.beta, params.alpha250_np_m)
     radius = params.contact_radius_m * np.sqrt(params.contact)
     green = np.zeros((fp.size, distances.shape[0], distances.shape[1]), dtype=complex)
+    disc = _disc_factor(k[:, None, None] * radius[None, None, :])
     for m in range(distances.shape[2]):  # a handful of images; frequencies stay vectorized
-        green += surface_green(k, distances[:, :, m], radius, max_nepers=max_nepers)
+        green += surface_green(k, distances[:, :, m], radius, max_nepers=max_nepers, disc_factor=disc)
     source = exciter_response(fp, params.f0_hz, params.q) * (params.gains * params.contact)[None, :]
     out[pos] = green * source[:, None, :]
     return out
@@ -357,11 +358,14 @@ class SimulatedForearm(Rig):
         n_out = n + n_tail
         # Linear convolution, zero-padded: the response of a drive played once from
         # silence, with its tail after the drive, never wrapped to the start.
-        conv = sp_signal.fftconvolve(ir, drive[None, :, :], axes=2)  # (n_points, n_act, n + n_ir - 1)
-        rec = conv.sum(axis=1)
+        # Silent channels contribute nothing (calibration plays one actuator at a time).
+        active = np.flatnonzero(np.any(drive != 0, axis=1))
         out = np.zeros((len(points), n_out))
-        m = min(n_out, rec.shape[1])
-        out[:, :m] = rec[:, :m]
+        if active.size:
+            conv = sp_signal.fftconvolve(ir[:, active], drive[None, active, :], axes=2)  # (n_points, n_active, n + n_ir - 1)
+            rec = conv.sum(axis=1)
+            m = min(n_out, rec.shape[1])
+            out[:, :m] = rec[:, :m]
         return self._measure(out)
 
     def _measure(self, clean: np.ndarray) -> np.ndarray:

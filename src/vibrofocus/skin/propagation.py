@@ -77,7 +77,7 @@ def _disc_factor(ka: np.ndarray) -> np.ndarray:
 
 
 def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
-                  max_nepers: float = _MAX_NEPERS) -> np.ndarray:
+                  max_nepers: float = _MAX_NEPERS, disc_factor: np.ndarray | None = None) -> np.ndarray:
     """2-D Green's function of a uniform disc source, in NumPy's sign convention.
 
     The out-of-plane displacement of a membrane-like skin layer under a unit force
@@ -103,6 +103,10 @@ def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
         Contact radius of each source, m.
     max_nepers : float
         Paths attenuated by more than this (``alpha d``) are left out (set to 0).
+    disc_factor : ndarray, complex, shape (n_freqs, 1, n_sources), optional
+        ``2 J1(k a) / (k a)`` if already computed (it does not depend on the distance,
+        so callers summing several paths compute it once; complex Bessel functions
+        are the costly part).
 
     Returns
     -------
@@ -114,6 +118,7 @@ def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
     d = np.asarray(distance, dtype=float)
     a = np.asarray(radius, dtype=float)
     ka = k * a[None, None, :]
+    factor = _disc_factor(ka) if disc_factor is None else disc_factor
     out = np.zeros((k.shape[0],) + d.shape, dtype=complex)
     # Skip frequency/path pairs attenuated beyond _MAX_NEPERS: their Hankel values
     # underflow anyway, and this keeps dense grids with far images cheap.
@@ -122,7 +127,7 @@ def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
     sel = live & outside
     if sel.any():
         kd = (k * d[None])[sel]
-        out[sel] = 0.25j * hankel0(kd) * np.broadcast_to(_disc_factor(ka), out.shape)[sel]
+        out[sel] = 0.25j * hankel0(kd) * np.broadcast_to(factor, out.shape)[sel]
     inside = np.broadcast_to(~outside, out.shape)
     if inside.any():
         kk = np.broadcast_to(k, out.shape)[inside]
