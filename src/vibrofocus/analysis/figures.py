@@ -205,7 +205,7 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
     return fig
 
 
-def save_figure(fig, path: str | os.PathLike, *, dpi: int = 150) -> Path:
+def save_figure(fig, path: str | os.PathLike, *, dpi: int = 110) -> Path:
     """Write ``fig`` as PNG to ``path`` and return the path."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)

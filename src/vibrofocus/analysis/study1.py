@@ -10,6 +10,7 @@ corrected paired t-tests for the method effect and, per location, for the intera
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
@@ -315,7 +316,8 @@ def study1_posthoc(
     main : DataFrame
         Paired t-tests between the levels of ``factor`` on each subject's mean over
         ``by`` (Bonferroni over these comparisons): ``A``, ``B``, ``mean_A``, ``mean_B``,
-        ``T``, ``dof``, ``p_unc``, ``p_bonf``, ``hedges``.
+        ``T``, ``dof``, ``p_unc``, ``p_bonf``, ``hedges``, ``note`` (why a test could not
+        be computed, e.g. identical values in all pairs; its T and p are NaN).
     interaction : DataFrame
         The same within each level of ``by`` (one column ``by``), Bonferroni-corrected
         within each level's family of comparisons.
@@ -325,12 +327,18 @@ def study1_posthoc(
     _require(errors, (dv, factor, by, subject), "errors")
 
     def pairs(data: pd.DataFrame) -> pd.DataFrame:
-        res = pg.pairwise_tests(data=data, dv=dv, within=factor, subject=subject, padjust="bonf")
+        with warnings.catch_warnings():
+            # Identical paired values give no t statistic; pingouin warns and returns NaN,
+            # which the table keeps (and a note explains).
+            warnings.simplefilter("ignore", UserWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
+            res = pg.pairwise_tests(data=data, dv=dv, within=factor, subject=subject, padjust="bonf")
         means = data.groupby(factor)[dv].mean()
         res = res.rename(columns={"p_corr": "p_bonf"})
         res["mean_A"] = res["A"].map(means)
         res["mean_B"] = res["B"].map(means)
-        return res[["A", "B", "mean_A", "mean_B", "T", "dof", "p_unc", "p_bonf", "hedges"]]
+        res["note"] = np.where(res["T"].isna(), "no variance in the paired differences: no test", "")
+        return res[["A", "B", "mean_A", "mean_B", "T", "dof", "p_unc", "p_bonf", "hedges", "note"]]
 
     per_subject = errors.groupby([subject, factor], as_index=False)[dv].mean()
     main = pairs(per_subject)

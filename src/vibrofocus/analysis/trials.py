@@ -123,75 +123,88 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     for col in REQUIRED_COLUMNS:
         df[col] = df[col].astype(str).str.strip()
 
+    def as_int(col: str) -> pd.Series:
+        """Integer values (``"3"``, ``"3.0"``) as Int64; anything else becomes <NA>."""
+        num = pd.to_numeric(df[col], errors="coerce")
+        ok = num.notna() & np.isfinite(num) & (num == np.round(num))
+        return num.where(ok).astype("Int64")
+
+    study = as_int("study")
+    trial = as_int("trial")
+    target = as_int("target")
+    phase = df["phase"].str.lower()
+    rt_text = df["rt_s"]
+    rt_empty = rt_text.eq("") | rt_text.str.lower().eq("nan")
+    rt = pd.to_numeric(rt_text.where(~rt_empty), errors="coerce")
+    parsed = [_parse_selection(text, n_locations) for text in df["response"]]
+    selection = pd.Series([sel for sel, _ in parsed], index=df.index, dtype=object)
+    response_reason = pd.Series([why for _, why in parsed], index=df.index, dtype=object)
+    n_sel = selection.map(lambda sel: len(sel) if sel is not None else 0)
+
+    checks: list[tuple[str, pd.Series, pd.Series]] = []  # (column, bad mask, reason per row)
+
+    def add(column: str, bad: pd.Series, reason) -> None:
+        bad = bad.fillna(True).astype(bool)
+        if bad.any():
+            reasons = reason if isinstance(reason, pd.Series) else pd.Series(reason, index=df.index)
+            checks.append((column, bad, reasons))
+
+    empty_participant = df["participant"].eq("") | df["participant"].str.lower().eq("nan")
+    add("participant", empty_participant, "participant is empty")
+    add("study", ~study.isin(STUDIES), "study must be 1 or 2, got " + df["study"].map(repr))
+    add("phase", ~phase.isin(PHASES), "phase must be 'training' or 'main', got " + df["phase"].map(repr))
+    add("trial", trial.isna(), "trial must be an integer trial number, got " + df["trial"].map(repr))
+    empty_method = df["method"].eq("") | df["method"].str.lower().eq("nan")
+    add("method", empty_method, "method is empty")
+    add(
+        "target",
+        ~target.between(1, n_locations),
+        f"target must be a location number 1..{n_locations}, got " + df["target"].map(repr),
+    )
+    add("response", response_reason.notna(), "response " + response_reason.fillna(""))
+    add(
+        "response",
+        response_reason.isna() & study.eq(1).fillna(False).astype(bool) & n_sel.ne(1),
+        "response study 1 takes exactly one location per trial, got " + n_sel.astype(str),
+    )
+    add(
+        "rt_s",
+        ~rt_empty & ~(np.isfinite(rt) & (rt >= 0)),
+        "rt_s must be a time >= 0 in seconds (or empty), got " + rt_text.map(repr),
+    )
+
     problems: list[dict] = []
-    records: list[dict] = []
-    for row in df.itertuples(index=False):
-        row_problems: list[tuple[str, str, str]] = []
-        participant = row.participant
-        if participant == "" or participant.lower() == "nan":
-            row_problems.append(("participant", participant, "is empty"))
-        study = _parse_int(row.study)
-        if study not in STUDIES:
-            row_problems.append(("study", row.study, f"must be 1 or 2, got {row.study!r}"))
-        phase = row.phase.lower()
-        if phase not in PHASES:
-            row_problems.append(("phase", row.phase, f"must be 'training' or 'main', got {row.phase!r}"))
-        trial = _parse_int(row.trial)
-        if trial is None:
-            row_problems.append(("trial", row.trial, f"must be an integer trial number, got {row.trial!r}"))
-        method = row.method
-        if method == "" or method.lower() == "nan":
-            row_problems.append(("method", method, "is empty"))
-        target = _parse_int(row.target)
-        if target is None or not 1 <= target <= n_locations:
-            row_problems.append(("target", row.target, f"must be a location number 1..{n_locations}, got {row.target!r}"))
-        selection, reason = _parse_selection(row.response, n_locations)
-        if reason is not None:
-            row_problems.append(("response", row.response, reason))
-        elif study == 1 and len(selection) != 1:
-            row_problems.append(
-                ("response", row.response, f"study 1 takes exactly one location per trial, got {len(selection)}")
-            )
-        rt_text = row.rt_s
-        if rt_text == "" or rt_text.lower() == "nan":
-            rt = float("nan")
-        else:
-            try:
-                rt = float(rt_text)
-            except ValueError:
-                rt = None
-            if rt is None or not np.isfinite(rt) or rt < 0:
-                row_problems.append(("rt_s", rt_text, f"must be a time >= 0 in seconds (or empty), got {rt_text!r}"))
-        for column, value, why in row_problems:
+    any_bad = pd.Series(False, index=df.index)
+    for column, bad, reasons in checks:
+        any_bad |= bad
+        for i in np.flatnonzero(bad.to_numpy()):
             problems.append(
                 {
-                    "line": int(row.line),
-                    "participant": participant,
-                    "study": study,
+                    "line": int(df["line"].iloc[i]),
+                    "participant": df["participant"].iloc[i],
+                    "study": None if pd.isna(study.iloc[i]) else int(study.iloc[i]),
                     "column": column,
-                    "value": value,
-                    "reason": f"{column} {why}",
+                    "value": df[column].iloc[i],
+                    "reason": reasons.iloc[i],
                 }
             )
-        if not row_problems:
-            records.append(
-                {
-                    "participant": participant,
-                    "study": study,
-                    "phase": phase,
-                    "trial": trial,
-                    "method": method,
-                    "target": target,
-                    "response": row.response,
-                    "selection": selection,
-                    "n_selected": len(selection),
-                    "rt_s": rt,
-                    "line": int(row.line),
-                }
-            )
-    columns = ["participant", "study", "phase", "trial", "method", "target", "response", "selection",
-               "n_selected", "rt_s", "line"]  # fmt: skip
-    trials = pd.DataFrame.from_records(records, columns=columns)
+    problems.sort(key=lambda p: p["line"])  # stable: per line, in the order of the checks
+    good = ~any_bad
+    trials = pd.DataFrame(
+        {
+            "participant": df["participant"][good],
+            "study": study[good],
+            "phase": phase[good],
+            "trial": trial[good],
+            "method": df["method"][good],
+            "target": target[good],
+            "response": df["response"][good],
+            "selection": selection[good],
+            "n_selected": n_sel[good],
+            "rt_s": rt[good],
+            "line": df["line"][good],
+        }
+    ).reset_index(drop=True)
     if len(trials):
         trials = trials.astype(
             {"study": int, "trial": int, "target": int, "n_selected": int, "rt_s": float, "line": int}

@@ -1,0 +1,180 @@
+"""report.json contract, results sentences, figures, HTML and the ``analyze`` command."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+from numpy.testing import assert_allclose
+from typer.testing import CliRunner
+
+from vibrofocus.analysis import analyze, format_p, load_trials, report_dict, results_sentences, write_report
+from vibrofocus.cli.main import app
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def cli_run(tmp_path_factory):
+    """Run ``vibrofocus analyze`` once on a synthetic file with planted effects."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from conftest import make_trials
+
+    tmp = tmp_path_factory.mktemp("cli")
+    df = make_trials(
+        12,
+        seed=11,
+        sd_mm={"funneling": 9.0, "inverse": 4.5, "combination": 5.0},
+        extra_mean={"funneling": 2.0, "inverse": 0.6, "combination": 0.7},
+    )
+    drop = (df["participant"] == "P12") & (df["study"] == 1) & (df["target"] == 3) & (df["phase"] == "main")
+    df = df[~drop]  # P12 misses a study-1 condition: must be excluded and reported
+    csv = tmp / "trials.csv"
+    df.to_csv(csv, index=False)
+    out = tmp / "report"
+    result = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out)])
+    return result, out, df
+
+
+@pytest.fixture(scope="module")
+def planted_result(cli_run):
+    """The Python API's analysis of the same file as the CLI run."""
+    return analyze(load_trials(cli_run[2]))
+
+
+def test_cli_writes_contract_report(cli_run):
+    result, out, _ = cli_run
+    assert result.exit_code == 0, result.output
+    report = json.loads((out / "report.json").read_text())
+    anova = report["study1"]["anova"]
+    assert [row["effect"] for row in anova] == ["location", "method", "location * method"]
+    for row in anova:
+        for key in ("F", "ddof1", "ddof2", "p_unc", "p_gg", "eps"):
+            assert isinstance(row[key], (int, float)), key
+        assert 0 < row["eps"] <= 1 and 0 <= row["p_gg"] <= 1
+    for factor in ("location", "method"):
+        f = report["study2"]["friedman"][factor]
+        assert set(f) >= {"chi2", "dof", "p"}
+    assert report["study2"]["friedman"]["location"]["dof"] == 8
+    assert report["study2"]["friedman"]["method"]["dof"] == 2
+    method = next(r for r in anova if r["effect"] == "method")
+    assert method["p_gg"] < 0.05 and report["study2"]["friedman"]["method"]["p"] < 0.05  # planted
+    assert "contains_target" in report["study2"] and "posthoc" in report["study1"]
+
+
+def test_cli_reports_exclusions_in_json_and_terminal(cli_run):
+    result, out, _ = cli_run
+    report = json.loads((out / "report.json").read_text())
+    (excl,) = report["exclusions"]
+    assert excl["participant"] == "P12" and excl["study"] == 1 and "incomplete" in excl["reason"]
+    assert report["study1"]["n_participants"] == 11 and report["study2"]["n_participants"] == 12
+    assert "excluded" in result.output and "P12" in result.output
+    assert "Study 1" in result.output and "Friedman" in result.output
+
+
+def test_cli_writes_figures_and_self_contained_html(cli_run):
+    _, out, _ = cli_run
+    report = json.loads((out / "report.json").read_text())
+    for name in ("study1_localization.png", "study1_errors.png", "study2_counts.png"):
+        assert (out / name).read_bytes()[:8] == PNG_MAGIC
+        assert name in report["figures"].values()
+    html = (out / "report.html").read_text()
+    assert html.count("data:image/png;base64,") == 3
+    assert "P12" in html and "Greenhouse–Geisser" in html and "Friedman" in html
+    assert re.search(r"F\(\d+\.\d\d, \d+\.\d\d\) = \d+\.\d\d, p [<=] ", html)  # GG-corrected dofs
+
+
+def test_report_values_match_the_python_api(cli_run, planted_result):
+    _, out, _ = cli_run
+    result = planted_result
+    report = json.loads((out / "report.json").read_text())
+    api = result.study1.anova.set_index("effect")
+    for row in report["study1"]["anova"]:
+        assert_allclose([row["F"], row["p_gg"], row["eps"]], api.loc[row["effect"], ["F", "p_gg", "eps"]].astype(float))
+    fr = result.study2.all_trials.friedman
+    assert_allclose(report["study2"]["friedman"]["method"]["chi2"], fr.loc["method", "chi2"])
+
+
+def test_sentences_use_gg_dofs_when_sphericity_is_not_assumed(planted_result):
+    result = planted_result
+    sentences = results_sentences(result)
+    aov = result.study1.anova.set_index("effect")
+    inter = aov.loc["location * method"]
+    assert not inter["mauchly_defined"]  # 11 participants < 17 needed for 16 contrasts
+    expected = f"F({inter['ddof1_gg']:.2f}, {inter['ddof2_gg']:.2f}) = {inter['F']:.2f}, {format_p(inter['p_gg'])}"
+    assert any(expected in s for s in sentences["study1"]), sentences["study1"]
+    method = aov.loc["method"]
+    if method["sphericity_violated"] is False:  # spherical: uncorrected integer dofs
+        plain = f"F({method['ddof1']}, {method['ddof2']}) = {method['F']:.2f}"
+        assert any(plain in s for s in sentences["study1"])
+    assert any(s.startswith("Friedman tests") and "χ²(2)" in s for s in sentences["study2"])
+
+
+def test_format_p():
+    assert format_p(3e-7) == "p < 0.0001"
+    assert format_p(0.00042) == "p = 0.0004"
+    assert format_p(0.0123) == "p = 0.012"
+    assert format_p(float("nan")) == "p = n/a"
+
+
+def test_report_for_a_single_study_says_why(tmp_path, synthetic):
+    result = analyze(load_trials(synthetic(4, seed=21, studies=(2,))))
+    paths = write_report(result, tmp_path)
+    report = json.loads(paths["json"].read_text())
+    assert report["study1"] == {
+        "available": False,
+        "reason": "study 1: the trials file has no rows for this study",
+        "anova": [],
+    }
+    assert report["study2"]["available"] and set(report["study2"]["friedman"]) == {"location", "method"}
+    assert "Study 1 was not analysed" in paths["html"].read_text()
+    assert not (tmp_path / "study1_localization.png").exists()
+
+
+def test_report_dict_is_strict_json(planted_result):
+    d = report_dict(planted_result)
+    json.dumps(d, allow_nan=False)  # NaN would raise
+    # NaN (undefined Mauchly) becomes null
+    inter = next(r for r in d["study1"]["anova"] if r["effect"] == "location * method")
+    assert inter["p_mauchly"] is None and inter["sphericity_violated"] is None
+
+
+def test_cli_bad_input_is_one_line_error(tmp_path):
+    bad = pd.DataFrame(
+        [["P1", 1, "main", 1, "inverse", 5, "12", 0.8]],
+        columns=["participant", "study", "phase", "trial", "method", "target", "response", "rt_s"],
+    )
+    csv = tmp_path / "bad.csv"
+    bad.to_csv(csv, index=False)
+    result = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(tmp_path / "o")])
+    assert result.exit_code == 2
+    assert "error:" in result.output and "line 2" in result.output and "outside 1..9" in result.output
+    assert not (tmp_path / "o" / "report.json").exists()
+
+
+def test_cli_help_mentions_the_contract():
+    result = CliRunner().invoke(app, ["analyze", "--help"])
+    assert result.exit_code == 0
+    assert "--out" in result.output and "--exclude-invalid" in result.output
+    assert "Friedman" in result.output and "Greenhouse" in result.output
+
+
+def test_localization_panels_follow_the_grid(planted_result):
+    from vibrofocus.analysis import plot_localization
+
+    result = planted_result
+    fig = plot_localization(result.study1.positions)
+    titles = [ax.get_title() for ax in fig.axes if ax.get_visible() and ax.get_title()]
+    assert titles == [f"target {i}" for i in range(1, 10)]  # row by row from the wrist side
+    # each panel: 3 method means and 3 ellipses
+    first = next(ax for ax in fig.axes if ax.get_title() == "target 1")
+    assert len(first.patches) == 3
+    centre = np.array(first.patches[0].center)
+    pos = result.study1.positions.set_index(["location", "method"])
+    assert_allclose(centre, pos.loc[(1, "funneling"), ["mean_x_mm", "mean_y_mm"]].astype(float))
