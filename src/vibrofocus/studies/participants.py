@@ -169,10 +169,18 @@ class SimulatedParticipant:
         self._n_grid = len(self.grid_xy)
         freqs = np.fft.rfftfreq(m.n_fft, 1.0 / forearm.fs)
         self._bins = np.flatnonzero((freqs >= m.band_hz[0]) & (freqs <= m.band_hz[1]))
-        # The transfer to the grid and the locations, once: each stimulus is then one product.
-        points = np.concatenate([self.grid_xy, self.locations_xy])
-        self._H = forearm.transfer(points, freqs[self._bins])  # (n_bins, n_points, n_act)
+        self._freqs = freqs[self._bins]
+        self._H_grid: np.ndarray | None = None
         self._cache: dict[str, Percept] = {}
+
+    @property
+    def _H(self) -> np.ndarray:
+        # The transfer to the grid and the locations, computed once on first use (the
+        # costly part): each stimulus is then one matrix product.
+        if self._H_grid is None:
+            points = np.concatenate([self.grid_xy, self.locations_xy])
+            self._H_grid = self.forearm.transfer(points, self._freqs)  # (n_bins, n_points, n_act)
+        return self._H_grid
 
     def describe(self) -> dict[str, Any]:
         """The participant's traits and the model parameters (JSON-serialisable)."""
@@ -196,8 +204,9 @@ class SimulatedParticipant:
             V.
         """
         d = np.asarray(drives, dtype=float)
-        if d.ndim != 2 or d.shape[0] != self._H.shape[2]:
-            raise StudyError(f"drives must have shape ({self._H.shape[2]}, n_samples), got {d.shape}")
+        n_act = self.forearm.layout.n_actuators
+        if d.ndim != 2 or d.shape[0] != n_act:
+            raise StudyError(f"drives must have shape ({n_act}, n_samples), got {d.shape}")
         if d.shape[1] > self.model.n_fft:
             raise StudyError(f"drives of {d.shape[1]} samples are longer than the model's n_fft={self.model.n_fft}")
         spec = np.fft.rfft(d, self.model.n_fft, axis=1)[:, self._bins]  # (n_act, n_bins)

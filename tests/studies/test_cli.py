@@ -1,0 +1,136 @@
+"""The command line: a SIGKILL in the middle of a study loses nothing; export; the
+terminal runner."""
+
+import csv
+import os
+import signal
+import sqlite3
+import subprocess
+import sys
+import time
+
+import pytest
+from typer.testing import CliRunner
+
+from vibrofocus.cli.main import app
+from vibrofocus.studies import StudyStore
+
+pytestmark = pytest.mark.slow
+
+
+def _answers(db):
+    # A separate read-only connection, as another program would read the file.
+    con = sqlite3.connect(f"file:{db}?mode=ro", uri=True, timeout=30)
+    try:
+        return con.execute(
+            "SELECT answer_id, session_id, trial_index, response, rt_s, drive_sha256, calibration_id, recorded_at "
+            "FROM answers ORDER BY session_id, trial_index"
+        ).fetchall()
+    except sqlite3.OperationalError:  # the schema is not there yet
+        return []
+    finally:
+        con.close()
+
+
+def _simulate(db, *extra):
+    return [sys.executable, "-m", "vibrofocus", "simulate-study", "--participants", "1", "--seed", "7",
+            "--db", str(db), "--quiet", *extra]
+
+
+def test_sigkill_mid_study_loses_and_duplicates_nothing(tmp_path):
+    db = tmp_path / "study.db"
+    proc = subprocess.Popen(_simulate(db, "--pace", "0.05"), stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and proc.poll() is None:
+            if db.exists() and len(_answers(db)) >= 25:
+                break
+            time.sleep(0.05)
+        assert proc.poll() is None, f"simulate-study ended before the kill: {proc.stderr.read().decode()[-2000:]}"
+        os.kill(proc.pid, signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        proc.stderr.close()
+    assert proc.returncode == -signal.SIGKILL
+    before = _answers(db)
+    assert 25 <= len(before) < 172, "the kill must land in the middle of the study"
+
+    rerun = subprocess.run(_simulate(db), capture_output=True, text=True, timeout=400)
+    assert rerun.returncode == 0, rerun.stderr[-2000:]
+    after = _answers(db)
+    assert after[: len(before)] == before  # every committed answer, unchanged
+    assert len(after) == 172 == len({(a[1], a[2]) for a in after}) == len({a[0] for a in after})
+
+    out = tmp_path / "trials.csv"
+    result = CliRunner().invoke(app, ["study", "export", "--db", str(db), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 172
+    assert len({(r["study"], r["phase"], r["trial"]) for r in rows}) == 172
+
+    # The resumed run answered as an uninterrupted one would: recompute every answer
+    # from the stored calibration, the participant seed and the trial.
+    from vibrofocus.calibration import load_calibration
+    from vibrofocus.rigs import make_rig
+    from vibrofocus.studies.engine import calibration_renderer, drive_sha256
+    from vibrofocus.studies.participants import SimulatedParticipant
+
+    with StudyStore(db) as store:
+        info = store.sessions("sim-001")[0]
+        rig = make_rig("simulated", seed=info.config["participant_seed"])
+        cal = load_calibration(store.verify_calibration(info.calibration_id))
+        renderer = calibration_renderer(cal)
+        model = SimulatedParticipant(rig, info.config["participant_seed"])
+        cache = {}
+        for session in store.sessions("sim-001"):
+            plan = store.planned_trials(session.session_id)
+            for trial, answer in zip(plan, store.answers(session.session_id)):
+                key = (trial.method, trial.target)
+                if key not in cache:
+                    cache[key] = renderer(*key)
+                expected = model.answer(cache[key], session.study, trial.trial_index, session.design)
+                assert answer.response == expected.locations
+                assert answer.rt_s == pytest.approx(expected.rt_s, rel=1e-12)
+                assert answer.drive_sha256 == drive_sha256(cache[key])
+
+
+def test_export_refuses_a_missing_database(tmp_path):
+    result = CliRunner().invoke(app, ["study", "export", "--db", str(tmp_path / "none.db"), "--out", str(tmp_path / "t.csv")])
+    assert result.exit_code == 2
+    assert "no study database" in " ".join(result.output.split())
+
+
+def test_terminal_runner_takes_keypad_answers_pause_and_abort(tmp_path, calibration_file):
+    db = tmp_path / "real.db"
+    args = ["study", "run", "--participant", "p-real", "--study", "2", "--db", str(db),
+            "--calibration", str(calibration_file), "--seed", "3", "--no-beep"]
+    # Trial 1: "45"; trial 2: a bad answer then "9"; pause and resume; trial 3: "1 2 3"; abort.
+    result = CliRunner().invoke(app, args, input="45\n0\n9\np\n\n1 2 3\nq\n")
+    assert result.exit_code == 0, result.output
+    assert "outside the study's locations" in " ".join(result.output.split())
+    with StudyStore(db) as store:
+        (session,) = store.sessions("p-real")
+        assert session.status == "aborted"
+        assert [a.response for a in store.answers(session.session_id)] == [(4, 5), (9,), (1, 2, 3)]
+        assert all(a.drive_sha256 for a in store.answers(session.session_id))
+    # Running again resumes the same session at trial 4; end of input aborts again.
+    result = CliRunner().invoke(app, args, input="5\n")
+    assert result.exit_code == 0, result.output
+    assert "resuming session 1: 3 of 86" in " ".join(result.output.split())
+    with StudyStore(db) as store:
+        assert [a.trial_index for a in store.answers(1)] == [0, 1, 2, 3]
+
+
+def test_terminal_runner_refuses_a_calibration_of_someone_else(tmp_path, calibration_file):
+    result = CliRunner().invoke(app, [
+        "study", "run", "--participant", "p-other", "--study", "1", "--db", str(tmp_path / "x.db"),
+        "--calibration", str(calibration_file), "--no-beep",
+    ])
+    assert result.exit_code == 2
+    assert "belongs to participant 'p-real'" in " ".join(result.output.split())
+
+

@@ -1,0 +1,130 @@
+"""StudyEngine: every presented trial logged, every answer committed with its drive hash,
+pause / abort / resume without loss or duplicates."""
+
+import numpy as np
+import pytest
+
+from vibrofocus.errors import StudyError
+from vibrofocus.rendering import render
+from vibrofocus.rigs import make_rig
+from vibrofocus.studies import StudyStore
+from vibrofocus.studies.engine import ABORT, PAUSE, Response, StudyEngine, calibration_renderer, drive_sha256
+
+N = 4096  # the default window (a shorter one fails the causality check)
+
+
+@pytest.fixture
+def rig():
+    return make_rig("simulated", seed=3)
+
+
+@pytest.fixture
+def renderer(rig):
+    # Rendered from the forearm's true transfer: real drives without a calibration run.
+    H = rig.transfer(rig.layout.points_xy, np.fft.rfftfreq(N, 1 / rig.fs))
+
+    def _render(method, target):
+        return render(method, H, rig.fs, rig.layout, target).drives
+
+    return _render
+
+
+@pytest.fixture
+def store(tmp_path):
+    with StudyStore(tmp_path / "s.db") as s:
+        s.add_participant("p1")
+        yield s
+
+
+class Scripted:
+    """A participant answering from a script: location numbers, 'pause' or 'abort'."""
+
+    def __init__(self, script, resume=True):
+        self.script = list(script)
+        self.resume = resume
+        self.seen = []
+
+    def respond(self, presentation):
+        self.seen.append(presentation.trial.trial_index)
+        item = self.script.pop(0)
+        return item if isinstance(item, str) else Response(item, 0.5 + 0.01 * len(self.seen))
+
+    def wait_resume(self):
+        return self.resume
+
+
+def test_run_commits_each_answer_with_its_drive_hash_and_logs_cue_then_stimulus(store, rig, renderer):
+    sid = store.create_session("p1", 1, seed=2, config={"repetitions": 1, "n_training": 1})
+    engine = StudyEngine(store, sid, rig, renderer=renderer)
+    summary = engine.run(Scripted([5] * 28))
+    assert (summary.status, summary.n_answered, summary.n_trials, summary.n_run) == ("completed", 28, 28, 28)
+    plan = store.planned_trials(sid)
+    answers = store.answers(sid)
+    for trial, ans in zip(plan, answers):
+        assert ans.drive_sha256 == drive_sha256(renderer(trial.method, trial.target))
+    assert rig.n_played == 28
+    kinds = [e.kind for e in store.events(sid) if e.kind in ("cue", "stimulus_onset", "answer")]
+    assert kinds == ["cue", "stimulus_onset", "answer"] * 28
+    onsets = store.events(sid, kind="stimulus_onset")
+    assert [e.payload["trial_index"] for e in onsets] == list(range(28))
+
+
+def test_max_trials_then_resume_continues_at_first_unanswered(store, rig, renderer):
+    sid = store.create_session("p1", 2, seed=4, config={"repetitions": 1, "n_training": 2})
+    first = StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([[5, 4]] * 10), max_trials=10)
+    assert (first.status, first.n_answered) == ("running", 10)
+    before = store.answers(sid)
+    # A new engine (as after a crash) starts where the store says.
+    participant = Scripted([[1, 2]] * 19)
+    second = StudyEngine(store, sid, rig, renderer=renderer).run(participant)
+    assert participant.seen[0] == 10
+    assert second.status == "completed" and second.n_answered == 29
+    after = store.answers(sid)
+    assert after[:10] == before
+    assert [a.trial_index for a in after] == list(range(29))
+    assert {a.response for a in after[10:]} == {(1, 2)}
+
+
+def test_pause_presents_the_trial_again_and_abort_keeps_answers(store, rig, renderer):
+    sid = store.create_session("p1", 1, seed=6, config={"repetitions": 1, "n_training": 0})
+    participant = Scripted([3, PAUSE, 4, ABORT])
+    summary = StudyEngine(store, sid, rig, renderer=renderer).run(participant)
+    assert participant.seen == [0, 1, 1, 2]
+    assert summary.status == "aborted"
+    assert [a.response for a in store.answers(sid)] == [(3,), (4,)]
+    kinds = [e.kind for e in store.events(sid) if e.kind in ("pause", "resume", "abort")]
+    assert kinds == ["pause", "resume", "abort"]
+    # Resuming an aborted session continues at trial 2.
+    participant = Scripted([7] * 25)
+    assert StudyEngine(store, sid, rig, renderer=renderer).run(participant).status == "completed"
+    assert participant.seen[0] == 2
+
+
+def test_pause_then_no_resume_aborts(store, rig, renderer):
+    sid = store.create_session("p1", 1, seed=6, config={"repetitions": 1, "n_training": 0})
+    summary = StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([PAUSE], resume=False))
+    assert summary.status == "aborted" and summary.n_answered == 0
+
+
+def test_bad_setup_and_bad_responder_are_refused(store, rig, renderer):
+    with pytest.raises(StudyError, match="unknown session 42"):
+        StudyEngine(store, 42, rig, renderer=renderer)
+    sid = store.create_session("p1", 1, seed=1)
+    with pytest.raises(StudyError, match="calibration"):
+        StudyEngine(store, sid, rig)
+    with pytest.raises(StudyError, match="expected a Response"):
+        StudyEngine(store, sid, rig, renderer=renderer).run(Scripted(["maybe"]))
+    with pytest.raises(StudyError, match="outside"):
+        StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([11]))
+    assert store.answers(sid) == []
+
+
+def test_calibration_renderer_uses_the_calibration(calibration_file):
+    from vibrofocus.calibration import load_calibration
+
+    cal = load_calibration(calibration_file)
+    drives = calibration_renderer(cal, n_samples=N)("inverse", 5)
+    H = cal.transfer_for(N)
+    expected = render("inverse", H, cal.fs, cal.layout, 5).drives
+    np.testing.assert_allclose(drives, expected, rtol=1e-12, atol=0)
+    assert drives.shape == (cal.layout.n_actuators, N)
