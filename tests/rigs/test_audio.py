@@ -125,6 +125,18 @@ def test_drive_reaches_output_scaled_by_gain_and_full_scale(rig):
     assert not block[:, 1:4].any()
 
 
+def test_resampling_overshoot_never_exceeds_the_limit(rig, caplog):
+    # Full-scale steps at the limit: the 10 kHz -> 48 kHz interpolation overshoots
+    # between the original samples (Gibbs); the device must still never see more.
+    drive = np.zeros((4, 400))
+    drive[0, 100:110] = 10.0
+    drive[0, 110:120] = -10.0
+    block = rig._to_device(rig.check(drive), n_tail=0)
+    ceiling = rig.limits.peak_v / (GAIN * VFS_OUT)
+    assert np.abs(block).max() <= ceiling * (1 + 1e-6)
+    assert "clipped" in caplog.text
+
+
 def test_missing_loopback_signal_is_a_clear_error(jack_server):
     # Output 5 carries the copy, but input 6 is wired to the unused output 6.
     with make_rig("audio", config=jack_config(loopback_input=6)) as r:
