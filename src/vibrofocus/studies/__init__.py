@@ -29,9 +29,34 @@ Storage (:mod:`.storage`)
     receipt; the first answer sets status ``running`` and the last ``completed``.
 Export (:mod:`.export`)
     :data:`TRIALS_COLUMNS`, :func:`write_trials_csv`, :func:`read_trials_csv`.
+Running trials (:mod:`.engine`)
+    ``StudyEngine(store, session_id, rig, calibration=None, *, renderer=None, cue=None,
+    n_samples=4096, limit_v=10.0)`` with ``.stimulus(method, target) -> Stimulus``
+    (cached drives + sha256), ``.present(trial) -> Presentation`` (logs ``cue``, beeps,
+    logs ``stimulus_onset``, ``rig.play``), ``.submit(presentation, Response(locations, rt_s),
+    *, answer_id=None) -> AnswerReceipt`` and ``.run(responder, *, pace_s=0, max_trials=None,
+    progress=None) -> RunSummary``. A responder has ``respond(presentation) -> Response |
+    PAUSE | ABORT`` and ``wait_resume() -> bool``. :func:`drive_sha256` (shape, then float64
+    bytes), :func:`calibration_renderer`, :func:`terminal_beep`.
+Simulated participants (:mod:`.participants`, :mod:`.simulate`)
+    :class:`SimulatedParticipant` (a perceptual MODEL, not data), :class:`PerceptualModel`,
+    :func:`simulate_studies`, :func:`participant_seeds`, :func:`summarize_simulation`.
 """
 
+from .engine import (
+    ABORT,
+    PAUSE,
+    Presentation,
+    Response,
+    RunSummary,
+    Stimulus,
+    StudyEngine,
+    calibration_renderer,
+    drive_sha256,
+    terminal_beep,
+)
 from .export import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
+from .participants import MODEL_NOTICE, Percept, PerceptualModel, SimulatedParticipant
 from .protocol import PHASES, STUDIES, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .storage import (
     APPLICATION_ID,
@@ -45,6 +70,8 @@ from .storage import (
     StudyStore,
     file_sha256,
 )
+from .simulate import participant_seeds, simulate_studies, summarize_simulation
+from .terminal import TerminalResponder
 
 __all__ = [
     "STUDIES",
@@ -67,4 +94,22 @@ __all__ = [
     "TRIALS_COLUMNS",
     "write_trials_csv",
     "read_trials_csv",
+    "StudyEngine",
+    "Stimulus",
+    "Presentation",
+    "Response",
+    "RunSummary",
+    "PAUSE",
+    "ABORT",
+    "drive_sha256",
+    "calibration_renderer",
+    "terminal_beep",
+    "TerminalResponder",
+    "SimulatedParticipant",
+    "PerceptualModel",
+    "Percept",
+    "MODEL_NOTICE",
+    "simulate_studies",
+    "participant_seeds",
+    "summarize_simulation",
 ]
