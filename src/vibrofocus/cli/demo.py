@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import typer
@@ -15,6 +16,17 @@ from .main import app
 
 console = Console()
 err_console = Console(stderr=True)
+
+
+def _json_ready(obj):
+    """Strict JSON: NaN and infinities (a silent point, a perfect contrast) become null."""
+    if isinstance(obj, dict):
+        return {k: _json_ready(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_ready(v) for v in obj]
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    return obj
 
 
 def _fmt(value: float, digits: int = 2) -> str:
@@ -70,7 +82,7 @@ def demo_command(
                 "summary": summary,
                 "figures": [str(p) for p in paths],
             }
-            typer.echo(json.dumps(payload, allow_nan=True, default=float))
+            typer.echo(json.dumps(_json_ready(payload), allow_nan=False, default=float))
             return
         p = rig.participant
         console.print(

@@ -151,11 +151,11 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
         ax.set_ylabel(label)
         ax.axhline(0, color="k", lw=0.5)
         ax.grid(axis="y", alpha=0.3)
-    axes[0].legend(ncol=len(methods), fontsize=8, loc="lower right")
+    axes[0].legend(ncol=len(methods), fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
     axes[-1].set_xticks(range(len(locations)), [str(loc) for loc in locations])
     axes[-1].set_xlabel("location")
     fig.suptitle("Focus metrics measured on the simulated forearm")
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
     fig.savefig(path, dpi=120)
     plt.close(fig)
     return path

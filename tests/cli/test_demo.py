@@ -1,0 +1,28 @@
+"""``vibrofocus demo --json`` prints one JSON object with the results table."""
+
+import json
+
+from typer.testing import CliRunner
+
+from vibrofocus.cli.main import app
+
+
+def test_demo_json_has_every_location_and_method():
+    result = CliRunner().invoke(app, ["demo", "--json", "--no-figures", "--seed", "2"])
+    assert result.exit_code == 0, result.output
+    payload = json.loads(result.stdout)
+    rows = payload["results"]
+    assert len(rows) == 9 * 4
+    assert {(r["location"], r["method"]) for r in rows} == {
+        (loc, m) for loc in range(1, 10) for m in ("funneling", "inverse", "combination", "time_reversal")
+    }
+    for row in rows:
+        for key in ("fidelity", "contrast_db", "peak_drive_v", "target_peak_m"):
+            assert isinstance(row[key], float)
+    assert set(payload["summary"]) == {"funneling", "inverse", "combination", "time_reversal"}
+
+
+def test_demo_refuses_an_unknown_field_location(tmp_path):
+    result = CliRunner().invoke(app, ["demo", "--field-location", "10", "--out", str(tmp_path)])
+    assert result.exit_code == 2
+    assert "location 10" in result.output
