@@ -234,3 +234,35 @@ def test_export_writes_only_answered_trials_in_order(store, session, tmp_path):
     assert [f[2] for f in fields] == ["training"] * 5 + ["main"] * 2
     assert [f[4] for f in fields] == [t.method for t in plan[:7]]
     assert [int(f[5]) for f in fields] == [t.target for t in plan[:7]]
+
+
+def test_concurrent_retries_of_one_answer_store_it_once(store, session):
+    # Two threads (a double-clicked submit reaching two request handlers) race on one answer.
+    import threading
+
+    receipts, errors = [], []
+
+    def submit():
+        try:
+            receipts.append(store.record_answer(session, 0, 2, 0.8, answer_id="double-click"))
+        except StudyError as exc:  # pragma: no cover - would make the test fail below
+            errors.append(exc)
+
+    threads = [threading.Thread(target=submit) for _ in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert errors == []
+    assert len(set(receipts)) == 1 and len(receipts) == 8
+    assert len(store.answers(session)) == 1
+
+
+def test_two_processes_share_the_database(store, session):
+    # A second StudyStore on the same file (the web app beside the CLI) sees every commit.
+    with StudyStore(store.path) as other:
+        store.record_answer(session, 0, 1, 1.0, answer_id="from-a")
+        other.record_answer(session, 1, 2, 1.0, answer_id="from-b")
+        with pytest.raises(StudyError, match="already answered"):
+            other.record_answer(session, 0, 3, 1.0, answer_id="late")
+    assert [a.answer_id for a in store.answers(session)] == ["from-a", "from-b"]
