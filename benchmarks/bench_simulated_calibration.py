@@ -35,7 +35,9 @@ TAIL_S = 0.3
 AMPLITUDE_V = 5.0
 
 
-def simulate_flow(rig: SimulatedForearm, points: np.ndarray, sweep: np.ndarray, repeats: int) -> tuple[float, float, int]:
+def simulate_flow(
+    rig: SimulatedForearm, points: np.ndarray, sweep: np.ndarray, repeats: int
+) -> tuple[float, float, int]:
     """Run the single-spot flow; return (wall seconds, real-time seconds, recordings)."""
     n_act = rig.layout.n_actuators
     n_fft = sweep.size + int(round(TAIL_S * FS))

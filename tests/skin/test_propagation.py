@@ -43,7 +43,8 @@ def test_disc_source_centre_matches_radial_integral(f):
     k = _k(f)[0]
 
     def part(fun):
-        return integrate.quad(lambda r: fun(r * 0.25j * special.hankel1(0, k * r)), 0, a, limit=400, epsabs=0, epsrel=1e-11)[0]
+        integrand = lambda r: fun(r * 0.25j * special.hankel1(0, k * r))  # noqa: E731
+        return integrate.quad(integrand, 0, a, limit=400, epsabs=0, epsrel=1e-11)[0]
 
     ref = (2 / a**2) * (part(np.real) + 1j * part(np.imag))
     got = surface_green(np.array([k]), np.array([[0.0]]), np.array([a]))[0, 0, 0]

@@ -141,7 +141,8 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     locations = sorted({r["location"] for r in rows})
     width = 0.8 / max(len(methods), 1)
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
-    keys = (("fidelity", "fidelity", 1.0), ("contrast_db", "contrast (dB)", 1.0), ("target_peak_m", "target peak (µm)", 1e6))
+    keys = (("fidelity", "fidelity", 1.0), ("contrast_db", "contrast (dB)", 1.0),
+            ("target_peak_m", "target peak (µm)", 1e6))
     for ax, (key, label, factor) in zip(axes, keys):
         for j, method in enumerate(methods):
             vals = [next((r[key] for r in rows if r["location"] == loc and r["method"] == method), np.nan)

@@ -140,8 +140,9 @@ class SimulatedForearm(Rig):
     Attributes
     ----------
     participant : ForearmParameters
-        This participant's parameters.
+        This participant's parameters (read-only).
     geometry : ForearmGeometry
+        Surface geometry (read-only).
     last_drive : ndarray or None
         The last drive played (after the safety layer's fades), shape
         (n_actuators, n_samples), V; None until something plays.
@@ -183,10 +184,11 @@ class SimulatedForearm(Rig):
             raise ValidationError(f"participant must be a ForearmParameters, got {type(participant).__name__}")
         if participant.n_actuators != self.layout.n_actuators:
             raise ValidationError(
-                f"participant describes {participant.n_actuators} actuators but the layout has {self.layout.n_actuators}"
+                f"participant describes {participant.n_actuators} actuators but the layout has "
+                f"{self.layout.n_actuators}"
             )
-        self.participant = participant
-        self.geometry = ForearmGeometry.from_parameters(participant, kind=geometry, n_images=n_images)
+        self._participant = participant
+        self._geometry = ForearmGeometry.from_parameters(participant, kind=geometry, n_images=n_images)
         self.noise_m = check_positive(noise_m, "noise_m", allow_zero=True)
         self.dropout_rate = check_positive(dropout_rate, "dropout_rate", allow_zero=True)
         lo, hi = (check_positive(v, "dropout_duration_s") for v in dropout_duration_s)
@@ -207,6 +209,16 @@ class SimulatedForearm(Rig):
         self.last_dropout_mask: np.ndarray | None = None
 
     # ------------------------------------------------------------------ the model
+    @property
+    def participant(self) -> ForearmParameters:
+        """This participant's parameters (read-only: cached responses depend on them)."""
+        return self._participant
+
+    @property
+    def geometry(self) -> ForearmGeometry:
+        """The forearm's surface geometry (read-only)."""
+        return self._geometry
+
     def transfer(self, points_xy: np.ndarray, freqs: np.ndarray) -> np.ndarray:
         """The true transfer from every actuator's voltage to displacement at points.
 
@@ -362,7 +374,8 @@ class SimulatedForearm(Rig):
         active = np.flatnonzero(np.any(drive != 0, axis=1))
         out = np.zeros((len(points), n_out))
         if active.size:
-            conv = sp_signal.fftconvolve(ir[:, active], drive[None, active, :], axes=2)  # (n_points, n_active, n + n_ir - 1)
+            # shape (n_points, n_active, n + n_ir - 1)
+            conv = sp_signal.fftconvolve(ir[:, active], drive[None, active, :], axes=2)
             rec = conv.sum(axis=1)
             m = min(n_out, rec.shape[1])
             out[:, :m] = rec[:, :m]

@@ -133,7 +133,8 @@ def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
         kk = np.broadcast_to(k, out.shape)[inside]
         dd = np.broadcast_to(d[None], out.shape)[inside]
         aa = np.broadcast_to(a[None, None, :], out.shape)[inside]
-        out[inside] = 0.25j * (2 / (kk * aa**2)) * (2j / (np.pi * kk) + aa * special.jv(0, kk * dd) * special.hankel1(1, kk * aa))
+        bracket = 2j / (np.pi * kk) + aa * special.jv(0, kk * dd) * special.hankel1(1, kk * aa)
+        out[inside] = 0.25j * (2 / (kk * aa**2)) * bracket
     return np.conj(out)
 
 
