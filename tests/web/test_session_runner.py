@@ -1,0 +1,118 @@
+"""The trial loop on its own, with a real StudyStore, and the serve command's output."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import time
+
+import httpx
+import numpy as np
+import pytest
+
+from vibrofocus.studies import StudyStore
+from vibrofocus.web.session_runner import Pace, SessionRunner, drive_sha256
+
+from .conftest import free_port
+
+QUICK = Pace(ready_s=0.02, cue_to_stimulus_s=0.02, after_answer_s=0.0)
+
+
+class CountingRig:
+    """A stand-in rig that records what it was asked to play (the real rigs are tested elsewhere)."""
+
+    def __init__(self):
+        self.played = []
+        self.stops = 0
+
+    def play(self, drive):
+        self.played.append(np.array(drive))
+
+    def stop(self):
+        self.stops += 1
+
+
+def wait_for(predicate, timeout=5.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return
+        time.sleep(0.01)
+    raise AssertionError("condition not reached")
+
+
+@pytest.fixture
+def store(tmp_path):
+    with StudyStore(tmp_path / "s.sqlite") as st:
+        st.add_participant("P01")
+        yield st
+
+
+def test_runner_plays_answers_and_completes(store):
+    sid = store.create_session("P01", 1, seed=3, config={"n_training": 1, "repetitions": 1, "methods": ["funneling"], "locations": [2, 5]})
+    rig = CountingRig()
+    drive = lambda trial: np.full((4, 8), float(trial.target))  # noqa: E731
+    runner = SessionRunner(store, sid, stimulus=drive, rig=rig, pace=QUICK, require_page=False)
+    store.set_status(sid, "running")
+    runner.start()
+    for trial in store.planned_trials(sid):
+        wait_for(lambda: runner.snapshot()["state"] == "respond" and runner.snapshot()["trial_index"] == trial.trial_index)
+        store.record_answer(sid, trial.trial_index, trial.target, 0.3, answer_id=f"id-{trial.trial_index}",
+                            drive_sha256=runner.drive_sha_for(trial.trial_index))
+        runner.notify_answer(trial.trial_index)
+    wait_for(lambda: runner.snapshot()["state"] == "done")
+    assert store.session(sid).status == "completed"
+    assert [int(d[0, 0]) for d in rig.played] == [t.target for t in store.planned_trials(sid)]
+    assert [a.drive_sha256 for a in store.answers(sid)] == [drive_sha256(d) for d in rig.played]
+    assert rig.stops >= 1, "the rig is left silent at the end"
+
+
+def test_runner_holds_the_cue_until_a_page_is_there_and_while_paused(store):
+    sid = store.create_session("P01", 2, seed=1, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [1]})
+    runner = SessionRunner(store, sid, pace=QUICK)
+    runner.start()
+    time.sleep(0.3)
+    snap = runner.snapshot()
+    assert snap["state"] == "ready" and snap["waiting_for_page"]
+    assert store.events(sid, kind="cue") == [], "no cue without a participant page"
+    runner.pause()
+    runner.page_attach()
+    wait_for(lambda: runner.snapshot()["state"] == "paused")
+    time.sleep(0.2)
+    assert store.events(sid, kind="cue") == [], "no cue while paused"
+    runner.resume()
+    wait_for(lambda: runner.snapshot()["state"] == "respond")
+    assert [e.payload["trial_index"] for e in store.events(sid, kind="cue")] == [0]
+    runner.stop()
+    assert not runner.running
+    assert runner.snapshot()["state"] == "stopped"
+
+
+def test_serve_prints_token_and_warns_off_localhost(tmp_path):
+    port = free_port()
+    env = dict(os.environ, VIBROFOCUS_TOKEN="t" * 24)
+    # 127.0.0.2 is loopback on Linux but not one of the addresses serve treats as local,
+    # so it exercises the warning without exposing anything.
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "vibrofocus", "serve", "--db", str(tmp_path / "s.sqlite"), "--host", "127.0.0.2",
+         "--port", str(port), "--no-browser"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )
+    try:
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and proc.poll() is None:
+            try:
+                if httpx.get(f"http://127.0.0.2:{port}/api/rigs", headers={"X-Vibrofocus-Token": "t" * 24}, timeout=1).status_code == 200:
+                    break
+            except httpx.HTTPError:
+                time.sleep(0.1)
+    finally:
+        proc.terminate()
+        out, err = proc.communicate(timeout=10)
+    assert "WARNING" in err and "127.0.0.2" in err
+    assert "experimenter token: " + "t" * 24 in out
+    assert f"http://127.0.0.2:{port}/?token=" in out
+    bad = subprocess.run([sys.executable, "-m", "vibrofocus", "serve", "--rig", "laser", "--no-browser",
+                          "--db", str(tmp_path / "s.sqlite")], capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 2 and "rig" in bad.stderr
