@@ -228,3 +228,17 @@ def test_transfer_shape_dc_and_bad_input():
         SimulatedForearm(participant=ForearmParameters.nominal(2))
     with pytest.raises(ValidationError, match="noise_m"):
         SimulatedForearm(noise_m=-1.0)
+
+
+def test_waves_come_back_around_the_arm_at_low_frequencies_only():
+    params = ForearmParameters.nominal(4)
+    cyl = _quiet(participant=params)
+    flat = _quiet(participant=params, geometry="plane")
+    point = cyl.layout.actuators_xy[0][None] + [[0.03, 0.0]]
+    f = np.array([30.0, 500.0])
+    h_cyl = cyl.transfer(point, f)[:, 0, 0]
+    h_flat = flat.transfer(point, f)[:, 0, 0]
+    # At 500 Hz the way round (> 0.15 m) costs exp(-120 Np/m * 0.15 m) ~ 1e-8: no difference.
+    np.testing.assert_allclose(h_cyl[1], h_flat[1], rtol=1e-6)
+    # At 30 Hz (7 Np/m) the wave that went round the arm adds a sizeable contribution.
+    assert abs(h_cyl[0] - h_flat[0]) > 0.1 * abs(h_flat[0])
