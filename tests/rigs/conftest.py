@@ -20,7 +20,7 @@ import pytest
 
 #: Rate and period of the test server; the rig runs at 10 kHz and resamples (24/5).
 JACK_RATE = 48_000
-JACK_PERIOD = 1024
+JACK_PERIOD = 4096
 #: Loopback ports: four actuators, the latency loopback, a spare.
 JACK_LOOPBACK_PORTS = 6
 

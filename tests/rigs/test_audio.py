@@ -22,7 +22,7 @@ pytestmark = pytest.mark.jack
 
 # The test server of conftest.py (kept in step with JACK_RATE / JACK_PERIOD there).
 JACK_RATE = 48_000
-JACK_PERIOD = 1024
+JACK_PERIOD = 4096
 
 FS = 10_000.0
 GAIN = 10.0
@@ -39,7 +39,7 @@ def jack_config(**channels) -> dict:
     chans = {k: v for k, v in chans.items() if v is not None}
     return {
         "kind": "audio", "fs": FS, "amplifier_gain": GAIN, "volts_full_scale": VFS_OUT,
-        "input_volts_full_scale": VFS_IN,
+        "input_volts_full_scale": VFS_IN, "max_latency_s": 0.2, "xrun_retries": 5,
         "device": {"name": "loopback", "hostapi": "JACK", "samplerate": float(JACK_RATE)},
         "channels": chans,
         "vibrometer": {"decoder": "displacement", "sensitivity": SENS, "highpass_hz": None},
@@ -78,7 +78,8 @@ class _IdealLoopRig(Rig):
 def test_calibration_through_loopback_is_flat_gain_chain_with_zero_phase(rig):
     from vibrofocus.calibration import calibrate
 
-    settings = dict(participant_id="jack-loopback", points=[0], sweep_s=1.0, repeats=2,
+    # Real time on the dummy driver: one point, actuators 1 and 2 (2 goes elsewhere).
+    settings = dict(participant_id="jack-loopback", points=[0], actuators=[0, 1], sweep_s=1.0, repeats=2,
                     prompt=lambda label, xy: None)
     cal = calibrate(rig, **settings)
     assert rig.last_latency_samples == JACK_PERIOD  # JACK's loopback returns one period later
@@ -93,15 +94,16 @@ def test_calibration_through_loopback_is_flat_gain_chain_with_zero_phase(rig):
     flat = cal.freqs[band] >= 100
     np.testing.assert_allclose(np.abs(h[flat, 0]), EXPECTED_H, rtol=0.01)
     np.testing.assert_allclose(np.angle(h[flat, 0]), 0.0, atol=np.deg2rad(1.0))
-    # Actuators 2-4 go to other loopback ports: nothing of them reaches the vibrometer input.
-    assert np.abs(h[:, 1:]).max() < 1e-3 * EXPECTED_H
+    # Actuator 2 goes to another loopback port: nothing of it reaches the vibrometer input.
+    assert h.shape[1] == 2
+    assert np.abs(h[:, 1]).max() < 1e-3 * EXPECTED_H
     np.testing.assert_allclose(cal.coherence[band, 0, 0], 1.0, atol=1e-3)
 
 
 def test_fixed_latency_from_config_aligns_and_zero_latency_does_not(jack_server):
     drive = pulse_drive()
     expected_peak = int(np.argmax(np.abs(drive[0])))
-    lag_at_fs = JACK_PERIOD * FS / JACK_RATE  # 213.3 samples at 10 kHz
+    lag_at_fs = JACK_PERIOD * FS / JACK_RATE  # 853.3 samples at 10 kHz
     with make_rig("audio", config={**jack_config(loopback_output=None, loopback_input=None),
                                    "latency_samples": JACK_PERIOD}) as aligned:
         rec = aligned.play_and_record(drive, tail_s=0.01)

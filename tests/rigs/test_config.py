@@ -61,6 +61,7 @@ def test_json_and_toml_agree(tmp_path):
                                      r"Lower limits.peak_v to at most 5 V"),
         (dict(limits={"peak_v": 5.0, "rms_v": 0}), r"limits.rms_v: Input should be greater than 0"),
         (dict(latency_samples=-3), r"latency_samples: Input should be greater than or equal to 0"),
+        (dict(force_sensors={"channels": ["3"]}), r"force_sensors: audio interfaces are AC-coupled"),
     ],
 )
 def test_bad_audio_settings_are_named(change, message):

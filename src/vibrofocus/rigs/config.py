@@ -283,6 +283,16 @@ class AudioRigConfig(RigConfig):
     max_latency_s: PositiveFloat = 0.25
     xrun_retries: int = Field(2, ge=0, le=10)
 
+    @model_validator(mode="before")
+    @classmethod
+    def _no_force_sensors(cls, data: Any) -> Any:
+        if isinstance(data, dict) and "force_sensors" in data:
+            raise ValueError(
+                "force_sensors: audio interfaces are AC-coupled and cannot read the steady voltage of "
+                "force-sensing resistors; read the straps with an nidaq rig"
+            )
+        return data
+
     @model_validator(mode="after")
     def _check_level(self) -> "AudioRigConfig":
         need = self.output_peak_v
@@ -386,13 +396,13 @@ def _format_errors(exc: pydantic.ValidationError) -> str:
         loc = [str(p) for p in err["loc"]]
         if loc and loc[0] in ("audio", "nidaq"):
             loc = loc[1:]
-        where = ".".join(loc) or "(top level)"
+        where = ".".join(loc)
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown setting (check the spelling)"
         elif err["type"] == "union_tag_invalid":
             where, msg = "kind", f"must be 'audio' or 'nidaq', got {err['ctx']['tag']!r}"
-        parts.append(f"{where}: {msg}")
+        parts.append(f"{where}: {msg}" if loc or err["type"] == "union_tag_invalid" else msg)
     return "; ".join(parts)
 
 
