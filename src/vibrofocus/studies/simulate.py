@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import StudyError
+from ..errors import CalibrationFileError, StudyError
 from .storage import StudyStore
 
 __all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
@@ -45,10 +45,9 @@ def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tu
 
     for rec in reversed(store.calibrations(pid)):
         try:
-            path = store.verify_calibration(rec.calibration_id)
-        except StudyError:
-            continue  # file gone or changed: calibrate again rather than trust it
-        return rec.calibration_id, load_calibration(path)
+            return rec.calibration_id, load_calibration(store.verify_calibration(rec.calibration_id))
+        except (StudyError, CalibrationFileError):
+            continue  # file gone, changed or unreadable: calibrate again rather than trust it
     cal = calibrate(rig, participant_id=pid)
     cal_dir.mkdir(parents=True, exist_ok=True)
     final = cal_dir / f"{pid}.nc"
@@ -128,6 +127,8 @@ def simulate_studies(
                         f"{db} holds participant {pid} from a simulation with seed "
                         f"{info.config.get('simulation_seed')!r}, not {seed}; use that seed or another database"
                     )
+                # The stored seed wins over the derivation: the participant stays who it was.
+                pseed = int(info.config.get("participant_seed", pseed))
             # Built lazily, once per participant and shared by both studies: the rig, the
             # perceptual model (its grid transfer) and the rendered drives per condition.
             shared: dict[str, Any] = {}
