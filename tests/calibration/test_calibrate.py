@@ -19,9 +19,13 @@ def test_noise_free_fir_rig_is_recovered(fir_calibration):
     assert cal.H.shape == (cal.n_fft // 2 + 1, 13, 4) and cal.n_fft == 4096
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
-    # Exact up to the band-limited deconvolution: 1e-3 of each pair's largest gain.
+    # Exact up to the band-limited deconvolution, whose taper below 10 Hz rings longer
+    # than the 4096-sample window: 2e-3 of each pair's largest gain at the band's low
+    # edge, 1e-4 from 100 Hz up.
     scale = np.abs(truth[b]).max(axis=0)
-    assert np.all(np.abs(cal.H[b] - truth[b]) <= 1e-3 * scale)
+    assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * scale)
+    upper = (cal.freqs >= 100) & (cal.freqs <= 1000)
+    assert np.all(np.abs(cal.H[upper] - truth[upper]) <= 2e-4 * scale)
     np.testing.assert_allclose(cal.coherence[b], 1.0, atol=1e-6)
     assert cal.quality.ok and not cal.quality.issues
 
@@ -36,8 +40,9 @@ def test_transfer_for_other_window_lengths_matches_the_analytic_fir(fir_calibrat
         assert H.shape == (n // 2 + 1, 13, 4)
         scale = np.abs(truth[b]).max(axis=0)
         assert np.all(np.abs(H[b] - truth[b]) <= 2e-3 * scale), n
-        # Marked outside the band: tapered to exactly zero an octave beyond the edges.
-        assert np.all(H[(f < 5.0) | (f > 2000.0)] == 0)
+        # Marked outside the band: tapered to exactly zero half an octave beyond the edges.
+        assert np.all(H[(f < 7.0) | (f > 1415.0)] == 0)
+        assert np.all(H[(f > 10.0) & (f < 1000.0)] != 0)
 
 
 def test_transfer_for_refuses_odd_lengths(fir_calibration):
@@ -60,7 +65,7 @@ def test_single_spot_vibrometer_prompts_for_each_point(layout, firs):
     assert steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 13 * 4 * 2
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
-    assert np.all(np.abs(cal.H[b] - truth[b]) <= 1e-3 * np.abs(truth[b]).max(axis=0))
+    assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))
 
 
 def test_single_spot_rig_without_prompt_is_refused_before_playing(layout, firs):
@@ -113,7 +118,7 @@ def test_subset_of_points_and_actuators(layout, firs):
     np.testing.assert_allclose(cal.layout.points_xy, layout.points_xy[[0, 4, 9]])
     truth = rig.transfer(cal.n_fft)[:, [0, 4, 9]][:, :, [1, 2]]
     b = _band(cal.freqs)
-    assert np.all(np.abs(cal.H[b] - truth[b]) <= 1e-3 * np.abs(truth[b]).max(axis=0))
+    assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))
 
 
 @pytest.mark.parametrize(
@@ -153,4 +158,4 @@ def test_other_layouts_work_unchanged(firs):
     assert cal.H.shape[1:] == (5, 3)
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
-    assert np.all(np.abs(cal.H[b] - truth[b]) <= 1e-3 * np.abs(truth[b]).max(axis=0))
+    assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))

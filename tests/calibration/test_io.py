@@ -36,7 +36,7 @@ def test_round_trip_is_identical(fir_calibration, saved):
     assert back.layout.point_labels == cal.layout.point_labels
     q, qb = cal.quality, back.quality
     assert qb.issues == q.issues and qb.thresholds == q.thresholds
-    for name in ("snr_db", "noise_rms_m", "band_gain", "low_coherence_share", "clipped", "repeats_used",
+    for name in ("snr_db", "noise_rms_m", "band_gain", "low_coherence_share", "coherent_to_hz", "clipped", "repeats_used",
                  "dropouts", "polarity"):
         np.testing.assert_array_equal(getattr(qb, name), getattr(q, name), err_msg=name)
 

@@ -102,7 +102,7 @@ class Calibration:
         wrap to the end), shape (n_points, n_actuators, n_fft)."""
         return np.fft.irfft(np.moveaxis(self.H, 0, -1), self.n_fft, axis=-1)
 
-    def transfer_for(self, n: int, *, taper_octaves: float = 1.0) -> np.ndarray:
+    def transfer_for(self, n: int, *, taper_octaves: float = 0.5) -> np.ndarray:
         """The transfer matrix on the design grid ``rfftfreq(n, 1 / fs)``.
 
         The stored ``H`` (on ``rfftfreq(n_fft, 1/fs)``) is taken to the time domain; its
@@ -112,7 +112,8 @@ class Calibration:
         transformed back. Outside the calibrated band, where nothing was measured
         reliably, the values are tapered to zero with a raised cosine over
         ``taper_octaves`` octaves beyond each band edge (the designs band-limit to the
-        calibrated band anyway); beyond the taper they are exactly zero.
+        calibrated band anyway, with the same half-octave taper by default); beyond the
+        taper they are exactly zero.
 
         Parameters
         ----------
@@ -346,10 +347,9 @@ def calibrate(
 
     # Estimation, one actuator at a time (a handful), vectorised over repeats, points
     # and frequencies.
-    sweep_band = (settings.f_start, settings.f_stop)
     H_rep, valid, noise, snr = [], [], [], []
     for a in range(n_a):
-        Hr, ok = estimate_repeats(recordings[a], played, fs, sweep_band, n_fft)
+        Hr, ok = estimate_repeats(recordings[a], played, fs, band, n_fft)
         H_rep.append(Hr)
         valid.append(ok)
         nz, sn = noise_and_snr(recordings[a], ok, settings.n_pre, fs, band)

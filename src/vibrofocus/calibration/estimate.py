@@ -5,9 +5,13 @@ drive ``x``:
 
 1. **Linear deconvolution.** Each recording holds the drive convolved *linearly* with
    the skin's impulse response plus noise, so both are transformed with an FFT length
-   ``N >= len(y)`` (no wrap-around) and ``H_r(f) = Y_r(f) X_inv(f)``, with ``X_inv`` the
-   regularised, band-limited spectral inverse of the drive
-   (:func:`vibrofocus.signals.spectral_inverse`).
+   ``N >= len(y)`` (no wrap-around) and ``H_r(f) = Y_r(f) X_inv(f)`` with
+   ``X_inv = T(f) conj(X) / (|X|^2 + eps (1 - T(f)))``: ``T`` is the band taper (1 in
+   the calibrated band, a raised cosine to 0 over half an octave beyond each edge, which
+   is where the default sweep stops) and ``eps`` the smallest ``|X|^2`` in the band. In
+   the band this is the exact inverse (no bias); in the taper zone, where a sweep that
+   stops at the band edge (the paper's) has almost no energy, the regularisation grows
+   smoothly and keeps the noise gain within a few times its in-band worst case.
 2. **Onto the design grid.** ``H_r`` lives on the fine grid ``rfftfreq(N, 1/fs)``. Its
    impulse response is cut to the design length ``n`` (:func:`resize_impulse_response`:
    the causal part with a half-Hann fade-out, plus a short acausal part) and transformed
@@ -30,7 +34,8 @@ import numpy as np
 import scipy.fft
 
 from .._validation import as_array, check_band, check_positive
-from ..signals import spectral_inverse
+from ..errors import ValidationError
+from ..rendering.taper import band_taper
 
 __all__ = [
     "resize_impulse_response",
@@ -44,8 +49,11 @@ __all__ = [
 ACAUSAL_FRACTION = 1 / 16
 #: Share of the kept causal part over which a truncated response fades out.
 FADE_FRACTION = 1 / 8
-#: Regularisation of the drive's spectral inverse, relative to its largest power.
-REGULARIZATION = 1e-8
+#: Regularisation of the drive's spectral inverse outside the band, relative to the
+#: drive's smallest power in the calibrated band.
+REGULARIZATION = 1.0
+#: Width of the taper of the inverse beyond each band edge, octaves.
+TAPER_OCTAVES = 0.5
 
 
 def resize_impulse_response(h: np.ndarray, n_out: int) -> np.ndarray:
@@ -95,7 +103,7 @@ def estimate_repeats(
     recordings: np.ndarray,
     drive: np.ndarray,
     fs: float,
-    sweep_band: tuple[float, float],
+    band: tuple[float, float],
     n_fft: int,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-recording transfer estimates on the design grid.
@@ -110,8 +118,9 @@ def estimate_repeats(
         ``n_drive <= n_rec``.
     fs : float
         Sample rate, Hz.
-    sweep_band : (float, float)
-        Frequencies the drive covers, Hz; the inverse is tapered outside.
+    band : (float, float)
+        Calibrated band, Hz; the inverse is tapered to zero over half an octave beyond
+        each edge.
     n_fft : int
         Length of the design grid: the estimate is on ``rfftfreq(n_fft, 1/fs)``.
 
@@ -125,15 +134,22 @@ def estimate_repeats(
     y = np.asarray(recordings, dtype=float)
     x = as_array(drive, "drive", ndim=1)
     fs = check_positive(fs, "fs")
-    sweep_band = check_band(sweep_band, fs, "sweep_band")
+    band = check_band(band, fs)
     n_rec = y.shape[-1]
     valid = np.isfinite(y).all(axis=-1)
     y = np.where(np.isfinite(y), y, 0.0)
     # At least the recording length: linear, not circular, deconvolution.
     n_long = scipy.fft.next_fast_len(max(n_rec, x.size, n_fft), real=True)
-    # band_taper divides by f and overflows at 0 Hz (harmlessly: the weight there is 0).
-    with np.errstate(over="ignore", divide="ignore"):
-        x_inv = spectral_inverse(x, fs, n_long, sweep_band, regularization=REGULARIZATION)
+    spectrum = scipy.fft.rfft(x, n_long)
+    power = np.abs(spectrum) ** 2
+    freqs = scipy.fft.rfftfreq(n_long, 1 / fs)
+    in_band = (freqs >= band[0]) & (freqs <= band[1])
+    eps = REGULARIZATION * power[in_band].min()
+    if not eps > 0:
+        raise ValidationError(f"the drive has no energy at some frequency of the band {band[0]:g}-{band[1]:g} Hz")
+    with np.errstate(over="ignore", divide="ignore"):  # band_taper divides by f; 0 Hz is harmless
+        taper = band_taper(freqs, band, TAPER_OCTAVES)
+    x_inv = taper * np.conj(spectrum) / (power + eps * (1.0 - taper))
     h_long = scipy.fft.irfft(scipy.fft.rfft(y, n_long, axis=-1) * x_inv, n_long, axis=-1)
     H = scipy.fft.rfft(resize_impulse_response(h_long, n_fft), axis=-1)
     H[~valid] = 0.0

@@ -15,7 +15,7 @@ Variables
     readers expect); ``coherence`` (same dims, 1; NaN where not assessable);
     ``drive`` (actuator, drive_sample), V; ``recording`` (actuator, repeat, point,
     record_sample), m, float32, NaN marks a dropout; quality figures ``snr_db``,
-    ``noise_rms``, ``band_gain``, ``low_coherence_share``, ``clipped``, ``repeats_used``,
+    ``noise_rms``, ``band_gain``, ``low_coherence_share``, ``coherent_to_hz``, ``clipped``, ``repeats_used``,
     ``dropouts`` (point, actuator) and ``polarity`` (actuator).
 Attributes
     ``file_kind = "vibrofocus calibration"``, ``schema_version``, ``software``,
@@ -51,6 +51,7 @@ _QUALITY_VARS = {
     "noise_rms": ("m", "in-band noise floor from the pre-sweep silence"),
     "band_gain": ("m/V", "RMS of |H| over the calibrated band"),
     "low_coherence_share": ("1", "share of band frequencies with low coherence"),
+    "coherent_to_hz": ("Hz", "frequency up to which the pair is coherent"),
     "clipped": ("1", "1 if any recording of the pair was clipped"),
     "repeats_used": ("1", "recordings kept after excluding dropouts"),
     "dropouts": ("1", "recordings left out because of dropouts"),
@@ -82,7 +83,8 @@ def _to_dataset(cal: Calibration):
                      {"units": "1", "long_name": "relative polarity (+1/-1, 0 not judged)"}),
     }
     figures = {"snr_db": q.snr_db, "noise_rms": q.noise_rms_m, "band_gain": q.band_gain,
-               "low_coherence_share": q.low_coherence_share, "clipped": q.clipped.astype(np.int8),
+               "low_coherence_share": q.low_coherence_share, "coherent_to_hz": q.coherent_to_hz,
+               "clipped": q.clipped.astype(np.int8),
                "repeats_used": q.repeats_used.astype(np.int32), "dropouts": q.dropouts.astype(np.int32)}
     for name, values in figures.items():
         units, long_name = _QUALITY_VARS[name]
@@ -319,6 +321,7 @@ def _from_dataset(ds, path: Path) -> Calibration:
     quality = QualityReport(
         issues=issues, snr_db=ds["snr_db"].values, noise_rms_m=ds["noise_rms"].values,
         band_gain=ds["band_gain"].values, low_coherence_share=ds["low_coherence_share"].values,
+        coherent_to_hz=ds["coherent_to_hz"].values,
         clipped=ds["clipped"].values.astype(bool), repeats_used=ds["repeats_used"].values.astype(int),
         dropouts=ds["dropouts"].values.astype(int), polarity=ds["polarity"].values.astype(int),
         thresholds=thresholds,

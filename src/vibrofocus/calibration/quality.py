@@ -5,8 +5,12 @@ Checks (SPEC §4), each with its criterion (thresholds in :class:`QualityThresho
 low coherence
     Per (point, actuator), the in-band frequencies where the coherence over repeats is
     below ``coherence_min`` (default 0.5: the repeat-to-repeat noise is as large as the
-    response). Reported as frequency ranges when they cover at least
-    ``coherence_share`` of the band. Not assessable with a single repeat.
+    response), when they cover at least ``coherence_share`` of the band. If they lie
+    (80 % or more) in one range reaching the top of the band, the pair is reported as
+    usable up to that range (info: typical far from an actuator, where skin damps high
+    frequencies below the sensor noise; :attr:`QualityReport.coherent_to_hz`);
+    otherwise as a warning with the frequency ranges. Not assessable with a single
+    repeat.
 dead actuator
     The actuator's largest in-band RMS gain over all points is below ``dead_ratio``
     (default 0.1, -20 dB) of the median of that figure over the actuators, or it never
@@ -70,7 +74,7 @@ class QualityIssue:
     Parameters
     ----------
     check : str
-        ``low_coherence``, ``dead_actuator``, ``reversed_actuator``, ``clipping``,
+        ``low_coherence``, ``coherence_limit``, ``dead_actuator``, ``reversed_actuator``, ``clipping``,
         ``drive_at_limit``, ``low_snr``, ``still_point`` or ``dropouts``.
     severity : {"info", "warning", "error"}
     message : str
@@ -110,6 +114,9 @@ class QualityReport:
         RMS of ``|H|`` over the band, m/V.
     low_coherence_share : ndarray, shape (n_points, n_actuators)
         Share of band frequencies with low coherence (NaN: not assessable).
+    coherent_to_hz : ndarray, shape (n_points, n_actuators)
+        Frequency up to which the pair is coherent when its low coherence lies at the
+        top of the band; the band's top otherwise; NaN where not assessable.
     clipped : ndarray of bool, shape (n_points, n_actuators)
     repeats_used : ndarray of int, shape (n_points, n_actuators)
         Recordings kept after excluding dropouts.
@@ -125,11 +132,17 @@ class QualityReport:
     noise_rms_m: np.ndarray
     band_gain: np.ndarray
     low_coherence_share: np.ndarray
+    coherent_to_hz: np.ndarray
     clipped: np.ndarray
     repeats_used: np.ndarray
     dropouts: np.ndarray
     polarity: np.ndarray
     thresholds: QualityThresholds = field(default_factory=QualityThresholds)
+
+    @property
+    def _band_top(self) -> float:
+        finite = self.coherent_to_hz[np.isfinite(self.coherent_to_hz)]
+        return float(finite.max()) if finite.size else np.inf
 
     @property
     def ok(self) -> bool:
@@ -167,8 +180,12 @@ class QualityReport:
                 if self.snr_db[p, a] < t.snr_min_db:
                     tags[p][a].append(f"SNR {self.snr_db[p, a]:.0f} dB")
                 share = self.low_coherence_share[p, a]
+                top = self.coherent_to_hz[p, a]
                 if np.isfinite(share) and share >= t.coherence_share:
-                    tags[p][a].append(f"low coh. {share:.0%}")
+                    if np.isfinite(top) and top < self._band_top:
+                        tags[p][a].append(f"to {top:.0f} Hz")
+                    else:
+                        tags[p][a].append(f"low coh. {share:.0%}")
         out = np.empty((n_p, n_a), dtype=object)
         for p in range(n_p):
             for a in range(n_a):
@@ -183,16 +200,18 @@ class QualityReport:
         verdicts = self.verdicts()
         table = Table(title=title)
         table.add_column("point")
-        table.add_column("x, y (mm)", justify="right")
+        table.add_column("x, y (mm)", justify="right", no_wrap=True)
         for name in layout.actuator_names:
             table.add_column(name)
         for p, (label, xy) in enumerate(zip(layout.point_labels, layout.points_xy)):
             cells = []
             for a in range(layout.n_actuators):
                 v = verdicts[p, a]
-                style = "green" if v == "ok" else ("red" if _is_error(v) else "yellow")
+                style = "green" if v == "ok" else ("red" if _is_error(v) else
+                                                   "cyan" if v.startswith("to ") else "yellow")
                 snr = self.snr_db[p, a]
-                cells.append(f"[{style}]{v}[/] ({snr:.0f} dB)" if v == "ok" else f"[{style}]{v}[/]")
+                cells.append(f"[{style}]{v}[/] ({snr:.0f} dB)" if v == "ok"
+                             else f"[{style}]{v}[/]")
             table.add_row(label, f"{xy[0] * 1e3:+.1f}, {xy[1] * 1e3:+.1f}", *cells)
         return table
 
@@ -409,17 +428,30 @@ def assess_quality(
     low_mask = np.where(np.isfinite(coh), coh < t.coherence_min, False)
     share = np.where(assessable, low_mask.mean(axis=0), np.nan)
     flagged = assessable & (share >= t.coherence_share) & ~dead[None, :]
-    for a in np.flatnonzero(flagged.any(axis=0)):
-        parts = []
-        for p in np.flatnonzero(flagged[:, a]):
-            ranges = _ranges(f_band, low_mask[:, p, a], min_gap=max(3, int(0.02 * f_band.size)))
-            parts.append(f"{labels[p]} ({share[p, a]:.0%}: {_format_ranges(ranges)})")
+    coherent_to = np.where(assessable, band[1], np.nan)
+    wide: dict[int, list[str]] = {}
+    top_limited: dict[int, list[str]] = {}
+    for p, a in np.argwhere(flagged):
+        ranges = _ranges(f_band, low_mask[:, p, a], min_gap=max(3, int(0.02 * f_band.size)))
+        last_lo, last_hi = ranges[-1]
+        in_last = low_mask[:, p, a][f_band >= last_lo].sum()
+        if last_hi >= f_band[-1] and in_last >= 0.8 * low_mask[:, p, a].sum():
+            coherent_to[p, a] = last_lo
+            top_limited.setdefault(a, []).append(f"{labels[p]} (to {last_lo:.0f} Hz)")
+        else:
+            wide.setdefault(a, []).append(f"{labels[p]} ({share[p, a]:.0%}: {_format_ranges(ranges)})")
+    for a, parts in sorted(wide.items()):
         issues.append(QualityIssue(
             "low_coherence", "warning",
-            f"actuator {names[a]}: coherence below {t.coherence_min:g} over at least "
-            f"{t.coherence_share:.0%} of the band at point(s) {'; '.join(parts)}. Expected far from the "
-            "actuator where the skin damps high frequencies below the sensor noise; elsewhere check "
-            "the contact and the vibrometer signal",
+            f"actuator {names[a]}: coherence below {t.coherence_min:g} over at least {t.coherence_share:.0%} "
+            f"of the band at point(s) {'; '.join(parts)}; check the actuator's contact and the vibrometer "
+            "signal there, or add repeats",
+            actuator=int(a)))
+    for a, parts in sorted(top_limited.items()):
+        issues.append(QualityIssue(
+            "coherence_limit", "info",
+            f"actuator {names[a]}: coherent only up to a frequency at point(s) {', '.join(parts)}; above it the "
+            "skin damps the response below the sensor noise (expected far from an actuator)",
             actuator=int(a)))
 
     # Dropouts.
@@ -434,6 +466,6 @@ def assess_quality(
 
     return QualityReport(
         issues=issues, snr_db=np.asarray(snr_db, float), noise_rms_m=np.asarray(noise_rms_m, float),
-        band_gain=band_gain, low_coherence_share=share, clipped=np.asarray(clipped, bool),
+        band_gain=band_gain, low_coherence_share=share, coherent_to_hz=coherent_to, clipped=np.asarray(clipped, bool),
         repeats_used=np.asarray(repeats_used, int), dropouts=missing, polarity=polarity, thresholds=t,
     )

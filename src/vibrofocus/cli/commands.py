@@ -2,6 +2,8 @@
 
 # One import per command module, in the order ``--help`` should list them.
 from . import demo  # noqa: F401
+from . import calibrate  # noqa: F401
+from . import render  # noqa: F401
 from . import serve  # noqa: E402,F401
 from . import analyze  # noqa: F401
 from . import study  # noqa: F401

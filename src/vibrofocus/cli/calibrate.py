@@ -1,0 +1,80 @@
+"""``vibrofocus calibrate``: measure a participant's transfer matrix into one file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._errors import user_errors
+from .main import app
+
+
+@app.command("calibrate", epilog="Example: vibrofocus calibrate --rig simulated --participant P01 --out P01.nc --yes")
+def calibrate_command(
+    participant: str = typer.Option(..., "--participant", "-p", help="Participant id stored in the file."),
+    out: Path = typer.Option(..., "--out", "-o", help="Calibration file to write (.nc, netCDF4/HDF5)."),
+    rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
+    seed: int | None = typer.Option(None, "--seed", min=0, help="Participant seed of the simulated forearm."),
+    method: str = typer.Option("h1", "--method", help="h1 (exponential sweeps, repeats, coherence) | paper "
+                                                      "(one linear sweep, FFT ratio)."),
+    repeats: int | None = typer.Option(None, "--repeats", min=1, help="Recordings per point and actuator "
+                                                                       "(default 8 for h1, 1 for paper)."),
+    sweep_s: float | None = typer.Option(None, "--sweep-s", help="Sweep length, s (default 2)."),
+    amplitude_v: float = typer.Option(5.0, "--amplitude-v", help="Sweep peak at the actuator, V."),
+    yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before each point (only for rigs that "
+                                                        "record every point at once)."),
+    figure: bool = typer.Option(True, "--figure/--no-figure", help="Save |H| and coherence next to the file (.png)."),
+) -> None:
+    """Play sweeps on each actuator, record the skin, estimate H and judge its quality.
+
+    A single-spot vibrometer asks you to aim it at each point (coordinates in mm, origin
+    at the array centre, x toward the thumb, y toward the wrist). Writes OUT, a figure
+    beside it, and prints a verdict per point and actuator.
+    """
+    with user_errors():
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+        from ..calibration import calibrate, save_calibration
+        from ..errors import ValidationError
+        from ..rigs import make_rig
+
+        console = Console()
+        if not out.parent.exists():
+            raise ValidationError(f"--out {out}: the folder {out.parent} does not exist")
+        with make_rig(rig, config=rig_config, seed=seed) as r:
+            single_spot = r.max_points_per_recording is not None
+            if single_spot and yes:
+                raise ValidationError(
+                    f"--yes: the {rig} rig records {r.max_points_per_recording} point at a time and its vibrometer "
+                    "must be aimed at every point; run without --yes"
+                )
+            with Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
+                          MofNCompleteColumn(), TimeElapsedColumn(), console=console, transient=True) as progress:
+                task = progress.add_task("calibrating", total=None)
+
+                def on_progress(done: int, total: int, message: str) -> None:
+                    progress.update(task, completed=done, total=total, description=message)
+
+                def prompt(label: str, xy) -> None:
+                    progress.stop()
+                    typer.prompt(f"Aim the vibrometer at point {label} (x {xy[0] * 1e3:+.1f} mm, "
+                                 f"y {xy[1] * 1e3:+.1f} mm), then press Enter", default="", show_default=False)
+                    progress.start()
+
+                cal = calibrate(r, participant_id=participant, method=method, repeats=repeats, sweep_s=sweep_s,
+                                amplitude_v=amplitude_v, prompt=None if not single_spot else prompt,
+                                progress=on_progress)
+        save_calibration(cal, out)
+        console.print(cal.summary_table())
+        for line in cal.quality.lines():
+            console.print(line, highlight=False)
+        console.print(f"wrote {out}")
+        if figure:
+            from ..calibration.figures import plot_calibration
+
+            png = out.with_suffix(".png")
+            plot_calibration(cal, png)
+            console.print(f"wrote {png}")

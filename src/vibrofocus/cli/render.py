@@ -1,0 +1,95 @@
+"""``vibrofocus render``: drive signals for a tap at a location, from a calibration file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._errors import user_errors
+from .main import app
+
+
+@app.command("render", epilog="Example: vibrofocus render --calibration P01.nc --method inverse --location 5 "
+                               "--out drives.npz --wav drives.wav")
+def render_command(
+    calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration file (.nc)."),
+    location: int = typer.Option(..., "--location", "-l", help="Target location number (1-based)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Drives file: .npz (for vibrofocus play) or .csv."),
+    method: str = typer.Option("inverse", "--method", "-m", help="funneling | inverse | combination | time_reversal"),
+    regularization: str | None = typer.Option(None, "--regularization", help="tikhonov | tsvd (default: plain "
+                                                                              "pseudo-inverse)."),
+    reg_param: float | None = typer.Option(None, "--reg-param", help="Regularization relative to the largest "
+                                                                     "singular value."),
+    n_samples: int = typer.Option(4096, "--n-samples", help="Window length, samples."),
+    limit_v: float | None = typer.Option(None, "--limit-v", help="Drive limit, V peak (default: the rig's limit "
+                                                                 "stored in the calibration)."),
+    refuse: bool = typer.Option(False, "--refuse-over-limit", help="Refuse a design over the limit instead of "
+                                                                   "scaling it down."),
+    wav: Path | None = typer.Option(None, "--wav", help="Also write a multichannel WAV (float32, full scale = "
+                                                        "the drive limit)."),
+) -> None:
+    """Design drives for a tap at LOCATION with METHOD and write them with their metadata.
+
+    The .npz holds drives (n_actuators, n) in V, fs in Hz and the metadata; the .csv has
+    a time column and one column per actuator in V, after '#' metadata lines. The WAV is
+    for audio-interface rigs: sample value 1.0 means the drive limit (e.g. 10 V) at the
+    actuator, so set the interface and amplifier gain so that digital full scale gives
+    that voltage; the scale is written in the metadata (volts_per_full_scale).
+    """
+    with user_errors():
+        import json
+
+        import numpy as np
+
+        from .. import __version__
+        from ..calibration import load_calibration
+        from ..errors import ValidationError
+        from ..rendering import render
+
+        suffix = out.suffix.lower()
+        if suffix not in (".npz", ".csv"):
+            raise ValidationError(f"--out {out}: use a .npz or .csv file name")
+        for path in (out, wav):
+            if path is not None and not path.parent.exists():
+                raise ValidationError(f"{path}: the folder {path.parent} does not exist")
+        if wav is not None and wav.suffix.lower() != ".wav":
+            raise ValidationError(f"--wav {wav}: use a .wav file name")
+        cal = load_calibration(calibration)
+        limit = limit_v if limit_v is not None else float(cal.rig.get("limits", {}).get("peak_v", 10.0))
+        H = cal.transfer_for(n_samples)
+        rendering = render(method, H, cal.fs, cal.layout, location, limit_v=limit,
+                           on_limit="refuse" if refuse else "scale", regularization=regularization,
+                           reg_param=reg_param, band=cal.band)
+        drives = rendering.drives
+        predicted = rendering.metrics()
+        meta = {
+            "software": "vibrofocus", "software_version": __version__, "calibration": str(calibration),
+            "participant_id": cal.participant_id, "calibration_created": cal.created, "method": method,
+            "location": location, "target_index": rendering.target_index, "fs": cal.fs,
+            "actuators": list(cal.layout.actuator_names), "units": "V", "limit_v": limit,
+            "scale": rendering.scale, "needed_peak_v": rendering.needed_peak_v,
+            "predicted_target_peak_m": rendering.reached_peak_m, "t0_s": rendering.t0,
+            "regularization": regularization, "reg_param": reg_param, "band_hz": list(rendering.band),
+            "predicted_fidelity": predicted["fidelity"], "predicted_contrast_db": predicted["contrast_db"],
+        }
+        if suffix == ".npz":
+            np.savez(out, drives=drives, fs=np.float64(cal.fs), predicted=rendering.predicted,
+                     desired=rendering.desired, metadata=json.dumps(meta))
+        else:
+            t = np.arange(drives.shape[1]) / cal.fs
+            header = "\n".join(f"{k}: {json.dumps(v)}" for k, v in meta.items())
+            header += "\ntime_s," + ",".join(f"{name}_V" for name in cal.layout.actuator_names)
+            np.savetxt(out, np.column_stack([t, drives.T]), delimiter=",", header=header, comments="# ", fmt="%.9g")
+        typer.echo(f"wrote {out}: {drives.shape[0]} channels x {drives.shape[1]} samples at {cal.fs:g} Hz, "
+                   f"peak {np.abs(drives).max():.3g} V"
+                   + ("" if rendering.scale == 1.0 else f" (scaled by {rendering.scale:.3g} to the {limit:g} V limit)"))
+        if wav is not None:
+            from scipy.io import wavfile
+
+            # Full scale (1.0) is the drive limit: the drives already respect it, so the
+            # samples stay within [-1, 1] and the voltages are sample * volts_per_full_scale.
+            wavfile.write(wav, int(round(cal.fs)), (drives.T / limit).astype(np.float32))
+            sidecar = wav.with_name(wav.name + ".json")
+            sidecar.write_text(json.dumps({**meta, "volts_per_full_scale": limit}, indent=2))
+            typer.echo(f"wrote {wav} (float32, full scale = {limit:g} V) and {sidecar}")
