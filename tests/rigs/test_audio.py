@@ -245,6 +245,24 @@ def test_error_mid_play_stops_the_stream_and_outputs_go_silent(rig):
     assert not _loopback_input_now().any()  # every output is silent now
 
 
+def test_stop_during_a_recording_discards_it(rig):
+    import sounddevice as sd
+
+    real_wait = sd.wait
+
+    def stop_then_wait(*args, **kwargs):
+        time.sleep(0.05)
+        rig.stop()  # e.g. the experimenter's stop button, from another thread
+        return real_wait(*args, **kwargs)
+
+    with mock.patch.object(sd, "wait", stop_then_wait), \
+            mock.patch.object(sd, "playrec", wraps=sd.playrec) as spy:
+        with pytest.raises(DeviceError, match="stopped before it ended"):
+            rig.play_and_record(pulse_drive(n=20_000), tail_s=0.0)
+    assert spy.call_count == 1  # not retried
+    assert not _loopback_input_now().any()
+
+
 def test_device_selection_errors_are_specific(jack_server):
     with pytest.raises(DeviceError, match="no audio device named like 'nosuchcard'.*loopback"):
         make_rig("audio", config={**jack_config(), "device": {"name": "nosuchcard", "hostapi": "JACK"}})

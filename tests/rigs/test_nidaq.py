@@ -175,6 +175,29 @@ def test_driver_error_mid_play_leaves_zeros_and_says_so(method):
         task.close.assert_called_once()
 
 
+def test_stop_from_another_thread_halts_the_running_task_before_writing_zeros():
+    fake = FakeTaskFactory()
+    rig = make(fake)
+    original = fake._side_effect
+
+    def side_effect(number, name):
+        effect = original(number, name)
+        if number == 0 and name == "wait_until_done":
+            def stop_now(*a, **k):
+                effect(*a, **k)
+                rig.stop()  # the experimenter's stop button while the drive plays
+            return stop_now
+        return effect
+
+    fake._side_effect = side_effect
+    rig.play(drive())
+    play_task = fake.tasks[0]
+    first_zero_task = 1
+    assert fake.events.index((0, "stop")) < fake.events.index((first_zero_task, "write"))
+    np.testing.assert_array_equal(fake.tasks[first_zero_task].write.call_args.args[0], np.zeros(4))
+    play_task.close.assert_called_once()
+
+
 def test_interrupt_mid_recording_leaves_zeros():
     fake = FakeTaskFactory(reads=[])  # read() pops from an empty list: IndexError mid-recording
     rig = make(fake)

@@ -128,6 +128,11 @@ def resolve_audio_device(name: str | int | None, hostapi: str | None = None, *, 
     return int(dev["index"])
 
 
+class _Stopped(DeviceError):
+    def __init__(self) -> None:
+        super().__init__("the recording was stopped before it ended (rig.stop()); it is discarded")
+
+
 class AudioRig(Rig):
     """Actuators on the outputs of an audio interface, the vibrometer on one of its inputs.
 
@@ -189,6 +194,8 @@ class AudioRig(Rig):
             raise DeviceError(f"audio device {self.device_index} refuses {self.device_fs:g} Hz: {exc}; set "
                               "device.samplerate to a rate it supports") from None
         self.last_latency_samples: int | None = None
+        # Counts calls of _zero_outputs: a change during a stream means stop() cut it short.
+        self._stops = 0
 
     # ------------------------------------------------------------------ scaling
     @property
@@ -280,14 +287,18 @@ class AudioRig(Rig):
         max_lag = int(np.ceil(self.config.max_latency_s * self.device_fs))
         padded = np.concatenate([block, np.zeros((max_lag, block.shape[1]), np.float32)])
         for attempt in range(self.config.xrun_retries + 1):
+            stops = self._stops
             recorded = sd.playrec(padded, samplerate=self.device_fs, device=self.device_index,
                                   input_mapping=self._in_channels, output_mapping=self._out_channels,
                                   dtype="float32", blocking=False)
             try:
-                self._check_status(sd.wait(), "recording")
+                status = sd.wait()
+                if self._stops != stops:
+                    raise _Stopped()
+                self._check_status(status, "recording")
                 break
-            except DeviceError:
-                if attempt == self.config.xrun_retries:
+            except DeviceError as exc:
+                if isinstance(exc, _Stopped) or attempt == self.config.xrun_retries:
                     raise
                 log.warning("recording %d of %d lost samples; taking it again", attempt + 1,
                             self.config.xrun_retries + 1)
@@ -304,7 +315,9 @@ class AudioRig(Rig):
 
     def _zero_outputs(self) -> None:
         # Stopping the stream leaves the interface's outputs silent; sounddevice keeps the
-        # one stream it started, so this also ends a play interrupted half-way.
+        # one stream it started, so this also ends a play interrupted half-way (stop() from
+        # another thread included).
+        self._stops += 1
         sd = _sounddevice()
         sd.stop()
 

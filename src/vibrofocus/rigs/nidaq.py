@@ -76,6 +76,9 @@ class NidaqTasks:
         self.device = first.split("/")[0]
         #: Terminal the input task starts on.
         self.start_trigger = f"/{self.device}/ao/StartTrigger"
+        # The output task now generating, so write_zeros (stop() from another thread
+        # included) can halt it first: its channels are reserved until it stops.
+        self._active_ao = None
 
     # ------------------------------------------------------------------ channels
     def _ao_task(self):
@@ -128,11 +131,13 @@ class NidaqTasks:
             ao = self._ao_task()
             self._finite(ao, self.config.fs, n)
             ao.write(volts, auto_start=False)
+            self._active_ao = ao
             ao.start()
             ao.wait_until_done(timeout=self._timeout(n))
         except _daq_error_types() as exc:
             raise self._wrap(exc, "playing") from exc
         finally:
+            self._active_ao = None
             self._release(ao)
 
     def play_and_record(self, volts: np.ndarray, n_record: int) -> np.ndarray:
@@ -161,12 +166,14 @@ class NidaqTasks:
             ao = self._ao_task()
             self._finite(ao, cfg.fs, n)
             ao.write(volts, auto_start=False)
+            self._active_ao = ao
             ao.start()
             ao.wait_until_done(timeout=self._timeout(n))
             data = ai.read(number_of_samples_per_channel=n_record, timeout=self._timeout(n_record))
         except _daq_error_types() as exc:
             raise self._wrap(exc, "recording") from exc
         finally:
+            self._active_ao = None
             self._release(ao, ai)
         out = np.asarray(data, dtype=float).reshape(-1)
         if out.shape != (n_record,):
@@ -188,7 +195,13 @@ class NidaqTasks:
         return np.asarray(data, dtype=float).reshape(len(channels), n)
 
     def write_zeros(self) -> None:
-        """Set every actuator output to 0 V now (an on-demand write)."""
+        """Stop any output task that is generating, then set every actuator output to 0 V."""
+        active = self._active_ao
+        if active is not None:
+            try:
+                active.stop()
+            except _daq_error_types() as exc:  # already stopped or finished: zeros follow anyway
+                log.warning("stopping the running output task: %s", exc)
         ao = None
         try:
             ao = self._ao_task()
