@@ -29,6 +29,7 @@ def serve(
     """
     with user_errors():
         import secrets
+        import threading
         import webbrowser
 
         import uvicorn
@@ -57,5 +58,6 @@ def serve(
         typer.echo(f"experimenter page: {base}/?token={token}")
         typer.echo("participant pages: linked from the experimenter page (one per session)")
         if not no_browser:
-            webbrowser.open(f"{base}/?token={token}")
+            # A moment later, so that the page does not ask before uvicorn listens.
+            threading.Timer(1.5, webbrowser.open, args=(f"{base}/?token={token}",)).start()
         uvicorn.run(web_app, host=host, port=port, log_level="warning")

@@ -27,12 +27,24 @@ def _png(fig) -> bytes:
 def calibration_png(calibration: Any) -> bytes:
     """|H| and coherence of a calibration, per actuator, as PNG bytes.
 
+    Uses the calibration package's own figure (``plot_calibration``) when it has one, so
+    the experimenter sees the same picture as ``vibrofocus calibrate`` draws; otherwise a
+    compact figure drawn here.
+
     Parameters
     ----------
     calibration : Calibration
         ``H`` (n_freqs, n_points, n_actuators) m/V on ``freqs`` Hz, ``coherence`` of the
         same shape (or ``None``), ``layout`` and ``band``.
     """
+    try:
+        from ..calibration import plot_calibration
+    except ImportError:
+        return _calibration_png_compact(calibration)
+    return _png(plot_calibration(calibration))
+
+
+def _calibration_png_compact(calibration: Any) -> bytes:
     H = np.asarray(calibration.H)
     freqs = np.asarray(calibration.freqs)
     layout = calibration.layout
