@@ -25,58 +25,14 @@ def _png(fig) -> bytes:
 
 
 def calibration_png(calibration: Any) -> bytes:
-    """|H| and coherence of a calibration, per actuator, as PNG bytes.
+    """|H| and coherence of a calibration as PNG bytes.
 
-    Uses the calibration package's own figure (``plot_calibration``) when it has one, so
-    the experimenter sees the same picture as ``vibrofocus calibrate`` draws; otherwise a
-    compact figure drawn here.
-
-    Parameters
-    ----------
-    calibration : Calibration
-        ``H`` (n_freqs, n_points, n_actuators) m/V on ``freqs`` Hz, ``coherence`` of the
-        same shape (or ``None``), ``layout`` and ``band``.
+    The calibration package's own figure (:func:`vibrofocus.calibration.figures.plot_calibration`),
+    so the experimenter sees the same picture as ``vibrofocus calibrate`` draws.
     """
-    try:
-        from ..calibration import plot_calibration
-    except ImportError:
-        return _calibration_png_compact(calibration)
+    from ..calibration.figures import plot_calibration
+
     return _png(plot_calibration(calibration))
-
-
-def _calibration_png_compact(calibration: Any) -> bytes:
-    H = np.asarray(calibration.H)
-    freqs = np.asarray(calibration.freqs)
-    layout = calibration.layout
-    band = getattr(calibration, "band", (freqs[1], freqs[-1]))
-    sel = (freqs >= band[0]) & (freqs <= band[1])
-    coh = getattr(calibration, "coherence", None)
-    fig = _figure(figsize=(9, 5.2), layout="constrained")
-    ax_h, ax_c = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
-    names = getattr(layout, "actuator_names", None) or [f"A{q + 1}" for q in range(H.shape[2])]
-    n_loc = getattr(layout, "n_locations", H.shape[1])
-    for q in range(H.shape[2]):
-        mag_um = np.abs(H[sel, :n_loc, q]) * 1e6
-        color = f"C{q}"
-        # Median over the locations with the spread as a band: one readable curve per actuator.
-        ax_h.fill_between(freqs[sel], mag_um.min(axis=1), mag_um.max(axis=1), color=color, alpha=0.15, lw=0)
-        ax_h.plot(freqs[sel], np.median(mag_um, axis=1), color=color, label=names[q])
-        if coh is not None:
-            c = np.asarray(coh)[sel, :n_loc, q]
-            ax_c.plot(freqs[sel], c.min(axis=1), color=color)
-    ax_h.set_xscale("log")
-    ax_h.set_yscale("log")
-    ax_h.set_ylabel("|H| (µm/V)")
-    ax_h.set_title(f"Calibration of {getattr(calibration, 'participant_id', '?')}: median over locations, band = min..max")
-    ax_h.legend(ncols=len(names), fontsize=8)
-    ax_h.grid(True, which="both", alpha=0.3)
-    ax_c.set_ylim(0, 1.05)
-    ax_c.set_ylabel("coherence (min)")
-    ax_c.set_xlabel("frequency (Hz)")
-    ax_c.grid(True, which="both", alpha=0.3)
-    if coh is None:
-        ax_c.text(0.5, 0.5, "no coherence in this calibration", ha="center", va="center", transform=ax_c.transAxes)
-    return _png(fig)
 
 
 def preview_png(rendering: Any, layout: Any, fs: float, *, method: str, location: int) -> bytes:
