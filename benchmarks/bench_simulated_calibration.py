@@ -26,7 +26,7 @@ import time
 
 import numpy as np
 
-from vibrofocus import SimulatedForearm
+from vibrofocus import SimulatedForearm, ricker
 from vibrofocus.signals import exponential_sweep, linear_sweep
 
 FS = 10_000.0
@@ -74,6 +74,14 @@ def main() -> None:
         fresh = SimulatedForearm(seed=0)
         wall, real, n_rec = simulate_flow(fresh, points, sweep, repeats)
         print(f"{name:<40} {n_rec:>10d} {real:>12.1f} {wall:>8.2f} {real / wall:>12.1f}")
+    # The field over a dense grid (pictures, simulated participants): 2,025 points, 4 instants.
+    axis = np.linspace(-0.04, 0.04, 45)
+    grid = np.array(np.meshgrid(axis, axis)).reshape(2, -1).T
+    drive = np.zeros((layout.n_actuators, 4096))
+    drive[:] = ricker(FS, amplitude=5.0)
+    start = time.perf_counter()
+    rig.field(drive, grid, times=0.2048 + np.array([-3e-3, 0.0, 3e-3, 6e-3]))
+    print(f"field: {len(grid)} points x 4 instants of a Ricker tap in {time.perf_counter() - start:.2f} s")
     try:
         from vibrofocus.calibration import calibrate
     except ImportError:  # the calibration module is optional for this benchmark

@@ -95,3 +95,14 @@ def test_exciter_response_is_the_causal_analog_high_pass():
     got = exciter_response(f, np.array([f0]), np.array([q]))[:, 0]
     np.testing.assert_allclose(got, ref, rtol=1e-10)
     assert np.all(np.roots([1.0, w0 / q, w0**2]).real < 0)
+
+
+def test_distance_table_matches_exact_evaluation(rng):
+    k = wavenumber(np.linspace(5, 1500, 120), 3.5, 0.3, 60.0)
+    d = rng.uniform(0.0, 0.3, (300, 3))  # some paths inside the 3 mm contact too
+    a = np.array([3e-3, 2e-3, 3e-3])
+    exact = surface_green(k, d, a)
+    table = surface_green(k, d, a, table_step=5e-3)
+    np.testing.assert_allclose(table, exact, rtol=0, atol=1e-5 * np.abs(exact).max())
+    big = np.abs(exact) > 1e-3 * np.abs(exact).max()
+    np.testing.assert_allclose(table[big], exact[big], rtol=1e-5)
