@@ -34,18 +34,19 @@ def cli_run(tmp_path_factory):
         extra_mean={"funneling": 2.0, "inverse": 0.6, "combination": 0.7},
     )
     drop = (df["participant"] == "P12") & (df["study"] == 1) & (df["target"] == 3) & (df["phase"] == "main")
-    df = df[~drop]  # P12 misses a study-1 condition: must be excluded and reported
+    df = df[~drop].astype(str).reset_index(drop=True)  # P12 misses a study-1 condition: must be excluded and reported
+    df.loc[df.index[df["participant"] == "P11"][9], "response"] = "0"  # invalid: P11 is excluded
     csv = tmp / "trials.csv"
     df.to_csv(csv, index=False)
     out = tmp / "report"
-    result = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out)])
+    result = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out), "--exclude-invalid"])
     return result, out, df
 
 
 @pytest.fixture(scope="module")
 def planted_result(cli_run):
     """The Python API's analysis of the same file as the CLI run."""
-    return analyze(load_trials(cli_run[2]))
+    return analyze(load_trials(cli_run[2], on_invalid="exclude"))
 
 
 def test_cli_writes_contract_report(cli_run):
@@ -69,12 +70,24 @@ def test_cli_writes_contract_report(cli_run):
 
 
 def test_cli_reports_exclusions_in_json_and_terminal(cli_run):
-    result, out, _ = cli_run
+    result, out, df = cli_run
     report = json.loads((out / "report.json").read_text())
-    (excl,) = report["exclusions"]
-    assert excl["participant"] == "P12" and excl["study"] == 1 and "incomplete" in excl["reason"]
-    assert report["study1"]["n_participants"] == 11 and report["study2"]["n_participants"] == 12
-    assert "excluded" in result.output and "P12" in result.output
+    line = int(df.index[df["response"] == "0"][0]) + 2  # 1-based, after the header
+    assert report["exclusions"] == [
+        {
+            "participant": "P11",
+            "study": None,
+            "reason": f"invalid row(s) in the trials file: line {line}: response '0' names location 0, outside 1..9",
+        },
+        {
+            "participant": "P12",
+            "study": 1,
+            "reason": "incomplete: no main-phase trial for 3 of the 27 conditions in study 1 "
+            "(location 3 × funneling, location 3 × inverse, location 3 × combination)",
+        },
+    ]
+    assert report["study1"]["n_participants"] == 10 and report["study2"]["n_participants"] == 11
+    assert "excluded P11 (all studies)" in result.output and "excluded P12 (study 1)" in result.output
     assert "Study 1" in result.output and "Friedman" in result.output
 
 
@@ -106,7 +119,7 @@ def test_sentences_use_gg_dofs_when_sphericity_is_not_assumed(planted_result):
     sentences = results_sentences(result)
     aov = result.study1.anova.set_index("effect")
     inter = aov.loc["location * method"]
-    assert not inter["mauchly_defined"]  # 11 participants < 17 needed for 16 contrasts
+    assert not inter["mauchly_defined"]  # 10 participants < 17 needed for 16 contrasts
     expected = f"F({inter['ddof1_gg']:.2f}, {inter['ddof2_gg']:.2f}) = {inter['F']:.2f}, {format_p(inter['p_gg'])}"
     assert any(expected in s for s in sentences["study1"]), sentences["study1"]
     method = aov.loc["method"]
@@ -178,3 +191,4 @@ def test_localization_panels_follow_the_grid(planted_result):
     centre = np.array(first.patches[0].center)
     pos = result.study1.positions.set_index(["location", "method"])
     assert_allclose(centre, pos.loc[(1, "funneling"), ["mean_x_mm", "mean_y_mm"]].astype(float))
+

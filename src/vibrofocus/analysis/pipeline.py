@@ -242,6 +242,7 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
     if not results:
         raise ValidationError("no usable data in either study: " + "; ".join(unavailable.values()))
     excl_df = pd.DataFrame.from_records(exclusions, columns=["participant", "study", "reason"])
+    excl_df["study"] = excl_df["study"].astype("Int64")  # <NA>: excluded from the whole file
     return AnalysisResult(
         source=str(trials.attrs.get("source", "<DataFrame>")),
         n_trials=len(trials),

@@ -104,10 +104,12 @@ def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
     for row in s1.anova.itertuples(index=False):
         gg = _anova_uses_gg(row)
         d1, d2, p = (row.ddof1_gg, row.ddof2_gg, row.p_gg) if gg else (row.ddof1, row.ddof2, row.p_unc)
-        kind = "interaction" if "*" in row.effect else "main effect"
+        subject = (
+            f"The {_effect_name(row.effect)} interaction" if "*" in row.effect else f"The main effect of {row.effect}"
+        )
         verdict = "was significant" if p < alpha else "was not significant"
         out.append(
-            f"The {kind} of {_effect_name(row.effect)} {verdict}, F({_dof(d1)}, {_dof(d2)}) = {row.F:.2f}, "
+            f"{subject} {verdict}, F({_dof(d1)}, {_dof(d2)}) = {row.F:.2f}, "
             f"{format_p(p)}, η²G = {row.ng2:.3f}{' (Greenhouse–Geisser corrected)' if gg else ''}."
         )
     parts = []
@@ -149,7 +151,7 @@ def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str
             f"Kendall's W = {r['kendall_w']:.2f}"
         )
     out = [
-        f"Friedman tests on the mean number of selected locations per participant {label} (N = {n}) showed "
+        f"Friedman tests on the mean number of selected locations per participant, {label} (N = {n}), showed "
         + "; and ".join(bits) + "."
     ]
     for factor, table in part.wilcoxon.items():
@@ -170,9 +172,9 @@ def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str
 
 
 def _study2_sentences(s2: Study2Result, alpha: float) -> list[str]:
-    out = _friedman_sentence(s2.all_trials, "(all trials)", alpha)
+    out = _friedman_sentence(s2.all_trials, "on all trials", alpha)
     ct = s2.contains_target
-    label = "(only trials whose selection contains the target)"
+    label = "on the trials whose selection contains the target"
     if ct.excluded:
         out.append(
             f"For the trials whose selection contains the target, {len(ct.excluded)} participant(s) had no such "
@@ -312,13 +314,16 @@ def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
     shown = df if max_rows is None else df.head(max_rows)
 
     def fmt(x):
+        if x is None:
+            return "–"
         if isinstance(x, (float, np.floating)):
             if not np.isfinite(x):
                 return ""
             return f"{x:.3g}" if abs(x) < 1e-3 and x != 0 else f"{x:.4f}".rstrip("0").rstrip(".")
         return html.escape(str(x))
 
-    body = shown.to_html(index=False, escape=False, formatters={c: fmt for c in shown.columns}, border=0)
+    cells = shown.astype(object).map(lambda x: None if x is None or (isinstance(x, float) and x != x) else x)
+    body = cells.map(fmt).to_html(index=False, escape=False, border=0)
     note = f"<p class='small'>first {max_rows} of {len(df)} rows</p>" if max_rows and len(df) > max_rows else ""
     return body + note
 
@@ -343,7 +348,7 @@ def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
     parts.append("<h2>Participants and exclusions</h2>")
     if len(result.exclusions):
         parts.append("<p class='warn'>Some participants were excluded from an analysis:</p>")
-        parts.append(_table(result.exclusions.fillna("all")))
+        parts.append(_table(result.exclusions.astype(object).fillna("all")))
     else:
         parts.append("<p>No participant was excluded.</p>")
     for w in result.warnings:

@@ -361,10 +361,11 @@ def check_design(trials: pd.DataFrame, study: int) -> tuple[pd.DataFrame, list[d
     conditions = main[["target", "method"]].drop_duplicates()
     all_conditions = set(map(tuple, conditions.to_numpy().tolist()))
     counts = main.groupby(["participant", "target", "method"]).size()
+    rank = {m: i for i, m in enumerate(method_order(main["method"].unique()))}
     complete = []
     for participant, sub in counts.groupby(level="participant", sort=True):
         have = {(t, m) for _, t, m in sub.index}
-        lacking = sorted(all_conditions - have, key=lambda c: (c[1], c[0]))
+        lacking = sorted(all_conditions - have, key=lambda c: (c[0], rank[c[1]]))
         if lacking:
             shown = ", ".join(f"location {t} × {m}" for t, m in lacking[:_MAX_LISTED])
             more = f" and {len(lacking) - _MAX_LISTED} more" if len(lacking) > _MAX_LISTED else ""

@@ -55,6 +55,8 @@ def analyze_command(
     Participants missing a condition are excluded and listed, never dropped silently.
     """  # noqa: E501
     with user_errors():
+        import pandas as pd
+
         from .._validation import check_in_range
         from ..analysis import analyze, load_trials, write_report
 
@@ -69,7 +71,7 @@ def analyze_command(
         return
     console.print(f"[bold]vibrofocus analyze[/] {trials} ({result.n_trials} rows)")
     for row in result.exclusions.itertuples(index=False):
-        where = f"study {row.study}" if row.study is not None and row.study == row.study else "all studies"
+        where = "all studies" if row.study is None or row.study is pd.NA else f"study {int(row.study)}"
         console.print(f"[yellow]excluded[/] {row.participant} ({where}): {row.reason}")
     for w in result.warnings:
         console.print(f"[yellow]note[/] {w}")
