@@ -1,0 +1,77 @@
+"""``vibrofocus calibrate`` and ``vibrofocus render`` end to end on the simulated forearm."""
+
+import json
+
+import numpy as np
+import pytest
+from scipy.io import wavfile
+from typer.testing import CliRunner
+
+from vibrofocus.calibration import load_calibration
+from vibrofocus.cli.main import app
+
+runner = CliRunner()
+
+
+def text(result) -> str:
+    """The output with rich's line wrapping undone."""
+    return " ".join(result.output.split())
+
+
+@pytest.fixture(scope="module")
+def cal_file(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "P01.nc"
+    result = runner.invoke(app, ["calibrate", "--rig", "simulated", "--participant", "P01", "--out", str(out),
+                                 "--seed", "2", "--repeats", "2", "--sweep-s", "1", "--yes"])
+    assert result.exit_code == 0, result.output
+    assert "Calibration of P01" in text(result) and "wrote" in text(result) and out.is_file()
+    return out
+
+
+def test_calibrate_writes_the_file_and_its_figure(cal_file):
+    cal = load_calibration(cal_file)
+    assert cal.participant_id == "P01" and cal.method == "h1" and cal.sweep.repeats == 2
+    assert cal.rig["kind"] == "simulated" and cal.rig["seed"] == 2
+    png = cal_file.with_suffix(".png")
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_render_npz_csv_and_wav_agree(cal_file, tmp_path):
+    npz, csv, wav = tmp_path / "d.npz", tmp_path / "d.csv", tmp_path / "d.wav"
+    for out, extra in ((npz, ["--wav", str(wav)]), (csv, [])):
+        result = runner.invoke(app, ["render", "--calibration", str(cal_file), "--method", "inverse",
+                                     "--location", "5", "--out", str(out), *extra])
+        assert result.exit_code == 0, result.output
+    with np.load(npz) as data:
+        drives, fs = data["drives"], float(data["fs"])
+        meta = json.loads(str(data["metadata"]))
+    assert drives.shape == (4, 4096) and fs == 10_000.0
+    assert meta["location"] == 5 and meta["participant_id"] == "P01" and meta["units"] == "V"
+    assert np.abs(drives).max() <= meta["limit_v"] + 1e-12
+    table = np.loadtxt(csv, delimiter=",", comments="#")
+    np.testing.assert_allclose(table[:, 1:].T, drives, rtol=1e-8, atol=1e-12)
+    np.testing.assert_allclose(table[:, 0], np.arange(4096) / fs)
+    rate, samples = wavfile.read(wav)
+    scale = json.loads((tmp_path / "d.wav.json").read_text())["volts_per_full_scale"]
+    assert rate == 10_000 and samples.dtype == np.float32 and samples.shape == (4096, 4) and scale == 10.0
+    np.testing.assert_allclose(samples.T * scale, drives, rtol=1e-6, atol=1e-6)
+
+
+def test_render_refuses_a_foreign_calibration_file(tmp_path):
+    bad = tmp_path / "notes.nc"
+    bad.write_text("not a calibration")
+    result = runner.invoke(app, ["render", "--calibration", str(bad), "--location", "5",
+                                 "--out", str(tmp_path / "d.npz")])
+    assert result.exit_code == 2
+    assert "notes.nc: is not a netCDF4/HDF5 calibration file" in text(result)
+
+
+def test_render_refuses_a_location_outside_the_layout(cal_file, tmp_path):
+    result = runner.invoke(app, ["render", "--calibration", str(cal_file), "--location", "10",
+                                 "--out", str(tmp_path / "d.npz")])
+    assert result.exit_code == 2 and "location 10" in text(result)
+
+
+def test_calibrate_refuses_a_missing_output_folder(tmp_path):
+    result = runner.invoke(app, ["calibrate", "--participant", "P", "--out", str(tmp_path / "no" / "P.nc"), "--yes"])
+    assert result.exit_code == 2 and "does not exist" in text(result)

@@ -1,0 +1,88 @@
+"""Calibration of the simulated forearm, checked against its true transfer, and designs
+from the estimate played back on the arm."""
+
+import numpy as np
+import pytest
+
+from vibrofocus.calibration import calibrate
+from vibrofocus.rendering import InverseOperator, focus_metrics, render
+from vibrofocus.signals import ricker
+
+
+def median_relative_error(cal, rig):
+    truth = rig.transfer(rig.layout.points_xy, cal.freqs)
+    band = (cal.freqs >= cal.band[0]) & (cal.freqs <= cal.band[1])
+    return float(np.median(np.abs(cal.H[band] - truth[band]) / np.abs(truth[band])))
+
+
+def play_clean(rig, drives, tries=5):
+    """Play and record; repeat a recording spoiled by a vibrometer dropout."""
+    for _ in range(tries):
+        y = rig.play_and_record(drives, tail_s=0.0)
+        if np.isfinite(y).all():
+            return y
+    raise AssertionError("every recording dropped out")
+
+
+def test_default_method_is_within_5_percent_of_the_true_transfer(forearm_calibration):
+    rig, cal = forearm_calibration
+    err = median_relative_error(cal, rig)
+    print(f"median relative error, h1 (8 x 2 s exponential sweeps): {err:.2%}")
+    assert err < 0.05
+
+
+def test_paper_method_is_less_accurate_than_the_default(forearm_calibration):
+    from vibrofocus.skin import SimulatedForearm
+
+    rig, cal = forearm_calibration
+    paper_rig = SimulatedForearm(seed=0)
+    paper = calibrate(paper_rig, participant_id="S00", method="paper")
+    err_h1, err_paper = median_relative_error(cal, rig), median_relative_error(paper, paper_rig)
+    print(f"median relative error: h1 {err_h1:.2%}, paper (one 2 s linear sweep) {err_paper:.2%}")
+    assert err_h1 < err_paper < 0.10
+
+
+def test_the_simulated_participant_passes_the_quality_checks(forearm_calibration):
+    rig, cal = forearm_calibration
+    q = cal.quality
+    assert q.ok, q.lines()
+    np.testing.assert_array_equal(q.polarity, [1, 1, 1, 1])
+    # Every recording with NaN samples was counted as a dropout and left out.
+    nan_takes = np.isnan(cal.recordings).any(axis=-1).sum(axis=1).T  # (points, actuators)
+    np.testing.assert_array_equal(q.dropouts, nan_takes)
+    assert np.all(q.repeats_used >= 8 - q.dropouts)
+    # Coherent where the skin carries the vibration: near each actuator, over the band.
+    near = np.linalg.norm(rig.layout.points_xy[:, None] - rig.layout.actuators_xy[None], axis=-1).argmin(axis=0)
+    band = (cal.freqs >= 10) & (cal.freqs <= 1000)
+    assert np.all(cal.coherence[band][:, near, np.arange(4)] > 0.9)
+
+
+def test_designs_from_the_estimate_focus_like_designs_from_the_truth(forearm_calibration):
+    rig, cal = forearm_calibration
+    n = 4096
+    H_est = cal.transfer_for(n)
+    H_true = rig.transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
+    for location in rig.layout.location_numbers:
+        fid = []
+        for H in (H_est, H_true):
+            r = render("inverse", H, cal.fs, cal.layout, location, limit_v=rig.limits.peak_v)
+            y = play_clean(rig, r.drives)
+            fid.append(focus_metrics(y, r.target_index, r.desired, rig.fs)["fidelity"])
+        print(f"location {location}: fidelity from estimated H {fid[0]:.3f}, from true H {fid[1]:.3f}")
+        assert fid[0] == pytest.approx(fid[1], abs=0.02)
+
+
+def test_target_only_inverse_from_the_estimate_reaches_fidelity_0_9_everywhere(forearm_calibration):
+    rig, cal = forearm_calibration
+    n = 4096
+    H_est = cal.transfer_for(n)
+    stimulus = 2e-6 * ricker(rig.fs, 1e-3, n / rig.fs, 0.5 * n / rig.fs)
+    for location in rig.layout.location_numbers:
+        target = location - 1
+        op = InverseOperator(H_est, cal.fs, n_samples=n, control=[target], band=cal.band)
+        drives = op.drives_for_point(target, stimulus)
+        drives *= min(1.0, 0.95 * rig.limits.peak_v / np.abs(drives).max())  # fidelity ignores scale
+        y = play_clean(rig, drives)
+        fidelity = focus_metrics(y, target, op.band_limit(stimulus), rig.fs)["fidelity"]
+        print(f"location {location}: target-only inverse fidelity {fidelity:.3f}")
+        assert fidelity >= 0.9
