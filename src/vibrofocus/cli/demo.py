@@ -43,12 +43,10 @@ def demo_command(
 ) -> None:
     """Render a tap at every location with every method, play it on the simulated forearm, measure it.
 
-    For each of the layout's locations and each method (funneling, inverse, combination,
-    time reversal): design with the forearm's transfer, play with vibrometer noise,
-    and report fidelity, contrast (against the other locations), peak drive and the
-    target's peak displacement. Figures: propagation with and without correction, the
-    focused field around one location, and a metrics overview.
-    """
+    For each of the layout's locations and each method (funneling, inverse, combination, time reversal): design with the forearm's transfer, play with vibrometer noise, and report fidelity, contrast (against the other locations), peak drive and the target's peak displacement.
+
+    Figures: propagation with and without correction, the focused field around one location, and a metrics overview.
+    """  # noqa: E501
     with user_errors():
         import numpy as np
 

@@ -14,6 +14,7 @@ surface path lengths on the tapered cylinder, the short way and ``m`` times arou
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 from functools import lru_cache
 
@@ -153,6 +154,12 @@ class SimulatedForearm(Rig):
         Voltage now at each actuator; zero whenever the rig is idle.
     last_dropout_mask : ndarray of bool or None
         Dropout samples of the last recording, shape (n_points, n_samples).
+
+    Notes
+    -----
+    The simulated vibrometer measures anywhere at once (``max_points_per_recording``
+    is None); ``play_and_record(drive)`` without ``points_xy`` records at every point
+    of the layout (locations then guards).
     """
 
     kind = "simulated"
@@ -204,6 +211,7 @@ class SimulatedForearm(Rig):
         self.sensitivity = drive_sensitivity(self.fs)
         self._rng = np.random.default_rng([self.seed, 0xD0])
         self._ir_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
+        self._ir_lock = threading.Lock()
         self.last_drive: np.ndarray | None = None
         self.n_played = 0
         self.outputs_v = np.zeros(self.layout.n_actuators)
@@ -257,9 +265,10 @@ class SimulatedForearm(Rig):
         """
         points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
         key = points.tobytes()
-        if key in self._ir_cache:
-            self._ir_cache.move_to_end(key)
-            return self._ir_cache[key]
+        with self._ir_lock:
+            if key in self._ir_cache:
+                self._ir_cache.move_to_end(key)
+                return self._ir_cache[key]
         n_fft = 2 * self.n_ir
         h = self.transfer(points, np.fft.rfftfreq(n_fft, 1 / self.fs))
         ir = np.fft.irfft(h, n_fft, axis=0)[: self.n_ir]
@@ -267,9 +276,10 @@ class SimulatedForearm(Rig):
         ir[-n_fade:] *= np.hanning(2 * n_fade)[n_fade:, None, None]
         ir = np.ascontiguousarray(np.moveaxis(ir, 0, -1))
         ir.setflags(write=False)
-        self._ir_cache[key] = ir
-        if len(self._ir_cache) > _IR_CACHE_SIZE:
-            self._ir_cache.popitem(last=False)
+        with self._ir_lock:  # a web server may record from several threads
+            self._ir_cache[key] = ir
+            if len(self._ir_cache) > _IR_CACHE_SIZE:
+                self._ir_cache.popitem(last=False)
         return ir
 
     def field(
