@@ -13,6 +13,7 @@ from __future__ import annotations
 import warnings
 
 import numpy as np
+import scipy.fft
 
 from .._validation import as_array, check_choice, check_in_range
 from ..errors import CausalityError, ValidationError
@@ -65,16 +66,19 @@ def wraparound_fraction(drives: np.ndarray, H: np.ndarray) -> float:
         )
     n_points = H.shape[1]
     n_fft = 2 * n
-    drive_spectra = np.fft.rfft(drives, n_fft, axis=-1).T  # (n+1, n_act)
-    per_point = max(1, _CHUNK_BYTES // (16 * (n + 1) * max(H.shape[2], 1)))
+    # Single precision is ample for an energy share compared with ~1e-3 and halves the
+    # cost of transforming every path's impulse response.
+    drive_spectra = scipy.fft.rfft(drives.astype(np.float32), n_fft, axis=-1).T  # (n+1, n_act)
+    per_point = max(1, _CHUNK_BYTES // (8 * (n + 1) * max(H.shape[2], 1)))
     tail = 0.0
     total = 0.0
     for start in range(0, n_points, per_point):  # chunks of points bound the memory
-        impulse = np.fft.irfft(H[:, start:start + per_point, :], n, axis=0)
-        padded = np.fft.rfft(impulse, n_fft, axis=0)  # (n+1, chunk, n_act)
-        response = np.fft.irfft((padded @ drive_spectra[:, :, None])[:, :, 0], n_fft, axis=0)
-        tail += float(np.sum(response[n:] ** 2))
-        total += float(np.sum(response**2))
+        chunk = H[:, start:start + per_point, :].astype(np.complex64)
+        impulse = scipy.fft.irfft(chunk, n, axis=0)
+        padded = scipy.fft.rfft(impulse, n_fft, axis=0)  # (n+1, chunk, n_act)
+        response = scipy.fft.irfft((padded @ drive_spectra[:, :, None])[:, :, 0], n_fft, axis=0)
+        tail += float(np.sum(np.square(response[n:], dtype=np.float64)))
+        total += float(np.sum(np.square(response, dtype=np.float64)))
     return tail / total if total > 0 else 0.0
 
 
