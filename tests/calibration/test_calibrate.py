@@ -159,3 +159,23 @@ def test_other_layouts_work_unchanged(firs):
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
     assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))
+
+
+def test_samples_flagged_by_the_rig_count_as_dropouts(layout, firs):
+    class FlaggingRig(FIRRig):
+        """Flags a dropout without writing NaN (a vibrometer's signal-level flag)."""
+
+        def _play_and_record(self, drive, points_xy, n_tail):
+            y = super()._play_and_record(drive, points_xy, n_tail)
+            self.last_dropout_mask = np.zeros(y.shape, bool)
+            if self.n_recordings == 2:
+                self.last_dropout_mask[3, 500:520] = True
+                y[3, 500:520] = 1e-3  # garbage, not NaN
+            return y
+
+    cal = calibrate(FlaggingRig(firs, layout), participant_id="P", sweep_s=0.5, repeats=2)
+    assert cal.quality.dropouts[3, 0] == 1 and cal.quality.dropouts.sum() == 1
+    assert np.isnan(cal.recordings[0, 1, 3, 500:520]).all()
+    truth = FIRRig(firs, layout).transfer(cal.n_fft)
+    b = _band(cal.freqs)
+    assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))

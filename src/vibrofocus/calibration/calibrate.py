@@ -210,7 +210,10 @@ def calibrate(
     """Measure the transfer matrix from every actuator to every skin point.
 
     One actuator plays at a time (all other channels at zero) while the skin is
-    recorded. A rig that records any number of points at once (the simulated forearm)
+    recorded. Vibrometer dropouts (NaN samples, or samples flagged in the rig's
+    ``last_dropout_mask`` when it has one) exclude that recording of that point from the
+    estimate, never patched over; a point that dropped out in every take is recorded
+    again (up to three times). The quality report says how many were left out. A rig that records any number of points at once (the simulated forearm)
     records all points in each take; a single-spot vibrometer
     (``rig.max_points_per_recording == 1``) is aimed by the operator at each point in
     turn, after ``prompt(point_label, point_xy)`` returns.
@@ -310,6 +313,10 @@ def calibrate(
             raise VibrofocusError(
                 f"the {rig.kind} rig returned a recording of shape {y.shape}, expected {(len(group), n_rec)}"
             )
+        # A rig may flag dropout samples instead of (or besides) writing NaN into them.
+        flagged = getattr(rig, "last_dropout_mask", None)
+        if isinstance(flagged, np.ndarray) and flagged.shape == y.shape and flagged.any():
+            y = np.where(flagged, np.nan, y)
         return y
 
     for group in groups:
