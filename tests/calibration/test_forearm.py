@@ -86,3 +86,28 @@ def test_target_only_inverse_from_the_estimate_reaches_fidelity_0_9_everywhere(f
         fidelity = focus_metrics(y, target, op.band_limit(stimulus), rig.fs)["fidelity"]
         print(f"location {location}: target-only inverse fidelity {fidelity:.3f}")
         assert fidelity >= 0.9
+
+
+def test_dead_and_reversed_actuators_on_the_simulated_arm_are_flagged():
+    from dataclasses import replace
+
+    from vibrofocus.skin import ForearmParameters, SimulatedForearm
+
+    class MiswiredForearm(SimulatedForearm):
+        """The forearm with actuator A3's two wires swapped: its drive arrives negated."""
+
+        def _play_and_record(self, drive, points_xy, n_tail):
+            return super()._play_and_record(drive * np.array([[1.0], [1.0], [-1.0], [1.0]]), points_xy, n_tail)
+
+    reversed_cal = calibrate(MiswiredForearm(seed=4), participant_id="S04", repeats=2, sweep_s=1.0)
+    (issue,) = reversed_cal.quality.by_check("reversed_actuator")
+    assert issue.actuator == 2 and "A3 is reversed" in issue.message
+    assert reversed_cal.quality.by_check("dead_actuator") == []
+
+    lay = SimulatedForearm(seed=4).layout
+    params = ForearmParameters.draw(4, lay)
+    weak = replace(params, gains=params.gains * np.array([1.0, 1e-3, 1.0, 1.0]))  # A2 barely driven
+    dead_cal = calibrate(SimulatedForearm(seed=4, participant=weak), participant_id="S04", repeats=2, sweep_s=1.0)
+    (issue,) = dead_cal.quality.by_check("dead_actuator")
+    assert issue.actuator == 1 and "A2 looks dead" in issue.message
+    assert dead_cal.quality.by_check("reversed_actuator") == []
