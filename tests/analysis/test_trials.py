@@ -160,3 +160,22 @@ def test_other_method_names_are_allowed(synthetic):
     df = synthetic(3, seed=8, sd_mm={"funneling": 7.0, "time_reversal": 7.0, "my_method": 7.0}, studies=(1,))
     result = analyze(load_trials(df))
     assert result.study1.methods == ["funneling", "time_reversal", "my_method"]
+
+
+def test_api_steps_take_the_whole_table(tmp_path, small):
+    from vibrofocus.analysis import study1_errors, study2_counts
+
+    # The file as Excel writes it: UTF-8 with a byte-order mark.
+    path = tmp_path / "bom.csv"
+    path.write_bytes(b"\xef\xbb\xbf" + small.to_csv(index=False).encode())
+    trials = load_trials(path)
+    errors = study1_errors(trials)  # training and study-2 rows are left out
+    expected = small[(small["study"] == 1) & (small["phase"] == "main")]
+    assert errors["n_trials"].sum() == len(expected)
+    counts, _ = study2_counts(trials)
+    assert counts["n_trials"].sum() == len(small[(small["study"] == 2) & (small["phase"] == "main")])
+
+
+def test_few_participants_carry_a_warning(small):
+    result = analyze(load_trials(small))
+    assert any("only 4 participants" in w for w in result.warnings)

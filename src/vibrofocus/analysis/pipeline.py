@@ -12,6 +12,9 @@ from .study1 import localization_summary, shapiro_tests, study1_anova, study1_er
 from .study2 import friedman_tests, study2_counts, wilcoxon_posthoc
 from .trials import check_design, method_order
 
+#: Below this many complete participants a study's results carry a warning.
+_FEW_PARTICIPANTS = 6
+
 __all__ = ["Study1Result", "Study2Counts", "Study2Result", "AnalysisResult", "analyze"]
 
 
@@ -228,6 +231,12 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
         if reason is not None:
             unavailable[f"study{study}"] = reason
             continue
+        n = complete["participant"].nunique()
+        if n < _FEW_PARTICIPANTS:
+            warnings.append(
+                f"study {study}: only {n} participants; the tests have little power and their "
+                "large-sample approximations (Mauchly, Friedman chi-square) are rough"
+            )
         if study == 1:
             results[1] = _analyze_study1(complete, layout)
         else:

@@ -42,14 +42,24 @@ def _require(df: pd.DataFrame, columns: Sequence[str], what: str) -> None:
         raise ValidationError(f"{what} is missing the column(s) {', '.join(missing)}")
 
 
+def _only_study(trials: pd.DataFrame, study: int) -> pd.DataFrame:
+    """The main-phase rows of ``study`` when the table still holds other rows."""
+    if "study" in trials.columns and "phase" in trials.columns:
+        keep = (trials["study"] == study) & (trials["phase"] == "main")
+        if not keep.all():
+            return trials[keep].reset_index(drop=True)
+    return trials
+
+
 def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
     """Add the target and perceived positions (mm) and the error (mm) to study-1 trials.
 
     Parameters
     ----------
     trials : DataFrame
-        Study-1 trials with ``target`` and ``selection`` (one location per trial), as
-        from :func:`vibrofocus.analysis.check_design`.
+        Trials with ``target`` and ``selection`` (one location per trial): the output
+        of :func:`vibrofocus.analysis.load_trials` (only its study-1 main-phase rows are
+        used) or of :func:`vibrofocus.analysis.check_design`.
     layout : ArrayLayout, optional
         Location coordinates (m); default the reference layout.
 
@@ -60,6 +70,7 @@ def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None)
         ``perceived_x_mm``, ``perceived_y_mm`` and ``error_mm`` (Euclidean distance, mm).
     """
     _require(trials, ("target", "selection"), "study-1 trials")
+    trials = _only_study(trials, 1)
     xy_mm = np.asarray(_layout(layout).locations_xy) * _M_TO_MM
     out = trials.copy()
     if out.empty:

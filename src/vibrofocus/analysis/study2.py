@@ -15,7 +15,7 @@ import numpy as np
 import pandas as pd
 
 from ..errors import ValidationError
-from .study1 import _require, _sort
+from .study1 import _only_study, _require, _sort
 
 __all__ = ["study2_counts", "friedman_tests", "wilcoxon_posthoc"]
 
@@ -26,8 +26,9 @@ def study2_counts(trials: pd.DataFrame, *, contains_target: bool = False) -> tup
     Parameters
     ----------
     trials : DataFrame
-        Study-2 main-phase trials with ``participant``, ``target``, ``method`` and
-        ``selection`` (see :func:`vibrofocus.analysis.load_trials`).
+        Trials with ``participant``, ``target``, ``method`` and ``selection``: the
+        output of :func:`vibrofocus.analysis.load_trials` (only its study-2 main-phase
+        rows are used) or of :func:`vibrofocus.analysis.check_design`.
     contains_target : bool
         Keep only the trials whose selection contains the target.
 
@@ -42,6 +43,7 @@ def study2_counts(trials: pd.DataFrame, *, contains_target: bool = False) -> tup
         condition (``participant``, ``reason``); they are dropped from ``counts``.
     """
     _require(trials, ("participant", "target", "method", "selection"), "study-2 trials")
+    trials = _only_study(trials, 2)
     data = trials.copy()
     data["hit"] = [t in s for t, s in zip(data["target"], data["selection"])]
     data["n_selected"] = data["selection"].map(len)

@@ -277,7 +277,7 @@ def load_trials(
         if not os.path.isfile(name):
             raise ValidationError(f"trials file {name!r} does not exist or is not a file")
         try:
-            raw = pd.read_csv(name, dtype=str, keep_default_na=False, skipinitialspace=True)
+            raw = pd.read_csv(name, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig")
         except pd.errors.EmptyDataError:
             raise ValidationError(f"trials file {name!r} is empty: expected a header line and one row per trial") from None
         except (pd.errors.ParserError, UnicodeDecodeError) as exc:
