@@ -140,6 +140,12 @@ def _method_boxes(ax, data: pd.DataFrame, dv: str, methods, colors) -> None:
     ax.grid(True, axis="y", linewidth=0.3, alpha=0.6)
 
 
+def _legend(ax, methods, colors) -> None:
+    """Method colours in one row above the axes, clear of the data."""
+    handles = [ax.scatter([], [], color=colors[m], marker="s", label=m) for m in methods]
+    ax.legend(handles=handles, frameon=False, ncols=len(methods), loc="lower left", bbox_to_anchor=(0.0, 1.0))
+
+
 def plot_errors(errors: pd.DataFrame):
     """Box plots of the mean localization error per participant (study 1).
 
@@ -162,7 +168,7 @@ def plot_errors(errors: pd.DataFrame):
     _grouped_boxes(ax1, errors, "error_mm", locations, methods, colors)
     ax1.set_xlabel("target location")
     ax1.set_ylabel("mean Euclidean error (mm)")
-    ax1.legend(handles=[ax1.scatter([], [], color=colors[m], marker="s", label=m) for m in methods], frameon=False)
+    _legend(ax1, methods, colors)
     _method_boxes(ax2, errors, "error_mm", methods, colors)
     ax2.set_xlabel("method")
     fig.suptitle("Study 1: localization error per participant")
@@ -193,14 +199,12 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
     axes = fig.subplots(len(rows), 2, width_ratios=[3, 1], squeeze=False)
     for (label, data), (ax1, ax2) in zip(rows, axes):
         _grouped_boxes(ax1, data, "n_selected", locations, methods, colors)
-        ax1.set_ylabel("selected locations")
-        ax1.set_title(f"per location and method ({label})", fontsize=10)
+        ax1.set_ylabel(f"selected locations\n({label})")
         _method_boxes(ax2, data, "n_selected", methods, colors)
         ax2.set_title("per method", fontsize=10)
         ax2.sharey(ax1)
     axes[-1, 0].set_xlabel("target location")
-    axes[0, 0].legend(handles=[axes[0, 0].scatter([], [], color=colors[m], marker="s", label=m) for m in methods],
-                      frameon=False)  # fmt: skip
+    _legend(axes[0, 0], methods, colors)
     fig.suptitle("Study 2: number of selected locations per participant")
     return fig
 
