@@ -3,6 +3,7 @@ keep it in one self-describing netCDF4/HDF5 file (SPEC §4)."""
 
 from .calibrate import SCHEMA_VERSION, Calibration, calibrate
 from .excitation import METHODS, SweepSettings, default_settings, make_excitation
+from .figures import plot_calibration
 from .io import load_calibration, save_calibration
 from .quality import QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
 
@@ -11,6 +12,7 @@ __all__ = [
     "Calibration",
     "save_calibration",
     "load_calibration",
+    "plot_calibration",
     "SCHEMA_VERSION",
     "METHODS",
     "SweepSettings",

@@ -41,7 +41,10 @@ def plot_calibration(cal: Calibration, path: str | os.PathLike | None = None, *,
     f = cal.freqs
     show = (f >= cal.band[0] / 2) & (f <= min(cal.band[1] * 2, cal.fs / 2))
     gain_db = 20 * np.log10(np.maximum(np.abs(cal.H[show]), 1e-30) / 1e-6)
-    colours = [f"C{i % 10}" for i in range(lay.n_points)]
+    from matplotlib import colormaps
+
+    palette = colormaps["tab10" if lay.n_points <= 10 else "tab20"]
+    colours = [palette(i % palette.N) for i in range(lay.n_points)]
     for a in range(n_a):
         top, bottom = axes[0, a], axes[1, a]
         for p, label in enumerate(lay.point_labels):
@@ -61,9 +64,11 @@ def plot_calibration(cal: Calibration, path: str | os.PathLike | None = None, *,
                         transform=bottom.transAxes)
     axes[0, 0].set_ylabel("|H| (dB re 1 µm/V)")
     axes[1, 0].set_ylabel("coherence")
-    lo = np.percentile(gain_db, 1)
-    axes[0, 0].set_ylim(lo - 5, gain_db.max() + 5)
-    axes[0, -1].legend(title="point", fontsize="x-small", ncol=2, loc="lower right")
+    # Scale to the calibrated band: outside it the estimate is tapered to nothing.
+    in_band = (f[show] >= cal.band[0]) & (f[show] <= cal.band[1])
+    axes[0, 0].set_ylim(np.percentile(gain_db[in_band], 1) - 10, gain_db[in_band].max() + 5)
+    handles, names = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, names, title="point", fontsize="x-small", loc="outside right center")
     fig.suptitle(f"Calibration of {cal.participant_id} ({cal.method}, {cal.created})")
     if path is not None:
         fig.savefig(Path(path), dpi=dpi)
