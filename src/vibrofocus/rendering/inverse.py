@@ -143,7 +143,10 @@ class InverseOperator:
         H_active = H[active][:, self.control, :]
         _check_in_band(H_active, freqs[active], band, " at the control points")
         factors = SpectralPinv.factorize(H_active, self.regularization, self.reg_param)
-        self._matrix = factors.matrix() * taper[active, None, None]  # (F_active, n_act, n_control)
+        # Stored per control point, (n_control, n_actuators, F_active), contiguous along
+        # frequency: retargeting one point then reads one contiguous block and its drive
+        # spectra come out in the layout the inverse FFT wants.
+        self._columns = np.ascontiguousarray(np.transpose(factors.matrix() * taper[active, None, None], (2, 1, 0)))
         self.singular_values = np.zeros((len(freqs), factors.singular_values.shape[1]))
         self.singular_values[active] = factors.singular_values
 
@@ -158,13 +161,14 @@ class InverseOperator:
     def matrix(self) -> np.ndarray:
         """Band-limited pseudo-inverse, complex, shape (n // 2 + 1, n_actuators, n_control)."""
         full = np.zeros((len(self.freqs), self.n_actuators, len(self.control)), complex)
-        full[self._active] = self._matrix
+        full[self._active] = np.transpose(self._columns, (2, 1, 0))
         return full
 
     def _spectra_to_drives(self, spectra_active: np.ndarray) -> np.ndarray:
-        spectra = np.zeros((len(self.freqs), self.n_actuators), complex)
-        spectra[self._active] = spectra_active
-        return np.fft.irfft(spectra, self.n_samples, axis=0).T
+        """(n_actuators, F_active) drive spectra -> (n_actuators, n) drives."""
+        spectra = np.zeros((self.n_actuators, len(self.freqs)), complex)
+        spectra[:, self._active] = spectra_active
+        return np.fft.irfft(spectra, self.n_samples, axis=-1)
 
     def drives(self, targets: Any) -> np.ndarray:
         """Drives reproducing ``targets`` at the control points.
@@ -179,8 +183,8 @@ class InverseOperator:
         ndarray, shape (n_actuators, n)
         """
         targets = as_array(targets, "targets", ndim=2, shape=(len(self.control), self.n_samples))
-        spectra = np.fft.rfft(targets, axis=-1).T[self._active]  # (F_active, n_control)
-        return self._spectra_to_drives((self._matrix @ spectra[:, :, None])[:, :, 0])
+        spectra = np.fft.rfft(targets, axis=-1)[:, self._active]  # (n_control, F_active)
+        return self._spectra_to_drives(np.einsum("cqf,cf->qf", self._columns, spectra))
 
     def drives_for_point(self, point: int, waveform: Any) -> np.ndarray:
         """Drives putting ``waveform`` at one control point and zero at all the others.
@@ -199,13 +203,12 @@ class InverseOperator:
         -------
         ndarray, shape (n_actuators, n)
         """
-        point = int(as_indices(point, "point", self.n_points)[0])
-        where = np.flatnonzero(self.control == point)
-        if where.size == 0:
-            raise ValidationError(f"point {point} is not one of the operator's control points {self.control.tolist()}")
+        where = np.flatnonzero(self.control == point) if isinstance(point, (int, np.integer)) else ()
+        if isinstance(point, bool) or len(where) == 0:
+            raise ValidationError(f"point {point!r} is not one of the operator's control points {self.control.tolist()}")
         waveform = as_array(waveform, "waveform", ndim=1, shape=(self.n_samples,))
         spectrum = np.fft.rfft(waveform)[self._active]
-        return self._spectra_to_drives(self._matrix[:, :, where[0]] * spectrum[:, None])
+        return self._spectra_to_drives(self._columns[where[0]] * spectrum)
 
     def predict(self, drives: Any) -> np.ndarray:
         """Predicted response at every point of ``H`` (circular convolution through ``H``).
