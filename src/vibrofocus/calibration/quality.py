@@ -445,7 +445,9 @@ def assess_quality(
             "low_coherence", "warning",
             f"actuator {names[a]}: coherence below {t.coherence_min:g} over at least {t.coherence_share:.0%} "
             f"of the band at point(s) {'; '.join(parts)}; check the actuator's contact and the vibrometer "
-            "signal there, or add repeats",
+            "signal there, or add repeats"
+            + (f" (with {int(repeats_used.max())} repeats the coherence estimate itself is coarse: pure noise "
+               f"gives {1 / max(int(repeats_used.max()), 1):.2g} on average)" if repeats_used.max() < 4 else ""),
             actuator=int(a)))
     for a, parts in sorted(top_limited.items()):
         issues.append(QualityIssue(
