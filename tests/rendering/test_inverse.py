@@ -312,3 +312,27 @@ def test_rejects_bad_options(small_case):
         inverse_filter(H, targets, FS, max_drive=0)
     with pytest.raises(ValidationError, match="fs must be > 0"):
         inverse_filter(H, targets, -1.0)
+
+
+def test_odd_window_length(rng):
+    n = 1023  # n // 2 + 1 = 512 bins, the same count as n = 1022
+    H = random_medium(rng, n, 3, 3)
+    targets = rng.standard_normal((3, n))
+    drives = inverse_filter(H, targets, FS, check_wraparound=False)
+    assert drives.shape == (3, n)
+    assert_allclose(respond(H, drives), band_limited(targets), atol=1e-10 * np.abs(targets).max())
+    op = InverseOperator(H, FS, n_samples=n)
+    assert_allclose(op.drives(targets), drives, rtol=1e-10, atol=1e-12 * np.abs(drives).max())
+    with pytest.raises(ValidationError, match="n_samples implies n = 1000"):
+        InverseOperator(H, FS, n_samples=1000)
+
+
+def test_operator_bad_control(rng):
+    H = random_medium(rng, 256, 4, 2, length=8)
+    with pytest.raises(ValidationError, match="control holds indices outside the 4 points"):
+        InverseOperator(H, FS, control=[0, 4])
+    with pytest.raises(ValidationError, match="control holds repeated point indices"):
+        InverseOperator(H, FS, control=[1, 1])
+    op = InverseOperator(H, FS, control=[0, 2])
+    with pytest.raises(ValidationError, match=r"targets must have shape \(2, 256\)"):
+        op.drives(np.zeros((4, 256)))
