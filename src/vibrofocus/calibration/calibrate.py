@@ -10,7 +10,7 @@ import numpy as np
 
 from .._validation import check_band, check_choice
 from ..defaults import BAND_HZ, N_SAMPLES
-from ..errors import ValidationError, VibrofocusError
+from ..errors import SafetyError, ValidationError, VibrofocusError
 from ..layout import ArrayLayout
 from ..rendering.taper import band_taper
 from ..rigs.base import Rig
@@ -285,7 +285,13 @@ def calibrate(
     # Refuse an unsafe sweep before the first recording, not halfway through.
     probe = np.zeros((rig.layout.n_actuators, excitation.size))
     probe[a_idx[0]] = excitation
-    played = rig.check(probe)[a_idx[0]]
+    try:
+        played = rig.check(probe)[a_idx[0]]
+    except SafetyError as exc:
+        raise SafetyError(
+            f"the calibration sweep ({settings.amplitude_v:g} V peak, {settings.amplitude_v / np.sqrt(2):.3g} V RMS) "
+            f"breaks the {rig.kind} rig's limits, nothing was played: {exc}; lower amplitude_v"
+        ) from exc
 
     points_xy = rig.layout.points_xy[p_idx]
     labels = layout.point_labels
