@@ -179,3 +179,20 @@ def test_samples_flagged_by_the_rig_count_as_dropouts(layout, firs):
     truth = FIRRig(firs, layout).transfer(cal.n_fft)
     b = _band(cal.freqs)
     assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))
+
+
+def test_clipping_reported_by_the_rig_is_a_verdict(layout, firs):
+    class ReportingRig(FIRRig):
+        """Its converter clipped during one take of point 7 (invisible in displacement)."""
+
+        def _play_and_record(self, drive, points_xy, n_tail):
+            y = super()._play_and_record(drive, points_xy, n_tail)
+            self.last_clipped = np.arange(len(y)) == 6 if self.n_recordings == 5 else False
+            return y
+
+    cal = calibrate(ReportingRig(firs, layout), participant_id="P", sweep_s=0.5, repeats=2)
+    expected = np.zeros((13, 4), bool)
+    expected[6, 2] = True  # take 5 = actuator A3 (index 2), first repeat
+    np.testing.assert_array_equal(cal.quality.clipped, expected)
+    (issue,) = cal.quality.by_check("clipping")
+    assert "point 7 / A3" in issue.message and not cal.quality.ok

@@ -213,7 +213,10 @@ def calibrate(
     recorded. Vibrometer dropouts (NaN samples, or samples flagged in the rig's
     ``last_dropout_mask`` when it has one) exclude that recording of that point from the
     estimate, never patched over; a point that dropped out in every take is recorded
-    again (up to three times). The quality report says how many were left out. A rig that records any number of points at once (the simulated forearm)
+    again (up to three times). The quality report says how many were left out.
+    Clipping is detected in the recordings (a flat top, or the rig's ``sensor_range_m``)
+    and taken from the rig's ``last_clipped`` (bool, per recorded point or for all) when
+    it reports one. A rig that records any number of points at once (the simulated forearm)
     records all points in each take; a single-spot vibrometer
     (``rig.max_points_per_recording == 1``) is aimed by the operator at each point in
     turn, after ``prompt(point_label, point_xy)`` returns.
@@ -310,6 +313,8 @@ def calibrate(
     n_rec = settings.n_drive + settings.n_tail
     recordings = np.full((n_a, n_r, n_p, n_rec), np.nan)
     dropouts = np.zeros((n_p, n_a), dtype=int)
+    adc_clipped = np.zeros((n_p, n_a), dtype=bool)
+    current = [0]  # actuator being recorded, for record()
     total, done = len(groups) * n_a * n_r, 0
 
     def record(drive: np.ndarray, group: np.ndarray) -> np.ndarray:
@@ -323,6 +328,11 @@ def calibrate(
         flagged = getattr(rig, "last_dropout_mask", None)
         if isinstance(flagged, np.ndarray) and flagged.shape == y.shape and flagged.any():
             y = np.where(flagged, np.nan, y)
+        # Clipping at the sensor's converter may be invisible after the rig converts to
+        # displacement (a velocity decoder is integrated): a rig can report it.
+        rig_clipped = getattr(rig, "last_clipped", None)
+        if rig_clipped is not None:
+            adc_clipped[group, current[0]] |= np.broadcast_to(np.asarray(rig_clipped, bool), (len(group),))
         return y
 
     for group in groups:
@@ -330,6 +340,7 @@ def calibrate(
             for p in group:
                 prompt(labels[p], points_xy[p].copy())
         for a, channel in enumerate(a_idx):
+            current[0] = a
             drive = np.zeros((rig.layout.n_actuators, excitation.size))
             drive[channel] = excitation
             for r in range(n_r):
@@ -377,7 +388,7 @@ def calibrate(
 
     sensor_range = getattr(rig, "sensor_range_m", None)
     clipped = detect_clipping(recordings, clip_samples=(thresholds or QualityThresholds()).clip_samples,
-                              sensor_range_m=sensor_range).any(axis=1).T  # (P, A)
+                              sensor_range_m=sensor_range).any(axis=1).T | adc_clipped  # (P, A)
     quality = assess_quality(
         H, coherence, freqs, band, layout,
         snr_db=np.stack(snr, axis=1), noise_rms_m=np.stack(noise, axis=1), clipped=clipped,
