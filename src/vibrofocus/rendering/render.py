@@ -159,6 +159,7 @@ def render(
     form: str = "zero_mean",
     check_wraparound: bool | str = True,
     wraparound_tol: float = DEFAULT_WRAPAROUND_TOL,
+    calibrated_band: tuple[float, float] | None = None,
 ) -> Rendering:
     """Render a tap at a layout location with one of the methods of SPEC §2.
 
@@ -210,6 +211,9 @@ def render(
         CausalityError, warn, or skip).
     wraparound_tol : float
         Tolerated share of the response energy past the window.
+    calibrated_band : (float, float), optional
+        Band the calibration is valid in, Hz (``Calibration.band``); ``band`` must lie
+        inside it.
 
     Returns
     -------
@@ -227,6 +231,13 @@ def render(
     fs = check_positive(fs, "fs")
     n = samples_for(H.shape[0], n_samples)
     band = check_band(band, fs)
+    if calibrated_band is not None:
+        cal_low, cal_high = check_band(calibrated_band, fs, name="calibrated_band")
+        if band[0] < cal_low or band[1] > cal_high:
+            raise ValidationError(
+                f"band=({band[0]:g}, {band[1]:g}) Hz reaches outside the calibrated band "
+                f"({cal_low:g}, {cal_high:g}) Hz: H is not known there"
+            )
     limit_v = check_positive(limit_v, "limit_v")
     check_choice(on_limit, "on_limit", ("scale", "refuse"))
     check_choice(control, "control", CONTROL_SETS)
