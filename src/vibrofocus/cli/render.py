@@ -84,6 +84,8 @@ def render_command(
         typer.echo(f"wrote {out}: {drives.shape[0]} channels x {drives.shape[1]} samples at {cal.fs:g} Hz, "
                    f"peak {np.abs(drives).max():.3g} V"
                    + ("" if rendering.scale == 1.0 else f" (scaled by {rendering.scale:.3g} to the {limit:g} V limit)"))
+        typer.echo(f"predicted at location {location}: fidelity {predicted['fidelity']:.3f}, contrast "
+                   f"{predicted['contrast_db']:.1f} dB, target peak {rendering.reached_peak_m * 1e6:.3g} µm")
         if wav is not None:
             from scipy.io import wavfile
 
