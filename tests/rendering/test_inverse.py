@@ -336,3 +336,18 @@ def test_operator_bad_control(rng):
     op = InverseOperator(H, FS, control=[0, 2])
     with pytest.raises(ValidationError, match=r"targets must have shape \(2, 256\)"):
         op.drives(np.zeros((4, 256)))
+
+
+def test_weighted_operator_matches_weighted_pinv(rng):
+    n = 512
+    H = random_medium(rng, n, 5, 3)
+    weights = np.array([1.0, 0.2, 0.2, 3.0, 0.5])
+    targets = rng.standard_normal((5, n))
+    op = InverseOperator(H, FS, weights=weights)
+    # (W H)^+ W U per frequency, by the naive loop on the weighted problem.
+    expected = naive_pinv_design(H * weights[None, :, None], targets * weights[:, None])
+    assert_allclose(op.drives(targets), expected, atol=1e-9 * np.abs(expected).max())
+    with pytest.raises(ValidationError, match="weights must all be > 0"):
+        InverseOperator(H, FS, weights=[1, 1, 0, 1, 1])
+    with pytest.raises(ValidationError, match=r"weights must have shape \(5,\)"):
+        InverseOperator(H, FS, weights=[1, 1])

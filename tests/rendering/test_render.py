@@ -99,6 +99,18 @@ def test_reference_layout_least_squares_design_is_consistent(H_ref):
     assert list(all_points.control_indices) == [4, 0, 1, 2, 3, 5, 6, 7, 8, 9, 10, 11, 12]
 
 
+def test_lighter_guards_let_the_target_be_reached(H_ref):
+    # 5 x 4 least squares: lowering the guards' weight moves the solution toward the
+    # target at the guards' expense.
+    reached, guard_peak = [], []
+    for weight in (1.0, 0.3, 0.1, 0.01):
+        r = render("inverse", H_ref, FS, REF, 5, guard_weight=weight, limit_v=1e3)
+        reached.append(r.reached_peak_m)
+        guard_peak.append(np.abs(r.predicted[REF.guard_indices]).max())
+    assert np.all(np.diff(reached) > 0) and np.all(np.diff(guard_peak) > 0)
+    assert reached[-1] > 0.9 * 2e-6
+
+
 def test_window_too_short_raises_causality_error():
     # 120 ms of latency in a 2048-sample window whose target sits at 102 ms: the drive
     # would have to start before the window.

@@ -112,6 +112,10 @@ class InverseOperator:
         Default 1e-2 for the regularized designs; must be None for the plain one.
     taper_octaves : float
         Width of the raised-cosine roll-off outside each band edge, octaves.
+    weights : ndarray, shape (n_control,), optional
+        Positive weights ``w_c`` of the control points: the design minimizes
+        ``sum_c w_c^2 |H_c S - U_c|^2`` (then the smallest-norm ``S``), i.e. uses
+        ``(W H_c)^+ W``. Default: all 1, the plain ``H_c^+`` of SPEC §2.
 
     Attributes
     ----------
@@ -134,6 +138,7 @@ class InverseOperator:
         regularization: str | None = None,
         reg_param: float | None = None,
         taper_octaves: float = 0.5,
+        weights: Any = None,
     ) -> None:
         H, fs, n, band, taper, freqs, active = _prepare_design(as_transfer(H), fs, n_samples, band, taper_octaves)
         self.regularization, self.reg_param = check_regularization(regularization, reg_param)
@@ -142,11 +147,19 @@ class InverseOperator:
         self.freqs, self.taper, self._active = freqs, taper, active
         H_active = H[active][:, self.control, :]
         _check_in_band(H_active, freqs[active], band, " at the control points")
+        if weights is None:
+            self.weights = np.ones(len(self.control))
+        else:
+            self.weights = as_array(weights, "weights", ndim=1, shape=(len(self.control),))
+            if np.any(self.weights <= 0):
+                raise ValidationError(f"weights must all be > 0, got {self.weights.tolist()}")
+            H_active = H_active * self.weights[None, :, None]
         factors = SpectralPinv.factorize(H_active, self.regularization, self.reg_param)
         # Stored per control point, (n_control, n_actuators, F_active), contiguous along
         # frequency: retargeting one point then reads one contiguous block and its drive
         # spectra come out in the layout the inverse FFT wants.
-        self._columns = np.ascontiguousarray(np.transpose(factors.matrix() * taper[active, None, None], (2, 1, 0)))
+        weighted = factors.matrix() * (taper[active, None, None] * self.weights[None, None, :])
+        self._columns = np.ascontiguousarray(np.transpose(weighted, (2, 1, 0)))
         self.singular_values = np.zeros((len(freqs), factors.singular_values.shape[1]))
         self.singular_values[active] = factors.singular_values
 

@@ -160,6 +160,7 @@ def render(
     check_wraparound: bool | str = True,
     wraparound_tol: float = DEFAULT_WRAPAROUND_TOL,
     calibrated_band: tuple[float, float] | None = None,
+    guard_weight: float = 1.0,
 ) -> Rendering:
     """Render a tap at a layout location with one of the methods of SPEC §2.
 
@@ -214,6 +215,12 @@ def render(
     calibrated_band : (float, float), optional
         Band the calibration is valid in, Hz (``Calibration.band``); ``band`` must lie
         inside it.
+    guard_weight : float
+        Weight of the zero-displacement control points relative to the target in the
+        least-squares inverse designs (> 0). 1.0 (default) is the plain pseudo-inverse
+        of SPEC §2. With guards that sit close to the actuators, equal weights let the
+        guards' silence dominate and the target is reached only partly; a smaller weight
+        trades guard silence for target amplitude.
 
     Returns
     -------
@@ -243,6 +250,7 @@ def render(
     check_choice(control, "control", CONTROL_SETS)
     check_choice(check_wraparound, "check_wraparound", (True, False, "warn"))
     target_peak_m = check_positive(target_peak_m, "target_peak_m")
+    guard_weight = check_positive(guard_weight, "guard_weight")
     target_index = layout.location_index(location)
     duration = n / fs
     t0 = TARGET_FRACTION * duration if t0 is None else t0
@@ -267,8 +275,11 @@ def render(
         drives = time_reversal_drives(H[:, control_indices], targets, fs, max_drive=limit_v, band=band,
                                       taper_octaves=taper_octaves)
     else:
+        weights = np.full(len(control_indices), guard_weight)
+        weights[0] = 1.0
         operator = InverseOperator(H, fs, n_samples=n, control=control_indices, band=band,
-                                   regularization=regularization, reg_param=reg_param, taper_octaves=taper_octaves)
+                                   regularization=regularization, reg_param=reg_param, taper_octaves=taper_octaves,
+                                   weights=weights)
         # The operator applies the band taper itself: hand it the raw target waveform.
         if method == "combination":
             raw_target = combination_target(H, target_index, gains, stimulus, fs, band=None)
