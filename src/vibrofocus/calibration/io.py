@@ -207,7 +207,7 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
         what = "it is empty" if not head else f"it starts with {head!r}"
         raise _fail(path, f"is not a netCDF4/HDF5 calibration file ({what}, not the HDF5 signature)")
     try:
-        with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False) as ds:
+        with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False, phony_dims="access") as ds:
             ds = ds.load()
     except Exception as exc:  # h5py reports truncation as OSError, others as ValueError/KeyError
         raise _fail(path, f"is truncated or corrupt: the HDF5 library could not read it ({exc})") from exc
