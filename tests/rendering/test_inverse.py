@@ -294,7 +294,7 @@ def test_rejects_transfer_zero_inside_band(small_case):
     H, targets = small_case
     H = H.copy()
     H[10] = 0  # 10 * 10 kHz / 256 = 390.625 Hz
-    with pytest.raises(ValidationError, match=r"H is zero at 1 frequencies inside band.*390.625 Hz"):
+    with pytest.raises(ValidationError, match=r"H is zero at 1 frequency inside band.*390.625 Hz"):
         inverse_filter(H, targets, FS)
 
 

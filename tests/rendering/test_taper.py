@@ -26,3 +26,18 @@ def test_monotone_roll_off_and_brick_wall():
 def test_dc_is_zero_without_warnings():
     # pyproject turns RuntimeWarnings from vibrofocus into errors: log2(0) must be silent.
     assert band_taper(np.array([0.0]), (10.0, 1000.0))[0] == 0.0
+
+
+def test_bad_input():
+    import pytest
+
+    from vibrofocus.errors import ValidationError
+
+    with pytest.raises(ValidationError, match="band must satisfy 0 < low < high"):
+        band_taper(np.arange(10.0), (100.0, 10.0))
+    with pytest.raises(ValidationError, match="band must be a pair"):
+        band_taper(np.arange(10.0), 100.0)
+    with pytest.raises(ValidationError, match="taper_octaves must be >= 0"):
+        band_taper(np.arange(10.0), (1.0, 5.0), -1)
+    with pytest.raises(ValidationError, match="freqs contains"):
+        band_taper(np.array([np.nan]), (1.0, 5.0))

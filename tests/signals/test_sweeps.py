@@ -111,3 +111,10 @@ def test_bad_input():
         spectral_inverse(linear_sweep(FS), FS, 16384, (10, 6000))
     with pytest.raises(ValidationError, match="excitation contains"):
         spectral_inverse(np.full(10, np.nan), FS, 16, (10, 1000))
+
+
+def test_fades_bad_input():
+    with pytest.raises(ValidationError, match="fade_in_s must be >= 0"):
+        apply_fades(np.ones(10), FS, -0.1)
+    with pytest.raises(ValidationError, match="signal contains"):
+        apply_fades(np.array([np.inf]), FS, 0.1)

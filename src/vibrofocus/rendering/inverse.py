@@ -81,7 +81,8 @@ def _check_in_band(H_active: np.ndarray, freqs_active: np.ndarray, band: tuple[f
     zero = inside & ~np.any(H_active != 0, axis=(1, 2))
     if zero.any():
         raise ValidationError(
-            f"H is zero at {int(zero.sum())} frequencies inside band={band} Hz{what} (first at "
+            f"H is zero at {int(zero.sum())} {'frequency' if zero.sum() == 1 else 'frequencies'} inside "
+            f"band={band} Hz{what} (first at "
             f"{freqs_active[zero][0]:g} Hz): the transfer matrix is singular there; recalibrate or narrow the band"
         )
 

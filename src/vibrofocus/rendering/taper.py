@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._validation import as_array, check_positive
+from ..errors import ValidationError
+
 __all__ = ["band_taper"]
 
 
@@ -27,8 +30,14 @@ def band_taper(freqs: np.ndarray, band: tuple[float, float], taper_octaves: floa
     -------
     ndarray, shape (n_freqs,)
     """
-    f = np.asarray(freqs, dtype=float)
-    low, high = band
+    f = as_array(freqs, "freqs")
+    try:
+        low, high = (float(b) for b in band)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"band must be a pair (low_hz, high_hz), got {band!r}") from exc
+    if not 0 < low < high < np.inf:
+        raise ValidationError(f"band must satisfy 0 < low < high, got ({low:g}, {high:g}) Hz")
+    taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     w = ((f >= low) & (f <= high)).astype(float)
     if taper_octaves > 0:
         # log2(0) = -inf puts DC infinitely many octaves below the band (weight 0).

@@ -28,8 +28,10 @@ def apply_fades(signal: np.ndarray, fs: float, fade_in_s: float, fade_out_s: flo
     fade_in_s, fade_out_s : float
         Fade lengths, s; ``fade_out_s`` defaults to ``fade_in_s``.
     """
-    out = np.array(signal, dtype=float, copy=True)
-    fade_out_s = fade_in_s if fade_out_s is None else fade_out_s
+    out = as_array(signal, "signal").copy()
+    fs = check_positive(fs, "fs")
+    fade_in_s = check_positive(fade_in_s, "fade_in_s", allow_zero=True)
+    fade_out_s = fade_in_s if fade_out_s is None else check_positive(fade_out_s, "fade_out_s", allow_zero=True)
     n = out.shape[-1]
     m_in = min(int(round(fade_in_s * fs)), n // 2)
     m_out = min(int(round(fade_out_s * fs)), n // 2)
