@@ -1,5 +1,4 @@
 import numpy as np
-import pytest
 
 from vibrofocus.calibration import calibrate, detect_clipping
 
