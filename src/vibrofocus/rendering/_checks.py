@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_array, check_choice, check_in_range, check_positive
+from .._validation import as_array, check_choice, check_finite, check_in_range, check_positive
 from ..errors import ValidationError
 from ._pinv import REGULARIZATIONS
 
@@ -18,7 +18,13 @@ DEFAULT_REG_PARAM = {"tikhonov": 1e-2, "tsvd": 1e-2}
 
 def as_transfer(H: Any, name: str = "H") -> np.ndarray:
     """Complex transfer matrix, shape (n_freqs, n_points, n_actuators), finite, non-zero."""
-    arr = as_array(H, name, ndim=3, dtype="complex")
+    arr = as_array(H, name, ndim=3, dtype="complex", finite=False)
+    # One summing pass instead of an elementwise mask over a large array; the detailed
+    # check (which says where) runs only when the sum is not finite.
+    with np.errstate(over="ignore", invalid="ignore"):
+        total = arr.sum()
+    if not np.isfinite(total):
+        check_finite(arr, name)
     if arr.size == 0:
         raise ValidationError(f"{name} is empty (shape {arr.shape}); a transfer matrix needs frequencies, points and actuators")
     if arr.shape[0] < 2:
