@@ -20,11 +20,7 @@ PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 @pytest.fixture(scope="module")
 def cli_run(tmp_path_factory):
     """Run ``vibrofocus analyze`` once on a synthetic file with planted effects."""
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from conftest import make_trials
+    from .synthetic import make_trials
 
     tmp = tmp_path_factory.mktemp("cli")
     df = make_trials(
