@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 from vibrofocus.errors import CausalityError, ValidationError
 from vibrofocus.rendering import check_wraparound, wraparound_fraction
 
-from _media import FS, delay_gain_medium
+from ._media import FS, delay_gain_medium
 
 
 def impulse(n, k, amplitude=1.0):

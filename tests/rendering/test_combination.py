@@ -8,7 +8,7 @@ from vibrofocus import ricker
 from vibrofocus.errors import ValidationError
 from vibrofocus.rendering import band_taper, combination_target
 
-from _media import FS, delay_gain_medium
+from ._media import FS, delay_gain_medium
 
 
 def test_pure_delay_paths_sum_shifted_scaled_stimuli():

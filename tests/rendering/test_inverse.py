@@ -11,7 +11,7 @@ from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
 from vibrofocus.rendering import DriveScaledWarning, band_taper
 from vibrofocus.signals import ricker
 
-from _media import FS, delay_gain_medium, fir_medium, random_fir_taps
+from ._media import FS, delay_gain_medium, fir_medium, random_fir_taps
 
 BAND = (10.0, 1000.0)
 

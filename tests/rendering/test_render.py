@@ -8,7 +8,7 @@ from vibrofocus import ArrayLayout, Rendering, funneling_gains, render, ricker
 from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
 from vibrofocus.rendering import band_taper
 
-from _media import FS, layout_medium
+from ._media import FS, layout_medium
 
 N = 4096
 REF = ArrayLayout.reference()

@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 from vibrofocus.errors import ValidationError
 from vibrofocus.rendering import band_taper, time_reversal_drives
 
-from _media import FS, delay_gain_medium
+from ._media import FS, delay_gain_medium
 
 
 def test_pure_delays_are_reversed_in_time():
