@@ -69,9 +69,11 @@ def _prepare_design(H: np.ndarray, fs: Any, n: int | None, band: Any, taper_octa
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     freqs = np.fft.rfftfreq(n, 1 / fs)
     taper = band_taper(freqs, (low, high), taper_octaves)
-    active = np.flatnonzero(taper > 0)
-    if active.size == 0:
+    nonzero = np.flatnonzero(taper > 0)
+    if nonzero.size == 0:
         raise ValidationError(f"band=({low:g}, {high:g}) Hz holds no frequency of the {n}-sample grid at fs={fs:g} Hz")
+    # The taper's support is one run of bins: a slice selects it from H without a copy.
+    active = slice(int(nonzero[0]), int(nonzero[-1]) + 1)
     return H, fs, n, (low, high), taper, freqs, active
 
 
