@@ -351,3 +351,20 @@ def test_weighted_operator_matches_weighted_pinv(rng):
         InverseOperator(H, FS, weights=[1, 1, 0, 1, 1])
     with pytest.raises(ValidationError, match=r"weights must have shape \(5,\)"):
         InverseOperator(H, FS, weights=[1, 1])
+
+
+@settings(max_examples=15, deadline=None, derandomize=True)
+@given(seed=st.integers(0, 2**32 - 1), n_points=st.integers(1, 7), n_actuators=st.integers(1, 5),
+       regularization=st.sampled_from([None, "tikhonov", "tsvd"]), shift=st.integers(-100, 100))
+def test_operator_equals_design_and_designs_are_shift_covariant(seed, n_points, n_actuators, regularization, shift):
+    rng = np.random.default_rng(seed)
+    n = 256
+    H = random_medium(rng, n, n_points, n_actuators, length=12)
+    targets = rng.standard_normal((n_points, n))
+    kw = dict(regularization=regularization, reg_param=None if regularization is None else 0.05)
+    drives = inverse_filter(H, targets, FS, check_wraparound=False, **kw)
+    op = InverseOperator(H, FS, **kw)
+    assert_allclose(op.drives(targets), drives, rtol=1e-10, atol=1e-12 * np.abs(drives).max())
+    # A linear time-invariant design: delaying the targets (circularly) delays the drives.
+    shifted = inverse_filter(H, np.roll(targets, shift, axis=1), FS, check_wraparound=False, **kw)
+    assert_allclose(shifted, np.roll(drives, shift, axis=1), atol=1e-10 * np.abs(drives).max())
