@@ -162,5 +162,9 @@ def test_bad_input(H_ref):
         render("inverse", np.zeros_like(H_ref), FS, REF, 1)
     with pytest.raises(ValidationError, match=r"band=\(5, 1000\) Hz reaches outside the calibrated band \(10, 1000\)"):
         render("inverse", H_ref, FS, REF, 1, band=(5, 1000), calibrated_band=(10, 1000))
+    with pytest.raises(ValidationError, match="regularization must be one of"):
+        render("funneling", H_ref, FS, REF, 1, regularization="lasso")
+    with pytest.raises(ValidationError, match="guard_weight must be > 0"):
+        render("inverse", H_ref, FS, REF, 1, guard_weight=0)
     with pytest.raises(ValidationError, match="control must be one of"):
         render("inverse", H_ref, FS, REF, 1, control="none")

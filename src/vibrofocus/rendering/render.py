@@ -20,7 +20,7 @@ from ..defaults import (
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from ..signals.ricker import ricker
-from ._checks import as_transfer, samples_for
+from ._checks import as_transfer, check_regularization, samples_for
 from .causality import DEFAULT_WRAPAROUND_TOL, check_wraparound as _check_wraparound
 from .combination import combination_target
 from .funneling import funneling_gains
@@ -251,6 +251,7 @@ def render(
     check_choice(check_wraparound, "check_wraparound", (True, False, "warn"))
     target_peak_m = check_positive(target_peak_m, "target_peak_m")
     guard_weight = check_positive(guard_weight, "guard_weight")
+    regularization, reg_param = check_regularization(regularization, reg_param)
     target_index = layout.location_index(location)
     duration = n / fs
     t0 = TARGET_FRACTION * duration if t0 is None else t0
