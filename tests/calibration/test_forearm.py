@@ -72,6 +72,19 @@ def test_designs_from_the_estimate_focus_like_designs_from_the_truth(forearm_cal
         assert fid[0] == pytest.approx(fid[1], abs=0.02)
 
 
+def test_default_inverse_design_from_the_estimate_reaches_fidelity_0_9_everywhere(forearm_calibration):
+    # The requirement, through the rendering layer's defaults (target and guards,
+    # guards weighted down) as every user of ``render`` gets them, played on the noisy arm.
+    rig, cal = forearm_calibration
+    H_est = cal.transfer_for(4096)
+    for location in rig.layout.location_numbers:
+        r = render("inverse", H_est, cal.fs, cal.layout, location, limit_v=rig.limits.peak_v)
+        y = play_clean(rig, r.drives)
+        fidelity = focus_metrics(y, r.target_index, r.desired, rig.fs)["fidelity"]
+        print(f"location {location}: inverse fidelity {fidelity:.3f}")
+        assert fidelity >= 0.9
+
+
 def test_target_only_inverse_from_the_estimate_reaches_fidelity_0_9_everywhere(forearm_calibration):
     rig, cal = forearm_calibration
     n = 4096

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vibrofocus import SimulatedForearm
-from vibrofocus.demo import design_transfer, record_clean, run_demo, summarize
+from vibrofocus.demo import model_transfer, record_clean, run_demo, summarize
 from vibrofocus.demo.run import ROW_KEYS
 from vibrofocus.errors import ValidationError
 
@@ -25,10 +25,10 @@ def test_rows_cover_every_location_and_method(quiet_result):
         assert row["peak_drive_v"] <= 10.0 + 1e-9
 
 
-def test_design_transfer_is_the_rigs_truth_at_the_layout_points():
+def test_model_transfer_is_the_rigs_truth_at_the_layout_points():
     rig = SimulatedForearm(seed=2)
     n = 512
-    h = design_transfer(rig, n)
+    h = model_transfer(rig, n)
     assert h.shape == (n // 2 + 1, rig.layout.n_points, rig.layout.n_actuators)
     f = np.fft.rfftfreq(n, 1 / rig.fs)
     np.testing.assert_array_equal(h[7], rig.transfer(rig.layout.points_xy, f[7:8])[0])

@@ -89,18 +89,21 @@ def test_limit_scales_or_refuses(H_square):
     assert_allclose(funnel.scale, 1.0 / 2.5, rtol=1e-12)
 
 
-def test_reference_layout_least_squares_design_is_consistent(H_ref):
-    # 5 control points (target + 4 guards), 4 actuators: the least-squares design. Its
-    # residual at the control points is orthogonal to the range of H_c at every
-    # frequency of the band: H_c^H (H_c S - U_c) = 0 (the normal equations).
-    r = render("inverse", H_ref, FS, REF, 5, limit_v=1e3)
+@pytest.mark.parametrize("guard_weight", [1.0, 0.1])
+def test_reference_layout_least_squares_design_is_consistent(H_ref, guard_weight):
+    # 5 control points (target + 4 guards), 4 actuators: the (weighted) least-squares
+    # design. With W = diag(1, w, w, w, w), its residual at the control points satisfies
+    # the weighted normal equations H_c^H W^2 (H_c S - U_c) = 0 at every frequency of
+    # the band; w = 1 is the paper's plain pseudo-inverse.
+    r = render("inverse", H_ref, FS, REF, 5, limit_v=1e3, guard_weight=guard_weight)
     assert list(r.control_indices) == [4, 9, 10, 11, 12]
     Hc = H_ref[:, r.control_indices, :]
+    w2 = np.array([1.0] + [guard_weight**2] * 4)
     wanted = np.zeros((5, N))
     wanted[0] = r.desired
     residual = np.fft.rfft(r.predicted[r.control_indices] - wanted, axis=-1).T  # (F, 5)
-    normal = np.einsum("fcq,fc->fq", Hc.conj(), residual)
-    scale = np.abs(np.einsum("fcq,fc->fq", Hc.conj(), np.fft.rfft(wanted, axis=-1).T)).max()
+    normal = np.einsum("fcq,fc->fq", Hc.conj(), w2 * residual)
+    scale = np.abs(np.einsum("fcq,fc->fq", Hc.conj(), w2 * np.fft.rfft(wanted, axis=-1).T)).max()
     assert np.abs(normal).max() < 1e-9 * scale
     assert np.abs(residual).max() > 1e-3 * np.abs(np.fft.rfft(r.desired)).max()  # not met exactly
     all_points = render("inverse", H_ref, FS, REF, 5, control="all", regularization="tikhonov")

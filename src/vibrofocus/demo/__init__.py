@@ -1,6 +1,6 @@
 """The ``vibrofocus demo``: every rendering method at every location on the simulated
 forearm, with focus metrics and figures."""
 
-from .run import DemoResult, design_transfer, record_clean, run_demo, summarize
+from .run import DemoResult, calibrated_transfer, model_transfer, record_clean, run_demo, summarize
 
-__all__ = ["DemoResult", "design_transfer", "record_clean", "run_demo", "summarize"]
+__all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "record_clean", "run_demo", "summarize"]

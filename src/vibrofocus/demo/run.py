@@ -1,8 +1,8 @@
 """The demo: every rendering method at every location, played on the simulated forearm.
 
-The transfer matrix used for the designs comes from one function,
-:func:`design_transfer`; it is the simulator's true transfer for now, and a measured
-calibration replaces it without touching the rest.
+The transfer matrix used for the designs comes from one callable ``transfer(rig, n)``:
+by default a measured calibration (:func:`calibrated_transfer`), as a user would work,
+or the simulator's exact transfer (:func:`model_transfer`) for comparison.
 """
 
 from __future__ import annotations
@@ -18,14 +18,14 @@ from ..defaults import METHODS, N_SAMPLES
 from ..errors import ValidationError
 from ..rigs.base import Rig
 
-__all__ = ["DemoResult", "design_transfer", "run_demo", "record_clean", "summarize"]
+__all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "run_demo", "record_clean", "summarize"]
 
 #: Metrics every result row carries (SPEC §8 contract of ``--json``).
 ROW_KEYS = ("location", "method", "fidelity", "contrast_db", "peak_drive_v", "target_peak_m")
 
 
-def design_transfer(rig: Rig, n: int) -> np.ndarray:
-    """The transfer matrix the demo designs with, on ``rfftfreq(n, 1 / rig.fs)``.
+def model_transfer(rig: Rig, n: int) -> np.ndarray:
+    """The simulator's exact transfer matrix on ``rfftfreq(n, 1 / rig.fs)``.
 
     Parameters
     ----------
@@ -41,8 +41,8 @@ def design_transfer(rig: Rig, n: int) -> np.ndarray:
 
     Notes
     -----
-    This is the one place where the demo obtains ``H``. It is the simulator's exact
-    transfer here; a measured calibration (``Calibration.transfer_for(n)``) drops in.
+    Only a model rig knows its true transfer; designing from it shows what a perfect
+    calibration would give. A user designs from a measured one (:func:`calibrated_transfer`).
     """
     transfer = getattr(rig, "transfer", None)
     if transfer is None:
@@ -95,13 +95,30 @@ class DemoResult:
     H: np.ndarray = field(repr=False)
 
 
+def calibrated_transfer(calibration) -> Callable[[Rig, int], np.ndarray]:
+    """A ``transfer(rig, n)`` callable that designs from a measured calibration.
+
+    Parameters
+    ----------
+    calibration : vibrofocus.calibration.Calibration
+        Measured on the rig the demo plays on, over ``rig.layout.points_xy``.
+    """
+
+    def transfer(rig: Rig, n: int) -> np.ndarray:
+        if calibration.layout != rig.layout:
+            raise ValidationError("the calibration was measured on another layout than the rig's")
+        return calibration.transfer_for(n)
+
+    return transfer
+
+
 def run_demo(
     rig: Rig,
     *,
     methods: Sequence[str] = METHODS,
     locations: Sequence[int] | None = None,
     n_samples: int = N_SAMPLES,
-    transfer: Callable[[Rig, int], np.ndarray] = design_transfer,
+    transfer: Callable[[Rig, int], np.ndarray] = model_transfer,
     progress: Callable[[str], None] | None = None,
 ) -> DemoResult:
     """Render every method at every location, play it and measure how well it focuses.
@@ -117,7 +134,8 @@ def run_demo(
     n_samples : int
         Design window, samples.
     transfer : callable
-        ``transfer(rig, n) -> H``; default :func:`design_transfer`.
+        ``transfer(rig, n) -> H``; default :func:`model_transfer`; pass
+        :func:`calibrated_transfer` to design from a measurement.
     progress : callable, optional
         Called with a short label after each (location, method).
 

@@ -31,6 +31,8 @@ from .time_reversal import time_reversal_drives
 
 __all__ = ["Rendering", "render", "CONTROL_SETS"]
 
+#: Default weight of the quiet control points against the target (see ``render``).
+DEFAULT_GUARD_WEIGHT = 0.1
 #: Which points a design constrains besides the target: ``"guards"`` (SPEC §2: the
 #: target and the guard points) or ``"all"`` (every other calibrated point held at zero).
 CONTROL_SETS = ("guards", "all")
@@ -160,7 +162,7 @@ def render(
     check_wraparound: bool | str = True,
     wraparound_tol: float = DEFAULT_WRAPAROUND_TOL,
     calibrated_band: tuple[float, float] | None = None,
-    guard_weight: float = 1.0,
+    guard_weight: float = DEFAULT_GUARD_WEIGHT,
 ) -> Rendering:
     """Render a tap at a layout location with one of the methods of SPEC §2.
 
@@ -217,10 +219,14 @@ def render(
         inside it.
     guard_weight : float
         Weight of the zero-displacement control points relative to the target in the
-        least-squares inverse designs (> 0). 1.0 (default) is the plain pseudo-inverse
-        of SPEC §2. With guards that sit close to the actuators, equal weights let the
-        guards' silence dominate and the target is reached only partly; a smaller weight
-        trades guard silence for target amplitude.
+        least-squares inverse designs (> 0). ``1.0`` is the plain pseudo-inverse of the
+        method's source paper (SPEC §2). With four actuators, the target and four guards
+        are five equations for four unknowns; the guards sit 6 mm from the actuators and
+        couple far more strongly than the target, so with equal weights the fit keeps
+        them quiet at the target's expense: on the simulated forearm the tap keeps only
+        fidelity 0.63-0.85 and about 5 % of the asked amplitude. The default
+        ``DEFAULT_GUARD_WEIGHT = 0.1`` weights the target's waveform first (fidelity
+        0.95-0.99 from a measured calibration) and still pushes the guards down.
 
     Returns
     -------
