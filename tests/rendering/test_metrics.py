@@ -48,6 +48,20 @@ def test_inverted_and_delayed():
     assert np.isnan(m["contrast_db"])  # a single point has nothing to contrast with
 
 
+def test_shape_fidelity_finds_a_late_copy_and_its_lag():
+    desired = ricker(FS, SIGMA, N / FS)
+    delay = 97  # samples
+    late = 0.3 * np.roll(desired, delay)
+    m = focus_metrics(late[None], 0, desired, FS)
+    assert abs(m["fidelity"]) < 0.05  # zero lag barely overlaps a copy 9.7 sigma late
+    assert_allclose(m["shape_fidelity"], 1.0, rtol=1e-9)
+    assert_allclose(m["shape_lag_s"], delay / FS, rtol=1e-12)
+    # A different shape stays below 1 at every lag: the Ricker's derivative is orthogonal
+    # to it at zero lag and still unlike it at its best lag.
+    other = np.gradient(desired)
+    assert focus_metrics(other[None], 0, desired, FS)["shape_fidelity"] < 0.9
+
+
 def test_fidelity_is_scale_invariant_and_band_option_filters_desired():
     desired = ricker(FS, SIGMA, N / FS, form="printed")  # non-zero mean: DC removed by the band
     band_limited = focus_metrics(desired[None] * 3, 0, desired, FS, band=(10, 1000))

@@ -124,20 +124,25 @@ def demo_command(
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
         table = Table(title=f"Focus metrics, designed from {source}, measured on the arm (noise on)")
-        for col in ("loc", "method", "fidelity", "contrast dB", "drive V", "target µm", "scaled"):
+        table.caption = "* designs scaled down to the drive limit"
+        for col in ("loc", "method", "fidelity", "shape", "contrast dB", "drive V", "target µm"):
             table.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
         for row in result.rows:
             table.add_row(
-                str(row["location"]), row["method"], _fmt(row["fidelity"]), _fmt(row["contrast_db"], 1),
-                _fmt(row["peak_drive_v"], 1), _fmt(row["target_peak_m"] * 1e6, 3),
-                "" if row["scale"] >= 1 else f"x{row['scale']:.2f}",
+                str(row["location"]), row["method"], _fmt(row["fidelity"]), _fmt(row["shape_fidelity"]),
+                _fmt(row["contrast_db"], 1),
+                _fmt(row["peak_drive_v"], 1) + (" " if row["scale"] >= 1 else "*"), _fmt(row["target_peak_m"] * 1e6, 3),
             )
         console.print(table)
-        med = Table(title="Median over locations")
-        for col in ("method", "fidelity", "contrast dB", "target peak µm", "peak drive V"):
+        med = Table(
+            title="Median over locations",
+            caption="fidelity: correlation with the desired tap at its time; shape: at the best lag "
+            "(funneling arrives late)",
+        )
+        for col in ("method", "fidelity", "shape", "contrast dB", "target µm", "drive V"):
             med.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
         for method, values in summary.items():
-            med.add_row(method, _fmt(values["fidelity"]), _fmt(values["contrast_db"], 1),
+            med.add_row(method, _fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
                         _fmt(values["target_peak_m"] * 1e6, 3), _fmt(values["peak_drive_v"], 1))
         console.print(med)
         for path in paths:

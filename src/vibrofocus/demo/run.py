@@ -171,6 +171,8 @@ def run_demo(
             row.update({k: float(measured[k]) for k in ("fidelity", "contrast_db", "peak_drive_v", "target_peak_m")})
             row.update(
                 compactness=float(measured.get("compactness", np.nan)),
+                shape_fidelity=float(measured["shape_fidelity"]),
+                shape_lag_s=float(measured["shape_lag_s"]),
                 contrast_all_points_db=float(every["contrast_db"]),
                 predicted_fidelity=float(predicted["fidelity"]),
                 predicted_contrast_db=float(predicted["contrast_db"]),
@@ -186,12 +188,12 @@ def run_demo(
 
 
 def summarize(rows: Sequence[dict]) -> dict[str, dict[str, float]]:
-    """Median fidelity, contrast, target peak and peak drive per method."""
+    """Median fidelity, shape fidelity, contrast, target peak and peak drive per method."""
     out: dict[str, dict[str, float]] = {}
     for method in dict.fromkeys(r["method"] for r in rows):
         sub = [r for r in rows if r["method"] == method]
         out[method] = {
             key: float(np.nanmedian([r[key] for r in sub]))
-            for key in ("fidelity", "contrast_db", "target_peak_m", "peak_drive_v")
+            for key in ("fidelity", "shape_fidelity", "contrast_db", "target_peak_m", "peak_drive_v")
         }
     return out

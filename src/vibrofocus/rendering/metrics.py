@@ -5,6 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from scipy.signal import correlate
 
 from .._validation import as_array, check_band, check_index, check_positive
 from ..defaults import SIGMA_S
@@ -67,6 +68,11 @@ def focus_metrics(
         ``peak_time_s``: time of the peak ``|u|`` at the target; ``timing_error_s``: that
         minus ``t0``.
         ``relative_error``: ``||u_t - d|| / ||d||`` (NaN if ``d`` is silent).
+        ``shape_fidelity``: the largest normalized cross-correlation of ``u_t`` with
+        ``d`` over all lags, and ``shape_lag_s`` the lag where it occurs (positive when
+        ``u_t`` is late). Zero-lag ``fidelity`` scores a waveform that arrives late as
+        poor even when its shape is right (funneling travels from the actuators and
+        arrives several ms after ``t0``); this pair tells shape and timing apart.
     """
     response = as_array(response, "response", ndim=2)
     n_points, n = response.shape
@@ -119,6 +125,13 @@ def focus_metrics(
     window = np.abs(np.arange(n) - t0 * fs) <= 2 * sigma * fs * (1 + 1e-9)
     energy = float(np.sum(achieved**2))
     compactness = float(np.sum(achieved[window] ** 2) / energy) if energy > 0 else float("nan")
+    if silent:
+        shape_fidelity, shape_lag = float("nan"), float("nan")
+    else:
+        xcorr = correlate(achieved, desired, mode="full", method="fft")
+        best = int(np.argmax(xcorr))
+        shape_fidelity = float(xcorr[best] / (norm_achieved * norm_desired))
+        shape_lag = (best - (n - 1)) / fs
     peak_time = float(np.argmax(np.abs(achieved))) / fs
     error = float(np.linalg.norm(achieved - desired) / norm_desired) if norm_desired > 0 else float("nan")
     return {
@@ -130,4 +143,6 @@ def focus_metrics(
         "peak_time_s": peak_time,
         "timing_error_s": peak_time - t0,
         "relative_error": error,
+        "shape_fidelity": shape_fidelity,
+        "shape_lag_s": shape_lag,
     }
