@@ -124,3 +124,13 @@ def test_dead_and_reversed_actuators_on_the_simulated_arm_are_flagged():
     (issue,) = dead_cal.quality.by_check("dead_actuator")
     assert issue.actuator == 1 and "A2 looks dead" in issue.message
     assert dead_cal.quality.by_check("reversed_actuator") == []
+
+
+def test_strap_forces_are_stored_with_the_calibration(forearm_calibration, tmp_path):
+    from vibrofocus.calibration import load_calibration, save_calibration
+
+    rig, cal = forearm_calibration
+    assert cal.straps is not None
+    np.testing.assert_allclose(cal.straps["forces_n"], rig.read_strap_forces(), rtol=1e-12)
+    loaded = load_calibration(save_calibration(cal, tmp_path / "with_straps.nc"))
+    assert loaded.straps == cal.straps

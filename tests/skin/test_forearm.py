@@ -242,3 +242,18 @@ def test_waves_come_back_around_the_arm_at_low_frequencies_only():
     np.testing.assert_allclose(h_cyl[1], h_flat[1], rtol=1e-6)
     # At 30 Hz (7 Np/m) the wave that went round the arm adds a sizeable contribution.
     assert abs(h_cyl[0] - h_flat[0]) > 0.1 * abs(h_flat[0])
+
+
+def test_simulated_strap_forces_follow_contact_and_the_seed():
+    from vibrofocus.rigs.force import check_straps
+
+    rig = SimulatedForearm(seed=4)
+    forces = rig.read_strap_forces()
+    assert forces.shape == (rig.layout.n_actuators,)
+    np.testing.assert_array_equal(forces, SimulatedForearm(seed=4).read_strap_forces())
+    assert not np.array_equal(forces, SimulatedForearm(seed=5).read_strap_forces())
+    # F = 1 N (0.6 + 0.4 contact) within the 0.03 N scatter (4 SD)
+    expected = 0.6 + 0.4 * np.asarray(rig.participant.contact)
+    np.testing.assert_allclose(forces, expected, atol=0.12)
+    reading = check_straps(rig)
+    assert reading.simulated and reading.target_n == 1.0

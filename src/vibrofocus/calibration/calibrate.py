@@ -59,6 +59,9 @@ class Calibration:
         Stored in single precision (about 0.1 ppm of the signal, far below sensor noise).
     rig : dict
         ``rig.describe()`` at calibration time.
+    straps : dict or None
+        Strap force reading taken just before the sweeps (``StrapReading.to_dict()``:
+        forces in N against the 1 N target), for rigs with strap sensors; else None.
     sweep : SweepSettings
     created : str
         ISO 8601 time (UTC) of the calibration.
@@ -83,6 +86,7 @@ class Calibration:
     created: str = field(default_factory=lambda: _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"))
     software_version: str = field(default_factory=lambda: _software_version())
     schema_version: int = SCHEMA_VERSION
+    straps: dict | None = None
 
     @property
     def n_fft(self) -> int:
@@ -398,6 +402,15 @@ def calibrate(
     return Calibration(
         H=H, freqs=freqs, fs=fs, coherence=coherence, layout=layout, band=band,
         participant_id=participant_id, method=method, quality=quality, drives=drives,
-        recordings=recordings, rig=rig.describe(), sweep=settings,
+        recordings=recordings, rig=rig.describe(), sweep=settings, straps=_read_straps(rig),
     )
+
+
+def _read_straps(rig: Rig) -> dict | None:
+    """The strap force reading of rigs that have strap sensors (stored with the calibration)."""
+    if getattr(rig, "read_strap_forces", None) is None:
+        return None
+    from ..rigs.force import check_straps
+
+    return check_straps(rig).to_dict()
 

@@ -118,6 +118,8 @@ def _to_dataset(cal: Calibration):
         "quality_issues": json.dumps([i.to_dict() for i in q.issues]),
         "quality_thresholds": json.dumps(q.thresholds.to_dict()),
     }
+    if cal.straps is not None:
+        attrs["strap_forces"] = json.dumps(cal.straps)
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
@@ -244,6 +246,7 @@ def _from_dataset(ds, path: Path) -> Calibration:
         sweep = SweepSettings.from_dict(json.loads(attrs["sweep"]))
         issues = [QualityIssue.from_dict(d) for d in json.loads(attrs["quality_issues"])]
         thresholds = QualityThresholds(**json.loads(attrs["quality_thresholds"]))
+        straps = json.loads(attrs["strap_forces"]) if "strap_forces" in attrs else None
     except (ValueError, TypeError, KeyError) as exc:  # JSONDecodeError is a ValueError
         raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
 
@@ -331,4 +334,5 @@ def _from_dataset(ds, path: Path) -> Calibration:
         layout=layout, band=band, participant_id=str(attrs["participant_id"]), method=str(attrs["method"]),
         quality=quality, drives=drive, recordings=ds["recording"].values, rig=rig, sweep=sweep,
         created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
+        straps=straps,
     )

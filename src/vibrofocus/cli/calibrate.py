@@ -45,6 +45,10 @@ def calibrate_command(
         if not out.parent.exists():
             raise ValidationError(f"--out {out}: the folder {out.parent} does not exist")
         with make_rig(rig, config=rig_config, seed=seed) as r:
+            if getattr(r, "read_strap_forces", None) is not None:
+                from ..rigs.force import check_straps
+
+                console.print(f"strap forces: {check_straps(r).message}", highlight=False)
             single_spot = r.max_points_per_recording is not None
             if single_spot and yes:
                 raise ValidationError(

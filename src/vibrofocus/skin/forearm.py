@@ -371,6 +371,23 @@ class SimulatedForearm(Rig):
         return out
 
     # ------------------------------------------------------------------ Rig backend
+    def read_strap_forces(self) -> np.ndarray:
+        """Simulated strap force sensors, one per actuator strap, N.
+
+        A model, not a measurement: a strap tightened to the 1 N target reads close to it
+        where the actuator sits flat, and less where the arm narrows under it (partial
+        contact), ``F = 1 N * (0.6 + 0.4 * contact)``, plus a seeded reading scatter of
+        0.03 N. Used by ``vibrofocus straps`` and stored with each calibration, as the
+        force-sensing resistors of a real rig are.
+
+        Returns
+        -------
+        ndarray, shape (n_actuators,)
+        """
+        contact = np.asarray(self.participant.contact, dtype=float)
+        scatter = np.random.default_rng([self.participant.seed or 0, 7919]).normal(0.0, 0.03, contact.shape)
+        return 1.0 * (0.6 + 0.4 * contact) + scatter
+
     def _play(self, drive: np.ndarray) -> None:
         self.last_drive = np.array(drive, copy=True)
         self.n_played += 1
