@@ -85,7 +85,7 @@ def demo_command(
                     "method": cal.method,
                     "median_relative_error": _relative_error_to_model(rig, cal),
                     "quality_ok": bool(cal.quality.ok),
-                    "quality_issues": [str(issue) for issue in cal.quality.issues],
+                    "quality_issues": [f"{issue.severity}: {issue.message}" for issue in cal.quality.issues],
                 }
             task = progress.add_task("rendering and playing", total=total)
             result = run_demo(rig, transfer=transfer,
