@@ -62,6 +62,16 @@ def test_shape_fidelity_finds_a_late_copy_and_its_lag():
     assert focus_metrics(other[None], 0, desired, FS)["shape_fidelity"] < 0.9
 
 
+def test_a_recording_with_a_decay_tail_is_compared_with_the_padded_design():
+    desired = ricker(FS, SIGMA, N / FS)
+    tail = 500
+    recorded = np.concatenate([desired, np.zeros(tail)])[None]
+    m = focus_metrics(recorded, 0, desired, FS, drives=np.ones((2, N)))
+    assert_allclose(m["fidelity"], 1.0, rtol=1e-12)
+    with pytest.raises(ValidationError, match="desired has 4096 samples, more than the 4000"):
+        focus_metrics(recorded[:, :4000], 0, desired, FS)
+
+
 def test_fidelity_is_scale_invariant_and_band_option_filters_desired():
     desired = ricker(FS, SIGMA, N / FS, form="printed")  # non-zero mean: DC removed by the band
     band_limited = focus_metrics(desired[None] * 3, 0, desired, FS, band=(10, 1000))
@@ -86,8 +96,10 @@ def test_bad_input():
     desired = ricker(FS, SIGMA, N / FS)
     with pytest.raises(ValidationError, match="target_index=3 is outside the 2 points"):
         focus_metrics(np.zeros((2, N)), 3, desired, FS)
-    with pytest.raises(ValidationError, match="desired must have shape"):
-        focus_metrics(np.zeros((2, N)), 0, desired[:-1], FS)
+    with pytest.raises(ValidationError, match="desired has 4096 samples, more than the 4095"):
+        focus_metrics(np.zeros((2, N - 1)), 0, desired, FS)
+    with pytest.raises(ValidationError, match="desired must have 1 dimension"):
+        focus_metrics(np.zeros((2, N)), 0, desired[None], FS)
     with pytest.raises(ValidationError, match="response contains"):
         focus_metrics(np.full((2, N), np.nan), 0, desired, FS)
     with pytest.raises(ValidationError, match="drives must have 4096 samples"):

@@ -36,8 +36,10 @@ def focus_metrics(
         Displacement at every point (predicted or measured), m.
     target_index : int
         Row of ``response`` of the target point.
-    desired : ndarray, shape (n,)
-        Desired target waveform, m.
+    desired : ndarray, shape (n_desired,)
+        Desired target waveform, m, ``n_desired <= n``. A shorter waveform (the design
+        window, when ``response`` is a recording with a decay tail) is zero-padded at
+        the end.
     fs : float
         Sample rate, Hz.
     t0 : float, optional
@@ -47,7 +49,7 @@ def focus_metrics(
     band : (float, float), optional
         If given, ``desired`` is band-limited with :func:`band_taper` first (Hz);
         otherwise it is used as given (pass an already band-limited waveform).
-    drives : ndarray, shape (n_actuators, n), optional
+    drives : ndarray, shape (n_actuators, n) or (n_actuators, n_desired), optional
         Drives that produced the response, V; for ``peak_drive_v``.
     taper_octaves : float
         Taper width used with ``band``.
@@ -77,7 +79,13 @@ def focus_metrics(
     response = as_array(response, "response", ndim=2)
     n_points, n = response.shape
     target_index = check_index(target_index, "target_index", n_points, what="points of response")
-    desired = as_array(desired, "desired", ndim=1, shape=(n,))
+    desired = as_array(desired, "desired", ndim=1)
+    if desired.size > n:
+        raise ValidationError(
+            f"desired has {desired.size} samples, more than the {n} of response; pass the whole response"
+        )
+    n_design = desired.size
+    desired = np.pad(desired, (0, n - n_design))
     fs = check_positive(fs, "fs")
     sigma = check_positive(sigma, "sigma")
     if band is not None:
@@ -92,8 +100,10 @@ def focus_metrics(
         peak_drive = float("nan")
     else:
         drives = as_array(drives, "drives", ndim=2)
-        if drives.shape[1] != n:
-            raise ValidationError(f"drives must have {n} samples like response, got shape {drives.shape}")
+        if drives.shape[1] not in (n, n_design):
+            raise ValidationError(
+                f"drives must have {n_design} samples like desired (or {n} like response), got shape {drives.shape}"
+            )
         peak_drive = float(np.max(np.abs(drives)))
 
     achieved = response[target_index]
