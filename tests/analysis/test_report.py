@@ -188,3 +188,77 @@ def test_localization_panels_follow_the_grid(planted_result):
     pos = result.study1.positions.set_index(["location", "method"])
     assert_allclose(centre, pos.loc[(1, "funneling"), ["mean_x_mm", "mean_y_mm"]].astype(float))
 
+
+
+# --------------------------------------------------------------------------- too few participants
+
+
+@pytest.mark.parametrize("n", [1, 2, 3])
+def test_few_participants_degrade_clearly(tmp_path, n):
+    """1-3 participants: descriptive results and figures always; each test that needs more is
+    reported as unavailable with its reason (JSON, HTML, terminal), and the command exits 0."""
+    from .synthetic import make_trials
+
+    df = make_trials(n, seed=3)
+    csv = tmp_path / "trials.csv"
+    df.to_csv(csv, index=False)
+    out = tmp_path / "report"
+    run = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out)])
+    assert run.exit_code == 0, run.output
+    assert "Traceback" not in run.output and "Error" not in run.output
+    for name in ("study1_localization.png", "study1_errors.png", "study2_counts.png"):
+        assert (out / name).read_bytes()[:8] == PNG_MAGIC
+    report = json.loads((out / "report.json").read_text())
+    s1, s2 = report["study1"], report["study2"]
+    assert s1["available"] and s2["available"] and s1["n_participants"] == n
+    for key in ("anova_unavailable", "posthoc_unavailable", "shapiro_unavailable"):
+        assert key in s1
+    assert "friedman_unavailable" in s2 and "wilcoxon_unavailable" in s2
+    # descriptive results are there whatever n is
+    assert len(s1["positions"]) == 27 and len(s1["cell_means"]) == 27 and len(s1["errors"]) == 27 * n
+    assert len(s2["counts"]) == 27 * n
+    text = " ".join(run.output.split())  # the terminal wraps lines
+    page = (out / "report.html").read_text()
+    if n < 3:
+        assert s1["anova"] == [] and s1["mauchly"] == []
+        assert s1["anova_unavailable"].startswith(f"the two-way repeated-measures ANOVA needs at least 3 participants, got {n}")
+        assert "not computed: the two-way repeated-measures ANOVA needs at least 3" in text
+        assert "Not computed: the two-way repeated-measures ANOVA needs at least 3" in page
+        assert s1["shapiro"] == [] and "at least 3 participants per condition" in s1["shapiro_unavailable"]
+    else:
+        assert [r["effect"] for r in s1["anova"]] == ["location", "method", "location * method"]
+        assert s1["anova_unavailable"] is None and s1["shapiro_unavailable"] is None
+    if n < 2:
+        assert s1["posthoc"]["method"] == [] and "at least 2 participants, got 1" in s1["posthoc_unavailable"]
+        assert s2["friedman"] == {} and s2["wilcoxon"] == {}
+        assert s2["friedman_unavailable"] == "Friedman and Wilcoxon tests need at least 2 participants, got 1"
+        assert "Study 2 Friedman (all trials): not computed" in text
+        assert "Friedman tests on all trials were not computed" in " ".join(s2["sentences"])
+    else:
+        assert len(s1["posthoc"]["method"]) == 3 and s1["posthoc_unavailable"] is None
+        assert set(s2["friedman"]) == {"location", "method"} and s2["friedman_unavailable"] is None
+        ref = friedman_reference(report, n)
+        assert_allclose(s2["friedman"]["method"]["chi2"], ref, rtol=1e-10)
+
+
+def friedman_reference(report: dict, n: int) -> float:
+    """Friedman chi-square on method from the per-participant cell counts (SciPy, independent)."""
+    from scipy import stats
+
+    counts = pd.DataFrame(report["study2"]["counts"])
+    wide = counts.groupby(["participant", "method"])["n_selected"].mean().unstack()
+    assert wide.shape[0] == n
+    return stats.friedmanchisquare(*(wide[c].to_numpy() for c in wide.columns)).statistic
+
+
+def test_one_participant_analysis_api_keeps_descriptives():
+    from .synthetic import make_trials
+
+    result = analyze(load_trials(make_trials(1, seed=4)))
+    s1 = result.study1
+    assert set(s1.unavailable) == {"anova", "posthoc", "shapiro"}
+    assert s1.anova.empty and list(s1.anova.columns[:7]) == ["effect", "SS", "MS", "F", "ddof1", "ddof2", "p_unc"]
+    assert s1.positions["n"].eq(3).all()  # 3 repetitions pooled per target and method
+    sentences = results_sentences(result)["study1"]
+    assert "N = 1 participant," in sentences[0] and "ANOVA" not in sentences[0]
+    assert any(s.startswith("The two-way repeated-measures ANOVA needs at least 3") for s in sentences)

@@ -168,8 +168,11 @@ def test_anova_refuses_incomplete_subject():
     df = _long(rng.normal(size=(5, 3, 2)), [1, 2, 3], ["funneling", "inverse"])
     with pytest.raises(ValidationError, match="S02"):
         study1_anova(df.drop(index=13))  # rows 12..17 are S02: it loses one cell
-    with pytest.raises(ValidationError, match="at least 2"):
+    with pytest.raises(ValidationError, match="at least 3 participants, got 1"):
         study1_anova(df[df["participant"] == "S00"])
+    # Two subjects: pingouin's Mauchly divides by zero; refused with a reason instead.
+    with pytest.raises(ValidationError, match="at least 3 participants, got 2.*Mauchly"):
+        study1_anova(df[df["participant"].isin(["S00", "S01"])])
 
 
 # --------------------------------------------------------------------------- errors, ellipses
@@ -286,3 +289,30 @@ def test_false_positive_rate_of_the_method_effect_is_near_alpha(synthetic):
     assert np.sum(pvals < 0.05) <= 5
     # and the p-values are not degenerate (a broken test could return p = 1 always)
     assert 0.2 < np.median(pvals) < 0.8
+
+
+def test_posthoc_identical_differences_are_no_test_and_in_method_order():
+    # Differences combination - inverse equal in every subject up to float rounding
+    # (10.786893 - 7.45356 != 3.333333 exactly): a t statistic of ~1e15 would be an
+    # artefact; the pair must be reported as "no test". Pairs follow method_order.
+    rng = np.random.default_rng(12)
+    y = rng.normal(5.0, 2.0, size=(4, 2, 3))  # subjects, locations, methods (funneling, inverse, combination)
+    y[:, 0, 2] = y[:, 0, 1] + 10.0 / 3.0
+    errors = _long(y, [1, 2], ["funneling", "inverse", "combination"])
+    main, inter = study1_posthoc(errors)
+    assert list(zip(main["A"], main["B"])) == [("funneling", "inverse"), ("funneling", "combination"),
+                                               ("inverse", "combination")]  # fmt: skip
+    flat = inter[(inter["location"] == 1) & (inter["A"] == "inverse") & (inter["B"] == "combination")]
+    assert len(flat) == 1 and np.isnan(flat["T"].iloc[0]) and np.isnan(flat["p_bonf"].iloc[0])
+    assert "no variance" in flat["note"].iloc[0]
+    # The swapped pairs keep the sign of A - B.
+    row = main[(main["A"] == "funneling") & (main["B"] == "combination")].iloc[0]
+    ref = stats.ttest_rel(y[:, :, 0].mean(axis=1), y[:, :, 2].mean(axis=1))
+    assert_allclose([row["T"], row["p_unc"]], [ref.statistic, ref.pvalue], rtol=1e-8)
+
+
+def test_posthoc_refuses_one_subject():
+    rng = np.random.default_rng(13)
+    errors = _long(rng.normal(size=(1, 2, 2)), [1, 2], ["funneling", "inverse"])
+    with pytest.raises(ValidationError, match="at least 2 participants"):
+        study1_posthoc(errors)

@@ -151,9 +151,9 @@ def test_training_only_study_is_reported(small):
 
 
 def test_no_usable_data_at_all_is_refused(small):
-    one = small[small["participant"] == "P01"]
-    with pytest.raises(ValidationError, match="no usable data in either study.*at least 2"):
-        analyze(load_trials(one))
+    only_training = small[small["phase"] == "training"]
+    with pytest.raises(ValidationError, match="no usable data in either study.*only training trials"):
+        analyze(load_trials(only_training))
 
 
 def test_other_method_names_are_allowed(synthetic):

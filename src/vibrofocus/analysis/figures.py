@@ -110,7 +110,10 @@ def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None
         axes.flat[0].scatter([], [], color=c, label=m) for m, c in colors.items()
     ] + [axes.flat[0].scatter([], [], s=80, facecolor="none", edgecolor="black", label="target")]
     fig.legend(handles=handles, loc="outside right center", frameon=False)
-    fig.suptitle(title or "Study 1: perceived positions (mean and 1-SD ellipse)")
+    counts = sorted({int(k) for k in positions["n"]}) if len(positions) else []
+    per = "" if not counts else f", {counts[0]}" if len(counts) == 1 else f", {counts[0]}–{counts[-1]}"
+    per = per + " trials per ellipse" if per else ""
+    fig.suptitle(title or f"Study 1: perceived positions, mean and 1-SD ellipse per method (pooled{per})")
     return fig
 
 
@@ -199,7 +202,7 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
     axes = fig.subplots(len(rows), 2, width_ratios=[3, 1], squeeze=False)
     for (label, data), (ax1, ax2) in zip(rows, axes):
         _grouped_boxes(ax1, data, "n_selected", locations, methods, colors)
-        ax1.set_ylabel(f"selected locations\n({label})")
+        ax1.set_ylabel(f"selected locations\n({label}, N = {data['participant'].nunique()})")
         _method_boxes(ax2, data, "n_selected", methods, colors)
         ax2.set_title("per method", fontsize=10)
         ax2.sharey(ax1)

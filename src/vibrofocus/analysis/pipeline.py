@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
+import numpy as np
 import pandas as pd
 
 from ..errors import ValidationError
@@ -14,6 +17,27 @@ from .trials import check_design, method_order
 
 #: Below this many complete participants a study's results carry a warning.
 _FEW_PARTICIPANTS = 6
+
+#: Fewest participants each statistic needs; with fewer it is reported as unavailable.
+#: The two-way RM-ANOVA needs 3: with 2 the error terms have one degree of freedom per
+#: contrast, the contrast covariance has rank 1 (so the Greenhouse–Geisser epsilon is
+#: pinned at its lower bound instead of estimated) and Mauchly's test is undefined for
+#: every effect (pingouin divides by zero). Shapiro–Wilk needs 3 values per condition;
+#: paired t-tests, Friedman and Wilcoxon tests need 2 participants.
+MIN_PARTICIPANTS = {"anova": 3, "shapiro": 3, "posthoc": 2, "friedman": 2, "wilcoxon": 2}
+
+#: How a reason names each statistic, and why it needs that many participants.
+_STAT_NAMES = {
+    "anova": ("the two-way repeated-measures ANOVA needs", ""),
+    "shapiro": ("Shapiro–Wilk tests need", " per condition"),
+    "posthoc": ("post hoc paired t-tests need", ""),
+    "friedman": ("Friedman tests need", ""),
+    "wilcoxon": ("pairwise Wilcoxon signed-rank tests need", ""),
+}
+_ANOVA_WHY = (
+    "; with 2 the error terms have one degree of freedom per contrast, the Greenhouse–Geisser "
+    "epsilon cannot be estimated and Mauchly's test is undefined"
+)
 
 __all__ = ["Study1Result", "Study2Counts", "Study2Result", "AnalysisResult", "analyze"]
 
@@ -43,6 +67,10 @@ class Study1Result:
         Two-way RM-ANOVA with Mauchly and Greenhouse–Geisser.
     posthoc_method, posthoc_interaction : DataFrame
         Bonferroni-corrected paired t-tests.
+    unavailable : dict of str to str
+        Reason for each statistic that could not be computed (keys ``"anova"``,
+        ``"shapiro"``, ``"posthoc"``); its table is then empty. The descriptive tables
+        (``positions``, ``errors``, ``cell_means``) are always filled.
     """
 
     participants: list[str]
@@ -56,11 +84,29 @@ class Study1Result:
     anova: pd.DataFrame
     posthoc_method: pd.DataFrame
     posthoc_interaction: pd.DataFrame
+    unavailable: dict[str, str] = field(default_factory=dict)
 
 
 @dataclass
 class Study2Counts:
-    """Counts of selected locations and their tests, on all trials or on target-containing ones."""
+    """Counts of selected locations and their tests, on all trials or on target-containing ones.
+
+    Attributes
+    ----------
+    participants : list of str
+        Participants in this part of the analysis.
+    counts, cell_means : DataFrame
+        Mean count per participant and condition, and its mean and SD over participants.
+    friedman : DataFrame or None
+        None where the Friedman tests could not be computed (reason in ``unavailable``).
+    wilcoxon : dict of str to DataFrame
+        Pairwise tests per factor; empty where not computed (reason in
+        ``wilcoxon_unavailable``).
+    excluded : list of dict
+        Participants left out of this part and why.
+    unavailable, wilcoxon_unavailable : str or None
+        Why the Friedman / Wilcoxon tests were not computed.
+    """
 
     participants: list[str]
     counts: pd.DataFrame
@@ -69,6 +115,7 @@ class Study2Counts:
     wilcoxon: dict[str, pd.DataFrame]
     excluded: list[dict] = field(default_factory=list)
     unavailable: str | None = None
+    wilcoxon_unavailable: str | None = None
 
 
 @dataclass
@@ -129,14 +176,42 @@ def _study_levels(data: pd.DataFrame) -> tuple[list[str], list[int]]:
     return method_order(data["method"].unique()), sorted(int(t) for t in data["target"].unique())
 
 
+def _participants(n: int) -> str:
+    return f"{n} participant" if n == 1 else f"{n} participants"
+
+
+def _too_few(stat: str, n: int) -> str | None:
+    """Why ``stat`` cannot be computed with ``n`` participants, or None."""
+    need = MIN_PARTICIPANTS[stat]
+    if n >= need:
+        return None
+    name, per = _STAT_NAMES[stat]
+    why = _ANOVA_WHY if stat == "anova" and n == 2 else ""
+    return f"{name} at least {need} participants{per}, got {n}{why}"
+
+
+def _guarded(stat: str, n: int, compute: Callable[[], Any]) -> tuple[Any, str | None]:
+    """Run ``compute()`` unless ``n`` is too few for ``stat``; return ``(value, reason)``.
+
+    A library failure (pingouin or SciPy dividing by zero on a degenerate sample, say)
+    becomes a reason too, so one statistic that cannot be computed never stops the rest.
+    """
+    reason = _too_few(stat, n)
+    if reason is not None:
+        return None, reason
+    try:
+        return compute(), None
+    except (ArithmeticError, ValueError, np.linalg.LinAlgError, KeyError) as exc:
+        message = str(exc) if isinstance(exc, ValidationError) else f"{type(exc).__name__}: {exc}"
+        name = _STAT_NAMES[stat][0].rsplit(" ", 1)[0]
+        return None, f"{name} could not be computed ({message})"
+
+
 def _usable(data: pd.DataFrame, study: int) -> str | None:
     """Reason why the complete-participant trials of a study cannot be analysed, or None."""
     if data.empty:
         return None  # caller words this
-    n = data["participant"].nunique()
     methods, locations = _study_levels(data)
-    if n < 2:
-        return f"study {study}: only {n} participant with complete data; the repeated-measures tests need at least 2"
     if len(methods) < 2:
         return f"study {study}: only one method ({methods[0]}); nothing to compare"
     if len(locations) < 2:
@@ -144,11 +219,30 @@ def _usable(data: pd.DataFrame, study: int) -> str | None:
     return None
 
 
+_ANOVA_COLUMNS = ["effect", "SS", "MS", "F", "ddof1", "ddof2", "p_unc", "p_gg", "eps", "ddof1_gg", "ddof2_gg",
+                  "ng2", "W_mauchly", "p_mauchly", "sphericity_violated", "mauchly_defined"]  # fmt: skip
+_POSTHOC_COLUMNS = ["A", "B", "mean_A", "mean_B", "T", "dof", "p_unc", "p_bonf", "hedges", "note"]
+
+
 def _analyze_study1(data: pd.DataFrame, layout: ArrayLayout) -> Study1Result:
-    errors = study1_errors(data, layout)
-    main, inter = study1_posthoc(errors)
     from .study1 import perceived_positions
 
+    errors = study1_errors(data, layout)
+    n = errors["participant"].nunique()
+    unavailable: dict[str, str] = {}
+    anova, why = _guarded("anova", n, lambda: study1_anova(errors))
+    if why:
+        unavailable["anova"] = why
+        anova = pd.DataFrame(columns=_ANOVA_COLUMNS)
+    posthoc, why = _guarded("posthoc", n, lambda: study1_posthoc(errors))
+    if why:
+        unavailable["posthoc"] = why
+        posthoc = (pd.DataFrame(columns=_POSTHOC_COLUMNS), pd.DataFrame(columns=["location", *_POSTHOC_COLUMNS]))
+    main, inter = posthoc
+    shapiro, why = _guarded("shapiro", n, lambda: shapiro_tests(errors))
+    if why:
+        unavailable["shapiro"] = why
+        shapiro = pd.DataFrame(columns=["location", "method", "n", "W", "p", "normal"])
     methods, locations = _study_levels(data)
     return Study1Result(
         participants=sorted(map(str, data["participant"].unique())),
@@ -158,26 +252,34 @@ def _analyze_study1(data: pd.DataFrame, layout: ArrayLayout) -> Study1Result:
         positions=localization_summary(data, layout),
         errors=errors,
         cell_means=_cell_means(errors, "error_mm"),
-        shapiro=shapiro_tests(errors),
-        anova=study1_anova(errors),
+        shapiro=shapiro,
+        anova=anova,
         posthoc_method=main,
         posthoc_interaction=inter,
+        unavailable=unavailable,
     )
 
 
 def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
     counts, excluded = study2_counts(data, contains_target=contains_target)
     participants = sorted(map(str, counts["participant"].unique())) if len(counts) else []
-    if len(participants) < 2:
-        why = (
-            f"only {len(participants)} participant(s) left with a target-containing trial in every condition"
-            if contains_target
-            else f"only {len(participants)} participant(s)"
-        )
-        return Study2Counts(participants, counts, pd.DataFrame(), None, {}, excluded, why)
-    friedman = friedman_tests(counts)
-    wilcoxon = {factor: wilcoxon_posthoc(counts, factor) for factor in ("location", "method")}
-    return Study2Counts(participants, counts, _cell_means(counts, "n_selected"), friedman, wilcoxon, excluded)
+    n = len(participants)
+    cell_means = _cell_means(counts, "n_selected") if n else pd.DataFrame()
+    friedman, why_f = _guarded("friedman", n, lambda: friedman_tests(counts))
+    wilcoxon, why_w = _guarded(
+        "wilcoxon", n, lambda: {factor: wilcoxon_posthoc(counts, factor) for factor in ("location", "method")}
+    )
+    if why_f and why_w and n < min(MIN_PARTICIPANTS["friedman"], MIN_PARTICIPANTS["wilcoxon"]):
+        # One cause for both: say it once.
+        why_f = why_w = f"Friedman and Wilcoxon tests need at least 2 participants, got {n}"
+        if contains_target:
+            left = (
+                f"only {_participants(n)} left with a target-containing trial in every condition"
+                if n
+                else "no participant has a target-containing trial in every condition"
+            )
+            why_f = why_w = f"{left}; Friedman and Wilcoxon tests need at least 2"
+    return Study2Counts(participants, counts, cell_means, friedman, wilcoxon or {}, excluded, why_f, why_w)
 
 
 def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: float = 0.05) -> AnalysisResult:
@@ -185,7 +287,10 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
 
     Training rows are left out. Per study, participants missing a condition are excluded
     and reported; a study without usable data is reported as unavailable while the other
-    is still analysed.
+    is still analysed. With too few participants for a statistic (see
+    :data:`MIN_PARTICIPANTS`; one participant is enough for the descriptive results),
+    that statistic is left out with its reason in the study's ``unavailable`` and the
+    rest is still computed.
 
     Parameters
     ----------
@@ -204,7 +309,7 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
     Raises
     ------
     ValidationError
-        If neither study has usable data.
+        If neither study has usable data (not even for descriptive results).
     """
     if not isinstance(trials, pd.DataFrame) or "selection" not in trials.columns:
         raise ValidationError("analyze() takes the table returned by load_trials(path)")
@@ -232,7 +337,7 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
             unavailable[f"study{study}"] = reason
             continue
         n = complete["participant"].nunique()
-        if n < _FEW_PARTICIPANTS:
+        if 1 < n < _FEW_PARTICIPANTS:
             warnings.append(
                 f"study {study}: only {n} participants; the tests have little power and their "
                 "large-sample approximations (Mauchly, Friedman chi-square) are rough"

@@ -61,6 +61,23 @@ def _effect_name(effect: str) -> str:
     return effect.replace(" * ", " × ")
 
 
+def _num(x: float, digits: int = 2) -> str:
+    """``x`` with ``digits`` decimals, never ``-0.00``; ``n/a`` for NaN."""
+    if x is None or not np.isfinite(x):
+        return "n/a"
+    text = f"{x:.{digits}f}"
+    return text.lstrip("-") if float(text) == 0 else text
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
+def _capital(text: str) -> str:
+    """``text`` with its first letter upper-case (the rest untouched)."""
+    return text[:1].upper() + text[1:]
+
+
 # --------------------------------------------------------------------------- sentences
 def _anova_uses_gg(row) -> bool:
     """GG correction is reported where Mauchly rejects sphericity or cannot be computed."""
@@ -69,12 +86,22 @@ def _anova_uses_gg(row) -> bool:
 
 def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
     n = len(s1.participants)
-    out = [
+    design = (
         f"Localization error was the Euclidean distance between the perceived and the target location, averaged "
-        f"per participant and condition (N = {n} participants, {len(s1.locations)} locations × "
-        f"{len(s1.methods)} methods: {', '.join(s1.methods)}); it was analysed with a two-way repeated-measures "
-        f"ANOVA (location × method)."
-    ]
+        f"per participant and condition (N = {n} participant{'s' if n != 1 else ''}, {len(s1.locations)} "
+        f"locations × {len(s1.methods)} methods: {', '.join(s1.methods)})"
+    )
+    if "anova" in s1.unavailable:
+        out = [design + "."]
+    else:
+        out = [design + "; it was analysed with a two-way repeated-measures ANOVA (location × method)."]
+    means = s1.errors.groupby("method")["error_mm"].mean()
+    out.append(
+        "Mean error: " + ", ".join(f"{m} {means[m]:.2f} mm" for m in s1.methods if m in means.index) + "."
+    )
+    for key in ("shapiro", "anova", "posthoc"):
+        if key in s1.unavailable:
+            out.append(_capital(s1.unavailable[key]) + "; not computed.")
     sh = s1.shapiro.dropna(subset=["p"])
     if len(sh):
         n_bad = int((sh["p"] < alpha).sum())
@@ -115,7 +142,7 @@ def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
     parts = []
     for r in s1.posthoc_method.itertuples(index=False):
         parts.append(
-            f"{r.A} (M = {r.mean_A:.2f} mm) vs {r.B} (M = {r.mean_B:.2f} mm), t({_dof(r.dof)}) = {r.T:.2f}, "
+            f"{r.A} (M = {r.mean_A:.2f} mm) vs {r.B} (M = {r.mean_B:.2f} mm), t({_dof(r.dof)}) = {_num(r.T)}, "
             f"{format_p(r.p_bonf)}"
         )
     if parts:
@@ -141,7 +168,11 @@ def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
 
 def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str]:
     if part.friedman is None:
-        return [f"Friedman tests {label} were not computed: {part.unavailable}."]
+        return [f"Friedman tests {label} were not computed: {part.unavailable}."] + (
+            [f"Pairwise Wilcoxon tests {label} were not computed: {part.wilcoxon_unavailable}."]
+            if part.wilcoxon_unavailable and part.wilcoxon_unavailable != part.unavailable
+            else []
+        )
     n = int(part.friedman["n"].iloc[0])
     bits = []
     for factor, r in part.friedman.iterrows():
@@ -154,6 +185,8 @@ def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str
         f"Friedman tests on the mean number of selected locations per participant, {label} (N = {n}), showed "
         + "; and ".join(bits) + "."
     ]
+    if part.wilcoxon_unavailable:
+        out.append(f"Pairwise Wilcoxon tests {label} were not computed: {part.wilcoxon_unavailable}.")
     for factor, table in part.wilcoxon.items():
         sig = table[table["p_bonf"] < alpha]
         if len(sig):
@@ -177,8 +210,10 @@ def _study2_sentences(s2: Study2Result, alpha: float) -> list[str]:
     label = "on the trials whose selection contains the target"
     if ct.excluded:
         out.append(
-            f"For the trials whose selection contains the target, {len(ct.excluded)} participant(s) had no such "
-            f"trial in some condition and were left out of that analysis."
+            f"For the trials whose selection contains the target, "
+            f"{_count(len(ct.excluded), 'participant')} ({', '.join(e['participant'] for e in ct.excluded)}) "
+            f"had no such trial in some condition and {'was' if len(ct.excluded) == 1 else 'were'} left out of "
+            f"that analysis."
         )
     out += _friedman_sentence(ct, label, alpha)
     return out
@@ -213,19 +248,22 @@ def results_sentences(result: AnalysisResult) -> dict[str, list[str]]:
 # --------------------------------------------------------------------------- report.json
 def _study2_part_dict(part: Study2Counts) -> dict:
     d: dict[str, Any] = {
-        "available": part.friedman is not None,
         "n_participants": len(part.participants),
         "participants": part.participants,
         "excluded": part.excluded,
     }
-    if part.friedman is None:
-        d["reason"] = part.unavailable
-        d["friedman"] = {}
-        return d
-    d["friedman"] = {
-        factor: {"chi2": r["chi2"], "dof": int(r["dof"]), "p": r["p"], "kendall_w": r["kendall_w"], "n": int(r["n"])}
-        for factor, r in part.friedman.iterrows()
-    }
+    d["friedman_unavailable"] = part.unavailable if part.friedman is None else None
+    d["wilcoxon_unavailable"] = part.wilcoxon_unavailable
+    d["friedman"] = (
+        {}
+        if part.friedman is None
+        else {
+            factor: {
+                "chi2": r["chi2"], "dof": int(r["dof"]), "p": r["p"], "kendall_w": r["kendall_w"], "n": int(r["n"])
+            }
+            for factor, r in part.friedman.iterrows()
+        }
+    )  # fmt: skip
     d["wilcoxon"] = {factor: table for factor, table in part.wilcoxon.items()}
     d["cell_means"] = part.cell_means
     d["counts"] = part.counts
@@ -240,6 +278,15 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     more; ``study2.friedman`` has ``location`` and ``method``, each with ``chi2``,
     ``dof``, ``p``. A study without usable data has ``available: false`` and a
     ``reason`` (and an empty ``anova`` / ``friedman``).
+
+    A study analysed with too few participants for some statistic keeps
+    ``available: true`` and its descriptive tables, while each statistic that could not
+    be computed is empty (``anova: []``, ``posthoc.method: []``, ``shapiro: []``,
+    ``friedman: {}``, ``wilcoxon: {}``) and its reason is in the matching key
+    ``study1.anova_unavailable``, ``study1.posthoc_unavailable``,
+    ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
+    ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
+    these keys are always present and null when the statistic was computed.
     """
     from .. import __version__
 
@@ -266,6 +313,9 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
             "locations": s1.locations,
             "dv": "mean Euclidean error per participant and condition (mm)",
             "anova": anova,
+            "anova_unavailable": s1.unavailable.get("anova"),
+            "posthoc_unavailable": s1.unavailable.get("posthoc"),
+            "shapiro_unavailable": s1.unavailable.get("shapiro"),
             "mauchly": anova[["effect", "W_mauchly", "p_mauchly", "mauchly_defined", "sphericity_violated", "eps"]],
             "shapiro": s1.shapiro,
             "posthoc": {"method": s1.posthoc_method, "location_method": s1.posthoc_interaction},
@@ -319,13 +369,20 @@ def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
         if isinstance(x, (float, np.floating)):
             if not np.isfinite(x):
                 return ""
-            return f"{x:.3g}" if abs(x) < 1e-3 and x != 0 else f"{x:.4f}".rstrip("0").rstrip(".")
+            if abs(x) < 1e-12:  # float noise around zero (e.g. a t of -6e-16): show 0, not -0 or 1e-16
+                return "0"
+            text = f"{x:.3g}" if abs(x) < 1e-3 else f"{x:.4f}".rstrip("0").rstrip(".")
+            return "0" if text == "-0" else text
         return html.escape(str(x))
 
     cells = shown.astype(object).map(lambda x: None if x is None or (isinstance(x, float) and x != x) else x)
     body = cells.map(fmt).to_html(index=False, escape=False, border=0)
     note = f"<p class='small'>first {max_rows} of {len(df)} rows</p>" if max_rows and len(df) > max_rows else ""
     return body + note
+
+
+def _not_computed(reason: str) -> str:
+    return f"<p class='warn'>Not computed: {html.escape(reason)}.</p>"
 
 
 def _img(path: Path) -> str:
@@ -352,7 +409,7 @@ def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
     else:
         parts.append("<p>No participant was excluded.</p>")
     for w in result.warnings:
-        parts.append(f"<p class='warn'>Note: {html.escape(w)}</p>")
+        parts.append(f"<p class='warn'>Note: {html.escape(w.rstrip('.'))}.</p>")
     for reason in result.unavailable.values():
         parts.append(f"<p class='warn'><b>{html.escape(reason)}</b></p>")
 
@@ -363,18 +420,34 @@ def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
         for key in ("localization", "errors"):
             if key in figures:
                 parts.append(_img(figures[key]))
-        anova = s1.anova.copy()
-        anova["effect"] = anova["effect"].map(_effect_name)
         parts.append("<h3>Two-way repeated-measures ANOVA (location × method)</h3>")
-        parts.append(_table(anova.drop(columns=["SS", "MS"])))
+        if "anova" in s1.unavailable:
+            parts.append(_not_computed(s1.unavailable["anova"]))
+        else:
+            anova = s1.anova.copy()
+            anova["effect"] = anova["effect"].map(_effect_name)
+            shown = ["effect", "F", "ddof1", "ddof2", "p_unc", "eps", "p_gg", "ng2", "W_mauchly", "p_mauchly",
+                     "sphericity_violated"]  # fmt: skip
+            parts.append(_table(anova[shown]))
+            parts.append(
+                "<p class='small'>p_gg: Greenhouse–Geisser corrected p (ε = eps); W_mauchly, p_mauchly: Mauchly's "
+                "test (empty where undefined for this N or with two levels); ng2: generalized η². Full table in "
+                "report.json.</p>"
+            )
         parts.append("<h3>Post hoc: methods (paired t-tests, Bonferroni)</h3>")
-        parts.append(_table(s1.posthoc_method))
-        parts.append("<details><summary>Post hoc per location (interaction)</summary>")
-        parts.append(_table(s1.posthoc_interaction) + "</details>")
+        if "posthoc" in s1.unavailable:
+            parts.append(_not_computed(s1.unavailable["posthoc"]))
+        else:
+            parts.append(_table(s1.posthoc_method))
+            parts.append("<details><summary>Post hoc per location (interaction)</summary>")
+            parts.append(_table(s1.posthoc_interaction) + "</details>")
         parts.append("<details><summary>Mean error per condition (mm)</summary>")
         parts.append(_table(s1.cell_means) + "</details>")
         parts.append("<details><summary>Shapiro–Wilk per condition</summary>")
-        parts.append(_table(s1.shapiro) + "</details>")
+        parts.append(
+            (_not_computed(s1.unavailable["shapiro"]) if "shapiro" in s1.unavailable else _table(s1.shapiro))
+            + "</details>"
+        )
         parts.append("<details><summary>Mean perceived positions and 1-SD ellipses (mm)</summary>")
         parts.append(_table(s1.positions) + "</details>")
 
@@ -387,9 +460,11 @@ def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
         for label, part in (("all trials", s2.all_trials), ("trials whose selection contains the target", s2.contains_target)):
             parts.append(f"<h3>Friedman tests ({label})</h3>")
             if part.friedman is None:
-                parts.append(f"<p class='warn'>Not computed: {html.escape(str(part.unavailable))}</p>")
-                continue
-            parts.append(_table(part.friedman.reset_index()))
+                parts.append(_not_computed(str(part.unavailable)))
+            else:
+                parts.append(_table(part.friedman.reset_index()))
+            if part.wilcoxon_unavailable and part.wilcoxon_unavailable != part.unavailable:
+                parts.append(_not_computed(f"pairwise Wilcoxon tests: {part.wilcoxon_unavailable}"))
             for factor, table in part.wilcoxon.items():
                 parts.append(f"<details><summary>Pairwise Wilcoxon on {factor} ({label}, Bonferroni)</summary>")
                 parts.append(_table(table) + "</details>")
@@ -436,7 +511,8 @@ def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str
         )
         figures["errors"] = save_figure(plot_errors(result.study1.errors), out / "study1_errors.png")
     if result.study2 is not None:
-        hit = result.study2.contains_target.counts if result.study2.contains_target.friedman is not None else None
+        hit = result.study2.contains_target.counts
+        hit = hit if len(hit) else None
         figures["counts"] = save_figure(plot_counts(result.study2.all_trials.counts, hit), out / "study2_counts.png")
     report = report_dict(result, figures={k: p.name for k, p in figures.items()})
     json_path = out / "report.json"

@@ -261,7 +261,7 @@ def study1_anova(
     Raises
     ------
     ValidationError
-        Missing columns, fewer than two subjects, or a subject without every cell.
+        Missing columns, fewer than three subjects, or a subject without every cell.
     """
     import pingouin as pg
 
@@ -277,8 +277,12 @@ def study1_anova(
             f"incomplete or duplicated for {subject}(s) {', '.join(bad) or '(duplicates)'}"
         )
     n = len(per_subject)
-    if n < 2:
-        raise ValidationError(f"the repeated-measures ANOVA needs at least 2 {subject}s, got {n}")
+    if n < 3:
+        raise ValidationError(
+            f"the two-way repeated-measures ANOVA needs at least 3 {subject}s, got {n} (with 2 the error terms "
+            "have one degree of freedom per contrast, the Greenhouse–Geisser epsilon cannot be estimated and "
+            "Mauchly's test is undefined)"
+        )
     if n_a < 2 or n_b < 2:
         raise ValidationError(f"the two-way ANOVA needs at least 2 levels of {a} and of {b}, got {n_a} and {n_b}")
     aov = pg.rm_anova(data=errors, dv=dv, within=[a, b], subject=subject, correction=True, detailed=True)
@@ -332,6 +336,11 @@ def study1_posthoc(
     interaction : DataFrame
         The same within each level of ``by`` (one column ``by``), Bonferroni-corrected
         within each level's family of comparisons.
+
+    Raises
+    ------
+    ValidationError
+        Missing columns, or fewer than 2 subjects or levels of ``factor``.
     """
     import pingouin as pg
 
@@ -346,11 +355,28 @@ def study1_posthoc(
             res = pg.pairwise_tests(data=data, dv=dv, within=factor, subject=subject, padjust="bonf")
         means = data.groupby(factor)[dv].mean()
         res = res.rename(columns={"p_corr": "p_bonf"})
+        # Differences identical in every subject up to rounding (averages of a few discrete
+        # errors often are) give a t statistic of ~1e15 instead of NaN: no test either.
+        wide = data.pivot(index=subject, columns=factor, values=dv)
+        scale = max(float(np.nanmax(np.abs(wide.to_numpy()))), 1.0)
+        flat = [np.nanstd(wide[a] - wide[b], ddof=1) <= 1e-9 * scale for a, b in zip(res["A"], res["B"])]
+        res.loc[flat, ["T", "p_unc", "p_bonf", "hedges"]] = np.nan
+        # Known methods in their usual order (pingouin sorts alphabetically): swap A/B where needed.
+        order = {m: i for i, m in enumerate(method_order(wide.columns))}
+        swap = (res["A"].map(order) > res["B"].map(order)).to_numpy()
+        res.loc[swap, ["A", "B"]] = res.loc[swap, ["B", "A"]].to_numpy()
+        res.loc[swap, ["T", "hedges"]] = -res.loc[swap, ["T", "hedges"]]
+        res = res.iloc[np.lexsort((res["B"].map(order), res["A"].map(order)))].reset_index(drop=True)
         res["mean_A"] = res["A"].map(means)
         res["mean_B"] = res["B"].map(means)
         res["note"] = np.where(res["T"].isna(), "no variance in the paired differences: no test", "")
         return res[["A", "B", "mean_A", "mean_B", "T", "dof", "p_unc", "p_bonf", "hedges", "note"]]
 
+    n = errors[subject].nunique()
+    if n < 2 or errors[factor].nunique() < 2:
+        raise ValidationError(
+            f"paired t-tests need at least 2 {subject}s and 2 levels of {factor}, got {n} and {errors[factor].nunique()}"
+        )
     per_subject = errors.groupby([subject, factor], as_index=False)[dv].mean()
     main = pairs(per_subject)
     parts = []

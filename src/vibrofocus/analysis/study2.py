@@ -16,6 +16,7 @@ import pandas as pd
 
 from ..errors import ValidationError
 from .study1 import _only_study, _require, _sort
+from .trials import method_order
 
 __all__ = ["study2_counts", "friedman_tests", "wilcoxon_posthoc"]
 
@@ -153,13 +154,16 @@ def _wilcoxon_pair(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """
     import pingouin as pg
 
-    d = x - y
+    # Differences of means of counts are multiples of simple fractions; round away float
+    # noise so that zero differences and ties are recognised as such.
+    scale = max(float(np.max(np.abs(np.concatenate([x, y])))), 1.0)
+    d = np.round((x - y) / scale, 9) * scale
     nonzero = d[d != 0]
     if nonzero.size == 0:
         return 0.0, 1.0
     tied = np.unique(np.abs(nonzero)).size < nonzero.size
     kwargs = {"method": "approx", "correction": True} if tied or nonzero.size < d.size else {"method": "exact"}
-    res = pg.wilcoxon(x, y, **kwargs)
+    res = pg.wilcoxon(d, np.zeros_like(d), **kwargs)
     return float(res["W_val"].iloc[0]), float(res["p_val"].iloc[0])
 
 
@@ -185,14 +189,23 @@ def wilcoxon_posthoc(
     -------
     DataFrame
         ``A``, ``B``, ``median_A``, ``median_B``, ``W``, ``p_unc``, ``p_bonf``; one row
-        per pair of levels.
+        per pair of levels (methods in :func:`~vibrofocus.analysis.method_order`).
+
+    Raises
+    ------
+    ValidationError
+        Missing columns, or fewer than 2 subjects with every level of ``factor``.
     """
     import pingouin as pg
 
     _require(counts, (dv, subject, factor), "counts")
     wide = _per_subject_means(counts, dv, factor, subject).pivot(index=subject, columns=factor, values=dv)
     wide = wide.dropna()
-    levels = list(wide.columns)
+    if wide.shape[0] < 2:
+        raise ValidationError(
+            f"pairwise Wilcoxon tests on {factor} need at least 2 {subject}s with every level, got {wide.shape[0]}"
+        )
+    levels = method_order(wide.columns) if factor == "method" else list(wide.columns)
     rows = []
     for i, a in enumerate(levels):
         for b in levels[i + 1 :]:

@@ -79,23 +79,32 @@ def analyze_command(
         console.print(f"[bold yellow]{reason}[/]")
     s1 = result.study1
     if s1 is not None:
-        table = Table(title=f"Study 1: error (mm), RM-ANOVA, N = {len(s1.participants)}")
-        for col in ("effect", "F", "ddof1", "ddof2", "p_unc", "eps", "p_gg", "Mauchly p"):
-            table.add_column(col, justify="left" if col == "effect" else "right")
-        for r in s1.anova.itertuples(index=False):
-            mauchly = "n/a" if r.p_mauchly != r.p_mauchly else f"{r.p_mauchly:.3g}"
-            table.add_row(
-                r.effect.replace(" * ", " × "), f"{r.F:.2f}", str(r.ddof1), str(r.ddof2),
-                _p(r.p_unc), f"{r.eps:.3f}", _p(r.p_gg), mauchly,
-            )  # fmt: skip
-        console.print(table)
+        n1 = len(s1.participants)
+        if "anova" in s1.unavailable:
+            console.print(f"[yellow]Study 1 RM-ANOVA (N = {n1}): not computed: {s1.unavailable['anova']}[/]")
+        else:
+            table = Table(title=f"Study 1: error (mm), RM-ANOVA, N = {n1}")
+            for col in ("effect", "F", "ddof1", "ddof2", "p_unc", "eps", "p_gg", "Mauchly p"):
+                table.add_column(col, justify="left" if col == "effect" else "right")
+            for r in s1.anova.itertuples(index=False):
+                mauchly = "n/a" if r.p_mauchly != r.p_mauchly else f"{r.p_mauchly:.3g}"
+                table.add_row(
+                    r.effect.replace(" * ", " × "), f"{r.F:.2f}", str(r.ddof1), str(r.ddof2),
+                    _p(r.p_unc), f"{r.eps:.3f}", _p(r.p_gg), mauchly,
+                )  # fmt: skip
+            console.print(table)
+        for key, name in (("posthoc", "post hoc t-tests"), ("shapiro", "Shapiro–Wilk")):
+            if key in s1.unavailable:
+                console.print(f"[yellow]Study 1 {name}: not computed: {s1.unavailable[key]}[/]")
         means = s1.errors.groupby("method")["error_mm"].mean()
-        console.print("mean error: " + ", ".join(f"{m} {means[m]:.2f} mm" for m in s1.methods))
+        console.print("Study 1 mean error: " + ", ".join(f"{m} {means[m]:.2f} mm" for m in s1.methods))
     s2 = result.study2
     if s2 is not None:
         for label, part in (("all trials", s2.all_trials), ("contains target", s2.contains_target)):
+            if part.wilcoxon_unavailable and part.wilcoxon_unavailable != part.unavailable:
+                console.print(f"[yellow]Study 2 ({label}) Wilcoxon: not computed: {part.wilcoxon_unavailable}[/]")
             if part.friedman is None:
-                console.print(f"[yellow]Study 2 ({label}): not computed: {part.unavailable}[/]")
+                console.print(f"[yellow]Study 2 Friedman ({label}): not computed: {part.unavailable}[/]")
                 continue
             table = Table(title=f"Study 2: selected locations, Friedman ({label}), N = {len(part.participants)}")
             for col in ("factor", "chi2", "dof", "p", "Kendall W"):
