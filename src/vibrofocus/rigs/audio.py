@@ -38,9 +38,9 @@ import scipy.signal
 
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from .base import Rig
 from .config import AudioRigConfig
 from .devices import DeviceError
+from .hardware import HardwareRig
 
 __all__ = ["AudioRig", "resolve_audio_device"]
 
@@ -133,7 +133,7 @@ class _Stopped(DeviceError):
         super().__init__("the recording was stopped before it ended (rig.stop()); it is discarded")
 
 
-class AudioRig(Rig):
+class AudioRig(HardwareRig):
     """Actuators on the outputs of an audio interface, the vibrometer on one of its inputs.
 
     Parameters
@@ -158,20 +158,10 @@ class AudioRig(Rig):
     """
 
     kind = "audio"
-    max_points_per_recording = 1
+    config_class = AudioRigConfig
 
     def __init__(self, config: AudioRigConfig, layout: ArrayLayout | None = None):
-        if not isinstance(config, AudioRigConfig):
-            raise ValidationError(f"config must be an AudioRigConfig, got {type(config).__name__}")
-        layout = layout if layout is not None else ArrayLayout.reference()
-        if layout.n_actuators != config.n_actuators:
-            raise ValidationError(
-                f"the rig config maps {config.n_actuators} actuator channel(s) but the layout has "
-                f"{layout.n_actuators} actuators"
-            )
-        super().__init__(layout, fs=config.fs, limits=config.limits.build())
-        self.config = config
-        self.vibrometer = config.vibrometer.build()
+        super().__init__(config, layout)
         self.device_fs = float(config.device.samplerate or config.fs)
         ratio = Fraction(self.device_fs / self.fs).limit_denominator(1000)
         if abs(float(ratio) - self.device_fs / self.fs) > 1e-9 * self.device_fs / self.fs:

@@ -28,11 +28,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import ValidationError
 from ..layout import ArrayLayout
-from .base import Rig
 from .config import NidaqRigConfig
 from .devices import DeviceError
+from .hardware import HardwareRig
 
 __all__ = ["NidaqRig", "NidaqTasks"]
 
@@ -212,7 +211,7 @@ class NidaqTasks:
             self._release(ao)
 
 
-class NidaqRig(Rig):
+class NidaqRig(HardwareRig):
     """Actuators on NI-DAQmx analog outputs, the vibrometer (and strap sensors) on inputs.
 
     Parameters
@@ -229,21 +228,11 @@ class NidaqRig(Rig):
     """
 
     kind = "nidaq"
-    max_points_per_recording = 1
+    config_class = NidaqRigConfig
 
     def __init__(self, config: NidaqRigConfig, layout: ArrayLayout | None = None, *,
                  task_factory: Callable[[], object] | None = None):
-        if not isinstance(config, NidaqRigConfig):
-            raise ValidationError(f"config must be a NidaqRigConfig, got {type(config).__name__}")
-        layout = layout if layout is not None else ArrayLayout.reference()
-        if layout.n_actuators != config.n_actuators:
-            raise ValidationError(
-                f"the rig config maps {config.n_actuators} actuator channel(s) but the layout has "
-                f"{layout.n_actuators} actuators"
-            )
-        super().__init__(layout, fs=config.fs, limits=config.limits.build())
-        self.config = config
-        self.vibrometer = config.vibrometer.build()
+        super().__init__(config, layout)
         self.strap_sensors = config.force_sensors.build() if config.force_sensors else None
         self.tasks = NidaqTasks(config, task_factory)
 
