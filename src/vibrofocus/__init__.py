@@ -6,7 +6,9 @@ localization studies and analyse them. Runs on real rigs and, by default, on a
 physically based simulated forearm.
 """
 
+from importlib import import_module
 from importlib.metadata import PackageNotFoundError, version as _version
+from typing import TYPE_CHECKING
 
 try:
     __version__ = _version("vibrofocus")
@@ -22,12 +24,50 @@ from .errors import (
     ValidationError,
     VibrofocusError,
 )
-from .layout import ArrayLayout
-from .rigs import Rig, SafetyLimits
-from .signals import exponential_sweep, linear_sweep, ricker
-from .rendering import InverseOperator, Rendering, focus_metrics, funneling_gains, inverse_filter, render
-from .skin import SimulatedForearm
-from .calibration import Calibration, calibrate, load_calibration, save_calibration
+# The public API is loaded on first use (PEP 562), as MNE-Python does, so that
+# ``vibrofocus --help`` and light scripts do not import SciPy's signal stack, the skin
+# model or xarray. ``from vibrofocus import ricker`` works as usual.
+_LAZY_ATTRIBUTES = {
+    "ArrayLayout": ".layout",
+    "Rig": ".rigs",
+    "SafetyLimits": ".rigs",
+    "SimulatedForearm": ".skin",
+    "ricker": ".signals",
+    "linear_sweep": ".signals",
+    "exponential_sweep": ".signals",
+    "funneling_gains": ".rendering",
+    "inverse_filter": ".rendering",
+    "InverseOperator": ".rendering",
+    "focus_metrics": ".rendering",
+    "render": ".rendering",
+    "Rendering": ".rendering",
+    "calibrate": ".calibration",
+    "Calibration": ".calibration",
+    "load_calibration": ".calibration",
+    "save_calibration": ".calibration",
+}
+
+if TYPE_CHECKING:  # static analysers and IDEs see the real imports
+    from .calibration import Calibration, calibrate, load_calibration, save_calibration
+    from .layout import ArrayLayout
+    from .rendering import InverseOperator, Rendering, focus_metrics, funneling_gains, inverse_filter, render
+    from .rigs import Rig, SafetyLimits
+    from .signals import exponential_sweep, linear_sweep, ricker
+    from .skin import SimulatedForearm
+
+
+def __getattr__(name: str):
+    module = _LAZY_ATTRIBUTES.get(name)
+    if module is None:
+        raise AttributeError(f"module 'vibrofocus' has no attribute {name!r}")
+    value = getattr(import_module(module, __name__), name)
+    globals()[name] = value  # later look-ups skip this function
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
 
 __all__ = [
     "__version__",
