@@ -172,3 +172,17 @@ def test_no_count_effect_without_one(synthetic):
     pvals = np.array([_friedman_method_p(synthetic(8, seed=s, studies=(2,), n_training=0)) for s in range(2000, 2030)])
     assert np.sum(pvals < 0.05) <= 5
     assert 0.2 < np.median(pvals) < 0.8
+
+
+def test_friedman_recognises_ties_of_means_despite_float_noise():
+    # Cell means are counts of 3 repetitions / 3; averaging them over the methods gives
+    # values like 17/9 computed along different float paths (1.888...89 vs 1.888...87).
+    # Rationally equal means are ties; the reference ranks the integer totals.
+    rng = np.random.default_rng(11)
+    methods, locations = ["funneling", "inverse", "combination"], list(range(1, 10))
+    totals = rng.integers(3, 10, size=(4, 9, 3))  # selected locations summed over 3 repetitions
+    y = totals / 3.0
+    res = friedman_tests(_long(y, methods, locations), factors=("location",))
+    by_location = totals.sum(axis=2)  # integers: ties are exact
+    ref = stats.friedmanchisquare(*by_location.T)
+    assert_allclose(res.loc["location", ["chi2", "p"]].astype(float), [ref.statistic, ref.pvalue], rtol=1e-10)

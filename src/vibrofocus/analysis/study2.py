@@ -78,8 +78,20 @@ def study2_counts(trials: pd.DataFrame, *, contains_target: bool = False) -> tup
     return _sort(out.reset_index(drop=True), ("participant", "location", "method")), exclusions
 
 
+def _denoise(values: np.ndarray) -> np.ndarray:
+    """Round away float noise (to 1e-9 of the largest value, in decimal places so that
+    integers stay exact) so that means equal as fractions (17/9 reached along different
+    sums) tie when ranked."""
+    values = np.asarray(values, dtype=float)
+    finite = values[np.isfinite(values)]
+    scale = max(float(np.max(np.abs(finite))) if finite.size else 1.0, 1.0)
+    return np.round(values, 9 - int(np.ceil(np.log10(scale))))
+
+
 def _per_subject_means(data: pd.DataFrame, dv: str, factor: str, subject: str) -> pd.DataFrame:
-    return data.groupby([subject, factor], as_index=False, sort=True)[dv].mean()
+    means = data.groupby([subject, factor], as_index=False, sort=True)[dv].mean()
+    means[dv] = _denoise(means[dv].to_numpy(float))
+    return means
 
 
 def friedman_tests(
