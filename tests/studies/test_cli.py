@@ -134,3 +134,38 @@ def test_terminal_runner_refuses_a_calibration_of_someone_else(tmp_path, calibra
     assert "belongs to participant 'p-real'" in " ".join(result.output.split())
 
 
+
+
+@pytest.mark.parametrize("content", [b"", b"not a database at all\n"])
+def test_export_refuses_an_empty_or_foreign_file_and_leaves_it_untouched(tmp_path, content):
+    db = tmp_path / "empty.sqlite"
+    db.write_bytes(content)
+    out = tmp_path / "t.csv"
+    result = CliRunner().invoke(app, ["study", "export", "--db", str(db), "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    text = " ".join(result.output.split())
+    assert text.startswith("error:") and "not a vibrofocus study database" in text
+    assert "Traceback" not in result.output
+    assert db.read_bytes() == content  # an export writes nothing into the database file
+    assert not out.exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["empty.sqlite"]  # no -wal / -shm left
+
+
+def test_export_of_a_study_database_keeps_the_csv_contract(tmp_path, calibration_file):
+    db = tmp_path / "s.db"
+    with StudyStore(db) as store:
+        store.add_participant("p1")
+        sid = store.create_session("p1", 2, seed=4, config={"repetitions": 1, "n_training": 2})
+        trials = store.planned_trials(sid)
+        for t, resp in zip(trials[:4], ([5], [4, 5], [1], [9, 2, 3])):
+            store.record_answer(sid, t.trial_index, resp, 0.25 * (t.trial_index + 1), answer_id=f"a{t.trial_index}")
+    out = tmp_path / "t.csv"
+    result = CliRunner().invoke(app, ["study", "export", "--db", str(db), "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    with open(out, newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == ["participant", "study", "phase", "trial", "method", "target", "response", "rt_s"]
+    assert [r[2:4] for r in rows[1:]] == [["training", "1"], ["training", "2"], ["main", "1"], ["main", "2"]]
+    assert [r[6] for r in rows[1:]] == ["5", "4 5", "1", "2 3 9"]
+    assert [float(r[7]) for r in rows[1:]] == [0.25, 0.5, 0.75, 1.0]
+    assert [(int(r[5]), r[4]) for r in rows[1:]] == [(t.target, t.method) for t in trials[:4]]

@@ -34,3 +34,21 @@ def test_missing_folder_and_foreign_file_are_refused(tmp_path):
     foreign.write_text("a,b\n1,2\n")
     with pytest.raises(StudyError, match="not a trials file"):
         read_trials_csv(foreign)
+
+
+def test_trials_file_gets_the_usual_permissions_not_those_of_a_temporary_file(tmp_path):
+    import os
+    import stat
+
+    from vibrofocus.studies.export import write_trials_csv
+
+    row = {"participant": "p1", "study": 1, "phase": "main", "trial": 1, "method": "inverse",
+           "target": 5, "response": "5", "rt_s": 0.5}
+    old = os.umask(0o022)
+    try:
+        write_trials_csv([row], tmp_path / "t.csv")
+        (tmp_path / "plain.txt").write_text("x")  # what any program writing a file gets
+    finally:
+        os.umask(old)
+    mode = stat.S_IMODE((tmp_path / "t.csv").stat().st_mode)
+    assert mode == stat.S_IMODE((tmp_path / "plain.txt").stat().st_mode) == 0o644

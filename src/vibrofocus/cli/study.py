@@ -29,7 +29,7 @@ def export(
 
         if not db.is_file():
             raise StudyError(f"no study database at {db}")
-        with StudyStore(db) as store:
+        with StudyStore(db, create=False) as store:
             n = store.export_trials_csv(out, participant_id=participant)
         typer.echo(f"wrote {n} trials to {out}")
 

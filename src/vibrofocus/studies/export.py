@@ -59,6 +59,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
                 ])
                 n += 1
             fh.flush()
+            # mkstemp makes the file 0600; give it the mode any new file gets (umask).
+            os.fchmod(fh.fileno(), 0o666 & ~_umask())
             os.fsync(fh.fileno())
         os.replace(tmp, path)
     except OSError as exc:
@@ -103,6 +105,20 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
             return out
     except OSError as exc:
         raise StudyError(f"cannot read the trials file {path}: {exc.strerror or exc}") from exc
+
+
+def _umask() -> int:
+    """The process umask, read without changing it where the system tells (Linux)."""
+    try:
+        with open("/proc/self/status", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError):
+        pass
+    umask = os.umask(0o022)  # elsewhere: set and restore at once
+    os.umask(umask)
+    return umask
 
 
 def _silent_unlink(path: str) -> None:

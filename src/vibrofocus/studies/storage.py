@@ -261,6 +261,9 @@ class StudyStore:
     ----------
     path : path-like
         Database file; created with the current schema if it does not exist.
+    create : bool
+        ``False`` to open an existing study database only (an export): a missing or
+        empty file is refused and left as it is.
 
     Raises
     ------
@@ -277,10 +280,13 @@ class StudyStore:
     answer intact. Use as a context manager or call :meth:`close`.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike, *, create: bool = True) -> None:
         self.path = Path(path)
+        self._create = bool(create)
         if self.path.is_dir():
             raise StudyError(f"study database {self.path} is a folder, not a file")
+        if not self._create and not self.path.is_file():
+            raise StudyError(f"no study database at {self.path}")
         if not self.path.parent.is_dir():
             raise StudyError(f"cannot create the study database {self.path}: the folder {self.path.parent} does not exist")
         self._lock = threading.RLock()
@@ -312,6 +318,9 @@ class StudyStore:
                 f"{self.path} is not a vibrofocus study database (application_id {app_id:#x}, "
                 f"schema version {version}, tables: {', '.join(tables) or 'none'})"
             )
+        if version == 0 and not self._create:
+            # Only reading (an export): an empty file is not turned into a database.
+            raise StudyError(f"{self.path} is not a vibrofocus study database (an empty file); nothing was changed")
         if version > SCHEMA_VERSION:
             raise StudyError(
                 f"the study database {self.path} has schema version {version}, newer than this "
