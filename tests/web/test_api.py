@@ -131,3 +131,19 @@ def test_experimenter_routes_need_the_token_and_validate(server):
     assert r.status_code == 409 and "only a running session" in r.json()["detail"]
     r = server.api("POST", f"/api/sessions/{s['session_id']}/jump")
     assert r.status_code == 404 and "unknown session action" in r.json()["detail"]
+
+
+def test_an_answer_to_a_trial_not_yet_presented_is_refused(server):
+    """Started, but no participant page is open: the runner holds the first cue, no
+    stimulus is played, so an answer to trial 0 is not data and must not be stored."""
+    s = server.plan("P09", 1)
+    sid = s["session_id"]
+    key = s["participant_url"].split("key=")[1]
+    assert server.api("POST", f"/api/sessions/{sid}/start").status_code == 200
+    time.sleep(0.5)  # the runner is at "get ready", waiting for a page that can beep
+    before = snapshot(server.db)
+    assert not [e for e in before["events"] if e[2] == "stimulus_onset"]
+    r = answer(server, sid, key)
+    assert r.status_code == 409, r.text
+    assert "not been presented" in r.json()["detail"]
+    assert snapshot(server.db)["answers"] == before["answers"] == []

@@ -179,8 +179,19 @@ def participant_answer(
         if nxt is None or nxt.trial_index != body.trial_index:
             current = "none (all trials answered)" if nxt is None else str(nxt.trial_index)
             raise HTTPException(409, detail=f"trial_index {body.trial_index} is not the current trial of session {session_id} (current: {current})")
+        # Only a presented trial (its stimulus onset logged, by this server or one before a
+        # restart) can be answered: an answer sent before the stimulus is not data.
+        onsets = [
+            e.payload for e in web.store.events(session_id, kind="stimulus_onset")
+            if isinstance(e.payload, dict) and e.payload.get("trial_index") == body.trial_index
+        ]
+        if not onsets:
+            raise HTTPException(409, detail=f"trial {body.trial_index} of session {session_id} has not been presented yet (no stimulus played); answer when the page asks for it")
         runner = web.runner(session_id)
         sha = runner.drive_sha_for(body.trial_index) if runner is not None else None
+        if sha is None:
+            # Presented by a runner that is gone (a restart): its onset event has the hash.
+            sha = onsets[-1].get("drive_sha256")
         web.store.record_answer(
             session_id, body.trial_index, list(body.response), float(body.rt_s),
             answer_id=body.answer_id, drive_sha256=sha,
