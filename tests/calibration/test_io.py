@@ -153,3 +153,62 @@ def test_inconsistent_contents_are_refused(saved, tmp_path, edit, match):
 def test_save_into_a_missing_folder_is_refused(fir_calibration, tmp_path):
     with pytest.raises(CalibrationFileError, match="does not exist"):
         save_calibration(fir_calibration[1], tmp_path / "no" / "P.nc")
+
+
+def _set_attr(src, dst, name, value):
+    """Copy the file and overwrite one global attribute in place with h5py."""
+    import shutil
+
+    shutil.copy(src, dst)
+    with h5py.File(dst, "r+") as h5:
+        h5.attrs[name] = value
+    return dst
+
+
+@pytest.mark.parametrize(
+    "name, value, match",
+    [
+        ("fs", "ten kHz", "attribute fs"),
+        ("n_fft", "many", "attribute n_fft"),
+        ("band_low", "low", "attribute band_low"),
+        ("band_high", np.array([1.0, 2.0]), "attribute band_high"),
+        ("schema_version", 1.5, "schema_version"),
+        ("rig", "[1, 2]", "attribute rig"),
+        ("sweep", "[]", "unreadable description"),
+    ],
+)
+def test_malformed_attributes_are_named_not_a_traceback(saved, tmp_path, name, value, match):
+    bad = _set_attr(saved, tmp_path / "attr.nc", name, value)
+    with pytest.raises(CalibrationFileError, match=match):
+        load_calibration(bad)
+
+
+def _data_offset(dset) -> int:
+    # Contiguous data has one offset; chunked data (checksummed) starts at its first chunk.
+    if dset.chunks is None:
+        return int(dset.id.get_offset())
+    return int(dset.id.get_chunk_info(0).byte_offset)
+
+
+@pytest.mark.parametrize("variable", ["H_real", "H_imag", "coherence", "drive"])
+def test_a_flipped_bit_in_stored_data_is_detected(saved, tmp_path, variable):
+    # Flip the least significant bit of one float in the middle of the data: the value
+    # stays finite and plausible, so only a checksum can tell the file is corrupt.
+    with h5py.File(saved, "r") as h5:
+        dset = h5[variable]
+        offset = _data_offset(dset) + 8 * 1000
+        assert dset.dtype == np.float64
+    data = bytearray(saved.read_bytes())
+    data[offset] ^= 0x01
+    bad = tmp_path / "flipped.nc"
+    bad.write_bytes(bytes(data))
+    with pytest.raises(CalibrationFileError, match="corrupt"):
+        load_calibration(bad)
+
+
+def test_saved_arrays_carry_checksums(saved):
+    with xr.open_dataset(saved, engine="h5netcdf") as ds:
+        names = [name for name, var in ds.variables.items() if var.size > 1 and var.dtype.kind in "fiu"]
+    with h5py.File(saved, "r") as h5:
+        unchecked = [name for name in names if not h5[name].fletcher32]
+    assert "H_real" in names and unchecked == []

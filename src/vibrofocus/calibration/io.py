@@ -155,7 +155,11 @@ def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
         raise CalibrationFileError(f"{path}: the folder {path.parent} does not exist")
     ds = _to_dataset(cal)
     # Raw recordings are mostly sensor noise, which hardly compresses: light, fast zlib.
-    encoding = {"recording": {"zlib": True, "complevel": 1, "dtype": "float32"}}
+    # Every array carries an HDF5 Fletcher-32 checksum: a flipped bit in H (a plausible,
+    # finite, wrong value) then fails loading instead of silently changing the design.
+    encoding = {name: {"fletcher32": True} for name, var in ds.variables.items()
+                if var.size > 1 and var.dtype.kind in "fiub"}
+    encoding["recording"] = {"zlib": True, "complevel": 1, "dtype": "float32", "fletcher32": True}
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
@@ -216,16 +220,31 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
     return _from_dataset(ds, path)
 
 
+def _number_attr(attrs, name: str, path: Path) -> float:
+    """One real number from a global attribute, or CalibrationFileError naming it."""
+    raw = attrs[name]
+    try:
+        arr = np.asarray(raw)
+        if arr.size != 1 or arr.dtype.kind not in "iuf":
+            raise TypeError
+        return float(arr.reshape(()).item())
+    except (TypeError, ValueError):
+        raise _fail(path, f"attribute {name} must be one number, got {raw!r}") from None
+
+
 def _from_dataset(ds, path: Path) -> Calibration:
     attrs = ds.attrs
     if attrs.get("file_kind") != FILE_KIND:
         raise _fail(path, f"is an HDF5/netCDF file but not a vibrofocus calibration (file_kind is "
                           f"{attrs.get('file_kind')!r}, expected {FILE_KIND!r})")
-    version = attrs.get("schema_version")
+    raw_version = attrs.get("schema_version")
     try:
-        version = int(np.asarray(version).item())
-    except (TypeError, ValueError):
-        raise _fail(path, f"has no valid schema_version (got {version!r})") from None
+        value = np.asarray(raw_version).item()
+        if isinstance(value, (bool, np.bool_)) or not float(value).is_integer():
+            raise ValueError
+        version = int(value)
+    except (TypeError, ValueError, OverflowError):
+        raise _fail(path, f"has no valid schema_version (got {raw_version!r}; expected an integer)") from None
     if version > SCHEMA_VERSION:
         raise _fail(path, f"has schema version {version}, newer than this vibrofocus reads "
                           f"({SCHEMA_VERSION}); it was written by vibrofocus {attrs.get('software_version', '?')}; "
@@ -247,14 +266,19 @@ def _from_dataset(ds, path: Path) -> Calibration:
         issues = [QualityIssue.from_dict(d) for d in json.loads(attrs["quality_issues"])]
         thresholds = QualityThresholds(**json.loads(attrs["quality_thresholds"]))
         straps = json.loads(attrs["strap_forces"]) if "strap_forces" in attrs else None
-    except (ValueError, TypeError, KeyError) as exc:  # JSONDecodeError is a ValueError
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:  # JSONDecodeError is a ValueError
         raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
+    if not isinstance(rig, dict):
+        raise _fail(path, f"attribute rig must describe the rig as a JSON object, got {type(rig).__name__}")
 
-    fs = float(attrs["fs"])
-    n_fft = int(attrs["n_fft"])
+    fs = _number_attr(attrs, "fs", path)
+    n_fft = _number_attr(attrs, "n_fft", path)
+    if not float(n_fft).is_integer() or n_fft < 2:
+        raise _fail(path, f"attribute n_fft must be an integer >= 2, got {n_fft!r}")
+    n_fft = int(n_fft)
     if not np.isfinite(fs) or fs <= 0:
         raise _fail(path, f"has an invalid sample rate fs={fs!r}")
-    band = (float(attrs["band_low"]), float(attrs["band_high"]))
+    band = (_number_attr(attrs, "band_low", path), _number_attr(attrs, "band_high", path))
     if not (0 < band[0] < band[1] <= fs / 2):
         raise _fail(path, f"has an invalid band {band[0]:g}-{band[1]:g} Hz (needs 0 < low < high <= fs/2 = "
                           f"{fs / 2:g} Hz)")
