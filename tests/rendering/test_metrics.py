@@ -106,3 +106,26 @@ def test_bad_input():
         focus_metrics(np.zeros((2, N)), 0, desired, FS, drives=np.zeros((4, 10)))
     with pytest.raises(ValidationError, match="band must satisfy"):
         focus_metrics(np.zeros((2, N)), 0, desired, FS, band=(10, 9000))
+
+
+def test_an_empty_compare_list_gives_nan_contrast_not_an_index_error():
+    desired = ricker(FS, SIGMA, N / FS)
+    response = np.stack([desired, 0.5 * desired])
+    m = focus_metrics(response, 0, desired, FS, compare_indices=[])
+    assert np.isnan(m["contrast_db"])
+    assert_allclose(m["fidelity"], 1.0, rtol=1e-12)
+    # Only the target listed: nothing left to compare with.
+    assert np.isnan(focus_metrics(response, 0, desired, FS, compare_indices=[0])["contrast_db"])
+
+
+def test_an_empty_desired_waveform_is_refused():
+    desired = ricker(FS, SIGMA, N / FS)
+    with pytest.raises(ValidationError, match="desired"):
+        focus_metrics(np.stack([desired, desired]), 0, np.zeros(0), FS)
+
+
+@pytest.mark.parametrize("t0", [-0.01, N / FS + 0.01])
+def test_t0_outside_the_response_is_refused(t0):
+    desired = ricker(FS, SIGMA, N / FS)
+    with pytest.raises(ValidationError, match="t0"):
+        focus_metrics(np.stack([desired, desired]), 0, desired, FS, t0=t0)

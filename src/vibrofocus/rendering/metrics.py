@@ -6,7 +6,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import as_array, check_band, check_index, check_positive
+from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import SIGMA_S
 from ..errors import ValidationError
 from .taper import band_taper
@@ -79,6 +79,8 @@ def focus_metrics(
     n_points, n = response.shape
     target_index = check_index(target_index, "target_index", n_points, what="points of response")
     desired = as_array(desired, "desired", ndim=1)
+    if desired.size == 0:
+        raise ValidationError("desired holds no samples; pass the desired target waveform, m")
     if desired.size > n:
         raise ValidationError(
             f"desired has {desired.size} samples, more than the {n} of response; pass the whole response"
@@ -94,7 +96,7 @@ def focus_metrics(
     if t0 is None:
         t0 = float(np.argmax(np.abs(desired))) / fs
     else:
-        t0 = float(as_array(t0, "t0", ndim=0))
+        t0 = check_in_range(t0, "t0", 0.0, n / fs)
     if drives is None:
         peak_drive = float("nan")
     else:
@@ -112,6 +114,8 @@ def focus_metrics(
         compare = np.delete(np.arange(n_points), target_index)
     else:
         compare = np.atleast_1d(np.asarray(compare_indices))
+        if compare.size == 0 and compare.ndim == 1:
+            compare = compare.astype(int)  # an empty list comes out as float64
         if compare.ndim != 1 or (compare.size and not np.issubdtype(compare.dtype, np.integer)):
             raise ValidationError(f"compare_indices must be a sequence of integer point indices, got {compare_indices!r}")
         if compare.size and (compare.min() < 0 or compare.max() >= n_points):
