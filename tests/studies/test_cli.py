@@ -169,3 +169,16 @@ def test_export_of_a_study_database_keeps_the_csv_contract(tmp_path, calibration
     assert [r[6] for r in rows[1:]] == ["5", "4 5", "1", "2 3 9"]
     assert [float(r[7]) for r in rows[1:]] == [0.25, 0.5, 0.75, 1.0]
     assert [(int(r[5]), r[4]) for r in rows[1:]] == [(t.target, t.method) for t in trials[:4]]
+
+
+def test_terminal_runner_with_a_bad_rig_writes_nothing(tmp_path, calibration_file):
+    db = tmp_path / "x.db"
+    result = CliRunner().invoke(app, [
+        "study", "run", "--participant", "p-real", "--study", "1", "--db", str(db),
+        "--calibration", str(calibration_file), "--rig", "audio", "--no-beep",
+    ], input="")
+    assert result.exit_code == 2, result.output
+    assert "rig config" in " ".join(result.output.split())
+    if db.exists():  # nothing of this refused run is stored
+        with StudyStore(db) as store:
+            assert store.participants() == [] and store.sessions() == []

@@ -67,7 +67,10 @@ def run(
             raise StudyError(
                 f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {participant!r}"
             )
-        with StudyStore(db) as store:
+        # The rig first: a rig that cannot be made (no config, no device) leaves the
+        # database as it was, with no participant or session planned for nothing.
+        the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
+        with the_rig, StudyStore(db) as store:
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
             open_sessions = [s for s in store.sessions(participant, study=study) if not s.finished]
@@ -86,17 +89,15 @@ def run(
                     calibration_id=cid, config={"rig": rig},
                 )
                 console.print(f"new session {sid} for {participant}, study {study}")
-            the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
-            with the_rig:
-                cue = terminal_beep if beep and rig != "simulated" else (_bell if beep else None)
-                engine = StudyEngine(store, sid, the_rig, cal, cue=cue)
-                responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
-                try:
-                    summary = engine.run(responder)
-                except KeyboardInterrupt:
-                    store.set_status(sid, "paused")
-                    console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
-                    raise typer.Exit(code=130) from None
+            cue = terminal_beep if beep and rig != "simulated" else (_bell if beep else None)
+            engine = StudyEngine(store, sid, the_rig, cal, cue=cue)
+            responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
+            try:
+                summary = engine.run(responder)
+            except KeyboardInterrupt:
+                store.set_status(sid, "paused")
+                console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
+                raise typer.Exit(code=130) from None
             console.print(
                 f"session {sid}: {summary.status}, {summary.n_answered} of {summary.n_trials} trials answered"
             )
