@@ -147,3 +147,12 @@ def test_an_answer_to_a_trial_not_yet_presented_is_refused(server):
     assert r.status_code == 409, r.text
     assert "not been presented" in r.json()["detail"]
     assert snapshot(server.db)["answers"] == before["answers"] == []
+
+
+def test_a_session_with_an_unknown_rig_is_refused_and_nothing_is_stored(server):
+    assert server.api("POST", "/api/participants", json={"participant_id": "P10"}).status_code == 201
+    before = snapshot(server.db)
+    r = server.api("POST", "/api/sessions", json={"participant_id": "P10", "study": 1, "rig": "no-such-rig"})
+    assert r.status_code == 422, r.text
+    assert "no-such-rig" in r.json()["detail"] and "simulated" in r.json()["detail"]
+    assert snapshot(server.db) == before

@@ -216,6 +216,10 @@ def list_sessions(participant_id: str | None = Query(None, max_length=64), web: 
 @router.post("/api/sessions", status_code=201)
 def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Plan a session: the full trial list is stored; it starts with ``/start``."""
+    from ..rigs import RIG_KINDS
+
+    if body.rig not in RIG_KINDS:
+        raise HTTPException(422, detail=f"body.rig: unknown rig {body.rig!r}; known: {', '.join(RIG_KINDS)}")
     _check_participant(web, body.participant_id)
     if body.calibration_id is not None:
         web.calibration(body.calibration_id)  # 404 / 409 before anything is written
