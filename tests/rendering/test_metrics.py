@@ -129,3 +129,13 @@ def test_t0_outside_the_response_is_refused(t0):
     desired = ricker(FS, SIGMA, N / FS)
     with pytest.raises(ValidationError, match="t0"):
         focus_metrics(np.stack([desired, desired]), 0, desired, FS, t0=t0)
+
+
+def test_a_recording_with_dropouts_gets_an_actionable_message():
+    # SimulatedForearm and hardware rigs mark vibrometer dropouts as NaN runs; the
+    # message must say what they are and what to do (repeat), not just "non-finite".
+    desired = ricker(FS, SIGMA, N / FS)
+    rec = np.stack([desired, desired])
+    rec[1, 100:110] = np.nan
+    with pytest.raises(ValidationError, match=r"response.*10 NaN.*point\(s\) 1:.*dropout.*repeat"):
+        focus_metrics(rec, 0, desired, FS)

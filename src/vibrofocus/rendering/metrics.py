@@ -75,7 +75,15 @@ def focus_metrics(
         poor even when its shape is right (funneling travels from the actuators and
         arrives several ms after ``t0``); this pair tells shape and timing apart.
     """
-    response = as_array(response, "response", ndim=2)
+    response = as_array(response, "response", ndim=2, finite=False)
+    bad = ~np.isfinite(response)
+    if bad.any():
+        rows = np.flatnonzero(bad.any(axis=1))
+        raise ValidationError(
+            f"response contains {int(bad.sum())} NaN/Inf sample(s), at point(s) {', '.join(map(str, rows[:8]))}"
+            f"{' ...' if rows.size > 8 else ''}: a recording with vibrometer dropouts (NaN runs); repeat the "
+            "recording rather than patch it"
+        )
     n_points, n = response.shape
     target_index = check_index(target_index, "target_index", n_points, what="points of response")
     desired = as_array(desired, "desired", ndim=1)
