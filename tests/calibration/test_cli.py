@@ -75,3 +75,43 @@ def test_render_refuses_a_location_outside_the_layout(cal_file, tmp_path):
 def test_calibrate_refuses_a_missing_output_folder(tmp_path):
     result = runner.invoke(app, ["calibrate", "--participant", "P", "--out", str(tmp_path / "no" / "P.nc"), "--yes"])
     assert result.exit_code == 2 and "does not exist" in text(result)
+
+
+def test_render_refuses_a_limit_above_the_rigs(cal_file, tmp_path):
+    # The calibration stores the rig's safety limit (10 V); drives (and a WAV whose full
+    # scale is the limit) designed for more could never be played safely on that rig.
+    out = tmp_path / "d.npz"
+    result = runner.invoke(app, ["render", "--calibration", str(cal_file), "--location", "5",
+                                 "--limit-v", "25", "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert "--limit-v 25" in text(result) and "10 V" in text(result)
+    assert not out.exists()
+    lower = runner.invoke(app, ["render", "--calibration", str(cal_file), "--location", "5",
+                                "--limit-v", "5", "--out", str(out)])
+    assert lower.exit_code == 0, lower.output
+    with np.load(out) as data:
+        assert np.abs(data["drives"]).max() <= 5.0 + 1e-12
+
+
+@pytest.mark.parametrize("name, value", [("fs", "ten kHz"), ("rig", "[1, 2]"), ("n_fft", "x")])
+def test_render_from_a_calibration_with_a_malformed_attribute_is_one_line(cal_file, tmp_path, name, value):
+    import shutil
+
+    import h5py
+
+    bad = tmp_path / "bad.nc"
+    shutil.copy(cal_file, bad)
+    with h5py.File(bad, "r+") as h5:
+        h5.attrs[name] = value
+    result = runner.invoke(app, ["render", "--calibration", str(bad), "--location", "5",
+                                 "--out", str(tmp_path / "d.npz")])
+    assert result.exit_code == 2, result.output
+    assert "bad.nc" in text(result) and name in text(result)
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+
+
+def test_calibrate_over_the_duration_limit_does_not_blame_the_amplitude(tmp_path):
+    result = runner.invoke(app, ["calibrate", "--participant", "P", "--out", str(tmp_path / "c.nc"),
+                                 "--sweep-s", "40", "--yes"])
+    assert result.exit_code == 2
+    assert "longer than the limit" in text(result) and "sweep_s" in text(result)

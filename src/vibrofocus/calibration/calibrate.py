@@ -297,7 +297,8 @@ def calibrate(
     except SafetyError as exc:
         raise SafetyError(
             f"the calibration sweep ({settings.amplitude_v:g} V peak, {settings.amplitude_v / np.sqrt(2):.3g} V RMS) "
-            f"breaks the {rig.kind} rig's limits, nothing was played: {exc}; lower amplitude_v"
+            f"breaks the {rig.kind} rig's limits, nothing was played: {exc}; "
+            + ("shorten sweep_s" if "longer than the limit" in str(exc) else "lower amplitude_v")
         ) from exc
 
     points_xy = rig.layout.points_xy[p_idx]

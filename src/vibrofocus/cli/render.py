@@ -44,6 +44,7 @@ def render_command(
 
         from .. import __version__
         from ..calibration import load_calibration
+        from ..defaults import DRIVE_LIMIT_V
         from ..errors import ValidationError
         from ..rendering import render
 
@@ -56,7 +57,17 @@ def render_command(
         if wav is not None and wav.suffix.lower() != ".wav":
             raise ValidationError(f"--wav {wav}: use a .wav file name")
         cal = load_calibration(calibration)
-        limit = limit_v if limit_v is not None else float(cal.rig.get("limits", {}).get("peak_v", 10.0))
+        rig_limits = cal.rig.get("limits") if isinstance(cal.rig.get("limits"), dict) else {}
+        rig_limit = rig_limits.get("peak_v", DRIVE_LIMIT_V)
+        if isinstance(rig_limit, bool) or not isinstance(rig_limit, (int, float)) or not 0 < rig_limit < float("inf"):
+            raise ValidationError(f"{calibration}: the stored rig limit peak_v={rig_limit!r} is not a positive number")
+        rig_limit = float(rig_limit)
+        if limit_v is not None and limit_v > rig_limit * (1 + 1e-9):
+            raise ValidationError(
+                f"--limit-v {limit_v:g} is above the {rig_limit:g} V peak limit of the rig this calibration was "
+                f"measured on; such drives could not be played on it (give at most {rig_limit:g})"
+            )
+        limit = limit_v if limit_v is not None else rig_limit
         H = cal.transfer_for(n_samples)
         rendering = render(method, H, cal.fs, cal.layout, location, limit_v=limit,
                            on_limit="refuse" if refuse else "scale", regularization=regularization,
