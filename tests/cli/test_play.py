@@ -78,3 +78,25 @@ def test_hardware_rig_without_config_is_refused(tmp_path):
     result = runner.invoke(app, ["play", str(path), "--rig", "audio"])
     assert result.exit_code == 2
     assert "needs a rig config file" in " ".join(result.output.split())
+
+
+def test_a_plain_npy_or_foreign_file_is_named_not_a_traceback(tmp_path):
+    npy = tmp_path / "drives.npy"
+    np.save(npy, np.zeros((4, 10)))
+    result = runner.invoke(app, ["play", str(npy)])
+    assert result.exit_code == 2, result.output
+    assert "drives.npy" in flat(result) and ".npz" in flat(result)
+    assert result.exception is None or isinstance(result.exception, SystemExit)
+    other = tmp_path / "calibration.nc"
+    other.write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(100))
+    result = runner.invoke(app, ["play", str(other)])
+    assert result.exit_code == 2 and "not a readable .npz file" in flat(result)
+    assert "pickle" not in flat(result)
+
+
+def test_boolean_drives_are_not_voltages(tmp_path):
+    path = tmp_path / "bool.npz"
+    np.savez(path, drives=np.ones((4, 100), dtype=bool), fs=FS)
+    result = runner.invoke(app, ["play", str(path)])
+    assert result.exit_code == 2, result.output
+    assert "bool" in flat(result)

@@ -29,13 +29,26 @@ def load_drives(path: Path):
     if not path.is_file():
         raise ValidationError(f"drives file {path}: no such file")
     try:
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+    except OSError as exc:
+        raise ValidationError(f"drives file {path}: cannot be read ({exc.strerror or exc})") from None
+    if head[:2] != b"PK":  # an .npz is a zip archive
+        raise ValidationError(
+            f"drives file {path}: not a readable .npz file (it does not start as a zip archive; write it with "
+            "vibrofocus render --out FILE.npz or numpy.savez(FILE, drives=..., fs=...))"
+        )
+    try:
         with np.load(path, allow_pickle=False) as data:
             missing = [k for k in ("drives", "fs") if k not in data.files]
             if missing:
                 raise ValidationError(
                     f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {', '.join(data.files) or 'nothing'})"
                 )
-            drives = as_array(data["drives"], f"drives in {path}", ndim=2, finite=False)
+            raw = data["drives"]
+            if raw.dtype.kind == "b":
+                raise ValidationError(f"drives in {path} must be voltages, got dtype bool")
+            drives = as_array(raw, f"drives in {path}", ndim=2, finite=False)
             fs_arr = np.asarray(data["fs"])
     except (OSError, ValueError, zipfile.BadZipFile) as exc:
         if isinstance(exc, ValidationError):
