@@ -230,7 +230,8 @@ def test_few_participants_degrade_clearly(tmp_path, n):
         assert s1["anova_unavailable"] is None and s1["shapiro_unavailable"] is None
     if n < 2:
         assert s1["posthoc"]["method"] == [] and "at least 2 participants, got 1" in s1["posthoc_unavailable"]
-        assert s2["friedman"] == {} and s2["wilcoxon"] == {}
+        assert s2["friedman"] == {f: {"chi2": None, "dof": None, "p": None} for f in ("location", "method")}
+        assert s2["wilcoxon"] == {}
         assert s2["friedman_unavailable"] == "Friedman and Wilcoxon tests need at least 2 participants, got 1"
         assert "Study 2 Friedman (all trials): not computed" in text
         assert "Friedman tests on all trials were not computed" in " ".join(s2["sentences"])

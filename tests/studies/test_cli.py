@@ -182,3 +182,15 @@ def test_terminal_runner_with_a_bad_rig_writes_nothing(tmp_path, calibration_fil
     if db.exists():  # nothing of this refused run is stored
         with StudyStore(db) as store:
             assert store.participants() == [] and store.sessions() == []
+
+
+def test_simulate_study_refuses_a_trials_csv_folder_that_does_not_exist_before_simulating(tmp_path):
+    db = tmp_path / "study.sqlite"
+    result = CliRunner().invoke(
+        app, ["simulate-study", "--participants", "1", "--seed", "1", "--db", str(db),
+              "--trials-csv", str(tmp_path / "missing" / "trials.csv")],
+    )
+    assert result.exit_code == 2
+    message = " ".join(result.output.split())
+    assert "--trials-csv" in message and "does not exist" in message
+    assert not db.exists()  # refused before anything was simulated or stored

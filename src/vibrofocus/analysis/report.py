@@ -255,7 +255,7 @@ def _study2_part_dict(part: Study2Counts) -> dict:
     d["friedman_unavailable"] = part.unavailable if part.friedman is None else None
     d["wilcoxon_unavailable"] = part.wilcoxon_unavailable
     d["friedman"] = (
-        {}
+        _uncomputed_friedman()
         if part.friedman is None
         else {
             factor: {
@@ -270,6 +270,11 @@ def _study2_part_dict(part: Study2Counts) -> dict:
     return d
 
 
+def _uncomputed_friedman() -> dict:
+    """The SPEC §7 ``study2.friedman`` keys, with nulls where no test could be run."""
+    return {factor: {"chi2": None, "dof": None, "p": None} for factor in ("location", "method")}
+
+
 def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None) -> dict:
     """The content of report.json (SPEC §7 contract plus details), JSON-safe.
 
@@ -277,12 +282,13 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     ``location * method``), ``F``, ``ddof1``, ``ddof2``, ``p_unc``, ``p_gg``, ``eps`` and
     more; ``study2.friedman`` has ``location`` and ``method``, each with ``chi2``,
     ``dof``, ``p``. A study without usable data has ``available: false`` and a
-    ``reason`` (and an empty ``anova`` / ``friedman``).
+    ``reason`` (and an empty ``anova``; ``friedman`` keeps its ``location`` and
+    ``method`` keys with null values, so readers of the contract find them).
 
     A study analysed with too few participants for some statistic keeps
     ``available: true`` and its descriptive tables, while each statistic that could not
     be computed is empty (``anova: []``, ``posthoc.method: []``, ``shapiro: []``,
-    ``friedman: {}``, ``wilcoxon: {}``) and its reason is in the matching key
+    ``friedman`` with null ``chi2``/``dof``/``p``, ``wilcoxon: {}``) and its reason is in the matching key
     ``study1.anova_unavailable``, ``study1.posthoc_unavailable``,
     ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
     ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
@@ -326,7 +332,7 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
         }
     s2 = result.study2
     if s2 is None:
-        d["study2"] = {"available": False, "reason": result.unavailable.get("study2"), "friedman": {}}
+        d["study2"] = {"available": False, "reason": result.unavailable.get("study2"), "friedman": _uncomputed_friedman()}
     else:
         all_trials = _study2_part_dict(s2.all_trials)
         d["study2"] = {

@@ -36,6 +36,11 @@ def simulate_study(
         from ..studies.participants import MODEL_NOTICE
         from ..studies.simulate import simulate_studies, summarize_simulation
 
+        if trials_csv is not None and not trials_csv.parent.is_dir():
+            # Checked first: the simulation takes minutes and the file is written last.
+            from ..errors import ValidationError
+
+            raise ValidationError(f"--trials-csv {trials_csv}: the folder {trials_csv.parent} does not exist")
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE}[/]")
         with Progress(
