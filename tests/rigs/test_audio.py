@@ -281,3 +281,15 @@ def test_device_selection_by_index(jack_server):
     with make_rig("audio", config=cfg) as r:
         assert r.device_index == index
         assert r.describe()["device_fs"] == JACK_RATE
+
+
+def test_the_cue_is_refused_on_the_interface_that_drives_the_actuators(rig):
+    # A cue tone plays outside the safety layer, so it must never go to the rig's own
+    # interface: naming that device (by index, or by name) is refused.
+    from vibrofocus.errors import ValidationError
+    from vibrofocus.studies import headphone_beep
+
+    with pytest.raises(ValidationError, match="drives the actuators"):
+        headphone_beep(rig.device_index, rig=rig)
+    with pytest.raises(ValidationError, match="drives the actuators"):
+        headphone_beep("loopback", rig=rig)

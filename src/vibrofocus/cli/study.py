@@ -43,7 +43,12 @@ def run(
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
     seed: int | None = typer.Option(None, "--seed", min=0, help="Seed of the trial order (default: random, stored)."),
-    beep: bool = typer.Option(True, "--beep/--no-beep", help="Beep before each stimulus (bell or sound card)."),
+    beep: bool = typer.Option(True, "--beep/--no-beep", help="Cue before each stimulus (the terminal bell unless --beep-device)."),
+    beep_device: str | None = typer.Option(
+        None, "--beep-device",
+        help="Play the cue as a tone on this audio output (the participant's headphones; see `vibrofocus devices`). "
+        "The rig's own actuator interface is refused.",
+    ),
 ) -> None:
     """Run a real participant: each trial beeps, plays the stimulus, then waits for the
     answer on the keypad — digits then Enter (Study 2: several digits, e.g. ``45``);
@@ -58,7 +63,7 @@ def run(
         from ..errors import StudyError
         from ..rigs import make_rig
         from ..studies import StudyStore
-        from ..studies.engine import StudyEngine, terminal_beep
+        from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
         from ..studies.terminal import TerminalResponder
 
         console = Console()
@@ -89,7 +94,12 @@ def run(
                     calibration_id=cid, config={"rig": rig},
                 )
                 console.print(f"new session {sid} for {participant}, study {study}")
-            cue = terminal_beep if beep and rig != "simulated" else (_bell if beep else None)
+            if not beep:
+                cue = None
+            elif beep_device is not None:
+                cue = headphone_beep(beep_device, rig=the_rig)
+            else:
+                cue = terminal_beep
             engine = StudyEngine(store, sid, the_rig, cal, cue=cue)
             responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
             try:
@@ -101,11 +111,3 @@ def run(
             console.print(
                 f"session {sid}: {summary.status}, {summary.n_answered} of {summary.n_trials} trials answered"
             )
-
-
-def _bell() -> None:
-    # The simulated rig has no headphones: the terminal bell stands in for the beep.
-    import sys
-
-    sys.stdout.write("\a")
-    sys.stdout.flush()

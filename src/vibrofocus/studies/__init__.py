@@ -37,7 +37,7 @@ Running trials (:mod:`.engine`)
     *, answer_id=None) -> AnswerReceipt`` and ``.run(responder, *, pace_s=0, max_trials=None,
     progress=None) -> RunSummary``. A responder has ``respond(presentation) -> Response |
     PAUSE | ABORT`` and ``wait_resume() -> bool``. :func:`drive_sha256` (shape, then float64
-    bytes), :func:`calibration_renderer`, :func:`terminal_beep`.
+    bytes), :func:`calibration_renderer`, :func:`terminal_beep`, :func:`headphone_beep`.
 Simulated participants (:mod:`.participants`, :mod:`.simulate`)
     :class:`SimulatedParticipant` (a perceptual MODEL, not data), :class:`PerceptualModel`,
     :func:`simulate_studies`, :func:`participant_seeds`, :func:`summarize_simulation`.
@@ -54,6 +54,7 @@ from .engine import (
     calibration_renderer,
     drive_sha256,
     terminal_beep,
+    headphone_beep,
 )
 from .export import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
 from .participants import MODEL_NOTICE, Percept, PerceptualModel, SimulatedParticipant
@@ -104,6 +105,7 @@ __all__ = [
     "drive_sha256",
     "calibration_renderer",
     "terminal_beep",
+    "headphone_beep",
     "TerminalResponder",
     "SimulatedParticipant",
     "PerceptualModel",

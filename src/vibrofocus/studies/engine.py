@@ -19,7 +19,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..defaults import DRIVE_LIMIT_V, N_SAMPLES
-from ..errors import StudyError
+from ..errors import StudyError, ValidationError
 from .protocol import PlannedTrial, StudyDesign
 from .storage import AnswerReceipt, StudyStore
 
@@ -35,6 +35,7 @@ __all__ = [
     "drive_sha256",
     "calibration_renderer",
     "terminal_beep",
+    "headphone_beep",
 ]
 
 #: What a responder returns to pause the session (then :meth:`Responder.wait_resume`).
@@ -95,18 +96,55 @@ def calibration_renderer(
 
 
 def terminal_beep() -> None:
-    """A short beep for the participant: 1 kHz for 0.1 s on the default audio output
-    through sounddevice when it works, otherwise the terminal bell."""
-    try:
-        import sounddevice as sd
+    """The default cue: the terminal bell.
 
-        fs = 44_100
-        t = np.arange(int(0.1 * fs)) / fs
-        tone = 0.2 * np.sin(2 * np.pi * 1000.0 * t) * np.hanning(t.size)
-        sd.play(tone.astype(np.float32), fs, blocking=True)
-    except Exception:  # noqa: BLE001 - no audio device, no PortAudio: fall back to the bell
-        sys.stdout.write("\a")
-        sys.stdout.flush()
+    It needs no audio device, so it can never reach an actuator. For a tone in the
+    participant's headphones use :func:`headphone_beep` with the headphones' device.
+    """
+    sys.stdout.write("\a")
+    sys.stdout.flush()
+
+
+def headphone_beep(device: str | int, *, rig: object | None = None) -> Callable[[], None]:
+    """A cue that plays 1 kHz for 0.1 s on the participant's headphones.
+
+    Parameters
+    ----------
+    device : str or int
+        The headphones' PortAudio output device (index or part of its name, as listed
+        by ``vibrofocus devices``).
+    rig : Rig, optional
+        The rig of the study. The cue plays outside the rig's safety layer, so a device
+        that is the rig's own audio interface (which drives the actuators) is refused.
+
+    Returns
+    -------
+    callable
+        ``cue()``, blocking until the tone has played.
+
+    Raises
+    ------
+    ValidationError
+        If ``device`` is the rig's actuator interface.
+    """
+    import sounddevice as sd
+
+    from ..rigs.audio import resolve_audio_device
+
+    index = resolve_audio_device(device, outputs=1)
+    if index == getattr(rig, "device_index", None):
+        raise ValidationError(
+            f"the cue device {device!r} is the audio interface that drives the actuators; name the "
+            "participant's headphones instead (a cue must never reach an actuator)"
+        )
+    fs = 44_100
+    t = np.arange(int(0.1 * fs)) / fs
+    tone = (0.2 * np.sin(2 * np.pi * 1000.0 * t) * np.hanning(t.size)).astype(np.float32)
+
+    def cue() -> None:
+        sd.play(tone, fs, device=index, blocking=True)
+
+    return cue
 
 
 @dataclass(frozen=True)
