@@ -160,4 +160,7 @@ def test_kill_and_restart_server_mid_session(server, page):
     assert [(r[0], r[1]) for r in rows] == [(0, "1"), (1, "3"), (2, "5")]
     assert server.rows("SELECT COUNT(*), COUNT(DISTINCT trial_index) FROM answers") == [(3, 3)]
     assert server.rows("SELECT COUNT(*) FROM events WHERE kind = 'resumed_after_restart'") == [(1,)]
+    # The server commits before it answers, so the page clears its copy a moment after
+    # the row appears: wait for the confirmation to arrive, then nothing is pending.
+    page.wait_for_function(f"(localStorage.getItem('vibrofocus.pending.{sid}') || '[]') === '[]'")
     assert pending(page, sid) == []
