@@ -12,7 +12,6 @@ each change increments ``seq`` so the page can tell a new cue from the same one 
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import threading
 import time
@@ -21,6 +20,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+# The hash stored with every answer: one definition for the web app and the engine.
+from ..studies.engine import drive_sha256
 
 __all__ = ["Pace", "PACES", "SessionRunner", "drive_sha256"]
 
@@ -49,14 +51,6 @@ class Pace:
 
 #: Named paces: ``normal`` for people, ``fast`` for tests and demonstrations.
 PACES = {"normal": Pace(), "fast": Pace(ready_s=0.1, cue_to_stimulus_s=0.25, after_answer_s=0.05)}
-
-
-def drive_sha256(drives: np.ndarray) -> str:
-    """SHA-256 of a drive array (float64, C order, shape included), hex."""
-    arr = np.ascontiguousarray(np.asarray(drives, dtype=np.float64))
-    digest = hashlib.sha256(repr(arr.shape).encode())
-    digest.update(arr.tobytes())
-    return digest.hexdigest()
 
 
 class SessionRunner:
