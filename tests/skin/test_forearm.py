@@ -46,14 +46,19 @@ def _speed_and_attenuation(rig, src, direction, d1, d2, freqs, q=0):
     return speed, alpha
 
 
-def test_flat_arm_recovers_the_configured_dispersion_and_attenuation():
-    params = ForearmParameters.nominal(4, c250_m_s=3.0, alpha250_np_m=80.0, beta=0.4)
+def test_flat_arm_recovers_the_speed_and_attenuation_of_a_voigt_law():
+    # Kelvin-Voigt (order 1) has closed forms independent of the code under test.
+    mu, eta, rho = 6e3, 1.2, 1100.0
+    params = ForearmParameters.nominal(4, shear_modulus_pa=mu, spring_pot_pa_sn=eta, fractional_order=1.0,
+                                       density_kg_m3=rho, rayleigh_factor=1.0)
     rig = _quiet(participant=params, geometry="plane")
     src = rig.layout.actuators_xy[2]
     freqs = np.array([100.0, 250.0, 500.0])
     speed, alpha = _speed_and_attenuation(rig, src, np.array([0.0, -1.0]), 0.02, 0.04, freqs, q=2)
-    np.testing.assert_allclose(speed, 3.0 * (freqs / 250) ** 0.4, rtol=0.05)
-    np.testing.assert_allclose(alpha, 80.0 * freqs / 250, rtol=0.05)
+    w = 2 * np.pi * freqs
+    mag = np.sqrt(mu**2 + (w * eta) ** 2)
+    np.testing.assert_allclose(speed, np.sqrt(2 * mag**2 / (rho * (mu + mag))), rtol=0.05)
+    np.testing.assert_allclose(alpha, np.sqrt(rho * w**2 * (mag - mu) / (2 * mag**2)), rtol=0.05)
 
 
 def test_default_participant_speed_is_plausible_and_dispersive():
@@ -62,13 +67,13 @@ def test_default_participant_speed_is_plausible_and_dispersive():
     freqs = np.array([100.0, 250.0, 500.0])
     speed, alpha = _speed_and_attenuation(rig, src, np.array([0.0, -1.0]), 0.02, 0.04, freqs, q=2)
     p = rig.participant
-    assert 2.0 <= speed[1] <= 7.0
+    assert 2.0 <= speed[1] <= 8.0
     assert speed[0] < speed[1] < speed[2]  # low frequencies travel slower
     np.testing.assert_allclose(speed, p.phase_speed(freqs), rtol=0.05)
     np.testing.assert_allclose(alpha, p.attenuation(freqs), rtol=0.05)
 
 
-def test_default_participant_loses_20_to_30_db_by_35_mm():
+def test_default_participant_loses_30_to_45_db_by_35_mm():
     rig = _quiet()
     src = rig.layout.actuators_xy[2]
     drive = _single_actuator_drive(4, 2, amp=10.0, sigma=1e-3)  # the base stimulus
@@ -76,7 +81,7 @@ def test_default_participant_loses_20_to_30_db_by_35_mm():
     rec = rig.play_and_record(drive, np.array([src + 6e-3 * down, src + 35e-3 * down]))
     peaks = np.abs(rec).max(axis=1)
     loss_db = 20 * np.log10(peaks[0] / peaks[1])
-    assert 20.0 <= loss_db <= 30.0
+    assert 30.0 <= loss_db <= 45.0
 
 
 def test_ten_volts_give_about_two_micrometres_next_to_a_nominal_actuator():
@@ -157,9 +162,10 @@ def test_same_seed_reproduces_everything_and_seeds_differ():
 
 def test_playback_is_linear_not_circular():
     rig = _quiet(participant=ForearmParameters.nominal(4))
-    # 20 ms drive; the point is 60 mm away, so the wave arrives after the drive has ended.
-    drive = _single_actuator_drive(4, 0, duration=0.02, t0=0.01)
-    pt = rig.layout.actuators_xy[0][None] + [[0.0, -0.06]]
+    # 10 ms drive; the point is 90 mm away, so the wave (about 7 m/s group speed)
+    # arrives after the drive has ended.
+    drive = _single_actuator_drive(4, 0, duration=0.01, t0=0.004)
+    pt = rig.layout.actuators_xy[0][None] + [[0.0, -0.09]]
     rec = rig.play_and_record(drive, pt, tail_s=0.15)[0]
     n = drive.shape[1]
     assert np.abs(rec[:n]).max() < 0.05 * np.abs(rec).max()  # nothing wrapped to the start
@@ -188,9 +194,9 @@ def test_field_matches_noise_free_recordings_and_instants():
     rec = rig.play_and_record(drive, pts, tail_s=0.05)
     full = rig.field(rig.last_drive, pts, tail_s=0.05)
     assert full.shape == rec.shape
-    # Playback drops the model's short precursor before time zero (see latency_s); the
-    # field keeps it. It is a few tenths of a percent of the peak next to an actuator.
-    np.testing.assert_allclose(full, rec, rtol=0, atol=1e-2 * np.abs(rec).max())
+    # Playback samples the continuous response (impulse invariance); the field truncates
+    # the spectrum at Nyquist. They differ by the aliases above Nyquist, tiny at >= 6 mm.
+    np.testing.assert_allclose(full, rec, rtol=0, atol=1e-3 * np.abs(rec).max())
     idx = np.array([0, 100, 321, 999])
     some = rig.field(rig.last_drive, pts, times=idx / FS)
     np.testing.assert_allclose(some, full[:, idx], rtol=0, atol=1e-9 * np.abs(full).max())
@@ -235,12 +241,13 @@ def test_waves_come_back_around_the_arm_at_low_frequencies_only():
     cyl = _quiet(participant=params)
     flat = _quiet(participant=params, geometry="plane")
     point = cyl.layout.actuators_xy[0][None] + [[0.03, 0.0]]
-    f = np.array([30.0, 500.0])
+    f = np.array([12.0, 500.0])
     h_cyl = cyl.transfer(point, f)[:, 0, 0]
     h_flat = flat.transfer(point, f)[:, 0, 0]
-    # At 500 Hz the way round (> 0.15 m) costs exp(-120 Np/m * 0.15 m) ~ 1e-8: no difference.
+    # At 500 Hz the way round (> 0.15 m) costs exp(-alpha(500 Hz) * 0.15 m), below 1e-6.
+    assert params.attenuation([500.0])[0] * 0.15 > np.log(1e6)
     np.testing.assert_allclose(h_cyl[1], h_flat[1], rtol=1e-6)
-    # At 30 Hz (7 Np/m) the wave that went round the arm adds a sizeable contribution.
+    # At 12 Hz (a few Np/m) the wave that went round the arm adds a sizeable contribution.
     assert abs(h_cyl[0] - h_flat[0]) > 0.1 * abs(h_flat[0])
 
 
@@ -257,3 +264,72 @@ def test_simulated_strap_forces_follow_contact_and_the_seed():
     np.testing.assert_allclose(forces, expected, atol=0.12)
     reading = check_straps(rig)
     assert reading.simulated and reading.target_n == 1.0
+
+
+def _energy_before_zero(rig, points, oversampling=4, n=2**15, precursor_s=0.05):
+    """Share of each impulse response's energy in the ``precursor_s`` before t = 0.
+
+    Independent of the rig's own playback responses: the true transfer on a grid
+    ``oversampling`` times finer than the rig's rate, so that the spectrum's truncation at
+    Nyquist rings too little to matter, over a window (3.3 s) long enough that the slowly
+    decaying low-frequency tail wraps around into negative times at below 1e-9.
+    Returns shape (n_points, n_actuators).
+    """
+    m = n * oversampling
+    h = rig.transfer(points, np.fft.rfftfreq(m, 1 / (oversampling * rig.fs)))
+    e = np.fft.irfft(h, m, axis=0) ** 2
+    k = int(precursor_s * oversampling * rig.fs)
+    return e[m - k:].sum(axis=0) / e.sum(axis=0)
+
+
+@pytest.mark.parametrize("seed", [0, 3])
+def test_impulse_responses_are_causal_with_no_latency(seed):
+    rig = _quiet(seed=seed)
+    assert rig.latency_s == 0.0
+    a = rig.layout.actuators_xy
+    # every layout point, under each actuator's centre and 1 mm, 3 mm and 6 mm from it
+    pts = np.concatenate([rig.layout.points_xy, a, a + [1e-3, 0.0], a + [3e-3, 0.0], a + [0.0, 6e-3]])
+    assert _energy_before_zero(rig, pts).max() < 1e-6
+
+
+def test_arrival_times_follow_the_group_speed():
+    rig = _quiet(participant=ForearmParameters.nominal(4), geometry="plane")
+    f_c = 250.0
+    t = np.arange(int(0.4 * FS)) / FS
+    burst = 10.0 * np.exp(-0.5 * ((t - 0.1) / 0.02) ** 2) * np.sin(2 * np.pi * f_c * (t - 0.1))
+    drive = np.zeros((4, t.size))
+    drive[2] = burst
+    src = rig.layout.actuators_xy[2]
+    d1, d2 = 0.02, 0.05
+    rec = rig.play_and_record(drive, src + np.array([[0.0, -d1], [0.0, -d2]]), tail_s=0.0)
+    envelope = np.abs(signal.hilbert(rec, axis=1))
+    # the envelope's centroid is robust to its flat top
+    t_arrival = (envelope**2 @ t) / (envelope**2).sum(axis=1)
+    delay = t_arrival[1] - t_arrival[0]
+    expected = (d2 - d1) / rig.participant.group_speed(np.array([f_c]))[0]
+    np.testing.assert_allclose(delay, expected, rtol=0.05)
+    # and it is not the phase speed, which differs by more than the tolerance here
+    assert abs((d2 - d1) / rig.participant.phase_speed(np.array([f_c]))[0] - expected) > 0.1 * expected
+
+
+def test_skin_under_a_contact_is_passive():
+    # Driving-point compliance of the skin (no exciter): a passive medium absorbs power,
+    # which in NumPy's convention means Im(u / F) <= 0 at every frequency.
+    layout = ArrayLayout(np.array([[0.0, 0.0]]), np.array([[0.0, 0.0]]))
+    params = ForearmParameters.nominal(1)
+    rig = _quiet(layout=layout, participant=params, geometry="plane")
+    f = np.geomspace(5.0, 5000.0, 300)
+    from vibrofocus.skin.propagation import exciter_response
+
+    # The power a uniform pressure on the contact disc puts in is set by the disc's
+    # average displacement: midpoint quadrature over rings and sectors.
+    a = params.contact_radius_m
+    r = (np.arange(40) + 0.5) * a / 40
+    th = (np.arange(16) + 0.5) * 2 * np.pi / 16
+    pts = np.stack(np.broadcast_arrays(r[:, None] * np.cos(th), r[:, None] * np.sin(th)), -1).reshape(-1, 2)
+    weights = np.repeat(r, th.size) / np.repeat(r, th.size).sum()
+    h = rig.transfer(pts, f)[:, :, 0] @ weights
+    skin = h / exciter_response(f, params.f0_hz, params.q)[:, 0]
+    assert np.all(skin.imag < 0)
+    # An active term would show: flipping the sign of the loss would break it.
+    assert not np.all(np.conj(skin).imag < 0)

@@ -14,23 +14,25 @@ def test_same_seed_same_participant_and_different_seeds_differ(reference_layout)
     b = ForearmParameters.draw(7, reference_layout)
     c = ForearmParameters.draw(8, reference_layout)
     assert a.to_dict() == b.to_dict()
-    assert a.c250_m_s != c.c250_m_s
+    assert a.shear_modulus_pa != c.shear_modulus_pa
     assert not np.array_equal(a.contact, c.contact)
 
 
 def test_draws_stay_within_and_fill_the_documented_spreads(reference_layout):
     people = [ForearmParameters.draw(s, reference_layout) for s in range(300)]
-    speed = np.array([p.c250_m_s for p in people]) / 3.5 - 1
-    atten = np.array([p.alpha250_np_m for p in people]) / 60.0 - 1
+    stiffness = np.array([p.shear_modulus_pa for p in people]) / P.NOMINAL_LAW.mu0_pa - 1
+    order = np.array([p.fractional_order for p in people])
     gains = np.array([p.gains for p in people]) - 1
     f0 = np.array([p.f0_hz for p in people]) / 500.0 - 1
     q = np.array([p.q for p in people])
     contact = np.array([p.contact for p in people])
     wrist = reference_layout.actuators_xy[:, 1] > 0
-    for values, half in ((speed, 0.15), (atten, 0.25), (gains, 0.10), (f0, 0.10)):
+    for values, half in ((stiffness, P.STIFFNESS_SPREAD), (gains, 0.10), (f0, 0.10)):
         assert np.abs(values).max() <= half
         assert np.abs(values).max() > 0.9 * half  # the spread is used, not collapsed
     assert q.min() >= P.Q_RANGE[0] and q.max() <= P.Q_RANGE[1]
+    assert order.min() >= P.ORDER_RANGE[0] and order.max() <= P.ORDER_RANGE[1]
+    assert np.ptp(order) > 0.9 * np.diff(P.ORDER_RANGE)[0]
     assert contact[:, wrist].min() >= 0.4 and contact[:, wrist].min() < 0.45
     assert contact[:, ~wrist].min() >= P.ELBOW_CONTACT_RANGE[0]
     assert contact.max() <= 1.0
@@ -38,18 +40,30 @@ def test_draws_stay_within_and_fill_the_documented_spreads(reference_layout):
     assert contact[:, wrist].mean() < contact[:, ~wrist].mean() - 0.1
 
 
+def test_drawn_wave_laws_cover_the_literature_spread_of_speed_and_attenuation(reference_layout):
+    people = [ForearmParameters.draw(s, reference_layout) for s in range(300)]
+    nominal = ForearmParameters.nominal(4)
+    speed = np.array([p.c250_m_s for p in people]) / nominal.c250_m_s - 1
+    atten = np.array([p.alpha250_np_m for p in people]) / nominal.alpha250_np_m - 1
+    # Speed goes as the square root of the stiffness draw (about half its spread).
+    assert 0.6 * P.STIFFNESS_SPREAD / 2 < np.abs(speed).max() < 1.6 * P.STIFFNESS_SPREAD / 2
+    assert np.abs(atten).max() > 0.15  # attenuation varies with the order and stiffness
+
+
 def test_nominal_participant_has_identical_actuators():
-    p = ForearmParameters.nominal(3, c250_m_s=5.0)
-    assert p.c250_m_s == 5.0
+    p = ForearmParameters.nominal(3, shear_modulus_pa=8e3)
+    assert p.shear_modulus_pa == 8e3
     for name in ("contact", "gains", "f0_hz", "q"):
         assert np.ptp(getattr(p, name)) == 0
 
 
-def test_laws_give_spec_values_at_250_hz_and_grow_with_frequency():
+def test_nominal_law_is_the_fitted_one_and_is_dispersive():
     p = ForearmParameters.nominal(1)
-    np.testing.assert_allclose(p.phase_speed([250.0]), [3.5])
-    np.testing.assert_allclose(p.attenuation([250.0, 500.0]), [60.0, 120.0])
+    f = np.array([100.0, 250.0, 500.0])
+    np.testing.assert_allclose(p.phase_speed(f), P.NOMINAL_LAW.phase_speed(f), rtol=1e-12)
+    np.testing.assert_allclose(p.attenuation(f), P.NOMINAL_LAW.attenuation(f), rtol=1e-12)
     assert p.phase_speed([100.0])[0] < p.phase_speed([500.0])[0]
+    assert p.attenuation([100.0])[0] < p.attenuation([500.0])[0]
 
 
 @pytest.mark.parametrize("seed", [-1, 1.5, "a", True])
@@ -63,7 +77,9 @@ def test_bad_values_are_refused():
         ForearmParameters(contact=[1.2], gains=[1.0], f0_hz=[500.0], q=[1.0])
     with pytest.raises(ValidationError, match="gains"):
         ForearmParameters(contact=[1.0], gains=[1.0, 1.0], f0_hz=[500.0], q=[1.0])
-    with pytest.raises(ValidationError, match="c250_m_s"):
-        ForearmParameters.nominal(1, c250_m_s=-3.0)
+    with pytest.raises(ValidationError, match="shear_modulus_pa"):
+        ForearmParameters.nominal(1, shear_modulus_pa=-3.0)
+    with pytest.raises(ValidationError, match="fractional_order"):
+        ForearmParameters.nominal(1, fractional_order=1.5)
     with pytest.raises(ValidationError, match="wrist_y_m"):
         ForearmParameters.nominal(1, wrist_y_m=-0.2)

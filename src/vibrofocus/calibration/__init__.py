@@ -1,6 +1,7 @@
 """Calibration: measure the skin's transfer matrix with sweeps, judge its quality, and
 keep it in one self-describing netCDF4/HDF5 file (SPEC §4)."""
 
+from .accuracy import transfer_error
 from .calibrate import SCHEMA_VERSION, Calibration, calibrate
 from .excitation import METHODS, SweepSettings, default_settings, make_excitation
 from .figures import plot_calibration
@@ -23,4 +24,5 @@ __all__ = [
     "QualityThresholds",
     "assess_quality",
     "detect_clipping",
+    "transfer_error",
 ]

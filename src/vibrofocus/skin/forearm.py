@@ -2,12 +2,14 @@
 
 Model, per actuator ``q`` and skin point ``p`` (NumPy's ``exp(+i omega t)`` convention):
 
-``H_pq(f) = K g_q c_q E_q(f) sum_m G(k(f), d_pqm, a_q)``
+``H_pq(f) = K g_q c_q E_q(f) (mu_1 / G(f)) sum_m Green(k(f), d_pqm, a_q)``
 
 with ``K`` the drive sensitivity (so that 10 V of the base Ricker on one nominal
 actuator gives 2 µm peak 6 mm away), ``g_q`` the actuator's gain, ``c_q`` its contact
-(coupling), ``E_q`` the inertial-exciter resonance, ``G`` the finite-contact surface
-Green's function with the complex dispersive wavenumber ``k(f)`` and ``d_pqm`` the
+(coupling), ``E_q`` the inertial-exciter resonance, ``G(f)`` the skin's complex shear
+modulus (a causal viscoelastic law, :mod:`.viscoelastic`; ``mu_1`` = 1 kPa), ``Green`` the
+finite-contact surface Green's function with the complex wavenumber ``k(f)`` that the
+same law gives, and ``d_pqm`` the
 surface path lengths on the tapered cylinder, the short way and ``m`` times around
 (see :mod:`.parameters`, :mod:`.geometry`, :mod:`.propagation`).
 """
@@ -41,6 +43,13 @@ _REFERENCE_DISTANCE_M = 6e-3
 # Impulse responses kept per point set by play_and_record (calibration aims at a few
 # points at a time, so a small cache avoids recomputing the model for every repeat).
 _IR_CACHE_SIZE = 32
+# Playback responses sample the continuous-time response from a grid this many times
+# finer (see SimulatedForearm.impulse_responses), with the Hankel function interpolated
+# from a distance table of this relative step (about 1e-6 relative error).
+_IR_OVERSAMPLING = 4
+_IR_TABLE_STEP = 5e-3
+# Unit of the modulus in the compliance factor (any constant: K absorbs it).
+_MODULUS_UNIT_PA = 1e3
 
 
 def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmParameters,
@@ -56,7 +65,7 @@ def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmPara
     if not pos.any():
         return out
     fp = f[pos]
-    k = wavenumber(fp, params.c250_m_s, params.beta, params.alpha250_np_m)
+    k = wavenumber(fp, params.law)
     radius = params.contact_radius_m * np.sqrt(params.contact)
     green = np.zeros((fp.size, distances.shape[0], distances.shape[1]), dtype=complex)
     disc = _disc_factor(k[:, None, None] * radius[None, None, :])
@@ -64,7 +73,10 @@ def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmPara
         green += surface_green(k, distances[:, :, m], radius, max_nepers=max_nepers, disc_factor=disc,
                                table_step=table_step)
     source = exciter_response(fp, params.f0_hz, params.q) * (params.gains * params.contact)[None, :]
-    out[pos] = green * source[:, None, :]
+    # A stiffer medium moves less under the same force: displacement goes as 1 / G(f)
+    # (the "tension" of the skin layer), which is causal and passive like G itself.
+    compliance = _MODULUS_UNIT_PA / params.law.modulus(fp)
+    out[pos] = green * (source * compliance[:, None])[:, None, :]
     return out
 
 
@@ -130,12 +142,11 @@ class SimulatedForearm(Rig):
         :meth:`transfer` computed over twice this length (so nothing wraps into the
         kept part) with the last 10 % faded out.
     latency_s : float
-        Fixed delay between drive and recording, s: converter, amplifier and
-        vibrometer-decoder delays of a real rig. It also keeps the model causal in
-        practice: the prescribed dispersion law is not Kramers-Kronig consistent with
-        the attenuation law, which gives the response next to an actuator a precursor
-        about 1 ms long before the drive; with the default 2 ms the part still before
-        time zero holds about 1e-5 of the response energy and is dropped by playback.
+        Fixed delay between drive and recording, s, to model the converter, amplifier
+        and vibrometer-decoder delays of a particular rig. Default 0: the wave law is
+        causal by construction (:mod:`.viscoelastic`), so no delay is needed to hide a
+        precursor; an impulse response holds less than 1e-6 of its energy before
+        ``t = 0``.
     noise_band : (float, float)
         Band in which ``noise_m`` is specified, Hz.
 
@@ -179,7 +190,7 @@ class SimulatedForearm(Rig):
         geometry: str = "cylinder",
         n_images: int = 2,
         ir_duration_s: float = 0.4096,
-        latency_s: float = 2e-3,
+        latency_s: float = 0.0,
         noise_band: tuple[float, float] = BAND_HZ,
     ) -> None:
         super().__init__(layout=layout, fs=fs, limits=limits)
@@ -258,10 +269,17 @@ class SimulatedForearm(Rig):
     def impulse_responses(self, points_xy: np.ndarray) -> np.ndarray:
         """Impulse responses used for playback, shape (n_points, n_actuators, n_ir), m/V per sample.
 
-        The model is evaluated on ``rfftfreq(2 n_ir)``; the first ``n_ir`` samples of
-        its inverse FFT are kept and the last 10 % of them faded out with a half Hann
-        window, so the responses are finite and playback is an exact linear
-        convolution.
+        The responses are the continuous-time responses sampled at ``fs`` (impulse
+        invariance): the model is evaluated on a grid ``_IR_OVERSAMPLING`` times
+        finer in time (``rfftfreq(2 n_ir R, 1 / (R fs))``), transformed, and every
+        ``R``-th sample kept. Truncating the spectrum at ``fs / 2`` instead would be an
+        ideal low-pass, whose ringing puts up to 1e-4 of the energy of a response next
+        to an actuator before ``t = 0``; sampled this way, the causal model keeps less
+        than 1e-7 there. The first ``n_ir`` samples are kept and the last 10 % faded
+        out with a half Hann window, so the responses are finite and playback is an
+        exact linear convolution. In band their spectrum equals :meth:`transfer` up to
+        the aliases ``H(f + m fs)``, which the skin's attenuation makes negligible
+        except under the contact itself.
         """
         points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
         key = points.tobytes()
@@ -269,9 +287,10 @@ class SimulatedForearm(Rig):
             if key in self._ir_cache:
                 self._ir_cache.move_to_end(key)
                 return self._ir_cache[key]
-        n_fft = 2 * self.n_ir
-        h = self.transfer(points, np.fft.rfftfreq(n_fft, 1 / self.fs))
-        ir = np.fft.irfft(h, n_fft, axis=0)[: self.n_ir]
+        r = _IR_OVERSAMPLING
+        n_fft = 2 * self.n_ir * r
+        h = self._transfer(points, np.fft.rfftfreq(n_fft, 1 / (r * self.fs)), table_step=_IR_TABLE_STEP)
+        ir = r * np.fft.irfft(h, n_fft, axis=0)[: r * self.n_ir: r]
         n_fade = max(self.n_ir // 10, 1)
         ir[-n_fade:] *= np.hanning(2 * n_fade)[n_fade:, None, None]
         ir = np.ascontiguousarray(np.moveaxis(ir, 0, -1))
@@ -453,6 +472,6 @@ class SimulatedForearm(Rig):
     def __repr__(self) -> str:
         p = self.participant
         return (
-            f"SimulatedForearm(seed={self.seed}, c250={p.c250_m_s:.2f} m/s, alpha250={p.alpha250_np_m:.1f} Np/m, "
+            f"SimulatedForearm(seed={self.seed}, c(250 Hz)={p.c250_m_s:.2f} m/s, alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, "
             f"contact={np.round(p.contact, 2).tolist()}, geometry={self.geometry.kind!r})"
         )

@@ -1,8 +1,11 @@
 """Per-participant parameters of the simulated forearm and how a seed draws them.
 
-The nominal values follow SPEC §3; each field documents its literature source and the
-range reported there. A participant is the nominal forearm with speed, attenuation,
-contact and actuator gain/resonance drawn uniformly within documented spreads.
+The skin's wave law is a causal viscoelastic law (:mod:`.viscoelastic`): a fractional
+Kelvin-Voigt shear modulus whose nominal values are fitted to published forearm
+measurements by ``scripts/fit_skin_model.py`` (data and sources in
+``vibrofocus/skin/data/``). Each field documents what it was fitted to or says that it
+is an assumption. A participant is the nominal forearm with the modulus, the fractional
+order, contact and actuator gain/resonance drawn uniformly within documented spreads.
 """
 
 from __future__ import annotations
@@ -14,11 +17,13 @@ import numpy as np
 from .._validation import as_array, check_in_range, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
+from .viscoelastic import RAYLEIGH_FACTOR_INCOMPRESSIBLE, ViscoelasticLaw
 
 __all__ = [
     "ForearmParameters",
-    "SPEED_SPREAD",
-    "ATTENUATION_SPREAD",
+    "NOMINAL_LAW",
+    "STIFFNESS_SPREAD",
+    "ORDER_RANGE",
     "WRIST_CONTACT_RANGE",
     "ELBOW_CONTACT_RANGE",
     "GAIN_SPREAD",
@@ -26,15 +31,22 @@ __all__ = [
     "Q_RANGE",
 ]
 
-#: Relative half-width of the uniform draw of the 250 Hz phase speed (±15 %, SPEC §3).
-SPEED_SPREAD = 0.15
-#: Relative half-width of the uniform draw of the 250 Hz attenuation (±25 %, SPEC §3).
-ATTENUATION_SPREAD = 0.25
-#: Coupling of wrist-side actuators, drawn uniformly in this range (SPEC §3: 0.4-1.0).
+#: The nominal wave law, fitted by ``scripts/fit_skin_model.py`` (see
+#: :class:`ForearmParameters` for the sources and the residuals).
+NOMINAL_LAW = ViscoelasticLaw(mu0_pa=5.0e3, eta_pa_sn=300.0, order=0.6)
+#: Relative half-width of the uniform draw of a participant's stiffness: ``mu0`` and
+#: ``eta`` are scaled together by one factor, so the phase speed varies by about half
+#: this (speed goes as the square root of the modulus).
+STIFFNESS_SPREAD = 0.30
+#: Range of the fractional order drawn per participant (it sets the loss: attenuation
+#: over wavenumber is about ``tan(n pi / 4)`` where the spring-pot dominates).
+ORDER_RANGE = (0.5, 0.7)
+#: Coupling of wrist-side actuators, drawn uniformly in this range (an assumption of the
+#: model, see :class:`ForearmParameters`).
 WRIST_CONTACT_RANGE = (0.4, 1.0)
 #: Coupling of the other actuators, which sit on the fleshier, wider part of the arm.
 ELBOW_CONTACT_RANGE = (0.85, 1.0)
-#: Relative half-width of the uniform draw of each actuator's gain (±10 %, SPEC §3).
+#: Relative half-width of the uniform draw of each actuator's gain (±10 %, an assumption).
 GAIN_SPREAD = 0.10
 #: Relative half-width of each actuator's loaded resonance frequency (±10 %); with the
 #: Q draw below it gives the actuators different phase responses.
@@ -55,57 +67,68 @@ class ForearmParameters:
 
     Parameters
     ----------
-    c250_m_s : float
-        Phase speed of the surface wave at 250 Hz, m/s. Nominal 3.5 m/s (SPEC §3).
-        Skin surface-wave speeds reported in the literature lie between about 2 and
-        7 m/s and increase with frequency: Manfredi et al. 2012 (PLoS ONE 7:e31203,
-        primate glabrous skin), Shao, Hayward & Visell 2016 (PNAS 113:4188, whole hand,
-        about 5-7 m/s), Sofia & Jones 2013 (IEEE Trans. Haptics 6:320, forearm) and
-        Dandu et al. 2019 (IEEE World Haptics, forearm, dispersive).
-    beta : float
-        Dispersion exponent, ``c(f) = c250 (f / 250 Hz)^beta``. Nominal 0.3; the
-        literature above implies values between 0 (no dispersion) and about 0.55.
-    alpha250_np_m : float
-        Attenuation at 250 Hz, Np/m, growing in proportion to frequency. Nominal
-        60 Np/m (SPEC §3; reported 30-200 Np/m on the arm, Sofia & Jones 2013,
-        Dandu et al. 2019, Shah et al. 2019, Exp. Brain Res.): a 250 Hz wave loses
-        about 15 dB to attenuation alone over 30 mm.
-    contact_radius_m : float
-        Radius of the contact patch of a fully coupled actuator, m. Nominal 3 mm
-        (SPEC §3: a contactor on a 14 mm exciter); a partly coupled actuator touches a
-        patch of radius ``contact_radius_m * sqrt(contact)`` (area in proportion).
     contact : ndarray, shape (n_actuators,)
         Coupling of each actuator to the skin, 0-1 (1 = full contact). Wrist-side
-        actuators of a rigid array sit over the narrowing arm and lose contact
-        (SPEC §3: 0.4-1.0 per participant).
+        actuators of a rigid array sit over the narrowing arm and lose contact. The range
+        0.4-1.0 per participant is an assumption of the model (SPEC §3), not a
+        measurement.
     gains : ndarray, shape (n_actuators,)
-        Relative electromechanical gain of each actuator (1 = nominal), ±10 % as for
-        mass-produced exciters of one type (SPEC §3).
+        Relative electromechanical gain of each actuator (1 = nominal). The ±10 % spread
+        is an assumption for mass-produced exciters of one type.
     f0_hz : ndarray, shape (n_actuators,)
-        Loaded resonance frequency of each inertial exciter, Hz. Nominal 500 Hz
-        (SPEC §3; small 14 mm exciters resonate at a few hundred Hz, and the skin load
-        shifts and damps the resonance).
+        Loaded resonance frequency of each inertial exciter, Hz. Nominal 500 Hz: an
+        assumption. The free-air resonance of the 14 mm TEAX14C02-8 exciter is given in
+        its datasheet (see ``vibrofocus/skin/data/SOURCES.md``); the skin load moves and
+        damps it, and no loaded value was found in the literature.
     q : ndarray, shape (n_actuators,)
-        Loaded quality factor of each exciter; nominal 1 (skin damping, SPEC §3).
+        Loaded quality factor of each exciter; nominal 1 (an assumption: skin damping).
+    shear_modulus_pa : float
+        Relaxed shear modulus ``mu0`` of the fractional Kelvin-Voigt law, Pa.
+    spring_pot_pa_sn : float
+        Spring-pot coefficient ``eta``, Pa s^n.
+    fractional_order : float
+        Order ``n`` of the spring-pot (0 < n <= 1).
+    unrelaxed_modulus_pa : float
+        High-frequency limit of the modulus, Pa; ``inf`` (default) for the fractional
+        Kelvin-Voigt law.
+    density_kg_m3 : float
+        Skin and soft-tissue density, kg/m^3.
+    rayleigh_factor : float
+        Surface over shear wave speed, 0.9553 for a nearly incompressible solid.
+    contact_radius_m : float
+        Radius of the contact patch of a fully coupled actuator, m. Nominal 3 mm: the
+        contactor of a 14 mm exciter (an assumption; SPEC §3); a partly coupled actuator
+        touches a patch of radius ``contact_radius_m * sqrt(contact)`` (area in
+        proportion).
     circumference_wrist_m, circumference_elbow_m : float
         Forearm circumference at the wrist and near the elbow, m. Nominal 0.17 m and
-        0.25 m (SPEC §3), typical adult values (ANSUR II anthropometric survey, Gordon
-        et al. 2014: wrist about 15-19 cm, forearm about 24-32 cm).
+        0.25 m (SPEC §3). Typical adult values; not checked against an anthropometric
+        table (an assumption).
     wrist_y_m, elbow_y_m : float
         Where the wrist and the elbow-side end of the modelled cylinder lie on the
         layout's y axis (y toward the wrist), m. Nominal +0.125 m and -0.125 m: the
         array sits mid-forearm on a 25 cm forearm, where the circumference is 0.21 m.
     seed : int or None
         The seed that drew these parameters (None for hand-made ones).
+
+    Notes
+    -----
+    The nominal wave law (``shear_modulus_pa``, ``spring_pot_pa_sn``,
+    ``fractional_order``) is :data:`NOMINAL_LAW`; its values, the data they are fitted
+    to and the residuals are documented in ``docs/skin-model.md`` and printed by
+    ``scripts/fit_skin_model.py``.
     """
 
     contact: np.ndarray
     gains: np.ndarray
     f0_hz: np.ndarray
     q: np.ndarray
-    c250_m_s: float = 3.5
-    beta: float = 0.3
-    alpha250_np_m: float = 60.0
+    shear_modulus_pa: float = NOMINAL_LAW.mu0_pa
+    spring_pot_pa_sn: float = NOMINAL_LAW.eta_pa_sn
+    fractional_order: float = NOMINAL_LAW.order
+    unrelaxed_modulus_pa: float = NOMINAL_LAW.mu_inf_pa
+    density_kg_m3: float = NOMINAL_LAW.density_kg_m3
+    rayleigh_factor: float = RAYLEIGH_FACTOR_INCOMPRESSIBLE
     contact_radius_m: float = 3e-3
     circumference_wrist_m: float = 0.17
     circumference_elbow_m: float = 0.25
@@ -128,26 +151,34 @@ class ForearmParameters:
             arrays[name] = arr
         for name, arr in arrays.items():
             object.__setattr__(self, name, _frozen(arr))
-        for name in ("c250_m_s", "alpha250_np_m", "contact_radius_m", "circumference_wrist_m",
-                     "circumference_elbow_m"):
+        for name in ("contact_radius_m", "circumference_wrist_m", "circumference_elbow_m", "shear_modulus_pa",
+                     "spring_pot_pa_sn", "density_kg_m3"):
             object.__setattr__(self, name, check_positive(getattr(self, name), name))
-        object.__setattr__(self, "beta", check_in_range(self.beta, "beta", 0.0, 1.0))
         if not self.wrist_y_m > self.elbow_y_m:
             raise ValidationError(
                 f"wrist_y_m ({self.wrist_y_m}) must be larger than elbow_y_m ({self.elbow_y_m}): y points to the wrist"
             )
+        object.__setattr__(self, "fractional_order",
+                           check_in_range(self.fractional_order, "fractional_order", 0.0, 1.0, inclusive=False)
+                           if self.fractional_order != 1.0 else 1.0)
+        law = ViscoelasticLaw(
+            mu0_pa=self.shear_modulus_pa, eta_pa_sn=self.spring_pot_pa_sn, order=self.fractional_order,
+            mu_inf_pa=self.unrelaxed_modulus_pa, density_kg_m3=self.density_kg_m3,
+            rayleigh_factor=self.rayleigh_factor,
+        )
+        object.__setattr__(self, "_law", law)
 
     # ------------------------------------------------------------------ factories
     @classmethod
     def nominal(cls, n_actuators: int, **overrides: float) -> "ForearmParameters":
-        """The nominal forearm: identical, fully coupled actuators, SPEC §3 values.
+        """The nominal forearm: identical, fully coupled actuators and the fitted law.
 
         Parameters
         ----------
         n_actuators : int
             Number of actuators.
         **overrides
-            Any scalar field (``c250_m_s=5.0``, ...).
+            Any scalar field (``shear_modulus_pa=8e3``, ...).
         """
         if isinstance(n_actuators, bool) or not isinstance(n_actuators, (int, np.integer)) or n_actuators < 1:
             raise ValidationError(f"n_actuators must be a positive integer, got {n_actuators!r}")
@@ -155,13 +186,23 @@ class ForearmParameters:
         return cls(contact=ones, gains=ones, f0_hz=500.0 * ones, q=ones, **overrides)
 
     @classmethod
+    def from_law(cls, law: ViscoelasticLaw, n_actuators: int, **overrides: float) -> "ForearmParameters":
+        """The nominal forearm with another wave law (for sensitivity studies)."""
+        return cls.nominal(
+            n_actuators, shear_modulus_pa=law.mu0_pa, spring_pot_pa_sn=law.eta_pa_sn,
+            fractional_order=law.order, unrelaxed_modulus_pa=law.mu_inf_pa,
+            density_kg_m3=law.density_kg_m3, rayleigh_factor=law.rayleigh_factor, **overrides,
+        )
+
+    @classmethod
     def draw(cls, seed: int, layout: ArrayLayout) -> "ForearmParameters":
         """Draw one participant around the nominal forearm.
 
-        Each quantity is uniform within its spread (module constants): phase speed
-        ±``SPEED_SPREAD``, attenuation ±``ATTENUATION_SPREAD``, contact of wrist-side
-        actuators (y above the actuators' mean y) in ``WRIST_CONTACT_RANGE`` and of the
-        others in ``ELBOW_CONTACT_RANGE``, gains ±``GAIN_SPREAD``, resonance frequency
+        Each quantity is uniform within its spread (module constants): a stiffness
+        factor ±``STIFFNESS_SPREAD`` that scales ``mu0`` and ``eta`` together, the
+        fractional order in ``ORDER_RANGE``, contact of wrist-side actuators (y above
+        the actuators' mean y) in ``WRIST_CONTACT_RANGE`` and of the others in
+        ``ELBOW_CONTACT_RANGE``, gains ±``GAIN_SPREAD``, resonance frequency
         ±``RESONANCE_SPREAD`` and Q in ``Q_RANGE``.
 
         Parameters
@@ -181,10 +222,18 @@ class ForearmParameters:
         contact = np.where(
             wrist_side, rng.uniform(*WRIST_CONTACT_RANGE, n), rng.uniform(*ELBOW_CONTACT_RANGE, n)
         )
+        stiffness = 1 + rng.uniform(-STIFFNESS_SPREAD, STIFFNESS_SPREAD)
+        order = rng.uniform(*ORDER_RANGE)
+        # Keep |G| at the calibration frequency of the spring-pot term tied to the
+        # stiffness draw when the order changes: eta is quoted at 1 rad/s otherwise, and
+        # a change of order alone would move the modulus at 250 Hz by orders of magnitude.
+        omega_ref = 2 * np.pi * 250.0
+        eta = nominal.spring_pot_pa_sn * omega_ref ** (nominal.fractional_order - order)
         return replace(
             nominal,
-            c250_m_s=nominal.c250_m_s * (1 + rng.uniform(-SPEED_SPREAD, SPEED_SPREAD)),
-            alpha250_np_m=nominal.alpha250_np_m * (1 + rng.uniform(-ATTENUATION_SPREAD, ATTENUATION_SPREAD)),
+            shear_modulus_pa=nominal.shear_modulus_pa * stiffness,
+            spring_pot_pa_sn=eta * stiffness,
+            fractional_order=order,
             contact=contact,
             gains=1 + rng.uniform(-GAIN_SPREAD, GAIN_SPREAD, n),
             f0_hz=nominal.f0_hz * (1 + rng.uniform(-RESONANCE_SPREAD, RESONANCE_SPREAD, n)),
@@ -197,18 +246,46 @@ class ForearmParameters:
     def n_actuators(self) -> int:
         return int(self.contact.size)
 
+    @property
+    def law(self) -> ViscoelasticLaw:
+        """The participant's wave law."""
+        return self._law
+
+    def wavenumber(self, freqs: np.ndarray) -> np.ndarray:
+        """Physics-convention complex wavenumber ``2 pi f / c(f) + i alpha(f)``, see
+        :meth:`ViscoelasticLaw.wavenumber`."""
+        return self._law.wavenumber(freqs)
+
     def phase_speed(self, freqs: np.ndarray) -> np.ndarray:
-        """Phase speed ``c(f) = c250 (f / 250 Hz)^beta``, m/s, for ``freqs`` > 0 Hz."""
-        return self.c250_m_s * (np.asarray(freqs, dtype=float) / 250.0) ** self.beta
+        """Phase speed ``c(f)``, m/s, for ``freqs`` > 0 Hz (from the wave law)."""
+        return self._law.phase_speed(freqs)
+
+    def group_speed(self, freqs: np.ndarray) -> np.ndarray:
+        """Group speed, m/s, for ``freqs`` > 0 Hz (from the wave law)."""
+        return self._law.group_speed(freqs)
 
     def attenuation(self, freqs: np.ndarray) -> np.ndarray:
-        """Attenuation ``alpha(f) = alpha250 (f / 250 Hz)``, Np/m."""
-        return self.alpha250_np_m * np.asarray(freqs, dtype=float) / 250.0
+        """Attenuation ``alpha(f)``, Np/m (from the wave law)."""
+        return self._law.attenuation(freqs)
+
+    @property
+    def c250_m_s(self) -> float:
+        """Phase speed at 250 Hz, m/s (derived; for display)."""
+        return float(self.phase_speed(np.array([250.0]))[0])
+
+    @property
+    def alpha250_np_m(self) -> float:
+        """Attenuation at 250 Hz, Np/m (derived; for display)."""
+        return float(self.attenuation(np.array([250.0]))[0])
 
     def to_dict(self) -> dict:
-        """JSON-serialisable description (SI units)."""
+        """JSON-serialisable description (SI units; an infinite modulus is None)."""
         out = {}
         for name in self.__dataclass_fields__:
             value = getattr(self, name)
-            out[name] = value.tolist() if isinstance(value, np.ndarray) else value
+            if isinstance(value, np.ndarray):
+                value = value.tolist()
+            elif isinstance(value, float) and np.isinf(value):
+                value = None
+            out[name] = value
         return out

@@ -2,7 +2,7 @@
 
 Sign convention. The physics is written, as usual for waves, with ``exp(-i omega t)``
 time dependence, where an outgoing, decaying wave is ``H0^(1)(k r)`` with
-``k = 2 pi f / c(f) + i alpha(f)`` (SPEC §3). NumPy's FFT uses ``exp(+i omega t)``, in
+``k = 2 pi f / c(f) + i alpha(f)`` from a causal viscoelastic law (:mod:`.viscoelastic`). NumPy's FFT uses ``exp(+i omega t)``, in
 which a delay is ``exp(-i omega tau)``; :func:`surface_green` returns the complex
 conjugate so that everything handed out is in NumPy's convention.
 """
@@ -12,6 +12,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import special
 
+from .viscoelastic import ViscoelasticLaw
+
 __all__ = ["wavenumber", "surface_green", "exciter_response", "hankel0"]
 
 # Beyond this many nepers of decay an image path adds less than exp(-40) ~ 4e-18 of the
@@ -19,24 +21,22 @@ __all__ = ["wavenumber", "surface_green", "exciter_response", "hankel0"]
 _MAX_NEPERS = 40.0
 
 
-def wavenumber(freqs: np.ndarray, c250_m_s: float, beta: float, alpha250_np_m: float) -> np.ndarray:
+def wavenumber(freqs: np.ndarray, law: ViscoelasticLaw) -> np.ndarray:
     """Complex wavenumber ``k(f) = 2 pi f / c(f) + i alpha(f)`` (physics convention).
 
     Parameters
     ----------
     freqs : ndarray
         Frequencies, Hz, > 0.
-    c250_m_s, beta, alpha250_np_m : float
-        ``c(f) = c250 (f/250)^beta`` in m/s and ``alpha(f) = alpha250 f/250`` in Np/m.
+    law : ViscoelasticLaw
+        The medium's constitutive law; speed and attenuation both follow from it.
 
     Returns
     -------
     ndarray, complex, same shape as ``freqs``
         rad/m (real part) and Np/m (imaginary part).
     """
-    f = np.asarray(freqs, dtype=float)
-    c = c250_m_s * (f / 250.0) ** beta
-    return 2 * np.pi * f / c + 1j * alpha250_np_m * f / 250.0
+    return law.wavenumber(freqs)
 
 
 # Hankel's asymptotic expansion H0(z) ~ sqrt(2/(pi z)) e^{i(z - pi/4)} sum_j i^j a_j / z^j
