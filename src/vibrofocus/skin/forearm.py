@@ -52,31 +52,45 @@ _IR_TABLE_STEP = 5e-3
 _MODULUS_UNIT_PA = 1e3
 
 
+def _frequency_factors(freqs: np.ndarray, params: ForearmParameters) -> tuple[np.ndarray, ...]:
+    """What the transfer needs that depends on frequency but not on the points.
+
+    Returns the physics-convention wavenumber (n_freqs,), the contact-disc factor
+    (n_freqs, 1, n_actuators) and the source term (exciter, gain, contact and the skin's
+    compliance, n_freqs, n_actuators) for ``freqs`` > 0. The complex Bessel functions
+    of the disc factor are the costly part, so playback caches these per rig.
+    """
+    k = wavenumber(freqs, params.law)
+    radius = params.contact_radius_m * np.sqrt(params.contact)
+    disc = _disc_factor(k[:, None, None] * radius[None, None, :])
+    source = exciter_response(freqs, params.f0_hz, params.q) * (params.gains * params.contact)[None, :]
+    # A stiffer medium moves less under the same force: displacement goes as 1 / G(f)
+    # (the "tension" of the skin layer), which is causal and passive like G itself.
+    compliance = _MODULUS_UNIT_PA / params.law.modulus(freqs)
+    return k, disc, source * compliance[:, None]
+
+
 def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmParameters,
-                   max_nepers: float = 40.0, table_step: float | None = None) -> np.ndarray:
+                   max_nepers: float = 40.0, table_step: float | None = None,
+                   factors: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
     """Transfer without the drive sensitivity K, shape (n_freqs, n_points, n_actuators).
 
     ``distances`` has shape (n_points, n_actuators, n_images); DC gives 0 (an inertial
-    exciter exerts no static force).
+    exciter exerts no static force). ``factors``: :func:`_frequency_factors` of the
+    positive frequencies, if already computed.
     """
     f = np.asarray(freqs, dtype=float)
     out = np.zeros((f.size, distances.shape[0], distances.shape[1]), dtype=complex)
     pos = f > 0
     if not pos.any():
         return out
-    fp = f[pos]
-    k = wavenumber(fp, params.law)
+    k, disc, source = _frequency_factors(f[pos], params) if factors is None else factors
     radius = params.contact_radius_m * np.sqrt(params.contact)
-    green = np.zeros((fp.size, distances.shape[0], distances.shape[1]), dtype=complex)
-    disc = _disc_factor(k[:, None, None] * radius[None, None, :])
+    green = np.zeros((k.size, distances.shape[0], distances.shape[1]), dtype=complex)
     for m in range(distances.shape[2]):  # a handful of images; frequencies stay vectorized
         green += surface_green(k, distances[:, :, m], radius, max_nepers=max_nepers, disc_factor=disc,
                                table_step=table_step)
-    source = exciter_response(fp, params.f0_hz, params.q) * (params.gains * params.contact)[None, :]
-    # A stiffer medium moves less under the same force: displacement goes as 1 / G(f)
-    # (the "tension" of the skin layer), which is causal and passive like G itself.
-    compliance = _MODULUS_UNIT_PA / params.law.modulus(fp)
-    out[pos] = green * (source * compliance[:, None])[:, None, :]
+    out[pos] = green * source[:, None, :]
     return out
 
 
@@ -223,6 +237,7 @@ class SimulatedForearm(Rig):
         self._rng = np.random.default_rng([self.seed, 0xD0])
         self._ir_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
         self._ir_lock = threading.Lock()
+        self._ir_factors: tuple[np.ndarray, ...] | None = None
         self.last_drive: np.ndarray | None = None
         self.n_played = 0
         self.outputs_v = np.zeros(self.layout.n_actuators)
@@ -261,10 +276,10 @@ class SimulatedForearm(Rig):
         return self._transfer(points, f)
 
     def _transfer(self, points: np.ndarray, f: np.ndarray, max_nepers: float = 40.0,
-                  table_step: float | None = None) -> np.ndarray:
+                  table_step: float | None = None, factors: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
         d = self.geometry.path_lengths(points, self.layout.actuators_xy)
         delay = np.exp(-2j * np.pi * f * self.latency_s)[:, None, None]
-        return (self.sensitivity * delay) * _unit_transfer(f, d, self.participant, max_nepers, table_step)
+        return (self.sensitivity * delay) * _unit_transfer(f, d, self.participant, max_nepers, table_step, factors)
 
     def impulse_responses(self, points_xy: np.ndarray) -> np.ndarray:
         """Impulse responses used for playback, shape (n_points, n_actuators, n_ir), m/V per sample.
@@ -289,7 +304,12 @@ class SimulatedForearm(Rig):
                 return self._ir_cache[key]
         r = _IR_OVERSAMPLING
         n_fft = 2 * self.n_ir * r
-        h = self._transfer(points, np.fft.rfftfreq(n_fft, 1 / (r * self.fs)), table_step=_IR_TABLE_STEP)
+        freqs = np.fft.rfftfreq(n_fft, 1 / (r * self.fs))
+        with self._ir_lock:
+            if self._ir_factors is None:  # the same grid for every point set
+                self._ir_factors = _frequency_factors(freqs[1:], self.participant)
+            factors = self._ir_factors
+        h = self._transfer(points, freqs, table_step=_IR_TABLE_STEP, factors=factors)
         ir = r * np.fft.irfft(h, n_fft, axis=0)[: r * self.n_ir: r]
         n_fade = max(self.n_ir // 10, 1)
         ir[-n_fade:] *= np.hanning(2 * n_fade)[n_fade:, None, None]

@@ -23,24 +23,27 @@ __all__ = [
     "ForearmParameters",
     "NOMINAL_LAW",
     "STIFFNESS_SPREAD",
-    "ORDER_RANGE",
+    "VISCOSITY_SPREAD",
     "WRIST_CONTACT_RANGE",
     "ELBOW_CONTACT_RANGE",
     "GAIN_SPREAD",
     "RESONANCE_SPREAD",
     "Q_RANGE",
+    "attenuation_range_laws",
 ]
 
-#: The nominal wave law, fitted by ``scripts/fit_skin_model.py`` (see
-#: :class:`ForearmParameters` for the sources and the residuals).
-NOMINAL_LAW = ViscoelasticLaw(mu0_pa=5.0e3, eta_pa_sn=300.0, order=0.6)
-#: Relative half-width of the uniform draw of a participant's stiffness: ``mu0`` and
-#: ``eta`` are scaled together by one factor, so the phase speed varies by about half
-#: this (speed goes as the square root of the modulus).
-STIFFNESS_SPREAD = 0.30
-#: Range of the fractional order drawn per participant (it sets the loss: attenuation
-#: over wavenumber is about ``tan(n pi / 4)`` where the spring-pot dominates).
-ORDER_RANGE = (0.5, 0.7)
+#: The nominal wave law: :func:`vibrofocus.skin.fit.fit_wave_law` on the forearm data
+#: (Zhang et al. 2011, Med. Eng. Phys. 33(1):31-37, doi:10.1016/j.medengphy.2010.08.016:
+#: 3.25 m/s at 200 Hz and the Voigt fit of their 100-400 Hz dispersion), rounded to three
+#: digits. The fit drives the fractional order to 1: those data are a Voigt law.
+#: ``scripts/fit_skin_model.py`` prints the points and residuals (largest 0.9 %).
+NOMINAL_LAW = ViscoelasticLaw(mu0_pa=8.65e3, eta_pa_sn=5.61, order=0.999)
+#: Relative half-width of the uniform draw of a participant's static shear modulus: the
+#: relative SD of Zhang et al. 2011's forearm Voigt elasticity (1.86 / 7.86 kPa).
+STIFFNESS_SPREAD = 0.237
+#: Relative half-width of the uniform draw of the spring-pot (viscosity) coefficient: the
+#: relative SD of Zhang et al. 2011's forearm Voigt viscosity (0.60 / 5.03 Pa s).
+VISCOSITY_SPREAD = 0.119
 #: Coupling of wrist-side actuators, drawn uniformly in this range (an assumption of the
 #: model, see :class:`ForearmParameters`).
 WRIST_CONTACT_RANGE = (0.4, 1.0)
@@ -53,6 +56,26 @@ GAIN_SPREAD = 0.10
 RESONANCE_SPREAD = 0.10
 #: Range of each actuator's loaded quality factor.
 Q_RANGE = (0.8, 1.25)
+
+
+def attenuation_range_laws() -> dict[str, ViscoelasticLaw]:
+    """Laws at the low and high end of the drawn range of attenuation, and the nominal.
+
+    Attenuation grows with the viscosity and falls with the stiffness, so the ends of the
+    participant draw (:meth:`ForearmParameters.draw`) are the stiffest, least viscous
+    skin and the softest, most viscous one.
+
+    Returns
+    -------
+    dict
+        ``{"low": ..., "nominal": NOMINAL_LAW, "high": ...}``.
+    """
+    def scaled(stiffness: float, viscosity: float) -> ViscoelasticLaw:
+        return replace(NOMINAL_LAW, mu0_pa=NOMINAL_LAW.mu0_pa * stiffness,
+                       eta_pa_sn=NOMINAL_LAW.eta_pa_sn * viscosity)
+
+    return {"low": scaled(1 + STIFFNESS_SPREAD, 1 - VISCOSITY_SPREAD), "nominal": NOMINAL_LAW,
+            "high": scaled(1 - STIFFNESS_SPREAD, 1 + VISCOSITY_SPREAD)}
 
 
 def _frozen(arr: np.ndarray) -> np.ndarray:
@@ -198,9 +221,9 @@ class ForearmParameters:
     def draw(cls, seed: int, layout: ArrayLayout) -> "ForearmParameters":
         """Draw one participant around the nominal forearm.
 
-        Each quantity is uniform within its spread (module constants): a stiffness
-        factor ±``STIFFNESS_SPREAD`` that scales ``mu0`` and ``eta`` together, the
-        fractional order in ``ORDER_RANGE``, contact of wrist-side actuators (y above
+        Each quantity is uniform within its spread (module constants): the static shear
+        modulus ±``STIFFNESS_SPREAD`` and the spring-pot coefficient ±``VISCOSITY_SPREAD``
+        (one SD of the published forearm values either way), contact of wrist-side actuators (y above
         the actuators' mean y) in ``WRIST_CONTACT_RANGE`` and of the others in
         ``ELBOW_CONTACT_RANGE``, gains ±``GAIN_SPREAD``, resonance frequency
         ±``RESONANCE_SPREAD`` and Q in ``Q_RANGE``.
@@ -222,18 +245,10 @@ class ForearmParameters:
         contact = np.where(
             wrist_side, rng.uniform(*WRIST_CONTACT_RANGE, n), rng.uniform(*ELBOW_CONTACT_RANGE, n)
         )
-        stiffness = 1 + rng.uniform(-STIFFNESS_SPREAD, STIFFNESS_SPREAD)
-        order = rng.uniform(*ORDER_RANGE)
-        # Keep |G| at the calibration frequency of the spring-pot term tied to the
-        # stiffness draw when the order changes: eta is quoted at 1 rad/s otherwise, and
-        # a change of order alone would move the modulus at 250 Hz by orders of magnitude.
-        omega_ref = 2 * np.pi * 250.0
-        eta = nominal.spring_pot_pa_sn * omega_ref ** (nominal.fractional_order - order)
         return replace(
             nominal,
-            shear_modulus_pa=nominal.shear_modulus_pa * stiffness,
-            spring_pot_pa_sn=eta * stiffness,
-            fractional_order=order,
+            shear_modulus_pa=nominal.shear_modulus_pa * (1 + rng.uniform(-STIFFNESS_SPREAD, STIFFNESS_SPREAD)),
+            spring_pot_pa_sn=nominal.spring_pot_pa_sn * (1 + rng.uniform(-VISCOSITY_SPREAD, VISCOSITY_SPREAD)),
             contact=contact,
             gains=1 + rng.uniform(-GAIN_SPREAD, GAIN_SPREAD, n),
             f0_hz=nominal.f0_hz * (1 + rng.uniform(-RESONANCE_SPREAD, RESONANCE_SPREAD, n)),

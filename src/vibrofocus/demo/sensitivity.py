@@ -1,0 +1,73 @@
+"""How the focus metrics depend on the skin's attenuation: the documented sensitivity table.
+
+For each wave law (by default the low end, the nominal and the high end of the drawn
+attenuation range, :func:`vibrofocus.skin.parameters.attenuation_range_laws`), a nominal,
+noise-free simulated forearm is built, every method is designed from its exact transfer
+at every location and played, and the medians over the locations are reported. The
+table in ``docs/skin-model.md`` is this function's output; a test recomputes it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..defaults import METHODS
+
+__all__ = ["attenuation_sensitivity", "sensitivity_markdown"]
+
+_COLUMNS = ("fidelity", "contrast_db", "contrast_all_points_db", "target_peak_m")
+
+
+def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
+                            methods: Sequence[str] = METHODS) -> list[dict]:
+    """Focus metrics of each method on nominal forearms with different wave laws.
+
+    Parameters
+    ----------
+    laws : mapping of str to ViscoelasticLaw, optional
+        Label to law; default :func:`~vibrofocus.skin.parameters.attenuation_range_laws`.
+    methods : sequence of str
+        Rendering methods.
+
+    Returns
+    -------
+    list of dict
+        One per (law, method): ``law``, ``c250_m_s``, ``alpha250_np_m``, ``method`` and
+        the medians over the locations of ``fidelity``, ``contrast_db`` (against the
+        other locations), ``contrast_all_points_db`` (against every calibrated point)
+        and ``target_peak_m``.
+    """
+    from ..skin import ForearmParameters, SimulatedForearm
+    from ..skin.parameters import attenuation_range_laws
+    from .run import model_transfer, run_demo
+
+    laws = attenuation_range_laws() if laws is None else laws
+    rows = []
+    for label, law in laws.items():
+        params = ForearmParameters.from_law(law, 4)
+        rig = SimulatedForearm(participant=params, noise_m=0.0, dropout_rate=0.0)
+        result = run_demo(rig, methods=methods, transfer=model_transfer)
+        for method in methods:
+            sub = [r for r in result.rows if r["method"] == method]
+            row = {"law": label, "c250_m_s": params.c250_m_s, "alpha250_np_m": params.alpha250_np_m,
+                   "method": method}
+            row.update({key: float(np.median([r[key] for r in sub])) for key in _COLUMNS})
+            rows.append(row)
+    return rows
+
+
+def sensitivity_markdown(rows: Sequence[dict]) -> str:
+    """The rows of :func:`attenuation_sensitivity` as a Markdown table."""
+    lines = [
+        "| attenuation | c(250 Hz) m/s | α(250 Hz) Np/m | method | fidelity | contrast vs locations dB "
+        "| contrast vs all points dB | target peak µm |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['law']} | {r['c250_m_s']:.2f} | {r['alpha250_np_m']:.0f} | {r['method']} | {r['fidelity']:.2f} "
+            f"| {r['contrast_db']:.1f} | {r['contrast_all_points_db']:.1f} | {1e6 * r['target_peak_m']:.3f} |"
+        )
+    return "\n".join(lines)
