@@ -130,9 +130,12 @@ class SimulatedForearm(Rig):
     noise_m : float
         Vibrometer noise, m RMS within ``noise_band``. White Gaussian noise over the
         whole recording bandwidth, scaled so its in-band RMS is ``noise_m`` (its total
-        RMS is larger by ``sqrt((fs/2) / bandwidth)``). Default 1 nm: a laser-Doppler
-        vibrometer on skin with a retro-reflective patch resolves displacements of that
-        order in a 1 kHz band (SPEC §3). 0 turns noise off.
+        RMS is larger by ``sqrt((fs/2) / bandwidth)``). Default 1 nm (SPEC §3): an
+        assumption of the right order. The OFV-505/5000 specification could not be
+        checked; a related Polytec velocity decoder (PSV-500, DV-04) specifies a
+        resolution of 0.1-1 µm/s between 10 Hz and 5 kHz, which is 0.16-1.6 nm of
+        displacement at 100 Hz (``v / (2 pi f)``); on skin, less reflective than the
+        specified tape, a vibrometer does worse. 0 turns noise off.
     dropout_rate : float
         Expected vibrometer dropouts per second of recording per point (speckle or
         signal loss of a laser vibrometer). Samples lost in a dropout are ``NaN`` in

@@ -100,27 +100,42 @@ class ForearmParameters:
         is an assumption for mass-produced exciters of one type.
     f0_hz : ndarray, shape (n_actuators,)
         Loaded resonance frequency of each inertial exciter, Hz. Nominal 500 Hz: an
-        assumption. The free-air resonance of the 14 mm TEAX14C02-8 exciter is given in
-        its datasheet (see ``vibrofocus/skin/data/SOURCES.md``); the skin load moves and
-        damps it, and no loaded value was found in the literature.
+        assumption (SPEC §3). The TEAX14C02-8 datasheet could not be checked (see
+        ``vibrofocus/skin/data/SOURCES.md``), and no value loaded by skin was found in
+        the literature.
     q : ndarray, shape (n_actuators,)
         Loaded quality factor of each exciter; nominal 1 (an assumption: skin damping).
     shear_modulus_pa : float
-        Relaxed shear modulus ``mu0`` of the fractional Kelvin-Voigt law, Pa.
+        Relaxed shear modulus ``mu0`` of the fractional Kelvin-Voigt law, Pa. Nominal
+        8.65 kPa, fitted to the forearm data of Zhang et al. 2011 (Med. Eng. Phys.
+        33(1):31-37, doi:10.1016/j.medengphy.2010.08.016: Voigt elasticity 7.86 ± 1.86
+        kPa at their assumed density, 3.25 m/s at 200 Hz); drawn within ±1 SD.
+        Literature range for forearm skin: about 5-13 kPa (Zhang 2011 ±1 SD; dermis
+        E/3 of a layered Rayleigh-wave inversion, Li et al. 2022, arXiv).
     spring_pot_pa_sn : float
-        Spring-pot coefficient ``eta``, Pa s^n.
+        Spring-pot coefficient ``eta``, Pa s^n. Nominal 5.61 Pa s, fitted to the same
+        data (Voigt viscosity 5.03 ± 0.60 Pa s in Zhang et al. 2011); drawn within
+        ±1 SD (4.4-6.8 Pa s here).
     fractional_order : float
-        Order ``n`` of the spring-pot (0 < n <= 1).
+        Order ``n`` of the spring-pot (0 < n <= 1). The fit to the forearm data drives it
+        to 1 (0.999 ± 0.004): those data are a Voigt law. Fractional orders below 1 fit
+        skin about as well elsewhere (Kearney et al. 2015, Phys. Med. Biol.
+        60(17):6975, doi:10.1088/0031-9155/60/17/6975, abstract), so the order stays a
+        parameter.
     unrelaxed_modulus_pa : float
         High-frequency limit of the modulus, Pa; ``inf`` (default) for the fractional
         Kelvin-Voigt law.
     density_kg_m3 : float
-        Skin and soft-tissue density, kg/m^3.
+        Skin density, kg/m^3. Nominal 1100, inside the single-layer range 1093-1190
+        kg/m^3 of Table 1 of the review in Burns 43(5):909-932, 2017
+        (doi:10.1016/j.burns.2016.11.014). Only ``mu / rho`` and ``eta / rho`` matter
+        for the waves; the fit holds the density fixed.
     rayleigh_factor : float
-        Surface over shear wave speed, 0.9553 for a nearly incompressible solid.
+        Surface over shear wave speed, 0.9553 for an incompressible solid (the root of
+        the Rayleigh equation; soft tissue is nearly incompressible).
     contact_radius_m : float
-        Radius of the contact patch of a fully coupled actuator, m. Nominal 3 mm: the
-        contactor of a 14 mm exciter (an assumption; SPEC §3); a partly coupled actuator
+        Radius of the contact patch of a fully coupled actuator, m. Nominal 3 mm: an
+        assumption (SPEC §3) for the contactor of a 14 mm exciter; a partly coupled actuator
         touches a patch of radius ``contact_radius_m * sqrt(contact)`` (area in
         proportion).
     circumference_wrist_m, circumference_elbow_m : float
