@@ -27,3 +27,24 @@ TARGET_FRACTION = 0.5
 METHODS = ("funneling", "inverse", "combination", "time_reversal")
 #: Methods compared in the localization studies (SPEC §6).
 STUDY_METHODS = ("funneling", "inverse", "combination")
+
+
+def participant_seed(participant_id: str) -> int:
+    """Seed of a simulated forearm derived from a participant id (stable across runs and machines).
+
+    ``vibrofocus calibrate --rig simulated`` uses it when no ``--seed`` is given, so two
+    participants never share a bit-identical simulated arm.
+
+    Parameters
+    ----------
+    participant_id : str
+
+    Returns
+    -------
+    int
+        In ``[0, 2**31)``: the first four bytes of SHA-256 of the UTF-8 id.
+    """
+    import hashlib
+
+    digest = hashlib.sha256(str(participant_id).encode("utf-8")).digest()
+    return int.from_bytes(digest[:4], "big") & 0x7FFFFFFF
