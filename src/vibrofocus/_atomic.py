@@ -69,6 +69,9 @@ OUTPUT_ERRNOS = {
     _errno.ENAMETOOLONG: "the name is too long",
 }
 
+#: Opens the temporary file's descriptor (a seam for tests that inject a full disk).
+_open_fd = os.fdopen
+
 #: Headroom asked of a folder beyond the expected size of a file, bytes.
 SPACE_MARGIN_BYTES = 1 << 20
 
@@ -369,9 +372,9 @@ def atomic_write(
     try:
         try:
             if mode == "wb":
-                fh = os.fdopen(fd, "wb")
+                fh = _open_fd(fd, "wb")
             else:
-                fh = os.fdopen(fd, "w", encoding=encoding, newline=newline)
+                fh = _open_fd(fd, "w", encoding=encoding, newline=newline)
             with fh:
                 yield fh
                 fh.flush()

@@ -94,9 +94,3 @@ def save_or_offer_another_path(
         f"{failure}; the {what} could not be saved anywhere (also tried {', '.join(map(str, fallback_paths(out)))})",
         errno=failure.errno, path=failure.path,
     ) from failure
-
-
-def seed_help() -> str:
-    """Help text for a participant seed derived from the id."""
-    return ("Participant seed of the simulated forearm [default: derived from --participant, so each participant "
-            "id has its own arm]")

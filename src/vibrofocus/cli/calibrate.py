@@ -17,9 +17,8 @@ def calibrate_command(
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
     seed: int | None = typer.Option(
-        None, "--seed", min=0, show_default=False,
-        help="Participant seed of the simulated forearm [default: derived from --participant, so every participant "
-        "id has its own arm]",
+        None, "--seed", min=0, show_default="derived from --participant",
+        help="Participant seed of the simulated forearm; by default each participant id gets its own arm.",
     ),
     method: str = typer.Option("h1", "--method", help="h1 (exponential sweeps, repeats, coherence) | paper "
                                                       "(one linear sweep, FFT ratio)."),
