@@ -1,4 +1,4 @@
-"""Defaults of the reference setup (SPEC §1-§2), in SI units.
+"""Defaults of the reference setup (docs/method.md), in SI units.
 
 Everything here is a default, not a constant: each is a parameter of the object that
 uses it.
@@ -23,9 +23,9 @@ N_SAMPLES = 4096
 #: Where the target waveform sits in the window, as a fraction of its length: late enough
 #: that the acausal part of an inverse-filter drive (its pre-ringing) fits before it.
 TARGET_FRACTION = 0.5
-#: Rendering methods of SPEC §2.
+#: Rendering methods of docs/method.md, rendering methods.
 METHODS = ("funneling", "inverse", "combination", "time_reversal")
-#: Methods compared in the localization studies (SPEC §6).
+#: Methods compared in the localization studies (docs/file-formats.md, trials file).
 STUDY_METHODS = ("funneling", "inverse", "combination")
 
 

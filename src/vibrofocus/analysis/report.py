@@ -1,4 +1,4 @@
-"""report.json (SPEC §7 contract), results sentences, PNG figures and a readable HTML page."""
+"""report.json (docs/file-formats.md, report.json contract), results sentences, PNG figures and a readable HTML page."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from .pipeline import AnalysisResult, Study1Result, Study2Counts, Study2Result
 
 __all__ = ["report_dict", "results_sentences", "format_p", "write_report"]
 
-#: Columns of ``study1.anova`` that the SPEC §7 contract requires.
+#: Columns of ``study1.anova`` that the docs/file-formats.md, report.json contract requires.
 ANOVA_CONTRACT = ("effect", "F", "ddof1", "ddof2", "p_unc", "p_gg", "eps")
 
 
@@ -271,12 +271,12 @@ def _study2_part_dict(part: Study2Counts) -> dict:
 
 
 def _uncomputed_friedman() -> dict:
-    """The SPEC §7 ``study2.friedman`` keys, with nulls where no test could be run."""
+    """The docs/file-formats.md, report.json ``study2.friedman`` keys, with nulls where no test could be run."""
     return {factor: {"chi2": None, "dof": None, "p": None} for factor in ("location", "method")}
 
 
 def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None) -> dict:
-    """The content of report.json (SPEC §7 contract plus details), JSON-safe.
+    """The content of report.json (docs/file-formats.md, report.json contract plus details), JSON-safe.
 
     ``study1.anova`` is a list of rows with ``effect`` (``location``, ``method``,
     ``location * method``), ``F``, ``ddof1``, ``ddof2``, ``p_unc``, ``p_gg``, ``eps`` and

@@ -1,4 +1,4 @@
-"""Read and validate a trials file (SPEC §6), and check each study's design.
+"""Read and validate a trials file (docs/file-formats.md, trials file), and check each study's design.
 
 A trials file has one row per trial with the columns ``participant, study, phase, trial,
 method, target, response, rt_s``. :func:`load_trials` reads it, types every column and
@@ -33,7 +33,7 @@ __all__ = [
     "main_trials",
 ]
 
-#: Columns a trials file must have (SPEC §6).
+#: Columns a trials file must have (docs/file-formats.md, trials file).
 REQUIRED_COLUMNS: tuple[str, ...] = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
 #: Rendering methods in the order tables and figures list them; others follow alphabetically.
 KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal")
@@ -169,7 +169,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     if missing:
         raise ValidationError(
             f"trials file is missing the column(s) {', '.join(missing)}; "
-            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (SPEC §6), got {', '.join(map(str, raw.columns))}"
+            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (docs/file-formats.md, trials file), got {', '.join(map(str, raw.columns))}"
         )
     df = raw.copy()
     if "line" not in df.columns:
@@ -291,7 +291,7 @@ def load_trials(
     layout: ArrayLayout | None = None,
     on_invalid: Literal["raise", "exclude"] = "raise",
 ) -> pd.DataFrame:
-    """Read a trials CSV file (SPEC §6) and validate every row.
+    """Read a trials CSV file (docs/file-formats.md, trials file) and validate every row.
 
     Parameters
     ----------

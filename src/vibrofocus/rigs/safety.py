@@ -1,4 +1,4 @@
-"""The one safety layer every drive passes through before any rig plays it (SPEC §5)."""
+"""The one safety layer every drive passes through before any rig plays it (docs/method.md, rigs and safety)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ class SafetyLimits:
     ----------
     peak_v : float
         Largest instantaneous voltage magnitude, V. Default 10 V: a 1 V DAQ output
-        through a 20 dB amplifier (SPEC §1).
+        through a 20 dB amplifier (docs/method.md, reference setup).
     rms_v : float
         Largest RMS voltage per channel over the drive, V. Default 4 V, i.e. 2 W into the
         8 ohm coil of a 14 mm exciter, which such exciters stand for seconds; a 10 V peak

@@ -1,4 +1,4 @@
-"""The trials file: the CSV contract between the studies and the analysis (SPEC §6).
+"""The trials file: the CSV contract between the studies and the analysis (docs/file-formats.md, trials file).
 
 One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that order:
 ``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``

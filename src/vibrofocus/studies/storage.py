@@ -929,7 +929,7 @@ class StudyStore:
             return [dict(r) for r in conn.execute(sql, args).fetchall()]
 
     def export_trials_csv(self, path: str | os.PathLike, *, participant_id: str | None = None) -> int:
-        """Write the trials file of SPEC §6 (every answered trial); returns the row count."""
+        """Write the trials file of docs/file-formats.md, trials file (every answered trial); returns the row count."""
         from .export import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path)
