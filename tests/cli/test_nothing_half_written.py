@@ -613,3 +613,44 @@ def test_8_no_help_text_cites_a_spec_file_users_do_not_have():
     docs = Path(SRC).parent / "docs"
     for page in ("file-formats.md", "method.md"):
         assert (docs / page).is_file()
+
+
+def test_8_render_from_a_calibration_refuses_a_band_outside_it(cal_file):
+    from vibrofocus.calibration import load_calibration
+    from vibrofocus.errors import ValidationError
+    from vibrofocus.rendering import render
+
+    cal = load_calibration(cal_file)
+    inside = render("inverse", cal, cal.fs, cal.layout, 5, band=cal.band)
+    assert inside.drives.shape == (cal.layout.n_actuators, 4096)
+    with pytest.raises(ValidationError, match="calibrated_band|calibrat"):
+        render("inverse", cal, cal.fs, cal.layout, 5, band=(cal.band[0], cal.band[1] * 2))
+
+
+def test_8_vf_rigs_is_reachable_without_importing_it():
+    code = "import vibrofocus as vf; print(type(vf.rigs.make_rig('simulated', seed=1)).__name__)"
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         env={**os.environ, "PYTHONPATH": SRC}, timeout=120)
+    assert run.returncode == 0 and run.stdout.strip() == "SimulatedForearm", run.stderr
+
+
+def test_8_safety_errors_number_channels_from_one():
+    from vibrofocus.errors import SafetyError
+    from vibrofocus.rigs.safety import SafetyLimits, check_drive
+
+    drive = np.zeros((4, 100))
+    drive[0, 50] = 11.0  # the first channel, A1
+    with pytest.raises(SafetyError, match="channel 1 reaches 11 V"):
+        check_drive(drive, 10_000.0, 4, SafetyLimits(peak_v=10.0))
+
+
+def test_8_shapiro_does_not_count_tied_conditions_as_rejections():
+    import pandas as pd
+
+    from vibrofocus.analysis.study1 import shapiro_tests
+
+    # Three participants, two of whom localised perfectly: [0, 0, x] in every condition.
+    rows = [{"participant": f"P{i}", "location": loc, "method": m, "error_mm": 0.0 if i < 2 else 4.0 + loc}
+            for i in range(3) for loc in (1, 2) for m in ("funneling", "inverse")]
+    res = shapiro_tests(pd.DataFrame(rows))
+    assert res["p"].isna().all() and res["note"].str.contains("ties").all()

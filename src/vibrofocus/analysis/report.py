@@ -103,11 +103,22 @@ def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
         if key in s1.unavailable:
             out.append(_capital(s1.unavailable[key]) + "; not computed.")
     sh = s1.shapiro.dropna(subset=["p"])
+    n_untestable = len(s1.shapiro) - len(sh)
+    untestable = (
+        f"; {n_untestable} condition{'s' if n_untestable != 1 else ''} could not be tested (tied participant "
+        "averages)"
+        if n_untestable and len(s1.shapiro) else ""
+    )
     if len(sh):
         n_bad = int((sh["p"] < alpha).sum())
         out.append(
-            f"Shapiro–Wilk tests rejected normality of the participant averages in {n_bad} of {len(sh)} conditions "
-            f"(p < {alpha:g})."
+            f"Shapiro–Wilk tests rejected normality of the participant averages in {n_bad} of {len(sh)} testable "
+            f"conditions (p < {alpha:g}){untestable}."
+        )
+    elif n_untestable and "shapiro" not in s1.unavailable:
+        out.append(
+            f"Shapiro–Wilk tests could not be run: in all {n_untestable} conditions the participant averages are "
+            "tied (fewer than three distinct values)."
         )
     for row in s1.anova.itertuples(index=False):
         if row.ddof1 == 1:
