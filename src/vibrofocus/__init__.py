@@ -56,7 +56,16 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .skin import SimulatedForearm
 
 
+#: Subpackages reachable as attributes without importing them first (``vf.rigs.make_rig``).
+_SUBPACKAGES = frozenset({"analysis", "calibration", "defaults", "demo", "errors", "layout", "rendering", "rigs",
+                          "signals", "skin", "studies"})
+
+
 def __getattr__(name: str):
+    if name in _SUBPACKAGES:
+        value = import_module(f".{name}", __name__)
+        globals()[name] = value
+        return value
     module = _LAZY_ATTRIBUTES.get(name)
     if module is None:
         raise AttributeError(f"module 'vibrofocus' has no attribute {name!r}")

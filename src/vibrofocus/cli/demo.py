@@ -64,6 +64,18 @@ def demo_command(
         check_choice(design_from, "--design-from", ("calibration", "model"))
         rig = SimulatedForearm(seed=seed)
         rig.layout.location_index(location)
+        if design_from == "calibration" or figures:
+            # Before the calibration starts: a read-only or full output folder is found now.
+            from .._atomic import check_writable, output_error
+            from ..calibration.io import estimate_calibration_bytes
+
+            try:
+                out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise output_error(exc, out, "output folder") from exc
+            expected = estimate_calibration_bytes(rig.layout.n_points, rig.layout.n_actuators, 8,
+                                                  int(3.0 * rig.fs), 4096) if design_from == "calibration" else 0
+            check_writable(out / "calibration.nc", what="calibration", expected_bytes=expected)
         total = rig.layout.n_locations * len(METHODS)
         calibration_info: dict = {}
         with Progress(
@@ -77,8 +89,12 @@ def demo_command(
                     rig, participant_id=f"simulated-{seed}",
                     progress=lambda done, n, msg: progress.update(cal_task, completed=done, total=n, description=msg),
                 )
-                out.mkdir(parents=True, exist_ok=True)
-                cal_path = save_calibration(cal, out / "calibration.nc")
+                from ._save import save_or_offer_another_path
+
+                cal_path = save_or_offer_another_path(
+                    lambda path: save_calibration(cal, path), out / "calibration.nc", what="calibration",
+                    interactive=False if as_json else None,
+                )
                 transfer = calibrated_transfer(cal)
                 calibration_info = {
                     "file": str(cal_path),

@@ -20,7 +20,7 @@ from ..rigs.base import Rig
 
 __all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "run_demo", "record_clean", "summarize"]
 
-#: Metrics every result row carries (SPEC §8 contract of ``--json``).
+#: Metrics every result row carries (the ``--json`` contract, docs/file-formats.md, demo --json).
 ROW_KEYS = ("location", "method", "fidelity", "contrast_db", "peak_drive_v", "target_peak_m")
 
 
@@ -128,7 +128,7 @@ def run_demo(
     rig : Rig
         Where to play (the simulated forearm).
     methods : sequence of str
-        Rendering methods (SPEC §2).
+        Rendering methods (docs/method.md, rendering methods).
     locations : sequence of int, optional
         1-based locations; default all of the layout's.
     n_samples : int

@@ -169,9 +169,10 @@ def render(
     Parameters
     ----------
     method : {"funneling", "inverse", "combination", "time_reversal"}
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators), or Calibration
         Calibrated transfer matrix (m/V) on ``rfftfreq(n, 1 / fs)``, rows in the order of
-        ``layout.points_xy`` (locations then guards).
+        ``layout.points_xy`` (locations then guards). A ``Calibration`` gives its
+        ``transfer_for(n_samples)`` (default 4096) and its ``band`` as ``calibrated_band``.
     fs : float
         Sample rate, Hz.
     layout : ArrayLayout
@@ -235,6 +236,11 @@ def render(
     check_choice(method, "method", METHODS)
     if not isinstance(layout, ArrayLayout):
         raise ValidationError(f"layout must be an ArrayLayout, got {type(layout).__name__}")
+    if hasattr(H, "transfer_for") and hasattr(H, "band"):
+        # A Calibration carries the band it is valid in: a design outside it is refused.
+        if calibrated_band is None:
+            calibrated_band = tuple(H.band)
+        H = H.transfer_for(4096 if n_samples is None else n_samples)
     H = as_transfer(H)
     if H.shape[1:] != (layout.n_points, layout.n_actuators):
         raise ValidationError(
