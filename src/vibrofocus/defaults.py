@@ -24,6 +24,6 @@ N_SAMPLES = 4096
 #: that the acausal part of an inverse-filter drive (its pre-ringing) fits before it.
 TARGET_FRACTION = 0.5
 #: Rendering methods of SPEC §2.
-METHODS = ("funneling", "inverse", "combination", "time_reversal")
+METHODS = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
 #: Methods compared in the localization studies (SPEC §6).
 STUDY_METHODS = ("funneling", "inverse", "combination")
