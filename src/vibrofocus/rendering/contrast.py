@@ -199,7 +199,8 @@ def _bound_db(U: np.ndarray, lam: np.ndarray, n: int) -> float:
     target = float(np.sum(w))
     if target == 0:
         return float("nan")
-    reach = w > 0
+    # Bins carrying a negligible share of the energy (rounding where H vanishes) are left out.
+    reach = w > 1e-15 * target
     if np.any(reach & (lam <= 0)):
         return float("-inf")  # the waveform asks for energy where the target cannot move
     with np.errstate(divide="ignore"):
@@ -312,8 +313,8 @@ def contrast_bound(
     Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, sigma, t0, band, taper_octaves, waveform)
     active = taper > 0
-    lam = np.zeros(H.shape[0])
-    lam[active] = _exact_lambda(H[active, target_index, :], _gram(Hq[active]))
+    # Over every bin (not only the band's), so that bound_db_for can weigh any waveform.
+    lam = _exact_lambda(H[:, target_index, :], _gram(Hq))
     with np.errstate(divide="ignore", invalid="ignore"):
         quiet_min = np.where(active & (lam > 0), np.abs(U) ** 2 / np.where(lam > 0, lam, 1.0), 0.0)
     quiet_min = np.where(active & (lam <= 0) & (np.abs(U) > 0), np.inf, quiet_min)
