@@ -20,10 +20,11 @@ drives that put exactly ``U`` at the target, this ``s`` has the least regularize
 energy ``s^H B s = |U|^2 / lambda``: with ``delta = 0`` that is the *exact-tap bound* of
 SPEC §2.
 
-The constrained design trades fidelity for contrast: ``s = w U / (lambda + mu)`` puts
-``V = U lambda / (lambda + mu)`` at the target. It is the exact solution of
-``maximize corr(u_t, tap)`` subject to ``energy contrast >= C`` (Lagrange conditions give
-``V`` proportional to ``U lambda / (lambda + mu)`` for some ``mu >= 0``); fidelity and
+The constrained design trades fidelity for contrast: ``s = w V / lambda`` puts
+``V = g U`` at the target, ``g`` proportional to ``lambda / (lambda + mu)``. It solves
+``maximize corr(u_t, tap)`` subject to ``energy contrast >= C``: with ``x_f = |V_f|^2``
+that is a concave objective over linear constraints, whose KKT conditions give this
+``g`` (``mu >= 0``, or ``mu < -max lambda`` for contrasts beyond ``mu = inf``); fidelity and
 contrast do not change when all drives are scaled, so the peak-voltage constraint is met
 by scaling the drives to the limit, which also gives the largest target amplitude that
 design can reach within it.
@@ -480,13 +481,24 @@ def constrained_drives(
         As in :func:`contrast_drives`.
     contrast_weight : float, optional
         ``mu`` relative to the broadband exact-tap contrast ``lambda_ref`` (linear) of the
-        regularized design, ``mu = contrast_weight * lambda_ref``, >= 0.
+        regularized design, ``mu = contrast_weight * lambda_ref``, >= 0 (0: the exact tap).
     min_contrast_db : float, optional
         Required energy contrast, dB: target energy over the summed energy of the quiet
         points (the exact, unregularized prediction through ``H``). The design takes the
-        smallest ``mu`` (the best fidelity) that meets it.
+        least trade-off (the best fidelity) that meets it, searching ``mu`` from 0 to
+        infinity and then the branch beyond (module notes), which ends with all the
+        energy in the band's best bin (contrast ``lambda_max`` there, fidelity near 0).
     full_output : bool
-        Also return ``{"mu", "energy_contrast_db", "predicted_fidelity"}``.
+        Also return ``{"tradeoff", "energy_contrast_db", "predicted_fidelity"}``
+        (``tradeoff`` in [0, 2]: ``mu / (mu + lambda_ref)`` below 1, the branch beyond above).
+
+    Notes
+    -----
+    The target gets ``V = g U`` with ``g`` normalized so that its energy is the exact
+    tap's; for the best fidelity at a given contrast the KKT conditions of the convex
+    problem in ``|V|^2`` give ``g`` proportional to ``lambda / (lambda + mu)`` for
+    ``mu >= 0`` or to ``lambda / (|mu| - lambda)`` for ``|mu| > lambda_top`` (the branch
+    beyond).
 
     Returns
     -------
@@ -529,16 +541,32 @@ def constrained_drives(
     weight = np.where(ok, weight, 0.0)
     lam_ref = float(np.sum(weight) / np.sum(weight / safe))  # broadband exact-tap contrast (regularized)
 
-    def contrast_at(mu: np.ndarray) -> np.ndarray:
-        """Energy contrast (linear) for each mu, shape (M,)."""
-        g2 = (safe[None, :] / (safe[None, :] + mu[:, None])) ** 2 * weight[None, :]
+    lam_top = float(np.max(np.where(weight > 0, safe, 0.0)))
+
+    def gains(p: np.ndarray) -> np.ndarray:
+        """Target gain ``V / U`` per trade-off parameter ``p`` (M,) -> (M, F), normalized
+        to the exact tap's target energy. ``p`` in [0, 1): ``lambda / (lambda + mu)`` with
+        ``mu = lam_ref p / (1 - p)``; ``p`` in [1, 2]: the branch beyond ``mu = inf``,
+        ``lambda / (1 - (1 - q) lambda / lambda_top)`` with ``q = 10^(-30 (p - 1))``, which
+        ends on the best bin alone."""
+        p = p[:, None]
+        lo = safe / (np.minimum(p, 1.0) * lam_ref + (1 - np.minimum(p, 1.0)) * safe)
+        q = 10.0 ** (-30.0 * np.clip(p - 1.0, 0.0, 1.0))
+        hi = safe * lam_top / (lam_ref * ((lam_top - np.minimum(safe, lam_top)) + q * safe))
+        g = np.where(p < 1, lo, hi)
+        g = g * np.sqrt(np.sum(weight) / np.maximum(np.sum(g**2 * weight, axis=1, keepdims=True), 1e-300))
+        return np.where(ok, g, 0.0)
+
+    def contrast_at(p: np.ndarray) -> np.ndarray:
+        """Energy contrast (linear) for each p, shape (M,)."""
+        g2 = gains(p) ** 2 * weight[None, :]
         return np.sum(g2, axis=1) / np.maximum(np.sum(g2 * ratio[None, :], axis=1), 1e-300)
 
     if min_contrast_db is None:
-        mu = contrast_weight * lam_ref
+        p_opt = contrast_weight / (contrast_weight + 1.0)
     else:
         goal = 10 ** (min_contrast_db / 10)
-        grid = np.concatenate([[0.0], lam_ref * np.logspace(-4, 8, 121)])
+        grid = np.linspace(0.0, 2.0, 301)
         values = contrast_at(grid)
         meets = np.flatnonzero(values >= goal * (1 + 1e-9))
         if meets.size == 0:
@@ -548,7 +576,7 @@ def constrained_drives(
             )
         k = int(meets[0])
         if k == 0:
-            mu = 0.0
+            p_opt = 0.0
         else:
             lo, hi = grid[k - 1], grid[k]  # contrast below the goal at lo, at or above it at hi
             for _ in range(60):
@@ -557,15 +585,15 @@ def constrained_drives(
                     hi = mid
                 else:
                     lo = mid
-            mu = hi
-    gain = np.where(ok, Ua / (safe + mu), 0.0)
-    drives = _to_drives(w * gain[:, None], active, H.shape[0], n)
+            p_opt = hi
+    g = gains(np.array([p_opt]))[0]
+    drives = _to_drives(w * np.where(ok, g * Ua / safe, 0.0)[:, None], active, H.shape[0], n)
     if not full_output:
         return drives
-    V = np.where(ok, Ua * safe / (safe + mu), 0.0)
+    V = g * Ua
     pw = _parseval_weights(n)[active]
     fidelity = float(np.sum(pw * (np.conj(Ua) * V).real) / np.sqrt(np.sum(pw * np.abs(Ua) ** 2) * np.sum(pw * np.abs(V) ** 2)))
-    info = {"mu": float(mu), "mu_relative": float(mu / lam_ref), "energy_contrast_db": float(10 * np.log10(contrast_at(np.array([mu]))[0])),
+    info = {"tradeoff": float(p_opt), "energy_contrast_db": float(10 * np.log10(contrast_at(np.array([p_opt]))[0])),
             "predicted_fidelity": fidelity}
     return drives, info
 

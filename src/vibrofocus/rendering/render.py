@@ -450,7 +450,7 @@ def render(
     predicted = predict_response(H, drives)
     bound = bound_all = None
     if bounds:
-        common = dict(band=band, fs=fs, waveform=reference, taper_octaves=taper_octaves)
+        common = dict(band=band, fs=fs, waveform=target_peak_m * stimulus, taper_octaves=taper_octaves)
         others_loc = np.delete(np.arange(layout.n_locations), target_index)
         if others_loc.size:
             bound = contrast_bound(H, target_index, others_loc, **common)
