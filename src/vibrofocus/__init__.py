@@ -40,6 +40,7 @@ _LAZY_ATTRIBUTES = {
     "InverseOperator": ".rendering",
     "focus_metrics": ".rendering",
     "render": ".rendering",
+    "contrast_bound": ".rendering",
     "Rendering": ".rendering",
     "calibrate": ".calibration",
     "Calibration": ".calibration",
@@ -50,7 +51,15 @@ _LAZY_ATTRIBUTES = {
 if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .calibration import Calibration, calibrate, load_calibration, save_calibration
     from .layout import ArrayLayout
-    from .rendering import InverseOperator, Rendering, focus_metrics, funneling_gains, inverse_filter, render
+    from .rendering import (
+        InverseOperator,
+        Rendering,
+        contrast_bound,
+        focus_metrics,
+        funneling_gains,
+        inverse_filter,
+        render,
+    )
     from .rigs import Rig, SafetyLimits
     from .signals import exponential_sweep, linear_sweep, ricker
     from .skin import SimulatedForearm
@@ -91,6 +100,7 @@ __all__ = [
     "focus_metrics",
     "render",
     "Rendering",
+    "contrast_bound",
     "calibrate",
     "Calibration",
     "load_calibration",

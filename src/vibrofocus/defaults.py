@@ -24,7 +24,7 @@ N_SAMPLES = 4096
 #: that the acausal part of an inverse-filter drive (its pre-ringing) fits before it.
 TARGET_FRACTION = 0.5
 #: Rendering methods of docs/method.md, rendering methods.
-METHODS = ("funneling", "inverse", "combination", "time_reversal")
+METHODS = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
 #: Methods compared in the localization studies (docs/file-formats.md, trials file).
 STUDY_METHODS = ("funneling", "inverse", "combination")
 

@@ -36,7 +36,7 @@ __all__ = [
 #: Columns a trials file must have (docs/file-formats.md, trials file).
 REQUIRED_COLUMNS: tuple[str, ...] = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
 #: Rendering methods in the order tables and figures list them; others follow alphabetically.
-KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal")
+KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
 #: Valid phases.
 PHASES: tuple[str, ...] = ("training", "main")
 #: Valid study numbers.
