@@ -375,6 +375,16 @@ summary{cursor:pointer;font-weight:600}.small{color:#666;font-size:.85em}
 """
 
 
+#: Smallest p-value the report tables print as a number; smaller ones read "< 1e-12".
+P_DISPLAY_FLOOR = 1e-12
+
+
+def _is_p_column(name: object) -> bool:
+    """p-value columns of pingouin and vibrofocus tables (``p_unc``, ``p-corr``, ``p``, ...)."""
+    text = str(name).lower()
+    return text == "p" or text.startswith(("p_", "p-")) or text.endswith(("_p", "-p"))
+
+
 def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
     if df is None or len(df) == 0:
         return "<p class='small'>(empty)</p>"
@@ -392,8 +402,15 @@ def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
             return "0" if text == "-0" else text
         return html.escape(str(x))
 
+    def fmt_p(x):
+        # A p-value that underflows the display is bounded, never shown as 0.
+        if isinstance(x, (float, np.floating)) and np.isfinite(x) and 0 <= x < P_DISPLAY_FLOOR:
+            return f"&lt; {P_DISPLAY_FLOOR:.0e}".replace("e-0", "e-")
+        return fmt(x)
+
     cells = shown.astype(object).map(lambda x: None if x is None or (isinstance(x, float) and x != x) else x)
-    body = cells.map(fmt).to_html(index=False, escape=False, border=0)
+    cells = cells.apply(lambda col: col.map(fmt_p if _is_p_column(col.name) else fmt))
+    body = cells.to_html(index=False, escape=False, border=0)
     note = f"<p class='small'>first {max_rows} of {len(df)} rows</p>" if max_rows and len(df) > max_rows else ""
     return body + note
 
