@@ -11,12 +11,13 @@ import pytest
 from vibrofocus import ArrayLayout
 from vibrofocus._style import METHOD_COLORS
 from vibrofocus.analysis import load_trials, localization_summary
-from vibrofocus.analysis.figures import method_colors, plot_localization
+from vibrofocus.analysis.figures import method_colors, plot_counts, plot_localization
+from vibrofocus.analysis.study2 import study2_counts
 from vibrofocus.analysis.report import _table
 
 from .synthetic import make_trials
 
-BASELINE = Path(__file__).parent / "baseline" / "localization.png"
+BASELINES = Path(__file__).parent / "baseline"
 
 
 def test_a_method_keeps_its_colour_whichever_methods_a_figure_shows():
@@ -69,16 +70,25 @@ def test_report_tables_bound_tiny_p_values_instead_of_printing_zero():
     assert cells == ["a", "40", "&lt; 1e-12", "&lt; 1e-12", "b", "1", "0.03", "0.5"]
 
 
-def test_localization_figure_matches_its_baseline_image(positions, tmp_path):
+def _matches_baseline(fig, name, tmp_path):
     from matplotlib.testing.compare import compare_images
 
-    fig = plot_localization(positions, ArrayLayout.reference())
     for text in fig.findobj(lambda a: hasattr(a, "get_text") and hasattr(a, "set_visible")):
         text.set_visible(False)  # fonts differ between machines; shapes do not
-    actual = tmp_path / "localization.png"
+    actual = tmp_path / name
     fig.savefig(actual, dpi=60)
+    baseline = BASELINES / name
     if os.environ.get("VIBROFOCUS_UPDATE_BASELINES") == "1":  # pragma: no cover - after a reviewed change
-        BASELINE.write_bytes(actual.read_bytes())
-    assert BASELINE.exists(), f"missing {BASELINE}; write it with VIBROFOCUS_UPDATE_BASELINES=1 and review it"
+        baseline.write_bytes(actual.read_bytes())
+    assert baseline.exists(), f"missing {baseline}; write it with VIBROFOCUS_UPDATE_BASELINES=1 and review it"
     # RMS difference of the 0-255 pixel values; 3 tolerates anti-aliasing differences.
-    assert compare_images(str(BASELINE), str(actual), tol=3) is None
+    return compare_images(str(baseline), str(actual), tol=3) is None
+
+
+def test_localization_figure_matches_its_baseline_image(positions, tmp_path):
+    assert _matches_baseline(plot_localization(positions, ArrayLayout.reference()), "localization.png", tmp_path)
+
+
+def test_counts_figure_matches_its_baseline_image(tmp_path):
+    counts, _ = study2_counts(load_trials(make_trials(6, seed=5, studies=(2,))))
+    assert _matches_baseline(plot_counts(counts), "counts.png", tmp_path)
