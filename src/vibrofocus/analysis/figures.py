@@ -19,8 +19,18 @@ from .trials import method_order
 __all__ = ["plot_localization", "plot_errors", "plot_counts", "save_figure", "method_colors"]
 
 def method_colors(methods) -> dict[str, str]:
-    """Colour per method, the same in every figure of the package (Okabe–Ito palette), in
-    :func:`method_order`."""
+    """Colour per method, the same in every figure of the package (Okabe–Ito palette).
+
+    Parameters
+    ----------
+    methods : iterable of str
+        Method names; unknown names get colours no known method uses.
+
+    Returns
+    -------
+    dict of str to str
+        Method to hex colour, in :func:`method_order`.
+    """
     return _style.method_colors(method_order(methods))
 
 
@@ -224,7 +234,19 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
 
 
 def save_figure(fig, path: str | os.PathLike, *, dpi: int = 110) -> Path:
-    """Write ``fig`` as PNG to ``path`` and return the path."""
+    """Write ``fig`` as PNG to ``path`` (atomically; the folder is created) and return the path.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    path : path-like
+    dpi : int
+        Resolution, dots per inch.
+
+    Returns
+    -------
+    Path
+    """
     from .._atomic import save_figure as _save_atomic
 
     path = Path(path)

@@ -43,7 +43,17 @@ def _clean(value: Any) -> Any:
 
 
 def format_p(p: float) -> str:
-    """APA-like p: ``"p < 0.0001"``, ``"p = 0.0003"`` or ``"p = 0.012"``."""
+    """APA-like p: ``"p < 0.0001"``, ``"p = 0.0003"`` or ``"p = 0.012"``.
+
+    Parameters
+    ----------
+    p : float
+        The p-value; None or NaN gives ``"p = n/a"``.
+
+    Returns
+    -------
+    str
+    """
     if p is None or not np.isfinite(p):
         return "p = n/a"
     if p < 1e-4:
@@ -236,6 +246,11 @@ def results_sentences(result: AnalysisResult) -> dict[str, list[str]]:
     Degrees of freedom are Greenhouse–Geisser corrected where Mauchly's test rejects
     sphericity (or is undefined for the sample size).
 
+    Parameters
+    ----------
+    result : AnalysisResult
+        What :func:`~vibrofocus.analysis.analyze` found.
+
     Returns
     -------
     dict
@@ -304,6 +319,18 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
     ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
     these keys are always present and null when the statistic was computed.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        What :func:`~vibrofocus.analysis.analyze` found.
+    figures : dict of str to str, optional
+        Figure name to file name, listed under ``figures``.
+
+    Returns
+    -------
+    dict
+        JSON-safe (no NaN: missing values are null).
     """
     from .. import __version__
 

@@ -54,7 +54,23 @@ SEVERITIES = ("info", "warning", "error")
 
 @dataclass(frozen=True)
 class QualityThresholds:
-    """Thresholds of the quality checks (see the module docstring)."""
+    """Thresholds of the quality checks (see the module docstring).
+
+    Attributes
+    ----------
+    coherence_min : float
+        Coherence below which a frequency counts as incoherent.
+    coherence_share : float
+        Share of the band's frequencies that may be incoherent before a path is flagged.
+    dead_ratio : float
+        An actuator whose band gain is below this fraction of the others' median is dead.
+    still_ratio : float
+        A point whose response is below this fraction of the median point's barely moves.
+    snr_min_db : float
+        Lowest acceptable signal-to-noise ratio in the band, dB.
+    clip_samples : int
+        Samples at full scale that make a recording clipped.
+    """
 
     coherence_min: float = 0.5
     coherence_share: float = 0.1
