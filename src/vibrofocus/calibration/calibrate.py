@@ -12,7 +12,7 @@ from .._validation import check_band, check_choice
 from ..defaults import BAND_HZ, N_SAMPLES
 from ..errors import SafetyError, ValidationError, VibrofocusError
 from ..layout import ArrayLayout
-from ..rendering.taper import band_taper
+from ..signals.taper import band_taper
 from ..rigs.base import Rig
 from .estimate import estimate_repeats, h1_average, noise_and_snr, resize_impulse_response
 from .excitation import METHODS, SweepSettings, default_settings, make_excitation

@@ -35,7 +35,7 @@ import scipy.fft
 
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
-from ..rendering.taper import band_taper
+from ..signals.taper import band_taper
 
 __all__ = [
     "resize_impulse_response",

@@ -10,7 +10,7 @@ import numpy as np
 from .._atomic import save_figure
 from .._style import method_colors
 from ..defaults import BAND_HZ, N_SAMPLES, SIGMA_S, TARGET_PEAK_M
-from ..rendering.taper import band_taper
+from ..signals.taper import band_taper
 from ..signals.ricker import ricker
 from .run import DemoResult, record_clean
 

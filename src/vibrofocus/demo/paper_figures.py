@@ -54,7 +54,7 @@ def fig4_focusing_along_a_line(rig, path: Path, *, actuator: int | None = None,
     elsewhere.
     """
     from ..rendering import inverse_filter
-    from ..rendering.taper import band_taper
+    from ..signals.taper import band_taper
 
     plt = _pyplot()
     layout = rig.layout

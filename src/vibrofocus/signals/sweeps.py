@@ -7,7 +7,7 @@ import numpy as np
 from .._docs import fill_doc
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
-from ..rendering.taper import band_taper
+from .taper import band_taper
 
 __all__ = [
     "linear_sweep",
