@@ -58,11 +58,14 @@ def test_single_spot_vibrometer_prompts_for_each_point(layout, firs):
         asked.append(label)
         rig.aim(label, xy)  # the operator moves the spot there
 
-    steps = []
+    steps, messages = [], []
     cal = calibrate(rig, participant_id="P", sweep_s=0.5, repeats=2, prompt=prompt,
-                    progress=lambda done, total, msg: steps.append((done, total)))
+                    progress=lambda done, total, msg: (steps.append((done, total)), messages.append(msg)))
     assert asked == list(layout.point_labels)
-    assert steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 13 * 4 * 2
+    # The plan first (0 done), then one call per take.
+    assert steps[0] == (0, 104) and steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 13 * 4 * 2 + 1
+    take_s = (0.1 + 0.5 + 0.3)  # silence, sweep, tail
+    assert "104 takes" in messages[0] and f"{104 * take_s:.1f} s of sweeps" in messages[0], messages[0]
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
     assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))
