@@ -85,8 +85,9 @@ class Server:
         return {"X-Vibrofocus-Token": self.token}
 
     # ------------------------------------------------------------------ helpers
-    def api(self, method: str, path: str, **kwargs) -> httpx.Response:
-        return httpx.request(method, self.base_url + path, headers=self.headers, timeout=30, **kwargs)
+    def api(self, method: str, path: str, *, headers: dict | None = None, **kwargs) -> httpx.Response:
+        """A request with the experimenter token (and ``headers`` on top)."""
+        return httpx.request(method, self.base_url + path, headers={**self.headers, **(headers or {})}, timeout=30, **kwargs)
 
     def plan(self, participant: str, study: int, *, n_training: int = 2, repetitions: int = 1, seed: int = 7) -> dict:
         """Add a participant and plan a session; returns the session (with participant_url)."""
@@ -98,6 +99,12 @@ class Server:
         assert r.status_code == 201, r.text
         return r.json()
 
+    def login_link(self) -> str:
+        """The one-time login link this server printed last (from its log)."""
+        lines = [ln for ln in self.log.read_text().splitlines() if ln.startswith("one-time login link")]
+        assert lines, self.log.read_text()
+        return lines[-1].rsplit(" ", 1)[1]
+
     def rows(self, sql: str, *args) -> list[tuple]:
         """Read the database directly (a second connection, as another program would)."""
         con = sqlite3.connect(self.db)
@@ -105,6 +112,14 @@ class Server:
             return con.execute(sql, args).fetchall()
         finally:
             con.close()
+
+
+def login(page, server: Server) -> None:
+    """Log in on the experimenter page through its login form (the token in a POST)."""
+    page.goto(server.base_url + "/")
+    page.fill("#token", server.token)
+    page.click("main.login button[type=submit]")
+    page.wait_for_selector("#participant-card")
 
 
 @pytest.fixture

@@ -54,9 +54,9 @@ def test_bad_answers_are_refused_and_change_nothing(running):
     good = {"session_id": sid, "trial_index": 0, "response": [5], "rt_s": 0.8, "answer_id": "answer-0001"}
     cases = [
         # (request kwargs, expected status, words the message must contain)
-        (dict(json=good), 403, "participant key"),  # no key
-        (dict(json=good, headers={"X-Participant-Key": "not-the-key"}), 403, "participant key"),
-        (dict(json=good, headers=server.headers), 403, "participant key"),  # the token cannot answer
+        (dict(json=good), 403, "participant link"),  # no key
+        (dict(json=good, headers={"X-Participant-Key": "not-the-key"}), 403, "participant link"),
+        (dict(json=good, headers=server.headers), 403, "participant link"),  # the token cannot answer
         (dict(content=b"{not json", headers={"X-Participant-Key": key, "Content-Type": "application/json"}), 422, "json"),
         (dict(json={**good, "response": [0]}, headers={"X-Participant-Key": key}), 422, "greater than or equal to 1"),
         (dict(json={**good, "response": [10]}, headers={"X-Participant-Key": key}), 422, "less than or equal to 9"),

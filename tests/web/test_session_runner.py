@@ -111,8 +111,10 @@ def test_serve_prints_token_and_warns_off_localhost(tmp_path):
         proc.terminate()
         out, err = proc.communicate(timeout=10)
     assert "WARNING" in err and "127.0.0.2" in err
-    assert "experimenter token: " + "t" * 24 in out
-    assert f"http://127.0.0.2:{port}/?token=" in out
+    assert "experimenter token (for the login page): " + "t" * 24 in out
+    (link,) = [line.rsplit(" ", 1)[1] for line in out.splitlines() if line.startswith("one-time login link")]
+    assert link.startswith(f"http://127.0.0.2:{port}/login/") and "t" * 24 not in link
+    assert "?token=" not in out, "the token is never put in a URL"
     bad = subprocess.run([sys.executable, "-m", "vibrofocus", "serve", "--rig", "laser", "--no-browser",
                           "--db", str(tmp_path / "s.sqlite")], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rig" in bad.stderr

@@ -1,7 +1,9 @@
 """Routes of the experimenter page: participants, calibration, preview, sessions, export.
 
-Everything here needs the experimenter token (``X-Vibrofocus-Token`` header or the
-``vf_token`` cookie set when the page is opened with ``?token=``).
+Everything under ``/api`` and ``/reports`` needs the experimenter token
+(``X-Vibrofocus-Token`` header, for scripts) or the login cookie (``vf_token``, set by a
+one-time login link or the login form; it holds a value derived from the token, never
+the token itself).
 """
 
 from __future__ import annotations
@@ -15,10 +17,11 @@ import time
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import Path as FPath
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 
 from ..errors import StudyError, VibrofocusError
-from .api_models import AnalysisIn, CalibrationIn, ParticipantIn, SessionIn
+from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
 from .app import TOKEN_COOKIE, CalibrationJob, WebState, render_template
 
 router = APIRouter()
@@ -39,23 +42,57 @@ def _study_error(exc: StudyError, status: int = 409) -> HTTPException:
     return HTTPException(status, detail=str(exc))
 
 
-# ---------------------------------------------------------------------- page
+# ---------------------------------------------------------------------- page and login
+def _logged_in(web: WebState) -> Response:
+    """Set the login cookie and go to the experimenter page."""
+    resp = RedirectResponse("/", status_code=303)
+    # HttpOnly: no script can read it; SameSite=Strict: no other site's page sends it
+    # (other local ports are refused by the origin checks of web.security).
+    resp.set_cookie(TOKEN_COOKIE, web.cookie_value, httponly=True, samesite="strict", path="/")
+    return resp
+
+
+def _login_page(message: str = "", status: int = 401) -> HTMLResponse:
+    return HTMLResponse(render_template("login.html", message=message), status_code=status)
+
+
 @router.get("/", response_class=HTMLResponse, include_in_schema=False)
-def experimenter_page(request: Request, token: str | None = Query(None, max_length=128)) -> Response:
-    """The experimenter page; ``?token=`` logs in (sets a cookie) and is dropped from the URL."""
+def experimenter_page(request: Request) -> Response:
+    """The experimenter page, or the login page when not logged in."""
     web = _web(request)
-    if token is not None:
-        if not secrets.compare_digest(token, web.token):
-            return HTMLResponse(render_template("login.html", message="That token is not the one this server printed."), status_code=401)
-        resp = RedirectResponse("/", status_code=303)
-        # HttpOnly + SameSite=Strict: scripts and other sites cannot read or send it.
-        resp.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict")
-        return resp
-    try:
-        web.check_token(request)
-    except HTTPException:
-        return HTMLResponse(render_template("login.html", message=""), status_code=401)
-    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind))
+    if not web.cookie_ok(request.headers.get("cookie")):
+        return _login_page()
+    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind, rig_label=web.rig_label))
+
+
+@router.get("/login/{code}", include_in_schema=False)
+def login_link(request: Request, code: str = FPath(..., max_length=64)) -> Response:
+    """Exchange a one-time login link printed by ``vibrofocus serve`` for the login cookie."""
+    web = _web(request)
+    if not web.use_login_code(code):
+        return _login_page("That login link has been used already or has expired. Log in with the experimenter token instead.")
+    return _logged_in(web)
+
+
+@router.post("/login", include_in_schema=False)
+async def login_form(request: Request) -> Response:
+    """The login form: the experimenter token in a POST body (never in a URL)."""
+    from urllib.parse import parse_qs
+
+    web = _web(request)
+    fields = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=4)
+    given = (fields.get("token") or [""])[0].strip()
+    if not web.token_ok(given):
+        return _login_page("That is not the experimenter token this server printed. Check it and try again.")
+    return _logged_in(web)
+
+
+@router.post("/logout", include_in_schema=False)
+def logout() -> Response:
+    """Forget the login cookie in this browser."""
+    resp = RedirectResponse("/", status_code=303)
+    resp.delete_cookie(TOKEN_COOKIE, path="/", httponly=True, samesite="strict")
+    return resp
 
 
 # ---------------------------------------------------------------------- participants and rigs
@@ -162,7 +199,7 @@ def calibration_job(job_id: str, web: WebState = Depends(require_token)) -> dict
 
 
 @router.get("/api/calibrations/{calibration_id}/figure.png")
-def calibration_figure(calibration_id: int, web: WebState = Depends(require_token)) -> Response:
+def calibration_figure(calibration_id: CalibrationId, web: WebState = Depends(require_token)) -> Response:
     """|H| and coherence of a calibration (PNG)."""
     from .figures import calibration_png
 
@@ -171,7 +208,7 @@ def calibration_figure(calibration_id: int, web: WebState = Depends(require_toke
 
 @router.get("/api/preview.png")
 def preview(
-    calibration_id: int = Query(..., ge=1),
+    calibration_id: int = Query(..., ge=1, le=MAX_ID),
     method: str = Query(..., min_length=1, max_length=32),
     location: int = Query(..., ge=1),
     web: WebState = Depends(require_token),
@@ -238,7 +275,7 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
 
 
 @router.get("/api/sessions/{session_id}")
-def get_session(session_id: int, web: WebState = Depends(require_token)) -> dict[str, Any]:
+def get_session(session_id: SessionId, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """A session with its live state and its answers so far."""
     out = _session_out(web, session_id)
     with web.db:
@@ -256,7 +293,7 @@ def get_session(session_id: int, web: WebState = Depends(require_token)) -> dict
 
 
 @router.post("/api/sessions/{session_id}/{action}")
-def session_action(session_id: int, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+def session_action(session_id: SessionId, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """``start``, ``pause``, ``resume`` or ``stop`` a session."""
     if action not in ("start", "pause", "resume", "stop"):
         raise HTTPException(404, detail=f"unknown session action {action!r}; use start, pause, resume or stop")
