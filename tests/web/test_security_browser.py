@@ -230,3 +230,27 @@ def test_huge_bodies_are_refused_before_they_are_read(server):
     grown_mib = (_rss_kib(pid) - before) / 1024
     assert grown_mib < 20, f"the server grew by {grown_mib:.0f} MiB for refused uploads"
     assert server.api("GET", "/api/rigs").status_code == 200, "the server still answers"
+
+
+def test_database_and_exports_are_private_and_one_analysis_at_a_time(server):
+    s = server.plan("P36", 1)
+    assert server.api("GET", "/api/export/trials.csv").status_code == 200
+    files = server.db.parent / "studies-files"
+    (export,) = (files / "exports").iterdir()
+    modes = {p.name: p.stat().st_mode & 0o777 for p in (server.db, files, files / "exports", export)}
+    wal = server.db.with_name(server.db.name + "-wal")
+    if wal.exists():
+        modes[wal.name] = wal.stat().st_mode & 0o777
+    assert all(m & 0o077 == 0 for m in modes.values()), {k: oct(m) for k, m in modes.items()}
+    # Answer one trial so that there is something to analyse, then ask twice at once.
+    sid = s["session_id"]
+    key = s["participant_url"].split("key=")[1]
+    assert server.api("POST", f"/api/sessions/{sid}/start").status_code == 200
+    st = wait_state(server, sid, key, "respond")
+    r = httpx.post(f"{server.base_url}/api/participant/{sid}/answer", headers={"X-Participant-Key": key},
+                   json={"session_id": sid, "trial_index": st["trial_index"], "response": [5], "rt_s": 0.5, "answer_id": "cap-test-1"})
+    assert r.status_code == 200, r.text
+    replies = [server.api("POST", "/api/analysis", json={}) for _ in range(4)]
+    assert [r.status_code for r in replies].count(202) == 1, [r.text for r in replies]
+    assert all(r.status_code == 409 and "already running" in r.json()["detail"] for r in replies[1:])
+    assert len(list((files / "reports").iterdir())) == 1

@@ -9,6 +9,7 @@ the token itself).
 from __future__ import annotations
 
 import dataclasses
+import os
 import secrets
 import subprocess
 import sys
@@ -22,7 +23,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 
 from ..errors import StudyError, VibrofocusError
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
-from .app import TOKEN_COOKIE, CalibrationJob, WebState, render_template
+from .app import TOKEN_COOKIE, CalibrationJob, WebState, private_dir, render_template
 
 router = APIRouter()
 
@@ -172,7 +173,7 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
     try:
         cal = calibrate(rig, participant_id=job.participant_id, progress=progress)
         folder = web.data_dir / "calibrations"
-        folder.mkdir(exist_ok=True)
+        private_dir(folder)
         path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
         save_calibration(cal, path)
         with web.db:
@@ -339,11 +340,12 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
 def export_trials(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> FileResponse:
     """Every answered trial as the docs/file-formats.md, trials file trials file."""
     folder = web.data_dir / "exports"
-    folder.mkdir(exist_ok=True)
+    private_dir(folder)
     path = folder / f"trials-{time.strftime('%Y%m%d-%H%M%S')}.csv"
     try:
         with web.db:
             web.store.export_trials_csv(path, participant_id=participant_id)
+        os.chmod(path, 0o600)  # participant data: this user only, whatever the umask
     except StudyError as exc:
         raise HTTPException(404 if "unknown participant" in str(exc) else 409, detail=str(exc)) from None
     return FileResponse(path, media_type="text/csv", filename="trials.csv")
@@ -353,23 +355,38 @@ def export_trials(participant_id: str | None = Query(None, max_length=64), web: 
 def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Export the trials and run ``vibrofocus analyze`` on them in the background."""
     name = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
-    out = web.data_dir / "reports" / name
-    out.mkdir(parents=True)
-    trials = out / "trials.csv"
-    with web.db:
-        n = web.store.export_trials_csv(trials)
-    if n == 0:
-        raise HTTPException(409, detail="no answered trials yet: nothing to analyse")
-    job = {"name": name, "status": "running", "rows": n, "url": f"/reports/{name}/report.html", "log": ""}
-    web.analyses[name] = job
+    job = {"name": name, "status": "running", "rows": 0, "url": f"/reports/{name}/report.html", "log": ""}
+    with web.lock:
+        # One analysis at a time: each is a process of its own (pingouin, matplotlib).
+        if any(j["status"] == "running" for j in web.analyses.values()):
+            raise HTTPException(409, detail="An analysis is already running. Wait for it to finish, then run it again.")
+        web.analyses[name] = job
+    try:
+        out = web.data_dir / "reports" / name
+        out.mkdir(parents=True, mode=0o700)
+        trials = out / "trials.csv"
+        with web.db:
+            n = web.store.export_trials_csv(trials)
+        if n == 0:
+            raise HTTPException(409, detail="No answered trials yet: there is nothing to analyse.")
+    except BaseException:
+        with web.lock:
+            web.analyses.pop(name, None)
+        raise
+    job["rows"] = n
 
     def work() -> None:
         # Through the command line: the analysis runs in its own process (pingouin,
         # matplotlib) and the report is exactly what `vibrofocus analyze` writes.
-        proc = subprocess.run(
-            [sys.executable, "-m", "vibrofocus", "analyze", str(trials), "--out", str(out)],
-            capture_output=True, text=True, timeout=600,
-        )
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-m", "vibrofocus", "analyze", str(trials), "--out", str(out)],
+                capture_output=True, text=True, timeout=600,
+            )
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            job["log"] = f"the analysis could not run: {exc}"
+            job["status"] = "failed"
+            return
         job["log"] = (proc.stdout + proc.stderr)[-4000:]
         job["status"] = "done" if proc.returncode == 0 and (out / "report.html").exists() else "failed"
 
