@@ -37,7 +37,9 @@ def free_port() -> int:
 class Server:
     """``vibrofocus serve`` in a subprocess; can be killed (SIGKILL) and started again."""
 
-    def __init__(self, db: Path, port: int, log: Path) -> None:
+    def __init__(self, db: Path, port: int, log: Path, *, args: tuple[str, ...] = (), env: dict | None = None) -> None:
+        self.args = tuple(args)
+        self.env = dict(env or {})
         self.db = db
         self.port = port
         self.log = log
@@ -46,11 +48,11 @@ class Server:
         self.token = TOKEN
 
     def start(self) -> None:
-        env = dict(os.environ, VIBROFOCUS_TOKEN=self.token, PYTHONUNBUFFERED="1")
+        env = dict(os.environ, VIBROFOCUS_TOKEN=self.token, PYTHONUNBUFFERED="1", **self.env)
         with open(self.log, "ab") as fh:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "vibrofocus", "serve", "--db", str(self.db), "--port", str(self.port),
-                 "--no-browser", "--pace", "fast"],
+                 "--no-browser", "--pace", "fast", *self.args],
                 stdout=fh, stderr=subprocess.STDOUT, env=env,
             )
         deadline = time.monotonic() + 60

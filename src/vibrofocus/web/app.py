@@ -50,16 +50,58 @@ _HERE = Path(__file__).parent
 
 @dataclass
 class CalibrationJob:
-    """A calibration running in a background thread, as the experimenter page sees it."""
+    """A calibration running in a background thread, as the experimenter page sees it.
+
+    On a rig that records one point at a time (a single-spot vibrometer), the job stops
+    before each point with ``status = "waiting"`` and a ``prompt`` saying where to aim the
+    vibrometer; :meth:`go_on` lets it record, :meth:`cancel` ends it.
+    """
 
     job_id: str
     participant_id: str
     rig: str
-    status: str = "running"  # running | done | failed
+    status: str = "running"  # running | waiting | done | failed | cancelled
     progress: float = 0.0
     message: str = "starting"
     calibration_id: int | None = None
     error: str | None = None
+    prompt: str | None = None
+    straps: dict | None = None
+    _go: threading.Event = field(default_factory=threading.Event, repr=False)
+    _cancelled: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The job as the page reads it (JSON-ready)."""
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
+
+    def wait_for_experimenter(self, prompt: str) -> None:
+        """Block the calibration until the experimenter continues (or cancels)."""
+        self._go.clear()
+        self.prompt, self.status = prompt, "waiting"
+        while not self._go.wait(0.25):
+            if self._cancelled:
+                break
+        self.prompt = None
+        self.check_cancelled()
+        self.status = "running"
+
+    def go_on(self) -> None:
+        """The experimenter has aimed the vibrometer: record the point."""
+        self._go.set()
+
+    def cancel(self) -> None:
+        """Stop at the next point or recording (nothing is saved)."""
+        self._cancelled = True
+        self._go.set()
+
+    def check_cancelled(self) -> None:
+        """Raise :class:`CalibrationCancelled` if the experimenter cancelled."""
+        if self._cancelled:
+            raise CalibrationCancelled("cancelled by the experimenter")
+
+
+class CalibrationCancelled(Exception):
+    """The experimenter cancelled a calibration (nothing is saved)."""
 
 
 @dataclass
@@ -191,16 +233,35 @@ class WebState:
             raise HTTPException(404, detail=f"unknown session {session_id}")
         return _as_dict(info)
 
+    @property
+    def rig_kinds(self) -> list[str]:
+        """Rig kinds this server can use: its own, and the simulated forearm for rehearsals."""
+        return [self.rig_kind] + (["simulated"] if self.rig_kind != "simulated" else [])
+
+    def check_rig_kind(self, kind: str) -> None:
+        """Raise 409 unless this server can use rigs of ``kind``."""
+        if kind not in self.rig_kinds:
+            raise HTTPException(409, detail=(
+                f"This server was started for the {self.rig_label} rig. To use the {kind} rig, restart it with "
+                f"'vibrofocus serve --rig {kind} --rig-config FILE'."
+            ))
+
     def make_rig(self, kind: str, seed: int | None):
-        """A rig by kind and seed, made once and reused (a hardware rig holds a device)."""
+        """A rig by kind and seed, made once and reused (a hardware rig holds a device).
+
+        A hardware rig is the one the server was started with (``serve --rig KIND
+        --rig-config FILE``), built from that config file.
+        """
+        self.check_rig_kind(kind)
         key = (kind, -1 if seed is None else int(seed))
         with self.lock:
             if key not in self.rigs:
                 factory = self.rig_factory
                 if factory is None:
                     from ..rigs import make_rig as factory
+                extra = {"config": self.rig_config} if kind != "simulated" and self.rig_config is not None else {}
                 try:
-                    self.rigs[key] = factory(kind, seed=seed)
+                    self.rigs[key] = factory(kind, seed=seed, **extra)
                 except NotImplementedError as exc:
                     raise HTTPException(400, detail=str(exc)) from None
                 except VibrofocusError as exc:
@@ -363,6 +424,7 @@ def create_app(
     rig: str = "simulated",
     pace: str | Pace = "normal",
     rig_factory: Any = None,
+    rig_config: str | os.PathLike | None = None,
     resume: bool = True,
     allowed_hosts: tuple[str, ...] = (),
 ) -> FastAPI:
@@ -375,12 +437,15 @@ def create_app(
     token : str
         The experimenter token; at least 16 characters.
     rig : str
-        Default rig kind offered on the experimenter page (``simulated``, ``audio``,
-        ``nidaq``).
+        The rig of this server (``simulated``, ``audio``, ``nidaq``); a hardware rig
+        needs ``rig_config``. The simulated forearm stays available for rehearsals.
     pace : {"normal", "fast"} or Pace
         Trial timing; ``fast`` for tests and demonstrations.
     rig_factory : callable, optional
-        ``rig_factory(kind, seed=...) -> Rig``; default :func:`vibrofocus.rigs.make_rig`.
+        ``rig_factory(kind, seed=..., [config=...]) -> Rig``; default
+        :func:`vibrofocus.rigs.make_rig`.
+    rig_config : path-like, optional
+        The hardware rig's config file (``.toml``/``.json``, see ``examples/rigs/``).
     resume : bool
         Restart the sessions stored as running when the app starts.
     allowed_hosts : tuple of str
@@ -406,7 +471,7 @@ def create_app(
     store = StudyStore(db_path)
     state = WebState(
         store=store, db_path=db_path, token=token, secret=load_or_make_secret(db_path),
-        rig_kind=rig, pace=pace, rig_factory=rig_factory,
+        rig_kind=rig, pace=pace, rig_factory=rig_factory, rig_config=rig_config,
     )
 
     @asynccontextmanager

@@ -23,7 +23,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 
 from ..errors import StudyError, VibrofocusError
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
-from .app import TOKEN_COOKIE, CalibrationJob, WebState, private_dir, render_template
+from .app import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template
 
 router = APIRouter()
 
@@ -125,10 +125,27 @@ def add_participant(body: ParticipantIn, web: WebState = Depends(require_token))
 
 @router.get("/api/rigs")
 def list_rigs(web: WebState = Depends(require_token)) -> dict[str, Any]:
-    """Rig kinds and the server's default."""
-    from ..rigs import RIG_KINDS
+    """The rig kinds this server can use, its own rig first, and how it is shown."""
+    return {"kinds": web.rig_kinds, "default": web.rig_kind, "label": web.rig_label}
 
-    return {"kinds": list(RIG_KINDS), "default": web.rig_kind}
+
+@router.get("/api/rigs/straps")
+def read_straps(
+    rig: str = Query(..., min_length=1, max_length=32),
+    seed: int | None = Query(None, ge=0, le=2**32 - 1),
+    web: WebState = Depends(require_token),
+) -> dict[str, Any]:
+    """Read the strap forces of a rig now, with a verdict per strap and one line to show."""
+    from ..rigs.force import check_straps
+
+    r = web.make_rig(rig, seed)
+    if getattr(r, "read_strap_forces", None) is None:
+        raise HTTPException(409, detail=f"The {rig} rig has no strap force sensors; check the straps by hand before calibrating.")
+    try:
+        reading = check_straps(r)
+    except VibrofocusError as exc:
+        raise HTTPException(409, detail=f"The strap forces could not be read: {exc}") from None
+    return {**reading.to_dict(), "message": reading.message}
 
 
 def _check_participant(web: WebState, participant_id: str) -> None:
@@ -147,7 +164,7 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     rig = web.make_rig(body.rig, body.seed)
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
     with web.lock:
-        busy = [j for j in web.jobs.values() if j.status == "running"]
+        busy = [j for j in web.jobs.values() if j.status in ("running", "waiting")]
         if busy:
             raise HTTPException(409, detail=f"calibration {busy[0].job_id} of {busy[0].participant_id} is still running; wait for it")
         web.jobs[job.job_id] = job
@@ -169,9 +186,23 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
             job.progress = float(nums[0])
         if texts:
             job.message = texts[0]
+        job.check_cancelled()
+
+    def prompt(label: str, xy: Any) -> None:
+        job.wait_for_experimenter(
+            f"Aim the vibrometer at point {label} (x {xy[0] * 1e3:+.1f} mm, y {xy[1] * 1e3:+.1f} mm), then press Continue."
+        )
 
     try:
-        cal = calibrate(rig, participant_id=job.participant_id, progress=progress)
+        if getattr(rig, "read_strap_forces", None) is not None:
+            # Read before the first sweep, so the experimenter sees loose straps now;
+            # calibrate() stores its own reading with the calibration.
+            from ..rigs.force import check_straps
+
+            reading = check_straps(rig)
+            job.straps = {**reading.to_dict(), "message": reading.message}
+        single_spot = getattr(rig, "max_points_per_recording", None) is not None
+        cal = calibrate(rig, participant_id=job.participant_id, progress=progress, prompt=prompt if single_spot else None)
         folder = web.data_dir / "calibrations"
         private_dir(folder)
         path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
@@ -184,6 +215,9 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         job.progress = 1.0
         job.message = "done"
         job.status = "done"
+    except CalibrationCancelled:
+        job.status = "cancelled"
+        job.message = "cancelled: nothing was saved"
     except Exception as exc:  # noqa: BLE001 - shown on the experimenter page
         job.status = "failed"
         job.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, VibrofocusError) else str(exc)
@@ -193,10 +227,31 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
 @router.get("/api/calibrations/jobs/{job_id}")
 def calibration_job(job_id: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Progress of a calibration job."""
+    return _job(web, job_id).to_dict()
+
+
+def _job(web: WebState, job_id: str) -> CalibrationJob:
     job = web.jobs.get(job_id)
     if job is None:
-        raise HTTPException(404, detail=f"unknown calibration job {job_id!r}")
-    return dataclasses.asdict(job)
+        raise HTTPException(404, detail="There is no such calibration.")
+    return job
+
+
+@router.post("/api/calibrations/jobs/{job_id}/{action}")
+def calibration_step(job_id: str, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """``continue`` (the vibrometer is aimed at the point asked for) or ``cancel`` a calibration."""
+    job = _job(web, job_id)
+    if action == "continue":
+        if job.status != "waiting":
+            raise HTTPException(409, detail="This calibration is not waiting for you.")
+        job.go_on()
+    elif action == "cancel":
+        if job.status not in ("running", "waiting"):
+            raise HTTPException(409, detail=f"This calibration has already ended ({job.status}).")
+        job.cancel()
+    else:
+        raise HTTPException(404, detail="Unknown calibration action; use continue or cancel.")
+    return job.to_dict()
 
 
 @router.get("/api/calibrations/{calibration_id}/figure.png")
@@ -258,6 +313,7 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
 
     if body.rig not in RIG_KINDS:
         raise HTTPException(422, detail=f"body.rig: unknown rig {body.rig!r}; known: {', '.join(RIG_KINDS)}")
+    web.check_rig_kind(body.rig)
     _check_participant(web, body.participant_id)
     if body.calibration_id is not None:
         web.calibration(body.calibration_id)  # 404 / 409 before anything is written
