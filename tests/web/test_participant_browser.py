@@ -99,7 +99,7 @@ def test_study2_multi_select_with_enter_and_clicks(server, page):
     csv = server.api("GET", "/api/export/trials.csv")
     assert csv.status_code == 200
     lines = csv.text.strip().splitlines()
-    assert lines[0] == "participant,study,phase,trial,method,target,response,rt_s"
+    assert lines[0].startswith("participant,study,phase,trial,method,target,response,rt_s,session,")
     assert [line.split(",")[6] for line in lines[1:]] == ["2 7", "1 3", "9"]
 
 

@@ -291,6 +291,7 @@ def _session_out(web: WebState, session_id: int) -> dict[str, Any]:
     info = web.session(session_id)
     runner = web.runner(session_id)
     info["live"] = runner.snapshot() if runner is not None else None
+    info["dry_run"] = info.get("calibration_id") is None
     info["participant_url"] = f"/participant/{session_id}?key={web.participant_key(session_id)}"
     return info
 

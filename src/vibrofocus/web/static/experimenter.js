@@ -227,7 +227,7 @@
     if (s.status === "running" || s.status === "paused") act("Stop", "stop");
     const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
       el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
-      el("td", { class: `status ${s.status}` }, s.status), el("td", { class: "progress" }), el("td", { class: "live" }),
+      el("td", { class: `status ${s.status}` }, s.status + (s.dry_run ? " · dry run" : "")), el("td", { class: "progress" }), el("td", { class: "live" }),
       el("td", {}, link, " ", copy), el("td", {}, controls));
     tr.addEventListener("click", () => { selectedSession = s.session_id; loadSessions(); });
     return tr;
