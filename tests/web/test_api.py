@@ -20,9 +20,13 @@ def snapshot(db) -> dict[str, list[tuple]]:
 
 
 def wait_state(server, sid: int, key: str, state: str, timeout: float = 15.0) -> dict:
+    # As a page does: each request says which state it has seen (after=seq).
     deadline = time.monotonic() + timeout
+    seq = -1
     while time.monotonic() < deadline:
-        st = httpx.get(f"{server.base_url}/api/participant/{sid}/state?wait=1&ready=1", headers={"X-Participant-Key": key}).json()
+        st = httpx.get(f"{server.base_url}/api/participant/{sid}/state?after={seq}&wait=1&ready=1",
+                       headers={"X-Participant-Key": key}).json()
+        seq = st["seq"]
         if st["state"] == state:
             return st
     raise AssertionError(f"session {sid} never reached {state!r}; last state {st}")

@@ -107,19 +107,20 @@ async def participant_state(
     """State of the session as the page shows it; long-polls up to ``wait`` s for a change.
 
     A page that says it is ``ready`` (audio started) counts as present while its
-    request is open: the runner holds the next cue until one is.
+    request is open: the runner holds the next cue until one is, and plays a stimulus
+    only while a page whose request has seen the cue (``after`` is the cue's ``seq``)
+    is connected.
     """
     web = _web(request)
     web.check_key(session_id, key)
     state = await run_in_threadpool(_state, web, session_id)
     runner = web.runner(session_id)
-    if ready and runner is not None:
-        runner.page_attach()
+    token = runner.page_attach(after) if ready and runner is not None else None
     try:
         return await _wait_change(request, web, session_id, state, after, wait)
     finally:
-        if ready and runner is not None:
-            runner.page_detach()
+        if token is not None:
+            runner.page_detach(token)
 
 
 async def _wait_change(request: Request, web: WebState, session_id: int, state: dict[str, Any], after: int, wait: float) -> dict[str, Any]:
