@@ -198,3 +198,27 @@ def test_nothing_plays_when_the_page_is_closed_or_reloaded_before_the_stimulus(s
         assert [r[0] for r in wait_answers(server, sid, 2)] == [0, 1]
     finally:
         context.close()
+
+
+def test_no_answer_behind_the_begin_overlay_and_enter_never_repeats_a_click(server, page):
+    s = start(server, "P06", 1)
+    sid = s["session_id"]
+    open_page(page, server, s)
+    wait_respond(page, 0)
+    page.click(".cell[data-loc='4']")
+    wait_respond(page, 1)
+    for key in ("Enter", " "):  # the clicked cell must not answer trial 1 again
+        page.keyboard.press(key)
+    page.wait_for_timeout(500)
+    assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "4")]
+    assert server.rows("SELECT COUNT(*) FROM answers") == [(1,)]
+    page.reload()  # trial 1 is still open; the overlay asks to begin
+    page.wait_for_function("document.body.dataset.state === 'respond'")
+    page.keyboard.press("7")
+    page.wait_for_timeout(500)
+    assert server.rows("SELECT COUNT(*) FROM answers") == [(1,)], "a key answered behind the overlay"
+    assert pending(page, sid) == []
+    page.click("#begin")
+    wait_respond(page, 1)
+    page.keyboard.press("2")
+    assert [(r[0], r[1]) for r in wait_answers(server, sid, 2)] == [(0, "4"), (1, "2")]
