@@ -25,6 +25,7 @@ def test_experimenter_runs_a_session_from_the_page(server, chromium):
         assert "not the experimenter token" in exp.inner_text("body")
         login(exp, server)
         assert exp.url == server.base_url + "/", "nothing secret in the address bar"
+        assert not exp.is_visible("#cal-prompt"), "no calibration prompt when none waits"
         exp.fill("#new-participant-id", "P10")
         exp.click("#new-participant button")
         exp.wait_for_function("document.getElementById('participant').value === 'P10'")

@@ -48,7 +48,7 @@ def test_calibrate_on_the_audio_rig_from_the_page(jack_server, tmp_path, chromiu
         page.wait_for_function("document.getElementById('strap-message').textContent.includes('no strap force sensors')")
         # One vibrometer: the calibration asks where to aim it, records after Continue.
         page.click("#calibrate")
-        page.wait_for_selector("#cal-prompt:not([hidden])")
+        page.wait_for_selector("#cal-prompt", state="visible")
         assert "Aim the vibrometer at point" in page.inner_text("#cal-prompt-text")
         assert server.api("GET", "/api/rigs").json()["label"] == "audio (lab.json)"
         page.click("#cal-continue")
@@ -56,6 +56,7 @@ def test_calibrate_on_the_audio_rig_from_the_page(jack_server, tmp_path, chromiu
         page.click("#cal-cancel")
         page.wait_for_function("document.getElementById('flash').textContent.includes('cancelled')", timeout=60_000)
         assert server.rows("SELECT COUNT(*) FROM calibrations") == [(0,)]
+        assert not page.is_visible("#cal-prompt")
         # A session on this server's rig is planned; one on a rig it was not started for is refused.
         r = server.api("POST", "/api/sessions", json={"participant_id": "P40", "study": 1, "rig": "nidaq"})
         assert r.status_code == 409 and "--rig nidaq --rig-config" in r.json()["detail"]
