@@ -56,7 +56,7 @@ def test_calibrate_on_the_audio_rig_from_the_page(jack_server, tmp_path, chromiu
         page.click("#cal-cancel")
         page.wait_for_function("document.getElementById('flash').textContent.includes('cancelled')", timeout=60_000)
         assert server.rows("SELECT COUNT(*) FROM calibrations") == [(0,)]
-        assert not page.is_visible("#cal-prompt")
+        assert not page.is_visible("#cal-prompt") and not page.is_visible("#cal-cancel")
         # A session on this server's rig is planned; one on a rig it was not started for is refused.
         r = server.api("POST", "/api/sessions", json={"participant_id": "P40", "study": 1, "rig": "nidaq"})
         assert r.status_code == 409 and "--rig nidaq --rig-config" in r.json()["detail"]

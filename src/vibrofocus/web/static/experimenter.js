@@ -131,6 +131,7 @@
         participant_id: pid, rig: $("rig").value, seed: Number($("rig-seed").value) || 0 }) });
       calJob = job_id;
       $("calibrate").disabled = true;
+      $("cal-cancel").hidden = false;
       for (;;) {
         const job = await api(`/api/calibrations/jobs/${job_id}`);
         $("cal-progress").value = job.progress;
@@ -157,6 +158,7 @@
     } catch (e) { flash(e.message, true); }
     calJob = null;
     $("cal-prompt").hidden = true;
+    $("cal-cancel").hidden = true;
     $("calibrate").disabled = false;
   });
 
