@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 from vibrofocus.cli.main import app
 from vibrofocus.layout import ArrayLayout
 from vibrofocus.studies import TRIALS_COLUMNS, StudyStore
+from vibrofocus.studies.export import SESSION_COLUMNS
 from vibrofocus.studies.simulate import participant_seeds, simulate_studies
 
 pytestmark = pytest.mark.slow
@@ -33,7 +34,8 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         reader = csv.reader(fh)
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
-    assert tuple(header) == TRIALS_COLUMNS
+    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS
+    assert {r["dry_run"] for r in rows} == {"0"}, "simulated sessions are calibrated"
     assert len(rows) == 3 * 2 * 86
     keys = Counter((r["participant"], r["study"], r["phase"], r["trial"]) for r in rows)
     assert max(keys.values()) == 1  # no duplicates
