@@ -98,7 +98,9 @@ class FittedSkin:
     fs : float
         Sample rate of the calibration, Hz (sets the model's drive sensitivity).
     band : (float, float)
-        Band the model was fitted in, Hz; predictions outside it are extrapolations.
+        Calibrated band of the measurement the model was fitted to, Hz (the band fitted,
+        which may be narrower, is ``info["fit_band"]``); predictions outside it are
+        extrapolations.
     values : ndarray, shape (n_params,)
         Fitted parameters, SI units, in the order of :attr:`names`
         (:func:`parameter_names`).
@@ -116,7 +118,7 @@ class FittedSkin:
         ``wrist_y_m``, ``elbow_y_m``, ``geometry``, ``n_images``.
     info : dict
         Fit diagnostics: ``chi2_per_dof`` (``s^2``), ``n_residuals``, ``nfev``, ``status``,
-        ``message``.
+        ``message``, ``points`` (indices fitted) and ``fit_band`` (Hz).
     """
 
     layout: ArrayLayout
@@ -243,7 +245,7 @@ class FittedSkin:
     def __repr__(self) -> str:
         mu, eta = self.values[:2]
         s_mu, s_eta = self.std[:2]
-        return (f"FittedSkin(mu0={mu:.0f} ± {s_mu:.0f} Pa, eta={eta:.3f} ± {s_eta:.3f} Pa s^n, "
+        return (f"FittedSkin(mu0={mu:.5g} ± {s_mu:.2g} Pa, eta={eta:.4g} ± {s_eta:.2g} Pa s^n, "
                 f"median residual={np.median(self.residual):.3g}, band={self.band})")
 
 
@@ -424,7 +426,7 @@ def fit_model(cal, *, points=None, band=None, max_nfev: int = 200) -> FittedSkin
     diff = np.abs(model(res.x) - Hb) ** 2
     residual = np.sqrt(np.sum(w2 * diff, axis=(0, 2)) / np.maximum(np.sum(w2 * np.abs(Hb) ** 2, axis=(0, 2)), 1e-300))
     info = {"chi2_per_dof": float(s2), "n_residuals": int(m_res), "nfev": int(res.nfev), "status": int(res.status),
-            "message": str(res.message), "points": idx.tolist()}
-    return FittedSkin(layout=layout, fs=float(cal.fs), band=band, values=np.exp(res.x), log_covariance=cov,
+            "message": str(res.message), "points": idx.tolist(), "fit_band": list(band)}
+    return FittedSkin(layout=layout, fs=float(cal.fs), band=cal_band, values=np.exp(res.x), log_covariance=cov,
                       residual=residual, fixed=fixed, info=info)
 
