@@ -36,7 +36,8 @@ from .._validation import as_array, check_band
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 
-__all__ = ["FittedSkin", "fit_model", "FIT_GLOBAL_PARAMETERS", "FIT_ACTUATOR_PARAMETERS", "parameter_names"]
+__all__ = ["FittedSkin", "fit_model", "FIT_GLOBAL_PARAMETERS", "FIT_ACTUATOR_PARAMETERS", "parameter_names",
+           "true_parameters"]
 
 #: Wave-law parameters fitted once per participant (SI units).
 FIT_GLOBAL_PARAMETERS = ("shear_modulus_pa", "spring_pot_pa_sn")
@@ -226,7 +227,18 @@ class FittedSkin:
                 f"circumference, {f['circumference_elbow_m'] * 1e3:g}-{f['circumference_wrist_m'] * 1e3:g} mm")
 
     def table(self, truth: dict[str, float] | None = None) -> str:
-        """Markdown table of the fitted parameters (and of ``truth`` when given)."""
+        """Markdown table of the fitted parameters.
+
+        Parameters
+        ----------
+        truth : dict, optional
+            ``{name: true value}`` (e.g. :func:`true_parameters` of a simulated
+            participant): adds the truth and ``z = (fitted - truth) / std``.
+
+        Returns
+        -------
+        str
+        """
         head = "| parameter | fitted | std | relative std |" + (" truth | z |" if truth else "")
         rows = [head, "|---" * (6 if truth else 4) + "|"]
         for n, v, s in zip(self.names, self.values, self.std):
