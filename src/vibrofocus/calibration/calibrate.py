@@ -6,6 +6,7 @@ import datetime as _dt
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -96,6 +97,9 @@ class Calibration:
     recorded_s : float
         Real duration of the takes recorded, re-recordings included, s (NaN when not
         known, e.g. a file written before it was stored).
+    fit : FittedSkin or None
+        The skin model fitted to ``H`` (``cal.fit = fit_model(cal)``), stored with the
+        calibration file when set; None otherwise.
     """
 
     H: np.ndarray
@@ -118,6 +122,7 @@ class Calibration:
     codes: np.ndarray | None = None
     multiple_coherence: np.ndarray | None = None
     recorded_s: float = float("nan")
+    fit: Any = None
 
     @property
     def n_fft(self) -> int:
