@@ -141,7 +141,7 @@ def write_moving_gif(focus: MovingFocus, arm, path, *, half_width_m: float = 0.0
     times = np.concatenate([o + np.arange(frames_per_tap) * dt / frames_per_tap for o in focus.onsets_s])
     u = arm.field(focus.drives, grid, times).reshape(n_grid, n_grid, -1)
     vmax = float(np.abs(u).max()) or 1.0
-    fig, ax = plt.subplots(figsize=(4, 4))
+    fig, ax = plt.subplots(figsize=(4.4, 4), layout="constrained")
     mm = half_width_m * 1e3
     img = ax.imshow(u[..., 0] * 1e6, origin="lower", extent=(-mm, mm, -mm, mm), cmap="RdBu_r",
                     vmin=-vmax * 1e6, vmax=vmax * 1e6)
@@ -152,6 +152,7 @@ def write_moving_gif(focus: MovingFocus, arm, path, *, half_width_m: float = 0.0
     dot, = ax.plot([], [], "o", mfc="none", mec="k", ms=12)
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
+    fig.suptitle("Moving focus from the fitted skin model, played on the simulated forearm (a model)", fontsize=7)
 
     def frame(k):
         img.set_data(u[..., k] * 1e6)
