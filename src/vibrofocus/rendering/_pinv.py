@@ -150,7 +150,8 @@ def _plain_factor(gram: np.ndarray, inner: int):
     # delta ||A^-1|| (below 1e-5 relative under the bound), and one refinement step in
     # _gram_inverse_apply takes that to its square.
     shift = 2 * (inner + k) * np.finfo(float).eps * trace
-    system = gram + shift[:, None, None] * np.eye(k)
+    scale = np.where(zero, 1.0, trace)[:, None, None]  # inverted at unit trace: no overflow
+    system = gram / scale + (shift / scale[:, 0, 0])[:, None, None] * np.eye(k)
     system[zero] = np.eye(k)
     try:
         with _single_threaded_blas():
@@ -161,7 +162,7 @@ def _plain_factor(gram: np.ndarray, inner: int):
         # cond2(A) <= ||A||_F ||A^-1||_F
         ill = ~zero & ~(_frobenius2(system) * _frobenius2(inverse) <= GRAM_MAX_CONDITION**4)
     good = np.flatnonzero(~zero & ~ill)
-    return zero, good, np.flatnonzero(ill), inverse[good], shift[good]
+    return zero, good, np.flatnonzero(ill), inverse[good] / scale[good], shift[good]
 
 
 @dataclass
@@ -262,7 +263,7 @@ class SpectralPinv:
         with _single_threaded_blas():
             if self.inverse is not None:
                 y = self.inverse @ x  # (A + delta I)^-1 x
-                y = y + self.shift[:, None, None] * (self.inverse @ y)  # refined: A^-1 x
+                y = y + self.inverse @ (self.shift[:, None, None] * y)  # refined: A^-1 x
             else:
                 y = np.linalg.solve(self.system, x)
         return y[:, :, 0] if vec else y

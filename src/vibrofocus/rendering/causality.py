@@ -98,6 +98,9 @@ class WraparoundCheck:
         Transfer matrix on ``rfftfreq(n, 1 / fs)``.
     n_samples : int, optional
         Window length ``n``; default ``2 (n_freqs - 1)``. Give it for odd ``n``.
+    keep : bool
+        Compute ``H_odd`` at the first check and keep it (default); False transforms the
+        impulse responses at every check and keeps nothing (a single check).
 
     Notes
     -----
@@ -105,12 +108,13 @@ class WraparoundCheck:
     of ``H``.
     """
 
-    def __init__(self, H: Any, n_samples: int | None = None) -> None:
+    def __init__(self, H: Any, n_samples: int | None = None, *, keep: bool = True) -> None:
         H = as_array(H, "H", ndim=3, dtype="complex")
         self.n = 2 * (H.shape[0] - 1) if n_samples is None else int(n_samples)
         if H.shape[0] != self.n // 2 + 1:
             raise ValidationError(f"H has {H.shape[0]} frequencies, which does not match n_samples={n_samples!r}")
         self.H = H
+        self.keep = bool(keep)
         self._odd: np.ndarray | None = None
         self._odd_norms: np.ndarray | None = None
         self._even_norms: np.ndarray | None = None
@@ -177,7 +181,8 @@ class WraparoundCheck:
             else:
                 even_response = self._even_response(padded[0::2].astype(complex))
                 response[:, 0::2] = even_response.T
-            if self._odd is not None:
+            if self.keep:
+                self.odd_spectra
                 # The even bins' energy is a lower bound of the response's (Parseval).
                 bound = _energy_bound(2 * self._odd_norms, odd)  # mirrored bins counted
                 kept = _bins_within(bound, _SKIP_SHARE * float(np.vdot(even_response, even_response).real))
@@ -226,7 +231,7 @@ def wraparound_fraction(drives: np.ndarray, H: np.ndarray) -> float:
     if isinstance(H, WraparoundCheck):
         return H.fraction(drives)
     drives, H = _as_drives_and_transfer(drives, H)
-    return WraparoundCheck(H, drives.shape[1]).fraction(drives)
+    return WraparoundCheck(H, drives.shape[1], keep=False).fraction(drives)
 
 
 def _playback_wraparound_fraction(drives: np.ndarray, H: np.ndarray) -> float:
