@@ -142,6 +142,18 @@ class Calibration:
         wrap to the end), shape (n_points, n_actuators, n_fft)."""
         return np.fft.irfft(np.moveaxis(self.H, 0, -1), self.n_fft, axis=-1)
 
+    def wraparound_check(self, n: int, *, taper_octaves: float = 0.5):
+        """The :class:`~vibrofocus.rendering.WraparoundCheck` of ``transfer_for(n)``, built
+        once per ``(n, taper_octaves)`` and kept: its ``H`` is the design's transfer matrix
+        and the spectra it caches make every later check of a design cheap."""
+        from ..rendering.causality import WraparoundCheck
+
+        cache = self.__dict__.setdefault("_wraparound_checks", {})
+        key = (n, float(taper_octaves))
+        if key not in cache:
+            cache[key] = WraparoundCheck(self.transfer_for(n, taper_octaves=taper_octaves), n)
+        return cache[key]
+
     def transfer_for(self, n: int, *, taper_octaves: float = 0.5) -> np.ndarray:
         """The transfer matrix on the design grid ``rfftfreq(n, 1 / fs)``.
 

@@ -22,8 +22,7 @@ from ..layout import ArrayLayout
 from ..signals.ricker import ricker
 from ._checks import as_transfer, check_regularization, samples_for
 from .causality import DEFAULT_WRAPAROUND_TOL
-from .causality import check_wraparound as _check_wraparound
-from .causality import wraparound_fraction as _wraparound_fraction
+from .causality import WraparoundCheck
 from .combination import combination_target
 from .contrast import (
     DEFAULT_ACC_REG,
@@ -368,11 +367,16 @@ def render(
     elif target_xy is not None:
         raise ValidationError("target_xy needs a model of the skin as H (a FittedSkin from fit_model, or a "
                               "SimulatedForearm): a measured matrix knows H only at its calibrated points")
+    playback = None
     if hasattr(H, "transfer_for") and hasattr(H, "band"):
         # A Calibration carries the band it is valid in: a design outside it is refused.
         if calibrated_band is None:
             calibrated_band = tuple(H.band)
-        H = H.transfer_for(4096 if n_samples is None else n_samples)
+        if hasattr(H, "wraparound_check"):  # its transfer matrix with the check's cached spectra
+            playback = H.wraparound_check(4096 if n_samples is None else n_samples)
+            H = playback.H
+        else:
+            H = H.transfer_for(4096 if n_samples is None else n_samples)
     H = as_transfer(H)
     if H.shape[1:] != (layout.n_points, layout.n_actuators):
         raise ValidationError(
@@ -488,13 +492,15 @@ def render(
 
     fraction = float("nan")
     if check_wraparound:
-        if method in CONTRAST_METHODS and _wraparound_fraction(drives, H) > wraparound_tol:
+        if playback is None:
+            # Contrast designs are checked twice: transform the impulse responses once.
+            playback = WraparoundCheck(H, n, keep=method in CONTRAST_METHODS)
+        if method in CONTRAST_METHODS and playback.fraction(drives) > wraparound_tol:
             # Noise in a measured H spreads a little of these designs' drive over the
             # whole window (DRIVE_WINDOW_TAPER): taper the window's ends, then check.
             drives = taper_drive_ends(drives, int(np.argmax(np.abs(desired))))
         try:
-            fraction = _check_wraparound(drives, H, tol=wraparound_tol,
-                                         action="warn" if check_wraparound == "warn" else "raise")
+            fraction = playback.check(drives, tol=wraparound_tol, action="warn" if check_wraparound == "warn" else "raise")
         except CausalityError as exc:
             raise CausalityError(f"{what}: {exc}") from None
     drives, scale, needed = apply_drive_limit(drives, limit_v, on_limit, what)
