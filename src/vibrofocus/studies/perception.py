@@ -18,9 +18,9 @@ Central stage (cheap, per trial, :func:`draw_answers`)
        the reference tap, ``d_i`` a participant's threshold offset).
     2. **Funneling (energy law).** The felt points are integrated centrally into one
        percept at the energy-weighted mean of the supra-threshold energies
-       ``x_f = sum w_p x_p / sum w_p``, ``w_p = E_p - E_threshold`` (Alles 1970; Israr &
-       Poupyrev 2011; Park & Choi 2018 in 2D); ``s`` is the percept's spread (weighted RMS
-       distance, m).
+       ``x_f = sum w_p x_p / sum w_p``, ``w_p = (E_p / E_threshold - 1)^gamma`` with
+       ``gamma = 1`` the energy law (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018 in
+       2D) and ``gamma`` fitted; ``s`` is the percept's spread (weighted RMS distance, m).
     3. **Localization noise.** The sensed position is ``x_f + e``,
        ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k s)^2``: a participant's
        point-localization acuity on the mid-forearm (poor: fewer than half of the arm sites
@@ -131,6 +131,10 @@ class PerceptualModel:
         Frequencies counted, Hz (the vibrotactile range; the U-curve weights within it).
     sl_ref_db : float
         Sensation level of the reference tap (2 µm peak Ricker), dB. *Fitted.*
+    funneling_exponent : float
+        ``gamma`` of the central integration weights ``w_p = (E_p / E_thr - 1)^gamma``:
+        1 is the energy law of funneling (Alles 1970; Israr & Poupyrev 2011); smaller
+        values compress intensity (the felt area counts more than its peak). *Fitted.*
     threshold_sd_db : float
         SD across participants of the threshold offset, dB. *Assumption.*
     acuity_sd_m : (float, float)
@@ -158,6 +162,7 @@ class PerceptualModel:
     grid_step_m: float = 5e-3
     band_hz: tuple[float, float] = (10.0, 1000.0)
     sl_ref_db: float = 20.0
+    funneling_exponent: float = 1.0
     threshold_sd_db: float = 3.0
     acuity_sd_m: tuple[float, float] = (5e-3, 9e-3)
     spread_gain: float = 0.5
@@ -324,7 +329,9 @@ def central_percepts(energy: np.ndarray, points_xy: np.ndarray, model: Perceptua
     """Detection and funneling (energy law) for stimuli of felt energies ``energy`` (n, n_points)."""
     e = np.atleast_2d(np.asarray(energy, dtype=float))
     e_thr = 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)  # threshold, re reference
-    w = np.clip(e - e_thr, 0.0, None)
+    w = np.clip(e / e_thr - 1.0, 0.0, None)
+    if model.funneling_exponent != 1.0:
+        w = w**model.funneling_exponent
     total = w.sum(axis=1)
     felt = total > 0
     safe = np.where(felt, total, 1.0)[:, None]
