@@ -4,6 +4,10 @@ One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that orde
 ``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``
 (1-based within the phase), ``method``, ``target`` (1-9), ``response`` (the chosen
 locations, ascending, separated by spaces: ``5``, ``4 5``), ``rt_s`` (seconds).
+When the rows say whether each participant is simulated (key ``simulated``, as the study
+database's rows do), a last column ``simulated`` (``1`` / ``0``) follows: answers of
+simulated participants come from a perceptual model, not from people, and the analysis
+flags them.
 """
 
 from __future__ import annotations
@@ -17,10 +21,12 @@ from typing import Any
 
 from ..errors import StudyError
 
-__all__ = ["TRIALS_COLUMNS", "write_trials_csv", "read_trials_csv"]
+__all__ = ["TRIALS_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv"]
 
 #: Columns of the trials file, in order.
 TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
+#: Optional last column: 1 where the participant is simulated (a model, not data).
+SIMULATED_COLUMN = "simulated"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike) -> int:
@@ -29,7 +35,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
     Parameters
     ----------
     rows : iterable of mapping
-        Each with at least the keys of :data:`TRIALS_COLUMNS`; others are ignored.
+        Each with at least the keys of :data:`TRIALS_COLUMNS`; with ``simulated`` in the
+        first row, the column :data:`SIMULATED_COLUMN` is written too; others are ignored.
         ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
     path : path-like
         Destination CSV file; its folder must exist.
@@ -44,19 +51,25 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
         raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     n = 0
+    rows = iter(rows)
+    first = next(rows, None)
+    with_flag = first is not None and SIMULATED_COLUMN in first
     try:
         with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh, lineterminator="\n")
-            writer.writerow(TRIALS_COLUMNS)
-            for row in rows:
+            writer.writerow(TRIALS_COLUMNS + ((SIMULATED_COLUMN,) if with_flag else ()))
+            for row in ([first] if first is not None else []) + list(rows):
                 response = row["response"]
                 if not isinstance(response, str):
                     response = " ".join(str(int(x)) for x in sorted(response))
                 # repr keeps every digit of the stored float: the file round-trips exactly.
-                writer.writerow([
+                fields = [
                     row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
                     row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
-                ])
+                ]
+                if with_flag:
+                    fields.append(int(bool(row.get(SIMULATED_COLUMN))))
+                writer.writerow(fields)
                 n += 1
             fh.flush()
             # mkstemp makes the file 0600; give it the mode any new file gets (umask).
@@ -79,20 +92,24 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     -------
     list of dict
         ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
-        tuple of int; the rest as str.
+        tuple of int, ``simulated`` (when the file has it) as bool; the rest as str.
     """
     path = Path(path)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            if header is None or tuple(header) != TRIALS_COLUMNS:
+            columns = TRIALS_COLUMNS + (SIMULATED_COLUMN,)
+            if header is None or tuple(header) not in (TRIALS_COLUMNS, columns):
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
+            columns = tuple(header)
             out = []
             for line_no, rec in enumerate(reader, start=2):
-                if len(rec) != len(TRIALS_COLUMNS):
-                    raise StudyError(f"{path}:{line_no}: expected {len(TRIALS_COLUMNS)} fields, got {len(rec)}")
-                row = dict(zip(TRIALS_COLUMNS, rec))
+                if len(rec) != len(columns):
+                    raise StudyError(f"{path}:{line_no}: expected {len(columns)} fields, got {len(rec)}")
+                row = dict(zip(columns, rec))
+                if SIMULATED_COLUMN in row:
+                    row[SIMULATED_COLUMN] = row[SIMULATED_COLUMN].strip() in ("1", "true", "True")
                 try:
                     row["study"] = int(row["study"])
                     row["trial"] = int(row["trial"])
