@@ -53,7 +53,7 @@ def loss(stats: list[dict]) -> float:
     ]
     err_loc = np.mean([s["s1_error_by_location"] for s in stats], axis=0)
     ranks = np.argsort(np.argsort(err_loc))  # 0 = best
-    terms.append(((ranks[BEST].mean() - 1.5) / 3.0) ** 2)
+    terms.append(4.0 * ((ranks[BEST].mean() - 1.5) / 3.0) ** 2)
     share = np.mean([np.isin(INTERACTION, s["s1_interaction_locations"]).mean() for s in stats])
     terms.append(0.25 * (1.0 - share) ** 2)
     return float(np.sum(terms))
@@ -64,9 +64,9 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
         lo_a, lo_p, lo_k = rng.uniform(3e-3, 12e-3), rng.uniform(5e-3, 25e-3), rng.uniform(0.05, 0.6)
         return PerceptualModel().replace(
             sl_ref_db=rng.uniform(15, 40), funneling_exponent=rng.uniform(0.2, 1.0),
-            acuity_sd_m=(lo_a, lo_a * rng.uniform(1.2, 2.0)), spread_gain=rng.uniform(0, 1),
+            acuity_sd_m=(lo_a, lo_a * rng.uniform(1.2, 2.0)), spread_gain=tuple(sorted(rng.uniform(0, 2, 2))),
             prior_sd_m=(lo_p, lo_p * rng.uniform(1.2, 2.0)),
-            bias_mean_m=(rng.uniform(-5e-3, 5e-3), rng.uniform(-6e-3, 0.0)), bias_sd_m=rng.uniform(0, 4e-3),
+            bias_mean_m=(rng.uniform(-8e-3, 8e-3), rng.uniform(-8e-3, 0.0)), bias_sd_m=rng.uniform(0, 4e-3),
             select_kappa=(lo_k, min(lo_k + rng.uniform(0.1, 0.4), 0.99)), select_log_sd=rng.uniform(0.1, 1.0),
         )
     j = lambda v, s: v * np.exp(rng.normal(0, 0.15 * scale * s))  # noqa: E731
@@ -74,10 +74,10 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
     return b.replace(
         sl_ref_db=float(np.clip(b.sl_ref_db + rng.normal(0, 2 * scale), 5, 50)),
         funneling_exponent=float(np.clip(j(b.funneling_exponent, 1), 0.05, 1.5)),
-        acuity_sd_m=tuple(float(j(v, 1)) for v in b.acuity_sd_m), spread_gain=float(abs(j(b.spread_gain + 1e-3, 1))),
+        acuity_sd_m=tuple(float(j(v, 1)) for v in b.acuity_sd_m), spread_gain=tuple(sorted(float(abs(j(v + 1e-3, 1))) for v in b.spread_gain)),
         prior_sd_m=tuple(float(j(v, 1)) for v in b.prior_sd_m),
-        bias_mean_m=(float(b.bias_mean_m[0] + rng.normal(0, 1e-3 * scale)),
-                     float(min(0.0, b.bias_mean_m[1] + rng.normal(0, 1e-3 * scale)))),
+        bias_mean_m=(float(b.bias_mean_m[0] + rng.normal(0, 1.5e-3 * scale)),
+                     float(min(0.0, b.bias_mean_m[1] + rng.normal(0, 1.5e-3 * scale)))),
         bias_sd_m=float(abs(b.bias_sd_m + rng.normal(0, 5e-4 * scale))),
         select_kappa=tuple(float(np.clip(j(v, 1), 0.01, 0.99)) for v in b.select_kappa),
         select_log_sd=float(j(b.select_log_sd, 1)),

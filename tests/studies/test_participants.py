@@ -82,8 +82,8 @@ def _one(position, spread=0.0):
 
 
 def test_central_bias_is_the_bayesian_posterior_mean():
-    model = PerceptualModel(bias_mean_m=(0.0, 0.0), bias_sd_m=0.0, spread_gain=0.0)
-    traits = Traits(0.0, 8e-3, 10e-3, np.zeros(2), 0.5, 1.0)
+    model = PerceptualModel(bias_mean_m=(0.0, 0.0), bias_sd_m=0.0)
+    traits = Traits(0.0, 8e-3, 10e-3, np.zeros(2), 0.5, 1.0, spread_gain=0.0)
     locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
     x = np.array([0.01, 0.0])
     n = 20000
@@ -103,8 +103,8 @@ def test_central_bias_is_the_bayesian_posterior_mean():
 def test_a_diffuse_percept_is_localized_worse_and_selects_more():
     # Park & Choi 2018: phantoms are perceived over distributed positions -> more noise,
     # stronger central pull, and (Study 2) more locations selected.
-    model = PerceptualModel(spread_gain=1.0)
-    traits = Traits(0.0, 6e-3, 12e-3, np.zeros(2), 0.4, 1.0)
+    model = PerceptualModel()
+    traits = Traits(0.0, 6e-3, 12e-3, np.zeros(2), 0.4, 1.0, spread_gain=1.0)
     locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
     target = np.array([-0.01, 0.01])
     res = {}

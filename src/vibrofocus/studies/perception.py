@@ -22,7 +22,7 @@ Central stage (cheap, per trial, :func:`draw_answers`)
        ``gamma = 1`` the energy law (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018 in
        2D) and ``gamma`` fitted; ``s`` is the percept's spread (weighted RMS distance, m).
     3. **Localization noise.** The sensed position is ``x_f + e``,
-       ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k s)^2``: a participant's
+       ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k_i s)^2``: a participant's
        point-localization acuity on the mid-forearm (poor: fewer than half of the arm sites
        uniquely identified, Cholewiak & Collins 2003) plus a diffuse percept's extra
        uncertainty (phantoms are perceived over distributed positions, Park & Choi 2018).
@@ -140,8 +140,10 @@ class PerceptualModel:
     acuity_sd_m : (float, float)
         Range (uniform) of a participant's localization noise SD, m. *Fitted* (order of the
         location pitch: Cholewiak & Collins 2003).
-    spread_gain : float
-        ``k``: extra noise SD per metre of percept spread. *Fitted.*
+    spread_gain : (float, float)
+        Range (uniform) of a participant's ``k_i``: extra noise SD per metre of percept
+        spread (how much a diffuse, phantom-like percept degrades that participant's
+        localization). *Fitted.*
     prior_sd_m : (float, float)
         Range (uniform) of a participant's central-prior SD, m. *Fitted.*
     bias_mean_m : (float, float)
@@ -165,7 +167,7 @@ class PerceptualModel:
     funneling_exponent: float = 1.0
     threshold_sd_db: float = 3.0
     acuity_sd_m: tuple[float, float] = (5e-3, 9e-3)
-    spread_gain: float = 0.5
+    spread_gain: tuple[float, float] = (0.2, 0.8)
     prior_sd_m: tuple[float, float] = (8e-3, 14e-3)
     bias_mean_m: tuple[float, float] = (-1.5e-3, -2.0e-3)
     bias_sd_m: float = 1.5e-3
@@ -202,6 +204,8 @@ class Traits:
         Localization noise SD and central-prior SD, m.
     bias_m : ndarray, shape (2,)
         Constant bias of the prior's centre, m.
+    spread_gain : float
+        ``k_i``, extra localization noise SD per metre of percept spread.
     kappa : float
         Study 2 criterion.
     rt_median_s : float
@@ -214,6 +218,7 @@ class Traits:
     bias_m: np.ndarray
     kappa: float
     rt_median_s: float
+    spread_gain: float
 
     @classmethod
     def draw(cls, model: PerceptualModel, seed: int | np.random.Generator) -> "Traits":
@@ -226,6 +231,7 @@ class Traits:
             bias_m=np.asarray(model.bias_mean_m, dtype=float) + rng.normal(0.0, model.bias_sd_m, size=2),
             kappa=float(rng.uniform(*model.select_kappa)),
             rt_median_s=float(rng.uniform(*model.rt_median_s)),
+            spread_gain=float(rng.uniform(*model.spread_gain)),
         )
 
     def to_dict(self) -> dict[str, Any]:
@@ -391,7 +397,7 @@ def draw_answers(
     pos = percepts.position_m[idx]
     spread = percepts.spread_m[idx]
     felt = percepts.felt[idx]
-    sig_s2 = traits.acuity_sd_m**2 + (model.spread_gain * np.nan_to_num(spread)) ** 2
+    sig_s2 = traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
     sp2 = traits.prior_sd_m**2
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
     sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)
