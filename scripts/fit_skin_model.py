@@ -73,6 +73,8 @@ def _figure(fit, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from vibrofocus._atomic import save_figure
+
     law = fit.law
     f = np.geomspace(20, 1000, 200)
     quantities = [q for q in ("phase_speed_m_s", "attenuation_np_m") if q in set(fit.points["quantity"])]
@@ -101,7 +103,7 @@ def _figure(fit, path: str) -> None:
         bottom.set_xlabel("frequency, Hz")
     fig.suptitle("Forearm surface waves: published points and the fitted causal law", fontsize=10)
     fig.tight_layout()
-    fig.savefig(path, dpi=150)
+    save_figure(fig, path, dpi=150)
     plt.close(fig)
 
 

@@ -3,7 +3,7 @@
 
 Recomputes :func:`vibrofocus.demo.sensitivity.attenuation_sensitivity` (about 10 s) and
 replaces the table between the ``sensitivity-table`` markers of ``docs/skin-model.md``
-(atomically: a temporary file in the same folder, fsync, rename). With ``--check`` it only
+(atomically, through ``vibrofocus._atomic``). With ``--check`` it only
 compares and exits 1 if the page is out of date.
 
     .venv/bin/python scripts/skin_sensitivity.py [--check]
@@ -12,11 +12,10 @@ compares and exits 1 if the page is out of date.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
-import tempfile
 from pathlib import Path
 
+from vibrofocus._atomic import write_text
 from vibrofocus.demo.sensitivity import attenuation_sensitivity, sensitivity_markdown
 
 PAGE = Path(__file__).resolve().parent.parent / "docs" / "skin-model.md"
@@ -39,17 +38,7 @@ def main() -> int:
     if args.check:
         print("up to date" if new == text else "docs/skin-model.md is out of date")
         return 0 if new == text else 1
-    fd, tmp = tempfile.mkstemp(dir=PAGE.parent, prefix=".skin-model-", suffix=".md")
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(new)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, PAGE)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text(PAGE, new)
     print(table)
     return 0
 

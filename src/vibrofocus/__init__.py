@@ -40,6 +40,7 @@ _LAZY_ATTRIBUTES = {
     "InverseOperator": ".rendering",
     "focus_metrics": ".rendering",
     "render": ".rendering",
+    "contrast_bound": ".rendering",
     "Rendering": ".rendering",
     "calibrate": ".calibration",
     "Calibration": ".calibration",
@@ -50,13 +51,30 @@ _LAZY_ATTRIBUTES = {
 if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .calibration import Calibration, calibrate, load_calibration, save_calibration
     from .layout import ArrayLayout
-    from .rendering import InverseOperator, Rendering, focus_metrics, funneling_gains, inverse_filter, render
+    from .rendering import (
+        InverseOperator,
+        Rendering,
+        contrast_bound,
+        focus_metrics,
+        funneling_gains,
+        inverse_filter,
+        render,
+    )
     from .rigs import Rig, SafetyLimits
     from .signals import exponential_sweep, linear_sweep, ricker
     from .skin import SimulatedForearm
 
 
+#: Subpackages reachable as attributes without importing them first (``vf.rigs.make_rig``).
+_SUBPACKAGES = frozenset({"analysis", "calibration", "defaults", "demo", "errors", "layout", "rendering", "rigs",
+                          "signals", "skin", "studies"})
+
+
 def __getattr__(name: str):
+    if name in _SUBPACKAGES:
+        value = import_module(f".{name}", __name__)
+        globals()[name] = value
+        return value
     module = _LAZY_ATTRIBUTES.get(name)
     if module is None:
         raise AttributeError(f"module 'vibrofocus' has no attribute {name!r}")
@@ -82,6 +100,7 @@ __all__ = [
     "focus_metrics",
     "render",
     "Rendering",
+    "contrast_bound",
     "calibrate",
     "Calibration",
     "load_calibration",

@@ -1,4 +1,4 @@
-"""Defaults of the reference setup (SPEC §1-§2), in SI units.
+"""Defaults of the reference setup (docs/method.md), in SI units.
 
 Everything here is a default, not a constant: each is a parameter of the object that
 uses it.
@@ -23,7 +23,28 @@ N_SAMPLES = 4096
 #: Where the target waveform sits in the window, as a fraction of its length: late enough
 #: that the acausal part of an inverse-filter drive (its pre-ringing) fits before it.
 TARGET_FRACTION = 0.5
-#: Rendering methods of SPEC §2.
-METHODS = ("funneling", "inverse", "combination", "time_reversal")
-#: Methods compared in the localization studies (SPEC §6).
+#: Rendering methods of docs/method.md, rendering methods.
+METHODS = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
+#: Methods compared in the localization studies (docs/file-formats.md, trials file).
 STUDY_METHODS = ("funneling", "inverse", "combination")
+
+
+def participant_seed(participant_id: str) -> int:
+    """Seed of a simulated forearm derived from a participant id (stable across runs and machines).
+
+    ``vibrofocus calibrate --rig simulated`` uses it when no ``--seed`` is given, so two
+    participants never share a bit-identical simulated arm.
+
+    Parameters
+    ----------
+    participant_id : str
+
+    Returns
+    -------
+    int
+        In ``[0, 2**31)``: the first four bytes of SHA-256 of the UTF-8 id.
+    """
+    import hashlib
+
+    digest = hashlib.sha256(str(participant_id).encode("utf-8")).digest()
+    return int.from_bytes(digest[:4], "big") & 0x7FFFFFFF

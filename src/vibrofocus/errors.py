@@ -14,6 +14,7 @@ __all__ = [
     "CausalityError",
     "CalibrationFileError",
     "StudyError",
+    "OutputError",
 ]
 
 
@@ -43,3 +44,24 @@ class CalibrationFileError(VibrofocusError):
 
 class StudyError(VibrofocusError):
     """A study request is invalid: unknown participant/session, bad answer, ..."""
+
+
+class OutputError(VibrofocusError):
+    """An output file or folder cannot be written: no space, no permission, read-only.
+
+    Raised instead of a bare :class:`OSError` by every writer of vibrofocus (see
+    :mod:`vibrofocus._atomic`); the previous file under the target name is left untouched.
+
+    Attributes
+    ----------
+    errno : int or None
+        The ``errno`` of the underlying :class:`OSError` (``None`` when the problem was
+        found before writing, e.g. too little free space).
+    path : str or None
+        The file or folder concerned.
+    """
+
+    def __init__(self, message: str, *, errno: int | None = None, path: str | None = None) -> None:
+        super().__init__(message)
+        self.errno = errno
+        self.path = path

@@ -1,6 +1,6 @@
 """Geometry of an actuator array and its skin points.
 
-The frame (SPEC §1): origin at the array centre, x across the arm toward the thumb side,
+The frame (docs/method.md, reference setup): origin at the array centre, x across the arm toward the thumb side,
 y along the arm toward the wrist, metres.
 """
 
@@ -85,7 +85,7 @@ class ArrayLayout:
     # ------------------------------------------------------------------ factories
     @classmethod
     def reference(cls, guard_offset_m: float = 6e-3) -> "ArrayLayout":
-        """The reference setup of SPEC §1: 2 x 2 actuators at 45 mm, 3 x 3 locations at
+        """The reference setup of docs/method.md, reference setup: 2 x 2 actuators at 45 mm, 3 x 3 locations at
         10 mm pitch numbered row by row from the wrist side, four guards 6 mm inward
         from each actuator."""
         half = 22.5e-3

@@ -151,7 +151,9 @@ def test_inconsistent_contents_are_refused(saved, tmp_path, edit, match):
 
 
 def test_save_into_a_missing_folder_is_refused(fir_calibration, tmp_path):
-    with pytest.raises(CalibrationFileError, match="does not exist"):
+    from vibrofocus.errors import OutputError
+
+    with pytest.raises(OutputError, match="does not exist"):
         save_calibration(fir_calibration[1], tmp_path / "no" / "P.nc")
 
 

@@ -12,14 +12,14 @@ def test_demo_json_has_every_location_and_method():
     assert result.exit_code == 0, result.output
     payload = json.loads(result.stdout)
     rows = payload["results"]
-    assert len(rows) == 9 * 4
-    assert {(r["location"], r["method"]) for r in rows} == {
-        (loc, m) for loc in range(1, 10) for m in ("funneling", "inverse", "combination", "time_reversal")
-    }
+    methods = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
+    assert len(rows) == 9 * len(methods)
+    assert {(r["location"], r["method"]) for r in rows} == {(loc, m) for loc in range(1, 10) for m in methods}
     for row in rows:
-        for key in ("fidelity", "contrast_db", "peak_drive_v", "target_peak_m"):
+        for key in ("fidelity", "contrast_db", "peak_drive_v", "target_peak_m", "contrast_all_points_db",
+                    "energy_contrast_db", "bound_db"):
             assert isinstance(row[key], float)
-    assert set(payload["summary"]) == {"funneling", "inverse", "combination", "time_reversal"}
+    assert set(payload["summary"]) == set(methods)
 
 
 def test_demo_refuses_an_unknown_field_location(tmp_path):

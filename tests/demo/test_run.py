@@ -12,17 +12,25 @@ from vibrofocus.errors import ValidationError
 @pytest.fixture(scope="module")
 def quiet_result():
     rig = SimulatedForearm(seed=1, noise_m=0.0, dropout_rate=0.0)
-    return run_demo(rig, methods=("funneling", "inverse", "time_reversal"), locations=(1, 5))
+    return run_demo(rig, methods=("funneling", "inverse", "time_reversal", "contrast"), locations=(1, 5))
 
 
 def test_rows_cover_every_location_and_method(quiet_result):
     rows = quiet_result.rows
     assert [(r["location"], r["method"]) for r in rows] == [
-        (loc, m) for loc in (1, 5) for m in ("funneling", "inverse", "time_reversal")
+        (loc, m) for loc in (1, 5) for m in ("funneling", "inverse", "time_reversal", "contrast")
     ]
     for row in rows:
         assert set(ROW_KEYS) <= set(row)
-        assert row["peak_drive_v"] <= 10.0 + 1e-9
+        # Equal peak drive: every method scaled to the limit.
+        np.testing.assert_allclose(row["peak_drive_v"], 10.0, rtol=1e-9)
+        assert np.isfinite(row["bound_db"]) and np.isfinite(row["energy_contrast_db"])
+
+
+def test_the_contrast_design_stays_under_its_bound(quiet_result):
+    for row in quiet_result.rows:
+        if row["method"] == "contrast":
+            assert row["predicted_energy_contrast_db"] <= row["bound_db"] + 1e-6
 
 
 def test_model_transfer_is_the_rigs_truth_at_the_layout_points():

@@ -37,7 +37,7 @@ def H_ref():
 
 @pytest.mark.parametrize("location", [1, 5, 9])
 def test_inverse_meets_target_and_silences_guards(H_square, location):
-    r = render("inverse", H_square, FS, SQUARE, location, limit_v=1e3)
+    r = render("inverse", H_square, FS, SQUARE, location, limit_v=1e3, scale_to_limit=False)
     assert isinstance(r, Rendering)
     ideal = band_limited(2e-6 * ricker(FS, 1e-3, N / FS))
     assert_allclose(r.desired, ideal, atol=1e-15)
@@ -52,7 +52,7 @@ def test_inverse_meets_target_and_silences_guards(H_square, location):
 
 
 def test_funneling_drives_are_gains_times_ricker(H_ref):
-    r = render("funneling", H_ref, FS, REF, 1)
+    r = render("funneling", H_ref, FS, REF, 1, scale_to_limit=False)
     gains = funneling_gains(REF.actuators_xy, REF.locations_xy[0])
     assert_allclose(r.drives, gains[:, None] * ricker(FS, 1e-3, N / FS)[None], rtol=1e-12, atol=1e-15)
     assert_allclose(r.predicted, respond(H_ref, r.drives), atol=1e-18)
@@ -60,8 +60,8 @@ def test_funneling_drives_are_gains_times_ricker(H_ref):
 
 
 def test_combination_targets_the_funneling_prediction(H_square):
-    r = render("combination", H_square, FS, SQUARE, 2, limit_v=1e3)
-    funnel = render("funneling", H_square, FS, SQUARE, 2, limit_v=1e3)
+    r = render("combination", H_square, FS, SQUARE, 2, limit_v=1e3, scale_to_limit=False)
+    funnel = render("funneling", H_square, FS, SQUARE, 2, limit_v=1e3, scale_to_limit=False)
     assert_allclose(r.desired, band_limited(funnel.predicted[1]), atol=1e-9 * np.abs(r.desired).max())
     assert_allclose(r.predicted[1], r.desired, atol=1e-6 * np.abs(r.desired).max())
     assert np.abs(r.predicted[SQUARE.guard_indices]).max() < 1e-6 * np.abs(r.desired).max()
@@ -77,15 +77,15 @@ def test_time_reversal_is_conjugate_transfer_normalized_to_limit(H_ref):
 
 
 def test_limit_scales_or_refuses(H_square):
-    free = render("inverse", H_square, FS, SQUARE, 5, limit_v=1e3)
+    free = render("inverse", H_square, FS, SQUARE, 5, limit_v=1e3, scale_to_limit=False)
     limit = 0.25 * free.needed_peak_v
-    scaled = render("inverse", H_square, FS, SQUARE, 5, limit_v=limit)
+    scaled = render("inverse", H_square, FS, SQUARE, 5, limit_v=limit, scale_to_limit=False)
     assert_allclose(scaled.scale, 0.25, rtol=1e-12)
     assert_allclose(np.abs(scaled.drives).max(), limit, rtol=1e-12)
     assert_allclose(scaled.reached_peak_m, 0.25 * free.reached_peak_m, rtol=1e-12)
     with pytest.raises(DriveLimitError, match="location 5 needs .* peak drive, over the limit"):
-        render("inverse", H_square, FS, SQUARE, 5, limit_v=limit, on_limit="refuse")
-    funnel = render("funneling", H_square, FS, SQUARE, 5, limit_v=1.0)  # 2.5 V per actuator needed
+        render("inverse", H_square, FS, SQUARE, 5, limit_v=limit, on_limit="refuse", scale_to_limit=False)
+    funnel = render("funneling", H_square, FS, SQUARE, 5, limit_v=1.0, scale_to_limit=False)  # 2.5 V per actuator needed
     assert_allclose(funnel.scale, 1.0 / 2.5, rtol=1e-12)
 
 
@@ -95,7 +95,7 @@ def test_reference_layout_least_squares_design_is_consistent(H_ref, guard_weight
     # design. With W = diag(1, w, w, w, w), its residual at the control points satisfies
     # the weighted normal equations H_c^H W^2 (H_c S - U_c) = 0 at every frequency of
     # the band; w = 1 is the paper's plain pseudo-inverse.
-    r = render("inverse", H_ref, FS, REF, 5, limit_v=1e3, guard_weight=guard_weight)
+    r = render("inverse", H_ref, FS, REF, 5, limit_v=1e3, guard_weight=guard_weight, scale_to_limit=False)
     assert list(r.control_indices) == [4, 9, 10, 11, 12]
     Hc = H_ref[:, r.control_indices, :]
     w2 = np.array([1.0] + [guard_weight**2] * 4)
@@ -106,7 +106,7 @@ def test_reference_layout_least_squares_design_is_consistent(H_ref, guard_weight
     scale = np.abs(np.einsum("fcq,fc->fq", Hc.conj(), w2 * np.fft.rfft(wanted, axis=-1).T)).max()
     assert np.abs(normal).max() < 1e-9 * scale
     assert np.abs(residual).max() > 1e-3 * np.abs(np.fft.rfft(r.desired)).max()  # not met exactly
-    all_points = render("inverse", H_ref, FS, REF, 5, control="all", regularization="tikhonov")
+    all_points = render("inverse", H_ref, FS, REF, 5, control="all", regularization="tikhonov", scale_to_limit=False)
     assert list(all_points.control_indices) == [4, 0, 1, 2, 3, 5, 6, 7, 8, 9, 10, 11, 12]
 
 
@@ -115,7 +115,7 @@ def test_lighter_guards_let_the_target_be_reached(H_ref):
     # target at the guards' expense.
     reached, guard_peak = [], []
     for weight in (1.0, 0.3, 0.1, 0.01):
-        r = render("inverse", H_ref, FS, REF, 5, guard_weight=weight, limit_v=1e3)
+        r = render("inverse", H_ref, FS, REF, 5, guard_weight=weight, limit_v=1e3, scale_to_limit=False)
         reached.append(r.reached_peak_m)
         guard_peak.append(np.abs(r.predicted[REF.guard_indices]).max())
     assert np.all(np.diff(reached) > 0) and np.all(np.diff(guard_peak) > 0)
@@ -127,8 +127,8 @@ def test_window_too_short_raises_causality_error():
     # would have to start before the window.
     H = layout_medium(REF, 2048, FS, latency_s=0.12)
     with pytest.raises(CausalityError, match="too short"):
-        render("inverse", H, FS, REF, 5, regularization="tikhonov")
-    later = render("inverse", H, FS, REF, 5, regularization="tikhonov", t0=0.16)
+        render("inverse", H, FS, REF, 5, regularization="tikhonov", scale_to_limit=False)
+    later = render("inverse", H, FS, REF, 5, regularization="tikhonov", t0=0.16, scale_to_limit=False)
     assert later.wraparound_fraction < 1e-3
 
 
@@ -138,7 +138,7 @@ def test_sleeve_of_32_actuators_through_the_same_code():
     sleeve = ArrayLayout.sleeve()
     assert sleeve.n_actuators == 32 and sleeve.n_points == 108
     H = layout_medium(sleeve, n, FS, speed_m_s=20.0)
-    r = render("inverse", H, FS, sleeve, 50, n_samples=n, limit_v=1e3)
+    r = render("inverse", H, FS, sleeve, 50, n_samples=n, limit_v=1e3, scale_to_limit=False)
     assert r.drives.shape == (32, n) and r.predicted.shape == (108, n)
     assert_allclose(r.predicted[49], r.desired, atol=1e-6 * 2e-6)
     # With a guard by every actuator: 33 control points, the least-squares design.
@@ -152,30 +152,30 @@ def test_sleeve_of_32_actuators_through_the_same_code():
 
 def test_bad_input(H_ref):
     with pytest.raises(ValidationError, match="location 10 is outside the layout's locations 1..9"):
-        render("inverse", H_ref, FS, REF, 10)
+        render("inverse", H_ref, FS, REF, 10, scale_to_limit=False)
     with pytest.raises(ValidationError, match="location must be an integer"):
-        render("inverse", H_ref, FS, REF, 2.5)
+        render("inverse", H_ref, FS, REF, 2.5, scale_to_limit=False)
     with pytest.raises(ValidationError, match="method must be one of"):
         render("beamforming", H_ref, FS, REF, 1)
     with pytest.raises(ValidationError, match=r"H must have shape \(n_freqs, 13, 4\)"):
-        render("inverse", H_ref[:, :9], FS, REF, 1)
+        render("inverse", H_ref[:, :9], FS, REF, 1, scale_to_limit=False)
     with pytest.raises(ValidationError, match="layout must be an ArrayLayout"):
-        render("inverse", H_ref, FS, "reference", 1)
+        render("inverse", H_ref, FS, "reference", 1, scale_to_limit=False)
     with pytest.raises(ValidationError, match="band must satisfy"):
-        render("inverse", H_ref, FS, REF, 1, band=(10, 8000))
+        render("inverse", H_ref, FS, REF, 1, band=(10, 8000), scale_to_limit=False)
     with pytest.raises(ValidationError, match="n_samples implies n = 4000"):
-        render("inverse", H_ref, FS, REF, 1, n_samples=4000)
+        render("inverse", H_ref, FS, REF, 1, n_samples=4000, scale_to_limit=False)
     bad = H_ref.copy()
     bad[3, 2, 1] = np.nan
     with pytest.raises(ValidationError, match="H contains 1 non-finite"):
-        render("inverse", bad, FS, REF, 1)
+        render("inverse", bad, FS, REF, 1, scale_to_limit=False)
     with pytest.raises(ValidationError, match="H is all zero"):
-        render("inverse", np.zeros_like(H_ref), FS, REF, 1)
+        render("inverse", np.zeros_like(H_ref), FS, REF, 1, scale_to_limit=False)
     with pytest.raises(ValidationError, match=r"band=\(5, 1000\) Hz reaches outside the calibrated band \(10, 1000\)"):
-        render("inverse", H_ref, FS, REF, 1, band=(5, 1000), calibrated_band=(10, 1000))
+        render("inverse", H_ref, FS, REF, 1, band=(5, 1000), calibrated_band=(10, 1000), scale_to_limit=False)
     with pytest.raises(ValidationError, match="regularization must be one of"):
-        render("funneling", H_ref, FS, REF, 1, regularization="lasso")
+        render("funneling", H_ref, FS, REF, 1, regularization="lasso", scale_to_limit=False)
     with pytest.raises(ValidationError, match="guard_weight must be > 0"):
-        render("inverse", H_ref, FS, REF, 1, guard_weight=0)
+        render("inverse", H_ref, FS, REF, 1, guard_weight=0, scale_to_limit=False)
     with pytest.raises(ValidationError, match="control must be one of"):
-        render("inverse", H_ref, FS, REF, 1, control="none")
+        render("inverse", H_ref, FS, REF, 1, control="none", scale_to_limit=False)

@@ -27,8 +27,8 @@ def _bad_drives():
     inf[0, 0] = np.inf
     loud = np.full((4, 1000), 5.0)  # 5 V RMS on every channel, peak within limit
     return {
-        "over the peak limit": (over, "channel 2 reaches 10.5 V"),
-        "NaN": (nan, "NaN"),
+        "over the peak limit": (over, "channel 3 reaches 10.5 V"),  # numbered from 1
+        "NaN": (nan, "first on channel 2 at sample 10"),
         "Inf": (inf, "NaN/Inf"),
         "over the RMS limit": (loud, "RMS"),
         "too long": (np.zeros((4, 10_001)), "longer than the limit"),

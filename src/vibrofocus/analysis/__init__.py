@@ -1,4 +1,4 @@
-"""Statistics, figures and reports of the localization studies (SPEC §7).
+"""Statistics, figures and reports of the localization studies (docs/file-formats.md, report.json).
 
 Typical use in a notebook::
 

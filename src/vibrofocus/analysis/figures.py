@@ -214,7 +214,8 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
 
 def save_figure(fig, path: str | os.PathLike, *, dpi: int = 110) -> Path:
     """Write ``fig`` as PNG to ``path`` and return the path."""
+    from .._atomic import save_figure as _save_atomic
+
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=dpi, format="png")
-    return path
+    return _save_atomic(fig, path, dpi=dpi, format="png")

@@ -287,7 +287,7 @@ def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
 
 
 def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: float = 0.05) -> AnalysisResult:
-    """Analyse both studies of a trials table (SPEC §7).
+    """Analyse both studies of a trials table (docs/file-formats.md, report.json).
 
     Training rows are left out. Per study, participants missing a condition are excluded
     and reported; a study without usable data is reported as unavailable while the other

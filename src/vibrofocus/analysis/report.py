@@ -1,4 +1,4 @@
-"""report.json (SPEC §7 contract), results sentences, PNG figures and a readable HTML page."""
+"""report.json (docs/file-formats.md, report.json contract), results sentences, PNG figures and a readable HTML page."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from .pipeline import AnalysisResult, Study1Result, Study2Counts, Study2Result
 
 __all__ = ["report_dict", "results_sentences", "format_p", "write_report"]
 
-#: Columns of ``study1.anova`` that the SPEC §7 contract requires.
+#: Columns of ``study1.anova`` that the docs/file-formats.md, report.json contract requires.
 ANOVA_CONTRACT = ("effect", "F", "ddof1", "ddof2", "p_unc", "p_gg", "eps")
 
 
@@ -103,11 +103,22 @@ def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
         if key in s1.unavailable:
             out.append(_capital(s1.unavailable[key]) + "; not computed.")
     sh = s1.shapiro.dropna(subset=["p"])
+    n_untestable = len(s1.shapiro) - len(sh)
+    untestable = (
+        f"; {n_untestable} condition{'s' if n_untestable != 1 else ''} could not be tested (tied participant "
+        "averages)"
+        if n_untestable and len(s1.shapiro) else ""
+    )
     if len(sh):
         n_bad = int((sh["p"] < alpha).sum())
         out.append(
-            f"Shapiro–Wilk tests rejected normality of the participant averages in {n_bad} of {len(sh)} conditions "
-            f"(p < {alpha:g})."
+            f"Shapiro–Wilk tests rejected normality of the participant averages in {n_bad} of {len(sh)} testable "
+            f"conditions (p < {alpha:g}){untestable}."
+        )
+    elif n_untestable and "shapiro" not in s1.unavailable:
+        out.append(
+            f"Shapiro–Wilk tests could not be run: in all {n_untestable} conditions the participant averages are "
+            "tied (fewer than three distinct values)."
         )
     for row in s1.anova.itertuples(index=False):
         if row.ddof1 == 1:
@@ -271,7 +282,7 @@ def _study2_part_dict(part: Study2Counts) -> dict:
 
 
 def _uncomputed_friedman() -> dict:
-    """The SPEC §7 ``study2.friedman`` keys, with nulls where no test could be run."""
+    """The docs/file-formats.md, report.json ``study2.friedman`` keys, with nulls where no test could be run."""
     return {factor: {"chi2": None, "dof": None, "p": None} for factor in ("location", "method")}
 
 
@@ -294,7 +305,7 @@ def _simulated(result: AnalysisResult) -> dict[str, Any]:
 
 
 def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None) -> dict:
-    """The content of report.json (SPEC §7 contract plus details), JSON-safe.
+    """The content of report.json (docs/file-formats.md, report.json contract plus details), JSON-safe.
 
     ``study1.anova`` is a list of rows with ``effect`` (``location``, ``method``,
     ``location * method``), ``F``, ``ddof1``, ``ddof2``, ``p_unc``, ``p_gg``, ``eps`` and
@@ -512,41 +523,55 @@ def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
 
 
 # --------------------------------------------------------------------------- writer
+#: Names a report writes into its folder; only these are replaced (other files are left alone).
+REPORT_FILES = ("report.json", "report.html", "study1_localization.png", "study1_errors.png", "study2_counts.png")
+
+
 def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str, Path]:
     """Write report.json, PNG figures and a self-contained report.html into ``out_dir``.
+
+    The report is built in a temporary folder beside ``out_dir`` and put in place as a
+    whole (:func:`vibrofocus._atomic.atomic_directory`): after a failure (a full disk,
+    a read-only folder, Ctrl-C) ``out_dir`` holds the previous report unchanged, never a
+    mix of old and new files. Files in ``out_dir`` that a report does not write
+    (:data:`REPORT_FILES`) are left alone.
 
     Parameters
     ----------
     result : AnalysisResult
         Output of :func:`~vibrofocus.analysis.analyze`.
     out_dir : path
-        Created if needed; existing files of the same names are replaced.
+        Created if needed; a previous report there is replaced.
 
     Returns
     -------
     dict of str to Path
         ``"json"``, ``"html"`` and one entry per figure (``"localization"``,
         ``"errors"``, ``"counts"``).
+
+    Raises
+    ------
+    OutputError
+        The folder cannot be written; the previous report is unchanged.
     """
+    from .._atomic import atomic_directory, write_text
     from .figures import plot_counts, plot_errors, plot_localization, save_figure
 
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    figures: dict[str, Path] = {}
-    if result.study1 is not None:
-        figures["localization"] = save_figure(
-            plot_localization(result.study1.positions, result.layout), out / "study1_localization.png"
-        )
-        figures["errors"] = save_figure(plot_errors(result.study1.errors), out / "study1_errors.png")
-    if result.study2 is not None:
-        hit = result.study2.contains_target.counts
-        hit = hit if len(hit) else None
-        figures["counts"] = save_figure(plot_counts(result.study2.all_trials.counts, hit), out / "study2_counts.png")
-    report = report_dict(result, figures={k: p.name for k, p in figures.items()})
-    json_path = out / "report.json"
-    tmp = json_path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False), encoding="utf-8")
-    os.replace(tmp, json_path)
-    html_path = out / "report.html"
-    html_path.write_text(_html(result, figures), encoding="utf-8")
-    return {"json": json_path, "html": html_path, **figures}
+    names = {"localization": "study1_localization.png", "errors": "study1_errors.png", "counts": "study2_counts.png"}
+    with atomic_directory(out, owned=REPORT_FILES, what="report folder") as build:
+        figures: dict[str, Path] = {}
+        if result.study1 is not None:
+            figures["localization"] = save_figure(
+                plot_localization(result.study1.positions, result.layout), build / names["localization"]
+            )
+            figures["errors"] = save_figure(plot_errors(result.study1.errors), build / names["errors"])
+        if result.study2 is not None:
+            hit = result.study2.contains_target.counts
+            hit = hit if len(hit) else None
+            figures["counts"] = save_figure(plot_counts(result.study2.all_trials.counts, hit), build / names["counts"])
+        report = report_dict(result, figures={k: p.name for k, p in figures.items()})
+        write_text(build / "report.json", json.dumps(report, indent=2, ensure_ascii=False, allow_nan=False),
+                   what="report")
+        write_text(build / "report.html", _html(result, figures), what="report")
+    return {"json": out / "report.json", "html": out / "report.html", **{k: out / p.name for k, p in figures.items()}}

@@ -203,8 +203,9 @@ def shapiro_tests(
     Returns
     -------
     DataFrame
-        The ``by`` columns, ``n``, ``W``, ``p`` and ``normal`` (``p >= 0.05``); ``W``
-        and ``p`` are NaN where fewer than 3 values or all equal.
+        The ``by`` columns, ``n``, ``W``, ``p``, ``normal`` (``p >= 0.05``) and
+        ``note``; ``W`` and ``p`` are NaN, and ``note`` says why, where there are fewer
+        than 3 values or fewer than 3 distinct values (ties make the test degenerate).
     """
     from scipy import stats
 
@@ -212,12 +213,20 @@ def shapiro_tests(
     rows = []
     for key, g in errors.groupby(list(by), sort=False):
         values = g[dv].to_numpy(dtype=float)
-        if len(values) >= 3 and np.ptp(values) > 0:
+        # Ties make the test degenerate: with three values of which two are equal (two
+        # participants localised perfectly), W is 0.75 and p ~ 0 whatever the data, so
+        # such a "rejection" says nothing. Test only with >= 3 distinct values.
+        distinct = np.unique(values[np.isfinite(values)]).size
+        note = None
+        if len(values) >= 3 and distinct >= 3:
             w, p = stats.shapiro(values)
         else:
             w = p = np.nan
+            note = ("fewer than 3 values" if len(values) < 3
+                    else f"only {distinct} distinct value(s) among {len(values)} (ties): not testable")
         row = dict(zip(by, key if isinstance(key, tuple) else (key,)))
-        row.update(n=len(values), W=float(w), p=float(p), normal=bool(p >= 0.05) if np.isfinite(p) else None)
+        row.update(n=len(values), W=float(w), p=float(p), normal=bool(p >= 0.05) if np.isfinite(p) else None,
+                   note=note)
         rows.append(row)
     out = pd.DataFrame(rows)
     return _sort(out, tuple(by)) if "method" in by and not out.empty else out

@@ -1,4 +1,4 @@
-"""Read and validate a trials file (SPEC §6), and check each study's design.
+"""Read and validate a trials file (docs/file-formats.md, trials file), and check each study's design.
 
 A trials file has one row per trial with the columns ``participant, study, phase, trial,
 method, target, response, rt_s``. :func:`load_trials` reads it, types every column and
@@ -33,10 +33,10 @@ __all__ = [
     "main_trials",
 ]
 
-#: Columns a trials file must have (SPEC §6).
+#: Columns a trials file must have (docs/file-formats.md, trials file).
 REQUIRED_COLUMNS: tuple[str, ...] = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
 #: Rendering methods in the order tables and figures list them; others follow alphabetically.
-KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal")
+KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
 #: Valid phases.
 PHASES: tuple[str, ...] = ("training", "main")
 #: Valid study numbers.
@@ -81,6 +81,60 @@ def _parse_selection(text: str, n_locations: int) -> tuple[tuple[int, ...] | Non
     return tuple(sorted(numbers)), None
 
 
+def _normal_name(name: str) -> str:
+    return name.strip().lower().replace("-", "_").replace(" ", "_")
+
+
+def _suspect_methods(
+    method: pd.Series, study: pd.Series, phase: pd.Series, target: pd.Series, participant: pd.Series,
+    n_locations: int,
+) -> pd.Series:
+    """Reasons (or None) per row for a method name that is most likely a typo.
+
+    A method other than :data:`KNOWN_METHODS` is allowed (a new rendering method), but
+    not one that differs from a known name only in case or separators (``'Inverse'``),
+    nor one that no participant has for every target of the study (``'bogus'`` on one
+    row): such a row would otherwise become a condition of its own, and every correct
+    participant would look incomplete.
+    """
+    import difflib
+
+    reasons = pd.Series(None, index=method.index, dtype=object)
+    known = {_normal_name(m): m for m in KNOWN_METHODS}
+    usable = study.notna() & target.between(1, n_locations).fillna(False).astype(bool) & method.ne("")
+    for st in sorted(study[usable].unique()):
+        in_study = usable & study.eq(st).fillna(False).astype(bool)
+        main = in_study & phase.eq("main")
+        basis = main if main.any() else in_study
+        targets = set(target[basis].astype(int))
+        complete: set[str] = set()
+        for m in method[basis].unique():
+            rows = basis & method.eq(m)
+            have = pd.DataFrame({"p": participant[rows], "t": target[rows].astype(int)}).groupby("p")["t"].nunique()
+            if len(targets) and (have >= len(targets)).any():
+                complete.add(m)
+        candidates = list(KNOWN_METHODS) + sorted(m for m in complete if m not in KNOWN_METHODS)
+        for m in method[in_study].unique():
+            if m in KNOWN_METHODS:
+                continue
+            rows = in_study & method.eq(m)
+            norm = _normal_name(m)
+            if norm in known:
+                why = (f"method {m!r} is not {known[norm]!r}: method names are case-sensitive and a variant "
+                       f"would count as a method of its own; write {known[norm]!r}")
+            elif m in complete:
+                continue
+            else:
+                close = difflib.get_close_matches(norm, [_normal_name(c) for c in candidates], n=1, cutoff=0.6)
+                hint = ""
+                if close:
+                    hint = f"; did you mean {next(c for c in candidates if _normal_name(c) == close[0])!r}?"
+                why = (f"method {m!r} is not one of {', '.join(KNOWN_METHODS)} and no participant has it for every "
+                       f"target of study {int(st)}: probably a typo{hint}")
+            reasons[rows] = why
+    return reasons
+
+
 def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Type the columns of a raw trials table and list every row that breaks the contract.
 
@@ -115,7 +169,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     if missing:
         raise ValidationError(
             f"trials file is missing the column(s) {', '.join(missing)}; "
-            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (SPEC §6), got {', '.join(map(str, raw.columns))}"
+            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (docs/file-formats.md, trials file), got {', '.join(map(str, raw.columns))}"
         )
     df = raw.copy()
     if "line" not in df.columns:
@@ -156,6 +210,8 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     add("trial", trial.isna(), "trial must be an integer trial number, got " + df["trial"].map(repr))
     empty_method = df["method"].eq("") | df["method"].str.lower().eq("nan")
     add("method", empty_method, "method is empty")
+    method_reason = _suspect_methods(df["method"], study, phase, target, df["participant"], n_locations)
+    add("method", method_reason.notna(), method_reason.fillna(""))
     add(
         "target",
         ~target.between(1, n_locations),
@@ -235,7 +291,7 @@ def load_trials(
     layout: ArrayLayout | None = None,
     on_invalid: Literal["raise", "exclude"] = "raise",
 ) -> pd.DataFrame:
-    """Read a trials CSV file (SPEC §6) and validate every row.
+    """Read a trials CSV file (docs/file-formats.md, trials file) and validate every row.
 
     Parameters
     ----------

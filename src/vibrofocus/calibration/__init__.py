@@ -1,5 +1,5 @@
 """Calibration: measure the skin's transfer matrix with sweeps, judge its quality, and
-keep it in one self-describing netCDF4/HDF5 file (SPEC §4)."""
+keep it in one self-describing netCDF4/HDF5 file (docs/method.md, calibration)."""
 
 from .accuracy import transfer_error
 from .calibrate import SCHEMA_VERSION, Calibration, calibrate

@@ -1,6 +1,6 @@
 """Calibration excitations: the sweep one actuator plays while the skin is recorded.
 
-Two methods (SPEC §4):
+Two methods (docs/method.md, calibration):
 
 ``"h1"`` (default)
     An exponential sine sweep that covers the calibrated band with half an octave of

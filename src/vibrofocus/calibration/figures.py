@@ -71,5 +71,7 @@ def plot_calibration(cal: Calibration, path: str | os.PathLike | None = None, *,
     fig.legend(handles, names, title="point", fontsize="x-small", loc="outside right center")
     fig.suptitle(f"Calibration of {cal.participant_id} ({cal.method}, {cal.created})")
     if path is not None:
-        fig.savefig(Path(path), dpi=dpi)
+        from .._atomic import save_figure
+
+        save_figure(fig, Path(path), dpi=dpi)
     return fig

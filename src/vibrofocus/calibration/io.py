@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +41,7 @@ from .calibrate import SCHEMA_VERSION, Calibration
 from .excitation import SweepSettings
 from .quality import QualityIssue, QualityReport, QualityThresholds
 
-__all__ = ["save_calibration", "load_calibration"]
+__all__ = ["save_calibration", "load_calibration", "calibration_bytes", "estimate_calibration_bytes"]
 
 FILE_KIND = "vibrofocus calibration"
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
@@ -131,28 +130,15 @@ def _json_default(obj):
     return str(obj)
 
 
-def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
-    """Write a calibration to one netCDF4/HDF5 file (see the module docstring).
+def calibration_bytes(cal: Calibration) -> bytes:
+    """The calibration file's bytes (netCDF4/HDF5), built in memory.
 
-    The file is written next to its destination and then renamed, so an interrupted
-    save never leaves a half-written calibration under ``path``.
-
-    Parameters
-    ----------
-    cal : Calibration
-    path : str or PathLike
-        Destination, conventionally ``*.nc``.
-
-    Returns
-    -------
-    Path
-        ``path``.
+    Serializing in memory first means the HDF5 library never writes to the disk itself:
+    a full disk then surfaces as a plain, catchable ``OSError`` at the write, never as a
+    crash inside the library.
     """
     if not isinstance(cal, Calibration):
         raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
-    path = Path(path)
-    if not path.parent.exists():
-        raise CalibrationFileError(f"{path}: the folder {path.parent} does not exist")
     ds = _to_dataset(cal)
     # Raw recordings are mostly sensor noise, which hardly compresses: light, fast zlib.
     # Every array carries an HDF5 Fletcher-32 checksum: a flipped bit in H (a plausible,
@@ -160,17 +146,59 @@ def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
     encoding = {name: {"fletcher32": True} for name, var in ds.variables.items()
                 if var.size > 1 and var.dtype.kind in "fiub"}
     encoding["recording"] = {"zlib": True, "complevel": 1, "dtype": "float32", "fletcher32": True}
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        ds.to_netcdf(tmp, engine="h5netcdf", encoding=encoding)
-        os.replace(tmp, path)
-    except OSError as exc:
-        raise CalibrationFileError(f"{path}: cannot write the calibration ({exc})") from exc
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return path
+    return bytes(ds.to_netcdf(None, engine="h5netcdf", encoding=encoding))
+
+
+def estimate_calibration_bytes(n_points: int, n_actuators: int, repeats: int, n_record: int, n_fft: int) -> int:
+    """Upper estimate of a calibration file's size, bytes (for a free-space check before measuring).
+
+    Parameters
+    ----------
+    n_points, n_actuators : int
+        Recorded points and actuators.
+    repeats : int
+        Recordings per point and actuator.
+    n_record : int
+        Samples per recording.
+    n_fft : int
+        FFT length of the stored transfer matrix.
+    """
+    n_freqs = n_fft // 2 + 1
+    recordings = 4 * n_actuators * repeats * n_points * n_record  # float32, noise hardly compresses
+    matrices = 3 * 8 * n_freqs * n_points * n_actuators  # H real, H imag, coherence
+    drives = 8 * n_actuators * n_record
+    return int(1.1 * (recordings + matrices + drives)) + 64 * 1024
+
+
+def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
+    """Write a calibration to one netCDF4/HDF5 file (see the module docstring).
+
+    The file is built in memory, written next to its destination, fsynced and renamed
+    over it (:func:`vibrofocus._atomic.atomic_write`): a full disk, a read-only folder
+    or an interrupt never leaves a half-written calibration under ``path``, and a
+    previous file there is unchanged.
+
+    Parameters
+    ----------
+    cal : Calibration
+    path : str or PathLike
+        Destination, conventionally ``*.nc``; its folder must exist.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written (no space, read-only, missing folder, ...); ``cal``
+        is untouched, so the caller can save it elsewhere.
+    """
+    from .._atomic import write_bytes
+
+    data = calibration_bytes(cal)
+    return write_bytes(Path(path), data, what="calibration")
 
 
 def _fail(path: Path, what: str) -> CalibrationFileError:

@@ -1,6 +1,6 @@
 """Quality verdicts of a calibration: what to trust, what to re-measure, and why.
 
-Checks (SPEC §4), each with its criterion (thresholds in :class:`QualityThresholds`):
+Checks (docs/method.md, calibration), each with its criterion (thresholds in :class:`QualityThresholds`):
 
 low coherence
     Per (point, actuator), the in-band frequencies where the coherence over repeats is

@@ -1,8 +1,18 @@
-"""Turn vibrofocus errors into a clear one-line message and exit code 2 for the CLI."""
+"""One line per user error, exit codes, interrupts: how every command ends.
+
+- A :class:`~vibrofocus.errors.VibrofocusError` prints ``error: ...`` (one line) and
+  exits with code 2; an :class:`OSError` such as a full disk or a read-only folder that
+  reached a command is reported the same way.
+- Ctrl-C (SIGINT) and SIGTERM stop the command at the next safe point (a save in
+  progress is either committed whole or discarded, see :mod:`vibrofocus._atomic`),
+  print ``interrupted: ...`` and exit with code 130.
+- No traceback is printed for these unless ``vibrofocus --debug`` was given.
+"""
 
 from __future__ import annotations
 
 import contextlib
+import errno as _errno
 from collections.abc import Iterator
 
 import typer
@@ -10,14 +20,88 @@ from rich.console import Console
 
 from ..errors import VibrofocusError
 
-err_console = Console(stderr=True)
+err_console = Console(stderr=True, highlight=False, soft_wrap=True)
+
+#: Set by ``vibrofocus --debug``: print the traceback under a user error.
+DEBUG = False
+
+#: Exit code of a user error (bad input, unwritable output, ...).
+EXIT_USER_ERROR = 2
+#: Exit code after SIGINT/SIGTERM (128 + SIGINT, as shells report Ctrl-C).
+EXIT_INTERRUPTED = 130
+
+#: OSErrors reported as one-line user errors when they reach a command.
+_USER_ERRNOS = {
+    _errno.ENOSPC, _errno.EDQUOT, _errno.EACCES, _errno.EPERM, _errno.EROFS, _errno.ENOENT, _errno.ENOTDIR,
+    _errno.EISDIR, _errno.EFBIG, _errno.ENAMETOOLONG, _errno.EIO,
+}
+
+
+def set_debug(value: bool) -> None:
+    """Show tracebacks under user errors (``--debug``)."""
+    global DEBUG
+    DEBUG = bool(value)
+
+
+def _traceback() -> None:
+    if DEBUG:
+        err_console.print_exception(show_locals=False)
+
+
+def print_error(message: str) -> None:
+    """Print ``error: message`` on stderr as one logical line (no markup interpretation)."""
+    err_console.print("[bold red]error:[/] ", end="")
+    err_console.print(str(message).replace("\n", " "), markup=False)
+
+
+def interrupted_exit(detail: str = "") -> typer.Exit:
+    """Print the one interrupt line; return the Exit(130) to raise."""
+    err_console.print(
+        "[bold yellow]interrupted[/]" + (f": {detail}" if detail else ": stopped; no file was left half-written"),
+        highlight=False,
+    )
+    return typer.Exit(code=EXIT_INTERRUPTED)
 
 
 @contextlib.contextmanager
-def user_errors() -> Iterator[None]:
-    """Context manager: print a VibrofocusError as ``error: ...`` and exit with code 2."""
+def user_errors(*, interrupt_message: str = "") -> Iterator[None]:
+    """Run a command body: one ``error:`` line and exit 2 on user errors, exit 130 on interrupts.
+
+    SIGINT and SIGTERM raise KeyboardInterrupt while the body runs (at safe points: file
+    commits defer them until the rename is done); an interrupt that a library swallowed
+    is still honoured when the body ends.
+
+    Parameters
+    ----------
+    interrupt_message : str
+        What to say after ``interrupted:`` (default: nothing half-written).
+    """
+    from .. import _atomic
+
+    _atomic.clear_interrupt()
+    restore = _atomic.install_signal_handlers()
     try:
         yield
+        if _atomic.interrupt_pending() is not None:
+            raise KeyboardInterrupt
     except VibrofocusError as exc:
-        err_console.print(f"[bold red]error:[/] {exc}")
-        raise typer.Exit(code=2) from None
+        if _atomic.interrupt_pending() is not None:
+            raise interrupted_exit(interrupt_message) from None
+        _traceback()
+        print_error(str(exc))
+        raise typer.Exit(code=EXIT_USER_ERROR) from None
+    except KeyboardInterrupt:
+        _traceback()
+        raise interrupted_exit(interrupt_message) from None
+    except OSError as exc:
+        if exc.errno not in _USER_ERRNOS:
+            raise
+        from .._atomic import describe_os_error
+
+        _traceback()
+        where = f" {exc.filename}" if exc.filename else ""
+        print_error(f"cannot access{where}: {describe_os_error(exc)}")
+        raise typer.Exit(code=EXIT_USER_ERROR) from None
+    finally:
+        restore()
+        _atomic.clear_interrupt()

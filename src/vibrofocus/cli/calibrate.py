@@ -16,7 +16,10 @@ def calibrate_command(
     out: Path = typer.Option(..., "--out", "-o", help="Calibration file to write (.nc, netCDF4/HDF5)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
-    seed: int | None = typer.Option(None, "--seed", min=0, help="Participant seed of the simulated forearm."),
+    seed: int | None = typer.Option(
+        None, "--seed", min=0, show_default="derived from --participant",
+        help="Participant seed of the simulated forearm; by default each participant id gets its own arm.",
+    ),
     method: str = typer.Option("h1", "--method", help="h1 (exponential sweeps, repeats, coherence) | paper "
                                                       "(one linear sweep, FFT ratio)."),
     repeats: int | None = typer.Option(None, "--repeats", min=1, help="Recordings per point and actuator "
@@ -32,19 +35,37 @@ def calibrate_command(
     A single-spot vibrometer asks you to aim it at each point (coordinates in mm, origin
     at the array centre, x toward the thumb, y toward the wrist). Writes OUT, a figure
     beside it, and prints a verdict per point and actuator.
+
+    OUT is checked for room and write permission before the first sweep. If it still
+    cannot be written at the end, the measurement is not lost: you are asked for another
+    path (at a terminal) or it is saved to a fallback file that the error names.
     """
     with user_errors():
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
+        from .._atomic import check_writable
         from ..calibration import calibrate, save_calibration
+        from ..calibration.io import estimate_calibration_bytes
+        from ..defaults import participant_seed
         from ..errors import ValidationError
         from ..rigs import make_rig
+        from ._save import save_or_offer_another_path
 
         console = Console()
         if not out.parent.exists():
             raise ValidationError(f"--out {out}: the folder {out.parent} does not exist")
+        if seed is None and rig == "simulated":
+            seed = participant_seed(participant)
         with make_rig(rig, config=rig_config, seed=seed) as r:
+            # Before the first sweep: a read-only folder or a full disk is found now, not
+            # after the whole measurement.
+            n_rep = repeats if repeats is not None else (8 if method == "h1" else 1)
+            n_record = int(round(((sweep_s or 2.0) + 1.0) * r.fs))
+            check_writable(out, what="calibration", expected_bytes=estimate_calibration_bytes(
+                r.layout.n_points, r.layout.n_actuators, n_rep, n_record, 4096))
+            if figure:
+                check_writable(out.with_suffix(".png"), what="figure")
             if getattr(r, "read_strap_forces", None) is not None:
                 from ..rigs.force import check_straps
 
@@ -71,7 +92,8 @@ def calibrate_command(
                 cal = calibrate(r, participant_id=participant, method=method, repeats=repeats, sweep_s=sweep_s,
                                 amplitude_v=amplitude_v, prompt=None if not single_spot else prompt,
                                 progress=on_progress)
-        save_calibration(cal, out)
+        # The measurement stays in memory until it is on disk somewhere.
+        out = save_or_offer_another_path(lambda path: save_calibration(cal, path), out, what="calibration")
         console.print(cal.summary_table())
         for line in cal.quality.lines():
             console.print(line, highlight=False)

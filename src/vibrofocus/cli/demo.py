@@ -48,7 +48,7 @@ def demo_command(
 ) -> None:
     """Calibrate the simulated forearm, then render a tap at every location with every method, play it, measure it.
 
-    First a calibration (exponential sweeps, H1 estimate) measures the transfer matrix at every point; it is saved as OUT/calibration.nc. Then for each of the layout's locations and each method (funneling, inverse, combination, time reversal): design from the measured matrix, play with vibrometer noise, and report fidelity, contrast (against the other locations), peak drive and the target's peak displacement.
+    First a calibration (exponential sweeps, H1 estimate) measures the transfer matrix at every point; it is saved as OUT/calibration.nc. Then for each of the layout's locations and each method (funneling, inverse, combination, time reversal, contrast, constrained): design from the measured matrix, scale to the drive limit (equal peak drive), play with vibrometer noise, and report fidelity, contrast (against the other locations and against every calibrated point), energy contrast beside the array's bound, peak drive and the target's peak displacement.
 
     Figures: propagation with and without correction, the focused field around one location, and a metrics overview.
     """  # noqa: E501
@@ -64,6 +64,18 @@ def demo_command(
         check_choice(design_from, "--design-from", ("calibration", "model"))
         rig = SimulatedForearm(seed=seed)
         rig.layout.location_index(location)
+        if design_from == "calibration" or figures:
+            # Before the calibration starts: a read-only or full output folder is found now.
+            from .._atomic import check_writable, output_error
+            from ..calibration.io import estimate_calibration_bytes
+
+            try:
+                out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise output_error(exc, out, "output folder") from exc
+            expected = estimate_calibration_bytes(rig.layout.n_points, rig.layout.n_actuators, 8,
+                                                  int(3.0 * rig.fs), 4096) if design_from == "calibration" else 0
+            check_writable(out / "calibration.nc", what="calibration", expected_bytes=expected)
         total = rig.layout.n_locations * len(METHODS)
         calibration_info: dict = {}
         with Progress(
@@ -77,8 +89,12 @@ def demo_command(
                     rig, participant_id=f"simulated-{seed}",
                     progress=lambda done, n, msg: progress.update(cal_task, completed=done, total=n, description=msg),
                 )
-                out.mkdir(parents=True, exist_ok=True)
-                cal_path = save_calibration(cal, out / "calibration.nc")
+                from ._save import save_or_offer_another_path
+
+                cal_path = save_or_offer_another_path(
+                    lambda path: save_calibration(cal, path), out / "calibration.nc", what="calibration",
+                    interactive=False if as_json else None,
+                )
                 transfer = calibrated_transfer(cal)
                 calibration_info = {
                     "file": str(cal_path),
@@ -124,14 +140,17 @@ def demo_command(
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
         table = Table(title=f"Focus metrics, designed from {source}, measured on the arm (noise on)")
-        table.caption = "* designs scaled down to the drive limit"
-        for col in ("loc", "method", "fidelity", "shape", "contrast dB", "drive V", "target µm"):
+        table.caption = ("every method scaled to the same peak drive (the drive limit); contrast: against the other "
+                         "locations; all points: against every calibrated point; energy: energy contrast against the "
+                         "other locations; bound: the most energy contrast any drive giving the tap reaches (predicted)")
+        for col in ("loc", "method", "fidelity", "shape", "contrast dB", "all points dB", "energy dB", "bound dB",
+                    "drive V", "target µm"):
             table.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
         for row in result.rows:
             table.add_row(
                 str(row["location"]), row["method"], _fmt(row["fidelity"]), _fmt(row["shape_fidelity"]),
-                _fmt(row["contrast_db"], 1),
-                _fmt(row["peak_drive_v"], 1) + (" " if row["scale"] >= 1 else "*"), _fmt(row["target_peak_m"] * 1e6, 3),
+                _fmt(row["contrast_db"], 1), _fmt(row["contrast_all_points_db"], 1), _fmt(row["energy_contrast_db"], 1),
+                _fmt(row["bound_db"], 1), _fmt(row["peak_drive_v"], 1), _fmt(row["target_peak_m"] * 1e6, 3),
             )
         console.print(table)
         med = Table(
@@ -139,11 +158,14 @@ def demo_command(
             caption="fidelity: correlation with the desired tap at its time; shape: at the best lag "
             "(funneling arrives late)",
         )
-        for col in ("method", "fidelity", "shape", "contrast dB", "target µm", "drive V"):
+        for col in ("method", "fidelity", "shape", "contrast dB", "all points dB", "energy dB", "bound dB",
+                    "target µm", "drive V"):
             med.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
         for method, values in summary.items():
             med.add_row(method, _fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
-                        _fmt(values["target_peak_m"] * 1e6, 3), _fmt(values["peak_drive_v"], 1))
+                        _fmt(values["contrast_all_points_db"], 1), _fmt(values["energy_contrast_db"], 1),
+                        _fmt(values["bound_db"], 1), _fmt(values["target_peak_m"] * 1e6, 3),
+                        _fmt(values["peak_drive_v"], 1))
         console.print(med)
         for path in paths:
             console.print(f"wrote {path}")

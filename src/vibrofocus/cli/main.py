@@ -7,11 +7,56 @@ pingouin, FastAPI) are imported inside the command so ``vibrofocus --help`` stay
 
 from __future__ import annotations
 
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from typer._click import exceptions as click
 import typer
+from typer.core import TyperGroup
 
 from .. import __version__
+from ._errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, err_console, print_error, set_debug
+
+
+class _OneLineErrors(TyperGroup):
+    """The root command group: a usage error (``--location abc``) is one ``error:`` line, exit 2.
+
+    Typer draws usage errors in a multi-line box; here the message names the command
+    and the option, and points at ``--help``.
+    """
+
+    def main(
+        self,
+        args: Sequence[str] | None = None,
+        prog_name: str | None = None,
+        complete_var: str | None = None,
+        standalone_mode: bool = True,
+        windows_expand_args: bool = True,
+        **extra: Any,
+    ) -> Any:
+        if not standalone_mode:
+            return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
+        try:
+            rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
+        except click.UsageError as exc:
+            where = exc.ctx.command_path if exc.ctx is not None else "vibrofocus"
+            print_error(f"{where}: {exc.format_message()} (see '{where} --help')")
+            sys.exit(EXIT_USER_ERROR)
+        except click.ClickException as exc:
+            print_error(exc.format_message())
+            sys.exit(exc.exit_code)
+        except click.Abort as exc:
+            if isinstance(exc.__cause__, KeyboardInterrupt):
+                err_console.print("[bold yellow]interrupted[/]", highlight=False)
+                sys.exit(EXIT_INTERRUPTED)
+            err_console.print("aborted", highlight=False)
+            sys.exit(1)
+        sys.exit(rv if isinstance(rv, int) else 0)
+
 
 app = typer.Typer(
+    cls=_OneLineErrors,
     name="vibrofocus",
     help="Focused vibrotactile stimuli on sparse actuator arrays: calibrate, render, run studies, analyse.",
     no_args_is_help=True,
@@ -31,8 +76,12 @@ def _root(
     version: bool = typer.Option(
         False, "--version", callback=_version_callback, is_eager=True, help="Print the version and exit."
     ),
+    debug: bool = typer.Option(
+        False, "--debug", help="Show the Python traceback under an error message (for bug reports)."
+    ),
 ) -> None:
     """Focused vibrotactile stimuli on sparse actuator arrays."""
+    set_debug(debug)
 
 
 # Command modules register themselves on import; keep this list explicit.

@@ -43,6 +43,7 @@ def render_command(
         import numpy as np
 
         from .. import __version__
+        from .._atomic import atomic_write, check_writable, write_text
         from ..calibration import load_calibration
         from ..defaults import DRIVE_LIMIT_V
         from ..errors import ValidationError
@@ -51,11 +52,11 @@ def render_command(
         suffix = out.suffix.lower()
         if suffix not in (".npz", ".csv"):
             raise ValidationError(f"--out {out}: use a .npz or .csv file name")
-        for path in (out, wav):
-            if path is not None and not path.parent.exists():
-                raise ValidationError(f"{path}: the folder {path.parent} does not exist")
         if wav is not None and wav.suffix.lower() != ".wav":
             raise ValidationError(f"--wav {wav}: use a .wav file name")
+        for path, what in ((out, "drives file"), (wav, "WAV file")):
+            if path is not None:
+                check_writable(path, what=what)
         cal = load_calibration(calibration)
         rig_limits = cal.rig.get("limits") if isinstance(cal.rig.get("limits"), dict) else {}
         rig_limit = rig_limits.get("peak_v", DRIVE_LIMIT_V)
@@ -84,14 +85,18 @@ def render_command(
             "regularization": regularization, "reg_param": reg_param, "band_hz": list(rendering.band),
             "predicted_fidelity": predicted["fidelity"], "predicted_contrast_db": predicted["contrast_db"],
         }
-        if suffix == ".npz":
-            np.savez(out, drives=drives, fs=np.float64(cal.fs), predicted=rendering.predicted,
-                     desired=rendering.desired, metadata=json.dumps(meta))
-        else:
-            t = np.arange(drives.shape[1]) / cal.fs
-            header = "\n".join(f"{k}: {json.dumps(v)}" for k, v in meta.items())
-            header += "\ntime_s," + ",".join(f"{name}_V" for name in cal.layout.actuator_names)
-            np.savetxt(out, np.column_stack([t, drives.T]), delimiter=",", header=header, comments="# ", fmt="%.9g")
+        # Written beside the target and renamed over it: a full disk or Ctrl-C never
+        # leaves a truncated drives file, and an old file of that name survives a failure.
+        with atomic_write(out, "wb", what="drives file") as fh:
+            if suffix == ".npz":
+                np.savez(fh, drives=drives, fs=np.float64(cal.fs), predicted=rendering.predicted,
+                         desired=rendering.desired, metadata=json.dumps(meta))
+            else:
+                t = np.arange(drives.shape[1]) / cal.fs
+                header = "\n".join(f"{k}: {json.dumps(v)}" for k, v in meta.items())
+                header += "\ntime_s," + ",".join(f"{name}_V" for name in cal.layout.actuator_names)
+                np.savetxt(fh, np.column_stack([t, drives.T]), delimiter=",", header=header, comments="# ",
+                           fmt="%.9g", encoding="utf-8")
         typer.echo(f"wrote {out}: {drives.shape[0]} channels x {drives.shape[1]} samples at {cal.fs:g} Hz, "
                    f"peak {np.abs(drives).max():.3g} V"
                    + ("" if rendering.scale == 1.0 else f" (scaled by {rendering.scale:.3g} to the {limit:g} V limit)"))
@@ -102,7 +107,8 @@ def render_command(
 
             # Full scale (1.0) is the drive limit: the drives already respect it, so the
             # samples stay within [-1, 1] and the voltages are sample * volts_per_full_scale.
-            wavfile.write(wav, int(round(cal.fs)), (drives.T / limit).astype(np.float32))
+            with atomic_write(wav, "wb", what="WAV file") as fh:
+                wavfile.write(fh, int(round(cal.fs)), (drives.T / limit).astype(np.float32))
             sidecar = wav.with_name(wav.name + ".json")
-            sidecar.write_text(json.dumps({**meta, "volts_per_full_scale": limit}, indent=2))
+            write_text(sidecar, json.dumps({**meta, "volts_per_full_scale": limit}, indent=2), what="WAV metadata file")
             typer.echo(f"wrote {wav} (float32, full scale = {limit:g} V) and {sidecar}")

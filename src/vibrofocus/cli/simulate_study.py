@@ -36,11 +36,29 @@ def simulate_study(
         from ..studies.participants import MODEL_NOTICE
         from ..studies.simulate import simulate_studies, summarize_simulation
 
+        from .._atomic import check_writable, output_error
+        from ..calibration.io import estimate_calibration_bytes
+        from ..layout import ArrayLayout
+
         if trials_csv is not None and not trials_csv.parent.is_dir():
             # Checked first: the simulation takes minutes and the file is written last.
             from ..errors import ValidationError
 
             raise ValidationError(f"--trials-csv {trials_csv}: the folder {trials_csv.parent} does not exist")
+        # Every output place is checked before the first calibration: a read-only folder
+        # or a full disk is reported now, not after minutes of simulation.
+        check_writable(db, what="study database")
+        cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
+        try:
+            cal_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise output_error(exc, cal_dir, "calibration folder") from exc
+        lay = ArrayLayout.reference()
+        check_writable(cal_dir / "calibration.nc", what="calibration",
+                       expected_bytes=participants * estimate_calibration_bytes(lay.n_points, lay.n_actuators, 8,
+                                                                                30_000, 4096))
+        if trials_csv is not None:
+            check_writable(trials_csv, what="trials file")
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE}[/]")
         with Progress(

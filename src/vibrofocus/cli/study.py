@@ -19,7 +19,7 @@ app.add_typer(study_app, name="study")
 @study_app.command("export")
 def export(
     db: Path = typer.Option(..., "--db", help="Study database."),
-    out: Path = typer.Option(..., "--out", help="Trials CSV to write (SPEC §6 columns)."),
+    out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns: see docs/file-formats.md, trials file)."),
     participant: str | None = typer.Option(None, "--participant", help="Only this participant."),
 ) -> None:
     """Write every answered trial as ``participant,study,phase,trial,method,target,response,rt_s``."""

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._atomic import save_figure
 from ..defaults import N_SAMPLES, SIGMA_S, TARGET_PEAK_M
 from ..signals.ricker import ricker
 from .run import DemoResult, record_clean
@@ -82,7 +83,7 @@ def propagation_figure(rig, path: Path, *, actuator: int | None = None,
         ax.grid(alpha=0.3)
     fig.suptitle("Propagation on the simulated forearm: dispersion and attenuation, and their correction")
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 
@@ -128,7 +129,7 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
                 ax.set_xlabel("x (mm)")
         fig.colorbar(im, ax=axes[row, :].tolist(), shrink=0.8, label="µm")
     fig.suptitle(f"Field around location {location} on the simulated forearm (seed {getattr(rig, 'seed', '?')})")
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
 
@@ -166,7 +167,7 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     axes[-1].set_xlabel("location")
     fig.suptitle("Focus metrics measured on the simulated forearm")
     fig.tight_layout(rect=(0, 0, 1, 0.97))
-    fig.savefig(path, dpi=120)
+    save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
 

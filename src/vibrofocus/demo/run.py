@@ -20,7 +20,7 @@ from ..rigs.base import Rig
 
 __all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "run_demo", "record_clean", "summarize"]
 
-#: Metrics every result row carries (SPEC §8 contract of ``--json``).
+#: Metrics every result row carries (the ``--json`` contract, docs/file-formats.md, demo --json).
 ROW_KEYS = ("location", "method", "fidelity", "contrast_db", "peak_drive_v", "target_peak_m")
 
 
@@ -128,7 +128,7 @@ def run_demo(
     rig : Rig
         Where to play (the simulated forearm).
     methods : sequence of str
-        Rendering methods (SPEC §2).
+        Rendering methods (docs/method.md, rendering methods).
     locations : sequence of int, optional
         1-based locations; default all of the layout's.
     n_samples : int
@@ -159,7 +159,9 @@ def run_demo(
             with warnings.catch_warnings():
                 # Designs over the drive limit are scaled down on purpose; the row reports it.
                 warnings.simplefilter("ignore")
-                rendering = render(method, H, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale")
+                # Every method at equal peak drive: scaled to the rig's limit.
+                rendering = render(method, H, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale",
+                                   scale_to_limit=True)
             rec, repeats = record_clean(rig, rendering.drives, points)
             # Contrast against the other locations (the grid a participant names), as
             # Rendering.metrics does; the guards are reported separately.
@@ -167,6 +169,8 @@ def run_demo(
                                      drives=rendering.drives, compare_indices=np.arange(layout.n_locations))
             every = focus_metrics(rec, rendering.target_index, rendering.desired, rig.fs, sigma=rendering.sigma)
             predicted = rendering.metrics()
+            # The bound concerns the design's window: the energy contrast beside it is the
+            # prediction's (the recording carries the decay tail past the window).
             row = {"location": int(loc), "method": method}
             row.update({k: float(measured[k]) for k in ("fidelity", "contrast_db", "peak_drive_v", "target_peak_m")})
             row.update(
@@ -174,6 +178,9 @@ def run_demo(
                 shape_fidelity=float(measured["shape_fidelity"]),
                 shape_lag_s=float(measured["shape_lag_s"]),
                 contrast_all_points_db=float(every["contrast_db"]),
+                energy_contrast_db=float(measured["energy_contrast_db"]),
+                predicted_energy_contrast_db=float(predicted["energy_contrast_db"]),
+                bound_db=float(predicted.get("bound_db", np.nan)),
                 predicted_fidelity=float(predicted["fidelity"]),
                 predicted_contrast_db=float(predicted["contrast_db"]),
                 scale=float(rendering.scale),
@@ -188,12 +195,14 @@ def run_demo(
 
 
 def summarize(rows: Sequence[dict]) -> dict[str, dict[str, float]]:
-    """Median fidelity, shape fidelity, contrast, target peak and peak drive per method."""
+    """Median fidelity, shape fidelity, contrasts (locations, all points, energy) and
+    bound, target peak and peak drive per method."""
     out: dict[str, dict[str, float]] = {}
     for method in dict.fromkeys(r["method"] for r in rows):
         sub = [r for r in rows if r["method"] == method]
         out[method] = {
             key: float(np.nanmedian([r[key] for r in sub]))
-            for key in ("fidelity", "shape_fidelity", "contrast_db", "target_peak_m", "peak_drive_v")
+            for key in ("fidelity", "shape_fidelity", "contrast_db", "contrast_all_points_db", "energy_contrast_db",
+                        "bound_db", "target_peak_m", "peak_drive_v")
         }
     return out

@@ -1,8 +1,17 @@
 """Rendering methods of SPEC §2: funneling, inverse filter, combination, time reversal,
-the wrap-around check, focus metrics and the high-level :func:`render`."""
+the contrast designs (acoustic contrast control, constrained) and their bound, the
+wrap-around check, focus metrics and the high-level :func:`render`."""
 
 from .causality import CausalityWarning, check_wraparound, wraparound_fraction
 from .combination import combination_target
+from .contrast import (
+    ContrastBound,
+    constrained_drives,
+    contrast_bound,
+    contrast_drives,
+    energy_contrast_db,
+    generalized_eigh_max,
+)
 from .funneling import funneling_gains, funneling_weights
 from .inverse import DesignReport, DriveScaledWarning, InverseOperator, inverse_filter, predict_response
 from .metrics import focus_metrics
@@ -20,6 +29,12 @@ __all__ = [
     "DriveScaledWarning",
     "predict_response",
     "combination_target",
+    "contrast_drives",
+    "constrained_drives",
+    "contrast_bound",
+    "ContrastBound",
+    "generalized_eigh_max",
+    "energy_contrast_db",
     "time_reversal_drives",
     "wraparound_fraction",
     "check_wraparound",

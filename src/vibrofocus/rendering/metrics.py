@@ -9,6 +9,7 @@ import numpy as np
 from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import SIGMA_S
 from ..errors import ValidationError
+from .contrast import _energy_db
 from .taper import band_taper
 
 __all__ = ["focus_metrics"]
@@ -26,6 +27,8 @@ def focus_metrics(
     drives: Any = None,
     taper_octaves: float = 0.5,
     compare_indices: Any = None,
+    field: Any = None,
+    bound: Any = None,
 ) -> dict[str, float]:
     """How well a response focuses a tap at one point.
 
@@ -55,6 +58,13 @@ def focus_metrics(
     compare_indices : sequence of int, optional
         Rows of ``response`` the contrast compares the target against (the target itself
         is skipped if listed); default every other row.
+    field : ndarray, shape (n_grid, n) or (n_grid, n_desired), optional
+        Displacement over a dense skin grid (e.g. ``SimulatedForearm.field`` or a
+        prediction through a grid transfer), m; adds the contrast against it.
+    bound : ContrastBound, optional
+        The array's energy-contrast bound at this target against the compared points
+        (:func:`~vibrofocus.rendering.contrast_bound`); adds ``bound_db`` and
+        ``bound_own_db``.
 
     Returns
     -------
@@ -74,6 +84,19 @@ def focus_metrics(
         ``u_t`` is late). Zero-lag ``fidelity`` scores a waveform that arrives late as
         poor even when its shape is right (funneling travels from the actuators and
         arrives several ms after ``t0``); this pair tells shape and timing apart.
+        ``contrast_all_db``: peak contrast against every other row (all calibrated
+        points, guards included), whatever ``compare_indices``.
+        ``energy_contrast_db``: ``10 log10`` of the target's energy over the summed
+        energy of the compared points (what acoustic contrast control maximizes);
+        ``energy_contrast_all_db``: the same against every other row.
+        With ``field``: ``contrast_field_db`` (peak ``|u|`` at the target over the largest
+        peak anywhere on the grid) and ``energy_contrast_field_db`` (over the summed
+        energy of the grid points).
+        With ``bound``: ``bound_db``, its exact-tap bound (dB; comparable with
+        ``energy_contrast_db`` when ``bound`` was computed over the same compared
+        points), and ``bound_own_db``, the bound for the waveform the target actually
+        receives (no drive producing that waveform does better; NaN if ``bound`` is on
+        another window).
     """
     response = as_array(response, "response", ndim=2, finite=False)
     bad = ~np.isfinite(response)
@@ -137,6 +160,30 @@ def focus_metrics(
     else:
         contrast = float(20 * np.log10(target_peak / others.max()))
 
+    every = np.delete(np.arange(n_points), target_index)
+    if every.size == 0 or target_peak == 0:
+        contrast_all = float("nan")
+    else:
+        top = peaks[every].max()
+        contrast_all = float("inf") if top == 0 else float(20 * np.log10(target_peak / top))
+    energies = np.sum(response**2, axis=1)
+    energy_contrast = _energy_db(energies[target_index], energies[compare])
+    energy_contrast_all = _energy_db(energies[target_index], energies[every])
+    extra: dict[str, float] = {}
+    if field is not None:
+        field = as_array(field, "field", ndim=2)
+        if field.shape[1] not in (n, n_design) or field.shape[0] == 0:
+            raise ValidationError(
+                f"field must have shape (n_grid, {n}) like response (or {n_design} samples like desired), got {field.shape}"
+            )
+        top = float(np.max(np.abs(field)))
+        extra["contrast_field_db"] = (float("nan") if target_peak == 0 else
+                                      float("inf") if top == 0 else float(20 * np.log10(target_peak / top)))
+        extra["energy_contrast_field_db"] = _energy_db(energies[target_index], np.sum(field**2, axis=1))
+    if bound is not None:
+        extra["bound_db"] = float(bound.bound_db)
+        extra["bound_own_db"] = (float(bound.bound_db_for(achieved)) if bound.n_samples == n else float("nan"))
+
     norm_achieved = float(np.linalg.norm(achieved))
     norm_desired = float(np.linalg.norm(desired))
     silent = norm_achieved == 0 or norm_desired == 0
@@ -168,4 +215,8 @@ def focus_metrics(
         "relative_error": error,
         "shape_fidelity": shape_fidelity,
         "shape_lag_s": shape_lag,
+        "contrast_all_db": contrast_all,
+        "energy_contrast_db": energy_contrast,
+        "energy_contrast_all_db": energy_contrast_all,
+        **extra,
     }

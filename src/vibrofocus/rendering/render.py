@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from .._validation import check_band, check_choice, check_positive
+from .._validation import as_array, check_band, check_choice, check_positive
 from ..defaults import (
     BAND_HZ,
     DRIVE_LIMIT_V,
@@ -23,6 +23,7 @@ from ..signals.ricker import ricker
 from ._checks import as_transfer, check_regularization, samples_for
 from .causality import DEFAULT_WRAPAROUND_TOL, check_wraparound as _check_wraparound
 from .combination import combination_target
+from .contrast import DEFAULT_ACC_REG, ContrastBound, constrained_drives, contrast_bound, contrast_drives, exact_target_spectra
 from .funneling import funneling_gains
 from .inverse import InverseOperator, apply_drive_limit, predict_response
 from .metrics import focus_metrics
@@ -35,7 +36,9 @@ __all__ = ["Rendering", "render", "CONTROL_SETS"]
 DEFAULT_GUARD_WEIGHT = 0.1
 #: Which points a design constrains besides the target: ``"guards"`` (SPEC §2: the
 #: target and the guard points) or ``"all"`` (every other calibrated point held at zero).
-CONTROL_SETS = ("guards", "all")
+CONTROL_SETS = ("guards", "all", "locations", "field")
+#: Methods whose control points are quiet points of an energy (contrast) design.
+CONTRAST_METHODS = ("contrast", "constrained")
 
 
 @dataclass(frozen=True, eq=False)
@@ -45,7 +48,8 @@ class Rendering:
     Attributes
     ----------
     method : str
-        One of ``"funneling"``, ``"inverse"``, ``"combination"``, ``"time_reversal"``.
+        One of ``"funneling"``, ``"inverse"``, ``"combination"``, ``"time_reversal"``,
+        ``"contrast"``, ``"constrained"``.
     location : int
         1-based location number of the target.
     target_index : int
@@ -61,7 +65,9 @@ class Rendering:
         tap), the funneling prediction at the target for "combination".
     reference : ndarray, shape (n,)
         Band-limited Ricker at ``target_peak_m`` (same for every method), m: a common
-        yardstick across methods.
+        yardstick across methods. Like ``desired``, at the design's own level: when
+        the drives are scaled (``scale != 1``), the prediction is ``scale`` times the
+        design's.
     fs : float
         Sample rate, Hz.
     t0 : float
@@ -71,14 +77,16 @@ class Rendering:
     band : (float, float)
         Design band, Hz.
     scale : float
-        1.0 unless the drives were scaled down to the limit (then ``limit_v /
-        needed_peak_v``). Time reversal is always normalized to the limit and reports 1.0.
+        Factor applied to the design's drives: ``limit_v / needed_peak_v`` when scaled to
+        the limit (up or down, ``scaled_to_limit``) or down to it, else 1.0. Time
+        reversal is always normalized to the limit and reports 1.0.
     needed_peak_v : float
         Peak drive the design needed before any scaling, V.
     reached_peak_m : float
         Peak predicted ``|u|`` at the target after scaling, m.
     control_indices : ndarray of int
-        Points the design constrained (target first); empty for funneling.
+        Points the design constrained (target first, then the points held at zero or,
+        for the contrast designs, kept quiet); empty for funneling.
     wraparound_fraction : float
         Share of the response energy past the window when played once from silence
         (NaN if not checked).
@@ -86,6 +94,17 @@ class Rendering:
         Funneling amplitudes, V ("funneling" and "combination").
     layout : ArrayLayout or None
         The layout rendered on.
+    scaled_to_limit : bool
+        True when the drives were scaled so that their peak is exactly the drive limit
+        (``render(..., scale_to_limit=True)``, the default): every method then plays at
+        equal peak drive.
+    bound : ContrastBound or None
+        Energy-contrast bound of the array at this target against the other locations
+        (:func:`contrast_bound`, the Ricker's spectrum).
+    bound_all : ContrastBound or None
+        The same against every other calibrated point (guards included).
+    field_predicted : ndarray, shape (n_grid, n) or None
+        Displacement predicted over the quiet grid of ``control="field"``, m.
     """
 
     method: str
@@ -106,6 +125,10 @@ class Rendering:
     wraparound_fraction: float = float("nan")
     gains: np.ndarray | None = None
     layout: ArrayLayout | None = None
+    scaled_to_limit: bool = False
+    bound: ContrastBound | None = field(default=None, repr=False)
+    bound_all: ContrastBound | None = field(default=None, repr=False)
+    field_predicted: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def n_samples(self) -> int:
@@ -116,8 +139,9 @@ class Rendering:
         """ndarray, shape (n,): sample times, s."""
         return np.arange(self.n_samples) / self.fs
 
-    def metrics(self, *, against: str = "desired", contrast_over: str = "locations") -> dict[str, float]:
-        """:func:`focus_metrics` of the prediction.
+    def metrics(self, *, against: str = "desired", contrast_over: str = "locations",
+                field: Any = None) -> dict[str, float]:
+        """:func:`focus_metrics` of the prediction, with the array's contrast bound.
 
         Parameters
         ----------
@@ -126,16 +150,33 @@ class Rendering:
         contrast_over : {"locations", "points"}
             The contrast compares the target with the other skin locations (the grid a
             participant names; default) or with every other calibrated point, guards
-            included.
+            included. ``contrast_all_db`` and ``energy_contrast_all_db`` always compare
+            with every calibrated point.
+        field : ndarray, shape (n_grid, n), optional
+            Displacement over a dense skin grid, m (default ``field_predicted``); adds
+            ``contrast_field_db`` and ``energy_contrast_field_db``.
+
+        Returns
+        -------
+        dict
+            The keys of :func:`focus_metrics`, plus ``bound_db`` (exact-tap energy
+            contrast bound against the compared points, dB), ``bound_own_db`` (the bound
+            for the waveform the target actually receives: no drive producing it does
+            better) and ``bound_all_db`` (exact tap, against all points), when known.
         """
         check_choice(against, "against", ("desired", "reference"))
         check_choice(contrast_over, "contrast_over", ("locations", "points"))
         wanted = self.desired if against == "desired" else self.reference
         compare = None
+        bound = self.bound_all
         if contrast_over == "locations" and self.layout is not None:
             compare = np.arange(self.layout.n_locations)
-        return focus_metrics(self.predicted, self.target_index, wanted, self.fs, sigma=self.sigma,
-                             drives=self.drives, compare_indices=compare)
+            bound = self.bound
+        out = focus_metrics(self.predicted, self.target_index, wanted, self.fs, sigma=self.sigma,
+                            drives=self.drives, compare_indices=compare,
+                            field=self.field_predicted if field is None else field, bound=bound)
+        out["bound_all_db"] = self.bound_all.bound_db if self.bound_all is not None else float("nan")
+        return out
 
 
 def render(
@@ -154,7 +195,7 @@ def render(
     band: tuple[float, float] = BAND_HZ,
     n_samples: int | None = None,
     t0: float | None = None,
-    control: str = "guards",
+    control: str | None = None,
     funneling_law: str = "linear",
     funneling_amplitude_v: float = FUNNELING_AMPLITUDE_V,
     taper_octaves: float = 0.5,
@@ -163,15 +204,29 @@ def render(
     wraparound_tol: float = DEFAULT_WRAPAROUND_TOL,
     calibrated_band: tuple[float, float] | None = None,
     guard_weight: float = DEFAULT_GUARD_WEIGHT,
+    scale_to_limit: bool = True,
+    exact_target: bool | None = None,
+    contrast_weight: float | None = None,
+    min_contrast_db: float | None = None,
+    acc_reg: float = DEFAULT_ACC_REG,
+    field: Any = None,
+    field_xy: Any = None,
+    field_exclusion_m: float = 5e-3,
+    bounds: bool = True,
 ) -> Rendering:
     """Render a tap at a layout location with one of the methods of SPEC §2.
 
     Parameters
     ----------
-    method : {"funneling", "inverse", "combination", "time_reversal"}
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+    method : {"funneling", "inverse", "combination", "time_reversal", "contrast", "constrained"}
+        ``"contrast"``: acoustic contrast control, phase-aligned so the target receives
+        the band-limited tap exactly (:func:`contrast_drives`). ``"constrained"``: the
+        best fidelity for a required energy contrast, or a weighted trade-off
+        (:func:`constrained_drives`; ``min_contrast_db`` or ``contrast_weight``).
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators), or Calibration
         Calibrated transfer matrix (m/V) on ``rfftfreq(n, 1 / fs)``, rows in the order of
-        ``layout.points_xy`` (locations then guards).
+        ``layout.points_xy`` (locations then guards). A ``Calibration`` gives its
+        ``transfer_for(n_samples)`` (default 4096) and its ``band`` as ``calibrated_band``.
     fs : float
         Sample rate, Hz.
     layout : ArrayLayout
@@ -181,7 +236,15 @@ def render(
         Drive limit, V peak.
     on_limit : {"scale", "refuse"}
         A design over the limit is scaled down (reported in ``scale`` and
-        ``reached_peak_m``) or refused with :class:`~vibrofocus.errors.DriveLimitError`.
+        ``reached_peak_m``) or refused with :class:`~vibrofocus.errors.DriveLimitError`
+        (whatever ``scale_to_limit``).
+    scale_to_limit : bool
+        True (default): scale the drives up or down so that their peak is exactly
+        ``limit_v``, so that every method is compared at equal peak drive (fidelity and
+        contrast do not depend on the scale; the target amplitude does). False: keep
+        the design's own level (``target_peak_m`` at the target for the inverse and
+        contrast designs, funneling at ``funneling_amplitude_v``), scaled only down to
+        the limit if needed.
     sigma : float
         Ricker spread of the base stimulus, s.
     target_peak_m : float
@@ -196,12 +259,40 @@ def render(
         Centre of the base stimulus, s; default ``TARGET_FRACTION`` (half) of the window,
         which leaves room for the drive's pre-ringing before it and the medium's
         ring-down after it.
-    control : {"guards", "all"}
-        Control points of the inverse designs. ``"guards"`` (default, SPEC §2): the
-        target and the guard points (held at zero); the other locations are free, which
-        keeps the system close to square (5 x 4 in the reference setup) so the target is
-        met. ``"all"``: every other calibrated point held at zero too (a least-squares
-        compromise that trades target fidelity for quiet elsewhere).
+    control : {"guards", "all", "locations", "field"}, optional
+        Points held at zero (inverse designs) or kept quiet (contrast designs) besides
+        the target. ``"guards"`` (default of the inverse designs, SPEC §2): the guard
+        points; the other locations are free, which keeps the system close to square
+        (5 x 4 in the reference setup) so the target is met. ``"all"`` (default of the
+        contrast designs): every other calibrated point (for the inverse designs a
+        least-squares compromise that trades target fidelity for quiet elsewhere).
+        ``"locations"``: the other locations. ``"field"`` (contrast designs only): the
+        points of a dense skin grid given by ``field``.
+    exact_target : bool, optional
+        Inverse designs: meet the target waveform exactly and fit the other control
+        points in least squares (``guard_weight`` then plays no part), instead of one
+        weighted least-squares fit of all. Default True for "combination" (the paper's
+        condition: its displacement at the target is the funneling one), False for
+        "inverse". ``exact_target=False, guard_weight=1`` is the paper's plain
+        pseudo-inverse for both.
+    contrast_weight, min_contrast_db
+        "constrained" only: the trade-off weight (relative, >= 0; 0 is the exact tap of
+        "contrast") or the required energy contrast against the quiet points, dB; at most
+        one (neither: ``contrast_weight=1``). See :func:`constrained_drives`.
+    acc_reg : float
+        Regularization of the contrast designs, relative to the mean eigenvalue of the
+        quiet points' Gram matrix.
+    field : ndarray or callable, optional
+        ``control="field"``: transfer to the grid points, complex, shape
+        (n // 2 + 1, n_grid, n_actuators), m/V, or a callable ``field(freqs) -> H_grid``
+        (e.g. ``lambda f: forearm.transfer(grid_xy, f)``).
+    field_xy : ndarray, shape (n_grid, 2), optional
+        The grid points, m; those within ``field_exclusion_m`` of the target are not
+        counted as quiet (the tap must be able to spread over its own spot).
+    field_exclusion_m : float
+        See ``field_xy``, m.
+    bounds : bool
+        Compute the array's energy-contrast bounds (``Rendering.bound``, ``bound_all``).
     funneling_law : {"linear", "energy"}
     funneling_amplitude_v : float
         Funneling ``A``, V ("funneling" and "combination").
@@ -235,6 +326,11 @@ def render(
     check_choice(method, "method", METHODS)
     if not isinstance(layout, ArrayLayout):
         raise ValidationError(f"layout must be an ArrayLayout, got {type(layout).__name__}")
+    if hasattr(H, "transfer_for") and hasattr(H, "band"):
+        # A Calibration carries the band it is valid in: a design outside it is refused.
+        if calibrated_band is None:
+            calibrated_band = tuple(H.band)
+        H = H.transfer_for(4096 if n_samples is None else n_samples)
     H = as_transfer(H)
     if H.shape[1:] != (layout.n_points, layout.n_actuators):
         raise ValidationError(
@@ -253,7 +349,18 @@ def render(
             )
     limit_v = check_positive(limit_v, "limit_v")
     check_choice(on_limit, "on_limit", ("scale", "refuse"))
+    if control is None:
+        control = "all" if method in CONTRAST_METHODS else "guards"
     check_choice(control, "control", CONTROL_SETS)
+    if control == "field" and method not in CONTRAST_METHODS:
+        raise ValidationError(f"control='field' is for the contrast designs ({', '.join(CONTRAST_METHODS)}), not {method!r}")
+    if (control == "field") != (field is not None):
+        raise ValidationError("a dense quiet grid needs both control='field' and field=... (its transfer matrix)")
+    if method != "constrained" and (contrast_weight is not None or min_contrast_db is not None):
+        raise ValidationError("contrast_weight and min_contrast_db are options of method='constrained'")
+    if exact_target is None:
+        exact_target = method == "combination"
+    acc_reg = check_positive(acc_reg, "acc_reg", allow_zero=True)
     check_choice(check_wraparound, "check_wraparound", (True, False, "warn"))
     target_peak_m = check_positive(target_peak_m, "target_peak_m")
     guard_weight = check_positive(guard_weight, "guard_weight")
@@ -264,7 +371,29 @@ def render(
     stimulus = ricker(fs, sigma, duration, t0, form=form)
     taper = band_taper(np.fft.rfftfreq(n, 1 / fs), band, check_positive(taper_octaves, "taper_octaves", allow_zero=True))
     reference = np.fft.irfft(np.fft.rfft(target_peak_m * stimulus) * taper, n)
-    others = layout.guard_indices if control == "guards" else np.delete(np.arange(layout.n_points), target_index)
+    if control == "guards":
+        others = layout.guard_indices
+    elif control == "locations":
+        others = np.delete(np.arange(layout.n_locations), target_index)
+    elif control == "all":
+        others = np.delete(np.arange(layout.n_points), target_index)
+    else:
+        others = np.zeros(0, int)
+    quiet_H = None
+    if control == "field":
+        quiet_H = field(np.fft.rfftfreq(n, 1 / fs)) if callable(field) else field
+        quiet_H = as_transfer(quiet_H, "field")
+        if quiet_H.shape[0] != H.shape[0] or quiet_H.shape[2] != H.shape[2]:
+            raise ValidationError(
+                f"field has shape {quiet_H.shape}; it must have shape ({H.shape[0]}, n_grid, {H.shape[2]}) like H"
+            )
+        if field_xy is not None:
+            field_xy = as_array(field_xy, "field_xy", ndim=2, shape=(quiet_H.shape[1], 2))
+            far = np.linalg.norm(field_xy - layout.locations_xy[target_index], axis=1) > check_positive(
+                field_exclusion_m, "field_exclusion_m", allow_zero=True)
+            if not far.any():
+                raise ValidationError(f"every field point lies within field_exclusion_m={field_exclusion_m:g} m of the target")
+            quiet_H = quiet_H[:, far, :]
     control_indices = np.concatenate([[target_index], others]).astype(int)
     what = f"the {method} design for location {location}"
 
@@ -281,6 +410,26 @@ def render(
         targets[0] = target_peak_m * stimulus
         drives = time_reversal_drives(H[:, control_indices], targets, fs, max_drive=limit_v, band=band,
                                       taper_octaves=taper_octaves)
+    elif method in CONTRAST_METHODS:
+        options = dict(quiet_indices=others if others.size else None, quiet_H=quiet_H, band=band, sigma=sigma,
+                       waveform=target_peak_m * stimulus, reg_param=acc_reg, taper_octaves=taper_octaves)
+        if method == "contrast":
+            drives = contrast_drives(H, target_index, fs, **options)
+        else:
+            drives = constrained_drives(H, target_index, fs, contrast_weight=contrast_weight,
+                                        min_contrast_db=min_contrast_db, **options)
+    elif exact_target:
+        freqs = np.fft.rfftfreq(n, 1 / fs)
+        taper = band_taper(freqs, band, taper_octaves)
+        raw_target = (combination_target(H, target_index, gains, stimulus, fs, band=None)
+                      if method == "combination" else target_peak_m * stimulus)
+        desired = np.fft.irfft(np.fft.rfft(raw_target) * taper, n)
+        active = np.flatnonzero(taper > 0)
+        active = slice(int(active[0]), int(active[-1]) + 1)
+        spectra = np.zeros((len(freqs), layout.n_actuators), complex)
+        spectra[active] = exact_target_spectra(H[active], target_index, np.asarray(others, int),
+                                               np.fft.rfft(desired)[active], regularization, reg_param)
+        drives = np.fft.irfft(spectra, n, axis=0).T
     else:
         weights = np.full(len(control_indices), guard_weight)
         weights[0] = 1.0
@@ -299,7 +448,20 @@ def render(
     if check_wraparound:
         fraction = _check_wraparound(drives, H, tol=wraparound_tol, action="warn" if check_wraparound == "warn" else "raise")
     drives, scale, needed = apply_drive_limit(drives, limit_v, on_limit, what)
+    if scale_to_limit and method != "time_reversal":
+        if needed == 0:
+            raise ValidationError(f"{what} gives silent drives: nothing to scale to the limit")
+        drives = drives * (limit_v / float(np.max(np.abs(drives))))
+        scale = limit_v / needed
     predicted = predict_response(H, drives)
+    bound = bound_all = None
+    if bounds:
+        common = dict(band=band, fs=fs, waveform=target_peak_m * stimulus, taper_octaves=taper_octaves)
+        others_loc = np.delete(np.arange(layout.n_locations), target_index)
+        if others_loc.size:
+            bound = contrast_bound(H, target_index, others_loc, **common)
+        bound_all = contrast_bound(H, target_index, np.delete(np.arange(layout.n_points), target_index), **common)
+    field_predicted = predict_response(quiet_H, drives) if quiet_H is not None else None
     return Rendering(
         method=method,
         location=int(location),
@@ -319,4 +481,8 @@ def render(
         wraparound_fraction=fraction,
         gains=gains,
         layout=layout,
+        scaled_to_limit=bool(scale_to_limit),
+        bound=bound,
+        bound_all=bound_all,
+        field_predicted=field_predicted,
     )

@@ -1,4 +1,4 @@
-"""The one safety layer every drive passes through before any rig plays it (SPEC §5)."""
+"""The one safety layer every drive passes through before any rig plays it (docs/method.md, rigs and safety)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,7 @@ class SafetyLimits:
     ----------
     peak_v : float
         Largest instantaneous voltage magnitude, V. Default 10 V: a 1 V DAQ output
-        through a 20 dB amplifier (SPEC §1).
+        through a 20 dB amplifier (docs/method.md, reference setup).
     rms_v : float
         Largest RMS voltage per channel over the drive, V. Default 4 V, i.e. 2 W into the
         8 ohm coil of a 14 mm exciter, which such exciters stand for seconds; a 10 V peak
@@ -69,7 +69,8 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
     ------
     SafetyError
         Wrong type or shape, NaN/Inf, empty, too long, over the peak or RMS limit. The
-        message names the channel and the value.
+        message names the channel, numbered from 1 as people read them (channel 1 is
+        the first actuator, A1 in the reference layout), and the value.
     """
     try:
         arr = np.asarray(drive)
@@ -85,7 +86,7 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
     bad = ~np.isfinite(arr)
     if bad.any():
         ch, k = np.argwhere(bad)[0]
-        raise SafetyError(f"drive refused: {int(bad.sum())} NaN/Inf sample(s), first on channel {ch} at sample {k}")
+        raise SafetyError(f"drive refused: {int(bad.sum())} NaN/Inf sample(s), first on channel {ch + 1} at sample {k}")
     duration = arr.shape[1] / fs
     if duration > limits.max_duration_s:
         raise SafetyError(f"drive refused: {duration:.3f} s is longer than the limit of {limits.max_duration_s:g} s")
@@ -93,10 +94,10 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
     if peaks.max() > limits.peak_v * (1 + 1e-9):
         ch = int(peaks.argmax())
         raise SafetyError(
-            f"drive refused: channel {ch} reaches {peaks[ch]:.3g} V peak, over the limit of {limits.peak_v:g} V"
+            f"drive refused: channel {ch + 1} reaches {peaks[ch]:.3g} V peak, over the limit of {limits.peak_v:g} V"
         )
     rms = np.sqrt(np.mean(arr**2, axis=1))
     if rms.max() > limits.rms_v * (1 + 1e-9):
         ch = int(rms.argmax())
-        raise SafetyError(f"drive refused: channel {ch} has {rms[ch]:.3g} V RMS, over the limit of {limits.rms_v:g} V")
+        raise SafetyError(f"drive refused: channel {ch + 1} has {rms[ch]:.3g} V RMS, over the limit of {limits.rms_v:g} V")
     return apply_fades(arr, fs, limits.fade_s)

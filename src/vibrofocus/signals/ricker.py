@@ -1,4 +1,4 @@
-"""The Ricker wavelet, the base stimulus of SPEC §2."""
+"""The Ricker wavelet, the base stimulus of docs/method.md, rendering methods."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Sine sweeps for calibration and their inverses for deconvolution (SPEC §4)."""
+"""Sine sweeps for calibration and their inverses for deconvolution (docs/method.md, calibration)."""
 
 from __future__ import annotations
 

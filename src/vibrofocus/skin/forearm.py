@@ -1,4 +1,4 @@
-"""The simulated forearm: a physically based rig that needs no hardware (SPEC §3).
+"""The simulated forearm: a physically based rig that needs no hardware (docs/skin-model.md).
 
 Model, per actuator ``q`` and skin point ``p`` (NumPy's ``exp(+i omega t)`` convention):
 
@@ -36,7 +36,7 @@ from .propagation import _disc_factor, exciter_response, surface_green, wavenumb
 
 __all__ = ["SimulatedForearm", "drive_sensitivity"]
 
-#: Peak displacement 6 mm from one nominal actuator driven by a 10 V Ricker (SPEC §3).
+#: Peak displacement 6 mm from one nominal actuator driven by a 10 V Ricker (docs/skin-model.md).
 _REFERENCE_PEAK_M = 2e-6
 _REFERENCE_DRIVE_V = 10.0
 _REFERENCE_DISTANCE_M = 6e-3
@@ -99,7 +99,7 @@ def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S) -> float:
     """Drive sensitivity ``K`` of the model, m/V per unit Green's function.
 
     Chosen so that a 10 V peak Ricker (spread ``sigma``) on one nominal, fully coupled
-    actuator gives 2 µm peak displacement 6 mm from its centre on a flat arm (SPEC §3:
+    actuator gives 2 µm peak displacement 6 mm from its centre on a flat arm (docs/skin-model.md:
     "10 V on one actuator gives about 2 µm next to it"), the order of displacement
     that small inertial exciters produce on the forearm.
     """
@@ -122,7 +122,7 @@ class SimulatedForearm(Rig):
         Participant seed: draws the participant (:meth:`ForearmParameters.draw`) and
         seeds the measurement noise. Same seed, same calls: identical results.
     layout : ArrayLayout, optional
-        The array; default the reference setup (SPEC §1).
+        The array; default the reference setup (docs/method.md).
     fs : float
         Sample rate, Hz.
     limits : SafetyLimits, optional
@@ -130,7 +130,7 @@ class SimulatedForearm(Rig):
     noise_m : float
         Vibrometer noise, m RMS within ``noise_band``. White Gaussian noise over the
         whole recording bandwidth, scaled so its in-band RMS is ``noise_m`` (its total
-        RMS is larger by ``sqrt((fs/2) / bandwidth)``). Default 1 nm (SPEC §3): an
+        RMS is larger by ``sqrt((fs/2) / bandwidth)``). Default 1 nm (docs/skin-model.md): an
         assumption of the right order. The OFV-505/5000 specification could not be
         checked; a related Polytec velocity decoder (PSV-500, DV-04) specifies a
         resolution of 0.1-1 µm/s between 10 Hz and 5 kHz, which is 0.16-1.6 nm of

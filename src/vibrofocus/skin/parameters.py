@@ -93,14 +93,14 @@ class ForearmParameters:
     contact : ndarray, shape (n_actuators,)
         Coupling of each actuator to the skin, 0-1 (1 = full contact). Wrist-side
         actuators of a rigid array sit over the narrowing arm and lose contact. The range
-        0.4-1.0 per participant is an assumption of the model (SPEC §3), not a
+        0.4-1.0 per participant is an assumption of the model (docs/skin-model.md), not a
         measurement.
     gains : ndarray, shape (n_actuators,)
         Relative electromechanical gain of each actuator (1 = nominal). The ±10 % spread
         is an assumption for mass-produced exciters of one type.
     f0_hz : ndarray, shape (n_actuators,)
         Loaded resonance frequency of each inertial exciter, Hz. Nominal 500 Hz: an
-        assumption (SPEC §3). The TEAX14C02-8 datasheet could not be checked (see
+        assumption (docs/skin-model.md). The TEAX14C02-8 datasheet could not be checked (see
         ``vibrofocus/skin/data/SOURCES.md``), and no value loaded by skin was found in
         the literature.
     q : ndarray, shape (n_actuators,)
@@ -135,12 +135,12 @@ class ForearmParameters:
         the Rayleigh equation; soft tissue is nearly incompressible).
     contact_radius_m : float
         Radius of the contact patch of a fully coupled actuator, m. Nominal 3 mm: an
-        assumption (SPEC §3) for the contactor of a 14 mm exciter; a partly coupled actuator
+        assumption (docs/skin-model.md) for the contactor of a 14 mm exciter; a partly coupled actuator
         touches a patch of radius ``contact_radius_m * sqrt(contact)`` (area in
         proportion).
     circumference_wrist_m, circumference_elbow_m : float
         Forearm circumference at the wrist and near the elbow, m. Nominal 0.17 m and
-        0.25 m (SPEC §3). Typical adult values; not checked against an anthropometric
+        0.25 m (docs/skin-model.md). Typical adult values; not checked against an anthropometric
         table (an assumption).
     wrist_y_m, elbow_y_m : float
         Where the wrist and the elbow-side end of the modelled cylinder lie on the

@@ -1,4 +1,4 @@
-"""Localization studies (SPEC §6): planning, storage that loses nothing, export.
+"""Localization studies (docs/file-formats.md, trials file): planning, storage that loses nothing, export.
 
 Public API
 ----------

@@ -1,4 +1,4 @@
-"""The trials file: the CSV contract between the studies and the analysis (SPEC §6).
+"""The trials file: the CSV contract between the studies and the analysis (docs/file-formats.md, trials file).
 
 One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that order:
 ``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``
@@ -13,8 +13,8 @@ flags them.
 from __future__ import annotations
 
 import csv
+import itertools
 import os
-import tempfile
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
@@ -30,7 +30,11 @@ SIMULATED_COLUMN = "simulated"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike) -> int:
-    """Write trial rows to ``path`` (atomically: a reader never sees half a file).
+    """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
+
+    A reader never sees half a file; after a failure (a full disk, a read-only folder,
+    Ctrl-C) a previous file at ``path`` is unchanged and
+    :class:`~vibrofocus.errors.OutputError` says why.
 
     Parameters
     ----------
@@ -46,42 +50,31 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
     int
         Number of rows written.
     """
+    from .._atomic import atomic_write
+
     path = Path(path)
     if not path.parent.is_dir():
         raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     n = 0
     rows = iter(rows)
     first = next(rows, None)
     with_flag = first is not None and SIMULATED_COLUMN in first
-    try:
-        with os.fdopen(fd, "w", newline="", encoding="utf-8") as fh:
-            writer = csv.writer(fh, lineterminator="\n")
-            writer.writerow(TRIALS_COLUMNS + ((SIMULATED_COLUMN,) if with_flag else ()))
-            for row in ([first] if first is not None else []) + list(rows):
-                response = row["response"]
-                if not isinstance(response, str):
-                    response = " ".join(str(int(x)) for x in sorted(response))
-                # repr keeps every digit of the stored float: the file round-trips exactly.
-                fields = [
-                    row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
-                    row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
-                ]
-                if with_flag:
-                    fields.append(int(bool(row.get(SIMULATED_COLUMN))))
-                writer.writerow(fields)
-                n += 1
-            fh.flush()
-            # mkstemp makes the file 0600; give it the mode any new file gets (umask).
-            os.fchmod(fh.fileno(), 0o666 & ~_umask())
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except OSError as exc:
-        _silent_unlink(tmp)
-        raise StudyError(f"cannot write the trials file {path}: {exc.strerror or exc}") from exc
-    except BaseException:
-        _silent_unlink(tmp)
-        raise
+    with atomic_write(path, "w", newline="", what="trials file") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(TRIALS_COLUMNS + ((SIMULATED_COLUMN,) if with_flag else ()))
+        for row in itertools.chain([first] if first is not None else [], rows):
+            response = row["response"]
+            if not isinstance(response, str):
+                response = " ".join(str(int(x)) for x in sorted(response))
+            # repr keeps every digit of the stored float: the file round-trips exactly.
+            fields = [
+                row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
+                row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
+            ]
+            if with_flag:
+                fields.append(int(bool(row.get(SIMULATED_COLUMN))))
+            writer.writerow(fields)
+            n += 1
     return n
 
 
@@ -122,24 +115,3 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
             return out
     except OSError as exc:
         raise StudyError(f"cannot read the trials file {path}: {exc.strerror or exc}") from exc
-
-
-def _umask() -> int:
-    """The process umask, read without changing it where the system tells (Linux)."""
-    try:
-        with open("/proc/self/status", encoding="ascii") as fh:
-            for line in fh:
-                if line.startswith("Umask:"):
-                    return int(line.split()[1], 8)
-    except (OSError, ValueError):
-        pass
-    umask = os.umask(0o022)  # elsewhere: set and restore at once
-    os.umask(umask)
-    return umask
-
-
-def _silent_unlink(path: str) -> None:
-    try:
-        os.unlink(path)
-    except OSError:
-        pass

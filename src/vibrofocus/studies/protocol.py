@@ -1,4 +1,4 @@
-"""Planning of the localization studies (SPEC §6): designs, trial lists, response rules.
+"""Planning of the localization studies (docs/file-formats.md, trials file): designs, trial lists, response rules.
 
 A session's whole trial list is planned up front from a stored seed, so that the order a
 participant saw can be reproduced and a crashed session resumes on the very same plan.

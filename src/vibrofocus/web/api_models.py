@@ -21,7 +21,7 @@ __all__ = [
     "AnalysisIn",
 ]
 
-#: Locations a participant can name (SPEC §1): the 3 x 3 grid of the reference setup.
+#: Locations a participant can name (docs/method.md, reference setup): the 3 x 3 grid of the reference setup.
 N_LOCATIONS = 9
 
 Location = Annotated[int, Field(ge=1, le=N_LOCATIONS, strict=True)]
@@ -91,7 +91,7 @@ class SessionIn(_Strict):
     calibration_id: int | None = Field(default=None, ge=1)
     rig: str = Field(default="simulated", min_length=1, max_length=32)
     rig_seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
-    # Shorter designs for pilots and demonstrations; the defaults are SPEC §6's.
+    # Shorter designs for pilots and demonstrations; the defaults are docs/file-formats.md, trials file's.
     repetitions: int | None = Field(default=None, ge=1, le=10)
     n_training: int | None = Field(default=None, ge=0, le=30)
 

@@ -300,7 +300,7 @@ def session_action(session_id: int, action: str, web: WebState = Depends(require
 # ---------------------------------------------------------------------- export and analysis
 @router.get("/api/export/trials.csv")
 def export_trials(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> FileResponse:
-    """Every answered trial as the SPEC §6 trials file."""
+    """Every answered trial as the docs/file-formats.md, trials file trials file."""
     folder = web.data_dir / "exports"
     folder.mkdir(exist_ok=True)
     path = folder / f"trials-{time.strftime('%Y%m%d-%H%M%S')}.csv"

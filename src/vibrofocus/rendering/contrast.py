@@ -1,0 +1,640 @@
+"""Contrast designs of SPEC §2: acoustic contrast control (ACC), a constrained
+fidelity-contrast design, and the contrast bound of an array.
+
+Notation, per frequency ``f`` of ``rfftfreq(n, 1/fs)``: ``h`` (row, ``n_actuators``) is the
+transfer to the target, ``H_q`` (``n_quiet x n_actuators``) the transfer to the quiet
+points, ``s`` the drive spectra. The target's energy is ``|h s|^2 = s^H A s`` with
+``A = a a^H``, ``a = h^H``; the quiet points' energy is ``s^H G s`` with
+``G = H_q^H H_q``. Acoustic contrast control maximizes the Rayleigh quotient
+``s^H A s / s^H B s`` with ``B = G + delta I`` (a small regularization ``delta``, relative
+to the mean eigenvalue of ``G``, that keeps the drives finite where ``G`` is
+ill-conditioned). ``A`` has rank one, so the maximizing generalized eigenvector is
+``w = B^-1 a`` with eigenvalue ``lambda = a^H B^-1 a`` (one batched linear solve over all
+frequencies), and ``h w = lambda`` is real and positive.
+
+Phase alignment: an eigenvector is only defined up to a complex factor per frequency,
+which left free makes the drives a noise burst. The designs here choose it so that the
+target receives the band-limited tap: ``s = w U / lambda`` gives ``h s = U`` exactly, ``U``
+the spectrum of the desired waveform (the Ricker tap through the band taper). Among all
+drives that put exactly ``U`` at the target, this ``s`` has the least regularized quiet
+energy ``s^H B s = |U|^2 / lambda``: with ``delta = 0`` that is the *exact-tap bound* of
+SPEC §2.
+
+The constrained design trades fidelity for contrast: ``s = w V / lambda`` puts
+``V = g U`` at the target, ``g`` proportional to ``lambda / (lambda + mu)``. It solves
+``maximize corr(u_t, tap)`` subject to ``energy contrast >= C``: with ``x_f = |V_f|^2``
+that is a concave objective over linear constraints, whose KKT conditions give this
+``g`` (``mu >= 0``, or ``mu < -max lambda`` for contrasts beyond ``mu = inf``); fidelity and
+contrast do not change when all drives are scaled, so the peak-voltage constraint is met
+by scaling the drives to the limit, which also gives the largest target amplitude that
+design can reach within it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validation import as_array, check_band, check_index, check_positive
+from ..defaults import BAND_HZ, SIGMA_S
+from ..errors import ValidationError
+from ..signals.ricker import ricker
+from ._checks import as_indices, as_transfer, check_grid
+from ._pinv import _single_threaded_blas
+from .taper import band_taper
+
+__all__ = [
+    "ContrastBound",
+    "contrast_bound",
+    "generalized_eigh_max",
+    "acc_filters",
+    "contrast_drives",
+    "constrained_drives",
+    "energy_contrast_db",
+    "exact_target_spectra",
+    "DEFAULT_ACC_REG",
+]
+
+#: Default regularization ``delta`` of the contrast designs, relative to the mean
+#: eigenvalue ``trace(G) / n_actuators`` of the quiet points' Gram matrix at each frequency.
+DEFAULT_ACC_REG = 1e-3
+
+
+def _parseval_weights(n: int) -> np.ndarray:
+    """Weight of each ``rfft`` bin in the signal energy: ``sum x^2 = sum w |X|^2 / n``."""
+    w = np.full(n // 2 + 1, 2.0)
+    w[0] = 1.0
+    if n % 2 == 0:
+        w[-1] = 1.0
+    return w
+
+
+def generalized_eigh_max(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Largest generalized eigenpair of Hermitian pencils ``A v = lambda B v``, batched.
+
+    Parameters
+    ----------
+    A : ndarray, complex, shape (..., m, m)
+        Hermitian matrices.
+    B : ndarray, complex, shape (..., m, m)
+        Hermitian positive definite matrices.
+
+    Returns
+    -------
+    lam : ndarray, shape (...)
+        Largest generalized eigenvalue of each pencil.
+    vec : ndarray, complex, shape (..., m)
+        Its eigenvector, normalized ``v^H B v = 1`` (phase arbitrary).
+
+    Raises
+    ------
+    ValidationError
+        If a ``B`` is not positive definite (Cholesky fails).
+    """
+    A = as_array(A, "A", dtype="complex")
+    B = as_array(B, "B", dtype="complex")
+    if A.ndim < 2 or A.shape != B.shape or A.shape[-1] != A.shape[-2]:
+        raise ValidationError(f"A and B must be stacks of square matrices of one shape, got {A.shape} and {B.shape}")
+    with _single_threaded_blas():
+        try:
+            L = np.linalg.cholesky(B)
+        except np.linalg.LinAlgError as exc:
+            raise ValidationError("B is not positive definite: regularize the quiet points' Gram matrix") from exc
+        Linv = np.linalg.inv(L)
+        C = Linv @ A @ np.conj(np.swapaxes(Linv, -1, -2))
+        C = 0.5 * (C + np.conj(np.swapaxes(C, -1, -2)))
+        w, v = np.linalg.eigh(C)
+    vec = (np.conj(np.swapaxes(Linv, -1, -2)) @ v[..., :, -1:])[..., 0]
+    return w[..., -1], vec
+
+
+def _gram(Hq: np.ndarray) -> np.ndarray:
+    """``H_q^H H_q`` per frequency, shape (F, n_act, n_act), Hermitian."""
+    with _single_threaded_blas():
+        G = np.conj(np.swapaxes(Hq, -1, -2)) @ Hq
+    return 0.5 * (G + np.conj(np.swapaxes(G, -1, -2)))
+
+
+def acc_filters(h: np.ndarray, G: np.ndarray, reg_param: float) -> tuple[np.ndarray, np.ndarray]:
+    """ACC eigenpair per frequency for a single target row.
+
+    Parameters
+    ----------
+    h : ndarray, complex, shape (F, n_actuators)
+        Transfer to the target.
+    G : ndarray, complex, shape (F, n_actuators, n_actuators)
+        Gram matrix ``H_q^H H_q`` of the quiet points.
+    reg_param : float
+        ``delta`` relative to ``trace(G) / n_actuators`` (>= 0).
+
+    Returns
+    -------
+    lam : ndarray, shape (F,)
+        Largest eigenvalue ``a^H B^-1 a`` (0 where ``h`` vanishes).
+    w : ndarray, complex, shape (F, n_actuators)
+        Eigenvector ``B^-1 a``, scaled so that ``h w = lam``.
+    """
+    n_act = h.shape[1]
+    delta = reg_param * np.trace(G, axis1=1, axis2=2).real / n_act
+    # Frequencies where the quiet points vanish entirely: only the regularization is left.
+    delta = np.where(delta > 0, delta, max(reg_param, 1e-300) * np.maximum(np.sum(np.abs(h) ** 2, axis=1), 1e-300))
+    B = G + delta[:, None, None] * np.eye(n_act)
+    a = np.conj(h)
+    with _single_threaded_blas():
+        w = np.linalg.solve(B, a[:, :, None])[:, :, 0]
+    lam = np.einsum("fq,fq->f", h, w).real
+    return lam, w
+
+
+@dataclass(frozen=True)
+class ContrastBound:
+    """The most energy contrast an array can give at one target (SPEC §2).
+
+    Attributes
+    ----------
+    freqs : ndarray, shape (F,)
+        Frequencies, Hz (``rfftfreq(n, 1 / fs)``).
+    lambda_max : ndarray, shape (F,)
+        Largest ratio of target energy over summed quiet-point energy any drive reaches
+        at each frequency (inf where the quiet points leave a direction free).
+    tap_spectrum : ndarray, complex, shape (F,)
+        Spectrum ``U`` of the desired target waveform, m (rfft of it).
+    quiet_energy_min : ndarray, shape (F,)
+        Exact-tap bound per frequency: the least summed quiet-point energy ``|U|^2 /
+        lambda_max`` for the tap's spectrum at the target (rfft units, m^2).
+    bound_db : float
+        Broadband energy contrast of the exact tap at its best,
+        ``10 log10(sum w |U|^2 / sum w |U|^2 / lambda_max)`` (Parseval weights ``w``): no
+        drive that puts this waveform at the target does better.
+    best_db : float
+        ``10 log10(max lambda_max)`` over the band's bins: no drive at all does better.
+    n_samples : int
+    """
+
+    freqs: np.ndarray
+    lambda_max: np.ndarray
+    tap_spectrum: np.ndarray
+    quiet_energy_min: np.ndarray
+    bound_db: float
+    best_db: float
+    n_samples: int
+
+    def bound_db_for(self, waveform: Any) -> float:
+        """Exact-tap bound for another target waveform, dB.
+
+        Parameters
+        ----------
+        waveform : ndarray, shape (n,)
+            Waveform at the target (any real signal), m. The energy contrast of any drive
+            that produces it there through the same ``H`` is at most this.
+        """
+        waveform = as_array(waveform, "waveform", ndim=1, shape=(self.n_samples,))
+        return _bound_db(np.fft.rfft(waveform), self.lambda_max, self.n_samples)
+
+
+def _bound_db(U: np.ndarray, lam: np.ndarray, n: int) -> float:
+    w = _parseval_weights(n) * np.abs(U) ** 2
+    target = float(np.sum(w))
+    if target == 0:
+        return float("nan")
+    # Bins carrying a negligible share of the energy (rounding where H vanishes) are left out.
+    reach = w > 1e-15 * target
+    if np.any(reach & (lam <= 0)):
+        return float("-inf")  # the waveform asks for energy where the target cannot move
+    with np.errstate(divide="ignore"):
+        quiet = float(np.sum(np.where(reach, w / np.where(reach, lam, 1.0), 0.0)))
+    return float("inf") if quiet == 0 else float(10 * np.log10(target / quiet))
+
+
+def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
+    """Unregularized ``lambda_max = a^H G^+ a`` (inf where ``a`` leaves ``G``'s range)."""
+    with _single_threaded_blas():
+        mu, V = np.linalg.eigh(G)
+    proj = np.abs(np.einsum("fqk,fq->fk", np.conj(V), np.conj(h))) ** 2  # |v_k^H a|^2
+    mu_max = mu[:, -1:]
+    tol = G.shape[-1] * 1e3 * np.finfo(float).eps * np.where(mu_max > 0, mu_max, 1.0)
+    null = mu <= tol
+    a2 = np.sum(np.abs(h) ** 2, axis=1, keepdims=True)
+    escapes = np.any(null & (proj > 1e-12 * np.maximum(a2, 1e-300)), axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lam = np.sum(np.where(null, 0.0, proj / np.where(null, 1.0, mu)), axis=1)
+    return np.where(escapes, np.inf, lam)
+
+
+def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any) -> np.ndarray:
+    """The quiet points' transfer, (F, n_quiet, n_act), from indices and/or a field H."""
+    parts = []
+    if quiet_indices is not None:
+        q = as_indices(quiet_indices, "quiet_indices", H.shape[1])
+        if np.any(q == target_index):
+            raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
+        parts.append(H[:, q, :])
+    if quiet_H is not None:
+        Hf = as_transfer(quiet_H, "quiet_H")
+        if Hf.shape[0] != H.shape[0] or Hf.shape[2] != H.shape[2]:
+            raise ValidationError(
+                f"quiet_H has shape {Hf.shape} but H has {H.shape}: it must have shape "
+                f"({H.shape[0]}, n_grid, {H.shape[2]}) (same frequencies and actuators)"
+            )
+        parts.append(Hf)
+    if not parts:
+        q = np.delete(np.arange(H.shape[1]), target_index)
+        if q.size == 0:
+            raise ValidationError("H has a single point: there are no quiet points to compare the target with")
+        parts.append(H[:, q, :])
+    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+
+
+def _tap(n: int, fs: float, sigma: float, t0: float | None, band: tuple[float, float], taper_octaves: float,
+         waveform: Any) -> tuple[np.ndarray, np.ndarray]:
+    """(taper, U): the band taper and the spectrum of the band-limited desired waveform."""
+    taper = band_taper(np.fft.rfftfreq(n, 1 / fs), band, taper_octaves)
+    if waveform is None:
+        t0 = n / fs / 2 if t0 is None else t0
+        waveform = ricker(fs, sigma, n / fs, t0)
+    else:
+        waveform = as_array(waveform, "waveform", ndim=1, shape=(n,))
+    return taper, np.fft.rfft(waveform) * taper
+
+
+def contrast_bound(
+    H: Any,
+    target_index: int,
+    quiet_indices: Any = None,
+    band: tuple[float, float] = BAND_HZ,
+    *,
+    fs: float,
+    sigma: float = SIGMA_S,
+    t0: float | None = None,
+    waveform: Any = None,
+    quiet_H: Any = None,
+    taper_octaves: float = 0.5,
+) -> ContrastBound:
+    """Acoustic-contrast bound: the most target energy over quiet-point energy possible.
+
+    Parameters
+    ----------
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    target_index : int
+        Row of ``H`` of the target.
+    quiet_indices : sequence of int, optional
+        Rows of ``H`` whose summed energy is the denominator; default every other row
+        (unless ``quiet_H`` is given, then only its points).
+    band : (float, float)
+        Band of the tap, Hz; the tap is band-limited with :func:`band_taper`.
+    fs : float
+        Sample rate, Hz.
+    sigma, t0
+        Ricker spread and centre of the tap, s (t0 default: mid-window; the bound does
+        not depend on it).
+    waveform : ndarray, shape (n,), optional
+        Desired target waveform instead of the Ricker (band-limited here), m.
+    quiet_H : ndarray, complex, shape (n // 2 + 1, n_grid, n_actuators), optional
+        Transfer to further quiet points, e.g. a dense model-predicted skin grid.
+    taper_octaves : float
+        Taper roll-off, octaves.
+
+    Returns
+    -------
+    ContrastBound
+        ``lambda_max`` per frequency, the exact-tap bound per frequency and broadband.
+    """
+    H = as_transfer(H)
+    fs = check_positive(fs, "fs")
+    n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
+    check_grid(H.shape[0], n, "waveform (n,)")
+    target_index = check_index(target_index, "target_index", H.shape[1], what="points of H")
+    band = check_band(band, fs)
+    taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
+    sigma = check_positive(sigma, "sigma")
+    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
+    taper, U = _tap(n, fs, sigma, t0, band, taper_octaves, waveform)
+    active = taper > 0
+    # Over every bin (not only the band's), so that bound_db_for can weigh any waveform.
+    lam = _exact_lambda(H[:, target_index, :], _gram(Hq))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        quiet_min = np.where(active & (lam > 0), np.abs(U) ** 2 / np.where(lam > 0, lam, 1.0), 0.0)
+    quiet_min = np.where(active & (lam <= 0) & (np.abs(U) > 0), np.inf, quiet_min)
+    best = float(np.max(lam[active])) if active.any() else 0.0
+    return ContrastBound(
+        freqs=np.fft.rfftfreq(n, 1 / fs),
+        lambda_max=lam,
+        tap_spectrum=U,
+        quiet_energy_min=quiet_min,
+        bound_db=_bound_db(U, lam, n),
+        best_db=float(10 * np.log10(best)) if best > 0 else float("-inf"),
+        n_samples=n,
+    )
+
+
+def energy_contrast_db(response: Any, target_index: int, compare_indices: Any = None) -> float:
+    """``10 log10(E_target / sum of E at the compared rows)``, dB (what ACC maximizes).
+
+    Parameters
+    ----------
+    response : ndarray, shape (n_points, n)
+        Displacement, m.
+    target_index : int
+    compare_indices : sequence of int, optional
+        Rows summed in the denominator (the target skipped); default every other row.
+    """
+    response = as_array(response, "response", ndim=2)
+    target_index = check_index(target_index, "target_index", response.shape[0], what="points of response")
+    compare = np.delete(np.arange(response.shape[0]), target_index) if compare_indices is None else \
+        np.asarray(compare_indices, int)
+    compare = compare[compare != target_index]
+    energy = np.sum(response**2, axis=1)
+    return _energy_db(energy[target_index], energy[compare])
+
+
+def _energy_db(target: float, others: np.ndarray) -> float:
+    if others.size == 0 or target == 0:
+        return float("nan")
+    total = float(np.sum(others))
+    return float("inf") if total == 0 else float(10 * np.log10(target / total))
+
+
+def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, taper_octaves, reg_param):
+    H = as_transfer(H)
+    fs = check_positive(fs, "fs")
+    n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
+    check_grid(H.shape[0], n, "waveform (n,)")
+    target_index = check_index(target_index, "target_index", H.shape[1], what="points of H")
+    band = check_band(band, fs)
+    taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
+    reg_param = check_positive(reg_param, "reg_param", allow_zero=True)
+    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
+    taper, U = _tap(n, fs, check_positive(sigma, "sigma"), t0, band, taper_octaves, waveform)
+    active = slice(int(np.flatnonzero(taper > 0)[0]), int(np.flatnonzero(taper > 0)[-1]) + 1)
+    h = H[active, target_index, :]
+    if np.any(np.all(h == 0, axis=1) & (np.abs(U[active]) > 0)):
+        raise ValidationError(
+            f"H is zero from every actuator to the target (point {target_index}) at frequencies inside the band: "
+            "no drive moves it there; recalibrate or narrow the band"
+        )
+    G = _gram(Hq[active])
+    lam, w = acc_filters(h, G, reg_param)
+    return H, n, U, active, lam, w, G
+
+
+def _to_drives(spectra_active: np.ndarray, active: slice, F: int, n: int) -> np.ndarray:
+    spectra = np.zeros((F, spectra_active.shape[1]), complex)
+    spectra[active] = spectra_active
+    return np.fft.irfft(spectra, n, axis=0).T
+
+
+def contrast_drives(
+    H: Any,
+    target_index: int,
+    fs: float,
+    *,
+    quiet_indices: Any = None,
+    quiet_H: Any = None,
+    band: tuple[float, float] = BAND_HZ,
+    sigma: float = SIGMA_S,
+    t0: float | None = None,
+    waveform: Any = None,
+    target_peak: float = 1.0,
+    reg_param: float = DEFAULT_ACC_REG,
+    taper_octaves: float = 0.5,
+) -> np.ndarray:
+    """Acoustic contrast control, phase-aligned into the desired tap at the target.
+
+    Per frequency ``s = w U / lambda`` (module notes): the ACC eigenvector scaled so that
+    the target receives exactly the band-limited tap spectrum ``U``; batched over
+    frequency.
+
+    Parameters
+    ----------
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    target_index : int
+        Row of ``H`` of the target.
+    fs : float
+        Sample rate, Hz.
+    quiet_indices : sequence of int, optional
+        Rows of ``H`` to keep quiet; default every other row (unless ``quiet_H``).
+    quiet_H : ndarray, complex, shape (n // 2 + 1, n_grid, n_actuators), optional
+        Transfer to further quiet points (a dense skin grid).
+    band : (float, float)
+        Design band, Hz.
+    sigma, t0
+        Ricker spread and centre, s (t0 default: mid-window).
+    waveform : ndarray, shape (n,), optional
+        Desired target waveform instead of ``target_peak`` times the Ricker, m.
+    target_peak : float
+        Peak of the Ricker before band-limiting, m.
+    reg_param : float
+        ``delta`` relative to the mean eigenvalue of the quiet Gram matrix.
+    taper_octaves : float
+
+    Returns
+    -------
+    ndarray, real, shape (n_actuators, n)
+        Drives, V, unscaled (the rendering layer applies the drive limit).
+    """
+    if waveform is None:
+        n = 2 * (as_transfer(H).shape[0] - 1)
+        fs_ = check_positive(fs, "fs")
+        waveform = check_positive(target_peak, "target_peak") * ricker(fs_, check_positive(sigma, "sigma"), n / fs_,
+                                                                        n / fs_ / 2 if t0 is None else t0)
+    H, n, U, active, lam, w, _ = _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform,
+                                         taper_octaves, reg_param)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        gain = np.where(lam > 0, U[active] / np.where(lam > 0, lam, 1.0), 0.0)
+    return _to_drives(w * gain[:, None], active, H.shape[0], n)
+
+
+def constrained_drives(
+    H: Any,
+    target_index: int,
+    fs: float,
+    *,
+    contrast_weight: float | None = None,
+    min_contrast_db: float | None = None,
+    quiet_indices: Any = None,
+    quiet_H: Any = None,
+    band: tuple[float, float] = BAND_HZ,
+    sigma: float = SIGMA_S,
+    t0: float | None = None,
+    waveform: Any = None,
+    target_peak: float = 1.0,
+    reg_param: float = DEFAULT_ACC_REG,
+    taper_octaves: float = 0.5,
+    full_output: bool = False,
+) -> np.ndarray | tuple[np.ndarray, dict[str, float]]:
+    """Best target fidelity for a required energy contrast (or a weighted trade-off).
+
+    Per frequency ``s = w U / (lambda + mu)`` (module notes), which puts
+    ``V = U lambda / (lambda + mu)`` at the target: ``mu = 0`` is the exact tap of
+    :func:`contrast_drives`; a larger ``mu`` gives up the frequencies where the array
+    focuses poorly, so the energy contrast rises and the fidelity falls. Give exactly one
+    of ``contrast_weight`` and ``min_contrast_db`` (neither: ``contrast_weight=1``).
+
+    Parameters
+    ----------
+    H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, target_peak, reg_param, taper_octaves
+        As in :func:`contrast_drives`.
+    contrast_weight : float, optional
+        ``mu`` relative to the broadband exact-tap contrast ``lambda_ref`` (linear) of the
+        regularized design, ``mu = contrast_weight * lambda_ref``, >= 0 (0: the exact tap).
+    min_contrast_db : float, optional
+        Required energy contrast, dB: target energy over the summed energy of the quiet
+        points (the exact, unregularized prediction through ``H``). The design takes the
+        least trade-off (the best fidelity) that meets it, searching ``mu`` from 0 to
+        infinity and then the branch beyond (module notes), which ends with all the
+        energy in the band's best bin (contrast ``lambda_max`` there, fidelity near 0).
+    full_output : bool
+        Also return ``{"tradeoff", "energy_contrast_db", "predicted_fidelity"}``
+        (``tradeoff`` in [0, 2]: ``mu / (mu + lambda_ref)`` below 1, the branch beyond above).
+
+    Notes
+    -----
+    The target gets ``V = g U`` with ``g`` normalized so that its energy is the exact
+    tap's; for the best fidelity at a given contrast the KKT conditions of the convex
+    problem in ``|V|^2`` give ``g`` proportional to ``lambda / (lambda + mu)`` for
+    ``mu >= 0`` or to ``lambda / (|mu| - lambda)`` for ``|mu| > lambda_top`` (the branch
+    beyond).
+
+    Returns
+    -------
+    drives : ndarray, real, shape (n_actuators, n)
+        V, unscaled (scale them to the drive limit: neither fidelity nor contrast change).
+    info : dict
+        Only with ``full_output=True``.
+
+    Raises
+    ------
+    ValidationError
+        If ``min_contrast_db`` is beyond what any ``mu`` reaches (the message gives the
+        most reachable).
+    """
+    if contrast_weight is not None and min_contrast_db is not None:
+        raise ValidationError("give contrast_weight or min_contrast_db, not both")
+    if min_contrast_db is None:
+        contrast_weight = 1.0 if contrast_weight is None else check_positive(contrast_weight, "contrast_weight",
+                                                                             allow_zero=True)
+    else:
+        try:
+            min_contrast_db = float(min_contrast_db)
+        except (TypeError, ValueError) as exc:
+            raise ValidationError(f"min_contrast_db must be a number of dB, got {min_contrast_db!r}") from exc
+        if not np.isfinite(min_contrast_db):
+            raise ValidationError(f"min_contrast_db must be finite, got {min_contrast_db!r}")
+    if waveform is None:
+        n = 2 * (as_transfer(H).shape[0] - 1)
+        fs_ = check_positive(fs, "fs")
+        waveform = check_positive(target_peak, "target_peak") * ricker(fs_, check_positive(sigma, "sigma"), n / fs_,
+                                                                        n / fs_ / 2 if t0 is None else t0)
+    H, n, U, active, lam, w, G = _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform,
+                                         taper_octaves, reg_param)
+    Ua = U[active]
+    weight = _parseval_weights(n)[active] * np.abs(Ua) ** 2  # target energy per bin of the exact tap
+    ok = lam > 0
+    safe = np.where(ok, lam, 1.0)
+    # Exact quiet energy per unit target energy along the ACC direction: w^H G w / lambda^2.
+    ratio = np.where(ok, np.einsum("fq,fqk,fk->f", np.conj(w), G, w).real / safe**2, 0.0)
+    weight = np.where(ok, weight, 0.0)
+    lam_ref = float(np.sum(weight) / np.sum(weight / safe))  # broadband exact-tap contrast (regularized)
+
+    lam_top = float(np.max(np.where(weight > 0, safe, 0.0)))
+
+    def gains(p: np.ndarray) -> np.ndarray:
+        """Target gain ``V / U`` per trade-off parameter ``p`` (M,) -> (M, F), normalized
+        to the exact tap's target energy. ``p`` in [0, 1): ``lambda / (lambda + mu)`` with
+        ``mu = lam_ref p / (1 - p)``; ``p`` in [1, 2]: the branch beyond ``mu = inf``,
+        ``lambda / (1 - (1 - q) lambda / lambda_top)`` with ``q = 10^(-30 (p - 1))``, which
+        ends on the best bin alone."""
+        p = p[:, None]
+        lo = safe / (np.minimum(p, 1.0) * lam_ref + (1 - np.minimum(p, 1.0)) * safe)
+        q = 10.0 ** (-30.0 * np.clip(p - 1.0, 0.0, 1.0))
+        hi = safe * lam_top / (lam_ref * ((lam_top - np.minimum(safe, lam_top)) + q * safe))
+        g = np.where(p < 1, lo, hi)
+        g = g * np.sqrt(np.sum(weight) / np.maximum(np.sum(g**2 * weight, axis=1, keepdims=True), 1e-300))
+        return np.where(ok, g, 0.0)
+
+    def contrast_at(p: np.ndarray) -> np.ndarray:
+        """Energy contrast (linear) for each p, shape (M,)."""
+        g2 = gains(p) ** 2 * weight[None, :]
+        return np.sum(g2, axis=1) / np.maximum(np.sum(g2 * ratio[None, :], axis=1), 1e-300)
+
+    if min_contrast_db is None:
+        p_opt = contrast_weight / (contrast_weight + 1.0)
+    else:
+        goal = 10 ** (min_contrast_db / 10)
+        grid = np.linspace(0.0, 2.0, 301)
+        values = contrast_at(grid)
+        meets = np.flatnonzero(values >= goal * (1 + 1e-9))
+        if meets.size == 0:
+            raise ValidationError(
+                f"min_contrast_db={min_contrast_db:g} dB is beyond this array: the constrained design reaches at most "
+                f"{10 * np.log10(values.max()):.2f} dB of energy contrast at point {target_index} over these quiet points"
+            )
+        k = int(meets[0])
+        if k == 0:
+            p_opt = 0.0
+        else:
+            lo, hi = grid[k - 1], grid[k]  # contrast below the goal at lo, at or above it at hi
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                if contrast_at(np.array([mid]))[0] >= goal * (1 + 1e-9):
+                    hi = mid
+                else:
+                    lo = mid
+            p_opt = hi
+    g = gains(np.array([p_opt]))[0]
+    drives = _to_drives(w * np.where(ok, g * Ua / safe, 0.0)[:, None], active, H.shape[0], n)
+    if not full_output:
+        return drives
+    V = g * Ua
+    pw = _parseval_weights(n)[active]
+    fidelity = float(np.sum(pw * (np.conj(Ua) * V).real) / np.sqrt(np.sum(pw * np.abs(Ua) ** 2) * np.sum(pw * np.abs(V) ** 2)))
+    info = {"tradeoff": float(p_opt), "energy_contrast_db": float(10 * np.log10(contrast_at(np.array([p_opt]))[0])),
+            "predicted_fidelity": fidelity}
+    return drives, info
+
+
+def exact_target_spectra(H_active: np.ndarray, target_index: int, others: np.ndarray, U: np.ndarray,
+                         regularization: str | None = None, reg_param: float | None = None) -> np.ndarray:
+    """Drive spectra meeting the target exactly, other control points in least squares.
+
+    ``minimize sum_c |H_c s|^2 subject to h s = U`` per frequency by the null-space
+    method: ``s = s0 - (H_c P)^+ H_c s0`` with ``s0 = h^H U / |h|^2`` and ``P`` the
+    projector onto the null space of ``h`` (so ``h s = U`` whatever the fit of the
+    others). ``(H_c P)^+`` is the batched (regularized) pseudo-inverse of
+    :class:`~vibrofocus.rendering._pinv.SpectralPinv`.
+
+    Parameters
+    ----------
+    H_active : ndarray, complex, shape (F, n_points, n_actuators)
+        Transfer matrix at the design's frequencies.
+    target_index : int
+    others : ndarray of int
+        Control points held at zero in least squares.
+    U : ndarray, complex, shape (F,)
+        Target spectrum.
+    regularization, reg_param
+        Of the least-squares fit of the others (see :class:`InverseOperator`).
+
+    Returns
+    -------
+    ndarray, complex, shape (F, n_actuators)
+    """
+    from ._pinv import SpectralPinv
+
+    h = H_active[:, target_index, :]
+    h2 = np.sum(np.abs(h) ** 2, axis=1)
+    ok = h2 > 0
+    a = np.conj(h) / np.where(ok, h2, 1.0)[:, None]  # h a = 1
+    s0 = a * np.where(ok, U, 0.0)[:, None]
+    if len(others) == 0:
+        return s0
+    Hc = H_active[:, others, :]
+    # H_c P = H_c - (H_c a) h
+    M = Hc - (Hc @ a[:, :, None]) @ h[:, None, :]
+    factors = SpectralPinv.factorize(M, regularization, reg_param)
+    return s0 - factors.apply((Hc @ s0[:, :, None])[:, :, 0])
