@@ -129,7 +129,10 @@ def build_feature_bank(
         rig = make_rig("simulated", seed=pseed)
         layout = rig.layout
         cal = calibrate(rig, participant_id=f"bank-{k:03d}")
-        render = calibration_renderer(cal)
+        # Same drives as simulate-study; a design whose window is too short for the
+        # wrap-around check is kept with a CausalityWarning (the bank needs every cell),
+        # and the contrast bounds (not part of the drives) are not computed.
+        render = calibration_renderer(cal, bounds=False, check_wraparound="warn")
         n_loc = len(layout.locations_xy)
         drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
         centre = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
@@ -166,7 +169,7 @@ def default_bank() -> FeatureBank:
 
 @dataclass(frozen=True)
 class StudyArrays:
-    """Cell means of one simulated study (what the statistics of SPEC §7 need).
+    """Cell means of one simulated study (what the statistics of docs/method.md (Analysis) need).
 
     Attributes
     ----------
