@@ -1,4 +1,4 @@
-"""Speed of ``vibrofocus power``: simulated studies per second (SPEC §6, issue 16).
+"""Speed of ``vibrofocus power``: simulated studies per second (issue 16).
 
 Prints, from one run:
 

@@ -21,6 +21,7 @@ def test_power_writes_table_plot_and_json(tmp_path):
     table = pd.read_csv(out / "power.csv")
     assert set(table["n_participants"]) == {4, 6} and len(table) == 14
     assert table["power"].between(0, 1).all()
+    assert (table["model"].str.contains("not data") & table["model"].str.contains("model v2")).all()
     report = json.loads((out / "power.json").read_text())
     assert report["design"]["n_studies"] == 5 and "not data" in report["label"]
     assert (out / "power.png").stat().st_size > 1000
@@ -31,3 +32,28 @@ def test_power_refuses_bad_input():
     assert res.exit_code != 0 and "n_participants" in res.output
     res = runner.invoke(app, ["power", "-n", "ten", "--no-dask", "-q"])
     assert res.exit_code != 0 and "--participants" in res.output
+
+
+def test_power_checks_the_output_folder_before_simulating(tmp_path, monkeypatch):
+    from tests.cli.test_nothing_half_written import Faults, assert_one_error
+
+    out = tmp_path / "power"
+    out.mkdir()
+    Faults(monkeypatch).read_only(out)
+    calls = []
+    import vibrofocus.studies.power as power
+
+    monkeypatch.setattr(power, "run_power", lambda *a, **k: calls.append(1))
+    res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--out", str(out)])
+    assert_one_error(res, str(out / "power.json"), "read-only")
+    assert calls == [] and list(out.iterdir()) == []
+
+
+def test_power_files_are_whole_or_absent_on_a_full_disk(tmp_path, monkeypatch):
+    from tests.cli.test_nothing_half_written import Faults, assert_one_error, no_temp_files
+
+    out = tmp_path / "power"
+    Faults(monkeypatch).disk_full_on_write(after_bytes=100, only="power.csv")
+    res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--out", str(out)])
+    assert_one_error(res, "power.csv", "no space")
+    assert not (out / "power.csv").exists() and no_temp_files(out) == []

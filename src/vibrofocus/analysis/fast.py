@@ -1,4 +1,4 @@
-"""Vectorized statistics of SPEC §7 for many simulated studies at once (power analysis).
+"""Vectorized statistics of docs/method.md (Analysis) for many simulated studies at once (power analysis).
 
 The report's statistics go through pingouin one study at a time; for power analysis that
 is the bottleneck. These functions compute the same numbers on arrays of cell means,

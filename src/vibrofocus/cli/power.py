@@ -42,7 +42,7 @@ def power_command(
     out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
 ) -> None:
-    """Power of each test of SPEC §7 against the number of participants, by simulation.
+    """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
 
     Studies are simulated with the perceptual MODEL of simulated participants (model v2,
     fitted to the source paper's statistics), not data: the power is that of the model's
@@ -64,7 +64,13 @@ def power_command(
             locations=_ints(locations, "--locations") if locations else None, alpha=alpha, seed=seed,
         )
         if out is not None:
-            out.mkdir(parents=True, exist_ok=True)
+            from .._atomic import check_writable, output_error
+
+            try:
+                out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise output_error(exc, out, "output folder") from exc
+            check_writable(out / "power.json", what="power results")  # before the simulations, not after
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_LABEL}[/]")
         with Progress(
@@ -92,7 +98,12 @@ def power_command(
 
 
 def write_power(result: dict, out: Path) -> list[Path]:
-    """Write power.json, power.csv (the table) and power.png (power against N per test)."""
+    """Write power.json, power.csv (the table) and power.png (power against N per test).
+
+    Each file appears whole or not at all (:mod:`vibrofocus._atomic`) and says it comes
+    from simulated participants: ``label`` in the JSON, a ``model`` column in the CSV,
+    the title of the plot.
+    """
     import json
 
     import matplotlib
@@ -101,25 +112,26 @@ def write_power(result: dict, out: Path) -> list[Path]:
     import matplotlib.pyplot as plt
     import pandas as pd
 
+    from .._atomic import save_figure, write_text
     from ..studies.power import TESTS
 
-    table = pd.DataFrame(result["table"])
-    csv = out / "power.csv"
-    table.to_csv(csv, index=False)
-    js = out / "power.json"
-    js.write_text(json.dumps({k: result[k] for k in ("label", "design", "table", "elapsed_s")}, indent=1))
+    table = pd.DataFrame(result["table"]).assign(model=result["label"])
+    csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")
+    js = write_text(out / "power.json", json.dumps({k: result[k] for k in ("label", "design", "table", "elapsed_s")},
+                                                   indent=1), what="power results")
     fig, ax = plt.subplots(figsize=(7, 4.5))
-    for key, label in TESTS:
-        t = table[table["test"] == key]
-        ax.errorbar(t["n_participants"], t["power"], yerr=t["se"], marker="o", capsize=3, label=label)
-    ax.axhline(0.8, color="grey", lw=0.8, ls="--")
-    ax.set_xlabel("participants N")
-    ax.set_ylabel("power")
-    ax.set_ylim(-0.02, 1.02)
-    ax.set_title(f"Power by simulation — {result['label']}", fontsize=9)
-    ax.legend(fontsize=7, loc="lower right")
-    fig.tight_layout()
-    png = out / "power.png"
-    fig.savefig(png, dpi=120)
-    plt.close(fig)
+    try:
+        for key, label in TESTS:
+            t = table[table["test"] == key]
+            ax.errorbar(t["n_participants"], t["power"], yerr=t["se"], marker="o", capsize=3, label=label)
+        ax.axhline(0.8, color="grey", lw=0.8, ls="--")
+        ax.set_xlabel("participants N")
+        ax.set_ylabel("power")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_title(f"Power by simulation — {result['label']}", fontsize=9)
+        ax.legend(fontsize=7, loc="lower right")
+        fig.tight_layout()
+        png = save_figure(fig, out / "power.png", what="power plot", dpi=120)
+    finally:
+        plt.close(fig)
     return [js, csv, png]

@@ -4,7 +4,7 @@ For a design (participants N, repetitions, methods, locations) and the perceptua
 (its effect sizes are those of the model v2 as fitted, see
 ``docs/simulated-participants.md``), many studies are simulated per N with the fast path
 (:func:`~vibrofocus.studies.bank.simulate_cell_means`) and analysed with the vectorized
-statistics (:mod:`vibrofocus.analysis.fast`); the power of each test of SPEC §7 is the
+statistics (:mod:`vibrofocus.analysis.fast`); the power of each test of docs/method.md (Analysis) is the
 share of studies in which it is significant. Simulated participants: a model, not data.
 
 Every study ``j`` of sample size ``N`` draws from its own generator
@@ -27,7 +27,7 @@ from .perception import MODEL_LABEL, PerceptualModel
 
 __all__ = ["TESTS", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
 
-#: The tests of SPEC §7 whose power is reported: (key, description).
+#: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
     ("s1_location", "Study 1 RM-ANOVA, location (GG)"),
     ("s1_method", "Study 1 RM-ANOVA, method (GG)"),
@@ -99,7 +99,7 @@ def _paired_t_p(x: np.ndarray, y: np.ndarray) -> np.ndarray:
 
 
 def study_statistics(arrays: StudyArrays, alpha: float = 0.05) -> dict[str, Any]:
-    """The statistics of SPEC §7 for one simulated study (fast path).
+    """The statistics of docs/method.md (Analysis) for one simulated study (fast path).
 
     Returns
     -------
