@@ -8,7 +8,10 @@ against every calibrated point, energy contrast against the other locations besi
 exact-tap bound, peak contrast against a dense skin grid (model-predicted), the target's
 peak displacement and the peak drive. Prints a markdown table.
 
-Usage: python scripts/compare_render_defaults.py [--seeds 0 1 2 3 4] [--n 4096]
+Usage: python scripts/compare_render_defaults.py [--seeds 0 1 2 3] [--n 4096] [--readme]
+
+``--readme`` also writes the table into README.md between its ``compare-table`` markers
+(atomically).
 """
 
 from __future__ import annotations
@@ -17,14 +20,17 @@ import argparse
 import time
 import warnings
 
+from pathlib import Path
+
 import numpy as np
 
 from vibrofocus import SimulatedForearm, render
+from vibrofocus._atomic import write_text
 from vibrofocus.rendering.inverse import predict_response
 
 CANDIDATES = [
-    ("inverse, guard_weight 0.1 (default)", "inverse", {"guard_weight": 0.1}),
-    ("inverse, guard_weight 1 (paper)", "inverse", {"guard_weight": 1.0}),
+    ("inverse, guard_weight 0.1", "inverse", {"guard_weight": 0.1}),
+    ("inverse, guard_weight 1 (paper; default)", "inverse", {"guard_weight": 1.0}),
     ("contrast (ACC, all points)", "contrast", {}),
     ("contrast (ACC, locations)", "contrast", {"control": "locations"}),
     ("constrained, weight 0.3", "constrained", {"contrast_weight": 0.3}),
@@ -34,6 +40,7 @@ CANDIDATES = [
     ("combination", "combination", {}),
     ("time reversal", "time_reversal", {}),
 ]
+START, END = "<!-- compare-table:start -->", "<!-- compare-table:end -->"
 COLUMNS = ("fidelity", "contrast_db", "contrast_all_db", "energy_contrast_db", "bound_db", "contrast_field_db",
            "target_peak_m", "peak_drive_v")
 
@@ -43,6 +50,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--n", type=int, default=4096, help="design window, samples")
     parser.add_argument("--grid-mm", type=float, default=4.0, help="pitch of the dense skin grid, mm")
+    parser.add_argument("--readme", action="store_true", help="write the table into README.md")
     args = parser.parse_args()
     start = time.perf_counter()
     results: dict[str, list[dict]] = {label: [] for label, _, _ in CANDIDATES}
@@ -75,15 +83,23 @@ def main() -> None:
           "bound (no drive that puts the tap at the target does better; designs that give up fidelity change the "
           "target's waveform and may pass it). Fidelity is against the tap at t0 (funneling and combination "
           "arrive late and score near 0 there).\n")
-    header = ["candidate", "fidelity", "contrast vs locations", "contrast (all points)", "energy contrast",
-              "bound", "contrast vs skin grid", "target peak µm", "peak drive V"]
-    print("| " + " | ".join(header) + " |")
-    print("|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|")
+    header = ["candidate", "fidelity", "contrast vs locations dB", "contrast vs all points dB", "energy contrast dB",
+              "bound dB", "contrast vs skin grid dB", "target peak µm", "peak drive V"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|"]
     for label, rows in results.items():
         med = {k: float(np.median([row[k] for row in rows])) for k in COLUMNS}
-        print(f"| {label} | {med['fidelity']:.3f} | {med['contrast_db']:.1f} | {med['contrast_all_db']:.1f} | "
-              f"{med['energy_contrast_db']:.1f} | {med['bound_db']:.1f} | {med['contrast_field_db']:.1f} | "
-              f"{med['target_peak_m'] * 1e6:.3f} | {med['peak_drive_v']:.1f} |")
+        lines.append(f"| {label} | {med['fidelity']:.2f} | {med['contrast_db']:.1f} | {med['contrast_all_db']:.1f} | "
+                     f"{med['energy_contrast_db']:.1f} | {med['bound_db']:.1f} | {med['contrast_field_db']:.1f} | "
+                     f"{med['target_peak_m'] * 1e6:.3f} | {med['peak_drive_v']:.1f} |")
+    table = "\n".join(lines)
+    print(table)
+    if args.readme:
+        readme = Path(__file__).resolve().parent.parent / "README.md"
+        text = readme.read_text(encoding="utf-8")
+        head, rest = text.split(START, 1)
+        tail = rest.split(END, 1)[1]
+        write_text(readme, f"{head}{START}\n{table}\n{END}{tail}")
+        print(f"wrote the table into {readme}")
     print(f"\n({elapsed:.0f} s)")
 
 

@@ -5,6 +5,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from vibrofocus.defaults import METHODS
 from vibrofocus.demo.sensitivity import attenuation_sensitivity
 
 PAGE = Path(__file__).resolve().parents[2] / "docs" / "skin-model.md"
@@ -21,14 +22,16 @@ def _documented_rows() -> list[list[str]]:
 def test_documented_sensitivity_table_is_recomputed_by_the_code():
     documented = _documented_rows()
     computed = attenuation_sensitivity()
-    assert len(documented) == len(computed) == 12
+    assert len(documented) == len(computed) == 3 * len(METHODS)
     for doc, row in zip(documented, computed):
         assert doc[0] == row["law"] and doc[3] == row["method"]
         # each printed number equals the computed one to its printed precision
         for cell, value, half_unit in (
             (doc[1], row["c250_m_s"], 0.005), (doc[2], row["alpha250_np_m"], 0.5),
             (doc[4], row["fidelity"], 0.005), (doc[5], row["contrast_db"], 0.05),
-            (doc[6], row["contrast_all_points_db"], 0.05), (doc[7], 1e6 * row["target_peak_m"], 0.0005),
+            (doc[6], row["contrast_all_points_db"], 0.05), (doc[7], row["predicted_energy_contrast_db"], 0.05),
+            (doc[8], row["bound_own_db"], 0.05), (doc[9], row["bound_db"], 0.05),
+            (doc[10], 1e6 * row["target_peak_m"], 0.0005),
         ):
             assert abs(float(cell) - value) <= half_unit * 1.001 + 1e-12, (doc, row)
 
@@ -41,3 +44,9 @@ def test_attenuation_ends_bracket_the_nominal_law():
     # More attenuation, less of the tap reaches the target for the same design.
     fidelity = np.array([r["fidelity"] for r in rows])
     assert fidelity[0] > fidelity[2]
+
+
+def test_no_method_beats_the_bound_for_its_own_waveform():
+    rows = attenuation_sensitivity(methods=("inverse", "contrast"))
+    for r in rows:
+        assert r["predicted_energy_contrast_db"] <= r["bound_own_db"] + 1e-6, r

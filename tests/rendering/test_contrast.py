@@ -15,7 +15,8 @@ from vibrofocus.rendering import (
     energy_contrast_db,
     generalized_eigh_max,
 )
-from vibrofocus.rendering.contrast import acc_filters
+from vibrofocus.rendering.causality import wraparound_fraction
+from vibrofocus.rendering.contrast import acc_filters, exact_target_spectra
 
 from ._media import FS, layout_medium
 
@@ -211,6 +212,39 @@ def test_combination_reaches_exactly_the_funneling_displacement(quiet_forearm):
     assert_allclose(scaled.predicted[4], scaled.scale * own.predicted[4], rtol=1e-9, atol=1e-12 * np.abs(own.predicted[4]).max())
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_exact_target_spectra_solve_the_constrained_least_squares_problem(seed):
+    # Independent reference: the KKT system of min |H_c s|^2 subject to h s = U, solved
+    # directly per frequency.
+    rng = np.random.default_rng(seed)
+    n_freqs, n_act = 6, 4
+    H = rng.standard_normal((n_freqs, 5, n_act)) + 1j * rng.standard_normal((n_freqs, 5, n_act))
+    U = rng.standard_normal(n_freqs) + 1j * rng.standard_normal(n_freqs)
+    others = np.array([1, 2, 3, 4])
+    got = exact_target_spectra(H, 0, others, U)
+    for f in range(n_freqs):
+        h, Hc = H[f, 0], H[f, others]
+        kkt = np.zeros((n_act + 1, n_act + 1), complex)
+        kkt[:n_act, :n_act] = Hc.conj().T @ Hc
+        kkt[:n_act, n_act] = h.conj()
+        kkt[n_act, :n_act] = h
+        rhs = np.zeros(n_act + 1, complex)
+        rhs[n_act] = U[f]
+        assert_allclose(got[f], np.linalg.solve(kkt, rhs)[:n_act], rtol=1e-9, atol=1e-12)
+        assert_allclose(h @ got[f], U[f], rtol=1e-12)
+
+
+@pytest.mark.parametrize("seed", [0, 2])
+def test_the_combination_fits_the_design_window_at_every_location(seed):
+    # A rank-deficient null-space projection once turned a numerically zero singular
+    # value into a tone filling the whole window (seed 0, location 9).
+    rig = SimulatedForearm(seed=seed)
+    H = rig.transfer(rig.layout.points_xy, np.fft.rfftfreq(4096, 1 / rig.fs))
+    for loc in rig.layout.location_numbers:
+        r = render("combination", H, rig.fs, rig.layout, loc, bounds=False, check_wraparound=False)
+        assert wraparound_fraction(r.drives, H) < 1e-6, loc
+
+
 def test_the_paper_combination_is_one_keyword_away(quiet_forearm):
     rig, n, H = quiet_forearm
     paper = render("combination", H, rig.fs, rig.layout, 5, exact_target=False, guard_weight=1.0, scale_to_limit=False)
@@ -242,3 +276,20 @@ def test_bad_input():
         render("contrast", H, FS, REF, 1, n_samples=N, contrast_weight=1.0)
     with pytest.raises(ValidationError, match="quiet_H"):
         contrast_drives(H, 0, FS, quiet_H=H[:-1])
+
+
+def test_a_contrast_design_from_a_noisy_transfer_is_tapered_to_fit_the_window(quiet_forearm):
+    rig, n, H = quiet_forearm
+    rng = np.random.default_rng(5)
+    # Measurement noise 40 dB under the largest path, the level of a simulated calibration.
+    scale = 1e-2 * np.abs(H).max()
+    noisy = H + scale * (rng.standard_normal(H.shape) + 1j * rng.standard_normal(H.shape)) / np.sqrt(2)
+    noisy[0] = noisy[0].real
+    noisy[-1] = noisy[-1].real
+    raw = render("contrast", noisy, rig.fs, rig.layout, 5, check_wraparound=False, bounds=False)
+    assert wraparound_fraction(raw.drives, noisy) > 1e-3  # the case the taper is for
+    fitted = render("contrast", noisy, rig.fs, rig.layout, 5, bounds=False)
+    assert fitted.wraparound_fraction <= 1e-3
+    raw_m, fitted_m = raw.metrics(), fitted.metrics()
+    assert abs(fitted_m["energy_contrast_db"] - raw_m["energy_contrast_db"]) < 0.5
+    assert fitted_m["fidelity"] > raw_m["fidelity"] - 0.01

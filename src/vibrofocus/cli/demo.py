@@ -7,6 +7,7 @@ import math
 from pathlib import Path
 
 import typer
+from rich import box
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
@@ -40,6 +41,7 @@ def demo_command(
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Write the PNG figures."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (results and summary) and nothing else."),
     location: int = typer.Option(5, "--field-location", help="Location shown in the focused-field figure."),
+    per_location: bool = typer.Option(False, "--per-location", help="Also print one row per location and method."),
     design_from: str = typer.Option(
         "calibration", "--design-from",
         help="Design from a calibration measured first ('calibration', as a user would) or from the "
@@ -139,34 +141,37 @@ def demo_command(
                 f"{100 * calibration_info['median_relative_error']:.1f} %"
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
-        table = Table(title=f"Focus metrics, designed from {source}, measured on the arm (noise on)")
-        table.caption = ("every method scaled to the same peak drive (the drive limit); contrast: against the other "
-                         "locations; all points: against every calibrated point; energy: energy contrast against the "
-                         "other locations; bound: the most energy contrast any drive giving the tap reaches (predicted)")
-        for col in ("loc", "method", "fidelity", "shape", "contrast dB", "all points dB", "energy dB", "bound dB",
-                    "drive V", "target µm"):
-            table.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
-        for row in result.rows:
-            table.add_row(
-                str(row["location"]), row["method"], _fmt(row["fidelity"]), _fmt(row["shape_fidelity"]),
-                _fmt(row["contrast_db"], 1), _fmt(row["contrast_all_points_db"], 1), _fmt(row["energy_contrast_db"], 1),
-                _fmt(row["bound_db"], 1), _fmt(row["peak_drive_v"], 1), _fmt(row["target_peak_m"] * 1e6, 3),
-            )
-        console.print(table)
-        med = Table(
-            title="Median over locations",
-            caption="fidelity: correlation with the desired tap at its time; shape: at the best lag "
-            "(funneling arrives late)",
-        )
-        for col in ("method", "fidelity", "shape", "contrast dB", "all points dB", "energy dB", "bound dB",
-                    "target µm", "drive V"):
+        legend = ("All methods at the same peak drive (the drive limit). fid: correlation with the tap at its "
+                  "time; shape: at the best lag (funneling arrives late); contrast: peak at the target over the "
+                  "largest at the other locations; all pts: over every calibrated point; energy: energy contrast "
+                  "against the other locations; bound: the most energy contrast any drive that gives the tap "
+                  "reaches there.")
+        columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB", "target\nµm", "drive\nV")
+
+        def metric_cells(values: dict) -> list[str]:
+            return [_fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
+                    _fmt(values["contrast_all_points_db"], 1), _fmt(values["energy_contrast_db"], 1),
+                    _fmt(values["bound_db"], 1), _fmt(values["target_peak_m"] * 1e6, 3),
+                    _fmt(values["peak_drive_v"], 1)]
+
+        if per_location:
+            table = Table(title=f"Per location, designed from {source}, measured on the arm (noise on)",
+                          box=box.SIMPLE_HEAD, collapse_padding=True, pad_edge=False)
+            for col in ("loc", "method", *columns):
+                table.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
+            for row in result.rows:
+                table.add_row(str(row["location"]), row["method"], *metric_cells(row))
+            console.print(table)
+        med = Table(title=f"Median over locations, designed from {source}, measured on the arm (noise on)",
+                    box=box.SIMPLE_HEAD, collapse_padding=True, pad_edge=False)
+        for col in ("method", *columns):
             med.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
         for method, values in summary.items():
-            med.add_row(method, _fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
-                        _fmt(values["contrast_all_points_db"], 1), _fmt(values["energy_contrast_db"], 1),
-                        _fmt(values["bound_db"], 1), _fmt(values["target_peak_m"] * 1e6, 3),
-                        _fmt(values["peak_drive_v"], 1))
+            med.add_row(method, *metric_cells(values))
         console.print(med)
+        console.print(legend, style="dim")
+        if not per_location:
+            console.print("Per location: --per-location, --json, or the metrics figure.", style="dim")
         for path in paths:
             console.print(f"wrote {path}")
 

@@ -181,6 +181,7 @@ def run_demo(
                 energy_contrast_db=float(measured["energy_contrast_db"]),
                 predicted_energy_contrast_db=float(predicted["energy_contrast_db"]),
                 bound_db=float(predicted.get("bound_db", np.nan)),
+                bound_own_db=float(predicted.get("bound_own_db", np.nan)),
                 predicted_fidelity=float(predicted["fidelity"]),
                 predicted_contrast_db=float(predicted["contrast_db"]),
                 scale=float(rendering.scale),

@@ -17,7 +17,8 @@ from ..defaults import METHODS
 
 __all__ = ["attenuation_sensitivity", "sensitivity_markdown"]
 
-_COLUMNS = ("fidelity", "contrast_db", "contrast_all_points_db", "target_peak_m")
+_COLUMNS = ("fidelity", "contrast_db", "contrast_all_points_db", "predicted_energy_contrast_db", "bound_own_db", "bound_db",
+            "target_peak_m")
 
 
 def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
@@ -36,8 +37,11 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
     list of dict
         One per (law, method): ``law``, ``c250_m_s``, ``alpha250_np_m``, ``method`` and
         the medians over the locations of ``fidelity``, ``contrast_db`` (against the
-        other locations), ``contrast_all_points_db`` (against every calibrated point)
-        and ``target_peak_m``.
+        other locations), ``contrast_all_points_db`` (against every calibrated point),
+        ``predicted_energy_contrast_db`` (target energy over the other locations', in
+        the design window), ``bound_own_db`` (the most any drive allows for the
+        waveform the method delivers at the target), ``bound_db`` (the same for the
+        asked tap) and ``target_peak_m`` (every method at the same 10 V peak drive).
     """
     from ..skin import ForearmParameters, SimulatedForearm
     from ..skin.parameters import attenuation_range_laws
@@ -62,12 +66,14 @@ def sensitivity_markdown(rows: Sequence[dict]) -> str:
     """The rows of :func:`attenuation_sensitivity` as a Markdown table."""
     lines = [
         "| attenuation | c(250 Hz) m/s | α(250 Hz) Np/m | method | fidelity | contrast vs locations dB "
-        "| contrast vs all points dB | target peak µm |",
-        "|---|---|---|---|---|---|---|---|",
+        "| contrast vs all points dB | energy contrast dB | bound, own waveform dB | bound, tap dB "
+        "| target peak µm |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
             f"| {r['law']} | {r['c250_m_s']:.2f} | {r['alpha250_np_m']:.0f} | {r['method']} | {r['fidelity']:.2f} "
-            f"| {r['contrast_db']:.1f} | {r['contrast_all_points_db']:.1f} | {1e6 * r['target_peak_m']:.3f} |"
+            f"| {r['contrast_db']:.1f} | {r['contrast_all_points_db']:.1f} | {r['predicted_energy_contrast_db']:.1f} "
+            f"| {r['bound_own_db']:.1f} | {r['bound_db']:.1f} | {1e6 * r['target_peak_m']:.3f} |"
         )
     return "\n".join(lines)
