@@ -1,172 +1,251 @@
-"""Fit the free parameters of the perceptual model v2 to the paper's published statistics.
+#!/usr/bin/env python
+"""Fit the perceptual model v2 of the simulated participants to the paper; write its tables.
 
-The simulated participants are a MODEL, not data. This script fits the parameters marked
-*fitted* in ``vibrofocus.studies.perception.PerceptualModel`` to the statistics of
-de Vlam et al. (IEEE ToH 16(4), 2023) as listed in ``studies/data/psychophysics.json``
-(``paper_statistics``), by a seeded random search followed by a local refinement on the
-fast path (feature bank + vectorized statistics), then writes the side-by-side table
-(paper vs. the model's median and 90 % interval over many simulated 20-participant
-studies) for ``docs/simulated-participants.md``.
+Simulated participants are a MODEL, not data. The parameters marked *fitted* in
+:class:`vibrofocus.studies.perception.PerceptualModel` are fitted to the statistics of
+de Vlam et al. (IEEE ToH 16(4), 2023) kept in ``studies/data/psychophysics.json``
+(``paper_statistics``): a seeded random search, then a local refinement, each candidate
+judged on the same simulated 20-participant studies (seeds 1000.., fast path: feature
+bank + vectorized statistics; common random numbers make candidates comparable). The
+loss is the sum of squared log ratios of the model's median F / chi2 / GG epsilon to the
+paper's, hinge terms that keep the target-containing Study 2 tests at their null size,
+and terms for the best locations (4, 5, 7, 8) and the interaction's locations (1, 3, 9).
 
-    PYTHONPATH=src python scripts/fit_participants.py search --n-eval 150 --out fit.json
-    PYTHONPATH=src python scripts/fit_participants.py table --seeds 50
+    PYTHONPATH=src python scripts/fit_participants.py search --out fit.json   # ~7 min on one core
+    PYTHONPATH=src python scripts/fit_participants.py report [--fit fit.json]
+    PYTHONPATH=src python scripts/fit_participants.py table [--seeds 20] [--check]
 
-``table`` evaluates the model as it is in the code (the defaults of ``PerceptualModel``).
+``search`` prints each improvement, then the paper beside the best model and the
+residuals; its result goes into the defaults of ``PerceptualModel`` by hand (rounded).
+``report`` prints the same for the defaults (or a fit file) on the table's seeds.
+``table`` evaluates the defaults on seeds 0..N-1 and writes the side-by-side table between
+the ``participants-table`` markers of ``docs/simulated-participants.md`` and its short
+version into README.md (atomically); ``--check`` only compares.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-from vibrofocus.studies.bank import default_bank, simulate_cell_means
-from vibrofocus.studies.perception import MODEL_LABEL, PerceptualModel, psychophysics_data
-from vibrofocus.studies.power import study_statistics
+from vibrofocus._atomic import write_text
+from vibrofocus.studies.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, compare, comparison_markdown, seed_statistics
+from vibrofocus.studies.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
 
-N_PARTICIPANTS = 20
-BEST = np.array([4, 5, 7, 8]) - 1
-INTERACTION = np.array([1, 3, 9]) - 1
-CHI2_CRIT = {8: 15.507, 2: 5.991}
-
-
-def evaluate(model: PerceptualModel, seeds, n: int = N_PARTICIPANTS) -> list[dict]:
-    bank = default_bank()
-    return [study_statistics(simulate_cell_means(n, np.random.default_rng([int(s), 16]), bank=bank, model=model))
-            for s in seeds]
+ROOT = Path(__file__).resolve().parent.parent
+PAGES = {"docs": ROOT / "docs" / "simulated-participants.md", "readme": ROOT / "README.md"}
+FIT_SEEDS = range(1000, 1016)  # the tables use seeds 0..
 
 
-def loss(stats: list[dict]) -> float:
-    paper = psychophysics_data()["paper_statistics"]
-    med = lambda k: float(np.nanmedian([s[k] for s in stats]))  # noqa: E731
-    terms = [
-        np.log(max(med("s1_location_F"), 1e-3) / paper["study1_location"]["F"]) ** 2,
-        np.log(max(med("s1_method_F"), 1e-3) / paper["study1_method"]["F"]) ** 2,
-        np.log(max(med("s1_interaction_F"), 1e-3) / paper["study1_interaction"]["F"]) ** 2,
-        np.log(max(med("s2_location_chi2"), 1e-3) / paper["study2_location"]["chi2"]) ** 2,
-        np.log(med("s1_location_eps") / (paper["study1_location"]["ddof1"] / 8)) ** 2,
-        max(0.0, np.log(max(med("s2_hit_location_chi2"), 1e-3) / CHI2_CRIT[8])) ** 2,
-        max(0.0, np.log(max(med("s2_hit_method_chi2"), 1e-3) / CHI2_CRIT[2])) ** 2,
+def targets() -> list[tuple[str, str, float]]:
+    """(statistic key, label, paper value) of the numbers the fit matches."""
+    p = psychophysics_data()["paper_statistics"]
+    return [
+        ("s1_location_F", "Study 1 location F", p["study1_location"]["F"]),
+        ("s1_location_eps", "Study 1 location GG epsilon", p["study1_location"]["ddof1"] / 8.0),
+        ("s1_method_F", "Study 1 method F", p["study1_method"]["F"]),
+        ("s1_interaction_F", "Study 1 interaction F", p["study1_interaction"]["F"]),
+        ("s2_location_chi2", "Study 2 location chi2(8)", p["study2_location"]["chi2"]),
     ]
+
+
+#: Target-containing Study 2 tests: not significant in the paper; held at most at the null
+#: mean of their chi2 (its degrees of freedom).
+NULL_MEANS = (("s2_hit_location_chi2", 8.0), ("s2_hit_method_chi2", 2.0))
+
+
+def _median(stats: list[dict], key: str) -> float:
+    v = np.array([s[key] for s in stats], dtype=float)
+    return float(np.median(v[np.isfinite(v)])) if np.isfinite(v).any() else float("nan")
+
+
+def loss(stats: list[dict], weights: dict[str, float] | None = None) -> float:
+    """Fit loss of the studies ``stats`` (see the module docstring); inf if undefined.
+
+    ``weights``: factors of the squared log ratios, by statistic key (default 1).
+    """
+    w = weights or {}
+    terms = [w.get(k, 1.0) * np.log(max(_median(stats, k), 1e-3) / v) ** 2 for k, _, v in targets()]
+    terms += [max(0.0, np.log(max(_median(stats, k), 1e-3) / null)) ** 2 for k, null in NULL_MEANS]
     err_loc = np.mean([s["s1_error_by_location"] for s in stats], axis=0)
-    ranks = np.argsort(np.argsort(err_loc))  # 0 = best
-    terms.append(4.0 * ((ranks[BEST].mean() - 1.5) / 3.0) ** 2)
-    share = np.mean([np.isin(INTERACTION, s["s1_interaction_locations"]).mean() for s in stats])
+    ranks = np.argsort(np.argsort(err_loc))  # 0 = lowest mean error
+    terms.append(4.0 * ((ranks[BEST_LOCATIONS].mean() - 1.5) / 3.0) ** 2)
+    share = np.mean([np.isin(INTERACTION_LOCATIONS, s["s1_interaction_locations"]).mean() for s in stats])
     terms.append(0.25 * (1.0 - share) ** 2)
-    return float(np.sum(terms))
+    total = float(np.sum(terms))
+    return total if np.isfinite(total) else float("inf")
+
+
+def residuals(stats: list[dict]) -> str:
+    """The paper's numbers beside the model's medians, with the residuals, as text."""
+    lines = [f"{'statistic':34s} {'paper':>8s} {'model':>8s} {'model-paper':>12s} {'log ratio':>10s}"]
+    for k, label, v in targets():
+        m = _median(stats, k)
+        lines.append(f"{label:34s} {v:8.2f} {m:8.2f} {m - v:12.2f} {np.log(m / v):10.3f}")
+    for k, null in NULL_MEANS:
+        m = _median(stats, k)
+        ns = np.mean([s[k.replace('_chi2', '_p')] >= 0.05 for s in stats])
+        lines.append(f"{k + ' (paper: n.s.)':34s} {'n.s.':>8s} {m:8.2f} {'':12s} {'':10s} n.s. in {ns:.0%}")
+    err_loc = np.mean([s["s1_error_by_location"] for s in stats], axis=0)
+    best = np.sort(np.argsort(err_loc)[:4]) + 1
+    lines.append(f"{'best locations':34s} {'4,5,7,8':>8s} {','.join(map(str, best)):>8s}   mean error by location (mm): "
+                 + " ".join(f"{e:.1f}" for e in err_loc))
+    share = np.mean([np.isin(INTERACTION_LOCATIONS, s["s1_interaction_locations"]).mean() for s in stats])
+    lines.append(f"{'interaction post hoc at 1, 3, 9':34s} {'1,3,9':>8s} {share:8.0%} (share found)")
+    lines.append(f"loss {loss(stats):.4f} over {len(stats)} studies")
+    return "\n".join(lines)
 
 
 def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale: float = 1.0) -> PerceptualModel:
+    """A candidate: drawn from broad ranges (``base`` None) or jittered around ``base``."""
     if base is None:
         lo_a, lo_p, lo_k = rng.uniform(3e-3, 12e-3), rng.uniform(5e-3, 25e-3), rng.uniform(0.05, 0.6)
         return PerceptualModel().replace(
-            sl_ref_db=rng.uniform(15, 40), funneling_exponent=rng.uniform(0.2, 1.0),
+            sl_ref_db=rng.uniform(10, 45), funneling_exponent=rng.uniform(0.2, 1.0),
             acuity_sd_m=(lo_a, lo_a * rng.uniform(1.2, 2.0)), spread_gain=tuple(sorted(rng.uniform(0, 2, 2))),
             prior_sd_m=(lo_p, lo_p * rng.uniform(1.2, 2.0)),
             bias_mean_m=(rng.uniform(-8e-3, 8e-3), rng.uniform(-8e-3, 0.0)), bias_sd_m=rng.uniform(0, 4e-3),
             select_kappa=(lo_k, min(lo_k + rng.uniform(0.1, 0.4), 0.99)), select_log_sd=rng.uniform(0.1, 1.0),
         )
-    j = lambda v, s: v * np.exp(rng.normal(0, 0.15 * scale * s))  # noqa: E731
+
+    def jit(v: float) -> float:
+        return float(v * np.exp(rng.normal(0, 0.15 * scale)))
+
     b = base
     return b.replace(
         sl_ref_db=float(np.clip(b.sl_ref_db + rng.normal(0, 2 * scale), 5, 50)),
-        funneling_exponent=float(np.clip(j(b.funneling_exponent, 1), 0.05, 1.5)),
-        acuity_sd_m=tuple(float(j(v, 1)) for v in b.acuity_sd_m), spread_gain=tuple(sorted(float(abs(j(v + 1e-3, 1))) for v in b.spread_gain)),
-        prior_sd_m=tuple(float(j(v, 1)) for v in b.prior_sd_m),
+        funneling_exponent=float(np.clip(jit(b.funneling_exponent), 0.05, 1.5)),
+        acuity_sd_m=tuple(sorted(jit(v) for v in b.acuity_sd_m)),
+        spread_gain=tuple(sorted(abs(jit(v + 1e-3)) for v in b.spread_gain)),
+        prior_sd_m=tuple(sorted(jit(v) for v in b.prior_sd_m)),
         bias_mean_m=(float(b.bias_mean_m[0] + rng.normal(0, 1.5e-3 * scale)),
                      float(min(0.0, b.bias_mean_m[1] + rng.normal(0, 1.5e-3 * scale)))),
         bias_sd_m=float(abs(b.bias_sd_m + rng.normal(0, 5e-4 * scale))),
-        select_kappa=tuple(float(np.clip(j(v, 1), 0.01, 0.99)) for v in b.select_kappa),
-        select_log_sd=float(j(b.select_log_sd, 1)),
+        select_kappa=tuple(sorted(float(np.clip(jit(v), 0.01, 0.99)) for v in b.select_kappa)),
+        select_log_sd=jit(b.select_log_sd),
     )
 
 
-def search(n_eval: int, n_refine: int, seeds: int, out: Path, start: Path | None = None, rng_seed: int = 2023) -> None:
+def _load(path: Path | None) -> PerceptualModel:
+    if path is None:
+        return PerceptualModel()
+    return PerceptualModel().replace(**json.loads(path.read_text(encoding="utf-8"))["model"])
+
+
+def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: int,
+           weights: dict[str, float]) -> PerceptualModel:
     rng = np.random.default_rng(rng_seed)
-    fit_seeds = range(1000, 1000 + seeds)  # the table uses other seeds (0..)
-    best = PerceptualModel()
-    if start is not None:
-        best = best.replace(**json.loads(start.read_text())["model"])
-    best_loss = loss(evaluate(best, fit_seeds))
+    best = _load(start)
+    best_loss = loss(seed_statistics(best, FIT_SEEDS), weights)
+    print(f"start: loss {best_loss:.4f}", flush=True)
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
         cand = sample(rng) if i < n_eval else sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1))
-        try:
-            val = loss(evaluate(cand, fit_seeds))
-        except Exception as exc:  # a degenerate candidate (e.g. nothing felt): skip it
-            print(f"{i}: skipped ({exc})")
-            continue
+        val = loss(seed_statistics(cand, FIT_SEEDS), weights)
         if val < best_loss:
             best, best_loss = cand, val
-            print(f"{i}: loss {val:.4f} {time.perf_counter() - t0:.0f}s {json.dumps(cand.to_dict())}", flush=True)
-    out.write_text(json.dumps({"loss": best_loss, "model": best.to_dict()}, indent=1))
-    print(f"best loss {best_loss:.4f} -> {out}")
+            print(f"{i}: loss {val:.4f} ({time.perf_counter() - t0:.0f} s) {json.dumps(cand.to_dict())}", flush=True)
+    write_text(out, json.dumps({"loss": best_loss, "weights": weights, "fit_seeds": [FIT_SEEDS.start, FIT_SEEDS.stop],
+                                "model": best.to_dict()}, indent=1), what="fit")
+    print(f"best loss {best_loss:.4f} after {n_eval + n_refine} candidates ({time.perf_counter() - t0:.0f} s) -> {out}")
+    return best
 
 
-def _fmt(values, digits=2) -> str:
-    v = np.asarray(values, dtype=float)
-    v = v[np.isfinite(v)]
-    q = np.percentile(v, [50, 5, 95])
-    return f"{q[0]:.{digits}f} [{q[1]:.{digits}f}, {q[2]:.{digits}f}]"
+def replace_between_markers(text: str, name: str, block: str, page: Path) -> str:
+    """``text`` with ``block`` between the ``<!-- name:start -->`` / ``<!-- name:end -->`` markers."""
+    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
+    if start not in text or end not in text:
+        raise SystemExit(f"{page} has no {start} ... {end} markers")
+    head, rest = text.split(start, 1)
+    _, tail = rest.split(end, 1)
+    return f"{head}{start}\n{block}\n{end}{tail}"
 
 
-def table(seeds: int) -> str:
-    stats = evaluate(PerceptualModel(), range(seeds))
-    paper = psychophysics_data()["paper_statistics"]
-    sig = lambda k: np.mean([s[k] < 0.05 for s in stats])  # noqa: E731
-    err_loc = np.array([s["s1_error_by_location"] for s in stats])
-    ranks = np.argsort(np.argsort(err_loc, axis=1), axis=1)
-    best4 = np.mean([set(np.argsort(e)[:4]) == set(BEST) for e in err_loc])
-    best_in = np.mean(ranks[:, BEST] < 4)
-    inter = np.mean([np.isin(INTERACTION, s["s1_interaction_locations"]).all() for s in stats])
-    inter_any = np.mean([np.isin(INTERACTION, s["s1_interaction_locations"]).mean() for s in stats])
-    viol = np.mean([s["s1_location_p_mauchly"] < 0.05 for s in stats])
-    hit_ns = np.mean([(s["s2_hit_location_p"] >= 0.05) and (s["s2_hit_method_p"] >= 0.05) for s in stats])
-    em = np.array([s["s1_error_by_method"] for s in stats])
-    rows = [
-        ("Study 1 location F", f"F(4.34, 82.41) = {paper['study1_location']['F']}, p < 0.0001, GG",
-         _fmt([s["s1_location_F"] for s in stats]), f"{sig('s1_location_p'):.0%} significant (GG); sphericity violated in {viol:.0%}"),
-        ("Study 1 location GG epsilon", "0.54 (= 4.34 / 8)", _fmt([s["s1_location_eps"] for s in stats]), ""),
-        ("Study 1 method F", f"F(2, 38) = {paper['study1_method']['F']}, p = 0.005",
-         _fmt([s["s1_method_F"] for s in stats]), f"{sig('s1_method_p'):.0%} significant"),
-        ("Study 1 interaction F", f"F(16, 304) = {paper['study1_interaction']['F']}, p < 0.0001",
-         _fmt([s["s1_interaction_F"] for s in stats]), f"{sig('s1_interaction_p'):.0%} significant"),
-        ("interaction post hoc at 1, 3, 9", "locations 1, 3, 9", f"all three in {inter:.0%}; each in {inter_any:.0%} on average", ""),
-        ("best locations", "4, 5, 7, 8", f"exactly these 4 in {best4:.0%}; each of them among the 4 best in {best_in:.0%}", ""),
-        ("Study 2 location chi2(8)", f"{paper['study2_location']['chi2']}", _fmt([s["s2_location_chi2"] for s in stats]),
-         f"{sig('s2_location_p'):.0%} significant"),
-        ("Study 2 method chi2(2)", "not given here", _fmt([s["s2_method_chi2"] for s in stats]), f"{sig('s2_method_p'):.0%} significant"),
-        ("Study 2, trials containing the target: location chi2(8)", "not significant",
-         _fmt([s["s2_hit_location_chi2"] for s in stats]), f"{1 - sig('s2_hit_location_p'):.0%} not significant"),
-        ("Study 2, trials containing the target: method chi2(2)", "not significant",
-         _fmt([s["s2_hit_method_chi2"] for s in stats]), f"{1 - sig('s2_hit_method_p'):.0%} not significant; both n.s. in {hit_ns:.0%}"),
-    ]
-    for k, meth in enumerate(default_bank().methods):
-        rows.append((f"Study 1 mean error, {meth} (mm)", "not read", _fmt(em[:, k], 1), ""))
-    lines = [f"*{MODEL_LABEL}.* {seeds} simulated studies of {N_PARTICIPANTS} participants (seeds 0..{seeds - 1}); "
-             "model value: median [5th, 95th percentile].", "",
-             "| statistic | paper | model v2 median [90% interval] | share of seeds |", "|---|---|---|---|"]
-    lines += [f"| {a} | {b} | {c} | {d} |" for a, b, c, d in rows]
+def _value(v) -> str:
+    if isinstance(v, tuple):
+        return "(" + ", ".join(_value(x) for x in v) + ")"
+    return f"{v:.4g}" if isinstance(v, float) else str(v)
+
+
+def parameters_markdown() -> str:
+    """The parameters of the model's defaults with their kind and note, as markdown."""
+    model = PerceptualModel()
+    lines = [f"*{MODEL_LABEL}.* Values of `PerceptualModel()` (SI units: m, s, dB, Hz); ranges (lo, hi) are "
+             "uniform across simulated participants.", "",
+             "| parameter | value | kind | note |", "|---|---|---|---|"]
+    for name, (kind, note) in PARAMETER_SOURCES.items():
+        lines.append(f"| `{name}` | {_value(getattr(model, name))} | {kind} | {note} |")
     return "\n".join(lines)
 
 
-if __name__ == "__main__":
-    ap = argparse.ArgumentParser()
+def table(n_seeds: int, check: bool) -> int:
+    seeds = range(n_seeds)
+    stats = seed_statistics(PerceptualModel(), seeds)
+    rows = compare(stats)
+    resid = (f"`scripts/fit_participants.py report` ({MODEL_LABEL}; the defaults, the table's {n_seeds} seeds; "
+             "model: median over seeds):\n\n```\n" + residuals(stats) + "\n```")
+    blocks = {
+        PAGES["docs"]: {"participants-table": comparison_markdown(rows, seeds),
+                        "participants-parameters": parameters_markdown(), "fit-residuals": resid},
+        PAGES["readme"]: {"participants-table": comparison_markdown(rows, seeds, short=True)},
+    }
+    stale = []
+    for page, parts in blocks.items():
+        text = page.read_text(encoding="utf-8")
+        new = text
+        for name, block in parts.items():
+            new = replace_between_markers(new, name, block, page)
+        if new != text:
+            stale.append(page)
+            if not check:
+                write_text(page, new, what="page")
+    print(blocks[PAGES["docs"]]["participants-table"])
+    if check:
+        print("up to date" if not stale else "out of date: " + ", ".join(map(str, stale)))
+        return 1 if stale else 0
+    print("wrote " + (", ".join(map(str, stale)) if stale else "nothing (up to date)"))
+    return 0
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
-    s = sub.add_parser("search")
-    s.add_argument("--n-eval", type=int, default=150)
-    s.add_argument("--n-refine", type=int, default=100)
-    s.add_argument("--seeds", type=int, default=12)
+    s = sub.add_parser("search", help="fit (random search, then local refinement)")
+    s.add_argument("--n-eval", type=int, default=300, help="random candidates")
+    s.add_argument("--n-refine", type=int, default=500, help="refinement candidates")
     s.add_argument("--out", type=Path, default=Path("fit_participants.json"))
     s.add_argument("--start", type=Path, default=None, help="start from this fit (JSON written by search)")
     s.add_argument("--rng-seed", type=int, default=2023)
-    t = sub.add_parser("table")
-    t.add_argument("--seeds", type=int, default=50)
+    s.add_argument("--weight", action="append", default=[], metavar="KEY=W",
+                   help="weight of one matched statistic's term (e.g. s1_interaction_F=3); repeatable")
+    r = sub.add_parser("report", help="the paper beside the model, with residuals")
+    r.add_argument("--fit", type=Path, default=None, help="a fit file (default: the model's defaults)")
+    r.add_argument("--seeds", type=int, default=20)
+    t = sub.add_parser("table", help="write the tables of docs/simulated-participants.md and README.md")
+    t.add_argument("--seeds", type=int, default=20)
+    t.add_argument("--check", action="store_true", help="only compare; exit 1 if a page is out of date")
     args = ap.parse_args()
     if args.cmd == "search":
-        search(args.n_eval, args.n_refine, args.seeds, args.out, args.start, args.rng_seed)
-    else:
-        print(table(args.seeds))
+        weights = {}
+        for item in args.weight:
+            key, _, value = item.partition("=")
+            if key not in {k for k, _, _ in targets()}:
+                ap.error(f"--weight {item}: unknown statistic (one of {', '.join(k for k, _, _ in targets())})")
+            weights[key] = float(value)
+        best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights)
+        print("\nfit seeds:\n" + residuals(seed_statistics(best, FIT_SEEDS)))
+        print("\ntable seeds 0-19:\n" + residuals(seed_statistics(best, range(20))))
+        return 0
+    if args.cmd == "report":
+        print(residuals(seed_statistics(_load(args.fit), range(args.seeds))))
+        return 0
+    return table(args.seeds, args.check)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -116,6 +116,39 @@ def test_a_diffuse_percept_is_localized_worse_and_selects_more():
     assert res[0.02][1] > res[0.0][1] + 0.3
 
 
+def test_study2_selects_by_posterior_density_ratio():
+    # The selection rule: every location whose posterior density (Gaussian, mean the
+    # percept, variance g * sigma_s^2) reaches kappa * jitter of the best location's.
+    # Independent reference with scipy's normal density, from the same noise stream.
+    from scipy.stats import norm
+
+    model = PerceptualModel(select_log_sd=0.4)
+    traits = Traits(0.0, 7e-3, 11e-3, np.zeros(2), 0.35, 1.0, spread_gain=0.0)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    x = np.array([-0.004, 0.006])
+    n = 3000
+    a, sel, _ = draw_answers(_one(x), np.zeros(n, int), locs, np.zeros(2), model, traits, np.random.default_rng(9))
+    ref = np.random.default_rng(9)
+    noise, jitter = ref.standard_normal((n, 2)), ref.lognormal(0.0, 0.4, size=n)
+    g = 11e-3**2 / (11e-3**2 + 7e-3**2)
+    post = g * (x + 7e-3 * noise)
+    sd = np.sqrt(g) * 7e-3
+    dens = norm.pdf(locs[None, :, 0], post[:, None, 0], sd) * norm.pdf(locs[None, :, 1], post[:, None, 1], sd)
+    expected = dens / dens.max(axis=1, keepdims=True) >= np.clip(0.35 * jitter, 0, 1)[:, None]
+    np.testing.assert_array_equal(a, dens.argmax(axis=1))
+    np.testing.assert_array_equal(sel, expected)
+    assert 1.2 < sel.sum(1).mean() < 8  # several locations at times, not all
+
+
+def test_population_bias_points_toward_the_elbow():
+    # Cholewiak et al. 2020: the forearm's perceived midpoint lies toward the elbow (-y).
+    model = PerceptualModel()
+    assert model.bias_mean_m[1] < 0
+    biases = np.array([Traits.draw(model, k).bias_m for k in range(400)])
+    assert biases[:, 1].mean() < 0
+    assert abs(biases[:, 1].mean() - model.bias_mean_m[1]) < 3 * model.bias_sd_m / np.sqrt(400)
+
+
 def test_selection_always_contains_the_single_answer():
     model = PerceptualModel()
     traits = Traits.draw(model, 3)

@@ -70,6 +70,7 @@ __all__ = [
     "draw_answers",
     "study2_rt",
     "band_transfer",
+    "PARAMETER_SOURCES",
 ]
 
 #: Version of the perceptual model; bump it whenever answers for the same seeds change.
@@ -163,16 +164,18 @@ class PerceptualModel:
     grid_half_width_m: float = 25e-3
     grid_step_m: float = 5e-3
     band_hz: tuple[float, float] = (10.0, 1000.0)
-    sl_ref_db: float = 20.0
-    funneling_exponent: float = 1.0
+    # Fitted by scripts/fit_participants.py (docs/simulated-participants.md, "The fit"),
+    # rounded to 3 digits.
+    sl_ref_db: float = 42.6
+    funneling_exponent: float = 0.476
     threshold_sd_db: float = 3.0
-    acuity_sd_m: tuple[float, float] = (5e-3, 9e-3)
-    spread_gain: tuple[float, float] = (0.2, 0.8)
-    prior_sd_m: tuple[float, float] = (8e-3, 14e-3)
-    bias_mean_m: tuple[float, float] = (-1.5e-3, -2.0e-3)
-    bias_sd_m: float = 1.5e-3
-    select_kappa: tuple[float, float] = (0.3, 0.6)
-    select_log_sd: float = 0.3
+    acuity_sd_m: tuple[float, float] = (15.2e-3, 19.2e-3)
+    spread_gain: tuple[float, float] = (0.255, 0.502)
+    prior_sd_m: tuple[float, float] = (6.55e-3, 28.1e-3)
+    bias_mean_m: tuple[float, float] = (-11.7e-3, -1.81e-3)
+    bias_sd_m: float = 3.43e-3
+    select_kappa: tuple[float, float] = (0.545, 0.571)
+    select_log_sd: float = 0.346
     rt_median_s: tuple[float, float] = (0.9, 1.4)
     rt_log_sd: float = 0.3
     rt_per_extra_location_s: float = 0.35
@@ -190,6 +193,30 @@ class PerceptualModel:
             raise ValidationError(f"unknown perceptual model parameter(s): {', '.join(sorted(unknown))}")
         d.update(changes)
         return PerceptualModel(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+#: Where each parameter of :class:`PerceptualModel` comes from: ``(kind, note)`` with kind
+#: ``"assumption"``, ``"fitted"`` (by ``scripts/fit_participants.py`` to the paper's
+#: statistics) or ``"source + fitted"`` (direction read from a source, size fitted).
+#: ``docs/simulated-participants.md`` lists them with their values (generated).
+PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
+    "grid_half_width_m": ("assumption", "covers the array's area"),
+    "grid_step_m": ("assumption", "half the 10 mm location pitch"),
+    "band_hz": ("assumption", "the vibrotactile range; the U-curve weights within it"),
+    "sl_ref_db": ("fitted", "sensation level of the reference tap"),
+    "funneling_exponent": ("fitted", "1 is the energy law (Alles 1970; Israr & Poupyrev 2011)"),
+    "threshold_sd_db": ("assumption", "spread of detection thresholds across people"),
+    "acuity_sd_m": ("fitted", "poor localization on the mid-forearm (Cholewiak & Collins 2003)"),
+    "spread_gain": ("fitted", "diffuse phantoms are localized worse (Park & Choi 2018)"),
+    "prior_sd_m": ("fitted", "strength of the pull to the centre"),
+    "bias_mean_m": ("source + fitted", "y toward the elbow (Cholewiak et al. 2020); sizes fitted"),
+    "bias_sd_m": ("fitted", "spread of the participants' biases"),
+    "select_kappa": ("fitted", "Study 2 criterion"),
+    "select_log_sd": ("fitted", "Study 2 per-trial jitter of the criterion"),
+    "rt_median_s": ("assumption", "response times (not analysed)"),
+    "rt_log_sd": ("assumption", "response times (not analysed)"),
+    "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),
+}
 
 
 @dataclass(frozen=True)
