@@ -36,6 +36,8 @@ def _pingouin_analysis(arrays) -> None:
     study1_anova(pd.DataFrame({"error_mm": arrays.error_mm.ravel()}, index=idx).reset_index())
     friedman_tests(pd.DataFrame({"n_selected": arrays.count.ravel()}, index=idx).reset_index())
     keep = np.all(np.isfinite(arrays.count_hit), axis=(1, 2))
+    if keep.sum() < 2:  # too few participants with a target-containing trial in every condition
+        return
     friedman_tests(pd.DataFrame({"n_selected": arrays.count_hit[keep].ravel()},
                                 index=idx[np.repeat(keep, nl * nm)]).reset_index())
 

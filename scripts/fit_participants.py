@@ -8,8 +8,8 @@ de Vlam et al. (IEEE ToH 16(4), 2023) kept in ``studies/data/psychophysics.json`
 judged on the same simulated 20-participant studies (seeds 1000.., fast path: feature
 bank + vectorized statistics; common random numbers make candidates comparable). The
 loss is the sum of squared log ratios of the model's median F / chi2 / GG epsilon to the
-paper's, hinge terms that keep the target-containing Study 2 tests at their null size,
-and terms for the best locations (4, 5, 7, 8) and the interaction's locations (1, 3, 9).
+paper's, hinge terms that keep the target-containing Study 2 tests at their null size
+(optionally also on most participants: ``--weight s2_hit_n=W``), and terms for the best locations (4, 5, 7, 8) and the interaction's locations (1, 3, 9).
 
     PYTHONPATH=src python scripts/fit_participants.py search --out fit.json   # ~7 min on one core
     PYTHONPATH=src python scripts/fit_participants.py report [--fit fit.json]
@@ -57,6 +57,8 @@ def targets() -> list[tuple[str, str, float]]:
 #: Target-containing Study 2 tests: not significant in the paper; held at most at the null
 #: mean of their chi2 (its degrees of freedom).
 NULL_MEANS = (("s2_hit_location_chi2", 8.0), ("s2_hit_method_chi2", 2.0))
+#: Participants (of 20) the target-containing Study 2 tests should keep, at least (median).
+MIN_HIT_PARTICIPANTS = 15
 
 
 def _median(stats: list[dict], key: str) -> float:
@@ -72,6 +74,11 @@ def loss(stats: list[dict], weights: dict[str, float] | None = None) -> float:
     w = weights or {}
     terms = [w.get(k, 1.0) * np.log(max(_median(stats, k), 1e-3) / v) ** 2 for k, _, v in targets()]
     terms += [max(0.0, np.log(max(_median(stats, k), 1e-3) / null)) ** 2 for k, null in NULL_MEANS]
+    # The target-containing tests keep only participants with such a trial in every
+    # condition. Optional term (weight "s2_hit_n", default 0): keep most of them (how many
+    # the paper kept is not in the data file; the paper tested 20).
+    terms.append(w.get("s2_hit_n", 0.0)
+                 * max(0.0, np.log(MIN_HIT_PARTICIPANTS / max(_median(stats, "s2_hit_n"), 0.5))) ** 2)
     err_loc = np.mean([s["s1_error_by_location"] for s in stats], axis=0)
     ranks = np.argsort(np.argsort(err_loc))  # 0 = lowest mean error
     terms.append(4.0 * ((ranks[BEST_LOCATIONS].mean() - 1.5) / 3.0) ** 2)
@@ -91,6 +98,7 @@ def residuals(stats: list[dict]) -> str:
         m = _median(stats, k)
         ns = np.mean([s[k.replace('_chi2', '_p')] >= 0.05 for s in stats])
         lines.append(f"{k + ' (paper: n.s.)':34s} {'n.s.':>8s} {m:8.2f} {'':12s} {'':10s} n.s. in {ns:.0%}")
+    lines.append(f"{'s2_hit_n (participants kept)':34s} {'20?':>8s} {_median(stats, 's2_hit_n'):8.1f}")
     err_loc = np.mean([s["s1_error_by_location"] for s in stats], axis=0)
     best = np.sort(np.argsort(err_loc)[:4]) + 1
     lines.append(f"{'best locations':34s} {'4,5,7,8':>8s} {','.join(map(str, best)):>8s}   mean error by location (mm): "
@@ -234,8 +242,9 @@ def main() -> int:
         weights = {}
         for item in args.weight:
             key, _, value = item.partition("=")
-            if key not in {k for k, _, _ in targets()}:
-                ap.error(f"--weight {item}: unknown statistic (one of {', '.join(k for k, _, _ in targets())})")
+            known = [k for k, _, _ in targets()] + ["s2_hit_n"]
+            if key not in known:
+                ap.error(f"--weight {item}: unknown statistic (one of {', '.join(known)})")
             weights[key] = float(value)
         best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights)
         print("\nfit seeds:\n" + residuals(seed_statistics(best, FIT_SEEDS)))
