@@ -21,14 +21,14 @@ def firs(layout) -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def fir_calibration(layout, firs):
-    """A quick noise-free calibration of the FIR rig (2 repeats of a 1 s sweep)."""
+    """A quick noise-free h1 calibration of the FIR rig (2 repeats of a 1 s sweep)."""
     rig = FIRRig(firs, layout)
-    return rig, calibrate(rig, participant_id="FIR", sweep_s=1.0, repeats=2)
+    return rig, calibrate(rig, participant_id="FIR", method="h1", sweep_s=1.0, repeats=2)
 
 
 @pytest.fixture(scope="module")
 def forearm_calibration():
-    """The default calibration of simulated participant 0 (noise and dropouts on)."""
+    """The default (mimo) calibration of simulated participant 0 (noise and dropouts on)."""
     from vibrofocus.skin import SimulatedForearm
 
     rig = SimulatedForearm(seed=0)

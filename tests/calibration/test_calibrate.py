@@ -58,11 +58,14 @@ def test_single_spot_vibrometer_prompts_for_each_point(layout, firs):
         asked.append(label)
         rig.aim(label, xy)  # the operator moves the spot there
 
-    steps = []
-    cal = calibrate(rig, participant_id="P", sweep_s=0.5, repeats=2, prompt=prompt,
-                    progress=lambda done, total, msg: steps.append((done, total)))
+    steps, messages = [], []
+    cal = calibrate(rig, participant_id="P", method="h1", sweep_s=0.5, repeats=2, prompt=prompt,
+                    progress=lambda done, total, msg: (steps.append((done, total)), messages.append(msg)))
     assert asked == list(layout.point_labels)
-    assert steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 13 * 4 * 2
+    # The plan first (0 done), then one call per take.
+    assert steps[0] == (0, 104) and steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 13 * 4 * 2 + 1
+    take_s = (0.1 + 0.5 + 0.3)  # silence, sweep, tail
+    assert "104 takes" in messages[0] and f"{104 * take_s:.1f} s of sweeps" in messages[0], messages[0]
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
     assert np.all(np.abs(cal.H[b] - truth[b]) <= 2e-3 * np.abs(truth[b]).max(axis=0))
@@ -88,7 +91,7 @@ def test_unsafe_sweep_is_refused_before_any_recording(layout, firs):
 
 def test_dropouts_are_left_out_and_reported(layout, firs):
     rig = FIRRig(firs, layout, noise_m=1e-10, dropout_prob=0.2, seed=3)
-    cal = calibrate(rig, participant_id="P", sweep_s=0.5, repeats=3)
+    cal = calibrate(rig, participant_id="P", method="h1", sweep_s=0.5, repeats=3)
     q = cal.quality
     assert q.dropouts.sum() > 0
     assert np.all(q.repeats_used + q.dropouts >= 3)
@@ -112,7 +115,8 @@ def test_paper_method_with_one_repeat_has_no_coherence(layout, firs):
 
 def test_subset_of_points_and_actuators(layout, firs):
     rig = FIRRig(firs, layout)
-    cal = calibrate(rig, participant_id="P", points=[4, 9, 0], actuators=[2, 1], sweep_s=0.5, repeats=2)
+    cal = calibrate(rig, participant_id="P", method="h1", points=[4, 9, 0], actuators=[2, 1], sweep_s=0.5,
+                    repeats=2)
     assert cal.layout.n_locations == 2 and cal.layout.n_guards == 1
     assert cal.layout.actuator_names == ("A2", "A3")
     np.testing.assert_allclose(cal.layout.points_xy, layout.points_xy[[0, 4, 9]])
@@ -154,7 +158,7 @@ def test_other_layouts_work_unchanged(firs):
     from .firrig import analytic_firs
 
     rig = FIRRig(analytic_firs(lay, 10_000.0), lay)
-    cal = calibrate(rig, participant_id="P", sweep_s=0.5, repeats=2)
+    cal = calibrate(rig, participant_id="P", method="h1", sweep_s=0.5, repeats=2)
     assert cal.H.shape[1:] == (5, 3)
     truth = rig.transfer(cal.n_fft)
     b = _band(cal.freqs)
@@ -173,7 +177,7 @@ def test_samples_flagged_by_the_rig_count_as_dropouts(layout, firs):
                 y[3, 500:520] = 1e-3  # garbage, not NaN
             return y
 
-    cal = calibrate(FlaggingRig(firs, layout), participant_id="P", sweep_s=0.5, repeats=2)
+    cal = calibrate(FlaggingRig(firs, layout), participant_id="P", method="h1", sweep_s=0.5, repeats=2)
     assert cal.quality.dropouts[3, 0] == 1 and cal.quality.dropouts.sum() == 1
     assert np.isnan(cal.recordings[0, 1, 3, 500:520]).all()
     truth = FIRRig(firs, layout).transfer(cal.n_fft)
@@ -190,7 +194,7 @@ def test_clipping_reported_by_the_rig_is_a_verdict(layout, firs):
             self.last_clipped = np.arange(len(y)) == 6 if self.n_recordings == 5 else False
             return y
 
-    cal = calibrate(ReportingRig(firs, layout), participant_id="P", sweep_s=0.5, repeats=2)
+    cal = calibrate(ReportingRig(firs, layout), participant_id="P", method="h1", sweep_s=0.5, repeats=2)
     expected = np.zeros((13, 4), bool)
     expected[6, 2] = True  # take 5 = actuator A3 (index 2), first repeat
     np.testing.assert_array_equal(cal.quality.clipped, expected)

@@ -22,7 +22,7 @@ def text(result) -> str:
 def cal_file(tmp_path_factory):
     out = tmp_path_factory.mktemp("cli") / "P01.nc"
     result = runner.invoke(app, ["calibrate", "--rig", "simulated", "--participant", "P01", "--out", str(out),
-                                 "--seed", "2", "--repeats", "2", "--sweep-s", "1", "--yes"])
+                                 "--seed", "2", "--method", "h1", "--repeats", "2", "--sweep-s", "1", "--yes"])
     assert result.exit_code == 0, result.output
     assert "Calibration of P01" in text(result) and "wrote" in text(result) and out.is_file()
     return out
@@ -115,3 +115,44 @@ def test_calibrate_over_the_duration_limit_does_not_blame_the_amplitude(tmp_path
                                  "--sweep-s", "40", "--yes"])
     assert result.exit_code == 2
     assert "longer than the limit" in text(result) and "sweep_s" in text(result)
+
+
+def test_calibrate_accepts_method_mimo_and_prints_the_plan_first(tmp_path):
+    out = tmp_path / "M.nc"
+    result = runner.invoke(app, ["calibrate", "--rig", "simulated", "--participant", "M", "--out", str(out),
+                                 "--seed", "3", "--method", "mimo", "--repeats", "4", "--sweep-s", "1", "--yes",
+                                 "--no-figure"])
+    assert result.exit_code == 0, result.output
+    printed = text(result)
+    plan = ("plan: mimo: 4 takes of 1.4 s (all 4 actuators at once, 4 Hadamard-coded repeats, every point in each "
+            "take) = 5.6 s of sweeps")
+    assert plan in printed and printed.index(plan) < printed.index("Calibration of M")
+    cal = load_calibration(out)
+    assert cal.method == "mimo" and cal.codes.shape == (4, 4) and cal.recordings.shape[:2] == (4, 13)
+
+
+def test_calibrate_without_a_method_is_mimo_and_h1_prints_its_plan_too(tmp_path):
+    result = runner.invoke(app, ["calibrate", "--participant", "D", "--out", str(tmp_path / "D.nc"), "--seed", "3",
+                                 "--repeats", "4", "--sweep-s", "0.5", "--yes", "--no-figure"])
+    assert result.exit_code == 0, result.output
+    assert load_calibration(tmp_path / "D.nc").method == "mimo"
+    result = runner.invoke(app, ["calibrate", "--participant", "D", "--out", str(tmp_path / "H.nc"), "--seed", "3",
+                                 "--method", "h1", "--repeats", "1", "--sweep-s", "0.5", "--yes", "--no-figure"])
+    assert result.exit_code == 0, result.output
+    assert "plan: h1: 4 takes of 0.9 s (4 actuator(s) one at a time x 1 repeat(s), every point in each take) = " \
+           "3.6 s of sweeps" in text(result)
+
+
+def test_calibrate_mimo_refuses_repeats_that_cannot_separate_the_actuators(tmp_path):
+    out = tmp_path / "M.nc"
+    result = runner.invoke(app, ["calibrate", "--participant", "M", "--out", str(out), "--method", "mimo",
+                                 "--repeats", "6", "--yes"])
+    assert result.exit_code == 2, result.output
+    assert "repeats=6 cannot separate 4 actuators" in text(result) and "use 4 or 8" in text(result)
+    assert not out.exists()
+
+
+def test_calibrate_help_names_mimo_as_the_default():
+    result = runner.invoke(app, ["calibrate", "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0
+    assert "mimo (all actuators at once" in text(result) and "default: mimo" in text(result)

@@ -61,7 +61,7 @@ def test_quality_issues_survive_the_round_trip(layout, firs, tmp_path):
 
     h = firs.copy()
     h[:, 3] *= -1
-    cal = calibrate(FIRRig(h, layout), participant_id="P", sweep_s=0.5, repeats=2)
+    cal = calibrate(FIRRig(h, layout), participant_id="P", method="h1", sweep_s=0.5, repeats=2)
     back = load_calibration(save_calibration(cal, tmp_path / "rev.nc"))
     assert [i.check for i in back.quality.issues] == ["reversed_actuator"]
     assert back.quality.issues[0].actuator == 3

@@ -4,7 +4,7 @@ from vibrofocus.calibration import calibrate, detect_clipping
 
 from .firrig import FIRRig
 
-QUICK = {"sweep_s": 0.5, "repeats": 3}
+QUICK = {"sweep_s": 0.5, "repeats": 3, "method": "h1"}
 
 
 def _checks(cal):
@@ -70,7 +70,8 @@ def test_flat_top_is_detected_without_a_known_range(rng):
 def test_low_snr_and_low_coherence_are_flagged(layout, firs):
     # In-band noise (0.18 µm RMS) near the far responses (0.26 µm RMS), below the near
     # ones (1.4 µm RMS): the far pairs lose SNR and, at the band edges, coherence.
-    cal = calibrate(FIRRig(firs, layout, noise_m=4e-7, seed=2), participant_id="P", sweep_s=0.5, repeats=4)
+    cal = calibrate(FIRRig(firs, layout, noise_m=4e-7, seed=2), participant_id="P", method="h1", sweep_s=0.5,
+                    repeats=4)
     q = cal.quality
     assert q.by_check("low_snr") and q.by_check("low_coherence")
     far = np.unravel_index(np.argmin(q.band_gain), q.band_gain.shape)

@@ -139,7 +139,7 @@ def chmod_protects() -> bool:
 def cal_file(tmp_path_factory):
     out = tmp_path_factory.mktemp("cal") / "P01.nc"
     result = runner.invoke(app, ["calibrate", "--participant", "P01", "--out", str(out), "--seed", "2",
-                                 "--repeats", "2", "--sweep-s", "1", "--yes", "--no-figure"])
+                                 "--repeats", "4", "--sweep-s", "1", "--yes", "--no-figure"])
     assert result.exit_code == 0, result.output
     return out
 
@@ -259,7 +259,7 @@ def test_1_full_disk_while_saving_a_calibration_keeps_the_measurement(tmp_path, 
     monkeypatch.setattr(_atomic, "write_bytes", write_bytes)
     if command == "calibrate":
         (out_dir / "P01.nc").write_bytes(b"previous calibration")
-        args = ["calibrate", "-p", "P01", "-o", str(out_dir / "P01.nc"), "--repeats", "1", "--sweep-s", "1",
+        args = ["calibrate", "-p", "P01", "-o", str(out_dir / "P01.nc"), "--repeats", "4", "--sweep-s", "1",
                 "--yes", "--no-figure"]
     else:
         (out_dir / "calibration.nc").write_bytes(b"previous calibration")
@@ -287,7 +287,7 @@ def test_1_a_real_full_disk_gives_one_line_not_a_crash(tmp_path):
         env = {**os.environ, "PYTHONPATH": SRC}
         # The free-space check before measuring refuses at once ...
         run = subprocess.run([sys.executable, "-m", "vibrofocus", "calibrate", "-p", "P01", "-o", str(mnt / "P01.nc"),
-                              "--repeats", "1", "--sweep-s", "1", "--yes"], capture_output=True, text=True,
+                              "--repeats", "4", "--sweep-s", "1", "--yes"], capture_output=True, text=True,
                              env=env, cwd=tmp_path, timeout=300)
         assert run.returncode == 2, run.stderr
         assert "before starting" in run.stderr and "Traceback" not in run.stderr
@@ -298,7 +298,7 @@ def test_1_a_real_full_disk_gives_one_line_not_a_crash(tmp_path):
             from vibrofocus.calibration import calibrate, save_calibration
             from vibrofocus.skin import SimulatedForearm
             from vibrofocus.errors import OutputError
-            cal = calibrate(SimulatedForearm(seed=1), participant_id="P01", repeats=1, sweep_s=1.0)
+            cal = calibrate(SimulatedForearm(seed=1), participant_id="P01", repeats=4, sweep_s=1.0)
             try:
                 save_calibration(cal, {str(mnt / 'P01.nc')!r})
             except OutputError as exc:
@@ -575,7 +575,7 @@ def test_8_calibrate_seed_comes_from_the_participant(tmp_path):
     seeds = {}
     for pid in ("P01", "P02"):
         out = tmp_path / f"{pid}.nc"
-        result = runner.invoke(app, ["calibrate", "-p", pid, "-o", str(out), "--repeats", "1", "--sweep-s", "1",
+        result = runner.invoke(app, ["calibrate", "-p", pid, "-o", str(out), "--repeats", "4", "--sweep-s", "1",
                                      "--yes", "--no-figure"])
         assert result.exit_code == 0, result.output
         seeds[pid] = load_calibration(out).rig["seed"]

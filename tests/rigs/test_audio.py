@@ -79,7 +79,7 @@ def test_calibration_through_loopback_is_flat_gain_chain_with_zero_phase(rig):
     from vibrofocus.calibration import calibrate
 
     # Real time on the dummy driver: one point, actuators 1 and 2 (2 goes elsewhere).
-    settings = dict(participant_id="jack-loopback", points=[0], actuators=[0, 1], sweep_s=1.0, repeats=2,
+    settings = dict(participant_id="jack-loopback", method="h1", points=[0], actuators=[0, 1], sweep_s=1.0, repeats=2,
                     prompt=lambda label, xy: None)
     cal = calibrate(rig, **settings)
     assert rig.last_latency_samples == JACK_PERIOD  # JACK's loopback returns one period later

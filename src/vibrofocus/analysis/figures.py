@@ -12,17 +12,26 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .. import _style
 from ..layout import ArrayLayout
 from .trials import method_order
 
 __all__ = ["plot_localization", "plot_errors", "plot_counts", "save_figure", "method_colors"]
 
-_PALETTE = ("#0072B2", "#D55E00", "#009E73", "#CC79A7", "#E69F00", "#56B4E9", "#F0E442", "#000000")
-
-
 def method_colors(methods) -> dict[str, str]:
-    """Colour per method (colour-blind-safe Okabe–Ito palette), in :func:`method_order`."""
-    return {m: _PALETTE[i % len(_PALETTE)] for i, m in enumerate(method_order(methods))}
+    """Colour per method, the same in every figure of the package (Okabe–Ito palette).
+
+    Parameters
+    ----------
+    methods : iterable of str
+        Method names; unknown names get colours no known method uses.
+
+    Returns
+    -------
+    dict of str to str
+        Method to hex colour, in :func:`method_order`.
+    """
+    return _style.method_colors(method_order(methods))
 
 
 def _new_figure(figsize):
@@ -63,12 +72,15 @@ def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None
         as on the arm: wrist side up), all locations as grey dots, the target as a black
         ring, each method's mean as a dot with its ellipse, in mm.
     """
+    from matplotlib.colors import to_rgb
+    from matplotlib.lines import Line2D
     from matplotlib.patches import Ellipse
 
     layout = ArrayLayout.reference() if layout is None else layout
     xy = np.asarray(layout.locations_xy) * 1e3
     n_rows, n_cols, cells = _grid_shape(xy)
     colors = method_colors(positions["method"].unique()) if len(positions) else {}
+    styles = {m: _style.method_style(m, i) for i, m in enumerate(colors)}
     fig = _new_figure((3.0 * n_cols + 1.2, 3.0 * n_rows))
     axes = fig.subplots(n_rows, n_cols, squeeze=False, sharex=True, sharey=True)
     pad = 0.6 * max(np.ptp(xy[:, 0]), np.ptp(xy[:, 1]), 10.0) / max(n_cols - 1, 1)
@@ -81,8 +93,14 @@ def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None
         ax.scatter(xy[:, 0], xy[:, 1], s=12, color="0.75", zorder=1)
         ax.scatter(*xy[index], s=160, facecolor="none", edgecolor="black", linewidth=1.6, zorder=3)
         for row_ in positions[positions["location"] == location].itertuples(index=False):
-            c = colors[row_.method]
-            ax.scatter(row_.mean_x_mm, row_.mean_y_mm, s=28, color=c, zorder=4)
+            style = styles[row_.method]
+            c = style["color"]
+            # Three methods' ellipses overlap near the centre: told apart by line style
+            # and marker, with a faint fill, and a line from the target to each mean.
+            ax.plot([xy[index, 0], row_.mean_x_mm], [xy[index, 1], row_.mean_y_mm], color=c, lw=0.8, zorder=3,
+                    gid=f"offset:{row_.method}:{location}")
+            ax.scatter(row_.mean_x_mm, row_.mean_y_mm, s=34, color=c, marker=style["marker"], edgecolor="white",
+                       linewidth=0.5, zorder=4, gid=f"mean:{row_.method}:{location}")
             if np.isfinite(row_.ellipse_width_mm):
                 ax.add_patch(
                     Ellipse(
@@ -90,11 +108,12 @@ def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None
                         width=max(row_.ellipse_width_mm, 0.2),
                         height=max(row_.ellipse_height_mm, 0.2),
                         angle=row_.ellipse_angle_deg,
-                        facecolor=c,
-                        alpha=0.18,
+                        facecolor=(*to_rgb(c), 0.07),
                         edgecolor=c,
-                        linewidth=1.4,
+                        linestyle=style["linestyle"],
+                        linewidth=1.6,
                         zorder=2,
+                        gid=f"ellipse:{row_.method}:{location}",
                     )
                 )
         ax.set_title(f"target {location}", fontsize=10)
@@ -107,8 +126,10 @@ def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None
         if col == 0:
             ax.set_ylabel("y (mm, wrist ↑)")
     handles = [
-        axes.flat[0].scatter([], [], color=c, label=m) for m, c in colors.items()
-    ] + [axes.flat[0].scatter([], [], s=80, facecolor="none", edgecolor="black", label="target")]
+        Line2D([], [], color=st["color"], linestyle=st["linestyle"], marker=st["marker"], label=m)
+        for m, st in styles.items()
+    ] + [Line2D([], [], linestyle="none", marker="o", markersize=9, markerfacecolor="none", markeredgecolor="black",
+                label="target")]
     fig.legend(handles=handles, loc="outside right center", frameon=False)
     counts = sorted({int(k) for k in positions["n"]}) if len(positions) else []
     per = "" if not counts else f", {counts[0]}" if len(counts) == 1 else f", {counts[0]}–{counts[-1]}"
@@ -213,7 +234,19 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
 
 
 def save_figure(fig, path: str | os.PathLike, *, dpi: int = 110) -> Path:
-    """Write ``fig`` as PNG to ``path`` and return the path."""
+    """Write ``fig`` as PNG to ``path`` (atomically; the folder is created) and return the path.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+    path : path-like
+    dpi : int
+        Resolution, dots per inch.
+
+    Returns
+    -------
+    Path
+    """
     from .._atomic import save_figure as _save_atomic
 
     path = Path(path)

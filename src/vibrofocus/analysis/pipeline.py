@@ -120,7 +120,19 @@ class Study2Counts:
 
 @dataclass
 class Study2Result:
-    """Results of study 2 (confidence): all trials and trials containing the target."""
+    """Results of study 2 (confidence): all trials and trials containing the target.
+
+    Attributes
+    ----------
+    participants : list of str
+        Participants analysed.
+    methods, locations : list
+        Levels of the two factors.
+    all_trials : Study2Counts
+        Counts of selected locations on every main trial.
+    contains_target : Study2Counts
+        The same on the trials whose selection contains the target.
+    """
 
     participants: list[str]
     methods: list[str]

@@ -43,7 +43,17 @@ def _clean(value: Any) -> Any:
 
 
 def format_p(p: float) -> str:
-    """APA-like p: ``"p < 0.0001"``, ``"p = 0.0003"`` or ``"p = 0.012"``."""
+    """APA-like p: ``"p < 0.0001"``, ``"p = 0.0003"`` or ``"p = 0.012"``.
+
+    Parameters
+    ----------
+    p : float
+        The p-value; None or NaN gives ``"p = n/a"``.
+
+    Returns
+    -------
+    str
+    """
     if p is None or not np.isfinite(p):
         return "p = n/a"
     if p < 1e-4:
@@ -236,6 +246,11 @@ def results_sentences(result: AnalysisResult) -> dict[str, list[str]]:
     Degrees of freedom are Greenhouse–Geisser corrected where Mauchly's test rejects
     sphericity (or is undefined for the sample size).
 
+    Parameters
+    ----------
+    result : AnalysisResult
+        What :func:`~vibrofocus.analysis.analyze` found.
+
     Returns
     -------
     dict
@@ -322,6 +337,18 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
     ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
     these keys are always present and null when the statistic was computed.
+
+    Parameters
+    ----------
+    result : AnalysisResult
+        What :func:`~vibrofocus.analysis.analyze` found.
+    figures : dict of str to str, optional
+        Figure name to file name, listed under ``figures``.
+
+    Returns
+    -------
+    dict
+        JSON-safe (no NaN: missing values are null).
     """
     from .. import __version__
 
@@ -394,6 +421,16 @@ summary{cursor:pointer;font-weight:600}.small{color:#666;font-size:.85em}
 """
 
 
+#: Smallest p-value the report tables print as a number; smaller ones read "< 1e-12".
+P_DISPLAY_FLOOR = 1e-12
+
+
+def _is_p_column(name: object) -> bool:
+    """p-value columns of pingouin and vibrofocus tables (``p_unc``, ``p-corr``, ``p``, ...)."""
+    text = str(name).lower()
+    return text == "p" or text.startswith(("p_", "p-")) or text.endswith(("_p", "-p"))
+
+
 def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
     if df is None or len(df) == 0:
         return "<p class='small'>(empty)</p>"
@@ -411,8 +448,15 @@ def _table(df: pd.DataFrame, *, max_rows: int | None = None) -> str:
             return "0" if text == "-0" else text
         return html.escape(str(x))
 
+    def fmt_p(x):
+        # A p-value that underflows the display is bounded, never shown as 0.
+        if isinstance(x, (float, np.floating)) and np.isfinite(x) and 0 <= x < P_DISPLAY_FLOOR:
+            return f"&lt; {P_DISPLAY_FLOOR:.0e}".replace("e-0", "e-")
+        return fmt(x)
+
     cells = shown.astype(object).map(lambda x: None if x is None or (isinstance(x, float) and x != x) else x)
-    body = cells.map(fmt).to_html(index=False, escape=False, border=0)
+    cells = cells.apply(lambda col: col.map(fmt_p if _is_p_column(col.name) else fmt))
+    body = cells.to_html(index=False, escape=False, border=0)
     note = f"<p class='small'>first {max_rows} of {len(df)} rows</p>" if max_rows and len(df) > max_rows else ""
     return body + note
 

@@ -46,7 +46,17 @@ _MAX_LISTED = 5  # problems quoted in one error message
 
 
 def method_order(methods: Iterable[str]) -> list[str]:
-    """Sort method names: the known methods first (in :data:`KNOWN_METHODS` order), then the rest."""
+    """Sort method names: the known methods first (in :data:`KNOWN_METHODS` order), then the rest.
+
+    Parameters
+    ----------
+    methods : iterable of str
+        Method names; repeats are dropped.
+
+    Returns
+    -------
+    list of str
+    """
     methods = set(methods)
     known = [m for m in KNOWN_METHODS if m in methods]
     return known + sorted(methods - set(known))
@@ -385,7 +395,20 @@ def simulated_participants(raw: pd.DataFrame) -> list[str]:
 
 
 def main_trials(trials: pd.DataFrame, study: int) -> pd.DataFrame:
-    """Return the main-phase rows of one study (training rows are never analysed)."""
+    """Return the main-phase rows of one study (training rows are never analysed).
+
+    Parameters
+    ----------
+    trials : DataFrame
+        The table returned by :func:`load_trials`.
+    study : {1, 2}
+        Which study.
+
+    Returns
+    -------
+    DataFrame
+        Its main-phase rows, re-indexed from 0.
+    """
     check_choice(study, "study", STUDIES)
     missing = [c for c in ("study", "phase", "participant", "method", "target", "selection") if c not in trials.columns]
     if missing:

@@ -2,14 +2,18 @@
 keep it in one self-describing netCDF4/HDF5 file (docs/method.md, calibration)."""
 
 from .accuracy import transfer_error
-from .calibrate import SCHEMA_VERSION, Calibration, calibrate
-from .excitation import METHODS, SweepSettings, default_settings, make_excitation
+from .calibrate import DEFAULT_METHOD, SCHEMA_VERSION, Calibration, CalibrationPlan, calibrate, plan_calibration
+from .estimate import MimoEstimate, mimo_h1
+from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes, make_excitation
 from .figures import plot_calibration
 from .io import load_calibration, save_calibration
 from .quality import QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
 
 __all__ = [
     "calibrate",
+    "plan_calibration",
+    "CalibrationPlan",
+    "DEFAULT_METHOD",
     "Calibration",
     "save_calibration",
     "load_calibration",
@@ -19,6 +23,9 @@ __all__ = [
     "SweepSettings",
     "default_settings",
     "make_excitation",
+    "hadamard_codes",
+    "mimo_h1",
+    "MimoEstimate",
     "QualityIssue",
     "QualityReport",
     "QualityThresholds",

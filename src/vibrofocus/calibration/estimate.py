@@ -26,22 +26,36 @@ drive ``x``:
 
 Recordings with dropouts (NaN or Inf samples) are excluded from the average for the
 point they affect (weight 0).
+
+With several actuators playing at once (method ``mimo``) step 3 becomes the MIMO H1
+estimate (:func:`mimo_h1`) per point and frequency, over the takes: with input spectra
+``X_r`` (n_actuators,) and output ``Y_r``, ``G_xx = sum_r X_r X_r^H``,
+``G_yx = sum_r Y_r X_r^H`` and ``H = G_yx G_xx^-1``. When every actuator plays the same
+sweep ``x`` with a sign ``s_ra``, ``X_r(f) = s_r X(f)``; since the H1 estimate does not
+change when all inputs are divided by the same ``X(f)``, steps 1-2 deconvolve each take
+by ``x`` (giving ``sum_a s_ra H_a`` plus noise on the design grid) and step 3 uses the
+signs as the inputs. Its single-input case (one actuator, ``X_r = 1``) is step 3 above.
 """
 
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
 
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
-from ..rendering.taper import band_taper
+from ..signals.taper import band_taper
 
 __all__ = [
     "resize_impulse_response",
     "estimate_repeats",
     "h1_average",
+    "MimoEstimate",
+    "mimo_h1",
     "noise_and_snr",
+    "split_snr",
 ]
 
 #: Share of an impulse-response buffer kept for negative times (acausal part), e.g. the
@@ -189,6 +203,118 @@ def h1_average(H_repeats: np.ndarray, valid: np.ndarray) -> tuple[np.ndarray, np
     return H, coherence, n_used[..., 0].astype(int)
 
 
+@dataclass(frozen=True)
+class MimoEstimate:
+    """The MIMO H1 estimate of :func:`mimo_h1` and its diagnostics.
+
+    Attributes
+    ----------
+    H : ndarray, complex, shape (n_freqs, n_outputs, n_inputs)
+        ``G_yx G_xx^-1`` per output and frequency (output units per input unit).
+    multiple_coherence : ndarray, shape (n_freqs, n_outputs)
+        ``G_yx G_xx^-1 G_xy / G_yy`` in [0, 1]: the share of the output's power that the
+        inputs together explain linearly. NaN where not assessable (no more blocks than
+        inputs, or no output power). For pure noise its expected value is
+        ``n_inputs / n_blocks``.
+    partial_coherence : ndarray, shape (n_freqs, n_outputs, n_inputs)
+        Coherence of each input with the output once the other inputs' linear
+        contributions are removed: ``|H_a|^2 / [G_xx^-1]_aa`` over itself plus the
+        residual power. With one input it is the ordinary coherence; for pure noise
+        its expected value is ``1 / (n_blocks - n_inputs + 1)``. NaN where not
+        assessable.
+    condition_number : ndarray, shape (n_freqs, n_outputs)
+        2-norm condition number of ``G_xx`` (largest over smallest eigenvalue); inf
+        where it is singular.
+    input_correlation : ndarray, shape (n_freqs, n_outputs)
+        Largest ``|G_xx[a, b]| / sqrt(G_xx[a, a] G_xx[b, b])`` over input pairs
+        ``a != b``: 0 for uncorrelated inputs, 1 for inputs that cannot be told apart.
+        0 with one input.
+    n_used : ndarray of int, shape (n_outputs,)
+        Blocks kept per output.
+    """
+
+    H: np.ndarray
+    multiple_coherence: np.ndarray
+    partial_coherence: np.ndarray
+    condition_number: np.ndarray
+    input_correlation: np.ndarray
+    n_used: np.ndarray
+
+
+def mimo_h1(inputs: np.ndarray, outputs: np.ndarray, valid: np.ndarray | None = None) -> MimoEstimate:
+    """MIMO H1 estimate ``H = G_yx G_xx^-1``, batched over outputs and frequencies.
+
+    Every output is estimated separately (its own weights, so a block with a dropout
+    at one output leaves only that output's sums), with the cross-spectral matrices
+    summed over the blocks kept: ``G_xx = sum_r w_r X_r X_r^H`` (n_inputs, n_inputs),
+    ``G_yx = sum_r w_r Y_r X_r^H`` (1, n_inputs), ``G_yy = sum_r w_r |Y_r|^2``. The
+    inverse is a pseudo-inverse (Hermitian, relative cut-off 1e-12), so a singular
+    ``G_xx`` gives the minimum-norm estimate instead of overflow; ``condition_number``
+    says where that happened.
+
+    Parameters
+    ----------
+    inputs : array_like, shape (n_blocks, n_inputs, n_freqs)
+        Input spectra ``X_r`` per block (e.g. V); any shape that broadcasts to it
+        (``(n_blocks, n_inputs, 1)`` for inputs that are the same at every frequency).
+    outputs : array_like, complex, shape (n_blocks, n_outputs, n_freqs)
+        Output spectra ``Y_r`` per block (e.g. m).
+    valid : array_like of bool, shape (n_blocks, n_outputs), optional
+        Which blocks to keep for each output (default all).
+
+    Returns
+    -------
+    MimoEstimate
+    """
+    Y = as_array(outputs, "outputs", ndim=3, dtype="complex", finite=False)
+    n_blocks, n_out, n_freqs = Y.shape
+    X = np.asarray(inputs)
+    if X.ndim != 3 or X.shape[0] != n_blocks or X.shape[2] not in (1, n_freqs):
+        raise ValidationError(
+            f"inputs must have shape (n_blocks={n_blocks}, n_inputs, n_freqs={n_freqs} or 1), got {X.shape}"
+        )
+    X = as_array(X, "inputs", ndim=3, dtype="complex")
+    n_in = X.shape[1]
+    w = np.ones((n_blocks, n_out)) if valid is None else as_array(valid, "valid", shape=(n_blocks, n_out))
+    kept = w[..., None] > 0
+    if not np.isfinite(Y[np.broadcast_to(kept, Y.shape)]).all():
+        raise ValidationError("outputs holds NaN/Inf in a block marked valid")
+    Y = np.where(kept, Y, 0.0)  # a dropped block may hold garbage (NaN)
+    Xf = np.broadcast_to(X, (n_blocks, n_in, n_freqs))
+    # Cross-spectral sums, frequencies batched: (P, F, A, A), (P, F, A), (P, F).
+    Gxx = np.einsum("rp,raf,rbf->pfab", w, Xf, Xf.conj(), optimize=True)
+    Gyx = np.einsum("rp,rpf,raf->pfa", w, Y, Xf.conj(), optimize=True)
+    Gyy = np.einsum("rp,rpf->pf", w, np.abs(Y) ** 2)
+    inv = np.linalg.pinv(Gxx, rcond=1e-12, hermitian=True)
+    H = np.einsum("pfa,pfab->pfb", Gyx, inv)
+    explained = np.einsum("pfa,pfa->pf", H, Gyx.conj()).real  # G_yx G_xx^-1 G_xy
+    residual = np.maximum(Gyy - explained, 0.0)
+    n_used = w.sum(axis=0)
+    assessable = (n_used > n_in)[:, None] & (Gyy > 0)
+    multiple = np.full(Gyy.shape, np.nan)
+    np.divide(explained, Gyy, out=multiple, where=assessable)
+    # Adding input a to the others lowers the residual by |H_a|^2 / [G_xx^-1]_aa.
+    inv_diag = np.einsum("pfaa->pfa", inv).real
+    gain = np.divide(np.abs(H) ** 2, inv_diag, out=np.zeros(H.shape), where=inv_diag > 0)
+    total = gain + residual[..., None]
+    partial = np.full(H.shape, np.nan)
+    np.divide(gain, total, out=partial, where=assessable[..., None] & (total > 0))
+    eig = np.linalg.eigvalsh(Gxx)  # ascending, (P, F, A)
+    tiny = np.finfo(float).tiny
+    cond = np.divide(eig[..., -1], eig[..., 0], out=np.full(eig.shape[:-1], np.inf),
+                     where=eig[..., 0] > tiny * np.maximum(eig[..., -1], 1.0))
+    power = np.einsum("pfaa->pfa", Gxx).real
+    norm = np.sqrt(power[..., :, None] * power[..., None, :])
+    corr = np.divide(np.abs(Gxx), norm, out=np.zeros(Gxx.shape), where=norm > 0)
+    corr[..., np.arange(n_in), np.arange(n_in)] = 0.0
+    return MimoEstimate(
+        H=np.moveaxis(H, 0, 1), multiple_coherence=np.minimum(multiple, 1.0).T,
+        partial_coherence=np.minimum(np.moveaxis(partial, 0, 1), 1.0),
+        condition_number=np.moveaxis(cond, 0, 1), input_correlation=corr.max(axis=(-2, -1)).T,
+        n_used=n_used.astype(int),
+    )
+
+
 def noise_and_snr(
     recordings: np.ndarray, valid: np.ndarray, n_pre: int, fs: float, band: tuple[float, float]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -237,6 +363,50 @@ def noise_and_snr(
     # the figure stays a finite number in files and tables.
     snr_db = np.minimum(10.0 * snr_db, 300.0)
     return np.sqrt(p_noise), snr_db
+
+
+def split_snr(
+    snr_db: np.ndarray, H: np.ndarray, freqs: np.ndarray, band: tuple[float, float], drive: np.ndarray, fs: float
+) -> np.ndarray:
+    """Per-actuator SNR of takes in which all actuators played the same sweep at once.
+
+    Over a block of Hadamard-coded takes the cross terms between actuators cancel, so a
+    point's mean in-band response power is the sum of what each actuator alone gives.
+    That power over the noise floor (``snr_db`` of :func:`noise_and_snr`) is shared
+    among the actuators in proportion to ``sum_band |H_pa(f)|^2 |X(f)|^2``, the in-band
+    power actuator ``a`` gives at point ``p`` with the sweep's spectrum ``X``. The result
+    reads like the ``h1`` SNR of that pair: what the pair alone would have given.
+
+    Parameters
+    ----------
+    snr_db : ndarray, shape (n_points,)
+        In-band SNR of all actuators together, dB (:func:`noise_and_snr`).
+    H : ndarray, complex, shape (n_freqs, n_points, n_actuators)
+        Estimated transfer matrix, m/V.
+    freqs : ndarray, shape (n_freqs,)
+        Frequencies of ``H``, Hz.
+    band : (float, float)
+        Calibrated band, Hz.
+    drive : ndarray, shape (n_drive,)
+        The sweep each actuator played (up to its sign), V.
+    fs : float
+        Sample rate, Hz.
+
+    Returns
+    -------
+    ndarray, shape (n_points, n_actuators)
+        dB, floored at -60 dB and capped at 300 dB like :func:`noise_and_snr`.
+    """
+    n = scipy.fft.next_fast_len(max(drive.size, 2 * (len(freqs) - 1)), real=True)
+    sweep_power = np.interp(freqs, scipy.fft.rfftfreq(n, 1 / fs), np.abs(scipy.fft.rfft(drive, n)) ** 2)
+    in_band = (freqs >= band[0]) & (freqs <= band[1])
+    power = np.einsum("fpa,f->pa", np.abs(H[in_band]) ** 2, sweep_power[in_band])
+    total = power.sum(axis=1, keepdims=True)
+    share = np.divide(power, total, out=np.zeros(power.shape), where=total > 0)
+    ratio = 10.0 ** (np.asarray(snr_db, float)[:, None] / 10.0) * share
+    with np.errstate(divide="ignore"):
+        out = 10.0 * np.log10(np.maximum(ratio, 1e-6))
+    return np.where(np.isnan(snr_db)[:, None], np.nan, np.minimum(out, 300.0))
 
 
 def _band_power(y: np.ndarray, fs: float, band: tuple[float, float]) -> np.ndarray:

@@ -1,6 +1,6 @@
 """One self-describing netCDF4/HDF5 file per calibration (xarray + h5netcdf).
 
-File layout (schema version 1), readable by any netCDF4 or HDF5 reader:
+File layout (schema version 2), readable by any netCDF4 or HDF5 reader:
 
 Dimensions
     ``frequency`` (n_fft/2 + 1), ``point``, ``actuator``, ``repeat``, ``drive_sample``,
@@ -17,13 +17,20 @@ Variables
     record_sample), m, float32, NaN marks a dropout; quality figures ``snr_db``,
     ``noise_rms``, ``band_gain``, ``low_coherence_share``, ``coherent_to_hz``, ``clipped``, ``repeats_used``,
     ``dropouts`` (point, actuator) and ``polarity`` (actuator).
+    Method ``mimo`` (all actuators in every take) stores ``recording`` as (take, point,
+    record_sample) instead, and adds ``code`` (take, actuator; the sign of each
+    actuator's sweep in each take), ``multiple_coherence``, ``input_condition`` and
+    ``input_correlation`` (frequency, point).
 Attributes
     ``file_kind = "vibrofocus calibration"``, ``schema_version``, ``software``,
     ``software_version``, ``participant_id``, ``method``, ``fs`` (Hz), ``band_low``,
     ``band_high`` (Hz), ``n_fft``, ``created``, and JSON strings ``layout``, ``rig``,
-    ``sweep``, ``quality_issues``, ``quality_thresholds``.
+    ``sweep``, ``quality_issues``, ``quality_thresholds``; ``recorded_s`` (s, the real
+    duration of the takes) when known.
 
-:func:`load_calibration` checks all of it and raises
+Version 2 added the ``mimo`` variables, ``recorded_s`` and two quality thresholds;
+version 1 files (``h1``/``paper`` only) load unchanged, their missing thresholds taking
+the defaults. :func:`load_calibration` checks all of it and raises
 :class:`~vibrofocus.errors.CalibrationFileError` naming the file and what is wrong.
 """
 
@@ -56,6 +63,14 @@ _QUALITY_VARS = {
     "dropouts": ("1", "recordings left out because of dropouts"),
 }
 _REQUIRED_VARS = ("H_real", "H_imag", "coherence", "drive", "recording", *_QUALITY_VARS, "polarity")
+#: Variables of a ``mimo`` calibration besides those: dimensions, units, meaning.
+_MIMO_VARS = {
+    "code": (("take", "actuator"), "1", "sign of each actuator's sweep in each take (+1/-1)"),
+    "multiple_coherence": (("frequency", "point"), "1",
+                           "share of the response the actuators together explain (NaN: not assessable)"),
+    "input_condition": (("frequency", "point"), "1", "condition number of the input spectral matrix"),
+    "input_correlation": (("frequency", "point"), "1", "largest normalised input cross-spectrum"),
+}
 _REQUIRED_ATTRS = ("schema_version", "participant_id", "method", "fs", "band_low", "band_high", "n_fft",
                    "created", "software_version", "layout", "rig", "sweep", "quality_issues",
                    "quality_thresholds")
@@ -76,7 +91,7 @@ def _to_dataset(cal: Calibration):
                       {"units": "1", "long_name": "coherence over repeats (NaN: not assessable)"}),
         "drive": (("actuator", "drive_sample"), cal.drives,
                   {"units": "V", "long_name": "voltage on the measured actuator's channel (others zero)"}),
-        "recording": (("actuator", "repeat", "point", "record_sample"), cal.recordings,
+        "recording": (_recording_dims(cal.method), cal.recordings,
                       {"units": "m", "long_name": "raw displacement (NaN: dropout)"}),
         "polarity": (("actuator",), q.polarity.astype(np.int8),
                      {"units": "1", "long_name": "relative polarity (+1/-1, 0 not judged)"}),
@@ -88,6 +103,12 @@ def _to_dataset(cal: Calibration):
     for name, values in figures.items():
         units, long_name = _QUALITY_VARS[name]
         data_vars[name] = (pa, values, {"units": units, "long_name": long_name})
+    if cal.method == "mimo":
+        mimo = {"code": cal.codes.astype(np.int8), "multiple_coherence": cal.multiple_coherence,
+                "input_condition": q.input_condition, "input_correlation": q.input_correlation}
+        for name, values in mimo.items():
+            dims, units, long_name = _MIMO_VARS[name]
+            data_vars[name] = (dims, values, {"units": units, "long_name": long_name})
     coords = {
         "frequency": ("frequency", cal.freqs, {"units": "Hz"}),
         "point": ("point", list(lay.point_labels)),
@@ -101,7 +122,7 @@ def _to_dataset(cal: Calibration):
     attrs = {
         "title": f"vibrofocus calibration of {cal.participant_id}",
         "file_kind": FILE_KIND,
-        "schema_version": np.int32(cal.schema_version),
+        "schema_version": np.int32(SCHEMA_VERSION),
         "software": "vibrofocus",
         "software_version": cal.software_version,
         "participant_id": cal.participant_id,
@@ -119,7 +140,16 @@ def _to_dataset(cal: Calibration):
     }
     if cal.straps is not None:
         attrs["strap_forces"] = json.dumps(cal.straps)
+    if np.isfinite(cal.recorded_s):
+        attrs["recorded_s"] = float(cal.recorded_s)
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
+
+
+def _recording_dims(method: str) -> tuple[str, ...]:
+    """Dimensions of ``recording``: one actuator per take, or all at once (``mimo``)."""
+    if method == "mimo":
+        return ("take", "point", "record_sample")
+    return ("actuator", "repeat", "point", "record_sample")
 
 
 def _json_default(obj):
@@ -149,7 +179,8 @@ def calibration_bytes(cal: Calibration) -> bytes:
     return bytes(ds.to_netcdf(None, engine="h5netcdf", encoding=encoding))
 
 
-def estimate_calibration_bytes(n_points: int, n_actuators: int, repeats: int, n_record: int, n_fft: int) -> int:
+def estimate_calibration_bytes(n_points: int, n_actuators: int, repeats: int, n_record: int, n_fft: int,
+                               *, all_at_once: bool = False) -> int:
     """Upper estimate of a calibration file's size, bytes (for a free-space check before measuring).
 
     Parameters
@@ -162,12 +193,16 @@ def estimate_calibration_bytes(n_points: int, n_actuators: int, repeats: int, n_
         Samples per recording.
     n_fft : int
         FFT length of the stored transfer matrix.
+    all_at_once : bool
+        All actuators play in every take (``mimo``): one recording set, not one per actuator.
     """
     n_freqs = n_fft // 2 + 1
-    recordings = 4 * n_actuators * repeats * n_points * n_record  # float32, noise hardly compresses
+    sets = 1 if all_at_once else n_actuators
+    recordings = 4 * sets * repeats * n_points * n_record  # float32, noise hardly compresses
     matrices = 3 * 8 * n_freqs * n_points * n_actuators  # H real, H imag, coherence
     drives = 8 * n_actuators * n_record
-    return int(1.1 * (recordings + matrices + drives)) + 64 * 1024
+    mimo = 3 * 8 * n_freqs * n_points if all_at_once else 0  # multiple coherence, conditioning
+    return int(1.1 * (recordings + matrices + drives + mimo)) + 64 * 1024
 
 
 def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
@@ -283,7 +318,11 @@ def _from_dataset(ds, path: Path) -> Calibration:
     missing = [a for a in _REQUIRED_ATTRS if a not in attrs]
     if missing:
         raise _fail(path, f"lacks the attribute(s) {', '.join(missing)}")
-    missing = [v for v in _REQUIRED_VARS if v not in ds.variables]
+    method = str(attrs["method"])
+    mimo = method == "mimo"
+    if mimo and version < 2:
+        raise _fail(path, f"has method mimo but schema version {version}; mimo calibrations are version 2 or later")
+    missing = [v for v in (*_REQUIRED_VARS, *(_MIMO_VARS if mimo else ())) if v not in ds.variables]
     if missing:
         raise _fail(path, f"lacks the variable(s) {', '.join(missing)}")
 
@@ -315,8 +354,9 @@ def _from_dataset(ds, path: Path) -> Calibration:
     expected_dims = {
         "H_real": ("frequency", "point", "actuator"), "H_imag": ("frequency", "point", "actuator"),
         "coherence": ("frequency", "point", "actuator"), "drive": ("actuator", "drive_sample"),
-        "recording": ("actuator", "repeat", "point", "record_sample"), "polarity": ("actuator",),
+        "recording": _recording_dims(method), "polarity": ("actuator",),
         **{name: ("point", "actuator") for name in _QUALITY_VARS},
+        **({name: spec[0] for name, spec in _MIMO_VARS.items()} if mimo else {}),
     }
     for name, dims in expected_dims.items():
         if ds[name].dims != dims:
@@ -372,6 +412,19 @@ def _from_dataset(ds, path: Path) -> Calibration:
     drive = ds["drive"].values
     if not np.isfinite(drive).all():
         raise _fail(path, "variable drive holds NaN/Inf")
+    codes = multiple = condition = correlation = None
+    if mimo:
+        codes = ds["code"].values
+        if ds.sizes["take"] != codes.shape[0] or not np.isin(codes, (-1, 1)).all():
+            raise _fail(path, "variable code must hold +1 or -1 for every take and actuator")
+        codes = codes.astype(np.int8)
+        multiple = ds["multiple_coherence"].values.astype(float)
+        finite = np.isfinite(multiple)
+        if (multiple[finite] < -1e-9).any() or (multiple[finite] > 1 + 1e-9).any():
+            raise _fail(path, "variable multiple_coherence holds values outside [0, 1]")
+        condition = ds["input_condition"].values.astype(float)
+        correlation = ds["input_correlation"].values.astype(float)
+    recorded_s = _number_attr(attrs, "recorded_s", path) if "recorded_s" in attrs else float("nan")
 
     quality = QualityReport(
         issues=issues, snr_db=ds["snr_db"].values, noise_rms_m=ds["noise_rms"].values,
@@ -379,12 +432,12 @@ def _from_dataset(ds, path: Path) -> Calibration:
         coherent_to_hz=ds["coherent_to_hz"].values,
         clipped=ds["clipped"].values.astype(bool), repeats_used=ds["repeats_used"].values.astype(int),
         dropouts=ds["dropouts"].values.astype(int), polarity=ds["polarity"].values.astype(int),
-        thresholds=thresholds,
+        thresholds=thresholds, input_condition=condition, input_correlation=correlation,
     )
     return Calibration(
         H=H_real.astype(float) + 1j * H_imag.astype(float), freqs=freqs, fs=fs, coherence=coherence,
-        layout=layout, band=band, participant_id=str(attrs["participant_id"]), method=str(attrs["method"]),
+        layout=layout, band=band, participant_id=str(attrs["participant_id"]), method=method,
         quality=quality, drives=drive, recordings=ds["recording"].values, rig=rig, sweep=sweep,
         created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
-        straps=straps,
+        straps=straps, codes=codes, multiple_coherence=multiple, recorded_s=recorded_s,
     )

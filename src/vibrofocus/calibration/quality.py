@@ -37,6 +37,24 @@ a point that barely moves
     (default 0.1) of the median over points: usually a mis-aimed vibrometer.
 dropouts
     Recordings with NaN/Inf samples were left out of the estimate; reported as info.
+
+With all actuators at once (``mimo``) the per-pair checks read the same figures (the
+coherence is each actuator's partial coherence, the SNR each actuator's share of the
+response over the noise floor), plus three checks of the separation:
+
+ill-conditioned inputs
+    Per point, the condition number of the input spectral matrix of the takes kept
+    exceeds ``condition_max`` (default 10) somewhere in the band: the actuators cannot
+    be told apart reliably there (too many takes lost to dropouts). An error.
+correlated inputs
+    Per point, the largest normalised input cross-spectrum ``|G_ab| / sqrt(G_aa G_bb)``
+    in the band exceeds ``input_correlation_max`` (default 0.5). The Hadamard signs make
+    it 0; dropouts raise it (1/7 after losing one take of eight). A warning.
+low multiple coherence
+    Per point, the share of the response that the actuators together explain is below
+    ``coherence_min`` over at least ``coherence_share`` of the band, not only at its top
+    (nonlinearity, a moving arm, noise); read against the pure-noise value
+    ``n_actuators / n_takes``. A warning; at the top of the band only, info.
 """
 
 from __future__ import annotations
@@ -54,7 +72,23 @@ SEVERITIES = ("info", "warning", "error")
 
 @dataclass(frozen=True)
 class QualityThresholds:
-    """Thresholds of the quality checks (see the module docstring)."""
+    """Thresholds of the quality checks (see the module docstring).
+
+    Attributes
+    ----------
+    coherence_min : float
+        Coherence below which a frequency counts as incoherent.
+    coherence_share : float
+        Share of the band's frequencies that may be incoherent before a path is flagged.
+    dead_ratio : float
+        An actuator whose band gain is below this fraction of the others' median is dead.
+    still_ratio : float
+        A point whose response is below this fraction of the median point's barely moves.
+    snr_min_db : float
+        Lowest acceptable signal-to-noise ratio in the band, dB.
+    clip_samples : int
+        Samples at full scale that make a recording clipped.
+    """
 
     coherence_min: float = 0.5
     coherence_share: float = 0.1
@@ -62,6 +96,8 @@ class QualityThresholds:
     still_ratio: float = 0.1
     snr_min_db: float = 10.0
     clip_samples: int = 4
+    condition_max: float = 10.0
+    input_correlation_max: float = 0.5
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -75,7 +111,9 @@ class QualityIssue:
     ----------
     check : str
         ``low_coherence``, ``coherence_limit``, ``dead_actuator``, ``reversed_actuator``, ``clipping``,
-        ``drive_at_limit``, ``low_snr``, ``still_point`` or ``dropouts``.
+        ``drive_at_limit``, ``low_snr``, ``still_point``, ``dropouts``, or for ``mimo``
+        ``ill_conditioned``, ``input_correlation``, ``low_multiple_coherence`` and
+        ``multiple_coherence_limit``.
     severity : {"info", "warning", "error"}
     message : str
         What was found and what to do, in words.
@@ -125,6 +163,12 @@ class QualityReport:
     polarity : ndarray of int, shape (n_actuators,)
         +1 / -1 relative polarity, 0 where not judged (dead or too few actuators).
     thresholds : QualityThresholds
+    input_condition : ndarray, shape (n_freqs, n_points), or None
+        ``mimo`` only: condition number of the input spectral matrix per frequency and
+        point (1: perfectly separable; inf: singular).
+    input_correlation : ndarray, shape (n_freqs, n_points), or None
+        ``mimo`` only: largest normalised input cross-spectrum per frequency and point
+        (0: uncorrelated inputs).
     """
 
     issues: list[QualityIssue]
@@ -138,6 +182,8 @@ class QualityReport:
     dropouts: np.ndarray
     polarity: np.ndarray
     thresholds: QualityThresholds = field(default_factory=QualityThresholds)
+    input_condition: np.ndarray | None = None
+    input_correlation: np.ndarray | None = None
 
     @property
     def _band_top(self) -> float:
@@ -172,6 +218,9 @@ class QualityReport:
             elif issue.check == "still_point":
                 for a in range(n_a):
                     tags[issue.point][a].append("point still")
+            elif issue.check == "ill_conditioned":
+                for a in range(n_a):
+                    tags[issue.point][a].append("not separable")
         t = self.thresholds
         for p in range(n_p):
             for a in range(n_a):
@@ -222,7 +271,7 @@ class QualityReport:
 
 
 def _is_error(verdict: str) -> bool:
-    return any(tag in verdict for tag in ("dead", "reversed", "clipped"))
+    return any(tag in verdict for tag in ("dead", "reversed", "clipped", "not separable"))
 
 
 def detect_clipping(recordings: np.ndarray, *, clip_samples: int = 4, sensor_range_m: float | None = None) -> np.ndarray:
@@ -310,6 +359,9 @@ def assess_quality(
     drive_peak_v: float,
     peak_limit_v: float,
     thresholds: QualityThresholds | None = None,
+    multiple_coherence: np.ndarray | None = None,
+    input_condition: np.ndarray | None = None,
+    input_correlation: np.ndarray | None = None,
 ) -> QualityReport:
     """Run every check on an estimated transfer matrix.
 
@@ -318,7 +370,7 @@ def assess_quality(
     H : ndarray, complex, shape (n_freqs, n_points, n_actuators)
         Estimate, m/V.
     coherence : ndarray, shape (n_freqs, n_points, n_actuators)
-        In [0, 1]; NaN where not assessable.
+        In [0, 1]; NaN where not assessable (``mimo``: partial coherence).
     freqs : ndarray, shape (n_freqs,)
         Hz.
     band : (float, float)
@@ -335,6 +387,9 @@ def assess_quality(
     drive_peak_v, peak_limit_v : float
         Sweep peak and the rig's peak limit, V.
     thresholds : QualityThresholds, optional
+    multiple_coherence, input_condition, input_correlation : ndarray, shape (n_freqs, n_points), optional
+        ``mimo`` only (:class:`vibrofocus.calibration.estimate.MimoEstimate`): given
+        together, they add the separation checks and are kept in the report.
 
     Returns
     -------
@@ -421,40 +476,31 @@ def assess_quality(
                 "more repeats or a longer sweep help",
                 actuator=int(a)))
 
-    # Low coherence.
+    # Low coherence (partial coherence of each actuator for mimo).
     f_band = freqs[in_band]
-    coh = coherence[in_band]  # (n_band, P, A)
-    assessable = np.isfinite(coh).all(axis=0)
-    low_mask = np.where(np.isfinite(coh), coh < t.coherence_min, False)
-    share = np.where(assessable, low_mask.mean(axis=0), np.nan)
-    flagged = assessable & (share >= t.coherence_share) & ~dead[None, :]
-    coherent_to = np.where(assessable, band[1], np.nan)
-    wide: dict[int, list[str]] = {}
-    top_limited: dict[int, list[str]] = {}
-    for p, a in np.argwhere(flagged):
-        ranges = _ranges(f_band, low_mask[:, p, a], min_gap=max(3, int(0.02 * f_band.size)))
-        last_lo, last_hi = ranges[-1]
-        in_last = low_mask[:, p, a][f_band >= last_lo].sum()
-        if last_hi >= f_band[-1] and in_last >= 0.8 * low_mask[:, p, a].sum():
-            coherent_to[p, a] = last_lo
-            top_limited.setdefault(a, []).append(f"{labels[p]} (to {last_lo:.0f} Hz)")
-        else:
-            wide.setdefault(a, []).append(f"{labels[p]} ({share[p, a]:.0%}: {_format_ranges(ranges)})")
+    share, coherent_to, wide, top_limited = _low_coherence(f_band, coherence[in_band], band[1], t, ~dead)
+    n_inputs = H.shape[2] if multiple_coherence is not None else 1
+    dof = int(repeats_used.max()) - n_inputs + 1  # pure noise gives 1/dof on average
     for a, parts in sorted(wide.items()):
         issues.append(QualityIssue(
             "low_coherence", "warning",
             f"actuator {names[a]}: coherence below {t.coherence_min:g} over at least {t.coherence_share:.0%} "
-            f"of the band at point(s) {'; '.join(parts)}; check the actuator's contact and the vibrometer "
+            f"of the band at point(s) {'; '.join(f'{labels[p]} {d}' for p, d in parts)}; check the actuator's "
+            "contact and the vibrometer "
             "signal there, or add repeats"
             + (f" (with {int(repeats_used.max())} repeats the coherence estimate itself is coarse: pure noise "
-               f"gives {1 / max(int(repeats_used.max()), 1):.2g} on average)" if repeats_used.max() < 4 else ""),
+               f"gives {1 / max(dof, 1):.2g} on average)" if dof < 4 else ""),
             actuator=int(a)))
     for a, parts in sorted(top_limited.items()):
         issues.append(QualityIssue(
             "coherence_limit", "info",
-            f"actuator {names[a]}: coherent only up to a frequency at point(s) {', '.join(parts)}; above it the "
+            f"actuator {names[a]}: coherent only up to a frequency at point(s) "
+            f"{', '.join(f'{labels[p]} {d}' for p, d in parts)}; above it the "
             "skin damps the response below the sensor noise (expected far from an actuator)",
             actuator=int(a)))
+    if multiple_coherence is not None:
+        issues += _separation_issues(multiple_coherence[in_band], input_condition[in_band],
+                                     input_correlation[in_band], f_band, band[1], layout, repeats_used, t)
 
     # Dropouts.
     missing = np.asarray(dropouts, int)
@@ -470,4 +516,92 @@ def assess_quality(
         issues=issues, snr_db=np.asarray(snr_db, float), noise_rms_m=np.asarray(noise_rms_m, float),
         band_gain=band_gain, low_coherence_share=share, coherent_to_hz=coherent_to, clipped=np.asarray(clipped, bool),
         repeats_used=np.asarray(repeats_used, int), dropouts=missing, polarity=polarity, thresholds=t,
+        input_condition=None if input_condition is None else np.asarray(input_condition, float),
+        input_correlation=None if input_correlation is None else np.asarray(input_correlation, float),
     )
+
+
+def _low_coherence(f_band: np.ndarray, coh: np.ndarray, band_top: float, t: QualityThresholds,
+                   live: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict, dict]:
+    """Pairs whose coherence is low over a share of the band, and how.
+
+    Parameters
+    ----------
+    f_band : ndarray, shape (n_band,)
+        In-band frequencies, Hz.
+    coh : ndarray, shape (n_band, n_points, n_columns)
+        Coherence in the band (NaN: not assessable).
+    band_top : float
+        Top of the band, Hz.
+    t : QualityThresholds
+    live : ndarray of bool, shape (n_columns,)
+        Columns to judge.
+
+    Returns
+    -------
+    share, coherent_to : ndarray, shape (n_points, n_columns)
+        Share of low-coherence frequencies and frequency up to which the pair is coherent
+        (NaN: not assessable).
+    wide, top_limited : dict of column -> list of (int, str)
+        Flagged points per column with a note: low coherence spread over the band, or
+        only at its top.
+    """
+    assessable = np.isfinite(coh).all(axis=0)
+    low_mask = np.where(np.isfinite(coh), coh < t.coherence_min, False)
+    share = np.where(assessable, low_mask.mean(axis=0), np.nan)
+    flagged = assessable & (share >= t.coherence_share) & live[None, :]
+    coherent_to = np.where(assessable, band_top, np.nan)
+    wide: dict[int, list[tuple[int, str]]] = {}
+    top_limited: dict[int, list[tuple[int, str]]] = {}
+    for p, a in np.argwhere(flagged):
+        gap = max(3, int(0.02 * f_band.size))
+        ranges = _ranges(f_band, low_mask[:, p, a], min_gap=gap)
+        last_lo, last_hi = ranges[-1]
+        in_last = low_mask[:, p, a][f_band >= last_lo].sum()
+        # "At the top": the last range ends within a merge gap of the band's top (one
+        # noisy bin above the threshold there does not make it a mid-band problem).
+        if last_hi >= f_band[max(f_band.size - gap, 0)] and in_last >= 0.8 * low_mask[:, p, a].sum():
+            coherent_to[p, a] = last_lo
+            top_limited.setdefault(a, []).append((p, f"(to {last_lo:.0f} Hz)"))
+        else:
+            wide.setdefault(a, []).append((p, f"({share[p, a]:.0%}: {_format_ranges(ranges)})"))
+    return share, coherent_to, wide, top_limited
+
+
+def _separation_issues(multiple: np.ndarray, condition: np.ndarray, correlation: np.ndarray, f_band: np.ndarray,
+                       band_top: float, layout: ArrayLayout, repeats_used: np.ndarray,
+                       t: QualityThresholds) -> list[QualityIssue]:
+    """The ``mimo`` checks (module docstring) on in-band figures of shape (n_band, n_points)."""
+    labels = layout.point_labels
+    issues = []
+    worst_cond = condition.max(axis=0)
+    for p in np.flatnonzero(~(worst_cond <= t.condition_max)):
+        f_worst = f_band[int(np.argmax(condition[:, p]))]
+        issues.append(QualityIssue(
+            "ill_conditioned", "error",
+            f"point {labels[p]}: the takes kept cannot separate the actuators reliably (input condition number "
+            f"{worst_cond[p]:.3g} at {f_worst:.0f} Hz, limit {t.condition_max:g}); too many takes were lost to "
+            "dropouts: calibrate this point again", point=int(p)))
+    worst_corr = correlation.max(axis=0)
+    for p in np.flatnonzero(worst_corr > t.input_correlation_max):
+        issues.append(QualityIssue(
+            "input_correlation", "warning",
+            f"point {labels[p]}: the actuators' excitations in the takes kept are correlated up to "
+            f"{worst_corr[p]:.2f} (limit {t.input_correlation_max:g}; 0 with every take); the estimate separates "
+            "them but with more noise", point=int(p)))
+    _, _, wide, top_limited = _low_coherence(f_band, multiple[:, :, None], band_top, t, np.ones(1, bool))
+    n_inputs = layout.n_actuators
+    floor = n_inputs / max(int(repeats_used.max()), 1)
+    for check, severity, found, what in (
+        ("low_multiple_coherence", "warning", wide.get(0, []),
+         "check the contact of the actuators and the vibrometer signal there; nonlinearity or a moving arm "
+         "also lower it"),
+        ("multiple_coherence_limit", "info", top_limited.get(0, []),
+         "above it the skin damps every actuator's response below the sensor noise"),
+    ):
+        for p, detail in found:
+            issues.append(QualityIssue(
+                check, severity,
+                f"point {labels[p]}: the actuators together explain less than {t.coherence_min:g} of the response "
+                f"{detail} (multiple coherence; pure noise gives {floor:.2g}); {what}", point=int(p)))
+    return issues

@@ -42,6 +42,13 @@ def demo_command(
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (results and summary) and nothing else."),
     location: int = typer.Option(5, "--field-location", help="Location shown in the focused-field figure."),
     per_location: bool = typer.Option(False, "--per-location", help="Also print one row per location and method."),
+    paper_figures: bool = typer.Option(
+        False, "--paper-figures",
+        help="Instead of the demo, draw the source paper's Figs. 4-7 (de Vlam et al. 2023) from the simulated forearm "
+        "and a simulated study into OUT (paper_fig4.png ... paper_fig7.png).",
+    ),
+    participants: int = typer.Option(12, "--participants", min=1,
+                                     help="Simulated participants of the study behind --paper-figures (about 3 s each)."),
     design_from: str = typer.Option(
         "calibration", "--design-from",
         help="Design from a calibration measured first ('calibration', as a user would) or from the "
@@ -64,6 +71,9 @@ def demo_command(
         from ..skin import SimulatedForearm
 
         check_choice(design_from, "--design-from", ("calibration", "model"))
+        if paper_figures:
+            _write_paper_figures(out, seed=seed, participants=participants, location=location)
+            return
         rig = SimulatedForearm(seed=seed)
         rig.layout.location_index(location)
         if design_from == "calibration" or figures:
@@ -174,6 +184,25 @@ def demo_command(
             console.print("Per location: --per-location, --json, or the metrics figure.", style="dim")
         for path in paths:
             console.print(f"wrote {path}")
+
+
+def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int) -> None:
+    from .._atomic import output_error
+    from ..demo.paper_figures import write_paper_figures
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(exc, out, "output folder") from exc
+    with Progress(TextColumn("[progress.description]{task.description}"), TimeElapsedColumn(), console=err_console,
+                  transient=True) as progress:
+        task = progress.add_task("starting", total=None)
+        paths = write_paper_figures(out, seed=seed, participants=participants, location=location,
+                                    progress=lambda label: progress.update(task, description=label))
+    console.print("The source paper's figure layouts, drawn from the model (simulated forearm and simulated "
+                  "participants: not data):")
+    for path in paths:
+        console.print(f"wrote {path}")
 
 
 def _relative_error_to_model(rig, calibration) -> float:

@@ -8,15 +8,14 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import save_figure
+from .._style import method_colors
 from ..defaults import BAND_HZ, N_SAMPLES, SIGMA_S, TARGET_PEAK_M
-from ..rendering.taper import band_taper
+from ..signals.taper import band_taper
 from ..signals.ricker import ricker
 from .run import DemoResult, record_clean
 
 __all__ = ["propagation_figure", "field_figure", "metrics_figure", "write_figures"]
 
-_METHOD_COLORS = {"funneling": "tab:orange", "inverse": "tab:blue", "combination": "tab:green",
-                  "time_reversal": "tab:purple", "contrast": "tab:red", "constrained": "tab:brown"}
 
 
 def _pyplot():
@@ -108,12 +107,14 @@ def propagation_figure(rig, path: Path, *, actuator: int | None = None,
 
 def field_figure(result: DemoResult, path: Path, *, location: int = 5,
                  methods: tuple[str, ...] = ("funneling", "inverse"),
-                 offsets_ms: tuple[float, ...] = (-3.0, 0.0, 3.0, 6.0),
+                 offsets_ms: tuple[float, ...] = (-3.0, 0.0, 3.0, 6.0, 9.0),
                  half_width_m: float = 0.035, n_grid: int = 31) -> Path:
-    """Displacement around the array at a few instants around each method's tap.
+    """Displacement around the array at a few instants, every method on one time axis.
 
-    The instants are relative to the time of the largest recorded displacement at the
-    target, so every method is shown at its own focus.
+    Time 0 is the instant the tap is asked for at the target (the design's ``t0``), the
+    same for every method, so a late arrival (funneling's) shows as such. One colour
+    scale serves the whole figure: 1.2 times the largest displacement any method
+    reaches at the target (the skin under the actuators saturates it on purpose).
     """
     plt = _pyplot()
     rig = result.rig
@@ -122,17 +123,19 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
     axis = np.linspace(-half_width_m, half_width_m, n_grid)
     gx, gy = np.meshgrid(axis, axis)
     grid = np.column_stack([gx.ravel(), gy.ravel()])
-    fig, axes = plt.subplots(len(methods), len(offsets_ms), figsize=(2.6 * len(offsets_ms), 2.6 * len(methods)),
-                             squeeze=False, sharex=True, sharey=True)
-    for row, method in enumerate(methods):
+    offsets = np.asarray(offsets_ms, dtype=float) * 1e-3
+    fields, target_peak = [], 0.0
+    for method in methods:
         rendering = result.renderings[(location, method)]
         rec = result.recordings[(location, method)][rendering.target_index]
-        t_peak = float(np.nanargmax(np.abs(rec))) / rig.fs
-        times = np.clip(t_peak + np.array(offsets_ms) * 1e-3, 0, None)
-        u = rig.field(rendering.drives, grid, times=times, rtol=1e-5)
-        # Scale to the tap, not to the skin right under the actuators (which saturates).
-        scale = 1.2 * np.nanmax(np.abs(rec)) * 1e6
-        for col, t in enumerate(times):
+        target_peak = max(target_peak, float(np.nanmax(np.abs(rec))))
+        fields.append(rig.field(rendering.drives, grid, times=np.clip(rendering.t0 + offsets, 0, None), rtol=1e-5))
+    scale = 1.2 * target_peak * 1e6
+    fig, axes = plt.subplots(len(methods), len(offsets_ms), figsize=(2.6 * len(offsets_ms) + 1.0, 2.6 * len(methods)),
+                             squeeze=False, sharex=True, sharey=True)
+    im = None
+    for row, (method, u) in enumerate(zip(methods, fields)):
+        for col, offset in enumerate(offsets):
             ax = axes[row, col]
             img = u[:, col].reshape(n_grid, n_grid) * 1e6
             im = ax.imshow(img, origin="lower", cmap="RdBu_r", vmin=-scale, vmax=scale, interpolation="bilinear",
@@ -140,13 +143,15 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
             ax.plot(*(layout.actuators_xy.T * 1e3), "ks", ms=5, mfc="none")
             ax.plot(*(layout.locations_xy.T * 1e3), "k.", ms=2)
             ax.plot(*(layout.locations_xy[location - 1] * 1e3), "o", ms=7, mfc="none", mec="gold")
-            ax.set_title(f"{method}, t{(t - t_peak) * 1e3:+.0f} ms", fontsize=9)
+            ax.set_title(f"{method}, t = {offset * 1e3:+.0f} ms", fontsize=9)
             if col == 0:
                 ax.set_ylabel("y (mm, to wrist)")
             if row == len(methods) - 1:
                 ax.set_xlabel("x (mm)")
-        fig.colorbar(im, ax=axes[row, :].tolist(), shrink=0.8, label="µm")
-    fig.suptitle(f"Field around location {location} on the simulated forearm (seed {getattr(rig, 'seed', '?')})")
+    if im is not None:
+        fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="displacement (µm)")
+    fig.suptitle(f"Field around location {location} on the simulated forearm (seed {getattr(rig, 'seed', '?')}); "
+                 "t = 0: the tap asked at the target", fontsize=10)
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
@@ -163,6 +168,7 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     methods = list(dict.fromkeys(r["method"] for r in rows))
     locations = sorted({r["location"] for r in rows})
     width = 0.8 / max(len(methods), 1)
+    colors = method_colors(methods)
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
     keys = (("fidelity", "fidelity", 1.0), ("contrast_db", "contrast (dB)", 1.0),
             ("target_peak_m", "target peak (µm)", 1e6))
@@ -171,11 +177,11 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
             vals = [next((r[key] for r in rows if r["location"] == loc and r["method"] == method), np.nan)
                     for loc in locations]
             x = np.arange(len(locations)) + (j - (len(methods) - 1) / 2) * width
-            ax.bar(x, np.array(vals) * factor, width, label=method, color=_METHOD_COLORS.get(method))
+            ax.bar(x, np.array(vals) * factor, width, label=method, color=colors[method])
             if key == "fidelity":
                 shape = [next((r.get("shape_fidelity", np.nan) for r in rows
                                if r["location"] == loc and r["method"] == method), np.nan) for loc in locations]
-                ax.plot(x, shape, "o", ms=4, mfc="white", color=_METHOD_COLORS.get(method),
+                ax.plot(x, shape, "o", ms=4, mfc="white", color=colors[method],
                         label="shape (best lag)" if j == 0 else None)
         ax.set_ylabel(label)
         ax.axhline(0, color="k", lw=0.5)

@@ -57,6 +57,18 @@ def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: 
     A careful operator repeats a measurement whose sensor dropped out rather than
     patching it; so does the demo.
 
+    Parameters
+    ----------
+    rig : Rig
+    drive : ndarray, shape (n_actuators, n_samples)
+        Drives, V.
+    points_xy : ndarray, shape (n_points, 2)
+        Where to record, m.
+    tail_s : float
+        Extra recording after the drive ends, s.
+    max_tries : int
+        Recordings at most.
+
     Returns
     -------
     recording : ndarray, shape (n_points, n_samples + n_tail)
@@ -197,7 +209,18 @@ def run_demo(
 
 def summarize(rows: Sequence[dict]) -> dict[str, dict[str, float]]:
     """Median fidelity, shape fidelity, contrasts (locations, all points, energy) and
-    bound, target peak and peak drive per method."""
+    bound, target peak and peak drive per method.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        ``DemoResult.rows``.
+
+    Returns
+    -------
+    dict of str to dict
+        Method to the medians over its rows (NaN ignored).
+    """
     out: dict[str, dict[str, float]] = {}
     for method in dict.fromkeys(r["method"] for r in rows):
         sub = [r for r in rows if r["method"] == method]

@@ -409,6 +409,17 @@ def _format_errors(exc: pydantic.ValidationError) -> str:
 def parse_rig_config(data: Any, *, source: str = "rig config") -> AudioRigConfig | NidaqRigConfig:
     """Validate a mapping (as read from a file) into the config of its ``kind``.
 
+    Parameters
+    ----------
+    data : dict or RigConfig
+        Settings as read from a TOML/JSON file; a config passes through.
+    source : str
+        Where the settings came from, for the error messages.
+
+    Returns
+    -------
+    AudioRigConfig or NidaqRigConfig
+
     Raises
     ------
     ValidationError

@@ -189,6 +189,17 @@ class StrapSensors:
     """The strap force sensors of a rig: names, calibration curve, target.
 
     A rig that has them exposes ``read_strap_forces() -> ndarray (n_straps,)`` in N.
+
+    Attributes
+    ----------
+    names : tuple of str
+        One per strap.
+    curve : ForceCurve
+        Volts to newtons.
+    target_n : float
+        Strap force asked for, N.
+    tolerance_n : float
+        Accepted deviation from the target, N.
     """
 
     names: tuple[str, ...]

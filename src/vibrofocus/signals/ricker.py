@@ -12,7 +12,19 @@ __all__ = ["ricker", "time_axis"]
 
 
 def time_axis(n_samples: int, fs: float) -> np.ndarray:
-    """ndarray, shape (n_samples,): sample times ``k / fs`` in s."""
+    """Sample times ``k / fs``.
+
+    Parameters
+    ----------
+    n_samples : int
+    fs : float
+        Sample rate, Hz.
+
+    Returns
+    -------
+    ndarray, shape (n_samples,)
+        Times, s.
+    """
     return np.arange(int(n_samples)) / float(fs)
 
 

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
-from ..rendering.taper import band_taper
+from .taper import band_taper
 
 __all__ = [
     "linear_sweep",
@@ -49,6 +50,7 @@ def _check_sweep_args(fs: float, f_start: float, f_stop: float, duration: float)
     return fs, f_start, f_stop, int(round(duration * fs))
 
 
+@fill_doc
 def linear_sweep(
     fs: float,
     f_start: float = 10.0,
@@ -62,16 +64,13 @@ def linear_sweep(
 
     Parameters
     ----------
-    fs : float
-        Sample rate, Hz.
-    f_start, f_stop : float
-        Start and stop frequencies, Hz, ``0 < f_start < f_stop <= fs/2``.
-    duration : float
-        Length ``T``, s.
+    %(fs)s
+    %(sweep_f_start)s
+    %(sweep_f_stop)s
+    %(sweep_duration)s
     amplitude : float
         Peak value.
-    fade_s : float
-        Raised-cosine fade at both ends, s.
+    %(sweep_fade_s)s
 
     Returns
     -------
@@ -83,6 +82,7 @@ def linear_sweep(
     return apply_fades(amplitude * np.sin(phase), fs, fade_s)
 
 
+@fill_doc
 def exponential_sweep(
     fs: float,
     f_start: float = 10.0,
@@ -95,8 +95,21 @@ def exponential_sweep(
     """Exponential (logarithmic) sine sweep, ``f(t) = f_start (f_stop/f_start)^(t/T)``.
 
     Spends equal time per octave, so low frequencies, where skin is most damped at the
-    vibrometer, get more energy than in a linear sweep. Same parameters and return as
-    :func:`linear_sweep`.
+    vibrometer, get more energy than in a linear sweep.
+
+    Parameters
+    ----------
+    %(fs)s
+    %(sweep_f_start)s
+    %(sweep_f_stop)s
+    %(sweep_duration)s
+    amplitude : float
+        Peak value.
+    %(sweep_fade_s)s
+
+    Returns
+    -------
+    ndarray, shape (round(duration * fs),)
     """
     fs, f1, f2, n = _check_sweep_args(fs, f_start, f_stop, duration)
     t = np.arange(n) / fs
@@ -105,6 +118,7 @@ def exponential_sweep(
     return apply_fades(amplitude * np.sin(phase), fs, fade_s)
 
 
+@fill_doc
 def exponential_sweep_inverse(
     fs: float, f_start: float = 10.0, f_stop: float = 1000.0, duration: float = 1.0, *, fade_s: float = 0.01
 ) -> np.ndarray:
@@ -113,6 +127,14 @@ def exponential_sweep_inverse(
     The sweep reversed in time, with an envelope falling 6 dB per octave that undoes the
     sweep's pink spectrum, normalised so that the sweep convolved with it has unit gain
     at the band centre (geometric mean of the band).
+
+    Parameters
+    ----------
+    %(fs)s
+    %(sweep_f_start)s
+    %(sweep_f_stop)s
+    %(sweep_duration)s
+    %(sweep_fade_s)s
 
     Returns
     -------

@@ -81,6 +81,11 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
 def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     """Read a trials file back, checking the header; values typed as written.
 
+    Parameters
+    ----------
+    path : path-like
+        A trials CSV (docs/file-formats.md, trials file).
+
     Returns
     -------
     list of dict

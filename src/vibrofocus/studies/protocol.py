@@ -263,7 +263,17 @@ def parse_response(response: Any, design: StudyDesign) -> tuple[int, ...]:
 
 
 def format_response(locations: Sequence[int]) -> str:
-    """Locations as the export writes them: ascending, separated by spaces (``"4 5"``)."""
+    """Locations as the export writes them: ascending, separated by spaces (``"4 5"``).
+
+    Parameters
+    ----------
+    locations : sequence of int
+        Selected locations, 1-based.
+
+    Returns
+    -------
+    str
+    """
     return " ".join(str(int(x)) for x in sorted(locations))
 
 

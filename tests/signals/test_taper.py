@@ -3,7 +3,7 @@
 import numpy as np
 from numpy.testing import assert_allclose
 
-from vibrofocus.rendering import band_taper
+from vibrofocus.signals import band_taper
 
 
 def test_pass_band_roll_off_and_stop_band():

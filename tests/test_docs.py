@@ -1,0 +1,116 @@
+"""The documentation: every public callable documents every parameter, shared
+descriptions are filled in, and the Sphinx site builds without a warning."""
+
+from __future__ import annotations
+
+import importlib
+import inspect
+import pkgutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import vibrofocus
+from vibrofocus._docs import docdict, fill_doc
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# Public callables whose docstrings are still being completed (they live in code under
+# active change); this list only shrinks.
+KNOWN_GAPS = {
+    "vibrofocus.rendering.inverse.predict_response",
+    "vibrofocus.studies.storage.SessionInfo",
+    "vibrofocus.studies.storage.CalibrationRecord",
+    "vibrofocus.studies.storage.ParticipantInfo",
+    "vibrofocus.studies.storage.Event",
+    "vibrofocus.studies.storage.file_sha256",
+    "vibrofocus.studies.engine.Presentation",
+    "vibrofocus.studies.engine.Response",
+    "vibrofocus.studies.engine.RunSummary",
+    "vibrofocus.studies.simulate.participant_seeds",
+    "vibrofocus.studies.simulate.summarize_simulation",
+    "vibrofocus.web.app.WebState",
+}
+
+
+def _public_callables() -> dict[str, object]:
+    names = ["vibrofocus"] + [f"vibrofocus.{m.name}" for m in pkgutil.iter_modules(vibrofocus.__path__) if m.ispkg]
+    found = {}
+    for name in names:
+        module = importlib.import_module(name)
+        for attr in getattr(module, "__all__", []):
+            obj = getattr(module, attr)
+            if inspect.isfunction(obj) or inspect.isclass(obj):
+                found.setdefault(f"{obj.__module__}.{obj.__qualname__}", obj)
+    return found
+
+
+def _documented_names(obj) -> set[str]:
+    from numpydoc.docscrape import ClassDoc, FunctionDoc
+
+    docs = [ClassDoc(c) for c in inspect.getmro(obj) if c.__module__.startswith("vibrofocus")] \
+        if inspect.isclass(obj) else [FunctionDoc(obj)]
+    names = set()
+    for doc in docs:
+        for section in ("Parameters", "Other Parameters", "Attributes"):
+            for item in doc[section]:
+                names.update(n.strip().lstrip("*") for n in item.name.split(","))
+    return names
+
+
+def _undocumented(obj) -> list[str]:
+    try:
+        signature = inspect.signature(obj)
+    except (TypeError, ValueError):
+        return []
+    params = [p for p, v in signature.parameters.items()
+              if p not in ("self", "cls") and v.kind not in (v.VAR_POSITIONAL, v.VAR_KEYWORD)]
+    documented = _documented_names(obj)
+    return [p for p in params if p not in documented]
+
+
+def test_every_public_callable_documents_every_parameter():
+    pytest.importorskip("numpydoc")
+    missing = {key: gaps for key, obj in _public_callables().items() if (gaps := _undocumented(obj))}
+    unexpected = {k: v for k, v in missing.items() if k not in KNOWN_GAPS}
+    assert not unexpected, f"public callables with undocumented parameters: {unexpected}"
+    fixed = KNOWN_GAPS - set(missing)
+    assert not fixed, f"now documented, remove from KNOWN_GAPS: {sorted(fixed)}"
+
+
+def test_shared_descriptions_are_filled_with_the_placeholder_indent():
+    @fill_doc
+    def f(fs):
+        """Do.
+
+        Parameters
+        ----------
+        %(fs)s
+        """
+
+    assert "        fs : float\n            Sample rate, Hz." in f.__doc__
+    assert "%(" not in f.__doc__
+    with pytest.raises(KeyError, match="no shared description 'nope'"):
+        @fill_doc
+        def g():
+            """%(nope)s"""
+    assert set(docdict) >= {"fs", "band", "taper_octaves"}
+
+
+@pytest.mark.slow
+def test_the_documentation_site_builds_without_warnings(tmp_path):
+    pytest.importorskip("sphinx")
+    pytest.importorskip("sphinx_gallery")
+    result = subprocess.run(
+        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(ROOT / "docs"),
+         str(tmp_path / "html")],
+        capture_output=True, text=True, timeout=900, cwd=ROOT,
+    )
+    assert result.returncode == 0, result.stderr[-4000:]
+    html = tmp_path / "html"
+    assert (html / "api" / "vibrofocus.rendering.html").exists()
+    assert (html / "auto_examples" / "plot_rendering_methods.html").exists()
+    page = (html / "api" / "generated" / "vibrofocus.rendering.render.html").read_text(encoding="utf-8")
+    assert "guard_weight" in page and "Parameters" in page

@@ -1,0 +1,46 @@
+"""One-way imports between the subpackages, checked in fresh interpreters (as MNE-Python's
+test_import_nesting does): lower layers never load upper ones."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+# Subpackage -> the vibrofocus subpackages it must NOT load when imported.
+UPPER = {"rendering", "skin", "calibration", "rigs", "studies", "analysis", "demo", "web", "cli"}
+FORBIDDEN = {
+    "layout": UPPER | {"signals"},
+    "signals": UPPER,
+    "rendering": UPPER - {"rendering"},
+    "rigs": UPPER - {"rigs"},
+    "skin": {"calibration", "studies", "analysis", "demo", "web", "cli"},
+    "calibration": {"studies", "analysis", "demo", "web", "cli"},
+    "analysis": {"rendering", "skin", "calibration", "rigs", "studies", "demo", "web", "cli"},
+    "studies": {"analysis", "demo", "web", "cli"},
+    "web": {"cli", "demo"},
+}
+
+PROBE = """
+import json, sys
+import vibrofocus.{name}
+print(json.dumps(sorted({{m.split('.')[1] for m in sys.modules if m.startswith('vibrofocus.')}})))
+"""
+
+
+def _loaded(name: str) -> set[str]:
+    out = subprocess.run([sys.executable, "-c", PROBE.format(name=name)], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    return set(json.loads(out.stdout.strip().splitlines()[-1]))
+
+
+@pytest.mark.parametrize("name", sorted(FORBIDDEN))
+def test_a_subpackage_does_not_load_the_layers_above_it(name):
+    assert not (_loaded(name) & FORBIDDEN[name]), f"vibrofocus.{name} loads {sorted(_loaded(name) & FORBIDDEN[name])}"
+
+
+def test_importing_the_package_loads_almost_nothing():
+    # The public API is lazy (PEP 562): `import vibrofocus` loads only the error classes.
+    assert _loaded("errors") <= {"errors"}
