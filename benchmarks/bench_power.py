@@ -78,7 +78,7 @@ def main() -> None:
         t = time.perf_counter()
         res = run_power(design, n_workers=workers)
         rates[f"LocalCluster, {workers} worker(s)"] = total / (time.perf_counter() - t)
-        assert res["table"] == ref["table"], "Dask and one process disagree"
+        np.testing.assert_equal(res["table"], ref["table"], err_msg="Dask and one process disagree")
     print(f"power analysis, N = {ns}, {args.studies} studies per N ({total} studies), {cores} CPU core(s):")
     for k, v in rates.items():
         print(f"  {k:32s} {v:6.1f} studies/s")

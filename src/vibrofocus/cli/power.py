@@ -88,7 +88,8 @@ def power_command(
             table.add_column(f"N={n}", justify="right")
         by = {(r["test"], r["n_participants"]): r for r in result["table"]}
         for key, label in TESTS:
-            table.add_row(label, *[f"{by[(key, n)]['power']:.2f}" for n in design.n_participants])
+            table.add_row(label, *[f"{by[(key, n)]['power']:.2f}" if by[(key, n)]["n_studies"] else "not run"
+                                   for n in design.n_participants])
         Console().print(table)
         console.print(f"{len(design.n_participants) * design.n_studies} studies in {result['elapsed_s']:.1f} s")
         if out is not None:

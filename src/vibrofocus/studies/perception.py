@@ -159,6 +159,9 @@ class PerceptualModel:
         Per-trial log-normal jitter of the criterion. *Fitted.*
     rt_median_s, rt_log_sd, rt_per_extra_location_s
         Response times (assumption, as model v1).
+    version : str
+        Version of the model (:data:`MODEL_VERSION`), kept with the parameters in every
+        record of simulated data.
     """
 
     grid_half_width_m: float = 25e-3
