@@ -66,3 +66,14 @@ def test_simulated_flag_column_round_trips(tmp_path):
     assert path.read_text().splitlines()[0] == ",".join(TRIALS_COLUMNS) + ",simulated"
     back = read_trials_csv(path)
     assert [r["simulated"] for r in back] == [True, False]
+
+
+def test_real_participants_only_keep_the_contract_columns(tmp_path):
+    rows = [{"participant": "P01", "study": 1, "phase": "main", "trial": 1, "method": "inverse", "target": 5,
+             "response": (5,), "rt_s": 1.0, "simulated": 0}]
+    path = tmp_path / "t.csv"
+    write_trials_csv(rows, path)
+    assert path.read_text().splitlines()[0] == ",".join(TRIALS_COLUMNS)
+    # A simulated participant anywhere in the file adds the flag to every row.
+    write_trials_csv(rows + [dict(rows[0], participant="sim-001", simulated=1)], path)
+    assert [line.rsplit(",", 1)[1] for line in path.read_text().splitlines()] == ["simulated", "0", "1"]

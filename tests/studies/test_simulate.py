@@ -33,7 +33,9 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         reader = csv.reader(fh)
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
-    assert tuple(header) == TRIALS_COLUMNS
+    # Simulated participants: the contract's columns, then the flag that they are a model.
+    assert tuple(header) == TRIALS_COLUMNS + ("simulated",)
+    assert {r["simulated"] for r in rows} == {"1"}
     assert len(rows) == 3 * 2 * 86
     keys = Counter((r["participant"], r["study"], r["phase"], r["trial"]) for r in rows)
     assert max(keys.values()) == 1  # no duplicates

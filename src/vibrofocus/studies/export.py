@@ -4,16 +4,15 @@ One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that orde
 ``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``
 (1-based within the phase), ``method``, ``target`` (1-9), ``response`` (the chosen
 locations, ascending, separated by spaces: ``5``, ``4 5``), ``rt_s`` (seconds).
-When the rows say whether each participant is simulated (key ``simulated``, as the study
-database's rows do), a last column ``simulated`` (``1`` / ``0``) follows: answers of
+When some participant is simulated (key ``simulated`` of the rows, as the study
+database's rows have), a last column ``simulated`` (``1`` / ``0``) follows: answers of
 simulated participants come from a perceptual model, not from people, and the analysis
-flags them.
+flags them. A file of real participants only has exactly the columns above.
 """
 
 from __future__ import annotations
 
 import csv
-import itertools
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -39,8 +38,10 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
     Parameters
     ----------
     rows : iterable of mapping
-        Each with at least the keys of :data:`TRIALS_COLUMNS`; with ``simulated`` in the
-        first row, the column :data:`SIMULATED_COLUMN` is written too; others are ignored.
+        Each with at least the keys of :data:`TRIALS_COLUMNS`. When some row has a true
+        ``simulated`` (a simulated participant), the column :data:`SIMULATED_COLUMN` is
+        written too (1 / 0 per row); without one the file has exactly the contract's
+        columns. Other keys are ignored.
         ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
     path : path-like
         Destination CSV file; its folder must exist.
@@ -56,13 +57,12 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
     if not path.parent.is_dir():
         raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
     n = 0
-    rows = iter(rows)
-    first = next(rows, None)
-    with_flag = first is not None and SIMULATED_COLUMN in first
+    rows = list(rows)
+    with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(TRIALS_COLUMNS + ((SIMULATED_COLUMN,) if with_flag else ()))
-        for row in itertools.chain([first] if first is not None else [], rows):
+        for row in rows:
             response = row["response"]
             if not isinstance(response, str):
                 response = " ".join(str(int(x)) for x in sorted(response))
