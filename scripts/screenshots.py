@@ -81,7 +81,10 @@ def main() -> None:
                 part.screenshot(path=str(args.out / "participant.png"))
 
                 exp = ctx.new_page()
-                exp.goto(f"{base}/?token={TOKEN}")
+                exp.goto(f"{base}/")  # the login form: the token goes in a POST, never in a URL
+                exp.fill("#token", TOKEN)
+                exp.click("main.login button[type=submit]")
+                exp.wait_for_selector("#participant-card")
                 exp.wait_for_function("document.querySelectorAll('#answers tbody tr').length >= 4")
                 exp.locator("#cal-figure").evaluate("img => img.complete || new Promise(r => img.onload = r)")
                 exp.select_option("#method", "inverse")

@@ -164,7 +164,9 @@ def test_export_of_a_study_database_keeps_the_csv_contract(tmp_path, calibration
     assert result.exit_code == 0, result.output
     with open(out, newline="") as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["participant", "study", "phase", "trial", "method", "target", "response", "rt_s"]
+    assert rows[0][:8] == ["participant", "study", "phase", "trial", "method", "target", "response", "rt_s"]
+    assert rows[0][8:] == ["session", "session_status", "dry_run"]
+    assert {tuple(r[8:]) for r in rows[1:]} == {(str(sid), "running", "1")}  # no calibration: a dry run
     assert [r[2:4] for r in rows[1:]] == [["training", "1"], ["training", "2"], ["main", "1"], ["main", "2"]]
     assert [r[6] for r in rows[1:]] == ["5", "4 5", "1", "2 3 9"]
     assert [float(r[7]) for r in rows[1:]] == [0.25, 0.5, 0.75, 1.0]

@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 from vibrofocus.cli.main import app
 from vibrofocus.layout import ArrayLayout
 from vibrofocus.studies import TRIALS_COLUMNS, StudyStore
+from vibrofocus.studies.export import SESSION_COLUMNS
 from vibrofocus.studies.simulate import participant_seeds, simulate_studies
 
 pytestmark = pytest.mark.slow
@@ -33,8 +34,10 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         reader = csv.reader(fh)
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
-    # Simulated participants: the contract's columns, then the flag that they are a model.
-    assert tuple(header) == TRIALS_COLUMNS + ("simulated",)
+    # A database export: the contract's columns, the session columns, then the flag that
+    # these participants are simulated (a model, not data).
+    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS + ("simulated",)
+    assert {r["dry_run"] for r in rows} == {"0"}, "simulated sessions are calibrated"
     assert {r["simulated"] for r in rows} == {"1"}
     assert len(rows) == 3 * 2 * 86
     keys = Counter((r["participant"], r["study"], r["phase"], r["trial"]) for r in rows)

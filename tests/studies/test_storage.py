@@ -228,7 +228,8 @@ def test_export_writes_only_answered_trials_in_order(store, session, tmp_path):
     out = tmp_path / "trials.csv"
     assert store.export_trials_csv(out) == 7
     lines = out.read_text().splitlines()
-    assert lines[0] == "participant,study,phase,trial,method,target,response,rt_s"
+    # The contract's columns first, in order, then the session's (id, status, dry run).
+    assert lines[0] == "participant,study,phase,trial,method,target,response,rt_s,session,session_status,dry_run"
     plan = store.planned_trials(session)
     fields = [line.split(",") for line in lines[1:]]
     assert [f[2] for f in fields] == ["training"] * 5 + ["main"] * 2

@@ -37,7 +37,9 @@ def free_port() -> int:
 class Server:
     """``vibrofocus serve`` in a subprocess; can be killed (SIGKILL) and started again."""
 
-    def __init__(self, db: Path, port: int, log: Path) -> None:
+    def __init__(self, db: Path, port: int, log: Path, *, args: tuple[str, ...] = (), env: dict | None = None) -> None:
+        self.args = tuple(args)
+        self.env = dict(env or {})
         self.db = db
         self.port = port
         self.log = log
@@ -46,11 +48,11 @@ class Server:
         self.token = TOKEN
 
     def start(self) -> None:
-        env = dict(os.environ, VIBROFOCUS_TOKEN=self.token, PYTHONUNBUFFERED="1")
+        env = dict(os.environ, VIBROFOCUS_TOKEN=self.token, PYTHONUNBUFFERED="1", **self.env)
         with open(self.log, "ab") as fh:
             self.proc = subprocess.Popen(
                 [sys.executable, "-m", "vibrofocus", "serve", "--db", str(self.db), "--port", str(self.port),
-                 "--no-browser", "--pace", "fast"],
+                 "--no-browser", "--pace", "fast", *self.args],
                 stdout=fh, stderr=subprocess.STDOUT, env=env,
             )
         deadline = time.monotonic() + 60
@@ -85,8 +87,9 @@ class Server:
         return {"X-Vibrofocus-Token": self.token}
 
     # ------------------------------------------------------------------ helpers
-    def api(self, method: str, path: str, **kwargs) -> httpx.Response:
-        return httpx.request(method, self.base_url + path, headers=self.headers, timeout=30, **kwargs)
+    def api(self, method: str, path: str, *, headers: dict | None = None, **kwargs) -> httpx.Response:
+        """A request with the experimenter token (and ``headers`` on top)."""
+        return httpx.request(method, self.base_url + path, headers={**self.headers, **(headers or {})}, timeout=30, **kwargs)
 
     def plan(self, participant: str, study: int, *, n_training: int = 2, repetitions: int = 1, seed: int = 7) -> dict:
         """Add a participant and plan a session; returns the session (with participant_url)."""
@@ -98,6 +101,12 @@ class Server:
         assert r.status_code == 201, r.text
         return r.json()
 
+    def login_link(self) -> str:
+        """The one-time login link this server printed last (from its log)."""
+        lines = [ln for ln in self.log.read_text().splitlines() if ln.startswith("one-time login link")]
+        assert lines, self.log.read_text()
+        return lines[-1].rsplit(" ", 1)[1]
+
     def rows(self, sql: str, *args) -> list[tuple]:
         """Read the database directly (a second connection, as another program would)."""
         con = sqlite3.connect(self.db)
@@ -105,6 +114,14 @@ class Server:
             return con.execute(sql, args).fetchall()
         finally:
             con.close()
+
+
+def login(page, server: Server) -> None:
+    """Log in on the experimenter page through its login form (the token in a POST)."""
+    page.goto(server.base_url + "/")
+    page.fill("#token", server.token)
+    page.click("main.login button[type=submit]")
+    page.wait_for_selector("#participant-card")
 
 
 @pytest.fixture

@@ -20,9 +20,13 @@ def snapshot(db) -> dict[str, list[tuple]]:
 
 
 def wait_state(server, sid: int, key: str, state: str, timeout: float = 15.0) -> dict:
+    # As a page does: each request says which state it has seen (after=seq).
     deadline = time.monotonic() + timeout
+    seq = -1
     while time.monotonic() < deadline:
-        st = httpx.get(f"{server.base_url}/api/participant/{sid}/state?wait=1&ready=1", headers={"X-Participant-Key": key}).json()
+        st = httpx.get(f"{server.base_url}/api/participant/{sid}/state?after={seq}&wait=1&ready=1",
+                       headers={"X-Participant-Key": key}).json()
+        seq = st["seq"]
         if st["state"] == state:
             return st
     raise AssertionError(f"session {sid} never reached {state!r}; last state {st}")
@@ -54,9 +58,9 @@ def test_bad_answers_are_refused_and_change_nothing(running):
     good = {"session_id": sid, "trial_index": 0, "response": [5], "rt_s": 0.8, "answer_id": "answer-0001"}
     cases = [
         # (request kwargs, expected status, words the message must contain)
-        (dict(json=good), 403, "participant key"),  # no key
-        (dict(json=good, headers={"X-Participant-Key": "not-the-key"}), 403, "participant key"),
-        (dict(json=good, headers=server.headers), 403, "participant key"),  # the token cannot answer
+        (dict(json=good), 403, "participant link"),  # no key
+        (dict(json=good, headers={"X-Participant-Key": "not-the-key"}), 403, "participant link"),
+        (dict(json=good, headers=server.headers), 403, "participant link"),  # the token cannot answer
         (dict(content=b"{not json", headers={"X-Participant-Key": key, "Content-Type": "application/json"}), 422, "json"),
         (dict(json={**good, "response": [0]}, headers={"X-Participant-Key": key}), 422, "greater than or equal to 1"),
         (dict(json={**good, "response": [10]}, headers={"X-Participant-Key": key}), 422, "less than or equal to 9"),

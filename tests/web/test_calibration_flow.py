@@ -17,6 +17,8 @@ from vibrofocus.calibration import load_calibration
 from vibrofocus.rendering import render
 from vibrofocus.web.session_runner import drive_sha256
 
+from .test_api import wait_state
+
 pytestmark = pytest.mark.slow
 
 PNG = b"\x89PNG\r\n\x1a\n"
@@ -54,13 +56,8 @@ def test_calibrate_preview_and_run_with_stimuli(server):
     assert server.api("POST", f"/api/sessions/{sid}/start").status_code == 200
     planned = server.rows("SELECT trial_index, method, target FROM planned_trials WHERE session_id = ? ORDER BY trial_index", sid)
     for i in range(2):
-        deadline = time.monotonic() + 60
-        while time.monotonic() < deadline:
-            st = httpx.get(f"{server.base_url}/api/participant/{sid}/state?wait=2&ready=1",
-                           headers={"X-Participant-Key": key}, timeout=10).json()
-            if st["state"] == "respond" and st["trial_index"] == i:
-                break
-            assert st["state"] != "error", st
+        st = wait_state(server, sid, key, "respond", timeout=60)  # polls as a page showing the cue does
+        assert st["trial_index"] == i, st
         r = httpx.post(f"{server.base_url}/api/participant/{sid}/answer", headers={"X-Participant-Key": key}, json={
             "session_id": sid, "trial_index": i, "response": [planned[i][2]], "rt_s": 0.4, "answer_id": f"calflow-{i:04d}"})
         assert r.status_code == 200, r.text

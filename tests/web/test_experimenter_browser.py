@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pytest
 
+from .conftest import login
 from .test_participant_browser import wait_answers, wait_respond
 
 pytestmark = pytest.mark.browser
@@ -18,10 +19,13 @@ def test_experimenter_runs_a_session_from_the_page(server, chromium):
     context.set_default_timeout(15_000)
     try:
         exp = context.new_page()
-        r = exp.goto(f"{server.base_url}/?token=wrong-token-wrong")
-        assert r.status == 401 and "not the one this server printed" in exp.inner_text("body")
-        exp.goto(f"{server.base_url}/?token={server.token}")
-        assert exp.url == server.base_url + "/", "the token is dropped from the address bar"
+        exp.goto(server.base_url + "/")
+        exp.fill("#token", "wrong-token-wrong")
+        exp.click("main.login button[type=submit]")
+        assert "not the experimenter token" in exp.inner_text("body")
+        login(exp, server)
+        assert exp.url == server.base_url + "/", "nothing secret in the address bar"
+        assert not exp.is_visible("#cal-prompt"), "no calibration prompt when none waits"
         exp.fill("#new-participant-id", "P10")
         exp.click("#new-participant button")
         exp.wait_for_function("document.getElementById('participant').value === 'P10'")

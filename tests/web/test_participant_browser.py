@@ -99,7 +99,7 @@ def test_study2_multi_select_with_enter_and_clicks(server, page):
     csv = server.api("GET", "/api/export/trials.csv")
     assert csv.status_code == 200
     lines = csv.text.strip().splitlines()
-    assert lines[0] == "participant,study,phase,trial,method,target,response,rt_s"
+    assert lines[0].startswith("participant,study,phase,trial,method,target,response,rt_s,session,")
     assert [line.split(",")[6] for line in lines[1:]] == ["2 7", "1 3", "9"]
 
 
@@ -164,3 +164,61 @@ def test_kill_and_restart_server_mid_session(server, page):
     # the row appears: wait for the confirmation to arrive, then nothing is pending.
     page.wait_for_function(f"(localStorage.getItem('vibrofocus.pending.{sid}') || '[]') === '[]'")
     assert pending(page, sid) == []
+
+
+def test_nothing_plays_when_the_page_is_closed_or_reloaded_before_the_stimulus(server, chromium):
+    s = start(server, "P05", 1)
+    sid = s["session_id"]
+
+    def onsets(i: int) -> list:
+        return server.rows("SELECT event_id FROM events WHERE session_id = ? AND kind = 'stimulus_onset' "
+                           "AND json_extract(payload, '$.trial_index') = ?", sid, i)
+
+    context = chromium.new_context()
+    context.set_default_timeout(15_000)
+    try:
+        page = context.new_page()
+        open_page(page, server, s)
+        wait_respond(page, 0)
+        page.keyboard.press("5")
+        # Trial 1 says "Get ready": the participant reloads the page and does not begin.
+        page.wait_for_function("document.body.dataset.trial === '1' && ['ready', 'cue'].includes(document.body.dataset.state)")
+        page.reload()
+        page.wait_for_timeout(2000)
+        assert onsets(1) == [], "a stimulus played while the page showed 'Click here to begin'"
+        page.click("#begin")
+        wait_respond(page, 1)
+        assert len(onsets(1)) == 1
+        page.keyboard.press("6")
+        # Trial 2: the page is closed during "Get ready".
+        page.wait_for_function("document.body.dataset.trial === '2' && ['ready', 'cue'].includes(document.body.dataset.state)")
+        page.close()
+        time.sleep(2.0)
+        assert onsets(2) == [], "a stimulus played with no participant page open"
+        assert [r[0] for r in wait_answers(server, sid, 2)] == [0, 1]
+    finally:
+        context.close()
+
+
+def test_no_answer_behind_the_begin_overlay_and_enter_never_repeats_a_click(server, page):
+    s = start(server, "P06", 1)
+    sid = s["session_id"]
+    open_page(page, server, s)
+    wait_respond(page, 0)
+    page.click(".cell[data-loc='4']")
+    wait_respond(page, 1)
+    for key in ("Enter", " "):  # the clicked cell must not answer trial 1 again
+        page.keyboard.press(key)
+    page.wait_for_timeout(500)
+    assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "4")]
+    assert server.rows("SELECT COUNT(*) FROM answers") == [(1,)]
+    page.reload()  # trial 1 is still open; the overlay asks to begin
+    page.wait_for_function("document.body.dataset.state === 'respond'")
+    page.keyboard.press("7")
+    page.wait_for_timeout(500)
+    assert server.rows("SELECT COUNT(*) FROM answers") == [(1,)], "a key answered behind the overlay"
+    assert pending(page, sid) == []
+    page.click("#begin")
+    wait_respond(page, 1)
+    page.keyboard.press("2")
+    assert [(r[0], r[1]) for r in wait_answers(server, sid, 2)] == [(0, "4"), (1, "2")]

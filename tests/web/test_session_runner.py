@@ -77,16 +77,42 @@ def test_runner_holds_the_cue_until_a_page_is_there_and_while_paused(store):
     assert snap["state"] == "ready" and snap["waiting_for_page"]
     assert store.events(sid, kind="cue") == [], "no cue without a participant page"
     runner.pause()
-    runner.page_attach()
+    token = runner.page_attach(-1)
     wait_for(lambda: runner.snapshot()["state"] == "paused")
     time.sleep(0.2)
     assert store.events(sid, kind="cue") == [], "no cue while paused"
     runner.resume()
+    wait_for(lambda: runner.snapshot()["state"] == "cue")
+    # The page learns of the cue and asks again, saying it has seen it.
+    runner.page_detach(token)
+    runner.page_attach(runner.snapshot()["seq"])
     wait_for(lambda: runner.snapshot()["state"] == "respond")
     assert [e.payload["trial_index"] for e in store.events(sid, kind="cue")] == [0]
     runner.stop()
     assert not runner.running
     assert runner.snapshot()["state"] == "stopped"
+
+
+def test_no_stimulus_once_the_page_that_was_cued_has_gone(store):
+    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
+    rig = CountingRig()
+    runner = SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+    token = runner.page_attach(-1)
+    runner.start()
+    wait_for(lambda: runner.snapshot()["state"] == "cue")
+    cue_seq = runner.snapshot()["seq"]
+    runner.page_detach(token)  # the page is closed (or reloaded) right after the cue
+    wait_for(lambda: store.events(sid, kind="cue_cancelled"), timeout=3)
+    assert rig.played == [] and store.events(sid, kind="stimulus_onset") == []
+    # A page that has not seen the new cue does not count either; one that has, does.
+    token = runner.page_attach(cue_seq)
+    wait_for(lambda: runner.snapshot()["state"] == "cue" and runner.snapshot()["seq"] != cue_seq)
+    assert rig.played == []
+    runner.page_detach(token)
+    runner.page_attach(runner.snapshot()["seq"])
+    wait_for(lambda: runner.snapshot()["state"] == "respond")
+    assert len(rig.played) == 1 and len(store.events(sid, kind="stimulus_onset")) == 1
+    runner.stop()
 
 
 def test_serve_prints_token_and_warns_off_localhost(tmp_path):
@@ -111,8 +137,10 @@ def test_serve_prints_token_and_warns_off_localhost(tmp_path):
         proc.terminate()
         out, err = proc.communicate(timeout=10)
     assert "WARNING" in err and "127.0.0.2" in err
-    assert "experimenter token: " + "t" * 24 in out
-    assert f"http://127.0.0.2:{port}/?token=" in out
+    assert "experimenter token (for the login page): " + "t" * 24 in out
+    (link,) = [line.rsplit(" ", 1)[1] for line in out.splitlines() if line.startswith("one-time login link")]
+    assert link.startswith(f"http://127.0.0.2:{port}/login/") and "t" * 24 not in link
+    assert "?token=" not in out, "the token is never put in a URL"
     bad = subprocess.run([sys.executable, "-m", "vibrofocus", "serve", "--rig", "laser", "--no-browser",
                           "--db", str(tmp_path / "s.sqlite")], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rig" in bad.stderr

@@ -256,6 +256,9 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
             )
     problems.sort(key=lambda p: p["line"])  # stable: per line, in the order of the checks
     good = ~any_bad
+    # A study database's export names the session of each row: trial numbers repeat
+    # across two sessions of one participant, and are unique within a session.
+    by_session = {"session": df["session"][good]} if "session" in df.columns else {}
     trials = pd.DataFrame(
         {
             "participant": df["participant"][good],
@@ -269,13 +272,14 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
             "n_selected": n_sel[good],
             "rt_s": rt[good],
             "line": df["line"][good],
+            **by_session,
         }
     ).reset_index(drop=True)
     if len(trials):
         trials = trials.astype(
             {"study": int, "trial": int, "target": int, "n_selected": int, "rt_s": float, "line": int}
         )
-        key = ["participant", "study", "phase", "trial"]
+        key = ["participant", "study", "phase", "trial"] + list(by_session)
         dup = trials.duplicated(key, keep="first")
         for row in trials[dup].itertuples(index=False):
             problems.append(
@@ -300,6 +304,8 @@ def load_trials(
     *,
     layout: ArrayLayout | None = None,
     on_invalid: Literal["raise", "exclude"] = "raise",
+    keep_aborted: bool = False,
+    keep_dry_runs: bool = False,
 ) -> pd.DataFrame:
     """Read a trials CSV file (docs/file-formats.md, trials file) and validate every row.
 
@@ -319,6 +325,11 @@ def load_trials(
         ``"exclude"`` drops *all* rows of each participant with a bad row and records
         why in ``trials.attrs["exclusions"]`` (a list of dicts with ``participant``,
         ``study`` and ``reason``), which :func:`vibrofocus.analysis.analyze` reports.
+    keep_aborted, keep_dry_runs : bool
+        For a file with the session columns of a study database's export (``session``,
+        ``session_status``, ``dry_run``): rows of aborted sessions and of dry runs (no
+        calibration, nothing played) are left out unless these are True, and each such
+        session is listed in ``attrs["exclusions"]``.
 
     Returns
     -------
@@ -352,10 +363,10 @@ def load_trials(
             raise ValidationError(f"trials file {name!r} is not a readable CSV file: {exc}") from None
         raw.columns = [str(c).strip() for c in raw.columns]
         raw["line"] = np.arange(2, len(raw) + 2)
-    trials, problems = trial_problems(raw, layout=layout)
     if len(raw) == 0:
         raise ValidationError(f"trials file {name!r} has a header but no trials")
-    exclusions: list[dict] = []
+    raw, exclusions = _drop_sessions(raw, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    trials, problems = trial_problems(raw, layout=layout)
     if len(problems):
         if on_invalid == "raise":
             listed = "; ".join(f"line {p.line}: {p.reason}" for p in problems.head(_MAX_LISTED).itertuples())
@@ -392,6 +403,27 @@ def simulated_participants(raw: pd.DataFrame) -> list[str]:
         return []
     flag = raw["simulated"].astype(str).str.strip().str.lower().isin(("1", "true", "yes", "1.0"))
     return sorted({str(p).strip() for p in raw.loc[flag, "participant"]})
+
+
+def _drop_sessions(raw: pd.DataFrame, *, keep_aborted: bool, keep_dry_runs: bool) -> tuple[pd.DataFrame, list[dict]]:
+    """Leave out the rows of aborted sessions and dry runs; one exclusion per session."""
+    if not {"session", "session_status", "dry_run"} <= set(raw.columns):
+        return raw, []
+    status = raw["session_status"].astype(str).str.strip().str.lower()
+    dry = raw["dry_run"].astype(str).str.strip().str.lower().isin(("1", "true", "yes"))
+    aborted = status.eq("aborted") & (not keep_aborted)
+    dry_out = dry & (not keep_dry_runs)
+    drop = aborted | dry_out
+    exclusions = []
+    for (participant, study, session), rows in raw[drop].groupby(["participant", "study", "session"], sort=False):
+        whys = (["it was aborted"] if aborted[rows.index].any() else []) + (
+            ["it was a dry run (no calibration: nothing was played)"] if dry_out[rows.index].any() else [])
+        exclusions.append({
+            "participant": str(participant),
+            "study": _parse_int(str(study)),
+            "reason": f"session {session} left out because {' and '.join(whys)} ({len(rows)} answered trials)",
+        })
+    return raw[~drop].reset_index(drop=True), exclusions
 
 
 def main_trials(trials: pd.DataFrame, study: int) -> pd.DataFrame:

@@ -88,6 +88,12 @@ class QualityThresholds:
         Lowest acceptable signal-to-noise ratio in the band, dB.
     clip_samples : int
         Samples at full scale that make a recording clipped.
+    condition_max : float
+        ``mimo``: largest condition number of the input spectral matrix at which the
+        actuators are still separated (above it the calibration is an error).
+    input_correlation_max : float
+        ``mimo``: largest normalised cross-spectrum between two actuators' inputs before
+        a warning (0 when every take is kept: the Hadamard signs are orthogonal).
     """
 
     coherence_min: float = 0.5

@@ -43,6 +43,8 @@ def analyze_command(
         "--exclude-invalid",
         help="Exclude (and report) participants with invalid rows instead of refusing the file.",
     ),
+    keep_aborted: bool = typer.Option(False, "--keep-aborted", help="Analyse the answers of aborted sessions too (left out and listed by default)."),
+    keep_dry_runs: bool = typer.Option(False, "--keep-dry-runs", help="Analyse dry-run sessions too (no calibration, nothing played; left out and listed by default)."),
     alpha: float = typer.Option(0.05, "--alpha", help="Significance level for the results sentences."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the paths written."),
 ) -> None:
@@ -52,7 +54,8 @@ def analyze_command(
 
     Study 2: number of selected locations; Friedman tests for location and method; pairwise Wilcoxon (Bonferroni); the same on trials whose selection contains the target.
 
-    Participants missing a condition are excluded and listed, never dropped silently.
+    Participants missing a condition are excluded and listed, never dropped silently; so are
+    aborted sessions and dry runs of a study database's export (--keep-aborted, --keep-dry-runs).
     """  # noqa: E501
     with user_errors():
         import pandas as pd
@@ -61,7 +64,8 @@ def analyze_command(
         from ..analysis import analyze, load_trials, write_report
 
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
-        data = load_trials(trials, on_invalid="exclude" if exclude_invalid else "raise")
+        data = load_trials(trials, on_invalid="exclude" if exclude_invalid else "raise",
+                           keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
         result = analyze(data, alpha=alpha)
         paths = write_report(result, out)
 

@@ -18,14 +18,17 @@ def serve(
     db: Path = typer.Option(Path("vibrofocus-studies.sqlite"), "--db", help="Study database (SQLite); created if missing."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to bind. Keep 127.0.0.1 unless you know why not."),
     port: int = typer.Option(8000, "--port", min=0, max=65535, help="TCP port."),
-    rig: str = typer.Option("simulated", "--rig", help="Default rig: simulated, audio or nidaq."),
+    rig: str = typer.Option("simulated", "--rig", help="The rig: simulated, audio or nidaq (the simulated forearm stays available for rehearsals)."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file of the audio or nidaq rig (see examples/rigs/)."),
     no_browser: bool = typer.Option(False, "--no-browser", help="Do not open the experimenter page."),
     pace: str = typer.Option("normal", "--pace", help="Trial timing: normal, or fast for demonstrations and tests."),
+    allow_host: list[str] = typer.Option([], "--allow-host", help="Another host name the pages may be opened at (e.g. this computer's name on the lab network); repeatable."),
 ) -> None:
     """Run the experimenter and participant pages (FastAPI + uvicorn) on this computer.
 
-    Prints an experimenter token and the URL that logs in with it. Set
-    VIBROFOCUS_TOKEN to reuse a token across restarts.
+    Prints a one-time login link (opened in the browser) and the experimenter token,
+    which the login page also accepts. Set VIBROFOCUS_TOKEN to reuse a token across
+    restarts.
     """
     with user_errors():
         import secrets
@@ -39,6 +42,15 @@ def serve(
         from ..web import PACES, create_app
 
         check_choice(rig, "rig", RIG_KINDS)
+        if rig != "simulated":
+            from ..errors import ValidationError
+            from ..rigs.config import load_rig_config
+
+            if rig_config is None:
+                raise ValidationError(f"the {rig} rig needs its settings: add --rig-config FILE (see examples/rigs/{rig}.toml)")
+            cfg = load_rig_config(rig_config)  # a bad file is reported now, not at the first calibration
+            if cfg.kind != rig:
+                raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
         check_choice(pace, "pace", tuple(PACES))
         token = os.environ.get("VIBROFOCUS_TOKEN") or secrets.token_urlsafe(24)
         if len(token) < 16:
@@ -50,14 +62,22 @@ def serve(
                 f"[bold red]WARNING:[/] binding to {host}: anyone who can reach this address can try "
                 "to use the study server. The studies are meant to run on localhost (127.0.0.1)."
             )
-        web_app = create_app(db, token=token, rig=rig, pace=pace)
+        # Participant data: everything this server writes (database, calibrations,
+        # exports, reports) is readable by this user only.
+        os.umask(0o077)
+        extra_hosts = tuple(allow_host) + (() if host in _LOCAL_HOSTS + ("0.0.0.0", "::") else (host,))
+        web_app = create_app(db, token=token, rig=rig, pace=pace, allowed_hosts=extra_hosts,
+                             rig_config=rig_config if rig != "simulated" else None)
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
+        login = f"{base}/login/{web_app.state.web.new_login_code()}"
         typer.echo(f"study database: {Path(db).resolve()}")
-        typer.echo(f"experimenter token: {token}")
-        typer.echo(f"experimenter page: {base}/?token={token}")
+        typer.echo(f"rig: {web_app.state.web.rig_label}")
+        typer.echo(f"experimenter page: {base}/")
+        typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
+        typer.echo(f"experimenter token (for the login page): {token}")
         typer.echo("participant pages: linked from the experimenter page (one per session)")
         if not no_browser:
             # A moment later, so that the page does not ask before uvicorn listens.
-            threading.Timer(1.5, webbrowser.open, args=(f"{base}/?token={token}",)).start()
+            threading.Timer(1.5, webbrowser.open, args=(login,)).start()
         uvicorn.run(web_app, host=host, port=port, log_level="warning")

@@ -20,15 +20,20 @@ from typing import Any
 
 from ..errors import StudyError
 
-__all__ = ["TRIALS_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv"]
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv"]
 
 #: Columns of the trials file, in order.
 TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
-#: Optional last column: 1 where the participant is simulated (a model, not data).
+#: Columns a study database's export adds after :data:`TRIALS_COLUMNS`: the session id,
+#: its status (``planned``, ``running``, ``paused``, ``aborted``, ``completed``) and
+#: ``dry_run`` (1 when the session had no calibration, so nothing was played; else 0).
+SESSION_COLUMNS = ("session", "session_status", "dry_run")
+#: Last column when some participant is simulated: 1 where the participant is simulated
+#: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
 
 
-def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike) -> int:
+def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -45,6 +50,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
         ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
     path : path-like
         Destination CSV file; its folder must exist.
+    sessions : bool
+        Also write :data:`SESSION_COLUMNS` (then each row needs those keys too).
 
     Returns
     -------
@@ -61,19 +68,21 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike)
     with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(TRIALS_COLUMNS + ((SIMULATED_COLUMN,) if with_flag else ()))
+        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + ((SIMULATED_COLUMN,) if with_flag else ()))
         for row in rows:
             response = row["response"]
             if not isinstance(response, str):
                 response = " ".join(str(int(x)) for x in sorted(response))
             # repr keeps every digit of the stored float: the file round-trips exactly.
-            fields = [
+            values = [
                 row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
                 row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
             ]
+            if sessions:
+                values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"]))]
             if with_flag:
-                fields.append(int(bool(row.get(SIMULATED_COLUMN))))
-            writer.writerow(fields)
+                values.append(int(bool(row.get(SIMULATED_COLUMN))))
+            writer.writerow(values)
             n += 1
     return n
 
@@ -90,15 +99,17 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     -------
     list of dict
         ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
-        tuple of int, ``simulated`` (when the file has it) as bool; the rest as str.
+        tuple of int; the rest as str. A file with :data:`SESSION_COLUMNS` also gives
+        ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
+        :data:`SIMULATED_COLUMN` gives ``simulated`` (bool).
     """
     path = Path(path)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            columns = TRIALS_COLUMNS + (SIMULATED_COLUMN,)
-            if header is None or tuple(header) not in (TRIALS_COLUMNS, columns):
+            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS) for f in ((), (SIMULATED_COLUMN,))]
+            if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
             columns = tuple(header)
             out = []
@@ -109,6 +120,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                 if SIMULATED_COLUMN in row:
                     row[SIMULATED_COLUMN] = row[SIMULATED_COLUMN].strip() in ("1", "true", "True")
                 try:
+                    if "session" in row:
+                        row["session"] = int(row["session"])
+                        row["dry_run"] = bool(int(row["dry_run"]))
                     row["study"] = int(row["study"])
                     row["trial"] = int(row["trial"])
                     row["target"] = int(row["target"])

@@ -907,7 +907,9 @@ class StudyStore:
 
         Keys: the trials-file columns (``participant, study, phase, trial, method,
         target, response, rt_s``) plus ``session_id``, ``trial_index``, ``answer_id``,
-        ``drive_sha256``, ``calibration_id``, ``recorded_at``, ``simulated`` (1: the
+        ``drive_sha256``, ``calibration_id``, ``recorded_at``, the session columns of
+        the trials file: ``session`` (id), ``session_status``, ``dry_run`` (1 for a session
+        planned without a calibration: nothing was played), and ``simulated`` (1: the
         participant is simulated, answers from the perceptual model). Ordered by participant
         (as added), study, session and trial index.
         """
@@ -917,6 +919,7 @@ class StudyStore:
                 "p.method AS method, p.target AS target, a.response AS response, a.rt_s AS rt_s, "
                 "s.session_id AS session_id, p.trial_index AS trial_index, a.answer_id AS answer_id, "
                 "a.drive_sha256 AS drive_sha256, a.calibration_id AS calibration_id, a.recorded_at AS recorded_at, "
+                "s.session_id AS session, s.status AS session_status, (s.calibration_id IS NULL) AS dry_run, "
                 "pt.simulated AS simulated "
                 "FROM answers a JOIN planned_trials p ON p.session_id = a.session_id AND p.trial_index = a.trial_index "
                 "JOIN sessions s ON s.session_id = a.session_id "
@@ -931,10 +934,15 @@ class StudyStore:
             return [dict(r) for r in conn.execute(sql, args).fetchall()]
 
     def export_trials_csv(self, path: str | os.PathLike, *, participant_id: str | None = None) -> int:
-        """Write the trials file of docs/file-formats.md, trials file (every answered trial); returns the row count."""
+        """Write the trials file of docs/file-formats.md, trials file (every answered trial); returns the row count.
+
+        The file has the session columns after the contract's (see
+        :data:`~vibrofocus.studies.export.SESSION_COLUMNS`), so that an analysis can leave
+        out aborted sessions and dry runs.
+        """
         from .export import write_trials_csv
 
-        return write_trials_csv(self.trial_rows(participant_id=participant_id), path)
+        return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True)
 
 
 def _as_int(value: Any, name: str) -> int:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Annotated, Literal
 
+from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field, field_validator
 
 __all__ = [
@@ -19,10 +20,20 @@ __all__ = [
     "CalibrationIn",
     "SessionIn",
     "AnalysisIn",
+    "MAX_ID",
+    "SessionId",
+    "CalibrationId",
 ]
 
 #: Locations a participant can name (docs/method.md, reference setup): the 3 x 3 grid of the reference setup.
 N_LOCATIONS = 9
+
+#: Largest id accepted anywhere (SQLite integers are 64-bit; larger numbers are refused with 422, not an error).
+MAX_ID = 2**53
+
+#: Path parameters: a session or calibration id.
+SessionId = Annotated[int, Path(ge=1, le=MAX_ID, description="session id")]
+CalibrationId = Annotated[int, Path(ge=1, le=MAX_ID, description="calibration id")]
 
 Location = Annotated[int, Field(ge=1, le=N_LOCATIONS, strict=True)]
 # Ids end up in file names and URLs; keep them to a safe, readable alphabet.
@@ -41,8 +52,8 @@ class AnswerIn(_Strict):
     unchanged on every retry, so that the server can tell a re-send from a new answer.
     """
 
-    session_id: int = Field(ge=1, strict=True)
-    trial_index: int = Field(ge=0, strict=True)
+    session_id: int = Field(ge=1, le=MAX_ID, strict=True)
+    trial_index: int = Field(ge=0, le=MAX_ID, strict=True)
     response: list[Location] = Field(min_length=1, max_length=N_LOCATIONS)
     rt_s: float = Field(ge=0.0, le=3600.0, allow_inf_nan=False)
     answer_id: str = Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
@@ -88,7 +99,7 @@ class SessionIn(_Strict):
     participant_id: ParticipantId
     study: Literal[1, 2]
     seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
-    calibration_id: int | None = Field(default=None, ge=1)
+    calibration_id: int | None = Field(default=None, ge=1, le=MAX_ID)
     rig: str = Field(default="simulated", min_length=1, max_length=32)
     rig_seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
     # Shorter designs for pilots and demonstrations; the defaults are docs/file-formats.md, trials file's.

@@ -20,6 +20,7 @@ import logging
 import os
 import secrets
 import threading
+import time
 from contextlib import asynccontextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -31,6 +32,7 @@ from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 from ..errors import StudyError, VibrofocusError
+from .security import LOCAL_HOSTS, SecurityMiddleware, same_secret
 from .session_runner import PACES, Pace, SessionRunner
 
 __all__ = ["create_app", "render_template", "WebState", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
@@ -40,22 +42,66 @@ log = logging.getLogger(__name__)
 TOKEN_HEADER = "X-Vibrofocus-Token"
 TOKEN_COOKIE = "vf_token"
 KEY_HEADER = "X-Participant-Key"
+#: How long a one-time login link printed by ``vibrofocus serve`` stays valid, s.
+LOGIN_CODE_TTL_S = 15 * 60.0
 
 _HERE = Path(__file__).parent
 
 
 @dataclass
 class CalibrationJob:
-    """A calibration running in a background thread, as the experimenter page sees it."""
+    """A calibration running in a background thread, as the experimenter page sees it.
+
+    On a rig that records one point at a time (a single-spot vibrometer), the job stops
+    before each point with ``status = "waiting"`` and a ``prompt`` saying where to aim the
+    vibrometer; :meth:`go_on` lets it record, :meth:`cancel` ends it.
+    """
 
     job_id: str
     participant_id: str
     rig: str
-    status: str = "running"  # running | done | failed
+    status: str = "running"  # running | waiting | done | failed | cancelled
     progress: float = 0.0
     message: str = "starting"
     calibration_id: int | None = None
     error: str | None = None
+    prompt: str | None = None
+    straps: dict | None = None
+    _go: threading.Event = field(default_factory=threading.Event, repr=False)
+    _cancelled: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The job as the page reads it (JSON-ready)."""
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
+
+    def wait_for_experimenter(self, prompt: str) -> None:
+        """Block the calibration until the experimenter continues (or cancels)."""
+        self._go.clear()
+        self.prompt, self.status = prompt, "waiting"
+        while not self._go.wait(0.25):
+            if self._cancelled:
+                break
+        self.prompt = None
+        self.check_cancelled()
+        self.status = "running"
+
+    def go_on(self) -> None:
+        """The experimenter has aimed the vibrometer: record the point."""
+        self._go.set()
+
+    def cancel(self) -> None:
+        """Stop at the next point or recording (nothing is saved)."""
+        self._cancelled = True
+        self._go.set()
+
+    def check_cancelled(self) -> None:
+        """Raise :class:`CalibrationCancelled` if the experimenter cancelled."""
+        if self._cancelled:
+            raise CalibrationCancelled("cancelled by the experimenter")
+
+
+class CalibrationCancelled(Exception):
+    """The experimenter cancelled a calibration (nothing is saved)."""
 
 
 @dataclass
@@ -77,6 +123,7 @@ class WebState:
     rig_kind: str
     pace: Pace
     rig_factory: Any = None
+    rig_config: Any = None
     db: threading.RLock = field(default_factory=threading.RLock)
     runners: dict[int, SessionRunner] = field(default_factory=dict)
     calibrations: dict[int, Any] = field(default_factory=dict)
@@ -86,31 +133,93 @@ class WebState:
     planned: dict[int, list] = field(default_factory=dict)
     analyses: dict[str, dict] = field(default_factory=dict)
     lock: threading.RLock = field(default_factory=threading.RLock)
+    login_codes: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def rig_label(self) -> str:
+        """The server's rig as the experimenter page shows it (kind, and config file)."""
+        if self.rig_config is None:
+            return self.rig_kind
+        name = Path(self.rig_config).name if isinstance(self.rig_config, (str, os.PathLike)) else "given config"
+        return f"{self.rig_kind} ({name})"
 
     # ------------------------------------------------------------------ paths
     @property
     def data_dir(self) -> Path:
         """Folder for calibrations, exports and reports, beside the database."""
         d = self.db_path.parent / f"{self.db_path.stem}-files"
-        d.mkdir(parents=True, exist_ok=True)
+        private_dir(d)
         return d
 
     # ------------------------------------------------------------------ access
+    TOKEN_MESSAGE = (
+        "You are not logged in as the experimenter. Open the login link that 'vibrofocus serve' "
+        "printed, or log in with the experimenter token."
+    )
+    KEY_MESSAGE = "This participant link does not belong to this session. Ask the experimenter for the right link."
+
     def participant_key(self, session_id: int) -> str:
         """The participant key of a session (URL-safe, 22 characters)."""
         mac = hmac.new(self.secret, f"participant-session:{int(session_id)}".encode(), hashlib.sha256).digest()
         return base64.urlsafe_b64encode(mac[:16]).decode().rstrip("=")
 
+    def key_ok(self, session_id: int, key: str | None) -> bool:
+        """True if ``key`` is the participant key of ``session_id`` (constant time)."""
+        return same_secret(key, self.participant_key(session_id))
+
     def check_key(self, session_id: int, key: str | None) -> None:
         """Raise 403 unless ``key`` is the participant key of ``session_id``."""
-        if not key or not hmac.compare_digest(key, self.participant_key(session_id)):
-            raise HTTPException(403, detail=f"missing or wrong participant key for session {session_id}; open the participant link the experimenter page gives")
+        if not self.key_ok(session_id, key):
+            raise HTTPException(403, detail=self.KEY_MESSAGE)
+
+    @property
+    def cookie_value(self) -> str:
+        """What the login cookie holds: derived from the token, never the token itself.
+
+        It is an HMAC of the token under the secret kept beside the database, so a
+        server restarted with the same ``VIBROFOCUS_TOKEN`` keeps its experimenter
+        logged in, and a new token logs everybody out.
+        """
+        mac = hmac.new(self.secret, b"experimenter-cookie:" + self.token.encode(), hashlib.sha256).digest()
+        return base64.urlsafe_b64encode(mac).decode().rstrip("=")
+
+    def token_ok(self, given: str | None) -> bool:
+        """True if ``given`` is the experimenter token (constant time)."""
+        return same_secret(given, self.token)
+
+    def cookie_ok(self, cookie_header: str | None) -> bool:
+        """True if a ``Cookie`` header carries the experimenter login cookie."""
+        if not cookie_header:
+            return False
+        for part in cookie_header.split(";"):
+            name, _, value = part.strip().partition("=")
+            if name == TOKEN_COOKIE and same_secret(value, self.cookie_value):
+                return True
+        return False
 
     def check_token(self, request: Request) -> None:
-        """Raise 401 unless the request carries the experimenter token."""
-        given = request.headers.get(TOKEN_HEADER) or request.cookies.get(TOKEN_COOKIE)
-        if not given or not hmac.compare_digest(given, self.token):
-            raise HTTPException(401, detail=f"missing or wrong experimenter token (send the {TOKEN_HEADER} header, or open the URL printed by 'vibrofocus serve')")
+        """Raise 401 unless the request carries the experimenter token or login cookie."""
+        if not (self.token_ok(request.headers.get(TOKEN_HEADER)) or self.cookie_ok(request.headers.get("cookie"))):
+            raise HTTPException(401, detail=self.TOKEN_MESSAGE)
+
+    def new_login_code(self, ttl_s: float = LOGIN_CODE_TTL_S) -> str:
+        """A one-time login code, valid for ``ttl_s`` seconds (see ``GET /login/{code}``)."""
+        code = secrets.token_urlsafe(24)
+        with self.lock:
+            now = time.monotonic()
+            for old in [c for c, until in self.login_codes.items() if until < now]:
+                del self.login_codes[old]
+            self.login_codes[code] = now + ttl_s
+        return code
+
+    def use_login_code(self, code: str) -> bool:
+        """Spend a login code: True once for a valid, unexpired code, False otherwise."""
+        with self.lock:
+            match = next((c for c in self.login_codes if same_secret(code, c)), None)
+            if match is None:
+                return False
+            until = self.login_codes.pop(match)
+        return until >= time.monotonic()
 
     # ------------------------------------------------------------------ store helpers
     def session(self, session_id: int) -> dict[str, Any]:
@@ -124,16 +233,35 @@ class WebState:
             raise HTTPException(404, detail=f"unknown session {session_id}")
         return _as_dict(info)
 
+    @property
+    def rig_kinds(self) -> list[str]:
+        """Rig kinds this server can use: its own, and the simulated forearm for rehearsals."""
+        return [self.rig_kind] + (["simulated"] if self.rig_kind != "simulated" else [])
+
+    def check_rig_kind(self, kind: str) -> None:
+        """Raise 409 unless this server can use rigs of ``kind``."""
+        if kind not in self.rig_kinds:
+            raise HTTPException(409, detail=(
+                f"This server was started for the {self.rig_label} rig. To use the {kind} rig, restart it with "
+                f"'vibrofocus serve --rig {kind} --rig-config FILE'."
+            ))
+
     def make_rig(self, kind: str, seed: int | None):
-        """A rig by kind and seed, made once and reused (a hardware rig holds a device)."""
+        """A rig by kind and seed, made once and reused (a hardware rig holds a device).
+
+        A hardware rig is the one the server was started with (``serve --rig KIND
+        --rig-config FILE``), built from that config file.
+        """
+        self.check_rig_kind(kind)
         key = (kind, -1 if seed is None else int(seed))
         with self.lock:
             if key not in self.rigs:
                 factory = self.rig_factory
                 if factory is None:
                     from ..rigs import make_rig as factory
+                extra = {"config": self.rig_config} if kind != "simulated" and self.rig_config is not None else {}
                 try:
-                    self.rigs[key] = factory(kind, seed=seed)
+                    self.rigs[key] = factory(kind, seed=seed, **extra)
                 except NotImplementedError as exc:
                     raise HTTPException(400, detail=str(exc)) from None
                 except VibrofocusError as exc:
@@ -243,6 +371,36 @@ def _as_dict(obj: Any) -> dict[str, Any]:
     return dict(obj)
 
 
+def private_dir(path: Path) -> None:
+    """Create a folder only its owner can enter (0700); tighten it if it exists."""
+    path.mkdir(mode=0o700, parents=True, exist_ok=True)
+    _owner_only(path, 0o700)
+
+
+def private_file(path: Path) -> None:
+    """Create an empty file only its owner can read (0600), or tighten an existing one.
+
+    The study database holds participant data: it is created 0600 before SQLite opens
+    it (SQLite gives its journal files the database's mode).
+    """
+    try:
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except FileExistsError:
+        _owner_only(path, 0o600)
+    except OSError:  # a read-only folder: the store says so in its own words
+        pass
+
+
+def _owner_only(path: Path, mode: int) -> None:
+    try:
+        st = path.stat()
+        if st.st_uid == os.getuid() and st.st_mode & 0o077:
+            os.chmod(path, mode)
+            log.warning("%s could be read by other users; it is now %s", path, oct(mode))
+    except OSError:  # not ours, or a file system without modes: leave it as it is
+        pass
+
+
 def load_or_make_secret(db_path: Path) -> bytes:
     """The HMAC secret of participant keys, kept beside the database (mode 0600)."""
     path = db_path.with_name(db_path.name + ".web-secret")
@@ -266,7 +424,9 @@ def create_app(
     rig: str = "simulated",
     pace: str | Pace = "normal",
     rig_factory: Any = None,
+    rig_config: str | os.PathLike | None = None,
     resume: bool = True,
+    allowed_hosts: tuple[str, ...] = (),
 ) -> FastAPI:
     """Build the web app.
 
@@ -277,14 +437,20 @@ def create_app(
     token : str
         The experimenter token; at least 16 characters.
     rig : str
-        Default rig kind offered on the experimenter page (``simulated``, ``audio``,
-        ``nidaq``).
+        The rig of this server (``simulated``, ``audio``, ``nidaq``); a hardware rig
+        needs ``rig_config``. The simulated forearm stays available for rehearsals.
     pace : {"normal", "fast"} or Pace
         Trial timing; ``fast`` for tests and demonstrations.
     rig_factory : callable, optional
-        ``rig_factory(kind, seed=...) -> Rig``; default :func:`vibrofocus.rigs.make_rig`.
+        ``rig_factory(kind, seed=..., [config=...]) -> Rig``; default
+        :func:`vibrofocus.rigs.make_rig`.
+    rig_config : path-like, optional
+        The hardware rig's config file (``.toml``/``.json``, see ``examples/rigs/``).
     resume : bool
         Restart the sessions stored as running when the app starts.
+    allowed_hosts : tuple of str
+        Host names the server answers to besides 127.0.0.1, localhost and ::1 (the
+        ``--host`` it is bound to); requests naming any other host are refused.
 
     Returns
     -------
@@ -301,10 +467,11 @@ def create_app(
         pace = PACES[pace]
     db_path = Path(db_path).resolve()
     db_path.parent.mkdir(parents=True, exist_ok=True)
+    private_file(db_path)
     store = StudyStore(db_path)
     state = WebState(
         store=store, db_path=db_path, token=token, secret=load_or_make_secret(db_path),
-        rig_kind=rig, pace=pace, rig_factory=rig_factory,
+        rig_kind=rig, pace=pace, rig_factory=rig_factory, rig_config=rig_config,
     )
 
     @asynccontextmanager
@@ -321,6 +488,7 @@ def create_app(
 
     app = FastAPI(title="vibrofocus", lifespan=lifespan, docs_url=None, redoc_url=None)
     app.state.web = state
+    app.add_middleware(SecurityMiddleware, web=state, allowed_hosts=(*LOCAL_HOSTS, *allowed_hosts))
     app.mount("/static", StaticFiles(directory=str(_HERE / "static")), name="static")
 
     @app.exception_handler(RequestValidationError)

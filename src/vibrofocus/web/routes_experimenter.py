@@ -1,12 +1,15 @@
 """Routes of the experimenter page: participants, calibration, preview, sessions, export.
 
-Everything here needs the experimenter token (``X-Vibrofocus-Token`` header or the
-``vf_token`` cookie set when the page is opened with ``?token=``).
+Everything under ``/api`` and ``/reports`` needs the experimenter token
+(``X-Vibrofocus-Token`` header, for scripts) or the login cookie (``vf_token``, set by a
+one-time login link or the login form; it holds a value derived from the token, never
+the token itself).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
 import secrets
 import subprocess
 import sys
@@ -15,11 +18,12 @@ import time
 from typing import Any
 
 from fastapi import APIRouter, Depends, HTTPException, Query, Request
+from fastapi import Path as FPath
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 
 from ..errors import StudyError, VibrofocusError
-from .api_models import AnalysisIn, CalibrationIn, ParticipantIn, SessionIn
-from .app import TOKEN_COOKIE, CalibrationJob, WebState, render_template
+from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
+from .app import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template
 
 router = APIRouter()
 
@@ -39,23 +43,57 @@ def _study_error(exc: StudyError, status: int = 409) -> HTTPException:
     return HTTPException(status, detail=str(exc))
 
 
-# ---------------------------------------------------------------------- page
+# ---------------------------------------------------------------------- page and login
+def _logged_in(web: WebState) -> Response:
+    """Set the login cookie and go to the experimenter page."""
+    resp = RedirectResponse("/", status_code=303)
+    # HttpOnly: no script can read it; SameSite=Strict: no other site's page sends it
+    # (other local ports are refused by the origin checks of web.security).
+    resp.set_cookie(TOKEN_COOKIE, web.cookie_value, httponly=True, samesite="strict", path="/")
+    return resp
+
+
+def _login_page(message: str = "", status: int = 401) -> HTMLResponse:
+    return HTMLResponse(render_template("login.html", message=message), status_code=status)
+
+
 @router.get("/", response_class=HTMLResponse, include_in_schema=False)
-def experimenter_page(request: Request, token: str | None = Query(None, max_length=128)) -> Response:
-    """The experimenter page; ``?token=`` logs in (sets a cookie) and is dropped from the URL."""
+def experimenter_page(request: Request) -> Response:
+    """The experimenter page, or the login page when not logged in."""
     web = _web(request)
-    if token is not None:
-        if not secrets.compare_digest(token, web.token):
-            return HTMLResponse(render_template("login.html", message="That token is not the one this server printed."), status_code=401)
-        resp = RedirectResponse("/", status_code=303)
-        # HttpOnly + SameSite=Strict: scripts and other sites cannot read or send it.
-        resp.set_cookie(TOKEN_COOKIE, token, httponly=True, samesite="strict")
-        return resp
-    try:
-        web.check_token(request)
-    except HTTPException:
-        return HTMLResponse(render_template("login.html", message=""), status_code=401)
-    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind))
+    if not web.cookie_ok(request.headers.get("cookie")):
+        return _login_page()
+    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind, rig_label=web.rig_label))
+
+
+@router.get("/login/{code}", include_in_schema=False)
+def login_link(request: Request, code: str = FPath(..., max_length=64)) -> Response:
+    """Exchange a one-time login link printed by ``vibrofocus serve`` for the login cookie."""
+    web = _web(request)
+    if not web.use_login_code(code):
+        return _login_page("That login link has been used already or has expired. Log in with the experimenter token instead.")
+    return _logged_in(web)
+
+
+@router.post("/login", include_in_schema=False)
+async def login_form(request: Request) -> Response:
+    """The login form: the experimenter token in a POST body (never in a URL)."""
+    from urllib.parse import parse_qs
+
+    web = _web(request)
+    fields = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=4)
+    given = (fields.get("token") or [""])[0].strip()
+    if not web.token_ok(given):
+        return _login_page("That is not the experimenter token this server printed. Check it and try again.")
+    return _logged_in(web)
+
+
+@router.post("/logout", include_in_schema=False)
+def logout() -> Response:
+    """Forget the login cookie in this browser."""
+    resp = RedirectResponse("/", status_code=303)
+    resp.delete_cookie(TOKEN_COOKIE, path="/", httponly=True, samesite="strict")
+    return resp
 
 
 # ---------------------------------------------------------------------- participants and rigs
@@ -87,10 +125,27 @@ def add_participant(body: ParticipantIn, web: WebState = Depends(require_token))
 
 @router.get("/api/rigs")
 def list_rigs(web: WebState = Depends(require_token)) -> dict[str, Any]:
-    """Rig kinds and the server's default."""
-    from ..rigs import RIG_KINDS
+    """The rig kinds this server can use, its own rig first, and how it is shown."""
+    return {"kinds": web.rig_kinds, "default": web.rig_kind, "label": web.rig_label}
 
-    return {"kinds": list(RIG_KINDS), "default": web.rig_kind}
+
+@router.get("/api/rigs/straps")
+def read_straps(
+    rig: str = Query(..., min_length=1, max_length=32),
+    seed: int | None = Query(None, ge=0, le=2**32 - 1),
+    web: WebState = Depends(require_token),
+) -> dict[str, Any]:
+    """Read the strap forces of a rig now, with a verdict per strap and one line to show."""
+    from ..rigs.force import check_straps
+
+    r = web.make_rig(rig, seed)
+    if getattr(r, "read_strap_forces", None) is None:
+        raise HTTPException(409, detail=f"The {rig} rig has no strap force sensors; check the straps by hand before calibrating.")
+    try:
+        reading = check_straps(r)
+    except VibrofocusError as exc:
+        raise HTTPException(409, detail=f"The strap forces could not be read: {exc}") from None
+    return {**reading.to_dict(), "message": reading.message}
 
 
 def _check_participant(web: WebState, participant_id: str) -> None:
@@ -109,7 +164,7 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     rig = web.make_rig(body.rig, body.seed)
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
     with web.lock:
-        busy = [j for j in web.jobs.values() if j.status == "running"]
+        busy = [j for j in web.jobs.values() if j.status in ("running", "waiting")]
         if busy:
             raise HTTPException(409, detail=f"calibration {busy[0].job_id} of {busy[0].participant_id} is still running; wait for it")
         web.jobs[job.job_id] = job
@@ -131,11 +186,25 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
             job.progress = float(nums[0])
         if texts:
             job.message = texts[0]
+        job.check_cancelled()
+
+    def prompt(label: str, xy: Any) -> None:
+        job.wait_for_experimenter(
+            f"Aim the vibrometer at point {label} (x {xy[0] * 1e3:+.1f} mm, y {xy[1] * 1e3:+.1f} mm), then press Continue."
+        )
 
     try:
-        cal = calibrate(rig, participant_id=job.participant_id, progress=progress)
+        if getattr(rig, "read_strap_forces", None) is not None:
+            # Read before the first sweep, so the experimenter sees loose straps now;
+            # calibrate() stores its own reading with the calibration.
+            from ..rigs.force import check_straps
+
+            reading = check_straps(rig)
+            job.straps = {**reading.to_dict(), "message": reading.message}
+        single_spot = getattr(rig, "max_points_per_recording", None) is not None
+        cal = calibrate(rig, participant_id=job.participant_id, progress=progress, prompt=prompt if single_spot else None)
         folder = web.data_dir / "calibrations"
-        folder.mkdir(exist_ok=True)
+        private_dir(folder)
         path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
         save_calibration(cal, path)
         with web.db:
@@ -146,6 +215,9 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         job.progress = 1.0
         job.message = "done"
         job.status = "done"
+    except CalibrationCancelled:
+        job.status = "cancelled"
+        job.message = "cancelled: nothing was saved"
     except Exception as exc:  # noqa: BLE001 - shown on the experimenter page
         job.status = "failed"
         job.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, VibrofocusError) else str(exc)
@@ -155,14 +227,35 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
 @router.get("/api/calibrations/jobs/{job_id}")
 def calibration_job(job_id: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Progress of a calibration job."""
+    return _job(web, job_id).to_dict()
+
+
+def _job(web: WebState, job_id: str) -> CalibrationJob:
     job = web.jobs.get(job_id)
     if job is None:
-        raise HTTPException(404, detail=f"unknown calibration job {job_id!r}")
-    return dataclasses.asdict(job)
+        raise HTTPException(404, detail="There is no such calibration.")
+    return job
+
+
+@router.post("/api/calibrations/jobs/{job_id}/{action}")
+def calibration_step(job_id: str, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """``continue`` (the vibrometer is aimed at the point asked for) or ``cancel`` a calibration."""
+    job = _job(web, job_id)
+    if action == "continue":
+        if job.status != "waiting":
+            raise HTTPException(409, detail="This calibration is not waiting for you.")
+        job.go_on()
+    elif action == "cancel":
+        if job.status not in ("running", "waiting"):
+            raise HTTPException(409, detail=f"This calibration has already ended ({job.status}).")
+        job.cancel()
+    else:
+        raise HTTPException(404, detail="Unknown calibration action; use continue or cancel.")
+    return job.to_dict()
 
 
 @router.get("/api/calibrations/{calibration_id}/figure.png")
-def calibration_figure(calibration_id: int, web: WebState = Depends(require_token)) -> Response:
+def calibration_figure(calibration_id: CalibrationId, web: WebState = Depends(require_token)) -> Response:
     """|H| and coherence of a calibration (PNG)."""
     from .figures import calibration_png
 
@@ -171,7 +264,7 @@ def calibration_figure(calibration_id: int, web: WebState = Depends(require_toke
 
 @router.get("/api/preview.png")
 def preview(
-    calibration_id: int = Query(..., ge=1),
+    calibration_id: int = Query(..., ge=1, le=MAX_ID),
     method: str = Query(..., min_length=1, max_length=32),
     location: int = Query(..., ge=1),
     web: WebState = Depends(require_token),
@@ -198,6 +291,7 @@ def _session_out(web: WebState, session_id: int) -> dict[str, Any]:
     info = web.session(session_id)
     runner = web.runner(session_id)
     info["live"] = runner.snapshot() if runner is not None else None
+    info["dry_run"] = info.get("calibration_id") is None
     info["participant_url"] = f"/participant/{session_id}?key={web.participant_key(session_id)}"
     return info
 
@@ -220,6 +314,7 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
 
     if body.rig not in RIG_KINDS:
         raise HTTPException(422, detail=f"body.rig: unknown rig {body.rig!r}; known: {', '.join(RIG_KINDS)}")
+    web.check_rig_kind(body.rig)
     _check_participant(web, body.participant_id)
     if body.calibration_id is not None:
         web.calibration(body.calibration_id)  # 404 / 409 before anything is written
@@ -238,7 +333,7 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
 
 
 @router.get("/api/sessions/{session_id}")
-def get_session(session_id: int, web: WebState = Depends(require_token)) -> dict[str, Any]:
+def get_session(session_id: SessionId, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """A session with its live state and its answers so far."""
     out = _session_out(web, session_id)
     with web.db:
@@ -256,7 +351,7 @@ def get_session(session_id: int, web: WebState = Depends(require_token)) -> dict
 
 
 @router.post("/api/sessions/{session_id}/{action}")
-def session_action(session_id: int, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
+def session_action(session_id: SessionId, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """``start``, ``pause``, ``resume`` or ``stop`` a session."""
     if action not in ("start", "pause", "resume", "stop"):
         raise HTTPException(404, detail=f"unknown session action {action!r}; use start, pause, resume or stop")
@@ -302,11 +397,12 @@ def session_action(session_id: int, action: str, web: WebState = Depends(require
 def export_trials(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> FileResponse:
     """Every answered trial as the docs/file-formats.md, trials file trials file."""
     folder = web.data_dir / "exports"
-    folder.mkdir(exist_ok=True)
+    private_dir(folder)
     path = folder / f"trials-{time.strftime('%Y%m%d-%H%M%S')}.csv"
     try:
         with web.db:
             web.store.export_trials_csv(path, participant_id=participant_id)
+        os.chmod(path, 0o600)  # participant data: this user only, whatever the umask
     except StudyError as exc:
         raise HTTPException(404 if "unknown participant" in str(exc) else 409, detail=str(exc)) from None
     return FileResponse(path, media_type="text/csv", filename="trials.csv")
@@ -316,23 +412,38 @@ def export_trials(participant_id: str | None = Query(None, max_length=64), web: 
 def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Export the trials and run ``vibrofocus analyze`` on them in the background."""
     name = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
-    out = web.data_dir / "reports" / name
-    out.mkdir(parents=True)
-    trials = out / "trials.csv"
-    with web.db:
-        n = web.store.export_trials_csv(trials)
-    if n == 0:
-        raise HTTPException(409, detail="no answered trials yet: nothing to analyse")
-    job = {"name": name, "status": "running", "rows": n, "url": f"/reports/{name}/report.html", "log": ""}
-    web.analyses[name] = job
+    job = {"name": name, "status": "running", "rows": 0, "url": f"/reports/{name}/report.html", "log": ""}
+    with web.lock:
+        # One analysis at a time: each is a process of its own (pingouin, matplotlib).
+        if any(j["status"] == "running" for j in web.analyses.values()):
+            raise HTTPException(409, detail="An analysis is already running. Wait for it to finish, then run it again.")
+        web.analyses[name] = job
+    try:
+        out = web.data_dir / "reports" / name
+        out.mkdir(parents=True, mode=0o700)
+        trials = out / "trials.csv"
+        with web.db:
+            n = web.store.export_trials_csv(trials)
+        if n == 0:
+            raise HTTPException(409, detail="No answered trials yet: there is nothing to analyse.")
+    except BaseException:
+        with web.lock:
+            web.analyses.pop(name, None)
+        raise
+    job["rows"] = n
 
     def work() -> None:
         # Through the command line: the analysis runs in its own process (pingouin,
         # matplotlib) and the report is exactly what `vibrofocus analyze` writes.
-        proc = subprocess.run(
-            [sys.executable, "-m", "vibrofocus", "analyze", str(trials), "--out", str(out)],
-            capture_output=True, text=True, timeout=600,
-        )
+        try:
+            proc = subprocess.run(
+                [sys.executable, "-m", "vibrofocus", "analyze", str(trials), "--out", str(out)],
+                capture_output=True, text=True, timeout=600,
+            )
+        except (OSError, subprocess.TimeoutExpired) as exc:
+            job["log"] = f"the analysis could not run: {exc}"
+            job["status"] = "failed"
+            return
         job["log"] = (proc.stdout + proc.stderr)[-4000:]
         job["status"] = "done" if proc.returncode == 0 and (out / "report.html").exists() else "failed"
 

@@ -14,7 +14,7 @@ from fastapi import APIRouter, Header, HTTPException, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse
 
-from .api_models import AnswerIn, AnswerReceipt
+from .api_models import AnswerIn, AnswerReceipt, SessionId
 from .app import KEY_HEADER, WebState, render_template
 
 router = APIRouter()
@@ -87,7 +87,7 @@ def _state(web: WebState, session_id: int) -> dict[str, Any]:
 
 
 @router.get("/participant/{session_id}", response_class=HTMLResponse, include_in_schema=False)
-def participant_page(request: Request, session_id: int, key: str = Query("", max_length=64)) -> HTMLResponse:
+def participant_page(request: Request, session_id: SessionId, key: str = Query("", max_length=64)) -> HTMLResponse:
     """The full-screen participant page of a session (needs ``?key=``)."""
     web = _web(request)
     web.check_key(session_id, key)
@@ -98,7 +98,7 @@ def participant_page(request: Request, session_id: int, key: str = Query("", max
 @router.get("/api/participant/{session_id}/state")
 async def participant_state(
     request: Request,
-    session_id: int,
+    session_id: SessionId,
     after: int = Query(-1, description="return as soon as seq differs from this"),
     wait: float = Query(0.0, ge=0.0, le=MAX_WAIT_S, description="longest wait for a change, s"),
     ready: bool = Query(False, description="the page can play the beep (its audio is started)"),
@@ -107,19 +107,20 @@ async def participant_state(
     """State of the session as the page shows it; long-polls up to ``wait`` s for a change.
 
     A page that says it is ``ready`` (audio started) counts as present while its
-    request is open: the runner holds the next cue until one is.
+    request is open: the runner holds the next cue until one is, and plays a stimulus
+    only while a page whose request has seen the cue (``after`` is the cue's ``seq``)
+    is connected.
     """
     web = _web(request)
     web.check_key(session_id, key)
     state = await run_in_threadpool(_state, web, session_id)
     runner = web.runner(session_id)
-    if ready and runner is not None:
-        runner.page_attach()
+    token = runner.page_attach(after) if ready and runner is not None else None
     try:
         return await _wait_change(request, web, session_id, state, after, wait)
     finally:
-        if ready and runner is not None:
-            runner.page_detach()
+        if token is not None:
+            runner.page_detach(token)
 
 
 async def _wait_change(request: Request, web: WebState, session_id: int, state: dict[str, Any], after: int, wait: float) -> dict[str, Any]:
@@ -142,7 +143,7 @@ async def _wait_change(request: Request, web: WebState, session_id: int, state: 
 @router.post("/api/participant/{session_id}/answer", response_model=AnswerReceipt)
 def participant_answer(
     request: Request,
-    session_id: int,
+    session_id: SessionId,
     body: AnswerIn,
     key: str | None = Header(None, alias=KEY_HEADER),
 ) -> AnswerReceipt:

@@ -49,6 +49,10 @@ class Pace:
     after_answer_s: float = 0.8
 
 
+#: Longest wait, at the stimulus moment, for the page showing the cue to ask again, s
+#: (between two of its requests a page is briefly not connected).
+PAGE_GRACE_S = 0.5
+
 #: Named paces: ``normal`` for people, ``fast`` for tests and demonstrations.
 PACES = {"normal": Pace(), "fast": Pace(ready_s=0.1, cue_to_stimulus_s=0.25, after_answer_s=0.05)}
 
@@ -73,9 +77,10 @@ class SessionRunner:
     store_lock : threading.Lock, optional
         Serialises database access shared with the request handlers.
     require_page : bool
-        Hold each cue until a participant page that can play the beep is connected, so
-        that no stimulus is played to nobody (the experimenter may press Start before
-        the participant page is open, or the page may have been closed).
+        Hold each cue until a participant page that can play the beep is connected, and
+        play the stimulus only while a page is showing that cue, so that no stimulus is
+        played to nobody (the experimenter may press Start before the participant page
+        is open, or the page may be closed or reloaded during "get ready" or the cue).
     """
 
     def __init__(
@@ -110,8 +115,8 @@ class SessionRunner:
         }
         self._thread: threading.Thread | None = None
         self.require_page = bool(require_page)
-        self._pages = 0
-        self._page_seen = float("-inf")
+        self._polls: dict[int, int] = {}  # open state requests of ready pages: token -> seq they have seen
+        self._next_poll = 0
 
     # ------------------------------------------------------------------ control
     def start(self) -> None:
@@ -163,22 +168,41 @@ class SessionRunner:
             self._answered.add(int(trial_index))
             self._cond.notify_all()
 
-    def page_attach(self) -> None:
-        """A participant page (ready to play the beep) is asking for the state."""
+    def page_attach(self, seen_seq: int) -> int:
+        """A participant page (ready to play the beep) is waiting for news after ``seen_seq``.
+
+        Returns a token for :meth:`page_detach`. A page whose open request has seen the
+        cue's ``seq`` is showing that cue: only then is the stimulus played.
+        """
         with self._cond:
-            self._pages += 1
-            self._page_seen = time.monotonic()
+            self._next_poll += 1
+            self._polls[self._next_poll] = int(seen_seq)
+            self._cond.notify_all()
+            return self._next_poll
+
+    def page_detach(self, token: int) -> None:
+        """That page's request has ended (answered, or the page closed or reloaded)."""
+        with self._cond:
+            self._polls.pop(token, None)
             self._cond.notify_all()
 
-    def page_detach(self) -> None:
-        """That page's request has ended."""
-        with self._cond:
-            self._pages = max(self._pages - 1, 0)
-            self._page_seen = time.monotonic()
-
     def _page_present(self) -> bool:
-        # Between two long-polls no request is open; a page seen a moment ago still counts.
-        return not self.require_page or self._pages > 0 or time.monotonic() - self._page_seen < 1.5
+        # Strict: an open request now, no grace period (a closed page must not get a cue).
+        return not self.require_page or bool(self._polls)
+
+    def _page_showing(self, seq: int) -> bool:
+        return not self.require_page or any(seen == seq for seen in self._polls.values())
+
+    def _wait_showing(self, seq: int, seconds: float) -> bool:
+        """Wait up to ``seconds`` for a page showing state ``seq``; False on stop or pause too."""
+        deadline = time.monotonic() + seconds
+        with self._cond:
+            while not self._page_showing(seq):
+                left = deadline - time.monotonic()
+                if left <= 0 or self._stopping or self._paused:
+                    return False
+                self._cond.wait(left)
+            return not (self._stopping or self._paused)
 
     def drive_sha_for(self, trial_index: int) -> str | None:
         """Hash of the drive played for ``trial_index`` in this run, if one was played."""
@@ -268,10 +292,18 @@ class SessionRunner:
                     continue
                 self._state["waiting_for_page"] = False
             self._set("cue", trial_index=index, phase=phase)
+            cue_seq = self.snapshot()["seq"]
             self._log("cue", {"trial_index": index})
             if not self._wait(self.pace.cue_to_stimulus_s, index):
                 continue
             if self._paused:
+                continue
+            # Nothing plays unless a page is connected and showing this cue (it has
+            # seen it and is waiting for what comes next); a page closed or reloaded
+            # since then gets the trial again from "get ready".
+            if not self._wait_showing(cue_seq, PAGE_GRACE_S):
+                if not self._stopping and not self._paused:
+                    self._log("cue_cancelled", {"trial_index": index, "reason": "no participant page showing the cue"})
                 continue
             payload: dict[str, Any] = {"trial_index": index, "played": False}
             if self.stimulus is not None:

@@ -75,8 +75,9 @@
   // ---------------------------------------------------------------- rig and calibration
   async function loadRigs() {
     const rigs = await api("/api/rigs");
-    $("rig").replaceChildren(...rigs.kinds.map((k) => el("option", { value: k }, k)));
+    $("rig").replaceChildren(...rigs.kinds.map((k) => el("option", { value: k }, k === rigs.default ? rigs.label : k)));
     $("rig").value = rigs.default;
+    $("rig-label").textContent = rigs.label;
   }
 
   function onCalibration() {
@@ -94,17 +95,55 @@
   }
   $("calibration").addEventListener("change", onCalibration);
 
+  function rigQuery() {
+    return `rig=${encodeURIComponent($("rig").value)}&seed=${Number($("rig-seed").value) || 0}`;
+  }
+
+  async function readStraps() {
+    // Strap forces before calibrating: a loose strap changes the coupling to the skin.
+    const res = await fetch(`/api/rigs/straps?${rigQuery()}`, { credentials: "same-origin" });
+    const d = await res.json().catch(() => ({}));
+    const msg = $("strap-message");
+    msg.textContent = res.ok ? `Strap forces: ${d.message}` : (d.detail || "The strap forces could not be read.");
+    msg.className = res.ok && !d.ok ? "error" : "muted";
+    return res.ok ? d : null;
+  }
+  $("straps").addEventListener("click", readStraps);
+
+  let calJob = null;
+  $("cal-continue").addEventListener("click", async () => {
+    if (!calJob) return;
+    $("cal-continue").disabled = true;
+    try { await api(`/api/calibrations/jobs/${calJob}/continue`, { method: "POST" }); }
+    catch (e) { flash(e.message, true); }
+  });
+  $("cal-cancel").addEventListener("click", async () => {
+    if (!calJob) return;
+    try { await api(`/api/calibrations/jobs/${calJob}/cancel`, { method: "POST" }); }
+    catch (e) { flash(e.message, true); }
+  });
+
   $("calibrate").addEventListener("click", async () => {
     const pid = $("participant").value;
     if (!pid) { flash("Add or pick a participant first.", true); return; }
     try {
       const { job_id } = await api("/api/calibrations", { method: "POST", body: JSON.stringify({
         participant_id: pid, rig: $("rig").value, seed: Number($("rig-seed").value) || 0 }) });
+      calJob = job_id;
       $("calibrate").disabled = true;
+      $("cal-cancel").hidden = false;
       for (;;) {
         const job = await api(`/api/calibrations/jobs/${job_id}`);
         $("cal-progress").value = job.progress;
         $("cal-message").textContent = `${Math.round(job.progress * 100)} % · ${job.message}`;
+        if (job.straps) {
+          $("strap-message").textContent = `Strap forces: ${job.straps.message}`;
+          $("strap-message").className = job.straps.ok ? "muted" : "error";
+        }
+        const waiting = job.status === "waiting";
+        if (waiting && $("cal-prompt").hidden) $("cal-continue").disabled = false;
+        $("cal-prompt").hidden = !waiting;
+        $("cal-prompt-text").textContent = waiting ? job.prompt : "";
         if (job.status === "done") {
           flash(`Calibration #${job.calibration_id} saved.`);
           await loadParticipants(pid);
@@ -113,9 +152,13 @@
           break;
         }
         if (job.status === "failed") { flash(`Calibration failed: ${job.error}`, true); break; }
+        if (job.status === "cancelled") { flash("Calibration cancelled; nothing was saved."); break; }
         await new Promise((r) => setTimeout(r, 500));
       }
     } catch (e) { flash(e.message, true); }
+    calJob = null;
+    $("cal-prompt").hidden = true;
+    $("cal-cancel").hidden = true;
     $("calibrate").disabled = false;
   });
 
@@ -186,7 +229,7 @@
     if (s.status === "running" || s.status === "paused") act("Stop", "stop");
     const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
       el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
-      el("td", { class: `status ${s.status}` }, s.status), el("td", { class: "progress" }), el("td", { class: "live" }),
+      el("td", { class: `status ${s.status}` }, s.status + (s.dry_run ? " · dry run" : "")), el("td", { class: "progress" }), el("td", { class: "live" }),
       el("td", {}, link, " ", copy), el("td", {}, controls));
     tr.addEventListener("click", () => { selectedSession = s.session_id; loadSessions(); });
     return tr;

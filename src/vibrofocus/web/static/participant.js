@@ -255,6 +255,11 @@
   }
 
   document.addEventListener("keydown", (ev) => {
+    // Enter and Space would "click" the focused cell (the last one clicked) again:
+    // they never act on a cell. Nothing answers until the participant has begun
+    // (after a reload the "Click here to begin" overlay covers the grid).
+    if (ev.key === "Enter" || ev.key === " ") ev.preventDefault();
+    if (!audioReady) return;
     // Top-row digits and the keypad with NumLock give ev.key "1".."9"; the keypad
     // without NumLock gives navigation keys, so its ev.code is read as well.
     let loc = null;
@@ -267,7 +272,12 @@
       for (const c of cells) c.classList.remove("selected");
     }
   });
-  for (const c of cells) c.addEventListener("click", () => choose(Number(c.dataset.loc)));
+  for (const c of cells) {
+    c.addEventListener("click", (ev) => {
+      c.blur();  // no focus left on a cell: no hover or focus mark to bias the next answer
+      if (audioReady && ev.detail !== 0) choose(Number(c.dataset.loc));  // detail 0: a key, not the pointer
+    });
+  }
   $("confirm").addEventListener("click", () => submit([...selected]));
 
   $("begin").addEventListener("click", async () => {
