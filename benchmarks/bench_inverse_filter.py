@@ -1,30 +1,42 @@
-"""Speed of the batched inverse-filter design against a naive per-frequency loop (SPEC §9).
+"""Speed of the default inverse-filter design against a naive per-frequency loop (SPEC §9).
 
-Prints, from one run:
+Prints, from one run, for the reference setup and a dense sleeve, every row of issue 18's
+table:
 
-- inverse_filter (batched over frequencies) against a Python loop of
-  ``numpy.linalg.pinv`` at every active frequency, same inputs, same result to 1e-9
-  relative (asserted), for the reference setup and a dense sleeve;
-- the retargeting cost of a precomputed InverseOperator (new focus point and waveform)
-  against one inverse FFT of the drives.
+- a Python loop of ``numpy.linalg.pinv`` at every active frequency (the naive design);
+- ``inverse_filter`` without the wrap-around check (the solve), same result to 1e-9
+  relative (asserted);
+- the default path, ``inverse_filter`` with its wrap-around check (one shot: the check
+  transforms every path's impulse response);
+- the check alone: one shot, and through a cached ``WraparoundCheck`` (what an
+  ``InverseOperator`` or a ``Calibration`` keeps), with its one-time cost;
+- ``InverseOperator`` retargeting against one inverse FFT of the drives;
+- the peak memory of the sleeve design (a fresh subprocess, ``ru_maxrss`` less the
+  process's size before the design).
 
-Run: ``python benchmarks/bench_inverse_filter.py [--repeats 3]``. Timings are the best of
-``repeats`` runs; both sides run on the same machine in the same process.
+Run: ``python benchmarks/bench_inverse_filter.py [--repeats 5]``. Timings are the best of
+``repeats`` runs; every ratio compares timings of this one run on this one machine.
 """
 
 from __future__ import annotations
 
 import argparse
+import resource
+import subprocess
+import sys
 import time
+import tracemalloc
 
 import numpy as np
 from threadpoolctl import threadpool_limits
 
 from vibrofocus import InverseOperator, inverse_filter, ricker
-from vibrofocus.rendering import band_taper
+from vibrofocus.rendering import WraparoundCheck, band_taper
+from vibrofocus.rendering.causality import _playback_wraparound_fraction
 
 FS = 10_000.0
 BAND = (10.0, 1000.0)
+SIZES = {"reference": (4096, 13, 4), "sleeve": (8192, 256, 32)}
 
 
 def best_of(repeats: int, fn, *args, **kwargs) -> tuple[float, object]:
@@ -59,42 +71,96 @@ def medium(rng: np.random.Generator, n: int, n_points: int, n_actuators: int) ->
     return H
 
 
-def compare(label: str, n: int, n_points: int, n_actuators: int, repeats: int, rng: np.random.Generator) -> None:
-    H = medium(rng, n, n_points, n_actuators)
+def case(n: int, n_points: int, n_actuators: int, seed: int = 9) -> tuple[np.ndarray, np.ndarray]:
+    H = medium(np.random.default_rng(seed), n, n_points, n_actuators)
     targets = np.zeros((n_points, n))
     targets[0] = 2e-6 * ricker(FS, duration=n / FS)
-    t_fast, fast = best_of(repeats, inverse_filter, H, targets, FS, check_wraparound=False)
-    t_check, _ = best_of(1, inverse_filter, H, targets, FS, check_wraparound="warn")
-    t_naive, naive = best_of(max(1, repeats - 1), naive_design, H, targets)
-    error = np.max(np.abs(fast - naive)) / np.max(np.abs(naive))
-    assert error < 1e-9, f"batched and naive designs differ by {error:.2e} relative"
+    return H, targets
+
+
+def row(label: str, seconds: float, note: str = "") -> None:
+    print(f"  {label:<44} {seconds * 1e3:9.2f} ms   {note}")
+
+
+def compare(label: str, n: int, n_points: int, n_actuators: int, repeats: int) -> None:
+    H, targets = case(n, n_points, n_actuators)
     print(f"{label}: {n} samples, {n_points} points x {n_actuators} actuators")
-    print(f"  naive pinv loop   {t_naive * 1e3:9.1f} ms")
-    print(f"  inverse_filter    {t_fast * 1e3:9.1f} ms   speed-up {t_naive / t_fast:5.1f}x   (max rel. diff {error:.1e})")
-    print(f"  + wrap-around check {t_check * 1e3:7.1f} ms (linear-convolution playback at every point)")
+    t_naive, naive = best_of(max(1, repeats // 2), naive_design, H, targets)
+    t_solve, fast = best_of(repeats, inverse_filter, H, targets, FS, check_wraparound=False)
+    t_default, default = best_of(repeats, inverse_filter, H, targets, FS)
+    error = max(np.max(np.abs(d - naive)) / np.max(np.abs(naive)) for d in (fast, default))
+    assert error < 1e-9, f"batched and naive designs differ by {error:.2e} relative"
+    t_one_shot, fraction = best_of(repeats, WraparoundCheck(H, keep=False).fraction, fast)
+    t_old, old_fraction = best_of(1, _playback_wraparound_fraction, fast, H)
+    assert abs(fraction - old_fraction) <= 1e-4 * old_fraction + 1e-9, (fraction, old_fraction)
+    cached = WraparoundCheck(H)
+    t_build, _ = best_of(1, lambda: cached.odd_spectra)
+    cached.fraction(fast)  # its per-bin norms, once
+    t_cached, _ = best_of(repeats, cached.fraction, fast)
+    row("naive per-frequency numpy.linalg.pinv loop", t_naive)
+    row("inverse_filter solve (check_wraparound=False)", t_solve,
+        f"{t_naive / t_solve:5.1f}x naive (max rel. diff {error:.1e})")
+    row("default path: inverse_filter + check", t_default,
+        f"{t_naive / t_default:5.1f}x naive, check +{(t_default - t_solve) / t_solve:.0%} of the solve")
+    row("  check one shot (wraparound_fraction)", t_one_shot, f"{t_one_shot / t_solve:.0%} of the solve")
+    row("  check, cached spectra (per design)", t_cached,
+        f"{t_cached / t_solve:.0%} of the solve; once per H: {t_build * 1e3:.1f} ms")
+    row("  former playback check", t_old, f"fraction {fraction:.3g} (former {old_fraction:.3g})")
 
     control = np.arange(min(n_points, n_actuators + 1))
-    t_build, op = best_of(1, InverseOperator, H, FS, control=control)
+    t_build_op, op = best_of(1, InverseOperator, H, FS, control=control)
     waveform = 2e-6 * ricker(FS, duration=n / FS, t0=0.6 * n / FS)
     t_retarget, drives = best_of(max(repeats, 20), op.drives_for_point, int(control[-1]), waveform)
     spectra = np.fft.rfft(drives, axis=-1)  # (n_actuators, n // 2 + 1)
     t_irfft, _ = best_of(max(repeats, 20), np.fft.irfft, spectra, n, axis=-1)
-    print(f"  InverseOperator ({len(control)} control points): build {t_build * 1e3:.1f} ms, "
-          f"retarget {t_retarget * 1e3:.3f} ms = {t_retarget / t_irfft:.1f} x one irfft of the drives "
-          f"({t_irfft * 1e3:.3f} ms)")
+    op.check_wraparound(drives)  # builds and keeps the operator's check
+    t_op_check, _ = best_of(repeats, op.check_wraparound, drives)
+    row(f"InverseOperator ({len(control)} control points) build", t_build_op)
+    row("  retarget (drives_for_point)", t_retarget,
+        f"{t_retarget / t_irfft:.1f}x one irfft of the drives ({t_irfft * 1e3:.3f} ms)")
+    row("  operator.check_wraparound (cached)", t_op_check)
+
+
+def peak_memory(size: str) -> None:
+    """Run one default design of ``size`` in this script's --memory mode, in a fresh process."""
+    out = subprocess.run([sys.executable, __file__, "--memory", size], capture_output=True, text=True, check=True)
+    print(out.stdout.strip())
+
+
+def measure_memory(size: str) -> None:
+    n, n_points, n_actuators = SIZES[size]
+    H, targets = case(n, n_points, n_actuators)
+    inputs = H.nbytes + targets.nbytes
+    tracemalloc.start()  # numpy reports its buffers to tracemalloc
+    with threadpool_limits(limits=1, user_api="blas"):
+        inverse_filter(H, targets, FS)
+        _, design = tracemalloc.get_traced_memory()
+        tracemalloc.reset_peak()
+        op = InverseOperator(H, FS, control=np.arange(n_actuators + 1))
+        drives = op.drives_for_point(0, targets[0])
+        op.check_wraparound(drives)
+        _, cached = tracemalloc.get_traced_memory()
+    print(f"peak memory, {size}: default design (inverse_filter + check) {(inputs + design) / 2**30:.2f} GiB "
+          f"(inputs {inputs / 2**30:.2f} GiB + {design / 2**30:.2f} GiB working); InverseOperator + cached check "
+          f"{(inputs + cached) / 2**30:.2f} GiB; process peak (ru_maxrss, includes building the medium) "
+          f"{resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2**20:.2f} GiB")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--repeats", type=int, default=5)
     parser.add_argument("--blas-threads", type=int, default=1,
                         help="BLAS threads for both sides (default 1: compares batching, not threading)")
+    parser.add_argument("--memory", choices=sorted(SIZES), help=argparse.SUPPRESS)
     args = parser.parse_args()
-    rng = np.random.default_rng(9)
+    if args.memory:
+        measure_memory(args.memory)
+        return
     with threadpool_limits(limits=args.blas_threads, user_api="blas"):
         print(f"BLAS threads: {args.blas_threads} for both the naive loop and the batched design")
-        compare("reference setup", 4096, 13, 4, args.repeats, rng)
-        compare("dense sleeve", 8192, 256, 32, args.repeats, rng)
+        compare("reference setup", *SIZES["reference"], args.repeats)
+        compare("dense sleeve", *SIZES["sleeve"], args.repeats)
+    peak_memory("sleeve")
 
 
 if __name__ == "__main__":

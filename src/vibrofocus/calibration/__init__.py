@@ -6,6 +6,7 @@ from .calibrate import DEFAULT_METHOD, SCHEMA_VERSION, Calibration, CalibrationP
 from .estimate import MimoEstimate, mimo_h1
 from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes, make_excitation
 from .figures import plot_calibration
+from .fitmodel import FittedSkin, fit_model
 from .io import load_calibration, save_calibration
 from .quality import QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
 
@@ -32,4 +33,6 @@ __all__ = [
     "assess_quality",
     "detect_clipping",
     "transfer_error",
+    "fit_model",
+    "FittedSkin",
 ]

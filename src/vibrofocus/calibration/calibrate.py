@@ -6,6 +6,7 @@ import datetime as _dt
 import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -96,6 +97,9 @@ class Calibration:
     recorded_s : float
         Real duration of the takes recorded, re-recordings included, s (NaN when not
         known, e.g. a file written before it was stored).
+    fit : FittedSkin or None
+        The skin model fitted to ``H`` (``cal.fit = fit_model(cal)``), stored with the
+        calibration file when set; None otherwise.
     """
 
     H: np.ndarray
@@ -118,6 +122,7 @@ class Calibration:
     codes: np.ndarray | None = None
     multiple_coherence: np.ndarray | None = None
     recorded_s: float = float("nan")
+    fit: Any = None
 
     @property
     def n_fft(self) -> int:
@@ -136,6 +141,18 @@ class Calibration:
         """Impulse responses of ``H``, m/V per sample, time zero at index 0 (negative times
         wrap to the end), shape (n_points, n_actuators, n_fft)."""
         return np.fft.irfft(np.moveaxis(self.H, 0, -1), self.n_fft, axis=-1)
+
+    def wraparound_check(self, n: int, *, taper_octaves: float = 0.5):
+        """The :class:`~vibrofocus.rendering.WraparoundCheck` of ``transfer_for(n)``, built
+        once per ``(n, taper_octaves)`` and kept: its ``H`` is the design's transfer matrix
+        and the spectra it caches make every later check of a design cheap."""
+        from ..rendering.causality import WraparoundCheck
+
+        cache = self.__dict__.setdefault("_wraparound_checks", {})
+        key = (n, float(taper_octaves))
+        if key not in cache:
+            cache[key] = WraparoundCheck(self.transfer_for(n, taper_octaves=taper_octaves), n)
+        return cache[key]
 
     def transfer_for(self, n: int, *, taper_octaves: float = 0.5) -> np.ndarray:
         """The transfer matrix on the design grid ``rfftfreq(n, 1 / fs)``.

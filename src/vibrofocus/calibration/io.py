@@ -21,6 +21,12 @@ Variables
     record_sample) instead, and adds ``code`` (take, actuator; the sign of each
     actuator's sweep in each take), ``multiple_coherence``, ``input_condition`` and
     ``input_correlation`` (frequency, point).
+    Optional, when the skin model was fitted (``cal.fit``, :func:`.fit_model`):
+    ``fit_value`` (fit_parameter; SI units, named by the coordinate ``fit_parameter``),
+    ``fit_std`` (same), ``fit_log_covariance`` (fit_parameter, fit_parameter_b; of the
+    natural logarithms) and ``fit_residual`` (point), with the attribute ``fit`` (JSON:
+    band, fs, fixed settings, diagnostics). Files without them load as before, and
+    readers that do not know them ignore them.
 Attributes
     ``file_kind = "vibrofocus calibration"``, ``schema_version``, ``software``,
     ``software_version``, ``participant_id``, ``method``, ``fs`` (Hz), ``band_low``,
@@ -109,7 +115,18 @@ def _to_dataset(cal: Calibration):
         for name, values in mimo.items():
             dims, units, long_name = _MIMO_VARS[name]
             data_vars[name] = (dims, values, {"units": units, "long_name": long_name})
-    coords = {
+    coords = {}
+    if cal.fit is not None:
+        fit = cal.fit
+        coords["fit_parameter"] = ("fit_parameter", list(fit.names))
+        data_vars["fit_value"] = (("fit_parameter",), fit.values,
+                                  {"units": "SI", "long_name": "fitted skin-model parameter"})
+        data_vars["fit_std"] = (("fit_parameter",), fit.std, {"units": "SI", "long_name": "standard error"})
+        data_vars["fit_log_covariance"] = (("fit_parameter", "fit_parameter_b"), fit.log_covariance,
+                                           {"units": "1", "long_name": "covariance of log parameters"})
+        data_vars["fit_residual"] = (("point",), fit.residual,
+                                     {"units": "1", "long_name": "relative fit residual per point"})
+    coords |= {
         "frequency": ("frequency", cal.freqs, {"units": "Hz"}),
         "point": ("point", list(lay.point_labels)),
         "point_x": ("point", pts[:, 0], {"units": "m", "long_name": "x, across the arm toward the thumb"}),
@@ -142,6 +159,9 @@ def _to_dataset(cal: Calibration):
         attrs["strap_forces"] = json.dumps(cal.straps)
     if np.isfinite(cal.recorded_s):
         attrs["recorded_s"] = float(cal.recorded_s)
+    if cal.fit is not None:
+        attrs["fit"] = json.dumps({"band": list(cal.fit.band), "fs": cal.fit.fs, "fixed": cal.fit.fixed,
+                                   "info": cal.fit.info}, default=_json_default)
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
@@ -434,10 +454,35 @@ def _from_dataset(ds, path: Path) -> Calibration:
         dropouts=ds["dropouts"].values.astype(int), polarity=ds["polarity"].values.astype(int),
         thresholds=thresholds, input_condition=condition, input_correlation=correlation,
     )
+    fit = _fit_from_dataset(ds, attrs, layout, path) if "fit_value" in ds.variables else None
     return Calibration(
         H=H_real.astype(float) + 1j * H_imag.astype(float), freqs=freqs, fs=fs, coherence=coherence,
         layout=layout, band=band, participant_id=str(attrs["participant_id"]), method=method,
         quality=quality, drives=drive, recordings=ds["recording"].values, rig=rig, sweep=sweep,
         created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
-        straps=straps, codes=codes, multiple_coherence=multiple, recorded_s=recorded_s,
+        straps=straps, codes=codes, multiple_coherence=multiple, recorded_s=recorded_s, fit=fit,
     )
+
+
+def _fit_from_dataset(ds, attrs, layout: ArrayLayout, path: Path):
+    """The stored :class:`.FittedSkin`, or CalibrationFileError naming what is wrong."""
+    from .fitmodel import FittedSkin, parameter_names
+
+    missing = [v for v in ("fit_log_covariance", "fit_residual") if v not in ds.variables]
+    if "fit" not in attrs:
+        missing.append("attribute fit")
+    if missing:
+        raise _fail(path, f"has fit_value but lacks {', '.join(missing)}")
+    names = [str(v) for v in ds["fit_parameter"].values]
+    expected = list(parameter_names(layout.actuator_names))
+    if names != expected:
+        raise _fail(path, f"fit parameters {names} differ from the model's {expected}")
+    try:
+        meta = json.loads(attrs["fit"])
+        return FittedSkin(layout=layout, fs=float(meta["fs"]), band=tuple(meta["band"]),
+                          values=ds["fit_value"].values.astype(float),
+                          log_covariance=ds["fit_log_covariance"].values.astype(float),
+                          residual=ds["fit_residual"].values.astype(float), fixed=meta["fixed"],
+                          info=meta.get("info", {}))
+    except (ValueError, TypeError, KeyError, ValidationError) as exc:
+        raise _fail(path, f"has an unreadable skin-model fit ({exc})") from exc

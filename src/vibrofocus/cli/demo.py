@@ -49,6 +49,12 @@ def demo_command(
     ),
     participants: int = typer.Option(12, "--participants", min=1,
                                      help="Simulated participants of the study behind --paper-figures (about 3 s each)."),
+    moving: bool = typer.Option(
+        False, "--moving",
+        help="Instead of the demo: calibrate, fit the skin model to the calibration, render taps along a path "
+        "(location 7 to location 3) from the fitted model and write the field as OUT/moving_focus.gif.",
+    ),
+    moving_speed: float = typer.Option(0.1, "--moving-speed", help="Speed of the moving focus, m/s."),
     design_from: str = typer.Option(
         "calibration", "--design-from",
         help="Design from a calibration measured first ('calibration', as a user would) or from the "
@@ -73,6 +79,9 @@ def demo_command(
         check_choice(design_from, "--design-from", ("calibration", "model"))
         if paper_figures:
             _write_paper_figures(out, seed=seed, participants=participants, location=location)
+            return
+        if moving:
+            _write_moving_focus(out, seed=seed, speed_m_s=moving_speed, quiet=as_json)
             return
         rig = SimulatedForearm(seed=seed)
         rig.layout.location_index(location)
@@ -203,6 +212,31 @@ def _write_paper_figures(out: Path, *, seed: int, participants: int, location: i
                   "participants: not data):")
     for path in paths:
         console.print(f"wrote {path}")
+
+
+def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool) -> None:
+    """``demo --moving``: a moving focus rendered from the skin model fitted to a calibration."""
+    from .._atomic import output_error
+    from ..calibration import calibrate, fit_model
+    from ..demo.moving import moving_focus, write_moving_gif
+    from ..skin import SimulatedForearm
+
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(exc, out, "output folder") from exc
+    rig = SimulatedForearm(seed=seed)
+    cal = calibrate(rig, participant_id=f"simulated-{seed}")
+    fitted = fit_model(cal)
+    lay = rig.layout
+    focus = moving_focus(fitted, lay, rig.fs, start_xy=lay.locations_xy[6], end_xy=lay.locations_xy[2],
+                         speed_m_s=speed_m_s)
+    arm = SimulatedForearm(seed=seed, noise_m=0.0, dropout_rate=0.0)
+    path = write_moving_gif(focus, arm, out / "moving_focus.gif")
+    if not quiet:
+        console.print(f"fitted {fitted!r}")
+        console.print(f"{len(focus.targets_xy)} taps at {speed_m_s:g} m/s from location 7 to 3 "
+                      f"(drive scaled by {focus.scale:.2f}); animation: {path}")
 
 
 def _relative_error_to_model(rig, calibration) -> float:

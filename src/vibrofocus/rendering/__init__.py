@@ -2,7 +2,7 @@
 the contrast designs (acoustic contrast control, constrained) and their bound, the
 wrap-around check, focus metrics and the high-level :func:`render`."""
 
-from .causality import CausalityWarning, check_wraparound, wraparound_fraction
+from .causality import CausalityWarning, WraparoundCheck, check_wraparound, wraparound_fraction
 from .combination import combination_target
 from .contrast import (
     ContrastBound,
@@ -38,6 +38,7 @@ __all__ = [
     "time_reversal_drives",
     "wraparound_fraction",
     "check_wraparound",
+    "WraparoundCheck",
     "CausalityWarning",
     "focus_metrics",
     "render",

@@ -10,29 +10,38 @@ from .._validation import as_array, check_choice, check_finite, check_in_range, 
 from ..errors import ValidationError
 from ._pinv import REGULARIZATIONS
 
-__all__ = ["as_transfer", "samples_for", "check_regularization", "check_grid", "as_indices"]
+__all__ = ["as_transfer", "check_transfer_energy", "samples_for", "check_regularization", "check_grid", "as_indices"]
 
 #: Default ``reg_param`` of the regularized designs (relative to the largest singular value).
 DEFAULT_REG_PARAM = {"tikhonov": 1e-2, "tsvd": 1e-2}
 
 
-def as_transfer(H: Any, name: str = "H") -> np.ndarray:
-    """Complex transfer matrix, shape (n_freqs, n_points, n_actuators), finite, non-zero."""
+def as_transfer(H: Any, name: str = "H", *, values: bool = True) -> np.ndarray:
+    """Complex transfer matrix, shape (n_freqs, n_points, n_actuators), finite, non-zero.
+
+    ``values=False`` checks the shape only: the caller checks the values of the part it
+    uses (:func:`check_transfer_energy`), saving a pass over a large ``H``.
+    """
     arr = as_array(H, name, ndim=3, dtype="complex", finite=False)
     if arr.size == 0:
         raise ValidationError(f"{name} is empty (shape {arr.shape}); a transfer matrix needs frequencies, points and actuators")
     if arr.shape[0] < 2:
         raise ValidationError(f"{name} must hold at least 2 frequencies (n // 2 + 1 with n >= 2), got shape {arr.shape}")
-    # sum |H|^2 in one BLAS pass answers both checks on a large array: it is NaN/Inf if
-    # any entry is (then the detailed check says where; a mere overflow passes it) and
-    # 0 only if every entry is.
-    with np.errstate(over="ignore", invalid="ignore"):
-        energy = np.vdot(arr, arr).real
+    if values:
+        # sum |H|^2 in one BLAS pass answers both checks on a large array.
+        with np.errstate(over="ignore", invalid="ignore"):
+            check_transfer_energy(np.vdot(arr, arr).real, arr, name)
+    return arr
+
+
+def check_transfer_energy(energy: float, arr: np.ndarray, name: str = "H", where: str = "") -> None:
+    """Raise unless ``arr`` (a transfer matrix or the part of it in use, ``where``) is finite
+    and not all zero, given ``energy = sum |arr|^2``: it is NaN/Inf if any entry is (then
+    the detailed check says where; a mere overflow passes it) and 0 only if every entry is."""
     if not np.isfinite(energy):
         check_finite(arr, name)
     if energy == 0:
-        raise ValidationError(f"{name} is all zero: no actuator reaches any point (singular transfer matrix)")
-    return arr
+        raise ValidationError(f"{name} is all zero{where}: no actuator reaches any point (singular transfer matrix)")
 
 
 def samples_for(n_freqs: int, n_samples: Any, name: str = "n_samples") -> int:

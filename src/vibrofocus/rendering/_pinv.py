@@ -2,12 +2,19 @@
 
 A transfer matrix ``H`` of shape ``(n_freqs, n_rows, n_cols)`` is factorized once for all
 frequencies. Where a frequency is well conditioned the design works on the small Gram
-matrix (``H^H H`` or ``H H^H``): its eigenvalues (``eigvalsh``) give the singular values,
-and a batched linear solve gives the (Tikhonov-damped) pseudo-inverse, which is several
-times cheaper than a full SVD of a tall matrix. Its rounding error grows like
-``eps * cond(H)^2``, so frequencies whose condition number exceeds
-:data:`GRAM_MAX_CONDITION` are re-factorized by a (batched) SVD of ``H`` itself. The
-result therefore matches ``numpy.linalg.pinv`` to about ``1e-10`` relative everywhere.
+matrix ``A`` (``H^H H`` or ``H H^H``), which is several times cheaper than a full SVD of a
+tall matrix. Its rounding error grows like ``eps * cond(H)^2``, so frequencies whose
+condition number exceeds :data:`GRAM_MAX_CONDITION` are re-factorized by a (batched) SVD
+of ``H`` itself. The result therefore matches ``numpy.linalg.pinv`` to about ``1e-10``
+relative everywhere.
+
+- The plain pseudo-inverse (no regularization, the default) needs no eigenvalues: a
+  batched inverse of ``A + delta I`` (``delta`` a rounding-level shift that keeps it
+  positive definite, undone by one refinement step) gives ``A^-1`` and the bound
+  ``cond2(A) <= ||A||_F ||A^-1||_F`` that routes frequencies to the SVD. Singular values
+  are computed only when asked for.
+- The regularized designs take the eigenvalues of ``A`` (``eigvalsh``: they set ``lam``
+  and the conditioning test), then a linear solve (Tikhonov) or the eigenvectors (TSVD).
 
 Regularization acts on the singular values ``s`` of each frequency through a filter
 ``g(s)`` that replaces ``1/s``:
@@ -27,7 +34,7 @@ from functools import lru_cache
 import numpy as np
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["REGULARIZATIONS", "GRAM_MAX_CONDITION", "SpectralPinv", "filter_factors"]
+__all__ = ["REGULARIZATIONS", "GRAM_MAX_CONDITION", "SpectralPinv", "filter_factors", "gram_matrix", "small_gram"]
 
 REGULARIZATIONS = (None, "tikhonov", "tsvd")
 #: Above this condition number a frequency is factorized by SVD instead of the Gram
@@ -96,6 +103,68 @@ def _hmatvec(a: np.ndarray, x: np.ndarray) -> np.ndarray:
     return np.conj((np.conj(x)[:, None, :] @ a)[:, 0, :])
 
 
+def gram_matrix(H: np.ndarray) -> np.ndarray:
+    """``H^H H`` per frequency, shape (F, k, k), exactly Hermitian, without copying ``H``.
+
+    A complex128 ``H`` whose last axis is contiguous is read as real (``F, m, 2 k``) and
+    multiplied by its own transpose, which numpy hands to BLAS ``dsyrk`` (half the work of
+    a complex product and no conjugated copy of ``H``); the four real blocks make up the
+    complex Gram matrix.
+    """
+    if H.dtype != np.complex128 or H.strides[-1] != H.itemsize:
+        G = _herm(H) @ H
+        return 0.5 * (G + _herm(G))
+    X = H.view(np.float64)  # columns Re h_0, Im h_0, Re h_1, ...
+    R = np.swapaxes(X, -1, -2) @ X  # symmetric, (F, 2k, 2k)
+    G = np.empty(R.shape[:-2] + (R.shape[-1] // 2,) * 2, complex)
+    G.real = R[..., ::2, ::2] + R[..., 1::2, 1::2]
+    G.imag = R[..., ::2, 1::2] - R[..., 1::2, ::2]
+    return G
+
+
+def small_gram(H: np.ndarray) -> np.ndarray:
+    """The smaller Gram matrix of each frequency: ``H^H H`` (tall ``H``) or ``H H^H``."""
+    with _single_threaded_blas():
+        return gram_matrix(H) if H.shape[-2] >= H.shape[-1] else gram_matrix(np.swapaxes(H, -1, -2)).conj()
+
+
+def _frobenius2(a: np.ndarray) -> np.ndarray:
+    """Squared Frobenius norm of each matrix of a complex stack (F, m, n) -> (F,)."""
+    flat = a.reshape(a.shape[0], -1).view(np.float64)
+    return np.einsum("fi,fi->f", flat, flat)
+
+
+def _plain_factor(gram: np.ndarray, inner: int):
+    """Inverse-Gram route of the plain pseudo-inverse.
+
+    Returns ``(zero, good, bad, inverse, shift)``: the frequencies where ``H`` vanishes,
+    those solved through the Gram matrix and those left to the SVD; ``(A + delta I)^-1``
+    and ``delta`` at the good ones. None if an inversion failed all the same.
+    """
+    k = gram.shape[-1]
+    trace = np.trace(gram, axis1=-2, axis2=-1).real
+    zero = trace == 0
+    # A shift well above the rounding of the computed Gram matrix (about inner * eps *
+    # trace) keeps it positive definite even where H is singular; those frequencies fail
+    # the condition bound below and go to the SVD. Elsewhere it changes A^-1 by about
+    # delta ||A^-1|| (below 1e-5 relative under the bound), and one refinement step in
+    # _gram_inverse_apply takes that to its square.
+    shift = 2 * (inner + k) * np.finfo(float).eps * trace
+    scale = np.where(zero, 1.0, trace)[:, None, None]  # inverted at unit trace: no overflow
+    system = gram / scale + (shift / scale[:, 0, 0])[:, None, None] * np.eye(k)
+    system[zero] = np.eye(k)
+    try:
+        with _single_threaded_blas():
+            inverse = np.linalg.inv(system)
+    except np.linalg.LinAlgError:  # pragma: no cover - the shift is meant to prevent it
+        return None
+    with np.errstate(over="ignore", invalid="ignore"):
+        # cond2(A) <= ||A||_F ||A^-1||_F
+        ill = ~zero & ~(_frobenius2(system) * _frobenius2(inverse) <= GRAM_MAX_CONDITION**4)
+    good = np.flatnonzero(~zero & ~ill)
+    return zero, good, np.flatnonzero(ill), inverse[good] / scale[good], shift[good]
+
+
 @dataclass
 class SpectralPinv:
     """Factorized regularized pseudo-inverse of ``H`` at every frequency.
@@ -104,91 +173,135 @@ class SpectralPinv:
     frequency) or form the matrices with :meth:`matrix`.
 
     Well-conditioned frequencies use the Gram matrix ``A = H^H H`` (``H H^H`` when ``H``
-    is wide): the plain and Tikhonov designs solve ``(A + lam^2 I) x = b`` (the singular
-    values, from ``eigvalsh``, only set ``lam`` and the conditioning test), truncated SVD
-    uses the eigenvectors of ``A``. The other frequencies use an SVD of ``H``.
+    is wide): the plain design applies ``(A + delta I)^-1`` and one refinement step
+    (module notes), Tikhonov solves
+    ``(A + lam^2 I) x = b``, truncated SVD uses the eigenvectors of ``A``. The other
+    frequencies use an SVD of ``H``.
     """
 
     H: np.ndarray
     tall: bool
+    gram: np.ndarray  # (F, k, k) Gram matrix of every frequency
+    zero_freqs: np.ndarray  # (F,) bool: H vanishes there (zero drives)
     gram_freqs: np.ndarray  # indices of the frequencies on the Gram route
-    system: np.ndarray | None  # (n_gram, k, k) A + lam^2 I ("solve" route)
+    inverse: np.ndarray | None  # (n_gram, k, k) (A + delta I)^-1 ("inverse" route, plain)
+    shift: np.ndarray | None  # (n_gram,) delta
+    system: np.ndarray | None  # (n_gram, k, k) A + lam^2 I ("solve" route, tikhonov)
     basis: np.ndarray | None  # (n_gram, k, k) eigenvectors of A ("eig" route, tsvd)
     coef: np.ndarray | None  # (n_gram, k) g(s) / s ("eig" route)
-    singular_values: np.ndarray  # (F, k), descending
     svd_freqs: np.ndarray  # indices of frequencies factorized by SVD
     svd_u: np.ndarray  # (n_svd, n_rows, k)
+    svd_s: np.ndarray  # (n_svd, k)
     svd_vh: np.ndarray  # (n_svd, k, n_cols)
     svd_g: np.ndarray  # (n_svd, k)
+    _singular_values: np.ndarray | None = None
 
     @classmethod
-    def factorize(cls, H: np.ndarray, regularization: str | None = None, reg_param: float | None = None) -> "SpectralPinv":
-        """Factorize ``H`` (complex, shape ``(n_freqs, n_rows, n_cols)``)."""
+    def factorize(cls, H: np.ndarray, regularization: str | None = None, reg_param: float | None = None,
+                  gram: np.ndarray | None = None) -> "SpectralPinv":
+        """Factorize ``H`` (complex, shape ``(n_freqs, n_rows, n_cols)``); ``gram``: its
+        :func:`small_gram`, if already computed."""
         n_freqs, n_rows, n_cols = H.shape
         tall = n_rows >= n_cols
         k = min(n_rows, n_cols)
         max_dim = max(n_rows, n_cols)
-        gram = _herm(H) @ H if tall else H @ _herm(H)
+        gram = small_gram(H) if gram is None else gram
+        plain = _plain_factor(gram, max_dim) if regularization is None else None
+        inverse = shift = system = basis = coef = s = None
+        if plain is not None:
+            zero, good, bad, inverse, shift = plain
+        else:
+            with _single_threaded_blas():
+                eigvals = np.linalg.eigvalsh(gram)  # ascending
+            s = np.sqrt(np.clip(eigvals[:, ::-1], 0.0, None))
+            s_max, s_min = s[:, 0], s[:, -1]
+            zero = s_max == 0
+            # Frequencies where the Gram route loses accuracy (about eps * cond^2): use a
+            # true SVD of H there, batched over just those frequencies. Frequencies where
+            # H vanishes entirely get zero drives.
+            ill = ~zero & (s_min * GRAM_MAX_CONDITION < s_max)
+            good = np.flatnonzero(~zero & ~ill)
+            bad = np.flatnonzero(ill)
+            if regularization == "tsvd":
+                with _single_threaded_blas():
+                    w, vecs = np.linalg.eigh(gram[good])
+                s_good = np.sqrt(np.clip(w[:, ::-1], 0.0, None))
+                basis = vecs[:, :, ::-1]
+                g = filter_factors(s_good, regularization, reg_param, max_dim)
+                coef = np.where(s_good > 0, g / np.where(s_good > 0, s_good, 1.0), 0.0)
+            else:
+                # cond <= GRAM_MAX_CONDITION here, far above the plain pseudo-inverse cutoff,
+                # so the plain design is the exact inverse of the Gram matrix.
+                lam = 0.0 if regularization is None else reg_param * s_max[good]
+                system = gram[good]
+                if regularization is not None:
+                    system = system + (lam**2)[:, None, None] * np.eye(k)
         with _single_threaded_blas():
-            eigvals = np.linalg.eigvalsh(gram)  # ascending
-        s = np.sqrt(np.clip(eigvals[:, ::-1], 0.0, None))
-        s_max, s_min = s[:, 0], s[:, -1]
-        # Frequencies where the Gram route loses accuracy (about eps * cond^2): use a
-        # true SVD of H there, batched over just those frequencies. Frequencies where H
-        # vanishes entirely get zero drives.
-        ill = (s_max > 0) & (s_min * GRAM_MAX_CONDITION < s_max)
-        good = np.flatnonzero((s_max > 0) & ~ill)
-        bad = np.flatnonzero(ill)
-        system = basis = coef = None
-        if regularization == "tsvd":
-            with _single_threaded_blas():
-                w, vecs = np.linalg.eigh(gram[good])
-            s_good = np.sqrt(np.clip(w[:, ::-1], 0.0, None))
-            basis = vecs[:, :, ::-1]
-            g = filter_factors(s_good, regularization, reg_param, max_dim)
-            coef = np.where(s_good > 0, g / np.where(s_good > 0, s_good, 1.0), 0.0)
-        else:
-            # cond <= GRAM_MAX_CONDITION here, far above the plain pseudo-inverse cutoff,
-            # so the plain design is the exact inverse of the Gram matrix.
-            lam = 0.0 if regularization is None else reg_param * s_max[good]
-            system = gram[good]
-            if regularization is not None:
-                system = system + (lam**2)[:, None, None] * np.eye(k)
-        if bad.size:
-            with _single_threaded_blas():
-                u, s_bad, vh = np.linalg.svd(H[bad], full_matrices=False)
-            g_bad = filter_factors(s_bad, regularization, reg_param, max_dim)
+            u, s_bad, vh = np.linalg.svd(H[bad], full_matrices=False)
+        g_bad = filter_factors(s_bad, regularization, reg_param, max_dim) if bad.size else np.zeros((0, k))
+        if s is not None:
             s[bad] = s_bad
-        else:
-            u = np.zeros((0, n_rows, k), complex)
-            vh = np.zeros((0, k, n_cols), complex)
-            g_bad = np.zeros((0, k))
-        return cls(H, tall, good, system, basis, coef, s, bad, u, vh, g_bad)
+        return cls(H, tall, gram, zero, good, inverse, shift, system, basis, coef, bad, u, s_bad, vh, g_bad, s)
+
+    @property
+    def singular_values(self) -> np.ndarray:
+        """Singular values of ``H`` at each frequency, (n_freqs, k), descending (computed
+        on first use on the plain route)."""
+        if self._singular_values is None:
+            s = np.zeros(self.gram.shape[:2])
+            with _single_threaded_blas():
+                eigvals = np.linalg.eigvalsh(self.gram[self.gram_freqs])
+            s[self.gram_freqs] = np.sqrt(np.clip(eigvals[:, ::-1], 0.0, None))
+            s[self.svd_freqs] = self.svd_s
+            self._singular_values = s
+        return self._singular_values
+
+    def _gram_inverse_apply(self, x: np.ndarray) -> np.ndarray:
+        """``A^-1 x`` at the Gram-route frequencies; x (n_gram, k) or (n_gram, k, m)."""
+        vec = x.ndim == 2
+        x = x[:, :, None] if vec else x
+        with _single_threaded_blas():
+            if self.inverse is not None:
+                y = self.inverse @ x  # (A + delta I)^-1 x
+                y = y + self.inverse @ (self.shift[:, None, None] * y)  # refined: A^-1 x
+            else:
+                y = np.linalg.solve(self.system, x)
+        return y[:, :, 0] if vec else y
 
     def _gram_apply(self, H: np.ndarray, rhs: np.ndarray) -> np.ndarray:
         """Pseudo-inverse applied at the Gram-route frequencies (H, rhs restricted)."""
-        if self.system is not None:
-            with _single_threaded_blas():
-                if self.tall:
-                    return np.linalg.solve(self.system, _hmatvec(H, rhs)[:, :, None])[:, :, 0]
-                return _hmatvec(H, np.linalg.solve(self.system, rhs[:, :, None])[:, :, 0])
+        if self.basis is None:
+            if self.tall:
+                return self._gram_inverse_apply(_hmatvec(H, rhs))
+            return _hmatvec(H, self._gram_inverse_apply(rhs))
         V = self.basis
         if self.tall:
             return _matvec(V, self.coef * _hmatvec(V, _hmatvec(H, rhs)))
         return _hmatvec(H, _matvec(V, self.coef * _hmatvec(V, rhs)))
 
-    def apply(self, rhs: np.ndarray) -> np.ndarray:
-        """``H^+ rhs`` per frequency; ``rhs`` shape (n_freqs, n_rows) -> (n_freqs, n_cols)."""
-        n_freqs, _, n_cols = self.H.shape
+    def apply(self, rhs: np.ndarray, rows: np.ndarray | None = None) -> np.ndarray:
+        """``H^+ rhs`` per frequency; ``rhs`` shape (n_freqs, n_rows) -> (n_freqs, n_cols).
+
+        With ``rows`` (indices), ``rhs`` holds only those rows, shape (n_freqs, len(rows)):
+        the others are zero and cost nothing.
+        """
+        n_freqs, n_rows, n_cols = self.H.shape
+        H, u = self.H, self.svd_u
+        if rows is not None:
+            if not self.tall:
+                full = np.zeros((n_freqs, n_rows), complex)
+                full[:, rows] = rhs
+                return self.apply(full)
+            H, u = H[:, rows, :], u[:, rows, :]
         out = np.zeros((n_freqs, n_cols), complex)
         good = self.gram_freqs
         if good.size == n_freqs:  # the common case: no copies of H
-            out = self._gram_apply(self.H, rhs)
+            out = self._gram_apply(H, rhs)
         elif good.size:
-            out[good] = self._gram_apply(self.H[good], rhs[good])
+            out[good] = self._gram_apply(H[good], rhs[good])
         if self.svd_freqs.size:
             b = self.svd_freqs
-            out[b] = _hmatvec(self.svd_vh, self.svd_g * _hmatvec(self.svd_u, rhs[b]))
+            out[b] = _hmatvec(self.svd_vh, self.svd_g * _hmatvec(u, rhs[b]))
         return out
 
     def matrix(self) -> np.ndarray:
@@ -198,12 +311,12 @@ class SpectralPinv:
         good = self.gram_freqs
         if good.size:
             H = self.H if good.size == n_freqs else self.H[good]
-            if self.system is not None:
-                with _single_threaded_blas():
-                    if self.tall:
-                        out[good] = np.linalg.solve(self.system, _herm(H))
-                    else:
-                        out[good] = _herm(H) @ np.linalg.inv(self.system)
+            if self.basis is None:
+                if self.tall:
+                    out[good] = self._gram_inverse_apply(_herm(H))
+                else:
+                    eye = np.broadcast_to(np.eye(n_rows, dtype=complex), (good.size, n_rows, n_rows))
+                    out[good] = _herm(H) @ self._gram_inverse_apply(eye)
             else:
                 V = self.basis
                 if self.tall:

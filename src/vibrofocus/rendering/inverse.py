@@ -17,9 +17,9 @@ import numpy as np
 from .._validation import as_array, check_band, check_choice, check_positive
 from ..defaults import BAND_HZ
 from ..errors import DriveLimitError, ValidationError
-from ._checks import as_indices, as_transfer, check_grid, check_regularization, samples_for
-from ._pinv import SpectralPinv
-from .causality import DEFAULT_WRAPAROUND_TOL, check_wraparound as _check_wraparound
+from ._checks import as_indices, as_transfer, check_grid, check_regularization, check_transfer_energy, samples_for
+from ._pinv import SpectralPinv, small_gram
+from .causality import DEFAULT_WRAPAROUND_TOL, WraparoundCheck
 from .taper import band_taper
 
 __all__ = ["InverseOperator", "inverse_filter", "DesignReport", "DriveScaledWarning", "apply_drive_limit"]
@@ -77,11 +77,11 @@ def _prepare_design(H: np.ndarray, fs: Any, n: int | None, band: Any, taper_octa
     return H, fs, n, (low, high), taper, freqs, active
 
 
-def _check_in_band(s_max: np.ndarray, freqs_active: np.ndarray, band: tuple[float, float], what: str) -> None:
-    """Refuse a transfer matrix that vanishes (largest singular value 0) at frequencies
-    inside the band."""
+def _check_in_band(vanishes: np.ndarray, freqs_active: np.ndarray, band: tuple[float, float], what: str) -> None:
+    """Refuse a transfer matrix that vanishes (``vanishes``: bool per active frequency) at
+    frequencies inside the band."""
     inside = (freqs_active >= band[0]) & (freqs_active <= band[1])
-    zero = inside & (s_max == 0)
+    zero = inside & vanishes
     if zero.any():
         raise ValidationError(
             f"H is zero at {int(zero.sum())} {'frequency' if zero.sum() == 1 else 'frequencies'} inside "
@@ -158,14 +158,36 @@ class InverseOperator:
                 raise ValidationError(f"weights must all be > 0, got {self.weights.tolist()}")
             H_active = H_active * self.weights[None, :, None]
         factors = SpectralPinv.factorize(H_active, self.regularization, self.reg_param)
-        _check_in_band(factors.singular_values[:, 0], freqs[active], band, " at the control points")
+        _check_in_band(factors.zero_freqs, freqs[active], band, " at the control points")
         # Stored per control point, (n_control, n_actuators, F_active), contiguous along
         # frequency: retargeting one point then reads one contiguous block and its drive
         # spectra come out in the layout the inverse FFT wants.
         weighted = factors.matrix() * (taper[active, None, None] * self.weights[None, None, :])
         self._columns = np.ascontiguousarray(np.transpose(weighted, (2, 1, 0)))
-        self.singular_values = np.zeros((len(freqs), factors.singular_values.shape[1]))
-        self.singular_values[active] = factors.singular_values
+        self._factors = factors
+        self._wraparound: WraparoundCheck | None = None
+
+    @property
+    def wraparound(self) -> WraparoundCheck:
+        """The wrap-around check through ``H``, built on first use and kept: checking a
+        design then costs about one inverse FFT per point."""
+        if self._wraparound is None:
+            self._wraparound = WraparoundCheck(self.H, self.n_samples)
+        return self._wraparound
+
+    def check_wraparound(self, drives: Any, *, tol: float = DEFAULT_WRAPAROUND_TOL, action: str = "raise") -> float:
+        """:func:`~vibrofocus.rendering.check_wraparound` of ``drives`` through ``H``, with
+        the operator's cached :attr:`wraparound` spectra; returns the fraction."""
+        drives = as_array(drives, "drives", ndim=2, shape=(self.n_actuators, self.n_samples))
+        return self.wraparound.check(drives, tol=tol, action=action)
+
+    @property
+    def singular_values(self) -> np.ndarray:
+        """Singular values of ``H_c`` at each frequency, shape (n // 2 + 1, k) (0 outside the
+        taper's support); computed on first use."""
+        s = np.zeros((len(self.freqs), min(len(self.control), self.n_actuators)))
+        s[self._active] = self._factors.singular_values
+        return s
 
     @property
     def n_actuators(self) -> int:
@@ -344,7 +366,7 @@ def inverse_filter(
     report : DesignReport
         Only with ``full_output=True``.
     """
-    H = as_transfer(H)
+    H = as_transfer(H, values=False)  # values checked where used: a pass less over H
     targets = as_array(targets, "targets", ndim=2)
     n = targets.shape[1]
     if n < 2:
@@ -361,16 +383,24 @@ def inverse_filter(
         max_drive = check_positive(max_drive, "max_drive")
     regularization, reg_param = check_regularization(regularization, reg_param)
     H, fs, n, band, taper, freqs, active = _prepare_design(H, fs, n, band, taper_octaves)
-    factors = SpectralPinv.factorize(H[active], regularization, reg_param)
-    _check_in_band(factors.singular_values[:, 0], freqs[active], band, "")
-    rhs = np.fft.rfft(targets, axis=-1).T[active] * taper[active, None]
+    with np.errstate(over="ignore", invalid="ignore"):
+        gram = small_gram(H[active])
+        check_transfer_energy(np.trace(gram, axis1=1, axis2=2).real.sum(), H[active], "H", " in the design band")
+    factors = SpectralPinv.factorize(H[active], regularization, reg_param, gram=gram)
+    _check_in_band(factors.zero_freqs, freqs[active], band, "")
+    rows = np.flatnonzero(np.any(targets != 0, axis=1))  # quiet points add nothing to H^H U
+    rhs = np.fft.rfft(targets[rows], axis=-1).T[active] * taper[active, None]
     spectra = np.zeros((len(freqs), H.shape[2]), complex)
-    spectra[active] = factors.apply(rhs)
+    spectra[active] = factors.apply(rhs, rows)
     drives = np.fft.irfft(spectra, n, axis=0).T
 
     fraction = float("nan")
+    if check_wraparound or full_output:
+        with np.errstate(over="ignore", invalid="ignore"):
+            check_transfer_energy(np.vdot(H, H).real, H)  # the rest of H is used from here on
     if check_wraparound:
-        fraction = _check_wraparound(drives, H, tol=wraparound_tol, action="warn" if check_wraparound == "warn" else "raise")
+        fraction = WraparoundCheck(H, n, keep=False).check(drives, tol=wraparound_tol, spectra=spectra,
+                                                           action="warn" if check_wraparound == "warn" else "raise")
     drives, scale, needed = apply_drive_limit(drives, max_drive, on_limit, "the inverse filter")
     if not full_output:
         if scale < 1.0:

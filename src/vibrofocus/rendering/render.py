@@ -22,8 +22,7 @@ from ..layout import ArrayLayout
 from ..signals.ricker import ricker
 from ._checks import as_transfer, check_regularization, samples_for
 from .causality import DEFAULT_WRAPAROUND_TOL
-from .causality import check_wraparound as _check_wraparound
-from .causality import wraparound_fraction as _wraparound_fraction
+from .causality import WraparoundCheck
 from .combination import combination_target
 from .contrast import (
     DEFAULT_ACC_REG,
@@ -115,6 +114,8 @@ class Rendering:
         The same against every other calibrated point (guards included).
     field_predicted : ndarray, shape (n_grid, n) or None
         Displacement predicted over the quiet grid of ``control="field"``, m.
+    target_xy : ndarray, shape (2,) or None
+        Position of the target on the skin, m (``layout.points_xy[target_index]``).
     """
 
     method: str
@@ -139,6 +140,7 @@ class Rendering:
     bound: ContrastBound | None = field(default=None, repr=False)
     bound_all: ContrastBound | None = field(default=None, repr=False)
     field_predicted: np.ndarray | None = field(default=None, repr=False)
+    target_xy: np.ndarray | None = None
 
     @property
     def n_samples(self) -> int:
@@ -194,8 +196,9 @@ def render(
     H: Any,
     fs: float,
     layout: ArrayLayout,
-    location: int,
+    location: int | None = None,
     *,
+    target_xy: Any = None,
     limit_v: float = DRIVE_LIMIT_V,
     on_limit: str = "scale",
     sigma: float = SIGMA_S,
@@ -224,7 +227,7 @@ def render(
     field_exclusion_m: float = 5e-3,
     bounds: bool = True,
 ) -> Rendering:
-    """Render a tap at a layout location with one of the methods of SPEC §2.
+    """Render a tap at a layout location, or anywhere on the skin, with one of the methods of SPEC §2.
 
     Parameters
     ----------
@@ -233,15 +236,27 @@ def render(
         the band-limited tap exactly (:func:`contrast_drives`). ``"constrained"``: the
         best fidelity for a required energy contrast, or a weighted trade-off
         (:func:`constrained_drives`; ``min_contrast_db`` or ``contrast_weight``).
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators), or Calibration
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators), Calibration or model
         Calibrated transfer matrix (m/V) on ``rfftfreq(n, 1 / fs)``, rows in the order of
         ``layout.points_xy`` (locations then guards). A ``Calibration`` gives its
-        ``transfer_for(n_samples)`` (default 4096) and its ``band`` as ``calibrated_band``.
+        ``transfer_for(n_samples)`` (default 4096) and its ``band`` as ``calibrated_band``
+        (with ``target_xy``: its fitted model ``cal.fit``). A model of the skin, any
+        object with ``transfer(points_xy, freqs)`` (a fitted
+        :class:`~vibrofocus.calibration.FittedSkin`, or a ``SimulatedForearm`` for its
+        true H), gives H at the layout's points (and the target) on
+        ``rfftfreq(n_samples, 1 / fs)``; a model with a ``band`` is tapered outside it
+        like ``Calibration.transfer_for`` and sets ``calibrated_band``.
     fs : float
         Sample rate, Hz.
     layout : ArrayLayout
-    location : int
-        1-based location number of the target.
+    location : int, optional
+        1-based location number of the target; give this or ``target_xy``.
+    target_xy : (float, float), optional
+        Target position on the skin, m, in the layout frame: a tap anywhere, designed
+        with a model of the skin as ``H``. The target joins the layout as one more
+        location (number ``n_locations + 1``; ``Rendering.layout`` is that layout), so
+        the other locations and the guards keep their roles. A model with
+        ``on_skin(points_xy)`` refuses a target off its skin area.
     limit_v : float
         Drive limit, V peak.
     on_limit : {"scale", "refuse"}
@@ -338,11 +353,30 @@ def render(
     check_choice(method, "method", METHODS)
     if not isinstance(layout, ArrayLayout):
         raise ValidationError(f"layout must be an ArrayLayout, got {type(layout).__name__}")
+    if (location is None) == (target_xy is None):
+        raise ValidationError("give the target as location= (a layout location number) or target_xy= (a skin "
+                              "position, m), " + ("not both" if location is not None else "one of them"))
+    if target_xy is not None and hasattr(H, "transfer_for"):
+        if getattr(H, "fit", None) is None:
+            raise ValidationError("target_xy needs a model of the skin: fit one to the calibration first "
+                                  "(cal.fit = fit_model(cal)) or pass the FittedSkin as H")
+        H = H.fit
+    if hasattr(H, "transfer") and not hasattr(H, "transfer_for"):
+        H, layout, location, calibrated_band = _model_transfer(H, layout, location, target_xy, fs, n_samples,
+                                                               calibrated_band, taper_octaves)
+    elif target_xy is not None:
+        raise ValidationError("target_xy needs a model of the skin as H (a FittedSkin from fit_model, or a "
+                              "SimulatedForearm): a measured matrix knows H only at its calibrated points")
+    playback = None
     if hasattr(H, "transfer_for") and hasattr(H, "band"):
         # A Calibration carries the band it is valid in: a design outside it is refused.
         if calibrated_band is None:
             calibrated_band = tuple(H.band)
-        H = H.transfer_for(4096 if n_samples is None else n_samples)
+        if hasattr(H, "wraparound_check"):  # its transfer matrix with the check's cached spectra
+            playback = H.wraparound_check(4096 if n_samples is None else n_samples)
+            H = playback.H
+        else:
+            H = H.transfer_for(4096 if n_samples is None else n_samples)
     H = as_transfer(H)
     if H.shape[1:] != (layout.n_points, layout.n_actuators):
         raise ValidationError(
@@ -458,13 +492,15 @@ def render(
 
     fraction = float("nan")
     if check_wraparound:
-        if method in CONTRAST_METHODS and _wraparound_fraction(drives, H) > wraparound_tol:
+        if playback is None:
+            # Contrast designs are checked twice: transform the impulse responses once.
+            playback = WraparoundCheck(H, n, keep=method in CONTRAST_METHODS)
+        if method in CONTRAST_METHODS and playback.fraction(drives) > wraparound_tol:
             # Noise in a measured H spreads a little of these designs' drive over the
             # whole window (DRIVE_WINDOW_TAPER): taper the window's ends, then check.
             drives = taper_drive_ends(drives, int(np.argmax(np.abs(desired))))
         try:
-            fraction = _check_wraparound(drives, H, tol=wraparound_tol,
-                                         action="warn" if check_wraparound == "warn" else "raise")
+            fraction = playback.check(drives, tol=wraparound_tol, action="warn" if check_wraparound == "warn" else "raise")
         except CausalityError as exc:
             raise CausalityError(f"{what}: {exc}") from None
     drives, scale, needed = apply_drive_limit(drives, limit_v, on_limit, what)
@@ -505,4 +541,41 @@ def render(
         bound=bound,
         bound_all=bound_all,
         field_predicted=field_predicted,
+        target_xy=np.array(layout.points_xy[target_index], dtype=float),
     )
+
+
+def _model_transfer(model: Any, layout: ArrayLayout, location: int | None, target_xy: Any, fs: float,
+                    n_samples: int | None, calibrated_band: tuple[float, float] | None, taper_octaves: float):
+    """H of a skin model at the layout's points (the target added as a location).
+
+    Returns ``(H, layout, location, calibrated_band)``; see :func:`render`.
+    """
+    if target_xy is not None:
+        target = as_array(target_xy, "target_xy", ndim=1, shape=(2,))
+        if not np.isfinite(target).all():
+            raise ValidationError(f"target_xy must be finite, got {target.tolist()}")
+        if hasattr(model, "on_skin") and not bool(model.on_skin(target[None])[0]):
+            area = model.skin_area_description() if hasattr(model, "skin_area_description") else "its skin area"
+            raise ValidationError(f"target_xy=({target[0] * 1e3:g}, {target[1] * 1e3:g}) mm lies outside the "
+                                  f"model's skin ({area})")
+        same = np.flatnonzero(np.all(np.abs(layout.locations_xy - target) < 1e-9, axis=1))
+        if same.size:  # a numbered location: no need for a new one
+            location = int(same[0]) + 1
+        else:
+            layout = ArrayLayout(layout.actuators_xy, np.vstack([layout.locations_xy, target]), layout.guards_xy,
+                                 spacing_xy=layout.spacing_xy, actuator_names=layout.actuator_names,
+                                 guard_names=layout.guard_names, name=f"{layout.name} + target")
+            location = layout.n_locations
+    n = 4096 if n_samples is None else n_samples
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 16 or n % 2:
+        raise ValidationError(f"n_samples must be an even integer >= 16, got {n!r}")
+    freqs = np.fft.rfftfreq(int(n), 1 / check_positive(fs, "fs"))
+    H = np.asarray(model.transfer(layout.points_xy, freqs))
+    band = getattr(model, "band", None)
+    if band is not None:
+        if calibrated_band is None:
+            calibrated_band = tuple(band)
+        with np.errstate(over="ignore", divide="ignore"):  # band_taper at 0 Hz
+            H = H * band_taper(freqs, band, check_positive(taper_octaves, "taper_octaves", allow_zero=True))[:, None, None]
+    return H, layout, location, calibrated_band
