@@ -266,3 +266,26 @@ def test_one_participant_analysis_api_keeps_descriptives():
     sentences = results_sentences(result)["study1"]
     assert "N = 1 participant," in sentences[0] and "ANOVA" not in sentences[0]
     assert any(s.startswith("The two-way repeated-measures ANOVA needs at least 3") for s in sentences)
+
+
+def test_simulated_participants_are_flagged_in_json_and_html(tmp_path, synthetic):
+    # A trials file whose optional 'simulated' column marks some participants.
+    df = synthetic(4, seed=3)
+    sims = sorted(df["participant"].unique())[:2]
+    df["simulated"] = df["participant"].isin(sims).astype(int)
+    path = tmp_path / "trials.csv"
+    df.to_csv(path, index=False)
+    paths = write_report(analyze(load_trials(path)), tmp_path / "out")
+    report = json.loads(paths["json"].read_text())
+    assert report["simulated"]["any"] is True and report["simulated"]["participants"] == sims
+    assert "model v2" in report["simulated"]["model"] and "not data" in report["simulated"]["model"]
+    page = paths["html"].read_text()
+    assert "id='simulated-banner'" in page and "SIMULATED DATA" in page and sims[0] in page
+    # Without the column (or with only zeros): no flag, no banner.
+    df["simulated"] = 0
+    df.to_csv(path, index=False)
+    paths = write_report(analyze(load_trials(path)), tmp_path / "out2")
+    report = json.loads(paths["json"].read_text())
+    assert report["simulated"] == {"any": False, "participants": [], "model": None, "model_version": None,
+                                   "notice": None}
+    assert "simulated-banner" not in paths["html"].read_text()

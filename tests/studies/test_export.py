@@ -52,3 +52,28 @@ def test_trials_file_gets_the_usual_permissions_not_those_of_a_temporary_file(tm
         os.umask(old)
     mode = stat.S_IMODE((tmp_path / "t.csv").stat().st_mode)
     assert mode == stat.S_IMODE((tmp_path / "plain.txt").stat().st_mode) == 0o644
+
+
+def test_simulated_flag_column_round_trips(tmp_path):
+    rows = [
+        {"participant": "sim-001", "study": 1, "phase": "main", "trial": 1, "method": "inverse", "target": 5,
+         "response": (5,), "rt_s": 1.25, "simulated": 1},
+        {"participant": "P02", "study": 1, "phase": "main", "trial": 1, "method": "inverse", "target": 4,
+         "response": "4 5", "rt_s": 0.5, "simulated": 0},
+    ]
+    path = tmp_path / "t.csv"
+    assert write_trials_csv(rows, path) == 2
+    assert path.read_text().splitlines()[0] == ",".join(TRIALS_COLUMNS) + ",simulated"
+    back = read_trials_csv(path)
+    assert [r["simulated"] for r in back] == [True, False]
+
+
+def test_real_participants_only_keep_the_contract_columns(tmp_path):
+    rows = [{"participant": "P01", "study": 1, "phase": "main", "trial": 1, "method": "inverse", "target": 5,
+             "response": (5,), "rt_s": 1.0, "simulated": 0}]
+    path = tmp_path / "t.csv"
+    write_trials_csv(rows, path)
+    assert path.read_text().splitlines()[0] == ",".join(TRIALS_COLUMNS)
+    # A simulated participant anywhere in the file adds the flag to every row.
+    write_trials_csv(rows + [dict(rows[0], participant="sim-001", simulated=1)], path)
+    assert [line.rsplit(",", 1)[1] for line in path.read_text().splitlines()] == ["simulated", "0", "1"]

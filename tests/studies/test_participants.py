@@ -1,14 +1,26 @@
-"""The simulated participants' perceptual model: its energy is the skin field's, its
-answers are seeded per trial, its percept follows the stimulus."""
+"""The simulated participants' perceptual model v2: each component against its cited
+curve or law, seeded answers, and the engine responder interface."""
 
 import numpy as np
 import pytest
 
-from vibrofocus.errors import StudyError
+from vibrofocus.errors import StudyError, ValidationError
 from vibrofocus.rendering import render
 from vibrofocus.rigs import make_rig
 from vibrofocus.studies import StudyDesign
-from vibrofocus.studies.participants import PerceptualModel, SimulatedParticipant
+from vibrofocus.studies.participants import MODEL_NOTICE, PerceptualModel, SimulatedParticipant
+from vibrofocus.studies.perception import (
+    MODEL_LABEL,
+    Percepts,
+    Traits,
+    central_percepts,
+    draw_answers,
+    felt_energy,
+    psychophysics_data,
+    reference_felt_energy,
+    threshold_db,
+    threshold_weight,
+)
 
 N = 4096
 
@@ -30,20 +42,150 @@ def drives(rig):
             for m in ("funneling", "inverse") for loc in (4, 5, 6)}
 
 
-def test_energy_matches_the_skin_field_by_parseval(rig, drives):
-    # Independent reference: integrate u(x, t)^2 from SimulatedForearm.field in time.
-    model = PerceptualModel(grid_half_width_m=8e-3, grid_step_m=8e-3, band_hz=(0.0, rig.fs / 2), n_fft=16384)
+# ---------------------------------------------------------------- components vs sources
+def test_threshold_curve_is_verrillos_u_curve():
+    # Gescheider & Verrillo 1979 (Verrillo 1963): flat to 40 Hz, then -12 dB/octave to a
+    # minimum at 250 Hz; the rise above 250 Hz is an assumption (+12 dB/octave).
+    f = np.array([10, 20, 40, 80, 160, 250, 500, 1000.0])
+    expected = np.array([12 * np.log2(250 / 40)] * 3 + [12 * np.log2(250 / 80), 12 * np.log2(250 / 160), 0, 12, 24])
+    np.testing.assert_allclose(threshold_db(f), expected, atol=0.01)
+    fine = np.geomspace(20, 1000, 400)
+    assert fine[np.argmin(threshold_db(fine))] == pytest.approx(250, rel=0.01)
+    # The data file holds the points to 0.01 dB: 1e-3 relative in power.
+    np.testing.assert_allclose(threshold_weight(np.array([250.0, 125.0])), [1.0, 10 ** (-1.2)], rtol=1e-3)
+
+
+def test_funneling_follows_the_energy_law():
+    # Alles 1970 / Israr & Poupyrev 2011: amplitudes sqrt(1 - b) and sqrt(b) put the phantom
+    # b of the way from site 1 to site 2. Energies far above threshold, exponent 1.
+    model = PerceptualModel(funneling_exponent=1.0, sl_ref_db=80.0)
+    traits = Traits.draw(model, 0)
+    pts = np.array([[-0.02, 0.0], [0.025, 0.0]])
+    for b in (0.1, 0.3, 0.5, 0.8):
+        e = np.array([[1.0 - b, b]])  # energy ∝ amplitude²
+        p = central_percepts(e, pts, model, traits)
+        np.testing.assert_allclose(p.position_m[0], pts[0] + b * (pts[1] - pts[0]), atol=1e-6)
+
+
+def test_detection_threshold_decides_what_is_felt():
+    model = PerceptualModel(sl_ref_db=20.0, threshold_sd_db=0.0)
+    traits = Traits.draw(model, 0)
+    pts = np.array([[0.0, 0.0], [0.01, 0.0]])
+    # The reference tap is felt 20 dB above threshold: -19 dB re it is felt, -21 dB is not.
+    e = np.array([[10 ** -1.9, 0.0], [10 ** -2.1, 0.0]])
+    p = central_percepts(e, pts, model, traits)
+    assert p.felt.tolist() == [True, False]
+
+
+def _one(position, spread=0.0):
+    return Percepts(np.array([position], dtype=float), np.array([spread]), np.array([True]))
+
+
+def test_central_bias_is_the_bayesian_posterior_mean():
+    model = PerceptualModel(bias_mean_m=(0.0, 0.0), bias_sd_m=0.0)
+    traits = Traits(0.0, 8e-3, 10e-3, np.zeros(2), 0.5, 1.0, spread_gain=0.0)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    x = np.array([0.01, 0.0])
+    n = 20000
+    rng = np.random.default_rng(4)
+    # Independent reference: posterior mean gain of a Gaussian prior and likelihood.
+    g = 10e-3**2 / (10e-3**2 + 8e-3**2)
+    a, _, _ = draw_answers(_one(x), np.zeros(n, int), locs, np.zeros(2), model, traits, rng)
+    # Re-derive the perceived positions from the same noise stream.
+    noise = np.random.default_rng(4).standard_normal((n, 2))
+    perceived = g * (x + 8e-3 * noise)
+    np.testing.assert_array_equal(a, np.argmin(((locs[None] - perceived[:, None]) ** 2).sum(2), axis=1))
+    # And its statistics: mean pulled to g x, SD g * acuity (3 SE tolerances).
+    np.testing.assert_allclose(perceived.mean(0), g * x, atol=3 * g * 8e-3 / np.sqrt(n))
+    np.testing.assert_allclose(perceived.std(0), g * 8e-3, rtol=0.03)
+
+
+def test_a_diffuse_percept_is_localized_worse_and_selects_more():
+    # Park & Choi 2018: phantoms are perceived over distributed positions -> more noise,
+    # stronger central pull, and (Study 2) more locations selected.
+    model = PerceptualModel()
+    traits = Traits(0.0, 6e-3, 12e-3, np.zeros(2), 0.4, 1.0, spread_gain=1.0)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    target = np.array([-0.01, 0.01])
+    res = {}
+    for spread in (0.0, 0.02):
+        a, sel, _ = draw_answers(_one(target, spread), np.zeros(4000, int), locs, np.zeros(2), model, traits,
+                                 np.random.default_rng(1))
+        res[spread] = (np.mean(a == 0), sel.sum(1).mean())
+    assert res[0.02][0] < res[0.0][0] - 0.1
+    assert res[0.02][1] > res[0.0][1] + 0.3
+
+
+def test_study2_selects_by_posterior_density_ratio():
+    # The selection rule: every location whose posterior density (Gaussian, mean the
+    # percept, variance g * sigma_s^2) reaches kappa * jitter of the best location's.
+    # Independent reference with scipy's normal density, from the same noise stream.
+    from scipy.stats import norm
+
+    model = PerceptualModel(select_log_sd=0.4)
+    traits = Traits(0.0, 7e-3, 11e-3, np.zeros(2), 0.35, 1.0, spread_gain=0.0)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    x = np.array([-0.004, 0.006])
+    n = 3000
+    a, sel, _ = draw_answers(_one(x), np.zeros(n, int), locs, np.zeros(2), model, traits, np.random.default_rng(9))
+    ref = np.random.default_rng(9)
+    noise, jitter = ref.standard_normal((n, 2)), ref.lognormal(0.0, 0.4, size=n)
+    g = 11e-3**2 / (11e-3**2 + 7e-3**2)
+    post = g * (x + 7e-3 * noise)
+    sd = np.sqrt(g) * 7e-3
+    dens = norm.pdf(locs[None, :, 0], post[:, None, 0], sd) * norm.pdf(locs[None, :, 1], post[:, None, 1], sd)
+    expected = dens / dens.max(axis=1, keepdims=True) >= np.clip(0.35 * jitter, 0, 1)[:, None]
+    np.testing.assert_array_equal(a, dens.argmax(axis=1))
+    np.testing.assert_array_equal(sel, expected)
+    assert 1.2 < sel.sum(1).mean() < 8  # several locations at times, not all
+
+
+def test_population_bias_points_toward_the_elbow():
+    # Cholewiak et al. 2020: the forearm's perceived midpoint lies toward the elbow (-y).
+    model = PerceptualModel()
+    assert model.bias_mean_m[1] < 0
+    biases = np.array([Traits.draw(model, k).bias_m for k in range(400)])
+    assert biases[:, 1].mean() < 0
+    assert abs(biases[:, 1].mean() - model.bias_mean_m[1]) < 3 * model.bias_sd_m / np.sqrt(400)
+
+
+def test_selection_always_contains_the_single_answer():
+    model = PerceptualModel()
+    traits = Traits.draw(model, 3)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    a, sel, rt = draw_answers(_one([0.004, -0.002], 0.01), np.zeros(500, int), locs, np.zeros(2), model, traits,
+                              np.random.default_rng(2))
+    assert sel[np.arange(500), a].all() and (rt > 0).all()
+
+
+def test_felt_energy_matches_the_skin_field(rig, drives):
+    # Independent reference: the time-domain field of SimulatedForearm.field, weighted by the
+    # threshold curve in frequency and integrated (Parseval), over the reference tap's.
+    model = PerceptualModel(band_hz=(10.0, 1000.0))
     p = SimulatedParticipant(rig, seed=1, model=model)
     d = drives[("inverse", 5)]
-    points = np.concatenate([p.grid_xy, p.locations_xy])
-    u = rig.field(d, points, tail_s=0.6)
-    expected = np.sum(u**2, axis=1) / rig.fs
-    np.testing.assert_allclose(p.energy(d), expected, rtol=2e-3)
+    pts = p.grid_xy[::17]
+    n = 16384
+    u = rig.field(d, pts, tail_s=(n - d.shape[1]) / rig.fs)[:, :n]
+    U = np.fft.rfft(u, n, axis=1)
+    f = np.fft.rfftfreq(n, 1 / rig.fs)
+    band = (f >= 10) & (f <= 1000)
+    e = 2 * np.sum(np.abs(U[:, band]) ** 2 * threshold_weight(f[band]), axis=1) / (n * rig.fs)
+    H = rig.transfer(pts, np.fft.rfftfreq(d.shape[1], 1 / rig.fs)[1:])  # not used: band bins below
+    del H
+    got = p.energy(d)[::17] * reference_felt_energy(rig.fs, d.shape[1], model)
+    np.testing.assert_allclose(got, e, rtol=0.03)
 
 
+def test_data_file_has_the_paper_statistics():
+    paper = psychophysics_data()["paper_statistics"]
+    assert paper["study1_location"]["F"] == 10.96 and paper["study2_location"]["chi2"] == 30.75
+
+
+# ---------------------------------------------------------------- responder
 def test_percept_follows_the_target_across_the_arm(participant, drives):
     for method in ("funneling", "inverse"):
-        xs = [participant.percept(drives[(method, loc)]).centroid_xy[0] for loc in (4, 5, 6)]
+        xs = [participant.percept(drives[(method, loc)]).position_m[0, 0] for loc in (4, 5, 6)]
         assert xs[0] < xs[1] < xs[2], (method, xs)
 
 
@@ -65,12 +207,16 @@ def test_design_limits_the_answers(participant, drives):
     design = StudyDesign(study=1, locations=(4, 5))
     picks = {participant.answer(drives[("funneling", 6)], 1, k, design).locations[0] for k in range(40)}
     assert picks <= {4, 5}
+    design2 = StudyDesign(study=2, locations=(4, 5))
+    sels = {x for k in range(40) for x in participant.answer(drives[("funneling", 6)], 2, k, design2).locations}
+    assert sels <= {4, 5}
 
 
-def test_different_participants_differ(rig):
+def test_different_participants_differ_and_are_labelled(rig):
     a, b = SimulatedParticipant(rig, seed=1), SimulatedParticipant(rig, seed=2)
-    assert (a.noise_sd_m, a.rt_median_s) != (b.noise_sd_m, b.rt_median_s)
-    assert "not data" in a.describe()["model"]
+    assert a.traits.to_dict() != b.traits.to_dict()
+    assert a.describe()["model"] == MODEL_LABEL and "not data" in MODEL_LABEL and "v2" in MODEL_LABEL
+    assert "not data" in MODEL_NOTICE or "not from people" in MODEL_NOTICE
 
 
 def test_bad_input_is_refused(rig, participant):
@@ -82,3 +228,7 @@ def test_bad_input_is_refused(rig, participant):
         participant.energy(np.zeros((3, 100)))
     with pytest.raises(StudyError, match="no vibration"):
         participant.percept(np.zeros((4, 100)))
+    with pytest.raises(ValidationError):
+        threshold_db(np.array([0.0]))
+    with pytest.raises(ValidationError):
+        PerceptualModel().replace(nonsense=1)

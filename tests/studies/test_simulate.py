@@ -34,8 +34,11 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         reader = csv.reader(fh)
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
-    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS
+    # A database export: the contract's columns, the session columns, then the flag that
+    # these participants are simulated (a model, not data).
+    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS + ("simulated",)
     assert {r["dry_run"] for r in rows} == {"0"}, "simulated sessions are calibrated"
+    assert {r["simulated"] for r in rows} == {"1"}
     assert len(rows) == 3 * 2 * 86
     keys = Counter((r["participant"], r["study"], r["phase"], r["trial"]) for r in rows)
     assert max(keys.values()) == 1  # no duplicates

@@ -163,6 +163,9 @@ class AnalysisResult:
         Significance level used in sentences and flags.
     layout : ArrayLayout or None
         Layout the locations refer to (None: the reference layout).
+    simulated_participants : list of str
+        Participants marked simulated in the trials (answers from the perceptual model,
+        not from people).
     """
 
     source: str
@@ -174,6 +177,7 @@ class AnalysisResult:
     unavailable: dict[str, str]
     alpha: float = 0.05
     layout: ArrayLayout | None = None
+    simulated_participants: list[str] = field(default_factory=list)
 
 
 def _cell_means(df: pd.DataFrame, dv: str) -> pd.DataFrame:
@@ -379,4 +383,5 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
         unavailable=unavailable,
         alpha=alpha,
         layout=layout,
+        simulated_participants=list(trials.attrs.get("simulated_participants", [])),
     )

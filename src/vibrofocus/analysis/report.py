@@ -301,6 +301,24 @@ def _uncomputed_friedman() -> dict:
     return {factor: {"chi2": None, "dof": None, "p": None} for factor in ("location", "method")}
 
 
+def _simulated(result: AnalysisResult) -> dict[str, Any]:
+    """``report.json["simulated"]``: which participants are simulated, and the model label."""
+    from ..studies.perception import MODEL_LABEL, MODEL_VERSION
+
+    sim = list(result.simulated_participants)
+    return {
+        "any": bool(sim),
+        "participants": sim,
+        "model": MODEL_LABEL if sim else None,
+        "model_version": MODEL_VERSION if sim else None,
+        "notice": (
+            f"{len(sim)} participant(s) are simulated ({MODEL_LABEL}): their answers come from a "
+            "perceptual model, not from people; statistics that include them are not evidence about perception."
+            if sim else None
+        ),
+    }
+
+
 def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None) -> dict:
     """The content of report.json (docs/file-formats.md, report.json contract plus details), JSON-safe.
 
@@ -343,6 +361,7 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
         "exclusions": result.exclusions,
         "warnings": result.warnings,
         "unavailable": result.unavailable,
+        "simulated": _simulated(result),
     }
     s1 = result.study1
     if s1 is None:
@@ -460,6 +479,9 @@ def _html(result: AnalysisResult, figures: dict[str, Path]) -> str:
         "<title>vibrofocus localization report</title>",
         f"<style>{_CSS}</style></head><body>",
         "<h1>Localization studies: analysis report</h1>",
+        *([f"<p class='warn' id='simulated-banner' style='border:2px solid #b45309;padding:0.6em;font-weight:bold'>"
+           f"SIMULATED DATA — {html.escape(_simulated(result)['notice'])} Simulated: "
+           f"{html.escape(', '.join(result.simulated_participants))}.</p>"] if result.simulated_participants else []),
         f"<p class='small'>Source: {html.escape(result.source)} · {result.n_trials} trial rows (training rows not "
         f"analysed) · α = {result.alpha:g} · vibrofocus {html.escape(__version__)}</p>",
     ]

@@ -317,6 +317,8 @@ def load_trials(
         Layout whose locations the targets and responses refer to; default the
         reference layout (locations 1–9).
     on_invalid : {"raise", "exclude"}
+        (An optional ``simulated`` column marks simulated participants; they are listed
+        in ``trials.attrs["simulated_participants"]``.)
         What to do with rows that break the contract (a response or target outside the
         locations, an unparsable response, an unknown study or phase, a duplicated
         trial, ...): ``"raise"`` refuses the file, quoting the first problems;
@@ -387,7 +389,20 @@ def load_trials(
     trials = trials.sort_values(["participant", "study", "phase", "trial"], kind="stable").reset_index(drop=True)
     trials.attrs["exclusions"] = exclusions
     trials.attrs["source"] = name
+    trials.attrs["simulated_participants"] = simulated_participants(raw)
     return trials
+
+
+def simulated_participants(raw: pd.DataFrame) -> list[str]:
+    """Participants whose rows say ``simulated`` (column ``simulated`` true: 1/true/yes).
+
+    Their answers come from the perceptual model of simulated participants, not from
+    people; the report flags them.
+    """
+    if "simulated" not in raw.columns or "participant" not in raw.columns:
+        return []
+    flag = raw["simulated"].astype(str).str.strip().str.lower().isin(("1", "true", "yes", "1.0"))
+    return sorted({str(p).strip() for p in raw.loc[flag, "participant"]})
 
 
 def _drop_sessions(raw: pd.DataFrame, *, keep_aborted: bool, keep_dry_runs: bool) -> tuple[pd.DataFrame, list[dict]]:

@@ -74,6 +74,10 @@ def analyze_command(
             console.print(str(p))
         return
     console.print(f"[bold]vibrofocus analyze[/] {trials} ({result.n_trials} rows)")
+    if result.simulated_participants:
+        from ..analysis.report import _simulated
+
+        console.print(f"[bold yellow]SIMULATED: {_simulated(result)['notice']}[/]")
     for row in result.exclusions.itertuples(index=False):
         where = "all studies" if row.study is None or row.study is pd.NA else f"study {int(row.study)}"
         console.print(f"[yellow]excluded[/] {row.participant} ({where}): {row.reason}")

@@ -8,5 +8,6 @@ from . import serve  # noqa: E402,F401
 from . import analyze  # noqa: F401
 from . import study  # noqa: F401
 from . import simulate_study  # noqa: F401
+from . import power  # noqa: F401
 from . import play  # noqa: F401
 from . import devices  # noqa: F401

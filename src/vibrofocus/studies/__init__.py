@@ -57,7 +57,7 @@ from .engine import (
     headphone_beep,
 )
 from .export import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
-from .participants import MODEL_NOTICE, Percept, PerceptualModel, SimulatedParticipant
+from .participants import MODEL_LABEL, MODEL_NOTICE, MODEL_VERSION, Percepts, PerceptualModel, SimulatedParticipant
 from .protocol import PHASES, STUDIES, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .storage import (
     APPLICATION_ID,
@@ -109,7 +109,9 @@ __all__ = [
     "TerminalResponder",
     "SimulatedParticipant",
     "PerceptualModel",
-    "Percept",
+    "Percepts",
+    "MODEL_LABEL",
+    "MODEL_VERSION",
     "MODEL_NOTICE",
     "simulate_studies",
     "participant_seeds",

@@ -4,6 +4,10 @@ One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that orde
 ``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``
 (1-based within the phase), ``method``, ``target`` (1-9), ``response`` (the chosen
 locations, ascending, separated by spaces: ``5``, ``4 5``), ``rt_s`` (seconds).
+When some participant is simulated (key ``simulated`` of the rows, as the study
+database's rows have), a last column ``simulated`` (``1`` / ``0``) follows: answers of
+simulated participants come from a perceptual model, not from people, and the analysis
+flags them. A file of real participants only has exactly the columns above.
 """
 
 from __future__ import annotations
@@ -16,7 +20,7 @@ from typing import Any
 
 from ..errors import StudyError
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "write_trials_csv", "read_trials_csv"]
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv"]
 
 #: Columns of the trials file, in order.
 TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
@@ -24,6 +28,9 @@ TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", 
 #: its status (``planned``, ``running``, ``paused``, ``aborted``, ``completed``) and
 #: ``dry_run`` (1 when the session had no calibration, so nothing was played; else 0).
 SESSION_COLUMNS = ("session", "session_status", "dry_run")
+#: Last column when some participant is simulated: 1 where the participant is simulated
+#: (answers from the perceptual model, not data), else 0.
+SIMULATED_COLUMN = "simulated"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False) -> int:
@@ -36,7 +43,10 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     Parameters
     ----------
     rows : iterable of mapping
-        Each with at least the keys of :data:`TRIALS_COLUMNS`; others are ignored.
+        Each with at least the keys of :data:`TRIALS_COLUMNS`. When some row has a true
+        ``simulated`` (a simulated participant), the column :data:`SIMULATED_COLUMN` is
+        written too (1 / 0 per row); without one the file has exactly the contract's
+        columns. Other keys are ignored.
         ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
     path : path-like
         Destination CSV file; its folder must exist.
@@ -54,9 +64,11 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     if not path.parent.is_dir():
         raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
     n = 0
+    rows = list(rows)
+    with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()))
+        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + ((SIMULATED_COLUMN,) if with_flag else ()))
         for row in rows:
             response = row["response"]
             if not isinstance(response, str):
@@ -68,6 +80,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
             ]
             if sessions:
                 values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"]))]
+            if with_flag:
+                values.append(int(bool(row.get(SIMULATED_COLUMN))))
             writer.writerow(values)
             n += 1
     return n
@@ -86,14 +100,16 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     list of dict
         ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
         tuple of int; the rest as str. A file with :data:`SESSION_COLUMNS` also gives
-        ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool).
+        ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
+        :data:`SIMULATED_COLUMN` gives ``simulated`` (bool).
     """
     path = Path(path)
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            if header is None or tuple(header) not in (TRIALS_COLUMNS, TRIALS_COLUMNS + SESSION_COLUMNS):
+            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS) for f in ((), (SIMULATED_COLUMN,))]
+            if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
             columns = tuple(header)
             out = []
@@ -101,6 +117,8 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                 if len(rec) != len(columns):
                     raise StudyError(f"{path}:{line_no}: expected {len(columns)} fields, got {len(rec)}")
                 row = dict(zip(columns, rec))
+                if SIMULATED_COLUMN in row:
+                    row[SIMULATED_COLUMN] = row[SIMULATED_COLUMN].strip() in ("1", "true", "True")
                 try:
                     if "session" in row:
                         row["session"] = int(row["session"])

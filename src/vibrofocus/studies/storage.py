@@ -907,9 +907,10 @@ class StudyStore:
 
         Keys: the trials-file columns (``participant, study, phase, trial, method,
         target, response, rt_s``) plus ``session_id``, ``trial_index``, ``answer_id``,
-        ``drive_sha256``, ``calibration_id``, ``recorded_at``, and the session columns of
+        ``drive_sha256``, ``calibration_id``, ``recorded_at``, the session columns of
         the trials file: ``session`` (id), ``session_status``, ``dry_run`` (1 for a session
-        planned without a calibration: nothing was played). Ordered by participant
+        planned without a calibration: nothing was played), and ``simulated`` (1: the
+        participant is simulated, answers from the perceptual model). Ordered by participant
         (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
@@ -918,7 +919,8 @@ class StudyStore:
                 "p.method AS method, p.target AS target, a.response AS response, a.rt_s AS rt_s, "
                 "s.session_id AS session_id, p.trial_index AS trial_index, a.answer_id AS answer_id, "
                 "a.drive_sha256 AS drive_sha256, a.calibration_id AS calibration_id, a.recorded_at AS recorded_at, "
-                "s.session_id AS session, s.status AS session_status, (s.calibration_id IS NULL) AS dry_run "
+                "s.session_id AS session, s.status AS session_status, (s.calibration_id IS NULL) AS dry_run, "
+                "pt.simulated AS simulated "
                 "FROM answers a JOIN planned_trials p ON p.session_id = a.session_id AND p.trial_index = a.trial_index "
                 "JOIN sessions s ON s.session_id = a.session_id "
                 "JOIN participants pt ON pt.participant_id = s.participant_id "

@@ -1,0 +1,138 @@
+"""``vibrofocus power``: study power by simulation, on Dask."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._errors import user_errors
+from .main import app
+
+
+def _ints(text: str, name: str) -> tuple[int, ...]:
+    from ..errors import ValidationError
+
+    try:
+        values = tuple(int(x) for x in text.replace(",", " ").split())
+    except ValueError:
+        raise ValidationError(f"{name} must be integers separated by commas, got {text!r}") from None
+    if not values:
+        raise ValidationError(f"{name} is empty")
+    return values
+
+
+@app.command(
+    "power",
+    epilog="Example: vibrofocus power --participants 10,15,20,25,30 --studies 200 --out power/",
+)
+def power_command(
+    participants: str = typer.Option("10,15,20,25,30", "--participants", "-n", help="Sample sizes N, comma separated."),
+    studies: int = typer.Option(200, "--studies", min=1, help="Simulated studies per N."),
+    repetitions: int = typer.Option(3, "--repetitions", min=1, help="Trials per condition and study."),
+    methods: str | None = typer.Option(None, "--methods", help="Methods, comma separated (default all three)."),
+    locations: str | None = typer.Option(None, "--locations", help="Location numbers, comma separated (default 1-9)."),
+    alpha: float = typer.Option(0.05, "--alpha", help="Significance level."),
+    seed: int = typer.Option(0, "--seed", min=0, help="Master seed (study j of size N uses [seed, N, j])."),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler", help="Dask scheduler address (tcp://host:8786); default a LocalCluster on this machine."
+    ),
+    workers: int | None = typer.Option(None, "--workers", min=1, help="LocalCluster worker processes (default: CPUs)."),
+    local: bool = typer.Option(False, "--no-dask", help="Run in this process without Dask (same numbers)."),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
+    quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+) -> None:
+    """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
+
+    Studies are simulated with the perceptual MODEL of simulated participants (model v2,
+    fitted to the source paper's statistics), not data: the power is that of the model's
+    effect sizes.
+    """
+    with user_errors():
+        from rich.console import Console
+        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from rich.table import Table
+
+        from .._validation import check_in_range
+        from ..studies.perception import MODEL_LABEL
+        from ..studies.power import TESTS, PowerDesign, run_power
+
+        check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
+        design = PowerDesign(
+            n_participants=_ints(participants, "--participants"), n_studies=studies, repetitions=repetitions,
+            methods=tuple(m.strip() for m in methods.split(",") if m.strip()) if methods else None,
+            locations=_ints(locations, "--locations") if locations else None, alpha=alpha, seed=seed,
+        )
+        if out is not None:
+            from .._atomic import check_writable, output_error
+
+            try:
+                out.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise output_error(exc, out, "output folder") from exc
+            check_writable(out / "power.json", what="power results")  # before the simulations, not after
+        console = Console(stderr=True)
+        console.print(f"[yellow]{MODEL_LABEL}[/]")
+        with Progress(
+            TextColumn("studies"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+            console=console, disable=quiet,
+        ) as bar:
+            task = bar.add_task("studies", total=len(design.n_participants) * design.n_studies)
+            result = run_power(
+                design, scheduler=scheduler, n_workers=workers, local=local,
+                progress=lambda done, total: bar.update(task, completed=done, total=total),
+            )
+        table = Table(title=f"Power by simulation ({MODEL_LABEL}), {design.n_studies} studies per N, alpha {alpha}")
+        table.add_column("test")
+        for n in design.n_participants:
+            table.add_column(f"N={n}", justify="right")
+        by = {(r["test"], r["n_participants"]): r for r in result["table"]}
+        for key, label in TESTS:
+            table.add_row(label, *[f"{by[(key, n)]['power']:.2f}" if by[(key, n)]["n_studies"] else "not run"
+                                   for n in design.n_participants])
+        Console().print(table)
+        console.print(f"{len(design.n_participants) * design.n_studies} studies in {result['elapsed_s']:.1f} s")
+        if out is not None:
+            paths = write_power(result, out)
+            console.print("wrote " + ", ".join(str(p) for p in paths))
+        console.print(f"[yellow]{MODEL_LABEL}[/]")
+
+
+def write_power(result: dict, out: Path) -> list[Path]:
+    """Write power.json, power.csv (the table) and power.png (power against N per test).
+
+    Each file appears whole or not at all (:mod:`vibrofocus._atomic`) and says it comes
+    from simulated participants: ``label`` in the JSON, a ``model`` column in the CSV,
+    the title of the plot.
+    """
+    import json
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import pandas as pd
+
+    from .._atomic import save_figure, write_text
+    from ..studies.power import TESTS
+
+    table = pd.DataFrame(result["table"]).assign(model=result["label"])
+    csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")
+    js = write_text(out / "power.json", json.dumps({k: result[k] for k in ("label", "design", "table", "elapsed_s")},
+                                                   indent=1), what="power results")
+    fig, ax = plt.subplots(figsize=(7, 4.5))
+    try:
+        for key, label in TESTS:
+            t = table[table["test"] == key]
+            ax.errorbar(t["n_participants"], t["power"], yerr=t["se"], marker="o", capsize=3, label=label)
+        ax.axhline(0.8, color="grey", lw=0.8, ls="--")
+        ax.set_xlabel("participants N")
+        ax.set_ylabel("power")
+        ax.set_ylim(-0.02, 1.02)
+        ax.set_title(f"Power by simulation — {result['label']}", fontsize=9)
+        ax.legend(fontsize=7, loc="lower right")
+        fig.tight_layout()
+        png = save_figure(fig, out / "power.png", what="power plot", dpi=120)
+    finally:
+        plt.close(fig)
+    return [js, csv, png]

@@ -1,0 +1,255 @@
+"""Stimulus features of simulated participants, computed once, and fast simulated studies.
+
+Simulating a study trial by trial through the engine renders every stimulus and plays it
+on the simulated forearm. For fitting the perceptual model and for power analysis that is
+far too slow, and needless: the peripheral stage of the model
+(:func:`~vibrofocus.studies.perception.felt_energy`) depends only on the participant's
+forearm and the stimulus (method, location). A :class:`FeatureBank` holds it for a set of
+simulated forearms (each calibrated and rendered for exactly as in ``simulate-study``);
+:func:`simulate_cell_means` then draws whole studies from it with numpy only: new
+perceptual traits per simulated participant, a forearm drawn from the bank, every trial's
+answer from :func:`~vibrofocus.studies.perception.draw_answers`.
+
+The answers are those of the same model as :class:`SimulatedParticipant` (a model, not
+data); they use other random streams than the engine path, so they agree in
+distribution, not trial by trial.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import StudyError, ValidationError
+from .perception import MODEL_VERSION, PerceptualModel, Traits, central_percepts, draw_answers
+
+__all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
+
+#: The bank shipped with the package (built by ``scripts/build_feature_bank.py``).
+DEFAULT_BANK = "data/feature_bank.npz"
+
+
+@dataclass(frozen=True)
+class FeatureBank:
+    """Felt energies of every study stimulus on a set of simulated forearms.
+
+    Attributes
+    ----------
+    energy : ndarray, shape (n_forearms, n_methods, n_locations, n_points)
+        Felt energy re the reference tap (:func:`~vibrofocus.studies.perception.felt_energy`).
+    points_xy : ndarray, shape (n_points, 2)
+        Skin grid, m.
+    locations_xy : ndarray, shape (n_locations, 2)
+        m.
+    centre_xy : ndarray, shape (2,)
+        Array centre, m.
+    methods : tuple of str
+    forearm_seeds : ndarray of int, shape (n_forearms,)
+        Participant seeds of the forearms (``participant_seeds(seed, k)[0]``).
+    seed : int
+        Simulation seed they were derived from.
+    """
+
+    energy: np.ndarray
+    points_xy: np.ndarray
+    locations_xy: np.ndarray
+    centre_xy: np.ndarray
+    methods: tuple[str, ...]
+    forearm_seeds: np.ndarray
+    seed: int
+
+    @property
+    def n_forearms(self) -> int:
+        return int(self.energy.shape[0])
+
+    def save(self, path: str | os.PathLike) -> None:
+        """Write the bank (``.npz``)."""
+        np.savez_compressed(
+            path, energy=self.energy.astype(np.float32), points_xy=self.points_xy, locations_xy=self.locations_xy,
+            centre_xy=self.centre_xy, methods=np.array(self.methods), forearm_seeds=self.forearm_seeds,
+            seed=np.int64(self.seed), model_version=np.array(MODEL_VERSION),
+        )
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "FeatureBank":
+        """Read a bank written by :meth:`save`."""
+        try:
+            with np.load(path) as z:
+                return cls(
+                    energy=z["energy"].astype(float), points_xy=z["points_xy"], locations_xy=z["locations_xy"],
+                    centre_xy=z["centre_xy"], methods=tuple(str(m) for m in z["methods"]),
+                    forearm_seeds=z["forearm_seeds"], seed=int(z["seed"]),
+                )
+        except (OSError, KeyError, ValueError) as exc:
+            raise ValidationError(f"cannot read the feature bank {path}: {exc}") from exc
+
+
+def build_feature_bank(
+    n_forearms: int,
+    *,
+    seed: int = 0,
+    methods: tuple[str, ...] = ("funneling", "inverse", "combination"),
+    model: PerceptualModel | None = None,
+    progress: Any = None,
+) -> FeatureBank:
+    """Calibrate ``n_forearms`` simulated forearms, render every stimulus, compute felt energies.
+
+    Forearm ``k`` (1-based) is simulated participant ``sim-00k`` of ``simulate-study
+    --seed seed``: same participant seed, same calibration, same drives.
+
+    Parameters
+    ----------
+    n_forearms : int
+    seed : int
+    methods : tuple of str
+    model : PerceptualModel, optional
+        Only its grid and band matter here.
+    progress : callable, optional
+        ``progress(done, total)`` after each forearm.
+    """
+    from ..calibration import calibrate
+    from ..defaults import N_SAMPLES
+    from ..rigs import make_rig
+    from .engine import calibration_renderer
+    from .perception import band_transfer, felt_energy, skin_grid
+    from .simulate import participant_seeds
+
+    if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
+        raise StudyError(f"n_forearms must be an integer >= 1, got {n_forearms!r}")
+    m = model or PerceptualModel()
+    energies, seeds = [], []
+    layout = points = None
+    for k in range(1, n_forearms + 1):
+        pseed = participant_seeds(seed, k)[0]
+        rig = make_rig("simulated", seed=pseed)
+        layout = rig.layout
+        cal = calibrate(rig, participant_id=f"bank-{k:03d}")
+        # Same drives as simulate-study; a design whose window is too short for the
+        # wrap-around check is kept with a CausalityWarning (the bank needs every cell),
+        # and the contrast bounds (not part of the drives) are not computed.
+        render = calibration_renderer(cal, bounds=False, check_wraparound="warn")
+        n_loc = len(layout.locations_xy)
+        drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
+        centre = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
+        points = skin_grid(centre, m)
+        H = band_transfer(rig, points, N_SAMPLES, m)
+        energies.append(felt_energy(H, drives, rig.fs, m).reshape(len(methods), n_loc, len(points)))
+        seeds.append(pseed)
+        if progress is not None:
+            progress(k, n_forearms)
+    assert layout is not None and points is not None
+    return FeatureBank(
+        energy=np.stack(energies), points_xy=points, locations_xy=np.asarray(layout.locations_xy, dtype=float),
+        centre_xy=np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), methods=tuple(methods),
+        forearm_seeds=np.asarray(seeds, dtype=np.int64), seed=int(seed),
+    )
+
+
+_DEFAULT: FeatureBank | None = None
+
+
+def default_bank() -> FeatureBank:
+    """The feature bank shipped with vibrofocus (reference layout, seed 0)."""
+    global _DEFAULT
+    if _DEFAULT is None:
+        ref = resources.files("vibrofocus.studies").joinpath(DEFAULT_BANK)
+        with resources.as_file(ref) as path:
+            if not Path(path).is_file():
+                raise StudyError(
+                    "the feature bank is missing; build it with scripts/build_feature_bank.py"
+                )
+            _DEFAULT = FeatureBank.load(path)
+    return _DEFAULT
+
+
+@dataclass(frozen=True)
+class StudyArrays:
+    """Cell means of one simulated study (what the statistics of docs/method.md (Analysis) need).
+
+    Attributes
+    ----------
+    error_mm : ndarray, shape (n_participants, n_locations, n_methods)
+        Study 1: mean Euclidean error per participant and condition, mm.
+    count : ndarray, shape (n_participants, n_locations, n_methods)
+        Study 2: mean number of selected locations.
+    count_hit : ndarray, shape (n_participants, n_locations, n_methods)
+        Study 2, trials whose selection contains the target only (NaN: no such trial).
+    """
+
+    error_mm: np.ndarray
+    count: np.ndarray
+    count_hit: np.ndarray
+
+
+def simulate_cell_means(
+    n_participants: int,
+    rng: np.random.Generator,
+    *,
+    bank: FeatureBank | None = None,
+    model: PerceptualModel | None = None,
+    repetitions: int = 3,
+    methods: tuple[str, ...] | None = None,
+    locations: tuple[int, ...] | None = None,
+    forearms: np.ndarray | None = None,
+) -> StudyArrays:
+    """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
+
+    Parameters
+    ----------
+    n_participants : int
+    rng : numpy.random.Generator
+        All randomness (forearm choice, traits, trials) comes from it, in a fixed order.
+    bank : FeatureBank, optional
+        Default :func:`default_bank`.
+    model : PerceptualModel, optional
+    repetitions : int
+        Trials per condition and study.
+    methods, locations : tuple, optional
+        Subsets of the bank's methods and of location numbers (default all).
+    forearms : ndarray of int, optional
+        Bank rows to use per participant (default: drawn without replacement when the
+        bank is large enough, else with replacement).
+    """
+    b = bank if bank is not None else default_bank()
+    m = model or PerceptualModel()
+    if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
+        raise ValidationError(f"n_participants must be an integer >= 1, got {n_participants!r}")
+    if isinstance(repetitions, bool) or not isinstance(repetitions, (int, np.integer)) or repetitions < 1:
+        raise ValidationError(f"repetitions must be an integer >= 1, got {repetitions!r}")
+    meth_idx = np.arange(len(b.methods)) if methods is None else np.array([b.methods.index(x) for x in methods])
+    loc_idx = np.arange(len(b.locations_xy)) if locations is None else np.asarray(locations, dtype=int) - 1
+    if forearms is None:
+        replace = n_participants > b.n_forearms
+        forearms = rng.choice(b.n_forearms, size=n_participants, replace=replace)
+    n_l, n_m = loc_idx.size, meth_idx.size
+    # Trials of one study: every (location, method) ``repetitions`` times; order is irrelevant
+    # to the model (no sequence effects), so the plan's shuffle is not simulated.
+    cell_l = np.repeat(np.tile(np.arange(n_l), n_m), repetitions)
+    cell_m = np.repeat(np.repeat(np.arange(n_m), n_l), repetitions)
+    stim = meth_idx[cell_m] * len(b.locations_xy) + loc_idx[cell_l]
+    targets = loc_idx[cell_l]
+    shape = (n_participants, n_l, n_m)
+    err, cnt, cnt_hit = np.empty(shape), np.empty(shape), np.empty(shape)
+    locs_mm = b.locations_xy * 1e3
+    n_cell = n_l * n_m
+    flat = cell_l * n_m + cell_m
+    for i in range(n_participants):
+        traits = Traits.draw(m, rng)
+        energy = b.energy[forearms[i]].reshape(-1, b.points_xy.shape[0])
+        per = central_percepts(energy, b.points_xy, m, traits)
+        a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
+        a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
+        e = np.linalg.norm(locs_mm[a1] - locs_mm[targets], axis=1)
+        err[i] = (np.bincount(flat, e, n_cell) / np.bincount(flat, minlength=n_cell)).reshape(n_l, n_m)
+        k = sel[:, loc_idx].sum(axis=1)
+        cnt[i] = (np.bincount(flat, k, n_cell) / np.bincount(flat, minlength=n_cell)).reshape(n_l, n_m)
+        hit = sel[np.arange(sel.shape[0]), targets]
+        nh = np.bincount(flat[hit], minlength=n_cell)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cnt_hit[i] = (np.bincount(flat[hit], k[hit], n_cell) / nh).reshape(n_l, n_m)
+    return StudyArrays(err, cnt, cnt_hit)

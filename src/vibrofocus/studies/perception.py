@@ -1,0 +1,453 @@
+"""The simulated participants' perceptual model, version 2 (a MODEL, not data).
+
+A stimulus is felt in two stages, each from published psychophysics (sources in
+``studies/data/SOURCES.md``; parameters that are assumptions or fitted are said so in
+:class:`PerceptualModel` and in ``docs/simulated-participants.md``).
+
+Peripheral stage (computed ONCE per stimulus, :func:`felt_energy`)
+    The true skin displacement ``u_p(t)`` at a modest grid of skin points ``p`` (11 x 11,
+    5 mm pitch, ±25 mm: the array's area) is weighted in frequency by the inverse of the
+    Pacinian detection threshold curve (U-shaped: flat to 40 Hz, -12 dB/octave to 250 Hz,
+    Verrillo 1963 as summarised by Gescheider & Verrillo 1979; rising 12 dB/octave above,
+    an assumption), giving a *felt energy* ``E_p`` per point, expressed relative to the
+    felt energy of the reference tap (the band-limited Ricker of 2 µm peak).
+
+Central stage (cheap, per trial, :func:`draw_answers`)
+    1. **Detection.** A point is felt where its sensation level
+       ``L_p = 10 log10(E_p) + SL_ref - d_i`` exceeds 0 dB (``SL_ref``: sensation level of
+       the reference tap, ``d_i`` a participant's threshold offset).
+    2. **Funneling (energy law).** The felt points are integrated centrally into one
+       percept at the energy-weighted mean of the supra-threshold energies
+       ``x_f = sum w_p x_p / sum w_p``, ``w_p = (E_p / E_threshold - 1)^gamma`` with
+       ``gamma = 1`` the energy law (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018 in
+       2D) and ``gamma`` fitted; ``s`` is the percept's spread (weighted RMS distance, m).
+    3. **Localization noise.** The sensed position is ``x_f + e``,
+       ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k_i s)^2``: a participant's
+       point-localization acuity on the mid-forearm (poor: fewer than half of the arm sites
+       uniquely identified, Cholewiak & Collins 2003) plus a diffuse percept's extra
+       uncertainty (phantoms are perceived over distributed positions, Park & Choi 2018).
+    4. **Central bias.** A Gaussian prior around the array centre shifted by the
+       participant's bias ``b_i`` (population mean toward the elbow: the forearm's
+       perceived midpoint lies toward the elbow, Cholewiak et al. 2020) of SD
+       ``sigma_prior``; the percept is the posterior mean
+       ``c_i + g (x_f + e - c_i)``, ``g = sigma_prior^2 / (sigma_prior^2 + sigma_s^2)``:
+       the less reliable the sensation, the stronger the pull to the centre.
+    5. **Study 1 answer:** the location nearest to the percept.
+       **Study 2 selection:** from the model's own uncertainty, the posterior
+       ``N(percept, sigma_post^2)`` with ``sigma_post^2 = g sigma_s^2``: every location
+       whose posterior density reaches a participant's criterion ``kappa_i`` (times a
+       per-trial log-normal jitter) of the largest one; the Study 1 answer is always in.
+       Nothing felt: the participant guesses from the prior.
+
+Every random draw is seeded; see :class:`Traits` and :func:`draw_answers`.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass, field
+from functools import lru_cache
+from importlib import resources
+from typing import Any
+
+import numpy as np
+
+from ..errors import StudyError, ValidationError
+
+__all__ = [
+    "MODEL_VERSION",
+    "MODEL_LABEL",
+    "PerceptualModel",
+    "Traits",
+    "psychophysics_data",
+    "threshold_db",
+    "threshold_weight",
+    "skin_grid",
+    "felt_energy",
+    "reference_felt_energy",
+    "Percepts",
+    "central_percepts",
+    "draw_answers",
+    "study2_rt",
+    "band_transfer",
+    "PARAMETER_SOURCES",
+]
+
+#: Version of the perceptual model; bump it whenever answers for the same seeds change.
+MODEL_VERSION = "2.0"
+#: The label every report made from simulated data carries.
+MODEL_LABEL = f"simulated participants: model v{MODEL_VERSION}, not data"
+
+
+@lru_cache(maxsize=1)
+def psychophysics_data() -> dict[str, Any]:
+    """The published points the model uses (``studies/data/psychophysics.json``)."""
+    text = resources.files("vibrofocus.studies").joinpath("data/psychophysics.json").read_text(encoding="utf-8")
+    return json.loads(text)
+
+
+def threshold_db(freqs_hz: np.ndarray) -> np.ndarray:
+    """Vibrotactile (Pacinian) detection threshold relative to 250 Hz, dB (displacement).
+
+    Piecewise linear in log-frequency through the points of ``psychophysics.json``: flat
+    below 40 Hz, -12 dB/octave from 40 to 250 Hz (Verrillo 1963 via Gescheider & Verrillo
+    1979), +12 dB/octave above 250 Hz (assumption); constant beyond the end points.
+
+    Parameters
+    ----------
+    freqs_hz : ndarray, shape (n,)
+        Frequencies, Hz, > 0.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        Threshold re its value at 250 Hz, dB (0 at 250 Hz).
+    """
+    f = np.asarray(freqs_hz, dtype=float)
+    if np.any(~np.isfinite(f)) or np.any(f <= 0):
+        raise ValidationError("freqs_hz must be finite and > 0 Hz")
+    pts = psychophysics_data()["pacinian_threshold_db_re_250hz"]
+    return np.interp(np.log2(f), np.log2(pts["freq_hz"]), pts["threshold_db"])
+
+
+def threshold_weight(freqs_hz: np.ndarray) -> np.ndarray:
+    """Power weight ``10^(-threshold_db/10)`` (1 at 250 Hz; 0 at 0 Hz), shape of ``freqs_hz``."""
+    f = np.asarray(freqs_hz, dtype=float)
+    out = np.zeros_like(f)
+    pos = f > 0
+    out[pos] = 10.0 ** (-threshold_db(f[pos]) / 10.0)
+    return out
+
+
+@dataclass(frozen=True)
+class PerceptualModel:
+    """Parameters of the perceptual model v2 (SI units). Each says where it comes from.
+
+    Attributes
+    ----------
+    grid_half_width_m, grid_step_m : float
+        Skin grid of the peripheral stage, m (assumption: covers the array, 5 mm is half the
+        location pitch).
+    band_hz : (float, float)
+        Frequencies counted, Hz (the vibrotactile range; the U-curve weights within it).
+    sl_ref_db : float
+        Sensation level of the reference tap (2 µm peak Ricker), dB. *Fitted.*
+    funneling_exponent : float
+        ``gamma`` of the central integration weights ``w_p = (E_p / E_thr - 1)^gamma``:
+        1 is the energy law of funneling (Alles 1970; Israr & Poupyrev 2011); smaller
+        values compress intensity (the felt area counts more than its peak). *Fitted.*
+    threshold_sd_db : float
+        SD across participants of the threshold offset, dB. *Assumption.*
+    acuity_sd_m : (float, float)
+        Range (uniform) of a participant's localization noise SD, m. *Fitted* (order of the
+        location pitch: Cholewiak & Collins 2003).
+    spread_gain : (float, float)
+        Range (uniform) of a participant's ``k_i``: extra noise SD per metre of percept
+        spread (how much a diffuse, phantom-like percept degrades that participant's
+        localization). *Fitted.*
+    prior_sd_m : (float, float)
+        Range (uniform) of a participant's central-prior SD, m. *Fitted.*
+    bias_mean_m : (float, float)
+        Population mean of the participants' constant bias (x, y), m. Direction of y toward
+        the elbow (-y) from Cholewiak et al. 2020; sizes *fitted*.
+    bias_sd_m : float
+        SD of a participant's bias around the mean, per axis, m. *Fitted.*
+    select_kappa : (float, float)
+        Range (uniform) of a participant's Study 2 criterion (fraction of the largest
+        posterior density). *Fitted.*
+    select_log_sd : float
+        Per-trial log-normal jitter of the criterion. *Fitted.*
+    rt_median_s, rt_log_sd, rt_per_extra_location_s
+        Response times (assumption, as model v1).
+    version : str
+        Version of the model (:data:`MODEL_VERSION`), kept with the parameters in every
+        record of simulated data.
+    """
+
+    grid_half_width_m: float = 25e-3
+    grid_step_m: float = 5e-3
+    band_hz: tuple[float, float] = (10.0, 1000.0)
+    # Fitted by scripts/fit_participants.py (docs/simulated-participants.md, "The fit"),
+    # rounded to 3 digits.
+    sl_ref_db: float = 42.6
+    funneling_exponent: float = 0.476
+    threshold_sd_db: float = 3.0
+    acuity_sd_m: tuple[float, float] = (15.2e-3, 19.2e-3)
+    spread_gain: tuple[float, float] = (0.255, 0.502)
+    prior_sd_m: tuple[float, float] = (6.55e-3, 28.1e-3)
+    bias_mean_m: tuple[float, float] = (-11.7e-3, -1.81e-3)
+    bias_sd_m: float = 3.43e-3
+    select_kappa: tuple[float, float] = (0.545, 0.571)
+    select_log_sd: float = 0.346
+    rt_median_s: tuple[float, float] = (0.9, 1.4)
+    rt_log_sd: float = 0.3
+    rt_per_extra_location_s: float = 0.35
+    version: str = field(default=MODEL_VERSION)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Parameters as a JSON-ready dict."""
+        return asdict(self)
+
+    def replace(self, **changes: Any) -> "PerceptualModel":
+        """A copy with some parameters changed."""
+        d = self.to_dict()
+        unknown = set(changes) - set(d)
+        if unknown:
+            raise ValidationError(f"unknown perceptual model parameter(s): {', '.join(sorted(unknown))}")
+        d.update(changes)
+        return PerceptualModel(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+#: Where each parameter of :class:`PerceptualModel` comes from: ``(kind, note)`` with kind
+#: ``"assumption"``, ``"fitted"`` (by ``scripts/fit_participants.py`` to the paper's
+#: statistics) or ``"source + fitted"`` (direction read from a source, size fitted).
+#: ``docs/simulated-participants.md`` lists them with their values (generated).
+PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
+    "grid_half_width_m": ("assumption", "covers the array's area"),
+    "grid_step_m": ("assumption", "half the 10 mm location pitch"),
+    "band_hz": ("assumption", "the vibrotactile range; the U-curve weights within it"),
+    "sl_ref_db": ("fitted", "sensation level of the reference tap"),
+    "funneling_exponent": ("fitted", "1 is the energy law (Alles 1970; Israr & Poupyrev 2011)"),
+    "threshold_sd_db": ("assumption", "spread of detection thresholds across people"),
+    "acuity_sd_m": ("fitted", "poor localization on the mid-forearm (Cholewiak & Collins 2003)"),
+    "spread_gain": ("fitted", "diffuse phantoms are localized worse (Park & Choi 2018)"),
+    "prior_sd_m": ("fitted", "strength of the pull to the centre"),
+    "bias_mean_m": ("source + fitted", "y toward the elbow (Cholewiak et al. 2020); sizes fitted"),
+    "bias_sd_m": ("fitted", "spread of the participants' biases"),
+    "select_kappa": ("fitted", "Study 2 criterion"),
+    "select_log_sd": ("fitted", "Study 2 per-trial jitter of the criterion"),
+    "rt_median_s": ("assumption", "response times (not analysed)"),
+    "rt_log_sd": ("assumption", "response times (not analysed)"),
+    "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),
+}
+
+
+@dataclass(frozen=True)
+class Traits:
+    """One simulated participant's traits, drawn once from the participant seed.
+
+    Attributes
+    ----------
+    threshold_offset_db : float
+        Added to the detection threshold, dB.
+    acuity_sd_m, prior_sd_m : float
+        Localization noise SD and central-prior SD, m.
+    bias_m : ndarray, shape (2,)
+        Constant bias of the prior's centre, m.
+    spread_gain : float
+        ``k_i``, extra localization noise SD per metre of percept spread.
+    kappa : float
+        Study 2 criterion.
+    rt_median_s : float
+        Median response time, s.
+    """
+
+    threshold_offset_db: float
+    acuity_sd_m: float
+    prior_sd_m: float
+    bias_m: np.ndarray
+    kappa: float
+    rt_median_s: float
+    spread_gain: float
+
+    @classmethod
+    def draw(cls, model: PerceptualModel, seed: int | np.random.Generator) -> "Traits":
+        """Draw traits from ``model``'s population ranges (seeded)."""
+        rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng([int(seed), 0x7A17])
+        return cls(
+            threshold_offset_db=float(rng.normal(0.0, model.threshold_sd_db)),
+            acuity_sd_m=float(rng.uniform(*model.acuity_sd_m)),
+            prior_sd_m=float(rng.uniform(*model.prior_sd_m)),
+            bias_m=np.asarray(model.bias_mean_m, dtype=float) + rng.normal(0.0, model.bias_sd_m, size=2),
+            kappa=float(rng.uniform(*model.select_kappa)),
+            rt_median_s=float(rng.uniform(*model.rt_median_s)),
+            spread_gain=float(rng.uniform(*model.spread_gain)),
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["bias_m"] = [float(v) for v in self.bias_m]
+        return d
+
+
+def skin_grid(centre_xy: np.ndarray, model: PerceptualModel | None = None) -> np.ndarray:
+    """The peripheral stage's skin points, shape (n_points, 2), m, centred on ``centre_xy``."""
+    m = model or PerceptualModel()
+    half, step = m.grid_half_width_m, m.grid_step_m
+    axis = np.arange(-half, half + step / 2, step)
+    gx, gy = np.meshgrid(axis + centre_xy[0], axis + centre_xy[1])
+    return np.column_stack([gx.ravel(), gy.ravel()])
+
+
+def _band_bins(n_fft: int, fs: float, band_hz: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
+    freqs = np.fft.rfftfreq(n_fft, 1.0 / fs)
+    bins = np.flatnonzero((freqs >= band_hz[0]) & (freqs <= band_hz[1]) & (freqs > 0))
+    return bins, freqs[bins]
+
+
+def reference_felt_energy(fs: float, n_samples: int, model: PerceptualModel | None = None) -> float:
+    """Felt energy of the reference tap (Ricker, 1 ms, 2 µm peak) at one point, m² s."""
+    from ..defaults import SIGMA_S, TARGET_PEAK_M
+    from ..signals.ricker import ricker
+
+    m = model or PerceptualModel()
+    u = ricker(fs, SIGMA_S, duration=n_samples / fs, amplitude=TARGET_PEAK_M)
+    bins, f = _band_bins(len(u), fs, m.band_hz)
+    spec = np.fft.rfft(u)[bins]
+    return float(2.0 * np.sum(np.abs(spec) ** 2 * threshold_weight(f)) / (len(u) * fs))
+
+
+def felt_energy(
+    H_points: np.ndarray, drives: np.ndarray, fs: float, model: PerceptualModel | None = None
+) -> np.ndarray:
+    """Threshold-weighted skin energy at points, relative to the reference tap's.
+
+    Parameters
+    ----------
+    H_points : ndarray, complex, shape (n_bins, n_points, n_actuators)
+        True transfer (m/V) on the model's band bins of ``rfftfreq(n_samples, 1/fs)`` (see
+        :func:`band_transfer`).
+    drives : ndarray, shape (n_stimuli, n_actuators, n_samples) or (n_actuators, n_samples)
+        V.
+    fs : float
+        Hz.
+
+    Returns
+    -------
+    ndarray, shape (n_stimuli, n_points) (or (n_points,))
+        ``E_p / E_ref`` (dimensionless; 1 = as felt as the reference tap).
+    """
+    m = model or PerceptualModel()
+    d = np.asarray(drives, dtype=float)
+    single = d.ndim == 2
+    if single:
+        d = d[None]
+    if d.ndim != 3 or d.shape[1] != H_points.shape[2]:
+        raise StudyError(f"drives must have shape (n_stimuli, {H_points.shape[2]}, n_samples), got {d.shape}")
+    n = d.shape[-1]
+    bins, f = _band_bins(n, fs, m.band_hz)
+    if len(bins) != H_points.shape[0]:
+        raise StudyError("H_points was not computed on this drive length's band bins")
+    spec = np.fft.rfft(d, axis=-1)[:, :, bins]  # (s, q, f)
+    u = np.einsum("fpq,sqf->spf", H_points, spec)
+    e = 2.0 * np.sum(np.abs(u) ** 2 * threshold_weight(f), axis=-1) / (n * fs)
+    out = e / reference_felt_energy(fs, n, m)
+    return out[0] if single else out
+
+
+def band_transfer(forearm: Any, points_xy: np.ndarray, n_samples: int, model: PerceptualModel | None = None) -> np.ndarray:
+    """True transfer of ``forearm`` to ``points_xy`` on the model's band bins, (n_bins, n_points, n_act)."""
+    m = model or PerceptualModel()
+    _, f = _band_bins(int(n_samples), forearm.fs, m.band_hz)
+    return forearm.transfer(np.asarray(points_xy, dtype=float), f)
+
+
+@dataclass(frozen=True)
+class Percepts:
+    """Noise-free central percepts of stimuli for one participant.
+
+    Attributes
+    ----------
+    position_m : ndarray, shape (n, 2)
+        Energy-law (funneling) position of the felt points, m (NaN where nothing is felt).
+    spread_m : ndarray, shape (n,)
+        Weighted RMS distance of the felt points from it, m.
+    felt : ndarray of bool, shape (n,)
+        Whether any point is above threshold.
+    """
+
+    position_m: np.ndarray
+    spread_m: np.ndarray
+    felt: np.ndarray
+
+
+def central_percepts(energy: np.ndarray, points_xy: np.ndarray, model: PerceptualModel, traits: Traits) -> Percepts:
+    """Detection and funneling (energy law) for stimuli of felt energies ``energy`` (n, n_points)."""
+    e = np.atleast_2d(np.asarray(energy, dtype=float))
+    e_thr = 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)  # threshold, re reference
+    w = np.clip(e / e_thr - 1.0, 0.0, None)
+    if model.funneling_exponent != 1.0:
+        w = w**model.funneling_exponent
+    total = w.sum(axis=1)
+    felt = total > 0
+    safe = np.where(felt, total, 1.0)[:, None]
+    pos = (w @ points_xy) / safe
+    d2 = np.sum((points_xy[None, :, :] - pos[:, None, :]) ** 2, axis=2)
+    spread = np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0])
+    pos[~felt] = np.nan
+    spread[~felt] = np.nan
+    return Percepts(pos, spread, felt)
+
+
+def draw_answers(
+    percepts: Percepts,
+    index: np.ndarray,
+    locations_xy: np.ndarray,
+    centre_xy: np.ndarray,
+    model: PerceptualModel,
+    traits: Traits,
+    rng: np.random.Generator,
+    *,
+    allowed: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Answers to trials (vectorized): Study 1 location and Study 2 selection.
+
+    Parameters
+    ----------
+    percepts : Percepts
+        Of the distinct stimuli.
+    index : ndarray of int, shape (n_trials,)
+        Which stimulus each trial presents.
+    locations_xy : ndarray, shape (n_locations, 2)
+        m.
+    centre_xy : ndarray, shape (2,)
+        Array centre, m.
+    rng : numpy.random.Generator
+        Source of all per-trial noise (drawn in a fixed order: position noise (n, 2),
+        criterion jitter (n,), response time (n,)).
+    allowed : ndarray of int, optional
+        0-based indices of the locations that may be answered (default all).
+
+    Returns
+    -------
+    answer : ndarray of int, shape (n_trials,)
+        0-based index of the Study 1 answer.
+    selected : ndarray of bool, shape (n_trials, n_locations)
+        Study 2 selection (contains ``answer``).
+    rt_s : ndarray, shape (n_trials,)
+        Response time for Study 1, s (Study 2 adds the per-location cost, see
+        :func:`study2_rt`).
+    """
+    idx = np.asarray(index, dtype=int)
+    n = idx.size
+    noise = rng.standard_normal((n, 2))
+    jitter = rng.lognormal(0.0, model.select_log_sd, size=n)
+    rt = traits.rt_median_s * rng.lognormal(0.0, model.rt_log_sd, size=n)
+    c = np.asarray(centre_xy, dtype=float) + traits.bias_m
+    pos = percepts.position_m[idx]
+    spread = percepts.spread_m[idx]
+    felt = percepts.felt[idx]
+    sig_s2 = traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
+    sp2 = traits.prior_sd_m**2
+    g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
+    sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)
+    perceived = c + g[:, None] * (sensed - c)
+    post_sd = np.where(felt, np.sqrt(g * sig_s2), traits.prior_sd_m)
+    perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
+    locs = np.asarray(locations_xy, dtype=float)
+    d2 = np.sum((locs[None, :, :] - perceived[:, None, :]) ** 2, axis=2)  # (n, L)
+    if allowed is not None:
+        mask = np.zeros(locs.shape[0], dtype=bool)
+        mask[np.asarray(allowed, dtype=int)] = True
+        d2 = np.where(mask[None, :], d2, np.inf)
+    answer = np.argmin(d2, axis=1)
+    # Posterior density ratio to the best location: exp(-(d2 - d2_min) / (2 sd^2)).
+    ratio = np.exp(-(d2 - d2[np.arange(n), answer][:, None]) / (2.0 * post_sd[:, None] ** 2))
+    selected = ratio >= np.clip(traits.kappa * jitter, 0.0, 1.0)[:, None]
+    selected[np.arange(n), answer] = True
+    return answer, selected, rt
+
+
+def study2_rt(rt_s: np.ndarray, selected: np.ndarray, model: PerceptualModel) -> np.ndarray:
+    """Study 2 response times: Study 1's plus a cost per extra selected location, s."""
+    return rt_s + model.rt_per_extra_location_s * (selected.sum(axis=1) - 1)

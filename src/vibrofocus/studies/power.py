@@ -1,0 +1,301 @@
+"""Study power by simulation (``vibrofocus power``), on Dask.
+
+For a design (participants N, repetitions, methods, locations) and the perceptual model
+(its effect sizes are those of the model v2 as fitted, see
+``docs/simulated-participants.md``), many studies are simulated per N with the fast path
+(:func:`~vibrofocus.studies.bank.simulate_cell_means`) and analysed with the vectorized
+statistics (:mod:`vibrofocus.analysis.fast`); the power of each test of docs/method.md (Analysis) is the
+share of studies in which it is significant. Simulated participants: a model, not data.
+
+Every study ``j`` of sample size ``N`` draws from its own generator
+``numpy.random.default_rng([seed, N, j])``: results do not depend on how studies are
+split into tasks, nor on the scheduler (one process, a LocalCluster or a cluster).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from ..errors import ValidationError
+from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
+from .perception import MODEL_LABEL, PerceptualModel
+
+__all__ = ["TESTS", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
+
+#: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
+TESTS: tuple[tuple[str, str], ...] = (
+    ("s1_location", "Study 1 RM-ANOVA, location (GG)"),
+    ("s1_method", "Study 1 RM-ANOVA, method (GG)"),
+    ("s1_interaction", "Study 1 RM-ANOVA, location x method (GG)"),
+    ("s2_location", "Study 2 Friedman, location"),
+    ("s2_method", "Study 2 Friedman, method"),
+    ("s2_hit_location", "Study 2 Friedman, location (trials containing the target)"),
+    ("s2_hit_method", "Study 2 Friedman, method (trials containing the target)"),
+)
+
+
+@dataclass(frozen=True)
+class PowerDesign:
+    """A study design for power analysis.
+
+    Attributes
+    ----------
+    n_participants : tuple of int
+        Sample sizes N to evaluate.
+    n_studies : int
+        Simulated studies per N.
+    repetitions : int
+        Trials per condition and study.
+    methods : tuple of str or None
+        Methods (default the bank's: funneling, inverse, combination).
+    locations : tuple of int or None
+        Location numbers (default 1..9).
+    alpha : float
+        Significance level.
+    seed : int
+        Master seed.
+    model : PerceptualModel
+        The perceptual model (its effect sizes).
+    """
+
+    n_participants: tuple[int, ...] = (10, 15, 20, 25, 30)
+    n_studies: int = 200
+    repetitions: int = 3
+    methods: tuple[str, ...] | None = None
+    locations: tuple[int, ...] | None = None
+    alpha: float = 0.05
+    seed: int = 0
+    model: PerceptualModel = field(default_factory=PerceptualModel)
+
+    def __post_init__(self) -> None:
+        ns = tuple(int(n) for n in self.n_participants)
+        if not ns or min(ns) < 3:
+            raise ValidationError(f"n_participants must be sample sizes >= 3 (the RM-ANOVA needs 3), got {ns}")
+        object.__setattr__(self, "n_participants", ns)
+        for name, value, lo in (("n_studies", self.n_studies, 1), ("repetitions", self.repetitions, 1)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
+                raise ValidationError(f"{name} must be an integer >= {lo}, got {value!r}")
+        if not 0 < self.alpha < 1:
+            raise ValidationError(f"alpha must be in (0, 1), got {self.alpha!r}")
+        if self.locations is not None and len(self.locations) < 2:
+            raise ValidationError("at least 2 locations are needed")
+        if self.methods is not None and len(self.methods) < 2:
+            raise ValidationError("at least 2 methods are needed")
+
+
+def _paired_t_p(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    d = x - y
+    n = d.shape[0]
+    sd = d.std(axis=0, ddof=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = d.mean(axis=0) / (sd / np.sqrt(n))
+    p = 2 * stats.t.sf(np.abs(t), n - 1)
+    return np.where(sd > 0, p, 1.0)
+
+
+def study_statistics(arrays: StudyArrays, alpha: float = 0.05) -> dict[str, Any]:
+    """The statistics of docs/method.md (Analysis) for one simulated study (fast path).
+
+    Returns
+    -------
+    dict
+        ``s1_*``: ``F``, ``p`` (GG-corrected), ``eps``, ``p_mauchly`` per effect
+        (``location``, ``method``, ``interaction``); ``s1_error_by_method`` (n_methods,) and
+        ``s1_error_by_location`` (n_locations,), mm; ``s1_interaction_locations``: locations
+        (0-based) with a Bonferroni-significant paired t-test between some methods;
+        ``s2_*`` / ``s2_hit_*``: ``chi2``, ``p`` of the Friedman tests; ``s2_hit_n``:
+        participants kept for the target-containing analysis.
+    """
+    from ..analysis.fast import friedman_batch, rm_anova2_batch
+
+    out: dict[str, Any] = {}
+    a = rm_anova2_batch(arrays.error_mm[None])
+    for j, eff in enumerate(("location", "method", "interaction")):
+        out[f"s1_{eff}_F"] = float(a["F"][0, j])
+        out[f"s1_{eff}_p"] = float(a["p_gg"][0, j])
+        out[f"s1_{eff}_eps"] = float(a["eps"][0, j])
+        out[f"s1_{eff}_p_mauchly"] = float(a["p_mauchly"][0, j])
+    out["s1_error_by_method"] = arrays.error_mm.mean(axis=(0, 1))
+    out["s1_error_by_location"] = arrays.error_mm.mean(axis=(0, 2))
+    e = arrays.error_mm
+    n_m = e.shape[2]
+    pairs = [(i, j) for i in range(n_m) for j in range(i + 1, n_m)]
+    sig = np.zeros(e.shape[1], dtype=bool)
+    for i, j in pairs:
+        sig |= np.minimum(_paired_t_p(e[:, :, i], e[:, :, j]) * len(pairs), 1.0) < alpha
+    out["s1_interaction_locations"] = np.flatnonzero(sig)
+    for prefix, c in (("s2", arrays.count), ("s2_hit", arrays.count_hit)):
+        keep = np.all(np.isfinite(c), axis=(1, 2))
+        out[f"{prefix}_n"] = int(keep.sum())
+        c = c[keep]
+        for factor, axis in (("location", 2), ("method", 1)):
+            if c.shape[0] < 2:
+                out[f"{prefix}_{factor}_chi2"], out[f"{prefix}_{factor}_p"] = np.nan, np.nan
+                continue
+            f = friedman_batch(c.mean(axis=axis)[None])
+            out[f"{prefix}_{factor}_chi2"] = float(f["chi2"][0])
+            out[f"{prefix}_{factor}_p"] = float(f["p"][0])
+    return out
+
+
+def simulate_statistics(
+    n: int,
+    study_indices: Sequence[int],
+    design: PowerDesign,
+    bank: FeatureBank | None = None,
+) -> list[dict[str, Any]]:
+    """Simulate and analyse studies ``study_indices`` of sample size ``n`` (one task)."""
+    b = bank if bank is not None else default_bank()
+    out = []
+    for j in study_indices:
+        rng = np.random.default_rng([int(design.seed), int(n), int(j)])
+        arrays = simulate_cell_means(
+            int(n), rng, bank=b, model=design.model, repetitions=design.repetitions,
+            methods=design.methods, locations=design.locations,
+        )
+        out.append(study_statistics(arrays, design.alpha))
+    return out
+
+
+def power_table(
+    results: dict[int, list[dict[str, Any]]],
+    alpha: float = 0.05,
+    tests: Sequence[tuple[str, str]] = TESTS,
+) -> list[dict[str, Any]]:
+    """Power per N and test: share of studies with p < alpha and its binomial standard error.
+
+    Parameters
+    ----------
+    results : dict
+        ``{N: [statistics of each study]}``; each study's dict holds ``<test>_p``.
+    alpha : float
+    tests : sequence of (key, label)
+        Default :data:`TESTS`.
+
+    Returns
+    -------
+    list of dict
+        ``n_participants``, ``test``, ``label``, ``power``, ``se`` (binomial standard error),
+        ``n_studies`` (studies where the test could be computed).
+    """
+    rows = []
+    for n in sorted(results):
+        res = results[n]
+        for key, label in tests:
+            p = np.array([r[f"{key}_p"] for r in res], dtype=float)
+            ok = np.isfinite(p)
+            power = float(np.mean(p[ok] < alpha)) if ok.any() else float("nan")
+            k = int(ok.sum())
+            rows.append({
+                "n_participants": int(n), "test": key, "label": label, "power": power, "n_studies": k,
+                "se": float(np.sqrt(power * (1 - power) / k)) if k else float("nan"),
+            })
+    return rows
+
+
+def run_power(
+    design: PowerDesign,
+    *,
+    scheduler: str | None = None,
+    n_workers: int | None = None,
+    chunk: int = 10,
+    client: Any = None,
+    progress: Callable[[int, int], None] | None = None,
+    local: bool = False,
+    bank: FeatureBank | None = None,
+) -> dict[str, Any]:
+    """Run a power analysis on Dask (or in this process with ``local=True``).
+
+    Parameters
+    ----------
+    design : PowerDesign
+    scheduler : str, optional
+        Address of a Dask scheduler (``tcp://host:8786``); default a
+        ``distributed.LocalCluster`` on this machine with ``n_workers`` processes.
+    n_workers : int, optional
+        LocalCluster workers (default: the CPU count).
+    chunk : int
+        Studies per task.
+    client : distributed.Client, optional
+        Use this client instead of creating one.
+    progress : callable, optional
+        ``progress(done_studies, total_studies)`` as tasks finish.
+    local : bool
+        Run everything in this process (no Dask), same numbers.
+    bank : FeatureBank, optional
+        Default :func:`default_bank` (sent to the workers once).
+
+    Returns
+    -------
+    dict
+        ``label`` (the model notice), ``design`` (JSON-ready), ``results`` ({N: list of
+        per-study statistics}), ``table`` (:func:`power_table`), ``elapsed_s``.
+    """
+    import time
+
+    if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
+        raise ValidationError(f"chunk must be an integer >= 1, got {chunk!r}")
+    b = bank if bank is not None else default_bank()
+    tasks = [(n, list(range(s, min(s + chunk, design.n_studies))))
+             for n in design.n_participants for s in range(0, design.n_studies, chunk)]
+    total = len(design.n_participants) * design.n_studies
+    results: dict[int, list[dict[str, Any]]] = {n: [] for n in design.n_participants}
+    parts: dict[tuple[int, int], list[dict[str, Any]]] = {}
+    t0 = time.perf_counter()
+    done = 0
+    if local:
+        for n, idx in tasks:
+            parts[(n, idx[0])] = simulate_statistics(n, idx, design, b)
+            done += len(idx)
+            if progress is not None:
+                progress(done, total)
+    else:
+        from distributed import Client, LocalCluster, as_completed
+
+        own_client = client is None
+        cluster = None
+        if own_client:
+            if scheduler:
+                client = Client(scheduler)
+            else:
+                import os
+
+                cluster = LocalCluster(
+                    n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                    dashboard_address=None,
+                )
+                client = Client(cluster)
+        try:
+            bank_f = client.scatter(b, broadcast=True)
+            futures = {client.submit(simulate_statistics, n, idx, design, bank_f, pure=False): (n, idx)
+                       for n, idx in tasks}
+            for fut in as_completed(futures):
+                n, idx = futures[fut]
+                parts[(n, idx[0])] = fut.result()
+                done += len(idx)
+                if progress is not None:
+                    progress(done, total)
+        finally:
+            if own_client:
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+    for (n, _start), res in sorted(parts.items()):
+        results[n].extend(res)
+    return {
+        "label": MODEL_LABEL,
+        "design": {
+            "n_participants": list(design.n_participants), "n_studies": design.n_studies,
+            "repetitions": design.repetitions, "methods": list(design.methods or b.methods),
+            "locations": list(design.locations or range(1, len(b.locations_xy) + 1)),
+            "alpha": design.alpha, "seed": design.seed, "model": design.model.to_dict(),
+        },
+        "results": results,
+        "table": power_table(results, design.alpha),
+        "elapsed_s": time.perf_counter() - t0,
+    }

@@ -1,0 +1,61 @@
+"""``vibrofocus power``: the table, the files and the model label; bad input in one line."""
+
+from __future__ import annotations
+
+import json
+
+import pandas as pd
+from typer.testing import CliRunner
+
+from vibrofocus.cli.main import app
+
+runner = CliRunner()
+
+
+def test_power_writes_table_plot_and_json(tmp_path):
+    out = tmp_path / "power"
+    res = runner.invoke(app, ["power", "-n", "4,6", "--studies", "5", "--no-dask", "-q", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "model v2" in res.output and "not data" in res.output
+    assert "Study 1 RM-ANOVA, location (GG)" in res.output
+    table = pd.read_csv(out / "power.csv")
+    assert set(table["n_participants"]) == {4, 6} and len(table) == 14
+    ran = table["n_studies"] > 0  # a test that never ran (too few participants kept) has no power
+    assert table.loc[ran, "power"].between(0, 1).all() and table.loc[~ran, "power"].isna().all()
+    assert ran[table["test"].str.startswith("s1_")].all()
+    assert (table["model"].str.contains("not data") & table["model"].str.contains("model v2")).all()
+    report = json.loads((out / "power.json").read_text())
+    assert report["design"]["n_studies"] == 5 and "not data" in report["label"]
+    assert (out / "power.png").stat().st_size > 1000
+
+
+def test_power_refuses_bad_input():
+    res = runner.invoke(app, ["power", "-n", "2", "--studies", "5", "--no-dask", "-q"])
+    assert res.exit_code != 0 and "n_participants" in res.output
+    res = runner.invoke(app, ["power", "-n", "ten", "--no-dask", "-q"])
+    assert res.exit_code != 0 and "--participants" in res.output
+
+
+def test_power_checks_the_output_folder_before_simulating(tmp_path, monkeypatch):
+    from tests.cli.test_nothing_half_written import Faults, assert_one_error
+
+    out = tmp_path / "power"
+    out.mkdir()
+    Faults(monkeypatch).read_only(out)
+    calls = []
+    import vibrofocus.studies.power as power
+
+    monkeypatch.setattr(power, "run_power", lambda *a, **k: calls.append(1))
+    res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--out", str(out)])
+    assert_one_error(res, str(out / "power.json"), "read-only")
+    assert calls == [] and list(out.iterdir()) == []
+
+
+def test_power_files_are_whole_or_absent_on_a_full_disk(tmp_path, monkeypatch):
+    from tests.cli.test_nothing_half_written import Faults, assert_one_error, no_temp_files
+
+    out = tmp_path / "power"
+    Faults(monkeypatch).disk_full_on_write(after_bytes=100, only="power.csv")
+    res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--out", str(out)])
+    assert_one_error(res, "power.csv", "no space")
+    assert not (out / "power.csv").exists() and no_temp_files(out) == []

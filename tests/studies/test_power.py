@@ -1,0 +1,93 @@
+"""Power by simulation: a planted effect of known analytic power, Dask equals one process."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from vibrofocus.analysis.fast import rm_anova2_batch
+from vibrofocus.errors import ValidationError
+from vibrofocus.studies.bank import default_bank, simulate_cell_means
+from vibrofocus.studies.power import TESTS, PowerDesign, power_table, run_power, study_statistics
+
+
+@pytest.mark.parametrize(("n", "effect"), [(10, 0.6), (20, 0.5)])
+def test_planted_paired_effect_matches_analytic_power(n, effect):
+    # A 2 x 2 repeated-measures design whose only effect is a method difference d_s ~ N(effect, 1)
+    # per subject: the RM-ANOVA F test of method is the paired t-test of d_s, whose power is
+    # known analytically (noncentral t).
+    n_studies = 3000
+    rng = np.random.default_rng(n)
+    u = rng.normal(0, 2, (n_studies, n, 1, 1))
+    d = rng.normal(effect, 1.0, (n_studies, n, 1, 1))
+    noise = rng.normal(0, 0.3, (n_studies, n, 2, 2))
+    Y = u + np.concatenate([np.zeros_like(d), d], axis=3) * np.ones((1, 1, 2, 1)) + noise
+    p = rm_anova2_batch(Y)["p_gg"][:, 1]
+    results = {n: [{"planted_p": float(x)} for x in p]}
+    row = power_table(results, 0.05, tests=[("planted", "paired t")])[0]
+    # Per-subject method difference of the means over a: d_s + mean_a(e_a1 - e_a0), whose
+    # variance is 1 + 2 * 0.3**2 / 2.
+    sd = np.sqrt(1.0 + 0.3**2)
+    ncp = effect / sd * np.sqrt(n)
+    tcrit = stats.t.ppf(0.975, n - 1)
+    analytic = stats.nct.sf(tcrit, n - 1, ncp) + stats.nct.cdf(-tcrit, n - 1, ncp)
+    se = np.sqrt(analytic * (1 - analytic) / n_studies)
+    assert abs(row["power"] - analytic) < 3 * se, (row, analytic, se)
+    assert row["se"] == pytest.approx(np.sqrt(row["power"] * (1 - row["power"]) / n_studies))
+
+
+def test_no_effect_gives_alpha():
+    # Spherical data, no effect: the uncorrected F tests reject at alpha; the GG-corrected
+    # ones (epsilon <= 1 by construction) at most that often.
+    rng = np.random.default_rng(5)
+    Y = rng.normal(size=(4000, 12, 3, 3))
+    res = rm_anova2_batch(Y)
+    se = np.sqrt(0.05 * 0.95 / 4000)
+    for j in range(3):
+        assert abs(np.mean(res["p_unc"][:, j] < 0.05) - 0.05) < 3 * se
+        assert np.mean(res["p_gg"][:, j] < 0.05) < 0.05 + 3 * se
+
+
+def test_study_statistics_has_every_test():
+    arrays = simulate_cell_means(8, np.random.default_rng(0))
+    s = study_statistics(arrays)
+    for key, _ in TESTS:
+        assert 0 <= s[f"{key}_p"] <= 1
+    assert arrays.error_mm.shape == (8, 9, 3) and np.all(arrays.count >= 1)
+
+
+def test_dask_equals_one_process():
+    design = PowerDesign(n_participants=(4, 6), n_studies=6, seed=3)
+    local = run_power(design, local=True, chunk=4)
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster, \
+            Client(cluster) as client:
+        seen = []
+        dask = run_power(design, client=client, chunk=2, progress=lambda done, total: seen.append((done, total)))
+    np.testing.assert_equal(local["table"], dask["table"])  # exact; NaN (a test that never ran) equals NaN
+    for n in design.n_participants:
+        for a, b in zip(local["results"][n], dask["results"][n]):
+            assert a.keys() == b.keys()
+            for k in a:
+                np.testing.assert_array_equal(a[k], b[k])
+    assert seen[-1] == (12, 12)
+    assert "not data" in dask["label"]
+
+
+def test_bad_designs_are_refused():
+    with pytest.raises(ValidationError):
+        PowerDesign(n_participants=(2,))
+    with pytest.raises(ValidationError):
+        PowerDesign(n_studies=0)
+    with pytest.raises(ValidationError):
+        PowerDesign(alpha=1.5)
+    with pytest.raises(ValidationError):
+        run_power(PowerDesign(n_participants=(5,), n_studies=1), local=True, chunk=0)
+
+
+def test_bank_is_the_simulated_participants():
+    bank = default_bank()
+    assert bank.energy.shape[1:3] == (3, 9) and bank.n_forearms >= 20
+    assert bank.methods == ("funneling", "inverse", "combination")
