@@ -4,8 +4,6 @@ a visible focus ring and legible text."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import pytest
 
 from .conftest import calibrate, contrast, login
@@ -42,12 +40,13 @@ def test_session_controls_on_screen_with_a_calibration_figure_and_no_broken_imag
     assert exp.evaluate("window.scrollY") == 0
     assert 0 <= box["y"] and box["y"] + box["height"] <= VIEWPORT["height"], box
     assert exp.evaluate(BROKEN_IMAGES) == 0
-    # A calibration whose file is gone: its figure cannot be drawn, and the page says so.
-    (path,) = server.rows("SELECT path FROM calibrations WHERE calibration_id = ?", cid)[0]
-    p = Path(path)
-    (p if p.is_absolute() else server.db.parent / p).unlink()
+    # A figure the server cannot draw (here a file that fails its check): the page says
+    # so in words instead of showing a broken image.
+    exp.route("**/figure.png", lambda route: route.fulfill(
+        status=409, content_type="application/json",
+        body='{"detail": "The calibration file has changed since it was saved."}'))
     exp.reload()
-    exp.wait_for_function("document.getElementById('cal-figure-message').textContent.includes('cannot')")
+    exp.wait_for_function("document.getElementById('cal-figure-message').textContent.includes('has changed')")
     assert exp.evaluate(BROKEN_IMAGES) == 0
 
 
@@ -112,7 +111,7 @@ def test_one_trial_numbering_on_both_pages(server, chromium):
         login(exp, server)
         exp.wait_for_function("document.querySelector('#sessions td.live')?.textContent.includes('trial')")
         assert exp.inner_text("#sessions td.live") == "respond · training trial 2 of 2"
-        assert "training trial 2 of 2" in exp.inner_text("#live-title")
+        exp.wait_for_function("document.getElementById('live-title').textContent.includes('training trial 2 of 2')")
         exp.wait_for_function("document.querySelectorAll('#answers tbody tr').length === 1")
         cells = exp.locator("#answers tbody tr td").all_inner_texts()
         assert cells[:2] == ["training", "1"]
