@@ -26,6 +26,14 @@ def exp(chromium):
         context.close()
 
 
+def add_participant(exp, server, participant: str) -> None:
+    """Log in and add ``participant`` through the page."""
+    login(exp, server)
+    exp.fill("#new-participant-id", participant)
+    exp.click("#new-participant button")
+    exp.wait_for_function(f"document.getElementById('participant').value === '{participant}'")
+
+
 @pytest.mark.slow
 def test_session_controls_on_screen_with_a_calibration_figure_and_no_broken_images(server, exp):
     assert server.api("POST", "/api/participants", json={"participant_id": "P40"}).status_code == 201
@@ -51,10 +59,7 @@ def test_session_controls_on_screen_with_a_calibration_figure_and_no_broken_imag
 
 
 def test_before_any_calibration_a_plain_message_and_no_image(server, exp):
-    login(exp, server)
-    exp.fill("#new-participant-id", "P41")
-    exp.click("#new-participant button")
-    exp.wait_for_function("document.getElementById('participant').value === 'P41'")
+    add_participant(exp, server, "P41")
     assert "No calibration yet" in exp.inner_text("#cal-figure-message")
     assert exp.is_visible("#cal-figure-message")
     assert exp.evaluate("[...document.images].filter((i) => i.offsetParent !== null).length") == 0
@@ -79,10 +84,7 @@ def test_flash_messages_clear(server, exp):
 
 
 def test_refusals_are_said_in_plain_words(server, exp):
-    login(exp, server)
-    exp.fill("#new-participant-id", "P43")
-    exp.click("#new-participant button")
-    exp.wait_for_function("document.getElementById('participant').value === 'P43'")
+    add_participant(exp, server, "P43")
     # Past the form's own checks (as an old browser or a script would be).
     exp.evaluate("document.getElementById('repetitions').removeAttribute('max')")
     exp.fill("#repetitions", "50")

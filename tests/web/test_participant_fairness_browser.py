@@ -6,15 +6,9 @@ from __future__ import annotations
 import httpx
 import pytest
 
-from .test_participant_browser import open_page, pending, start, wait_answers, wait_respond
+from .test_participant_browser import open_page, pending, start, trial_events, wait_answers, wait_respond
 
 pytestmark = pytest.mark.browser
-
-
-def trial_events(server, sid: int, i: int) -> list[str]:
-    return [k for (k,) in server.rows(
-        "SELECT kind FROM events WHERE session_id = ? AND json_extract(payload, '$.trial_index') = ? ORDER BY event_id",
-        sid, i)]
 
 
 def test_after_a_reload_the_trial_restarts_and_the_rt_is_timed_from_its_new_onset(server, page):
@@ -105,14 +99,17 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
     context = chromium.new_context()
     context.set_default_timeout(15_000)
     context.add_init_script(MESSAGES)
+    first, second = context.new_page(), context.new_page()
     try:
-        first, second = context.new_page(), context.new_page()
         freeze = {"on": False}
 
         def states(route):
             # Once frozen, the second screen hears of no state but "respond" (its
             # connection drops whenever there is news), so it still offers trial 0.
-            reply = route.fetch()
+            try:
+                reply = route.fetch()
+            except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
+                return
             if freeze["on"] and reply.json().get("state") != "respond":
                 route.abort()
             else:
@@ -136,6 +133,7 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
         assert pending(second, sid) == []
         assert server.rows("SELECT trial_index, response FROM answers") == [(0, "3")]
     finally:
+        second.unroute_all(behavior="ignoreErrors")
         context.close()
 
 
@@ -161,8 +159,8 @@ def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromi
         else:
             held.append(route)  # no reply at all
 
+    page = context.new_page()
     try:
-        page = context.new_page()
         open_page(page, server, s)
         wait_respond(page, 0)
         page.route("**/answer", answers)
@@ -182,5 +180,5 @@ def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromi
         assert server.rows("SELECT trial_index, response, answer_id FROM answers") == [(0, "4", rows[0][3])]
         assert len(held) >= 1
     finally:
-        page.unroute("**/answer")
+        page.unroute_all(behavior="ignoreErrors")
         context.close()
