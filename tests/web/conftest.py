@@ -156,3 +156,50 @@ def page(chromium):
         yield pg
     finally:
         context.close()
+
+
+#: ``(selector, property) => ratio``: the WCAG contrast ratio of an element's colour
+#: ``property`` (``color`` or ``outlineColor``) against the background it is drawn on,
+#: from computed styles. Opacity of the element and its ancestors is blended in; the
+#: background is the nearest ancestor's non-transparent background colour (for an
+#: outline, drawn outside the element, the search starts at the parent).
+CONTRAST_JS = """
+([selector, property]) => {
+  const el = document.querySelector(selector);
+  const parse = (c) => {
+    const v = c.match(/rgba?\\(([^)]+)\\)/)[1].split(/[\\s,\\/]+/).filter(Boolean).map(Number);
+    return [v[0], v[1], v[2], v.length > 3 ? v[3] : 1];
+  };
+  const fg = parse(getComputedStyle(el)[property]);
+  let alpha = fg[3];
+  for (let n = el; n; n = n.parentElement) alpha *= Number(getComputedStyle(n).opacity);
+  let bg = [255, 255, 255, 1];
+  for (let n = property === "outlineColor" ? el.parentElement : el; n; n = n.parentElement) {
+    const b = parse(getComputedStyle(n).backgroundColor);
+    if (b[3] > 0) { bg = b; break; }
+  }
+  const seen = fg.slice(0, 3).map((v, i) => v * alpha + bg[i] * (1 - alpha));
+  const lum = (c) => c.map((v) => { v /= 255; return v <= 0.03928 ? v / 12.92 : ((v + 0.055) / 1.055) ** 2.4; })
+    .reduce((s, v, i) => s + v * [0.2126, 0.7152, 0.0722][i], 0);
+  const [hi, lo] = [lum(seen), lum(bg.slice(0, 3))].sort((a, b) => b - a);
+  return (hi + 0.05) / (lo + 0.05);
+}
+"""
+
+
+def contrast(page, selector: str, prop: str = "color") -> float:
+    """The WCAG contrast ratio of ``selector``'s ``prop`` on the page (see CONTRAST_JS)."""
+    return page.evaluate(CONTRAST_JS, [selector, prop])
+
+
+def calibrate(server: Server, participant: str, seed: int = 4) -> int:
+    """Calibrate ``participant`` on the simulated forearm through the API; the calibration id."""
+    job = server.api("POST", "/api/calibrations", json={"participant_id": participant, "seed": seed}).json()
+    deadline = time.monotonic() + 180
+    while time.monotonic() < deadline:
+        j = server.api("GET", f"/api/calibrations/jobs/{job['job_id']}").json()
+        if j["status"] != "running":
+            assert j["status"] == "done", j
+            return j["calibration_id"]
+        time.sleep(0.3)
+    raise AssertionError("the calibration did not finish")

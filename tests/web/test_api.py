@@ -62,17 +62,17 @@ def test_bad_answers_are_refused_and_change_nothing(running):
         (dict(json=good, headers={"X-Participant-Key": "not-the-key"}), 403, "participant link"),
         (dict(json=good, headers=server.headers), 403, "participant link"),  # the token cannot answer
         (dict(content=b"{not json", headers={"X-Participant-Key": key, "Content-Type": "application/json"}), 422, "json"),
-        (dict(json={**good, "response": [0]}, headers={"X-Participant-Key": key}), 422, "greater than or equal to 1"),
-        (dict(json={**good, "response": [10]}, headers={"X-Participant-Key": key}), 422, "less than or equal to 9"),
+        (dict(json={**good, "response": [0]}, headers={"X-Participant-Key": key}), 422, "must be at least 1"),
+        (dict(json={**good, "response": [10]}, headers={"X-Participant-Key": key}), 422, "must be at most 9"),
         (dict(json={**good, "response": []}, headers={"X-Participant-Key": key}), 422, "at least 1"),
-        (dict(json={**good, "response": ["5"]}, headers={"X-Participant-Key": key}), 422, "response.0"),
+        (dict(json={**good, "response": ["5"]}, headers={"X-Participant-Key": key}), 422, "answer (item 1) is not a valid value"),
         (dict(json={**good, "response": [4, 5]}, headers={"X-Participant-Key": key}), 422, "exactly one location"),
         (dict(json={**good, "response": [5, 5]}, headers={"X-Participant-Key": key}), 422, "twice"),
-        (dict(json={**good, "rt_s": -1}, headers={"X-Participant-Key": key}), 422, "rt_s"),
-        (dict(json={**good, "trial_index": 3}, headers={"X-Participant-Key": key}), 409, "not the current trial"),
+        (dict(json={**good, "rt_s": -1}, headers={"X-Participant-Key": key}), 422, "reaction time must be at least 0"),
+        (dict(json={**good, "trial_index": 3}, headers={"X-Participant-Key": key}), 409, "not for the current trial"),
         (dict(json={**good, "trial_index": 999}, headers={"X-Participant-Key": key}), 422, "out of range"),
         (dict(json={**good, "session_id": sid + 1}, headers={"X-Participant-Key": key}), 422, "does not match"),
-        (dict(json={k: v for k, v in good.items() if k != "answer_id"}, headers={"X-Participant-Key": key}), 422, "answer_id"),
+        (dict(json={k: v for k, v in good.items() if k != "answer_id"}, headers={"X-Participant-Key": key}), 422, "answer id is missing"),
         (dict(json={**good, "extra": 1}, headers={"X-Participant-Key": key}), 422, "extra"),
     ]
     for kwargs, status, words in cases:
@@ -109,10 +109,10 @@ def test_experimenter_routes_need_the_token_and_validate(server):
         assert r.status_code == 401
     before = snapshot(server.db)
     checks = [
-        ("POST", "/api/participants", {"participant_id": "bad id!"}, 422, "participant_id"),
-        ("POST", "/api/participants", {"participant_id": ""}, 422, "participant_id"),
+        ("POST", "/api/participants", {"participant_id": "bad id!"}, 422, "participant id may hold only letters"),
+        ("POST", "/api/participants", {"participant_id": ""}, 422, "participant id is empty"),
         ("POST", "/api/sessions", {"participant_id": "nobody", "study": 1}, 404, "unknown participant"),
-        ("POST", "/api/sessions", {"participant_id": "P01", "study": 3}, 422, "study"),
+        ("POST", "/api/sessions", {"participant_id": "P01", "study": 3}, 422, "study must be 1 or 2"),
         ("GET", "/api/sessions/999", None, 404, "unknown session 999"),
         ("POST", "/api/sessions/999/start", None, 404, "unknown session 999"),
         ("POST", "/api/calibrations", {"participant_id": "nobody"}, 404, "unknown participant"),

@@ -41,6 +41,13 @@ def wait_answers(server, sid: int, n: int, timeout: float = 20.0) -> list[tuple]
     raise AssertionError(f"expected {n} answers in the database, found {rows}")
 
 
+def trial_events(server, sid: int, i: int) -> list[str]:
+    """The kinds of the events of trial ``i``, in order."""
+    return [k for (k,) in server.rows(
+        "SELECT kind FROM events WHERE session_id = ? AND json_extract(payload, '$.trial_index') = ? ORDER BY event_id",
+        sid, i)]
+
+
 def pending(page, sid: int) -> list[dict]:
     return json.loads(page.evaluate(f"localStorage.getItem('vibrofocus.pending.{sid}') || '[]'"))
 
@@ -68,9 +75,7 @@ def test_study1_training_and_trials_by_keyboard(server, page):
     assert [p[0] for p in phases] == ["training", "training", "main", "main", "main"]
     # Each answered trial had its cue and stimulus logged before the answer, and the page beeped.
     for i in range(5):
-        kinds = [k for (k,) in server.rows(
-            "SELECT kind FROM events WHERE session_id = ? AND json_extract(payload, '$.trial_index') = ? ORDER BY event_id",
-            sid, i)]
+        kinds = trial_events(server, sid, i)
         assert kinds[:3] == ["cue", "stimulus_onset", "answer"], kinds
     assert page.evaluate("window.vfBeeps") >= 5
     assert pending(page, sid) == []

@@ -14,21 +14,10 @@ import pytest
 
 from vibrofocus.studies.export import SESSION_COLUMNS, TRIALS_COLUMNS
 
+from .conftest import calibrate
 from .test_api import wait_state
 
 pytestmark = pytest.mark.slow
-
-
-def calibrate(server, participant: str, seed: int) -> int:
-    job = server.api("POST", "/api/calibrations", json={"participant_id": participant, "seed": seed}).json()
-    deadline = time.monotonic() + 180
-    while time.monotonic() < deadline:
-        j = server.api("GET", f"/api/calibrations/jobs/{job['job_id']}").json()
-        if j["status"] != "running":
-            assert j["status"] == "done", j
-            return j["calibration_id"]
-        time.sleep(0.3)
-    raise AssertionError("calibration did not finish")
 
 
 def answer_trials(server, session: dict, n: int, rng_seed: int) -> None:

@@ -66,6 +66,13 @@ class AnswerIn(_Strict):
         return sorted(value)
 
 
+class RestartIn(_Strict):
+    """A participant page asks for a trial again: it did not see that trial's stimulus onset."""
+
+    session_id: int = Field(ge=1, le=MAX_ID, strict=True)
+    trial_index: int = Field(ge=0, le=MAX_ID, strict=True)
+
+
 class AnswerReceipt(BaseModel):
     """What the server sends back once an answer is committed to the database."""
 

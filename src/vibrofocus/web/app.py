@@ -346,6 +346,61 @@ class WebState:
             runner.stop(timeout=2.0)
 
 
+#: What people call the fields of the requests, for the messages of refused requests.
+FIELD_NAMES = {
+    "participant_id": "The participant id", "study": "The study", "repetitions": "Repetitions",
+    "n_training": "Training trials", "seed": "The seed", "calibration_id": "The calibration",
+    "rig": "The rig", "rig_seed": "The rig seed", "response": "The answer", "rt_s": "The reaction time",
+    "answer_id": "The answer id", "trial_index": "The trial", "session_id": "The session",
+    "location": "The location", "method": "The method", "wait": "The wait", "after": "The state number",
+}
+
+
+def plain_problem(err: dict[str, Any]) -> str:
+    """One validation error of pydantic as a sentence a person can act on."""
+    loc = [p for p in err.get("loc", ()) if p not in ("body", "query", "path", "header")]
+    names = [p for p in loc if isinstance(p, str)]
+    what = FIELD_NAMES.get(names[-1], f"The field '{names[-1]}'") if names else "The request"
+    if any(isinstance(p, int) for p in loc):
+        what += f" (item {next(p for p in loc if isinstance(p, int)) + 1})"
+    kind, ctx = err.get("type", ""), err.get("ctx") or {}
+    if kind == "json_invalid":
+        return "The request is not valid JSON."
+    if kind == "missing":
+        return f"{what} is missing."
+    if kind == "extra_forbidden":
+        return f"'{names[-1] if names else '?'}' is not something this request takes."
+    bounds = {"greater_than_equal": "at least", "greater_than": "more than", "less_than_equal": "at most", "less_than": "less than"}
+    if kind in bounds:
+        return f"{what} must be {bounds[kind]} {next(iter(ctx.values()), '?')}."
+    if kind in ("too_short", "string_too_short"):
+        n = ctx.get("min_length", 1)
+        return f"{what} is empty." if n == 1 and kind == "string_too_short" else f"{what} needs at least {n}."
+    if kind in ("too_long", "string_too_long"):
+        return f"{what} is too long (at most {ctx.get('max_length', '?')})."
+    if kind == "string_pattern_mismatch":
+        return f"{what} may hold only letters, digits, '.', '_' and '-', and starts with a letter or digit."
+    if kind == "literal_error" and "expected" in ctx:
+        return f"{what} must be {ctx['expected']}."
+    if kind.startswith(("int_", "float_", "bool_", "string_")) or kind == "enum":
+        return f"{what} is not a valid value here."
+    msg = str(err.get("msg", "is not valid")).removeprefix("Value error, ")
+    return f"{what}: {msg[:1].lower() + msg[1:]}" + ("" if msg.endswith(".") else ".")
+
+
+def trial_position(trials: list[Any], index: int | None) -> dict[str, Any]:
+    """Where trial ``index`` stands, in the one numbering shown everywhere.
+
+    That numbering is the trials file's: the ``phase`` (training or main) and ``trial``,
+    the trial's number within its phase from 1, out of ``n_in_phase``. The 0-based
+    ``trial_index`` stays internal (routes and the database).
+    """
+    if index is None or not 0 <= index < len(trials):
+        return {"phase": None, "trial": None, "n_in_phase": None}
+    phase = trials[index].phase
+    return {"phase": phase, "trial": trials[index].trial, "n_in_phase": sum(1 for t in trials if t.phase == phase)}
+
+
 def render_template(name: str, **values: Any) -> str:
     """Fill ``web/templates/<name>`` (``string.Template`` placeholders, HTML-escaped values).
 
@@ -493,13 +548,10 @@ def create_app(
 
     @app.exception_handler(RequestValidationError)
     async def _invalid(request: Request, exc: RequestValidationError) -> JSONResponse:
-        # One readable sentence per problem ("body.response.0: Input should be less than
-        # or equal to 9") instead of pydantic's nested structure.
-        problems = []
-        for err in exc.errors():
-            where = ".".join(str(p) for p in err.get("loc", ()))
-            problems.append(f"{where}: {err.get('msg')}")
-        return JSONResponse(status_code=422, content={"detail": "; ".join(problems) or "invalid request"})
+        # One plain sentence per problem ("Repetitions must be at most 10.") instead of
+        # pydantic's nested structure and wording.
+        problems = [plain_problem(err) for err in exc.errors()]
+        return JSONResponse(status_code=422, content={"detail": " ".join(problems) or "This request is not valid."})
 
     @app.exception_handler(StudyError)
     async def _study_error(request: Request, exc: StudyError) -> JSONResponse:

@@ -23,7 +23,8 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 
 from ..errors import StudyError, VibrofocusError
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
-from .app import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template
+from .app import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template, trial_position
+from .routes_participant import planned
 
 router = APIRouter()
 
@@ -291,6 +292,8 @@ def _session_out(web: WebState, session_id: int) -> dict[str, Any]:
     info = web.session(session_id)
     runner = web.runner(session_id)
     info["live"] = runner.snapshot() if runner is not None else None
+    if info["live"] is not None:
+        info["live"].update(trial_position(planned(web, session_id), info["live"].get("trial_index")))
     info["dry_run"] = info.get("calibration_id") is None
     info["participant_url"] = f"/participant/{session_id}?key={web.participant_key(session_id)}"
     return info
@@ -313,7 +316,7 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
     from ..rigs import RIG_KINDS
 
     if body.rig not in RIG_KINDS:
-        raise HTTPException(422, detail=f"body.rig: unknown rig {body.rig!r}; known: {', '.join(RIG_KINDS)}")
+        raise HTTPException(422, detail=f"Unknown rig {body.rig!r}; this server knows: {', '.join(RIG_KINDS)}.")
     web.check_rig_kind(body.rig)
     _check_participant(web, body.participant_id)
     if body.calibration_id is not None:

@@ -14,8 +14,8 @@ from fastapi import APIRouter, Header, HTTPException, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse
 
-from .api_models import AnswerIn, AnswerReceipt, SessionId
-from .app import KEY_HEADER, WebState, render_template
+from .api_models import AnswerIn, AnswerReceipt, RestartIn, SessionId
+from .app import KEY_HEADER, WebState, render_template, trial_position
 
 router = APIRouter()
 
@@ -61,13 +61,11 @@ def _state(web: WebState, session_id: int) -> dict[str, Any]:
     snap = runner.snapshot() if runner is not None else {"state": "idle", "trial_index": None, "seq": 0, "paused": False}
     trials = planned(web, session_id)
     index = snap.get("trial_index")
-    trial = trials[index] if index is not None and 0 <= index < len(trials) else None
     state = snap["state"]
     if status in ("aborted", "completed"):
         state = "done" if status == "completed" else "stopped"
     elif status == "planned" or runner is None:
         state = "waiting"
-    n_training = sum(1 for t in trials if t.phase == "training")
     return {
         "session_id": session_id,
         "study": int(info["study"]),
@@ -77,9 +75,7 @@ def _state(web: WebState, session_id: int) -> dict[str, Any]:
         "seq": snap.get("seq", 0),
         "paused": bool(snap.get("paused")),
         "trial_index": index,
-        "phase": trial.phase if trial is not None else None,
-        "trial": trial.trial if trial is not None else None,
-        "n_in_phase": (n_training if trial.phase == "training" else len(trials) - n_training) if trial is not None else None,
+        **trial_position(trials, index),
         "n_trials": len(trials),
         "n_answered": int(info["n_answered"]),
         "error": snap.get("error"),
@@ -140,6 +136,26 @@ async def _wait_change(request: Request, web: WebState, session_id: int, state: 
     return state
 
 
+@router.post("/api/participant/{session_id}/restart")
+def participant_restart(
+    request: Request,
+    session_id: SessionId,
+    body: RestartIn,
+    key: str | None = Header(None, alias=KEY_HEADER),
+) -> dict[str, Any]:
+    """Present the waiting trial again from "get ready" (the page did not see its onset).
+
+    ``restarted`` is False when that trial no longer waits for an answer; the page then
+    simply follows the state it is sent.
+    """
+    web = _web(request)
+    web.check_key(session_id, key)
+    if body.session_id != session_id:
+        raise HTTPException(422, detail=f"body.session_id {body.session_id} does not match the session {session_id} of the URL")
+    runner = web.runner(session_id)
+    return {"restarted": bool(runner is not None and runner.restart_trial(body.trial_index))}
+
+
 @router.post("/api/participant/{session_id}/answer", response_model=AnswerReceipt)
 def participant_answer(
     request: Request,
@@ -165,7 +181,7 @@ def participant_answer(
         prior = done.get(body.trial_index)
         if prior is not None:
             if prior.answer_id != body.answer_id or list(prior.response) != body.response:
-                raise HTTPException(409, detail=f"trial {body.trial_index} of session {session_id} is already answered (answer_id {prior.answer_id}); a different answer is refused")
+                raise HTTPException(409, detail="This trial was already answered (perhaps on another screen), so this answer was not recorded.")
             nxt = web.store.next_trial(session_id)
             return AnswerReceipt(
                 session_id=session_id, trial_index=body.trial_index, answer_id=body.answer_id,
@@ -175,11 +191,10 @@ def participant_answer(
         # An answer to a stimulus felt just before a pause or a stop is data (it may
         # arrive late, from the page's store); a session never started has played nothing.
         if status not in ("running", "paused", "aborted"):
-            raise HTTPException(409, detail=f"session {session_id} is {status}; it takes no answers")
+            raise HTTPException(409, detail=f"This session {_STATUS_WORDS.get(status, 'is ' + status)}, so this answer was not recorded.")
         nxt = web.store.next_trial(session_id)
         if nxt is None or nxt.trial_index != body.trial_index:
-            current = "none (all trials answered)" if nxt is None else str(nxt.trial_index)
-            raise HTTPException(409, detail=f"trial_index {body.trial_index} is not the current trial of session {session_id} (current: {current})")
+            raise HTTPException(409, detail="This answer is not for the current trial, so it was not recorded.")
         # Only a presented trial (its stimulus onset logged, by this server or one before a
         # restart) can be answered: an answer sent before the stimulus is not data.
         onsets = [
@@ -187,7 +202,7 @@ def participant_answer(
             if isinstance(e.payload, dict) and e.payload.get("trial_index") == body.trial_index
         ]
         if not onsets:
-            raise HTTPException(409, detail=f"trial {body.trial_index} of session {session_id} has not been presented yet (no stimulus played); answer when the page asks for it")
+            raise HTTPException(409, detail="This trial has not been presented yet (no stimulus was played), so this answer was not recorded.")
         runner = web.runner(session_id)
         sha = runner.drive_sha_for(body.trial_index) if runner is not None else None
         if sha is None:

@@ -106,6 +106,7 @@ class SessionRunner:
         self._paused = False
         self._stopping = False
         self._answered: set[int] = set()
+        self._restart: int | None = None  # trial a page asked to present again
         self._drive_sha: dict[int, str] = {}
         # seq starts at the clock in ms, so that a page that saw an earlier runner of this
         # session (before a stop or a server restart) never mistakes a new state for one
@@ -167,6 +168,22 @@ class SessionRunner:
         with self._cond:
             self._answered.add(int(trial_index))
             self._cond.notify_all()
+
+    def restart_trial(self, trial_index: int) -> bool:
+        """Present ``trial_index`` again from "get ready", if it waits for its answer.
+
+        A participant page that did not see this trial's stimulus arrive (it was
+        reloaded after the onset) cannot time a reaction: it asks for the trial again,
+        so that the answer is timed from an onset the page saw. Returns False when the
+        trial is not the one waiting for an answer (answered meanwhile, or another trial).
+        """
+        with self._cond:
+            snap = self._state
+            if snap["state"] != "respond" or snap["trial_index"] != int(trial_index) or int(trial_index) in self._answered:
+                return False
+            self._restart = int(trial_index)
+            self._cond.notify_all()
+            return True
 
     def page_attach(self, seen_seq: int) -> int:
         """A participant page (ready to play the beep) is waiting for news after ``seen_seq``.
@@ -318,9 +335,14 @@ class SessionRunner:
                 self._log("stimulus_onset", payload)
             self._set("respond", trial_index=index, phase=phase)
             with self._cond:
-                while not self._stopping and index not in self._answered:
+                while not self._stopping and index not in self._answered and self._restart != index:
                     self._cond.wait(1.0)
+                restart = self._restart == index and index not in self._answered
+                self._restart = None
             if self._stopping:
+                continue
+            if restart:
+                self._log("trial_restarted", {"trial_index": index, "reason": "the participant page did not see the stimulus onset (reloaded)"})
                 continue
             self._set("taken", trial_index=index, phase=phase)
             self._wait(self.pace.after_answer_s)

@@ -6,10 +6,25 @@
   const $ = (id) => document.getElementById(id);
   let selectedSession = null;
 
+  // A confirmation goes after a few seconds; an error stays until the next action (a
+  // click on a control) or four times as long. Tests shorten the time.
+  const FLASH_MS = window.vfFlashMs || 6000;
+  let flashTimer = null;
   function flash(text, isError = false) {
     const el = $("flash");
     el.textContent = text;
     el.className = isError ? "error" : "";
+    clearTimeout(flashTimer);
+    flashTimer = text ? setTimeout(() => flash(""), isError ? 4 * FLASH_MS : FLASH_MS) : null;
+  }
+  document.addEventListener("click", (ev) => {
+    if ($("flash").className === "error" && ev.target.closest("button, a, select, input")) flash("");
+  }, true);
+
+  function statusText(status) {
+    return status >= 500
+      ? `The server could not do this (error ${status}); the terminal running 'vibrofocus serve' says why.`
+      : `The server refused this (error ${status}).`;
   }
 
   async function api(path, options = {}) {
@@ -20,7 +35,7 @@
     });
     if (!res.ok) {
       const detail = await res.json().catch(() => ({}));
-      throw new Error(detail.detail || `${res.status} ${res.statusText}`);
+      throw new Error(detail.detail || statusText(res.status));
     }
     return res.json();
   }
@@ -80,18 +95,36 @@
     $("rig-label").textContent = rigs.label;
   }
 
+  async function showFigure(url, img, message, busy) {
+    // A figure is fetched first and shown only once it has arrived: a failure is said
+    // in words, never shown as a broken image. Returns false if it failed.
+    message.textContent = busy;
+    const res = await fetch(url, { credentials: "same-origin" }).catch(() => null);
+    if (!res || !res.ok) {
+      const d = res ? await res.json().catch(() => ({})) : {};
+      img.hidden = true;
+      message.textContent = d.detail || (res ? statusText(res.status) : "The server cannot be reached.");
+      return false;
+    }
+    if (img.src.startsWith("blob:")) URL.revokeObjectURL(img.src);
+    img.src = URL.createObjectURL(await res.blob());
+    img.hidden = false;
+    message.textContent = "";
+    return true;
+  }
+
   function onCalibration() {
     const id = $("calibration").value;
     const img = $("cal-figure");
+    $("preview-message").textContent = id ? "" : "A preview needs a calibration.";
     if (id) {
-      img.src = `/api/calibrations/${id}/figure.png`;
-      img.hidden = false;
-      $("preview-message").textContent = "";
-    } else {
-      img.hidden = true;
-      img.removeAttribute("src");
-      $("preview-message").textContent = "Needs a calibration.";
+      showFigure(`/api/calibrations/${id}/figure.png`, img, $("cal-figure-message"), "Loading the figure…");
+      return;
     }
+    img.hidden = true;
+    const some = $("calibration").options.length > 1;
+    $("cal-figure-message").textContent = some ? "No calibration chosen: sessions planned now are dry runs (nothing is played)."
+      : "No calibration yet: press Calibrate.";
   }
   $("calibration").addEventListener("change", onCalibration);
 
@@ -169,17 +202,7 @@
     const id = $("calibration").value;
     if (!id) { flash("Calibrate first (or pick a calibration) to preview.", true); return; }
     const url = `/api/preview.png?calibration_id=${id}&method=${$("method").value}&location=${$("location").value}`;
-    $("preview-message").textContent = "Rendering…";
-    const res = await fetch(url, { credentials: "same-origin" });
-    if (!res.ok) {
-      const d = await res.json().catch(() => ({}));
-      $("preview-message").textContent = d.detail || res.statusText;
-      return;
-    }
-    const img = $("preview-figure");
-    img.src = URL.createObjectURL(await res.blob());
-    img.hidden = false;
-    $("preview-message").textContent = "";
+    await showFigure(url, $("preview-figure"), $("preview-message"), "Rendering…");
   });
 
   // ---------------------------------------------------------------- sessions
@@ -194,7 +217,7 @@
     const existing = new Map(Array.from(tbody.children, (tr) => [tr.dataset.session, tr]));
     const rows = sessions.slice().reverse().map((s) => {
       const live = s.live && s.live.waiting_for_page ? "waiting for the participant page"
-        : s.live ? `${s.live.state}${s.live.trial_index !== null && s.live.trial_index !== undefined ? " · trial " + s.live.trial_index : ""}` : "—";
+        : s.live ? [s.live.state, trialText(s.live)].filter(Boolean).join(" · ") : "—";
       let tr = existing.get(String(s.session_id));
       if (!tr || tr.dataset.status !== s.status) tr = sessionRow(s);
       tr.querySelector(".progress").textContent = `${s.n_answered} / ${s.n_trials}`;
@@ -205,6 +228,12 @@
     if (rows.length !== tbody.children.length || rows.some((tr, i) => tbody.children[i] !== tr)) tbody.replaceChildren(...rows);
     if (selectedSession === null && sessions.length) selectedSession = sessions[sessions.length - 1].session_id;
     loadLive();
+  }
+
+  function trialText(live) {
+    // The one numbering of trials: the phase and the trial's number within it, as in
+    // the trials file and on the participant page.
+    return live && live.trial ? `${live.phase} trial ${live.trial} of ${live.n_in_phase}` : "";
   }
 
   function sessionRow(s) {
@@ -256,10 +285,10 @@
     let s;
     try { s = await api(`/api/sessions/${selectedSession}`); } catch { return; }
     $("live-title").textContent = `session ${s.session_id} · study ${s.study} · ${s.status}` +
-      (s.live ? ` · ${s.live.state}` : "") + (s.live && s.live.error ? ` · ${s.live.error}` : "");
+      (s.live ? ` · ${[s.live.state, trialText(s.live)].filter(Boolean).join(" · ")}` : "") + (s.live && s.live.error ? ` · ${s.live.error}` : "");
     $("live-progress").value = s.n_trials ? s.n_answered / s.n_trials : 0;
     const rows = s.answers.slice().reverse().map((a) => el("tr", { class: a.response.includes(a.target) ? "hit" : "" },
-      el("td", {}, String(a.trial)), el("td", {}, a.phase), el("td", {}, a.method), el("td", {}, String(a.target)),
+      el("td", {}, a.phase), el("td", {}, String(a.trial)), el("td", {}, a.method), el("td", {}, String(a.target)),
       el("td", {}, a.response.join(" ")), el("td", {}, a.rt_s.toFixed(3)), el("td", {}, a.recorded_at.slice(11, 19))));
     $("answers").querySelector("tbody").replaceChildren(...rows);
   }

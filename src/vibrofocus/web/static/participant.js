@@ -18,7 +18,10 @@
 
   let seq = -1;               // last state seq seen (long-poll cursor)
   let state = null;           // last state object from the server
-  let respondSince = null;    // performance.now() when the grid became answerable
+  let respondSince = null;    // performance.now() when the grid became answerable: the RT's zero
+  let cueSeenFor = null;      // trial whose cue this page showed (so it saw the onset live)
+  let restartAskedAt = null;  // state seq at which this page asked for the trial again
+  let refused = null;         // {trial_index, text}: the server refused this page's answer
   let selected = new Set();   // Study 2 selection
   let sentFor = null;         // trial index answered on this page (waiting or confirmed)
   let confirmedFor = null;    // trial index whose answer the server confirmed
@@ -46,7 +49,25 @@
   const headers = { "Content-Type": "application/json", "X-Participant-Key": key };
   const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 
+  // A send that gets no reply within this time is given up and tried again (same answer
+  // id, so a request that did reach the server is not stored twice). Tests shorten it.
+  const SEND_TIMEOUT_MS = window.vfSendTimeoutMs || 5000;
   let sending = false;
+  let stalled = false;        // the last send got no reply in time (the server is slow or unreachable)
+  let wakeSender = null;      // ends the sender's back-off at once ("Try again now")
+  function backoff(ms) {
+    return new Promise((resolve) => {
+      const timer = setTimeout(resolve, ms);
+      wakeSender = () => { clearTimeout(timer); resolve(); };
+    }).finally(() => { wakeSender = null; });
+  }
+  function setStalled(value) {
+    if (stalled === value) return;
+    stalled = value;
+    $("retry").hidden = !value;
+    if (state) render(state);
+  }
+
   async function flushPending() {
     // One sender at a time; retries until every stored answer has a verdict.
     if (sending) return;
@@ -55,41 +76,65 @@
     try {
       for (;;) {
         const list = loadPending();
-        if (!list.length) return;
+        if (!list.length) { setStalled(false); return; }
         const answer = list[0];
-        let res;
+        const abort = new AbortController();
+        const timer = setTimeout(() => abort.abort(), SEND_TIMEOUT_MS);
+        let res = null;
         try {
           res = await fetch(`/api/participant/${sessionId}/answer`, {
-            method: "POST", headers, body: JSON.stringify(answer), cache: "no-store",
+            method: "POST", headers, body: JSON.stringify(answer), cache: "no-store", signal: abort.signal,
           });
         } catch {
-          setOnline(false);
-          if (state) render(state);  // say that the answer is kept here
-          await sleep(delay);
-          delay = Math.min(delay * 2, 4000);
-          continue;
+          // No reply: the answer stays stored here and is sent again with the same id.
+          if (abort.signal.aborted) setStalled(true); else setOnline(false);
+        } finally {
+          clearTimeout(timer);
         }
-        setOnline(true);
-        if (res.ok) {
+        if (res !== null) setOnline(true);
+        if (res !== null && res.ok) {
           dropPending(answer.answer_id);
+          setStalled(false);
           confirmedFor = answer.trial_index;
           if (sentFor === answer.trial_index) showTaken();
           delay = 250;
-        } else if (res.status >= 400 && res.status < 500) {
-          // Refused for good (e.g. the trial was answered differently, the session
-          // stopped): retrying cannot succeed, so it is dropped and logged.
+        } else if (res !== null && res.status >= 400 && res.status < 500) {
+          // Refused for good (the trial was answered on another screen, the session
+          // ended): retrying cannot succeed, so it is dropped and the page says why.
           const detail = await res.json().catch(() => ({}));
           console.warn("answer refused", res.status, detail.detail);
           dropPending(answer.answer_id);
-          if (sentFor === answer.trial_index) sentFor = null;
+          setStalled(false);
+          refused = { trial_index: answer.trial_index, text: refusalText(res.status, detail.detail) };
+          if (state) render(state);
         } else {
-          await sleep(delay);
+          if (res !== null) setStalled(true);  // a server error: the same as no reply
+          if (state) render(state);  // say that the answer is kept here
+          await backoff(delay);
           delay = Math.min(delay * 2, 4000);
         }
       }
     } finally {
       sending = false;
     }
+  }
+
+  function refusalText(status, detail) {
+    if (status === 409 && detail) return detail;
+    if (status === 403) return "This answer was not recorded: this page's link is not valid for the session. Please tell the experimenter.";
+    return "This answer was not recorded. Please tell the experimenter.";
+  }
+
+  async function askRestart(trialIndex) {
+    // This page did not see the stimulus of the trial waiting for an answer (it was
+    // reloaded after it): the trial is presented again, so that the reaction time is
+    // timed from an onset this page saw.
+    try {
+      await fetch(`/api/participant/${sessionId}/restart`, {
+        method: "POST", headers, cache: "no-store",
+        body: JSON.stringify({ session_id: sessionId, trial_index: trialIndex }),
+      });
+    } catch { /* the next state asks again */ }
   }
 
   let pollAbort = null;
@@ -168,26 +213,40 @@
     body.dataset.trial = next.trial_index ?? "";
     const newTrial = !previous || previous.trial_index !== next.trial_index;
     if (newTrial) { selected = new Set(); }
-    if (next.state === "cue") {
+    if (next.state === "cue" && audioReady) {
+      cueSeenFor = next.trial_index;
       const tag = `${next.trial_index}:${next.seq}`;
       if (tag !== lastBeep) { lastBeep = tag; beep(); }
     }
-    if (next.state === "respond" && respondSince === null) respondSince = performance.now();
-    if (next.state !== "respond") respondSince = null;
+    if (refused && refused.trial_index !== next.trial_index) refused = null;
+    const refusedHere = refused !== null;
+    const pendingHere = loadPending().some((a) => a.trial_index === next.trial_index);
+    const respond = next.state === "respond";
+    // A trial waiting for an answer whose onset this page did not see (it was loaded or
+    // reloaded after the stimulus) is asked for again, from "Get ready".
+    const restart = respond && audioReady && cueSeenFor !== next.trial_index && sentFor !== next.trial_index
+      && !pendingHere && !refusedHere;
+    if (restart && restartAskedAt !== next.seq) {
+      restartAskedAt = next.seq;
+      askRestart(next.trial_index);
+    }
 
-    const phase = next.phase === "training" ? "Training" : "Trial";
-    $("progress").textContent = next.trial ? `${phase} ${next.trial} of ${next.n_in_phase}` : "";
+    $("progress").textContent = next.trial ? trialLabel(next) : "";
 
-    const answerable = next.state === "respond" && sentFor !== next.trial_index
-      && !loadPending().some((a) => a.trial_index === next.trial_index);
+    const answerable = respond && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
+    const wasAnswerable = body.classList.contains("answerable");
+    if (answerable && !wasAnswerable) startAnswering();
+    if (!answerable) respondSince = null;
     body.classList.toggle("answerable", answerable);
     const waitingForServer = sentFor === next.trial_index && confirmedFor !== next.trial_index;
     $("confirm").hidden = !(multi && answerable);
     for (const c of cells) c.classList.toggle("selected", selected.has(Number(c.dataset.loc)));
     $("hint").textContent = "";
 
-    if (!online && loadPending().length) {
-      setMessage("Answer saved on this computer — reconnecting…");
+    if (refusedHere && ["respond", "taken"].includes(next.state)) { setMessage(refused.text); return; }
+    if (loadPending().length && (!online || stalled)) {
+      setMessage(stalled ? "Your answer is saved on this computer. The server has not replied yet — trying again…"
+                         : "Answer saved on this computer — reconnecting…");
       return;
     }
     if (!online) { setMessage("Connection lost — reconnecting…"); return; }
@@ -197,20 +256,47 @@
       case "ready": setMessage("Get ready"); break;
       case "cue": setMessage("●"); break;
       case "respond":
-        if (waitingForServer) setMessage("Sending…");
+        if (restart) setMessage("Get ready");
+        else if (waitingForServer) setMessage("Sending…");
         else if (confirmedFor === next.trial_index) showTaken();
         else {
           setMessage(multi ? "Where did you feel it? Select, then Enter."
                            : "Where did you feel it most?");
         }
         break;
-      case "taken": showTaken(); break;
+      case "taken": if (confirmedFor === next.trial_index) showTaken(); else setMessage("Please wait."); break;
       case "done": setMessage("Thank you! The session is complete."); break;
       case "stopped": setMessage("The session has ended."); break;
       case "error": setMessage("Please wait — the experimenter has been notified."); break;
       default: setMessage("Please wait.");
     }
   }
+
+  function trialLabel(next) {
+    // The numbering of the trials file and the experimenter page: phase, then the
+    // trial's number within it.
+    return `${next.phase === "training" ? "Training" : "Trial"} ${next.trial} of ${next.n_in_phase}`;
+  }
+
+  // The grid becomes answerable: the reaction time starts now, and no cell may carry a
+  // hover or focus mark left from the last answer or the Begin click (a response bias).
+  let pointerAt = null;       // last known pointer position
+  let pointerAnchor = null;   // where the pointer was when the grid became answerable
+  function startAnswering() {
+    respondSince = performance.now();
+    if (document.activeElement && document.activeElement.classList.contains("cell")) document.activeElement.blur();
+    body.classList.remove("pointer-moved");
+    pointerAnchor = pointerAt;
+  }
+  function trackPointer(ev) {
+    pointerAt = [ev.clientX, ev.clientY];
+    if (!body.classList.contains("answerable")) return;
+    if (pointerAnchor === null) { pointerAnchor = pointerAt; return; }
+    // Hover marks show only once the participant moves the pointer on purpose.
+    if (Math.hypot(pointerAt[0] - pointerAnchor[0], pointerAt[1] - pointerAnchor[1]) > 4) body.classList.add("pointer-moved");
+  }
+  document.addEventListener("pointermove", trackPointer);
+  document.addEventListener("pointerdown", (ev) => { pointerAt = [ev.clientX, ev.clientY]; });
 
   function showTaken() {
     body.dataset.taken = "1";
@@ -221,14 +307,13 @@
 
   // ---------------------------------------------------------------- answering
   function canAnswer() {
-    return state && state.state === "respond" && sentFor !== state.trial_index
-      && !loadPending().some((a) => a.trial_index === state.trial_index);
+    return state && body.classList.contains("answerable") && respondSince !== null;
   }
 
   function submit(locations) {
     if (!canAnswer()) return;
     if (!locations.length) { $("hint").textContent = "Select at least one location."; return; }
-    const rt = respondSince === null ? 0 : (performance.now() - respondSince) / 1000;
+    const rt = (performance.now() - respondSince) / 1000;
     const answer = {
       session_id: sessionId,
       trial_index: state.trial_index,
@@ -279,6 +364,10 @@
     });
   }
   $("confirm").addEventListener("click", () => submit([...selected]));
+  $("retry").addEventListener("click", () => {
+    $("retry").blur();
+    if (wakeSender) wakeSender(); else flushPending();
+  });
 
   $("begin").addEventListener("click", async () => {
     // Browsers start audio only after a gesture on the page: this click is it.
@@ -289,6 +378,7 @@
     try { await document.documentElement.requestFullscreen(); } catch { /* headless or refused */ }
     $("overlay").hidden = true;
     audioReady = true;
+    if (state) render(state);  // e.g. ask for a trial whose onset came before this page
     wakePoll();
   });
 

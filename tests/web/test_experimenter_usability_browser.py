@@ -1,0 +1,160 @@
+"""Usability of both pages in a real chromium at 1280x720: what is on screen without
+scrolling, one trial numbering, no broken images, messages that clear and read plainly,
+a visible focus ring and legible text."""
+
+from __future__ import annotations
+
+import pytest
+
+from .conftest import calibrate, contrast, login
+from .test_participant_browser import open_page, start, wait_answers, wait_respond
+
+pytestmark = pytest.mark.browser
+
+VIEWPORT = {"width": 1280, "height": 720}
+BROKEN_IMAGES = "[...document.images].filter((i) => i.offsetParent !== null && !(i.complete && i.naturalWidth > 0)).length"
+
+
+@pytest.fixture
+def exp(chromium):
+    context = chromium.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(15_000)
+    context.add_init_script("window.vfFlashMs = 400;")
+    try:
+        yield context.new_page()
+    finally:
+        context.close()
+
+
+def add_participant(exp, server, participant: str) -> None:
+    """Log in and add ``participant`` through the page."""
+    login(exp, server)
+    exp.fill("#new-participant-id", participant)
+    exp.click("#new-participant button")
+    exp.wait_for_function(f"document.getElementById('participant').value === '{participant}'")
+
+
+@pytest.mark.slow
+def test_session_controls_on_screen_with_a_calibration_figure_and_no_broken_images(server, exp):
+    assert server.api("POST", "/api/participants", json={"participant_id": "P40"}).status_code == 201
+    cid = calibrate(server, "P40")
+    r = server.api("POST", "/api/sessions", json={"participant_id": "P40", "study": 1, "calibration_id": cid})
+    assert r.status_code == 201, r.text
+    login(exp, server)
+    exp.wait_for_function("document.getElementById('cal-figure').naturalWidth > 0 && !document.getElementById('cal-figure').hidden")
+    start_button = exp.locator("#sessions button[data-action=start]")
+    start_button.wait_for()
+    box = start_button.bounding_box()
+    assert exp.evaluate("window.scrollY") == 0
+    assert 0 <= box["y"] and box["y"] + box["height"] <= VIEWPORT["height"], box
+    assert exp.evaluate(BROKEN_IMAGES) == 0
+    # A figure the server cannot draw (here a file that fails its check): the page says
+    # so in words instead of showing a broken image.
+    exp.route("**/figure.png", lambda route: route.fulfill(
+        status=409, content_type="application/json",
+        body='{"detail": "The calibration file has changed since it was saved."}'))
+    exp.reload()
+    exp.wait_for_function("document.getElementById('cal-figure-message').textContent.includes('has changed')")
+    assert exp.evaluate(BROKEN_IMAGES) == 0
+
+
+def test_before_any_calibration_a_plain_message_and_no_image(server, exp):
+    add_participant(exp, server, "P41")
+    assert "No calibration yet" in exp.inner_text("#cal-figure-message")
+    assert exp.is_visible("#cal-figure-message")
+    assert exp.evaluate("[...document.images].filter((i) => i.offsetParent !== null).length") == 0
+    exp.click("#preview")
+    assert "calibrat" in exp.inner_text("#flash").lower()
+    assert exp.evaluate(BROKEN_IMAGES) == 0
+
+
+def test_flash_messages_clear(server, exp):
+    login(exp, server)
+    exp.fill("#new-participant-id", "P42")
+    exp.click("#new-participant button")
+    exp.wait_for_function("document.getElementById('flash').textContent.includes('added')")
+    exp.wait_for_function("document.getElementById('flash').textContent === ''", timeout=3000)
+    # An error stays a while longer than a confirmation, then the next action clears it.
+    exp.click("#preview")
+    assert exp.inner_text("#flash") != ""
+    exp.wait_for_timeout(600)
+    assert exp.inner_text("#flash") != "", "an error went before it could be read"
+    exp.click("#straps")
+    assert exp.inner_text("#flash") == ""
+
+
+def test_refusals_are_said_in_plain_words(server, exp):
+    add_participant(exp, server, "P43")
+    # Past the form's own checks (as an old browser or a script would be).
+    exp.evaluate("document.getElementById('repetitions').removeAttribute('max')")
+    exp.fill("#repetitions", "50")
+    exp.click("#new-session button")
+    exp.wait_for_function("document.getElementById('flash').classList.contains('error')")
+    text = exp.inner_text("#flash")
+    assert text == "Repetitions must be at most 10.", text
+    r = server.api("POST", "/api/sessions", json={"participant_id": "P43", "study": 1, "rig": "laser"})
+    detail = r.json()["detail"]
+    assert r.status_code == 422 and "body." not in detail and "Input should" not in detail, detail
+
+
+def test_one_trial_numbering_on_both_pages(server, chromium):
+    context = chromium.new_context(viewport=VIEWPORT)
+    context.set_default_timeout(15_000)
+    try:
+        s = start(server, "P44", 1, n_training=2)
+        sid = s["session_id"]
+        part = context.new_page()
+        open_page(part, server, s)
+        wait_respond(part, 0)
+        part.keyboard.press("5")
+        wait_respond(part, 1)  # the second training trial
+        assert part.inner_text("#progress") == "Training 2 of 2"
+        exp = context.new_page()
+        login(exp, server)
+        exp.wait_for_function("document.querySelector('#sessions td.live')?.textContent.includes('trial')")
+        assert exp.inner_text("#sessions td.live") == "respond · training trial 2 of 2"
+        exp.wait_for_function("document.getElementById('live-title').textContent.includes('training trial 2 of 2')")
+        exp.wait_for_function("document.querySelectorAll('#answers tbody tr').length === 1")
+        cells = exp.locator("#answers tbody tr td").all_inner_texts()
+        assert cells[:2] == ["training", "1"]
+        assert [r[0] for r in wait_answers(server, sid, 1)] == [0]
+        csv = server.api("GET", "/api/export/trials.csv").text.splitlines()
+        assert csv[1].split(",")[2:4] == ["training", "1"]
+    finally:
+        context.close()
+
+
+def tab_to_a_button(page) -> str:
+    page.locator("body").click(position={"x": 5, "y": 5})
+    for _ in range(30):
+        page.keyboard.press("Tab")
+        if page.evaluate("document.activeElement.tagName") == "BUTTON":
+            return page.evaluate("document.activeElement.id || document.activeElement.textContent")
+    raise AssertionError("no button took the focus")
+
+
+def assert_focus_ring(page) -> None:
+    page.evaluate("document.activeElement.setAttribute('data-focused', '1')")
+    style = page.evaluate("(() => { const s = getComputedStyle(document.activeElement); return [s.outlineStyle, s.outlineWidth]; })()")
+    assert style[0] not in ("none", "auto") and float(style[1].removesuffix("px")) >= 2, style
+    assert contrast(page, "[data-focused]", "outlineColor") >= 3.0
+
+
+def test_visible_focus_ring_and_legible_text(server, exp):
+    login(exp, server)
+    tab_to_a_button(exp)
+    assert_focus_ring(exp)
+    assert contrast(exp, ".muted") >= 4.5
+    s = server.plan("P45", 1)
+    part = exp.context.new_page()
+    part.goto(server.base_url + s["participant_url"])
+    part.keyboard.press("Tab")
+    assert part.evaluate("document.activeElement.id") == "begin"
+    assert_focus_ring(part)
+    part.click("#begin")
+    for selector in ("#orientation", "#message"):
+        assert contrast(part, selector) >= 4.5, selector
+    server.api("POST", f"/api/sessions/{s['session_id']}/start")
+    wait_respond(part, 0)
+    for selector in ("#progress", "#orientation"):
+        assert contrast(part, selector) >= 4.5, selector

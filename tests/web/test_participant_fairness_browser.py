@@ -1,0 +1,184 @@
+"""The participant page is fair and honest: reaction times from an onset the page saw,
+no cell marked before the answer, refusals said as such, and no endless "Sending…"."""
+
+from __future__ import annotations
+
+import httpx
+import pytest
+
+from .test_participant_browser import open_page, pending, start, trial_events, wait_answers, wait_respond
+
+pytestmark = pytest.mark.browser
+
+
+def test_after_a_reload_the_trial_restarts_and_the_rt_is_timed_from_its_new_onset(server, page):
+    s = start(server, "P31", 1)
+    sid = s["session_id"]
+    open_page(page, server, s)
+    wait_respond(page, 0)
+    page.keyboard.press("2")
+    wait_respond(page, 1)  # trial 1's stimulus has played; the participant reloads
+    page.reload()
+    page.wait_for_function("document.body.dataset.state === 'respond'")
+    page.wait_for_timeout(1500)  # the overlay waits; this time is not a reaction time
+    page.click("#begin")
+    # The trial comes again from "Get ready"; nothing answers before its new stimulus.
+    page.wait_for_function("document.body.dataset.state !== 'respond'")
+    wait_respond(page, 1)
+    page.keyboard.press("6")
+    rows = wait_answers(server, sid, 2)
+    assert [(r[0], r[1]) for r in rows] == [(0, "2"), (1, "6")]
+    assert rows[1][2] < 1.0, f"RT {rows[1][2]} s counts the time since the reload"
+    assert trial_events(server, sid, 1) == [
+        "cue", "stimulus_onset", "trial_restarted", "cue", "stimulus_onset", "answer"]
+
+
+def cells_boxes(page) -> list[dict]:
+    return [page.locator(f".cell[data-loc='{i}']").bounding_box() for i in range(1, 10)]
+
+
+def overlap(a: dict, b: dict) -> bool:
+    return not (a["x"] + a["width"] <= b["x"] or b["x"] + b["width"] <= a["x"]
+                or a["y"] + a["height"] <= b["y"] or b["y"] + b["height"] <= a["y"])
+
+
+@pytest.mark.parametrize("size", [(1280, 720), (1920, 1080), (1024, 768), (1366, 768)])
+def test_the_begin_button_is_off_the_grid(server, chromium, size):
+    s = server.plan("P32", 1)
+    context = chromium.new_context(viewport={"width": size[0], "height": size[1]})
+    try:
+        page = context.new_page()
+        page.goto(server.base_url + s["participant_url"])
+        begin = page.locator("#begin").bounding_box()
+        assert begin["y"] + begin["height"] <= size[1], "Begin is on the screen"
+        boxes = cells_boxes(page)
+        assert all(b["y"] >= 0 and b["y"] + b["height"] <= size[1] for b in boxes), "the grid fits the screen"
+        assert not any(overlap(begin, b) for b in boxes), (begin, boxes)
+    finally:
+        context.close()
+
+
+BORDER = "i => getComputedStyle(document.querySelector(`.cell[data-loc='${i}']`)).borderTopColor"
+
+
+def test_no_cell_carries_a_hover_or_focus_mark_when_the_trial_starts(server, page):
+    page.set_viewport_size({"width": 1280, "height": 720})
+    s = start(server, "P33", 1)
+    open_page(page, server, s)
+    # The pointer rests on cell 5 and cell 5 has the focus before the stimulus.
+    box = page.locator(".cell[data-loc='5']").bounding_box()
+    page.mouse.move(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    page.evaluate("document.querySelector(\".cell[data-loc='5']\").focus()")
+    wait_respond(page, 0)
+    plain = page.evaluate(BORDER, 1)
+    assert page.evaluate(BORDER, 5) == plain, "the cell under the resting pointer is marked"
+    assert not page.evaluate("document.activeElement.classList.contains('cell')"), "a cell keeps the focus"
+    assert page.evaluate("getComputedStyle(document.querySelector(\".cell[data-loc='5']\")).outlineStyle") == "none"
+    # Moving the pointer on purpose shows where it points.
+    page.mouse.move(box["x"] + box["width"] / 2 + 30, box["y"] + box["height"] / 2 + 10, steps=5)
+    assert page.evaluate(BORDER, 5) != plain
+    # The cell clicked for an answer is not marked when the next trial starts.
+    page.mouse.click(box["x"] + box["width"] / 2, box["y"] + box["height"] / 2)
+    wait_respond(page, 1)
+    assert page.evaluate(BORDER, 5) == plain
+    assert not page.evaluate("document.activeElement.classList.contains('cell')")
+
+
+MESSAGES = """
+window.vfMessages = [];
+document.addEventListener('DOMContentLoaded', () => {
+  const m = document.getElementById('message');
+  new MutationObserver(() => window.vfMessages.push(m.textContent)).observe(m, {childList: true, characterData: true, subtree: true});
+});
+"""
+
+
+def test_a_refused_answer_is_not_called_taken(server, chromium):
+    s = start(server, "P34", 1)
+    sid = s["session_id"]
+    context = chromium.new_context()
+    context.set_default_timeout(15_000)
+    context.add_init_script(MESSAGES)
+    first, second = context.new_page(), context.new_page()
+    try:
+        freeze = {"on": False}
+
+        def states(route):
+            # Once frozen, the second screen hears of no state but "respond" (its
+            # connection drops whenever there is news), so it still offers trial 0.
+            try:
+                reply = route.fetch()
+            except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
+                return
+            if freeze["on"] and reply.json().get("state") != "respond":
+                route.abort()
+            else:
+                route.fulfill(response=reply)
+
+        second.route("**/state*", states)
+        open_page(first, server, s)
+        open_page(second, server, s)
+        wait_respond(first, 0)
+        wait_respond(second, 0)
+        freeze["on"] = True
+        first.keyboard.press("3")
+        assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
+        second.keyboard.press("5")  # answers trial 0 differently: 409
+        second.wait_for_function("document.getElementById('message').textContent.includes('not recorded')")
+        assert "already answered" in second.inner_text("#message")
+        assert not second.evaluate("document.body.classList.contains('answerable')"), "trial 0 offered again"
+        freeze["on"] = False
+        wait_respond(second, 1)
+        assert not any("Answer taken" in m for m in second.evaluate("window.vfMessages")), second.evaluate("window.vfMessages")
+        assert pending(second, sid) == []
+        assert server.rows("SELECT trial_index, response FROM answers") == [(0, "3")]
+    finally:
+        second.unroute_all(behavior="ignoreErrors")
+        context.close()
+
+
+def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromium):
+    s = start(server, "P35", 1)
+    sid = s["session_id"]
+    context = chromium.new_context()
+    context.set_default_timeout(15_000)
+    context.add_init_script("window.vfSendTimeoutMs = 800;" + MESSAGES)
+    held = []
+    hold = {"on": True}
+
+    def answers(route):
+        if not hold["on"]:
+            route.continue_()
+        elif not held:
+            # The answer reaches the server and is committed, but the reply never
+            # reaches the page (sent from here so that the page's time-out cannot cut it).
+            r = httpx.post(route.request.url, content=route.request.post_data,
+                           headers={k: v for k, v in route.request.headers.items() if k.lower() in ("content-type", "x-participant-key")})
+            assert r.status_code == 200, r.text
+            held.append(route)
+        else:
+            held.append(route)  # no reply at all
+
+    page = context.new_page()
+    try:
+        open_page(page, server, s)
+        wait_respond(page, 0)
+        page.route("**/answer", answers)
+        page.keyboard.press("4")
+        page.wait_for_selector("#retry", state="visible")
+        assert "not replied yet" in page.inner_text("#message")
+        rows = wait_answers(server, sid, 1)
+        kept = pending(page, sid)
+        assert [(a["trial_index"], a["response"], a["answer_id"]) for a in kept] == [(0, [4], rows[0][3])], \
+            "the answer stays stored on the page until the server confirms it"
+        hold["on"] = False
+        page.click("#retry")
+        page.wait_for_function("document.getElementById('message').textContent.includes('Answer taken')")
+        assert page.is_hidden("#retry")
+        assert pending(page, sid) == []
+        wait_respond(page, 1)
+        assert server.rows("SELECT trial_index, response, answer_id FROM answers") == [(0, "4", rows[0][3])]
+        assert len(held) >= 1
+    finally:
+        page.unroute_all(behavior="ignoreErrors")
+        context.close()
