@@ -91,6 +91,9 @@ def main() -> None:
                 exp.select_option("#location", "2")
                 exp.click("#preview")
                 exp.wait_for_function("!document.getElementById('preview-figure').hidden && document.getElementById('preview-figure').complete")
+                exp.wait_for_function("(() => { const m = document.getElementById('cal-figure-message');"
+                                      " return !m || m.hidden || !m.textContent.startsWith('Loading'); })()",
+                                      timeout=60_000)
                 exp.wait_for_timeout(300)
                 exp.screenshot(path=str(args.out / "experimenter.png"), full_page=True)
                 browser.close()
