@@ -9,6 +9,7 @@ API; the gallery runs the scripts in ``examples/``.
 from __future__ import annotations
 
 import importlib
+import shutil
 import sys
 from pathlib import Path
 
@@ -90,7 +91,9 @@ API_PACKAGES = {
 
 def _write_api_pages() -> None:
     api = DOCS / "api"
-    api.mkdir(exist_ok=True)
+    # Stubs of names that left an __all__ would otherwise be read again (and fail to import).
+    shutil.rmtree(api, ignore_errors=True)
+    api.mkdir()
     toc = []
     for name, title in API_PACKAGES.items():
         module = importlib.import_module(name)
@@ -104,10 +107,7 @@ def _write_api_pages() -> None:
         lines = [title, "=" * len(title), "", f".. currentmodule:: {name}", "",
                  f".. automodule:: {name}", "   :no-members:", "", ".. autosummary::", *toctree,
                  "   :nosignatures:", ""] + [f"   {n}" for n in callables] + [""]
-        page = api / f"{name}.rst"
-        text = "\n".join(lines)
-        if not page.exists() or page.read_text(encoding="utf-8") != text:
-            page.write_text(text, encoding="utf-8")
+        (api / f"{name}.rst").write_text("\n".join(lines), encoding="utf-8")
         toc.append(f"   {name}")
     index = "\n".join(["API reference", "=============", "",
                        "Everything a subpackage exports in ``__all__``; the numpydoc docstrings state units and "
