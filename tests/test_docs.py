@@ -17,22 +17,8 @@ from vibrofocus._docs import docdict, fill_doc
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# Public callables whose docstrings are still being completed (they live in code under
-# active change); this list only shrinks.
-KNOWN_GAPS = {
-    "vibrofocus.rendering.inverse.predict_response",
-    "vibrofocus.studies.storage.SessionInfo",
-    "vibrofocus.studies.storage.CalibrationRecord",
-    "vibrofocus.studies.storage.ParticipantInfo",
-    "vibrofocus.studies.storage.Event",
-    "vibrofocus.studies.storage.file_sha256",
-    "vibrofocus.studies.engine.Presentation",
-    "vibrofocus.studies.engine.Response",
-    "vibrofocus.studies.engine.RunSummary",
-    "vibrofocus.studies.simulate.participant_seeds",
-    "vibrofocus.studies.simulate.summarize_simulation",
-    "vibrofocus.web.app.WebState",
-}
+# Public callables whose docstrings are still being completed; this set only shrinks.
+KNOWN_GAPS: set[str] = set()
 
 
 def _public_callables() -> dict[str, object]:

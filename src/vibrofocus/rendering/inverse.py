@@ -272,10 +272,19 @@ class InverseOperator:
 
 
 def predict_response(H: np.ndarray, drives: np.ndarray) -> np.ndarray:
-    """Response ``irfft(H @ rfft(drives))`` at every point, shape (n_points, n).
+    """Response ``irfft(H @ rfft(drives))`` at every point (circular, as the design sees it).
 
-    ``H`` complex (n // 2 + 1, n_points, n_actuators) and ``drives`` real
-    (n_actuators, n), both already validated.
+    Parameters
+    ----------
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+        Transfer matrix, m/V (already validated).
+    drives : ndarray, real, shape (n_actuators, n)
+        Drives, V (already validated).
+
+    Returns
+    -------
+    ndarray, shape (n_points, n)
+        Displacement, m.
     """
     n = drives.shape[1]
     spectra = np.fft.rfft(drives, axis=-1).T  # (F, n_act)

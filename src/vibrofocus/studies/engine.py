@@ -170,7 +170,21 @@ class Stimulus:
 
 @dataclass(frozen=True)
 class Presentation:
-    """A trial as it was presented: the stimulus and its onset (``time.monotonic()``, s)."""
+    """A trial as it was presented.
+
+    Attributes
+    ----------
+    session_id : int
+    study : int
+    trial : PlannedTrial
+        The planned trial.
+    stimulus : Stimulus
+        What was played.
+    onset_s : float
+        Stimulus onset, ``time.monotonic()``, s.
+    design : StudyDesign
+        The session's design.
+    """
 
     session_id: int
     study: int
@@ -182,7 +196,15 @@ class Presentation:
 
 @dataclass(frozen=True)
 class Response:
-    """An answer: ``locations`` (int, str like ``"4 5"`` or a sequence) and ``rt_s`` (s)."""
+    """An answer.
+
+    Attributes
+    ----------
+    locations : int, str or sequence of int
+        Selected location(s): an int, a string like ``"4 5"`` or a sequence.
+    rt_s : float
+        Reaction time from the stimulus onset, s.
+    """
 
     locations: Any
     rt_s: float
@@ -200,7 +222,18 @@ class Responder(Protocol):
 
 @dataclass(frozen=True)
 class RunSummary:
-    """Where a run left the session."""
+    """Where a run left the session.
+
+    Attributes
+    ----------
+    session_id : int
+    status : str
+        The session's state after the run.
+    n_answered, n_trials : int
+        Answered and planned trials of the session.
+    n_run : int
+        Trials answered during this run.
+    """
 
     session_id: int
     status: str

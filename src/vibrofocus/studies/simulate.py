@@ -29,6 +29,13 @@ ProgressFn = Callable[[str, int, int], None]
 def participant_seeds(seed: int, k: int) -> tuple[int, int, int]:
     """Seeds of simulated participant ``k`` (1-based) of a simulation seeded with ``seed``.
 
+    Parameters
+    ----------
+    seed : int
+        Seed of the simulation.
+    k : int
+        Participant number, 1-based.
+
     Returns
     -------
     (participant_seed, study1_seed, study2_seed) : tuple of int
@@ -201,6 +208,16 @@ def summarize_simulation(db: str | os.PathLike) -> list[dict[str, Any]]:
     (Study 2: to the centroid of the selected locations), on the reference layout's
     location coordinates stored in each participant's calibration layout (reference
     layout assumed when unavailable).
+
+    Parameters
+    ----------
+    db : path-like
+        Study database.
+
+    Returns
+    -------
+    list of dict
+        One per (study, method).
     """
     from ..layout import ArrayLayout
 

@@ -176,7 +176,29 @@ class AnswerReceipt:
 
 @dataclass(frozen=True)
 class SessionInfo:
-    """A session as stored, with its progress (``n_answered`` of ``n_trials``)."""
+    """A session as stored, with its progress (``n_answered`` of ``n_trials``).
+
+    Attributes
+    ----------
+    session_id : int
+    participant_id : str
+    study : int
+        1 or 2.
+    seed : int
+        Seed of the trial order.
+    status : str
+        The session's state (planned, running, paused, finished, aborted, ...).
+    calibration_id : int or None
+        The calibration the stimuli are rendered from.
+    config : dict
+        Design and run settings the session was planned with.
+    software_version : str
+        vibrofocus version that planned it.
+    created_at, updated_at : str
+        ISO 8601 times, UTC.
+    n_trials, n_answered : int
+        Planned and answered trials.
+    """
 
     session_id: int
     participant_id: str
@@ -204,7 +226,19 @@ class SessionInfo:
 
 @dataclass(frozen=True)
 class CalibrationRecord:
-    """A calibration file registered for a participant."""
+    """A calibration file registered for a participant.
+
+    Attributes
+    ----------
+    calibration_id : int
+    participant_id : str
+    path : str
+        The file.
+    sha256 : str
+        Hex SHA-256 of its bytes when registered (checked before use).
+    created_at : str
+        ISO 8601 time, UTC.
+    """
 
     calibration_id: int
     participant_id: str
@@ -215,7 +249,16 @@ class CalibrationRecord:
 
 @dataclass(frozen=True)
 class ParticipantInfo:
-    """A participant (``simulated``: answers come from the perceptual model)."""
+    """A participant.
+
+    Attributes
+    ----------
+    participant_id : str
+    simulated : bool
+        True when the answers come from the perceptual model (not a person).
+    created_at : str
+        ISO 8601 time, UTC.
+    """
 
     participant_id: str
     simulated: bool
@@ -224,7 +267,19 @@ class ParticipantInfo:
 
 @dataclass(frozen=True)
 class Event:
-    """One entry of a session's append-only event log."""
+    """One entry of a session's append-only event log.
+
+    Attributes
+    ----------
+    event_id : int
+    session_id : int
+    kind : str
+        What happened (``cue``, ``stimulus_onset``, ``answer``, ...).
+    payload : Any
+        Its details, as stored (JSON).
+    created_at : str
+        ISO 8601 time, UTC.
+    """
 
     event_id: int
     session_id: int
@@ -239,7 +294,17 @@ def _now() -> str:
 
 
 def file_sha256(path: str | os.PathLike) -> str:
-    """SHA-256 of a file's bytes, hex."""
+    """SHA-256 of a file's bytes.
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    str
+        Hex digest.
+    """
     digest = hashlib.sha256()
     with open(path, "rb") as fh:
         for block in iter(lambda: fh.read(1 << 20), b""):

@@ -114,6 +114,36 @@ class WebState:
         The study database. SQLite connections are not shared between threads safely,
         so every use goes through ``db`` (a lock): request handlers run in a thread pool
         and each running session has its own thread.
+    db_path : Path
+        The database file (calibrations, exports and reports go beside it).
+    token : str
+        The experimenter token.
+    secret : bytes
+        Server secret from which the cookie value is derived.
+    rig_kind : str
+        The rig the server was started for (``simulated``, ``audio``, ``nidaq``).
+    pace : Pace
+        Timing of the participant page.
+    rig_factory : callable, optional
+        Builds a rig (tests pass their own).
+    rig_config : path or RigConfig, optional
+        Hardware rig settings given to ``serve``.
+    db, lock : threading.RLock
+        Guard the database and the shared dictionaries below.
+    runners : dict
+        Session id to its running :class:`SessionRunner`.
+    calibrations, banks : dict
+        Loaded calibrations and rendered stimuli, by calibration id.
+    jobs : dict
+        Calibration jobs in progress, by job id.
+    rigs : dict
+        Open rigs by (kind, seed).
+    planned : dict
+        Planned trials by session id.
+    analyses : dict
+        Analyses run from the page, by id (one at a time).
+    login_codes : dict
+        One-time login codes and their expiry (``time.monotonic()``, s).
     """
 
     store: Any
