@@ -87,13 +87,10 @@ def demo_command(
         rig.layout.location_index(location)
         if design_from == "calibration" or figures:
             # Before the calibration starts: a read-only or full output folder is found now.
-            from .._atomic import check_writable, output_error
+            from .._atomic import check_writable
             from ..calibration.io import estimate_calibration_bytes
 
-            try:
-                out.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise output_error(exc, out, "output folder") from exc
+            _make_output_folder(out)
             expected = estimate_calibration_bytes(rig.layout.n_points, rig.layout.n_actuators, 8,
                                                   int(3.0 * rig.fs), 4096) if design_from == "calibration" else 0
             check_writable(out / "calibration.nc", what="calibration", expected_bytes=expected)
@@ -195,14 +192,20 @@ def demo_command(
             console.print(f"wrote {path}")
 
 
-def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int) -> None:
+def _make_output_folder(out: Path) -> None:
+    """Create ``out`` (and parents); a folder that cannot be made is one clear error."""
     from .._atomic import output_error
-    from ..demo.paper_figures import write_paper_figures
 
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise output_error(exc, out, "output folder") from exc
+
+
+def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int) -> None:
+    from ..demo.paper_figures import write_paper_figures
+
+    _make_output_folder(out)
     with Progress(TextColumn("[progress.description]{task.description}"), TimeElapsedColumn(), console=err_console,
                   transient=True) as progress:
         task = progress.add_task("starting", total=None)
@@ -216,15 +219,11 @@ def _write_paper_figures(out: Path, *, seed: int, participants: int, location: i
 
 def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool) -> None:
     """``demo --moving``: a moving focus rendered from the skin model fitted to a calibration."""
-    from .._atomic import output_error
     from ..calibration import calibrate, fit_model
     from ..demo.moving import moving_focus, write_moving_gif
     from ..skin import SimulatedForearm
 
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise output_error(exc, out, "output folder") from exc
+    _make_output_folder(out)
     rig = SimulatedForearm(seed=seed)
     cal = calibrate(rig, participant_id=f"simulated-{seed}")
     fitted = fit_model(cal)

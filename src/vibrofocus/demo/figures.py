@@ -105,6 +105,29 @@ def propagation_figure(rig, path: Path, *, actuator: int | None = None,
     return path
 
 
+def fields_around_the_tap(result: DemoResult, location: int, methods, offsets_ms, half_width_m: float,
+                          n_grid: int) -> tuple[list[str], list[np.ndarray], float]:
+    """The skin field of each method at ``offsets_ms`` after its design's ``t0``.
+
+    Returns the methods rendered at ``location`` (in the given order), their fields, each
+    ndarray of shape (n_grid * n_grid, n_offsets) in m on a square grid of half-width
+    ``half_width_m``, and the largest recorded displacement at the target, m.
+    """
+    axis = np.linspace(-half_width_m, half_width_m, n_grid)
+    gx, gy = np.meshgrid(axis, axis)
+    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    offsets = np.asarray(offsets_ms, dtype=float) * 1e-3
+    methods = [m for m in methods if (location, m) in result.renderings]
+    fields, target_peak = [], 0.0
+    for method in methods:
+        rendering = result.renderings[(location, method)]
+        rec = result.recordings[(location, method)][rendering.target_index]
+        target_peak = max(target_peak, float(np.nanmax(np.abs(rec))))
+        fields.append(result.rig.field(rendering.drives, grid, times=np.clip(rendering.t0 + offsets, 0, None),
+                                       rtol=1e-5))
+    return methods, fields, target_peak
+
+
 def field_figure(result: DemoResult, path: Path, *, location: int = 5,
                  methods: tuple[str, ...] = ("funneling", "inverse"),
                  offsets_ms: tuple[float, ...] = (-3.0, 0.0, 3.0, 6.0, 9.0),
@@ -119,17 +142,8 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
     plt = _pyplot()
     rig = result.rig
     layout = rig.layout
-    methods = tuple(m for m in methods if (location, m) in result.renderings)
-    axis = np.linspace(-half_width_m, half_width_m, n_grid)
-    gx, gy = np.meshgrid(axis, axis)
-    grid = np.column_stack([gx.ravel(), gy.ravel()])
+    methods, fields, target_peak = fields_around_the_tap(result, location, methods, offsets_ms, half_width_m, n_grid)
     offsets = np.asarray(offsets_ms, dtype=float) * 1e-3
-    fields, target_peak = [], 0.0
-    for method in methods:
-        rendering = result.renderings[(location, method)]
-        rec = result.recordings[(location, method)][rendering.target_index]
-        target_peak = max(target_peak, float(np.nanmax(np.abs(rec))))
-        fields.append(rig.field(rendering.drives, grid, times=np.clip(rendering.t0 + offsets, 0, None), rtol=1e-5))
     scale = 1.2 * target_peak * 1e6
     fig, axes = plt.subplots(len(methods), len(offsets_ms), figsize=(2.6 * len(offsets_ms) + 1.0, 2.6 * len(methods)),
                              squeeze=False, sharex=True, sharey=True)

@@ -22,7 +22,7 @@ from .._atomic import save_figure
 from .._style import method_colors
 from ..defaults import BAND_HZ, N_SAMPLES, SIGMA_S, TARGET_PEAK_M
 from ..signals.ricker import ricker
-from .figures import _pyplot, _reachable_upper_hz
+from .figures import _pyplot, _reachable_upper_hz, fields_around_the_tap
 from .run import DemoResult, record_clean
 
 __all__ = ["PAPER", "fig4_focusing_along_a_line", "fig5_focus_at_a_location", "fig6_localization", "fig7_counts",
@@ -130,18 +130,9 @@ def fig5_focus_at_a_location(result: DemoResult, path: Path, *, location: int = 
     plt = _pyplot()
     rig = result.rig
     layout = rig.layout
-    methods = [m for m in methods if (location, m) in result.renderings]
+    methods, fields, peak = fields_around_the_tap(result, location, methods, offsets_ms, half_width_m, n_grid)
     colors = method_colors(methods)
-    axis = np.linspace(-half_width_m, half_width_m, n_grid)
-    gx, gy = np.meshgrid(axis, axis)
-    grid = np.column_stack([gx.ravel(), gy.ravel()])
     offsets = np.asarray(offsets_ms, dtype=float) * 1e-3
-    fields, peak = [], 0.0
-    for method in methods:
-        rendering = result.renderings[(location, method)]
-        rec = result.recordings[(location, method)]
-        peak = max(peak, float(np.nanmax(np.abs(rec[rendering.target_index]))))
-        fields.append(rig.field(rendering.drives, grid, times=np.clip(rendering.t0 + offsets, 0, None), rtol=1e-5))
     scale = 1.2 * peak * 1e6
     n_cols = len(offsets)
     fig = plt.figure(figsize=(2.3 * n_cols + 1.2, 2.3 * len(methods) + 3.0))
