@@ -371,7 +371,10 @@ def _energy_db(target: float, others: np.ndarray) -> float:
     return float("inf") if total == 0 else float(10 * np.log10(target / total))
 
 
-def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, taper_octaves, reg_param):
+def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, target_peak, taper_octaves,
+            reg_param):
+    """Validate, then the ACC eigenpairs over the band; ``waveform=None`` asks for
+    ``target_peak`` times the Ricker centred at ``t0`` (default mid-window)."""
     H = as_transfer(H)
     fs = check_positive(fs, "fs")
     n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
@@ -382,6 +385,8 @@ def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, wavefo
     reg_param = check_positive(reg_param, "reg_param", allow_zero=True)
     Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, check_positive(sigma, "sigma"), t0, band, taper_octaves, waveform)
+    if waveform is None:
+        U = check_positive(target_peak, "target_peak") * U
     active = slice(int(np.flatnonzero(taper > 0)[0]), int(np.flatnonzero(taper > 0)[-1]) + 1)
     h = H[active, target_index, :]
     if np.any(np.all(h == 0, axis=1) & (np.abs(U[active]) > 0)):
@@ -472,13 +477,8 @@ def contrast_drives(
     ndarray, real, shape (n_actuators, n)
         Drives, V, unscaled (the rendering layer applies the drive limit).
     """
-    if waveform is None:
-        n = 2 * (as_transfer(H).shape[0] - 1)
-        fs_ = check_positive(fs, "fs")
-        waveform = check_positive(target_peak, "target_peak") * ricker(fs_, check_positive(sigma, "sigma"), n / fs_,
-                                                                        n / fs_ / 2 if t0 is None else t0)
     H, n, U, active, lam, w, _ = _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform,
-                                         taper_octaves, reg_param)
+                                         target_peak, taper_octaves, reg_param)
     with np.errstate(divide="ignore", invalid="ignore"):
         gain = np.where(lam > 0, U[active] / np.where(lam > 0, lam, 1.0), 0.0)
     return _to_drives(w * gain[:, None], active, H.shape[0], n)
@@ -560,13 +560,8 @@ def constrained_drives(
             raise ValidationError(f"min_contrast_db must be a number of dB, got {min_contrast_db!r}") from exc
         if not np.isfinite(min_contrast_db):
             raise ValidationError(f"min_contrast_db must be finite, got {min_contrast_db!r}")
-    if waveform is None:
-        n = 2 * (as_transfer(H).shape[0] - 1)
-        fs_ = check_positive(fs, "fs")
-        waveform = check_positive(target_peak, "target_peak") * ricker(fs_, check_positive(sigma, "sigma"), n / fs_,
-                                                                        n / fs_ / 2 if t0 is None else t0)
     H, n, U, active, lam, w, G = _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform,
-                                         taper_octaves, reg_param)
+                                         target_peak, taper_octaves, reg_param)
     Ua = U[active]
     weight = _parseval_weights(n)[active] * np.abs(Ua) ** 2  # target energy per bin of the exact tap
     ok = lam > 0
