@@ -290,6 +290,23 @@ def _commit(tmp: str, path: Path, what: str) -> None:
 
 # ---------------------------------------------------------------------- files
 @contextlib.contextmanager
+def _replacing(tmp: str, path: Path, what: str) -> Iterator[None]:
+    """Around the body that writes and fsyncs ``tmp``: an ``OSError`` becomes an
+    :class:`OutputError`; success renames ``tmp`` over ``path``; any failure (Ctrl-C
+    included) removes ``tmp`` and leaves ``path`` as it was."""
+    try:
+        try:
+            yield
+        except OSError as exc:
+            raise output_error(exc, path, what) from exc
+        _commit(tmp, path, what)
+    except BaseException:
+        with critical_section():
+            _unlink_quietly(tmp)
+        raise
+
+
+@contextlib.contextmanager
 def atomic_path(path: str | os.PathLike, *, what: str = "file") -> Iterator[Path]:
     """Yield a temporary path beside ``path``; on success it replaces ``path`` atomically.
 
@@ -314,22 +331,14 @@ def atomic_path(path: str | os.PathLike, *, what: str = "file") -> Iterator[Path
     _check_folder(path, what)
     fd, tmp = _mkstemp(path, what)
     os.close(fd)
-    try:
+    with _replacing(tmp, path, what):
+        yield Path(tmp)
+        fd = os.open(tmp, os.O_RDWR)
         try:
-            yield Path(tmp)
-            fd = os.open(tmp, os.O_RDWR)
-            try:
-                os.fchmod(fd, new_file_mode(path))
-                os.fsync(fd)
-            finally:
-                os.close(fd)
-        except OSError as exc:
-            raise output_error(exc, path, what) from exc
-        _commit(tmp, path, what)
-    except BaseException:
-        with critical_section():
-            _unlink_quietly(tmp)
-        raise
+            os.fchmod(fd, new_file_mode(path))
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
 
 @contextlib.contextmanager
@@ -369,24 +378,16 @@ def atomic_write(
     path = Path(path)
     _check_folder(path, what)
     fd, tmp = _mkstemp(path, what)
-    try:
-        try:
-            if mode == "wb":
-                fh = _open_fd(fd, "wb")
-            else:
-                fh = _open_fd(fd, "w", encoding=encoding, newline=newline)
-            with fh:
-                yield fh
-                fh.flush()
-                os.fchmod(fh.fileno(), new_file_mode(path))
-                os.fsync(fh.fileno())
-        except OSError as exc:
-            raise output_error(exc, path, what) from exc
-        _commit(tmp, path, what)
-    except BaseException:
-        with critical_section():
-            _unlink_quietly(tmp)
-        raise
+    with _replacing(tmp, path, what):
+        if mode == "wb":
+            fh = _open_fd(fd, "wb")
+        else:
+            fh = _open_fd(fd, "w", encoding=encoding, newline=newline)
+        with fh:
+            yield fh
+            fh.flush()
+            os.fchmod(fh.fileno(), new_file_mode(path))
+            os.fsync(fh.fileno())
 
 
 def write_bytes(path: str | os.PathLike, data: bytes, *, what: str = "file") -> Path:
