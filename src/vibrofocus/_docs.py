@@ -24,11 +24,13 @@ docdict: dict[str, str] = {
     "taper_octaves": """taper_octaves : float
     Width of the raised-cosine roll-off beyond each band edge, octaves (0: a brick
     wall). The default 0.5 keeps the band's edges smooth in time.""",
-    "sweep_f_start": """f_start : float
-    Start frequency, Hz (> 0).""",
-    "sweep_f_stop": """f_stop : float
-    Stop frequency, Hz (> f_start, at most fs / 2).""",
-    "sweep_duration": """duration : float
+    "sweep": """fs : float
+    Sample rate, Hz.
+f_start : float
+    Start frequency, Hz (> 0).
+f_stop : float
+    Stop frequency, Hz (> f_start, at most fs / 2).
+duration : float
     Length of the sweep, s.""",
     "sweep_fade_s": """fade_s : float
     Length of the raised-cosine fade-in and fade-out, s (0: none).""",

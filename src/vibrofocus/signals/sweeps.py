@@ -64,10 +64,7 @@ def linear_sweep(
 
     Parameters
     ----------
-    %(fs)s
-    %(sweep_f_start)s
-    %(sweep_f_stop)s
-    %(sweep_duration)s
+    %(sweep)s
     amplitude : float
         Peak value.
     %(sweep_fade_s)s
@@ -99,10 +96,7 @@ def exponential_sweep(
 
     Parameters
     ----------
-    %(fs)s
-    %(sweep_f_start)s
-    %(sweep_f_stop)s
-    %(sweep_duration)s
+    %(sweep)s
     amplitude : float
         Peak value.
     %(sweep_fade_s)s
@@ -130,10 +124,7 @@ def exponential_sweep_inverse(
 
     Parameters
     ----------
-    %(fs)s
-    %(sweep_f_start)s
-    %(sweep_f_stop)s
-    %(sweep_duration)s
+    %(sweep)s
     %(sweep_fade_s)s
 
     Returns
