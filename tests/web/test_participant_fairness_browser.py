@@ -104,13 +104,14 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
         freeze = {"on": False}
 
         def states(route):
-            # Once frozen, the second screen hears of no state but "respond" (its
+            # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
             # connection drops whenever there is news), so it still offers trial 0.
             try:
                 reply = route.fetch()
             except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
                 return
-            if freeze["on"] and reply.json().get("state") != "respond":
+            news = reply.json()
+            if freeze["on"] and (news.get("state"), news.get("trial_index")) != ("respond", 0):
                 route.abort()
             else:
                 route.fulfill(response=reply)

@@ -115,6 +115,44 @@ def test_no_stimulus_once_the_page_that_was_cued_has_gone(store):
     runner.stop()
 
 
+def test_with_two_screens_the_stimulus_waits_for_the_one_catching_up(store):
+    # One screen shows the cue; the other's request still carries an older state. The
+    # stimulus waits (within the grace period) until both show the cue, so neither misses
+    # the onset and asks for the trial again while the participant answers on the other.
+    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
+    rig = CountingRig()
+    runner = SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+    token_a = runner.page_attach(-1)
+    token_b = runner.page_attach(-1)
+    runner.start()
+    wait_for(lambda: runner.snapshot()["state"] == "cue")
+    cue_seq = runner.snapshot()["seq"]
+    runner.page_detach(token_a)
+    runner.page_attach(cue_seq)  # screen A shows the cue; screen B is behind
+    time.sleep(0.25)  # past the cue-to-stimulus time, within the grace period
+    assert rig.played == [], "played while a connected screen had not shown the cue"
+    runner.page_detach(token_b)
+    runner.page_attach(cue_seq)
+    wait_for(lambda: runner.snapshot()["state"] == "respond", timeout=1.0)
+    assert len(rig.played) == 1
+    runner.stop()
+
+
+def test_a_screen_that_never_catches_up_does_not_hold_the_study(store):
+    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
+    rig = CountingRig()
+    runner = SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+    token_a = runner.page_attach(-1)
+    runner.page_attach(-1)  # screen B's request hangs on an old state
+    runner.start()
+    wait_for(lambda: runner.snapshot()["state"] == "cue")
+    runner.page_detach(token_a)
+    runner.page_attach(runner.snapshot()["seq"])
+    wait_for(lambda: runner.snapshot()["state"] == "respond", timeout=3.0)
+    assert len(rig.played) == 1 and store.events(sid, kind="cue_cancelled") == []
+    runner.stop()
+
+
 def test_serve_prints_token_and_warns_off_localhost(tmp_path):
     port = free_port()
     env = dict(os.environ, VIBROFOCUS_TOKEN="t" * 24)

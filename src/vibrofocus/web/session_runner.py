@@ -207,19 +207,31 @@ class SessionRunner:
         # Strict: an open request now, no grace period (a closed page must not get a cue).
         return not self.require_page or bool(self._polls)
 
-    def _page_showing(self, seq: int) -> bool:
-        return not self.require_page or any(seen == seq for seen in self._polls.values())
+    def _pages_showing(self, seq: int) -> tuple[bool, bool]:
+        """(some connected page shows ``seq``, every connected page shows it)."""
+        if not self.require_page:
+            return True, True
+        seen = list(self._polls.values())
+        return any(s == seq for s in seen), bool(seen) and all(s == seq for s in seen)
 
     def _wait_showing(self, seq: int, seconds: float) -> bool:
-        """Wait up to ``seconds`` for a page showing state ``seq``; False on stop or pause too."""
+        """Wait up to ``seconds`` for the connected pages to show state ``seq``.
+
+        True as soon as every connected page shows it; at the deadline, True if at least
+        one does. Waiting for all of them matters with two screens: a page still catching
+        up would otherwise miss the cue, ask for the trial again, and take the trial away
+        from the screen the participant is answering on. False on stop or pause.
+        """
         deadline = time.monotonic() + seconds
         with self._cond:
-            while not self._page_showing(seq):
-                left = deadline - time.monotonic()
-                if left <= 0 or self._stopping or self._paused:
+            while True:
+                if self._stopping or self._paused:
                     return False
+                some, every = self._pages_showing(seq)
+                left = deadline - time.monotonic()
+                if every or left <= 0:
+                    return some
                 self._cond.wait(left)
-            return not (self._stopping or self._paused)
 
     def drive_sha_for(self, trial_index: int) -> str | None:
         """Hash of the drive played for ``trial_index`` in this run, if one was played."""
