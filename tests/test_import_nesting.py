@@ -12,8 +12,12 @@ import pytest
 # Subpackage -> the vibrofocus subpackages it must NOT load when imported.
 UPPER = {"rendering", "skin", "calibration", "rigs", "studies", "analysis", "demo", "web", "cli"}
 FORBIDDEN = {
-    "layout": UPPER | {"signals"},
-    "signals": UPPER,
+    "layout": UPPER | {"signals", "io"},
+    # The file formats sit just above layout: every layer may read and write files.
+    "io": UPPER | {"signals"},
+    **{f"io.{m}": UPPER | {"signals"}
+       for m in ("calibration_nc", "drives", "trials_csv", "responses", "report_json", "jsonsafe")},
+    "signals": UPPER | {"io"},
     "rendering": UPPER - {"rendering"},
     "rigs": UPPER - {"rigs"},
     "skin": {"calibration", "studies", "analysis", "demo", "web", "cli"},

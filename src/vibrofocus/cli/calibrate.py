@@ -51,7 +51,7 @@ def calibrate_command(
 
         from .._atomic import check_writable
         from ..calibration import calibrate, plan_calibration, save_calibration
-        from ..calibration.io import estimate_calibration_bytes
+        from ..io.calibration_nc import estimate_calibration_bytes
         from ..defaults import participant_seed
         from ..errors import ValidationError
         from ..rigs import make_rig

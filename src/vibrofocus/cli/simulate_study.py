@@ -37,7 +37,7 @@ def simulate_study(
         from ..studies.simulate import simulate_studies, summarize_simulation
 
         from .._atomic import check_writable, output_error
-        from ..calibration.io import estimate_calibration_bytes
+        from ..io.calibration_nc import estimate_calibration_bytes
         from ..layout import ArrayLayout
 
         if trials_csv is not None and not trials_csv.parent.is_dir():
