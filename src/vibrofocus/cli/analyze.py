@@ -9,7 +9,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 console = Console()
 
@@ -21,7 +21,7 @@ def _p(p: float) -> str:
     return format_p(p).removeprefix("p = ").removeprefix("p ")
 
 
-@app.command(
+@command(
     "analyze",
     epilog=(
         "Example: vibrofocus analyze trials.csv --out report/  "

@@ -12,7 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 console = Console()
 err_console = Console(stderr=True)
@@ -22,7 +22,7 @@ def _fmt(value: float, digits: int = 2) -> str:
     return "—" if value != value else f"{value:.{digits}f}"  # NaN -> dash
 
 
-@app.command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
+@command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
 def demo_command(
     seed: int = typer.Option(0, "--seed", help="Simulated participant (forearm) seed."),
     out: Path = typer.Option(Path("demo-output"), "--out", "-o", help="Folder for the figures (created)."),

@@ -8,10 +8,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-@app.command("play")
+@command("play")
 def play(
     drives_file: Path = typer.Argument(..., help="An .npz with arrays drives (n_actuators, n) V and fs (Hz)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),

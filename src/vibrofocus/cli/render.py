@@ -7,10 +7,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-@app.command("render", epilog="Example: vibrofocus render --calibration P01.nc --method inverse --location 5 "
+@command("render", epilog="Example: vibrofocus render --calibration P01.nc --method inverse --location 5 "
                                "--out drives.npz --wav drives.wav")
 def render_command(
     calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration file (.nc)."),
