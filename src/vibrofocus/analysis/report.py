@@ -17,7 +17,7 @@ from ..io.report_json import FRIEDMAN_FACTORS, FRIEDMAN_KEYS, REPORT_JSON, write
 from .pipeline import AnalysisResult, Study2Counts
 from .sentences import format_p, results_sentences
 
-__all__ = ["report_dict", "results_sentences", "format_p", "write_report"]
+__all__ = ["report_dict", "results_sentences", "format_p", "write_report", "report_trials_file"]
 
 
 # --------------------------------------------------------------------------- report.json
@@ -210,3 +210,52 @@ def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str
         write_text(build / "report.html", render_html(result, figures, simulated_notice=report["simulated"]["notice"]),
                    what="report")
     return {"json": out / REPORT_JSON, "html": out / "report.html", **{k: out / p.name for k, p in figures.items()}}
+
+
+def report_trials_file(
+    trials: str | os.PathLike,
+    out_dir: str | os.PathLike,
+    *,
+    on_invalid: str = "raise",
+    keep_aborted: bool = False,
+    keep_dry_runs: bool = False,
+    alpha: float = 0.05,
+) -> tuple[AnalysisResult, dict[str, Path]]:
+    """Analyse a trials file and write its report folder: what ``vibrofocus analyze`` and the web app do.
+
+    Parameters
+    ----------
+    trials : path-like
+        A trials CSV (docs/file-formats.md, trials file).
+    out_dir : path-like
+        Report folder, created if needed (see :func:`write_report`).
+    on_invalid : {"raise", "exclude"}
+        Rows that break the contract refuse the file, or exclude their participants
+        (see :func:`~vibrofocus.analysis.load_trials`).
+    keep_aborted, keep_dry_runs : bool
+        Analyse aborted sessions and dry runs of a study database's export too.
+    alpha : float
+        Significance level of the results sentences, in (0, 1).
+
+    Returns
+    -------
+    result : AnalysisResult
+        What :func:`~vibrofocus.analysis.analyze` found.
+    paths : dict of str to Path
+        What :func:`write_report` wrote.
+
+    Raises
+    ------
+    ValidationError
+        An unreadable or invalid trials file, or ``alpha`` outside (0, 1).
+    OutputError
+        The folder cannot be written; a previous report there is unchanged.
+    """
+    from .._validation import check_in_range
+    from .pipeline import analyze
+    from .trials import load_trials
+
+    check_in_range(alpha, "alpha", 0.0, 1.0, inclusive=False)
+    data = load_trials(trials, on_invalid=on_invalid, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    result = analyze(data, alpha=alpha)
+    return result, write_report(result, out_dir)
