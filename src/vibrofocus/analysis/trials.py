@@ -17,7 +17,7 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
-from .._validation import check_choice
+from .._validation import check_choice, integer_text
 from ..errors import ValidationError
 from ..io.responses import parse_response_text
 from ..io.trials_csv import TRIALS_COLUMNS, read_trials_table
@@ -62,17 +62,6 @@ def method_order(methods: Iterable[str]) -> list[str]:
     methods = set(methods)
     known = [m for m in KNOWN_METHODS if m in methods]
     return known + sorted(methods - set(known))
-
-
-def _parse_int(text: str) -> int | None:
-    """Return ``text`` as int if it is an integer (``"3"``, ``"3.0"``), else None."""
-    try:
-        value = float(text)
-    except ValueError:
-        return None
-    if not np.isfinite(value) or value != int(value):
-        return None
-    return int(value)
 
 
 def _parse_selection(text: str, n_locations: int) -> tuple[tuple[int, ...] | None, str | None]:
@@ -403,7 +392,7 @@ def _drop_sessions(raw: pd.DataFrame, *, keep_aborted: bool, keep_dry_runs: bool
             ["it was a dry run (no calibration: nothing was played)"] if dry_out[rows.index].any() else [])
         exclusions.append({
             "participant": str(participant),
-            "study": _parse_int(str(study)),
+            "study": integer_text(str(study)),
             "reason": f"session {session} left out because {' and '.join(whys)} ({len(rows)} answered trials)",
         })
     return raw[~drop].reset_index(drop=True), exclusions

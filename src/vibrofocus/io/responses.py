@@ -8,9 +8,9 @@ checked by :func:`vibrofocus.studies.parse_response` before they are stored.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 
+from .._validation import integer_text
 from ..errors import ValidationError
 
 __all__ = ["format_response", "parse_response_text"]
@@ -29,17 +29,6 @@ def format_response(locations: Iterable[int]) -> str:
     str
     """
     return " ".join(str(int(x)) for x in sorted(locations))
-
-
-def _location(token: str) -> int | None:
-    """``token`` as an int if it is an integer (``"3"``, ``"3.0"``), else None."""
-    try:
-        value = float(token)
-    except ValueError:
-        return None
-    if not math.isfinite(value) or value != int(value):
-        return None
-    return int(value)
 
 
 def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[int, ...]:
@@ -68,7 +57,7 @@ def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[i
         raise ValidationError("response is empty: no location was chosen")
     numbers = []
     for token in tokens:
-        value = _location(token)
+        value = integer_text(token)
         if value is None:
             raise ValidationError(f"response {text!r} is not a list of location numbers separated by spaces")
         if n_locations is not None and not 1 <= value <= n_locations:
