@@ -177,3 +177,25 @@ def test_a_report_breaking_the_contract_is_refused_naming_the_key(tmp_path, brea
     (tmp_path / "old.json").write_text(json.dumps(json_safe(report)))
     with pytest.raises(ValidationError, match="old.json breaks the report.json contract"):
         read_report_json(tmp_path / "old.json")
+
+
+# --------------------------------------------------------------------------- feature bank
+def test_feature_bank_round_trips_and_the_shipped_one_loads(tmp_path):
+    from vibrofocus.io import load_feature_bank, save_feature_bank
+    from vibrofocus.studies.bank import FeatureBank, default_bank
+
+    rng = np.random.default_rng(1)
+    bank = FeatureBank(energy=rng.random((2, 3, 9, 5)), points_xy=rng.random((5, 2)), locations_xy=rng.random((9, 2)),
+                       centre_xy=np.array([0.0, 0.01]), methods=("funneling", "inverse", "combination"),
+                       forearm_seeds=np.array([11, 12]), seed=4)
+    save_feature_bank(bank, tmp_path / "b.npz", model_version="test")
+    back = load_feature_bank(tmp_path / "b.npz")
+    np.testing.assert_allclose(back.energy, bank.energy, rtol=1e-6)  # stored as float32
+    np.testing.assert_array_equal(back.points_xy, bank.points_xy)
+    assert back.methods == bank.methods and back.seed == 4 and list(back.forearm_seeds) == [11, 12]
+    with np.load(tmp_path / "b.npz") as z:
+        assert str(z["model_version"]) == "test"
+    with pytest.raises(ValidationError, match="cannot read the feature bank"):
+        load_feature_bank(tmp_path / "none.npz")
+    shipped = default_bank()
+    assert shipped.energy.ndim == 4 and shipped.n_forearms >= 1

@@ -12,6 +12,9 @@
     A stored response (``"4 5"``): :func:`format_response`, :func:`parse_response_text`.
 :mod:`.report_json`
     report.json: :func:`write_report_json`, :func:`read_report_json`, :func:`check_report`.
+:mod:`.feature_bank`
+    Feature banks of simulated forearms (``.npz``): :func:`save_feature_bank`,
+    :func:`load_feature_bank`.
 :mod:`.jsonsafe`
     The one JSON sanitizer, :func:`json_safe`.
 
@@ -22,6 +25,7 @@ so every layer can use it.
 
 from .calibration_nc import load_calibration, save_calibration
 from .drives import read_drives, write_drives, write_drives_wav
+from .feature_bank import load_feature_bank, save_feature_bank
 from .jsonsafe import json_safe
 from .report_json import check_report, read_report_json, write_report_json
 from .responses import format_response, parse_response_text
@@ -42,5 +46,7 @@ __all__ = [
     "check_report",
     "write_report_json",
     "read_report_json",
+    "save_feature_bank",
+    "load_feature_bank",
     "json_safe",
 ]
