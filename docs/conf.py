@@ -77,6 +77,7 @@ sphinx_gallery_conf = {
 API_PACKAGES = {
     "vibrofocus": "Top level",
     "vibrofocus.layout": "Array layouts",
+    "vibrofocus.io": "File formats",
     "vibrofocus.signals": "Signals",
     "vibrofocus.rendering": "Rendering",
     "vibrofocus.skin": "Simulated forearm",

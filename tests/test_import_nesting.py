@@ -12,8 +12,12 @@ import pytest
 # Subpackage -> the vibrofocus subpackages it must NOT load when imported.
 UPPER = {"rendering", "skin", "calibration", "rigs", "studies", "analysis", "demo", "web", "cli"}
 FORBIDDEN = {
-    "layout": UPPER | {"signals"},
-    "signals": UPPER,
+    "layout": UPPER | {"signals", "io"},
+    # The file formats sit just above layout: every layer may read and write files.
+    "io": UPPER | {"signals"},
+    **{f"io.{m}": UPPER | {"signals"}
+       for m in ("calibration_nc", "drives", "trials_csv", "responses", "report_json", "jsonsafe", "feature_bank")},
+    "signals": UPPER | {"io"},
     "rendering": UPPER - {"rendering"},
     "rigs": UPPER - {"rigs"},
     "skin": {"calibration", "studies", "analysis", "demo", "web", "cli"},
@@ -44,3 +48,21 @@ def test_a_subpackage_does_not_load_the_layers_above_it(name):
 def test_importing_the_package_loads_almost_nothing():
     # The public API is lazy (PEP 562): `import vibrofocus` loads only the error classes.
     assert _loaded("errors") <= {"errors"}
+
+
+def test_the_web_app_does_not_shell_out_to_the_cli():
+    # The analysis runs in-process (vibrofocus.analysis.report_trials_file on a worker
+    # thread), never as `python -m vibrofocus ...` in a child process.
+    import ast
+    from pathlib import Path
+
+    import vibrofocus.web
+
+    for path in sorted(Path(vibrofocus.web.__file__).parent.glob("*.py")):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        imported = {alias.name.split(".")[0] for node in ast.walk(tree) if isinstance(node, (ast.Import, ast.ImportFrom))
+                    for alias in node.names} | {node.module.split(".")[0] for node in ast.walk(tree)
+                                                if isinstance(node, ast.ImportFrom) and node.module and node.level == 0}
+        assert not imported & {"subprocess", "multiprocessing"}, f"{path.name} starts processes"
+        assert "sys.executable" not in ast.unparse(tree), f"{path.name} runs a Python interpreter"
+    assert "cli" not in _loaded("web")

@@ -22,6 +22,7 @@ __all__ = [
     "check_choice",
     "check_band",
     "check_index",
+    "integer_text",
 ]
 
 
@@ -154,3 +155,18 @@ def check_index(index: Any, name: str, n: int, *, what: str = "items") -> int:
     if not 0 <= int(index) < n:
         raise ValidationError(f"{name}={index} is outside the {n} {what} (valid: 0..{n - 1})")
     return int(index)
+
+
+def integer_text(text: str) -> int | None:
+    """``text`` as an int if it writes an integer (``"3"``, ``"3.0"``, ``" 3 "``), else None.
+
+    For values read from text files (a trials file's study or a response's locations),
+    where a bad value is reported with its line rather than raised at once.
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        return None
+    if not np.isfinite(value) or value != int(value):
+        return None
+    return int(value)

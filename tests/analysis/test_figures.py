@@ -13,7 +13,7 @@ from vibrofocus._style import METHOD_COLORS
 from vibrofocus.analysis import load_trials, localization_summary
 from vibrofocus.analysis.figures import method_colors, plot_counts, plot_localization
 from vibrofocus.analysis.study2 import study2_counts
-from vibrofocus.analysis.report import _table
+from vibrofocus.analysis.report_html import _table
 
 from .synthetic import make_trials
 

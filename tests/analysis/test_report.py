@@ -289,3 +289,19 @@ def test_simulated_participants_are_flagged_in_json_and_html(tmp_path, synthetic
     assert report["simulated"] == {"any": False, "participants": [], "model": None, "model_version": None,
                                    "notice": None}
     assert "simulated-banner" not in paths["html"].read_text()
+
+
+def test_html_shows_ids_and_method_names_as_text_never_as_markup(tmp_path, synthetic):
+    # A participant id and a method name from the trials file are data: the page must show
+    # them escaped, in the tables, the sentences and the simulated-data banner alike.
+    df = synthetic(6, seed=4).astype(str)
+    evil_id, evil_method = "<script>alert('id')</script>", "<img src=x onerror=alert(1)>"
+    df.loc[df["participant"] == "P01", "participant"] = evil_id
+    df.loc[df["method"] == "combination", "method"] = evil_method
+    df["simulated"] = np.where(df["participant"] == evil_id, "1", "0")
+    paths = write_report(analyze(load_trials(df)), tmp_path / "r")
+    page = paths["html"].read_text(encoding="utf-8")
+    assert "<script" not in page and "<img src=x" not in page
+    assert "&lt;script&gt;alert(" in page and "&lt;img src=x onerror=alert(1)&gt;" in page
+    report = json.loads(paths["json"].read_text(encoding="utf-8"))
+    assert evil_id in report["simulated"]["participants"] and evil_method in report["study1"]["methods"]

@@ -16,7 +16,7 @@ Each step is also available on its own (:func:`study1_errors`, :func:`study1_ano
 
 from .figures import method_colors, plot_counts, plot_errors, plot_localization, save_figure
 from .pipeline import AnalysisResult, Study1Result, Study2Counts, Study2Result, analyze
-from .report import format_p, report_dict, results_sentences, write_report
+from .report import format_p, report_dict, report_trials_file, results_sentences, write_report
 from .study1 import (
     localization_summary,
     perceived_positions,
@@ -53,6 +53,7 @@ __all__ = [
     "results_sentences",
     "format_p",
     "write_report",
+    "report_trials_file",
     "plot_localization",
     "plot_errors",
     "plot_counts",

@@ -17,8 +17,10 @@ from typing import Literal
 import numpy as np
 import pandas as pd
 
-from .._validation import check_choice
+from .._validation import check_choice, integer_text
 from ..errors import ValidationError
+from ..io.responses import parse_response_text
+from ..io.trials_csv import TRIALS_COLUMNS, read_trials_table
 from ..layout import ArrayLayout
 
 __all__ = [
@@ -33,8 +35,8 @@ __all__ = [
     "main_trials",
 ]
 
-#: Columns a trials file must have (docs/file-formats.md, trials file).
-REQUIRED_COLUMNS: tuple[str, ...] = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
+#: Columns a trials file must have (docs/file-formats.md, trials file): :data:`vibrofocus.io.trials_csv.TRIALS_COLUMNS`.
+REQUIRED_COLUMNS: tuple[str, ...] = TRIALS_COLUMNS
 #: Rendering methods in the order tables and figures list them; others follow alphabetically.
 KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_reversal", "contrast", "constrained")
 #: Valid phases.
@@ -62,33 +64,12 @@ def method_order(methods: Iterable[str]) -> list[str]:
     return known + sorted(methods - set(known))
 
 
-def _parse_int(text: str) -> int | None:
-    """Return ``text`` as int if it is an integer (``"3"``, ``"3.0"``), else None."""
-    try:
-        value = float(text)
-    except ValueError:
-        return None
-    if not np.isfinite(value) or value != int(value):
-        return None
-    return int(value)
-
-
 def _parse_selection(text: str, n_locations: int) -> tuple[tuple[int, ...] | None, str | None]:
     """Parse a response such as ``"4 5"``; return ``(selection, None)`` or ``(None, reason)``."""
-    tokens = text.replace(",", " ").split()
-    if not tokens:
-        return None, "is empty: no location was chosen"
-    numbers = []
-    for token in tokens:
-        value = _parse_int(token)
-        if value is None:
-            return None, f"{text!r} is not a list of location numbers separated by spaces"
-        if not 1 <= value <= n_locations:
-            return None, f"{text!r} names location {value}, outside 1..{n_locations}"
-        numbers.append(value)
-    if len(set(numbers)) != len(numbers):
-        return None, f"{text!r} names the same location more than once"
-    return tuple(sorted(numbers)), None
+    try:
+        return parse_response_text(text, n_locations=n_locations), None
+    except ValidationError as exc:
+        return None, str(exc)
 
 
 def _normal_name(name: str) -> str:
@@ -227,7 +208,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
         ~target.between(1, n_locations),
         f"target must be a location number 1..{n_locations}, got " + df["target"].map(repr),
     )
-    add("response", response_reason.notna(), "response " + response_reason.fillna(""))
+    add("response", response_reason.notna(), response_reason.fillna(""))
     add(
         "response",
         response_reason.isna() & study.eq(1).fillna(False).astype(bool) & n_sel.ne(1),
@@ -353,16 +334,7 @@ def load_trials(
             raw["line"] = np.arange(2, len(raw) + 2)
     else:
         name = os.fspath(source)
-        if not os.path.isfile(name):
-            raise ValidationError(f"trials file {name!r} does not exist or is not a file")
-        try:
-            raw = pd.read_csv(name, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig")
-        except pd.errors.EmptyDataError:
-            raise ValidationError(f"trials file {name!r} is empty: expected a header line and one row per trial") from None
-        except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-            raise ValidationError(f"trials file {name!r} is not a readable CSV file: {exc}") from None
-        raw.columns = [str(c).strip() for c in raw.columns]
-        raw["line"] = np.arange(2, len(raw) + 2)
+        raw = read_trials_table(name)
     if len(raw) == 0:
         raise ValidationError(f"trials file {name!r} has a header but no trials")
     raw, exclusions = _drop_sessions(raw, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
@@ -420,7 +392,7 @@ def _drop_sessions(raw: pd.DataFrame, *, keep_aborted: bool, keep_dry_runs: bool
             ["it was a dry run (no calibration: nothing was played)"] if dry_out[rows.index].any() else [])
         exclusions.append({
             "participant": str(participant),
-            "study": _parse_int(str(study)),
+            "study": integer_text(str(study)),
             "reason": f"session {session} left out because {' and '.join(whys)} ({len(rows)} answered trials)",
         })
     return raw[~drop].reset_index(drop=True), exclusions

@@ -7,7 +7,7 @@ from .estimate import MimoEstimate, mimo_h1
 from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes, make_excitation
 from .figures import plot_calibration
 from .fitmodel import FittedSkin, fit_model
-from .io import load_calibration, save_calibration
+from ..io.calibration_nc import load_calibration, save_calibration
 from .quality import QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
 
 __all__ = [

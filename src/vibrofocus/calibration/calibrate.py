@@ -13,6 +13,7 @@ import numpy as np
 from .._validation import check_band, check_choice
 from ..defaults import BAND_HZ, N_SAMPLES
 from ..errors import SafetyError, ValidationError, VibrofocusError
+from ..io.calibration_nc import SCHEMA_VERSION
 from ..layout import ArrayLayout
 from ..signals.taper import band_taper
 from ..rigs.base import Rig
@@ -29,9 +30,9 @@ from .quality import QualityReport, QualityThresholds, assess_quality, detect_cl
 
 __all__ = ["SCHEMA_VERSION", "DEFAULT_METHOD", "Calibration", "CalibrationPlan", "calibrate", "plan_calibration"]
 
-#: Version of the calibration data model and of its file layout (:mod:`.io`). Version 2
-#: added the ``mimo`` method's variables; version 1 files still load.
-SCHEMA_VERSION = 2
+# SCHEMA_VERSION: version of the calibration data model and of its file layout
+# (vibrofocus.io.calibration_nc, its home). Version 2 added the ``mimo`` method's
+# variables; version 1 files still load.
 
 #: Method of :func:`calibrate` when none is given.
 DEFAULT_METHOD = "mimo"

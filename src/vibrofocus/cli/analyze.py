@@ -9,7 +9,7 @@ from rich.console import Console
 from rich.table import Table
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 console = Console()
 
@@ -21,7 +21,7 @@ def _p(p: float) -> str:
     return format_p(p).removeprefix("p = ").removeprefix("p ")
 
 
-@app.command(
+@command(
     "analyze",
     epilog=(
         "Example: vibrofocus analyze trials.csv --out report/  "
@@ -61,13 +61,11 @@ def analyze_command(
         import pandas as pd
 
         from .._validation import check_in_range
-        from ..analysis import analyze, load_trials, write_report
+        from ..analysis import report_trials_file
 
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
-        data = load_trials(trials, on_invalid="exclude" if exclude_invalid else "raise",
-                           keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
-        result = analyze(data, alpha=alpha)
-        paths = write_report(result, out)
+        result, paths = report_trials_file(trials, out, on_invalid="exclude" if exclude_invalid else "raise",
+                                           keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, alpha=alpha)
 
     if quiet:
         for p in paths.values():

@@ -7,10 +7,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-@app.command("calibrate", epilog="Example: vibrofocus calibrate --rig simulated --participant P01 --out P01.nc --yes")
+@command("calibrate", epilog="Example: vibrofocus calibrate --rig simulated --participant P01 --out P01.nc --yes")
 def calibrate_command(
     participant: str = typer.Option(..., "--participant", "-p", help="Participant id stored in the file."),
     out: Path = typer.Option(..., "--out", "-o", help="Calibration file to write (.nc, netCDF4/HDF5)."),
@@ -51,7 +51,7 @@ def calibrate_command(
 
         from .._atomic import check_writable
         from ..calibration import calibrate, plan_calibration, save_calibration
-        from ..calibration.io import estimate_calibration_bytes
+        from ..io.calibration_nc import estimate_calibration_bytes
         from ..defaults import participant_seed
         from ..errors import ValidationError
         from ..rigs import make_rig

@@ -1,13 +1,37 @@
-"""Explicit list of the command modules; importing each registers its commands on ``app``."""
+"""The command modules, in the order ``vibrofocus --help`` lists them, and their registration on the app.
 
-# One import per command module, in the order ``--help`` should list them.
-from . import demo  # noqa: F401
-from . import calibrate  # noqa: F401
-from . import render  # noqa: F401
-from . import serve  # noqa: E402,F401
-from . import analyze  # noqa: F401
-from . import study  # noqa: F401
-from . import simulate_study  # noqa: F401
-from . import power  # noqa: F401
-from . import play  # noqa: F401
-from . import devices  # noqa: F401
+Registration is one-way: :mod:`.main` calls :func:`register`, which imports each module
+of :data:`COMMAND_MODULES` and adds what it marks (:func:`._command.command`) and its
+sub-apps (``SUB_APPS``, name to :class:`typer.Typer`). Command modules never import
+:mod:`.main`.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import typer
+
+from ._command import marked_commands
+
+__all__ = ["COMMAND_MODULES", "register"]
+
+#: Command modules of this package, in ``--help`` order.
+COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "analyze", "study", "simulate_study", "power", "play",
+                   "devices")
+
+
+def register(app: typer.Typer) -> None:
+    """Add every command of :data:`COMMAND_MODULES` to ``app``, in that order.
+
+    Parameters
+    ----------
+    app : typer.Typer
+        The root app.
+    """
+    for name in COMMAND_MODULES:
+        module = importlib.import_module(f"{__package__}.{name}")
+        for fn, command_name, options in marked_commands(module):
+            app.command(command_name, **options)(fn)
+        for sub_name, sub_app in getattr(module, "SUB_APPS", {}).items():
+            app.add_typer(sub_app, name=sub_name)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import math
 from pathlib import Path
 
 import typer
@@ -13,28 +12,17 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 console = Console()
 err_console = Console(stderr=True)
-
-
-def _json_ready(obj):
-    """Strict JSON: NaN and infinities (a silent point, a perfect contrast) become null."""
-    if isinstance(obj, dict):
-        return {k: _json_ready(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_json_ready(v) for v in obj]
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    return obj
 
 
 def _fmt(value: float, digits: int = 2) -> str:
     return "—" if value != value else f"{value:.{digits}f}"  # NaN -> dash
 
 
-@app.command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
+@command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
 def demo_command(
     seed: int = typer.Option(0, "--seed", help="Simulated participant (forearm) seed."),
     out: Path = typer.Option(Path("demo-output"), "--out", "-o", help="Folder for the figures (created)."),
@@ -88,7 +76,7 @@ def demo_command(
         if design_from == "calibration" or figures:
             # Before the calibration starts: a read-only or full output folder is found now.
             from .._atomic import check_writable
-            from ..calibration.io import estimate_calibration_bytes
+            from ..io.calibration_nc import estimate_calibration_bytes
 
             _make_output_folder(out)
             expected = estimate_calibration_bytes(rig.layout.n_points, rig.layout.n_actuators, 8,
@@ -143,7 +131,10 @@ def demo_command(
                 "summary": summary,
                 "figures": [str(p) for p in paths],
             }
-            typer.echo(json.dumps(_json_ready(payload), allow_nan=False, default=float))
+            from ..io.jsonsafe import json_safe
+
+            # Strict JSON: NaN and infinities (a silent point, a perfect contrast) become null.
+            typer.echo(json.dumps(json_safe(payload), allow_nan=False, default=float))
             return
         p = rig.participant
         console.print(

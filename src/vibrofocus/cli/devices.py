@@ -8,10 +8,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-@app.command("devices")
+@command("devices")
 def devices(
     as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
 ) -> None:
@@ -48,7 +48,7 @@ def devices(
             console.print(f"[yellow]NI-DAQmx:[/] {nidaq.note}")
 
 
-@app.command("straps")
+@command("straps")
 def straps(
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),

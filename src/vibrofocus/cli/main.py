@@ -1,6 +1,7 @@
 """The ``vibrofocus`` command line.
 
-Each command lives in its own module of this subpackage and registers itself on ``app``.
+Each command lives in its own module of this subpackage; :func:`.commands.register`
+adds them to ``app`` in a fixed order (the modules never import this one).
 Command modules import only typer at module level; heavy dependencies (matplotlib,
 pingouin, FastAPI) are imported inside the command so ``vibrofocus --help`` stays fast.
 """
@@ -84,5 +85,6 @@ def _root(
     set_debug(debug)
 
 
-# Command modules register themselves on import; keep this list explicit.
-from . import commands  # noqa: E402,F401
+from .commands import register  # noqa: E402
+
+register(app)

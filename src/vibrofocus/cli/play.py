@@ -8,58 +8,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-def load_drives(path: Path):
-    """Read ``drives`` (n_actuators, n_samples) V and ``fs`` Hz from an ``.npz`` file.
-
-    Raises
-    ------
-    ValidationError
-        Missing file, not an npz, missing or malformed arrays.
-    """
-    import zipfile
-
-    import numpy as np
-
-    from .._validation import as_array, check_positive
-    from ..errors import ValidationError
-
-    if not path.is_file():
-        raise ValidationError(f"drives file {path}: no such file")
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4)
-    except OSError as exc:
-        raise ValidationError(f"drives file {path}: cannot be read ({exc.strerror or exc})") from None
-    if head[:2] != b"PK":  # an .npz is a zip archive
-        raise ValidationError(
-            f"drives file {path}: not a readable .npz file (it does not start as a zip archive; write it with "
-            "vibrofocus render --out FILE.npz or numpy.savez(FILE, drives=..., fs=...))"
-        )
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in ("drives", "fs") if k not in data.files]
-            if missing:
-                raise ValidationError(
-                    f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {', '.join(data.files) or 'nothing'})"
-                )
-            raw = data["drives"]
-            if raw.dtype.kind == "b":
-                raise ValidationError(f"drives in {path} must be voltages, got dtype bool")
-            drives = as_array(raw, f"drives in {path}", ndim=2, finite=False)
-            fs_arr = np.asarray(data["fs"])
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
-        if isinstance(exc, ValidationError):
-            raise
-        raise ValidationError(f"drives file {path}: not a readable .npz file ({exc})") from None
-    if fs_arr.size != 1:
-        raise ValidationError(f"drives file {path}: fs must be one number, got shape {fs_arr.shape}")
-    return drives, check_positive(fs_arr.reshape(()).item(), f"fs in {path}")
-
-
-@app.command("play")
+@command("play")
 def play(
     drives_file: Path = typer.Argument(..., help="An .npz with arrays drives (n_actuators, n) V and fs (Hz)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
@@ -73,9 +25,10 @@ def play(
         import numpy as np
 
         from ..errors import ValidationError
+        from ..io.drives import read_drives
         from ..rigs import make_rig
 
-        drives, fs = load_drives(drives_file)
+        drives, fs = read_drives(drives_file)
         with make_rig(rig, config=rig_config, seed=seed) as r:
             if abs(fs - r.fs) > 1e-9 * r.fs:
                 raise ValidationError(

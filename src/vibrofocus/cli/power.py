@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
 def _ints(text: str, name: str) -> tuple[int, ...]:
@@ -22,7 +22,7 @@ def _ints(text: str, name: str) -> tuple[int, ...]:
     return values
 
 
-@app.command(
+@command(
     "power",
     epilog="Example: vibrofocus power --participants 10,15,20,25,30 --studies 200 --out power/",
 )

@@ -7,10 +7,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-@app.command("render", epilog="Example: vibrofocus render --calibration P01.nc --method inverse --location 5 "
+@command("render", epilog="Example: vibrofocus render --calibration P01.nc --method inverse --location 5 "
                                "--out drives.npz --wav drives.wav")
 def render_command(
     calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration file (.nc)."),
@@ -38,19 +38,17 @@ def render_command(
     that voltage; the scale is written in the metadata (volts_per_full_scale).
     """
     with user_errors():
-        import json
-
         import numpy as np
 
         from .. import __version__
-        from .._atomic import atomic_write, check_writable, write_text
+        from .._atomic import check_writable
         from ..calibration import load_calibration
         from ..defaults import DRIVE_LIMIT_V
         from ..errors import ValidationError
+        from ..io.drives import DRIVES_SUFFIXES, write_drives, write_drives_wav
         from ..rendering import render
 
-        suffix = out.suffix.lower()
-        if suffix not in (".npz", ".csv"):
+        if out.suffix.lower() not in DRIVES_SUFFIXES:
             raise ValidationError(f"--out {out}: use a .npz or .csv file name")
         if wav is not None and wav.suffix.lower() != ".wav":
             raise ValidationError(f"--wav {wav}: use a .wav file name")
@@ -87,28 +85,13 @@ def render_command(
         }
         # Written beside the target and renamed over it: a full disk or Ctrl-C never
         # leaves a truncated drives file, and an old file of that name survives a failure.
-        with atomic_write(out, "wb", what="drives file") as fh:
-            if suffix == ".npz":
-                np.savez(fh, drives=drives, fs=np.float64(cal.fs), predicted=rendering.predicted,
-                         desired=rendering.desired, metadata=json.dumps(meta))
-            else:
-                t = np.arange(drives.shape[1]) / cal.fs
-                header = "\n".join(f"{k}: {json.dumps(v)}" for k, v in meta.items())
-                header += "\ntime_s," + ",".join(f"{name}_V" for name in cal.layout.actuator_names)
-                np.savetxt(fh, np.column_stack([t, drives.T]), delimiter=",", header=header, comments="# ",
-                           fmt="%.9g", encoding="utf-8")
+        write_drives(out, drives, cal.fs, actuator_names=cal.layout.actuator_names, metadata=meta,
+                     predicted=rendering.predicted, desired=rendering.desired)
         typer.echo(f"wrote {out}: {drives.shape[0]} channels x {drives.shape[1]} samples at {cal.fs:g} Hz, "
                    f"peak {np.abs(drives).max():.3g} V"
                    + ("" if rendering.scale == 1.0 else f" (scaled by {rendering.scale:.3g} to the {limit:g} V limit)"))
         typer.echo(f"predicted at location {location}: fidelity {predicted['fidelity']:.3f}, contrast "
                    f"{predicted['contrast_db']:.1f} dB, target peak {rendering.reached_peak_m * 1e6:.3g} µm")
         if wav is not None:
-            from scipy.io import wavfile
-
-            # Full scale (1.0) is the drive limit: the drives already respect it, so the
-            # samples stay within [-1, 1] and the voltages are sample * volts_per_full_scale.
-            with atomic_write(wav, "wb", what="WAV file") as fh:
-                wavfile.write(fh, int(round(cal.fs)), (drives.T / limit).astype(np.float32))
-            sidecar = wav.with_name(wav.name + ".json")
-            write_text(sidecar, json.dumps({**meta, "volts_per_full_scale": limit}, indent=2), what="WAV metadata file")
+            _, sidecar = write_drives_wav(wav, drives, cal.fs, volts_per_full_scale=limit, metadata=meta)
             typer.echo(f"wrote {wav} (float32, full scale = {limit:g} V) and {sidecar}")

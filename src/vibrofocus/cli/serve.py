@@ -8,12 +8,12 @@ from pathlib import Path
 import typer
 
 from ._errors import err_console, user_errors
-from .main import app
+from ._command import command
 
 _LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
 
-@app.command()
+@command()
 def serve(
     db: Path = typer.Option(Path("vibrofocus-studies.sqlite"), "--db", help="Study database (SQLite); created if missing."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to bind. Keep 127.0.0.1 unless you know why not."),

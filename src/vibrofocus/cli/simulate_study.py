@@ -7,10 +7,10 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 
-@app.command("simulate-study")
+@command("simulate-study")
 def simulate_study(
     participants: int = typer.Option(3, "--participants", "-n", min=1, help="Number of simulated participants."),
     seed: int = typer.Option(0, "--seed", min=0, help="Seed of the whole simulation (participants, trial orders, answers)."),
@@ -37,7 +37,7 @@ def simulate_study(
         from ..studies.simulate import simulate_studies, summarize_simulation
 
         from .._atomic import check_writable, output_error
-        from ..calibration.io import estimate_calibration_bytes
+        from ..io.calibration_nc import estimate_calibration_bytes
         from ..layout import ArrayLayout
 
         if trials_csv is not None and not trials_csv.parent.is_dir():

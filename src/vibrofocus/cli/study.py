@@ -7,13 +7,14 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from .main import app
+from ._command import command
 
 study_app = typer.Typer(
     name="study", help="Localization studies: run a participant at the terminal, export trials.",
     no_args_is_help=True,
 )
-app.add_typer(study_app, name="study")
+#: Sub-apps this module adds to the root app (registered by :mod:`.commands`).
+SUB_APPS = {"study": study_app}
 
 
 @study_app.command("export")

@@ -7,7 +7,6 @@ or the simulator's exact transfer (:func:`model_transfer`) for comparison.
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
@@ -168,12 +167,10 @@ def run_demo(
     rows, renderings, recordings = [], {}, {}
     for loc in locations:
         for method in methods:
-            with warnings.catch_warnings():
-                # Designs over the drive limit are scaled down on purpose; the row reports it.
-                warnings.simplefilter("ignore")
-                # Every method at equal peak drive: scaled to the rig's limit.
-                rendering = render(method, H, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale",
-                                   scale_to_limit=True)
+            # Every method at equal peak drive: scaled to the rig's limit (render reports the
+            # scale in the Rendering; it warns of nothing).
+            rendering = render(method, H, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale",
+                               scale_to_limit=True)
             rec, repeats = record_clean(rig, rendering.drives, points)
             # Contrast against the other locations (the grid a participant names), as
             # Rendering.metrics does; the guards are reported separately.

@@ -27,7 +27,7 @@ Storage (:mod:`.storage`)
 
     Answers must come in trial order; the same ``answer_id`` again returns the same
     receipt; the first answer sets status ``running`` and the last ``completed``.
-Export (:mod:`.export`)
+Export (the trials file, :mod:`vibrofocus.io.trials_csv`)
     :data:`TRIALS_COLUMNS`, :func:`write_trials_csv`, :func:`read_trials_csv`.
 Running trials (:mod:`.engine`)
     ``StudyEngine(store, session_id, rig, calibration=None, *, renderer=None, cue=None,
@@ -56,7 +56,7 @@ from .engine import (
     terminal_beep,
     headphone_beep,
 )
-from .export import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
+from ..io.trials_csv import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
 from .participants import MODEL_LABEL, MODEL_NOTICE, MODEL_VERSION, Percepts, PerceptualModel, SimulatedParticipant
 from .protocol import PHASES, STUDIES, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .storage import (

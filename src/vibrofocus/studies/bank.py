@@ -68,25 +68,29 @@ class FeatureBank:
         return int(self.energy.shape[0])
 
     def save(self, path: str | os.PathLike) -> None:
-        """Write the bank (``.npz``)."""
-        np.savez_compressed(
-            path, energy=self.energy.astype(np.float32), points_xy=self.points_xy, locations_xy=self.locations_xy,
-            centre_xy=self.centre_xy, methods=np.array(self.methods), forearm_seeds=self.forearm_seeds,
-            seed=np.int64(self.seed), model_version=np.array(MODEL_VERSION),
-        )
+        """Write the bank (``.npz``, atomically; :func:`vibrofocus.io.feature_bank.save_feature_bank`).
+
+        Parameters
+        ----------
+        path : path-like
+            Destination ``.npz``; its folder must exist.
+        """
+        from ..io.feature_bank import save_feature_bank
+
+        save_feature_bank(self, path, model_version=MODEL_VERSION)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "FeatureBank":
-        """Read a bank written by :meth:`save`."""
-        try:
-            with np.load(path) as z:
-                return cls(
-                    energy=z["energy"].astype(float), points_xy=z["points_xy"], locations_xy=z["locations_xy"],
-                    centre_xy=z["centre_xy"], methods=tuple(str(m) for m in z["methods"]),
-                    forearm_seeds=z["forearm_seeds"], seed=int(z["seed"]),
-                )
-        except (OSError, KeyError, ValueError) as exc:
-            raise ValidationError(f"cannot read the feature bank {path}: {exc}") from exc
+        """Read a bank written by :meth:`save` (:func:`vibrofocus.io.feature_bank.load_feature_bank`).
+
+        Parameters
+        ----------
+        path : path-like
+            A feature-bank ``.npz``.
+        """
+        from ..io.feature_bank import load_feature_bank
+
+        return load_feature_bank(path)
 
 
 def build_feature_bank(

@@ -11,7 +11,7 @@ location, repeated, in random order, after a few training trials.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -19,6 +19,7 @@ import numpy as np
 
 from ..defaults import METHODS, STUDY_METHODS
 from ..errors import StudyError
+from ..io.responses import format_response  # the stored form of a response: one home, re-exported
 
 __all__ = [
     "STUDIES",
@@ -260,21 +261,6 @@ def parse_response(response: Any, design: StudyDesign) -> tuple[int, ...]:
     if not design.multi_select and len(locations) != 1:
         raise StudyError(f"Study 1 takes exactly one location per trial, got {len(locations)}: {locations}")
     return tuple(sorted(locations))
-
-
-def format_response(locations: Sequence[int]) -> str:
-    """Locations as the export writes them: ascending, separated by spaces (``"4 5"``).
-
-    Parameters
-    ----------
-    locations : sequence of int
-        Selected locations, 1-based.
-
-    Returns
-    -------
-    str
-    """
-    return " ".join(str(int(x)) for x in sorted(locations))
 
 
 def _check_seed(seed: Any) -> int:

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import CalibrationFileError, StudyError
+from ..io.responses import parse_response_text
 from .storage import StudyStore
 
 __all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
@@ -230,7 +231,7 @@ def summarize_simulation(db: str | os.PathLike) -> list[dict[str, Any]]:
         sel = [r for r in rows if r["study"] == study and r["method"] == method]
         errs, correct, counts = [], [], []
         for r in sel:
-            resp = [int(x) for x in r["response"].split()]
+            resp = list(parse_response_text(r["response"]))
             perceived = locations[np.asarray(resp) - 1].mean(axis=0)
             errs.append(float(np.linalg.norm(perceived - locations[r["target"] - 1])))
             correct.append(r["target"] in resp if study == 2 else resp == [r["target"]])

@@ -292,8 +292,6 @@ class WebState:
                 extra = {"config": self.rig_config} if kind != "simulated" and self.rig_config is not None else {}
                 try:
                     self.rigs[key] = factory(kind, seed=seed, **extra)
-                except NotImplementedError as exc:
-                    raise HTTPException(400, detail=str(exc)) from None
                 except VibrofocusError as exc:
                     raise HTTPException(400, detail=str(exc)) from None
             return self.rigs[key]

@@ -45,17 +45,23 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..errors import CalibrationFileError, ValidationError
 from ..layout import ArrayLayout
-from .calibrate import SCHEMA_VERSION, Calibration
-from .excitation import SweepSettings
-from .quality import QualityIssue, QualityReport, QualityThresholds
+from .jsonsafe import json_safe
 
-__all__ = ["save_calibration", "load_calibration", "calibration_bytes", "estimate_calibration_bytes"]
+if TYPE_CHECKING:  # the record types live in vibrofocus.calibration, above this module
+    from ..calibration.calibrate import Calibration
 
+__all__ = ["SCHEMA_VERSION", "FILE_KIND", "save_calibration", "load_calibration", "calibration_bytes",
+           "estimate_calibration_bytes"]
+
+#: Version of the calibration file layout this vibrofocus writes (and the newest it reads).
+SCHEMA_VERSION = 2
+#: The ``file_kind`` attribute that marks a vibrofocus calibration file.
 FILE_KIND = "vibrofocus calibration"
 _HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
 _QUALITY_VARS = {
@@ -150,7 +156,7 @@ def _to_dataset(cal: Calibration):
         "n_fft": np.int32(cal.n_fft),
         "created": cal.created,
         "layout": json.dumps(lay.to_dict()),
-        "rig": json.dumps(cal.rig, default=_json_default),
+        "rig": _json_text(cal.rig),
         "sweep": json.dumps(cal.sweep.to_dict()),
         "quality_issues": json.dumps([i.to_dict() for i in q.issues]),
         "quality_thresholds": json.dumps(q.thresholds.to_dict()),
@@ -160,8 +166,8 @@ def _to_dataset(cal: Calibration):
     if np.isfinite(cal.recorded_s):
         attrs["recorded_s"] = float(cal.recorded_s)
     if cal.fit is not None:
-        attrs["fit"] = json.dumps({"band": list(cal.fit.band), "fs": cal.fit.fs, "fixed": cal.fit.fixed,
-                                   "info": cal.fit.info}, default=_json_default)
+        attrs["fit"] = _json_text({"band": list(cal.fit.band), "fs": cal.fit.fs, "fixed": cal.fit.fixed,
+                                   "info": cal.fit.info})
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
@@ -172,12 +178,9 @@ def _recording_dims(method: str) -> tuple[str, ...]:
     return ("actuator", "repeat", "point", "record_sample")
 
 
-def _json_default(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return str(obj)
+def _json_text(value) -> str:
+    """A description attribute as JSON text (NaN kept: Python's json reads it back)."""
+    return json.dumps(json_safe(value, finite=False), default=str)
 
 
 def calibration_bytes(cal: Calibration) -> bytes:
@@ -187,6 +190,8 @@ def calibration_bytes(cal: Calibration) -> bytes:
     a full disk then surfaces as a plain, catchable ``OSError`` at the write, never as a
     crash inside the library.
     """
+    from ..calibration.calibrate import Calibration
+
     if not isinstance(cal, Calibration):
         raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
     ds = _to_dataset(cal)
@@ -316,6 +321,10 @@ def _number_attr(attrs, name: str, path: Path) -> float:
 
 
 def _from_dataset(ds, path: Path) -> Calibration:
+    from ..calibration.calibrate import Calibration
+    from ..calibration.excitation import SweepSettings
+    from ..calibration.quality import QualityIssue, QualityReport, QualityThresholds
+
     attrs = ds.attrs
     if attrs.get("file_kind") != FILE_KIND:
         raise _fail(path, f"is an HDF5/netCDF file but not a vibrofocus calibration (file_kind is "
@@ -466,7 +475,7 @@ def _from_dataset(ds, path: Path) -> Calibration:
 
 def _fit_from_dataset(ds, attrs, layout: ArrayLayout, path: Path):
     """The stored :class:`.FittedSkin`, or CalibrationFileError naming what is wrong."""
-    from .fitmodel import FittedSkin, parameter_names
+    from ..calibration.fitmodel import FittedSkin, parameter_names
 
     missing = [v for v in ("fit_log_covariance", "fit_residual") if v not in ds.variables]
     if "fit" not in attrs:

@@ -1,0 +1,52 @@
+"""File formats: one module per on-disk format, each the only writer and reader of it.
+
+:mod:`.calibration_nc`
+    Calibration files (netCDF4/HDF5): :func:`save_calibration`, :func:`load_calibration`.
+:mod:`.drives`
+    Drives files (``.npz``, ``.csv``, ``.wav``): :func:`write_drives`,
+    :func:`write_drives_wav`, :func:`read_drives`.
+:mod:`.trials_csv`
+    The trials file (CSV): :func:`write_trials_csv`, :func:`read_trials_csv`,
+    :func:`read_trials_table`.
+:mod:`.responses`
+    A stored response (``"4 5"``): :func:`format_response`, :func:`parse_response_text`.
+:mod:`.report_json`
+    report.json: :func:`write_report_json`, :func:`read_report_json`, :func:`check_report`.
+:mod:`.feature_bank`
+    Feature banks of simulated forearms (``.npz``): :func:`save_feature_bank`,
+    :func:`load_feature_bank`.
+:mod:`.jsonsafe`
+    The one JSON sanitizer, :func:`json_safe`.
+
+This package sits just above :mod:`vibrofocus.layout`: it loads no other subpackage of
+vibrofocus (the calibration record types are imported when a file is read or written),
+so every layer can use it.
+"""
+
+from .calibration_nc import load_calibration, save_calibration
+from .drives import read_drives, write_drives, write_drives_wav
+from .feature_bank import load_feature_bank, save_feature_bank
+from .jsonsafe import json_safe
+from .report_json import check_report, read_report_json, write_report_json
+from .responses import format_response, parse_response_text
+from .trials_csv import TRIALS_COLUMNS, read_trials_csv, read_trials_table, write_trials_csv
+
+__all__ = [
+    "save_calibration",
+    "load_calibration",
+    "write_drives",
+    "write_drives_wav",
+    "read_drives",
+    "TRIALS_COLUMNS",
+    "write_trials_csv",
+    "read_trials_csv",
+    "read_trials_table",
+    "format_response",
+    "parse_response_text",
+    "check_report",
+    "write_report_json",
+    "read_report_json",
+    "save_feature_bank",
+    "load_feature_bank",
+    "json_safe",
+]

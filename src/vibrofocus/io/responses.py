@@ -1,0 +1,68 @@
+"""A stored response: the chosen locations as text, ascending, separated by spaces (``"4 5"``).
+
+The one writer (:func:`format_response`) and the one reader
+(:func:`parse_response_text`) of the ``response`` column of the trials file and the
+study database. Answers as typed by a participant (keypad digits, design rules) are
+checked by :func:`vibrofocus.studies.parse_response` before they are stored.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+
+from .._validation import integer_text
+from ..errors import ValidationError
+
+__all__ = ["format_response", "parse_response_text"]
+
+
+def format_response(locations: Iterable[int]) -> str:
+    """Locations as the export writes them: ascending, separated by spaces (``"4 5"``).
+
+    Parameters
+    ----------
+    locations : iterable of int
+        Selected locations, 1-based.
+
+    Returns
+    -------
+    str
+    """
+    return " ".join(str(int(x)) for x in sorted(locations))
+
+
+def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[int, ...]:
+    """Read a stored response (``"4 5"``; commas are accepted as separators too).
+
+    Parameters
+    ----------
+    text : str
+        The ``response`` field of a trials file or study database row.
+    n_locations : int, optional
+        Number of locations; when given, every location must be in ``1..n_locations``.
+
+    Returns
+    -------
+    tuple of int
+        The locations, ascending.
+
+    Raises
+    ------
+    ValidationError
+        Empty, not a list of integers, a location out of range, or one named twice;
+        the message starts with ``"response"`` and quotes ``text``.
+    """
+    tokens = text.replace(",", " ").split()
+    if not tokens:
+        raise ValidationError("response is empty: no location was chosen")
+    numbers = []
+    for token in tokens:
+        value = integer_text(token)
+        if value is None:
+            raise ValidationError(f"response {text!r} is not a list of location numbers separated by spaces")
+        if n_locations is not None and not 1 <= value <= n_locations:
+            raise ValidationError(f"response {text!r} names location {value}, outside 1..{n_locations}")
+        numbers.append(value)
+    if len(set(numbers)) != len(numbers):
+        raise ValidationError(f"response {text!r} names the same location more than once")
+    return tuple(sorted(numbers))

@@ -1,0 +1,179 @@
+"""The trials file: the CSV contract between the studies and the analysis (docs/file-formats.md, trials file).
+
+One row per answered trial with the columns :data:`TRIALS_COLUMNS`, in that order:
+``participant`` (id), ``study`` (1 or 2), ``phase`` (``training`` | ``main``), ``trial``
+(1-based within the phase), ``method``, ``target`` (1-9), ``response`` (the chosen
+locations, ascending, separated by spaces: ``5``, ``4 5``), ``rt_s`` (seconds).
+When some participant is simulated (key ``simulated`` of the rows, as the study
+database's rows have), a last column ``simulated`` (``1`` / ``0``) follows: answers of
+simulated participants come from a perceptual model, not from people, and the analysis
+flags them. A file of real participants only has exactly the columns above.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Iterable, Mapping
+from pathlib import Path
+from typing import Any
+
+from ..errors import StudyError, ValidationError
+from .responses import format_response, parse_response_text
+
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv",
+           "read_trials_table"]
+
+#: Columns of the trials file, in order.
+TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
+#: Columns a study database's export adds after :data:`TRIALS_COLUMNS`: the session id,
+#: its status (``planned``, ``running``, ``paused``, ``aborted``, ``completed``) and
+#: ``dry_run`` (1 when the session had no calibration, so nothing was played; else 0).
+SESSION_COLUMNS = ("session", "session_status", "dry_run")
+#: Last column when some participant is simulated: 1 where the participant is simulated
+#: (answers from the perceptual model, not data), else 0.
+SIMULATED_COLUMN = "simulated"
+
+
+def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False) -> int:
+    """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
+
+    A reader never sees half a file; after a failure (a full disk, a read-only folder,
+    Ctrl-C) a previous file at ``path`` is unchanged and
+    :class:`~vibrofocus.errors.OutputError` says why.
+
+    Parameters
+    ----------
+    rows : iterable of mapping
+        Each with at least the keys of :data:`TRIALS_COLUMNS`. When some row has a true
+        ``simulated`` (a simulated participant), the column :data:`SIMULATED_COLUMN` is
+        written too (1 / 0 per row); without one the file has exactly the contract's
+        columns. Other keys are ignored.
+        ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
+    path : path-like
+        Destination CSV file; its folder must exist.
+    sessions : bool
+        Also write :data:`SESSION_COLUMNS` (then each row needs those keys too).
+
+    Returns
+    -------
+    int
+        Number of rows written.
+    """
+    from .._atomic import atomic_write
+
+    path = Path(path)
+    if not path.parent.is_dir():
+        raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
+    n = 0
+    rows = list(rows)
+    with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
+    with atomic_write(path, "w", newline="", what="trials file") as fh:
+        writer = csv.writer(fh, lineterminator="\n")
+        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + ((SIMULATED_COLUMN,) if with_flag else ()))
+        for row in rows:
+            response = row["response"]
+            if not isinstance(response, str):
+                response = format_response(response)
+            # repr keeps every digit of the stored float: the file round-trips exactly.
+            values = [
+                row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
+                row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
+            ]
+            if sessions:
+                values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"]))]
+            if with_flag:
+                values.append(int(bool(row.get(SIMULATED_COLUMN))))
+            writer.writerow(values)
+            n += 1
+    return n
+
+
+def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """Read a trials file back, checking the header; values typed as written.
+
+    Parameters
+    ----------
+    path : path-like
+        A trials CSV (docs/file-formats.md, trials file).
+
+    Returns
+    -------
+    list of dict
+        ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
+        tuple of int; the rest as str. A file with :data:`SESSION_COLUMNS` also gives
+        ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
+        :data:`SIMULATED_COLUMN` gives ``simulated`` (bool).
+    """
+    path = Path(path)
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            reader = csv.reader(fh)
+            header = next(reader, None)
+            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS) for f in ((), (SIMULATED_COLUMN,))]
+            if header is None or tuple(header) not in headers:
+                raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
+            columns = tuple(header)
+            out = []
+            for line_no, rec in enumerate(reader, start=2):
+                if len(rec) != len(columns):
+                    raise StudyError(f"{path}:{line_no}: expected {len(columns)} fields, got {len(rec)}")
+                row = dict(zip(columns, rec))
+                if SIMULATED_COLUMN in row:
+                    row[SIMULATED_COLUMN] = row[SIMULATED_COLUMN].strip() in ("1", "true", "True")
+                try:
+                    if "session" in row:
+                        row["session"] = int(row["session"])
+                        row["dry_run"] = bool(int(row["dry_run"]))
+                    row["study"] = int(row["study"])
+                    row["trial"] = int(row["trial"])
+                    row["target"] = int(row["target"])
+                    row["rt_s"] = float(row["rt_s"])
+                    row["response"] = parse_response_text(row["response"])
+                except ValueError as exc:  # ValidationError is a ValueError
+                    raise StudyError(f"{path}:{line_no}: {exc}") from None
+                out.append(row)
+            return out
+    except OSError as exc:
+        raise StudyError(f"cannot read the trials file {path}: {exc.strerror or exc}") from exc
+
+
+def read_trials_table(path: str | os.PathLike):
+    """Read a trials file as text, for checking row by row (:func:`vibrofocus.analysis.load_trials`).
+
+    Unlike :func:`read_trials_csv`, nothing is typed or refused here but an unreadable
+    file: every value stays the text of the file, so each bad row can be reported with
+    its line.
+
+    Parameters
+    ----------
+    path : path-like
+        A trials CSV (docs/file-formats.md, trials file); a UTF-8 byte-order mark and
+        spaces after the commas are allowed.
+
+    Returns
+    -------
+    DataFrame
+        One column per header field (names stripped of spaces), every value a str,
+        plus ``line``: the line number in the file (the header is line 1).
+
+    Raises
+    ------
+    ValidationError
+        The file does not exist, is empty, or is not a readable CSV file.
+    """
+    import numpy as np
+    import pandas as pd
+
+    name = os.fspath(path)
+    if not os.path.isfile(name):
+        raise ValidationError(f"trials file {name!r} does not exist or is not a file")
+    try:
+        raw = pd.read_csv(name, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig")
+    except pd.errors.EmptyDataError:
+        raise ValidationError(f"trials file {name!r} is empty: expected a header line and one row per trial") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ValidationError(f"trials file {name!r} is not a readable CSV file: {exc}") from None
+    raw.columns = [str(c).strip() for c in raw.columns]
+    raw["line"] = np.arange(2, len(raw) + 2)
+    return raw

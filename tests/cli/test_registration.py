@@ -1,0 +1,55 @@
+"""The commands are registered one way, in one fixed order, whatever is imported first."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+
+import pytest
+
+from vibrofocus.cli.commands import COMMAND_MODULES
+
+ORDER = ["demo", "calibrate", "render", "serve", "analyze", "simulate-study", "power", "play", "devices", "straps",
+         "study"]
+
+PROBE = """
+import json, sys
+{first}
+from typer.main import get_command
+from vibrofocus.cli.main import app
+group = get_command(app)
+print(json.dumps(list(group.list_commands(None))))
+"""
+
+
+def _listed(first: str) -> list[str]:
+    out = subprocess.run([sys.executable, "-c", PROBE.format(first=first)], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+@pytest.mark.parametrize("first", ["", "import vibrofocus.cli.play", "import vibrofocus.cli.devices",
+                                   "import vibrofocus.cli.study", "from vibrofocus.cli import demo, power"])
+def test_commands_are_listed_in_one_order_whatever_is_imported_first(first):
+    assert _listed(first) == ORDER
+
+
+def test_help_lists_the_commands_in_that_order():
+    out = subprocess.run([sys.executable, "-m", "vibrofocus", "--help"], capture_output=True, text=True, timeout=120,
+                         env={"COLUMNS": "200", "TERM": "dumb", "PATH": "", "PYTHONPATH": ":".join(sys.path)})
+    assert out.returncode == 0, out.stderr
+    named = [m.group(1) for m in re.finditer(r"^│ (\S+)\s", out.stdout, re.M) if m.group(1) in ORDER]
+    assert named == [c for c in ORDER], out.stdout
+
+
+def test_command_modules_never_import_the_app():
+    # The registration is one-way: main imports the command modules, never the reverse.
+    from pathlib import Path
+
+    folder = Path(__import__("vibrofocus.cli", fromlist=["x"]).__file__).parent
+    for name in COMMAND_MODULES:
+        text = (folder / f"{name}.py").read_text()
+        assert "from .main import" not in text and "import main" not in text, name
