@@ -411,7 +411,7 @@ def export_trials(participant_id: str | None = Query(None, max_length=64), web: 
 
 @router.post("/api/analysis", status_code=202)
 def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require_token)) -> dict[str, Any]:
-    """Export the trials and analyse them in the background (what ``vibrofocus analyze`` does), on a worker thread."""
+    """Export the trials and analyse them in the background (what ``vibrofocus analyze`` does), in a child process."""
     name = time.strftime("%Y%m%d-%H%M%S") + "-" + secrets.token_hex(3)
     job = {"name": name, "status": "running", "rows": 0, "url": f"/reports/{name}/report.html", "log": ""}
     with web.lock:
@@ -434,24 +434,18 @@ def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require
     job["rows"] = n
 
     def work() -> None:
-        # In this process, on a worker thread: the same call as `vibrofocus analyze`
-        # (the figures are built without pyplot, so no GUI backend is touched).
-        from ..analysis import report_trials_file
+        from .analysis_job import analyse_in_child
 
         try:
-            result, paths = report_trials_file(trials, out)
+            lines = analyse_in_child(trials, out)
         except VibrofocusError as exc:
             job["log"] = f"error: {exc}"[-4000:]
             job["status"] = "failed"
             return
-        except Exception as exc:  # a bug must not leave the job 'running' forever
+        except Exception as exc:  # a bug or a dead child must not leave the job 'running' forever
             job["log"] = f"the analysis failed: {type(exc).__name__}: {exc}"[-4000:]
             job["status"] = "failed"
             return
-        lines = [f"analysed {result.n_trials} rows"]
-        lines += [f"excluded {e.participant}: {e.reason}" for e in result.exclusions.itertuples(index=False)]
-        lines += [f"note: {w}" for w in result.warnings]
-        lines.append(f"wrote {', '.join(p.name for p in paths.values())}")
         job["log"] = "\n".join(lines)[-4000:]
         job["status"] = "done"
 
