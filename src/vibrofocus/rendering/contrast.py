@@ -44,7 +44,7 @@ from ..defaults import BAND_HZ, SIGMA_S
 from ..errors import ValidationError
 from ..signals.ricker import ricker
 from ._checks import as_indices, as_transfer, check_grid
-from ._pinv import _single_threaded_blas
+from ._pinv import _single_threaded_blas, gram_matrix
 from .taper import band_taper
 
 __all__ = [
@@ -125,10 +125,10 @@ def generalized_eigh_max(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _gram(Hq: np.ndarray) -> np.ndarray:
-    """``H_q^H H_q`` per frequency, shape (F, n_act, n_act), Hermitian."""
+    """``H_q^H H_q`` per frequency, shape (F, n_act, n_act), exactly Hermitian (a real
+    ``dsyrk`` over ``H_q`` read as real, :func:`~vibrofocus.rendering._pinv.gram_matrix`)."""
     with _single_threaded_blas():
-        G = np.conj(np.swapaxes(Hq, -1, -2)) @ Hq
-    return 0.5 * (G + np.conj(np.swapaxes(G, -1, -2)))
+        return gram_matrix(Hq)
 
 
 def acc_filters(h: np.ndarray, G: np.ndarray, reg_param: float) -> tuple[np.ndarray, np.ndarray]:
@@ -237,14 +237,16 @@ def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.where(escapes, np.inf, lam)
 
 
-def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any) -> np.ndarray:
-    """The quiet points' transfer, (F, n_quiet, n_act), from indices and/or a field H."""
+def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any,
+                    bins: slice = slice(None)) -> np.ndarray:
+    """The quiet points' transfer at ``bins``, (F_bins, n_quiet, n_act), from indices
+    and/or a field H (only those bins are copied)."""
     parts = []
     if quiet_indices is not None:
         q = as_indices(quiet_indices, "quiet_indices", H.shape[1])
         if np.any(q == target_index):
             raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
-        parts.append(H[:, q, :])
+        parts.append(H[bins][:, q, :])
     if quiet_H is not None:
         Hf = as_transfer(quiet_H, "quiet_H")
         if Hf.shape[0] != H.shape[0] or Hf.shape[2] != H.shape[2]:
@@ -252,12 +254,12 @@ def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_
                 f"quiet_H has shape {Hf.shape} but H has {H.shape}: it must have shape "
                 f"({H.shape[0]}, n_grid, {H.shape[2]}) (same frequencies and actuators)"
             )
-        parts.append(Hf)
+        parts.append(Hf[bins])
     if not parts:
         q = np.delete(np.arange(H.shape[1]), target_index)
         if q.size == 0:
             raise ValidationError("H has a single point: there are no quiet points to compare the target with")
-        parts.append(H[:, q, :])
+        parts.append(H[bins][:, q, :])
     return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
 
 
@@ -383,18 +385,18 @@ def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, wavefo
     band = check_band(band, fs)
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     reg_param = check_positive(reg_param, "reg_param", allow_zero=True)
-    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, check_positive(sigma, "sigma"), t0, band, taper_octaves, waveform)
     if waveform is None:
         U = check_positive(target_peak, "target_peak") * U
     active = slice(int(np.flatnonzero(taper > 0)[0]), int(np.flatnonzero(taper > 0)[-1]) + 1)
+    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H, active)
     h = H[active, target_index, :]
     if np.any(np.all(h == 0, axis=1) & (np.abs(U[active]) > 0)):
         raise ValidationError(
             f"H is zero from every actuator to the target (point {target_index}) at frequencies inside the band: "
             "no drive moves it there; recalibrate or narrow the band"
         )
-    G = _gram(Hq[active])
+    G = _gram(Hq)
     lam, w = acc_filters(h, G, reg_param)
     return H, n, U, active, lam, w, G
 
@@ -572,25 +574,37 @@ def constrained_drives(
     lam_ref = float(np.sum(weight) / np.sum(weight / safe))  # broadband exact-tap contrast (regularized)
 
     lam_top = float(np.max(np.where(weight > 0, safe, 0.0)))
+    beyond_num = safe * lam_top / lam_ref  # the branch beyond: beyond_num / (beyond_den + q lambda)
+    beyond_den = lam_top - np.minimum(safe, lam_top)
+
+    def shape(p: np.ndarray) -> np.ndarray:
+        """Target gain ``V / U`` up to a factor, per trade-off parameter ``p`` (M,) -> (M, F).
+        ``p`` in [0, 1): ``lambda / (lambda + mu)`` with ``mu = lam_ref p / (1 - p)``; ``p`` in
+        [1, 2]: the branch beyond ``mu = inf``, ``lambda / (1 - (1 - q) lambda / lambda_top)``
+        with ``q = 10^(-30 (p - 1))``, which ends on the best bin alone. Each branch is
+        computed only for its own ``p``."""
+        g = np.empty((p.size, safe.size))
+        below = p < 1
+        g[below] = safe / (safe + p[below, None] * (lam_ref - safe))
+        q = 10.0 ** (-30.0 * np.clip(p[~below, None] - 1.0, 0.0, 1.0))
+        g[~below] = beyond_num / (beyond_den + q * safe)
+        return g
 
     def gains(p: np.ndarray) -> np.ndarray:
-        """Target gain ``V / U`` per trade-off parameter ``p`` (M,) -> (M, F), normalized
-        to the exact tap's target energy. ``p`` in [0, 1): ``lambda / (lambda + mu)`` with
-        ``mu = lam_ref p / (1 - p)``; ``p`` in [1, 2]: the branch beyond ``mu = inf``,
-        ``lambda / (1 - (1 - q) lambda / lambda_top)`` with ``q = 10^(-30 (p - 1))``, which
-        ends on the best bin alone."""
-        p = p[:, None]
-        lo = safe / (np.minimum(p, 1.0) * lam_ref + (1 - np.minimum(p, 1.0)) * safe)
-        q = 10.0 ** (-30.0 * np.clip(p - 1.0, 0.0, 1.0))
-        hi = safe * lam_top / (lam_ref * ((lam_top - np.minimum(safe, lam_top)) + q * safe))
-        g = np.where(p < 1, lo, hi)
+        """:func:`shape` normalized to the exact tap's target energy, 0 where ``lambda <= 0``."""
+        g = shape(p)
         g = g * np.sqrt(np.sum(weight) / np.maximum(np.sum(g**2 * weight, axis=1, keepdims=True), 1e-300))
         return np.where(ok, g, 0.0)
 
+    # Target and quiet energy per bin of a unit gain (zero where lambda <= 0): the contrast
+    # of a gain g is (g^2 . weight) / (g^2 . weight ratio), independent of g's scale.
+    energies = np.stack([weight, weight * ratio], axis=1)  # (F, 2)
+
     def contrast_at(p: np.ndarray) -> np.ndarray:
-        """Energy contrast (linear) for each p, shape (M,)."""
-        g2 = gains(p) ** 2 * weight[None, :]
-        return np.sum(g2, axis=1) / np.maximum(np.sum(g2 * ratio[None, :], axis=1), 1e-300)
+        """Energy contrast (linear) for each p, shape (M,): one product over the bins."""
+        g = shape(p)
+        target, quiet = ((g * g) @ energies).T
+        return target / np.maximum(quiet, 1e-300 * target)
 
     if min_contrast_db is None:
         p_opt = contrast_weight / (contrast_weight + 1.0)
@@ -608,13 +622,14 @@ def constrained_drives(
         if k == 0:
             p_opt = 0.0
         else:
-            lo, hi = grid[k - 1], grid[k]  # contrast below the goal at lo, at or above it at hi
-            for _ in range(60):
-                mid = 0.5 * (lo + hi)
-                if contrast_at(np.array([mid]))[0] >= goal * (1 + 1e-9):
-                    hi = mid
-                else:
-                    lo = mid
+            # Contrast below the goal at lo, at or above it at hi: 15 rounds of 15 interior
+            # points narrow the bracket by 16^15 = 2^60, as 60 bisection steps would.
+            lo, hi = grid[k - 1], grid[k]
+            for _ in range(15):
+                inner = lo + (hi - lo) * np.arange(1, 16) / 16
+                above = np.flatnonzero(contrast_at(inner) >= goal * (1 + 1e-9))
+                first = int(above[0]) if above.size else 15
+                lo, hi = (inner[first - 1] if first > 0 else lo), (inner[first] if first < 15 else hi)
             p_opt = hi
     g = gains(np.array([p_opt]))[0]
     drives = _to_drives(w * np.where(ok, g * Ua / safe, 0.0)[:, None], active, H.shape[0], n)
