@@ -408,7 +408,7 @@ def inverse_filter(
         with np.errstate(over="ignore", invalid="ignore"):
             check_transfer_energy(np.vdot(H, H).real, H)  # the rest of H is used from here on
     if check_wraparound:
-        fraction = WraparoundCheck(H, n, keep=False).check(drives, tol=wraparound_tol, spectra=spectra,
+        fraction = WraparoundCheck._trusted(H, n, keep=False).check(drives, tol=wraparound_tol, spectra=spectra,
                                                            action="warn" if check_wraparound == "warn" else "raise")
     drives, scale, needed = apply_drive_limit(drives, max_drive, on_limit, "the inverse filter")
     if not full_output:
