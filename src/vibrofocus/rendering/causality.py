@@ -48,6 +48,9 @@ _CHUNK_BYTES = 64 * 2**20
 #: past the band, from their values at the window's ends, so a much smaller share would
 #: keep nearly every bin.)
 _SKIP_SHARE = 1e-10
+#: Share of the bound ``||H2[k]||_F^2 |D2[k]|^2`` outside the bins whose energy a cached
+#: check computes first, to set the budget of the bins skipped.
+_CORE_SHARE = 1e-6
 
 
 class CausalityWarning(UserWarning):
@@ -97,30 +100,35 @@ def _bins_within(bound: np.ndarray, budget: float) -> slice:
     return slice(low, max(low, high))
 
 
-def _head_and_tail(H2: np.ndarray, drives2: np.ndarray, bins: slice, n: int) -> tuple[float, float]:
-    """Energies ``sum_p sum_{k < n} y_p[k]^2`` and ``sum_p sum_{k >= n} y_p[k]^2`` of the
-    linear responses ``y_p = irfft(H2[:, p] @ drives2, 2 n)`` with only ``bins`` kept.
+def _response(H2: np.ndarray, drives2: np.ndarray, bins: slice) -> np.ndarray:
+    """Spectra of the linear responses at ``bins`` of the ``2 n`` grid, (n_bins, n_points)
+    complex64. H2 : (n + 1, n_points, n_act) spectra of the impulse responses on that grid;
+    drives2 : (n + 1, n_act) complex64 spectra of the drives on it. Call it with one BLAS
+    thread (:func:`~vibrofocus.rendering._pinv._single_threaded_blas`): thousands of
+    small products gain nothing from threads and lose much to their hand-offs."""
+    return _matvec(H2[bins], drives2[bins])
 
-    H2 : (n + 1, n_points, n_act) spectra of the impulse responses on the ``2 n`` grid;
-    drives2 : (n + 1, n_act) spectra of the drives on it. Points are taken a block at a
-    time so that the responses' spectra and signals stay small (no transposed copy of a
-    whole (n_points, 2 n) array).
-    """
-    head = tail = 0.0
+
+def _bin_energy(response: np.ndarray, bins: slice, n: int) -> float:
+    """``sum_k w_k sum_p |Y_kp|^2`` over ``response`` (at ``bins``), double precision: ``2 n``
+    times the energy these bins put in the responses (Parseval)."""
+    flat = response.view(np.float32)
+    power = np.einsum("kp,kp->k", flat, flat, dtype=np.float64)
+    return float(_parseval_weights_2n(n)[bins] @ power)
+
+
+def _head_and_tail(response: np.ndarray, bins: slice, n: int) -> tuple[float, float]:
+    """Energies ``sum_p sum_{k < n} y_p[k]^2`` and ``sum_p sum_{k >= n} y_p[k]^2`` of the
+    linear responses ``y_p = irfft(Y_p, 2 n)`` whose spectra are ``response`` (n_bins,
+    n_points) at ``bins`` and zero elsewhere; the total by Parseval, the tail from the
+    signals."""
     if bins.stop <= bins.start:
-        return head, tail
-    n_points = H2.shape[1]
-    block = max(1, min(n_points, 2**21 // (8 * (n + 1))))  # about 2 MiB of spectra
-    spectra = np.zeros((block, n + 1), np.complex64)
-    with _single_threaded_blas():
-        for start in range(0, n_points, block):
-            points = slice(start, min(start + block, n_points))
-            rows = spectra[: points.stop - start]
-            rows[:, bins] = _matvec(H2[bins, points], drives2[bins]).T
-            played = scipy.fft.irfft(rows, 2 * n, axis=-1)
-            head += float(np.einsum("pt,pt->", played[:, :n], played[:, :n], dtype=np.float64))
-            tail += float(np.einsum("pt,pt->", played[:, n:], played[:, n:], dtype=np.float64))
-    return head, tail
+        return 0.0, 0.0
+    spectra = np.zeros((response.shape[1], n + 1), np.complex64)
+    spectra[:, bins] = response.T
+    played = scipy.fft.irfft(spectra, 2 * n, axis=-1)[:, n:]
+    tail = float(np.einsum("pt,pt->", played, played, dtype=np.float64))
+    return _bin_energy(response, bins, n) / (2 * n) - tail, tail
 
 
 class WraparoundCheck:
@@ -220,24 +228,27 @@ class WraparoundCheck:
         n = self.n
         if not self.keep:  # one-shot: every bin of every point, no need to keep H2
             head = tail = 0.0
+            every = slice(0, n + 1)
             for points in _point_chunks(self.H):
-                part = _head_and_tail(self._padded_chunk(points), padded, slice(0, n + 1), n)
+                part = _head_and_tail(_response(self._padded_chunk(points), padded, every), every, n)
                 head, tail = head + part[0], tail + part[1]
             return head, tail, 0.0
         H2 = self.padded_spectra
         bound = _parseval_weights_2n(n) * self._norms * power  # >= the bin's energy
         if full:
-            return (*_head_and_tail(H2, padded, _bins_within(bound, 0.0), n), 0.0)
-        # The energy of every other bin of those holding all but 1e-6 of the bound is a
-        # lower bound of the response's: the bins outside `kept` hold at most _SKIP_SHARE
+            every = _bins_within(bound, 0.0)  # the bins left out are exact zeros
+            return (*_head_and_tail(_response(H2, padded, every), every, n), 0.0)
+        # The energy of the bins holding all but _CORE_SHARE of the bound is a lower bound
+        # of the response's: the bins outside `kept` (a superset) hold at most _SKIP_SHARE
         # of it.
-        core = _bins_within(bound, 1e-6 * float(np.sum(bound)))
-        sample = slice(core.start, core.stop, 2)
-        response = _matvec(H2[sample], padded[sample]).astype(np.complex128)
-        floor = float(np.sum(_parseval_weights_2n(n)[sample, None] * np.abs(response) ** 2))
-        kept = _bins_within(bound, _SKIP_SHARE * floor)
+        core = _bins_within(bound, _CORE_SHARE * float(np.sum(bound)))
+        core_response = _response(H2, padded, core)
+        kept = _bins_within(bound, _SKIP_SHARE * _bin_energy(core_response, core, n))
+        kept = slice(min(kept.start, core.start), max(kept.stop, core.stop))
+        response = np.concatenate([_response(H2, padded, slice(kept.start, core.start)), core_response,
+                                   _response(H2, padded, slice(core.stop, kept.stop))])
         skipped = (float(np.sum(bound)) - float(np.sum(bound[kept]))) / (2 * n)
-        return (*_head_and_tail(H2, padded, kept, n), max(skipped, 0.0))
+        return (*_head_and_tail(response, kept, n), max(skipped, 0.0))
 
     def fraction(self, drives: Any, spectra: np.ndarray | None = None) -> float:
         """Share of the response energy that one playback of ``drives`` puts past the window.
@@ -254,7 +265,8 @@ class WraparoundCheck:
         float
             As :func:`wraparound_fraction`.
         """
-        head, tail, _ = self._played(self._validated(drives), spectra, full=False)
+        with _single_threaded_blas():
+            head, tail, _ = self._played(self._validated(drives), spectra, full=False)
         return _share(head, tail)
 
     def check(self, drives: Any, *, tol: float = DEFAULT_WRAPAROUND_TOL, action: str = "raise",
@@ -262,14 +274,15 @@ class WraparoundCheck:
         """:func:`check_wraparound` through this check's cached spectra."""
         drives = self._validated(drives)
         tol = check_in_range(tol, "tol", 0.0, 1.0, inclusive=False)
-        head, tail, skipped = self._played(drives, spectra, full=False)
-        # The bins left out change the tail's root-energy by at most sqrt(skipped) and
-        # add at most `skipped` to the total: play them all where that could matter.
-        root = np.sqrt(skipped)
-        low = max(np.sqrt(tail) - root, 0.0) ** 2 / (head + tail + skipped) if head + tail > 0 else 0.0
-        high = (np.sqrt(tail) + root) ** 2 / (head + tail) if head + tail > 0 else 0.0
-        if skipped > 0 and (low > tol) != (high > tol):
-            head, tail, _ = self._played(drives, spectra, full=True)
+        with _single_threaded_blas():
+            head, tail, skipped = self._played(drives, spectra, full=False)
+            # The bins left out change the tail's root-energy by at most sqrt(skipped) and
+            # add at most `skipped` to the total: play them all where that could matter.
+            root = np.sqrt(skipped)
+            low = max(np.sqrt(tail) - root, 0.0) ** 2 / (head + tail + skipped) if head + tail > 0 else 0.0
+            high = (np.sqrt(tail) + root) ** 2 / (head + tail) if head + tail > 0 else 0.0
+            if skipped > 0 and (low > tol) != (high > tol):
+                head, tail, _ = self._played(drives, spectra, full=True)
         return _verdict(_share(head, tail), drives, tol, action)
 
 
