@@ -18,7 +18,7 @@ from .._validation import as_array, check_band, check_choice, check_positive
 from ..defaults import BAND_HZ
 from ..errors import DriveLimitError, ValidationError
 from ._checks import as_indices, as_transfer, check_grid, check_regularization, check_transfer_energy, samples_for
-from ._pinv import SpectralPinv, small_gram
+from ._pinv import SpectralPinv, _single_threaded_blas, small_gram
 from .causality import DEFAULT_WRAPAROUND_TOL, WraparoundCheck
 from .taper import band_taper
 
@@ -315,6 +315,7 @@ def apply_drive_limit(drives: np.ndarray, max_drive: float | None, on_limit: str
     return drives * scale, scale, needed
 
 
+@_single_threaded_blas()  # one BLAS thread for the whole design (set once)
 def inverse_filter(
     H: Any,
     targets: Any,
