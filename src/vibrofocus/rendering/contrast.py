@@ -574,26 +574,25 @@ def constrained_drives(
     lam_ref = float(np.sum(weight) / np.sum(weight / safe))  # broadband exact-tap contrast (regularized)
 
     lam_top = float(np.max(np.where(weight > 0, safe, 0.0)))
+    towards_ref = lam_ref - safe  # p < 1: lambda / (lambda + p (lam_ref - lambda))
     beyond_num = safe * lam_top / lam_ref  # the branch beyond: beyond_num / (beyond_den + q lambda)
     beyond_den = lam_top - np.minimum(safe, lam_top)
 
     def shape(p: np.ndarray) -> np.ndarray:
-        """Target gain ``V / U`` up to a factor, per trade-off parameter ``p`` (M,) -> (M, F).
-        ``p`` in [0, 1): ``lambda / (lambda + mu)`` with ``mu = lam_ref p / (1 - p)``; ``p`` in
-        [1, 2]: the branch beyond ``mu = inf``, ``lambda / (1 - (1 - q) lambda / lambda_top)``
-        with ``q = 10^(-30 (p - 1))``, which ends on the best bin alone. Each branch is
-        computed only for its own ``p``."""
-        g = np.empty((p.size, safe.size))
-        below = p < 1
-        g[below] = safe / (safe + p[below, None] * (lam_ref - safe))
-        q = 10.0 ** (-30.0 * np.clip(p[~below, None] - 1.0, 0.0, 1.0))
-        g[~below] = beyond_num / (beyond_den + q * safe)
-        return g
+        """Target gain ``V / U`` up to a factor, per trade-off parameter ``p`` (M,) -> (M, F),
+        all ``p`` on one branch: ``p`` in [0, 1): ``lambda / (lambda + mu)`` with
+        ``mu = lam_ref p / (1 - p)``; ``p`` in [1, 2]: the branch beyond ``mu = inf``,
+        ``lambda / (1 - (1 - q) lambda / lambda_top)`` with ``q = 10^(-30 (p - 1))``, which
+        ends on the best bin alone."""
+        if np.all(p < 1):
+            return safe / (safe + p[:, None] * towards_ref)
+        return beyond_num / (beyond_den + 10.0 ** (-30.0 * np.minimum(p[:, None] - 1.0, 1.0)) * safe)
 
-    def gains(p: np.ndarray) -> np.ndarray:
-        """:func:`shape` normalized to the exact tap's target energy, 0 where ``lambda <= 0``."""
-        g = shape(p)
-        g = g * np.sqrt(np.sum(weight) / np.maximum(np.sum(g**2 * weight, axis=1, keepdims=True), 1e-300))
+    def gains(p: float) -> np.ndarray:
+        """:func:`shape` at one ``p``, normalized to the exact tap's target energy, 0 where
+        ``lambda <= 0``, shape (F,)."""
+        g = shape(np.array([p]))[0]
+        g = g * np.sqrt(np.sum(weight) / max(float(np.sum(g**2 * weight)), 1e-300))
         return np.where(ok, g, 0.0)
 
     # Target and quiet energy per bin of a unit gain (zero where lambda <= 0): the contrast
@@ -601,10 +600,15 @@ def constrained_drives(
     energies = np.stack([weight, weight * ratio], axis=1)  # (F, 2)
 
     def contrast_at(p: np.ndarray) -> np.ndarray:
-        """Energy contrast (linear) for each p, shape (M,): one product over the bins."""
-        g = shape(p)
-        target, quiet = ((g * g) @ energies).T
-        return target / np.maximum(quiet, 1e-300 * target)
+        """Energy contrast (linear) for each p, shape (M,): one product over the bins per
+        branch."""
+        out = np.empty(p.size)
+        for branch in (p < 1, p >= 1):
+            if branch.any():
+                g = shape(p[branch])
+                target, quiet = ((g * g) @ energies).T
+                out[branch] = target / np.maximum(quiet, 1e-300 * target)
+        return out
 
     if min_contrast_db is None:
         p_opt = contrast_weight / (contrast_weight + 1.0)
@@ -622,16 +626,30 @@ def constrained_drives(
         if k == 0:
             p_opt = 0.0
         else:
-            # Contrast below the goal at lo, at or above it at hi: 15 rounds of 15 interior
-            # points narrow the bracket by 16^15 = 2^60, as 60 bisection steps would.
+            # Contrast below the goal at lo, at or above it at hi (p = 1 is a grid point: the
+            # bracket lies in one branch). Regula falsi with the Illinois step narrows it to
+            # rounding (what 60 bisection steps gave) in a few evaluations; a step that
+            # would not land strictly inside the bracket bisects instead.
             lo, hi = grid[k - 1], grid[k]
-            for _ in range(15):
-                inner = lo + (hi - lo) * np.arange(1, 16) / 16
-                above = np.flatnonzero(contrast_at(inner) >= goal * (1 + 1e-9))
-                first = int(above[0]) if above.size else 15
-                lo, hi = (inner[first - 1] if first > 0 else lo), (inner[first] if first < 15 else hi)
+            f_lo, f_hi = values[k - 1] - goal * (1 + 1e-9), values[k] - goal * (1 + 1e-9)
+            side = 0
+            for _ in range(200):
+                if hi - lo <= 4 * np.finfo(float).eps * hi:
+                    break
+                mid = hi - f_hi * (hi - lo) / (f_hi - f_lo)
+                if not lo < mid < hi:
+                    mid = 0.5 * (lo + hi)
+                f_mid = contrast_at(np.array([mid]))[0] - goal * (1 + 1e-9)
+                if f_mid >= 0:
+                    hi, f_hi = mid, f_mid
+                    f_lo = 0.5 * f_lo if side == 1 else f_lo
+                    side = 1
+                else:
+                    lo, f_lo = mid, f_mid
+                    f_hi = 0.5 * f_hi if side == -1 else f_hi
+                    side = -1
             p_opt = hi
-    g = gains(np.array([p_opt]))[0]
+    g = gains(p_opt)
     drives = _to_drives(w * np.where(ok, g * Ua / safe, 0.0)[:, None], active, H.shape[0], n)
     if not full_output:
         return drives
