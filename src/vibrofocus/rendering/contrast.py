@@ -43,7 +43,7 @@ from .._validation import as_array, check_band, check_in_range, check_index, che
 from ..defaults import BAND_HZ, SIGMA_S
 from ..errors import ValidationError
 from ..signals.ricker import ricker
-from ._checks import as_indices, as_transfer, check_grid
+from ._checks import as_indices, as_transfer, check_grid, check_transfer_energy
 from ._pinv import _single_threaded_blas, gram_matrix
 from .taper import band_taper
 
@@ -237,16 +237,26 @@ def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.where(escapes, np.inf, lam)
 
 
-def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any,
-                    bins: slice = slice(None)) -> np.ndarray:
-    """The quiet points' transfer at ``bins``, (F_bins, n_quiet, n_act), from indices
-    and/or a field H (only those bins are copied)."""
+def _runs(indices: np.ndarray) -> list[tuple[int, int]]:
+    """``indices`` as runs ``[start, stop)`` of consecutive values, in their order."""
+    breaks = np.flatnonzero(np.diff(indices) != 1) + 1
+    starts, ends = np.r_[0, breaks], np.r_[breaks, len(indices)]
+    return [(int(indices[s]), int(indices[e - 1]) + 1) for s, e in zip(starts, ends)]
+
+
+def _quiet_gram(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any,
+                bins: slice = slice(None)) -> np.ndarray:
+    """Gram matrix ``H_q^H H_q`` of the quiet points at ``bins``, (F_bins, n_act, n_act),
+    from indices and/or a field H. Runs of consecutive quiet points (every other point,
+    the default, is two) are read from ``H`` in place, summing their Gram matrices: no
+    copy of the quiet points' transfer."""
     parts = []
     if quiet_indices is not None:
         q = as_indices(quiet_indices, "quiet_indices", H.shape[1])
         if np.any(q == target_index):
             raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
-        parts.append(H[bins][:, q, :])
+        runs = _runs(q)
+        parts += [H[bins, start:stop] for start, stop in runs] if len(runs) <= 8 else [H[bins][:, q, :]]
     if quiet_H is not None:
         Hf = as_transfer(quiet_H, "quiet_H")
         if Hf.shape[0] != H.shape[0] or Hf.shape[2] != H.shape[2]:
@@ -256,11 +266,11 @@ def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_
             )
         parts.append(Hf[bins])
     if not parts:
-        q = np.delete(np.arange(H.shape[1]), target_index)
-        if q.size == 0:
+        if H.shape[1] == 1:
             raise ValidationError("H has a single point: there are no quiet points to compare the target with")
-        parts.append(H[bins][:, q, :])
-    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+        parts += [H[bins, :target_index], H[bins, target_index + 1:]]
+    grams = [_gram(part) for part in parts if part.shape[1]]
+    return grams[0] if len(grams) == 1 else np.sum(grams, axis=0)
 
 
 def _tap(n: int, fs: float, sigma: float, t0: float | None, band: tuple[float, float], taper_octaves: float,
@@ -326,11 +336,11 @@ def contrast_bound(
     band = check_band(band, fs)
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     sigma = check_positive(sigma, "sigma")
-    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
+    G = _quiet_gram(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, sigma, t0, band, taper_octaves, waveform)
     active = taper > 0
     # Over every bin (not only the band's), so that bound_db_for can weigh any waveform.
-    lam = _exact_lambda(H[:, target_index, :], _gram(Hq))
+    lam = _exact_lambda(H[:, target_index, :], G)
     with np.errstate(divide="ignore", invalid="ignore"):
         quiet_min = np.where(active & (lam > 0), np.abs(U) ** 2 / np.where(lam > 0, lam, 1.0), 0.0)
     quiet_min = np.where(active & (lam <= 0) & (np.abs(U) > 0), np.inf, quiet_min)
@@ -376,8 +386,9 @@ def _energy_db(target: float, others: np.ndarray) -> float:
 def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, target_peak, taper_octaves,
             reg_param):
     """Validate, then the ACC eigenpairs over the band; ``waveform=None`` asks for
-    ``target_peak`` times the Ricker centred at ``t0`` (default mid-window)."""
-    H = as_transfer(H)
+    ``target_peak`` times the Ricker centred at ``t0`` (default mid-window). ``H``'s values
+    are checked in the band, the only part used (a pass less over a large ``H``)."""
+    H = as_transfer(H, values=False)
     fs = check_positive(fs, "fs")
     n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
     check_grid(H.shape[0], n, "waveform (n,)")
@@ -389,14 +400,15 @@ def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, wavefo
     if waveform is None:
         U = check_positive(target_peak, "target_peak") * U
     active = slice(int(np.flatnonzero(taper > 0)[0]), int(np.flatnonzero(taper > 0)[-1]) + 1)
-    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H, active)
+    with np.errstate(over="ignore", invalid="ignore"):
+        check_transfer_energy(np.vdot(H[active], H[active]).real, H[active], "H", " in the design band")
+    G = _quiet_gram(H, target_index, quiet_indices, quiet_H, active)
     h = H[active, target_index, :]
     if np.any(np.all(h == 0, axis=1) & (np.abs(U[active]) > 0)):
         raise ValidationError(
             f"H is zero from every actuator to the target (point {target_index}) at frequencies inside the band: "
             "no drive moves it there; recalibrate or narrow the band"
         )
-    G = _gram(Hq)
     lam, w = acc_filters(h, G, reg_param)
     return H, n, U, active, lam, w, G
 
