@@ -277,9 +277,27 @@ class WraparoundCheck:
             head, tail, _ = self._played(self._validated(drives), spectra, full=False)
         return _share(head, tail)
 
-    def check(self, drives: Any, *, tol: float = DEFAULT_WRAPAROUND_TOL, action: str = "raise",
-              spectra: np.ndarray | None = None) -> float:
-        """:func:`check_wraparound` through this check's cached spectra."""
+    def _exceeds(self, drives: Any, tol: float = DEFAULT_WRAPAROUND_TOL,
+                 spectra: np.ndarray | None = None) -> tuple[bool, float]:
+        """Whether the share past the window exceeds ``tol``, with that share.
+
+        The verdict is the one of playing every bin: where the bins a cached check leaves
+        out could change it, they are played too.
+
+        Parameters
+        ----------
+        drives, spectra
+            As in :meth:`fraction`.
+        tol : float
+            Largest tolerated share, in (0, 1).
+
+        Returns
+        -------
+        exceeded : bool
+            ``fraction > tol``.
+        fraction : float
+            As :meth:`fraction`.
+        """
         drives = self._validated(drives)
         tol = check_in_range(tol, "tol", 0.0, 1.0, inclusive=False)
         with _single_threaded_blas():
@@ -291,7 +309,13 @@ class WraparoundCheck:
             high = (np.sqrt(tail) + root) ** 2 / (head + tail) if head + tail > 0 else 0.0
             if skipped > 0 and (low > tol) != (high > tol):
                 head, tail, _ = self._played(drives, spectra, full=True)
-        return _verdict(_share(head, tail), drives, tol, action)
+        fraction = _share(head, tail)
+        return fraction > tol, fraction
+
+    def check(self, drives: Any, *, tol: float = DEFAULT_WRAPAROUND_TOL, action: str = "raise",
+              spectra: np.ndarray | None = None) -> float:
+        """:func:`check_wraparound` through this check's cached spectra."""
+        return _verdict(self._exceeds(drives, tol, spectra)[1], drives, tol, action)
 
 
 def _share(head: float, tail: float) -> float:
