@@ -7,12 +7,15 @@ table:
 - ``inverse_filter`` without the wrap-around check (the solve), same result to 1e-9
   relative (asserted);
 - the default path, ``inverse_filter`` with its wrap-around check (one shot: the check
-  transforms every path's impulse response);
+  transforms every path's impulse response), same result (asserted);
 - the check alone: one shot, and through a cached ``WraparoundCheck`` (what an
-  ``InverseOperator`` or a ``Calibration`` keeps), with its one-time cost;
+  ``InverseOperator`` or a ``Calibration`` keeps), with its one-time cost, against the
+  former playback check (same fraction, asserted);
 - ``InverseOperator`` retargeting against one inverse FFT of the drives;
-- the peak memory of the sleeve design (a fresh subprocess, ``ru_maxrss`` less the
-  process's size before the design).
+- the contrast designs (``contrast_drives``, ``constrained_drives``) against a
+  per-frequency ``scipy.linalg.eigh`` loop on the same medium, same drives to 1e-9
+  (asserted);
+- the peak memory of the sleeve design (a fresh subprocess, numpy's buffers traced).
 
 Run: ``python benchmarks/bench_inverse_filter.py [--repeats 5]``. Timings are the best of
 ``repeats`` runs; every ratio compares timings of this one run on this one machine.
@@ -30,8 +33,9 @@ import tracemalloc
 import numpy as np
 from threadpoolctl import threadpool_limits
 
+from bench_contrast import loop_acc
 from vibrofocus import InverseOperator, inverse_filter, ricker
-from vibrofocus.rendering import WraparoundCheck, band_taper
+from vibrofocus.rendering import WraparoundCheck, band_taper, constrained_drives, contrast_drives
 from vibrofocus.rendering.causality import _playback_wraparound_fraction
 
 FS = 10_000.0
@@ -94,18 +98,19 @@ def compare(label: str, n: int, n_points: int, n_actuators: int, repeats: int) -
     t_old, old_fraction = best_of(1, _playback_wraparound_fraction, fast, H)
     assert abs(fraction - old_fraction) <= 1e-4 * old_fraction + 1e-9, (fraction, old_fraction)
     cached = WraparoundCheck(H)
-    t_build, _ = best_of(1, lambda: cached.odd_spectra)
-    cached.fraction(fast)  # its per-bin norms, once
-    t_cached, _ = best_of(repeats, cached.fraction, fast)
+    t_build, _ = best_of(1, lambda: cached.padded_spectra)
+    t_cached, cached_fraction = best_of(repeats, cached.check, fast)
+    assert abs(cached_fraction - old_fraction) <= 1e-4 * old_fraction + 1e-9, (cached_fraction, old_fraction)
     row("naive per-frequency numpy.linalg.pinv loop", t_naive)
     row("inverse_filter solve (check_wraparound=False)", t_solve,
         f"{t_naive / t_solve:5.1f}x naive (max rel. diff {error:.1e})")
-    row("default path: inverse_filter + check", t_default,
+    row("default path: inverse_filter + one-shot check", t_default,
         f"{t_naive / t_default:5.1f}x naive, check +{(t_default - t_solve) / t_solve:.0%} of the solve")
     row("  check one shot (wraparound_fraction)", t_one_shot, f"{t_one_shot / t_solve:.0%} of the solve")
     row("  check, cached spectra (per design)", t_cached,
-        f"{t_cached / t_solve:.0%} of the solve; once per H: {t_build * 1e3:.1f} ms")
-    row("  former playback check", t_old, f"fraction {fraction:.3g} (former {old_fraction:.3g})")
+        f"{t_cached / t_solve:.0%} of the solve; solve + check {t_naive / (t_solve + t_cached):.1f}x naive")
+    row("  the cache, once per transfer matrix", t_build)
+    row("  former playback check", t_old, f"fraction {fraction:.4g} (cached {cached_fraction:.4g}, former {old_fraction:.4g})")
 
     control = np.arange(min(n_points, n_actuators + 1))
     t_build_op, op = best_of(1, InverseOperator, H, FS, control=control)
@@ -119,6 +124,20 @@ def compare(label: str, n: int, n_points: int, n_actuators: int, repeats: int) -
     row("  retarget (drives_for_point)", t_retarget,
         f"{t_retarget / t_irfft:.1f}x one irfft of the drives ({t_irfft * 1e3:.3f} ms)")
     row("  operator.check_wraparound (cached)", t_op_check)
+
+    quiet = np.arange(1, n_points)
+    t_loop, looped = best_of(1, loop_acc, H, 0, quiet, n, 1e-3)
+    t_acc, acc = best_of(repeats, contrast_drives, H, 0, FS, quiet_indices=quiet)
+    t_con, con = best_of(repeats, constrained_drives, H, 0, FS, quiet_indices=quiet, contrast_weight=0.0)
+    error = max(np.max(np.abs(d - looped)) / np.max(np.abs(looped)) for d in (acc, con))
+    assert error < 1e-9, f"batched and looped contrast designs differ by {error:.2e} relative"
+    _, goal = constrained_drives(H, 0, FS, quiet_indices=quiet, contrast_weight=1.0, full_output=True)
+    t_search, _ = best_of(repeats, constrained_drives, H, 0, FS, quiet_indices=quiet,
+                          min_contrast_db=goal["energy_contrast_db"])
+    row("naive per-frequency scipy.linalg.eigh ACC loop", t_loop)
+    row("  contrast_drives (ACC)", t_acc, f"{t_loop / t_acc:5.1f}x the loop (max rel. diff {error:.1e})")
+    row("  constrained_drives (contrast_weight)", t_con, f"{t_loop / t_con:5.1f}x the loop")
+    row("  constrained_drives (min_contrast_db search)", t_search, f"{t_loop / t_search:5.1f}x the loop")
 
 
 def peak_memory(size: str) -> None:

@@ -293,3 +293,22 @@ def test_a_contrast_design_from_a_noisy_transfer_is_tapered_to_fit_the_window(qu
     raw_m, fitted_m = raw.metrics(), fitted.metrics()
     assert abs(fitted_m["energy_contrast_db"] - raw_m["energy_contrast_db"]) < 0.5
     assert fitted_m["fidelity"] > raw_m["fidelity"] - 0.01
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_constrained_search_finds_the_least_tradeoff(seed):
+    # Ask for the contrast the contrast_weight=0.7 design reaches (tradeoff p = 0.7 / 1.7):
+    # the search returns that p, and the designs just below it miss the goal.
+    H = random_medium(np.random.default_rng(seed), REF.n_points, REF.n_actuators)
+    target, quiet = 4, np.delete(np.arange(REF.n_points), 4)
+
+    def design(**kwargs):
+        return constrained_drives(H, target, FS, quiet_indices=quiet, full_output=True, **kwargs)
+
+    drives, asked = design(contrast_weight=0.7)
+    found, info = design(min_contrast_db=asked["energy_contrast_db"] * (1 - 1e-12))
+    assert info["tradeoff"] == pytest.approx(0.7 / 1.7, rel=1e-4)  # the goal is met with a 1e-9 margin
+    assert_allclose(found, drives, rtol=0, atol=1e-4 * np.abs(drives).max())
+    for factor in (1 - 1e-4, 1 - 1e-2):
+        p = info["tradeoff"] * factor
+        assert design(contrast_weight=p / (1 - p))[1]["energy_contrast_db"] < info["energy_contrast_db"]

@@ -72,6 +72,29 @@ def test_verdict_at_the_edge_of_the_tolerance(rng, factor, raises):
             assert run() == pytest.approx(fraction, rel=1e-4)
 
 
+def test_verdict_plays_every_bin_where_the_skipped_bins_could_change_it(rng, monkeypatch):
+    import vibrofocus.rendering.causality as causality
+
+    n = 512
+    H = random_medium(rng, n, 5, 2, longest=0.3)
+    drives = tap_drives(rng, n, 2, 0.75 * n)
+    exact = _playback_wraparound_fraction(drives, H)
+    for share in ("_SKIP_SHARE", "_CORE_SHARE"):  # leave out bins that move the share
+        monkeypatch.setattr(causality, share, 0.05)
+    check = WraparoundCheck(H, n)
+    rough = check.fraction(drives)
+    assert abs(rough - exact) > 1e-3 * exact
+    tol = 0.5 * (rough + exact)  # the bins kept and all the bins give opposite verdicts
+    if exact > tol:
+        with pytest.raises(CausalityError):
+            check.check(drives, tol=tol)
+    else:
+        assert check.check(drives, tol=tol) == pytest.approx(exact, rel=1e-4)
+    far = 0.5 * min(rough, exact)  # far from both: the bins kept decide
+    with pytest.raises(CausalityError):
+        check.check(drives, tol=far)
+
+
 def test_inverse_filter_verdict_equals_playback(rng):
     n = 1024
     H = fir_medium(n, random_fir_taps(rng, 6, 3, 40))

@@ -43,8 +43,8 @@ from .._validation import as_array, check_band, check_in_range, check_index, che
 from ..defaults import BAND_HZ, SIGMA_S
 from ..errors import ValidationError
 from ..signals.ricker import ricker
-from ._checks import as_indices, as_transfer, check_grid
-from ._pinv import _single_threaded_blas
+from ._checks import as_indices, as_transfer, check_grid, check_transfer_energy
+from ._pinv import _single_threaded_blas, gram_matrix
 from .taper import band_taper
 
 __all__ = [
@@ -125,10 +125,10 @@ def generalized_eigh_max(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _gram(Hq: np.ndarray) -> np.ndarray:
-    """``H_q^H H_q`` per frequency, shape (F, n_act, n_act), Hermitian."""
+    """``H_q^H H_q`` per frequency, shape (F, n_act, n_act), exactly Hermitian (a real
+    ``dsyrk`` over ``H_q`` read as real, :func:`~vibrofocus.rendering._pinv.gram_matrix`)."""
     with _single_threaded_blas():
-        G = np.conj(np.swapaxes(Hq, -1, -2)) @ Hq
-    return 0.5 * (G + np.conj(np.swapaxes(G, -1, -2)))
+        return gram_matrix(Hq)
 
 
 def acc_filters(h: np.ndarray, G: np.ndarray, reg_param: float) -> tuple[np.ndarray, np.ndarray]:
@@ -237,14 +237,26 @@ def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.where(escapes, np.inf, lam)
 
 
-def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any) -> np.ndarray:
-    """The quiet points' transfer, (F, n_quiet, n_act), from indices and/or a field H."""
+def _runs(indices: np.ndarray) -> list[tuple[int, int]]:
+    """``indices`` as runs ``[start, stop)`` of consecutive values, in their order."""
+    breaks = np.flatnonzero(np.diff(indices) != 1) + 1
+    starts, ends = np.r_[0, breaks], np.r_[breaks, len(indices)]
+    return [(int(indices[s]), int(indices[e - 1]) + 1) for s, e in zip(starts, ends)]
+
+
+def _quiet_gram(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any,
+                bins: slice = slice(None)) -> np.ndarray:
+    """Gram matrix ``H_q^H H_q`` of the quiet points at ``bins``, (F_bins, n_act, n_act),
+    from indices and/or a field H. Runs of consecutive quiet points (every other point,
+    the default, is two) are read from ``H`` in place, summing their Gram matrices: no
+    copy of the quiet points' transfer."""
     parts = []
     if quiet_indices is not None:
         q = as_indices(quiet_indices, "quiet_indices", H.shape[1])
         if np.any(q == target_index):
             raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
-        parts.append(H[:, q, :])
+        runs = _runs(q)
+        parts += [H[bins, start:stop] for start, stop in runs] if len(runs) <= 8 else [H[bins][:, q, :]]
     if quiet_H is not None:
         Hf = as_transfer(quiet_H, "quiet_H")
         if Hf.shape[0] != H.shape[0] or Hf.shape[2] != H.shape[2]:
@@ -252,13 +264,13 @@ def _quiet_transfer(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_
                 f"quiet_H has shape {Hf.shape} but H has {H.shape}: it must have shape "
                 f"({H.shape[0]}, n_grid, {H.shape[2]}) (same frequencies and actuators)"
             )
-        parts.append(Hf)
+        parts.append(Hf[bins])
     if not parts:
-        q = np.delete(np.arange(H.shape[1]), target_index)
-        if q.size == 0:
+        if H.shape[1] == 1:
             raise ValidationError("H has a single point: there are no quiet points to compare the target with")
-        parts.append(H[:, q, :])
-    return parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
+        parts += [H[bins, :target_index], H[bins, target_index + 1:]]
+    grams = [_gram(part) for part in parts if part.shape[1]]
+    return grams[0] if len(grams) == 1 else np.sum(grams, axis=0)
 
 
 def _tap(n: int, fs: float, sigma: float, t0: float | None, band: tuple[float, float], taper_octaves: float,
@@ -324,11 +336,11 @@ def contrast_bound(
     band = check_band(band, fs)
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     sigma = check_positive(sigma, "sigma")
-    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
+    G = _quiet_gram(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, sigma, t0, band, taper_octaves, waveform)
     active = taper > 0
     # Over every bin (not only the band's), so that bound_db_for can weigh any waveform.
-    lam = _exact_lambda(H[:, target_index, :], _gram(Hq))
+    lam = _exact_lambda(H[:, target_index, :], G)
     with np.errstate(divide="ignore", invalid="ignore"):
         quiet_min = np.where(active & (lam > 0), np.abs(U) ** 2 / np.where(lam > 0, lam, 1.0), 0.0)
     quiet_min = np.where(active & (lam <= 0) & (np.abs(U) > 0), np.inf, quiet_min)
@@ -374,8 +386,9 @@ def _energy_db(target: float, others: np.ndarray) -> float:
 def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, target_peak, taper_octaves,
             reg_param):
     """Validate, then the ACC eigenpairs over the band; ``waveform=None`` asks for
-    ``target_peak`` times the Ricker centred at ``t0`` (default mid-window)."""
-    H = as_transfer(H)
+    ``target_peak`` times the Ricker centred at ``t0`` (default mid-window). ``H``'s values
+    are checked in the band, the only part used (a pass less over a large ``H``)."""
+    H = as_transfer(H, values=False)
     fs = check_positive(fs, "fs")
     n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
     check_grid(H.shape[0], n, "waveform (n,)")
@@ -383,18 +396,19 @@ def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, wavefo
     band = check_band(band, fs)
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     reg_param = check_positive(reg_param, "reg_param", allow_zero=True)
-    Hq = _quiet_transfer(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, check_positive(sigma, "sigma"), t0, band, taper_octaves, waveform)
     if waveform is None:
         U = check_positive(target_peak, "target_peak") * U
     active = slice(int(np.flatnonzero(taper > 0)[0]), int(np.flatnonzero(taper > 0)[-1]) + 1)
+    with np.errstate(over="ignore", invalid="ignore"):
+        check_transfer_energy(np.vdot(H[active], H[active]).real, H[active], "H", " in the design band")
+    G = _quiet_gram(H, target_index, quiet_indices, quiet_H, active)
     h = H[active, target_index, :]
     if np.any(np.all(h == 0, axis=1) & (np.abs(U[active]) > 0)):
         raise ValidationError(
             f"H is zero from every actuator to the target (point {target_index}) at frequencies inside the band: "
             "no drive moves it there; recalibrate or narrow the band"
         )
-    G = _gram(Hq[active])
     lam, w = acc_filters(h, G, reg_param)
     return H, n, U, active, lam, w, G
 
@@ -572,25 +586,41 @@ def constrained_drives(
     lam_ref = float(np.sum(weight) / np.sum(weight / safe))  # broadband exact-tap contrast (regularized)
 
     lam_top = float(np.max(np.where(weight > 0, safe, 0.0)))
+    towards_ref = lam_ref - safe  # p < 1: lambda / (lambda + p (lam_ref - lambda))
+    beyond_num = safe * lam_top / lam_ref  # the branch beyond: beyond_num / (beyond_den + q lambda)
+    beyond_den = lam_top - np.minimum(safe, lam_top)
 
-    def gains(p: np.ndarray) -> np.ndarray:
-        """Target gain ``V / U`` per trade-off parameter ``p`` (M,) -> (M, F), normalized
-        to the exact tap's target energy. ``p`` in [0, 1): ``lambda / (lambda + mu)`` with
+    def shape(p: np.ndarray) -> np.ndarray:
+        """Target gain ``V / U`` up to a factor, per trade-off parameter ``p`` (M,) -> (M, F),
+        all ``p`` on one branch: ``p`` in [0, 1): ``lambda / (lambda + mu)`` with
         ``mu = lam_ref p / (1 - p)``; ``p`` in [1, 2]: the branch beyond ``mu = inf``,
         ``lambda / (1 - (1 - q) lambda / lambda_top)`` with ``q = 10^(-30 (p - 1))``, which
         ends on the best bin alone."""
-        p = p[:, None]
-        lo = safe / (np.minimum(p, 1.0) * lam_ref + (1 - np.minimum(p, 1.0)) * safe)
-        q = 10.0 ** (-30.0 * np.clip(p - 1.0, 0.0, 1.0))
-        hi = safe * lam_top / (lam_ref * ((lam_top - np.minimum(safe, lam_top)) + q * safe))
-        g = np.where(p < 1, lo, hi)
-        g = g * np.sqrt(np.sum(weight) / np.maximum(np.sum(g**2 * weight, axis=1, keepdims=True), 1e-300))
+        if np.all(p < 1):
+            return safe / (safe + p[:, None] * towards_ref)
+        return beyond_num / (beyond_den + 10.0 ** (-30.0 * np.minimum(p[:, None] - 1.0, 1.0)) * safe)
+
+    def gains(p: float) -> np.ndarray:
+        """:func:`shape` at one ``p``, normalized to the exact tap's target energy, 0 where
+        ``lambda <= 0``, shape (F,)."""
+        g = shape(np.array([p]))[0]
+        g = g * np.sqrt(np.sum(weight) / max(float(np.sum(g**2 * weight)), 1e-300))
         return np.where(ok, g, 0.0)
 
+    # Target and quiet energy per bin of a unit gain (zero where lambda <= 0): the contrast
+    # of a gain g is (g^2 . weight) / (g^2 . weight ratio), independent of g's scale.
+    energies = np.stack([weight, weight * ratio], axis=1)  # (F, 2)
+
     def contrast_at(p: np.ndarray) -> np.ndarray:
-        """Energy contrast (linear) for each p, shape (M,)."""
-        g2 = gains(p) ** 2 * weight[None, :]
-        return np.sum(g2, axis=1) / np.maximum(np.sum(g2 * ratio[None, :], axis=1), 1e-300)
+        """Energy contrast (linear) for each p, shape (M,): one product over the bins per
+        branch."""
+        out = np.empty(p.size)
+        for branch in (p < 1, p >= 1):
+            if branch.any():
+                g = shape(p[branch])
+                target, quiet = ((g * g) @ energies).T
+                out[branch] = target / np.maximum(quiet, 1e-300 * target)
+        return out
 
     if min_contrast_db is None:
         p_opt = contrast_weight / (contrast_weight + 1.0)
@@ -608,15 +638,30 @@ def constrained_drives(
         if k == 0:
             p_opt = 0.0
         else:
-            lo, hi = grid[k - 1], grid[k]  # contrast below the goal at lo, at or above it at hi
-            for _ in range(60):
-                mid = 0.5 * (lo + hi)
-                if contrast_at(np.array([mid]))[0] >= goal * (1 + 1e-9):
-                    hi = mid
+            # Contrast below the goal at lo, at or above it at hi (p = 1 is a grid point: the
+            # bracket lies in one branch). Regula falsi with the Illinois step narrows it to
+            # rounding (what 60 bisection steps gave) in a few evaluations; a step that
+            # would not land strictly inside the bracket bisects instead.
+            lo, hi = grid[k - 1], grid[k]
+            f_lo, f_hi = values[k - 1] - goal * (1 + 1e-9), values[k] - goal * (1 + 1e-9)
+            side = 0
+            for _ in range(200):
+                if hi - lo <= 4 * np.finfo(float).eps * hi:
+                    break
+                mid = hi - f_hi * (hi - lo) / (f_hi - f_lo)
+                if not lo < mid < hi:
+                    mid = 0.5 * (lo + hi)
+                f_mid = contrast_at(np.array([mid]))[0] - goal * (1 + 1e-9)
+                if f_mid >= 0:
+                    hi, f_hi = mid, f_mid
+                    f_lo = 0.5 * f_lo if side == 1 else f_lo
+                    side = 1
                 else:
-                    lo = mid
+                    lo, f_lo = mid, f_mid
+                    f_hi = 0.5 * f_hi if side == -1 else f_hi
+                    side = -1
             p_opt = hi
-    g = gains(np.array([p_opt]))[0]
+    g = gains(p_opt)
     drives = _to_drives(w * np.where(ok, g * Ua / safe, 0.0)[:, None], active, H.shape[0], n)
     if not full_output:
         return drives

@@ -18,7 +18,7 @@ from .._validation import as_array, check_band, check_choice, check_positive
 from ..defaults import BAND_HZ
 from ..errors import DriveLimitError, ValidationError
 from ._checks import as_indices, as_transfer, check_grid, check_regularization, check_transfer_energy, samples_for
-from ._pinv import SpectralPinv, small_gram
+from ._pinv import SpectralPinv, _single_threaded_blas, small_gram
 from .causality import DEFAULT_WRAPAROUND_TOL, WraparoundCheck
 from .taper import band_taper
 
@@ -315,6 +315,7 @@ def apply_drive_limit(drives: np.ndarray, max_drive: float | None, on_limit: str
     return drives * scale, scale, needed
 
 
+@_single_threaded_blas()  # one BLAS thread for the whole design (set once)
 def inverse_filter(
     H: Any,
     targets: Any,
@@ -408,7 +409,7 @@ def inverse_filter(
         with np.errstate(over="ignore", invalid="ignore"):
             check_transfer_energy(np.vdot(H, H).real, H)  # the rest of H is used from here on
     if check_wraparound:
-        fraction = WraparoundCheck(H, n, keep=False).check(drives, tol=wraparound_tol, spectra=spectra,
+        fraction = WraparoundCheck._trusted(H, n, keep=False).check(drives, tol=wraparound_tol, spectra=spectra,
                                                            action="warn" if check_wraparound == "warn" else "raise")
     drives, scale, needed = apply_drive_limit(drives, max_drive, on_limit, "the inverse filter")
     if not full_output:

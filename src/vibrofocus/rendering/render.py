@@ -494,8 +494,8 @@ def render(
     if check_wraparound:
         if playback is None:
             # Contrast designs are checked twice: transform the impulse responses once.
-            playback = WraparoundCheck(H, n, keep=method in CONTRAST_METHODS)
-        if method in CONTRAST_METHODS and playback.fraction(drives) > wraparound_tol:
+            playback = WraparoundCheck._trusted(H, n, keep=method in CONTRAST_METHODS)
+        if method in CONTRAST_METHODS and playback._exceeds(drives, wraparound_tol)[0]:
             # Noise in a measured H spreads a little of these designs' drive over the
             # whole window (DRIVE_WINDOW_TAPER): taper the window's ends, then check.
             drives = taper_drive_ends(drives, int(np.argmax(np.abs(desired))))
