@@ -14,6 +14,7 @@ __all__ = [
     "CausalityError",
     "CalibrationFileError",
     "StudyError",
+    "AnswerRefused",
     "OutputError",
 ]
 
@@ -44,6 +45,34 @@ class CalibrationFileError(VibrofocusError):
 
 class StudyError(VibrofocusError):
     """A study request is invalid: unknown participant/session, bad answer, ..."""
+
+
+class AnswerRefused(StudyError):
+    """An answer the study database refused to store; nothing was written.
+
+    Attributes
+    ----------
+    reason : str
+        Which rule refused it, so that a caller can word it for its audience (the
+        participant page says "already answered" for ``answered``):
+
+        ``invalid``
+            Malformed answer: response, reaction time or answer id.
+        ``unknown_trial``
+            The session has no such trial.
+        ``answered``
+            The trial already has another answer (or this answer id another response).
+        ``reused_id``
+            The answer id was used for another trial.
+        ``not_current``
+            Not the session's first unanswered trial (answers come in trial order).
+        ``not_presented``
+            Asked to be presented first, and no stimulus onset is logged for the trial.
+    """
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class OutputError(VibrofocusError):

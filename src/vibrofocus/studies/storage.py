@@ -31,13 +31,14 @@ import re
 import sqlite3
 import threading
 from collections.abc import Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from ..errors import StudyError
+from ..errors import AnswerRefused, StudyError
 from .protocol import PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
+from .session_status import SESSION_STATUSES, check_transition, status_after_answer, transition_event
 
 __all__ = [
     "SCHEMA_VERSION",
@@ -56,13 +57,6 @@ __all__ = [
 SCHEMA_VERSION = 1
 #: ``PRAGMA application_id`` marking a vibrofocus study database ("VBFC").
 APPLICATION_ID = 0x56424643
-#: Session statuses. ``planned``: created, nothing answered; ``running``; ``paused``;
-#: ``aborted`` (stopped by the experimenter, data kept, may be resumed);
-#: ``completed`` (every planned trial answered).
-SESSION_STATUSES = ("planned", "running", "paused", "aborted", "completed")
-
-# Event kinds logged by set_status for each new status.
-_STATUS_EVENT = {"running": "resume", "paused": "pause", "aborted": "abort", "completed": "complete", "planned": "replan"}
 
 _PARTICIPANT_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
 _EVENT_RE = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
@@ -162,6 +156,9 @@ class AnswerReceipt:
         Calibration the session used.
     recorded_at : str
         UTC time of the commit, ISO 8601.
+    duplicate : bool
+        True when this receipt answers a re-send (the same ``answer_id`` again): nothing
+        new was stored. Not part of equality: a re-send's receipt equals the original's.
     """
 
     answer_id: str
@@ -172,6 +169,7 @@ class AnswerReceipt:
     drive_sha256: str | None
     calibration_id: int | None
     recorded_at: str
+    duplicate: bool = field(default=False, compare=False)
 
 
 @dataclass(frozen=True)
@@ -747,25 +745,17 @@ class StudyStore:
         trial answered, and a completed session keeps that status. Aborting keeps all data;
         an aborted session can be resumed by setting ``running``.
         """
-        if status not in SESSION_STATUSES:
-            raise StudyError(f"status must be one of {', '.join(SESSION_STATUSES)}; got {status!r}")
         with self._write(f"set the status of session {session_id!r}") as conn:
             info = self._session(conn, session_id)
+            check_transition(info.session_id, info.status, status, n_answered=info.n_answered, n_trials=info.n_trials)
             if info.status == status:
                 return
-            if info.status == "completed":
-                raise StudyError(f"session {info.session_id} is completed; its status cannot become {status!r}")
-            if status == "completed" and not info.finished:
-                raise StudyError(
-                    f"session {info.session_id} cannot be completed: {info.n_answered} of {info.n_trials} trials answered"
-                )
-            if status == "planned":
-                raise StudyError(f"session {info.session_id} cannot go back to 'planned'")
-            conn.execute(
-                "UPDATE sessions SET status = ?, updated_at = ? WHERE session_id = ?", (status, _now(), info.session_id)
-            )
-            kind = "start" if (status == "running" and info.status == "planned") else _STATUS_EVENT[status]
-            self._insert_event(conn, info.session_id, kind, {"from": info.status, "to": status})
+            self._change_status(conn, info, status, _now())
+
+    def _change_status(self, conn: sqlite3.Connection, info: SessionInfo, status: str, now: str) -> None:
+        """Write an allowed status change and its event (inside the caller's transaction)."""
+        conn.execute("UPDATE sessions SET status = ?, updated_at = ? WHERE session_id = ?", (status, now, info.session_id))
+        self._insert_event(conn, info.session_id, transition_event(info.status, status), {"from": info.status, "to": status})
 
     # ------------------------------------------------------------------ trials
     def planned_trials(self, session_id: int) -> list[PlannedTrial]:
@@ -803,8 +793,12 @@ class StudyStore:
         *,
         answer_id: str,
         drive_sha256: str | None = None,
+        require_presented: bool = False,
     ) -> AnswerReceipt:
         """Validate an answer and commit it in its own transaction before returning.
+
+        This is the one place where the rules of answers are enforced, for every
+        responder (keypad, simulated participant, web page).
 
         Parameters
         ----------
@@ -815,14 +809,20 @@ class StudyStore:
             unanswered trial (answers come in order: nothing is skipped).
         response : int, str or iterable of int
             Locations (see :func:`parse_response`): Study 1 exactly one, Study 2 one or
-            more distinct, each within the design's locations (1-9).
+            more distinct, each within the design's locations.
         rt_s : float
             Response time, s (finite, >= 0).
         answer_id : str
             Client-supplied id (printable ASCII, no spaces, <= 128 characters). The same
-            id sent again returns the same receipt and stores nothing new.
+            id sent again returns the same receipt (``duplicate=True``) and stores
+            nothing new.
         drive_sha256 : str, optional
-            SHA-256 (hex) of the drive signals played for this trial.
+            SHA-256 (hex) of the drive signals played for this trial. Default with
+            ``require_presented``: the hash in the trial's last ``stimulus_onset`` event.
+        require_presented : bool
+            Refuse an answer to a trial whose ``stimulus_onset`` is not logged (an answer
+            sent before the stimulus is not data): for answers that arrive from outside
+            the trial loop, such as the web participant page.
 
         Returns
         -------
@@ -830,63 +830,72 @@ class StudyStore:
 
         Raises
         ------
-        StudyError
-            Unknown session or trial, invalid response or rt, a trial already answered
+        AnswerRefused
+            Invalid response, rt or answer id, unknown trial, a trial already answered
             under another ``answer_id``, an ``answer_id`` reused for another trial or
-            response, a trial out of order, or a database failure (disk full, ...): the
-            answer is then *not* stored and earlier answers are intact.
+            response, a trial out of order, or (``require_presented``) a trial not
+            presented; :attr:`AnswerRefused.reason` says which. Nothing is stored.
+        StudyError
+            Unknown session, or a database failure (disk full, ...): the answer is
+            then *not* stored and earlier answers are intact.
 
         Notes
         -----
         Answers are accepted whatever the session's status (an answer to a stimulus felt
-        just before a pause or abort is data). The first answer moves a ``planned``
-        session to ``running``; the answer to the last planned trial makes it
-        ``completed``, in the same transaction. Each answer is also logged as an
-        ``answer`` event.
+        just before a pause or abort is data). The status then changes as
+        :func:`~vibrofocus.studies.session_status.status_after_answer` says (the first
+        answer starts a planned session, the last completes it), in the same
+        transaction. Each answer is also logged as an ``answer`` event.
         """
         if not isinstance(answer_id, str) or not _ANSWER_ID_RE.match(answer_id):
-            raise StudyError(f"answer_id must be 1-128 printable ASCII characters without spaces, got {answer_id!r}")
+            raise AnswerRefused(f"answer_id must be 1-128 printable ASCII characters without spaces, got {answer_id!r}", "invalid")
         tidx = _as_int(trial_index, "trial index")
         if drive_sha256 is not None and (not isinstance(drive_sha256, str) or not re.fullmatch(r"[0-9a-f]{64}", drive_sha256)):
             raise StudyError(f"drive_sha256 must be 64 lowercase hex digits, got {drive_sha256!r}")
         with self._write(f"record the answer to trial {trial_index!r} of session {session_id!r}") as conn:
             info = self._session(conn, session_id)
             sid = info.session_id
+            try:
+                locations = parse_response(response, info.design)
+            except StudyError as exc:
+                raise AnswerRefused(str(exc), "invalid") from None
             prior = conn.execute("SELECT * FROM answers WHERE answer_id = ?", (answer_id,)).fetchone()
-            design = info.design
-            locations = parse_response(response, design)
             if prior is not None:
                 receipt = _receipt(prior)
                 if (receipt.session_id, receipt.trial_index, receipt.response) != (sid, tidx, locations):
-                    raise StudyError(
+                    same_trial = (receipt.session_id, receipt.trial_index) == (sid, tidx)
+                    raise AnswerRefused(
                         f"answer_id {answer_id!r} was already used for session {receipt.session_id} trial "
                         f"{receipt.trial_index} (response {format_response(receipt.response)!r}); "
-                        "send a new answer_id for a new answer"
+                        "send a new answer_id for a new answer", "answered" if same_trial else "reused_id",
                     )
-                return receipt  # idempotent retry: same receipt, nothing written
-            try:
-                rt = float(rt_s)
-            except (TypeError, ValueError):
-                raise StudyError(f"rt_s must be a number of seconds, got {rt_s!r}") from None
-            if not math.isfinite(rt) or rt < 0:
-                raise StudyError(f"rt_s must be finite and >= 0 s, got {rt_s!r}")
-            if conn.execute(
-                "SELECT 1 FROM planned_trials WHERE session_id = ? AND trial_index = ?", (sid, tidx)
-            ).fetchone() is None:
-                raise StudyError(f"session {sid} has no trial {tidx} (trials 0..{info.n_trials - 1})")
+                return _receipt(prior, duplicate=True)  # idempotent retry: same receipt, nothing written
+            rt = _check_rt(rt_s)
+            if not 0 <= tidx < info.n_trials:
+                raise AnswerRefused(
+                    f"trial_index {tidx} is out of range: session {sid} has no trial {tidx} (trials 0..{info.n_trials - 1})",
+                    "unknown_trial",
+                )
             existing = conn.execute(
                 "SELECT answer_id, response FROM answers WHERE session_id = ? AND trial_index = ?", (sid, tidx)
             ).fetchone()
             if existing is not None:
-                raise StudyError(
+                raise AnswerRefused(
                     f"trial {tidx} of session {sid} is already answered ({existing['response']!r}, "
-                    f"answer_id {existing['answer_id']!r}); a trial takes one answer"
+                    f"answer_id {existing['answer_id']!r}); a trial takes one answer", "answered",
                 )
             nxt = self._next_row(conn, sid)
             if nxt is not None and nxt["trial_index"] != tidx:
-                raise StudyError(
-                    f"trial {tidx} of session {sid} is not the next trial: answer trial {nxt['trial_index']} first"
+                raise AnswerRefused(
+                    f"trial {tidx} of session {sid} is not the next trial: answer trial {nxt['trial_index']} first",
+                    "not_current",
                 )
+            if require_presented:
+                onset = self._last_onset(conn, sid, tidx)
+                if onset is None:
+                    raise AnswerRefused(f"trial {tidx} of session {sid} has not been presented (no stimulus onset)", "not_presented")
+                if drive_sha256 is None:
+                    drive_sha256 = onset.get("drive_sha256")
             now = _now()
             conn.execute(
                 "INSERT INTO answers (answer_id, session_id, trial_index, response, rt_s, drive_sha256, "
@@ -896,19 +905,23 @@ class StudyStore:
             self._insert_event(conn, sid, "answer", {
                 "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt,
             })
-            new_status = info.status
-            if info.n_answered + 1 >= info.n_trials:
-                new_status = "completed"
-            elif info.status == "planned":
-                new_status = "running"
+            new_status = status_after_answer(info.status, finished=info.n_answered + 1 >= info.n_trials)
             if new_status != info.status:
-                conn.execute("UPDATE sessions SET status = ?, updated_at = ? WHERE session_id = ?", (new_status, now, sid))
-                kind = "complete" if new_status == "completed" else "start"
-                self._insert_event(conn, sid, kind, {"from": info.status, "to": new_status})
+                self._change_status(conn, info, new_status, now)
             else:
                 conn.execute("UPDATE sessions SET updated_at = ? WHERE session_id = ?", (now, sid))
             row = conn.execute("SELECT * FROM answers WHERE answer_id = ?", (answer_id,)).fetchone()
         return _receipt(row)
+
+    @staticmethod
+    def _last_onset(conn: sqlite3.Connection, sid: int, tidx: int) -> dict[str, Any] | None:
+        """Payload of the last ``stimulus_onset`` event of a trial, or None if it was never presented."""
+        row = conn.execute(
+            "SELECT payload FROM events WHERE session_id = ? AND kind = 'stimulus_onset' "
+            "AND json_extract(payload, '$.trial_index') = ? ORDER BY event_id DESC LIMIT 1",
+            (sid, tidx),
+        ).fetchone()
+        return None if row is None else json.loads(row["payload"])
 
     def answers(self, session_id: int) -> list[AnswerReceipt]:
         """Committed answers of a session, by trial index."""
@@ -1025,7 +1038,17 @@ def _trial(r: sqlite3.Row) -> PlannedTrial:
     return PlannedTrial(r["session_id"], r["trial_index"], r["phase"], r["trial"], r["method"], r["target"])
 
 
-def _receipt(r: sqlite3.Row) -> AnswerReceipt:
+def _check_rt(rt_s: Any) -> float:
+    try:
+        rt = float(rt_s)
+    except (TypeError, ValueError):
+        raise AnswerRefused(f"rt_s must be a number of seconds, got {rt_s!r}", "invalid") from None
+    if not math.isfinite(rt) or rt < 0:
+        raise AnswerRefused(f"rt_s must be finite and >= 0 s, got {rt_s!r}", "invalid")
+    return rt
+
+
+def _receipt(r: sqlite3.Row, *, duplicate: bool = False) -> AnswerReceipt:
     return AnswerReceipt(
         answer_id=r["answer_id"],
         session_id=r["session_id"],
@@ -1035,4 +1058,5 @@ def _receipt(r: sqlite3.Row) -> AnswerReceipt:
         drive_sha256=r["drive_sha256"],
         calibration_id=r["calibration_id"],
         recorded_at=r["recorded_at"],
+        duplicate=duplicate,
     )
