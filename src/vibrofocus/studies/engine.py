@@ -144,18 +144,9 @@ class CalibrationRenderer:
         return np.asarray(self.rendering(method, target).drives, dtype=float)
 
 
-def calibration_renderer(
-    calibration: Any,
-    *,
-    n_samples: int = N_SAMPLES,
-    limit_v: float = DRIVE_LIMIT_V,
-    **render_options: Any,
-) -> CalibrationRenderer:
-    """A ``renderer(method, target) -> drives`` built on a participant's calibration.
-
-    Parameters are those of :class:`CalibrationRenderer`, which this returns.
-    """
-    return CalibrationRenderer(calibration, n_samples=n_samples, limit_v=limit_v, **render_options)
+#: ``calibration_renderer(calibration, *, n_samples, limit_v, **render_options)``: the
+#: name callers have used since before :class:`CalibrationRenderer` was a class.
+calibration_renderer = CalibrationRenderer
 
 
 def terminal_beep() -> None:
