@@ -28,6 +28,7 @@ __all__ = [
     "SESSION_STATUSES",
     "TRANSITIONS",
     "SESSION_ACTIONS",
+    "LIVE_STATUSES",
     "check_transition",
     "transition_event",
     "status_after_answer",
@@ -49,6 +50,10 @@ TRANSITIONS: dict[str, tuple[str, ...]] = {
 
 # The event logged for each new status (a planned session that runs is a "start").
 _EVENT_OF = {"running": "resume", "paused": "pause", "aborted": "abort", "completed": "complete"}
+
+#: Statuses of a session that has a trial loop (presenting, or held by a pause): after a
+#: server restart its loop is rebuilt, and goes on at the first unanswered trial.
+LIVE_STATUSES = ("running", "paused")
 
 #: The experimenter's controls of a session (the web app's buttons).
 SESSION_ACTIONS = ("start", "pause", "resume", "stop")

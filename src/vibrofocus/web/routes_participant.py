@@ -15,6 +15,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse
 
 from ..errors import AnswerRefused
+from ..studies.session_status import LIVE_STATUSES
 from .api_models import AnswerIn, AnswerReceipt, RestartIn, SessionId
 from .app import KEY_HEADER, WebState, render_template, trial_position
 
@@ -40,7 +41,7 @@ def planned(web: WebState, session_id: int) -> list[Any]:
 def _live_runner(web: WebState, session_id: int, status: str):
     """The runner of a session the store calls running or paused, built after a restart if needed."""
     runner = web.runner(session_id)
-    if runner is None and status in ("running", "paused"):
+    if runner is None and status in LIVE_STATUSES:
         runner = web.runner(session_id, create=True)
         if status == "paused":
             runner.pause()
