@@ -54,20 +54,13 @@ class AnswerRefused(StudyError):
     ----------
     reason : str
         Which rule refused it, so that a caller can word it for its audience (the
-        participant page says "already answered" for ``answered``):
-
-        ``invalid``
-            Malformed answer: response, reaction time or answer id.
-        ``unknown_trial``
-            The session has no such trial.
-        ``answered``
-            The trial already has another answer (or this answer id another response).
-        ``reused_id``
-            The answer id was used for another trial.
-        ``not_current``
-            Not the session's first unanswered trial (answers come in trial order).
-        ``not_presented``
-            Asked to be presented first, and no stimulus onset is logged for the trial.
+        participant page says "already answered" for ``answered``): ``invalid`` (the
+        response, reaction time or answer id is malformed), ``unknown_trial`` (the
+        session has no such trial), ``answered`` (the trial already has another answer,
+        or this answer id another response), ``reused_id`` (the answer id was used for
+        another trial), ``not_current`` (not the session's first unanswered trial:
+        answers come in trial order) or ``not_presented`` (no stimulus onset is logged
+        for the trial, and the caller asked for one).
     """
 
     def __init__(self, message: str, reason: str) -> None:

@@ -144,9 +144,21 @@ class CalibrationRenderer:
         return np.asarray(self.rendering(method, target).drives, dtype=float)
 
 
-#: ``calibration_renderer(calibration, *, n_samples, limit_v, **render_options)``: the
-#: name callers have used since before :class:`CalibrationRenderer` was a class.
-calibration_renderer = CalibrationRenderer
+def calibration_renderer(calibration: Any, **options: Any) -> CalibrationRenderer:
+    """A ``renderer(method, target) -> drives`` built on a participant's calibration.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        The participant's calibration.
+    **options
+        ``n_samples``, ``limit_v`` and rendering options, as :class:`CalibrationRenderer` takes them.
+
+    Returns
+    -------
+    CalibrationRenderer
+    """
+    return CalibrationRenderer(calibration, **options)
 
 
 def terminal_beep() -> None:

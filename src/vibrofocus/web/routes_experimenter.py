@@ -359,15 +359,21 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
     """``start``, ``pause``, ``resume`` or ``stop`` a session.
 
     Which control applies to which status is the session state machine's
-    (:func:`~vibrofocus.studies.session_status.action_status`); the status is stored
-    first, then the runner follows it.
+    (:func:`~vibrofocus.studies.session_status.action_status`). The status is stored
+    first and the runner follows it, except for a stop: the runner has ended before
+    ``aborted`` is stored, so that it cannot write a status after the stop's.
     """
     if action not in SESSION_ACTIONS:
         raise HTTPException(404, detail=f"unknown session action {action!r}; use start, pause, resume or stop")
     info = web.session(session_id)
     try:
         status = action_status(action, session_id, info["status"])
-        if status == "running":
+        if status == "aborted":
+            with web.lock:
+                runner = web.runners.pop(session_id, None)
+            if runner is not None:
+                runner.stop()
+        elif status == "running":
             runner = web.runner(session_id, create=True)
         with web.db:
             web.store.set_status(session_id, status)
@@ -380,11 +386,6 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
         runner = web.runner(session_id)
         if runner is not None:
             runner.pause()
-    else:
-        with web.lock:
-            runner = web.runners.pop(session_id, None)
-        if runner is not None:
-            runner.stop()
     return _session_out(web, session_id)
 
 
