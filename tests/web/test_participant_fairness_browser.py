@@ -138,6 +138,45 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
         context.close()
 
 
+def test_two_tabs_each_report_only_their_own_answer(server, chromium):
+    # Two tabs of one browser share localStorage, where unsent answers wait. The tab that
+    # did not answer must not send the other's answer and then say "Answer taken".
+    s = start(server, "P36", 1)
+    sid = s["session_id"]
+    context = chromium.new_context()
+    context.set_default_timeout(15_000)
+    context.add_init_script(MESSAGES)
+    first, second = context.new_page(), context.new_page()
+    hold = {"on": True}
+
+    def answers(route):
+        if hold["on"]:
+            route.abort()  # the first tab's sends fail for now: its answer stays stored
+        else:
+            route.continue_()
+
+    try:
+        open_page(first, server, s)
+        open_page(second, server, s)
+        wait_respond(first, 0)
+        wait_respond(second, 0)
+        first.route("**/answer", answers)
+        first.keyboard.press("3")
+        first.wait_for_function(f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]').length === 1")
+        second.evaluate("window.dispatchEvent(new Event('online'))")  # wakes the second tab's sender
+        second.wait_for_timeout(1000)
+        assert server.rows("SELECT trial_index FROM answers") == [], "the second tab sent the first tab's answer"
+        hold["on"] = False
+        first.wait_for_function(f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]').length === 0")
+        assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
+        wait_respond(second, 1)
+        first.wait_for_function("window.vfMessages.some(m => m.includes('Answer taken'))")
+        assert not any("Answer taken" in m for m in second.evaluate("window.vfMessages")), second.evaluate("window.vfMessages")
+    finally:
+        first.unroute_all(behavior="ignoreErrors")
+        context.close()
+
+
 def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromium):
     s = start(server, "P35", 1)
     sid = s["session_id"]

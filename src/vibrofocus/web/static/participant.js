@@ -37,6 +37,12 @@
   }
   function savePending(list) { localStorage.setItem(pendingKey, JSON.stringify(list)); }
   function dropPending(answerId) { savePending(loadPending().filter((a) => a.answer_id !== answerId)); }
+  // Two tabs of one browser share localStorage. Each page sends, and reports on, only its
+  // own answers: those it took, and those left stored when it was loaded (a reload or a
+  // crash before they were sent). Otherwise one screen would say "Answer taken" for the
+  // other's answer, or swallow the refusal of the other's answer.
+  const ownIds = new Set(loadPending().map((a) => a.answer_id));
+  function ownPending() { return loadPending().filter((a) => ownIds.has(a.answer_id)); }
 
   function newAnswerId() {
     if (crypto.randomUUID) return crypto.randomUUID().replace(/-/g, "");
@@ -75,7 +81,7 @@
     let delay = 250;
     try {
       for (;;) {
-        const list = loadPending();
+        const list = ownPending();
         if (!list.length) { setStalled(false); return; }
         const answer = list[0];
         const abort = new AbortController();
@@ -167,7 +173,7 @@
         setOnline(true);
         delay = 250;
         const next = await res.json();
-        if (loadPending().length) flushPending();
+        if (ownPending().length) flushPending();
         render(next);
       } catch {
         setOnline(false);
@@ -220,7 +226,7 @@
     }
     if (refused && refused.trial_index !== next.trial_index) refused = null;
     const refusedHere = refused !== null;
-    const pendingHere = loadPending().some((a) => a.trial_index === next.trial_index);
+    const pendingHere = ownPending().some((a) => a.trial_index === next.trial_index);
     const respond = next.state === "respond";
     // A trial waiting for an answer whose onset this page did not see (it was loaded or
     // reloaded after the stimulus) is asked for again, from "Get ready".
@@ -244,7 +250,7 @@
     $("hint").textContent = "";
 
     if (refusedHere && ["respond", "taken"].includes(next.state)) { setMessage(refused.text); return; }
-    if (loadPending().length && (!online || stalled)) {
+    if (ownPending().length && (!online || stalled)) {
       setMessage(stalled ? "Your answer is saved on this computer. The server has not replied yet — trying again…"
                          : "Answer saved on this computer — reconnecting…");
       return;
@@ -322,6 +328,7 @@
       answer_id: newAnswerId(),
     };
     // Stored before the first send: a crash or reload from here on cannot lose it.
+    ownIds.add(answer.answer_id);
     savePending([...loadPending(), answer]);
     sentFor = state.trial_index;
     for (const c of cells) c.classList.toggle("selected", answer.response.includes(Number(c.dataset.loc)));
