@@ -14,6 +14,7 @@ __all__ = [
     "CausalityError",
     "CalibrationFileError",
     "StudyError",
+    "AnswerRefused",
     "OutputError",
 ]
 
@@ -44,6 +45,27 @@ class CalibrationFileError(VibrofocusError):
 
 class StudyError(VibrofocusError):
     """A study request is invalid: unknown participant/session, bad answer, ..."""
+
+
+class AnswerRefused(StudyError):
+    """An answer the study database refused to store; nothing was written.
+
+    Attributes
+    ----------
+    reason : str
+        Which rule refused it, so that a caller can word it for its audience (the
+        participant page says "already answered" for ``answered``): ``invalid`` (the
+        response, reaction time or answer id is malformed), ``unknown_trial`` (the
+        session has no such trial), ``answered`` (the trial already has another answer,
+        or this answer id another response), ``reused_id`` (the answer id was used for
+        another trial), ``not_current`` (not the session's first unanswered trial:
+        answers come in trial order) or ``not_presented`` (no stimulus onset is logged
+        for the trial, and the caller asked for one).
+    """
+
+    def __init__(self, message: str, reason: str) -> None:
+        super().__init__(message)
+        self.reason = reason
 
 
 class OutputError(VibrofocusError):

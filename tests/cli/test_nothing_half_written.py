@@ -441,10 +441,10 @@ def test_4_study_export_into_a_read_only_folder(tmp_path, read_only):
 
 # ---------------------------------------------------------------------- case 5: a study database in a read-only folder
 def test_5_export_from_a_read_only_folder_reads_a_private_copy(tmp_path, monkeypatch):
-    from vibrofocus.studies import storage
+    from vibrofocus.studies import database
 
     db = _study_db(tmp_path)
-    monkeypatch.setattr(storage, "_folder_writable", lambda folder: Path(folder) != tmp_path)
+    monkeypatch.setattr(database, "_folder_writable", lambda folder: Path(folder) != tmp_path)
     out_dir = tmp_path.parent / (tmp_path.name + "-out")
     out_dir.mkdir()
     result = runner.invoke(app, ["study", "export", "--db", str(db), "--out", str(out_dir / "t.csv")])
@@ -455,10 +455,10 @@ def test_5_export_from_a_read_only_folder_reads_a_private_copy(tmp_path, monkeyp
 
 def test_5_running_a_study_in_a_read_only_folder_says_so(tmp_path, monkeypatch):
     from vibrofocus.errors import StudyError
-    from vibrofocus.studies import StudyStore, storage
+    from vibrofocus.studies import StudyStore, database
 
     db = _study_db(tmp_path)
-    monkeypatch.setattr(storage, "_folder_writable", lambda folder: False)
+    monkeypatch.setattr(database, "_folder_writable", lambda folder: False)
     with pytest.raises(StudyError, match="read-only") as info:
         StudyStore(db)
     assert "not a vibrofocus study database" not in str(info.value)

@@ -8,7 +8,7 @@ from vibrofocus.errors import StudyError
 from vibrofocus.rendering import render
 from vibrofocus.rigs import make_rig
 from vibrofocus.studies import StudyStore
-from vibrofocus.studies.engine import ABORT, PAUSE, Response, StudyEngine, calibration_renderer, drive_sha256
+from vibrofocus.studies.engine import ABORT, PAUSE, STOP, Again, Response, StudyEngine, calibration_renderer, drive_sha256
 
 N = 4096  # the default window (a shorter one fails the causality check)
 
@@ -128,3 +128,90 @@ def test_calibration_renderer_uses_the_calibration(calibration_file):
     expected = render("inverse", H, cal.fs, cal.layout, 5).drives
     np.testing.assert_allclose(drives, expected, rtol=1e-12, atol=0)
     assert drives.shape == (cal.layout.n_actuators, N)
+
+
+class Hooked(Scripted):
+    """A scripted participant that also answers the engine's optional hooks, from scripts."""
+
+    def __init__(self, script, before=(), shown=(), resume=True):
+        super().__init__(script, resume)
+        self.before, self.shown, self.taken = list(before), list(shown), []
+
+    def respond(self, presentation):
+        if isinstance(self.script[0], Again):
+            self.seen.append(presentation.trial.trial_index)
+            return self.script.pop(0)
+        return super().respond(presentation)
+
+    def before_cue(self, trial):
+        return self.before.pop(0) if self.before else None
+
+    def cue_shown(self, trial):
+        return self.shown.pop(0) if self.shown else None
+
+    def answered(self, presentation, receipt):
+        self.taken.append(receipt.trial_index)
+
+
+def _small(store):
+    return store.create_session("p1", 1, seed=5, config={"repetitions": 1, "n_training": 0, "methods": ["inverse"], "locations": [4, 6]})
+
+
+def test_hooks_cancel_a_cue_restart_a_trial_and_log_why(store, rig, renderer):
+    sid = _small(store)
+    participant = Hooked(
+        [Again("trial_restarted", "page reloaded"), 4, 6],
+        before=[Again()],  # e.g. the trial was answered meanwhile: nothing is logged
+        shown=[Again("cue_cancelled", "nobody saw the cue")],
+    )
+    summary = StudyEngine(store, sid, rig, renderer=renderer).run(participant)
+    assert summary.status == "completed" and participant.taken == [0, 1]
+    kinds = [(e.kind, e.payload.get("trial_index")) for e in store.events(sid)
+             if e.kind in ("cue", "stimulus_onset", "cue_cancelled", "trial_restarted", "answer")]
+    assert kinds == [
+        ("cue", 0), ("cue_cancelled", 0),  # no stimulus for a cancelled cue
+        ("cue", 0), ("stimulus_onset", 0), ("trial_restarted", 0),
+        ("cue", 0), ("stimulus_onset", 0), ("answer", 0),
+        ("cue", 1), ("stimulus_onset", 1), ("answer", 1),
+    ]
+    assert rig.n_played == 3
+    assert store.events(sid, kind="cue_cancelled")[0].payload["reason"] == "nobody saw the cue"
+
+
+def test_stop_keeps_the_status_and_a_hook_can_pause(store, rig, renderer):
+    sid = _small(store)
+    stopped = StudyEngine(store, sid, rig, renderer=renderer).run(Hooked([], before=[PAUSE], resume=STOP))
+    assert stopped.status == "paused" and rig.n_played == 0, "a stop leaves the session as it was"
+    store.set_status(sid, "running")
+    stopped = StudyEngine(store, sid, rig, renderer=renderer).run(Hooked([], shown=[STOP]))
+    assert stopped.status == "running" and rig.n_played == 0
+    with pytest.raises(StudyError, match="expected a Response"):
+        StudyEngine(store, sid, rig, renderer=renderer).run(Hooked([], before=["later"]))
+
+
+def test_every_responder_writes_the_same_payloads_and_a_dry_run_plays_nothing(store, rig, renderer):
+    played, dry = _small(store), _small(store)
+    StudyEngine(store, played, rig, renderer=renderer).run(Scripted([4, 6]))
+    StudyEngine(store, dry, None, dry_run=True, cue_by="page").run(Scripted([4, 6]))
+    assert rig.n_played == 2
+    for kind in ("cue", "stimulus_onset"):
+        a, b = store.events(played, kind=kind), store.events(dry, kind=kind)
+        assert [set(e.payload) for e in a] == [set(e.payload) for e in b]
+    onset = store.events(played, kind="stimulus_onset")[0].payload
+    assert onset["played"] and onset["drive_sha256"] == drive_sha256(renderer(onset["method"], onset["target"]))
+    assert store.events(dry, kind="stimulus_onset")[0].payload["played"] is False
+    assert store.events(dry, kind="cue")[0].payload["beep"] == "page"
+    assert [a.drive_sha256 for a in store.answers(dry)] == [None, None]
+
+
+def test_a_failing_rig_is_logged_and_the_session_resumes(store, renderer):
+    class Broken:
+        def play(self, drives):
+            raise RuntimeError("interface unplugged")
+
+    sid = _small(store)
+    with pytest.raises(RuntimeError, match="unplugged"):
+        StudyEngine(store, sid, Broken(), renderer=renderer).run(Scripted([4, 6]))
+    (event,) = store.events(sid, kind="error")
+    assert "interface unplugged" in event.payload["message"]
+    assert store.session(sid).status == "running" and store.answers(sid) == []

@@ -4,7 +4,7 @@ import sqlite3
 
 import pytest
 
-from vibrofocus.errors import StudyError
+from vibrofocus.errors import AnswerRefused, StudyError
 from vibrofocus.studies import SCHEMA_VERSION, StudyStore
 
 
@@ -267,3 +267,33 @@ def test_two_processes_share_the_database(store, session):
         with pytest.raises(StudyError, match="already answered"):
             other.record_answer(session, 0, 3, 1.0, answer_id="late")
     assert [a.answer_id for a in store.answers(session)] == ["from-a", "from-b"]
+
+
+def test_an_answer_that_must_be_presented_waits_for_its_onset_and_takes_its_hash(store, session):
+    with pytest.raises(AnswerRefused, match="not been presented") as refused:
+        store.record_answer(session, 0, 4, 0.5, answer_id="early", require_presented=True)
+    assert refused.value.reason == "not_presented" and store.answers(session) == []
+    store.log_event(session, "stimulus_onset", {"trial_index": 0, "drive_sha256": "a" * 64})
+    store.log_event(session, "stimulus_onset", {"trial_index": 0, "drive_sha256": "b" * 64})  # presented again
+    receipt = store.record_answer(session, 0, 4, 0.5, answer_id="late", require_presented=True)
+    assert receipt.drive_sha256 == "b" * 64, "the hash of the last presentation"
+    again = store.record_answer(session, 0, 4, 0.5, answer_id="late", require_presented=True)
+    assert again == receipt and again.duplicate and not receipt.duplicate
+    assert len(store.answers(session)) == 1
+
+
+@pytest.mark.parametrize("call, reason", [
+    (lambda st, s: st.record_answer(s, 0, 99, 0.5, answer_id="x1"), "invalid"),
+    (lambda st, s: st.record_answer(s, 0, 4, -1.0, answer_id="x2"), "invalid"),
+    (lambda st, s: st.record_answer(s, 500, 4, 0.5, answer_id="x3"), "unknown_trial"),
+    (lambda st, s: st.record_answer(s, 0, 5, 0.5, answer_id="x4"), "answered"),
+    (lambda st, s: st.record_answer(s, 0, 5, 0.5, answer_id="first"), "answered"),
+    (lambda st, s: st.record_answer(s, 1, 4, 0.5, answer_id="first"), "reused_id"),
+    (lambda st, s: st.record_answer(s, 2, 4, 0.5, answer_id="x5"), "not_current"),
+])
+def test_each_refusal_says_which_rule(store, session, call, reason):
+    store.record_answer(session, 0, 4, 0.5, answer_id="first")
+    with pytest.raises(AnswerRefused) as refused:
+        call(store, session)
+    assert refused.value.reason == reason
+    assert [a.answer_id for a in store.answers(session)] == ["first"]

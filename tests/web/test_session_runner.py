@@ -182,3 +182,32 @@ def test_serve_prints_token_and_warns_off_localhost(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "vibrofocus", "serve", "--rig", "laser", "--no-browser",
                           "--db", str(tmp_path / "s.sqlite")], capture_output=True, text=True, timeout=60)
     assert bad.returncode == 2 and "rig" in bad.stderr
+
+
+def test_the_web_writes_the_engines_payloads_and_a_paused_session_stays_paused(store):
+    sid = store.create_session("P01", 1, seed=3, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [2]})
+    rig = CountingRig()
+    runner = SessionRunner(store, sid, renderer=lambda method, target: np.ones((4, 8)), rig=rig, pace=QUICK, require_page=False)
+    runner.start()
+    wait_for(lambda: runner.snapshot()["state"] == "respond")
+    (cue,) = store.events(sid, kind="cue")
+    (onset,) = store.events(sid, kind="stimulus_onset")
+    # The keys the study engine writes for every responder (tests/studies/test_engine.py).
+    assert cue.payload == {"trial_index": 0, "beep": "page"}
+    assert onset.payload == {"trial_index": 0, "method": "inverse", "target": 2, "played": True,
+                             "drive_sha256": drive_sha256(np.ones((4, 8)))}
+    runner.stop()
+    assert store.session(sid).status == "running", "a stop (server shutdown) leaves the session to resume"
+    # Rebuilt for a session stored as paused (a restart), the runner waits and sets nothing.
+    store.set_status(sid, "paused")
+    again = SessionRunner(store, sid, renderer=lambda method, target: np.ones((4, 8)), rig=rig, pace=QUICK, require_page=False)
+    again.pause()
+    again.start()
+    wait_for(lambda: again.snapshot()["state"] == "paused")
+    time.sleep(0.1)
+    assert store.session(sid).status == "paused" and len(rig.played) == 1
+    store.set_status(sid, "running")
+    again.resume()
+    wait_for(lambda: again.snapshot()["state"] == "respond")
+    assert len(rig.played) == 2 and len(store.events(sid, kind="cue")) == 2
+    again.stop()

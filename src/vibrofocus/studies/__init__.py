@@ -26,7 +26,12 @@ Storage (:mod:`.storage`)
         # events(session_id, kind=None), trial_rows(), close(), context manager
 
     Answers must come in trial order; the same ``answer_id`` again returns the same
-    receipt; the first answer sets status ``running`` and the last ``completed``.
+    receipt; the first answer sets status ``running`` and the last ``completed``. A
+    refused answer raises :class:`~vibrofocus.errors.AnswerRefused` (``reason``).
+Session states (:mod:`.session_status`)
+    The one state machine: :data:`SESSION_STATUSES`, :data:`TRANSITIONS`,
+    :func:`action_status` (start / pause / resume / stop), used by the store, the
+    engine and the web app.
 Export (the trials file, :mod:`vibrofocus.io.trials_csv`)
     :data:`TRIALS_COLUMNS`, :func:`write_trials_csv`, :func:`read_trials_csv`.
 Running trials (:mod:`.engine`)
@@ -35,9 +40,13 @@ Running trials (:mod:`.engine`)
     (cached drives + sha256), ``.present(trial) -> Presentation`` (logs ``cue``, beeps,
     logs ``stimulus_onset``, ``rig.play``), ``.submit(presentation, Response(locations, rt_s),
     *, answer_id=None) -> AnswerReceipt`` and ``.run(responder, *, pace_s=0, max_trials=None,
-    progress=None) -> RunSummary``. A responder has ``respond(presentation) -> Response |
-    PAUSE | ABORT`` and ``wait_resume() -> bool``. :func:`drive_sha256` (shape, then float64
-    bytes), :func:`calibration_renderer`, :func:`terminal_beep`, :func:`headphone_beep`.
+    progress=None) -> RunSummary``: the one study loop of every responder. A responder
+    has ``respond(presentation) -> Response | PAUSE | ABORT | STOP | Again`` and
+    ``wait_resume() -> bool | STOP``, and may have the hooks ``before_cue(trial)``,
+    ``cue_shown(trial)`` and ``answered(presentation, receipt)`` (the web participant
+    page uses them). :func:`drive_sha256` (shape, then float64 bytes),
+    :func:`calibration_renderer` / :class:`CalibrationRenderer`, :func:`terminal_beep`,
+    :func:`headphone_beep`.
 Simulated participants (:mod:`.participants`, :mod:`.simulate`)
     :class:`SimulatedParticipant` (a perceptual MODEL, not data), :class:`PerceptualModel`,
     :func:`simulate_studies`, :func:`participant_seeds`, :func:`summarize_simulation`.
@@ -46,6 +55,9 @@ Simulated participants (:mod:`.participants`, :mod:`.simulate`)
 from .engine import (
     ABORT,
     PAUSE,
+    STOP,
+    Again,
+    CalibrationRenderer,
     Presentation,
     Response,
     RunSummary,
@@ -59,10 +71,10 @@ from .engine import (
 from ..io.trials_csv import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
 from .participants import MODEL_LABEL, MODEL_NOTICE, MODEL_VERSION, Percepts, PerceptualModel, SimulatedParticipant
 from .protocol import PHASES, STUDIES, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
+from .session_status import SESSION_STATUSES, TRANSITIONS, action_status
 from .storage import (
     APPLICATION_ID,
     SCHEMA_VERSION,
-    SESSION_STATUSES,
     AnswerReceipt,
     CalibrationRecord,
     Event,
@@ -91,6 +103,8 @@ __all__ = [
     "SCHEMA_VERSION",
     "APPLICATION_ID",
     "SESSION_STATUSES",
+    "TRANSITIONS",
+    "action_status",
     "file_sha256",
     "TRIALS_COLUMNS",
     "write_trials_csv",
@@ -102,8 +116,11 @@ __all__ = [
     "RunSummary",
     "PAUSE",
     "ABORT",
+    "STOP",
+    "Again",
     "drive_sha256",
     "calibration_renderer",
+    "CalibrationRenderer",
     "terminal_beep",
     "headphone_beep",
     "TerminalResponder",

@@ -1,20 +1,27 @@
-"""Running the trials of a stored session on a rig.
+"""Running the trials of a stored session on a rig: the one study loop.
 
 The store is the only memory of progress: :meth:`StudyEngine.run` asks it for the first
 unanswered trial, presents it (event ``cue``, the beep, event ``stimulus_onset``, the
 drive on the rig), takes the answer from a :class:`Responder` and commits it before the
 next trial starts. A killed or interrupted run resumes by running again.
+
+Every responder (the terminal keypad, the simulated participant, the web participant
+page) runs in this loop; what a responder needs beyond ``respond`` it gets through the
+optional hooks of :class:`Responder` (wait until a screen can take the cue, cancel a cue
+nobody saw, present a trial again, pause, stop). The engine writes every trial event, in
+the same form for every responder.
 """
 
 from __future__ import annotations
 
 import hashlib
 import sys
+import threading
 import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any, Protocol, Union
 
 import numpy as np
 
@@ -26,6 +33,9 @@ from .storage import AnswerReceipt, StudyStore
 __all__ = [
     "PAUSE",
     "ABORT",
+    "STOP",
+    "Again",
+    "Control",
     "Stimulus",
     "Presentation",
     "Response",
@@ -34,6 +44,7 @@ __all__ = [
     "StudyEngine",
     "drive_sha256",
     "calibration_renderer",
+    "CalibrationRenderer",
     "terminal_beep",
     "headphone_beep",
 ]
@@ -42,6 +53,31 @@ __all__ = [
 PAUSE = "pause"
 #: What a responder returns to abort the session (answers so far are kept).
 ABORT = "abort"
+#: What a responder returns to end the run and leave the session's status as it is (a
+#: server shutting down, or an experimenter whose stop is already stored).
+STOP = "stop"
+
+
+@dataclass(frozen=True)
+class Again:
+    """What a responder returns to have the first unanswered trial presented again.
+
+    Attributes
+    ----------
+    event : str or None
+        Event logged for the trial (``cue_cancelled``, ``trial_restarted``), with
+        ``reason``; ``None``: nothing to log (the trial was answered meanwhile, say).
+    reason : str
+        Why, in words.
+    """
+
+    event: str | None = None
+    reason: str = ""
+
+
+#: What a hook may return: ``None`` (go on), :data:`PAUSE`, :data:`ABORT`, :data:`STOP` or :class:`Again`.
+Control = Union[None, str, Again]
+_CONTROLS = (PAUSE, ABORT, STOP)
 
 Renderer = Callable[[str, int], np.ndarray]
 
@@ -60,17 +96,13 @@ def drive_sha256(drives: np.ndarray) -> str:
     return digest.hexdigest()
 
 
-def calibration_renderer(
-    calibration: Any,
-    *,
-    n_samples: int = N_SAMPLES,
-    limit_v: float = DRIVE_LIMIT_V,
-    **render_options: Any,
-) -> Renderer:
-    """A ``renderer(method, target) -> drives`` built on a participant's calibration.
+class CalibrationRenderer:
+    """``renderer(method, target) -> drives`` built on a participant's calibration, cached.
 
     Every stimulus is ``rendering.render(method, H, fs, layout, target, limit_v=...)``
-    with ``H = calibration.transfer_for(n_samples)``.
+    with ``H = calibration.transfer_for(n_samples)``, rendered on first use and kept (a
+    trial's stimulus is a pure function of the calibration and the condition). Safe to
+    share between threads (a web app's sessions and previews of one calibration).
 
     Parameters
     ----------
@@ -84,15 +116,49 @@ def calibration_renderer(
     **render_options
         Passed on to ``rendering.render``.
     """
-    from ..rendering import render  # imported here: planning and storage do not need it
 
-    H = calibration.transfer_for(int(n_samples))
+    def __init__(self, calibration: Any, *, n_samples: int = N_SAMPLES, limit_v: float = DRIVE_LIMIT_V, **render_options: Any) -> None:
+        self.calibration = calibration
+        self.n_samples = int(n_samples)
+        self.limit_v = float(limit_v)
+        self._options = render_options
+        self._lock = threading.Lock()
+        self._H: np.ndarray | None = None
+        self._cache: dict[tuple[str, int], Any] = {}
 
-    def renderer(method: str, target: int) -> np.ndarray:
-        out = render(method, H, calibration.fs, calibration.layout, int(target), limit_v=limit_v, **render_options)
-        return np.asarray(out.drives, dtype=float)
+    def rendering(self, method: str, target: int) -> Any:
+        """The :class:`~vibrofocus.rendering.Rendering` of ``method`` at location number ``target``."""
+        from ..rendering import render  # imported here: planning and storage do not need it
 
-    return renderer
+        key = (str(method), int(target))
+        with self._lock:
+            if key not in self._cache:
+                if self._H is None:
+                    self._H = self.calibration.transfer_for(self.n_samples)
+                cal = self.calibration
+                self._cache[key] = render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
+            return self._cache[key]
+
+    def __call__(self, method: str, target: int) -> np.ndarray:
+        """Drives of a condition, shape (n_actuators, n_samples), V."""
+        return np.asarray(self.rendering(method, target).drives, dtype=float)
+
+
+def calibration_renderer(calibration: Any, **options: Any) -> CalibrationRenderer:
+    """A ``renderer(method, target) -> drives`` built on a participant's calibration.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        The participant's calibration.
+    **options
+        ``n_samples``, ``limit_v`` and rendering options, as :class:`CalibrationRenderer` takes them.
+
+    Returns
+    -------
+    CalibrationRenderer
+    """
+    return CalibrationRenderer(calibration, **options)
 
 
 def terminal_beep() -> None:
@@ -178,8 +244,8 @@ class Presentation:
     study : int
     trial : PlannedTrial
         The planned trial.
-    stimulus : Stimulus
-        What was played.
+    stimulus : Stimulus or None
+        What was played; ``None`` in a dry run (nothing is played).
     onset_s : float
         Stimulus onset, ``time.monotonic()``, s.
     design : StudyDesign
@@ -189,7 +255,7 @@ class Presentation:
     session_id: int
     study: int
     trial: PlannedTrial
-    stimulus: Stimulus
+    stimulus: Stimulus | None
     onset_s: float
     design: StudyDesign
 
@@ -204,20 +270,42 @@ class Response:
         Selected location(s): an int, a string like ``"4 5"`` or a sequence.
     rt_s : float
         Reaction time from the stimulus onset, s.
+    answer_id : str, optional
+        The answer's id; a new one is made when it is committed if ``None``. A responder
+        whose answers arrive already committed (the web page's, by its answer route)
+        gives that answer's id, so that committing it again stores nothing new.
     """
 
     locations: Any
     rt_s: float
+    answer_id: str | None = None
 
 
 class Responder(Protocol):
-    """Who answers trials: a person at a keypad or a simulated participant."""
+    """Who answers trials: a person at a keypad or a web page, or a simulated participant.
 
-    def respond(self, presentation: Presentation) -> Response | str:
-        """Answer a presented trial, or return :data:`PAUSE` / :data:`ABORT`."""
+    ``respond`` and ``wait_resume`` are required. The other methods are optional hooks
+    (the engine calls them when a responder has them): each returns a :data:`Control`,
+    ``None`` to go on.
+    """
 
-    def wait_resume(self) -> bool:
-        """Block while paused; True to resume (the trial is presented again), False to abort."""
+    def respond(self, presentation: Presentation) -> Response | str | Again:
+        """Answer a presented trial, or return :data:`PAUSE`, :data:`ABORT`, :data:`STOP` or :class:`Again`."""
+
+    def wait_resume(self) -> bool | str:
+        """Block while paused; True to resume (the trial is presented again), False to abort, :data:`STOP` to stop."""
+
+    # Optional hooks (not required by the protocol; documented here):
+    #
+    # before_cue(trial) -> Control
+    #     Before a trial's cue: e.g. show "get ready" and wait until a screen can take
+    #     the cue. Again: present the first unanswered trial again.
+    # cue_shown(trial) -> Control
+    #     After the cue is logged and beeped, until the stimulus moment: e.g. wait until
+    #     the screens show the cue. Again("cue_cancelled", reason): nobody saw the cue,
+    #     nothing is played, the trial is presented again.
+    # answered(presentation, receipt) -> None
+    #     After the answer is committed: e.g. show "taken".
 
 
 @dataclass(frozen=True)
@@ -251,17 +339,24 @@ class StudyEngine:
         The study database.
     session_id : int
         A session of ``store``.
-    rig : Rig
-        Where stimuli play (``rig.play``).
+    rig : Rig or None
+        Where stimuli play (``rig.play``); may be ``None`` in a dry run.
     calibration : Calibration, optional
         The participant's calibration; stimuli are rendered from it with
-        :func:`calibration_renderer`. Required unless ``renderer`` is given.
+        :func:`calibration_renderer`. Required unless ``renderer`` is given or
+        ``dry_run``.
     renderer : callable, optional
         ``renderer(method, target) -> drives`` instead of the calibration.
     cue : callable, optional
         Called with no argument just before each stimulus to beep in the participant's
-        headphones (e.g. :func:`terminal_beep`). ``None``: the cue is only logged (the
-        simulated rig, whose participant has no ears).
+        headphones (e.g. :func:`terminal_beep`). ``None``: the responder beeps (a web
+        page), or the cue is only logged (the simulated rig, whose participant has no ears).
+    cue_by : str, optional
+        What the ``cue`` event says of the beep when ``cue`` is ``None``:
+        ``"event-only"`` (default) or ``"page"`` (the participant page beeps).
+    dry_run : bool
+        Present without stimuli (no calibration): cues and answers work, nothing is
+        played, ``stimulus_onset`` says ``played: false``.
     n_samples, limit_v :
         Drive length (samples) and limit (V peak) for the calibration renderer.
 
@@ -269,6 +364,12 @@ class StudyEngine:
     -----
     Drives are rendered once per (method, target) and cached: a trial's stimulus is a
     pure function of the calibration and the condition.
+
+    Events written for each presentation (payload keys): ``cue`` (``trial_index``,
+    ``beep``), ``stimulus_onset`` (``trial_index``, ``method``, ``target``, ``played``,
+    ``drive_sha256``), and when a responder asks for a trial again ``cue_cancelled`` or
+    ``trial_restarted`` (``trial_index``, ``reason``); ``error`` (``message``) when the
+    run fails.
     """
 
     def __init__(
@@ -280,6 +381,8 @@ class StudyEngine:
         *,
         renderer: Renderer | None = None,
         cue: Callable[[], None] | None = None,
+        cue_by: str = "event-only",
+        dry_run: bool = False,
         n_samples: int = N_SAMPLES,
         limit_v: float = DRIVE_LIMIT_V,
     ) -> None:
@@ -289,7 +392,7 @@ class StudyEngine:
         self.study = info.study
         self.design = info.design
         self.rig = rig
-        if renderer is None:
+        if renderer is None and not dry_run:
             if calibration is None:
                 raise StudyError("a study engine needs the participant's calibration (or a renderer)")
             if calibration.layout.n_locations < max(self.design.locations):
@@ -298,13 +401,16 @@ class StudyEngine:
                     f"study uses locations up to {max(self.design.locations)}"
                 )
             renderer = calibration_renderer(calibration, n_samples=n_samples, limit_v=limit_v)
-        self._renderer = renderer
+        self._renderer = None if dry_run else renderer
         self.cue = cue
+        self._beep = "played" if cue is not None else str(cue_by)
         self._cache: dict[tuple[str, int], Stimulus] = {}
 
     # ------------------------------------------------------------------ pieces
-    def stimulus(self, method: str, target: int) -> Stimulus:
-        """The (cached) stimulus of a condition."""
+    def stimulus(self, method: str, target: int) -> Stimulus | None:
+        """The (cached) stimulus of a condition; ``None`` in a dry run."""
+        if self._renderer is None:
+            return None
         key = (str(method), int(target))
         if key not in self._cache:
             drives = np.asarray(self._renderer(*key), dtype=float)
@@ -312,28 +418,56 @@ class StudyEngine:
             self._cache[key] = Stimulus(key[0], key[1], drives, drive_sha256(drives))
         return self._cache[key]
 
-    def present(self, trial: PlannedTrial) -> Presentation:
-        """Cue, then play the trial's stimulus; both are logged before they happen."""
+    def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
+        self.store.log_event(self.session_id, kind, {"trial_index": trial.trial_index, **fields})
+
+    def present(self, trial: PlannedTrial, responder: Any = None) -> Presentation | str | Again:
+        """Cue, then play the trial's stimulus; both are logged before they happen.
+
+        With a ``responder`` that has the ``cue_shown`` hook, the stimulus waits for it
+        and is not played when it returns a control (returned here instead).
+        """
         stim = self.stimulus(trial.method, trial.target)
-        self.store.log_event(self.session_id, "cue", {
-            "trial_index": trial.trial_index, "beep": "played" if self.cue is not None else "event-only",
-        })
+        self._log("cue", trial, beep=self._beep)
         if self.cue is not None:
             self.cue()
-        self.store.log_event(self.session_id, "stimulus_onset", {
-            "trial_index": trial.trial_index, "method": trial.method, "target": trial.target,
-            "drive_sha256": stim.sha256,
-        })
+        control = _hook(responder, "cue_shown", trial)
+        if control is not None:
+            return control
+        self._log(
+            "stimulus_onset", trial, method=trial.method, target=trial.target,
+            played=stim is not None, drive_sha256=None if stim is None else stim.sha256,
+        )
         onset = time.monotonic()
-        self.rig.play(stim.drives)
+        if stim is not None:
+            self.rig.play(stim.drives)
         return Presentation(self.session_id, self.study, trial, stim, onset, self.design)
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
         """Commit the answer to a presented trial (with the drive hash) before returning."""
+        stim = presentation.stimulus
         return self.store.record_answer(
             self.session_id, presentation.trial.trial_index, response.locations, response.rt_s,
-            answer_id=answer_id or uuid.uuid4().hex, drive_sha256=presentation.stimulus.sha256,
+            answer_id=answer_id or response.answer_id or uuid.uuid4().hex,
+            drive_sha256=None if stim is None else stim.sha256,
         )
+
+    def _trial(self, responder: Responder, trial: PlannedTrial) -> AnswerReceipt | str | Again:
+        """Present one trial and commit its answer; or the control a responder returned."""
+        control = _hook(responder, "before_cue", trial)
+        if control is not None:
+            return control
+        presentation = self.present(trial, responder)
+        if not isinstance(presentation, Presentation):
+            return presentation
+        reply = responder.respond(presentation)
+        if isinstance(reply, (str, Again)):
+            return _checked(reply)
+        receipt = self.submit(presentation, reply)
+        answered = getattr(responder, "answered", None)
+        if answered is not None:
+            answered(presentation, receipt)
+        return receipt
 
     # ------------------------------------------------------------------ loop
     def run(
@@ -344,7 +478,7 @@ class StudyEngine:
         max_trials: int | None = None,
         progress: Callable[[PlannedTrial, AnswerReceipt], None] | None = None,
     ) -> RunSummary:
-        """Run from the first unanswered trial until the end, an abort or ``max_trials``.
+        """Run from the first unanswered trial until the end, an abort, a stop or ``max_trials``.
 
         Parameters
         ----------
@@ -360,35 +494,63 @@ class StudyEngine:
         Returns
         -------
         RunSummary
+
+        Notes
+        -----
+        An exception (a rig or a renderer failing) is logged as an ``error`` event and
+        raised; the session keeps its status, so running again resumes it.
         """
+        try:
+            n_run = self._run(responder, pace_s, max_trials, progress)
+        except Exception as exc:
+            self.store.log_event(self.session_id, "error", {"message": f"{type(exc).__name__}: {exc}"})
+            raise
+        info = self.store.session(self.session_id)
+        return RunSummary(self.session_id, info.status, info.n_answered, info.n_trials, n_run)
+
+    def _run(self, responder: Responder, pace_s: float, max_trials: int | None, progress: Any) -> int:
         info = self.store.session(self.session_id)
         if info.status == "completed":
-            return RunSummary(self.session_id, info.status, info.n_answered, info.n_trials, 0)
-        if info.status != "running":
-            self.store.set_status(self.session_id, "running")
+            return 0
+        self.store.set_status(self.session_id, "running")
         n_run = 0
         while max_trials is None or n_run < max_trials:
             trial = self.store.next_trial(self.session_id)
             if trial is None:
+                self.store.set_status(self.session_id, "completed")  # no-op when the last answer did it
                 break
-            presentation = self.present(trial)
-            reply = responder.respond(presentation)
-            if isinstance(reply, str):
-                if reply == PAUSE:
-                    self.store.set_status(self.session_id, "paused")
-                    if responder.wait_resume():
-                        self.store.set_status(self.session_id, "running")
-                        continue  # the same trial is presented again
-                    reply = ABORT
-                if reply == ABORT:
-                    self.store.set_status(self.session_id, "aborted")
-                    break
-                raise StudyError(f"a responder returned {reply!r}; expected a Response, 'pause' or 'abort'")
-            receipt = self.submit(presentation, reply)
+            outcome = self._trial(responder, trial)
+            if isinstance(outcome, Again):
+                if outcome.event is not None:
+                    self._log(outcome.event, trial, reason=outcome.reason)
+                continue
+            if outcome == PAUSE:
+                self.store.set_status(self.session_id, "paused")
+                resume = responder.wait_resume()
+                if resume is True:
+                    self.store.set_status(self.session_id, "running")
+                    continue  # the same trial is presented again
+                outcome = STOP if resume == STOP else ABORT
+            if outcome == ABORT:
+                self.store.set_status(self.session_id, "aborted")
+                break
+            if outcome == STOP:
+                break
             n_run += 1
             if progress is not None:
-                progress(trial, receipt)
+                progress(trial, outcome)
             if pace_s > 0:
                 time.sleep(pace_s)
-        info = self.store.session(self.session_id)
-        return RunSummary(self.session_id, info.status, info.n_answered, info.n_trials, n_run)
+        return n_run
+
+
+def _hook(responder: Any, name: str, trial: PlannedTrial) -> Control:
+    """Call a responder's optional hook ``name(trial)``; ``None`` when it has none."""
+    hook = getattr(responder, name, None)
+    return None if hook is None else _checked(hook(trial))
+
+
+def _checked(control: Control) -> Control:
+    if control is None or isinstance(control, Again) or control in _CONTROLS:
+        return control
+    raise StudyError(f"a responder returned {control!r}; expected a Response, 'pause', 'abort', 'stop' or Again")

@@ -20,10 +20,12 @@ import numpy as np
 from ..defaults import METHODS, STUDY_METHODS
 from ..errors import StudyError
 from ..io.responses import format_response  # the stored form of a response: one home, re-exported
+from ..layout import ArrayLayout
 
 __all__ = [
     "STUDIES",
     "PHASES",
+    "REFERENCE_LOCATIONS",
     "StudyDesign",
     "PlannedTrial",
     "plan_trials",
@@ -35,6 +37,9 @@ __all__ = [
 STUDIES = (1, 2)
 #: Phases of a session, in the order they are run.
 PHASES = ("training", "main")
+#: Location numbers of the reference setup (docs/method.md): the default design's
+#: locations. A design names its own (any layout's ``location_numbers``).
+REFERENCE_LOCATIONS: tuple[int, ...] = ArrayLayout.reference().location_numbers
 
 
 @dataclass(frozen=True)
@@ -48,7 +53,8 @@ class StudyDesign:
     methods : tuple of str
         Rendering methods compared (default: funneling, inverse, combination).
     locations : tuple of int
-        Location numbers (1-based) used as targets and accepted as answers.
+        Location numbers (1-based) used as targets and accepted as answers
+        (default :data:`REFERENCE_LOCATIONS`).
     repetitions : int
         Times each (method, location) condition appears in the main phase.
     n_training : int
@@ -57,7 +63,7 @@ class StudyDesign:
 
     study: int = 1
     methods: tuple[str, ...] = STUDY_METHODS
-    locations: tuple[int, ...] = tuple(range(1, 10))
+    locations: tuple[int, ...] = REFERENCE_LOCATIONS
     repetitions: int = 3
     n_training: int = 5
 

@@ -1,8 +1,9 @@
 """Pydantic models of every request body and of the main responses of the web API.
 
-The models refuse what is malformed on its own (a location outside 1-9, a negative
-reaction time, an unknown method); checks that need the database (is this the current
-trial? does the study allow several locations?) live in the routes.
+The models refuse what is malformed on its own (a location the participant page cannot
+show, a negative reaction time, an unknown method); the rules that need the database
+(is this the current trial? is the location one of the session's? does the study allow
+several locations?) are the store's (:meth:`StudyStore.record_answer`).
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from typing import Annotated, Literal
 
 from fastapi import Path
 from pydantic import BaseModel, ConfigDict, Field, field_validator
+
+from ..studies.protocol import REFERENCE_LOCATIONS
 
 __all__ = [
     "N_LOCATIONS",
@@ -25,8 +28,10 @@ __all__ = [
     "CalibrationId",
 ]
 
-#: Locations a participant can name (docs/method.md, reference setup): the 3 x 3 grid of the reference setup.
-N_LOCATIONS = 9
+#: Locations the participant page can show, and so name: those of the reference setup
+#: (its grid is web/templates/participant.html's). Which of them a session takes is its
+#: design's, checked by the store.
+N_LOCATIONS = len(REFERENCE_LOCATIONS)
 
 #: Largest id accepted anywhere (SQLite integers are 64-bit; larger numbers are refused with 422, not an error).
 MAX_ID = 2**53

@@ -132,8 +132,10 @@ class WebState:
         Guard the database and the shared dictionaries below.
     runners : dict
         Session id to its running :class:`SessionRunner`.
-    calibrations, banks : dict
-        Loaded calibrations and rendered stimuli, by calibration id.
+    calibrations : dict
+        Loaded calibrations, by calibration id.
+    banks : dict
+        Renderers (cached stimuli) by (calibration id, drive limit in V).
     jobs : dict
         Calibration jobs in progress, by job id.
     rigs : dict
@@ -157,7 +159,7 @@ class WebState:
     db: threading.RLock = field(default_factory=threading.RLock)
     runners: dict[int, SessionRunner] = field(default_factory=dict)
     calibrations: dict[int, Any] = field(default_factory=dict)
-    banks: dict[int, Any] = field(default_factory=dict)
+    banks: dict[tuple[int, float], Any] = field(default_factory=dict)
     jobs: dict[str, CalibrationJob] = field(default_factory=dict)
     rigs: dict[tuple[str, int], Any] = field(default_factory=dict)
     planned: dict[int, list] = field(default_factory=dict)
@@ -319,15 +321,30 @@ class WebState:
         return cal
 
     def bank(self, calibration_id: int, limit_v: float | None = None):
-        """The stimulus bank (cached renderings) of a calibration."""
-        from .stimuli import StimulusBank
+        """The renderer of a calibration (renders each condition once; previews and sessions share it).
 
+        Parameters
+        ----------
+        calibration_id : int
+            A registered calibration.
+        limit_v : float, optional
+            Drive limit, V peak (a rig's limit); default the rendering layer's.
+
+        Returns
+        -------
+        CalibrationRenderer
+        """
+        from ..defaults import DRIVE_LIMIT_V
+        from ..studies.engine import CalibrationRenderer
+
+        limit = DRIVE_LIMIT_V if limit_v is None else float(limit_v)
+        key = (int(calibration_id), limit)
         with self.lock:
-            bank = self.banks.get(calibration_id)
+            bank = self.banks.get(key)
         if bank is None:
-            bank = StimulusBank(self.calibration(calibration_id), limit_v=limit_v)
+            bank = CalibrationRenderer(self.calibration(calibration_id), limit_v=limit)
             with self.lock:
-                bank = self.banks.setdefault(calibration_id, bank)
+                bank = self.banks.setdefault(key, bank)
         return bank
 
     def runner(self, session_id: int, *, create: bool = False) -> SessionRunner | None:
@@ -338,13 +355,12 @@ class WebState:
                 return runner
         info = self.session(session_id)
         config = info.get("config") or {}
-        stimulus = rig = None
+        renderer = rig = None
         cal_id = info.get("calibration_id")
         if cal_id is not None:
             rig = self.make_rig(config.get("rig", self.rig_kind), config.get("rig_seed"))
-            bank = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None))
-            stimulus = bank.drives_for
-        runner = SessionRunner(self.store, session_id, stimulus=stimulus, rig=rig, pace=self.pace, store_lock=self.db)
+            renderer = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None))
+        runner = SessionRunner(self.store, session_id, renderer=renderer, rig=rig, pace=self.pace)
         with self.lock:
             return self.runners.setdefault(session_id, runner)
 

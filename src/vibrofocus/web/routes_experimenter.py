@@ -20,6 +20,7 @@ from fastapi import Path as FPath
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 
 from ..errors import StudyError, VibrofocusError
+from ..studies.session_status import SESSION_ACTIONS, action_status
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
 from .app import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template, trial_position
 from .routes_participant import planned
@@ -353,43 +354,36 @@ def get_session(session_id: SessionId, web: WebState = Depends(require_token)) -
 
 @router.post("/api/sessions/{session_id}/{action}")
 def session_action(session_id: SessionId, action: str, web: WebState = Depends(require_token)) -> dict[str, Any]:
-    """``start``, ``pause``, ``resume`` or ``stop`` a session."""
-    if action not in ("start", "pause", "resume", "stop"):
+    """``start``, ``pause``, ``resume`` or ``stop`` a session.
+
+    Which control applies to which status is the session state machine's
+    (:func:`~vibrofocus.studies.session_status.action_status`). The status is stored
+    first and the runner follows it, except for a stop: the runner has ended before
+    ``aborted`` is stored, so that it cannot write a status after the stop's.
+    """
+    if action not in SESSION_ACTIONS:
         raise HTTPException(404, detail=f"unknown session action {action!r}; use start, pause, resume or stop")
     info = web.session(session_id)
-    status = info["status"]
-    if status == "completed":
-        raise HTTPException(409, detail=f"session {session_id} is completed")
     try:
-        if action in ("start", "resume"):
-            if action == "start" and status != "planned":
-                raise HTTPException(409, detail=f"session {session_id} is {status}, not planned; use resume")
-            if action == "resume" and status == "planned":
-                raise HTTPException(409, detail=f"session {session_id} has not started; use start")
-            runner = web.runner(session_id, create=True)
-            with web.db:
-                web.store.set_status(session_id, "running")
-            runner.resume()
-            runner.start()
-        elif action == "pause":
-            if status != "running":
-                raise HTTPException(409, detail=f"session {session_id} is {status}; only a running session can pause")
-            with web.db:
-                web.store.set_status(session_id, "paused")
-            runner = web.runner(session_id)
-            if runner is not None:
-                runner.pause()
-        else:
-            if status == "planned":
-                raise HTTPException(409, detail=f"session {session_id} has not started")
-            with web.db:
-                web.store.set_status(session_id, "aborted")
+        status = action_status(action, session_id, info["status"])
+        if status == "aborted":
             with web.lock:
                 runner = web.runners.pop(session_id, None)
             if runner is not None:
                 runner.stop()
+        elif status == "running":
+            runner = web.runner(session_id, create=True)
+        with web.db:
+            web.store.set_status(session_id, status)
     except StudyError as exc:
         raise _study_error(exc) from None
+    if status == "running":
+        runner.resume()
+        runner.start()
+    elif status == "paused":
+        runner = web.runner(session_id)
+        if runner is not None:
+            runner.pause()
     return _session_out(web, session_id)
 
 

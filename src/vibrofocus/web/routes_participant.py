@@ -14,6 +14,8 @@ from fastapi import APIRouter, Header, HTTPException, Query, Request
 from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import HTMLResponse
 
+from ..errors import AnswerRefused
+from ..studies.session_status import LIVE_STATUSES
 from .api_models import AnswerIn, AnswerReceipt, RestartIn, SessionId
 from .app import KEY_HEADER, WebState, render_template, trial_position
 
@@ -36,17 +38,10 @@ def planned(web: WebState, session_id: int) -> list[Any]:
     return cache[session_id]
 
 
-def answered(web: WebState, session_id: int) -> dict[int, Any]:
-    """Stored answers of a session by trial index."""
-    with web.db:
-        rows = web.store.answers(session_id)
-    return {int(row.trial_index): row for row in rows}
-
-
 def _live_runner(web: WebState, session_id: int, status: str):
     """The runner of a session the store calls running or paused, built after a restart if needed."""
     runner = web.runner(session_id)
-    if runner is None and status in ("running", "paused"):
+    if runner is None and status in LIVE_STATUSES:
         runner = web.runner(session_id, create=True)
         if status == "paused":
             runner.pause()
@@ -156,6 +151,17 @@ def participant_restart(
     return {"restarted": bool(runner is not None and runner.restart_trial(body.trial_index))}
 
 
+#: How the participant page words each refusal of the store (AnswerRefused.reason):
+#: (HTTP status, sentence); None: the store's own message. The rules are the store's.
+_REFUSALS: dict[str, tuple[int, str | None]] = {
+    "invalid": (422, None),
+    "unknown_trial": (422, None),
+    "answered": (409, "This trial was already answered (perhaps on another screen), so this answer was not recorded."),
+    "not_current": (409, "This answer is not for the current trial, so it was not recorded."),
+    "not_presented": (409, "This trial has not been presented yet (no stimulus was played), so this answer was not recorded."),
+}
+
+
 @router.post("/api/participant/{session_id}/answer", response_model=AnswerReceipt)
 def participant_answer(
     request: Request,
@@ -163,59 +169,31 @@ def participant_answer(
     body: AnswerIn,
     key: str | None = Header(None, alias=KEY_HEADER),
 ) -> AnswerReceipt:
-    """Commit one answer; idempotent on ``answer_id`` (a re-send gets the same receipt)."""
+    """Commit one answer; the reply comes only after the commit.
+
+    Idempotent on ``answer_id`` (a re-send gets the same receipt, ``duplicate``). Every
+    rule (the current trial, presented, answered once) is the store's
+    (:meth:`StudyStore.record_answer`); this route only words its refusals.
+    """
     web = _web(request)
     web.check_key(session_id, key)
     if body.session_id != session_id:
         raise HTTPException(422, detail=f"body.session_id {body.session_id} does not match the session {session_id} of the URL")
-    info = web.session(session_id)
-    study = int(info["study"])
-    if study == 1 and len(body.response) != 1:
-        raise HTTPException(422, detail=f"Study 1 takes exactly one location per trial, got {len(body.response)}: {body.response}")
-    trials = planned(web, session_id)
-    if body.trial_index >= len(trials):
-        raise HTTPException(422, detail=f"trial_index {body.trial_index} is out of range: session {session_id} has {len(trials)} trials")
-    # One lock around check-and-commit: a re-send racing the original must not both pass.
-    with web.db:
-        done = answered(web, session_id)
-        prior = done.get(body.trial_index)
-        if prior is not None:
-            if prior.answer_id != body.answer_id or list(prior.response) != body.response:
-                raise HTTPException(409, detail="This trial was already answered (perhaps on another screen), so this answer was not recorded.")
-            nxt = web.store.next_trial(session_id)
-            return AnswerReceipt(
-                session_id=session_id, trial_index=body.trial_index, answer_id=body.answer_id,
-                response=body.response, duplicate=True, next_trial_index=None if nxt is None else nxt.trial_index,
-            )
-        status = info["status"]
-        # An answer to a stimulus felt just before a pause or a stop is data (it may
-        # arrive late, from the page's store); a session never started has played nothing.
-        if status not in ("running", "paused", "aborted"):
-            raise HTTPException(409, detail=f"This session {_STATUS_WORDS.get(status, 'is ' + status)}, so this answer was not recorded.")
-        nxt = web.store.next_trial(session_id)
-        if nxt is None or nxt.trial_index != body.trial_index:
-            raise HTTPException(409, detail="This answer is not for the current trial, so it was not recorded.")
-        # Only a presented trial (its stimulus onset logged, by this server or one before a
-        # restart) can be answered: an answer sent before the stimulus is not data.
-        onsets = [
-            e.payload for e in web.store.events(session_id, kind="stimulus_onset")
-            if isinstance(e.payload, dict) and e.payload.get("trial_index") == body.trial_index
-        ]
-        if not onsets:
-            raise HTTPException(409, detail="This trial has not been presented yet (no stimulus was played), so this answer was not recorded.")
-        runner = web.runner(session_id)
-        sha = runner.drive_sha_for(body.trial_index) if runner is not None else None
-        if sha is None:
-            # Presented by a runner that is gone (a restart): its onset event has the hash.
-            sha = onsets[-1].get("drive_sha256")
-        web.store.record_answer(
+    web.session(session_id)  # 404 for an unknown session
+    try:
+        receipt = web.store.record_answer(
             session_id, body.trial_index, list(body.response), float(body.rt_s),
-            answer_id=body.answer_id, drive_sha256=sha,
+            answer_id=body.answer_id, require_presented=True,
         )
-        nxt = web.store.next_trial(session_id)
+    except AnswerRefused as exc:
+        status, words = _REFUSALS.get(exc.reason, (409, None))
+        raise HTTPException(status, detail=words or str(exc)) from None
+    runner = web.runner(session_id)
     if runner is not None:
-        runner.notify_answer(body.trial_index)
+        runner.notify_answer(receipt.trial_index, receipt)
+    nxt = web.store.next_trial(session_id)
     return AnswerReceipt(
-        session_id=session_id, trial_index=body.trial_index, answer_id=body.answer_id,
-        response=body.response, next_trial_index=None if nxt is None else nxt.trial_index,
+        session_id=session_id, trial_index=receipt.trial_index, answer_id=receipt.answer_id,
+        response=list(receipt.response), duplicate=receipt.duplicate,
+        next_trial_index=None if nxt is None else nxt.trial_index,
     )

@@ -1,10 +1,15 @@
-"""The background trial loop of one running study session.
+"""The participant pages of one running session, as a responder of the study engine.
 
-One thread per running session walks the planned trials in the store: for the first
-unanswered trial it shows "get ready", sets the state to ``cue`` (the participant page
-plays the beep), waits, plays the stimulus on the rig, sets ``respond`` and waits until
-the answer is committed by the answer route. The database is the only memory of progress:
-a restarted server builds a new runner that starts again at the first unanswered trial.
+One thread per running session runs :meth:`vibrofocus.studies.StudyEngine.run` (the one
+study loop, shared with the keypad and the simulated participant) with a
+:class:`SessionRunner` as its responder. The runner's hooks give the loop what the web
+needs: "get ready" and a wait until a participant page can take the cue; the stimulus
+only while the connected pages show that cue; a trial presented again when a reloaded
+page asks for it; pause, resume and stop from the experimenter page. Answers are
+committed by the answer route (:meth:`StudyStore.record_answer`, before it replies); the
+runner hears of them through :meth:`SessionRunner.notify_answer`. The database is the
+only memory of progress: a restarted server builds a new runner that starts again at
+the first unanswered trial.
 
 The participant page learns about state changes by long-polling :meth:`SessionRunner.snapshot`;
 each change increments ``seq`` so the page can tell a new cue from the same one seen again.
@@ -21,8 +26,7 @@ from typing import Any
 
 import numpy as np
 
-# The hash stored with every answer: one definition for the web app and the engine.
-from ..studies.engine import drive_sha256
+from ..studies.engine import PAUSE, STOP, Again, Control, Presentation, Response, StudyEngine, drive_sha256
 
 __all__ = ["Pace", "PACES", "SessionRunner", "drive_sha256"]
 
@@ -58,7 +62,7 @@ PACES = {"normal": Pace(), "fast": Pace(ready_s=0.1, cue_to_stimulus_s=0.25, aft
 
 
 class SessionRunner:
-    """Run the trials of one session in a background thread.
+    """Run the trials of one session in a background thread, answered on participant pages.
 
     Parameters
     ----------
@@ -66,16 +70,17 @@ class SessionRunner:
         The study database; every progress decision is read from it.
     session_id : int
         The session to run.
+    renderer : callable, optional
+        ``renderer(method, target) -> drives`` with drives of shape (n_actuators,
+        n_samples), V (e.g. :class:`~vibrofocus.studies.engine.CalibrationRenderer`).
     stimulus : callable, optional
-        ``stimulus(trial) -> drives`` with drives of shape (n_actuators, n_samples), V,
-        or ``None`` for a dry run (no calibration: the cue and answers still work, but
+        The older form of ``renderer``: ``stimulus(trial) -> drives``.
+        Neither given: a dry run (no calibration: the cue and answers still work, but
         nothing is played).
     rig : Rig, optional
-        Where the drives play. Required when ``stimulus`` is given.
+        Where the drives play. Required with ``renderer`` or ``stimulus``.
     pace : Pace
         Trial timing.
-    store_lock : threading.Lock, optional
-        Serialises database access shared with the request handlers.
     require_page : bool
         Hold each cue until a participant page that can play the beep is connected, and
         play the stimulus only while a page is showing that cue, so that no stimulus is
@@ -88,24 +93,25 @@ class SessionRunner:
         store: Any,
         session_id: int,
         *,
+        renderer: Callable[[str, int], np.ndarray] | None = None,
         stimulus: Callable[[Any], np.ndarray] | None = None,
         rig: Any = None,
         pace: Pace = PACES["normal"],
-        store_lock: threading.Lock | None = None,
         require_page: bool = True,
     ) -> None:
-        if stimulus is not None and rig is None:
+        if stimulus is not None and renderer is None:
+            renderer = lambda method, target: stimulus(_Condition(method, target))  # noqa: E731
+        if renderer is not None and rig is None:
             raise ValueError("a runner with a stimulus needs a rig to play it on")
         self.store = store
         self.session_id = int(session_id)
-        self.stimulus = stimulus
         self.rig = rig
         self.pace = pace
-        self._db = store_lock if store_lock is not None else threading.Lock()
+        self.engine = StudyEngine(store, session_id, rig, renderer=renderer, dry_run=renderer is None, cue_by="page")
         self._cond = threading.Condition()
         self._paused = False
         self._stopping = False
-        self._answered: set[int] = set()
+        self._answered: dict[int, Any] = {}  # trial index -> its receipt (None: read it from the store)
         self._restart: int | None = None  # trial a page asked to present again
         self._drive_sha: dict[int, str] = {}
         # seq starts at the clock in ms, so that a page that saw an earlier runner of this
@@ -142,18 +148,14 @@ class SessionRunner:
             self._cond.notify_all()
 
     def stop(self, timeout: float = 5.0) -> None:
-        """End the loop, leave the rig silent, and wait for the thread."""
+        """End the loop (the session keeps its status), leave the rig silent, and wait for the thread."""
         with self._cond:
             self._stopping = True
             self._cond.notify_all()
         thread = self._thread
         if thread is not None and thread is not threading.current_thread():
             thread.join(timeout)
-        if self.rig is not None:
-            try:
-                self.rig.stop()
-            except Exception:  # noqa: BLE001 - stopping must never raise
-                log.exception("rig.stop failed")
+        self._silence()
 
     @property
     def paused(self) -> bool:
@@ -163,10 +165,10 @@ class SessionRunner:
     def running(self) -> bool:
         return self._thread is not None and self._thread.is_alive()
 
-    def notify_answer(self, trial_index: int) -> None:
-        """Tell the loop that the answer to ``trial_index`` is committed."""
+    def notify_answer(self, trial_index: int, receipt: Any = None) -> None:
+        """Tell the loop that the answer to ``trial_index`` is committed (its receipt, if at hand)."""
         with self._cond:
-            self._answered.add(int(trial_index))
+            self._answered[int(trial_index)] = receipt
             self._cond.notify_all()
 
     def restart_trial(self, trial_index: int) -> bool:
@@ -203,6 +205,91 @@ class SessionRunner:
             self._polls.pop(token, None)
             self._cond.notify_all()
 
+    def drive_sha_for(self, trial_index: int) -> str | None:
+        """Hash of the drive played for ``trial_index`` in this run, if one was played."""
+        with self._cond:
+            return self._drive_sha.get(int(trial_index))
+
+    def snapshot(self) -> dict[str, Any]:
+        """A copy of the current state (``state``, ``trial_index``, ``phase``, ``seq``, ...)."""
+        with self._cond:
+            snap = dict(self._state)
+            snap["paused"] = self._paused
+            return snap
+
+    # ------------------------------------------------------------------ engine hooks
+    def before_cue(self, trial: Any) -> Control:
+        """ "Get ready", then hold the cue until a page that can beep is connected."""
+        index = int(trial.trial_index)
+        held = self._held()
+        if held is not None:
+            return held
+        self._set("ready", trial_index=index, phase=trial.phase, waiting_for_page=False)
+        if not self._wait(self.pace.ready_s, index):
+            return self._held() or Again()  # answered meanwhile: the next trial
+        with self._cond:
+            while not self._page_present() and not self._stopping and not self._paused:
+                if not self._state.get("waiting_for_page"):
+                    self._set("ready", trial_index=index, phase=trial.phase, waiting_for_page=True)
+                self._cond.wait(0.2)
+            self._state["waiting_for_page"] = False
+        return self._held()
+
+    def cue_shown(self, trial: Any) -> Control:
+        """Show the cue (the page beeps); at the stimulus moment, go on only if pages show it."""
+        index = int(trial.trial_index)
+        self._set("cue", trial_index=index, phase=trial.phase)
+        cue_seq = self.snapshot()["seq"]
+        if not self._wait(self.pace.cue_to_stimulus_s, index):
+            return self._held() or Again()
+        # Nothing plays unless a page is connected and showing this cue (it has seen it
+        # and is waiting for what comes next); a page closed or reloaded since then gets
+        # the trial again from "get ready".
+        if not self._wait_showing(cue_seq, PAGE_GRACE_S):
+            return self._held() or Again("cue_cancelled", "no participant page showing the cue")
+        return self._held()
+
+    def respond(self, presentation: Presentation) -> Response | str | Again:
+        """Wait until the answer route has committed the answer (or a page asks for the trial again)."""
+        index = int(presentation.trial.trial_index)
+        if presentation.stimulus is not None:
+            with self._cond:
+                self._drive_sha[index] = presentation.stimulus.sha256
+        self._set("respond", trial_index=index, phase=presentation.trial.phase)
+        with self._cond:
+            while not self._stopping and index not in self._answered and self._restart != index:
+                self._cond.wait(1.0)
+            answered = index in self._answered
+            receipt = self._answered.get(index)
+            self._restart = None
+        if answered:
+            if receipt is None:  # told by trial index only: the store has the answer
+                receipt = next(a for a in self.store.answers(self.session_id) if a.trial_index == index)
+            # Already committed: the engine's commit finds the same answer_id and stores nothing new.
+            return Response(receipt.response, receipt.rt_s, answer_id=receipt.answer_id)
+        if self._stopping:
+            return STOP
+        return Again("trial_restarted", "the participant page did not see the stimulus onset (reloaded)")
+
+    def answered(self, presentation: Presentation, receipt: Any) -> None:
+        """Show "taken" for a while before the next trial."""
+        self._set("taken", trial_index=int(presentation.trial.trial_index), phase=presentation.trial.phase)
+        self._wait(self.pace.after_answer_s)
+
+    def wait_resume(self) -> bool | str:
+        """Show "paused" until the experimenter resumes (True) or stops (:data:`STOP`)."""
+        self._set("paused")
+        with self._cond:
+            while self._paused and not self._stopping:
+                self._cond.wait(0.5)
+            return STOP if self._stopping else True
+
+    # ------------------------------------------------------------------ waiting
+    def _held(self) -> Control:
+        """STOP or PAUSE when the experimenter asked for it, else None."""
+        with self._cond:
+            return STOP if self._stopping else PAUSE if self._paused else None
+
     def _page_present(self) -> bool:
         # Strict: an open request now, no grace period (a closed page must not get a cue).
         return not self.require_page or bool(self._polls)
@@ -233,19 +320,6 @@ class SessionRunner:
                     return some
                 self._cond.wait(left)
 
-    def drive_sha_for(self, trial_index: int) -> str | None:
-        """Hash of the drive played for ``trial_index`` in this run, if one was played."""
-        with self._cond:
-            return self._drive_sha.get(int(trial_index))
-
-    def snapshot(self) -> dict[str, Any]:
-        """A copy of the current state (``state``, ``trial_index``, ``phase``, ``seq``, ...)."""
-        with self._cond:
-            snap = dict(self._state)
-            snap["paused"] = self._paused
-            return snap
-
-    # ------------------------------------------------------------------ loop
     def _set(self, state: str, **fields: Any) -> None:
         with self._cond:
             self._state.update(fields)
@@ -255,106 +329,45 @@ class SessionRunner:
             self._cond.notify_all()
 
     def _wait(self, seconds: float, trial_index: int | None = None) -> bool:
-        """Sleep ``seconds``; return False early on stop or when the trial got its answer."""
+        """Sleep ``seconds``; False early on stop, pause, or when the trial got its answer."""
         deadline = time.monotonic() + seconds
         with self._cond:
             while True:
-                if self._stopping or (trial_index is not None and trial_index in self._answered):
+                if self._stopping or (trial_index is not None and (self._paused or trial_index in self._answered)):
                     return False
                 left = deadline - time.monotonic()
                 if left <= 0:
                     return True
                 self._cond.wait(left)
 
-    def _log(self, kind: str, payload: dict[str, Any]) -> None:
-        with self._db:
-            self.store.log_event(self.session_id, kind, payload)
-
+    # ------------------------------------------------------------------ thread
     def _run(self) -> None:
         try:
-            self._loop()
-        except Exception as exc:  # noqa: BLE001 - reported to the experimenter page
+            # A runner rebuilt for a paused session (a server restart) waits before the
+            # engine starts, which would set the session running.
+            if self._held() != PAUSE or self.wait_resume() is True:
+                summary = self.engine.run(self)
+                if summary.status == "completed":
+                    self._set("done", trial_index=None)
+                    return
+            self._set("stopped", trial_index=None)
+        except Exception as exc:  # noqa: BLE001 - reported to the experimenter page (the engine logged it)
             log.exception("session %s failed", self.session_id)
             self._set("error", error=f"{type(exc).__name__}: {exc}")
-            try:
-                self._log("error", {"message": str(exc)})
-            except Exception:  # noqa: BLE001
-                log.exception("could not log the error of session %s", self.session_id)
         finally:
-            if self.rig is not None:
-                try:
-                    self.rig.stop()
-                except Exception:  # noqa: BLE001
-                    log.exception("rig.stop failed")
+            self._silence()
 
-    def _loop(self) -> None:
-        while True:
-            with self._cond:
-                if self._stopping:
-                    self._set("stopped", trial_index=None)
-                    return
-                if self._paused:
-                    if self._state["state"] != "paused":
-                        self._set("paused")
-                    self._cond.wait(0.5)
-                    continue
-            with self._db:
-                trial = self.store.next_trial(self.session_id)
-            if trial is None:
-                with self._db:
-                    self.store.set_status(self.session_id, "completed")
-                self._set("done", trial_index=None)
-                return
-            index = int(trial.trial_index)
-            phase = getattr(trial, "phase", None)
-            self._set("ready", trial_index=index, phase=phase, waiting_for_page=False)
-            if not self._wait(self.pace.ready_s, index):
-                continue
-            if self._paused:
-                continue  # the trial starts again from "get ready" after resume
-            with self._cond:
-                while not self._page_present() and not self._stopping and not self._paused:
-                    if not self._state.get("waiting_for_page"):
-                        self._set("ready", trial_index=index, phase=phase, waiting_for_page=True)
-                    self._cond.wait(0.2)
-                if self._stopping or self._paused:
-                    continue
-                self._state["waiting_for_page"] = False
-            self._set("cue", trial_index=index, phase=phase)
-            cue_seq = self.snapshot()["seq"]
-            self._log("cue", {"trial_index": index})
-            if not self._wait(self.pace.cue_to_stimulus_s, index):
-                continue
-            if self._paused:
-                continue
-            # Nothing plays unless a page is connected and showing this cue (it has
-            # seen it and is waiting for what comes next); a page closed or reloaded
-            # since then gets the trial again from "get ready".
-            if not self._wait_showing(cue_seq, PAGE_GRACE_S):
-                if not self._stopping and not self._paused:
-                    self._log("cue_cancelled", {"trial_index": index, "reason": "no participant page showing the cue"})
-                continue
-            payload: dict[str, Any] = {"trial_index": index, "played": False}
-            if self.stimulus is not None:
-                drives = self.stimulus(trial)
-                sha = drive_sha256(drives)
-                with self._cond:
-                    self._drive_sha[index] = sha
-                payload.update(played=True, drive_sha256=sha)
-                self._log("stimulus_onset", payload)
-                self.rig.play(drives)
-            else:
-                self._log("stimulus_onset", payload)
-            self._set("respond", trial_index=index, phase=phase)
-            with self._cond:
-                while not self._stopping and index not in self._answered and self._restart != index:
-                    self._cond.wait(1.0)
-                restart = self._restart == index and index not in self._answered
-                self._restart = None
-            if self._stopping:
-                continue
-            if restart:
-                self._log("trial_restarted", {"trial_index": index, "reason": "the participant page did not see the stimulus onset (reloaded)"})
-                continue
-            self._set("taken", trial_index=index, phase=phase)
-            self._wait(self.pace.after_answer_s)
+    def _silence(self) -> None:
+        if self.rig is not None:
+            try:
+                self.rig.stop()
+            except Exception:  # noqa: BLE001 - stopping must never raise
+                log.exception("rig.stop failed")
+
+
+@dataclass(frozen=True)
+class _Condition:
+    """What a ``stimulus(trial)`` callable reads of a trial: its method and target."""
+
+    method: str
+    target: int
