@@ -67,3 +67,19 @@ def test_the_web_app_does_not_shell_out_to_the_cli():
         assert "subprocess" not in imported, f"{path.name} runs commands"
         assert "sys.executable" not in ast.unparse(tree), f"{path.name} runs a Python interpreter"
     assert "cli" not in _loaded("web")
+
+
+def test_the_web_routers_do_not_import_the_app_factory():
+    # app -> routes_* -> state: a router importing app would close the cycle again.
+    import ast
+    from pathlib import Path
+
+    import vibrofocus.web
+
+    folder = Path(vibrofocus.web.__file__).parent
+    routers = sorted(folder.glob("routes_*.py"))
+    assert routers, "no router modules found"
+    for path in routers + [folder / "state.py"]:
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        relative = {node.module for node in ast.walk(tree) if isinstance(node, ast.ImportFrom) and node.level == 1}
+        assert "app" not in relative, f"{path.name} imports the app factory"

@@ -22,7 +22,7 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from ..errors import StudyError, VibrofocusError
 from ..studies.session_status import SESSION_ACTIONS, action_status
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
-from .app import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template, trial_position
+from .state import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template, trial_position
 from .routes_participant import planned
 
 router = APIRouter()

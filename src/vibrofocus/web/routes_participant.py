@@ -17,7 +17,7 @@ from fastapi.responses import HTMLResponse
 from ..errors import AnswerRefused
 from ..studies.session_status import LIVE_STATUSES
 from .api_models import AnswerIn, AnswerReceipt, RestartIn, SessionId
-from .app import KEY_HEADER, WebState, render_template, trial_position
+from .state import KEY_HEADER, WebState, render_template, trial_position
 
 router = APIRouter()
 

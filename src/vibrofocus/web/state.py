@@ -1,0 +1,508 @@
+"""The web app's shared state and helpers: the running sessions, calibration jobs,
+secrets, templates and owner-only files, used by the app factory and both routers.
+
+The routers import from here, never from :mod:`.app`, so imports run one way:
+``app`` -> ``routes_*`` -> ``state``.
+"""
+
+from __future__ import annotations
+
+import base64
+import hashlib
+import hmac
+import logging
+import os
+import secrets
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fastapi import HTTPException, Request
+
+from ..errors import StudyError, VibrofocusError
+from .security import same_secret
+from .session_runner import Pace, SessionRunner
+
+__all__ = ["WebState", "CalibrationJob", "CalibrationCancelled", "render_template", "trial_position", "private_dir", "private_file", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
+
+log = logging.getLogger(__name__)
+
+TOKEN_HEADER = "X-Vibrofocus-Token"
+TOKEN_COOKIE = "vf_token"
+KEY_HEADER = "X-Participant-Key"
+#: How long a one-time login link printed by ``vibrofocus serve`` stays valid, s.
+LOGIN_CODE_TTL_S = 15 * 60.0
+
+_HERE = Path(__file__).parent
+
+
+@dataclass
+class CalibrationJob:
+    """A calibration running in a background thread, as the experimenter page sees it.
+
+    On a rig that records one point at a time (a single-spot vibrometer), the job stops
+    before each point with ``status = "waiting"`` and a ``prompt`` saying where to aim the
+    vibrometer; :meth:`go_on` lets it record, :meth:`cancel` ends it.
+    """
+
+    job_id: str
+    participant_id: str
+    rig: str
+    status: str = "running"  # running | waiting | done | failed | cancelled
+    progress: float = 0.0
+    message: str = "starting"
+    calibration_id: int | None = None
+    error: str | None = None
+    prompt: str | None = None
+    straps: dict | None = None
+    _go: threading.Event = field(default_factory=threading.Event, repr=False)
+    _cancelled: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        """The job as the page reads it (JSON-ready)."""
+        return {k: v for k, v in self.__dict__.items() if not k.startswith("_")}
+
+    def wait_for_experimenter(self, prompt: str) -> None:
+        """Block the calibration until the experimenter continues (or cancels)."""
+        self._go.clear()
+        self.prompt, self.status = prompt, "waiting"
+        while not self._go.wait(0.25):
+            if self._cancelled:
+                break
+        self.prompt = None
+        self.check_cancelled()
+        self.status = "running"
+
+    def go_on(self) -> None:
+        """The experimenter has aimed the vibrometer: record the point."""
+        self._go.set()
+
+    def cancel(self) -> None:
+        """Stop at the next point or recording (nothing is saved)."""
+        self._cancelled = True
+        self._go.set()
+
+    def check_cancelled(self) -> None:
+        """Raise :class:`CalibrationCancelled` if the experimenter cancelled."""
+        if self._cancelled:
+            raise CalibrationCancelled("cancelled by the experimenter")
+
+
+class CalibrationCancelled(Exception):
+    """The experimenter cancelled a calibration (nothing is saved)."""
+
+
+@dataclass
+class WebState:
+    """Everything the routes share; one per app.
+
+    Attributes
+    ----------
+    store : StudyStore
+        The study database. SQLite connections are not shared between threads safely,
+        so every use goes through ``db`` (a lock): request handlers run in a thread pool
+        and each running session has its own thread.
+    db_path : Path
+        The database file (calibrations, exports and reports go beside it).
+    token : str
+        The experimenter token.
+    secret : bytes
+        Server secret from which the cookie value is derived.
+    rig_kind : str
+        The rig the server was started for (``simulated``, ``audio``, ``nidaq``).
+    pace : Pace
+        Timing of the participant page.
+    rig_factory : callable, optional
+        Builds a rig (tests pass their own).
+    rig_config : path or RigConfig, optional
+        Hardware rig settings given to ``serve``.
+    db, lock : threading.RLock
+        Guard the database and the shared dictionaries below.
+    runners : dict
+        Session id to its running :class:`SessionRunner`.
+    calibrations : dict
+        Loaded calibrations, by calibration id.
+    banks : dict
+        Renderers (cached stimuli) by (calibration id, drive limit in V).
+    jobs : dict
+        Calibration jobs in progress, by job id.
+    rigs : dict
+        Open rigs by (kind, seed).
+    planned : dict
+        Planned trials by session id.
+    analyses : dict
+        Analyses run from the page, by id (one at a time).
+    login_codes : dict
+        One-time login codes and their expiry (``time.monotonic()``, s).
+    """
+
+    store: Any
+    db_path: Path
+    token: str
+    secret: bytes
+    rig_kind: str
+    pace: Pace
+    rig_factory: Any = None
+    rig_config: Any = None
+    db: threading.RLock = field(default_factory=threading.RLock)
+    runners: dict[int, SessionRunner] = field(default_factory=dict)
+    calibrations: dict[int, Any] = field(default_factory=dict)
+    banks: dict[tuple[int, float], Any] = field(default_factory=dict)
+    jobs: dict[str, CalibrationJob] = field(default_factory=dict)
+    rigs: dict[tuple[str, int], Any] = field(default_factory=dict)
+    planned: dict[int, list] = field(default_factory=dict)
+    analyses: dict[str, dict] = field(default_factory=dict)
+    lock: threading.RLock = field(default_factory=threading.RLock)
+    login_codes: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def rig_label(self) -> str:
+        """The server's rig as the experimenter page shows it (kind, and config file)."""
+        if self.rig_config is None:
+            return self.rig_kind
+        name = Path(self.rig_config).name if isinstance(self.rig_config, (str, os.PathLike)) else "given config"
+        return f"{self.rig_kind} ({name})"
+
+    # ------------------------------------------------------------------ paths
+    @property
+    def data_dir(self) -> Path:
+        """Folder for calibrations, exports and reports, beside the database."""
+        d = self.db_path.parent / f"{self.db_path.stem}-files"
+        private_dir(d)
+        return d
+
+    # ------------------------------------------------------------------ access
+    TOKEN_MESSAGE = (
+        "You are not logged in as the experimenter. Open the login link that 'vibrofocus serve' "
+        "printed, or log in with the experimenter token."
+    )
+    KEY_MESSAGE = "This participant link does not belong to this session. Ask the experimenter for the right link."
+
+    def participant_key(self, session_id: int) -> str:
+        """The participant key of a session (URL-safe, 22 characters)."""
+        mac = hmac.new(self.secret, f"participant-session:{int(session_id)}".encode(), hashlib.sha256).digest()
+        return base64.urlsafe_b64encode(mac[:16]).decode().rstrip("=")
+
+    def key_ok(self, session_id: int, key: str | None) -> bool:
+        """True if ``key`` is the participant key of ``session_id`` (constant time)."""
+        return same_secret(key, self.participant_key(session_id))
+
+    def check_key(self, session_id: int, key: str | None) -> None:
+        """Raise 403 unless ``key`` is the participant key of ``session_id``."""
+        if not self.key_ok(session_id, key):
+            raise HTTPException(403, detail=self.KEY_MESSAGE)
+
+    @property
+    def cookie_value(self) -> str:
+        """What the login cookie holds: derived from the token, never the token itself.
+
+        It is an HMAC of the token under the secret kept beside the database, so a
+        server restarted with the same ``VIBROFOCUS_TOKEN`` keeps its experimenter
+        logged in, and a new token logs everybody out.
+        """
+        mac = hmac.new(self.secret, b"experimenter-cookie:" + self.token.encode(), hashlib.sha256).digest()
+        return base64.urlsafe_b64encode(mac).decode().rstrip("=")
+
+    def token_ok(self, given: str | None) -> bool:
+        """True if ``given`` is the experimenter token (constant time)."""
+        return same_secret(given, self.token)
+
+    def cookie_ok(self, cookie_header: str | None) -> bool:
+        """True if a ``Cookie`` header carries the experimenter login cookie."""
+        if not cookie_header:
+            return False
+        for part in cookie_header.split(";"):
+            name, _, value = part.strip().partition("=")
+            if name == TOKEN_COOKIE and same_secret(value, self.cookie_value):
+                return True
+        return False
+
+    def check_token(self, request: Request) -> None:
+        """Raise 401 unless the request carries the experimenter token or login cookie."""
+        if not (self.token_ok(request.headers.get(TOKEN_HEADER)) or self.cookie_ok(request.headers.get("cookie"))):
+            raise HTTPException(401, detail=self.TOKEN_MESSAGE)
+
+    def new_login_code(self, ttl_s: float = LOGIN_CODE_TTL_S) -> str:
+        """A one-time login code, valid for ``ttl_s`` seconds (see ``GET /login/{code}``)."""
+        code = secrets.token_urlsafe(24)
+        with self.lock:
+            now = time.monotonic()
+            for old in [c for c, until in self.login_codes.items() if until < now]:
+                del self.login_codes[old]
+            self.login_codes[code] = now + ttl_s
+        return code
+
+    def use_login_code(self, code: str) -> bool:
+        """Spend a login code: True once for a valid, unexpired code, False otherwise."""
+        with self.lock:
+            match = next((c for c in self.login_codes if same_secret(code, c)), None)
+            if match is None:
+                return False
+            until = self.login_codes.pop(match)
+        return until >= time.monotonic()
+
+    # ------------------------------------------------------------------ store helpers
+    def session(self, session_id: int) -> dict[str, Any]:
+        """The session's row as a dict; 404 if there is no such session."""
+        with self.db:
+            try:
+                info = self.store.session(int(session_id))
+            except StudyError:
+                info = None
+        if info is None:
+            raise HTTPException(404, detail=f"unknown session {session_id}")
+        return _as_dict(info)
+
+    @property
+    def rig_kinds(self) -> list[str]:
+        """Rig kinds this server can use: its own, and the simulated forearm for rehearsals."""
+        return [self.rig_kind] + (["simulated"] if self.rig_kind != "simulated" else [])
+
+    def check_rig_kind(self, kind: str) -> None:
+        """Raise 409 unless this server can use rigs of ``kind``."""
+        if kind not in self.rig_kinds:
+            raise HTTPException(409, detail=(
+                f"This server was started for the {self.rig_label} rig. To use the {kind} rig, restart it with "
+                f"'vibrofocus serve --rig {kind} --rig-config FILE'."
+            ))
+
+    def make_rig(self, kind: str, seed: int | None):
+        """A rig by kind and seed, made once and reused (a hardware rig holds a device).
+
+        A hardware rig is the one the server was started with (``serve --rig KIND
+        --rig-config FILE``), built from that config file.
+        """
+        self.check_rig_kind(kind)
+        key = (kind, -1 if seed is None else int(seed))
+        with self.lock:
+            if key not in self.rigs:
+                factory = self.rig_factory
+                if factory is None:
+                    from ..rigs import make_rig as factory
+                extra = {"config": self.rig_config} if kind != "simulated" and self.rig_config is not None else {}
+                try:
+                    self.rigs[key] = factory(kind, seed=seed, **extra)
+                except VibrofocusError as exc:
+                    raise HTTPException(400, detail=str(exc)) from None
+            return self.rigs[key]
+
+    def calibration(self, calibration_id: int):
+        """A calibration by id: from memory or loaded from its file; 404 if unknown."""
+        with self.lock:
+            if calibration_id in self.calibrations:
+                return self.calibrations[calibration_id]
+        with self.db:
+            try:
+                self.store.calibration(calibration_id)
+            except StudyError:
+                raise HTTPException(404, detail=f"unknown calibration {calibration_id}") from None
+            # Checks the file still has the hash it was registered with.
+            path = self.store.verify_calibration(calibration_id)
+        from ..calibration import load_calibration
+
+        try:
+            cal = load_calibration(path)
+        except VibrofocusError as exc:
+            raise HTTPException(409, detail=f"calibration {calibration_id} cannot be loaded: {exc}") from None
+        with self.lock:
+            self.calibrations[calibration_id] = cal
+        return cal
+
+    def bank(self, calibration_id: int, limit_v: float | None = None):
+        """The renderer of a calibration (renders each condition once; previews and sessions share it).
+
+        Parameters
+        ----------
+        calibration_id : int
+            A registered calibration.
+        limit_v : float, optional
+            Drive limit, V peak (a rig's limit); default the rendering layer's.
+
+        Returns
+        -------
+        CalibrationRenderer
+        """
+        from ..defaults import DRIVE_LIMIT_V
+        from ..studies.engine import CalibrationRenderer
+
+        limit = DRIVE_LIMIT_V if limit_v is None else float(limit_v)
+        key = (int(calibration_id), limit)
+        with self.lock:
+            bank = self.banks.get(key)
+        if bank is None:
+            bank = CalibrationRenderer(self.calibration(calibration_id), limit_v=limit)
+            with self.lock:
+                bank = self.banks.setdefault(key, bank)
+        return bank
+
+    def runner(self, session_id: int, *, create: bool = False) -> SessionRunner | None:
+        """The runner of a session; with ``create``, build it from the stored session."""
+        with self.lock:
+            runner = self.runners.get(session_id)
+            if runner is not None or not create:
+                return runner
+        info = self.session(session_id)
+        config = info.get("config") or {}
+        renderer = rig = None
+        cal_id = info.get("calibration_id")
+        if cal_id is not None:
+            rig = self.make_rig(config.get("rig", self.rig_kind), config.get("rig_seed"))
+            renderer = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None))
+        runner = SessionRunner(self.store, session_id, renderer=renderer, rig=rig, pace=self.pace)
+        with self.lock:
+            return self.runners.setdefault(session_id, runner)
+
+    def resume_running_sessions(self) -> list[int]:
+        """After a restart: start a runner for every session stored as running."""
+        with self.db:
+            rows = [_as_dict(s) for s in self.store.sessions()]
+        started = []
+        for row in rows:
+            if row.get("status") == "running":
+                sid = int(row["session_id"])
+                try:
+                    runner = self.runner(sid, create=True)
+                    runner.start()
+                    with self.db:
+                        self.store.log_event(sid, "resumed_after_restart", None)
+                    started.append(sid)
+                except Exception:  # noqa: BLE001 - one broken session must not stop the server
+                    log.exception("could not resume session %s", sid)
+        return started
+
+    def shutdown(self) -> None:
+        """Stop every runner (their sessions stay 'running' in the store, to resume)."""
+        with self.lock:
+            runners = list(self.runners.values())
+        for runner in runners:
+            runner.stop(timeout=2.0)
+
+
+#: What people call the fields of the requests, for the messages of refused requests.
+FIELD_NAMES = {
+    "participant_id": "The participant id", "study": "The study", "repetitions": "Repetitions",
+    "n_training": "Training trials", "seed": "The seed", "calibration_id": "The calibration",
+    "rig": "The rig", "rig_seed": "The rig seed", "response": "The answer", "rt_s": "The reaction time",
+    "answer_id": "The answer id", "trial_index": "The trial", "session_id": "The session",
+    "location": "The location", "method": "The method", "wait": "The wait", "after": "The state number",
+}
+
+
+def plain_problem(err: dict[str, Any]) -> str:
+    """One validation error of pydantic as a sentence a person can act on."""
+    loc = [p for p in err.get("loc", ()) if p not in ("body", "query", "path", "header")]
+    names = [p for p in loc if isinstance(p, str)]
+    what = FIELD_NAMES.get(names[-1], f"The field '{names[-1]}'") if names else "The request"
+    if any(isinstance(p, int) for p in loc):
+        what += f" (item {next(p for p in loc if isinstance(p, int)) + 1})"
+    kind, ctx = err.get("type", ""), err.get("ctx") or {}
+    if kind == "json_invalid":
+        return "The request is not valid JSON."
+    if kind == "missing":
+        return f"{what} is missing."
+    if kind == "extra_forbidden":
+        return f"'{names[-1] if names else '?'}' is not something this request takes."
+    bounds = {"greater_than_equal": "at least", "greater_than": "more than", "less_than_equal": "at most", "less_than": "less than"}
+    if kind in bounds:
+        return f"{what} must be {bounds[kind]} {next(iter(ctx.values()), '?')}."
+    if kind in ("too_short", "string_too_short"):
+        n = ctx.get("min_length", 1)
+        return f"{what} is empty." if n == 1 and kind == "string_too_short" else f"{what} needs at least {n}."
+    if kind in ("too_long", "string_too_long"):
+        return f"{what} is too long (at most {ctx.get('max_length', '?')})."
+    if kind == "string_pattern_mismatch":
+        return f"{what} may hold only letters, digits, '.', '_' and '-', and starts with a letter or digit."
+    if kind == "literal_error" and "expected" in ctx:
+        return f"{what} must be {ctx['expected']}."
+    if kind.startswith(("int_", "float_", "bool_", "string_")) or kind == "enum":
+        return f"{what} is not a valid value here."
+    msg = str(err.get("msg", "is not valid")).removeprefix("Value error, ")
+    return f"{what}: {msg[:1].lower() + msg[1:]}" + ("" if msg.endswith(".") else ".")
+
+
+def trial_position(trials: list[Any], index: int | None) -> dict[str, Any]:
+    """Where trial ``index`` stands, in the one numbering shown everywhere.
+
+    That numbering is the trials file's: the ``phase`` (training or main) and ``trial``,
+    the trial's number within its phase from 1, out of ``n_in_phase``. The 0-based
+    ``trial_index`` stays internal (routes and the database).
+    """
+    if index is None or not 0 <= index < len(trials):
+        return {"phase": None, "trial": None, "n_in_phase": None}
+    phase = trials[index].phase
+    return {"phase": phase, "trial": trials[index].trial, "n_in_phase": sum(1 for t in trials if t.phase == phase)}
+
+
+def render_template(name: str, **values: Any) -> str:
+    """Fill ``web/templates/<name>`` (``string.Template`` placeholders, HTML-escaped values).
+
+    The pages are static apart from a few ids, so plain ``$name`` substitution is enough
+    and spares a template-engine dependency.
+    """
+    import html
+    from string import Template
+
+    text = (_HERE / "templates" / name).read_text(encoding="utf-8")
+    return Template(text).substitute({k: html.escape(str(v), quote=True) for k, v in values.items()})
+
+
+def _as_dict(obj: Any) -> dict[str, Any]:
+    if isinstance(obj, dict):
+        return obj
+    if hasattr(obj, "_asdict"):
+        return obj._asdict()
+    if hasattr(obj, "__dataclass_fields__"):
+        import dataclasses
+
+        return dataclasses.asdict(obj)
+    return dict(obj)
+
+
+def private_dir(path: Path) -> None:
+    """Create a folder only its owner can enter (0700); tighten it if it exists."""
+    path.mkdir(mode=0o700, parents=True, exist_ok=True)
+    _owner_only(path, 0o700)
+
+
+def private_file(path: Path) -> None:
+    """Create an empty file only its owner can read (0600), or tighten an existing one.
+
+    The study database holds participant data: it is created 0600 before SQLite opens
+    it (SQLite gives its journal files the database's mode).
+    """
+    try:
+        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+    except FileExistsError:
+        _owner_only(path, 0o600)
+    except OSError:  # a read-only folder: the store says so in its own words
+        pass
+
+
+def _owner_only(path: Path, mode: int) -> None:
+    try:
+        st = path.stat()
+        if st.st_uid == os.getuid() and st.st_mode & 0o077:
+            os.chmod(path, mode)
+            log.warning("%s could be read by other users; it is now %s", path, oct(mode))
+    except OSError:  # not ours, or a file system without modes: leave it as it is
+        pass
+
+
+def load_or_make_secret(db_path: Path) -> bytes:
+    """The HMAC secret of participant keys, kept beside the database (mode 0600)."""
+    path = db_path.with_name(db_path.name + ".web-secret")
+    if path.exists():
+        return bytes.fromhex(path.read_text().strip())
+    secret = secrets.token_bytes(32)
+    # O_EXCL: two servers starting at once must not each write their own secret.
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    except FileExistsError:
+        return bytes.fromhex(path.read_text().strip())
+    with os.fdopen(fd, "w") as fh:
+        fh.write(secret.hex())
+    return secret
+
+
