@@ -8,6 +8,7 @@ The routers import from here, never from :mod:`.app`, so imports run one way:
 from __future__ import annotations
 
 import base64
+import functools
 import hashlib
 import hmac
 import logging
@@ -435,17 +436,32 @@ def trial_position(trials: list[Any], index: int | None) -> dict[str, Any]:
     return {"phase": phase, "trial": trials[index].trial, "n_in_phase": sum(1 for t in trials if t.phase == phase)}
 
 
+@functools.cache
+def _templates() -> Any:
+    import jinja2
+
+    # Autoescaped, and a missing value is an error rather than an empty string.
+    return jinja2.Environment(
+        loader=jinja2.FileSystemLoader(_HERE / "templates"), autoescape=True, undefined=jinja2.StrictUndefined,
+    )
+
+
 def render_template(name: str, **values: Any) -> str:
-    """Fill ``web/templates/<name>`` (``string.Template`` placeholders, HTML-escaped values).
+    """Render ``web/templates/<name>`` with Jinja2 (autoescaped: every value is HTML-escaped).
 
-    The pages are static apart from a few ids, so plain ``$name`` substitution is enough
-    and spares a template-engine dependency.
+    Parameters
+    ----------
+    name : str
+        Template file name, e.g. ``"participant.html"``.
+    **values
+        The template's values.
+
+    Returns
+    -------
+    str
+        The page.
     """
-    import html
-    from string import Template
-
-    text = (_HERE / "templates" / name).read_text(encoding="utf-8")
-    return Template(text).substitute({k: html.escape(str(v), quote=True) for k, v in values.items()})
+    return _templates().get_template(name).render(**values)
 
 
 def _as_dict(obj: Any) -> dict[str, Any]:
