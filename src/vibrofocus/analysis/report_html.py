@@ -10,13 +10,13 @@ from __future__ import annotations
 
 import base64
 import html
-from functools import cache
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from .._templates import template_environment
 from .pipeline import AnalysisResult, Study1Result, Study2Counts
 from .sentences import _effect_name, results_sentences
 
@@ -25,16 +25,6 @@ __all__ = ["P_DISPLAY_FLOOR", "render_html"]
 #: Smallest p-value the report tables print as a number; smaller ones read "< 1e-12".
 P_DISPLAY_FLOOR = 1e-12
 _TEMPLATES = Path(__file__).with_name("templates")
-
-
-@cache
-def _environment():
-    import jinja2
-
-    return jinja2.Environment(
-        loader=jinja2.FileSystemLoader(_TEMPLATES), autoescape=True, undefined=jinja2.StrictUndefined,
-        keep_trailing_newline=False,
-    )
 
 
 def _is_p_column(name: object) -> bool:
@@ -162,4 +152,4 @@ def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_n
         if s2 is not None else None,
         "figures": {name: _figure(path) for name, path in figures.items()},
     }
-    return _environment().get_template("report.html").render(context)
+    return template_environment(_TEMPLATES).get_template("report.html").render(context)

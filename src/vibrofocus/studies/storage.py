@@ -605,10 +605,10 @@ class StudyStore(StudyDatabase):
         """Write the trials file of docs/file-formats.md, trials file (every answered trial); returns the row count.
 
         The file has the session columns after the contract's (see
-        :data:`~vibrofocus.studies.export.SESSION_COLUMNS`), so that an analysis can leave
+        :data:`~vibrofocus.io.trials_csv.SESSION_COLUMNS`), so that an analysis can leave
         out aborted sessions and dry runs.
         """
-        from .export import write_trials_csv
+        from ..io.trials_csv import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True)
 

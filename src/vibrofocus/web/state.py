@@ -8,7 +8,6 @@ The routers import from here, never from :mod:`.app`, so imports run one way:
 from __future__ import annotations
 
 import base64
-import functools
 import hashlib
 import hmac
 import logging
@@ -22,6 +21,7 @@ from typing import Any
 
 from fastapi import HTTPException, Request
 
+from .._templates import template_environment
 from ..errors import StudyError, VibrofocusError
 from .security import same_secret
 from .session_runner import Pace, SessionRunner
@@ -436,16 +436,6 @@ def trial_position(trials: list[Any], index: int | None) -> dict[str, Any]:
     return {"phase": phase, "trial": trials[index].trial, "n_in_phase": sum(1 for t in trials if t.phase == phase)}
 
 
-@functools.cache
-def _templates() -> Any:
-    import jinja2
-
-    # Autoescaped, and a missing value is an error rather than an empty string.
-    return jinja2.Environment(
-        loader=jinja2.FileSystemLoader(_HERE / "templates"), autoescape=True, undefined=jinja2.StrictUndefined,
-    )
-
-
 def render_template(name: str, **values: Any) -> str:
     """Render ``web/templates/<name>`` with Jinja2 (autoescaped: every value is HTML-escaped).
 
@@ -461,7 +451,7 @@ def render_template(name: str, **values: Any) -> str:
     str
         The page.
     """
-    return _templates().get_template(name).render(**values)
+    return template_environment(_HERE / "templates").get_template(name).render(**values)
 
 
 def _as_dict(obj: Any) -> dict[str, Any]:
