@@ -3,6 +3,8 @@ no cell marked before the answer, refusals said as such, and no endless "Sending
 
 from __future__ import annotations
 
+import contextlib
+
 import httpx
 import pytest
 
@@ -93,49 +95,63 @@ document.addEventListener('DOMContentLoaded', () => {
 """
 
 
+@contextlib.contextmanager
+def watched_context(chromium, script: str = ""):
+    """A browser context whose pages record every message they show (``window.vfMessages``)."""
+    context = chromium.new_context()
+    context.set_default_timeout(15_000)
+    context.add_init_script(script + MESSAGES)
+    try:
+        yield context
+    finally:
+        context.close()
+
+
+def shown(page) -> list[str]:
+    """Every message the page has shown, in order."""
+    return page.evaluate("window.vfMessages")
+
+
 def test_a_refused_answer_is_not_called_taken(server, chromium):
     s = start(server, "P34", 1)
     sid = s["session_id"]
-    context = chromium.new_context()
-    context.set_default_timeout(15_000)
-    context.add_init_script(MESSAGES)
-    first, second = context.new_page(), context.new_page()
-    try:
-        freeze = {"on": False}
+    with watched_context(chromium) as context:
+        first, second = context.new_page(), context.new_page()
+        try:
+            freeze = {"on": False}
 
-        def states(route):
-            # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
-            # connection drops whenever there is news), so it still offers trial 0.
-            try:
-                reply = route.fetch()
-            except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
-                return
-            news = reply.json()
-            if freeze["on"] and (news.get("state"), news.get("trial_index")) != ("respond", 0):
-                route.abort()
-            else:
-                route.fulfill(response=reply)
+            def states(route):
+                # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
+                # connection drops whenever there is news), so it still offers trial 0.
+                try:
+                    reply = route.fetch()
+                except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
+                    return
+                news = reply.json()
+                if freeze["on"] and (news.get("state"), news.get("trial_index")) != ("respond", 0):
+                    route.abort()
+                else:
+                    route.fulfill(response=reply)
 
-        second.route("**/state*", states)
-        open_page(first, server, s)
-        open_page(second, server, s)
-        wait_respond(first, 0)
-        wait_respond(second, 0)
-        freeze["on"] = True
-        first.keyboard.press("3")
-        assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
-        second.keyboard.press("5")  # answers trial 0 differently: 409
-        second.wait_for_function("document.getElementById('message').textContent.includes('not recorded')")
-        assert "already answered" in second.inner_text("#message")
-        assert not second.evaluate("document.body.classList.contains('answerable')"), "trial 0 offered again"
-        freeze["on"] = False
-        wait_respond(second, 1)
-        assert not any("Answer taken" in m for m in second.evaluate("window.vfMessages")), second.evaluate("window.vfMessages")
-        assert pending(second, sid) == []
-        assert server.rows("SELECT trial_index, response FROM answers") == [(0, "3")]
-    finally:
-        second.unroute_all(behavior="ignoreErrors")
-        context.close()
+            second.route("**/state*", states)
+            open_page(first, server, s)
+            open_page(second, server, s)
+            wait_respond(first, 0)
+            wait_respond(second, 0)
+            freeze["on"] = True
+            first.keyboard.press("3")
+            assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
+            second.keyboard.press("5")  # answers trial 0 differently: 409
+            second.wait_for_function("document.getElementById('message').textContent.includes('not recorded')")
+            assert "already answered" in second.inner_text("#message")
+            assert not second.evaluate("document.body.classList.contains('answerable')"), "trial 0 offered again"
+            freeze["on"] = False
+            wait_respond(second, 1)
+            assert not any("Answer taken" in m for m in shown(second)), shown(second)
+            assert pending(second, sid) == []
+            assert server.rows("SELECT trial_index, response FROM answers") == [(0, "3")]
+        finally:
+            second.unroute_all(behavior="ignoreErrors")
 
 
 def test_two_tabs_each_report_only_their_own_answer(server, chromium):
@@ -143,82 +159,76 @@ def test_two_tabs_each_report_only_their_own_answer(server, chromium):
     # did not answer must not send the other's answer and then say "Answer taken".
     s = start(server, "P36", 1)
     sid = s["session_id"]
-    context = chromium.new_context()
-    context.set_default_timeout(15_000)
-    context.add_init_script(MESSAGES)
-    first, second = context.new_page(), context.new_page()
-    hold = {"on": True}
+    with watched_context(chromium) as context:
+        first, second = context.new_page(), context.new_page()
+        hold = {"on": True}
 
-    def answers(route):
-        if hold["on"]:
-            route.abort()  # the first tab's sends fail for now: its answer stays stored
-        else:
-            route.continue_()
+        def answers(route):
+            if hold["on"]:
+                route.abort()  # the first tab's sends fail for now: its answer stays stored
+            else:
+                route.continue_()
 
-    try:
-        open_page(first, server, s)
-        open_page(second, server, s)
-        wait_respond(first, 0)
-        wait_respond(second, 0)
-        first.route("**/answer", answers)
-        first.keyboard.press("3")
-        first.wait_for_function(f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]').length === 1")
-        second.evaluate("window.dispatchEvent(new Event('online'))")  # wakes the second tab's sender
-        second.wait_for_timeout(1000)
-        assert server.rows("SELECT trial_index FROM answers") == [], "the second tab sent the first tab's answer"
-        hold["on"] = False
-        first.wait_for_function(f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]').length === 0")
-        assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
-        wait_respond(second, 1)
-        first.wait_for_function("window.vfMessages.some(m => m.includes('Answer taken'))")
-        assert not any("Answer taken" in m for m in second.evaluate("window.vfMessages")), second.evaluate("window.vfMessages")
-    finally:
-        first.unroute_all(behavior="ignoreErrors")
-        context.close()
+        try:
+            open_page(first, server, s)
+            open_page(second, server, s)
+            wait_respond(first, 0)
+            wait_respond(second, 0)
+            first.route("**/answer", answers)
+            first.keyboard.press("3")
+            first.wait_for_function(f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]').length === 1")
+            second.evaluate("window.dispatchEvent(new Event('online'))")  # wakes the second tab's sender
+            second.wait_for_timeout(1000)
+            assert server.rows("SELECT trial_index FROM answers") == [], "the second tab sent the first tab's answer"
+            hold["on"] = False
+            first.wait_for_function(f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]').length === 0")
+            assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
+            wait_respond(second, 1)
+            first.wait_for_function("window.vfMessages.some(m => m.includes('Answer taken'))")
+            assert not any("Answer taken" in m for m in shown(second)), shown(second)
+        finally:
+            first.unroute_all(behavior="ignoreErrors")
 
 
 def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromium):
     s = start(server, "P35", 1)
     sid = s["session_id"]
-    context = chromium.new_context()
-    context.set_default_timeout(15_000)
-    context.add_init_script("window.vfSendTimeoutMs = 800;" + MESSAGES)
-    held = []
-    hold = {"on": True}
+    with watched_context(chromium, "window.vfSendTimeoutMs = 800;") as context:
+        held = []
+        hold = {"on": True}
 
-    def answers(route):
-        if not hold["on"]:
-            route.continue_()
-        elif not held:
-            # The answer reaches the server and is committed, but the reply never
-            # reaches the page (sent from here so that the page's time-out cannot cut it).
-            r = httpx.post(route.request.url, content=route.request.post_data,
-                           headers={k: v for k, v in route.request.headers.items() if k.lower() in ("content-type", "x-participant-key")})
-            assert r.status_code == 200, r.text
-            held.append(route)
-        else:
-            held.append(route)  # no reply at all
+        def answers(route):
+            if not hold["on"]:
+                route.continue_()
+            elif not held:
+                # The answer reaches the server and is committed, but the reply never
+                # reaches the page (sent from here so that the page's time-out cannot cut it).
+                r = httpx.post(route.request.url, content=route.request.post_data,
+                               headers={k: v for k, v in route.request.headers.items() if k.lower() in ("content-type", "x-participant-key")})
+                assert r.status_code == 200, r.text
+                held.append(route)
+            else:
+                held.append(route)  # no reply at all
 
-    page = context.new_page()
-    try:
-        open_page(page, server, s)
-        wait_respond(page, 0)
-        page.route("**/answer", answers)
-        page.keyboard.press("4")
-        page.wait_for_selector("#retry", state="visible")
-        assert "not replied yet" in page.inner_text("#message")
-        rows = wait_answers(server, sid, 1)
-        kept = pending(page, sid)
-        assert [(a["trial_index"], a["response"], a["answer_id"]) for a in kept] == [(0, [4], rows[0][3])], \
-            "the answer stays stored on the page until the server confirms it"
-        hold["on"] = False
-        page.click("#retry")
-        page.wait_for_function("document.getElementById('message').textContent.includes('Answer taken')")
-        assert page.is_hidden("#retry")
-        assert pending(page, sid) == []
-        wait_respond(page, 1)
-        assert server.rows("SELECT trial_index, response, answer_id FROM answers") == [(0, "4", rows[0][3])]
-        assert len(held) >= 1
-    finally:
-        page.unroute_all(behavior="ignoreErrors")
-        context.close()
+        page = context.new_page()
+        try:
+            open_page(page, server, s)
+            wait_respond(page, 0)
+            page.route("**/answer", answers)
+            page.keyboard.press("4")
+            page.wait_for_selector("#retry", state="visible")
+            assert "not replied yet" in page.inner_text("#message")
+            rows = wait_answers(server, sid, 1)
+            kept = pending(page, sid)
+            assert [(a["trial_index"], a["response"], a["answer_id"]) for a in kept] == [(0, [4], rows[0][3])], \
+                "the answer stays stored on the page until the server confirms it"
+            hold["on"] = False
+            page.click("#retry")
+            page.wait_for_function("document.getElementById('message').textContent.includes('Answer taken')")
+            assert page.is_hidden("#retry")
+            assert pending(page, sid) == []
+            wait_respond(page, 1)
+            assert server.rows("SELECT trial_index, response, answer_id FROM answers") == [(0, "4", rows[0][3])]
+            assert len(held) >= 1
+        finally:
+            page.unroute_all(behavior="ignoreErrors")
