@@ -42,6 +42,13 @@ def wait_for(predicate, timeout=5.0):
     raise AssertionError("condition not reached")
 
 
+def one_trial_runner(store):
+    """A session of one Study 1 trial, its counting rig, and a runner that needs a page."""
+    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
+    rig = CountingRig()
+    return sid, rig, SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+
+
 @pytest.fixture
 def store(tmp_path):
     with StudyStore(tmp_path / "s.sqlite") as st:
@@ -94,9 +101,7 @@ def test_runner_holds_the_cue_until_a_page_is_there_and_while_paused(store):
 
 
 def test_no_stimulus_once_the_page_that_was_cued_has_gone(store):
-    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
-    rig = CountingRig()
-    runner = SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+    sid, rig, runner = one_trial_runner(store)
     token = runner.page_attach(-1)
     runner.start()
     wait_for(lambda: runner.snapshot()["state"] == "cue")
@@ -119,9 +124,7 @@ def test_with_two_screens_the_stimulus_waits_for_the_one_catching_up(store):
     # One screen shows the cue; the other's request still carries an older state. The
     # stimulus waits (within the grace period) until both show the cue, so neither misses
     # the onset and asks for the trial again while the participant answers on the other.
-    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
-    rig = CountingRig()
-    runner = SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+    sid, rig, runner = one_trial_runner(store)
     token_a = runner.page_attach(-1)
     token_b = runner.page_attach(-1)
     runner.start()
@@ -139,9 +142,7 @@ def test_with_two_screens_the_stimulus_waits_for_the_one_catching_up(store):
 
 
 def test_a_screen_that_never_catches_up_does_not_hold_the_study(store):
-    sid = store.create_session("P01", 1, seed=2, config={"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [4]})
-    rig = CountingRig()
-    runner = SessionRunner(store, sid, stimulus=lambda trial: np.ones((4, 8)), rig=rig, pace=QUICK)
+    sid, rig, runner = one_trial_runner(store)
     token_a = runner.page_attach(-1)
     runner.page_attach(-1)  # screen B's request hangs on an old state
     runner.start()
