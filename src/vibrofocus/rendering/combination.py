@@ -11,7 +11,7 @@ from .._validation import as_array, check_band, check_index, check_positive
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
 from ._checks import as_transfer, check_grid
-from .taper import band_taper
+from .taper import design_grid
 
 __all__ = ["combination_target"]
 
@@ -67,8 +67,8 @@ def combination_target(
     if band is None:
         taper = 1.0
     else:
-        taper = band_taper(np.fft.rfftfreq(stimulus.size, 1 / fs), check_band(band, fs),
-                           check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+        taper = design_grid(stimulus.size, fs, check_band(band, fs),
+                            check_positive(taper_octaves, "taper_octaves", allow_zero=True))[1]
     spectrum = (H[:, target_index, :] @ gains) * np.fft.rfft(stimulus) * taper
     target = np.fft.irfft(spectrum, stimulus.size)
     if not np.any(np.abs(target) > 0):

@@ -45,7 +45,7 @@ from ..errors import ValidationError
 from ..signals.ricker import ricker
 from ._checks import as_indices, as_transfer, check_grid, check_transfer_energy
 from ._pinv import _single_threaded_blas, gram_matrix
-from .taper import band_taper
+from .taper import design_grid
 
 __all__ = [
     "ContrastBound",
@@ -276,7 +276,7 @@ def _quiet_gram(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: A
 def _tap(n: int, fs: float, sigma: float, t0: float | None, band: tuple[float, float], taper_octaves: float,
          waveform: Any) -> tuple[np.ndarray, np.ndarray]:
     """(taper, U): the band taper and the spectrum of the band-limited desired waveform."""
-    taper = band_taper(np.fft.rfftfreq(n, 1 / fs), band, taper_octaves)
+    taper = design_grid(n, fs, band, taper_octaves)[1]
     if waveform is None:
         t0 = n / fs / 2 if t0 is None else t0
         waveform = ricker(fs, sigma, n / fs, t0)

@@ -20,7 +20,7 @@ from ..errors import DriveLimitError, ValidationError
 from ._checks import as_indices, as_transfer, check_grid, check_regularization, check_transfer_energy, samples_for
 from ._pinv import SpectralPinv, _single_threaded_blas, small_gram
 from .causality import DEFAULT_WRAPAROUND_TOL, WraparoundCheck
-from .taper import band_taper
+from .taper import design_grid
 
 __all__ = ["InverseOperator", "inverse_filter", "DesignReport", "DriveScaledWarning", "apply_drive_limit"]
 
@@ -67,8 +67,7 @@ def _prepare_design(H: np.ndarray, fs: Any, n: int | None, band: Any, taper_octa
     n = samples_for(H.shape[0], n)
     low, high = check_band(band, fs)
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
-    freqs = np.fft.rfftfreq(n, 1 / fs)
-    taper = band_taper(freqs, (low, high), taper_octaves)
+    freqs, taper = design_grid(n, fs, (low, high), taper_octaves)
     nonzero = np.flatnonzero(taper > 0)
     if nonzero.size == 0:
         raise ValidationError(f"band=({low:g}, {high:g}) Hz holds no frequency of the {n}-sample grid at fs={fs:g} Hz")

@@ -10,7 +10,7 @@ from .._validation import as_array, check_band, check_in_range, check_index, che
 from ..defaults import SIGMA_S
 from ..errors import ValidationError
 from .contrast import _energy_db
-from .taper import band_taper
+from .taper import design_grid
 
 __all__ = ["focus_metrics"]
 
@@ -121,8 +121,8 @@ def focus_metrics(
     fs = check_positive(fs, "fs")
     sigma = check_positive(sigma, "sigma")
     if band is not None:
-        taper = band_taper(np.fft.rfftfreq(n, 1 / fs), check_band(band, fs),
-                           check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+        taper = design_grid(n, fs, check_band(band, fs),
+                            check_positive(taper_octaves, "taper_octaves", allow_zero=True))[1]
         desired = np.fft.irfft(np.fft.rfft(desired) * taper, n)
     if t0 is None:
         t0 = float(np.argmax(np.abs(desired))) / fs

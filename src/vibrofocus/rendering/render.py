@@ -36,7 +36,7 @@ from .contrast import (
 from .funneling import funneling_gains
 from .inverse import InverseOperator, apply_drive_limit, predict_response
 from .metrics import focus_metrics
-from .taper import band_taper
+from .taper import band_taper, design_grid
 from .time_reversal import time_reversal_drives
 
 __all__ = ["Rendering", "render", "CONTROL_SETS"]
@@ -415,7 +415,7 @@ def render(
     duration = n / fs
     t0 = TARGET_FRACTION * duration if t0 is None else t0
     stimulus = ricker(fs, sigma, duration, t0, form=form)
-    taper = band_taper(np.fft.rfftfreq(n, 1 / fs), band, check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+    taper = design_grid(n, fs, band, check_positive(taper_octaves, "taper_octaves", allow_zero=True))[1]
     reference = np.fft.irfft(np.fft.rfft(target_peak_m * stimulus) * taper, n)
     if control == "guards":
         others = layout.guard_indices
@@ -465,8 +465,7 @@ def render(
             drives = constrained_drives(H, target_index, fs, contrast_weight=contrast_weight,
                                         min_contrast_db=min_contrast_db, **options)
     elif exact_target:
-        freqs = np.fft.rfftfreq(n, 1 / fs)
-        taper = band_taper(freqs, band, taper_octaves)
+        freqs, taper = design_grid(n, fs, band, taper_octaves)
         raw_target = (combination_target(H, target_index, gains, stimulus, fs, band=None)
                       if method == "combination" else target_peak_m * stimulus)
         desired = np.fft.irfft(np.fft.rfft(raw_target) * taper, n)

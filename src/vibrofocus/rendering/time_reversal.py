@@ -10,7 +10,7 @@ from .._validation import as_array, check_band, check_positive
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
 from ._checks import as_transfer, check_grid
-from .taper import band_taper
+from .taper import design_grid
 
 __all__ = ["time_reversal_drives"]
 
@@ -55,8 +55,7 @@ def time_reversal_drives(
     if targets.shape[0] != H.shape[1]:
         raise ValidationError(f"targets has {targets.shape[0]} rows but H has {H.shape[1]} points")
     n = targets.shape[1]
-    taper = band_taper(np.fft.rfftfreq(n, 1 / fs), check_band(band, fs),
-                       check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+    taper = design_grid(n, fs, check_band(band, fs), check_positive(taper_octaves, "taper_octaves", allow_zero=True))[1]
     rhs = np.fft.rfft(targets, axis=-1).T * taper[:, None]  # (F, n_points)
     spectra = np.conj((np.conj(rhs)[:, None, :] @ H)[:, 0, :])  # H^H u per frequency
     drives = np.fft.irfft(spectra, n, axis=0).T
