@@ -92,12 +92,17 @@ def _parseval_weights_2n(n: int) -> np.ndarray:
     return w
 
 
-def _bins_within(bound: np.ndarray, budget: float) -> slice:
-    """The shortest run of bins outside which ``bound`` sums to at most ``budget`` (half
-    of it at each end)."""
-    low = int(np.searchsorted(np.cumsum(bound), 0.5 * budget, side="right"))
-    high = len(bound) - int(np.searchsorted(np.cumsum(bound[::-1]), 0.5 * budget, side="right"))
-    return slice(low, max(low, high))
+class _BinRuns:
+    """Shortest runs of bins outside which ``bound`` sums to at most a budget (half of it
+    at each end), for several budgets: the cumulative sums are formed once."""
+
+    def __init__(self, bound: np.ndarray) -> None:
+        self.rising, self.falling = np.cumsum(bound), np.cumsum(bound[::-1])
+
+    def within(self, budget: float) -> slice:
+        low = int(np.searchsorted(self.rising, 0.5 * budget, side="right"))
+        high = len(self.rising) - int(np.searchsorted(self.falling, 0.5 * budget, side="right"))
+        return slice(low, max(low, high))
 
 
 def _response(H2: np.ndarray, drives2: np.ndarray, bins: slice) -> np.ndarray:
@@ -180,7 +185,7 @@ class WraparoundCheck:
         self.H = H
         self.keep = bool(keep)
         self._padded: np.ndarray | None = None
-        self._norms: np.ndarray | None = None  # ||H2[k]||_F^2 per bin of the 2n grid
+        self._weighted_norms: np.ndarray | None = None  # ||H2[k]||_F^2 per bin of the 2n grid, Parseval-weighted
 
     def _padded_rows(self, points: slice) -> np.ndarray:
         """``H2`` of some points as rows, complex64, shape (n_chunk, n_actuators, n + 1)
@@ -197,7 +202,7 @@ class WraparoundCheck:
             for points in _point_chunks(self.H):
                 padded[:, points] = np.moveaxis(self._padded_rows(points), -1, 0)
             flat = padded.reshape(padded.shape[0], -1).view(np.float32)
-            self._norms = np.einsum("fi,fi->f", flat, flat, dtype=np.float64)
+            self._weighted_norms = _parseval_weights_2n(self.n) * np.einsum("fi,fi->f", flat, flat, dtype=np.float64)
             self._padded = padded
         return self._padded
 
@@ -225,7 +230,8 @@ class WraparoundCheck:
         """(head, tail, skipped): energies before and past the window's end and a bound of
         the energy in the bins left out (0 when ``full`` or for a single check)."""
         padded = self._padded_drives(drives, spectra)
-        power = np.sum(np.abs(padded) ** 2, axis=1)
+        flat = padded.view(np.float64)
+        power = np.einsum("ki,ki->k", flat, flat)  # sum |D2[k]|^2 over actuators
         padded = padded.astype(np.complex64)
         n = self.n
         if not self.keep:  # one-shot: every bin of every point, no need to keep H2
@@ -240,22 +246,26 @@ class WraparoundCheck:
                 head, tail = head + part[0], tail + part[1]
             return head, tail, 0.0
         H2 = self.padded_spectra
-        bound = _parseval_weights_2n(n) * self._norms * power  # >= the bin's energy
+        bound = self._weighted_norms * power  # >= the bin's energy
         if full:
-            every = _bins_within(bound, 0.0)  # the bins left out are exact zeros
+            every = _BinRuns(bound).within(0.0)  # the bins left out are exact zeros
             return (*_head_and_tail(_placed(_response(H2, padded, every), every, n), every, n), 0.0)
         # The energy of the bins holding all but _CORE_SHARE of the bound is a lower bound
         # of the response's: the bins outside `kept` (a superset) hold at most _SKIP_SHARE
         # of it.
-        core = _bins_within(bound, _CORE_SHARE * float(np.sum(bound)))
+        runs = _BinRuns(bound)
+        core = runs.within(_CORE_SHARE * float(runs.rising[-1]))
         core_response = _response(H2, padded, core)
         flat = core_response.view(np.float32)
         core_energy = _parseval_weights_2n(n)[core] @ np.einsum("kp,kp->k", flat, flat, dtype=np.float64)
-        kept = _bins_within(bound, _SKIP_SHARE * float(core_energy))
+        kept = runs.within(_SKIP_SHARE * float(core_energy))
         kept = slice(min(kept.start, core.start), max(kept.stop, core.stop))
-        response = np.concatenate([_response(H2, padded, slice(kept.start, core.start)), core_response,
-                                   _response(H2, padded, slice(core.stop, kept.stop))])
-        skipped = (float(np.sum(bound)) - float(np.sum(bound[kept]))) / (2 * n)
+        if (kept.start, kept.stop) == (core.start, core.stop):
+            response = core_response
+        else:
+            response = np.concatenate([_response(H2, padded, slice(kept.start, core.start)), core_response,
+                                       _response(H2, padded, slice(core.stop, kept.stop))])
+        skipped = (float(runs.rising[-1]) - float(np.sum(bound[kept]))) / (2 * n)
         return (*_head_and_tail(_placed(response, kept, n), kept, n), max(skipped, 0.0))
 
     def fraction(self, drives: Any, spectra: np.ndarray | None = None) -> float:
