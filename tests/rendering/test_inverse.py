@@ -8,7 +8,7 @@ from scipy.signal import fftconvolve
 
 from vibrofocus import InverseOperator, inverse_filter
 from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
-from vibrofocus.rendering import DriveScaledWarning, band_taper
+from vibrofocus.rendering import DriveScaledWarning, WraparoundCheck, band_taper
 from vibrofocus.signals import ricker
 
 from ._media import FS, delay_gain_medium, fir_medium, random_fir_taps
@@ -100,6 +100,43 @@ def test_wraparound_check_fires_when_window_too_short():
     # The same target late enough in the window passes.
     late = ricker(FS, 1e-3, duration=n / FS, t0=600 / FS)[None]
     inverse_filter(H, late, FS)
+
+
+def test_a_kept_wraparound_check_gives_the_one_shot_verdict(rng):
+    n = 1024
+    H = delay_gain_medium(n, FS, np.array([[300]]), np.array([[1.0]]))
+    kept = WraparoundCheck(H)
+    early = ricker(FS, 1e-3, duration=n / FS, t0=100 / FS)[None]
+    with pytest.raises(CausalityError, match="too short"):
+        inverse_filter(H, early, FS, wraparound=kept)
+    # Through a richer medium, several designs reuse the kept spectra: same drives and
+    # the fraction of the one-shot check (which transforms every path again).
+    H = random_medium(rng, n, 5, 3)
+    kept = WraparoundCheck(H)
+    for t0 in (0.3, 0.5, 0.7):
+        targets = np.zeros((5, n))
+        targets[1] = ricker(FS, 1e-3, duration=n / FS, t0=t0 * n / FS)
+        once, report = inverse_filter(H, targets, FS, full_output=True)
+        again, kept_report = inverse_filter(H, targets, FS, wraparound=kept, full_output=True)
+        assert_allclose(again, once, rtol=0, atol=0)
+        assert_allclose(kept_report.wraparound_fraction, report.wraparound_fraction, rtol=1e-4, atol=1e-12)
+    assert kept._padded is not None  # built once, kept
+
+
+def test_a_wraparound_check_of_another_medium_is_refused(rng):
+    n = 256
+    H = random_medium(rng, n, 3, 2)
+    targets = rng.standard_normal((3, n))
+    other = H.copy()
+    other[10] *= 2
+    with pytest.raises(ValidationError, match="another transfer matrix"):
+        inverse_filter(H, targets, FS, wraparound=WraparoundCheck(other))
+    with pytest.raises(ValidationError, match="another transfer matrix"):
+        inverse_filter(H[:-1], targets[:, :-2], FS, wraparound=WraparoundCheck(H))
+    with pytest.raises(ValidationError, match="must be a WraparoundCheck"):
+        inverse_filter(H, targets, FS, wraparound=H)
+    # An equal copy is the same medium.
+    inverse_filter(H, targets, FS, wraparound=WraparoundCheck(H.copy()), check_wraparound=False)
 
 
 def test_wraparound_can_warn_instead():

@@ -145,8 +145,8 @@ def gram_matrix(H: np.ndarray) -> np.ndarray:
     X = H.view(np.float64)  # columns Re h_0, Im h_0, Re h_1, ...
     R = np.swapaxes(X, -1, -2) @ X  # symmetric, (F, 2k, 2k)
     G = np.empty(R.shape[:-2] + (R.shape[-1] // 2,) * 2, complex)
-    G.real = R[..., ::2, ::2] + R[..., 1::2, 1::2]
-    G.imag = R[..., ::2, 1::2] - R[..., 1::2, ::2]
+    np.add(R[..., ::2, ::2], R[..., 1::2, 1::2], out=G.real)  # out=: no temporaries
+    np.subtract(R[..., ::2, 1::2], R[..., 1::2, ::2], out=G.imag)
     return G
 
 

@@ -387,7 +387,8 @@ def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, wavefo
             reg_param):
     """Validate, then the ACC eigenpairs over the band; ``waveform=None`` asks for
     ``target_peak`` times the Ricker centred at ``t0`` (default mid-window). ``H``'s values
-    are checked in the band, the only part used (a pass less over a large ``H``)."""
+    are checked where used, the target and quiet points in the band, through the Gram
+    matrix (no pass of its own over a large ``H``)."""
     H = as_transfer(H, values=False)
     fs = check_positive(fs, "fs")
     n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
@@ -400,10 +401,12 @@ def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, wavefo
     if waveform is None:
         U = check_positive(target_peak, "target_peak") * U
     active = slice(int(np.flatnonzero(taper > 0)[0]), int(np.flatnonzero(taper > 0)[-1]) + 1)
-    with np.errstate(over="ignore", invalid="ignore"):
-        check_transfer_energy(np.vdot(H[active], H[active]).real, H[active], "H", " in the design band")
     G = _quiet_gram(H, target_index, quiet_indices, quiet_H, active)
     h = H[active, target_index, :]
+    with np.errstate(over="ignore", invalid="ignore"):
+        # The Gram matrix's trace and |h|^2 hold the energy of every part of H in use.
+        used = np.trace(G, axis1=1, axis2=2).real.sum() + np.vdot(h, h).real
+        check_transfer_energy(used, H[active], "H", " in the design band")
     if np.any(np.all(h == 0, axis=1) & (np.abs(U[active]) > 0)):
         raise ValidationError(
             f"H is zero from every actuator to the target (point {target_index}) at frequencies inside the band: "

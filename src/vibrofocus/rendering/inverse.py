@@ -290,6 +290,18 @@ def predict_response(H: np.ndarray, drives: np.ndarray) -> np.ndarray:
     return np.fft.irfft((H @ spectra[:, :, None])[:, :, 0], n, axis=0).T
 
 
+def _check_same_transfer(wraparound: Any, H: np.ndarray, n: int) -> None:
+    """Refuse a wrap-around check built from another transfer matrix or window: it would
+    judge the drives through the wrong medium."""
+    if not isinstance(wraparound, WraparoundCheck):
+        raise ValidationError(f"wraparound must be a WraparoundCheck of H (WraparoundCheck(H)), got {type(wraparound).__name__}")
+    if wraparound.n != n or not (wraparound.H is H or np.array_equal(wraparound.H, H)):
+        raise ValidationError(
+            f"wraparound was built from another transfer matrix (shape {wraparound.H.shape}, window "
+            f"{wraparound.n} samples) than this design's H (shape {H.shape}, window {n}): build it with WraparoundCheck(H)"
+        )
+
+
 def apply_drive_limit(drives: np.ndarray, max_drive: float | None, on_limit: str, what: str = "the design") -> tuple[np.ndarray, float, float]:
     """Refuse or scale drives whose peak exceeds ``max_drive``.
 
@@ -328,6 +340,7 @@ def inverse_filter(
     taper_octaves: float = 0.5,
     check_wraparound: bool | str = True,
     wraparound_tol: float = DEFAULT_WRAPAROUND_TOL,
+    wraparound: WraparoundCheck | None = None,
     full_output: bool = False,
 ) -> np.ndarray | tuple[np.ndarray, DesignReport]:
     """Inverse-filter drives: ``irfft(T(f) H(f)^+ U(f))`` (SPEC §2, §8).
@@ -365,6 +378,11 @@ def inverse_filter(
         True raises :class:`~vibrofocus.errors.CausalityError`, "warn" warns, False skips.
     wraparound_tol : float
         Largest tolerated share of the response energy past the window.
+    wraparound : WraparoundCheck, optional
+        ``WraparoundCheck(H)``, built once and passed to every design through this ``H``:
+        it keeps the impulse responses' padded spectra after its first check, so each
+        later check costs a fraction of the design instead of several designs. Default:
+        a one-shot check, which transforms every path's impulse response.
     full_output : bool
         Also return a :class:`DesignReport`.
 
@@ -391,6 +409,8 @@ def inverse_filter(
     if max_drive is not None:
         max_drive = check_positive(max_drive, "max_drive")
     regularization, reg_param = check_regularization(regularization, reg_param)
+    if wraparound is not None:
+        _check_same_transfer(wraparound, H, n)
     H, fs, n, band, taper, freqs, active = _prepare_design(H, fs, n, band, taper_octaves)
     with np.errstate(over="ignore", invalid="ignore"):
         gram = small_gram(H[active])
@@ -408,8 +428,9 @@ def inverse_filter(
         with np.errstate(over="ignore", invalid="ignore"):
             check_transfer_energy(np.vdot(H, H).real, H)  # the rest of H is used from here on
     if check_wraparound:
-        fraction = WraparoundCheck._trusted(H, n, keep=False).check(drives, tol=wraparound_tol, spectra=spectra,
-                                                           action="warn" if check_wraparound == "warn" else "raise")
+        playback = WraparoundCheck._trusted(H, n, keep=False) if wraparound is None else wraparound
+        fraction = playback.check(drives, tol=wraparound_tol, spectra=spectra,
+                                  action="warn" if check_wraparound == "warn" else "raise")
     drives, scale, needed = apply_drive_limit(drives, max_drive, on_limit, "the inverse filter")
     if not full_output:
         if scale < 1.0:
