@@ -137,6 +137,15 @@ def test_a_wraparound_check_of_another_medium_is_refused(rng):
         inverse_filter(H, targets, FS, wraparound=H)
     # An equal copy is the same medium.
     inverse_filter(H, targets, FS, wraparound=WraparoundCheck(H.copy()), check_wraparound=False)
+    # The same array changed in place after the check was built is not.
+    kept = WraparoundCheck(H)
+    inverse_filter(H, targets, FS, wraparound=kept, check_wraparound=False)  # compared all the same
+    H[20, 1, 0] *= 1.001
+    with pytest.raises(ValidationError, match="changed in place"):
+        inverse_filter(H, targets, FS, wraparound=kept, check_wraparound=False)
+    H[20, 2, 1] = np.nan
+    with pytest.raises(ValidationError, match="NaN|finite"):
+        inverse_filter(H, targets, FS, wraparound=kept, check_wraparound=False)
 
 
 def test_wraparound_can_warn_instead():

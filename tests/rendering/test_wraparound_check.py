@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from vibrofocus.errors import CausalityError
+from vibrofocus.errors import CausalityError, ValidationError
 from vibrofocus.rendering import InverseOperator, WraparoundCheck, check_wraparound, inverse_filter, wraparound_fraction
 from vibrofocus.rendering._pinv import SpectralPinv
 from vibrofocus.rendering.causality import _playback_wraparound_fraction
@@ -178,3 +178,15 @@ def test_operator_singular_values_on_demand(rng):
     active = operator.taper > 0
     assert_allclose(s[active], np.linalg.svd(H[active], compute_uv=False), rtol=1e-10)
     assert np.all(s[~active] == 0)
+
+
+def test_a_check_of_an_array_changed_in_place_refuses_to_build_its_spectra(rng):
+    n = 256
+    H = random_medium(rng, n, 4, 2, longest=0.3)
+    check = WraparoundCheck(H)
+    assert check.matches(H) and check.matches(H.copy())
+    assert check.matches(np.asfortranarray(H))  # a strided copy: same values, no copy made
+    H[5, 0, 0] += 1e-3 * np.abs(H).max()
+    assert not check.matches(H)
+    with pytest.raises(ValidationError, match="changed in place"):
+        check.padded_spectra

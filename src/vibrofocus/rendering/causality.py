@@ -25,12 +25,13 @@ transformed, which costs more than the design itself on a large array.
 from __future__ import annotations
 
 import warnings
+from functools import lru_cache
 from typing import Any
 
 import numpy as np
 import scipy.fft
 
-from .._validation import as_array, check_choice, check_in_range
+from .._validation import as_array, check_choice, check_finite, check_in_range
 from ..errors import CausalityError, ValidationError
 from ._pinv import _single_threaded_blas
 
@@ -82,6 +83,25 @@ def _point_chunks(H: np.ndarray, bytes_per_value: int = 16):
 
 def _matvec(a: np.ndarray, x: np.ndarray) -> np.ndarray:
     return (a @ x[:, :, None])[:, :, 0]
+
+
+@lru_cache(maxsize=8)
+def _probe(n_points: int, n_actuators: int) -> np.ndarray:
+    """Fixed pseudo-random complex weights, (n_points, n_actuators), of the fingerprint."""
+    rng = np.random.default_rng(0x5EED)
+    probe = rng.standard_normal((n_points, n_actuators)) + 1j * rng.standard_normal((n_points, n_actuators))
+    probe.setflags(write=False)
+    return probe
+
+
+def _fingerprint(H: np.ndarray) -> np.ndarray:
+    """One random projection of each frequency's matrix, (n_freqs,) complex: a change of
+    ``H`` changes it (but for a change orthogonal to a random vector). One BLAS pass over a
+    contiguous ``H``, no copy of a strided one."""
+    probe = _probe(*H.shape[1:])
+    if H.flags.c_contiguous:
+        return H.reshape(H.shape[0], -1) @ probe.reshape(-1)
+    return np.einsum("fpa,pa->f", H, probe)
 
 
 def _parseval_weights_2n(n: int) -> np.ndarray:
@@ -164,6 +184,10 @@ class WraparoundCheck:
     -----
     ``H2`` takes ``8 (n + 1) n_points n_actuators`` bytes (single precision), about as
     much as ``H`` in double precision.
+
+    The check keeps a reference to ``H``, not a copy, and a fingerprint of its values
+    taken when it is built: a check of an ``H`` changed in place since then refuses to
+    build its spectra, and :func:`~vibrofocus.rendering.inverse_filter` refuses it.
     """
 
     def __init__(self, H: Any, n_samples: int | None = None, *, keep: bool = True) -> None:
@@ -172,6 +196,27 @@ class WraparoundCheck:
         if H.shape[0] != self.n // 2 + 1:
             raise ValidationError(f"H has {H.shape[0]} frequencies, which does not match n_samples={n_samples!r}")
         self._set(H, keep)
+        self._fingerprint = _fingerprint(H) if keep else None
+
+    def matches(self, H: np.ndarray) -> bool:
+        """Whether ``H`` (validated, complex) holds the values this check was built from
+        (its fingerprint: a fixed random projection of each frequency's matrix, equal to
+        about 1e-12 of its largest value; one pass over ``H``).
+
+        Raises
+        ------
+        ValidationError
+            If ``H`` holds NaN or infinite values (they also fail the comparison).
+        """
+        if H.shape != self.H.shape:
+            return False
+        fingerprint = _fingerprint(H)
+        if not np.all(np.isfinite(fingerprint)):
+            check_finite(H, "H")  # says where; a mere overflow passes on to the comparison
+        reference = self._fingerprint if self._fingerprint is not None else _fingerprint(self.H)
+        scale = float(np.max(np.abs(reference), initial=0.0)) or 1.0
+        with np.errstate(invalid="ignore"):
+            return bool(np.all(np.abs(fingerprint - reference) <= 1e-12 * scale))
 
     @classmethod
     def _trusted(cls, H: np.ndarray, n: int, keep: bool) -> "WraparoundCheck":
@@ -182,6 +227,7 @@ class WraparoundCheck:
         return check
 
     def _set(self, H: np.ndarray, keep: bool) -> None:
+        self._fingerprint: np.ndarray | None = None  # of H's values when built (a public check)
         self.H = H
         self.keep = bool(keep)
         self._padded: np.ndarray | None = None
@@ -198,6 +244,11 @@ class WraparoundCheck:
         """``H2``, complex64, shape (n + 1, n_points, n_actuators): the spectra of the
         impulse responses zero-padded to ``2 n`` (even bins: ``H``; computed once)."""
         if self._padded is None:
+            if self._fingerprint is not None and not self.matches(self.H):
+                raise ValidationError(
+                    "H was changed in place after this WraparoundCheck was built: its spectra would judge "
+                    "drives through a medium that is no longer H; build a new WraparoundCheck(H)"
+                )
             padded = np.empty((self.n + 1,) + self.H.shape[1:], np.complex64)
             for points in _point_chunks(self.H):
                 padded[:, points] = np.moveaxis(self._padded_rows(points), -1, 0)

@@ -291,14 +291,16 @@ def predict_response(H: np.ndarray, drives: np.ndarray) -> np.ndarray:
 
 
 def _check_same_transfer(wraparound: Any, H: np.ndarray, n: int) -> None:
-    """Refuse a wrap-around check built from another transfer matrix or window: it would
-    judge the drives through the wrong medium."""
+    """Refuse a wrap-around check built from another transfer matrix or window, or from
+    this ``H`` before it was changed in place: it would judge the drives through the
+    wrong medium. Its comparison is the pass that validates ``H``'s values."""
     if not isinstance(wraparound, WraparoundCheck):
         raise ValidationError(f"wraparound must be a WraparoundCheck of H (WraparoundCheck(H)), got {type(wraparound).__name__}")
-    if wraparound.n != n or not (wraparound.H is H or np.array_equal(wraparound.H, H)):
+    if wraparound.n != n or not wraparound.matches(H):
         raise ValidationError(
             f"wraparound was built from another transfer matrix (shape {wraparound.H.shape}, window "
-            f"{wraparound.n} samples) than this design's H (shape {H.shape}, window {n}): build it with WraparoundCheck(H)"
+            f"{wraparound.n} samples) than this design's H (shape {H.shape}, window {n}), or H was changed "
+            "in place since: build it with WraparoundCheck(H)"
         )
 
 
@@ -424,7 +426,7 @@ def inverse_filter(
     drives = np.fft.irfft(spectra, n, axis=0).T
 
     fraction = float("nan")
-    if check_wraparound or full_output:
+    if (check_wraparound or full_output) and wraparound is None:  # (else validated by its comparison)
         with np.errstate(over="ignore", invalid="ignore"):
             check_transfer_energy(np.vdot(H, H).real, H)  # the rest of H is used from here on
     if check_wraparound:
