@@ -36,6 +36,16 @@ def test_hpd_inverse_leaves_its_input_alone(rng):
         assert np.array_equal(A, before)
 
 
+@pytest.mark.parametrize("k", [3, SMALL_GRAM + 4])
+def test_an_exactly_singular_matrix_spoils_only_its_own_inverse(rng, k):
+    A = with_condition(rng, 3, k, 10.0)
+    A[1] = 0.0  # LAPACK refuses the whole batch for it
+    inverse = hpd_inverse(A)
+    assert not np.all(np.isfinite(inverse[1]))
+    for f in (0, 2):
+        assert_allclose(inverse[f] @ A[f], np.eye(k), rtol=0, atol=1e-12)
+
+
 def test_hpd_inverse_of_a_singular_matrix_is_not_finite_or_fails_the_bound(rng):
     v = random_stack(rng, 1, 4, 1)
     singular = v @ np.conj(np.swapaxes(v, 1, 2))  # rank one

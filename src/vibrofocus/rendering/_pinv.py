@@ -134,6 +134,7 @@ def gram_matrix(H: np.ndarray) -> np.ndarray:
     multiplied by its own transpose, which numpy hands to BLAS ``dsyrk`` (half the work of
     a complex product and no conjugated copy of ``H``); the four real blocks make up the
     complex Gram matrix.
+
     Up to :data:`SMALL_GRAM` columns a complex product is faster (fewer, larger BLAS
     calls per frequency).
     """
@@ -180,8 +181,11 @@ def hpd_inverse(a: np.ndarray) -> np.ndarray:
     """
     k = a.shape[-1]
     if k > SMALL_GRAM:
-        with _single_threaded_blas():
-            return np.linalg.inv(a)
+        try:
+            with _single_threaded_blas():
+                return np.linalg.inv(a)
+        except np.linalg.LinAlgError:  # an exactly singular matrix stops the whole batch
+            pass  # the sweep leaves it non-finite and inverts the others
     work = np.moveaxis(a, 0, -1).copy(order="C")  # (k, k, F): each entry a contiguous row; never a view of a
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         for i in range(k):
