@@ -97,11 +97,17 @@ def _probe(n_points: int, n_actuators: int) -> np.ndarray:
 def _fingerprint(H: np.ndarray) -> np.ndarray:
     """One random projection of each frequency's matrix, (n_freqs,) complex: a change of
     ``H`` changes it (but for a change orthogonal to a random vector). One BLAS pass over a
-    contiguous ``H``, no copy of a strided one."""
+    contiguous ``H``, no copy of a strided one, which also validates its values: a NaN or
+    infinity in ``H`` makes the projection non-finite, and then
+    :class:`~vibrofocus.errors.ValidationError` says where (a mere overflow passes)."""
     probe = _probe(*H.shape[1:])
     if H.flags.c_contiguous:
-        return H.reshape(H.shape[0], -1) @ probe.reshape(-1)
-    return np.einsum("fpa,pa->f", H, probe)
+        fingerprint = H.reshape(H.shape[0], -1) @ probe.reshape(-1)
+    else:
+        fingerprint = np.einsum("fpa,pa->f", H, probe)
+    if not np.all(np.isfinite(fingerprint)):
+        check_finite(H, "H")
+    return fingerprint
 
 
 def _parseval_weights_2n(n: int) -> np.ndarray:
@@ -191,7 +197,8 @@ class WraparoundCheck:
     """
 
     def __init__(self, H: Any, n_samples: int | None = None, *, keep: bool = True) -> None:
-        H = as_array(H, "H", ndim=3, dtype="complex")
+        # A kept check validates H's values with its fingerprint: one pass, not two.
+        H = as_array(H, "H", ndim=3, dtype="complex", finite=not keep)
         self.n = 2 * (H.shape[0] - 1) if n_samples is None else int(n_samples)
         if H.shape[0] != self.n // 2 + 1:
             raise ValidationError(f"H has {H.shape[0]} frequencies, which does not match n_samples={n_samples!r}")
@@ -211,8 +218,6 @@ class WraparoundCheck:
         if H.shape != self.H.shape:
             return False
         fingerprint = _fingerprint(H)
-        if not np.all(np.isfinite(fingerprint)):
-            check_finite(H, "H")  # says where; a mere overflow passes on to the comparison
         reference = self._fingerprint if self._fingerprint is not None else _fingerprint(self.H)
         scale = float(np.max(np.abs(reference), initial=0.0)) or 1.0
         with np.errstate(invalid="ignore"):
