@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from ..errors import ValidationError
+import numpy as np
+
+from ..errors import SafetyError, ValidationError
 from ..layout import ArrayLayout
 from .base import Rig
 from .config import RigConfig
+from .device_lock import DeviceLock
 
 __all__ = ["HardwareRig"]
 
@@ -42,3 +45,30 @@ class HardwareRig(Rig):
         super().__init__(layout, fs=config.fs, limits=config.limits.build())
         self.config = config
         self.vibrometer = config.vibrometer.build()
+        self.device_lock: DeviceLock | None = None
+
+    def _lock_device(self, device_id: str) -> None:
+        """Take the device for this rig until :meth:`close` (subclasses call it once they know the device)."""
+        self.device_lock = DeviceLock(device_id, owner=f"a {self.kind} rig").acquire()
+
+    def close(self) -> None:
+        """Release the device (outputs left at zero) and its lock."""
+        try:
+            super().close()
+        finally:
+            if self.device_lock is not None:
+                self.device_lock.release()
+
+    @property
+    def max_amplifier_input_v(self) -> float:
+        """The most any sample may put into the amplifier, V: the actuator limit over the gain, capped."""
+        return min(self.config.output_peak_v, self.config.amplifier_input_max_v)
+
+    def _check_output_level(self, drive: np.ndarray) -> None:
+        # Independent of the limits at the actuator: the voltage into the amplifier.
+        volts = float(np.abs(drive).max(initial=0.0)) / self.config.amplifier_gain
+        cap = self.config.amplifier_input_max_v
+        if volts > cap * (1 + 1e-9):
+            raise SafetyError(
+                f"drive refused: it needs {volts:.4g} V into the amplifier, over amplifier_input_max_v = {cap:g} V"
+            )
