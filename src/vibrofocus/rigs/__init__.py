@@ -6,7 +6,7 @@ from .device_lock import DeviceLock
 from .devices import DeviceBusyError, DeviceError, list_audio_devices, list_nidaq_devices
 from .factory import RIG_KINDS, make_rig
 from .hardware import HardwareRig
-from .force import ForceCurve, StrapReading, StrapSensors, check_straps, evaluate_straps
+from .force import ForceCurve, StrapReading, StrapSensors, check_straps, evaluate_straps, has_strap_sensors
 from .safety import EnergyBudget, SafetyLimits, check_drive
 from .vibrometer import Vibrometer
 
@@ -15,6 +15,6 @@ from .vibrometer import Vibrometer
 __all__ = [
     "Rig", "HardwareRig", "SafetyLimits", "EnergyBudget", "check_drive", "DeviceLock", "DeviceBusyError", "make_rig", "RIG_KINDS",
     "RigConfig", "AudioRigConfig", "NidaqRigConfig", "load_rig_config", "parse_rig_config",
-    "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps",
+    "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps", "has_strap_sensors",
     "DeviceError", "list_audio_devices", "list_nidaq_devices",
 ]

@@ -57,6 +57,9 @@ class Rig(ABC):
     kind: str = "abstract"
     #: Points one recording can cover; None means any number.
     max_points_per_recording: int | None = 1
+    #: Whether one job at a time holds the rig (hardware: True). A model, such as the
+    #: simulated forearm, may serve several threads at once.
+    one_job_at_a_time: bool = False
 
     def __init__(self, layout: ArrayLayout | None = None, fs: float = FS_HZ, limits: SafetyLimits | None = None):
         self.layout = layout if layout is not None else ArrayLayout.reference()
@@ -101,6 +104,9 @@ class Rig(ABC):
             What holds it, as people read it ("calibration of P01"); shown to whoever
             is refused.
         """
+        if not self.one_job_at_a_time:
+            yield self
+            return
         self._acquire(owner)
         self._job_owner, self._job_thread = owner, threading.get_ident()
         try:
@@ -126,7 +132,7 @@ class Rig(ABC):
     @contextmanager
     def _exclusive(self, what: str) -> Iterator[None]:
         """Hold the hardware for one play: inside the caller's job, or alone."""
-        if self._job_thread is not None and self._job_thread == threading.get_ident():
+        if not self.one_job_at_a_time or self._job_thread == threading.get_ident():
             yield  # this thread's own job holds the rig
             return
         self._acquire(what)

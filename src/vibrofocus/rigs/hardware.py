@@ -32,6 +32,8 @@ class HardwareRig(Rig):
     config_class: type[RigConfig] = RigConfig
     #: A single-spot vibrometer: the operator aims it at one point per recording.
     max_points_per_recording = 1
+    #: A physical device: one job at a time (Rig.reserve), and one rig per device (DeviceLock).
+    one_job_at_a_time = True
 
     def __init__(self, config: RigConfig, layout: ArrayLayout | None = None):
         if not isinstance(config, self.config_class):
