@@ -418,3 +418,23 @@ def test_interface_identity_across_host_apis(rig_name, cue_name, same):
     from vibrofocus.rigs.audio import same_audio_interface
 
     assert same_audio_interface(rig_name, cue_name) is same
+
+
+def test_devices_check_opens_the_rig_and_plays_nothing(jack_server, tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    good = tmp_path / "lab.json"
+    good.write_text(json.dumps(jack_config()))
+    r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(good), "--json"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    found = json.loads(r.stdout)["found"]
+    assert found[0].endswith("loopback (JACK Audio Connection Kit)") and "resampled 24/5" in found[1]
+    assert any("at most 1 V into it" in line for line in found)
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(jack_config(loopback_output=7)))
+    r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(bad)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("error:") == 1 and "output channels up to 7" in r.stderr

@@ -57,8 +57,8 @@ def test_json_and_toml_agree(tmp_path):
          r"loopback_output 4 is also an actuator output"),
         (dict(vibrometer={"decoder": "acceleration", "sensitivity": 1.0}), r"vibrometer.decoder: Input should be"),
         (dict(vibrometer={"decoder": "velocity"}), r"vibrometer.sensitivity: Field required"),
-        (dict(volts_full_scale=0.5), r"needs 1 V at the interface .* volts_full_scale = 0.5 V: drives would clip. "
-                                     r"Lower limits.peak_v to at most 5 V"),
+        (dict(volts_full_scale=0.5), r"needs 1 V at the interface .* volts_full_scale = 0.5 V. Drives would clip: "
+                                     r"raise amplifier_gain, or lower limits.peak_v to at most 5 V"),
         (dict(limits={"peak_v": 5.0, "rms_v": 0}), r"limits.rms_v: Input should be greater than 0"),
         (dict(latency_samples=-3), r"latency_samples: Input should be greater than or equal to 0"),
         (dict(force_sensors={"channels": ["3"]}), r"force_sensors: audio interfaces are AC-coupled"),

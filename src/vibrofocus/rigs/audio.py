@@ -254,6 +254,15 @@ class AudioRig(HardwareRig):
             )
         words = sorted(audio_interface_words(self.device_name)) or [self.device_name.lower()]
         self._lock_device("audio:" + "-".join(words))
+        self.setup_report = [
+            f"device {self.device_index}: {self.device_name} ({self.hostapi_name})",
+            f"rate: device {self.device_fs:g} Hz, rig {self.fs:g} Hz (resampled {self._up}/{self._down})"
+            if (self._up, self._down) != (1, 1) else f"rate: {self.fs:g} Hz",
+            f"channels: actuators on outputs {', '.join(map(str, ch.actuators))}, vibrometer on input "
+            f"{ch.vibrometer}" + (f", loopback output {ch.loopback_output} -> input {ch.loopback_input}"
+                                  if ch.loopback_output else f", no loopback (latency {config.latency_samples} samples)"),
+            f"output latency reported by the device: {1e3 * float(dev['default_low_output_latency']):.0f} ms",
+        ]
         self.last_latency_samples: int | None = None
         self.last_clipped: np.ndarray | None = None
         self.last_dropout_mask: np.ndarray | None = None

@@ -195,16 +195,20 @@ class RigConfig(_Model):
     vibrometer: VibrometerConfig
     limits: LimitsConfig = LimitsConfig()
 
+    def _refuse_peak_over(self, ceiling_v: float, name: str, where: str, advice: str) -> None:
+        """Refuse a ``limits.peak_v`` that needs more than ``ceiling_v`` at the interface."""
+        need = self.output_peak_v
+        if need > ceiling_v * (1 + 1e-9):
+            raise ValueError(
+                f"limits.peak_v = {self.limits.peak_v:g} V at the actuator needs {need:g} V {where} "
+                f"(amplifier_gain = {self.amplifier_gain:g}), more than {name} = {ceiling_v:g} V. {advice} "
+                f"limits.peak_v to at most {ceiling_v * self.amplifier_gain:g} V"
+            )
+
     @model_validator(mode="after")
     def _check_amplifier_cap(self) -> "RigConfig":
-        need = self.output_peak_v
-        if need > self.amplifier_input_max_v * (1 + 1e-9):
-            raise ValueError(
-                f"limits.peak_v = {self.limits.peak_v:g} V at the actuator needs {need:g} V into the amplifier "
-                f"(amplifier_gain = {self.amplifier_gain:g}), more than amplifier_input_max_v = "
-                f"{self.amplifier_input_max_v:g} V. Check amplifier_gain (10 for 20 dB); if it is right, lower "
-                f"limits.peak_v to at most {self.amplifier_input_max_v * self.amplifier_gain:g} V"
-            )
+        self._refuse_peak_over(self.amplifier_input_max_v, "amplifier_input_max_v", "into the amplifier",
+                               "Check amplifier_gain (10 for 20 dB); if it is right, lower")
         return self
 
     @property
@@ -320,14 +324,8 @@ class AudioRigConfig(RigConfig):
 
     @model_validator(mode="after")
     def _check_level(self) -> "AudioRigConfig":
-        need = self.output_peak_v
-        if need > self.volts_full_scale * (1 + 1e-9):
-            raise ValueError(
-                f"limits.peak_v = {self.limits.peak_v:g} V at the actuator needs {need:g} V at the interface "
-                f"(amplifier_gain = {self.amplifier_gain:g}), more than volts_full_scale = "
-                f"{self.volts_full_scale:g} V: drives would clip. Lower limits.peak_v to at most "
-                f"{self.volts_full_scale * self.amplifier_gain:g} V or raise amplifier_gain"
-            )
+        self._refuse_peak_over(self.volts_full_scale, "volts_full_scale", "at the interface",
+                               "Drives would clip: raise amplifier_gain, or lower")
         return self
 
 

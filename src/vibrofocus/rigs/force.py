@@ -214,8 +214,19 @@ class StrapSensors:
 
 
 def has_strap_sensors(rig) -> bool:
-    """Whether a rig can read strap forces: it offers ``read_strap_forces`` and, where it
-    says which sensors it has (``strap_sensors``), has some."""
+    """Whether a rig can read strap forces.
+
+    Parameters
+    ----------
+    rig : Rig
+        Any rig. It can if it offers ``read_strap_forces`` and, where it says which
+        sensors it has (``strap_sensors``, e.g. an NI rig without ``force_sensors``), has
+        some.
+
+    Returns
+    -------
+    bool
+    """
     return getattr(rig, "read_strap_forces", None) is not None and getattr(rig, "strap_sensors", True) is not None
 
 

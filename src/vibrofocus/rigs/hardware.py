@@ -48,6 +48,18 @@ class HardwareRig(Rig):
         self.config = config
         self.vibrometer = config.vibrometer.build()
         self.device_lock: DeviceLock | None = None
+        #: What the checks at setup found, one line each (``vibrofocus devices --check``).
+        self.setup_report: list[str] = []
+
+    def limits_report(self) -> list[str]:
+        """The limits this rig enforces, one line each, as people read them."""
+        cfg, lim = self.config, self.limits
+        return [
+            f"amplifier: gain {cfg.amplifier_gain:g} V/V; at most {self.max_amplifier_input_v:g} V into it "
+            f"(cap amplifier_input_max_v = {cfg.amplifier_input_max_v:g} V)",
+            f"limits at the actuator: {lim.peak_v:g} V peak, {lim.rms_v:g} V RMS over any {lim.rms_window_s:g} s "
+            f"(across plays), drives up to {lim.max_duration_s:g} s, {1e3 * lim.fade_s:g} ms fades",
+        ]
 
     def _lock_device(self, device_id: str) -> None:
         """Take the device for this rig until :meth:`close` (subclasses call it once they know the device)."""
