@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import RIG_CONFIG_HELP, check_rig_options, force_option
 from ._command import command
 
 study_app = typer.Typer(
@@ -22,12 +23,15 @@ def export(
     db: Path = typer.Option(..., "--db", help="Study database."),
     out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns: see docs/file-formats.md, trials file)."),
     participant: str | None = typer.Option(None, "--participant", help="Only this participant."),
+    force: bool = force_option(),
 ) -> None:
     """Write every answered trial as ``participant,study,phase,trial,method,target,response,rt_s``."""
     with user_errors():
+        from .._atomic import allow_overwrite
         from ..errors import StudyError
         from ..studies import StudyStore
 
+        allow_overwrite(force)
         if not db.is_file():
             raise StudyError(f"no study database at {db}")
         with StudyStore(db, create=False) as store:
@@ -42,7 +46,7 @@ def run(
     db: Path = typer.Option(..., "--db", help="Study database; an unfinished session of this participant and study is resumed."),
     calibration: Path = typer.Option(..., "--calibration", help="The participant's calibration file (netCDF)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
-    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
     seed: int | None = typer.Option(None, "--seed", min=0, help="Seed of the trial order (default: random, stored)."),
     beep: bool = typer.Option(True, "--beep/--no-beep", help="Cue before each stimulus (the terminal bell unless --beep-device)."),
     beep_device: str | None = typer.Option(
@@ -68,6 +72,7 @@ def run(
         from ..studies.terminal import TerminalResponder
 
         console = Console()
+        check_rig_options(rig, rig_config)
         cal = load_calibration(calibration)
         if getattr(cal, "participant_id", participant) != participant:
             raise StudyError(

@@ -172,7 +172,10 @@ class StudyStore(StudyDatabase):
             The calibration id; the existing id when the same file content is already
             registered for this participant.
         """
+        from .._atomic import protect
+
         file = Path(path)
+        protect(file, "calibration of the study database")
         try:
             sha = file_sha256(file)
         except OSError as exc:
