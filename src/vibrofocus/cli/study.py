@@ -69,7 +69,7 @@ def run(
         from ..rigs import make_rig
         from ..studies import StudyStore
         from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
-        from ..studies.terminal import TerminalResponder
+        from ..studies.terminal import InputEnded, TerminalResponder
 
         console = Console()
         check_rig_options(rig, rig_config)
@@ -114,6 +114,13 @@ def run(
                 store.set_status(sid, "paused")
                 console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
                 raise typer.Exit(code=130) from None
+            except InputEnded as exc:
+                # Nobody is answering (stdin closed or redirected): pause, never abort.
+                console.print()  # end the prompt's line
+                store.set_status(sid, "paused")
+                info = store.session(sid)
+                raise StudyError(f"{exc}: session {sid} is paused with {info.n_answered} of {info.n_trials} trials "
+                                 "answered; run the same command at a terminal to resume") from None
             console.print(
                 f"session {sid}: {summary.status}, {summary.n_answered} of {summary.n_trials} trials answered"
             )
