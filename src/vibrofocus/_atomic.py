@@ -827,7 +827,8 @@ def make_output_folder(path: str | os.PathLike, *, what: str = "output folder") 
 
 
 # ---------------------------------------------------------------------- checks
-def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: str = "file") -> Path:
+def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: str = "file",
+                   written_as: str | None = None) -> Path:
     """Check, before a long job, that ``path`` can be written and its folder has room.
 
     Checks the rules of :func:`output_target`, that the folder exists, that a file can
@@ -843,6 +844,9 @@ def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: st
         Estimated size of the file, bytes.
     what : str
         For error messages.
+    written_as : str, optional
+        The suffix whose kind of file will be written (``".csv"``), when the name's own
+        suffix does not say it.
 
     Returns
     -------
@@ -855,7 +859,8 @@ def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: st
     """
     path = Path(path)
     _check_folder(path, what)
-    folder = output_target(path, what, kind=_suffix_kind(path)).parent
+    kind = _suffix_kind(Path(f"x{written_as}") if written_as else path)
+    folder = output_target(path, what, kind=kind).parent
     try:
         fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
     except OSError as exc:

@@ -61,10 +61,13 @@ def _traceback() -> None:
 
 
 def print_error(message: str) -> None:
-    """Print ``error: message`` on stderr as one logical line (no markup interpretation), cut at :data:`MAX_MESSAGE_CHARS`."""
-    text = str(message).replace("\n", " ")
+    """Print ``error: message`` on stderr as one logical line (no markup, no control characters), cut at :data:`MAX_MESSAGE_CHARS`."""
+    text = str(message)
     if len(text) > MAX_MESSAGE_CHARS:
         text = f"{text[:MAX_MESSAGE_CHARS]}... (message cut; {len(text):,} characters)"
+    # Control characters (newlines, carriage returns, separators) would break the one
+    # line or rewrite the terminal: each becomes a space.
+    text = "".join(ch if ch.isprintable() else " " for ch in text)
     err_console.print("[bold red]error:[/] ", end="")
     err_console.print(text, markup=False)
 

@@ -61,7 +61,7 @@ def simulate_study(
                 from ..studies import StudyStore
 
                 StudyStore(db, create=False).close()  # protects the calibrations it lists
-            check_writable(trials_csv, what="trials file")
+            check_writable(trials_csv, what="trials file", written_as=".csv")
         cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
         created = not cal_dir.exists()
         try:
