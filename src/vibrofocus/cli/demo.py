@@ -12,6 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ._errors import user_errors
+from ._options import force_option
 from ._command import command
 
 console = Console()
@@ -49,6 +50,7 @@ def demo_command(
         help="Design from a calibration measured first ('calibration', as a user would) or from the "
         "simulator's exact transfer ('model', what a perfect calibration would give).",
     ),
+    force: bool = force_option(),
 ) -> None:
     """Calibrate the simulated forearm, then render a tap at every location with every method, play it, measure it.
 
@@ -59,12 +61,14 @@ def demo_command(
     with user_errors():
         import numpy as np
 
+        from .._atomic import allow_overwrite
         from .._validation import check_choice
         from ..calibration import calibrate, save_calibration
         from ..defaults import METHODS
         from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
         from ..skin import SimulatedForearm
 
+        allow_overwrite(force)
         check_choice(design_from, "--design-from", ("calibration", "model"))
         if paper_figures:
             _write_paper_figures(out, seed=seed, participants=participants, location=location)

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import force_option
 from ._command import command
 
 
@@ -47,6 +48,7 @@ def power_command(
     local: bool = typer.Option(False, "--no-dask", help="Run in this process without Dask (same numbers)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    force: bool = force_option(),
 ) -> None:
     """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
 
@@ -59,10 +61,12 @@ def power_command(
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
         from rich.table import Table
 
+        from .._atomic import allow_overwrite
         from .._validation import check_in_range
         from ..studies.perception import MODEL_LABEL
         from ..studies.power import TESTS, PowerDesign, run_power
 
+        allow_overwrite(force)
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
         design = PowerDesign(
             n_participants=_ints(participants, "--participants"), n_studies=studies, repetitions=repetitions,
