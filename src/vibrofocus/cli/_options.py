@@ -1,8 +1,9 @@
 """Options several commands share: their help texts, ranges and checks.
 
 Only typer at module level (see :mod:`vibrofocus.cli.main`). Every numeric option of a
-command has a documented range (docs/cli.md, "Ranges of the options"); the ranges that
-size memory or run time live here so the help and the checks cannot disagree.
+command has its range in ``--help`` (docs/method.md, "Bad input, full disks and
+interrupts"); the ranges that size memory or run time live here, so the help and the
+checks cannot disagree.
 """
 
 from __future__ import annotations
@@ -11,6 +12,8 @@ from pathlib import Path
 
 import typer
 
+#: Largest ``--seed`` of every command: seeds are stored as 64-bit integers.
+SEED_MAX = 2**63 - 1
 #: ``--n-samples`` of render: 64 samples (a few ms) up to 2**21 (3.5 min at 10 kHz).
 N_SAMPLES_RANGE = (64, 2**21)
 #: ``--repeats`` of calibrate: a 2.5 s sweep per take, so 64 repeats are about 3 min of sweeps per point.

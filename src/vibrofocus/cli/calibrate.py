@@ -7,7 +7,15 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import AMPLITUDE_V_MIN, REPEATS_MAX, RIG_CONFIG_HELP, SWEEP_S_MIN, check_rig_options, force_option
+from ._options import (
+    AMPLITUDE_V_MIN,
+    REPEATS_MAX,
+    RIG_CONFIG_HELP,
+    SEED_MAX,
+    SWEEP_S_MIN,
+    check_rig_options,
+    force_option,
+)
 from ._command import command
 
 
@@ -18,7 +26,7 @@ def calibrate_command(
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
     seed: int | None = typer.Option(
-        None, "--seed", min=0, show_default="derived from --participant",
+        None, "--seed", min=0, max=SEED_MAX, show_default="derived from --participant",
         help="Participant seed of the simulated forearm; by default each participant id gets its own arm.",
     ),
     method: str = typer.Option(

@@ -15,13 +15,14 @@ from ._command import command
                                "--out drives.npz --wav drives.wav")
 def render_command(
     calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration file (.nc)."),
-    location: int = typer.Option(..., "--location", "-l", help="Target location number (1-based)."),
+    location: int = typer.Option(..., "--location", "-l", help="Target location number (1-based; 1-9 on the reference layout)."),
     out: Path = typer.Option(..., "--out", "-o", help="Drives file: .npz (for vibrofocus play) or .csv."),
     method: str = typer.Option("inverse", "--method", "-m", help="funneling | inverse | combination | time_reversal"),
     regularization: str | None = typer.Option(None, "--regularization", help="tikhonov | tsvd (default: plain "
                                                                               "pseudo-inverse)."),
-    reg_param: float | None = typer.Option(None, "--reg-param", help="Regularization relative to the largest "
-                                                                     "singular value."),
+    reg_param: float | None = typer.Option(None, "--reg-param", max=1e3,
+                                           help="Regularization relative to the largest singular value "
+                                                "(0 < value <= 1000)."),
     n_samples: int = typer.Option(4096, "--n-samples", min=N_SAMPLES_RANGE[0], max=N_SAMPLES_RANGE[1],
                                   help="Window length, samples."),
     limit_v: float | None = typer.Option(None, "--limit-v", min=LIMIT_V_MIN,

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import force_option
+from ._options import SEED_MAX, force_option
 from ._command import command
 
 
@@ -15,7 +15,7 @@ from ._command import command
 def simulate_study(
     participants: int = typer.Option(3, "--participants", "-n", min=1, max=1000,
                                      help="Number of simulated participants."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the whole simulation (participants, trial orders, answers)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Seed of the whole simulation (participants, trial orders, answers)."),
     db: Path = typer.Option(..., "--db", help="Study database (SQLite); an unfinished one is resumed."),
     pace: float = typer.Option(0.0, "--pace", min=0.0, max=60.0, help="Wait this long after each answer, s."),
     trials_csv: Path | None = typer.Option(
