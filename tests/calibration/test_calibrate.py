@@ -62,8 +62,11 @@ def test_single_spot_vibrometer_prompts_for_each_point(layout, firs):
     cal = calibrate(rig, participant_id="P", method="h1", sweep_s=0.5, repeats=2, prompt=prompt,
                     progress=lambda done, total, msg: (steps.append((done, total)), messages.append(msg)))
     assert asked == list(layout.point_labels)
-    # The plan first (0 done), then one call per take.
-    assert steps[0] == (0, 104) and steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 13 * 4 * 2 + 1
+    # The plan first (0 done), then two calls per take: as it starts ("playing") and when done.
+    assert steps[0] == (0, 104) and steps[-1] == (13 * 4 * 2, 13 * 4 * 2) and len(steps) == 2 * 13 * 4 * 2 + 1
+    starts = [i for i, m in enumerate(messages) if m.endswith(": playing")]
+    assert starts == list(range(1, len(steps), 2))
+    assert all(steps[i] == steps[i - 1] and steps[i + 1][0] == steps[i][0] + 1 for i in starts)
     take_s = (0.1 + 0.5 + 0.3)  # silence, sweep, tail
     assert "104 takes" in messages[0] and f"{104 * take_s:.1f} s of sweeps" in messages[0], messages[0]
     truth = rig.transfer(cal.n_fft)

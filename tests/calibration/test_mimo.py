@@ -287,7 +287,9 @@ def test_calibrate_reports_the_plan_before_the_first_take(layout, firs):
     assert (done, total, recorded) == (0, 4, 0)
     assert message == "mimo: 4 takes of 0.9 s (all 4 actuators at once, 4 Hadamard-coded repeats, every point " \
                       "in each take) = 3.6 s of sweeps"
-    assert [c[0] for c in calls] == [0, 1, 2, 3, 4]
+    # then each take twice: as it starts (nothing recorded yet for it) and once recorded
+    assert [c[0] for c in calls] == [0, 0, 1, 1, 2, 2, 3, 3, 4]
+    assert [c[3] for c in calls] == [0, 0, 1, 1, 2, 2, 3, 3, 4]
 
 
 # ------------------------------------------------------------------ the file

@@ -40,6 +40,16 @@ def test_dead_actuator_is_flagged_and_not_called_reversed(layout, firs):
     assert cal.quality.polarity[2] == 0
 
 
+def test_one_connected_actuator_is_not_called_dead(layout, firs):
+    # A loopback bench: only A1 reaches the input, the others are unconnected (zero).
+    h = np.zeros_like(firs)
+    h[:, 0] = firs[:, 0]
+    cal = calibrate(FIRRig(h, layout, noise_m=1e-11), participant_id="P", **QUICK)
+    dead = cal.quality.by_check("dead_actuator")
+    assert sorted(i.actuator for i in dead) == [1, 2, 3]
+    assert all("relative to the strongest actuator (A1)" in i.message for i in dead)
+
+
 def test_point_that_barely_moves_is_flagged(layout, firs):
     h = firs.copy()
     h[4] *= 1e-3  # the vibrometer misses point 5

@@ -150,7 +150,7 @@ def test_no_way_to_align_refuses_before_opening_the_stream(jack_server):
     import sounddevice as sd
 
     with make_rig("audio", config=jack_config(loopback_output=None, loopback_input=None)) as r:
-        with mock.patch.object(sd, "playrec", wraps=sd.playrec) as spy:
+        with mock.patch.object(sd, "Stream", wraps=sd.Stream) as spy:
             with pytest.raises(DeviceError, match="cannot align recordings"):
                 r.play_and_record(pulse_drive())
         spy.assert_not_called()
@@ -170,8 +170,8 @@ def test_unsafe_drives_never_reach_the_stream(rig, bad, match):
     import sounddevice as sd
 
     drive = bad(pulse_drive())
-    with mock.patch.object(sd, "playrec", wraps=sd.playrec) as rec_spy, \
-            mock.patch.object(sd, "play", wraps=sd.play) as play_spy:
+    with mock.patch.object(sd, "Stream", wraps=sd.Stream) as rec_spy, \
+            mock.patch.object(sd, "OutputStream", wraps=sd.OutputStream) as play_spy:
         with pytest.raises(SafetyError, match=match):
             rig.play(drive)
         with pytest.raises(SafetyError, match=match):
@@ -180,85 +180,196 @@ def test_unsafe_drives_never_reach_the_stream(rig, bad, match):
     play_spy.assert_not_called()
 
 
-def test_stream_xrun_discards_the_recording(rig):
+def _with_status(rig, flags_for_call):
+    """Wrap the rig's stream runner so the n-th stream reports ``flags_for_call(n)`` besides its own.
+
+    JACK's dummy driver cannot be made to lose samples on demand; this injects the flag
+    PortAudio would raise, to test what the rig does with it.
+    """
     import sounddevice as sd
 
-    real_wait = sd.wait
+    real = rig._run_stream
+    calls = []
 
-    def wait_with_underflow(*args, **kwargs):
-        real_wait(*args, **kwargs)
-        return sd.CallbackFlags(4)  # paOutputUnderflow: PortAudio lost output samples
+    def run(block, record, what):
+        recorded, status = real(block, record, what)
+        calls.append(status)
+        status |= sd.CallbackFlags(flags_for_call(len(calls)))
+        return recorded, status
 
-    with mock.patch.object(sd, "wait", wait_with_underflow), \
-            mock.patch.object(sd, "playrec", wraps=sd.playrec) as spy:
+    return mock.patch.object(rig, "_run_stream", run), calls
+
+
+def test_stream_xrun_discards_the_recording(rig):
+    patch, calls = _with_status(rig, lambda n: 4)  # paOutputUnderflow: PortAudio lost output samples
+    with patch:
         with pytest.raises(DeviceError, match="output underflow while recording"):
             rig.play_and_record(pulse_drive(), tail_s=0.0)
-        assert spy.call_count == 1 + rig.config.xrun_retries  # taken again, then refused
+        assert len(calls) == 1 + rig.config.xrun_retries  # taken again, then refused
         with pytest.raises(DeviceError, match="output underflow while playing"):
             rig.play(pulse_drive())  # a stimulus is never repeated
-    assert not sd.get_stream().active
+    assert len(calls) == 2 + rig.config.xrun_retries
 
 
 def test_one_xrun_is_retried_and_the_recording_kept(rig):
-    import sounddevice as sd
-
-    real_wait = sd.wait
-    calls = []
-
-    def wait_once_bad(*args, **kwargs):
-        status = real_wait(*args, **kwargs)
-        calls.append(status)
-        return sd.CallbackFlags(2) if len(calls) == 1 else status  # paInputOverflow once
-
+    patch, calls = _with_status(rig, lambda n: 2 if n == 1 else 0)  # paInputOverflow once
     drive = pulse_drive()
-    with mock.patch.object(sd, "wait", wait_once_bad):
+    with patch:
         rec = rig.play_and_record(drive, tail_s=0.0)
-    assert len(calls) >= 2
-    assert int(np.argmax(np.abs(rec[0]))) == int(np.argmax(np.abs(drive[0])))
+    assert len(calls) == 2
+    assert int(np.argmax(np.abs(drive[0]))) == int(np.argmax(np.abs(rec[0])))
+
+
+class _LoopbackRecorder:
+    """A second JACK client recording the loopback capture ports (what the actuators get)."""
+
+    def __init__(self, channels=(1, 2, 3, 4)):
+        import sounddevice as sd
+
+        self.chunks = []
+        cols = [c - 1 for c in channels]
+
+        def callback(indata, frames, time_info, status):
+            self.chunks.append((time_info.inputBufferAdcTime, indata[:, cols].copy()))
+
+        self.stream = sd.InputStream(samplerate=JACK_RATE, device="loopback", channels=max(channels),
+                                     dtype="float32", callback=callback)
+
+    def __enter__(self):
+        self.stream.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.stream.stop()
+        self.stream.close()
+
+    def now(self) -> float:
+        return self.stream.time
+
+    def signal(self) -> tuple[np.ndarray, np.ndarray]:
+        """(times (n,), samples (n, channels)) of everything recorded."""
+        times = np.concatenate([t + np.arange(len(x)) / JACK_RATE for t, x in self.chunks])
+        return times, np.concatenate([x for _, x in self.chunks])
 
 
 def _loopback_input_now(seconds: float = 0.1) -> np.ndarray:
-    import sounddevice as sd
-
-    x = sd.rec(int(seconds * JACK_RATE), samplerate=JACK_RATE, device="loopback", mapping=[1, 2, 3, 4],
-               blocking=True)
-    return np.asarray(x)
+    with _LoopbackRecorder() as rec:
+        time.sleep(seconds + 2 * JACK_PERIOD / JACK_RATE)
+    return rec.signal()[1]
 
 
-def test_error_mid_play_stops_the_stream_and_outputs_go_silent(rig):
-    import sounddevice as sd
+def _long_sine(seconds=2.0, peak=2.0):
+    n = int(seconds * FS)
+    return np.tile(peak * np.sin(2 * np.pi * 200 * np.arange(n) / FS), (4, 1))  # 1.4 V RMS
 
-    drive = np.zeros((4, int(2 * FS)))
-    drive[:, :] = 2.0 * np.sin(2 * np.pi * 200 * np.arange(drive.shape[1]) / FS)  # 1.4 V RMS, 2 s
-    started = {}
 
-    def failing_wait(*args, **kwargs):
-        time.sleep(0.2)
-        started["active"] = sd.get_stream().active
-        raise RuntimeError("operator pulled the cable")
+def test_ctrl_c_mid_play_silences_the_outputs(rig):
+    import _thread
+    import threading
 
-    with mock.patch.object(sd, "wait", failing_wait):
-        with pytest.raises(RuntimeError, match="cable"):
-            rig.play(drive)
-    assert started["active"]  # the error came while the drive was playing...
-    assert not sd.get_stream().active  # ...and the rig stopped it at once
+    timer = threading.Timer(0.3, _thread.interrupt_main)
+    timer.start()
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        rig.play(_long_sine())
+    assert time.monotonic() - t0 < 1.0
     assert not _loopback_input_now().any()  # every output is silent now
 
 
+def test_stop_from_another_thread_reaches_zero_within_100_ms_plus_the_buffered_latency(rig):
+    import threading
+
+    stopped = {}
+
+    def stop_later():
+        time.sleep(0.5)
+        stopped["t"] = recorder.now()
+        rig.stop()
+
+    with _LoopbackRecorder() as recorder:
+        thread = threading.Thread(target=stop_later)
+        thread.start()
+        with pytest.raises(DeviceError, match="play was stopped before it ended"):
+            rig.play(_long_sine(seconds=3.0))
+        thread.join()
+        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    times, x = recorder.signal()
+    loud = np.flatnonzero(np.abs(x).max(axis=1) > 1e-4)
+    assert loud.size, "the drive never reached the outputs"
+    time_to_zero = times[loud[-1]] - stopped["t"]
+    # The loopback itself delays what it records by one period.
+    allowed = 0.100 + rig.output_latency_s + JACK_PERIOD / JACK_RATE
+    print(f"time to zero {1e3 * time_to_zero:.0f} ms (allowed {1e3 * allowed:.0f} ms; output latency "
+          f"{1e3 * rig.output_latency_s:.0f} ms)")
+    assert time_to_zero < allowed
+
+
+def test_the_whole_drive_plays_including_its_fade_out(rig):
+    # A drive that is loud up to its last samples: the stream must not end before they play.
+    drive = np.zeros((4, 3000))
+    drive[0] = 3.0 * np.sin(2 * np.pi * 200 * np.arange(3000) / FS)
+    with _LoopbackRecorder(channels=(1,)) as recorder:
+        rig.play(drive)
+        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    x = recorder.signal()[1][:, 0]
+    played = rig.check(drive)[0] / (GAIN * VFS_OUT)  # digital level of what was asked
+    expected_energy = np.sum(played**2) * JACK_RATE / FS
+    np.testing.assert_allclose(np.sum(x.astype(float) ** 2), expected_energy, rtol=0.02)
+
+
+def test_a_second_job_on_the_device_is_refused(rig, jack_server):
+    import threading
+
+    from vibrofocus.rigs import DeviceBusyError
+
+    with pytest.raises(DeviceBusyError, match="audio:loopback is in use by"):
+        make_rig("audio", config=jack_config())  # a second rig on the same interface
+    holding, release = threading.Event(), threading.Event()
+
+    def job():
+        with rig.reserve("calibration of P01"):
+            holding.set()
+            release.wait(5)
+
+    thread = threading.Thread(target=job)
+    thread.start()
+    holding.wait(5)
+    try:
+        with pytest.raises(DeviceBusyError, match="busy with calibration of P01"):
+            rig.play(pulse_drive())
+        with pytest.raises(DeviceBusyError, match="busy with calibration of P01"):
+            rig.play_and_record(pulse_drive())
+    finally:
+        release.set()
+        thread.join()
+    rig.play(pulse_drive())  # free again
+
+
+def test_a_clipped_vibrometer_input_is_reported(rig):
+    rig.play_and_record(pulse_drive(), tail_s=0.0)
+    assert rig.last_clipped.tolist() == [False]
+    # 10 V at the actuator -> 0.5 digital out -> looped back at 0.5 of the input's full scale; a
+    # config whose input full scale equals the output's reads it at the same level.
+    cfg = jack_config()
+    cfg["volts_full_scale"] = 0.5
+    cfg["amplifier_gain"] = 20.0
+    rig.close()
+    with make_rig("audio", config=cfg) as loud:
+        drive = np.zeros((4, 2000))
+        drive[0, 500:1500] = 10.0  # a 10 V step: 1.0 digital, the end of the range
+        loud.play_and_record(drive, tail_s=0.0)
+        assert loud.last_clipped.tolist() == [True]
+
+
 def test_stop_during_a_recording_discards_it(rig):
-    import sounddevice as sd
+    import threading
 
-    real_wait = sd.wait
-
-    def stop_then_wait(*args, **kwargs):
-        time.sleep(0.05)
-        rig.stop()  # e.g. the experimenter's stop button, from another thread
-        return real_wait(*args, **kwargs)
-
-    with mock.patch.object(sd, "wait", stop_then_wait), \
-            mock.patch.object(sd, "playrec", wraps=sd.playrec) as spy:
-        with pytest.raises(DeviceError, match="stopped before it ended"):
+    timer = threading.Timer(0.3, rig.stop)
+    with mock.patch.object(rig, "_run_stream", wraps=rig._run_stream) as spy:
+        timer.start()
+        with pytest.raises(DeviceError, match="recording was stopped before it ended"):
             rig.play_and_record(pulse_drive(n=20_000), tail_s=0.0)
+    timer.join()
     assert spy.call_count == 1  # not retried
     assert not _loopback_input_now().any()
 
@@ -289,7 +400,41 @@ def test_the_cue_is_refused_on_the_interface_that_drives_the_actuators(rig):
     from vibrofocus.errors import ValidationError
     from vibrofocus.studies import headphone_beep
 
-    with pytest.raises(ValidationError, match="drives the actuators"):
+    with pytest.raises(ValidationError, match="may be the audio interface that drives the actuators"):
         headphone_beep(rig.device_index, rig=rig)
-    with pytest.raises(ValidationError, match="drives the actuators"):
+    with pytest.raises(ValidationError, match="may be the audio interface that drives the actuators"):
         headphone_beep("loopback", rig=rig)
+
+
+@pytest.mark.parametrize("rig_name, cue_name, same", [
+    ("Focusrite USB ASIO", "Speakers (Focusrite USB Audio)", True),  # ASIO vs MME names of one interface
+    ("Focusrite USB ASIO", "Headphones (Realtek High Definition Audio)", False),
+    ("Scarlett 2i2 USB: Audio (hw:1,0)", "Scarlett 2i2 USB: Audio (hw:1,0)", True),
+    ("Scarlett 2i2 USB: Audio (hw:1,0)", "HDA Intel PCH: ALC3246 Analog (hw:0,0)", False),
+    ("MOTU UltraLite-mk5", "default", True),  # routes to the system mix: may reach the interface
+    ("MOTU UltraLite-mk5", "pulse", True),
+])
+def test_interface_identity_across_host_apis(rig_name, cue_name, same):
+    from vibrofocus.rigs.audio import same_audio_interface
+
+    assert same_audio_interface(rig_name, cue_name) is same
+
+
+def test_devices_check_opens_the_rig_and_plays_nothing(jack_server, tmp_path):
+    import json
+    import subprocess
+    import sys
+
+    good = tmp_path / "lab.json"
+    good.write_text(json.dumps(jack_config()))
+    r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(good), "--json"],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    found = json.loads(r.stdout)["found"]
+    assert found[0].endswith("loopback (JACK Audio Connection Kit)") and "resampled 24/5" in found[1]
+    assert any("at most 1 V into it" in line for line in found)
+    bad = tmp_path / "bad.json"
+    bad.write_text(json.dumps(jack_config(loopback_output=7)))
+    r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(bad)],
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("error:") == 1 and "output channels up to 7" in r.stderr

@@ -57,11 +57,21 @@ def test_json_and_toml_agree(tmp_path):
          r"loopback_output 4 is also an actuator output"),
         (dict(vibrometer={"decoder": "acceleration", "sensitivity": 1.0}), r"vibrometer.decoder: Input should be"),
         (dict(vibrometer={"decoder": "velocity"}), r"vibrometer.sensitivity: Field required"),
-        (dict(volts_full_scale=0.5), r"needs 1 V at the interface .* volts_full_scale = 0.5 V: drives would clip. "
-                                     r"Lower limits.peak_v to at most 5 V"),
+        (dict(volts_full_scale=0.5), r"needs 1 V at the interface .* volts_full_scale = 0.5 V. Drives would clip: "
+                                     r"raise amplifier_gain, or lower limits.peak_v to at most 5 V"),
         (dict(limits={"peak_v": 5.0, "rms_v": 0}), r"limits.rms_v: Input should be greater than 0"),
         (dict(latency_samples=-3), r"latency_samples: Input should be greater than or equal to 0"),
         (dict(force_sensors={"channels": ["3"]}), r"force_sensors: audio interfaces are AC-coupled"),
+        # hard ceilings and the amplifier cap (docs/hardware.md)
+        (dict(amplifier_gain=float("inf")), r"amplifier_gain: Input should be a finite number"),
+        (dict(amplifier_gain=1.0), r"needs 10 V into the amplifier .* amplifier_input_max_v = 1 V. Check amplifier_gain"),
+        (dict(amplifier_input_max_v=20.0), r"amplifier_input_max_v: Input should be less than or equal to 10"),
+        (dict(limits={"peak_v": 30.0}), r"limits.peak_v: Input should be less than or equal to 20"),
+        (dict(limits={"rms_v": 100.0}), r"limits.rms_v: Input should be less than or equal to 8"),
+        (dict(limits={"max_duration_s": 1000.0}), r"limits.max_duration_s: Input should be less than or equal to 60"),
+        (dict(limits={"fade_s": 0.0}), r"limits.fade_s: Input should be greater than or equal to 0.0001"),
+        (dict(limits={"fade_s": 100.0}), r"limits.fade_s: Input should be less than or equal to 0.05"),
+        (dict(limits={"peak_v": float("nan")}), r"limits.peak_v: Input should be a finite number"),
     ],
 )
 def test_bad_audio_settings_are_named(change, message):
@@ -76,8 +86,9 @@ def test_bad_nidaq_settings_are_named():
         parse_rig_config({**base, "channels": {"actuators": ["ao0", "ai1", "ao2", "ao3"], "vibrometer": "ai0"}})
     with pytest.raises(ValidationError, match=r"vibrometer channel 'ao1' is not an analog input"):
         parse_rig_config({**base, "channels": {"actuators": ["ao0"], "vibrometer": "ao1"}})
-    with pytest.raises(ValidationError, match=r"needs 20 V at the analog outputs .* ao_max_v = 10 V"):
-        parse_rig_config({**base, "amplifier_gain": 0.5})
+    with pytest.raises(ValidationError, match=r"amplifier_input_max_v = 5 V is more than the analog outputs can "
+                                              r"put out \(ao_max_v = 2 V\)"):
+        parse_rig_config({**base, "amplifier_input_max_v": 5.0, "ao_max_v": 2.0})
     with pytest.raises(ValidationError, match=r"force_sensors: .*names has 1 entries but channels has 2"):
         parse_rig_config({**base, "force_sensors": {"channels": ["ai1", "ai2"], "names": ["a"]}})
     with pytest.raises(ValidationError, match=r"force_sensors.curve: .*strictly increasing"):

@@ -1,17 +1,20 @@
 """The NI-DAQmx rig.
 
-No NI driver can run here, so the adapter is checked against FAKE tasks: autospecs of
-the real ``nidaqmx.Task`` API (and of its channel, timing and trigger collections), which
-refuse calls or arguments the real API does not have. Tests against a real device or
-NI's simulated device are marked ``nidaq_hardware`` and run only when
-``VIBROFOCUS_NIDAQ_DEVICE`` names one (e.g. a simulated PCIe-6361 made in NI MAX).
+No NI driver can run here, so the adapter is checked against a FAKE task layer
+(``fake_nidaqmx``) that models NI's task states: reserved channels, error -50103,
+outputs that hold their last value, a coerced sample clock. Its methods have the real
+``nidaqmx`` signatures (checked below). Tests against a real device or NI's simulated
+device are marked ``nidaq_hardware`` and run only when ``VIBROFOCUS_NIDAQ_DEVICE`` names
+one (e.g. a simulated PCIe-6361 made in NI MAX).
 """
 
 from __future__ import annotations
 
+import _thread
+import inspect
 import os
-from unittest import mock
-from unittest.mock import create_autospec
+import threading
+import time
 
 import nidaqmx
 import numpy as np
@@ -19,12 +22,15 @@ import pytest
 from nidaqmx.constants import AcquisitionType, TerminalConfiguration
 from nidaqmx.errors import DaqError
 from nidaqmx.task import Timing
+from nidaqmx.task.channels import AOChannel
 from nidaqmx.task.collections import AIChannelCollection, AOChannelCollection
-from nidaqmx.task.triggering import StartTrigger, Triggers
+from nidaqmx.task.triggering import StartTrigger
 
 from vibrofocus.errors import SafetyError, ValidationError
-from vibrofocus.rigs import DeviceError, check_straps, parse_rig_config
+from vibrofocus.rigs import DeviceBusyError, DeviceError, check_straps, parse_rig_config
 from vibrofocus.rigs.nidaq import NidaqRig
+
+from .fake_nidaqmx import RESERVED, FakeDevice, FakeTask, _AIChannels, _AOChannels, _StartTrigger, _Timing
 
 FS = 10_000.0
 GAIN = 10.0
@@ -41,53 +47,20 @@ def nidaq_config(**extra) -> dict:
     return cfg
 
 
-class FakeTaskFactory:
-    """Makes FAKE ``nidaqmx.Task`` objects (autospecs) and records every one it made, in order.
-
-    ``reads`` gives what successive ``read`` calls return (the recorded input); ``fail_on``
-    makes a named method of the first task raise a ``DaqError`` as the driver would.
-    """
-
-    def __init__(self, reads=None, fail_on: str | None = None):
-        self.tasks: list[mock.NonCallableMagicMock] = []
-        self.reads = list(reads or [])
-        self.fail_on = fail_on
-        self.events: list[tuple[int, str]] = []  # (task number, method) in call order
-
-    def __call__(self):
-        task = create_autospec(nidaqmx.Task, instance=True)
-        # Properties are not specced by create_autospec; spec them by hand.
-        task.ao_channels = create_autospec(AOChannelCollection, instance=True)
-        task.ai_channels = create_autospec(AIChannelCollection, instance=True)
-        task.timing = create_autospec(Timing, instance=True)
-        task.triggers = create_autospec(Triggers, instance=True)
-        task.triggers.start_trigger = create_autospec(StartTrigger, instance=True)
-        number = len(self.tasks)
-        for name in ("start", "write", "read", "stop", "close", "wait_until_done"):
-            getattr(task, name).side_effect = self._side_effect(number, name)
-        self.tasks.append(task)
-        return task
-
-    def _side_effect(self, number, name):
-        def effect(*args, **kwargs):
-            self.events.append((number, name))
-            if name == self.fail_on and number == 0:
-                raise DaqError("fake driver failure", -200000)
-            if name == "read":
-                return self.reads.pop(0)
-            return None
-
-        return effect
-
-    def ao_tasks(self):
-        return [t for t in self.tasks if t.ao_channels.add_ao_voltage_chan.called]
-
-    def ai_tasks(self):
-        return [t for t in self.tasks if t.ai_channels.add_ai_voltage_chan.called]
+@pytest.fixture
+def device():
+    return FakeDevice()
 
 
-def make(factory, **extra) -> NidaqRig:
-    return NidaqRig(parse_rig_config(nidaq_config(**extra)), task_factory=factory)
+def make(device, **extra) -> NidaqRig:
+    return NidaqRig(parse_rig_config(nidaq_config(**extra)), task_factory=device.factory, system=device.system())
+
+
+@pytest.fixture
+def rig(device):
+    r = make(device)
+    yield r
+    r.close()
 
 
 def drive(n=1000, amplitude=5.0):
@@ -97,114 +70,230 @@ def drive(n=1000, amplitude=5.0):
     return d
 
 
-def test_output_channels_have_the_range_the_limit_allows():
-    fake = FakeTaskFactory()
-    make(fake).play(drive())
-    play_task = fake.ao_tasks()[0]
-    calls = play_task.ao_channels.add_ao_voltage_chan.call_args_list
-    assert [c.args[0] for c in calls] == ["Dev1/ao0", "Dev1/ao1", "Dev1/ao2", "Dev1/ao3"]
-    assert [c.kwargs["name_to_assign_to_channel"] for c in calls] == [f"actuator{i}" for i in (1, 2, 3, 4)]
-    for c in calls:  # 10 V at the actuator through a gain of 10: +-1 V at the outputs
-        assert (c.kwargs["min_val"], c.kwargs["max_val"]) == (-1.0, 1.0)
+def ao_tasks(device):
+    return [t for t in device.tasks if t.ao_channels.channels]
 
 
-def test_writes_are_scaled_by_the_amplifier_gain_and_outputs_end_at_zero():
-    fake = FakeTaskFactory()
-    rig = make(fake)
+@pytest.mark.parametrize("fake, real", [(FakeTask, nidaqmx.Task), (_AOChannels, AOChannelCollection),
+                                        (_AIChannels, AIChannelCollection), (_Timing, Timing),
+                                        (_StartTrigger, StartTrigger)])
+def test_fake_matches_the_real_api(fake, real):
+    for name, member in vars(fake).items():
+        if name.startswith("_") or not callable(member):
+            continue
+        assert hasattr(real, name), f"nidaqmx has no {real.__name__}.{name}"
+        fake_params = list(inspect.signature(member).parameters)
+        real_params = list(inspect.signature(getattr(real, name)).parameters)
+        assert fake_params == real_params[:len(fake_params)], name
+    assert hasattr(AOChannel, "ao_idle_output_behavior")
+
+
+def test_output_channels_have_the_range_of_the_amplifier_cap(rig, device):
+    rig.play(drive())
+    play_task = ao_tasks(device)[0]
+    assert [c.name for c in play_task.ao_channels.channels] == ["Dev1/ao0", "Dev1/ao1", "Dev1/ao2", "Dev1/ao3"]
+    for c in play_task.ao_channels.channels:  # amplifier_input_max_v, 1 V by default
+        assert (c.min_val, c.max_val) == (-1.0, 1.0)
+
+
+def test_writes_are_scaled_by_the_amplifier_gain_and_outputs_end_at_zero(rig, device):
     d = drive()
     rig.play(d)
-    play_task, zero_task = fake.ao_tasks()
-    written = play_task.write.call_args.args[0]
-    np.testing.assert_allclose(written, rig.check(d) / GAIN, rtol=1e-12)
-    assert play_task.write.call_args.kwargs["auto_start"] is False
-    play_task.timing.cfg_samp_clk_timing.assert_called_once_with(
-        FS, sample_mode=AcquisitionType.FINITE, samps_per_chan=d.shape[1])
-    # After the play: an explicit on-demand zero on every output, and every task closed.
-    np.testing.assert_array_equal(zero_task.write.call_args.args[0], np.zeros(4))
-    assert zero_task.write.call_args.kwargs["auto_start"] is True
-    for task in fake.tasks:
-        task.close.assert_called_once()
+    play_task, zero_task = ao_tasks(device)
+    np.testing.assert_allclose(play_task.written[0], rig.check(d) / GAIN, rtol=1e-12)
+    assert play_task.timing.samps_per_chan == d.shape[1]
+    np.testing.assert_array_equal(zero_task.written[0][:, -1], np.zeros(4))
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+    assert all(t.state == "closed" for t in device.tasks)
+    assert device.reserved == {}
 
 
-def test_input_is_armed_on_the_output_start_trigger_before_the_output_starts():
+def test_input_is_armed_on_the_output_start_trigger_before_the_output_starts(rig, device):
     n, tail = 1000, 200
     expected_volts = np.random.default_rng(7).standard_normal(n + tail)
-    fake = FakeTaskFactory(reads=[expected_volts.tolist()])
-    rig = make(fake)
+    device.reads = [expected_volts.tolist()]
     rec = rig.play_and_record(drive(n), tail_s=tail / FS)
-    ai = fake.ai_tasks()[0]
-    ao = fake.ao_tasks()[0]
-    ai.ai_channels.add_ai_voltage_chan.assert_called_once_with(
-        "Dev1/ai0", name_to_assign_to_channel="vibrometer", terminal_config=TerminalConfiguration.DIFF,
-        min_val=-10.0, max_val=10.0)
-    ai.triggers.start_trigger.cfg_dig_edge_start_trig.assert_called_once_with("/Dev1/ao/StartTrigger")
-    # Same rate and clock for both; the input takes the drive plus its tail.
-    ai.timing.cfg_samp_clk_timing.assert_called_once_with(FS, sample_mode=AcquisitionType.FINITE,
-                                                          samps_per_chan=n + tail)
-    ao.timing.cfg_samp_clk_timing.assert_called_once_with(FS, sample_mode=AcquisitionType.FINITE,
-                                                          samps_per_chan=n + tail)
-    ai_no, ao_no = fake.tasks.index(ai), fake.tasks.index(ao)
-    events = fake.events
-    assert events.index((ai_no, "start")) < events.index((ao_no, "write")) < events.index((ao_no, "start"))
-    # The output plays the tail as zeros, so it ends at 0 V.
-    assert not ao.write.call_args.args[0][:, n:].any()
+    ai = next(t for t in device.tasks if t.ai_channels.channels)
+    ao = ao_tasks(device)[0]
+    (chan,) = ai.ai_channels.channels
+    assert (chan.name, chan.terminal_config, chan.min_val, chan.max_val) == (
+        "Dev1/ai0", TerminalConfiguration.DIFF, -10.0, 10.0)
+    assert ai.triggers.start_trigger.source == "/Dev1/ao/StartTrigger"
+    assert ai.timing.samps_per_chan == ao.timing.samps_per_chan == n + tail
+    ev = device.events
+    assert ev.index((ai.number, "start")) < ev.index((ao.number, "write")) < ev.index((ao.number, "start"))
+    assert not ao.written[0][:, n:].any()  # the output plays the tail as zeros
     np.testing.assert_allclose(rec, expected_volts[None] * 1e-6, rtol=1e-12)
+    assert rig.last_clipped.tolist() == [False]
 
 
-def test_known_input_delay_is_removed():
+def test_a_clipped_vibrometer_input_is_reported(rig, device):
+    volts = np.zeros(1100)
+    volts[500] = 10.0  # the end of the +-10 V input range
+    device.reads = [volts.tolist()]
+    rig.play_and_record(drive(), tail_s=0.01)
+    assert rig.last_clipped.tolist() == [True]
+
+
+def test_known_input_delay_is_removed(device):
     n, lag = 500, 3
     volts = np.zeros(n + lag)
     volts[lag + 100] = 1.0
-    fake = FakeTaskFactory(reads=[volts.tolist()])
-    rec = make(fake, latency_samples=lag).play_and_record(drive(n), tail_s=0)
+    device.reads = [volts.tolist()]
+    with make(device, latency_samples=lag) as r:
+        rec = r.play_and_record(drive(n), tail_s=0)
     assert rec.shape == (1, n)
     assert int(np.argmax(rec[0])) == 100
-    fake.ai_tasks()[0].timing.cfg_samp_clk_timing.assert_called_once_with(
-        FS, sample_mode=AcquisitionType.FINITE, samps_per_chan=n + lag)
 
 
-@pytest.mark.parametrize("method", ["write", "start", "wait_until_done"])
-def test_driver_error_mid_play_leaves_zeros_and_says_so(method):
-    fake = FakeTaskFactory(fail_on=method)
+@pytest.mark.parametrize("method", ["write", "start", "is_task_done"])
+def test_driver_error_mid_play_leaves_zeros_and_says_so(rig, device, method):
+    device.fail[method] = DaqError("fake driver failure", -200000)
     with pytest.raises(DeviceError, match="NI-DAQmx failed while playing: .*fake driver failure"):
-        make(fake).play(drive())
-    play_task, zero_task = fake.tasks
-    np.testing.assert_array_equal(zero_task.write.call_args.args[0], np.zeros(4))
-    for task in fake.tasks:
-        task.stop.assert_called_once()
-        task.close.assert_called_once()
+        rig.play(drive())
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+    assert all(t.state == "closed" for t in device.tasks) and device.reserved == {}
 
 
-def test_stop_from_another_thread_halts_the_running_task_before_writing_zeros():
-    fake = FakeTaskFactory()
-    rig = make(fake)
-    original = fake._side_effect
+def test_stop_from_another_thread_brings_the_outputs_to_zero(device):
+    """The fix of -50103: abort + unreserve the playing task before the zero write."""
+    device.idle_zero = False  # the outputs hold their last value by themselves
+    rig = make(device)
+    d = np.full((4, int(2 * FS)), 0.0)
+    d[:, 100:-100] = 3.0  # 0.3 V held at the outputs while it plays
+    rig.limits = type(rig.limits)(peak_v=10.0, rms_v=4.0)
+    seen = {}
 
-    def side_effect(number, name):
-        effect = original(number, name)
-        if number == 0 and name == "wait_until_done":
-            def stop_now(*a, **k):
-                effect(*a, **k)
-                rig.stop()  # the experimenter's stop button while the drive plays
-            return stop_now
-        return effect
+    def stopper():
+        time.sleep(0.2)
+        seen["before"] = device.output_vector()
+        t0 = time.monotonic()
+        rig.stop()
+        seen["after"] = device.output_vector()
+        seen["stop_s"] = time.monotonic() - t0
 
-    fake._side_effect = side_effect
-    rig.play(drive())
-    play_task = fake.tasks[0]
-    first_zero_task = 1
-    assert fake.events.index((0, "stop")) < fake.events.index((first_zero_task, "write"))
-    np.testing.assert_array_equal(fake.tasks[first_zero_task].write.call_args.args[0], np.zeros(4))
-    play_task.close.assert_called_once()
+    thread = threading.Thread(target=stopper)
+    thread.start()
+    t0 = time.monotonic()
+    with pytest.raises(DeviceError, match="stopped"):
+        rig.play(d)
+    elapsed = time.monotonic() - t0
+    thread.join()
+    assert elapsed < 1.0  # the 2 s play ended at the stop
+    np.testing.assert_array_equal(seen["after"], 0.0)  # 0 V when stop() returns
+    assert seen["stop_s"] < 0.1
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+    assert all(t.state == "closed" for t in device.tasks) and device.reserved == {}
+    rig.close()
 
 
-def test_interrupt_mid_recording_leaves_zeros():
-    fake = FakeTaskFactory(reads=[])  # read() pops from an empty list: IndexError mid-recording
-    rig = make(fake)
-    with pytest.raises(IndexError):
+def test_the_fake_refuses_a_zero_write_while_a_stopped_task_holds_its_channels(device):
+    """What the old stop did: stop() the committed task, then a second task writes zeros."""
+    play, zero = device.factory(), device.factory()
+    for task in (play, zero):
+        for i in range(4):
+            task.ao_channels.add_ao_voltage_chan(f"Dev1/ao{i}", min_val=-1.0, max_val=1.0)
+    play.timing.cfg_samp_clk_timing(FS, sample_mode=AcquisitionType.FINITE, samps_per_chan=10_000)
+    play.write(np.full((4, 10_000), 0.5), auto_start=False)
+    play.start()
+    play.stop()
+    with pytest.raises(DaqError) as err:
+        zero.write(np.zeros(4), auto_start=True)
+    assert err.value.error_code == RESERVED
+    assert device.output_vector().max() == 0.5  # the coil keeps its voltage
+
+
+def test_ctrl_c_interrupts_a_long_play_and_leaves_zeros(rig, device):
+    d = np.full((4, int(5 * FS)), 0.0)
+    d[:, 100:-100] = 2.0
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+    timer.start()
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        rig.play(d)
+    assert time.monotonic() - t0 < 1.0
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+
+
+def test_a_failing_abort_still_closes_every_task_and_the_first_error_is_kept(rig, device):
+    device.fail["read"] = DaqError("read failed", -200279)
+    device.fail["control TASK_ABORT"] = DaqError("abort failed", -200000)
+    with pytest.raises(DeviceError, match="read failed"):
         rig.play_and_record(drive())
-    zero_task = fake.ao_tasks()[-1]
-    np.testing.assert_array_equal(zero_task.write.call_args.args[0], np.zeros(4))
+    assert all(t.state == "closed" for t in device.tasks)
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+
+
+def test_an_error_while_zeroing_does_not_hide_the_first_one(rig, device):
+    device.fail["read"] = DaqError("read failed", -200279)
+    original = device.factory
+
+    def factory():
+        task = original()
+        if len(device.tasks) == 3:  # the zero task after the failed recording
+            task.device.fail["add_ao_voltage_chan"] = DaqError("device gone", -201003)
+        return task
+
+    rig.tasks._task_factory = factory
+    with pytest.raises(DeviceError, match="read failed") as err:
+        rig.play_and_record(drive())
+    assert any("ALSO failed" in note and "device gone" in note for note in err.value.__notes__)
+
+
+def test_channel_creation_failure_closes_the_task(device):
+    cfg = nidaq_config()
+    with make(device) as r:
+        device.fail["add_ao_voltage_chan"] = DaqError("no such channel", -200170)
+        with pytest.raises(DeviceError):
+            r.play(drive())
+    assert all(t.state == "closed" for t in device.tasks)
+
+
+def test_a_rate_the_timebase_cannot_make_is_refused(device):
+    device.timebase_hz = 80e6 / 3  # 26.67 MHz: no integer divisor gives 10 kHz
+    with make(device) as r, pytest.raises(DeviceError, match="sample clock at .* not the 10000 Hz"):
+        r.play(drive())
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+
+
+def test_a_mistaken_gain_cannot_put_more_than_the_cap_into_the_amplifier(device):
+    # amplifier_gain = 1 by mistake: the actuator limit of 10 V would need 10 V into the amplifier.
+    with pytest.raises(ValidationError, match="amplifier_input_max_v = 1 V"):
+        parse_rig_config(nidaq_config(amplifier_gain=1.0))
+    # with the limit lowered to fit the cap, no sample beyond 1 V leaves the DAQ
+    with make(device, amplifier_gain=1.0, limits={"peak_v": 1.0}) as r:
+        with pytest.raises(SafetyError):
+            r.play(drive(amplitude=5.0))
+        r.play(drive(amplitude=1.0))
+    assert max(np.abs(w).max() for t in device.tasks for w in t.written) <= 1.0
+
+
+@pytest.mark.parametrize("change, words", [
+    (dict(device="Dev2", channels={"actuators": ["ao0", "ao1", "ao2", "ao3"], "vibrometer": "ai0"}),
+     "NI device 'Dev2' not found"),
+    (dict(channels={"actuators": ["ao0", "ao1", "ao2", "ao7"], "vibrometer": "ai0"}), "no analog output Dev1/ao7"),
+    (dict(), "outside the output rates"),  # on a device whose outputs run at most 5 kHz
+])
+def test_setup_is_checked_before_the_first_play(device, change, words):
+    device.ao_max_rate = 5_000.0 if not change else device.ao_max_rate
+    cfg = nidaq_config(**change)
+    with pytest.raises(DeviceError, match=words):
+        NidaqRig(parse_rig_config(cfg), task_factory=device.factory, system=device.system())
+    assert device.tasks == []
+
+
+def test_channels_on_two_devices_are_refused():
+    cfg = nidaq_config(channels={"actuators": ["Dev1/ao0", "Dev2/ao0", "Dev1/ao1", "Dev1/ao2"],
+                                 "vibrometer": "ai0"})
+    with pytest.raises(ValidationError, match="2 devices .*sample-synchronous"):
+        parse_rig_config(cfg)
+
+
+def test_one_device_one_rig(rig, device):
+    with pytest.raises(DeviceBusyError, match="nidaq:Dev1 is in use by"):
+        make(device)
+    rig.close()
+    make(device).close()  # free again once the first rig is closed
 
 
 @pytest.mark.parametrize(
@@ -216,39 +305,37 @@ def test_interrupt_mid_recording_leaves_zeros():
     ],
     ids=["over-limit", "inf", "too-long"],
 )
-def test_unsafe_drives_never_reach_a_task(bad, match):
-    fake = FakeTaskFactory()
-    rig = make(fake)
+def test_unsafe_drives_never_reach_a_task(rig, device, bad, match):
     with pytest.raises(SafetyError, match=match):
         rig.play(bad)
     with pytest.raises(SafetyError, match=match):
         rig.play_and_record(bad)
-    assert fake.tasks == []  # no task was even created
+    assert device.tasks == []  # no task was even created
 
 
-def test_strap_forces_read_through_the_curve():
+def test_strap_forces_read_through_the_curve(device):
     curve = {"volts": [0.0, 1.0, 2.0], "newtons": [0.0, 1.0, 3.0]}
     # averaging_s = 0.01 s at 10 kHz: 100 samples per strap
-    volts = np.vstack([np.full(100, 1.0), np.full(100, 1.5)])
-    fake = FakeTaskFactory(reads=[volts.tolist()])
-    rig = make(fake, force_sensors={"channels": ["ai1", "ai2"], "names": ["proximal", "distal"],
-                                    "curve": curve, "averaging_s": 0.01})
-    reading = check_straps(rig)
+    device.reads = [np.vstack([np.full(100, 1.0), np.full(100, 1.5)]).tolist()]
+    with make(device, force_sensors={"channels": ["ai1", "ai2"], "names": ["proximal", "distal"],
+                                     "curve": curve, "averaging_s": 0.01}) as r:
+        reading = check_straps(r)
     np.testing.assert_allclose(reading.forces_n, [1.0, 2.0])
     assert reading.verdicts == ("ok", "too tight")
     assert not reading.ok
-    ai = fake.ai_tasks()[0]
-    assert [c.args[0] for c in ai.ai_channels.add_ai_voltage_chan.call_args_list] == ["Dev1/ai1", "Dev1/ai2"]
-    assert not fake.ao_tasks()  # reading the straps never touches the outputs
+    ai = next(t for t in device.tasks if t.ai_channels.channels)
+    assert [c.name for c in ai.ai_channels.channels] == ["Dev1/ai1", "Dev1/ai2"]
+    # reading the straps plays nothing (only the closing zero write touches the outputs)
+    assert all(not t.written or not np.any(t.written[0]) for t in ao_tasks(device))
 
 
-def test_layout_mismatch_is_refused():
+def test_layout_mismatch_is_refused(device):
     from vibrofocus import ArrayLayout
 
     ref = ArrayLayout.reference()
     two = ArrayLayout(ref.actuators_xy[:2], ref.locations_xy)
     with pytest.raises(ValidationError, match="4 actuator channel.*2 actuators"):
-        NidaqRig(parse_rig_config(nidaq_config()), layout=two, task_factory=FakeTaskFactory())
+        NidaqRig(parse_rig_config(nidaq_config()), layout=two, task_factory=device.factory)
 
 
 def test_missing_driver_is_a_clear_error():
@@ -261,7 +348,7 @@ def test_missing_driver_is_a_clear_error():
 @pytest.mark.nidaq_hardware
 @pytest.mark.skipif(not os.environ.get("VIBROFOCUS_NIDAQ_DEVICE"),
                     reason="set VIBROFOCUS_NIDAQ_DEVICE to a real or NI-simulated device (e.g. Dev1)")
-def test_real_device_plays_and_records():
+def test_real_device_plays_records_and_stops_from_another_thread():
     from vibrofocus.rigs import make_rig
 
     dev = os.environ["VIBROFOCUS_NIDAQ_DEVICE"]
@@ -271,3 +358,10 @@ def test_real_device_plays_and_records():
         rec = rig.play_and_record(drive(), tail_s=0.01)
         assert rec.shape == (1, 1100)
         assert np.isfinite(rec).all()
+        long = np.zeros((4, int(2 * FS)))
+        long[:, 100:-100] = 1.0
+        timer = threading.Timer(0.2, rig.stop)
+        timer.start()
+        with pytest.raises(DeviceError, match="stopped"):
+            rig.play(long)
+        timer.join()

@@ -25,7 +25,7 @@ def _bad_drives():
     nan[1, 10] = np.nan
     inf = ok.copy()
     inf[0, 0] = np.inf
-    loud = np.full((4, 1000), 5.0)  # 5 V RMS on every channel, peak within limit
+    loud = np.full((4, 10_000), 5.0)  # 5 V RMS over 1 s on every channel, peak within limit
     return {
         "over the peak limit": (over, "channel 3 reaches 10.5 V"),  # numbered from 1
         "NaN": (nan, "first on channel 2 at sample 10"),
@@ -65,3 +65,81 @@ def test_check_drive_returns_what_plays(rig):
     expected = check_drive(drive, FS, 4, rig.limits)
     rig.play(drive)
     np.testing.assert_array_equal(rig.last_drive, expected)
+
+
+# ---------------------------------------------------------------- RMS over a sliding window
+def _sine(peak_v, seconds, f=200.0):
+    t = np.arange(int(round(seconds * FS))) / FS
+    return peak_v * np.sin(2 * np.pi * f * t)
+
+
+def test_zero_padding_cannot_dilute_the_rms_limit():
+    # 10 V peak for 5 s, then 25 s of zeros: 2.89 V RMS over the whole drive, 7.07 V over any 1 s of the sine.
+    d = np.tile(np.concatenate([_sine(10.0, 5.0), np.zeros(int(25 * FS))]), (4, 1))
+    assert np.sqrt(np.mean(d**2)) < 4.0
+    with pytest.raises(SafetyError, match=r"channel 1 reaches 7.071 V RMS over 1 s, over the limit of 4 V RMS"):
+        check_drive(d, FS, 4, SafetyLimits())
+
+
+@pytest.mark.parametrize("seconds, refused", [(0.3, False), (0.33, True), (5.0, True)])
+def test_a_short_burst_counts_over_the_whole_window(seconds, refused):
+    # 10 V peak sine: 50 V^2 per s; over a 1 s window, 4 V RMS is 16 V^2 s, so at most 0.32 s of it.
+    d = np.tile(_sine(10.0, seconds), (4, 1))
+    if refused:
+        with pytest.raises(SafetyError, match="V RMS"):
+            check_drive(d, FS, 4, SafetyLimits())
+    else:
+        check_drive(d, FS, 4, SafetyLimits())
+
+
+def test_windowed_rms_against_a_direct_loop(rng):
+    x = rng.standard_normal((2, 500))
+    from vibrofocus.rigs.safety import windowed_rms
+
+    n = 64
+    direct = [max(np.sqrt(np.sum(ch[i:i + n] ** 2) / n) for i in range(500 - n + 1)) for ch in x]
+    np.testing.assert_allclose(windowed_rms(x**2, n), direct, rtol=1e-12)
+    np.testing.assert_allclose(windowed_rms(x[:, :10] ** 2, n), np.sqrt(np.sum(x[:, :10] ** 2, axis=1) / n),
+                               rtol=1e-12)
+
+
+def test_back_to_back_plays_share_one_budget(rig):
+    # 0.3 s of a 10 V sine passes alone (15 V^2 s); a second one right after would make 30 V^2 s in 1 s.
+    burst = np.tile(_sine(10.0, 0.3), (4, 1))
+    rig.limits = SafetyLimits(peak_v=10.0, rms_v=4.0, max_duration_s=1.0)
+    rig.play(burst)
+    with pytest.raises(SafetyError, match="together with the plays before it.*wait"):
+        rig.play(burst)
+    assert rig.n_played == 1
+
+
+def test_the_budget_recovers_after_the_window():
+    from vibrofocus.rigs.safety import EnergyBudget
+
+    burst = np.tile(_sine(10.0, 0.3), (4, 1))
+    budget = EnergyBudget(SafetyLimits(), 4, FS)
+    budget.admit(burst, start_s=100.0)
+    with pytest.raises(SafetyError):
+        budget.admit(burst, start_s=100.5)  # 0.2 s after the first ended
+    budget.admit(burst, start_s=101.3)  # 1 s after the first ended: a fresh window
+    with pytest.raises(SafetyError):
+        budget.admit(burst, start_s=101.3)  # overlapping plays count as back to back
+
+
+@pytest.mark.parametrize("field, value, words", [
+    ("peak_v", 25.0, "hard ceiling of 20"), ("rms_v", 9.0, "hard ceiling of 8"),
+    ("max_duration_s", 61.0, "hard ceiling of 60"), ("fade_s", 0.0, r"fade_s must lie in \[0.0001, 0.05\]"),
+    ("fade_s", 100.0, "fade_s must lie in"), ("peak_v", float("inf"), "peak_v must be > 0 and finite"),
+])
+def test_limits_have_hard_ceilings_and_a_minimum_fade(field, value, words):
+    from vibrofocus.errors import ValidationError
+
+    with pytest.raises(ValidationError, match=words):
+        SafetyLimits(**{field: value})
+
+
+def test_a_value_just_over_the_limit_never_reads_as_the_limit():
+    d = np.zeros((4, 100))
+    d[0, 50] = 10.0 + 1e-6
+    with pytest.raises(SafetyError, match=r"reaches 10.000001 V peak, over the limit of 10 V"):
+        check_drive(d, FS, 4, SafetyLimits())

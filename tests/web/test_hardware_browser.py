@@ -4,6 +4,7 @@ device (JACK's loopback driver, as in tests/rigs), driven from the experimenter 
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
@@ -60,6 +61,26 @@ def test_calibrate_on_the_audio_rig_from_the_page(jack_server, tmp_path, chromiu
         # A session on this server's rig is planned; one on a rig it was not started for is refused.
         r = server.api("POST", "/api/sessions", json={"participant_id": "P40", "study": 1, "rig": "nidaq"})
         assert r.status_code == 409 and "--rig nidaq --rig-config" in r.json()["detail"]
+
+        # One job on the hardware at a time. The server holds the interface: the CLI is refused...
+        drives = tmp_path / "tap.npz"
+        import numpy as np
+
+        np.savez(drives, drives=np.zeros((4, 200)), fs=10_000.0)
+        cli = subprocess.run([sys.executable, "-m", "vibrofocus", "play", str(drives), "--rig", "audio",
+                              "--rig-config", str(config)], capture_output=True, text=True, timeout=60,
+                             env={**os.environ, "JACK_DEFAULT_SERVER": jack_server.name, "JACK_NO_START_SERVER": "1"})
+        assert cli.returncode == 2, cli.stderr
+        assert "audio:loopback is in use by" in cli.stderr and "Traceback" not in cli.stderr
+        # ...and so is a second calibration while one waits at its first point.
+        page.click("#calibrate")
+        page.wait_for_selector("#cal-prompt", state="visible")
+        r = server.api("POST", "/api/calibrations", json={"participant_id": "P40", "rig": "audio"})
+        assert r.status_code == 409 and "busy with the calibration of P40" in r.json()["detail"]
+        # The emergency stop: outputs at zero, the calibration cancelled, said on the page.
+        page.click("#emergency-stop")
+        page.wait_for_function("document.getElementById('flash').textContent.includes('audio rig outputs at 0 V')")
+        assert "calibration of P40 cancelled" in page.inner_text("#flash")
     finally:
         context.close()
         server.stop()

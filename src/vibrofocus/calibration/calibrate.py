@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import datetime as _dt
 import logging
+import os
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
@@ -362,6 +363,8 @@ def calibrate(
     n_fft: int = N_SAMPLES,
     prompt: PromptFn | None = None,
     progress: ProgressFn | None = None,
+    checkpoint: str | os.PathLike | None = None,
+    resume: bool = False,
     thresholds: QualityThresholds | None = None,
 ) -> Calibration:
     """Measure the transfer matrix from every actuator to every skin point.
@@ -421,7 +424,16 @@ def calibrate(
         is on the point. Required for such rigs.
     progress : callable ``(done: int, total: int, message: str) -> None``, optional
         Called once with ``done = 0`` and the plan (:meth:`CalibrationPlan.describe`)
-        before the first take, then after every take.
+        before the first take, then as each take starts (its message ends in
+        "playing") and after every take.
+    checkpoint : path-like, optional
+        A partial file (:func:`~vibrofocus.calibration.checkpoint.partial_path`) that
+        receives the takes of each completed point group as it is measured, so an
+        interruption loses at most the point being measured. Delete it once the
+        calibration is saved (the CLI does).
+    resume : bool
+        Continue from ``checkpoint``: its completed points are not measured again. It
+        must come from the same plan on the same rig, or it is refused.
     thresholds : QualityThresholds, optional
         Thresholds of the quality verdicts.
 
@@ -489,17 +501,24 @@ def calibrate(
     log.info("calibration plan for %s: %s", participant_id, plan.describe())
     if progress is not None:
         progress(0, plan.takes, plan.describe())
-    session = _Takes(rig, points_xy, limit is not None, n_rec, settings.tail_s, (n_p, n_a))
+    session = _Takes(rig, points_xy, limit is not None, n_rec, settings.tail_s, (n_p, n_a), progress, plan.takes)
+    if checkpoint is not None:
+        from .checkpoint import CalibrationCheckpoint
+
+        described = {k: v for k, v in rig.describe().items() if k != "last_latency_samples"}
+        session.checkpoint = CalibrationCheckpoint(checkpoint, {
+            "participant": participant_id, "method": method, "points": p_idx.tolist(), "actuators": a_idx.tolist(),
+            "settings": asdict(settings), "n_fft": n_fft, "rig": described}, resume=resume)
     # Single precision from the start (what the file keeps): 0.1 ppm of the signal, far
     # below sensor noise, and half the memory for dense arrays and long sweeps.
     if mimo:
         codes = hadamard_codes(n_a, n_r)
         recordings, dropouts = _record_mimo(session, excitation, a_idx, codes, groups, labels, layout,
-                                            thresholds, prompt, progress, plan.takes)
+                                            thresholds, prompt)
     else:
         codes = None
         recordings, dropouts = _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layout,
-                                                     prompt, progress, plan.takes)
+                                                     prompt)
 
     freqs = np.fft.rfftfreq(n_fft, 1 / fs)
     multiple = condition = correlation = None
@@ -551,14 +570,40 @@ def calibrate(
 
 
 class _Takes:
-    """Records takes on a rig and keeps what a take tells besides the displacement."""
+    """Records takes on a rig and keeps what a take tells besides the displacement.
+
+    Also the progress of the takes (``done`` of ``total``) and the optional checkpoint of
+    completed point groups.
+    """
 
     def __init__(self, rig: Rig, points_xy: np.ndarray, aimed: bool, n_rec: int, tail_s: float,
-                 shape: tuple[int, int]) -> None:
+                 shape: tuple[int, int], progress: ProgressFn | None = None, total: int = 0) -> None:
         self.rig, self.points_xy, self.aimed = rig, points_xy, aimed
         self.n_rec, self.tail_s = n_rec, tail_s
         self.adc_clipped = np.zeros(shape, dtype=bool)  # (P, A): the rig's converter clipped
         self.n_takes = 0
+        self.progress, self.total, self.done = progress, total, 0
+        self.checkpoint = None
+
+    def tell(self, message: str, *, took: int = 0) -> None:
+        self.done += took
+        if self.progress is not None:
+            self.progress(self.done, self.total, message)
+
+    def restored(self, index: int, group: np.ndarray, labels) -> dict | None:
+        """The saved takes of point group ``index`` from the checkpoint, if it was completed."""
+        saved = None if self.checkpoint is None else self.checkpoint.restore(index)
+        if saved is not None:
+            self.adc_clipped[group] = saved["adc_clipped"]
+            self.n_takes += int(saved["n_takes"])
+            self.tell(f"point {', '.join(labels[p] for p in group)}: kept from the partial file",
+                      took=int(saved["n_planned"]))
+        return saved
+
+    def completed(self, index: int, group: np.ndarray, n_planned: int, n_takes_before: int, **arrays) -> None:
+        if self.checkpoint is not None:
+            self.checkpoint.save(index, adc_clipped=self.adc_clipped[group], n_takes=self.n_takes - n_takes_before,
+                                 n_planned=n_planned, **arrays)
 
     def record(self, drive: np.ndarray, group: np.ndarray, actuator: int | None) -> np.ndarray:
         """One take at the points ``group``; ``actuator`` None when all of them played.
@@ -595,7 +640,7 @@ def _where(layout: ArrayLayout, group: np.ndarray, aimed: bool) -> str:
     return "point " + ", ".join(layout.point_labels[p] for p in group) if aimed else "all points"
 
 
-def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layout, prompt, progress, total):
+def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layout, prompt):
     """The takes of ``h1``/``paper``: one actuator at a time.
 
     Returns recordings (n_actuators, n_repeats, n_points, n_rec) float32 and the dropouts
@@ -604,8 +649,12 @@ def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layou
     n_a, n_p = len(a_idx), len(session.points_xy)
     recordings = np.full((n_a, n_r, n_p, session.n_rec), np.nan, dtype=np.float32)
     dropouts = np.zeros((n_p, n_a), dtype=int)
-    done = 0
-    for group in groups:
+    for gi, group in enumerate(groups):
+        saved = session.restored(gi, group, labels)
+        if saved is not None:
+            recordings[:, :, group], dropouts[group] = saved["recordings"], saved["dropouts"]
+            continue
+        takes_before = session.n_takes
         if session.aimed:
             for p in group:
                 prompt(labels[p], session.points_xy[p].copy())
@@ -613,11 +662,10 @@ def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layou
             drive = np.zeros((rig.layout.n_actuators, excitation.size))
             drive[channel] = excitation
             for r in range(n_r):
+                what = f"{layout.actuator_names[a]}, {_where(layout, group, session.aimed)}, take {r + 1}/{n_r}"
+                session.tell(what + ": playing")
                 recordings[a, r, group] = session.record(drive, group, a)
-                done += 1
-                if progress is not None:
-                    progress(done, total, f"{layout.actuator_names[a]}, {_where(layout, group, session.aimed)}, "
-                                          f"take {r + 1}/{n_r}")
+                session.tell(what, took=1)
             bad = ~np.isfinite(recordings[a][:, group]).all(axis=-1)  # (R, len(group))
             dropouts[group, a] = bad.sum(axis=0)
             # A point that dropped out in every take is re-recorded into its first slot.
@@ -637,6 +685,8 @@ def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layou
                     f"{', '.join(labels[p] for p in lost)} with actuator {layout.actuator_names[a]} "
                     f"({n_r + MAX_RETRIES} tries); check its aim and signal level"
                 )
+        session.completed(gi, group, n_a * n_r, takes_before, recordings=recordings[:, :, group],
+                          dropouts=dropouts[group])
     return recordings, dropouts
 
 
@@ -660,7 +710,7 @@ def _separable(codes: np.ndarray, kept: np.ndarray, condition_max: float) -> np.
     return eig[:, 0] * condition_max >= eig[:, -1] * (1 - 1e-12)
 
 
-def _record_mimo(session, excitation, a_idx, codes, groups, labels, layout, thresholds, prompt, progress, total):
+def _record_mimo(session, excitation, a_idx, codes, groups, labels, layout, thresholds, prompt):
     """The takes of ``mimo``: every actuator at once, with the signs ``codes[r]`` in take ``r``.
 
     Returns recordings (n_takes, n_points, n_rec) float32 and the dropouts per (point,
@@ -676,17 +726,20 @@ def _record_mimo(session, excitation, a_idx, codes, groups, labels, layout, thre
         drive[a_idx] = codes[r].astype(float)[:, None] * excitation[None, :]
         return drive
 
-    done = 0
-    for group in groups:
+    for gi, group in enumerate(groups):
+        saved = session.restored(gi, group, labels)
+        if saved is not None:
+            recordings[:, group], dropouts[group] = saved["recordings"], saved["dropouts"]
+            continue
+        takes_before = session.n_takes
         if session.aimed:
             for p in group:
                 prompt(labels[p], session.points_xy[p].copy())
         for r in range(n_r):
+            what = f"all {n_a} actuators, {_where(layout, group, session.aimed)}, take {r + 1}/{n_r}"
+            session.tell(what + ": playing")
             recordings[r, group] = session.record(take(r), group, None)
-            done += 1
-            if progress is not None:
-                progress(done, total, f"all {n_a} actuators, {_where(layout, group, session.aimed)}, "
-                                      f"take {r + 1}/{n_r}")
+            session.tell(what, took=1)
         bad = ~np.isfinite(recordings[:, group]).all(axis=-1)  # (R, len(group))
         dropouts[group] = bad.sum(axis=0)[:, None]
         # Too many takes lost at a point to separate the actuators: record the first of
@@ -707,14 +760,16 @@ def _record_mimo(session, excitation, a_idx, codes, groups, labels, layout, thre
                 f"that the {n_a} actuators cannot be told apart ({n_r + MAX_RETRIES} tries); check its aim and "
                 "signal level"
             )
+        session.completed(gi, group, n_r, takes_before, recordings=recordings[:, group], dropouts=dropouts[group])
     return recordings, dropouts
 
 
 def _read_straps(rig: Rig) -> dict | None:
     """The strap force reading of rigs that have strap sensors (stored with the calibration)."""
-    if getattr(rig, "read_strap_forces", None) is None:
+    from ..rigs.force import check_straps, has_strap_sensors
+
+    if not has_strap_sensors(rig):
         return None
-    from ..rigs.force import check_straps
 
     return check_straps(rig).to_dict()
 

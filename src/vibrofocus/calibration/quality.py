@@ -13,8 +13,9 @@ low coherence
     repeat.
 dead actuator
     The actuator's largest in-band RMS gain over all points is below ``dead_ratio``
-    (default 0.1, -20 dB) of the median of that figure over the actuators, or it never
-    rises ``snr_min_db`` above the noise floor at any point.
+    (default 0.1, -20 dB) of that figure for the strongest actuator, or it never rises
+    ``snr_min_db`` above the noise floor at any point. (The strongest, not the median: with
+    most actuators unconnected the median is zero and would condemn the one that works.)
 reversed actuator
     Polarity is judged relative to the other actuators, because a rig's absolute sign
     convention (exciter wiring, vibrometer axis) is arbitrary. For each actuator take its
@@ -81,7 +82,7 @@ class QualityThresholds:
     coherence_share : float
         Share of the band's frequencies that may be incoherent before a path is flagged.
     dead_ratio : float
-        An actuator whose band gain is below this fraction of the others' median is dead.
+        An actuator whose band gain is below this fraction of the strongest actuator's is dead.
     still_ratio : float
         A point whose response is below this fraction of the median point's barely moves.
     snr_min_db : float
@@ -407,16 +408,22 @@ def assess_quality(
     band_gain = np.sqrt(np.mean(np.abs(H[in_band]) ** 2, axis=0))  # (P, A)
     issues: list[QualityIssue] = []
 
-    # Dead actuators: compared with the others, or never above the noise floor.
+    # Dead actuators: compared with the strongest one (not the median, which is zero when
+    # most are unconnected and would then call every actuator dead), or never above the
+    # noise floor.
     best = band_gain.max(axis=0)
-    reference = np.median(best)
+    strongest = int(np.argmax(best))
+    reference = best[strongest]
     dead = (best < t.dead_ratio * reference) | (np.nanmax(snr_db, axis=0) < t.snr_min_db / 2)
     for a in np.flatnonzero(dead):
         ratio_db = 20 * np.log10(max(best[a], 1e-300) / reference) if reference > 0 else -np.inf
+        relative = (f"{ratio_db:.0f} dB relative to the strongest actuator ({names[strongest]})"
+                    if reference > 0 and a != strongest else "no response above zero" if reference == 0
+                    else "the strongest of all")
         issues.append(QualityIssue(
             "dead_actuator", "error",
-            f"actuator {names[a]} looks dead: its strongest response anywhere is {ratio_db:.0f} dB "
-            f"relative to the median actuator and its best SNR is {np.nanmax(snr_db[:, a]):.0f} dB; "
+            f"actuator {names[a]} looks dead: its strongest response anywhere is {relative} "
+            f"and its best SNR is {np.nanmax(snr_db[:, a]):.0f} dB; "
             "check its cable, amplifier channel and contact with the skin",
             actuator=int(a)))
 

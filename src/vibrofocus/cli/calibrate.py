@@ -46,6 +46,8 @@ def calibrate_command(
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before each point (only for rigs that "
                                                         "record every point at once)."),
     figure: bool = typer.Option(True, "--figure/--no-figure", help="Save |H| and coherence next to the file (.png)."),
+    resume: bool = typer.Option(False, "--resume", help="Continue an interrupted calibration from OUT.partial.npz "
+                                                        "(same command, same rig): its completed points are kept."),
     force: bool = typer.Option(False, "--force", help="Write the file even with error verdicts, and replace an "
                                                      "existing file of another kind."),
 ) -> None:
@@ -59,20 +61,23 @@ def calibrate_command(
     OUT is checked for room and write permission before the first sweep. If it still
     cannot be written at the end, the measurement is not lost: you are asked for another
     path (at a terminal) or it is saved to a fallback file that the error names.
+
+    On a single-spot rig every completed point is kept in OUT.partial.npz as it is
+    measured: after an interruption, the same command with --resume continues from the
+    next point. The partial file is deleted once OUT is written.
     """
     with user_errors():
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        from .._atomic import check_writable
+        from .._atomic import allow_overwrite, check_writable
         from ..calibration import calibrate, plan_calibration, save_calibration
+        from ..calibration.checkpoint import partial_path
         from ..io.calibration_nc import estimate_calibration_bytes
         from ..defaults import participant_seed
         from ..errors import ValidationError
         from ..rigs import make_rig
         from ._save import save_or_offer_another_path
-
-        from .._atomic import allow_overwrite
 
         console = Console()
         allow_overwrite(force)
@@ -93,9 +98,9 @@ def calibrate_command(
                 all_at_once=method == "mimo"))
             if figure:
                 check_writable(out.with_suffix(".png"), what="figure")
-            if getattr(r, "read_strap_forces", None) is not None:
-                from ..rigs.force import check_straps
+            from ..rigs.force import check_straps, has_strap_sensors
 
+            if has_strap_sensors(r):
                 console.print(f"strap forces: {check_straps(r).message}", highlight=False)
             single_spot = r.max_points_per_recording is not None
             if single_spot and yes:
@@ -103,13 +108,19 @@ def calibrate_command(
                     f"--yes: the {rig} rig records {r.max_points_per_recording} point at a time and its vibrometer "
                     "must be aimed at every point; run without --yes"
                 )
+            partial = partial_path(out) if single_spot else None
+            if resume and (partial is None or not partial.exists()):
+                raise ValidationError(f"--resume: there is no partial calibration {partial_path(out)} to continue"
+                                      + ("" if single_spot else f" (the {rig} rig records every point at once)"))
             console.print(f"plan: {plan.describe()}", highlight=False)
             with Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
                           MofNCompleteColumn(), TimeElapsedColumn(), console=console, transient=True) as progress:
                 task = progress.add_task("calibrating", total=None)
+                take = _TakeClock(progress, plan.settings.take_s)
 
                 def on_progress(done: int, total: int, message: str) -> None:
                     progress.update(task, completed=done, total=total, description=message)
+                    take.started() if message.endswith(": playing") else take.ended()
 
                 def prompt(label: str, xy) -> None:
                     progress.stop()
@@ -117,9 +128,17 @@ def calibrate_command(
                                  f"y {xy[1] * 1e3:+.1f} mm), then press Enter", default="", show_default=False)
                     progress.start()
 
-                cal = calibrate(r, participant_id=participant, method=method, repeats=repeats, sweep_s=sweep_s,
-                                amplitude_v=amplitude_v, prompt=None if not single_spot else prompt,
-                                progress=on_progress)
+                try:
+                    cal = calibrate(r, participant_id=participant, method=method, repeats=repeats, sweep_s=sweep_s,
+                                    amplitude_v=amplitude_v, prompt=None if not single_spot else prompt,
+                                    progress=on_progress, checkpoint=partial, resume=resume)
+                except BaseException:
+                    if partial is not None and partial.exists():
+                        console.print(f"the completed points are kept in {partial}; continue with --resume",
+                                      highlight=False)
+                    raise
+                finally:
+                    take.ended()
         console.print(cal.summary_table())
         for line in cal.quality.lines():
             # Indented: the one ``error:`` line of a refused run is the command's own.
@@ -127,16 +146,55 @@ def calibrate_command(
         n_errors = sum(issue.severity == "error" for issue in cal.quality.issues)
         if n_errors and not force:
             # An error verdict and a file on disk would disagree: the file would be used.
+            kept = f"; its takes stay in {partial} (--resume --force writes it)" if partial is not None and \
+                partial.exists() else ""
             raise ValidationError(
                 f"{n_errors} error verdict(s) above: the calibration was not written; fix the setup and measure "
-                f"again (or keep it anyway with --force)"
+                f"again (or keep it anyway with --force){kept}"
             )
         # The measurement stays in memory until it is on disk somewhere.
         out = save_or_offer_another_path(lambda path: save_calibration(cal, path), out, what="calibration")
         console.print(f"wrote {out}")
+        if partial is not None:
+            partial.unlink(missing_ok=True)  # the whole calibration is on disk now
         if figure:
             from ..calibration.figures import plot_calibration
 
             png = out.with_suffix(".png")
             plot_calibration(cal, png)
             console.print(f"wrote {png}")
+
+
+class _TakeClock:
+    """A second progress bar that fills while a take plays (a take lasts seconds)."""
+
+    def __init__(self, progress, take_s: float):
+        import threading
+
+        self.progress, self.take_s = progress, take_s
+        self.task = progress.add_task("this take", total=take_s, visible=False)
+        self._stop = threading.Event()
+        self._thread = None
+
+    def started(self) -> None:
+        import threading
+        import time
+
+        self.ended()
+        self._stop.clear()
+        t0 = time.monotonic()
+        self.progress.update(self.task, completed=0, visible=True)
+
+        def tick() -> None:
+            while not self._stop.wait(0.1):
+                self.progress.update(self.task, completed=min(time.monotonic() - t0, self.take_s))
+
+        self._thread = threading.Thread(target=tick, daemon=True)
+        self._thread.start()
+
+    def ended(self) -> None:
+        if self._thread is not None:
+            self._stop.set()
+            self._thread.join()
+            self._thread = None
+        self.progress.update(self.task, visible=False)

@@ -12,11 +12,21 @@ from ._options import SEED_MAX
 from ._command import command
 
 
-@command("devices")
+@command("devices", epilog="Example: vibrofocus devices --check examples/rigs/audio.toml")
 def devices(
     as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
+    check: Path | None = typer.Option(
+        None, "--check", metavar="RIG_CONFIG",
+        help="Open the rig of this config file and run its checks at setup (device, channels, rates, output "
+             "range, timing, limits) without playing anything; exit 2 at the first problem."),
 ) -> None:
-    """List audio interfaces (PortAudio) and NI-DAQmx devices, with their channels."""
+    """List audio interfaces (PortAudio) and NI-DAQmx devices, with their channels.
+
+    With --check FILE, open that rig as a calibration or study would, run the same checks
+    it runs before its first play, print what they found, and close it: nothing is played.
+    """
+    if check is not None:
+        return _check_rig(check, as_json)
     with user_errors():
         from rich.console import Console
         from rich.table import Table
@@ -86,3 +96,21 @@ def straps(
             console.print(reading.message)
         if not reading.ok:
             raise typer.Exit(code=1)
+
+
+def _check_rig(path: Path, as_json: bool) -> None:
+    with user_errors():
+        from rich.console import Console
+
+        from ..rigs import load_rig_config, make_rig
+
+        cfg = load_rig_config(path)
+        with make_rig(cfg.kind, config=cfg) as rig:
+            lines = [*rig.setup_report, *rig.limits_report()]
+        if as_json:
+            typer.echo(json.dumps({"rig": cfg.kind, "config": str(path), "ok": True, "found": lines}, indent=2))
+            return
+        console = Console()
+        console.print(f"{cfg.kind} rig from {path}: every check passed; nothing was played", highlight=False)
+        for line in lines:
+            console.print(f"  {line}", highlight=False)

@@ -24,12 +24,29 @@ cross-correlation between what was sent and what came back, in device samples; t
 vibrometer recording is shifted by it. Without a loopback the rig uses
 ``latency_samples`` from the configuration, measured once at setup.
 
+Host APIs that resample or mix behind the program's back (MME, DirectSound, WASAPI in
+shared mode) do not keep one round trip from recording to recording, so on them a
+loopback is required.
+
+Streams
+-------
+Each play or recording runs in a stream of its own (not sounddevice's module-level
+stream, which a cue tone could share), fed by a callback. The drive is followed by
+silence at least as long as the interface's output latency, so its fade-out is played
+and not cut by the end of the stream; a stream that delivered fewer frames than it was
+given is refused. :meth:`AudioRig.stop`, from any thread, aborts the running stream: the
+outputs are silent within one buffer plus the interface's buffered output latency
+(:attr:`AudioRig.output_latency_s`). A recording buffer starts as zeros, never as
+uninitialised memory.
+
 Audio interfaces are AC-coupled, so this rig cannot read strap force sensors.
 """
 
 from __future__ import annotations
 
 import logging
+import re
+import threading
 from fractions import Fraction
 
 import numpy as np
@@ -42,13 +59,53 @@ from .config import AudioRigConfig
 from .devices import DeviceError
 from .hardware import HardwareRig
 
-__all__ = ["AudioRig", "resolve_audio_device"]
+__all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface"]
 
 log = logging.getLogger(__name__)
 
 #: A loopback whose normalised cross-correlation peak falls below this did not receive
 #: the copy sent to it (cable unplugged, wrong channel).
 MIN_LOOPBACK_CORRELATION = 0.5
+#: Host APIs whose round trip changes between streams: a loopback is required there.
+UNSTEADY_LATENCY_HOSTAPIS = ("mme", "directsound", "wasapi")
+#: A recorded sample at or above this fraction of full scale counts as clipped.
+CLIP_FRACTION = 0.999
+#: How often a waiting play looks whether it was stopped (and lets Ctrl-C in), s.
+POLL_S = 0.02
+# Words that say how a device is reached, not which interface it is.
+_GENERIC_WORDS = {
+    "usb", "audio", "device", "devices", "output", "outputs", "input", "inputs", "speakers", "speaker",
+    "headphones", "headphone", "line", "out", "in", "digital", "analog", "analogue", "asio", "wasapi", "mme",
+    "directsound", "wdm", "ks", "driver", "hw", "the", "and", "of", "sound", "mapper", "primary", "microsoft",
+    "playback", "capture", "stereo", "mono", "channels", "channel", "ch", "jack", "alsa", "core", "coreaudio",
+}
+# Devices that route to whatever the system mixes to: never a safe cue beside an audio rig.
+_ROUTING_DEVICES = {"default", "sysdefault", "pulse", "pipewire", "dmix", "system"}
+
+
+def audio_interface_words(name: str) -> frozenset[str]:
+    """The words that name an audio interface, whatever host API lists it.
+
+    ``"Speakers (Focusrite USB Audio)"`` (MME), ``"Focusrite USB ASIO"`` and
+    ``"Scarlett 2i2 USB: Audio (hw:1,0)"`` (ALSA) all give words that identify the
+    interface ({"focusrite"}, {"scarlett", "2i2"}), leaving out host-API and generic words
+    and ALSA's ``hw:`` numbers.
+    """
+    text = re.sub(r"\(hw:[^)]*\)", " ", name.lower())
+    words = re.findall(r"[a-z0-9]+(?:[-_][a-z0-9]+)*", text)
+    return frozenset(w for w in words if w not in _GENERIC_WORDS and not w.isdigit())
+
+
+def same_audio_interface(a: str, b: str) -> bool:
+    """Whether two device names may be the same interface (on any host API).
+
+    Errs on the side of "the same": any shared identifying word, or a name that only
+    routes to the system's mix (``default``, ``pulse``, ...), counts.
+    """
+    wa, wb = audio_interface_words(a), audio_interface_words(b)
+    if wa & _ROUTING_DEVICES or wb & _ROUTING_DEVICES or not wa or not wb:
+        return True
+    return bool(wa & wb)
 
 
 def _sounddevice():
@@ -103,6 +160,8 @@ def resolve_audio_device(name: str | int | None, hostapi: str | None = None, *, 
         else:
             api = apis[pool[0]["hostapi"]]
             idx = api["default_output_device"] if outputs else api["default_input_device"]
+            if idx is None or idx < 0:
+                raise DeviceError(f"the host API {api['name']} has no default audio device; name one of: {listing}")
         dev = devices[idx]
     elif isinstance(name, int):
         matches = [d for d in pool if d["index"] == name]
@@ -129,8 +188,9 @@ def resolve_audio_device(name: str | int | None, hostapi: str | None = None, *, 
 
 
 class _Stopped(DeviceError):
-    def __init__(self) -> None:
-        super().__init__("the recording was stopped before it ended (rig.stop()); it is discarded")
+    def __init__(self, what: str = "recording") -> None:
+        super().__init__(f"the {what} was stopped before it ended (rig.stop()); outputs are silent"
+                         + ("; it is discarded" if what == "recording" else ""))
 
 
 class AudioRig(HardwareRig):
@@ -183,15 +243,42 @@ class AudioRig(HardwareRig):
         except sd.PortAudioError as exc:
             raise DeviceError(f"audio device {self.device_index} refuses {self.device_fs:g} Hz: {exc}; set "
                               "device.samplerate to a rate it supports") from None
+        dev = sd.query_devices(self.device_index)
+        self.device_name = str(dev["name"])
+        self.hostapi_name = str(sd.query_hostapis(dev["hostapi"])["name"])
+        if ch.loopback_output is None and any(h in self.hostapi_name.lower() for h in UNSTEADY_LATENCY_HOSTAPIS):
+            raise DeviceError(
+                f"the {self.hostapi_name} host API does not keep one round-trip latency from recording to "
+                "recording, so latency_samples cannot align them; wire a loopback (channels.loopback_output "
+                "and channels.loopback_input) or use ASIO, Core Audio, ALSA or JACK"
+            )
+        words = sorted(audio_interface_words(self.device_name)) or [self.device_name.lower()]
+        self._lock_device("audio:" + "-".join(words))
+        self.setup_report = [
+            f"device {self.device_index}: {self.device_name} ({self.hostapi_name})",
+            f"rate: device {self.device_fs:g} Hz, rig {self.fs:g} Hz (resampled {self._up}/{self._down})"
+            if (self._up, self._down) != (1, 1) else f"rate: {self.fs:g} Hz",
+            f"channels: actuators on outputs {', '.join(map(str, ch.actuators))}, vibrometer on input "
+            f"{ch.vibrometer}" + (f", loopback output {ch.loopback_output} -> input {ch.loopback_input}"
+                                  if ch.loopback_output else f", no loopback (latency {config.latency_samples} samples)"),
+            f"output latency reported by the device: {1e3 * float(dev['default_low_output_latency']):.0f} ms",
+        ]
         self.last_latency_samples: int | None = None
-        # Counts calls of _zero_outputs: a change during a stream means stop() cut it short.
-        self._stops = 0
+        self.last_clipped: np.ndarray | None = None
+        self.last_dropout_mask: np.ndarray | None = None
+        self._output_latency_s = 0.0
+        # The running stream, so stop() from any thread can abort it; the lock keeps that
+        # from racing the owner closing it.
+        self._stream = None
+        self._stream_lock = threading.Lock()
+        self._abort = threading.Event()
 
     # ------------------------------------------------------------------ scaling
     @property
     def _digital_peak(self) -> float:
-        # Digital level of the actuator limit: the hard ceiling of every sample sent.
-        return self.config.output_peak_v / self.config.volts_full_scale
+        # Digital level of the actuator limit (or the amplifier cap, if lower): the hard
+        # ceiling of every sample sent.
+        return self.max_amplifier_input_v / self.config.volts_full_scale
 
     def _to_device(self, drive: np.ndarray, n_tail: int) -> np.ndarray:
         """Checked actuator volts (n_act, n) -> device block (n_dev, n_out) float32."""
@@ -256,12 +343,94 @@ class AudioRig(HardwareRig):
                 "device's buffer size"
             )
 
-    def _play(self, drive: np.ndarray) -> None:
+    @property
+    def output_latency_s(self) -> float:
+        """Buffered output latency of the last stream, s (what a stop cannot recall)."""
+        return self._output_latency_s
+
+    def _run_stream(self, block: np.ndarray, record: bool, what: str) -> tuple[np.ndarray | None, object]:
+        """Play ``block`` (n_frames, n_out) through a stream of its own; record if asked.
+
+        Returns the recorded input (n_frames, n_in), zeros where nothing came, and the
+        stream's status flags over the whole run.
+        """
         sd = _sounddevice()
-        block = self._to_device(drive, n_tail=0)
-        sd.play(block, samplerate=self.device_fs, device=self.device_index, mapping=self._out_channels,
-                blocking=False)
-        self._check_status(sd.wait(), "playing")
+        n_out, n_in = max(self._out_channels), max(self._in_channels)
+        out_cols = [c - 1 for c in self._out_channels]
+        in_cols = [c - 1 for c in self._in_channels]
+        total = len(block)
+        recorded = np.zeros((total, len(in_cols)), np.float32) if record else None
+        state = {"pos": 0, "status": sd.CallbackFlags()}
+        done = threading.Event()
+
+        def fill(outdata, frames):
+            pos = state["pos"]
+            outdata.fill(0)
+            if self._abort.is_set():
+                raise sd.CallbackAbort
+            n = min(frames, total - pos)
+            outdata[:n, out_cols] = block[pos:pos + n]
+            return pos, n
+
+        def duplex(indata, outdata, frames, time_info, status):
+            state["status"] |= status
+            pos, n = fill(outdata, frames)
+            recorded[pos:pos + n] = indata[:n, in_cols]
+            state["pos"] = pos + n
+            if state["pos"] >= total:
+                raise sd.CallbackStop
+
+        def output_only(outdata, frames, time_info, status):
+            state["status"] |= status
+            pos, n = fill(outdata, frames)
+            state["pos"] = pos + n
+            if state["pos"] >= total:
+                raise sd.CallbackStop
+
+        self._abort.clear()
+        try:
+            if record:
+                stream = sd.Stream(samplerate=self.device_fs, device=self.device_index, channels=(n_in, n_out),
+                                   dtype="float32", callback=duplex, finished_callback=done.set)
+            else:
+                stream = sd.OutputStream(samplerate=self.device_fs, device=self.device_index, channels=n_out,
+                                         dtype="float32", callback=output_only, finished_callback=done.set)
+        except sd.PortAudioError as exc:
+            raise DeviceError(f"the audio interface could not open a stream for {what}: {exc}") from None
+        try:
+            latency = stream.latency
+            self._output_latency_s = float(latency[1] if isinstance(latency, tuple) else latency)
+            with self._stream_lock:
+                self._stream = stream
+            stream.start()
+            while not done.wait(POLL_S):  # short waits: Ctrl-C gets in between them
+                pass
+        except sd.PortAudioError as exc:
+            raise DeviceError(f"the audio interface failed while {what}: {exc}") from None
+        finally:
+            with self._stream_lock:
+                self._stream = None
+                try:
+                    stream.abort() if stream.active else None
+                finally:
+                    stream.close()
+        if self._abort.is_set():
+            raise _Stopped("recording" if record else "play")
+        if state["pos"] < total:
+            raise DeviceError(f"the audio interface took {state['pos']} of the {total} frames while {what}; "
+                              "the rest never played")
+        return recorded, state["status"]
+
+    def _padded(self, block: np.ndarray) -> np.ndarray:
+        # Silence after the drive, longer than what the interface buffers: the fade-out
+        # plays in full before the stream ends.
+        n_pad = int(np.ceil(max(self._output_latency_s, 0.05) * self.device_fs)) + 4096
+        return np.concatenate([block, np.zeros((n_pad, block.shape[1]), np.float32)])
+
+    def _play(self, drive: np.ndarray) -> None:
+        block = self._padded(self._to_device(drive, n_tail=0))
+        _, status = self._run_stream(block, record=False, what="playing")
+        self._check_status(status, "playing")
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         has_loopback = self.config.channels.loopback_output is not None
@@ -270,25 +439,18 @@ class AudioRig(HardwareRig):
                 "the audio rig cannot align recordings: wire a loopback (channels.loopback_output and "
                 "channels.loopback_input) or set latency_samples measured at setup"
             )
-        sd = _sounddevice()
         n_total = drive.shape[1] + n_tail
         block = self._to_device(drive, n_tail)
         n_dev = len(block)
         max_lag = int(np.ceil(self.config.max_latency_s * self.device_fs))
         padded = np.concatenate([block, np.zeros((max_lag, block.shape[1]), np.float32)])
         for attempt in range(self.config.xrun_retries + 1):
-            stops = self._stops
-            recorded = sd.playrec(padded, samplerate=self.device_fs, device=self.device_index,
-                                  input_mapping=self._in_channels, output_mapping=self._out_channels,
-                                  dtype="float32", blocking=False)
+            recorded, status = self._run_stream(padded, record=True, what="recording")
             try:
-                status = sd.wait()
-                if self._stops != stops:
-                    raise _Stopped()
                 self._check_status(status, "recording")
                 break
-            except DeviceError as exc:
-                if isinstance(exc, _Stopped) or attempt == self.config.xrun_retries:
+            except DeviceError:
+                if attempt == self.config.xrun_retries:
                     raise
                 log.warning("recording %d of %d lost samples; taking it again", attempt + 1,
                             self.config.xrun_retries + 1)
@@ -300,21 +462,29 @@ class AudioRig(HardwareRig):
             if lag > max_lag:
                 raise DeviceError(f"latency_samples = {lag} is longer than max_latency_s allows ({max_lag})")
         self.last_latency_samples = lag
-        volts = self._from_device(recorded[lag:lag + n_dev, 0], n_total)
+        vib = recorded[lag:lag + n_dev, 0]
+        # A converter at full scale clipped the vibrometer signal: H from it would be wrong.
+        self.last_clipped = np.array([bool(np.any(np.abs(vib) >= CLIP_FRACTION))])
+        self.last_dropout_mask = np.zeros((1, n_total), dtype=bool)
+        volts = self._from_device(vib, n_total)
         return self.vibrometer.to_displacement(volts, self.fs)[None, :]
 
     def _zero_outputs(self) -> None:
-        # Stopping the stream leaves the interface's outputs silent; sounddevice keeps the
-        # one stream it started, so this also ends a play interrupted half-way (stop() from
-        # another thread included).
-        self._stops += 1
-        sd = _sounddevice()
-        sd.stop()
+        # Emergency stop from any thread: abort the running stream (pending buffers are
+        # dropped); the callback also writes silence from the moment it sees the flag.
+        self._abort.set()
+        with self._stream_lock:
+            stream = self._stream
+            if stream is not None and stream.active:
+                try:
+                    stream.abort()
+                except Exception as exc:  # noqa: BLE001 - the owner closes it anyway
+                    log.warning("aborting the audio stream: %s", exc)
 
     def describe(self) -> dict:
         """Settings to store beside a calibration (JSON-serialisable)."""
         out = super().describe()
         out.update(config=self.config.model_dump(mode="json"), device_index=self.device_index,
-                   device_fs=self.device_fs, last_latency_samples=self.last_latency_samples,
+                   device_name=self.device_name, hostapi=self.hostapi_name, device_fs=self.device_fs, last_latency_samples=self.last_latency_samples,
                    vibrometer=self.vibrometer.describe())
         return out

@@ -4,11 +4,21 @@ In the way nidaqmx separates its public API from interchangeable interpreters, t
 public methods here (``play``, ``play_and_record``, ``stop``) are final: they run the
 safety layer and guarantee zero outputs afterwards, then hand a checked drive to the
 backend's private ``_play`` / ``_play_and_record`` / ``_zero_outputs``.
+
+They also keep one job at a time on the hardware: a play or recording from a thread
+other than the one that holds :meth:`Rig.reserve` is refused with
+:class:`~vibrofocus.rigs.DeviceBusyError`, and so is a play while another is running.
+:meth:`Rig.stop` is the exception: it works from any thread, at any time.
 """
 
 from __future__ import annotations
 
+import logging
+import threading
+import time
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
+from typing import Iterator
 
 import numpy as np
 
@@ -16,9 +26,12 @@ from .._validation import as_array, check_positive
 from ..defaults import FS_HZ
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from .safety import SafetyLimits, check_drive
+from .devices import DeviceBusyError
+from .safety import EnergyBudget, SafetyLimits, check_drive
 
 __all__ = ["Rig"]
+
+log = logging.getLogger(__name__)
 
 
 class Rig(ABC):
@@ -44,16 +57,98 @@ class Rig(ABC):
     kind: str = "abstract"
     #: Points one recording can cover; None means any number.
     max_points_per_recording: int | None = 1
+    #: Whether one job at a time holds the rig (hardware: True). A model, such as the
+    #: simulated forearm, may serve several threads at once.
+    one_job_at_a_time: bool = False
 
     def __init__(self, layout: ArrayLayout | None = None, fs: float = FS_HZ, limits: SafetyLimits | None = None):
         self.layout = layout if layout is not None else ArrayLayout.reference()
         self.fs = check_positive(fs, "fs")
         self.limits = limits if limits is not None else SafetyLimits()
+        self._budget: EnergyBudget | None = None
+        # Who holds the hardware: a job (reserve) or a single play; never two at once.
+        self._use_lock = threading.Lock()
+        self._job_owner: str | None = None
+        self._job_thread: int | None = None
+        self._playing = False
 
     # ------------------------------------------------------------------ public, final
     def check(self, drive: np.ndarray) -> np.ndarray:
-        """Run the safety layer on ``drive`` without playing it; return what would play."""
-        return check_drive(drive, self.fs, self.layout.n_actuators, self.limits)
+        """Run the safety layer on ``drive`` without playing it; return what would play.
+
+        The check of one drive: the budget across consecutive plays is applied when the
+        drive plays.
+        """
+        safe = check_drive(drive, self.fs, self.layout.n_actuators, self.limits)
+        self._check_output_level(safe)
+        return safe
+
+    @property
+    def budget(self) -> EnergyBudget:
+        """The RMS budget across this rig's consecutive plays (rebuilt if ``limits`` change)."""
+        if self._budget is None or self._budget.limits is not self.limits:
+            self._budget = EnergyBudget(self.limits, self.layout.n_actuators, self.fs)
+        return self._budget
+
+    @contextmanager
+    def reserve(self, owner: str) -> Iterator["Rig"]:
+        """Hold the rig for one job (a calibration, a session) on this thread.
+
+        While it is held, plays and recordings from other threads, and a second
+        ``reserve``, are refused with :class:`DeviceBusyError`. :meth:`stop` still works
+        from any thread.
+
+        Parameters
+        ----------
+        owner : str
+            What holds it, as people read it ("calibration of P01"); shown to whoever
+            is refused.
+        """
+        if not self.one_job_at_a_time:
+            yield self
+            return
+        self._acquire(owner)
+        self._job_owner, self._job_thread = owner, threading.get_ident()
+        try:
+            yield self
+        finally:
+            self._job_owner = self._job_thread = None
+            self._use_lock.release()
+
+    @property
+    def busy_with(self) -> str | None:
+        """What holds the rig now ("calibration of P01", "a play"), or None when it is free."""
+        if self._job_owner is not None:
+            return self._job_owner
+        return "a play" if self._playing else None
+
+    def _acquire(self, what: str) -> None:
+        if not self._use_lock.acquire(blocking=False):
+            raise DeviceBusyError(
+                f"the {self.kind} rig is busy with {self.busy_with or 'another job'}; {what} was refused. "
+                "Wait until it ends, or stop it first (one job uses a device at a time)"
+            )
+
+    @contextmanager
+    def _exclusive(self, what: str) -> Iterator[None]:
+        """Hold the hardware for one play: inside the caller's job, or alone."""
+        if not self.one_job_at_a_time or self._job_thread == threading.get_ident():
+            yield  # this thread's own job holds the rig
+            return
+        self._acquire(what)
+        self._playing = True
+        try:
+            yield
+        finally:
+            self._playing = False
+            self._use_lock.release()
+
+    def _clock(self) -> float:
+        """Now, s, on the clock the energy budget places plays on (monotonic)."""
+        return time.monotonic()
+
+    def _check_output_level(self, drive: np.ndarray) -> None:
+        """A backend's own check of a checked drive (e.g. the voltage into its amplifier)."""
 
     def play(self, drive: np.ndarray) -> None:
         """Play a drive on the actuators (participant stimulation).
@@ -69,7 +164,9 @@ class Rig(ABC):
             Before anything is played, if the drive breaks a limit.
         """
         safe = self.check(drive)
-        self._run_guarded(self._play, safe)
+        with self._exclusive("a play"):
+            self.budget.admit(safe, self._clock())
+            self._run_guarded(self._play, safe)
 
     def play_and_record(
         self, drive: np.ndarray, points_xy: np.ndarray | None = None, *, tail_s: float = 0.05
@@ -101,12 +198,24 @@ class Rig(ABC):
                     f"points_xy asks for {len(points_xy)} points, but the {self.kind} rig records "
                     f"{limit} point(s) per recording; record them one at a time"
                 )
-        out = self._run_guarded(self._play_and_record, safe, points_xy, n_tail)
+        with self._exclusive("a recording"):
+            self.budget.admit(safe, self._clock())
+            out = self._run_guarded(self._play_and_record, safe, points_xy, n_tail)
         return np.asarray(out, dtype=float)
 
     def stop(self) -> None:
-        """Stop at once and leave every output at zero."""
+        """Emergency stop: every output to zero now, from any thread.
+
+        A play or recording running in another thread ends with a
+        :class:`DeviceError`. The outputs reach 0 V within 100 ms plus the interface's
+        own buffered output latency (:attr:`output_latency_s`).
+        """
         self._zero_outputs()
+
+    @property
+    def output_latency_s(self) -> float:
+        """Buffered output latency of the interface, s: what :meth:`stop` cannot recall."""
+        return 0.0
 
     def close(self) -> None:
         """Release the device (outputs left at zero)."""
@@ -126,9 +235,17 @@ class Rig(ABC):
     def _run_guarded(self, func, *args):
         # Outputs go to zero whatever happens, including KeyboardInterrupt mid-play.
         try:
-            return func(*args)
-        finally:
-            self._zero_outputs()
+            result = func(*args)
+        except BaseException as exc:
+            try:
+                self._zero_outputs()
+            except Exception as zero_exc:  # noqa: BLE001 - the first error must not be hidden
+                log.critical("setting the outputs to zero failed: %s", zero_exc)
+                exc.add_note(f"Setting the outputs to zero afterwards ALSO failed ({zero_exc}): "
+                             "switch the amplifier off.")
+            raise
+        self._zero_outputs()
+        return result
 
     @abstractmethod
     def _play(self, drive: np.ndarray) -> None:

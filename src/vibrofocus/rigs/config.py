@@ -38,7 +38,7 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
 
 from ..errors import ValidationError
-from .safety import SafetyLimits
+from .safety import DURATION_S_CEILING, MAX_FADE_S, MIN_FADE_S, PEAK_V_CEILING, RMS_V_CEILING, SafetyLimits
 
 __all__ = [
     "RigConfig",
@@ -55,7 +55,8 @@ __all__ = [
 class _Model(BaseModel):
     # Unknown keys are refused: a misspelt "amplifer_gain" must not silently fall back to
     # a default that changes the voltage at the actuator.
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # NaN and infinities are refused everywhere: "amplifier_gain = inf" is a typo, not a gain.
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class VibrometerConfig(_Model):
@@ -148,12 +149,16 @@ class ForceSensorsConfig(_Model):
 
 
 class LimitsConfig(_Model):
-    """Safety limits at the actuator terminals (see :class:`~vibrofocus.rigs.safety.SafetyLimits`)."""
+    """Safety limits at the actuator terminals (see :class:`~vibrofocus.rigs.safety.SafetyLimits`).
 
-    peak_v: PositiveFloat = SafetyLimits.peak_v
-    rms_v: PositiveFloat = SafetyLimits.rms_v
-    max_duration_s: PositiveFloat = SafetyLimits.max_duration_s
-    fade_s: float = Field(SafetyLimits.fade_s, ge=0)
+    Each has a hard ceiling no file can raise: ``peak_v`` <= 20 V, ``rms_v`` <= 8 V,
+    ``max_duration_s`` <= 60 s, and ``fade_s`` in [0.1 ms, 50 ms].
+    """
+
+    peak_v: float = Field(SafetyLimits.peak_v, gt=0, le=PEAK_V_CEILING)
+    rms_v: float = Field(SafetyLimits.rms_v, gt=0, le=RMS_V_CEILING)
+    max_duration_s: float = Field(SafetyLimits.max_duration_s, gt=0, le=DURATION_S_CEILING)
+    fade_s: float = Field(SafetyLimits.fade_s, ge=MIN_FADE_S, le=MAX_FADE_S)
 
     def build(self) -> SafetyLimits:
         return SafetyLimits(peak_v=self.peak_v, rms_v=self.rms_v, max_duration_s=self.max_duration_s, fade_s=self.fade_s)
@@ -170,17 +175,41 @@ class RigConfig(_Model):
         Sample rate of drives and recordings, Hz.
     amplifier_gain : float
         Voltage gain of the power amplifier between the interface and the actuators, V/V
-        (10 for 20 dB). Drives are actuator volts; the interface puts out drive / gain.
+        (10 for 20 dB), in (0, 1000]. Drives are actuator volts; the interface puts out
+        drive / gain.
+    amplifier_input_max_v : float
+        Independent cap on the voltage into the amplifier, V, in (0, 10]; default 1 V
+        (the reference setup's 1 V into a 20 dB amplifier). No sample sent to the
+        interface exceeds it, whatever the gain says, and it is the NI output range. A
+        config whose ``limits.peak_v / amplifier_gain`` exceeds it is refused, so a gain
+        entered as 1 instead of 10 cannot put 10 V into the amplifier.
     vibrometer : VibrometerConfig
     limits : LimitsConfig
         Safety limits at the actuator.
     """
 
     kind: str
-    fs: PositiveFloat = 10_000.0
-    amplifier_gain: PositiveFloat = 10.0
+    fs: float = Field(10_000.0, gt=0, le=1e6)
+    amplifier_gain: float = Field(10.0, gt=0, le=1000)
+    amplifier_input_max_v: float = Field(1.0, gt=0, le=10)
     vibrometer: VibrometerConfig
     limits: LimitsConfig = LimitsConfig()
+
+    def _refuse_peak_over(self, ceiling_v: float, name: str, where: str, advice: str) -> None:
+        """Refuse a ``limits.peak_v`` that needs more than ``ceiling_v`` at the interface."""
+        need = self.output_peak_v
+        if need > ceiling_v * (1 + 1e-9):
+            raise ValueError(
+                f"limits.peak_v = {self.limits.peak_v:g} V at the actuator needs {need:g} V {where} "
+                f"(amplifier_gain = {self.amplifier_gain:g}), more than {name} = {ceiling_v:g} V. {advice} "
+                f"limits.peak_v to at most {ceiling_v * self.amplifier_gain:g} V"
+            )
+
+    @model_validator(mode="after")
+    def _check_amplifier_cap(self) -> "RigConfig":
+        self._refuse_peak_over(self.amplifier_input_max_v, "amplifier_input_max_v", "into the amplifier",
+                               "Check amplifier_gain (10 for 20 dB); if it is right, lower")
+        return self
 
     @property
     def n_actuators(self) -> int:
@@ -295,14 +324,8 @@ class AudioRigConfig(RigConfig):
 
     @model_validator(mode="after")
     def _check_level(self) -> "AudioRigConfig":
-        need = self.output_peak_v
-        if need > self.volts_full_scale * (1 + 1e-9):
-            raise ValueError(
-                f"limits.peak_v = {self.limits.peak_v:g} V at the actuator needs {need:g} V at the interface "
-                f"(amplifier_gain = {self.amplifier_gain:g}), more than volts_full_scale = "
-                f"{self.volts_full_scale:g} V: drives would clip. Lower limits.peak_v to at most "
-                f"{self.volts_full_scale * self.amplifier_gain:g} V or raise amplifier_gain"
-            )
+        self._refuse_peak_over(self.volts_full_scale, "volts_full_scale", "at the interface",
+                               "Drives would clip: raise amplifier_gain, or lower")
         return self
 
 
@@ -370,12 +393,25 @@ class NidaqRigConfig(RigConfig):
 
     @model_validator(mode="after")
     def _check_level(self) -> "NidaqRigConfig":
-        need = self.output_peak_v
-        if need > self.ao_max_v * (1 + 1e-9):
+        if self.amplifier_input_max_v > self.ao_max_v:
             raise ValueError(
-                f"limits.peak_v = {self.limits.peak_v:g} V at the actuator needs {need:g} V at the analog "
-                f"outputs (amplifier_gain = {self.amplifier_gain:g}), more than ao_max_v = {self.ao_max_v:g} V. "
-                f"Lower limits.peak_v to at most {self.ao_max_v * self.amplifier_gain:g} V or raise amplifier_gain"
+                f"amplifier_input_max_v = {self.amplifier_input_max_v:g} V is more than the analog outputs can "
+                f"put out (ao_max_v = {self.ao_max_v:g} V); it is also their range"
+            )
+        return self
+
+    @model_validator(mode="after")
+    def _one_device(self) -> "NidaqRigConfig":
+        # Input and output are synchronised through one device's start trigger and
+        # timebase; channels on two devices would not be sample-synchronous.
+        names = list(self.channels.actuators) + [self.channels.vibrometer]
+        if self.force_sensors:
+            names += list(self.force_sensors.channels)
+        devices = sorted({self.physical(ch).split("/")[0] for ch in names})
+        if len(devices) > 1:
+            raise ValueError(
+                f"channels are on {len(devices)} devices ({', '.join(devices)}): actuators and vibrometer must be "
+                f"on one device to be sample-synchronous; put them all on {self.device}"
             )
         return self
 

@@ -10,11 +10,15 @@ from dataclasses import dataclass, field
 
 from ..errors import VibrofocusError
 
-__all__ = ["DeviceError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
+__all__ = ["DeviceError", "DeviceBusyError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
 
 
 class DeviceError(VibrofocusError):
     """A device is missing or failed while playing or recording; outputs were set to zero."""
+
+
+class DeviceBusyError(DeviceError):
+    """Another job (in this process or another one) is using the device; nothing was played."""
 
 
 @dataclass

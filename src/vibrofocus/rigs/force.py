@@ -213,6 +213,23 @@ class StrapSensors:
         return evaluate_straps(forces, names=self.names, target_n=self.target_n, tolerance_n=self.tolerance_n)
 
 
+def has_strap_sensors(rig) -> bool:
+    """Whether a rig can read strap forces.
+
+    Parameters
+    ----------
+    rig : Rig
+        Any rig. It can if it offers ``read_strap_forces`` and, where it says which
+        sensors it has (``strap_sensors``, e.g. an NI rig without ``force_sensors``), has
+        some.
+
+    Returns
+    -------
+    bool
+    """
+    return getattr(rig, "read_strap_forces", None) is not None and getattr(rig, "strap_sensors", True) is not None
+
+
 def check_straps(rig, *, target_n: float | None = None, tolerance_n: float | None = None) -> StrapReading:
     """Read the strap forces of a rig and judge them against the target (default 1 N).
 
@@ -231,13 +248,12 @@ def check_straps(rig, *, target_n: float | None = None, tolerance_n: float | Non
     """
     from .devices import DeviceError
 
-    reader = getattr(rig, "read_strap_forces", None)
-    if reader is None:
+    if not has_strap_sensors(rig):
         raise DeviceError(
             f"the {getattr(rig, 'kind', type(rig).__name__)} rig has no strap force sensors "
             "(configure force_sensors on an nidaq rig)"
         )
-    forces = np.asarray(reader(), dtype=float)
+    forces = np.asarray(rig.read_strap_forces(), dtype=float)
     sensors = getattr(rig, "strap_sensors", None)
     names = getattr(sensors, "names", None)
     target = target_n if target_n is not None else getattr(sensors, "target_n", 1.0)

@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
-from ..errors import ValidationError
+import numpy as np
+
+from ..errors import SafetyError, ValidationError
 from ..layout import ArrayLayout
 from .base import Rig
 from .config import RigConfig
+from .device_lock import DeviceLock
 
 __all__ = ["HardwareRig"]
 
@@ -29,6 +32,8 @@ class HardwareRig(Rig):
     config_class: type[RigConfig] = RigConfig
     #: A single-spot vibrometer: the operator aims it at one point per recording.
     max_points_per_recording = 1
+    #: A physical device: one job at a time (Rig.reserve), and one rig per device (DeviceLock).
+    one_job_at_a_time = True
 
     def __init__(self, config: RigConfig, layout: ArrayLayout | None = None):
         if not isinstance(config, self.config_class):
@@ -42,3 +47,42 @@ class HardwareRig(Rig):
         super().__init__(layout, fs=config.fs, limits=config.limits.build())
         self.config = config
         self.vibrometer = config.vibrometer.build()
+        self.device_lock: DeviceLock | None = None
+        #: What the checks at setup found, one line each (``vibrofocus devices --check``).
+        self.setup_report: list[str] = []
+
+    def limits_report(self) -> list[str]:
+        """The limits this rig enforces, one line each, as people read them."""
+        cfg, lim = self.config, self.limits
+        return [
+            f"amplifier: gain {cfg.amplifier_gain:g} V/V; at most {self.max_amplifier_input_v:g} V into it "
+            f"(cap amplifier_input_max_v = {cfg.amplifier_input_max_v:g} V)",
+            f"limits at the actuator: {lim.peak_v:g} V peak, {lim.rms_v:g} V RMS over any {lim.rms_window_s:g} s "
+            f"(across plays), drives up to {lim.max_duration_s:g} s, {1e3 * lim.fade_s:g} ms fades",
+        ]
+
+    def _lock_device(self, device_id: str) -> None:
+        """Take the device for this rig until :meth:`close` (subclasses call it once they know the device)."""
+        self.device_lock = DeviceLock(device_id, owner=f"a {self.kind} rig").acquire()
+
+    def close(self) -> None:
+        """Release the device (outputs left at zero) and its lock."""
+        try:
+            super().close()
+        finally:
+            if self.device_lock is not None:
+                self.device_lock.release()
+
+    @property
+    def max_amplifier_input_v(self) -> float:
+        """The most any sample may put into the amplifier, V: the actuator limit over the gain, capped."""
+        return min(self.config.output_peak_v, self.config.amplifier_input_max_v)
+
+    def _check_output_level(self, drive: np.ndarray) -> None:
+        # Independent of the limits at the actuator: the voltage into the amplifier.
+        volts = float(np.abs(drive).max(initial=0.0)) / self.config.amplifier_gain
+        cap = self.config.amplifier_input_max_v
+        if volts > cap * (1 + 1e-9):
+            raise SafetyError(
+                f"drive refused: it needs {volts:.4g} V into the amplifier, over amplifier_input_max_v = {cap:g} V"
+            )

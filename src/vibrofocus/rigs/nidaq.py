@@ -12,19 +12,33 @@ both sample clocks derive from the device's timebase, so input sample ``k`` is t
 output sample ``k``. The output task plays the drive followed by the recording tail in
 zeros, so the outputs end at zero; NI analog outputs hold their last value, which is why
 :meth:`NidaqTasks.write_zeros` also writes an explicit zero after every play and after
-any error.
+any error, and why the output channels ask for ``ao_idle_output_behavior = ZERO_VOLTS``
+where the device supports it.
+
+Stopping
+--------
+A play waits for its task by polling ``is_task_done`` every few milliseconds, so Ctrl-C
+and a stop from another thread end it at once. The emergency stop
+(:meth:`NidaqTasks.write_zeros`) aborts the running output task and unreserves its
+channels (``TaskMode.TASK_ABORT``, then ``TASK_UNRESERVE``): a stopped task that was
+written before it started stays committed and keeps its channels reserved, so a zero
+written through a second task would fail with error -50103 while the outputs hold their
+last value.
 
 Voltage ranges
 --------------
 Drives are actuator volts; the analog outputs put out ``drive / amplifier_gain`` and are
-created with the range ``± limits.peak_v / amplifier_gain``, so the driver itself refuses
-anything beyond the actuator limit.
+created with the range ``± amplifier_input_max_v`` (1 V by default), so the driver itself
+refuses anything beyond the independent cap on the voltage into the amplifier.
 """
 
 from __future__ import annotations
 
 import logging
-from typing import Callable
+import threading
+import time
+from contextlib import contextmanager
+from typing import Callable, Iterator
 
 import numpy as np
 
@@ -37,6 +51,11 @@ __all__ = ["NidaqRig", "NidaqTasks"]
 
 log = logging.getLogger(__name__)
 
+#: How often a play looks whether its task is done (and whether it was stopped), s.
+POLL_S = 0.005
+#: DAQmx error of a property the device does not support.
+_UNSUPPORTED_PROPERTY = -200452
+
 
 def _daq_error_types() -> tuple[type[BaseException], ...]:
     try:
@@ -46,6 +65,11 @@ def _daq_error_types() -> tuple[type[BaseException], ...]:
     return (DaqError, DaqNotFoundError, DaqNotSupportedError)
 
 
+class _Stopped(DeviceError):
+    def __init__(self) -> None:
+        super().__init__("the play was stopped before it ended (rig.stop()); outputs are at 0 V")
+
+
 class NidaqTasks:
     """Thin adapter over ``nidaqmx``: the only code of vibrofocus that calls the driver.
 
@@ -53,67 +77,192 @@ class NidaqTasks:
     ----------
     config : NidaqRigConfig
     task_factory : callable, optional
-        Returns a new ``nidaqmx.Task``; default ``nidaqmx.Task``. Tests pass a factory of
-        autospec fakes.
+        Returns a new ``nidaqmx.Task``; default ``nidaqmx.Task``. Tests pass the factory
+        of a FAKE task layer.
+    system : object, optional
+        ``nidaqmx.system.System.local()`` or a fake of it, for :meth:`check_setup`.
     """
 
-    def __init__(self, config: NidaqRigConfig, task_factory: Callable[[], object] | None = None):
+    def __init__(self, config: NidaqRigConfig, task_factory: Callable[[], object] | None = None,
+                 system: object | None = None):
         self.config = config
         if task_factory is None:
             import nidaqmx
             import nidaqmx.system
 
             try:  # fail at setup, not at the first stimulus, when the driver is missing
-                nidaqmx.system.System.local().driver_version
+                system = nidaqmx.system.System.local()
+                system.driver_version
             except _daq_error_types() + (OSError,) as exc:
                 raise DeviceError(
                     f"the NI-DAQmx driver is not available ({exc}); install NI-DAQmx, or use --rig simulated"
                 ) from None
             task_factory = nidaqmx.Task
         self._task_factory = task_factory
+        self._system = system
         first = config.physical(config.channels.actuators[0])
         self.device = first.split("/")[0]
         #: Terminal the input task starts on.
         self.start_trigger = f"/{self.device}/ao/StartTrigger"
-        # The output task now generating, so write_zeros (stop() from another thread
-        # included) can halt it first: its channels are reserved until it stops.
+        # The output task now generating, so an emergency stop from another thread can
+        # abort it and free its channels; the lock keeps that from racing its closing.
         self._active_ao = None
+        self._active_lock = threading.Lock()
+        self._stop_requested = threading.Event()
+        #: Whether the outputs go to 0 V by themselves when a task stops (device-dependent).
+        self.idle_zero_supported: bool | None = None
+
+    # ------------------------------------------------------------------ setup checks
+    def check_setup(self) -> list[str]:
+        """Check the device, channels, rates, output range and timing before any play.
+
+        Returns
+        -------
+        list of str
+            What was found, one line each, for ``vibrofocus devices --check``.
+
+        Raises
+        ------
+        DeviceError
+            Naming the first thing that does not fit, in words a lab can act on.
+        """
+        cfg = self.config
+        if self._system is None:
+            return ["NI-DAQmx: no system to query; setup not checked"]
+        found = []
+        names = [d.name for d in self._system.devices]
+        if self.device not in names:
+            raise DeviceError(f"NI device {self.device!r} not found; NI MAX lists: {', '.join(names) or 'none'}")
+        dev = self._system.devices[self.device]
+        found.append(f"device {self.device}: {dev.product_type}")
+        ao = {c.name for c in dev.ao_physical_chans}
+        ai = {c.name for c in dev.ai_physical_chans}
+        missing = [cfg.physical(c) for c in cfg.channels.actuators if cfg.physical(c) not in ao]
+        if missing:
+            raise DeviceError(f"{self.device} has no analog output {', '.join(missing)}; its outputs are "
+                              f"{', '.join(sorted(ao)) or 'none'}")
+        inputs = [cfg.channels.vibrometer] + (list(cfg.force_sensors.channels) if cfg.force_sensors else [])
+        missing = [cfg.physical(c) for c in inputs if cfg.physical(c) not in ai]
+        if missing:
+            raise DeviceError(f"{self.device} has no analog input {', '.join(missing)}; its inputs are "
+                              f"{', '.join(sorted(ai)) or 'none'}")
+        found.append(f"channels: outputs {', '.join(cfg.physical(c) for c in cfg.channels.actuators)}, "
+                     f"vibrometer {cfg.physical(cfg.channels.vibrometer)}")
+        if not dev.ao_samp_clk_supported:
+            raise DeviceError(f"{self.device} has no hardware-timed analog output; it cannot play drives")
+        if not dev.ao_min_rate <= cfg.fs <= dev.ao_max_rate:
+            raise DeviceError(f"fs = {cfg.fs:g} Hz is outside the output rates of {self.device} "
+                              f"({dev.ao_min_rate:g}-{dev.ao_max_rate:g} Hz)")
+        if cfg.fs > dev.ai_max_single_chan_rate:
+            raise DeviceError(f"fs = {cfg.fs:g} Hz is above the input rate of {self.device} "
+                              f"({dev.ai_max_single_chan_rate:g} Hz)")
+        found.append(f"rate: {cfg.fs:g} Hz (outputs {dev.ao_min_rate:g}-{dev.ao_max_rate:g} Hz, "
+                     f"input up to {dev.ai_max_single_chan_rate:g} Hz)")
+        rngs = list(dev.ao_voltage_rngs)
+        cap = cfg.amplifier_input_max_v
+        pairs = [(rngs[i], rngs[i + 1]) for i in range(0, len(rngs) - 1, 2)]
+        if not any(lo <= -cap and cap <= hi for lo, hi in pairs):
+            raise DeviceError(f"no output range of {self.device} covers +-{cap:g} V (ranges {pairs})")
+        found.append(f"output range: +-{cap:g} V into the amplifier (device ranges {pairs})")
+        return found
 
     # ------------------------------------------------------------------ channels
     def _ao_task(self):
         cfg = self.config
         task = self._task_factory()
-        peak = cfg.output_peak_v
-        for i, ch in enumerate(cfg.channels.actuators):
-            task.ao_channels.add_ao_voltage_chan(cfg.physical(ch), name_to_assign_to_channel=f"actuator{i + 1}",
-                                                 min_val=-peak, max_val=peak)
+        try:
+            cap = cfg.amplifier_input_max_v
+            for i, ch in enumerate(cfg.channels.actuators):
+                chan = task.ao_channels.add_ao_voltage_chan(
+                    cfg.physical(ch), name_to_assign_to_channel=f"actuator{i + 1}", min_val=-cap, max_val=cap)
+                self._idle_at_zero(chan)
+        except BaseException:
+            task.close()  # a task whose channels failed would otherwise leak
+            raise
         return task
+
+    def _idle_at_zero(self, chan) -> None:
+        if self.idle_zero_supported is False:
+            return
+        from nidaqmx.constants import AOIdleOutputBehavior
+
+        try:
+            chan.ao_idle_output_behavior = AOIdleOutputBehavior.ZERO_VOLTS
+            self.idle_zero_supported = True
+        except _daq_error_types() as exc:
+            if getattr(exc, "error_code", None) != _UNSUPPORTED_PROPERTY:
+                raise
+            self.idle_zero_supported = False  # the explicit zero write still follows every play
 
     def _ai_task(self, channels: list[str], names: list[str], range_v: float):
         from nidaqmx.constants import TerminalConfiguration
 
         terminal = getattr(TerminalConfiguration, self.config.terminal_config.upper())
         task = self._task_factory()
-        for ch, name in zip(channels, names):
-            task.ai_channels.add_ai_voltage_chan(self.config.physical(ch), name_to_assign_to_channel=name,
-                                                 terminal_config=terminal, min_val=-range_v, max_val=range_v)
+        try:
+            for ch, name in zip(channels, names):
+                task.ai_channels.add_ai_voltage_chan(self.config.physical(ch), name_to_assign_to_channel=name,
+                                                     terminal_config=terminal, min_val=-range_v, max_val=range_v)
+        except BaseException:
+            task.close()
+            raise
         return task
 
-    @staticmethod
-    def _finite(task, fs: float, n: int) -> None:
+    def _finite(self, task, n: int) -> None:
         from nidaqmx.constants import AcquisitionType
 
+        fs = self.config.fs
         task.timing.cfg_samp_clk_timing(fs, sample_mode=AcquisitionType.FINITE, samps_per_chan=n)
+        actual = float(task.timing.samp_clk_rate)  # the driver may coerce the rate
+        if abs(actual - fs) > 1e-6 * fs:
+            raise DeviceError(f"NI-DAQmx runs the sample clock at {actual:g} Hz, not the {fs:g} Hz asked; "
+                              "choose an fs the device's timebase divides exactly")
 
     @staticmethod
-    def _release(*tasks) -> None:
+    def _release(tasks) -> BaseException | None:
+        """Abort and close every task, even when one of them fails; return the first failure."""
+        from nidaqmx.constants import TaskMode
+
+        first = None
         for task in tasks:
-            if task is None:
-                continue
             try:
-                task.stop()
+                task.control(TaskMode.TASK_ABORT)
+            except _daq_error_types() as exc:
+                first = first or exc
             finally:
-                task.close()
+                try:
+                    task.close()
+                except _daq_error_types() as exc:
+                    first = first or exc
+        return first
+
+    @contextmanager
+    def _tasks(self, what: str, *, stoppable: bool = True) -> Iterator[list]:
+        """Tasks made in the block are closed after it; driver errors become DeviceError.
+
+        A failure while closing never hides the error that ended the block.
+        """
+        tasks: list = []
+        try:
+            yield tasks
+        except _daq_error_types() as exc:
+            self._close_after_error(tasks)
+            if stoppable and self._stop_requested.is_set():  # the task was aborted under it by stop()
+                raise _Stopped() from exc
+            raise self._wrap(exc, what) from exc
+        except BaseException:
+            self._close_after_error(tasks)
+            raise
+        self._set_active(None)
+        failure = self._release(tasks)
+        if failure is not None:
+            raise self._wrap(failure, f"closing the tasks after {what}")
+
+    def _close_after_error(self, tasks: list) -> None:
+        self._set_active(None)
+        failure = self._release(tasks)
+        if failure is not None:
+            log.error("closing NI-DAQmx tasks after an error also failed: %s", failure)
 
     def _timeout(self, n: int) -> float:
         return n / self.config.fs + 5.0
@@ -121,23 +270,35 @@ class NidaqTasks:
     def _wrap(self, exc: BaseException, what: str) -> DeviceError:
         return DeviceError(f"NI-DAQmx failed while {what}: {exc}")
 
+    def _set_active(self, task) -> None:
+        with self._active_lock:
+            self._active_ao = task
+
+    def _run_output(self, ao, n: int) -> None:
+        """Start the written output task and wait for it, polling, so a stop or Ctrl-C ends it at once."""
+        self._set_active(ao)
+        ao.start()
+        deadline = time.monotonic() + self._timeout(n)
+        while True:
+            if self._stop_requested.is_set():
+                raise _Stopped()
+            if ao.is_task_done():
+                break
+            if time.monotonic() > deadline:
+                raise DeviceError(f"NI-DAQmx did not finish a {n / self.config.fs:.3f} s play in time")
+            time.sleep(POLL_S)
+
     # ------------------------------------------------------------------ operations
     def play(self, volts: np.ndarray) -> None:
         """Play output volts, shape (n_actuators, n), V at the analog outputs."""
         n = volts.shape[1]
-        ao = None
-        try:
+        self._stop_requested.clear()
+        with self._tasks("playing") as tasks:
             ao = self._ao_task()
-            self._finite(ao, self.config.fs, n)
+            tasks.append(ao)
+            self._finite(ao, n)
             ao.write(volts, auto_start=False)
-            self._active_ao = ao
-            ao.start()
-            ao.wait_until_done(timeout=self._timeout(n))
-        except _daq_error_types() as exc:
-            raise self._wrap(exc, "playing") from exc
-        finally:
-            self._active_ao = None
-            self._release(ao)
+            self._run_output(ao, n)
 
     def play_and_record(self, volts: np.ndarray, n_record: int) -> np.ndarray:
         """Play output volts and record the vibrometer input, sample-synchronously.
@@ -156,24 +317,19 @@ class NidaqTasks:
         """
         cfg = self.config
         n = volts.shape[1]
-        ai = ao = None
-        try:
+        self._stop_requested.clear()
+        with self._tasks("recording") as tasks:
             ai = self._ai_task([cfg.channels.vibrometer], ["vibrometer"], cfg.ai_range_v)
-            self._finite(ai, cfg.fs, n_record)
+            tasks.append(ai)
+            self._finite(ai, n_record)
             ai.triggers.start_trigger.cfg_dig_edge_start_trig(self.start_trigger)
             ai.start()  # armed: it waits for the output task's start trigger
             ao = self._ao_task()
-            self._finite(ao, cfg.fs, n)
+            tasks.insert(0, ao)  # the output is aborted first
+            self._finite(ao, n)
             ao.write(volts, auto_start=False)
-            self._active_ao = ao
-            ao.start()
-            ao.wait_until_done(timeout=self._timeout(n))
+            self._run_output(ao, n)
             data = ai.read(number_of_samples_per_channel=n_record, timeout=self._timeout(n_record))
-        except _daq_error_types() as exc:
-            raise self._wrap(exc, "recording") from exc
-        finally:
-            self._active_ao = None
-            self._release(ao, ai)
         out = np.asarray(data, dtype=float).reshape(-1)
         if out.shape != (n_record,):
             raise DeviceError(f"NI-DAQmx returned {out.size} samples, expected {n_record}")
@@ -181,34 +337,31 @@ class NidaqTasks:
 
     def read_inputs(self, channels: list[str], n: int, range_v: float = 10.0) -> np.ndarray:
         """Read analog inputs for ``n`` samples at the rig's rate; returns (n_channels, n) V."""
-        ai = None
-        try:
+        with self._tasks("reading inputs") as tasks:
             ai = self._ai_task(channels, [f"input{i + 1}" for i in range(len(channels))], range_v)
-            self._finite(ai, self.config.fs, n)
+            tasks.append(ai)
+            self._finite(ai, n)
             ai.start()
             data = ai.read(number_of_samples_per_channel=n, timeout=self._timeout(n))
-        except _daq_error_types() as exc:
-            raise self._wrap(exc, "reading inputs") from exc
-        finally:
-            self._release(ai)
         return np.asarray(data, dtype=float).reshape(len(channels), n)
 
     def write_zeros(self) -> None:
-        """Stop any output task that is generating, then set every actuator output to 0 V."""
-        active = self._active_ao
-        if active is not None:
-            try:
-                active.stop()
-            except _daq_error_types() as exc:  # already stopped or finished: zeros follow anyway
-                log.warning("stopping the running output task: %s", exc)
-        ao = None
-        try:
+        """Emergency stop, from any thread: abort and unreserve the running output task, then write 0 V."""
+        from nidaqmx.constants import TaskMode
+
+        self._stop_requested.set()
+        with self._active_lock:
+            active = self._active_ao
+            if active is not None:
+                for mode in (TaskMode.TASK_ABORT, TaskMode.TASK_UNRESERVE):
+                    try:
+                        active.control(mode)
+                    except _daq_error_types() as exc:  # already done and closing: zeros follow anyway
+                        log.warning("%s of the running output task failed: %s", mode.name, exc)
+        with self._tasks("setting the outputs to zero", stoppable=False) as tasks:
             ao = self._ao_task()
+            tasks.append(ao)
             ao.write(np.zeros(self.config.n_actuators), auto_start=True)
-        except _daq_error_types() as exc:
-            raise self._wrap(exc, "setting the outputs to zero") from exc
-        finally:
-            self._release(ao)
 
 
 class NidaqRig(HardwareRig):
@@ -221,6 +374,8 @@ class NidaqRig(HardwareRig):
         Must have as many actuators as ``config.channels.actuators``.
     task_factory : callable, optional
         Passed to :class:`NidaqTasks` (tests only).
+    system : object, optional
+        Passed to :class:`NidaqTasks` (tests only).
 
     Notes
     -----
@@ -231,10 +386,18 @@ class NidaqRig(HardwareRig):
     config_class = NidaqRigConfig
 
     def __init__(self, config: NidaqRigConfig, layout: ArrayLayout | None = None, *,
-                 task_factory: Callable[[], object] | None = None):
+                 task_factory: Callable[[], object] | None = None, system: object | None = None):
         super().__init__(config, layout)
         self.strap_sensors = config.force_sensors.build() if config.force_sensors else None
-        self.tasks = NidaqTasks(config, task_factory)
+        self.tasks = NidaqTasks(config, task_factory, system)
+        self._lock_device(f"nidaq:{self.tasks.device}")
+        try:  # the same checks as `vibrofocus devices --check`, before the first play
+            self.setup_report = self.tasks.check_setup()
+        except BaseException:
+            self.device_lock.release()
+            raise
+        self.last_clipped: np.ndarray | None = None
+        self.last_dropout_mask: np.ndarray | None = None
 
     def _play(self, drive: np.ndarray) -> None:
         self.tasks.play(drive / self.config.amplifier_gain)
@@ -244,6 +407,9 @@ class NidaqRig(HardwareRig):
         lag = self.config.latency_samples
         out = np.pad(drive / self.config.amplifier_gain, ((0, 0), (0, n_tail)))
         volts = self.tasks.play_and_record(out, n_total + lag)[lag:]
+        # A converter at the end of its range clipped the vibrometer signal: H would be wrong.
+        self.last_clipped = np.array([bool(np.any(np.abs(volts) >= 0.999 * self.config.ai_range_v))])
+        self.last_dropout_mask = np.zeros((1, volts.size), dtype=bool)
         return self.vibrometer.to_displacement(volts, self.fs)[None, :]
 
     def _zero_outputs(self) -> None:
@@ -255,7 +421,8 @@ class NidaqRig(HardwareRig):
         if fcfg is None:
             raise DeviceError("this nidaq rig has no force_sensors configured")
         n = max(1, int(round(fcfg.averaging_s * self.fs)))
-        volts = self.tasks.read_inputs(list(fcfg.channels), n)
+        with self._exclusive("a strap reading"):
+            volts = self.tasks.read_inputs(list(fcfg.channels), n)
         return self.strap_sensors.curve(volts.mean(axis=1))
 
     def describe(self) -> dict:

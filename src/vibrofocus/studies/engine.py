@@ -181,7 +181,8 @@ def headphone_beep(device: str | int, *, rig: object | None = None) -> Callable[
         by ``vibrofocus devices``).
     rig : Rig, optional
         The rig of the study. The cue plays outside the rig's safety layer, so a device
-        that is the rig's own audio interface (which drives the actuators) is refused.
+        that may be the rig's own audio interface (which drives the actuators), on any
+        host API, is refused (:class:`vibrofocus.rigs.cue.CueTone`).
 
     Returns
     -------
@@ -191,26 +192,11 @@ def headphone_beep(device: str | int, *, rig: object | None = None) -> Callable[
     Raises
     ------
     ValidationError
-        If ``device`` is the rig's actuator interface.
+        If ``device`` may be the rig's actuator interface.
     """
-    import sounddevice as sd
+    from ..rigs.cue import CueTone
 
-    from ..rigs.audio import resolve_audio_device
-
-    index = resolve_audio_device(device, outputs=1)
-    if index == getattr(rig, "device_index", None):
-        raise ValidationError(
-            f"the cue device {device!r} is the audio interface that drives the actuators; name the "
-            "participant's headphones instead (a cue must never reach an actuator)"
-        )
-    fs = 44_100
-    t = np.arange(int(0.1 * fs)) / fs
-    tone = (0.2 * np.sin(2 * np.pi * 1000.0 * t) * np.hanning(t.size)).astype(np.float32)
-
-    def cue() -> None:
-        sd.play(tone, fs, device=index, blocking=True)
-
-    return cue
+    return CueTone(device, rig=rig)
 
 
 @dataclass(frozen=True)

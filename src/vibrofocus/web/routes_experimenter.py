@@ -9,6 +9,7 @@ the token itself).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import secrets
 import threading
@@ -24,6 +25,8 @@ from ..studies.session_status import SESSION_ACTIONS, action_status
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
 from .state import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template, trial_position
 from .routes_participant import planned
+
+log = logging.getLogger(__name__)
 
 router = APIRouter()
 
@@ -136,10 +139,10 @@ def read_straps(
     web: WebState = Depends(require_token),
 ) -> dict[str, Any]:
     """Read the strap forces of a rig now, with a verdict per strap and one line to show."""
-    from ..rigs.force import check_straps
+    from ..rigs.force import check_straps, has_strap_sensors
 
     r = web.make_rig(rig, seed)
-    if getattr(r, "read_strap_forces", None) is None:
+    if not has_strap_sensors(r):
         raise HTTPException(409, detail=f"The {rig} rig has no strap force sensors; check the straps by hand before calibrating.")
     try:
         reading = check_straps(r)
@@ -162,6 +165,7 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     """Calibrate a participant on a rig in the background; poll the returned job."""
     _check_participant(web, body.participant_id)
     rig = web.make_rig(body.rig, body.seed)
+    _refuse_if_busy(rig)
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
     with web.lock:
         busy = [j for j in web.jobs.values() if j.status in ("running", "waiting")]
@@ -172,8 +176,16 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     return {"job_id": job.job_id}
 
 
+def _refuse_if_busy(rig: Any) -> None:
+    """409 when a hardware job holds the rig (one job uses a device at a time)."""
+    busy = getattr(rig, "busy_with", None) if getattr(rig, "one_job_at_a_time", False) else None
+    if busy:
+        raise HTTPException(409, detail=f"The {rig.kind} rig is busy with {busy}. Wait until it ends, or stop it first.")
+
+
 def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
     from ..calibration import calibrate, save_calibration
+    from ..rigs.force import has_strap_sensors
 
     def progress(*args: Any, **kwargs: Any) -> None:
         # Accept the callback in the forms a long task usually reports: a fraction, a
@@ -194,7 +206,7 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         )
 
     try:
-        if getattr(rig, "read_strap_forces", None) is not None:
+        if has_strap_sensors(rig):
             # Read before the first sweep, so the experimenter sees loose straps now;
             # calibrate() stores its own reading with the calibration.
             from ..rigs.force import check_straps
@@ -202,7 +214,9 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
             reading = check_straps(rig)
             job.straps = {**reading.to_dict(), "message": reading.message}
         single_spot = getattr(rig, "max_points_per_recording", None) is not None
-        cal = calibrate(rig, participant_id=job.participant_id, progress=progress, prompt=prompt if single_spot else None)
+        with rig.reserve(f"the calibration of {job.participant_id}"):
+            cal = calibrate(rig, participant_id=job.participant_id, progress=progress,
+                            prompt=prompt if single_spot else None)
         folder = web.data_dir / "calibrations"
         private_dir(folder)
         path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
@@ -373,6 +387,8 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
                 runner.stop()
         elif status == "running":
             runner = web.runner(session_id, create=True)
+            if runner.rig is not None and not runner.running:
+                _refuse_if_busy(runner.rig)  # before the status is stored
         with web.db:
             web.store.set_status(session_id, status)
     except StudyError as exc:
@@ -385,6 +401,23 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
         if runner is not None:
             runner.pause()
     return _session_out(web, session_id)
+
+
+@router.post("/api/emergency-stop")
+def emergency_stop(web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """Every output to 0 V now; calibrations cancelled, running sessions paused (resume them later)."""
+    done = web.emergency_stop()
+    with web.lock:
+        session_ids = list(web.runners)
+    for sid in session_ids:
+        with web.db:
+            try:
+                if web.store.session(sid).status == "running":
+                    web.store.set_status(sid, "paused")
+            except StudyError:
+                continue
+    log.warning("emergency stop: %s", "; ".join(done))
+    return {"stopped": done}
 
 
 # ---------------------------------------------------------------------- export and analysis

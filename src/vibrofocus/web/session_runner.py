@@ -17,6 +17,7 @@ each change increments ``seq`` so the page can tell a new cue from the same one 
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import threading
 import time
@@ -346,7 +347,8 @@ class SessionRunner:
             # A runner rebuilt for a paused session (a server restart) waits before the
             # engine starts, which would set the session running.
             if self._held() != PAUSE or self.wait_resume() is True:
-                summary = self.engine.run(self)
+                with self._reserved():  # one job on the hardware at a time
+                    summary = self.engine.run(self)
                 if summary.status == "completed":
                     self._set("done", trial_index=None)
                     return
@@ -356,6 +358,11 @@ class SessionRunner:
             self._set("error", error=f"{type(exc).__name__}: {exc}")
         finally:
             self._silence()
+
+    def _reserved(self):
+        if self.rig is None:
+            return contextlib.nullcontext()
+        return self.rig.reserve(f"session {self.session_id}")
 
     def _silence(self) -> None:
         if self.rig is not None:

@@ -276,7 +276,8 @@ class WebState:
         --rig-config FILE``), built from that config file.
         """
         self.check_rig_kind(kind)
-        key = (kind, -1 if seed is None else int(seed))
+        # One rig per physical device: a hardware rig is the same object whatever the seed.
+        key = (kind, -1 if seed is None or kind != "simulated" else int(seed))
         with self.lock:
             if key not in self.rigs:
                 factory = self.rig_factory
@@ -372,6 +373,37 @@ class WebState:
                 except Exception:  # noqa: BLE001 - one broken session must not stop the server
                     log.exception("could not resume session %s", sid)
         return started
+
+    def emergency_stop(self) -> list[str]:
+        """Every rig's outputs to zero now, every calibration cancelled, every runner paused.
+
+        The caller stores the paused sessions' status (the routes own the session state
+        machine).
+
+        Returns
+        -------
+        list of str
+            What was stopped, as people read it.
+        """
+        with self.lock:
+            rigs = list(self.rigs.items())
+            runners = list(self.runners.items())
+            jobs = [j for j in self.jobs.values() if j.status in ("running", "waiting")]
+        done = []
+        for (kind, _), rig in rigs:  # first the outputs: nothing else is as urgent
+            try:
+                rig.stop()
+                done.append(f"{kind} rig outputs at 0 V")
+            except Exception as exc:  # noqa: BLE001 - the others must still be stopped
+                log.exception("emergency stop of the %s rig failed", kind)
+                done.append(f"{kind} rig: stop FAILED ({exc}); switch the amplifier off")
+        for job in jobs:
+            job.cancel()
+            done.append(f"calibration of {job.participant_id} cancelled")
+        for sid, runner in runners:
+            runner.pause()
+            done.append(f"session {sid} paused")
+        return done
 
     def shutdown(self) -> None:
         """Stop every runner (their sessions stay 'running' in the store, to resume)."""

@@ -50,6 +50,24 @@
     return node;
   }
 
+  // ---------------------------------------------------------------- emergency stop
+  async function emergencyStop() {
+    try {
+      const out = await api("/api/emergency-stop", { method: "POST" });
+      flash("Stopped: " + out.stopped.join("; "), true);
+    } catch (err) {
+      flash("The emergency stop did not reach the server (" + err.message + "): switch the amplifier off.", true);
+    }
+  }
+  $("emergency-stop").addEventListener("click", emergencyStop);
+  let lastEscape = 0;
+  document.addEventListener("keydown", (ev) => {
+    if (ev.key !== "Escape") return;
+    const now = Date.now();
+    if (now - lastEscape < 800) emergencyStop();
+    lastEscape = now;
+  });
+
   // ---------------------------------------------------------------- participants
   let participants = [];
   async function loadParticipants(select = null) {

@@ -1,0 +1,80 @@
+"""One job on the hardware at a time, and the emergency stop, through the web app's API.
+
+The rig is the NI rig on the FAKE NI-DAQmx task layer of tests/rigs (no NI driver runs
+here); the app, its routes and its calibration thread are the real ones, in process.
+"""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+import pytest
+from fastapi.testclient import TestClient
+
+from tests.rigs.fake_nidaqmx import FakeDevice
+from tests.rigs.test_nidaq import nidaq_config
+from vibrofocus.rigs import parse_rig_config
+from vibrofocus.rigs.nidaq import NidaqRig
+from vibrofocus.web.app import create_app
+
+TOKEN = "t" * 32
+
+
+@pytest.fixture
+def app_and_device(tmp_path):
+    device = FakeDevice()
+    made = []
+
+    def factory(kind, seed=None, config=None):
+        if kind == "simulated":
+            from vibrofocus.rigs import make_rig
+
+            return make_rig("simulated", seed=seed)
+        rig = NidaqRig(parse_rig_config(nidaq_config(force_sensors=None)), task_factory=device.factory,
+                       system=device.system())
+        made.append(rig)
+        return rig
+
+    config = tmp_path / "lab.json"
+    config.write_text("{}")
+    app = create_app(tmp_path / "s.sqlite", token=TOKEN, rig="nidaq", rig_factory=factory, rig_config=config,
+                     allowed_hosts=("testserver",), resume=False)
+    with TestClient(app, headers={"X-Vibrofocus-Token": TOKEN, "Origin": "http://testserver"}) as client:
+        yield client, device, made
+    for rig in made:
+        rig.close()
+
+
+def _wait(client, job_id, status, timeout=10.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        job = client.get(f"/api/calibrations/jobs/{job_id}").json()
+        if job["status"] == status:
+            return job
+        time.sleep(0.05)
+    raise AssertionError(f"job never reached {status}: {job}")
+
+
+def test_a_second_hardware_job_is_refused_and_the_emergency_stop_zeroes_the_outputs(app_and_device):
+    client, device, made = app_and_device
+    assert client.post("/api/participants", json={"participant_id": "P01"}).status_code == 201
+    r = client.post("/api/calibrations", json={"participant_id": "P01", "rig": "nidaq"})
+    assert r.status_code == 202
+    job_id = r.json()["job_id"]
+    _wait(client, job_id, "waiting")  # at its first point, holding the rig
+    # Another seed names the same physical device: one rig, still busy.
+    r = client.post("/api/calibrations", json={"participant_id": "P01", "rig": "nidaq", "seed": 3})
+    assert r.status_code == 409
+    assert "The nidaq rig is busy with the calibration of P01" in r.json()["detail"]
+    assert len(made) == 1
+    device.outputs["Dev1/ao1"] = 0.4  # as if a drive were holding its last value
+    r = client.post("/api/emergency-stop")
+    assert r.status_code == 200
+    assert r.json()["stopped"] == ["nidaq rig outputs at 0 V", "calibration of P01 cancelled"]
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+    _wait(client, job_id, "cancelled")
+    # Free again once the job ended.
+    r = client.post("/api/calibrations", json={"participant_id": "P01", "rig": "nidaq"})
+    assert r.status_code == 202
+    client.post(f"/api/calibrations/jobs/{r.json()['job_id']}/cancel")
