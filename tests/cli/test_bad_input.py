@@ -394,6 +394,28 @@ def test_10_a_stored_limit_never_loosens_the_rigs_own(ws):
     assert json.loads(Path(str(wav) + ".json").read_text())["volts_per_full_scale"] == 5
 
 
+@pytest.mark.parametrize("stored, refused", [(15.0, False), (25.0, True)])
+def test_10_a_hardware_rigs_stored_limit_is_capped_by_the_hard_ceiling(ws, stored, refused):
+    from vibrofocus.rigs.safety import PEAK_V_CEILING
+
+    def as_audio(f):
+        rig = json.loads(f.attrs["rig"])
+        rig["kind"] = "audio"
+        rig.setdefault("limits", {})["peak_v"] = stored
+        f.attrs["rig"] = json.dumps(rig)
+
+    cal = _edit_calibration(ws["cal"], ws["folder"] / "audio.nc", as_audio)
+    out_npz = ws["folder"] / "d.npz"
+    args = ["render", "-c", cal, "-l", "5", "-o", out_npz]
+    if refused:
+        run_checked(ws, args, f"peak_v={stored:g}", "hard ceiling", f"at most {PEAK_V_CEILING:g}")
+        return
+    out, code = invoke(args)
+    assert code == 0, out
+    with np.load(out_npz) as data:
+        assert json.loads(str(data["metadata"]))["limit_v"] == stored
+
+
 def test_12_a_bit_flip_in_the_header_is_one_line_and_no_ignored_exception(ws):
     data = bytearray(ws["cal"].read_bytes())
     data[200] ^= 0x10  # inside HDF5's superblock / root object header (checksummed)

@@ -27,7 +27,8 @@ def render_command(
                                   help="Window length, samples."),
     limit_v: float | None = typer.Option(None, "--limit-v", min=LIMIT_V_MIN,
                                          help="Drive limit, V peak: at most the rig's limit stored in the calibration, "
-                                              "itself never above the reference setup's 10 V (default: that limit)."),
+                                              "itself never above the rig's own (10 V for the simulated rig, 20 V "
+                                              "for any; default: that limit)."),
     refuse: bool = typer.Option(False, "--refuse-over-limit", help="Refuse a design over the limit instead of "
                                                                    "scaling it down."),
     wav: Path | None = typer.Option(None, "--wav", help="Also write a multichannel WAV (float32, full scale = "
@@ -53,6 +54,7 @@ def render_command(
         from ..errors import ValidationError
         from ..io.drives import DRIVES_SUFFIXES, write_drives, write_drives_wav
         from ..rendering import render
+        from ..rigs.safety import PEAK_V_CEILING, SafetyLimits
 
         allow_overwrite(force)
         protect(calibration, "calibration")
@@ -74,13 +76,17 @@ def render_command(
         rig_limit = rig_limits.get("peak_v", DRIVE_LIMIT_V)
         if isinstance(rig_limit, bool) or not isinstance(rig_limit, (int, float)) or not 0 < rig_limit < float("inf"):
             raise ValidationError(f"{calibration}: the stored rig limit peak_v={rig_limit!r} is not a positive number")
-        if rig_limit > DRIVE_LIMIT_V and limit_v is None:
-            # A stored limit never loosens the rig's own: a file cannot raise the ceiling.
+        # A stored limit never loosens the rig's own: the simulated rig's is fixed, and no
+        # hardware configuration may pass the hard ceiling; a larger value was edited in.
+        kind = cal.rig.get("kind")
+        own = SafetyLimits().peak_v if kind == "simulated" else PEAK_V_CEILING
+        if rig_limit > own and limit_v is None:
             raise ValidationError(
-                f"{calibration}: the stored rig limit peak_v={rig_limit:g} V is above the {DRIVE_LIMIT_V:g} V peak "
-                f"of the reference setup (the file may have been edited); give --limit-v, at most {DRIVE_LIMIT_V:g}"
+                f"{calibration}: the stored rig limit peak_v={rig_limit:g} V is above the {own:g} V that "
+                + ("the simulated rig has" if kind == "simulated" else "any rig may have (the hard ceiling)")
+                + f" (the file may have been edited); give --limit-v, at most {own:g}"
             )
-        rig_limit = min(float(rig_limit), DRIVE_LIMIT_V)
+        rig_limit = min(float(rig_limit), own)
         if limit_v is not None and limit_v > rig_limit * (1 + 1e-9):
             raise ValidationError(
                 f"--limit-v {limit_v:g} is above the {rig_limit:g} V peak limit of the rig this calibration was "
