@@ -65,6 +65,7 @@ __all__ = [
     "output_target",
     "output_guard",
     "protect",
+    "guarding",
     "allow_overwrite",
     "file_kind",
     "make_output_folder",
@@ -339,6 +340,11 @@ def allow_overwrite(force: bool) -> None:
     guard = _guard.get()
     if guard is not None:
         guard.force = bool(force)
+
+
+def guarding() -> bool:
+    """Whether a command's :func:`output_guard` is active (else :func:`protect` does nothing)."""
+    return _guard.get() is not None
 
 
 def protect(paths: str | os.PathLike | Iterable[str | os.PathLike], what: str) -> None:

@@ -61,7 +61,8 @@ def _traceback() -> None:
 
 
 def print_error(message: str) -> None:
-    """Print ``error: message`` on stderr as one logical line (no markup, no control characters), cut at :data:`MAX_MESSAGE_CHARS`."""
+    """Print ``error: message`` on stderr as one line: no markup, no control characters, cut at
+    :data:`MAX_MESSAGE_CHARS`."""
     text = str(message)
     if len(text) > MAX_MESSAGE_CHARS:
         text = f"{text[:MAX_MESSAGE_CHARS]}... (message cut; {len(text):,} characters)"
@@ -73,7 +74,8 @@ def print_error(message: str) -> None:
 
 
 def log_folder() -> Path:
-    """Where tracebacks of unexpected errors go: ``$VIBROFOCUS_LOG_DIR``, else ``vibrofocus-logs`` in the temp folder."""
+    """Where tracebacks of unexpected errors go: ``$VIBROFOCUS_LOG_DIR``, else ``vibrofocus-logs`` in the
+    temporary folder."""
     import tempfile
 
     return Path(os.environ.get("VIBROFOCUS_LOG_DIR") or Path(tempfile.gettempdir()) / "vibrofocus-logs")

@@ -35,7 +35,8 @@ def analyze_command(
         show_default=False,
     ),
     out: Path = typer.Option(
-        ..., "--out", "-o", help="Output folder for report.json, report.html and the PNG figures (created; its parent must exist).",
+        ..., "--out", "-o",
+        help="Output folder for report.json, report.html and the PNG figures (created; its parent must exist).",
         show_default=False,
     ),
     exclude_invalid: bool = typer.Option(

@@ -26,7 +26,8 @@ def _fmt(value: float, digits: int = 2) -> str:
 @command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
 def demo_command(
     seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Simulated participant (forearm) seed."),
-    out: Path = typer.Option(Path("demo-output"), "--out", "-o", help="Folder for the figures (created; its parent must exist)."),
+    out: Path = typer.Option(Path("demo-output"), "--out", "-o",
+                             help="Folder for the figures (created; its parent must exist)."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Write the PNG figures."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (results and summary) and nothing else."),
     location: int = typer.Option(5, "--field-location", help="Location shown in the focused-field figure (1-9)."),

@@ -17,7 +17,8 @@ def play(
     drives_file: Path = typer.Argument(..., help="An .npz with arrays drives (n_actuators, n) V and fs (Hz)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
-    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX, help="Participant seed of the simulated forearm."),
+    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
+                                    help="Participant seed of the simulated forearm."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Only run the safety checks; play nothing."),
     as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
 ) -> None:

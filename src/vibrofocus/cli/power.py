@@ -39,7 +39,8 @@ def power_command(
     locations: str | None = typer.Option(None, "--locations", help="Location numbers 1-9, comma separated, at "
                                                                    "least two (default 1-9)."),
     alpha: float = typer.Option(0.05, "--alpha", help="Significance level, in (0, 1)."),
-    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Master seed (study j of size N uses [seed, N, j])."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX,
+                             help="Master seed (study j of size N uses [seed, N, j])."),
     scheduler: str | None = typer.Option(
         None, "--scheduler", help="Dask scheduler address (tcp://host:8786); default a LocalCluster on this machine."
     ),

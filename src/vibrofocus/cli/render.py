@@ -15,7 +15,8 @@ from ._command import command
                                "--out drives.npz --wav drives.wav")
 def render_command(
     calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration file (.nc)."),
-    location: int = typer.Option(..., "--location", "-l", help="Target location number (1-based; 1-9 on the reference layout)."),
+    location: int = typer.Option(..., "--location", "-l",
+                                 help="Target location number (1-based; 1-9 on the reference layout)."),
     out: Path = typer.Option(..., "--out", "-o", help="Drives file: .npz (for vibrofocus play) or .csv."),
     method: str = typer.Option("inverse", "--method", "-m", help="funneling | inverse | combination | time_reversal"),
     regularization: str | None = typer.Option(None, "--regularization", help="tikhonov | tsvd (default: plain "

@@ -15,7 +15,8 @@ from ._command import command
 def simulate_study(
     participants: int = typer.Option(3, "--participants", "-n", min=1, max=1000,
                                      help="Number of simulated participants."),
-    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Seed of the whole simulation (participants, trial orders, answers)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX,
+                             help="Seed of the whole simulation (participants, trial orders, answers)."),
     db: Path = typer.Option(..., "--db", help="Study database (SQLite); an unfinished one is resumed."),
     pace: float = typer.Option(0.0, "--pace", min=0.0, max=60.0, help="Wait this long after each answer, s."),
     trials_csv: Path | None = typer.Option(
@@ -56,11 +57,12 @@ def simulate_study(
         # minutes of simulation (and nothing is created for a refused run).
         check_writable(db, what="study database")
         protect(db, "study database")
-        if trials_csv is not None:
-            if db.exists():
-                from ..studies import StudyStore
+        if db.exists():
+            from ..studies import StudyStore
 
-                StudyStore(db, create=False).close()  # protects the calibrations it lists
+            # A foreign file is refused now; an open store protects the calibrations it lists.
+            StudyStore(db, create=False).close()
+        if trials_csv is not None:
             check_writable(trials_csv, what="trials file", written_as=".csv")
         cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
         created = not cal_dir.exists()

@@ -47,7 +47,8 @@ def run(
     calibration: Path = typer.Option(..., "--calibration", help="The participant's calibration file (netCDF)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
-    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX, help="Seed of the trial order (default: random, stored)."),
+    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
+                                    help="Seed of the trial order (default: random, stored)."),
     beep: bool = typer.Option(True, "--beep/--no-beep", help="Cue before each stimulus (the terminal bell unless --beep-device)."),
     beep_device: str | None = typer.Option(
         None, "--beep-device",

@@ -287,7 +287,7 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
         not a vibrofocus calibration; unknown schema version; missing variables or
         attributes; inconsistent dimensions, shapes or dtypes; NaN/Inf in the transfer
         matrix (named with its frequency, point and actuator), or a finite one that no
-        skin gives (|H| above :data:`~vibrofocus.defaults.H_MAX_M_PER_V` anywhere, or
+        skin gives (a magnitude of H above :data:`~vibrofocus.defaults.H_MAX_M_PER_V` anywhere, or
         the whole array below :data:`~vibrofocus.defaults.H_MIN_PEAK_M_PER_V` in the
         band; named likewise); a bad band; points or actuators that do not match the
         layout. The message names the file.

@@ -139,11 +139,11 @@ def write_drives_wav(
 
 
 def _npy_header(zf, name: str, path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
-    """Shape, dtype and data size of member ``name`` of an npz, from its header alone (nothing decompressed but the header).
+    """Shape, dtype and data size (bytes) of member ``name`` of an npz, from its header alone.
 
-    The header's shape is checked against the size the archive's directory declares for
-    the member, so a header that claims more data than the file holds is refused here,
-    before anything is allocated.
+    Nothing but the header is decompressed. The header's shape is checked against the
+    size the archive's directory declares for the member, so a header that claims more
+    data than the file holds is refused here, before anything is allocated.
     """
     info = zf.getinfo(name)
     with zf.open(info) as fh:
@@ -200,7 +200,7 @@ def read_drives(path: str | os.PathLike, *, max_duration_s: float | None = None)
     import zipfile
 
     from .._atomic import protect
-    from .._validation import as_array, check_memory, check_positive
+    from .._validation import as_array, check_memory, check_positive, shorten
 
     path = Path(path)
     protect(path, "drives file")
@@ -223,9 +223,8 @@ def read_drives(path: str | os.PathLike, *, max_duration_s: float | None = None)
             files = [n.removesuffix(".npy") for n in zf.namelist()]
             missing = [k for k in ("drives", "fs") if k not in files]
             if missing:
-                raise ValidationError(
-                    f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {', '.join(files) or 'nothing'})"
-                )
+                held = shorten(", ".join(files) or "nothing", 200)
+                raise ValidationError(f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {held})")
             fs_shape, _, _ = _npy_header(zf, "fs.npy", path)
             if int(np.prod(fs_shape)) != 1:
                 raise ValidationError(f"drives file {path}: fs must be one number, got shape {fs_shape}")

@@ -186,8 +186,10 @@ class StudyDatabase:
 
     def _protect_files(self) -> None:
         """Within a command, no output may replace this database, its journal or a calibration it lists."""
-        from .._atomic import protect
+        from .._atomic import guarding, protect
 
+        if not guarding():  # the Python API and the web app: no command's outputs to check
+            return
         protect([self.path, Path(str(self.path) + "-wal"), Path(str(self.path) + "-shm")], "study database")
         try:
             rows = self._conn.execute("SELECT path FROM calibrations").fetchall()
