@@ -36,12 +36,23 @@ def force_option() -> bool:
 
 
 def check_rig_options(rig: str, rig_config: Path | None) -> None:
-    """Refuse ``--rig-config`` with the simulated rig instead of ignoring it.
+    """Refuse ``--rig-config`` with the simulated rig instead of ignoring it; no output may replace the config.
+
+    Parameters
+    ----------
+    rig : str
+        ``--rig``.
+    rig_config : Path or None
+        ``--rig-config``.
 
     Raises
     ------
     ValidationError
     """
+    if rig_config is not None:
+        from .._atomic import protect
+
+        protect(rig_config, "rig config")
     if rig == "simulated" and rig_config is not None:
         from ..errors import ValidationError
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import SEED_MAX
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options
 from ._command import command
 
 
@@ -62,7 +62,7 @@ def devices(
 @command("straps")
 def straps(
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
-    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
     seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
                                     help="Participant seed of the simulated forearm."),
     target: float | None = typer.Option(None, "--target-n", min=0.01, max=20.0,
@@ -79,6 +79,7 @@ def straps(
 
         from ..rigs import check_straps, make_rig
 
+        check_rig_options(rig, rig_config)
         with make_rig(rig, config=rig_config, seed=seed) as r:
             reading = check_straps(r, target_n=target, tolerance_n=tolerance)
         if as_json:
