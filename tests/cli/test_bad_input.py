@@ -541,3 +541,23 @@ def test_no_trials_export_replaces_a_file_of_another_kind(seed_files, tmp_path_f
     out, code = invoke(["study", "export", "--db", seed_files["db"], "--out", target])
     assert_refused(out, code, "--force")
     assert changed(before, snapshot(folder)) == []
+
+
+def test_end_of_input_at_a_prompt_is_one_error_line():
+    """click turns the end of input at a prompt into ``typer.Abort``; the root group says so in one line."""
+    import typer
+
+    from vibrofocus.cli.main import _OneLineErrors
+
+    mini = typer.Typer(cls=_OneLineErrors)
+
+    @mini.command()
+    def ask() -> None:
+        typer.prompt("where did you feel it")
+
+    @mini.command()
+    def other() -> None:  # two commands: a group, as the real app
+        pass
+
+    result = runner.invoke(mini, ["ask"], input="")
+    assert_refused(result.output, result.exit_code, "input ended")

@@ -47,10 +47,15 @@ class _OneLineErrors(TyperGroup):
             return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
         try:
             rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
-        except typer.Abort as exc:
-            if isinstance(exc.__cause__, KeyboardInterrupt) or isinstance(exc.__context__, KeyboardInterrupt):
+        except typer.Abort as exc:  # raised by click for Ctrl-C or end of input at a prompt
+            cause = exc.__cause__ or exc.__context__
+            if isinstance(cause, KeyboardInterrupt):
                 err_console.print("[bold yellow]interrupted[/]", highlight=False)
                 sys.exit(EXIT_INTERRUPTED)
+            if isinstance(cause, EOFError):
+                typer.echo()  # end the prompt's line
+                print_error("the input ended (end of file) while a prompt waited for an answer; run it at a terminal")
+                sys.exit(EXIT_USER_ERROR)
             err_console.print("aborted", highlight=False)
             sys.exit(1)
         except typer.TyperException as exc:  # click's ClickException and UsageError
