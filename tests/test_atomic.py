@@ -118,3 +118,13 @@ def test_make_output_folder_creates_one_level_only(tmp_path):
     with pytest.raises(OutputError, match="in the way"):
         _atomic.make_output_folder(tmp_path / "file")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["file", "out"]
+
+
+def test_a_file_protected_before_it_existed_stays_protected_once_created(tmp_path):
+    db = tmp_path / "new.db"
+    with _atomic.output_guard(force=True):
+        _atomic.protect(db, "study database")
+        db.write_bytes(b"SQLite format 3\x00 created after")
+        with pytest.raises(OutputError, match="same file"):
+            _atomic.write_text(db, "participant\n")
+    assert db.read_bytes() == b"SQLite format 3\x00 created after"

@@ -433,7 +433,8 @@ def output_target(path: str | os.PathLike, what: str = "file", *, kind: str | No
     guard = _guard.get()
     if guard is None:
         return real
-    same = guard.inodes.get((st.st_dev, st.st_ino)) if st is not None else guard.paths.get(str(real))
+    # By inode; by path too, for a file protected before it existed (a new database).
+    same = (guard.inodes.get((st.st_dev, st.st_ino)) if st is not None else None) or guard.paths.get(str(real))
     if same is not None:
         raise refuse(f"it is the {same} this command reads (the same file); choose another name", _errno.EEXIST)
     if st is not None and kind is not None and not guard.force:
