@@ -561,3 +561,16 @@ def test_end_of_input_at_a_prompt_is_one_error_line():
 
     result = runner.invoke(mini, ["ask"], input="")
     assert_refused(result.output, result.exit_code, "input ended")
+
+
+@pytest.mark.parametrize("target, needle", [("fifo", "FIFO"), ("cal", "not a study database"),
+                                            ("folder", "folder"), ("missing", "does not exist")])
+def test_serve_refuses_a_database_that_is_none_before_touching_it(ws, target, needle):
+    """The server tightens its database's mode at start: a calibration given as --db kept its mode (0644)."""
+    ws["cal"].chmod(0o644)
+    db = {"cal": ws["cal"], "folder": ws["folder"], "missing": ws["folder"] / "no" / "x.db",
+          "fifo": ws["folder"] / "fifo.db"}[target]
+    if target == "fifo":
+        os.mkfifo(db)
+    run_checked(ws, ["serve", "--no-browser", "--db", db], needle)
+    assert not (ws["folder"] / "no").exists()
