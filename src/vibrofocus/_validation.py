@@ -184,7 +184,7 @@ def integer_text(text: str) -> int | None:
     return int(value)
 
 
-def shorten(value: Any, limit: int = SHORTEN_CHARS) -> str:
+def shorten(value: Any, limit: int = SHORTEN_CHARS, *, as_text: bool = False) -> str:
     """``repr(value)`` cut to at most about ``limit`` characters, so a message never echoes unbounded input.
 
     Parameters
@@ -193,13 +193,15 @@ def shorten(value: Any, limit: int = SHORTEN_CHARS) -> str:
         What the user gave.
     limit : int
         Characters kept.
+    as_text : bool
+        Use ``str(value)`` instead of the repr (no quotes), for lists of names.
 
     Returns
     -------
     str
-        The repr, or its start followed by ``... (N characters)``.
+        The repr (or text), or its start followed by ``... (N characters)``.
     """
-    text = repr(value)
+    text = str(value) if as_text else repr(value)
     if len(text) <= limit:
         return text
     return f"{text[:limit]}... ({len(text)} characters)"

@@ -79,7 +79,7 @@ def _require_columns(raw: pd.DataFrame) -> None:
         raise ValidationError(
             f"trials file is missing the column(s) {', '.join(missing)}; "
             f"expected the columns {', '.join(REQUIRED_COLUMNS)} (docs/file-formats.md, trials file), got "
-            f"{shorten(', '.join(map(str, raw.columns)), 300)}"
+            f"{shorten(', '.join(map(str, raw.columns)), 300, as_text=True)}"
         )
 
 

@@ -223,7 +223,7 @@ def read_drives(path: str | os.PathLike, *, max_duration_s: float | None = None)
             files = [n.removesuffix(".npy") for n in zf.namelist()]
             missing = [k for k in ("drives", "fs") if k not in files]
             if missing:
-                held = shorten(", ".join(files) or "nothing", 200)
+                held = shorten(", ".join(files) or "nothing", 200, as_text=True)
                 raise ValidationError(f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {held})")
             fs_shape, _, _ = _npy_header(zf, "fs.npy", path)
             if int(np.prod(fs_shape)) != 1:
