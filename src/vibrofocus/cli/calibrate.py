@@ -21,7 +21,8 @@ from ._command import command
 
 @command("calibrate", epilog="Example: vibrofocus calibrate --rig simulated --participant P01 --out P01.nc --yes")
 def calibrate_command(
-    participant: str = typer.Option(..., "--participant", "-p", help="Participant id stored in the file."),
+    participant: str = typer.Option(..., "--participant", "-p",
+                                    help="Participant id stored in the file (1-64 letters, digits, _ . -)."),
     out: Path = typer.Option(..., "--out", "-o", help="Calibration file to write (a .nc name; netCDF4/HDF5)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
     rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
@@ -77,10 +78,12 @@ def calibrate_command(
         from ..defaults import participant_seed
         from ..errors import ValidationError
         from ..rigs import make_rig
+        from ..studies.storage import check_participant_id
         from ._save import save_or_offer_another_path
 
         console = Console()
         allow_overwrite(force)
+        check_participant_id(participant)  # the same rule as the study database's
         check_rig_options(rig, rig_config)
         if out.suffix.lower() != ".nc":
             raise ValidationError(f"--out {out}: use a .nc file name (the calibration is a netCDF4/HDF5 file)")

@@ -71,13 +71,14 @@ def run(
         from ..studies import StudyStore
         from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
         from ..studies.terminal import InputEnded, TerminalResponder
+        from .._validation import shorten
 
         console = Console()
         check_rig_options(rig, rig_config)
         cal = load_calibration(calibration)
         if getattr(cal, "participant_id", participant) != participant:
             raise StudyError(
-                f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {participant!r}"
+                f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {shorten(participant)}"
             )
         # The rig first: a rig that cannot be made (no config, no device) leaves the
         # database as it was, with no participant or session planned for nothing.
