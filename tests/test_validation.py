@@ -87,3 +87,31 @@ def test_check_band_shape():
         check_band((10.0,), 1000.0)
     with pytest.raises(ValidationError, match="band must be a pair"):
         check_band(None, 1000.0)
+
+
+# --------------------------------------------------------------------------- issue 31
+def test_shorten_bounds_what_a_message_echoes():
+    from vibrofocus._validation import shorten
+
+    assert shorten("abc") == "'abc'"
+    long = shorten("x" * 4_000_000)
+    assert len(long) < 120 and "4000002 characters" in long
+
+
+def test_check_memory_against_what_the_machine_has():
+    from vibrofocus._validation import available_memory_bytes, check_memory
+
+    free = available_memory_bytes()
+    if free is None:
+        pytest.skip("this system does not tell its available memory")
+    check_memory(1024, "a small job")
+    with pytest.raises(ValidationError, match=r"--n-samples 1e20 needs about .* GiB"):
+        check_memory(4 * free, "--n-samples 1e20")
+
+
+@pytest.mark.parametrize("text", ["\u0663", "\uff15", "1\u0660", "\u00b2"])
+def test_integer_text_reads_ascii_digits_only(text):
+    from vibrofocus._validation import integer_text
+
+    assert integer_text(text) is None
+    assert integer_text(" 7 ") == 7

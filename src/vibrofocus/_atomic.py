@@ -14,6 +14,13 @@ One family of helpers used by every writer of the package (calibration netCDF, d
 - :func:`output_error` turns an :class:`OSError` (``ENOSPC``, ``EDQUOT``, ``EACCES``,
   ``EPERM``, ``EROFS``, ...) into an :class:`~vibrofocus.errors.OutputError` with one
   clear line.
+- :func:`output_target` holds the rules of what an output may replace, and every writer
+  above applies it (before writing and again just before the rename): never a folder, a
+  device, a FIFO or a socket; through a symbolic link only to a regular file, which is
+  replaced while the link stays; never a file this command reads (an input, the study
+  database, a calibration), compared by device and inode; and, inside a command
+  (:func:`output_guard`), an existing file of another kind (a calibration under a CSV's
+  name) only with ``--force`` (:func:`allow_overwrite`).
 
 Interrupts: the commit (rename) runs with SIGINT/SIGTERM deferred (see
 :func:`critical_section`), so an interrupt leaves either the old file or the complete
@@ -24,14 +31,17 @@ stops the save before the commit.
 from __future__ import annotations
 
 import contextlib
+import contextvars
 import ctypes
 import errno as _errno
 import os
 import shutil
 import signal
+import stat
 import tempfile
 import threading
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import IO, Any
 
@@ -52,6 +62,13 @@ __all__ = [
     "clear_interrupt",
     "install_signal_handlers",
     "new_file_mode",
+    "output_target",
+    "output_guard",
+    "protect",
+    "guarding",
+    "allow_overwrite",
+    "file_kind",
+    "make_output_folder",
 ]
 
 #: Errors that mean "this location cannot take the file", reported as one line.
@@ -232,6 +249,206 @@ def new_file_mode(target: Path) -> int:
         return 0o666 & ~_umask()
 
 
+# ---------------------------------------------------------------------- output targets
+#: Leading bytes of the kinds of file a command may meet at an output name.
+_MAGIC = (
+    (b"SQLite format 3\x00", "SQLite database"),
+    (b"\x89HDF\r\n\x1a\n", "HDF5/netCDF file (a calibration?)"),
+    (b"PK\x03\x04", "zip/npz archive"),
+    (b"PK\x05\x06", "zip/npz archive"),
+    (b"\x89PNG\r\n\x1a\n", "PNG image"),
+    (b"GIF8", "GIF image"),
+    (b"%PDF", "PDF document"),
+)
+#: The kind each output suffix is written as (for the check before writing).
+_SUFFIX_KIND = {
+    ".nc": "HDF5/netCDF file (a calibration?)", ".npz": "zip/npz archive", ".png": "PNG image",
+    ".gif": "GIF image", ".wav": "WAV audio", ".csv": "text file", ".json": "text file", ".html": "text file",
+    ".txt": "text file", ".md": "text file",
+}
+_TEXT = "text file"
+
+
+def file_kind(path: str | os.PathLike) -> str | None:
+    """What a file holds, from its first bytes: ``"SQLite database"``, ``"text file"``, ...
+
+    Parameters
+    ----------
+    path : path-like
+        A regular file.
+
+    Returns
+    -------
+    str or None
+        None for an empty or unreadable file (nothing to lose by its kind).
+    """
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    if not head:
+        return None
+    for magic, kind in _MAGIC:
+        if head.startswith(magic):
+            return kind
+    if head[:4] == b"RIFF" and head[8:12] == b"WAVE":
+        return "WAV audio"
+    if b"\x00" in head:
+        return "binary file"
+    try:
+        head.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        if exc.start < len(head) - 3:  # not just a character cut at the 4096th byte
+            return "binary file"
+    return _TEXT
+
+
+@dataclass
+class _Guard:
+    """What the running command reads (by device and inode, or by path before it exists) and ``--force``."""
+
+    inodes: dict[tuple[int, int], str] = field(default_factory=dict)
+    paths: dict[str, str] = field(default_factory=dict)
+    force: bool = False
+
+
+_guard: contextvars.ContextVar[_Guard | None] = contextvars.ContextVar("vibrofocus_output_guard", default=None)
+
+
+@contextlib.contextmanager
+def output_guard(*, force: bool = False) -> Iterator[None]:
+    """Within the body (one command), outputs never replace what :func:`protect` named.
+
+    Also turns on the kind rule of :func:`output_target`: an existing file of another
+    kind is replaced only when ``force`` (or :func:`allow_overwrite`) says so.
+
+    Parameters
+    ----------
+    force : bool
+        The command's ``--force``.
+    """
+    token = _guard.set(_Guard(force=bool(force)))
+    try:
+        yield
+    finally:
+        _guard.reset(token)
+
+
+def allow_overwrite(force: bool) -> None:
+    """Set ``--force`` for the running command (no effect outside :func:`output_guard`)."""
+    guard = _guard.get()
+    if guard is not None:
+        guard.force = bool(force)
+
+
+def guarding() -> bool:
+    """Whether a command's :func:`output_guard` is active (else :func:`protect` does nothing)."""
+    return _guard.get() is not None
+
+
+def protect(paths: str | os.PathLike | Iterable[str | os.PathLike], what: str) -> None:
+    """Name files the running command reads or keeps state in; no output may replace them.
+
+    Compared by device and inode (a second name, a hard link or a symbolic link is the
+    same file), and by resolved path for a file not created yet (a new study database).
+    Outside :func:`output_guard` (the Python API) this does nothing.
+
+    Parameters
+    ----------
+    paths : path-like or iterable of path-like
+    what : str
+        What the file is, for the message (``"study database"``).
+    """
+    guard = _guard.get()
+    if guard is None:
+        return
+    if isinstance(paths, (str, os.PathLike)):
+        paths = [paths]
+    for p in paths:
+        with contextlib.suppress(OSError, ValueError):
+            guard.paths.setdefault(os.path.realpath(p), what)
+            st = os.stat(p)
+            guard.inodes.setdefault((st.st_dev, st.st_ino), what)
+
+
+_NOT_REGULAR = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                (stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISSOCK, "a socket"))
+
+
+def output_target(path: str | os.PathLike, what: str = "file", *, kind: str | None = None) -> Path:
+    """Check that ``path`` may receive a new file; return the real path to write to.
+
+    The one place for these rules (every writer of :mod:`vibrofocus._atomic` applies
+    them before writing and again before the rename):
+
+    - a folder, a device, a FIFO or a socket is never replaced;
+    - a symbolic link is followed: to a regular file it is written through (the file is
+      replaced, the link stays); to nothing it is refused;
+    - a file the running command reads or keeps state in (:func:`protect`) is refused,
+      compared by device and inode;
+    - inside a command (:func:`output_guard`), an existing non-empty file of another
+      kind than ``kind`` (see :func:`file_kind`) needs ``--force``.
+
+    Parameters
+    ----------
+    path : path-like
+        The output name the user gave.
+    what : str
+        What is written, for messages.
+    kind : str, optional
+        The kind of the new file (:func:`file_kind` of it, or from the suffix); None
+        skips the kind rule.
+
+    Returns
+    -------
+    Path
+        Where to put the file: ``path`` itself, or the file a symbolic link points to.
+
+    Raises
+    ------
+    OutputError
+        Naming the path and the rule.
+    """
+    path = Path(path)
+    real = Path(os.path.realpath(path))
+
+    def refuse(reason: str, err: int | None = None) -> OutputError:
+        return OutputError(f"cannot write the {what} {path}: {reason}; nothing was written", errno=err,
+                           path=str(path))
+
+    if path.is_symlink() and not real.exists():
+        raise refuse("it is a symbolic link to a missing file; give the file's own name", _errno.ENOENT)
+    try:
+        st = os.stat(real)
+    except FileNotFoundError:
+        st = None
+    except OSError as exc:
+        raise output_error(exc, path, what) from exc
+    if st is not None:
+        for test, name in _NOT_REGULAR:
+            if test(st.st_mode):
+                raise refuse(f"{'it points to' if path.is_symlink() else 'it is'} {name}, not a regular file; "
+                             "choose a file name", _errno.EISDIR if name == "a folder" else _errno.EINVAL)
+    guard = _guard.get()
+    if guard is None:
+        return real
+    # By inode; by path too, for a file protected before it existed (a new database).
+    same = (guard.inodes.get((st.st_dev, st.st_ino)) if st is not None else None) or guard.paths.get(str(real))
+    if same is not None:
+        raise refuse(f"it is the {same} this command reads (the same file); choose another name", _errno.EEXIST)
+    if st is not None and kind is not None and not guard.force:
+        old = file_kind(real)
+        if old is not None and old != kind:
+            raise refuse(f"it holds a {old}, not a {kind}; choose another name, or pass --force to replace it",
+                         _errno.EEXIST)
+    return real
+
+
+def _suffix_kind(path: Path) -> str | None:
+    return _SUFFIX_KIND.get(path.suffix.lower())
+
+
 # ---------------------------------------------------------------------- helpers
 def _fsync_dir(folder: Path) -> None:
     """Make a rename in ``folder`` durable (where folders can be opened)."""
@@ -253,6 +470,13 @@ def _unlink_quietly(path: str | os.PathLike) -> None:
 
 
 def _check_folder(path: Path, what: str) -> None:
+    _check_parent(path, what)
+    if path.is_dir():
+        raise OutputError(f"cannot write the {what} {path}: a folder of that name is in the way",
+                          errno=_errno.EISDIR, path=str(path))
+
+
+def _check_parent(path: Path, what: str) -> None:
     folder = path.parent
     if not folder.exists():
         raise OutputError(f"cannot write the {what} {path}: the folder {folder} does not exist",
@@ -260,9 +484,6 @@ def _check_folder(path: Path, what: str) -> None:
     if not folder.is_dir():
         raise OutputError(f"cannot write the {what} {path}: {folder} is not a folder",
                           errno=_errno.ENOTDIR, path=str(path))
-    if path.is_dir():
-        raise OutputError(f"cannot write the {what} {path}: a folder of that name is in the way",
-                          errno=_errno.EISDIR, path=str(path))
 
 
 def _mkstemp(path: Path, what: str) -> tuple[int, str]:
@@ -273,19 +494,24 @@ def _mkstemp(path: Path, what: str) -> tuple[int, str]:
 
 
 def _commit(tmp: str, path: Path, what: str) -> None:
-    """Rename ``tmp`` over ``path`` with interrupts deferred; an interrupt noted before aborts."""
+    """Rename ``tmp`` over ``path`` with interrupts deferred; an interrupt noted before aborts.
+
+    The rules of :func:`output_target` are checked again first, with the kind of the
+    file just written (the target may have changed while it was written).
+    """
     with critical_section():
         if interrupt_pending() is not None:
             # An interrupt arrived while a library was writing (and may have swallowed
             # it): do not commit a file the user asked to stop.
             _unlink_quietly(tmp)
             raise KeyboardInterrupt
+        real = output_target(path, what, kind=file_kind(tmp))
         try:
-            os.replace(tmp, path)
+            os.replace(tmp, real)
         except OSError as exc:
             _unlink_quietly(tmp)
             raise output_error(exc, path, what) from exc
-        _fsync_dir(path.parent)
+        _fsync_dir(real.parent)
 
 
 # ---------------------------------------------------------------------- files
@@ -329,13 +555,14 @@ def atomic_path(path: str | os.PathLike, *, what: str = "file") -> Iterator[Path
     """
     path = Path(path)
     _check_folder(path, what)
-    fd, tmp = _mkstemp(path, what)
+    real = output_target(path, what, kind=_suffix_kind(path))
+    fd, tmp = _mkstemp(real, what)
     os.close(fd)
     with _replacing(tmp, path, what):
         yield Path(tmp)
         fd = os.open(tmp, os.O_RDWR)
         try:
-            os.fchmod(fd, new_file_mode(path))
+            os.fchmod(fd, new_file_mode(real))
             os.fsync(fd)
         finally:
             os.close(fd)
@@ -377,7 +604,8 @@ def atomic_write(
         raise ValueError(f"atomic_write mode must be 'w' or 'wb', got {mode!r}")
     path = Path(path)
     _check_folder(path, what)
-    fd, tmp = _mkstemp(path, what)
+    real = output_target(path, what, kind=_suffix_kind(path))
+    fd, tmp = _mkstemp(real, what)
     with _replacing(tmp, path, what):
         if mode == "wb":
             fh = _open_fd(fd, "wb")
@@ -386,7 +614,7 @@ def atomic_write(
         with fh:
             yield fh
             fh.flush()
-            os.fchmod(fh.fileno(), new_file_mode(path))
+            os.fchmod(fh.fileno(), new_file_mode(real))
             os.fsync(fh.fileno())
 
 
@@ -471,7 +699,8 @@ def atomic_directory(
     Parameters
     ----------
     path : path-like
-        The folder to produce; its parent must exist (it is created if missing).
+        The folder to produce; its parent must exist (a mistyped parent is reported,
+        not created).
     owned : set of str or callable, optional
         Names of the entries a build produces (or a predicate); default: every name the
         new build holds.
@@ -483,10 +712,7 @@ def atomic_directory(
     OutputError
     """
     path = Path(path)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise output_error(exc, path, what) from exc
+    _check_parent(path, what)
     if path.exists() and not path.is_dir():
         raise OutputError(f"cannot write the {what} {path}: a file of that name is in the way",
                           errno=_errno.ENOTDIR, path=str(path))
@@ -575,13 +801,47 @@ def _swap_entries(new: Path, path: Path, stale: list[str]) -> None:
     shutil.rmtree(aside, ignore_errors=True)
 
 
+def make_output_folder(path: str | os.PathLike, *, what: str = "output folder") -> Path:
+    """Create the output folder ``path`` if missing; its parent must exist (a typo is reported, not created).
+
+    Parameters
+    ----------
+    path : path-like
+    what : str
+        For error messages.
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    OutputError
+        The parent is missing, a file is in the way, or the folder cannot be made.
+    """
+    path = Path(path)
+    if path.is_dir():
+        return path
+    _check_parent(path, what)
+    if path.exists() or path.is_symlink():
+        raise OutputError(f"cannot make the {what} {path}: a file of that name is in the way",
+                          errno=_errno.EEXIST, path=str(path))
+    try:
+        path.mkdir()
+    except OSError as exc:
+        raise output_error(exc, path, what) from exc
+    return path
+
+
 # ---------------------------------------------------------------------- checks
-def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: str = "file") -> Path:
+def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: str = "file",
+                   written_as: str | None = None) -> Path:
     """Check, before a long job, that ``path`` can be written and its folder has room.
 
-    Checks that the folder exists, that a file can be created and removed there (which
-    also catches a read-only file system, even for root) and that the free space is at
-    least ``expected_bytes`` plus a margin (:data:`SPACE_MARGIN_BYTES`).
+    Checks the rules of :func:`output_target`, that the folder exists, that a file can
+    be created and removed there (which also catches a read-only file system, even for
+    root) and that the free space is at least ``expected_bytes`` plus a margin
+    (:data:`SPACE_MARGIN_BYTES`).
 
     Parameters
     ----------
@@ -591,6 +851,9 @@ def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: st
         Estimated size of the file, bytes.
     what : str
         For error messages.
+    written_as : str, optional
+        The suffix whose kind of file will be written (``".csv"``), when the name's own
+        suffix does not say it.
 
     Returns
     -------
@@ -603,7 +866,8 @@ def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: st
     """
     path = Path(path)
     _check_folder(path, what)
-    folder = path.parent
+    kind = _suffix_kind(Path(f"x{written_as}") if written_as else path)
+    folder = output_target(path, what, kind=kind).parent
     try:
         fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)
     except OSError as exc:

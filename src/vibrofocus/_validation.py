@@ -23,7 +23,15 @@ __all__ = [
     "check_band",
     "check_index",
     "integer_text",
+    "shorten",
+    "available_memory_bytes",
+    "check_memory",
 ]
+
+#: Longest text of a user's value an error message repeats, characters.
+SHORTEN_CHARS = 80
+#: Share of the available memory one allocation may take.
+MEMORY_SHARE = 0.5
 
 
 def _describe_shape(shape: Sequence[int | None]) -> str:
@@ -107,9 +115,9 @@ def check_positive(value: float, name: str, *, allow_zero: bool = False) -> floa
     try:
         v = float(value)
     except (TypeError, ValueError) as exc:
-        raise ValidationError(f"{name} must be a number, got {value!r}") from exc
+        raise ValidationError(f"{name} must be a number, got {shorten(value)}") from exc
     if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
-        raise ValidationError(f"{name} must be {'>= 0' if allow_zero else '> 0'} and finite, got {value!r}")
+        raise ValidationError(f"{name} must be {'>= 0' if allow_zero else '> 0'} and finite, got {shorten(value)}")
     return v
 
 
@@ -118,11 +126,11 @@ def check_in_range(value: float, name: str, low: float, high: float, *, inclusiv
     try:
         v = float(value)
     except (TypeError, ValueError) as exc:
-        raise ValidationError(f"{name} must be a number, got {value!r}") from exc
+        raise ValidationError(f"{name} must be a number, got {shorten(value)}") from exc
     inside = low <= v <= high if inclusive else low < v < high
     if not np.isfinite(v) or not inside:
         brackets = ("[", "]") if inclusive else ("(", ")")
-        raise ValidationError(f"{name} must lie in {brackets[0]}{low}, {high}{brackets[1]}, got {value!r}")
+        raise ValidationError(f"{name} must lie in {brackets[0]}{low}, {high}{brackets[1]}, got {shorten(value)}")
     return v
 
 
@@ -130,7 +138,7 @@ def check_choice(value: Any, name: str, choices: Iterable[Any]) -> Any:
     """Return ``value`` if it is one of ``choices``."""
     choices = tuple(choices)
     if value not in choices:
-        raise ValidationError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
+        raise ValidationError(f"{name} must be one of {', '.join(map(repr, choices))}; got {shorten(value)}")
     return value
 
 
@@ -139,7 +147,7 @@ def check_band(band: Any, fs: float, name: str = "band") -> tuple[float, float]:
     try:
         low, high = (float(b) for b in band)
     except (TypeError, ValueError) as exc:
-        raise ValidationError(f"{name} must be a pair (low_hz, high_hz), got {band!r}") from exc
+        raise ValidationError(f"{name} must be a pair (low_hz, high_hz), got {shorten(band)}") from exc
     nyquist = fs / 2
     if not (np.isfinite(low) and np.isfinite(high)) or not 0 < low < high <= nyquist:
         raise ValidationError(
@@ -151,7 +159,7 @@ def check_band(band: Any, fs: float, name: str = "band") -> tuple[float, float]:
 def check_index(index: Any, name: str, n: int, *, what: str = "items") -> int:
     """Return ``index`` as int if ``0 <= index < n``."""
     if isinstance(index, bool) or not isinstance(index, (int, np.integer)):
-        raise ValidationError(f"{name} must be an integer index, got {index!r}")
+        raise ValidationError(f"{name} must be an integer index, got {shorten(index)}")
     if not 0 <= int(index) < n:
         raise ValidationError(f"{name}={index} is outside the {n} {what} (valid: 0..{n - 1})")
     return int(index)
@@ -161,8 +169,12 @@ def integer_text(text: str) -> int | None:
     """``text`` as an int if it writes an integer (``"3"``, ``"3.0"``, ``" 3 "``), else None.
 
     For values read from text files (a trials file's study or a response's locations),
-    where a bad value is reported with its line rather than raised at once.
+    where a bad value is reported with its line rather than raised at once. Only ASCII
+    digits count: ``float`` also reads other scripts' digits (``"٣"``), which no file
+    of the contract holds.
     """
+    if not text.isascii():
+        return None
     try:
         value = float(text)
     except ValueError:
@@ -170,3 +182,65 @@ def integer_text(text: str) -> int | None:
     if not np.isfinite(value) or value != int(value):
         return None
     return int(value)
+
+
+def shorten(value: Any, limit: int = SHORTEN_CHARS, *, as_text: bool = False) -> str:
+    """``repr(value)`` cut to at most about ``limit`` characters, so a message never echoes unbounded input.
+
+    Parameters
+    ----------
+    value : object
+        What the user gave.
+    limit : int
+        Characters kept.
+    as_text : bool
+        Use ``str(value)`` instead of the repr (no quotes), for lists of names.
+
+    Returns
+    -------
+    str
+        The repr (or text), or its start followed by ``... (N characters)``.
+    """
+    text = str(value) if as_text else repr(value)
+    if len(text) <= limit:
+        return text
+    return f"{text[:limit]}... ({len(text)} characters)"
+
+
+def available_memory_bytes() -> int | None:
+    """Memory the system can still give this process, bytes (``MemAvailable``; None where unknown)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        import os
+
+        return int(os.sysconf("SC_AVPHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return None
+
+
+def check_memory(n_bytes: float, what: str) -> None:
+    """Refuse, before allocating, a job needing more than half the available memory.
+
+    Parameters
+    ----------
+    n_bytes : float
+        Estimated peak memory of the job, bytes.
+    what : str
+        The job and the input that sized it (``"--n-samples 100000000"``), for the message.
+
+    Raises
+    ------
+    ValidationError
+    """
+    free = available_memory_bytes()
+    if free is not None and n_bytes > MEMORY_SHARE * free:
+        raise ValidationError(
+            f"{what} needs about {n_bytes / 2**30:.3g} GiB of memory; this machine has {free / 2**30:.3g} GiB "
+            f"available (at most {MEMORY_SHARE:.0%} of it is used for one job)"
+        )

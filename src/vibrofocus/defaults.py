@@ -12,6 +12,13 @@ FS_HZ = 10_000.0
 BAND_HZ = (10.0, 1000.0)
 #: Drive limit at the actuator, V peak (1 V DAQ output through a 20 dB amplifier).
 DRIVE_LIMIT_V = 10.0
+#: Largest plausible transfer magnitude ``|H|`` of a calibration, m/V: 1 mm of skin displacement per volt
+#: at the actuator (exciters on skin give micrometres per volt; the simulated forearm at
+#: most 0.3 um/V). A larger value is a corrupt or edited file, not a measurement.
+H_MAX_M_PER_V = 1e-3
+#: Smallest plausible in-band peak of ``|H|`` over the whole array, m/V (1 pm per volt): below,
+#: no actuator moved the skin measurably and every design would ask for absurd drives.
+H_MIN_PEAK_M_PER_V = 1e-12
 #: Ricker spread sigma of the base stimulus, s.
 SIGMA_S = 1e-3
 #: Peak displacement asked of the target point by the inverse filter, m.

@@ -27,6 +27,8 @@ from vibrofocus.cli.main import app
 from vibrofocus.errors import OutputError
 
 runner = CliRunner()
+#: An earlier "calibration": HDF5's signature, so replacing it needs no --force (same kind).
+PREVIOUS_CALIBRATION = b"\x89HDF\r\n\x1a\nprevious calibration"
 SRC = str(Path(__file__).resolve().parents[2] / "src")
 
 
@@ -258,11 +260,11 @@ def test_1_full_disk_while_saving_a_calibration_keeps_the_measurement(tmp_path, 
 
     monkeypatch.setattr(_atomic, "write_bytes", write_bytes)
     if command == "calibrate":
-        (out_dir / "P01.nc").write_bytes(b"previous calibration")
+        (out_dir / "P01.nc").write_bytes(PREVIOUS_CALIBRATION)
         args = ["calibrate", "-p", "P01", "-o", str(out_dir / "P01.nc"), "--repeats", "4", "--sweep-s", "1",
                 "--yes", "--no-figure"]
     else:
-        (out_dir / "calibration.nc").write_bytes(b"previous calibration")
+        (out_dir / "calibration.nc").write_bytes(PREVIOUS_CALIBRATION)
         args = ["demo", "--out", str(out_dir), "--no-figures", "--json"]
     result = runner.invoke(app, args)
     assert_one_error(result, "no space left on the device", "saved to", str(fallback_dir))
@@ -271,7 +273,7 @@ def test_1_full_disk_while_saving_a_calibration_keeps_the_measurement(tmp_path, 
     cal = cal_io.load_calibration(saved[0])
     assert cal.H.shape[1:] == (cal.layout.n_points, cal.layout.n_actuators)
     name = "P01.nc" if command == "calibrate" else "calibration.nc"
-    assert (out_dir / name).read_bytes() == b"previous calibration"
+    assert (out_dir / name).read_bytes() == PREVIOUS_CALIBRATION
     assert no_temp_files(out_dir) == []
 
 
@@ -283,7 +285,7 @@ def test_1_a_real_full_disk_gives_one_line_not_a_crash(tmp_path):
                       capture_output=True).returncode != 0:
         pytest.skip("cannot mount a tmpfs here (needs root and CAP_SYS_ADMIN); the injected ENOSPC tests cover it")
     try:
-        (mnt / "P01.nc").write_bytes(b"previous")
+        (mnt / "P01.nc").write_bytes(PREVIOUS_CALIBRATION)
         env = {**os.environ, "PYTHONPATH": SRC}
         # The free-space check before measuring refuses at once ...
         run = subprocess.run([sys.executable, "-m", "vibrofocus", "calibrate", "-p", "P01", "-o", str(mnt / "P01.nc"),
@@ -291,7 +293,7 @@ def test_1_a_real_full_disk_gives_one_line_not_a_crash(tmp_path):
                              env=env, cwd=tmp_path, timeout=300)
         assert run.returncode == 2, run.stderr
         assert "before starting" in run.stderr and "Traceback" not in run.stderr
-        assert (mnt / "P01.nc").read_bytes() == b"previous"
+        assert (mnt / "P01.nc").read_bytes() == PREVIOUS_CALIBRATION
         # ... and a save that meets a full disk anyway fails cleanly (no segfault), old file intact.
         code = textwrap.dedent(f"""
             import sys
@@ -307,7 +309,7 @@ def test_1_a_real_full_disk_gives_one_line_not_a_crash(tmp_path):
         run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=300)
         assert run.returncode == 2, (run.returncode, run.stderr)
         assert "no space left on the device" in run.stdout
-        assert (mnt / "P01.nc").read_bytes() == b"previous"
+        assert (mnt / "P01.nc").read_bytes() == PREVIOUS_CALIBRATION
         assert sorted(p.name for p in mnt.iterdir()) == ["P01.nc"]
     finally:
         subprocess.run(["umount", str(mnt)], capture_output=True)

@@ -117,12 +117,16 @@ def test_terminal_runner_takes_keypad_answers_pause_and_abort(tmp_path, calibrat
         assert session.status == "aborted"
         assert [a.response for a in store.answers(session.session_id)] == [(4, 5), (9,), (1, 2, 3)]
         assert all(a.drive_sha256 for a in store.answers(session.session_id))
-    # Running again resumes the same session at trial 4; end of input aborts again.
+    # Running again resumes the same session at trial 4; the end of the input (nobody is
+    # answering any more) pauses it, with one error line and exit 2 (issue 31).
     result = CliRunner().invoke(app, args, input="5\n")
-    assert result.exit_code == 0, result.output
+    assert result.exit_code == 2, result.output
     assert "resuming session 1: 3 of 86" in " ".join(result.output.split())
+    assert [line for line in result.output.splitlines() if line.startswith("error:")] == [
+        line for line in result.output.splitlines() if "input ended" in line and "paused" in line]
     with StudyStore(db) as store:
         assert [a.trial_index for a in store.answers(1)] == [0, 1, 2, 3]
+        assert store.session(1).status == "paused"
 
 
 def test_terminal_runner_refuses_a_calibration_of_someone_else(tmp_path, calibration_file):

@@ -64,6 +64,25 @@ def method_order(methods: Iterable[str]) -> list[str]:
     return known + sorted(methods - set(known))
 
 
+def _short(value: object) -> str:
+    from .._validation import shorten
+
+    return shorten(value)
+
+
+def _require_columns(raw: pd.DataFrame) -> None:
+    """ValidationError naming the contract's columns that ``raw`` lacks (checked before any row is used)."""
+    missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
+    if missing:
+        from .._validation import shorten
+
+        raise ValidationError(
+            f"trials file is missing the column(s) {', '.join(missing)}; "
+            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (docs/file-formats.md, trials file), got "
+            f"{shorten(', '.join(map(str, raw.columns)), 300, as_text=True)}"
+        )
+
+
 def _parse_selection(text: str, n_locations: int) -> tuple[tuple[int, ...] | None, str | None]:
     """Parse a response such as ``"4 5"``; return ``(selection, None)`` or ``(None, reason)``."""
     try:
@@ -156,12 +175,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     """
     layout = ArrayLayout.reference() if layout is None else layout
     n_locations = len(layout.locations_xy)
-    missing = [c for c in REQUIRED_COLUMNS if c not in raw.columns]
-    if missing:
-        raise ValidationError(
-            f"trials file is missing the column(s) {', '.join(missing)}; "
-            f"expected the columns {', '.join(REQUIRED_COLUMNS)} (docs/file-formats.md, trials file), got {', '.join(map(str, raw.columns))}"
-        )
+    _require_columns(raw)
     df = raw.copy()
     if "line" not in df.columns:
         df["line"] = np.arange(2, len(df) + 2)  # header is line 1
@@ -169,18 +183,18 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
         df[col] = df[col].astype(str).str.strip()
 
     def as_int(col: str) -> pd.Series:
-        """Integer values (``"3"``, ``"3.0"``) as Int64; anything else becomes <NA>."""
-        num = pd.to_numeric(df[col], errors="coerce")
+        """Integer values (``"3"``, ``"3.0"``; ASCII digits only) as Int64; anything else becomes <NA>."""
+        num = pd.to_numeric(df[col].where(df[col].map(str.isascii)), errors="coerce")
         ok = num.notna() & np.isfinite(num) & (num == np.round(num))
         return num.where(ok).astype("Int64")
 
     study = as_int("study")
     trial = as_int("trial")
     target = as_int("target")
-    phase = df["phase"].str.lower()
+    phase = df["phase"]  # the contract's words exactly: 'MAIN' is a typo to report, not to guess
     rt_text = df["rt_s"]
-    rt_empty = rt_text.eq("") | rt_text.str.lower().eq("nan")
-    rt = pd.to_numeric(rt_text.where(~rt_empty), errors="coerce")
+    rt_empty = rt_text.eq("")
+    rt = pd.to_numeric(rt_text.where(~rt_empty & rt_text.map(str.isascii)), errors="coerce")
     parsed = [_parse_selection(text, n_locations) for text in df["response"]]
     selection = pd.Series([sel for sel, _ in parsed], index=df.index, dtype=object)
     response_reason = pd.Series([why for _, why in parsed], index=df.index, dtype=object)
@@ -196,9 +210,9 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
 
     empty_participant = df["participant"].eq("") | df["participant"].str.lower().eq("nan")
     add("participant", empty_participant, "participant is empty")
-    add("study", ~study.isin(STUDIES), "study must be 1 or 2, got " + df["study"].map(repr))
-    add("phase", ~phase.isin(PHASES), "phase must be 'training' or 'main', got " + df["phase"].map(repr))
-    add("trial", trial.isna(), "trial must be an integer trial number, got " + df["trial"].map(repr))
+    add("study", ~study.isin(STUDIES), "study must be 1 or 2, got " + df["study"].map(_short))
+    add("phase", ~phase.isin(PHASES), "phase must be 'training' or 'main', got " + df["phase"].map(_short))
+    add("trial", ~trial.ge(1), "trial must be an integer trial number >= 1, got " + df["trial"].map(_short))
     empty_method = df["method"].eq("") | df["method"].str.lower().eq("nan")
     add("method", empty_method, "method is empty")
     method_reason = _suspect_methods(df["method"], study, phase, target, df["participant"], n_locations)
@@ -206,7 +220,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     add(
         "target",
         ~target.between(1, n_locations),
-        f"target must be a location number 1..{n_locations}, got " + df["target"].map(repr),
+        f"target must be a location number 1..{n_locations}, got " + df["target"].map(_short),
     )
     add("response", response_reason.notna(), response_reason.fillna(""))
     add(
@@ -217,7 +231,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     add(
         "rt_s",
         ~rt_empty & ~(np.isfinite(rt) & (rt >= 0)),
-        "rt_s must be a time >= 0 in seconds (or empty), got " + rt_text.map(repr),
+        "rt_s must be a time >= 0 in seconds (or empty), got " + rt_text.map(_short),
     )
 
     problems: list[dict] = []
@@ -337,6 +351,7 @@ def load_trials(
         raw = read_trials_table(name)
     if len(raw) == 0:
         raise ValidationError(f"trials file {name!r} has a header but no trials")
+    _require_columns(raw)  # before the session columns are used
     raw, exclusions = _drop_sessions(raw, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
     trials, problems = trial_problems(raw, layout=layout)
     if len(problems):

@@ -7,13 +7,21 @@
   progress is either committed whole or discarded, see :mod:`vibrofocus._atomic`),
   print ``interrupted: ...`` and exit with code 130.
 - No traceback is printed for these unless ``vibrofocus --debug`` was given.
+- Anything else (a bug, or a case no check foresaw) prints one ``error:`` line naming
+  a log file that holds the traceback and exits with code 1
+  (:func:`report_unexpected`).
+- Messages are cut at :data:`MAX_MESSAGE_CHARS` characters: they never echo an
+  unbounded input.
 """
 
 from __future__ import annotations
 
 import contextlib
 import errno as _errno
+import os
+import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import typer
 from rich.console import Console
@@ -27,6 +35,10 @@ DEBUG = False
 
 #: Exit code of a user error (bad input, unwritable output, ...).
 EXIT_USER_ERROR = 2
+#: Exit code of an unexpected error (a bug): the traceback is in a log file.
+EXIT_UNEXPECTED = 1
+#: Longest error message printed, characters (the rest is cut, and says so).
+MAX_MESSAGE_CHARS = 2000
 #: Exit code after SIGINT/SIGTERM (128 + SIGINT, as shells report Ctrl-C).
 EXIT_INTERRUPTED = 130
 
@@ -49,9 +61,59 @@ def _traceback() -> None:
 
 
 def print_error(message: str) -> None:
-    """Print ``error: message`` on stderr as one logical line (no markup interpretation)."""
+    """Print ``error: message`` on stderr as one line: no markup, no control characters, cut at
+    :data:`MAX_MESSAGE_CHARS`."""
+    text = str(message)
+    if len(text) > MAX_MESSAGE_CHARS:
+        text = f"{text[:MAX_MESSAGE_CHARS]}... (message cut; {len(text):,} characters)"
+    # Control characters (newlines, carriage returns, separators) would break the one
+    # line or rewrite the terminal: each becomes a space.
+    text = "".join(ch if ch.isprintable() else " " for ch in text)
     err_console.print("[bold red]error:[/] ", end="")
-    err_console.print(str(message).replace("\n", " "), markup=False)
+    err_console.print(text, markup=False)
+
+
+def log_folder() -> Path:
+    """Where tracebacks of unexpected errors go: ``$VIBROFOCUS_LOG_DIR``, else ``vibrofocus-logs`` in the
+    temporary folder."""
+    import tempfile
+
+    return Path(os.environ.get("VIBROFOCUS_LOG_DIR") or Path(tempfile.gettempdir()) / "vibrofocus-logs")
+
+
+def report_unexpected() -> int:
+    """Report the exception being handled as one ``error:`` line; write its traceback to a log file.
+
+    Called from an ``except`` block. With ``--debug`` the traceback is printed as well.
+
+    Returns
+    -------
+    int
+        The exit code, :data:`EXIT_UNEXPECTED`.
+    """
+    import datetime as _dt
+    import tempfile
+    import traceback
+
+    exc = sys.exc_info()[1]
+    text = "".join(traceback.format_exception(exc))
+    where = "nowhere (the log folder cannot be written)"
+    try:
+        folder = log_folder()
+        folder.mkdir(parents=True, exist_ok=True)
+        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+        fd, name = tempfile.mkstemp(prefix=f"error-{stamp}-", suffix=".log", dir=folder)
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(f"vibrofocus {' '.join(sys.argv[1:])[:MAX_MESSAGE_CHARS]}\n{text}")
+        where = name
+    except OSError:
+        pass
+    if DEBUG:
+        err_console.print(text, markup=False, highlight=False)
+    summary = str(exc).replace("\n", " ")[:200] or "(no message)"
+    print_error(f"unexpected {type(exc).__name__}: {summary} -- this is a bug or a case vibrofocus does not check "
+                f"yet; the traceback is in {where} (run with --debug to see it; please report it)")
+    return EXIT_UNEXPECTED
 
 
 def interrupted_exit(detail: str = "") -> typer.Exit:
@@ -80,6 +142,8 @@ def user_errors(*, interrupt_message: str = "") -> Iterator[None]:
 
     _atomic.clear_interrupt()
     restore = _atomic.install_signal_handlers()
+    guard = _atomic.output_guard()  # outputs never replace what the command reads
+    guard.__enter__()
     try:
         yield
         if _atomic.interrupt_pending() is not None:
@@ -103,5 +167,6 @@ def user_errors(*, interrupt_message: str = "") -> Iterator[None]:
         print_error(f"cannot access{where}: {describe_os_error(exc)}")
         raise typer.Exit(code=EXIT_USER_ERROR) from None
     finally:
+        guard.__exit__(None, None, None)
         restore()
         _atomic.clear_interrupt()

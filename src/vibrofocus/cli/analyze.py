@@ -35,7 +35,8 @@ def analyze_command(
         show_default=False,
     ),
     out: Path = typer.Option(
-        ..., "--out", "-o", help="Output folder for report.json, report.html and the PNG figures (created).",
+        ..., "--out", "-o",
+        help="Output folder for report.json, report.html and the PNG figures (created; its parent must exist).",
         show_default=False,
     ),
     exclude_invalid: bool = typer.Option(
@@ -45,7 +46,7 @@ def analyze_command(
     ),
     keep_aborted: bool = typer.Option(False, "--keep-aborted", help="Analyse the answers of aborted sessions too (left out and listed by default)."),
     keep_dry_runs: bool = typer.Option(False, "--keep-dry-runs", help="Analyse dry-run sessions too (no calibration, nothing played; left out and listed by default)."),
-    alpha: float = typer.Option(0.05, "--alpha", help="Significance level for the results sentences."),
+    alpha: float = typer.Option(0.05, "--alpha", help="Significance level for the results sentences, in (0, 1)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the paths written."),
 ) -> None:
     """Analyse localization studies 1 and 2 from a trials file.

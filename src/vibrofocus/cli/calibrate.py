@@ -7,17 +7,27 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import (
+    AMPLITUDE_V_MIN,
+    REPEATS_MAX,
+    RIG_CONFIG_HELP,
+    SEED_MAX,
+    SWEEP_S_MIN,
+    check_rig_options,
+    force_option,
+)
 from ._command import command
 
 
 @command("calibrate", epilog="Example: vibrofocus calibrate --rig simulated --participant P01 --out P01.nc --yes")
 def calibrate_command(
-    participant: str = typer.Option(..., "--participant", "-p", help="Participant id stored in the file."),
-    out: Path = typer.Option(..., "--out", "-o", help="Calibration file to write (.nc, netCDF4/HDF5)."),
+    participant: str = typer.Option(..., "--participant", "-p",
+                                    help="Participant id stored in the file (1-64 letters, digits, _ . -)."),
+    out: Path = typer.Option(..., "--out", "-o", help="Calibration file to write (a .nc name; netCDF4/HDF5)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
-    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
     seed: int | None = typer.Option(
-        None, "--seed", min=0, show_default="derived from --participant",
+        None, "--seed", min=0, max=SEED_MAX, show_default="derived from --participant",
         help="Participant seed of the simulated forearm; by default each participant id gets its own arm.",
     ),
     method: str = typer.Option(
@@ -25,16 +35,22 @@ def calibrate_command(
         help="mimo (all actuators at once with Hadamard-signed exponential sweeps, MIMO H1: about 1/3 of h1's time "
              "for a lower H error) | h1 (one actuator at a time, exponential sweeps, repeats, coherence) | paper "
              "(one linear sweep per actuator, FFT ratio)."),
-    repeats: int | None = typer.Option(None, "--repeats", min=1, help="Recordings per point and actuator "
+    repeats: int | None = typer.Option(None, "--repeats", min=1, max=REPEATS_MAX,
+                                       help="Recordings per point and actuator "
                                                                        "(default 8 for h1 and mimo, 1 for paper; "
                                                                        "mimo: a multiple of 4 for 3-4 actuators)."),
-    sweep_s: float | None = typer.Option(None, "--sweep-s", help="Sweep length, s (default 2; 2.5 for mimo)."),
-    amplitude_v: float = typer.Option(5.0, "--amplitude-v", help="Sweep peak at the actuator, V."),
+    sweep_s: float | None = typer.Option(None, "--sweep-s", min=SWEEP_S_MIN,
+                                         help="Sweep length, s (default 2; 2.5 for mimo; at most the rig's longest "
+                                              "drive, 30 s on the simulated rig)."),
+    amplitude_v: float = typer.Option(5.0, "--amplitude-v", min=AMPLITUDE_V_MIN,
+                                      help="Sweep peak at the actuator, V (at most the rig's peak limit)."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before each point (only for rigs that "
                                                         "record every point at once)."),
     figure: bool = typer.Option(True, "--figure/--no-figure", help="Save |H| and coherence next to the file (.png)."),
     resume: bool = typer.Option(False, "--resume", help="Continue an interrupted calibration from OUT.partial.npz "
                                                         "(same command, same rig): its completed points are kept."),
+    force: bool = typer.Option(False, "--force", help="Write the file even with error verdicts, and replace an "
+                                                     "existing file of another kind."),
 ) -> None:
     """Play sweeps on the actuators, record the skin, estimate H and judge its quality.
 
@@ -55,16 +71,22 @@ def calibrate_command(
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-        from .._atomic import check_writable
+        from .._atomic import allow_overwrite, check_writable
         from ..calibration import calibrate, plan_calibration, save_calibration
         from ..calibration.checkpoint import partial_path
         from ..io.calibration_nc import estimate_calibration_bytes
         from ..defaults import participant_seed
         from ..errors import ValidationError
         from ..rigs import make_rig
+        from ..studies.storage import check_participant_id
         from ._save import save_or_offer_another_path
 
         console = Console()
+        allow_overwrite(force)
+        check_participant_id(participant)  # the same rule as the study database's
+        check_rig_options(rig, rig_config)
+        if out.suffix.lower() != ".nc":
+            raise ValidationError(f"--out {out}: use a .nc file name (the calibration is a netCDF4/HDF5 file)")
         if not out.parent.exists():
             raise ValidationError(f"--out {out}: the folder {out.parent} does not exist")
         if seed is None and rig == "simulated":
@@ -120,11 +142,21 @@ def calibrate_command(
                     raise
                 finally:
                     take.ended()
-        # The measurement stays in memory until it is on disk somewhere.
-        out = save_or_offer_another_path(lambda path: save_calibration(cal, path), out, what="calibration")
         console.print(cal.summary_table())
         for line in cal.quality.lines():
-            console.print(line, highlight=False)
+            # Indented: the one ``error:`` line of a refused run is the command's own.
+            console.print(f"  {line}", highlight=False)
+        n_errors = sum(issue.severity == "error" for issue in cal.quality.issues)
+        if n_errors and not force:
+            # An error verdict and a file on disk would disagree: the file would be used.
+            kept = f"; its takes stay in {partial} (--resume --force writes it)" if partial is not None and \
+                partial.exists() else ""
+            raise ValidationError(
+                f"{n_errors} error verdict(s) above: the calibration was not written; fix the setup and measure "
+                f"again (or keep it anyway with --force){kept}"
+            )
+        # The measurement stays in memory until it is on disk somewhere.
+        out = save_or_offer_another_path(lambda path: save_calibration(cal, path), out, what="calibration")
         console.print(f"wrote {out}")
         if partial is not None:
             partial.unlink(missing_ok=True)  # the whole calibration is on disk now

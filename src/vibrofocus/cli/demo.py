@@ -12,6 +12,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ._errors import user_errors
+from ._options import SEED_MAX, force_option
 from ._command import command
 
 console = Console()
@@ -24,30 +25,33 @@ def _fmt(value: float, digits: int = 2) -> str:
 
 @command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
 def demo_command(
-    seed: int = typer.Option(0, "--seed", help="Simulated participant (forearm) seed."),
-    out: Path = typer.Option(Path("demo-output"), "--out", "-o", help="Folder for the figures (created)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Simulated participant (forearm) seed."),
+    out: Path = typer.Option(Path("demo-output"), "--out", "-o",
+                             help="Folder for the figures (created; its parent must exist)."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Write the PNG figures."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (results and summary) and nothing else."),
-    location: int = typer.Option(5, "--field-location", help="Location shown in the focused-field figure."),
+    location: int = typer.Option(5, "--field-location", help="Location shown in the focused-field figure (1-9)."),
     per_location: bool = typer.Option(False, "--per-location", help="Also print one row per location and method."),
     paper_figures: bool = typer.Option(
         False, "--paper-figures",
         help="Instead of the demo, draw the source paper's Figs. 4-7 (de Vlam et al. 2023) from the simulated forearm "
         "and a simulated study into OUT (paper_fig4.png ... paper_fig7.png).",
     ),
-    participants: int = typer.Option(12, "--participants", min=1,
+    participants: int = typer.Option(12, "--participants", min=1, max=200,
                                      help="Simulated participants of the study behind --paper-figures (about 3 s each)."),
     moving: bool = typer.Option(
         False, "--moving",
         help="Instead of the demo: calibrate, fit the skin model to the calibration, render taps along a path "
         "(location 7 to location 3) from the fitted model and write the field as OUT/moving_focus.gif.",
     ),
-    moving_speed: float = typer.Option(0.1, "--moving-speed", help="Speed of the moving focus, m/s."),
+    moving_speed: float = typer.Option(0.1, "--moving-speed", min=0.01, max=2.0,
+                                      help="Speed of the moving focus, m/s (a finger's stroke: 0.01 to 2)."),
     design_from: str = typer.Option(
         "calibration", "--design-from",
         help="Design from a calibration measured first ('calibration', as a user would) or from the "
         "simulator's exact transfer ('model', what a perfect calibration would give).",
     ),
+    force: bool = force_option(),
 ) -> None:
     """Calibrate the simulated forearm, then render a tap at every location with every method, play it, measure it.
 
@@ -58,12 +62,14 @@ def demo_command(
     with user_errors():
         import numpy as np
 
+        from .._atomic import allow_overwrite
         from .._validation import check_choice
         from ..calibration import calibrate, save_calibration
         from ..defaults import METHODS
         from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
         from ..skin import SimulatedForearm
 
+        allow_overwrite(force)
         check_choice(design_from, "--design-from", ("calibration", "model"))
         if paper_figures:
             _write_paper_figures(out, seed=seed, participants=participants, location=location)
@@ -184,13 +190,10 @@ def demo_command(
 
 
 def _make_output_folder(out: Path) -> None:
-    """Create ``out`` (and parents); a folder that cannot be made is one clear error."""
-    from .._atomic import output_error
+    """Create ``out`` (its parent must exist); a folder that cannot be made is one clear error."""
+    from .._atomic import make_output_folder
 
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise output_error(exc, out, "output folder") from exc
+    make_output_folder(out)
 
 
 def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int) -> None:

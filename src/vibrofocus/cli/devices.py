@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options
 from ._command import command
 
 
@@ -61,10 +62,12 @@ def devices(
 @command("straps")
 def straps(
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
-    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
-    seed: int | None = typer.Option(None, "--seed", min=0, help="Participant seed of the simulated forearm."),
-    target: float | None = typer.Option(None, "--target-n", help="Target strap force, N (default from the config, 1 N)."),
-    tolerance: float | None = typer.Option(None, "--tolerance-n", help="Accepted deviation, N."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
+    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
+                                    help="Participant seed of the simulated forearm."),
+    target: float | None = typer.Option(None, "--target-n", min=0.01, max=20.0,
+                                         help="Target strap force, N (default from the config, 1 N)."),
+    tolerance: float | None = typer.Option(None, "--tolerance-n", min=0.0, max=20.0, help="Accepted deviation, N."),
     as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
 ) -> None:
     """Read the strap force sensors before a calibration and say whether to tighten or loosen.
@@ -76,6 +79,7 @@ def straps(
 
         from ..rigs import check_straps, make_rig
 
+        check_rig_options(rig, rig_config)
         with make_rig(rig, config=rig_config, seed=seed) as r:
             reading = check_straps(r, target_n=target, tolerance_n=tolerance)
         if as_json:

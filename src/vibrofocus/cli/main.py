@@ -12,19 +12,26 @@ import sys
 from collections.abc import Sequence
 from typing import Any
 
-from typer._click import exceptions as click
 import typer
 from typer.core import TyperGroup
 
 from .. import __version__
-from ._errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, err_console, print_error, set_debug
+from ._errors import EXIT_INTERRUPTED, EXIT_USER_ERROR, err_console, print_error, report_unexpected, set_debug
 
 
 class _OneLineErrors(TyperGroup):
-    """The root command group: a usage error (``--location abc``) is one ``error:`` line, exit 2.
+    """The root command group: every way a command ends is one line and an exit code.
 
-    Typer draws usage errors in a multi-line box; here the message names the command
-    and the option, and points at ``--help``.
+    - A usage error (``--location abc``) is one ``error:`` line, exit 2; typer draws it
+      in a multi-line box, here the message names the command and the option, and
+      points at ``--help``.
+    - An unexpected exception (a bug, or a case no check foresaw) is one ``error:``
+      line naming the log file that holds the traceback, exit 1
+      (:func:`._errors.report_unexpected`); ``vibrofocus --debug`` prints it too.
+
+    Only typer's public exceptions are used: ``typer.Abort``, and
+    ``typer.TyperException`` with its ``exit_code`` and ``format_message()`` (a usage
+    error has exit code 2 and a context).
     """
 
     def main(
@@ -40,19 +47,30 @@ class _OneLineErrors(TyperGroup):
             return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
         try:
             rv = super().main(args, prog_name, complete_var, False, windows_expand_args, **extra)
-        except click.UsageError as exc:
-            where = exc.ctx.command_path if exc.ctx is not None else "vibrofocus"
-            print_error(f"{where}: {exc.format_message()} (see '{where} --help')")
-            sys.exit(EXIT_USER_ERROR)
-        except click.ClickException as exc:
-            print_error(exc.format_message())
-            sys.exit(exc.exit_code)
-        except click.Abort as exc:
-            if isinstance(exc.__cause__, KeyboardInterrupt):
+        except typer.Abort as exc:  # raised by click for Ctrl-C or end of input at a prompt
+            cause = exc.__cause__ or exc.__context__
+            if isinstance(cause, KeyboardInterrupt):
                 err_console.print("[bold yellow]interrupted[/]", highlight=False)
                 sys.exit(EXIT_INTERRUPTED)
+            if isinstance(cause, EOFError):
+                typer.echo()  # end the prompt's line
+                print_error("the input ended (end of file) while a prompt waited for an answer; run it at a terminal")
+                sys.exit(EXIT_USER_ERROR)
             err_console.print("aborted", highlight=False)
             sys.exit(1)
+        except typer.TyperException as exc:  # click's ClickException and UsageError
+            ctx = getattr(exc, "ctx", None)
+            if exc.exit_code == EXIT_USER_ERROR:
+                where = ctx.command_path if ctx is not None else "vibrofocus"
+                print_error(f"{where}: {exc.format_message()} (see '{where} --help')")
+            else:
+                print_error(exc.format_message())
+            sys.exit(exc.exit_code)
+        except KeyboardInterrupt:
+            err_console.print("[bold yellow]interrupted[/]", highlight=False)
+            sys.exit(EXIT_INTERRUPTED)
+        except Exception:  # noqa: BLE001 - the last resort: one line and a log, never a bare traceback
+            sys.exit(report_unexpected())
         sys.exit(rv if isinstance(rv, int) else 0)
 
 

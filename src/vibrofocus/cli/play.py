@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options
 from ._command import command
 
 
@@ -15,8 +16,9 @@ from ._command import command
 def play(
     drives_file: Path = typer.Argument(..., help="An .npz with arrays drives (n_actuators, n) V and fs (Hz)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
-    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
-    seed: int | None = typer.Option(None, "--seed", min=0, help="Participant seed of the simulated forearm."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
+    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
+                                    help="Participant seed of the simulated forearm."),
     dry_run: bool = typer.Option(False, "--dry-run", help="Only run the safety checks; play nothing."),
     as_json: bool = typer.Option(False, "--json", help="Print machine-readable JSON."),
 ) -> None:
@@ -28,8 +30,11 @@ def play(
         from ..io.drives import read_drives
         from ..rigs import make_rig
 
-        drives, fs = read_drives(drives_file)
+        check_rig_options(rig, rig_config)
         with make_rig(rig, config=rig_config, seed=seed) as r:
+            # The rig's duration limit is checked from the file's header, before the
+            # samples are decompressed.
+            drives, fs = read_drives(drives_file, max_duration_s=r.limits.max_duration_s)
             if abs(fs - r.fs) > 1e-9 * r.fs:
                 raise ValidationError(
                     f"drives file {drives_file} is at {fs:g} Hz but the {rig} rig runs at {r.fs:g} Hz; render it again "

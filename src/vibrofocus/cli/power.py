@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import SEED_MAX, force_option
 from ._command import command
 
 
@@ -16,7 +17,9 @@ def _ints(text: str, name: str) -> tuple[int, ...]:
     try:
         values = tuple(int(x) for x in text.replace(",", " ").split())
     except ValueError:
-        raise ValidationError(f"{name} must be integers separated by commas, got {text!r}") from None
+        from .._validation import shorten
+
+        raise ValidationError(f"{name} must be integers separated by commas, got {shorten(text)}") from None
     if not values:
         raise ValidationError(f"{name} is empty")
     return values
@@ -27,20 +30,26 @@ def _ints(text: str, name: str) -> tuple[int, ...]:
     epilog="Example: vibrofocus power --participants 10,15,20,25,30 --studies 200 --out power/",
 )
 def power_command(
-    participants: str = typer.Option("10,15,20,25,30", "--participants", "-n", help="Sample sizes N, comma separated."),
-    studies: int = typer.Option(200, "--studies", min=1, help="Simulated studies per N."),
-    repetitions: int = typer.Option(3, "--repetitions", min=1, help="Trials per condition and study."),
-    methods: str | None = typer.Option(None, "--methods", help="Methods, comma separated (default all three)."),
-    locations: str | None = typer.Option(None, "--locations", help="Location numbers, comma separated (default 1-9)."),
-    alpha: float = typer.Option(0.05, "--alpha", help="Significance level."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Master seed (study j of size N uses [seed, N, j])."),
+    participants: str = typer.Option("10,15,20,25,30", "--participants", "-n",
+                                     help="Sample sizes N, comma separated, each from 3 to 1000."),
+    studies: int = typer.Option(200, "--studies", min=1, max=100_000, help="Simulated studies per N."),
+    repetitions: int = typer.Option(3, "--repetitions", min=1, max=100, help="Trials per condition and study."),
+    methods: str | None = typer.Option(None, "--methods", help="Methods, comma separated: at least two of "
+                                                               "funneling, inverse, combination (default all three)."),
+    locations: str | None = typer.Option(None, "--locations", help="Location numbers 1-9, comma separated, at "
+                                                                   "least two (default 1-9)."),
+    alpha: float = typer.Option(0.05, "--alpha", help="Significance level, in (0, 1)."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX,
+                             help="Master seed (study j of size N uses [seed, N, j])."),
     scheduler: str | None = typer.Option(
         None, "--scheduler", help="Dask scheduler address (tcp://host:8786); default a LocalCluster on this machine."
     ),
-    workers: int | None = typer.Option(None, "--workers", min=1, help="LocalCluster worker processes (default: CPUs)."),
+    workers: int | None = typer.Option(None, "--workers", min=1, max=256,
+                                       help="LocalCluster worker processes (default: CPUs)."),
     local: bool = typer.Option(False, "--no-dask", help="Run in this process without Dask (same numbers)."),
     out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    force: bool = force_option(),
 ) -> None:
     """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
 
@@ -53,10 +62,12 @@ def power_command(
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
         from rich.table import Table
 
+        from .._atomic import allow_overwrite
         from .._validation import check_in_range
         from ..studies.perception import MODEL_LABEL
         from ..studies.power import TESTS, PowerDesign, run_power
 
+        allow_overwrite(force)
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
         design = PowerDesign(
             n_participants=_ints(participants, "--participants"), n_studies=studies, repetitions=repetitions,
@@ -64,12 +75,9 @@ def power_command(
             locations=_ints(locations, "--locations") if locations else None, alpha=alpha, seed=seed,
         )
         if out is not None:
-            from .._atomic import check_writable, output_error
+            from .._atomic import check_writable, make_output_folder
 
-            try:
-                out.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise output_error(exc, out, "output folder") from exc
+            make_output_folder(out)
             check_writable(out / "power.json", what="power results")  # before the simulations, not after
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_LABEL}[/]")

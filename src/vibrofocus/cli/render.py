@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import LIMIT_V_MIN, N_SAMPLES_RANGE, force_option
 from ._command import command
 
 
@@ -14,20 +15,26 @@ from ._command import command
                                "--out drives.npz --wav drives.wav")
 def render_command(
     calibration: Path = typer.Option(..., "--calibration", "-c", help="Calibration file (.nc)."),
-    location: int = typer.Option(..., "--location", "-l", help="Target location number (1-based)."),
+    location: int = typer.Option(..., "--location", "-l",
+                                 help="Target location number (1-based; 1-9 on the reference layout)."),
     out: Path = typer.Option(..., "--out", "-o", help="Drives file: .npz (for vibrofocus play) or .csv."),
     method: str = typer.Option("inverse", "--method", "-m", help="funneling | inverse | combination | time_reversal"),
     regularization: str | None = typer.Option(None, "--regularization", help="tikhonov | tsvd (default: plain "
                                                                               "pseudo-inverse)."),
-    reg_param: float | None = typer.Option(None, "--reg-param", help="Regularization relative to the largest "
-                                                                     "singular value."),
-    n_samples: int = typer.Option(4096, "--n-samples", help="Window length, samples."),
-    limit_v: float | None = typer.Option(None, "--limit-v", help="Drive limit, V peak (default: the rig's limit "
-                                                                 "stored in the calibration)."),
+    reg_param: float | None = typer.Option(None, "--reg-param", max=1e3,
+                                           help="Regularization relative to the largest singular value "
+                                                "(0 < value <= 1000)."),
+    n_samples: int = typer.Option(4096, "--n-samples", min=N_SAMPLES_RANGE[0], max=N_SAMPLES_RANGE[1],
+                                  help="Window length, samples."),
+    limit_v: float | None = typer.Option(None, "--limit-v", min=LIMIT_V_MIN,
+                                         help="Drive limit, V peak: at most the rig's limit stored in the calibration, "
+                                              "itself never above the rig's own (10 V for the simulated rig, 20 V "
+                                              "for any; default: that limit)."),
     refuse: bool = typer.Option(False, "--refuse-over-limit", help="Refuse a design over the limit instead of "
                                                                    "scaling it down."),
     wav: Path | None = typer.Option(None, "--wav", help="Also write a multichannel WAV (float32, full scale = "
                                                         "the drive limit)."),
+    force: bool = force_option(),
 ) -> None:
     """Design drives for a tap at LOCATION with METHOD and write them with their metadata.
 
@@ -41,26 +48,46 @@ def render_command(
         import numpy as np
 
         from .. import __version__
-        from .._atomic import check_writable
+        from .._atomic import allow_overwrite, check_writable, protect
+        from .._validation import check_memory
         from ..calibration import load_calibration
         from ..defaults import DRIVE_LIMIT_V
         from ..errors import ValidationError
         from ..io.drives import DRIVES_SUFFIXES, write_drives, write_drives_wav
         from ..rendering import render
+        from ..rigs.safety import PEAK_V_CEILING, SafetyLimits
 
+        allow_overwrite(force)
+        protect(calibration, "calibration")
         if out.suffix.lower() not in DRIVES_SUFFIXES:
             raise ValidationError(f"--out {out}: use a .npz or .csv file name")
         if wav is not None and wav.suffix.lower() != ".wav":
             raise ValidationError(f"--wav {wav}: use a .wav file name")
+        if wav is not None and len({out.resolve(), wav.resolve()}) == 1:
+            raise ValidationError(f"--out and --wav name the same file {out}")
         for path, what in ((out, "drives file"), (wav, "WAV file")):
             if path is not None:
                 check_writable(path, what=what)
         cal = load_calibration(calibration)
+        # H on the window, the designs' batched solves and the responses: about ten
+        # copies of H (n/2+1 frequencies x points x actuators, complex).
+        check_memory(10 * 16 * (n_samples // 2 + 1) * cal.layout.n_points * cal.layout.n_actuators,
+                     f"--n-samples {n_samples}")
         rig_limits = cal.rig.get("limits") if isinstance(cal.rig.get("limits"), dict) else {}
         rig_limit = rig_limits.get("peak_v", DRIVE_LIMIT_V)
         if isinstance(rig_limit, bool) or not isinstance(rig_limit, (int, float)) or not 0 < rig_limit < float("inf"):
             raise ValidationError(f"{calibration}: the stored rig limit peak_v={rig_limit!r} is not a positive number")
-        rig_limit = float(rig_limit)
+        # A stored limit never loosens the rig's own: the simulated rig's is fixed, and no
+        # hardware configuration may pass the hard ceiling; a larger value was edited in.
+        kind = cal.rig.get("kind")
+        own = SafetyLimits().peak_v if kind == "simulated" else PEAK_V_CEILING
+        if rig_limit > own and limit_v is None:
+            raise ValidationError(
+                f"{calibration}: the stored rig limit peak_v={rig_limit:g} V is above the {own:g} V that "
+                + ("the simulated rig has" if kind == "simulated" else "any rig may have (the hard ceiling)")
+                + f" (the file may have been edited); give --limit-v, at most {own:g}"
+            )
+        rig_limit = min(float(rig_limit), own)
         if limit_v is not None and limit_v > rig_limit * (1 + 1e-9):
             raise ValidationError(
                 f"--limit-v {limit_v:g} is above the {rig_limit:g} V peak limit of the rig this calibration was "

@@ -52,6 +52,7 @@ def serve(
             if cfg.kind != rig:
                 raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
         check_choice(pace, "pace", tuple(PACES))
+        _check_database(db)
         token = os.environ.get("VIBROFOCUS_TOKEN") or secrets.token_urlsafe(24)
         if len(token) < 16:
             err_console.print("[bold red]error:[/] VIBROFOCUS_TOKEN must be at least 16 characters")
@@ -81,3 +82,21 @@ def serve(
             # A moment later, so that the page does not ask before uvicorn listens.
             threading.Timer(1.5, webbrowser.open, args=(login,)).start()
         uvicorn.run(web_app, host=host, port=port, log_level="warning")
+
+
+def _check_database(db: Path) -> None:
+    """Refuse, before the server touches it (it tightens the file's mode), a --db that is no study database.
+
+    A device, FIFO or folder (:func:`vibrofocus._atomic.output_target`), a file of
+    another kind (a calibration), or a missing folder: one error line, nothing changed.
+    """
+    from .._atomic import file_kind, output_target
+    from ..errors import ValidationError
+
+    if db.exists() or db.is_symlink():
+        output_target(db, "study database")
+        kind = file_kind(db)
+        if kind not in (None, "SQLite database"):
+            raise ValidationError(f"--db {db}: it holds a {kind}, not a study database; give a .sqlite file or a new name")
+    elif not db.parent.is_dir():
+        raise ValidationError(f"--db {db}: the folder {db.parent} does not exist")

@@ -7,20 +7,26 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import SEED_MAX, force_option
 from ._command import command
 
 
 @command("simulate-study")
 def simulate_study(
-    participants: int = typer.Option(3, "--participants", "-n", min=1, help="Number of simulated participants."),
-    seed: int = typer.Option(0, "--seed", min=0, help="Seed of the whole simulation (participants, trial orders, answers)."),
+    participants: int = typer.Option(3, "--participants", "-n", min=1, max=1000,
+                                     help="Number of simulated participants."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX,
+                             help="Seed of the whole simulation (participants, trial orders, answers)."),
     db: Path = typer.Option(..., "--db", help="Study database (SQLite); an unfinished one is resumed."),
-    pace: float = typer.Option(0.0, "--pace", min=0.0, help="Wait this long after each answer, s."),
-    trials_csv: Path | None = typer.Option(None, "--trials-csv", help="Also write the trials file here."),
+    pace: float = typer.Option(0.0, "--pace", min=0.0, max=60.0, help="Wait this long after each answer, s."),
+    trials_csv: Path | None = typer.Option(
+        None, "--trials-csv", help="Also write the trials file here (never over the database or a calibration)."
+    ),
     calibration_dir: Path | None = typer.Option(
         None, "--calibration-dir", help="Where calibration files go (default: <db>.calibrations/ beside the database)."
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
+    force: bool = force_option(),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -36,29 +42,43 @@ def simulate_study(
         from ..studies.participants import MODEL_NOTICE
         from ..studies.simulate import simulate_studies, summarize_simulation
 
-        from .._atomic import check_writable, output_error
+        from .._atomic import allow_overwrite, check_writable, output_error, protect
         from ..io.calibration_nc import estimate_calibration_bytes
         from ..layout import ArrayLayout
 
+        allow_overwrite(force)
         if trials_csv is not None and not trials_csv.parent.is_dir():
             # Checked first: the simulation takes minutes and the file is written last.
             from ..errors import ValidationError
 
             raise ValidationError(f"--trials-csv {trials_csv}: the folder {trials_csv.parent} does not exist")
-        # Every output place is checked before the first calibration: a read-only folder
-        # or a full disk is reported now, not after minutes of simulation.
+        # Every output place is checked before the first calibration: a read-only folder,
+        # a full disk or a trials file named like the database is reported now, not after
+        # minutes of simulation (and nothing is created for a refused run).
         check_writable(db, what="study database")
+        protect(db, "study database")
+        if db.exists():
+            from ..studies import StudyStore
+
+            # A foreign file is refused now; an open store protects the calibrations it lists.
+            StudyStore(db, create=False).close()
+        if trials_csv is not None:
+            check_writable(trials_csv, what="trials file", written_as=".csv")
         cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
+        created = not cal_dir.exists()
         try:
             cal_dir.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
             raise output_error(exc, cal_dir, "calibration folder") from exc
         lay = ArrayLayout.reference()
-        check_writable(cal_dir / "calibration.nc", what="calibration",
-                       expected_bytes=participants * estimate_calibration_bytes(lay.n_points, lay.n_actuators, 8,
-                                                                                30_000, 4096))
-        if trials_csv is not None:
-            check_writable(trials_csv, what="trials file")
+        try:
+            check_writable(cal_dir / "calibration.nc", what="calibration",
+                           expected_bytes=participants * estimate_calibration_bytes(lay.n_points, lay.n_actuators,
+                                                                                    8, 30_000, 4096))
+        except BaseException:
+            if created:
+                cal_dir.rmdir()
+            raise
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE}[/]")
         with Progress(

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options, force_option
 from ._command import command
 
 study_app = typer.Typer(
@@ -22,12 +23,15 @@ def export(
     db: Path = typer.Option(..., "--db", help="Study database."),
     out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns: see docs/file-formats.md, trials file)."),
     participant: str | None = typer.Option(None, "--participant", help="Only this participant."),
+    force: bool = force_option(),
 ) -> None:
     """Write every answered trial as ``participant,study,phase,trial,method,target,response,rt_s``."""
     with user_errors():
+        from .._atomic import allow_overwrite
         from ..errors import StudyError
         from ..studies import StudyStore
 
+        allow_overwrite(force)
         if not db.is_file():
             raise StudyError(f"no study database at {db}")
         with StudyStore(db, create=False) as store:
@@ -42,8 +46,9 @@ def run(
     db: Path = typer.Option(..., "--db", help="Study database; an unfinished session of this participant and study is resumed."),
     calibration: Path = typer.Option(..., "--calibration", help="The participant's calibration file (netCDF)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
-    rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file for audio/nidaq."),
-    seed: int | None = typer.Option(None, "--seed", min=0, help="Seed of the trial order (default: random, stored)."),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
+    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
+                                    help="Seed of the trial order (default: random, stored)."),
     beep: bool = typer.Option(True, "--beep/--no-beep", help="Cue before each stimulus (the terminal bell unless --beep-device)."),
     beep_device: str | None = typer.Option(
         None, "--beep-device",
@@ -65,13 +70,15 @@ def run(
         from ..rigs import make_rig
         from ..studies import StudyStore
         from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
-        from ..studies.terminal import TerminalResponder
+        from ..studies.terminal import InputEnded, TerminalResponder
+        from .._validation import shorten
 
         console = Console()
+        check_rig_options(rig, rig_config)
         cal = load_calibration(calibration)
         if getattr(cal, "participant_id", participant) != participant:
             raise StudyError(
-                f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {participant!r}"
+                f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {shorten(participant)}"
             )
         # The rig first: a rig that cannot be made (no config, no device) leaves the
         # database as it was, with no participant or session planned for nothing.
@@ -109,6 +116,13 @@ def run(
                 store.set_status(sid, "paused")
                 console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
                 raise typer.Exit(code=130) from None
+            except InputEnded as exc:
+                # Nobody is answering (stdin closed or redirected): pause, never abort.
+                console.print()  # end the prompt's line
+                store.set_status(sid, "paused")
+                info = store.session(sid)
+                raise StudyError(f"{exc}: session {sid} is paused with {info.n_answered} of {info.n_trials} trials "
+                                 "answered; run the same command at a terminal to resume") from None
             console.print(
                 f"session {sid}: {summary.status}, {summary.n_answered} of {summary.n_trials} trials answered"
             )

@@ -42,8 +42,12 @@ the defaults. :func:`load_calibration` checks all of it and raises
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import json
 import os
+import sys
+from collections.abc import Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -282,12 +286,18 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
         Missing or unreadable file; not HDF5 (foreign file); truncated or corrupt HDF5;
         not a vibrofocus calibration; unknown schema version; missing variables or
         attributes; inconsistent dimensions, shapes or dtypes; NaN/Inf in the transfer
-        matrix (named with its frequency, point and actuator); a bad band; points or
-        actuators that do not match the layout. The message names the file.
+        matrix (named with its frequency, point and actuator), or a finite one that no
+        skin gives (a magnitude of H above :data:`~vibrofocus.defaults.H_MAX_M_PER_V` anywhere, or
+        the whole array below :data:`~vibrofocus.defaults.H_MIN_PEAK_M_PER_V` in the
+        band; named likewise); a bad band; points or actuators that do not match the
+        layout. The message names the file.
     """
     import xarray as xr
 
+    from .._atomic import protect
+
     path = Path(path)
+    protect(path, "calibration")
     if not path.exists():
         raise _fail(path, "no such calibration file")
     if not path.is_file():
@@ -300,12 +310,40 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
     if head != _HDF5_SIGNATURE:
         what = "it is empty" if not head else f"it starts with {head!r}"
         raise _fail(path, f"is not a netCDF4/HDF5 calibration file ({what}, not the HDF5 signature)")
-    try:
-        with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False, phony_dims="access") as ds:
-            ds = ds.load()
-    except Exception as exc:  # h5py reports truncation as OSError, others as ValueError/KeyError
-        raise _fail(path, f"is truncated or corrupt: the HDF5 library could not read it ({exc})") from exc
+    problem = None
+    with _quiet_half_open_files():
+        try:
+            with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False, phony_dims="access") as ds:
+                ds = ds.load()
+        except Exception as exc:  # h5py reports truncation as OSError, others as ValueError/KeyError
+            problem = str(exc)[:300]
+    if problem is not None:
+        # Not chained: the traceback would keep h5netcdf's half-open file alive.
+        raise _fail(path, f"is truncated or corrupt: the HDF5 library could not read it ({problem})")
     return _from_dataset(ds, path)
+
+
+@contextlib.contextmanager
+def _quiet_half_open_files() -> Iterator[None]:
+    """Silence what a half-constructed h5netcdf file says when it is collected.
+
+    A corrupt header stops ``h5netcdf.File.__init__`` midway; the object's ``__del__``
+    then fails (``'File' object has no attribute '_writable'``) and Python prints an
+    "Exception ignored" traceback after the one-line error. The object is collected
+    here, inside the body's scope, with that one report dropped.
+    """
+    previous = sys.unraisablehook
+
+    def hook(unraisable) -> None:
+        if "h5netcdf" not in getattr(getattr(unraisable.object, "__func__", unraisable.object), "__module__", ""):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        gc.collect()
+        sys.unraisablehook = previous
 
 
 def _number_attr(attrs, name: str, path: Path) -> float:
@@ -434,6 +472,7 @@ def _from_dataset(ds, path: Path) -> Calibration:
             f, p, a = np.argwhere(bad)[0]
             raise _fail(path, f"variable {name} holds {int(bad.sum())} NaN/Inf value(s); first at "
                               f"{freqs[f]:g} Hz, point {labels[p]}, actuator {names[a]}")
+    _check_plausible(H_real, H_imag, freqs, band, labels, names, path)
     coherence = ds["coherence"].values.astype(float)
     finite = np.isfinite(coherence)
     if (coherence[finite] < -1e-9).any() or (coherence[finite] > 1 + 1e-9).any():
@@ -471,6 +510,28 @@ def _from_dataset(ds, path: Path) -> Calibration:
         created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
         straps=straps, codes=codes, multiple_coherence=multiple, recorded_s=recorded_s, fit=fit,
     )
+
+
+def _check_plausible(H_real: np.ndarray, H_imag: np.ndarray, freqs: np.ndarray, band: tuple[float, float],
+                     labels: list[str], names: list[str], path: Path) -> None:
+    """Refuse a finite H that no skin gives (:data:`~vibrofocus.defaults.H_MAX_M_PER_V`,
+    :data:`~vibrofocus.defaults.H_MIN_PEAK_M_PER_V`), naming where and what."""
+    from ..defaults import H_MAX_M_PER_V, H_MIN_PEAK_M_PER_V
+
+    mag = np.hypot(H_real, H_imag)
+    f, p, a = np.unravel_index(int(np.argmax(mag)), mag.shape)
+    if mag[f, p, a] > H_MAX_M_PER_V:
+        n_over = int((mag > H_MAX_M_PER_V).sum())
+        raise _fail(path, f"its transfer matrix is not physically plausible: |H| = {mag[f, p, a]:.3g} m/V at "
+                          f"{freqs[f]:g} Hz, point {labels[p]}, actuator {names[a]} ({n_over} value(s) above "
+                          f"{H_MAX_M_PER_V:g} m/V, i.e. {H_MAX_M_PER_V * 1e3:g} mm of skin motion per volt); the "
+                          "file is corrupt or was edited: calibrate again")
+    inside = (freqs >= band[0]) & (freqs <= band[1])
+    peak = float(mag[inside].max()) if inside.any() else 0.0
+    if peak < H_MIN_PEAK_M_PER_V:
+        raise _fail(path, f"its transfer matrix is not physically plausible: |H| is at most {peak:.3g} m/V over the "
+                          f"band {band[0]:g}-{band[1]:g} Hz, below {H_MIN_PEAK_M_PER_V:g} m/V (1 pm per volt): no "
+                          "actuator moved the skin measurably; check the rig and calibrate again")
 
 
 def _fit_from_dataset(ds, attrs, layout: ArrayLayout, path: Path):

@@ -138,14 +138,51 @@ def write_drives_wav(
     return path, sidecar
 
 
-def read_drives(path: str | os.PathLike) -> tuple[np.ndarray, float]:
+def _npy_header(zf, name: str, path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
+    """Shape, dtype and data size (bytes) of member ``name`` of an npz, from its header alone.
+
+    Nothing but the header is decompressed. The header's shape is checked against the
+    size the archive's directory declares for the member, so a header that claims more
+    data than the file holds is refused here, before anything is allocated.
+    """
+    info = zf.getinfo(name)
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ValueError(f"npy format version {version} of {name}")
+        header_bytes = fh.tell()
+    count = 1
+    for n in shape:
+        count *= int(n)
+    data_bytes = count * dtype.itemsize
+    if data_bytes != info.file_size - header_bytes:
+        raise ValidationError(
+            f"drives file {path}: the header of {name} claims shape {tuple(shape)} ({data_bytes:,} bytes of "
+            f"{dtype}) but the file holds {max(info.file_size - header_bytes, 0):,} bytes for it; the file is "
+            "corrupt or was not written by numpy"
+        )
+    return tuple(int(n) for n in shape), dtype, data_bytes
+
+
+def read_drives(path: str | os.PathLike, *, max_duration_s: float | None = None) -> tuple[np.ndarray, float]:
     """Read ``drives`` and ``fs`` from an ``.npz`` drives file.
+
+    The arrays' headers are checked before any data is decompressed: the shape must
+    match the data the file holds, the duration must be within ``max_duration_s`` and
+    the array must fit in memory (:func:`vibrofocus._validation.check_memory`).
 
     Parameters
     ----------
     path : path-like
         An ``.npz`` with the arrays ``drives`` (n_actuators, n_samples), V, and ``fs``
         (one number), Hz, as :func:`write_drives` or ``numpy.savez`` write it.
+    max_duration_s : float, optional
+        Longest drive accepted, s (a rig's ``limits.max_duration_s``), checked from
+        the header.
 
     Returns
     -------
@@ -157,13 +194,18 @@ def read_drives(path: str | os.PathLike) -> tuple[np.ndarray, float]:
     Raises
     ------
     ValidationError
-        Missing file, not an npz, missing or malformed arrays.
+        Missing file or a folder, not an npz, missing or malformed arrays, a header
+        that does not match the data, too long a drive, too little memory.
     """
     import zipfile
 
-    from .._validation import as_array, check_positive
+    from .._atomic import protect
+    from .._validation import as_array, check_memory, check_positive, shorten
 
     path = Path(path)
+    protect(path, "drives file")
+    if path.is_dir():
+        raise ValidationError(f"drives file {path}: it is a folder; give the .npz file written by vibrofocus render")
     if not path.is_file():
         raise ValidationError(f"drives file {path}: no such file")
     try:
@@ -177,21 +219,30 @@ def read_drives(path: str | os.PathLike) -> tuple[np.ndarray, float]:
             "vibrofocus render --out FILE.npz or numpy.savez(FILE, drives=..., fs=...))"
         )
     try:
-        with np.load(path, allow_pickle=False) as data:
-            missing = [k for k in ("drives", "fs") if k not in data.files]
+        with zipfile.ZipFile(path) as zf:
+            files = [n.removesuffix(".npy") for n in zf.namelist()]
+            missing = [k for k in ("drives", "fs") if k not in files]
             if missing:
-                raise ValidationError(
-                    f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {', '.join(data.files) or 'nothing'})"
-                )
-            raw = data["drives"]
-            if raw.dtype.kind == "b":
-                raise ValidationError(f"drives in {path} must be voltages, got dtype bool")
-            drives = as_array(raw, f"drives in {path}", ndim=2, finite=False)
+                held = shorten(", ".join(files) or "nothing", 200, as_text=True)
+                raise ValidationError(f"drives file {path}: missing array(s) {', '.join(missing)} (it holds {held})")
+            fs_shape, _, _ = _npy_header(zf, "fs.npy", path)
+            if int(np.prod(fs_shape)) != 1:
+                raise ValidationError(f"drives file {path}: fs must be one number, got shape {fs_shape}")
+            shape, dtype, n_bytes = _npy_header(zf, "drives.npy", path)
+        with np.load(path, allow_pickle=False) as data:
             fs_arr = np.asarray(data["fs"])
-    except (OSError, ValueError, zipfile.BadZipFile) as exc:
+            fs = check_positive(fs_arr.reshape(()).item(), f"fs in {path}")
+            if dtype.kind == "b":
+                raise ValidationError(f"drives in {path} must be voltages, got dtype bool")
+            if len(shape) == 2 and max_duration_s is not None and shape[1] / fs > max_duration_s:
+                raise ValidationError(
+                    f"drives file {path}: {shape[1]:,} samples at {fs:g} Hz last {shape[1] / fs:.6g} s, longer than "
+                    f"the rig's limit of {max_duration_s:g} s (checked before reading the samples)"
+                )
+            check_memory(2 * n_bytes, f"drives file {path} (shape {shape})")  # the array and one copy
+            drives = as_array(data["drives"], f"drives in {path}", ndim=2, finite=False)
+    except (OSError, ValueError, zipfile.BadZipFile, KeyError) as exc:
         if isinstance(exc, ValidationError):
             raise
         raise ValidationError(f"drives file {path}: not a readable .npz file ({exc})") from None
-    if fs_arr.size != 1:
-        raise ValidationError(f"drives file {path}: fs must be one number, got shape {fs_arr.shape}")
-    return drives, check_positive(fs_arr.reshape(()).item(), f"fs in {path}")
+    return drives, fs

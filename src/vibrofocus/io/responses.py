@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from .._validation import integer_text
+from .._validation import integer_text, shorten
 from ..errors import ValidationError
 
 __all__ = ["format_response", "parse_response_text"]
@@ -59,10 +59,10 @@ def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[i
     for token in tokens:
         value = integer_text(token)
         if value is None:
-            raise ValidationError(f"response {text!r} is not a list of location numbers separated by spaces")
+            raise ValidationError(f"response {shorten(text)} is not a list of location numbers separated by spaces")
         if n_locations is not None and not 1 <= value <= n_locations:
-            raise ValidationError(f"response {text!r} names location {value}, outside 1..{n_locations}")
+            raise ValidationError(f"response {shorten(text)} names location {value}, outside 1..{n_locations}")
         numbers.append(value)
     if len(set(numbers)) != len(numbers):
-        raise ValidationError(f"response {text!r} names the same location more than once")
+        raise ValidationError(f"response {shorten(text)} names the same location more than once")
     return tuple(sorted(numbers))

@@ -105,7 +105,10 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
         :data:`SIMULATED_COLUMN` gives ``simulated`` (bool).
     """
+    from .._atomic import protect
+
     path = Path(path)
+    protect(path, "trials file")
     try:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
@@ -165,7 +168,10 @@ def read_trials_table(path: str | os.PathLike):
     import numpy as np
     import pandas as pd
 
+    from .._atomic import protect
+
     name = os.fspath(path)
+    protect(name, "trials file")
     if not os.path.isfile(name):
         raise ValidationError(f"trials file {name!r} does not exist or is not a file")
     try:

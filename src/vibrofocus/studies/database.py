@@ -182,6 +182,20 @@ class StudyDatabase:
             self._conn.close()
             self._drop_snapshot()
             raise
+        self._protect_files()
+
+    def _protect_files(self) -> None:
+        """Within a command, no output may replace this database, its journal or a calibration it lists."""
+        from .._atomic import guarding, protect
+
+        if not guarding():  # the Python API and the web app: no command's outputs to check
+            return
+        protect([self.path, Path(str(self.path) + "-wal"), Path(str(self.path) + "-shm")], "study database")
+        try:
+            rows = self._conn.execute("SELECT path FROM calibrations").fetchall()
+        except sqlite3.Error:  # an old schema without the table: nothing more to protect
+            return
+        protect([str(r[0]) for r in rows], "calibration of the study database")
 
     def _snapshot_copy(self) -> Path:
         """Copy the database (and its ``-wal``) into a private temporary folder; return the copy's path."""

@@ -39,6 +39,16 @@ TESTS: tuple[tuple[str, str], ...] = (
 )
 
 
+#: Largest sample size N of a power analysis (memory grows with N x studies).
+MAX_PARTICIPANTS = 1000
+#: Most simulated studies per N.
+MAX_STUDIES = 100_000
+#: Most trials per condition and study.
+MAX_REPETITIONS = 100
+#: Seconds to wait for a Dask scheduler given by address.
+SCHEDULER_TIMEOUT_S = 5
+
+
 @dataclass(frozen=True)
 class PowerDesign:
     """A study design for power analysis.
@@ -73,19 +83,39 @@ class PowerDesign:
     model: PerceptualModel = field(default_factory=PerceptualModel)
 
     def __post_init__(self) -> None:
+        from .._validation import shorten
+        from ..defaults import STUDY_METHODS
+        from ..layout import ArrayLayout
+
         ns = tuple(int(n) for n in self.n_participants)
-        if not ns or min(ns) < 3:
-            raise ValidationError(f"n_participants must be sample sizes >= 3 (the RM-ANOVA needs 3), got {ns}")
+        if not ns or min(ns) < 3 or max(ns) > MAX_PARTICIPANTS:
+            raise ValidationError(f"n_participants must be sample sizes from 3 (the RM-ANOVA needs 3) to "
+                                  f"{MAX_PARTICIPANTS}, got {shorten(ns)}")
         object.__setattr__(self, "n_participants", ns)
-        for name, value, lo in (("n_studies", self.n_studies, 1), ("repetitions", self.repetitions, 1)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo:
-                raise ValidationError(f"{name} must be an integer >= {lo}, got {value!r}")
+        for name, value, lo, hi in (("n_studies", self.n_studies, 1, MAX_STUDIES),
+                                    ("repetitions", self.repetitions, 1, MAX_REPETITIONS)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not lo <= value <= hi:
+                raise ValidationError(f"{name} must be an integer from {lo} to {hi}, got {shorten(value)}")
         if not 0 < self.alpha < 1:
             raise ValidationError(f"alpha must be in (0, 1), got {self.alpha!r}")
-        if self.locations is not None and len(self.locations) < 2:
-            raise ValidationError("at least 2 locations are needed")
-        if self.methods is not None and len(self.methods) < 2:
-            raise ValidationError("at least 2 methods are needed")
+        if self.methods is not None:
+            unknown = [m for m in self.methods if m not in STUDY_METHODS]
+            if unknown:
+                raise ValidationError(f"methods: unknown method(s) {shorten(unknown)}; the studies use "
+                                      f"{', '.join(STUDY_METHODS)}")
+            if len(set(self.methods)) != len(self.methods):
+                raise ValidationError(f"methods: each method once, got {shorten(self.methods)}")
+            if len(self.methods) < 2:
+                raise ValidationError("at least 2 methods are needed")
+        if self.locations is not None:
+            n_loc = ArrayLayout.reference().n_locations
+            outside = [x for x in self.locations if not 1 <= x <= n_loc]
+            if outside:
+                raise ValidationError(f"locations: {shorten(outside)} outside the location numbers 1 to {n_loc}")
+            if len(set(self.locations)) != len(self.locations):
+                raise ValidationError(f"locations: each location once, got {shorten(self.locations)}")
+            if len(self.locations) < 2:
+                raise ValidationError("at least 2 locations are needed")
 
 
 def _paired_t_p(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -198,6 +228,22 @@ def power_table(
     return rows
 
 
+def _connect(client_cls: Any, scheduler: str) -> Any:
+    """A Dask client of the scheduler at ``scheduler`` (``tcp://host:port``), or ValidationError in one line."""
+    import re
+
+    from .._validation import shorten
+
+    if not re.fullmatch(r"(?:[a-z]+://)?[^\s/:]+:\d{1,5}", scheduler):
+        raise ValidationError(f"scheduler must be an address like tcp://host:8786, got {shorten(scheduler)}")
+    try:
+        return client_cls(scheduler, timeout=SCHEDULER_TIMEOUT_S)
+    except (OSError, TimeoutError, ValueError) as exc:
+        raise ValidationError(f"cannot reach the Dask scheduler at {shorten(scheduler)} within "
+                              f"{SCHEDULER_TIMEOUT_S} s ({shorten(str(exc), 120)}); start it, or leave out "
+                              "--scheduler for a cluster on this machine") from None
+
+
 def run_power(
     design: PowerDesign,
     *,
@@ -261,7 +307,7 @@ def run_power(
         cluster = None
         if own_client:
             if scheduler:
-                client = Client(scheduler)
+                client = _connect(Client, scheduler)
             else:
                 import os
 

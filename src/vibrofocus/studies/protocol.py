@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import shorten
 from ..defaults import METHODS, STUDY_METHODS
 from ..errors import StudyError
 from ..io.responses import format_response  # the stored form of a response: one home, re-exported
@@ -233,14 +234,18 @@ def parse_response(response: Any, design: StudyDesign) -> tuple[int, ...]:
     valid = design.locations
     lo, hi = min(valid), max(valid)
     if isinstance(response, bool):
-        raise StudyError(f"response must be location numbers {lo}-{hi}, got {response!r}")
+        raise StudyError(f"response must be location numbers {lo}-{hi}, got {shorten(response)}")
     if isinstance(response, (int, np.integer)):
         items: list[Any] = [int(response)]
     elif isinstance(response, str):
         text = response.strip()
         tokens = [t for t in _SPLIT.split(text) if t]
-        # Keypad digits typed together ("45") mean several single-digit locations.
-        if len(tokens) == 1 and len(tokens[0]) > 1 and tokens[0].isdigit() and hi <= 9:
+        # Keypad digits typed together ("45") mean several single-digit locations; a 0
+        # among them ("10") is a number the participant meant, not location 0.
+        if len(tokens) == 1 and len(tokens[0]) > 1 and tokens[0].isascii() and tokens[0].isdigit() and hi <= 9:
+            if "0" in tokens[0] and 0 not in valid:
+                raise StudyError(f"response location {int(tokens[0])} is outside the study's locations {lo}-{hi} "
+                                 "(several locations: type their digits together, e.g. 45)")
             tokens = list(tokens[0])
         items = tokens
     elif isinstance(response, Iterable):
@@ -256,9 +261,11 @@ def parse_response(response: Any, design: StudyDesign) -> tuple[int, ...]:
                 raise ValueError
             if isinstance(item, (float, np.floating)) and not float(item).is_integer():
                 raise ValueError
+            if isinstance(item, str) and not item.isascii():  # int() reads other scripts' digits too
+                raise ValueError
             value = int(item)
         except (TypeError, ValueError):
-            raise StudyError(f"response must be location numbers {lo}-{hi}, got {item!r}") from None
+            raise StudyError(f"response must be location numbers {lo}-{hi}, got {shorten(item)}") from None
         if value not in valid:
             raise StudyError(f"response location {value} is outside the study's locations {lo}-{hi}")
         locations.append(value)

@@ -27,6 +27,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .._validation import shorten
 from ..errors import AnswerRefused, StudyError
 from .database import APPLICATION_ID, SCHEMA_VERSION, StudyDatabase, now_utc, software_version
 from .protocol import PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
@@ -57,11 +58,37 @@ __all__ = [
     "ParticipantInfo",
     "Event",
     "file_sha256",
+    "check_participant_id",
 ]
 
 _PARTICIPANT_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
 _EVENT_RE = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
 _ANSWER_ID_RE = re.compile(r"^[\x21-\x7e]{1,128}$")  # printable ASCII, no spaces
+
+
+def check_participant_id(participant_id: Any) -> str:
+    """Return ``participant_id`` if it is 1-64 letters, digits, ``_ . -``, starting with a letter or digit.
+
+    Parameters
+    ----------
+    participant_id : str
+        The id, as stored in the study database and in calibration files.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    StudyError
+        Naming the rule and (cut to a few dozen characters) the id given.
+    """
+    if not isinstance(participant_id, str) or not _PARTICIPANT_RE.match(participant_id):
+        raise StudyError(
+            f"participant id must be 1-64 letters, digits, '_', '.' or '-' starting with a "
+            f"letter or digit, got {shorten(participant_id)}"
+        )
+    return participant_id
 
 
 def file_sha256(path: str | os.PathLike) -> str:
@@ -126,12 +153,8 @@ class StudyStore(StudyDatabase):
         StudyError
             Malformed id, or the id exists with a different ``simulated`` flag.
         """
-        if not isinstance(participant_id, str) or not _PARTICIPANT_RE.match(participant_id):
-            raise StudyError(
-                f"participant id must be 1-64 letters, digits, '_', '.' or '-' starting with a "
-                f"letter or digit, got {participant_id!r}"
-            )
-        with self._write(f"add participant {participant_id!r}") as conn:
+        check_participant_id(participant_id)
+        with self._write(f"add participant {shorten(participant_id)}") as conn:
             row = conn.execute("SELECT * FROM participants WHERE participant_id = ?", (participant_id,)).fetchone()
             if row is None:
                 conn.execute(
@@ -141,7 +164,7 @@ class StudyStore(StudyDatabase):
                 row = conn.execute("SELECT * FROM participants WHERE participant_id = ?", (participant_id,)).fetchone()
             elif bool(row["simulated"]) != bool(simulated):
                 kind = "simulated" if row["simulated"] else "real"
-                raise StudyError(f"participant {participant_id!r} already exists as a {kind} participant")
+                raise StudyError(f"participant {shorten(participant_id)} already exists as a {kind} participant")
         return participant_from_row(row)
 
     def participants(self) -> list[ParticipantInfo]:
@@ -160,7 +183,7 @@ class StudyStore(StudyDatabase):
     def _require_participant(self, conn: sqlite3.Connection, participant_id: Any) -> None:
         row = conn.execute("SELECT 1 FROM participants WHERE participant_id = ?", (str(participant_id),)).fetchone()
         if row is None:
-            raise StudyError(f"unknown participant {participant_id!r} in {self.path}; add the participant first")
+            raise StudyError(f"unknown participant {shorten(participant_id)} in {self.path}; add the participant first")
 
     # ------------------------------------------------------------------ calibrations
     def add_calibration(self, participant_id: str, path: str | os.PathLike) -> int:
@@ -172,12 +195,15 @@ class StudyStore(StudyDatabase):
             The calibration id; the existing id when the same file content is already
             registered for this participant.
         """
+        from .._atomic import protect
+
         file = Path(path)
+        protect(file, "calibration of the study database")
         try:
             sha = file_sha256(file)
         except OSError as exc:
             raise StudyError(f"cannot read the calibration file {file}: {exc.strerror or exc}") from exc
-        with self._write(f"add a calibration for {participant_id!r}") as conn:
+        with self._write(f"add a calibration for {shorten(participant_id)}") as conn:
             self._require_participant(conn, participant_id)
             row = conn.execute(
                 "SELECT calibration_id FROM calibrations WHERE participant_id = ? AND sha256 = ?",
@@ -273,7 +299,7 @@ class StudyStore(StudyDatabase):
             raise StudyError(f"session config must be JSON-serialisable: {exc}") from exc
         trials = plan_trials(design, seed)
         now = now_utc()
-        with self._write(f"create a study {study} session for {participant_id!r}") as conn:
+        with self._write(f"create a study {study} session for {shorten(participant_id)}") as conn:
             self._require_participant(conn, participant_id)
             if calibration_id is not None:
                 cal = conn.execute(
@@ -284,7 +310,7 @@ class StudyStore(StudyDatabase):
                     raise StudyError(f"unknown calibration {calibration_id!r} in {self.path}")
                 if cal[0] != participant_id:
                     raise StudyError(
-                        f"calibration {calibration_id} belongs to participant {cal[0]!r}, not {participant_id!r}"
+                        f"calibration {calibration_id} belongs to participant {cal[0]!r}, not {shorten(participant_id)}"
                     )
             cur = conn.execute(
                 "INSERT INTO sessions (participant_id, study, seed, calibration_id, status, config, "

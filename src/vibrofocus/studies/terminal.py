@@ -10,7 +10,11 @@ from ..errors import StudyError
 from .engine import ABORT, PAUSE, Presentation, Response
 from .protocol import parse_response
 
-__all__ = ["TerminalResponder"]
+__all__ = ["TerminalResponder", "InputEnded"]
+
+
+class InputEnded(StudyError):
+    """The answers' input ended (end of file: stdin closed or redirected) before the session did."""
 
 
 class TerminalResponder:
@@ -21,7 +25,9 @@ class TerminalResponder:
     console : rich.console.Console, optional
         Where prompts go.
     input_fn : callable, optional
-        Reads one line (default :func:`input`); end of input aborts.
+        Reads one line (default :func:`input`); end of input raises :class:`InputEnded`
+        (nobody is answering: ``vibrofocus study run`` pauses the session, it does not
+        abort it).
     n_trials : int, optional
         Shown in the prompt.
 
@@ -40,12 +46,12 @@ class TerminalResponder:
         self.input_fn = input_fn if input_fn is not None else input
         self.n_trials = n_trials
 
-    def _read(self, prompt: str) -> str | None:
+    def _read(self, prompt: str) -> str:
         self.console.print(prompt, end="")
         try:
             return self.input_fn("")
         except EOFError:
-            return None
+            raise InputEnded("the keypad input ended (end of file) before the session did") from None
 
     def respond(self, presentation: Presentation) -> Response | str:
         t = presentation.trial
@@ -55,8 +61,6 @@ class TerminalResponder:
         while True:
             line = self._read(prompt)
             rt = time.monotonic() - presentation.onset_s
-            if line is None:
-                return ABORT
             text = line.strip().lower()
             if text == "p":
                 return PAUSE
@@ -71,4 +75,4 @@ class TerminalResponder:
 
     def wait_resume(self) -> bool:
         line = self._read("[yellow]paused[/] — Enter to resume (the trial is played again), q to abort: ")
-        return line is not None and line.strip().lower() != "q"
+        return line.strip().lower() != "q"
