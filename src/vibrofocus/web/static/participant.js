@@ -398,6 +398,7 @@
       await audio.resume();
     } catch (e) { console.warn("no audio", e); }
     try { await document.documentElement.requestFullscreen(); } catch { /* headless or refused */ }
+    $("begin").blur();  // keys from now on answer; none may press Begin again
     $("overlay").hidden = true;
     audioReady = true;
     if (state) render(state);  // e.g. ask for a trial whose onset came before this page
