@@ -67,7 +67,18 @@ class ServerLimits:
 
 
 def effective_cap(limits: ServerLimits) -> int:
-    """The connection cap after leaving :data:`FD_RESERVE` descriptors free."""
+    """The connection cap after leaving :data:`FD_RESERVE` descriptors free.
+
+    Parameters
+    ----------
+    limits : ServerLimits
+        The limits asked for.
+
+    Returns
+    -------
+    int
+        ``limits.max_connections``, lowered to fit the process's file-descriptor limit.
+    """
     try:
         import resource
     except ImportError:  # Windows: no descriptor limit of this kind
