@@ -192,9 +192,10 @@
 
   async function readStraps() {
     // Strap forces before calibrating: a loose strap changes the coupling to the skin.
-    const res = await fetch(`/api/rigs/straps?${rigQuery()}`, { credentials: "same-origin" });
-    const d = await res.json().catch(() => ({}));
+    const res = await fetch(`/api/rigs/straps?${rigQuery()}`, { credentials: "same-origin" }).catch(() => null);
     const msg = $("strap-message");
+    if (res === null) { msg.textContent = UNREACHABLE; msg.className = "error"; return null; }
+    const d = await res.json().catch(() => ({}));
     msg.textContent = res.ok ? `Strap forces: ${d.message}` : (d.detail || "The strap forces could not be read.");
     msg.className = res.ok && !d.ok ? "error" : "muted";
     return res.ok ? d : null;
@@ -311,8 +312,10 @@
     const link = el("a", { href: s.participant_url, target: "_blank", rel: "noopener" }, "open");
     const copy = el("button", { class: "small", onclick: (ev) => {
       ev.stopPropagation();
-      navigator.clipboard?.writeText(new URL(s.participant_url, location.href).href);
-      flash("Participant link copied.");
+      const copied = navigator.clipboard ? navigator.clipboard.writeText(new URL(s.participant_url, location.href).href)
+        : Promise.reject(new Error("no clipboard"));
+      copied.then(() => flash("Participant link copied."),
+        () => flash("The link could not be copied here: right-click 'open' and copy the link address.", true));
     } }, "copy");
     const controls = el("span", { class: "controls" });
     const act = (label, action) => controls.append(el("button", { class: "small", "data-action": action,
