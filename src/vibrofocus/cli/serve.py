@@ -23,6 +23,9 @@ def serve(
     no_browser: bool = typer.Option(False, "--no-browser", help="Do not open the experimenter page."),
     pace: str = typer.Option("normal", "--pace", help="Trial timing: normal, or fast for demonstrations and tests."),
     allow_host: list[str] = typer.Option([], "--allow-host", help="Another host name the pages may be opened at (e.g. this computer's name on the lab network); repeatable."),
+    max_connections: int = typer.Option(1000, "--max-connections", min=4, max=1_000_000, help="Most connections open at once; beyond it the longest-idle one is closed, or the new one refused when all are busy."),
+    header_timeout: float = typer.Option(10.0, "--header-timeout", min=0.1, max=600.0, help="Seconds a connection may take to send a request's headers before it is closed."),
+    keep_alive: float = typer.Option(5.0, "--keep-alive", min=0.1, max=3600.0, help="Seconds an idle connection is kept open between requests."),
 ) -> None:
     """Run the experimenter and participant pages (FastAPI + uvicorn) on this computer.
 
@@ -35,11 +38,10 @@ def serve(
         import threading
         import webbrowser
 
-        import uvicorn
-
         from .._validation import check_choice
         from ..rigs import RIG_KINDS
         from ..web import PACES, create_app
+        from ..web.serving import ServerLimits, run
 
         check_choice(rig, "rig", RIG_KINDS)
         if rig != "simulated":
@@ -81,7 +83,8 @@ def serve(
         if not no_browser:
             # A moment later, so that the page does not ask before uvicorn listens.
             threading.Timer(1.5, webbrowser.open, args=(login,)).start()
-        uvicorn.run(web_app, host=host, port=port, log_level="warning")
+        limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive)
+        run(web_app, host=host, port=port, limits=limits)
 
 
 def _check_database(db: Path) -> None:

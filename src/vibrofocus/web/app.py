@@ -23,6 +23,7 @@ from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
+from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ..errors import StudyError
 from . import routes_experimenter, routes_participant
@@ -36,8 +37,10 @@ from .state import (
     load_or_make_secret,
     plain_problem,
     private_file,
+    private_journal,
     render_template,
 )
+from .public_text import public_text
 
 __all__ = ["create_app", "render_template", "WebState", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
 
@@ -96,7 +99,9 @@ def create_app(
     db_path = Path(db_path).resolve()
     db_path.parent.mkdir(parents=True, exist_ok=True)
     private_file(db_path)
+    private_journal(db_path)  # before SQLite opens them, and again once it has
     store = StudyStore(db_path)
+    private_journal(db_path)
     state = WebState(
         store=store, db_path=db_path, token=token, secret=load_or_make_secret(db_path),
         rig_kind=rig, pace=pace, rig_factory=rig_factory, rig_config=rig_config,
@@ -114,7 +119,7 @@ def create_app(
         if close is not None:
             close()
 
-    app = FastAPI(title="vibrofocus", lifespan=lifespan, docs_url=None, redoc_url=None)
+    app = FastAPI(title="vibrofocus", lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)
     app.state.web = state
     app.add_middleware(SecurityMiddleware, web=state, allowed_hosts=(*LOCAL_HOSTS, *allowed_hosts))
     app.mount("/static", StaticFiles(directory=str(_HERE / "static")), name="static")
@@ -126,9 +131,23 @@ def create_app(
         problems = [plain_problem(err) for err in exc.errors()]
         return JSONResponse(status_code=422, content={"detail": " ".join(problems) or "This request is not valid."})
 
+    @app.exception_handler(StarletteHTTPException)
+    async def _http_error(request: Request, exc: StarletteHTTPException) -> JSONResponse:
+        # Messages of the layers below may name files by their absolute paths.
+        detail = public_text(exc.detail) if isinstance(exc.detail, str) else exc.detail
+        return JSONResponse(status_code=exc.status_code, content={"detail": detail}, headers=getattr(exc, "headers", None))
+
     @app.exception_handler(StudyError)
     async def _study_error(request: Request, exc: StudyError) -> JSONResponse:
-        return JSONResponse(status_code=409, content={"detail": str(exc)})
+        return JSONResponse(status_code=409, content={"detail": public_text(str(exc))})
+
+    @app.exception_handler(Exception)
+    async def _unexpected(request: Request, exc: Exception) -> JSONResponse:
+        # The trace goes to the server's log, never to a page.
+        log.error("unexpected error on %s %s", request.method, request.url.path, exc_info=exc)
+        return JSONResponse(status_code=500, content={"detail": (
+            "The server could not do this because of an unexpected error; the terminal running "
+            "'vibrofocus serve' says why.")})
 
     app.include_router(routes_participant.router)
     app.include_router(routes_experimenter.router)

@@ -23,8 +23,10 @@ from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Resp
 from ..errors import StudyError, VibrofocusError
 from ..studies.session_status import SESSION_ACTIONS, action_status
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
-from .state import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, private_dir, render_template, trial_position
+from .public_text import public_text
+from .state import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, login_cookie, private_dir, render_template, trial_position
 from .routes_participant import planned
+from .throttle import THROTTLED_MESSAGE
 
 log = logging.getLogger(__name__)
 
@@ -43,17 +45,32 @@ def require_token(request: Request) -> WebState:
 
 
 def _study_error(exc: StudyError, status: int = 409) -> HTTPException:
-    return HTTPException(status, detail=str(exc))
+    return HTTPException(status, detail=public_text(str(exc)))
 
 
 # ---------------------------------------------------------------------- page and login
 def _logged_in(web: WebState) -> Response:
     """Set the login cookie and go to the experimenter page."""
     resp = RedirectResponse("/", status_code=303)
-    # HttpOnly: no script can read it; SameSite=Strict: no other site's page sends it
-    # (other local ports are refused by the origin checks of web.security).
-    resp.set_cookie(TOKEN_COOKIE, web.cookie_value, httponly=True, samesite="strict", path="/")
+    # A random id per login (logout revokes it). HttpOnly: no script can read it;
+    # SameSite=Strict: no other site's page sends it (other local ports are refused by
+    # the origin checks of web.security).
+    resp.set_cookie(TOKEN_COOKIE, web.logins.new(), httponly=True, samesite="strict", path="/")
     return resp
+
+
+def _throttled(web: WebState, request: Request) -> Response | None:
+    """The login page with 429 while this client is throttled, else None."""
+    wait = web.throttle.retry_after(_client(request), "token")
+    if wait is None:
+        return None
+    resp = _login_page(THROTTLED_MESSAGE, status=429)
+    resp.headers["Retry-After"] = str(wait)
+    return resp
+
+
+def _client(request: Request) -> str:
+    return request.client.host if request.client is not None else "unknown"
 
 
 def _login_page(message: str = "", status: int = 401) -> HTMLResponse:
@@ -73,7 +90,11 @@ def experimenter_page(request: Request) -> Response:
 def login_link(request: Request, code: str = FPath(..., max_length=64)) -> Response:
     """Exchange a one-time login link printed by ``vibrofocus serve`` for the login cookie."""
     web = _web(request)
+    throttled = _throttled(web, request)
+    if throttled is not None:
+        return throttled
     if not web.use_login_code(code):
+        web.throttle.failed(_client(request), "token")
         return _login_page("That login link has been used already or has expired. Log in with the experimenter token instead.")
     return _logged_in(web)
 
@@ -84,16 +105,25 @@ async def login_form(request: Request) -> Response:
     from urllib.parse import parse_qs
 
     web = _web(request)
-    fields = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=4)
+    throttled = _throttled(web, request)
+    if throttled is not None:
+        return throttled
+    try:
+        fields = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=4)
+    except ValueError:  # more fields than the form has
+        return _login_page("The login form was not filled in as expected. Reload the page and try again.", status=400)
     given = (fields.get("token") or [""])[0].strip()
     if not web.token_ok(given):
+        if given:
+            web.throttle.failed(_client(request), "token")
         return _login_page("That is not the experimenter token this server printed. Check it and try again.")
     return _logged_in(web)
 
 
 @router.post("/logout", include_in_schema=False)
-def logout() -> Response:
-    """Forget the login cookie in this browser."""
+def logout(request: Request) -> Response:
+    """End this login on the server (its cookie stops working everywhere) and forget it here."""
+    _web(request).logins.revoke(login_cookie(request.headers.get("cookie")))
     resp = RedirectResponse("/", status_code=303)
     resp.delete_cookie(TOKEN_COOKIE, path="/", httponly=True, samesite="strict")
     return resp
@@ -234,7 +264,11 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         job.message = "cancelled: nothing was saved"
     except Exception as exc:  # noqa: BLE001 - shown on the experimenter page
         job.status = "failed"
-        job.error = f"{type(exc).__name__}: {exc}" if not isinstance(exc, VibrofocusError) else str(exc)
+        if isinstance(exc, VibrofocusError):
+            job.error = public_text(str(exc))
+        else:  # a bug: the trace goes to the terminal, not to the page
+            log.exception("calibration %s failed", job.job_id)
+            job.error = "an unexpected error; the terminal running 'vibrofocus serve' says why"
         job.message = "failed"
 
 
@@ -319,7 +353,7 @@ def list_sessions(participant_id: str | None = Query(None, max_length=64), web: 
         with web.db:
             ids = [s.session_id for s in web.store.sessions(participant_id)]
     except StudyError as exc:
-        raise HTTPException(404, detail=str(exc)) from None
+        raise _study_error(exc, 404) from None
     return [_session_out(web, sid) for sid in ids]
 
 
@@ -378,8 +412,13 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
     if action not in SESSION_ACTIONS:
         raise HTTPException(404, detail=f"unknown session action {action!r}; use start, pause, resume or stop")
     info = web.session(session_id)
+    if info["status"] == "aborted" and action != "stop":
+        raise HTTPException(409, detail=(
+            f"Session {session_id} was stopped, and a stop is final. To go on with this participant, plan a new session."))
     try:
         status = action_status(action, session_id, info["status"])
+        if status == "running" and info.get("calibration_id") is not None:
+            web.calibration(int(info["calibration_id"]))  # its hash, before anything plays
         if status == "aborted":
             with web.lock:
                 runner = web.runners.pop(session_id, None)
@@ -432,7 +471,7 @@ def export_trials(participant_id: str | None = Query(None, max_length=64), web: 
             web.store.export_trials_csv(path, participant_id=participant_id)
         os.chmod(path, 0o600)  # participant data: this user only, whatever the umask
     except StudyError as exc:
-        raise HTTPException(404 if "unknown participant" in str(exc) else 409, detail=str(exc)) from None
+        raise _study_error(exc, 404 if "unknown participant" in str(exc) else 409) from None
     return FileResponse(path, media_type="text/csv", filename="trials.csv")
 
 
@@ -466,14 +505,15 @@ def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require
         try:
             lines = analyse_in_child(trials, out)
         except VibrofocusError as exc:
-            job["log"] = f"error: {exc}"[-4000:]
+            job["log"] = public_text(f"error: {exc}")[-4000:]
             job["status"] = "failed"
             return
-        except Exception as exc:  # a bug or a dead child must not leave the job 'running' forever
-            job["log"] = f"the analysis failed: {type(exc).__name__}: {exc}"[-4000:]
+        except Exception:  # a bug or a dead child must not leave the job 'running' forever
+            log.exception("analysis %s failed", name)
+            job["log"] = "the analysis failed because of an unexpected error; the terminal running 'vibrofocus serve' says why"
             job["status"] = "failed"
             return
-        job["log"] = "\n".join(lines)[-4000:]
+        job["log"] = public_text("\n".join(lines))[-4000:]
         job["status"] = "done"
 
     threading.Thread(target=work, name=f"analysis-{name}", daemon=True).start()
@@ -493,8 +533,11 @@ def analysis_job(name: str, web: WebState = Depends(require_token)) -> dict[str,
 def report_file(name: str, file_path: str, web: WebState = Depends(require_token)) -> FileResponse:
     """Files of an analysis report (HTML, PNG, JSON)."""
     root = (web.data_dir / "reports").resolve()
+    missing = HTTPException(404, detail="There is no such report file.")
+    if "\x00" in name or "\x00" in file_path:  # the file system cannot even look such a name up
+        raise missing
     target = (root / name / file_path).resolve()
     # Refuse anything that resolves outside the reports folder (../ tricks).
     if root not in target.parents or not target.is_file():
-        raise HTTPException(404, detail=f"no report file {name}/{file_path}")
+        raise missing
     return FileResponse(target)

@@ -179,7 +179,8 @@ def participant_answer(
     web.check_key(session_id, key)
     if body.session_id != session_id:
         raise HTTPException(422, detail=f"body.session_id {body.session_id} does not match the session {session_id} of the URL")
-    web.session(session_id)  # 404 for an unknown session
+    if web.session(session_id)["status"] == "aborted":  # 404 for an unknown session
+        raise HTTPException(409, detail="The experimenter has ended this session, so this answer was not recorded.")
     try:
         receipt = web.store.record_answer(
             session_id, body.trial_index, list(body.response), float(body.rt_s),

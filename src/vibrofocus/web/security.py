@@ -17,6 +17,9 @@ It is a plain ASGI middleware, so that it acts before FastAPI reads or parses an
 3. **Authentication before the body.** Experimenter routes need the token (header) or
    the login cookie, participant routes the session's key, checked from the headers
    alone; a request that fails is answered before a byte of its body is read.
+   Wrong secrets are counted per client (:mod:`.throttle`): a client that gives too many
+   is refused (429) for a while, the right secret included. The login cookie, a random
+   id, is not throttled, so that a flood of wrong tokens does not log the experimenter out.
 4. **Size limit.** A body longer than :data:`MAX_BODY_BYTES` is refused (413) while it is
    read, so a huge upload costs no memory.
 5. **Headers on every answer.** ``Content-Security-Policy`` (``frame-ancestors 'none'``:
@@ -33,7 +36,9 @@ from __future__ import annotations
 import json
 from collections.abc import Awaitable, Callable, Iterable
 from typing import Any
-from urllib.parse import urlsplit
+from urllib.parse import parse_qs, urlsplit
+
+from .throttle import THROTTLED_MESSAGE
 
 __all__ = [
     "MAX_BODY_BYTES",
@@ -149,10 +154,12 @@ class SecurityMiddleware:
                 await _refuse(send, 403, "This request came from a page that is not part of this study server, so it was refused.")
                 return
 
-        denied = self._access(path, headers)
+        client = (scope.get("client") or ("unknown",))[0]
+        query = scope.get("query_string", b"").decode("latin-1")
+        denied = self._access(path, headers, client, query)
         if denied is not None:
-            status, message = denied
-            await _refuse(send, status, message)
+            status, message, *retry = denied
+            await _refuse(send, status, message, retry_after=retry[0] if retry else None)
             return
 
         if method not in _SAFE_METHODS:
@@ -169,19 +176,24 @@ class SecurityMiddleware:
         await self.app(scope, receive, _with_headers(send, path))
 
     # ------------------------------------------------------------------ checks
-    def _access(self, path: str, headers: dict[str, str]) -> tuple[int, str] | None:
-        """``(status, message)`` if the request may not reach its route, else None."""
+    def _access(self, path: str, headers: dict[str, str], client: str = "unknown", query: str = "") -> tuple | None:
+        """``(status, message[, retry_after_s])`` if the request may not reach its route, else None."""
         web = self.web
-        if path.startswith("/api/participant/"):
-            sid = path.split("/")[3]
-            if not sid.isdigit() or len(sid) > 15:
+        if path.startswith(("/api/participant/", "/participant/")):
+            parts = path.split("/")
+            sid = parts[3] if path.startswith("/api/") else parts[2]
+            # ASCII digits only: str.isdigit() also takes '²' and '١' (which int() reads as 1).
+            if not (sid.isascii() and sid.isdigit()) or len(sid) > 15:
                 return 404, "There is no such session."
-            if not web.key_ok(int(sid), headers.get("x-participant-key")):
-                return 403, web.KEY_MESSAGE
-            return None
-        if path.startswith("/api/") or path.startswith("/reports/"):
-            if web.token_ok(headers.get("x-vibrofocus-token")):
-                return None
+            if path.startswith("/api/"):
+                key = headers.get("x-participant-key")
+            else:
+                key = (parse_qs(query).get("key") or [None])[0]
+            return self._secret(client, "key", key, lambda: web.key_ok(int(sid), key), 403, web.KEY_MESSAGE)
+        if path.startswith(("/api/", "/reports/")):
+            token = headers.get("x-vibrofocus-token")
+            if token is not None:
+                return self._secret(client, "token", token, lambda: web.token_ok(token), 401, web.TOKEN_MESSAGE)
             if web.cookie_ok(headers.get("cookie")):
                 site = headers.get("sec-fetch-site")
                 if site is not None and site not in ("same-origin", "none"):
@@ -189,6 +201,17 @@ class SecurityMiddleware:
                 return None
             return 401, web.TOKEN_MESSAGE
         return None
+
+    def _secret(self, client: str, kind: str, given: str | None, ok: Callable[[], bool], status: int, message: str) -> tuple | None:
+        """Check a secret under the client's throttle; a wrong one (not a missing one) counts."""
+        wait = self.web.throttle.retry_after(client, kind)
+        if wait is not None:
+            return 429, THROTTLED_MESSAGE, wait
+        if ok():
+            return None
+        if given:
+            self.web.throttle.failed(client, kind)
+        return status, message
 
     async def _read_body(self, receive: Receive) -> tuple[list[dict[str, Any]], bool]:
         """Read the whole body, at most ``max_body_bytes``; ``(messages, within limit)``."""
@@ -240,13 +263,12 @@ def _with_headers(send: Send, path: str) -> Send:
     return wrapped
 
 
-async def _refuse(send: Send, status: int, detail: str) -> None:
+async def _refuse(send: Send, status: int, detail: str, *, retry_after: int | None = None) -> None:
     """Answer ``{"detail": ...}`` with ``status`` (and the security headers)."""
     body = json.dumps({"detail": detail}).encode()
-    await _with_headers(send, "/api/")({
-        "type": "http.response.start",
-        "status": status,
-        "headers": [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
-                    (b"connection", b"close")],
-    })
+    headers = [(b"content-type", b"application/json"), (b"content-length", str(len(body)).encode()),
+               (b"connection", b"close")]
+    if retry_after is not None:
+        headers.append((b"retry-after", str(int(retry_after)).encode()))
+    await _with_headers(send, "/api/")({"type": "http.response.start", "status": status, "headers": headers})
     await send({"type": "http.response.body", "body": body})

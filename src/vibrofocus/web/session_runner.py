@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import VibrofocusError
 from ..studies.engine import PAUSE, STOP, Again, Control, Presentation, Response, StudyEngine, drive_sha256
 
 __all__ = ["Pace", "PACES", "SessionRunner", "drive_sha256"]
@@ -137,15 +138,23 @@ class SessionRunner:
             self._thread.start()
 
     def pause(self) -> None:
-        """Pause before the next stimulus; an answer to a stimulus already felt is still taken."""
-        with self._cond:
-            self._paused = True
-            self._cond.notify_all()
+        """Pause before the next stimulus.
+
+        A trial waiting for its answer stays open, but the pages learn of the pause at
+        once (``seq`` changes): they show the break and stop the trial's clock until
+        :meth:`resume`, so the pause is not counted in the response time.
+        """
+        self._set_paused(True)
 
     def resume(self) -> None:
         """Resume after :meth:`pause`."""
+        self._set_paused(False)
+
+    def _set_paused(self, paused: bool) -> None:
         with self._cond:
-            self._paused = False
+            if self._paused != paused:
+                self._paused = paused
+                self._state["seq"] += 1  # news for the pages' long-polls
             self._cond.notify_all()
 
     def stop(self, timeout: float = 5.0) -> None:
@@ -355,7 +364,11 @@ class SessionRunner:
             self._set("stopped", trial_index=None)
         except Exception as exc:  # noqa: BLE001 - reported to the experimenter page (the engine logged it)
             log.exception("session %s failed", self.session_id)
-            self._set("error", error=f"{type(exc).__name__}: {exc}")
+            # Shown on the experimenter page: the trace stays in the terminal.
+            from .public_text import public_text
+
+            shown = str(exc) if isinstance(exc, VibrofocusError) else "an unexpected error; the terminal running 'vibrofocus serve' says why"
+            self._set("error", error=public_text(shown))
         finally:
             self._silence()
 

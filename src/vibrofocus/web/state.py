@@ -23,10 +23,13 @@ from fastapi import HTTPException, Request
 
 from .._templates import template_environment
 from ..errors import StudyError, VibrofocusError
+from .logins import LoginSessions
+from .public_text import public_text
 from .security import same_secret
 from .session_runner import Pace, SessionRunner
+from .throttle import Throttle
 
-__all__ = ["WebState", "CalibrationJob", "CalibrationCancelled", "render_template", "trial_position", "private_dir", "private_file", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
+__all__ = ["WebState", "CalibrationJob", "CalibrationCancelled", "render_template", "trial_position", "private_dir", "private_file", "private_journal", "login_cookie", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
 
 log = logging.getLogger(__name__)
 
@@ -137,6 +140,10 @@ class WebState:
         Analyses run from the page, by id (one at a time).
     login_codes : dict
         One-time login codes and their expiry (``time.monotonic()``, s).
+    logins : LoginSessions
+        The experimenter logins (the cookie's random ids).
+    throttle : Throttle
+        Wrong secrets per client.
     """
 
     store: Any
@@ -157,6 +164,12 @@ class WebState:
     analyses: dict[str, dict] = field(default_factory=dict)
     lock: threading.RLock = field(default_factory=threading.RLock)
     login_codes: dict[str, float] = field(default_factory=dict)
+    logins: LoginSessions | None = None
+    throttle: Throttle = field(default_factory=Throttle)
+
+    def __post_init__(self) -> None:
+        if self.logins is None:
+            self.logins = LoginSessions(self.db_path.with_name(self.db_path.name + ".web-logins"), self.secret, self.token)
 
     @property
     def rig_label(self) -> str:
@@ -195,30 +208,13 @@ class WebState:
         if not self.key_ok(session_id, key):
             raise HTTPException(403, detail=self.KEY_MESSAGE)
 
-    @property
-    def cookie_value(self) -> str:
-        """What the login cookie holds: derived from the token, never the token itself.
-
-        It is an HMAC of the token under the secret kept beside the database, so a
-        server restarted with the same ``VIBROFOCUS_TOKEN`` keeps its experimenter
-        logged in, and a new token logs everybody out.
-        """
-        mac = hmac.new(self.secret, b"experimenter-cookie:" + self.token.encode(), hashlib.sha256).digest()
-        return base64.urlsafe_b64encode(mac).decode().rstrip("=")
-
     def token_ok(self, given: str | None) -> bool:
         """True if ``given`` is the experimenter token (constant time)."""
         return same_secret(given, self.token)
 
     def cookie_ok(self, cookie_header: str | None) -> bool:
-        """True if a ``Cookie`` header carries the experimenter login cookie."""
-        if not cookie_header:
-            return False
-        for part in cookie_header.split(";"):
-            name, _, value = part.strip().partition("=")
-            if name == TOKEN_COOKIE and same_secret(value, self.cookie_value):
-                return True
-        return False
+        """True if a ``Cookie`` header carries a current experimenter login."""
+        return self.logins.valid(login_cookie(cookie_header))
 
     def check_token(self, request: Request) -> None:
         """Raise 401 unless the request carries the experimenter token or login cookie."""
@@ -291,23 +287,38 @@ class WebState:
             return self.rigs[key]
 
     def calibration(self, calibration_id: int):
-        """A calibration by id: from memory or loaded from its file; 404 if unknown."""
+        """A calibration by id, after checking its file's SHA-256; 404 if unknown, 409 if changed.
+
+        Every use checks the hash, the cached copy's too: a file changed on disk is
+        refused at once, not after a restart.
+        """
+        calibration_id = int(calibration_id)
+        with self.db:
+            try:
+                rec = self.store.calibration(calibration_id)
+            except StudyError:
+                raise HTTPException(404, detail=f"unknown calibration {calibration_id}") from None
+            name = Path(rec.path).name
+            try:
+                path = self.store.verify_calibration(calibration_id)
+            except StudyError:
+                with self.lock:  # a file that changed is never used again from memory
+                    self.calibrations.pop(calibration_id, None)
+                    for key in [k for k in self.banks if k[0] == calibration_id]:
+                        del self.banks[key]
+                raise HTTPException(409, detail=(
+                    f"Calibration {calibration_id} ({name}) is missing or has changed since it was saved, so it is not "
+                    "used. Calibrate again, or put the original file back."
+                )) from None
         with self.lock:
             if calibration_id in self.calibrations:
                 return self.calibrations[calibration_id]
-        with self.db:
-            try:
-                self.store.calibration(calibration_id)
-            except StudyError:
-                raise HTTPException(404, detail=f"unknown calibration {calibration_id}") from None
-            # Checks the file still has the hash it was registered with.
-            path = self.store.verify_calibration(calibration_id)
         from ..calibration import load_calibration
 
         try:
             cal = load_calibration(path)
         except VibrofocusError as exc:
-            raise HTTPException(409, detail=f"calibration {calibration_id} cannot be loaded: {exc}") from None
+            raise HTTPException(409, detail=public_text(f"Calibration {calibration_id} ({name}) cannot be loaded: {exc}")) from None
         with self.lock:
             self.calibrations[calibration_id] = cal
         return cal
@@ -331,10 +342,11 @@ class WebState:
 
         limit = DRIVE_LIMIT_V if limit_v is None else float(limit_v)
         key = (int(calibration_id), limit)
+        cal = self.calibration(calibration_id)  # the hash, checked at every use
         with self.lock:
             bank = self.banks.get(key)
         if bank is None:
-            bank = CalibrationRenderer(self.calibration(calibration_id), limit_v=limit)
+            bank = CalibrationRenderer(cal, limit_v=limit)
             with self.lock:
                 bank = self.banks.setdefault(key, bank)
         return bank
@@ -523,15 +535,33 @@ def _owner_only(path: Path, mode: int) -> None:
         st = path.stat()
         if st.st_uid == os.getuid() and st.st_mode & 0o077:
             os.chmod(path, mode)
-            log.warning("%s could be read by other users; it is now %s", path, oct(mode))
+            log.warning("%s could be read by other users; it is now %s", path.name, oct(mode))
     except OSError:  # not ours, or a file system without modes: leave it as it is
         pass
 
 
+def private_journal(db_path: Path) -> None:
+    """Tighten the database's -wal and -shm to 0600 where they exist (a crashed writer's)."""
+    for suffix in ("-wal", "-shm", "-journal"):
+        path = db_path.with_name(db_path.name + suffix)
+        if path.exists():
+            _owner_only(path, 0o600)
+
+
+def login_cookie(cookie_header: str | None) -> str | None:
+    """The login cookie's value in a ``Cookie`` header, if any."""
+    for part in (cookie_header or "").split(";"):
+        name, _, value = part.strip().partition("=")
+        if name == TOKEN_COOKIE:
+            return value
+    return None
+
+
 def load_or_make_secret(db_path: Path) -> bytes:
-    """The HMAC secret of participant keys, kept beside the database (mode 0600)."""
+    """The HMAC secret of participant keys, kept beside the database (mode 0600, enforced)."""
     path = db_path.with_name(db_path.name + ".web-secret")
     if path.exists():
+        _owner_only(path, 0o600)
         return bytes.fromhex(path.read_text().strip())
     secret = secrets.token_bytes(32)
     # O_EXCL: two servers starting at once must not each write their own secret.

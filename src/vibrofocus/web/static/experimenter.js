@@ -27,12 +27,46 @@
       : `The server refused this (error ${status}).`;
   }
 
+  // The server may stop and start again (a restart, a crash) while this page stays open:
+  // while it cannot be reached the page says so and shows no live state it cannot vouch
+  // for; when it answers again, everything is read afresh. A server that no longer
+  // knows this login (a new token) gets the login form at once.
+  const UNREACHABLE = "The server cannot be reached: is 'vibrofocus serve' still running? Retrying…";
+  let offline = false;
+  function setOffline(value) {
+    if (offline === value) return;
+    offline = value;
+    document.body.classList.toggle("offline", value);
+    $("connection").hidden = !value;
+    $("connection").textContent = value ? UNREACHABLE : "";
+    if (value) {
+      for (const td of document.querySelectorAll("#sessions td.live")) td.textContent = "unknown (server not reachable)";
+      $("live-title").textContent = "· unknown while the server is not reachable";
+    } else {
+      flash("The server is back; the page has been refreshed.");
+      loadRigs().then(() => loadParticipants()).catch((e) => flash(e.message, true));
+    }
+  }
+
   async function api(path, options = {}) {
-    const res = await fetch(path, {
-      credentials: "same-origin",
-      headers: { "Content-Type": "application/json" },
-      ...options,
-    });
+    let res;
+    try {
+      res = await fetch(path, {
+        credentials: "same-origin",
+        headers: { "Content-Type": "application/json" },
+        ...options,
+      });
+    } catch {
+      setOffline(true);
+      throw new Error(UNREACHABLE);
+    }
+    setOffline(false);
+    if (res.status === 401) {
+      // Logged out on the server (logout elsewhere, or a restart with a new token):
+      // the page itself is now the login form.
+      location.reload();
+      throw new Error("Not logged in any more: log in again.");
+    }
     if (!res.ok) {
       const detail = await res.json().catch(() => ({}));
       throw new Error(detail.detail || statusText(res.status));
@@ -80,7 +114,13 @@
     onParticipant();
   }
 
+  let shownParticipant = null;
   function onParticipant() {
+    if ($("participant").value !== shownParticipant) {
+      // Another participant: the live panel must not go on showing the last one's session.
+      shownParticipant = $("participant").value;
+      selectSession(null);
+    }
     const p = participants.find((x) => x.participant_id === $("participant").value);
     const cals = p ? p.calibrations : [];
     const sel = $("calibration");
@@ -152,9 +192,10 @@
 
   async function readStraps() {
     // Strap forces before calibrating: a loose strap changes the coupling to the skin.
-    const res = await fetch(`/api/rigs/straps?${rigQuery()}`, { credentials: "same-origin" });
-    const d = await res.json().catch(() => ({}));
+    const res = await fetch(`/api/rigs/straps?${rigQuery()}`, { credentials: "same-origin" }).catch(() => null);
     const msg = $("strap-message");
+    if (res === null) { msg.textContent = UNREACHABLE; msg.className = "error"; return null; }
+    const d = await res.json().catch(() => ({}));
     msg.textContent = res.ok ? `Strap forces: ${d.message}` : (d.detail || "The strap forces could not be read.");
     msg.className = res.ok && !d.ok ? "error" : "muted";
     return res.ok ? d : null;
@@ -228,7 +269,8 @@
     const pid = $("participant").value;
     let sessions = [];
     try { sessions = await api(`/api/sessions${pid ? `?participant_id=${encodeURIComponent(pid)}` : ""}`); }
-    catch (e) { flash(e.message, true); return; }
+    catch (e) { if (!offline) flash(e.message, true); return; }
+    if (pid !== $("participant").value) return;  // an answer for a participant no longer shown
     // Rows are updated in place and rebuilt only when a status changes, so that the
     // control buttons do not move or vanish under the experimenter's pointer.
     const tbody = $("sessions").querySelector("tbody");
@@ -244,8 +286,20 @@
       return tr;
     });
     if (rows.length !== tbody.children.length || rows.some((tr, i) => tbody.children[i] !== tr)) tbody.replaceChildren(...rows);
-    if (selectedSession === null && sessions.length) selectedSession = sessions[sessions.length - 1].session_id;
+    if (!sessions.some((s) => s.session_id === selectedSession)) {
+      selectSession(sessions.length ? sessions[sessions.length - 1].session_id : null);
+      for (const tr of rows) tr.classList.toggle("selected", tr.dataset.session === String(selectedSession));
+    }
     loadLive();
+  }
+
+  function selectSession(id) {
+    if (id === selectedSession) return;
+    selectedSession = id;
+    liveAsked += 1;  // a reply still on its way is for the session shown before
+    $("live-title").textContent = id === null ? "" : `session ${id}`;
+    $("live-progress").value = 0;
+    $("answers").querySelector("tbody").replaceChildren();
   }
 
   function trialText(live) {
@@ -258,8 +312,10 @@
     const link = el("a", { href: s.participant_url, target: "_blank", rel: "noopener" }, "open");
     const copy = el("button", { class: "small", onclick: (ev) => {
       ev.stopPropagation();
-      navigator.clipboard?.writeText(new URL(s.participant_url, location.href).href);
-      flash("Participant link copied.");
+      const copied = navigator.clipboard ? navigator.clipboard.writeText(new URL(s.participant_url, location.href).href)
+        : Promise.reject(new Error("no clipboard"));
+      copied.then(() => flash("Participant link copied."),
+        () => flash("The link could not be copied here: right-click 'open' and copy the link address.", true));
     } }, "copy");
     const controls = el("span", { class: "controls" });
     const act = (label, action) => controls.append(el("button", { class: "small", "data-action": action,
@@ -267,18 +323,18 @@
         ev.stopPropagation();
         try { await api(`/api/sessions/${s.session_id}/${action}`, { method: "POST" }); flash(`Session ${s.session_id}: ${action}.`); }
         catch (e) { flash(e.message, true); }
-        selectedSession = s.session_id;
+        selectSession(s.session_id);
         loadSessions();
       } }, label));
     if (s.status === "planned") act("Start", "start");
     if (s.status === "running") act("Pause", "pause");
-    if (s.status === "paused" || s.status === "aborted") act("Resume", "resume");
+    if (s.status === "paused") act("Resume", "resume");  // a stop is final: a new session goes on
     if (s.status === "running" || s.status === "paused") act("Stop", "stop");
     const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
       el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
       el("td", { class: `status ${s.status}` }, s.status + (s.dry_run ? " · dry run" : "")), el("td", { class: "progress" }), el("td", { class: "live" }),
       el("td", {}, link, " ", copy), el("td", {}, controls));
-    tr.addEventListener("click", () => { selectedSession = s.session_id; loadSessions(); });
+    tr.addEventListener("click", () => { selectSession(s.session_id); loadSessions(); });
     return tr;
   }
 
@@ -292,16 +348,20 @@
         participant_id: pid, study: Number($("study").value), calibration_id: cal ? Number(cal) : null,
         rig: $("rig").value, rig_seed: Number($("rig-seed").value) || 0,
         repetitions: Number($("repetitions").value), n_training: Number($("n-training").value) }) });
-      selectedSession = s.session_id;
+      selectSession(s.session_id);
       flash(`Session ${s.session_id} planned (${s.n_trials} trials)${cal ? "" : " — no calibration: a dry run, nothing is played"}.`);
       loadSessions();
     } catch (e) { flash(e.message, true); }
   });
 
+  let liveAsked = 0;  // numbers the live panel's requests: only the latest one's reply is shown
   async function loadLive() {
     if (selectedSession === null) return;
+    const asked = ++liveAsked;
     let s;
-    try { s = await api(`/api/sessions/${selectedSession}`); } catch { return; }
+    try { s = await api(`/api/sessions/${selectedSession}`); }
+    catch (e) { if (!offline && asked === liveAsked) $("live-title").textContent = `· ${e.message}`; return; }
+    if (asked !== liveAsked || s.session_id !== selectedSession) return;  // a slow reply for another session
     $("live-title").textContent = `session ${s.session_id} · study ${s.study} · ${s.status}` +
       (s.live ? ` · ${[s.live.state, trialText(s.live)].filter(Boolean).join(" · ")}` : "") + (s.live && s.live.error ? ` · ${s.live.error}` : "");
     $("live-progress").value = s.n_trials ? s.n_answered / s.n_trials : 0;

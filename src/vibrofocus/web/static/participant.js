@@ -26,6 +26,7 @@
   let sentFor = null;         // trial index answered on this page (waiting or confirmed)
   let confirmedFor = null;    // trial index whose answer the server confirmed
   let lastBeep = null;        // "trial:seq" of the last cue played, to beep once per cue
+  let pausedAt = null;        // {t, trial}: when a break began during an answer window (its clock stops)
   let audio = null;
   let audioReady = false;    // the begin click started audio: cues may play
   let online = true;
@@ -104,7 +105,7 @@
           confirmedFor = answer.trial_index;
           if (sentFor === answer.trial_index) showTaken();
           delay = 250;
-        } else if (res !== null && res.status >= 400 && res.status < 500) {
+        } else if (res !== null && res.status >= 400 && res.status < 500 && res.status !== 429) {
           // Refused for good (the trial was answered on another screen, the session
           // ended): retrying cannot succeed, so it is dropped and the page says why.
           const detail = await res.json().catch(() => ({}));
@@ -163,6 +164,7 @@
           if (e.name === "AbortError") continue;
           throw e;
         }
+        if (res.status === 429) throw new Error("throttled");  // a flood from this computer: retry later
         if (!res.ok) {
           const detail = await res.json().catch(() => ({}));
           setMessage(detail.detail || `The server refused this page (${res.status}).`);
@@ -239,11 +241,20 @@
 
     $("progress").textContent = next.trial ? trialLabel(next) : "";
 
-    const answerable = respond && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
+    // A break (the experimenter paused) stops the trial's clock: the answer window
+    // closes, and when it opens again the reaction time goes on from where it stopped.
+    const onBreak = Boolean(next.paused) && !["done", "stopped"].includes(next.state);
+    if (onBreak && respondSince !== null && pausedAt === null) pausedAt = { t: performance.now(), trial: next.trial_index };
+    const answerable = respond && !onBreak && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
     const wasAnswerable = body.classList.contains("answerable");
-    if (answerable && !wasAnswerable) startAnswering();
-    if (!answerable) respondSince = null;
+    if (answerable && !wasAnswerable) {
+      if (pausedAt !== null && respondSince !== null && pausedAt.trial === next.trial_index) respondSince += performance.now() - pausedAt.t;
+      else startAnswering();
+    }
+    if (!onBreak) pausedAt = null;
+    if (!answerable && !onBreak) respondSince = null;
     body.classList.toggle("answerable", answerable);
+    body.classList.toggle("on-break", onBreak);
     const waitingForServer = sentFor === next.trial_index && confirmedFor !== next.trial_index;
     $("confirm").hidden = !(multi && answerable);
     for (const c of cells) c.classList.toggle("selected", selected.has(Number(c.dataset.loc)));
@@ -256,6 +267,7 @@
       return;
     }
     if (!online) { setMessage("Connection lost — reconnecting…"); return; }
+    if (onBreak) { setMessage("Short break. Please wait."); return; }
     switch (next.state) {
       case "waiting": setMessage("Please wait — the experimenter will start the session."); break;
       case "paused": setMessage("Short break. Please wait."); break;
@@ -347,9 +359,12 @@
   }
 
   document.addEventListener("keydown", (ev) => {
-    // Enter and Space would "click" the focused cell (the last one clicked) again:
-    // they never act on a cell. Nothing answers until the participant has begun
-    // (after a reload the "Click here to begin" overlay covers the grid).
+    // Enter and Space press a focused button (Begin, Confirm, Try again) as usual. On a
+    // cell they would "click" it again (the last one clicked): they never act on a cell.
+    // Nothing answers until the participant has begun (after a reload the "Click here
+    // to begin" overlay covers the grid).
+    const onButton = ev.target instanceof HTMLButtonElement && !ev.target.classList.contains("cell");
+    if ((ev.key === "Enter" || ev.key === " ") && onButton) return;
     if (ev.key === "Enter" || ev.key === " ") ev.preventDefault();
     if (!audioReady) return;
     // Top-row digits and the keypad with NumLock give ev.key "1".."9"; the keypad
@@ -383,6 +398,7 @@
       await audio.resume();
     } catch (e) { console.warn("no audio", e); }
     try { await document.documentElement.requestFullscreen(); } catch { /* headless or refused */ }
+    $("begin").blur();  // keys from now on answer; none may press Begin again
     $("overlay").hidden = true;
     audioReady = true;
     if (state) render(state);  // e.g. ask for a trial whose onset came before this page

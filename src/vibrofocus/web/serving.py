@@ -1,0 +1,268 @@
+"""How ``vibrofocus serve`` runs the app: connection limits, timeouts and a log that cannot flood.
+
+uvicorn accepts every TCP connection and keeps a silent one open for ever; enough of them
+use up the process's file descriptors, and then nobody gets a page while every refused
+accept writes a line to the log. Here each connection is held to:
+
+- a **header timeout**: a connection that has not sent a whole request head within
+  ``header_timeout_s`` (a silent socket, or one that sends a header a byte at a time)
+  is closed;
+- a **keep-alive timeout**: a connection idle between requests is closed after
+  ``keep_alive_s`` (uvicorn's own);
+- a **cap** on open connections (below the file-descriptor limit): a connection beyond
+  it closes the longest-idle connection (one with no request in progress), so idle
+  sockets cannot lock out a participant; when every connection is busy, the new one
+  gets ``503`` with a sentence saying why, and is closed.
+
+Log records pass through :class:`FloodFilter`: a message repeated faster than a few times
+a minute is counted, not written, and the count is written once the burst is over.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import sys
+import time
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = ["ServerLimits", "FloodFilter", "guarded_protocol", "effective_cap", "run"]
+
+log = logging.getLogger(__name__)
+
+#: File descriptors kept free for the database, calibrations, reports and the listener.
+FD_RESERVE = 128
+
+#: What a connection beyond the cap reads.
+FULL_MESSAGE = (
+    "The study server has too many open connections right now. Try again in a few seconds; "
+    "if this persists, tell the experimenter."
+)
+
+
+@dataclass(frozen=True)
+class ServerLimits:
+    """Connection limits of ``vibrofocus serve``.
+
+    Attributes
+    ----------
+    max_connections : int
+        Most connections open at once (lowered to fit the file-descriptor limit).
+    header_timeout_s : float
+        Longest wait for a whole request head on a connection, s.
+    keep_alive_s : float
+        Longest idle time between two requests on one connection, s.
+    """
+
+    max_connections: int = 1000
+    header_timeout_s: float = 10.0
+    keep_alive_s: float = 5.0
+
+    def __post_init__(self) -> None:
+        if self.max_connections < 4:
+            raise ValueError(f"max_connections must be at least 4, got {self.max_connections}")
+        if not self.header_timeout_s > 0 or not self.keep_alive_s > 0:
+            raise ValueError("header_timeout_s and keep_alive_s must be positive")
+
+
+def effective_cap(limits: ServerLimits) -> int:
+    """The connection cap after leaving :data:`FD_RESERVE` descriptors free.
+
+    Parameters
+    ----------
+    limits : ServerLimits
+        The limits asked for.
+
+    Returns
+    -------
+    int
+        ``limits.max_connections``, lowered to fit the process's file-descriptor limit.
+    """
+    try:
+        import resource
+    except ImportError:  # Windows: no descriptor limit of this kind
+        return limits.max_connections
+    soft, _ = resource.getrlimit(resource.RLIMIT_NOFILE)
+    if soft == resource.RLIM_INFINITY:
+        return limits.max_connections
+    return max(4, min(limits.max_connections, soft - FD_RESERVE))
+
+
+def guarded_protocol(limits: ServerLimits, cap: int | None = None) -> type:
+    """uvicorn's h11 protocol with the header timeout and the connection cap of ``limits``.
+
+    Parameters
+    ----------
+    limits : ServerLimits
+        The limits.
+    cap : int, optional
+        Connection cap; default :func:`effective_cap`.
+
+    Returns
+    -------
+    type
+        An ``asyncio.Protocol`` class for ``uvicorn.Config(http=...)``.
+    """
+    import h11
+    from uvicorn.protocols.http.h11_impl import H11Protocol
+
+    cap = effective_cap(limits) if cap is None else int(cap)
+    full_body = json.dumps({"detail": FULL_MESSAGE}).encode()
+    full_response = (
+        b"HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\nretry-after: 5\r\n"
+        b"connection: close\r\ncontent-length: " + str(len(full_body)).encode() + b"\r\n\r\n" + full_body
+    )
+
+    class GuardedH11Protocol(H11Protocol):
+        """One connection, under the limits (see the module's docstring)."""
+
+        _idle_since: float = 0.0
+        _head_timer: Any = None
+
+        def connection_made(self, transport: Any) -> None:  # noqa: D102 - asyncio's
+            super().connection_made(transport)
+            self._idle_since = time.monotonic()
+            if len(self.connections) > cap and not self._evict_idle():
+                self.connections.discard(self)
+                transport.write(full_response)
+                transport.close()
+                return
+            self._arm_head_timer()
+
+        def data_received(self, data: bytes) -> None:  # noqa: D102 - asyncio's
+            super().data_received(data)
+            if self._busy():
+                self._disarm_head_timer()
+            elif self._head_timer is None and not self.transport.is_closing():
+                self._arm_head_timer()  # the start of a request head after a keep-alive wait
+
+        def on_response_complete(self) -> None:  # noqa: D102 - uvicorn's
+            self._idle_since = time.monotonic()
+            self._disarm_head_timer()
+            super().on_response_complete()
+
+        def connection_lost(self, exc: Exception | None) -> None:  # noqa: D102 - asyncio's
+            self._disarm_head_timer()
+            super().connection_lost(exc)
+
+        # -------------------------------------------------------------- helpers
+        def _busy(self) -> bool:
+            """A request is in progress (its head is read, its response not finished)."""
+            return self.cycle is not None and not self.cycle.response_complete
+
+        def _evict_idle(self) -> bool:
+            """Close the longest-idle other connection; False if every one is busy."""
+            idle = [c for c in self.connections if c is not self and isinstance(c, GuardedH11Protocol) and not c._busy()]
+            if not idle:
+                return False
+            min(idle, key=lambda c: c._idle_since)._close()
+            return True
+
+        def _arm_head_timer(self) -> None:
+            self._head_timer = self.loop.call_later(limits.header_timeout_s, self._head_timeout)
+
+        def _disarm_head_timer(self) -> None:
+            if self._head_timer is not None:
+                self._head_timer.cancel()
+                self._head_timer = None
+
+        def _head_timeout(self) -> None:
+            self._head_timer = None
+            if not self._busy():
+                self._close()
+
+        def _close(self) -> None:
+            self._disarm_head_timer()
+            self.connections.discard(self)
+            if not self.transport.is_closing():
+                try:
+                    self.conn.send(h11.ConnectionClosed())
+                except h11.LocalProtocolError:
+                    pass  # mid-request head: nothing to tell the peer
+                self.transport.close()
+
+    return GuardedH11Protocol
+
+
+class FloodFilter(logging.Filter):
+    """Let through at most ``burst`` records of one message per ``window_s`` seconds.
+
+    The rest are counted; the first record of that message after the window says how
+    many were left out. A total of ``total`` records per window bounds the log whatever
+    the messages.
+
+    Parameters
+    ----------
+    burst : int
+        Records of one message (logger and format string) per window.
+    total : int
+        Records of all messages per window.
+    window_s : float
+        The window, s.
+    clock : callable
+        Time source, s (``time.monotonic``).
+    """
+
+    def __init__(self, burst: int = 5, total: int = 100, window_s: float = 60.0, clock: Any = time.monotonic) -> None:
+        super().__init__()
+        self.burst, self.total, self.window_s, self.clock = int(burst), int(total), float(window_s), clock
+        self._start = clock()
+        self._counts: dict[tuple[str, str], int] = {}
+        self._dropped: dict[tuple[str, str], int] = {}
+        self._passed = 0
+
+    def filter(self, record: logging.LogRecord) -> bool:  # noqa: D102 - logging's
+        now = self.clock()
+        if now - self._start >= self.window_s:
+            self._start, self._counts, self._passed = now, {}, 0
+        what = (record.name, str(record.msg))
+        n = self._counts[what] = self._counts.get(what, 0) + 1
+        if n > self.burst or self._passed >= self.total:
+            self._dropped[what] = self._dropped.get(what, 0) + 1
+            return False
+        self._passed += 1
+        left_out = self._dropped.pop(what, 0)
+        if left_out:
+            record.msg = f"{record.msg} [{left_out} more like this were left out of the log]"
+        return True
+
+
+def _logging(level: int = logging.WARNING) -> None:
+    """One stderr handler on the root logger, through a :class:`FloodFilter`."""
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("%(asctime)s %(levelname)s %(name)s: %(message)s"))
+    handler.addFilter(FloodFilter())
+    root = logging.getLogger()
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    for name in ("uvicorn", "uvicorn.error", "uvicorn.access", "asyncio"):
+        logging.getLogger(name).handlers[:] = []
+        logging.getLogger(name).propagate = True
+
+
+def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits()) -> None:
+    """Serve ``app`` with uvicorn under ``limits`` until interrupted.
+
+    Parameters
+    ----------
+    app : ASGI application
+        The app of :func:`vibrofocus.web.create_app`.
+    host : str
+        Address to bind.
+    port : int
+        TCP port.
+    limits : ServerLimits
+        Connection limits.
+    """
+    import uvicorn
+
+    _logging()
+    cap = effective_cap(limits)
+    if cap < limits.max_connections:
+        log.warning("at most %d connections (the file-descriptor limit leaves no room for %d)", cap, limits.max_connections)
+    config = uvicorn.Config(
+        app, host=host, port=port, log_config=None, log_level="warning", access_log=False,
+        http=guarded_protocol(limits, cap), timeout_keep_alive=limits.keep_alive_s,
+    )
+    uvicorn.Server(config).run()

@@ -1,0 +1,161 @@
+"""Idle connections against the real server (issue 30): timeouts, the connection cap,
+a participant who still completes trials, and a log that cannot flood.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import os
+import socket
+import threading
+import time
+
+import httpx
+import pytest
+
+from vibrofocus.web.serving import FloodFilter
+
+from .conftest import Server, free_port
+from .test_api import wait_state
+
+CAP = 40
+
+
+@pytest.fixture
+def capped(tmp_path):
+    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log",
+                 args=("--max-connections", str(CAP), "--header-timeout", "30"))
+    srv.start()
+    try:
+        yield srv
+    finally:
+        srv.stop()
+
+
+def _closed_within(sock: socket.socket, seconds: float) -> bool:
+    """True if the server closes ``sock`` within ``seconds`` (what it sent, if anything, is read)."""
+    sock.settimeout(seconds)
+    try:
+        while sock.recv(4096):
+            pass
+        return True
+    except (TimeoutError, socket.timeout):
+        return False
+    except ConnectionResetError:
+        return True
+
+
+def test_silent_and_slow_headers_are_closed_after_the_header_timeout(tmp_path):
+    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log", args=("--header-timeout", "1"))
+    srv.start()
+    try:
+        silent = socket.create_connection(("127.0.0.1", srv.port))
+        slow = socket.create_connection(("127.0.0.1", srv.port))
+        slow.sendall(b"GET /api/rigs HTTP/1.1\r\nHost: 127.0.0.1\r\n")  # never ends its head
+        assert _closed_within(silent, 10), "a silent connection stays open"
+        assert _closed_within(slow, 10), "a connection sending a never-ending head stays open"
+        silent.close()
+        slow.close()
+        assert httpx.get(f"{srv.base_url}/api/rigs", headers=srv.headers).status_code == 200
+    finally:
+        srv.stop()
+
+
+def _open_idle(port: int, n: int) -> list[socket.socket]:
+    return [socket.create_connection(("127.0.0.1", port)) for _ in range(n)]
+
+
+def _fd_count(pid: int) -> int:
+    return len(os.listdir(f"/proc/{pid}/fd"))
+
+
+def test_idle_connections_up_to_the_cap_do_not_stop_a_participant(capped):
+    srv = capped
+    s = srv.plan("P01", 1, n_training=1, repetitions=1)
+    sid, key = s["session_id"], s["participant_url"].split("key=")[1]
+    assert srv.api("POST", f"/api/sessions/{sid}/start").status_code == 200
+    baseline_fds = _fd_count(srv.proc.pid)
+    held: list[socket.socket] = _open_idle(srv.port, 3 * CAP)
+    # The connections beyond the cap are closed as the server reaches them.
+    deadline = time.monotonic() + 10
+    while _fd_count(srv.proc.pid) > baseline_fds + CAP and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert _fd_count(srv.proc.pid) <= baseline_fds + CAP, "idle connections beyond the cap hold descriptors"
+    stop = threading.Event()
+
+    def keep_full() -> None:
+        # Someone on this computer keeps the server's connections full of idle sockets.
+        while not stop.is_set():
+            held.extend(_open_idle(srv.port, 5))
+            time.sleep(0.05)
+
+    filler = threading.Thread(target=keep_full, daemon=True)
+    filler.start()
+    try:
+        n_trials = len(srv.rows("SELECT trial_index FROM planned_trials WHERE session_id = ?", sid))
+        for i in range(n_trials):
+            st = wait_state(srv, sid, key, "respond", timeout=60)
+            assert st["trial_index"] == i
+            body = {"session_id": sid, "trial_index": i, "response": [5], "rt_s": 0.5, "answer_id": f"answer-{i:04d}"}
+            for _ in range(20):  # a connection can be closed under it as the oldest idle one: send again
+                try:
+                    r = httpx.post(f"{srv.base_url}/api/participant/{sid}/answer", json=body,
+                                   headers={"X-Participant-Key": key}, timeout=10)
+                    break
+                except httpx.TransportError:
+                    continue
+            assert r.status_code == 200, r.text
+        assert srv.rows("SELECT COUNT(*) FROM answers WHERE session_id = ?", sid) == [(n_trials,)]
+    finally:
+        stop.set()
+        filler.join(5)
+        for sock in held:
+            sock.close()
+    assert srv.log.stat().st_size < 20_000, "the log grew under idle connections"
+
+
+def test_beyond_the_cap_of_busy_connections_a_clear_refusal(capped):
+    srv = capped
+    s = srv.plan("P02", 1)
+    sid, key = s["session_id"], s["participant_url"].split("key=")[1]
+    busy = []
+    for _ in range(CAP):  # long-polls: each connection has a request in progress
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(f"GET /api/participant/{sid}/state?after=0&wait=10 HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                     f"X-Participant-Key: {key}\r\n\r\n".encode())
+        busy.append(sock)
+    # A planned session's state does not change: every long-poll stays open.
+    time.sleep(0.5)
+    try:
+        r = None
+        try:
+            r = httpx.get(f"{srv.base_url}/api/rigs", headers=srv.headers, timeout=5)
+        except httpx.TransportError as exc:
+            pytest.fail(f"no answer beyond the cap: {exc!r}")
+        assert r.status_code == 503 and "too many open connections" in r.json()["detail"], (r.status_code, r.text)
+    finally:
+        for sock in busy:
+            sock.close()
+
+
+def test_a_repeated_log_message_is_counted_not_written():
+    now = [0.0]
+    out = io.StringIO()
+    handler = logging.StreamHandler(out)
+    handler.addFilter(FloodFilter(burst=5, total=50, window_s=60.0, clock=lambda: now[0]))
+    logger = logging.getLogger("vibrofocus.test.flood")
+    logger.addHandler(handler)
+    logger.propagate = False
+    try:
+        for i in range(100_000):
+            logger.error("socket.accept() out of system resource: %s", i)
+        for i in range(200):
+            logger.error(f"distinct message {i}")  # noqa: G004 - each its own message on purpose
+        assert len(out.getvalue().splitlines()) == 50
+        now[0] = 61.0
+        logger.error("socket.accept() out of system resource: %s", "again")
+        last = out.getvalue().splitlines()[-1]
+        assert "99995 more like this were left out" in last, last
+    finally:
+        logger.removeHandler(handler)
