@@ -93,3 +93,19 @@ def test_snr_from_the_pre_sweep_silence(rng):
     assert noise[0] == pytest.approx(noise_rms * np.sqrt(990 / 5000), rel=0.1)
     expected = 10 * np.log10((1e-6**2 / 2) / (noise_rms**2 * 990 / 5000))
     assert snr[0] == pytest.approx(expected, abs=0.5)
+
+
+def test_an_integrated_velocity_recording_keeps_its_silence_silent():
+    # A noise-free take read through a velocity decoder: integrated over the whole take,
+    # the displacement drifts linearly in the silence before the sweep. That drift is not
+    # noise: the SNR of a perfect loopback must stay far above any verdict's threshold.
+    from vibrofocus.calibration.estimate import noise_and_snr
+    from vibrofocus.rigs import Vibrometer
+    from vibrofocus.signals.sweeps import exponential_sweep
+
+    fs, n_pre = 10_000.0, 1000
+    sweep = exponential_sweep(fs, 7.0, 1400.0, 1.0, amplitude=1.0, fade_s=0.01)
+    velocity_volts = np.concatenate([np.zeros(n_pre), sweep, np.zeros(3000)])
+    displacement = Vibrometer("velocity", 0.005, highpass_hz=None).to_displacement(velocity_volts, fs)
+    _, snr_db = noise_and_snr(displacement[None, None, :], np.ones((1, 1), bool), n_pre, fs, (10.0, 1000.0))
+    assert snr_db[0] > 100.0

@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.fft
+import scipy.signal
 
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
@@ -345,7 +346,10 @@ def noise_and_snr(
         at 300 dB.
     """
     y = np.where(np.isfinite(recordings), recordings, 0.0)
-    p_noise_each = _band_power(y[..., :n_pre], fs, band)
+    # The silence without its mean and linear trend: a velocity decoder's recording,
+    # integrated to displacement over the whole take, drifts linearly there, and that
+    # drift (not noise) would leak into the band through the window's edges.
+    p_noise_each = _band_power(scipy.signal.detrend(y[..., :n_pre], axis=-1, type="linear"), fs, band)
     p_total_each = _band_power(y[..., n_pre:], fs, band)
     w = np.asarray(valid, dtype=float)
     n_used = w.sum(axis=0)

@@ -360,9 +360,9 @@ class SessionRunner:
             self._silence()
 
     def _reserved(self):
-        if self.rig is None:
-            return contextlib.nullcontext()
-        return self.rig.reserve(f"session {self.session_id}")
+        # Any object with play/stop can serve as the rig; a vibrofocus Rig is also held.
+        reserve = getattr(self.rig, "reserve", None)
+        return contextlib.nullcontext() if reserve is None else reserve(f"session {self.session_id}")
 
     def _silence(self) -> None:
         if self.rig is not None:
