@@ -46,6 +46,28 @@ def _private_device_locks(tmp_path_factory):
 
 
 ROOT = Path(__file__).resolve().parents[1]
+
+#: Debian's chromium, driven by Playwright (the web pages, the docs' navigation bar).
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--autoplay-policy=no-user-gesture-required",
+]
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """One headless chromium per test process (a second Playwright in one thread cannot start)."""
+    if not CHROMIUM.exists():
+        pytest.skip("Debian's chromium is not installed (apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
 # Python's bytecode cache, pytest's cache and the install's own files: not written by a test.
 _NOT_FROM_TESTS = ("__pycache__/", ".pytest_cache/", ".venv/", ".egg-info/")
 

@@ -14,7 +14,6 @@ from pathlib import Path
 import pytest
 
 import vibrofocus
-from tests.web.conftest import chromium  # noqa: F401 - the fixture
 from vibrofocus._docs import docdict, fill_doc
 
 ROOT = Path(__file__).resolve().parents[1]
