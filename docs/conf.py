@@ -19,7 +19,8 @@ matplotlib.use("Agg")
 
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
-sys.path.insert(0, str(ROOT / "src"))
+if (ROOT / "src" / "vibrofocus").is_dir():  # a checkout; a copy of docs/ uses the installed package
+    sys.path.insert(0, str(ROOT / "src"))
 sys.path.insert(0, str(DOCS))
 
 import vibrofocus  # noqa: E402
@@ -45,7 +46,9 @@ root_doc = "index"
 
 html_theme = "pydata_sphinx_theme"
 html_title = "vibrofocus"
-html_theme_options = {"navigation_with_keys": False, "show_toc_level": 2}
+# A few links in the bar, the rest under "More": the bar fits on one line at 1280 px
+# (checked in a real browser by tests/test_docs.py).
+html_theme_options = {"navigation_with_keys": False, "show_toc_level": 2, "header_links_before_dropdown": 3}
 
 myst_heading_anchors = 3
 # Pages written for GitHub link to files outside the docs (the README, source files): those
@@ -117,3 +120,44 @@ def _write_api_pages() -> None:
 
 
 _write_api_pages()
+
+
+# ---------------------------------------------------------------------------------------
+# The command-line reference, written from the CLI itself at build time so it cannot drift.
+def _option_row(param) -> str:
+    import click
+
+    names = ", ".join(f"`{o}`" for o in [*param.opts, *param.secondary_opts])
+    if isinstance(param, click.Argument):
+        names = f"`{param.human_readable_name}`"
+    default = param.default
+    shown = "" if default is None or callable(default) or param.required else f"`{default}`"
+    if isinstance(default, bool) and param.secondary_opts:
+        shown = f"`{param.opts[0] if default else param.secondary_opts[0]}`"
+    helptext = " ".join((getattr(param, "help", None) or "").split()).replace("|", "\\|")
+    return f"| {names} | {helptext} | {'required' if param.required else shown} |"
+
+
+def _write_cli_page() -> None:
+    import typer.main
+
+    from vibrofocus.cli.main import app
+
+    root = typer.main.get_command(app)
+    lines = ["# Command-line reference", "",
+             "Written at build time from the command line itself (`vibrofocus COMMAND --help` says the "
+             "same). Every command prints one `error:` line and exits 2 on bad input.", ""]
+    for name, cmd in root.commands.items():
+        lines += [f"## `vibrofocus {name}`", "", " ".join((cmd.help or "").split("\n\n")[0].split()), ""]
+        rest = "\n\n".join(p.strip() for p in (cmd.help or "").split("\n\n")[1:])
+        if rest:
+            lines += [" ".join(par.split()) + "\n" for par in rest.split("\n\n")]
+        params = [p for p in cmd.params if p.name != "help"]
+        if params:
+            lines += ["| option | what | default |", "|---|---|---|", *[_option_row(p) for p in params], ""]
+        if cmd.epilog:
+            lines += [" ".join(cmd.epilog.split()), ""]
+    (DOCS / "cli.md").write_text("\n".join(lines), encoding="utf-8")
+
+
+_write_cli_page()

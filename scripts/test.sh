@@ -2,7 +2,8 @@
 # The whole test suite on a fresh machine with Python 3.11 and apt: installs Debian's
 # chromium (browser tests), jackd2 and libportaudio2 (the audio rig against a real JACK
 # server on its dummy driver), a virtual environment with vibrofocus and its test extras,
-# then runs pytest. Extra arguments go to pytest.
+# then runs pytest in parallel. Extra arguments go to pytest (e.g. -m "not slow" for a quick loop,
+# -n 0 for one process).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -22,4 +23,7 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
 
-exec .venv/bin/python -m pytest "$@"
+# In parallel on every core (pytest-xdist); no bytecode or pytest cache in the checkout: the
+# suite writes only to temporary folders (tests/conftest.py checks it).
+export PYTHONDONTWRITEBYTECODE=1
+exec .venv/bin/python -m pytest -n auto -p no:cacheprovider "$@"

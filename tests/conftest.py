@@ -1,7 +1,21 @@
-"""Shared fixtures. Every random generator in the tests is seeded."""
+"""Shared fixtures. Every random generator in the tests is seeded.
+
+The suite writes only to temporary folders: :func:`pytest_sessionfinish` fails the run if
+the checkout gained any file (``git status --porcelain --ignored``), apart from Python's
+and pytest's own caches (the README's test command turns those off too).
+"""
+
+import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import settings
+
+# Property tests draw the same examples on every run (seeded, like every RNG here) and keep
+# no example database in the checkout.
+settings.register_profile("vibrofocus", database=None, derandomize=True)
+settings.load_profile("vibrofocus")
 
 from vibrofocus import ArrayLayout
 
@@ -29,3 +43,70 @@ def _private_device_locks(tmp_path_factory):
         os.environ.pop("VIBROFOCUS_LOCK_DIR", None)
     else:
         os.environ["VIBROFOCUS_LOCK_DIR"] = before
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Debian's chromium, driven by Playwright (the web pages, the docs' navigation bar).
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+    "--autoplay-policy=no-user-gesture-required",
+]
+
+
+@pytest.fixture(scope="session")
+def chromium():
+    """One headless chromium per test process (a second Playwright in one thread cannot start)."""
+    if not CHROMIUM.exists():
+        pytest.skip("Debian's chromium is not installed (apt-get install chromium)")
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        try:
+            yield browser
+        finally:
+            browser.close()
+# Python's bytecode cache, pytest's cache and the install's own files: not written by a test.
+_NOT_FROM_TESTS = ("__pycache__/", ".pytest_cache/", ".venv/", ".egg-info/")
+
+
+def _checkout_state() -> set[str] | None:
+    try:
+        out = subprocess.run(["git", "status", "--porcelain", "--ignored", "--untracked-files=all"], cwd=ROOT,
+                             capture_output=True, text=True, timeout=60)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    if out.returncode != 0:
+        return None  # not a git checkout (an sdist): nothing to compare
+    return {line for line in out.stdout.splitlines() if not any(part in line for part in _NOT_FROM_TESTS)}
+
+
+def pytest_sessionstart(session):
+    if not hasattr(session.config, "workerinput"):  # once, in the controller of an xdist run
+        session.config._checkout_before = _checkout_state()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    before = getattr(session.config, "_checkout_before", None)
+    if before is None:
+        return
+    new = sorted((_checkout_state() or set()) - before)
+    if new:
+        session.config.get_terminal_writer().line(
+            "the test suite wrote into the checkout (tests must write to tmp_path):\n  " + "\n  ".join(new[:20]),
+            red=True)
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+#: Fixtures that make a test need a real outside part, and the marker that says so.
+_MARK_BY_FIXTURE = {"jack_server": "jack", "chromium": "browser", "page": "browser"}
+
+
+def pytest_collection_modifyitems(config, items):
+    # Marked by what they use, so `-m "not jack"` or `-m "not browser"` cannot miss one.
+    for item in items:
+        for fixture, marker in _MARK_BY_FIXTURE.items():
+            if fixture in getattr(item, "fixturenames", ()):
+                item.add_marker(getattr(pytest.mark, marker))

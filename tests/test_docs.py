@@ -6,6 +6,7 @@ from __future__ import annotations
 import importlib
 import inspect
 import pkgutil
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -86,13 +87,19 @@ def test_shared_descriptions_are_filled_with_the_placeholder_indent():
 
 
 @pytest.mark.slow
-def test_the_documentation_site_builds_without_warnings(tmp_path):
+def test_the_documentation_site_builds_without_warnings(tmp_path, chromium):
     pytest.importorskip("sphinx")
     pytest.importorskip("sphinx_gallery")
+    # Built from a copy: the build writes pages (api/, auto_examples/) next to its sources,
+    # and the test suite never writes into the checkout.
+    source = tmp_path / "source"
+    shutil.copytree(ROOT / "docs", source / "docs", ignore=shutil.ignore_patterns("_build", "api", "auto_examples"))
+    shutil.copytree(ROOT / "examples", source / "examples")
+    shutil.copy(ROOT / "CHANGELOG.md", source / "CHANGELOG.md")
     result = subprocess.run(
-        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(ROOT / "docs"),
+        [sys.executable, "-m", "sphinx", "-W", "--keep-going", "-q", "-b", "html", str(source / "docs"),
          str(tmp_path / "html")],
-        capture_output=True, text=True, timeout=900, cwd=ROOT,
+        capture_output=True, text=True, timeout=900, cwd=tmp_path,
     )
     assert result.returncode == 0, result.stderr[-4000:]
     html = tmp_path / "html"
@@ -100,3 +107,16 @@ def test_the_documentation_site_builds_without_warnings(tmp_path):
     assert (html / "auto_examples" / "plot_rendering_methods.html").exists()
     page = (html / "api" / "generated" / "vibrofocus.rendering.render.html").read_text(encoding="utf-8")
     assert "guard_weight" in page and "Parameters" in page
+    # The command-line reference comes from the CLI itself.
+    cli = (html / "cli.html").read_text(encoding="utf-8")
+    assert "vibrofocus calibrate" in cli and "--resume" in cli and "--check" in cli
+    # The navigation bar fits on one line at 1280 px, in a real browser.
+    context = chromium.new_context(viewport={"width": 1280, "height": 800})
+    try:
+        view = context.new_page()
+        view.goto((html / "index.html").as_uri())
+        tops = view.eval_on_selector_all(
+            ".bd-header .navbar-nav > li", "items => items.map(i => Math.round(i.getBoundingClientRect().top))")
+        assert len(tops) >= 3 and max(tops) - min(tops) <= 4, tops  # one row (a wrapped one is ~35 px lower)
+    finally:
+        context.close()

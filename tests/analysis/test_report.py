@@ -268,6 +268,7 @@ def test_one_participant_analysis_api_keeps_descriptives():
     assert any(s.startswith("The two-way repeated-measures ANOVA needs at least 3") for s in sentences)
 
 
+@pytest.mark.slow
 def test_simulated_participants_are_flagged_in_json_and_html(tmp_path, synthetic):
     # A trials file whose optional 'simulated' column marks some participants.
     df = synthetic(4, seed=3)
@@ -291,6 +292,7 @@ def test_simulated_participants_are_flagged_in_json_and_html(tmp_path, synthetic
     assert "simulated-banner" not in paths["html"].read_text()
 
 
+@pytest.mark.slow
 def test_html_shows_ids_and_method_names_as_text_never_as_markup(tmp_path, synthetic):
     # A participant id and a method name from the trials file are data: the page must show
     # them escaped, in the tables, the sentences and the simulated-data banner alike.

@@ -7,8 +7,8 @@ from typer.testing import CliRunner
 from vibrofocus.cli.main import app
 
 
-def test_demo_json_has_every_location_and_method():
-    result = CliRunner().invoke(app, ["demo", "--json", "--no-figures", "--seed", "2"])
+def test_demo_json_has_every_location_and_method(tmp_path):
+    result = CliRunner().invoke(app, ["demo", "--json", "--no-figures", "--seed", "2", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     payload = json.loads(result.stdout)
     rows = payload["results"]

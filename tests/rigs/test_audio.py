@@ -75,6 +75,7 @@ class _IdealLoopRig(Rig):
         pass
 
 
+@pytest.mark.slow
 def test_calibration_through_loopback_is_flat_gain_chain_with_zero_phase(rig):
     from vibrofocus.calibration import calibrate
 
@@ -200,6 +201,7 @@ def _with_status(rig, flags_for_call):
     return mock.patch.object(rig, "_run_stream", run), calls
 
 
+@pytest.mark.slow
 def test_stream_xrun_discards_the_recording(rig):
     patch, calls = _with_status(rig, lambda n: 4)  # paOutputUnderflow: PortAudio lost output samples
     with patch:
@@ -420,6 +422,7 @@ def test_interface_identity_across_host_apis(rig_name, cue_name, same):
     assert same_audio_interface(rig_name, cue_name) is same
 
 
+@pytest.mark.slow
 def test_devices_check_opens_the_rig_and_plays_nothing(jack_server, tmp_path):
     import json
     import subprocess

@@ -57,6 +57,7 @@ def test_study_statistics_has_every_test():
     assert arrays.error_mm.shape == (8, 9, 3) and np.all(arrays.count >= 1)
 
 
+@pytest.mark.slow
 def test_dask_equals_one_process():
     design = PowerDesign(n_participants=(4, 6), n_studies=6, seed=3)
     local = run_power(design, local=True, chunk=4)

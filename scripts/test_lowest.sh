@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Smoke test at the LOWEST versions pyproject.toml allows (uv --resolution lowest-direct):
+# import, --help, the demo, one render and one analysis, in a throw-away virtual environment.
+# Every minimum in pyproject.toml is one this run installed. Run by .ci/run after the suite.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+root=$(pwd)
+work=$(mktemp -d)
+trap 'rm -rf "$work"' EXIT
+
+python3 -m venv "$work/venv"
+"$work/venv/bin/python" -m pip install -q uv
+"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$root"
+"$work/venv/bin/uv" pip list -q --python "$work/venv/bin/python" --format freeze > "$work/versions.txt" 2>/dev/null || true
+
+export PYTHONDONTWRITEBYTECODE=1 MPLBACKEND=Agg
+cd "$work"  # nothing is written into the checkout
+vf="$work/venv/bin/vibrofocus"
+"$work/venv/bin/python" -c "import vibrofocus; print('vibrofocus', vibrofocus.__version__)"
+"$vf" --help > /dev/null
+"$vf" serve --help > /dev/null
+"$work/venv/bin/python" -c "
+import sys
+from vibrofocus.web.app import create_app
+create_app(sys.argv[1], token='t' * 32)" "$work/s.sqlite"
+"$vf" demo --json --no-figures --out "$work/demo" > "$work/demo.json"
+"$work/venv/bin/python" -c "import json, sys; d = json.load(open(sys.argv[1])); assert len(d['results']) == 54" "$work/demo.json"
+"$vf" render --calibration "$work/demo/calibration.nc" --method inverse --location 5 --out "$work/tap.npz" > /dev/null
+PYTHONPATH="$root" "$work/venv/bin/python" -c "
+import sys
+from tests.analysis.synthetic import make_trials
+make_trials(8, seed=3).to_csv(sys.argv[1], index=False)" "$work/trials.csv"
+"$vf" analyze "$work/trials.csv" --out "$work/report" > /dev/null
+test -s "$work/report/report.json"
+echo "lowest-versions smoke test passed with:"
+grep -iE '^(click|numpy|scipy|xarray|h5netcdf|h5py|pandas|pingouin|matplotlib|fastapi|jinja2|uvicorn|typer|rich|pydantic|sounddevice|nidaqmx|dask|distributed|threadpoolctl)==' "$work/versions.txt" | tr '\n' ' '
+echo
