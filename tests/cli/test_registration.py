@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import os
 import re
 import subprocess
 import sys
@@ -53,3 +54,20 @@ def test_command_modules_never_import_the_app():
     for name in COMMAND_MODULES:
         text = (folder / f"{name}.py").read_text()
         assert "from .main import" not in text and "import main" not in text, name
+
+
+@pytest.mark.parametrize("args", [["--help"], ["devices", "--json"]])
+def test_a_closed_pipe_ends_the_command_quietly(args, tmp_path):
+    # As `vibrofocus --help | head -0`: the reader is gone before the command writes.
+    import subprocess
+    import sys
+
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-m", "vibrofocus", *args], stdout=write, stderr=subprocess.PIPE,
+                              text=True, timeout=120, cwd=tmp_path)
+    finally:
+        os.close(write)
+    assert done.stderr == ""  # no traceback, no "error:", no "Exception ignored"
+    assert done.returncode in (1, 141)  # rich's quiet exit, or ours (128 + SIGPIPE)

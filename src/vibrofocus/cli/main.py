@@ -29,6 +29,8 @@ class _OneLineErrors(TyperGroup):
       line naming the log file that holds the traceback, exit 1
       (:func:`._errors.report_unexpected`); ``vibrofocus --debug`` prints it too.
 
+    - A closed pipe (``vibrofocus --help | head -1``) ends quietly, exit 141.
+
     Only typer's public exceptions are used: ``typer.Abort``, and
     ``typer.TyperException`` with its ``exit_code`` and ``format_message()`` (a usage
     error has exit code 2 and a context).
@@ -69,9 +71,31 @@ class _OneLineErrors(TyperGroup):
         except KeyboardInterrupt:
             err_console.print("[bold yellow]interrupted[/]", highlight=False)
             sys.exit(EXIT_INTERRUPTED)
+        except BrokenPipeError:
+            _quiet_after_closed_pipe()
         except Exception:  # noqa: BLE001 - the last resort: one line and a log, never a bare traceback
             sys.exit(report_unexpected())
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+#: Exit status of a command whose reader closed the pipe (128 + SIGPIPE, as ``git log | head``).
+EXIT_CLOSED_PIPE = 141
+
+
+def _quiet_after_closed_pipe() -> None:
+    """End quietly when the reader of stdout went away (``vibrofocus --help | head -1``).
+
+    What is still buffered for stdout goes to /dev/null, so Python's own flush at exit
+    cannot print a second error either.
+    """
+    import os
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError):  # stdout is not a real file (a test runner's capture)
+        pass
+    sys.exit(EXIT_CLOSED_PIPE)
 
 
 app = typer.Typer(
