@@ -41,7 +41,7 @@ def serve(
         from .._validation import check_choice
         from ..rigs import RIG_KINDS
         from ..web import PACES, create_app
-        from ..web.serving import ServerLimits, run
+        from ..web.serving import ServerLimits, listen, run
 
         check_choice(rig, "rig", RIG_KINDS)
         if rig != "simulated":
@@ -71,6 +71,8 @@ def serve(
         extra_hosts = tuple(allow_host) + (() if host in _LOCAL_HOSTS + ("0.0.0.0", "::") else (host,))
         web_app = create_app(db, token=token, rig=rig, pace=pace, allowed_hosts=extra_hosts,
                              rig_config=rig_config if rig != "simulated" else None)
+        sock = listen(host, port)  # a busy port is one error line, before any link is printed
+        port = sock.getsockname()[1]
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
         login = f"{base}/login/{web_app.state.web.new_login_code()}"
@@ -84,7 +86,7 @@ def serve(
             # A moment later, so that the page does not ask before uvicorn listens.
             threading.Timer(1.5, webbrowser.open, args=(login,)).start()
         limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive)
-        run(web_app, host=host, port=port, limits=limits)
+        run(web_app, host=host, port=port, limits=limits, sock=sock)
 
 
 def _check_database(db: Path) -> None:

@@ -20,6 +20,9 @@ a minute is counted, not written, and the count is written once the burst is ove
 
 from __future__ import annotations
 
+import errno
+import socket
+
 import json
 import logging
 import sys
@@ -241,7 +244,45 @@ def _logging(level: int = logging.WARNING) -> None:
         logging.getLogger(name).propagate = True
 
 
-def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits()) -> None:
+def listen(host: str, port: int) -> socket.socket:
+    """Bind and listen on ``host:port`` now, so a busy port is one clear error before anything starts.
+
+    Parameters
+    ----------
+    host : str
+        Address to bind.
+    port : int
+        TCP port (0: any free port).
+
+    Returns
+    -------
+    socket.socket
+        The listening socket, for :func:`run`.
+
+    Raises
+    ------
+    ValidationError
+        The address is in use or cannot be bound.
+    """
+    from ..errors import ValidationError
+
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, port))
+        sock.listen(2048)
+    except OSError as exc:
+        sock.close()
+        if exc.errno == errno.EADDRINUSE:
+            raise ValidationError(f"--port {port}: {host}:{port} is already in use (another vibrofocus serve?); "
+                                  "choose another --port or stop the other server") from None
+        raise ValidationError(f"--host {host} --port {port}: cannot listen there ({exc.strerror})") from None
+    return sock
+
+
+def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits(),
+        sock: socket.socket | None = None) -> None:
     """Serve ``app`` with uvicorn under ``limits`` until interrupted.
 
     Parameters
@@ -254,6 +295,8 @@ def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits()
         TCP port.
     limits : ServerLimits
         Connection limits.
+    sock : socket.socket, optional
+        A socket already listening (:func:`listen`); default: uvicorn binds ``host:port``.
     """
     import uvicorn
 
@@ -265,4 +308,4 @@ def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits()
         app, host=host, port=port, log_config=None, log_level="warning", access_log=False,
         http=guarded_protocol(limits, cap), timeout_keep_alive=limits.keep_alive_s,
     )
-    uvicorn.Server(config).run()
+    uvicorn.Server(config).run(sockets=None if sock is None else [sock])
