@@ -2,8 +2,9 @@
 # The whole test suite on a fresh machine with Python 3.11 and apt: installs Debian's
 # chromium (browser tests), jackd2 and libportaudio2 (the audio rig against a real JACK
 # server on its dummy driver), a virtual environment with vibrofocus and its test extras,
-# then runs pytest in parallel. Extra arguments go to pytest (e.g. -m "not slow" for a quick loop,
-# -n 0 for one process).
+# then runs pytest: in parallel, then the browser tests in one process. Extra arguments go to
+# both runs of pytest (e.g. -q, -x); to choose tests by marker, call pytest yourself
+# (DEVELOPING.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
@@ -23,7 +24,12 @@ fi
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
 
-# In parallel on every core (pytest-xdist); no bytecode or pytest cache in the checkout: the
-# suite writes only to temporary folders (tests/conftest.py checks it).
+# Everything but the browser tests in parallel on every core (pytest-xdist), then the
+# browser tests in one process: their pages keep real time (timeouts, pauses), which two
+# chromiums beside a loaded machine would stretch. No bytecode or pytest cache in the
+# checkout: the suite writes only to temporary folders (tests/conftest.py checks it).
 export PYTHONDONTWRITEBYTECODE=1
-exec .venv/bin/python -m pytest -n auto -p no:cacheprovider "$@"
+status=0
+.venv/bin/python -m pytest -n auto -p no:cacheprovider -m "not browser" "$@" || status=$?
+.venv/bin/python -m pytest -p no:cacheprovider -m browser "$@" || status=$?
+exit "$status"
