@@ -10,7 +10,10 @@ trap 'rm -rf "$work"' EXIT
 
 python3 -m venv "$work/venv"
 "$work/venv/bin/python" -m pip install -q uv
-"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$root"
+# Built from a copy: setuptools writes its build/ folder beside the sources.
+mkdir "$work/pkg"
+cp -r "$root/src" "$root/pyproject.toml" "$root/README.md" "$root/LICENSE" "$work/pkg/"
+"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$work/pkg"
 "$work/venv/bin/uv" pip list -q --python "$work/venv/bin/python" --format freeze > "$work/versions.txt" 2>/dev/null || true
 
 export PYTHONDONTWRITEBYTECODE=1 MPLBACKEND=Agg
