@@ -5,7 +5,8 @@ Model, per actuator ``q`` and skin point ``p`` (NumPy's ``exp(+i omega t)`` conv
 ``H_pq(f) = K g_q c_q E_q(f) (mu_1 / G(f)) sum_m Green(k(f), d_pqm, a_q)``
 
 with ``K`` the drive sensitivity (so that 10 V of the base Ricker on one nominal
-actuator gives 2 µm peak 6 mm away), ``g_q`` the actuator's gain, ``c_q`` its contact
+actuator gives 2 µm peak on the actuator, the paper's anchor; 6 mm away on the
+``voigt-fit`` preset), ``g_q`` the actuator's gain, ``c_q`` its contact
 (coupling), ``E_q`` the inertial-exciter resonance, ``G(f)`` the skin's complex shear
 modulus (a causal viscoelastic law, :mod:`.viscoelastic`; ``mu_1`` = 1 kPa), ``Green`` the
 finite-contact surface Green's function with the complex wavenumber ``k(f)`` that the
@@ -32,14 +33,15 @@ from ..rigs.base import Rig
 from ..rigs.safety import SafetyLimits
 from .geometry import ForearmGeometry
 from .parameters import ForearmParameters
+from .presets import DEFAULT_SKIN, skin_preset
 from .propagation import _disc_factor, exciter_response, surface_green, wavenumber
 
 __all__ = ["SimulatedForearm", "drive_sensitivity"]
 
-#: Peak displacement 6 mm from one nominal actuator driven by a 10 V Ricker (docs/skin-model.md).
+#: Peak displacement of one nominal actuator driven by a 10 V Ricker, at the preset's anchor
+#: distance (on the actuator: de Vlam et al. 2023, sec. II.C and Fig. 4b).
 _REFERENCE_PEAK_M = 2e-6
 _REFERENCE_DRIVE_V = 10.0
-_REFERENCE_DISTANCE_M = 6e-3
 # Impulse responses kept per point set by play_and_record (calibration aims at a few
 # points at a time, so a small cache avoids recomputing the model for every repeat).
 _IR_CACHE_SIZE = 32
@@ -95,18 +97,21 @@ def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmPara
 
 
 @lru_cache(maxsize=16)
-def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S) -> float:
+def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S, skin: str = "voigt-fit") -> float:
     """Drive sensitivity ``K`` of the model, m/V per unit Green's function.
 
     Chosen so that a 10 V peak Ricker (spread ``sigma``) on one nominal, fully coupled
-    actuator gives 2 µm peak displacement 6 mm from its centre on a flat arm (docs/skin-model.md:
-    "10 V on one actuator gives about 2 µm next to it"), the order of displacement
-    that small inertial exciters produce on the forearm.
+    actuator of the skin preset ``skin`` gives 2 µm peak displacement at the preset's
+    anchor distance on a flat arm: on the actuator for the evidence presets, as the
+    paper measured (about 2 µm on one exciter at the 10 V maximum, the reason for its
+    0.002 mm target; de Vlam et al. 2023, sec. II.C, Fig. 4b); 6 mm from its centre for
+    ``voigt-fit``, as the earlier model had it.
     """
     n = 4096
-    params = ForearmParameters.nominal(1)
+    preset = skin_preset(skin)
+    params = ForearmParameters.nominal(1, skin=skin)
     freqs = np.fft.rfftfreq(n, 1 / fs)
-    h = _unit_transfer(freqs, np.full((1, 1, 1), _REFERENCE_DISTANCE_M), params)[:, 0, 0]
+    h = _unit_transfer(freqs, np.full((1, 1, 1), preset.anchor_distance_m), params)[:, 0, 0]
     t = np.arange(n) / fs - 0.1
     pulse = _REFERENCE_DRIVE_V * (1 - t**2 / sigma**2) * np.exp(-(t**2) / (2 * sigma**2))
     response = np.fft.irfft(np.fft.rfft(pulse) * h, n)
@@ -147,7 +152,11 @@ class SimulatedForearm(Rig):
         Range of dropout durations, s (uniform).
     participant : ForearmParameters, optional
         Explicit parameters instead of drawing them from ``seed`` (for controlled
-        experiments, e.g. ``ForearmParameters.nominal(4)``).
+        experiments, e.g. ``ForearmParameters.nominal(4, skin="nominal")``).
+    skin : str, optional
+        Skin preset (:data:`vibrofocus.skin.SKIN_PRESETS`: ``"nominal"``, ``"low"``,
+        ``"high"``, ``"voigt-fit"``) around which ``seed`` draws the participant.
+        Default: the participant's preset when one is given, else ``"nominal"``.
     geometry : {"cylinder", "plane"}
         ``"cylinder"`` (default): the tapered forearm, waves come back around it.
         ``"plane"``: an unbounded flat skin, for checks of the propagation law.
@@ -204,6 +213,7 @@ class SimulatedForearm(Rig):
         *,
         dropout_duration_s: tuple[float, float] = (1e-3, 10e-3),
         participant: ForearmParameters | None = None,
+        skin: str | None = None,
         geometry: str = "cylinder",
         n_images: int = 2,
         ir_duration_s: float = 0.4096,
@@ -214,10 +224,14 @@ class SimulatedForearm(Rig):
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValidationError(f"seed must be a non-negative integer, got {seed!r}")
         self.seed = int(seed)
+        if skin is not None:
+            skin = skin_preset(skin).name
         if participant is None:
-            participant = ForearmParameters.draw(self.seed, self.layout)
+            participant = ForearmParameters.draw(self.seed, self.layout, skin=skin or DEFAULT_SKIN)
         elif not isinstance(participant, ForearmParameters):
             raise ValidationError(f"participant must be a ForearmParameters, got {type(participant).__name__}")
+        elif skin is not None and skin != participant.skin:
+            raise ValidationError(f"skin={skin!r} contradicts the participant's skin {participant.skin!r}")
         if participant.n_actuators != self.layout.n_actuators:
             raise ValidationError(
                 f"participant describes {participant.n_actuators} actuators but the layout has "
@@ -236,7 +250,7 @@ class SimulatedForearm(Rig):
         if self.n_ir < 16:
             raise ValidationError(f"ir_duration_s must cover at least 16 samples, got {self.n_ir}")
         self.latency_s = check_positive(latency_s, "latency_s", allow_zero=True)
-        self.sensitivity = drive_sensitivity(self.fs)
+        self.sensitivity = drive_sensitivity(self.fs, skin=participant.skin)
         self._rng = np.random.default_rng([self.seed, 0xD0])
         self._ir_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
         self._ir_lock = threading.Lock()
@@ -247,6 +261,11 @@ class SimulatedForearm(Rig):
         self.last_dropout_mask: np.ndarray | None = None
 
     # ------------------------------------------------------------------ the model
+    @property
+    def skin(self) -> str:
+        """Name of the skin preset this arm was drawn on (in every output made from it)."""
+        return self._participant.skin
+
     @property
     def participant(self) -> ForearmParameters:
         """This participant's parameters (read-only: cached responses depend on them)."""
@@ -482,6 +501,7 @@ class SimulatedForearm(Rig):
         out = super().describe()
         out.update(
             seed=self.seed,
+            skin=self.skin,
             participant=self.participant.to_dict(),
             geometry=self.geometry.kind,
             n_images=self.geometry.n_images,
@@ -495,6 +515,6 @@ class SimulatedForearm(Rig):
     def __repr__(self) -> str:
         p = self.participant
         return (
-            f"SimulatedForearm(seed={self.seed}, c(250 Hz)={p.c250_m_s:.2f} m/s, alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, "
+            f"SimulatedForearm(seed={self.seed}, skin={self.skin!r}, c(250 Hz)={p.c250_m_s:.2f} m/s, alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, "
             f"contact={np.round(p.contact, 2).tolist()}, geometry={self.geometry.kind!r})"
         )
