@@ -33,6 +33,7 @@ from ..rigs.base import Rig
 from ..rigs.safety import SafetyLimits
 from .geometry import ForearmGeometry
 from .parameters import ForearmParameters
+from .precursor import precursor_spectrum
 from .presets import DEFAULT_SKIN, skin_preset
 from .propagation import _disc_factor, exciter_response, surface_green, wavenumber
 
@@ -50,6 +51,9 @@ _IR_CACHE_SIZE = 32
 # from a distance table of this relative step (about 1e-6 relative error).
 _IR_OVERSAMPLING = 4
 _IR_TABLE_STEP = 5e-3
+# Length of the precursor (response before t = 0) that the layered presets take out of
+# their transfer, s: it holds all but ~1e-8 of the precursor's energy (tests/skin).
+_PRECURSOR_S = 0.05
 # Unit of the modulus in the compliance factor (any constant: K absorbs it).
 _MODULUS_UNIT_PA = 1e3
 
@@ -252,7 +256,8 @@ class SimulatedForearm(Rig):
         self.latency_s = check_positive(latency_s, "latency_s", allow_zero=True)
         self.sensitivity = drive_sensitivity(self.fs, skin=participant.skin)
         self._rng = np.random.default_rng([self.seed, 0xD0])
-        self._ir_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
+        # points -> (playback impulse responses, precursor samples or None)
+        self._ir_cache: OrderedDict[bytes, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._ir_lock = threading.Lock()
         self._ir_factors: tuple[np.ndarray, ...] | None = None
         self.last_drive: np.ndarray | None = None
@@ -290,12 +295,24 @@ class SimulatedForearm(Rig):
         -------
         ndarray, complex, shape (n_freqs, n_points, n_actuators)
             m/V, NumPy's FFT sign convention (a delay is ``exp(-2j pi f tau)``).
+
+        Notes
+        -----
+        On a layered preset the transfer is that of the response's causal part: the
+        single surface mode's precursor (the response before ``t = 0``, see
+        :mod:`.precursor`), computed on the playback grid, is subtracted, so the true H
+        and playback agree and nothing arrives before the drive.
         """
         points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
         f = as_array(freqs, "freqs", ndim=1)
         if np.any(f < 0):
             raise ValidationError(f"freqs must be >= 0 Hz, got a minimum of {f.min():g} Hz")
-        return self._transfer(points, f)
+        h = self._transfer(points, f)
+        pre = self._responses(points)[1]
+        if pre is not None:
+            h -= precursor_spectrum(pre, _IR_OVERSAMPLING * self.fs, f)
+            h[f == 0] = 0.0  # the exciter exerts no static force (the precursor's mean is ~1e-4 of |H|)
+        return h
 
     def _transfer(self, points: np.ndarray, f: np.ndarray, max_nepers: float = 40.0,
                   table_step: float | None = None, factors: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
@@ -318,7 +335,12 @@ class SimulatedForearm(Rig):
         the aliases ``H(f + m fs)``, which the skin's attenuation makes negligible
         except under the contact itself.
         """
-        points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
+        return self._responses(as_array(points_xy, "points_xy", ndim=2, shape=(None, 2)))[0]
+
+    def _responses(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Playback impulse responses and, on a layered preset, the precursor samples
+        (the last ``_PRECURSOR_S`` of the fine grid's circular response, shape
+        (n_pre, n_points, n_actuators)); cached per point set."""
         key = points.tobytes()
         with self._ir_lock:
             if key in self._ir_cache:
@@ -332,16 +354,21 @@ class SimulatedForearm(Rig):
                 self._ir_factors = _frequency_factors(freqs[1:], self.participant)
             factors = self._ir_factors
         h = self._transfer(points, freqs, table_step=_IR_TABLE_STEP, factors=factors)
-        ir = r * np.fft.irfft(h, n_fft, axis=0)[: r * self.n_ir: r]
+        fine = np.fft.irfft(h, n_fft, axis=0)
+        ir = r * fine[: r * self.n_ir: r]
         n_fade = max(self.n_ir // 10, 1)
         ir[-n_fade:] *= np.hanning(2 * n_fade)[n_fade:, None, None]
         ir = np.ascontiguousarray(np.moveaxis(ir, 0, -1))
         ir.setflags(write=False)
+        pre = None
+        if self.participant.layered is not None:
+            pre = fine[-min(int(round(_PRECURSOR_S * r * self.fs)), n_fft // 4):].copy()
+            pre.setflags(write=False)
         with self._ir_lock:  # a web server may record from several threads
-            self._ir_cache[key] = ir
+            self._ir_cache[key] = (ir, pre)
             if len(self._ir_cache) > _IR_CACHE_SIZE:
                 self._ir_cache.popitem(last=False)
-        return ir
+        return ir, pre
 
     def field(
         self,
