@@ -56,7 +56,7 @@ _TOP_SHEAR_PA = _DENSITY * (7.0 / RAYLEIGH_FACTOR_INCOMPRESSIBLE) ** 2
 _SUBSTRATE_SHEAR_PA = 15e3 / 3
 #: Effective depth of the top layer, m: fitted by ``scripts/fit_skin_model.py`` so that
 #: the nominal preset's phase speed at 200 Hz is Zhang et al. 2011's 3.25 m/s.
-_TOP_DEPTH_M = 0.404e-3
+_TOP_DEPTH_M = 0.3966e-3
 
 #: The nominal layered law (loss tangent 0.14).
 LAYERED_NOMINAL = LayeredLaw(top_shear_pa=_TOP_SHEAR_PA, substrate_shear_pa=_SUBSTRATE_SHEAR_PA,
