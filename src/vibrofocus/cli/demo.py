@@ -25,6 +25,9 @@ def _fmt(value: float, digits: int = 2) -> str:
 @command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
 def demo_command(
     seed: int = typer.Option(0, "--seed", help="Simulated participant (forearm) seed."),
+    skin: str = typer.Option("nominal", "--skin",
+                             help="Skin preset of the simulated forearm: nominal | low | high | voigt-fit "
+                                  "(docs: How true is the simulated arm)."),
     out: Path = typer.Option(Path("demo-output"), "--out", "-o", help="Folder for the figures (created)."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Write the PNG figures."),
     as_json: bool = typer.Option(False, "--json", help="Print one JSON object (results and summary) and nothing else."),
@@ -65,13 +68,16 @@ def demo_command(
         from ..skin import SimulatedForearm
 
         check_choice(design_from, "--design-from", ("calibration", "model"))
+        from ..skin import skin_preset
+
+        skin = skin_preset(skin).name
         if paper_figures:
-            _write_paper_figures(out, seed=seed, participants=participants, location=location)
+            _write_paper_figures(out, seed=seed, participants=participants, location=location, skin=skin)
             return
         if moving:
-            _write_moving_focus(out, seed=seed, speed_m_s=moving_speed, quiet=as_json)
+            _write_moving_focus(out, seed=seed, speed_m_s=moving_speed, quiet=as_json, skin=skin)
             return
-        rig = SimulatedForearm(seed=seed)
+        rig = SimulatedForearm(seed=seed, skin=skin)
         rig.layout.location_index(location)
         if design_from == "calibration" or figures:
             # Before the calibration starts: a read-only or full output folder is found now.
@@ -123,6 +129,7 @@ def demo_command(
             payload = {
                 "seed": seed,
                 "rig": "simulated",
+                "skin": rig.skin,
                 "participant": rig.participant.to_dict(),
                 "design_from": design_from,
                 "calibration": calibration_info or None,
@@ -138,7 +145,7 @@ def demo_command(
             return
         p = rig.participant
         console.print(
-            f"[bold]Simulated forearm[/], seed {seed}: c(250 Hz) = {p.c250_m_s:.2f} m/s, "
+            f"[bold]Simulated forearm[/], skin {rig.skin}, seed {seed}: c(250 Hz) = {p.c250_m_s:.2f} m/s, "
             f"alpha(250 Hz) = {p.alpha250_np_m:.0f} Np/m, contact {np.round(p.contact, 2).tolist()}"
         )
         if calibration_info:
@@ -193,7 +200,7 @@ def _make_output_folder(out: Path) -> None:
         raise output_error(exc, out, "output folder") from exc
 
 
-def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int) -> None:
+def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int, skin: str) -> None:
     from ..demo.paper_figures import write_paper_figures
 
     _make_output_folder(out)
@@ -201,27 +208,27 @@ def _write_paper_figures(out: Path, *, seed: int, participants: int, location: i
                   transient=True) as progress:
         task = progress.add_task("starting", total=None)
         paths = write_paper_figures(out, seed=seed, participants=participants, location=location,
-                                    progress=lambda label: progress.update(task, description=label))
-    console.print("The source paper's figure layouts, drawn from the model (simulated forearm and simulated "
-                  "participants: not data):")
+                                    progress=lambda label: progress.update(task, description=label), skin=skin)
+    console.print(f"The source paper's figure layouts, drawn from the model (simulated forearm, skin {skin}, and "
+                  "simulated participants on the voigt-fit skin: not data):")
     for path in paths:
         console.print(f"wrote {path}")
 
 
-def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool) -> None:
+def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool, skin: str) -> None:
     """``demo --moving``: a moving focus rendered from the skin model fitted to a calibration."""
     from ..calibration import calibrate, fit_model
     from ..demo.moving import moving_focus, write_moving_gif
     from ..skin import SimulatedForearm
 
     _make_output_folder(out)
-    rig = SimulatedForearm(seed=seed)
+    rig = SimulatedForearm(seed=seed, skin=skin)
     cal = calibrate(rig, participant_id=f"simulated-{seed}")
     fitted = fit_model(cal)
     lay = rig.layout
     focus = moving_focus(fitted, lay, rig.fs, start_xy=lay.locations_xy[6], end_xy=lay.locations_xy[2],
                          speed_m_s=speed_m_s)
-    arm = SimulatedForearm(seed=seed, noise_m=0.0, dropout_rate=0.0)
+    arm = SimulatedForearm(seed=seed, noise_m=0.0, dropout_rate=0.0, skin=skin)
     path = write_moving_gif(focus, arm, out / "moving_focus.gif")
     if not quiet:
         console.print(f"fitted {fitted!r}")

@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
+from .perception import STUDY_SKIN
 from .storage import StudyStore
 
 __all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
@@ -141,7 +142,7 @@ def simulate_studies(
 
             def participant_parts(cid: int | None, _pid: str = pid, _pseed: int = pseed) -> dict[str, Any]:
                 if "rig" not in shared:
-                    shared["rig"] = make_rig("simulated", seed=_pseed)
+                    shared["rig"] = make_rig("simulated", seed=_pseed, skin=STUDY_SKIN)
                 if cid is None:
                     cid, cal = _calibration_for(store, _pid, shared["rig"], cal_dir)
                     shared["cal"] = (cid, cal)
