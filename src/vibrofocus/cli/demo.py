@@ -64,7 +64,7 @@ def demo_command(
         from .._validation import check_choice
         from ..calibration import calibrate, save_calibration
         from ..defaults import METHODS
-        from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
+        from ..demo import calibrated_transfer, design_window, model_transfer, run_demo, summarize
         from ..skin import SimulatedForearm
 
         check_choice(design_from, "--design-from", ("calibration", "model"))
@@ -108,15 +108,18 @@ def demo_command(
                     interactive=False if as_json else None,
                 )
                 transfer = calibrated_transfer(cal)
+                from ..demo import calibration_trust
+
                 calibration_info = {
                     "file": str(cal_path),
                     "method": cal.method,
                     "median_relative_error": _relative_error_to_model(rig, cal),
+                    "trust": calibration_trust(cal, rig.transfer(rig.layout.points_xy, cal.freqs)),
                     "quality_ok": bool(cal.quality.ok),
                     "quality_issues": [f"{issue.severity}: {issue.message}" for issue in cal.quality.issues],
                 }
             task = progress.add_task("rendering and playing", total=total)
-            result = run_demo(rig, transfer=transfer,
+            result = run_demo(rig, transfer=transfer, n_samples=design_window(rig),
                               progress=lambda label: progress.update(task, advance=1, description=label))
             paths = []
             if figures:
@@ -153,6 +156,18 @@ def demo_command(
                 f"Calibrated ({calibration_info['method']}), saved to {calibration_info['file']}; "
                 f"median error of the measured H against the model's true H in band: "
                 f"{100 * calibration_info['median_relative_error']:.1f} %"
+            )
+            trust = calibration_info["trust"]
+            band = trust["coherent_band_hz"]
+            tap = trust["tap_band_hz"]
+            console.print(
+                ("coherence below 0.9 somewhere at every frequency" if band is None else
+                 f"coherence >= 0.9 at every point over {band[0]:.0f}-{band[1]:.0f} Hz")
+                + f" (the tap's band, within 20 dB of its peak: {tap[0]:.0f}-{tap[1]:.0f} Hz, "
+                f"{'covered' if trust['covers_tap_band'] else 'NOT covered'}); H error "
+                f"{100 * trust['error_inside']:.1f} % inside, "
+                + ("no calibrated bin outside" if trust["error_outside"] != trust["error_outside"]
+                   else f"{100 * trust['error_outside']:.1f} % outside")
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
         legend = ("All methods at the same peak drive (the drive limit). fid: correlation with the tap at its "

@@ -17,7 +17,8 @@ from ..defaults import METHODS, N_SAMPLES
 from ..errors import ValidationError
 from ..rigs.base import Rig
 
-__all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "run_demo", "record_clean", "summarize"]
+__all__ = ["DemoResult", "calibrated_transfer", "design_window", "model_transfer", "run_demo", "record_clean",
+           "summarize"]
 
 #: Metrics every result row carries (the ``--json`` contract, docs/file-formats.md, demo --json).
 ROW_KEYS = ("location", "method", "fidelity", "contrast_db", "peak_drive_v", "target_peak_m")
@@ -47,6 +48,29 @@ def model_transfer(rig: Rig, n: int) -> np.ndarray:
     if transfer is None:
         raise ValidationError(f"the {rig.kind} rig has no model transfer; calibrate it first")
     return transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
+
+
+def design_window(rig: Rig, minimum: int = N_SAMPLES, tol: float = 1e-4) -> int:
+    """A design window that follows the arm's impulse-response length, samples.
+
+    The tap sits mid-window, so the window needs twice the length over which the
+    responses ring down (``rig.response_length(tol=tol)``, a simulated forearm's), rounded
+    up to a power of two and at least ``minimum``. A rig that does not know its responses
+    gets ``minimum``.
+
+    Parameters
+    ----------
+    rig : Rig
+    minimum : int
+        Shortest window, samples.
+    tol : float
+        Share of each response's energy allowed past the ring-down length.
+    """
+    length = getattr(rig, "response_length", None)
+    if length is None:
+        return int(minimum)
+    need = 2 * int(length(tol=tol))
+    return int(max(minimum, 2 ** int(np.ceil(np.log2(need)))))
 
 
 def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: float = 0.0,

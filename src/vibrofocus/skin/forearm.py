@@ -370,6 +370,34 @@ class SimulatedForearm(Rig):
                 self._ir_cache.popitem(last=False)
         return ir, pre
 
+    def response_length(self, points_xy: np.ndarray | None = None, tol: float = 1e-4) -> int:
+        """Samples that hold all but ``tol`` of every playback impulse response's energy.
+
+        A design window needs about twice this (the target sits mid-window, and the
+        medium rings down after it); :func:`vibrofocus.demo.design_window` uses it.
+
+        Parameters
+        ----------
+        points_xy : ndarray, shape (n_points, 2), optional
+            Points, m; default the layout's points.
+        tol : float
+            Share of energy allowed past the returned length, in (0, 1).
+
+        Returns
+        -------
+        int
+            Samples at ``fs`` (at most ``n_ir``).
+        """
+        from .._validation import check_in_range
+
+        tol = check_in_range(tol, "tol", 0.0, 1.0, inclusive=False)
+        points = self.layout.points_xy if points_xy is None else as_array(points_xy, "points_xy", ndim=2,
+                                                                         shape=(None, 2))
+        energy = np.cumsum(self.impulse_responses(points) ** 2, axis=2)
+        total = energy[..., -1:]
+        done = np.all((energy >= (1 - tol) * total) | (total == 0), axis=(0, 1))
+        return int(np.argmax(done)) + 1 if done.any() else self.n_ir
+
     def field(
         self,
         drive: np.ndarray,
