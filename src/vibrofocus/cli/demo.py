@@ -64,7 +64,7 @@ def demo_command(
         from .._validation import check_choice
         from ..calibration import calibrate, save_calibration
         from ..defaults import METHODS
-        from ..demo import calibrated_transfer, design_window, model_transfer, run_demo, summarize
+        from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
         from ..skin import SimulatedForearm
 
         check_choice(design_from, "--design-from", ("calibration", "model"))
@@ -119,7 +119,7 @@ def demo_command(
                     "quality_issues": [f"{issue.severity}: {issue.message}" for issue in cal.quality.issues],
                 }
             task = progress.add_task("rendering and playing", total=total)
-            result = run_demo(rig, transfer=transfer, n_samples=design_window(rig),
+            result = run_demo(rig, transfer=transfer,
                               progress=lambda label: progress.update(task, advance=1, description=label))
             paths = []
             if figures:

@@ -50,13 +50,14 @@ def model_transfer(rig: Rig, n: int) -> np.ndarray:
     return transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
 
 
-def design_window(rig: Rig, minimum: int = N_SAMPLES, tol: float = 1e-4) -> int:
+def design_window(rig: Rig, minimum: int = N_SAMPLES, tol: float = 1e-5) -> int:
     """A design window that follows the arm's impulse-response length, samples.
 
-    The tap sits mid-window, so the window needs twice the length over which the
-    responses ring down (``rig.response_length(tol=tol)``, a simulated forearm's), rounded
-    up to a power of two and at least ``minimum``. A rig that does not know its responses
-    gets ``minimum``.
+    The tap sits mid-window: before it the inverse drive's pre-ringing, after it the
+    medium's ring-down, each about as long as the responses
+    (``rig.response_length(tol=tol)``, a simulated forearm's). The window is four times
+    that, rounded up to a power of two and at least ``minimum``; a rig that does not
+    know its responses gets ``minimum``.
 
     Parameters
     ----------
@@ -69,7 +70,7 @@ def design_window(rig: Rig, minimum: int = N_SAMPLES, tol: float = 1e-4) -> int:
     length = getattr(rig, "response_length", None)
     if length is None:
         return int(minimum)
-    need = 2 * int(length(tol=tol))
+    need = 4 * int(length(tol=tol))
     return int(max(minimum, 2 ** int(np.ceil(np.log2(need)))))
 
 
@@ -152,7 +153,7 @@ def run_demo(
     *,
     methods: Sequence[str] = METHODS,
     locations: Sequence[int] | None = None,
-    n_samples: int = N_SAMPLES,
+    n_samples: int | None = None,
     transfer: Callable[[Rig, int], np.ndarray] = model_transfer,
     progress: Callable[[str], None] | None = None,
 ) -> DemoResult:
@@ -166,8 +167,8 @@ def run_demo(
         Rendering methods (docs/method.md, rendering methods).
     locations : sequence of int, optional
         1-based locations; default all of the layout's.
-    n_samples : int
-        Design window, samples.
+    n_samples : int, optional
+        Design window, samples; default :func:`design_window` of the rig.
     transfer : callable
         ``transfer(rig, n) -> H``; default :func:`model_transfer`; pass
         :func:`calibrated_transfer` to design from a measurement.
@@ -186,7 +187,7 @@ def run_demo(
     locations = list(layout.location_numbers if locations is None else locations)
     for loc in locations:
         layout.location_index(loc)
-    H = transfer(rig, n_samples)
+    H = transfer(rig, design_window(rig) if n_samples is None else int(n_samples))
     points = layout.points_xy
     rows, renderings, recordings = [], {}, {}
     for loc in locations:
