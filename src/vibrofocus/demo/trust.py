@@ -15,6 +15,18 @@ def tap_band(sigma: float = SIGMA_S, dynamic_range_db: float = 20.0) -> tuple[fl
     The zero-mean Ricker of spread ``sigma`` has the amplitude spectrum
     ``f^2 exp(-(2 pi f sigma)^2 / 2)`` (up to a constant), which peaks at
     ``1 / (sqrt(2) pi sigma)`` (about 225 Hz for 1 ms).
+
+    Parameters
+    ----------
+    sigma : float
+        Ricker spread, s.
+    dynamic_range_db : float
+        How far under its peak the spectrum may fall inside the band, dB.
+
+    Returns
+    -------
+    (float, float)
+        Lowest and highest frequency of the band, Hz (on a grid of ``0.5e-3 / sigma`` Hz).
     """
     f = np.linspace(1.0, 10.0 / sigma, 20001)
     spec = f**2 * np.exp(-((2 * np.pi * f * sigma) ** 2) / 2)

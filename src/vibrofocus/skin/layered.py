@@ -41,6 +41,7 @@ import numpy as np
 from .._validation import check_in_range, check_positive
 from ..errors import ValidationError
 from .viscoelastic import RAYLEIGH_FACTOR_INCOMPRESSIBLE
+from .wavelaw import WaveNumberMixin
 
 __all__ = ["LayeredLaw"]
 
@@ -50,7 +51,7 @@ _NEWTON_STEPS = 40
 
 
 @dataclass(frozen=True)
-class LayeredLaw:
+class LayeredLaw(WaveNumberMixin):
     """Surface waves on a stiff top layer over a soft substrate, with a constant-loss law.
 
     Parameters
@@ -151,15 +152,6 @@ class LayeredLaw:
             k = np.conj(self.wavenumber(f[pos]))
             out[pos] = self.density_kg_m3 * (2 * np.pi * f[pos] / (self.rayleigh_factor * k)) ** 2
         return out
-
-    def phase_speed(self, freqs: np.ndarray) -> np.ndarray:
-        """Phase speed ``c(f) = 2 pi f / Re k``, m/s, for ``freqs`` > 0 Hz."""
-        f = np.asarray(freqs, dtype=float)
-        return 2 * np.pi * f / self.wavenumber(f).real
-
-    def attenuation(self, freqs: np.ndarray) -> np.ndarray:
-        """Attenuation ``alpha(f) = Im k``, Np/m."""
-        return self.wavenumber(freqs).imag
 
     def group_speed(self, freqs: np.ndarray) -> np.ndarray:
         """Group speed ``1 / Re(dk / d omega)``, m/s, from implicit differentiation.

@@ -103,5 +103,15 @@ DEFAULT_SKIN = "nominal"
 
 
 def skin_preset(name: str) -> SkinPreset:
-    """The preset called ``name`` (one of :data:`SKIN_PRESETS`), or a ValidationError naming the choices."""
+    """The preset called ``name``, or a ValidationError naming the choices.
+
+    Parameters
+    ----------
+    name : str
+        One of :data:`SKIN_PRESETS` (``"nominal"``, ``"low"``, ``"high"``, ``"voigt-fit"``).
+
+    Returns
+    -------
+    SkinPreset
+    """
     return SKIN_PRESETS[check_choice(name, "skin", tuple(SKIN_PRESETS))]
