@@ -173,10 +173,11 @@ class SimulatedForearm(Rig):
         kept part) with the last 10 % faded out.
     latency_s : float
         Fixed delay between drive and recording, s, to model the converter, amplifier
-        and vibrometer-decoder delays of a particular rig. Default 0: the wave law is
-        causal by construction (:mod:`.viscoelastic`), so no delay is needed to hide a
-        precursor; an impulse response holds less than 1e-6 of its energy before
-        ``t = 0``.
+        and vibrometer-decoder delays of a particular rig. Default 0: the ``voigt-fit``
+        law is causal by construction (:mod:`.viscoelastic`) and the layered presets'
+        transfer is the causal part of their surface mode (:mod:`.precursor`), so no
+        delay is needed to hide a precursor; an impulse response holds less than 1e-6
+        of its energy before ``t = 0``.
     noise_band : (float, float)
         Band in which ``noise_m`` is specified, Hz.
 
