@@ -118,3 +118,15 @@ def test_a_seed_draws_the_same_person_on_every_skin():
     assert abs(drawn.loss_tangent / base.loss_tangent - 1) <= 0.25
     assert abs(drawn.top_shear_pa / base.top_shear_pa - 1) <= 0.237
     assert people["nominal"].to_dict()["layered"]["kind"] == "layered"
+
+
+@pytest.mark.parametrize("skin", list(SKIN_PRESETS))
+def test_render_on_a_model_picks_a_window_its_responses_fit_in(skin):
+    from vibrofocus.rendering import render
+
+    arm = SimulatedForearm(seed=1, skin=skin, noise_m=0.0, dropout_rate=0.0)
+    n = arm.design_window()
+    assert n >= 4 * arm.response_length(tol=1e-5) and n & (n - 1) == 0
+    for loc in (2, 4, 5):  # at a fixed 4096 samples, 2 of 54 designs on nominal arms 0-1 were refused
+        r = render("inverse", arm, arm.fs, arm.layout, loc)
+        assert r.n_samples == n and r.wraparound_fraction < 1e-3

@@ -50,28 +50,20 @@ def model_transfer(rig: Rig, n: int) -> np.ndarray:
     return transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
 
 
-def design_window(rig: Rig, minimum: int = N_SAMPLES, tol: float = 1e-5) -> int:
-    """A design window that follows the arm's impulse-response length, samples.
+def design_window(rig: Rig, minimum: int = N_SAMPLES) -> int:
+    """The design window of the demo: the rig's own when it knows its responses.
 
-    The tap sits mid-window: before it the inverse drive's pre-ringing, after it the
-    medium's ring-down, each about as long as the responses
-    (``rig.response_length(tol=tol)``, a simulated forearm's). The window is four times
-    that, rounded up to a power of two and at least ``minimum``; a rig that does not
-    know its responses gets ``minimum``.
+    A simulated forearm's :meth:`~vibrofocus.skin.SimulatedForearm.design_window`
+    follows its impulse-response length; any other rig gets ``minimum``.
 
     Parameters
     ----------
     rig : Rig
     minimum : int
         Shortest window, samples.
-    tol : float
-        Share of each response's energy allowed past the ring-down length.
     """
-    length = getattr(rig, "response_length", None)
-    if length is None:
-        return int(minimum)
-    need = 4 * int(length(tol=tol))
-    return int(max(minimum, 2 ** int(np.ceil(np.log2(need)))))
+    own = getattr(rig, "design_window", None)
+    return int(minimum) if own is None else int(own(minimum))
 
 
 def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: float = 0.0,

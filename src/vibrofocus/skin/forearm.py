@@ -26,7 +26,7 @@ from scipy import fft as sp_fft
 from scipy import signal as sp_signal
 
 from .._validation import as_array, check_band, check_positive
-from ..defaults import BAND_HZ, FS_HZ, SIGMA_S
+from ..defaults import BAND_HZ, FS_HZ, N_SAMPLES, SIGMA_S
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from ..rigs.base import Rig
@@ -374,8 +374,7 @@ class SimulatedForearm(Rig):
     def response_length(self, points_xy: np.ndarray | None = None, tol: float = 1e-4) -> int:
         """Samples that hold all but ``tol`` of every playback impulse response's energy.
 
-        A design window needs about twice this (the target sits mid-window, and the
-        medium rings down after it); :func:`vibrofocus.demo.design_window` uses it.
+        :meth:`design_window` makes a design window from it.
 
         Parameters
         ----------
@@ -398,6 +397,25 @@ class SimulatedForearm(Rig):
         total = energy[..., -1:]
         done = np.all((energy >= (1 - tol) * total) | (total == 0), axis=(0, 1))
         return int(np.argmax(done)) + 1 if done.any() else self.n_ir
+
+    def design_window(self, minimum: int = N_SAMPLES, tol: float = 1e-5) -> int:
+        """A design window that follows this arm's impulse-response length, samples.
+
+        The tap sits mid-window: before it the inverse drive's pre-ringing, after it the
+        medium's ring-down, each about as long as the responses
+        (:meth:`response_length`). The window is four times that, rounded up to a power
+        of two and at least ``minimum``. ``render`` and the demo use it when no window is
+        given.
+
+        Parameters
+        ----------
+        minimum : int
+            Shortest window, samples.
+        tol : float
+            Share of each response's energy allowed past the ring-down length.
+        """
+        need = 4 * self.response_length(tol=tol)
+        return int(max(minimum, 2 ** int(np.ceil(np.log2(need)))))
 
     def field(
         self,
