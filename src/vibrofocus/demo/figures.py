@@ -30,8 +30,9 @@ def _pyplot():
 def arm_label(rig) -> str:
     """How figures name the arm they come from: ``"simulated forearm (skin nominal, seed 0)"``."""
     skin = getattr(rig, "skin", None)
-    seed = getattr(rig, "seed", "?")
-    return f"simulated forearm (skin {skin}, seed {seed})" if skin else f"{getattr(rig, 'kind', 'rig')} rig"
+    if skin:
+        return f"simulated forearm (skin {skin}, seed {getattr(rig, 'seed', '?')})"
+    return "simulated forearm" if rig is None else f"{getattr(rig, 'kind', 'unknown')} rig"
 
 
 def _reachable_upper_hz(freqs: np.ndarray, gain: np.ndarray, dynamic_range_db: float) -> float:
@@ -211,7 +212,7 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     axes[0].legend(ncol=len(methods) + 1, fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
     axes[-1].set_xticks(range(len(locations)), [str(loc) for loc in locations])
     axes[-1].set_xlabel("location")
-    fig.suptitle(f"Focus metrics measured on the {arm_label(result.rig)}")
+    fig.suptitle(f"Focus metrics measured on the {arm_label(getattr(result, 'rig', None))}")
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     save_figure(fig, path, dpi=120)
     plt.close(fig)
