@@ -122,20 +122,8 @@ class LayeredLaw(WaveNumberMixin):
             k = k - f / df
         return k
 
-    def wavenumber(self, freqs: np.ndarray) -> np.ndarray:
-        """Complex surface wavenumber in the physics convention, ``k = omega / c + i alpha``.
-
-        Parameters
-        ----------
-        freqs : ndarray
-            Frequencies, Hz, > 0.
-
-        Returns
-        -------
-        ndarray, complex, same shape as ``freqs``
-            rad/m (real part) and Np/m (imaginary part, >= 0).
-        """
-        f = np.asarray(freqs, dtype=float)
+    def _wavenumber(self, f: np.ndarray) -> np.ndarray:
+        """Physics-convention wavenumber at ``f`` (float array, Hz); see :meth:`wavenumber`."""
         # The physics convention exp(-i omega t) is the complex conjugate of NumPy's.
         return self._solve(2 * np.pi * f + 0j, np.conj(self.loss_factor(f)))
 

@@ -106,20 +106,8 @@ class ViscoelasticLaw(WaveNumberMixin):
         f = np.asarray(freqs, dtype=float)
         return self._modulus_of_s(2j * np.pi * f + 0.0j)
 
-    def wavenumber(self, freqs: np.ndarray) -> np.ndarray:
-        """Complex surface wavenumber in the physics convention, ``k = omega / c + i alpha``.
-
-        Parameters
-        ----------
-        freqs : ndarray
-            Frequencies, Hz, > 0.
-
-        Returns
-        -------
-        ndarray, complex, same shape as ``freqs``
-            rad/m (real part, ``2 pi f / c(f)``) and Np/m (imaginary part, ``alpha(f)``).
-        """
-        f = np.asarray(freqs, dtype=float)
+    def _wavenumber(self, f: np.ndarray) -> np.ndarray:
+        """Physics-convention wavenumber at ``f`` (float array, Hz); see :meth:`wavenumber`."""
         omega = 2 * np.pi * f
         # Physics convention exp(-i omega t) is the complex conjugate of NumPy's.
         g_phys = np.conj(self.modulus(f))
