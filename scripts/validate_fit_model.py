@@ -48,8 +48,9 @@ def played_metrics(rendering, arm: SimulatedForearm, layout: ArrayLayout) -> dic
 def validate_participant(seed: int, methods=METHODS, locations=None) -> list[dict]:
     """One row per held-out location and method (see the module docstring)."""
     layout = ArrayLayout.reference()
-    cal = calibrate(SimulatedForearm(seed=seed, layout=layout), participant_id=f"S{seed:02d}")
-    arm = SimulatedForearm(seed=seed, layout=layout, noise_m=0.0, dropout_rate=0.0)
+    # The fitted model is the homogeneous law: validate it on the arm of that family.
+    cal = calibrate(SimulatedForearm(seed=seed, layout=layout, skin="voigt-fit"), participant_id=f"S{seed:02d}")
+    arm = SimulatedForearm(seed=seed, layout=layout, noise_m=0.0, dropout_rate=0.0, skin="voigt-fit")
     locations = range(layout.n_locations) if locations is None else locations
     rows = []
     for p in locations:

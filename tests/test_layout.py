@@ -22,13 +22,13 @@ def test_reference_actuators_and_locations_exactly_as_spec():
     assert layout.point_labels == ("1", "2", "3", "4", "5", "6", "7", "8", "9", "G1", "G2", "G3", "G4")
 
 
-def test_reference_guards_6_mm_toward_the_origin():
+def test_reference_guards_9_mm_toward_the_origin():
     layout = ArrayLayout.reference()
     offset = layout.actuators_xy - layout.guards_xy
-    assert_allclose(np.linalg.norm(offset, axis=1), 6 * MM, rtol=1e-12)
+    assert_allclose(np.linalg.norm(offset, axis=1), 9 * MM, rtol=1e-12)  # outside the 14 mm exciter
     # Pointing from the actuator to the origin: parallel to the actuator's position.
     unit = layout.actuators_xy / np.linalg.norm(layout.actuators_xy, axis=1, keepdims=True)
-    assert_allclose(offset / (6 * MM), unit, rtol=1e-12)
+    assert_allclose(offset / (9 * MM), unit, rtol=1e-12)
     assert np.all(np.linalg.norm(layout.guards_xy, axis=1) < np.linalg.norm(layout.actuators_xy, axis=1))
     assert_array_equal(layout.guard_indices, [9, 10, 11, 12])
     assert_allclose(layout.points_xy[9:], layout.guards_xy)

@@ -84,10 +84,15 @@ class ArrayLayout:
 
     # ------------------------------------------------------------------ factories
     @classmethod
-    def reference(cls, guard_offset_m: float = 6e-3) -> "ArrayLayout":
+    def reference(cls, guard_offset_m: float = 9e-3) -> "ArrayLayout":
         """The reference setup of docs/method.md, reference setup: 2 x 2 actuators at 45 mm, 3 x 3 locations at
-        10 mm pitch numbered row by row from the wrist side, four guards 6 mm inward
-        from each actuator."""
+        10 mm pitch numbered row by row from the wrist side, four guards 9 mm from each
+        actuator's centre toward the array centre.
+
+        Nine millimetres puts a guard outside the 14 mm exciter's footprint (radius 7 mm),
+        where a vibrometer looking through the case opening sees the skin. The paper says
+        only "in the vicinity of the actuators" (de Vlam et al. 2023, sec. II.C); the
+        distance is our assumption."""
         half = 22.5e-3
         act = np.array([[-half, half], [half, half], [-half, -half], [half, -half]])
         pitch = 10e-3

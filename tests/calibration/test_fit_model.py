@@ -55,7 +55,7 @@ def test_a_biased_truth_is_outside_the_stated_uncertainty(forearm_calibration, f
 def test_leave_one_point_out_predicts_the_held_out_point(forearm_calibration):
     # docs/method.md: held-out H error 0.01 % (median and largest, 3 participants x 9 points).
     rig, cal = forearm_calibration
-    exact_arm = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0)
+    exact_arm = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0, skin="voigt-fit")
     p = 4  # location 5, the centre
     fit = fit_model(cal, points=np.delete(np.arange(cal.layout.n_points), p))
     assert p not in fit.info["points"]
@@ -65,13 +65,13 @@ def test_leave_one_point_out_predicts_the_held_out_point(forearm_calibration):
     err = np.linalg.norm(fit.transfer(pt, cal.freqs[band]) - truth) / np.linalg.norm(truth)
     assert err < 1e-3
     # A model of another participant does much worse: the check can fail.
-    other = SimulatedForearm(seed=5, noise_m=0.0).transfer(pt, cal.freqs[band])
+    other = SimulatedForearm(seed=5, noise_m=0.0, skin="voigt-fit").transfer(pt, cal.freqs[band])
     assert np.linalg.norm(other - truth) / np.linalg.norm(truth) > 10 * err
 
 
 def test_a_tap_anywhere_from_the_fit_matches_one_from_the_true_h(forearm_calibration, fitted):
     rig, cal = forearm_calibration
-    exact_arm = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0)
+    exact_arm = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0, skin="voigt-fit")
     target = (4e-3, -6e-3)  # between locations
     r_fit = render("contrast", fitted, cal.fs, cal.layout, target_xy=target)
     r_true = render("contrast", exact_arm, cal.fs, cal.layout, target_xy=target)

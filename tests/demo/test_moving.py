@@ -18,7 +18,7 @@ def arm():
 def test_taps_follow_the_path_at_the_speed(arm):
     lay = ArrayLayout.reference()
     focus = moving_focus(arm, lay, arm.fs, start_xy=(-0.01, 0.0), end_xy=(0.01, 0.0), speed_m_s=0.25,
-                         tap_interval_s=0.04, n_samples=2048)
+                         tap_interval_s=0.04)
     # 20 mm at 0.25 m/s: a tap every 10 mm -> 3 taps at x = -10, 0, 10 mm.
     assert_allclose(focus.targets_xy, [[-0.01, 0], [0, 0], [0.01, 0]], atol=1e-12)
     assert_allclose(np.diff(focus.onsets_s), 0.04, atol=1 / arm.fs)
@@ -33,7 +33,7 @@ def test_the_animation_is_a_gif_with_a_frame_per_step(tmp_path, arm):
 
     lay = ArrayLayout.reference()
     focus = moving_focus(arm, lay, arm.fs, start_xy=(0.0, -0.01), end_xy=(0.0, 0.01), speed_m_s=0.5,
-                         tap_interval_s=0.02, n_samples=2048)
+                         tap_interval_s=0.02)
     path = write_moving_gif(focus, arm, tmp_path / "m.gif", n_grid=9, frames_per_tap=2)
     with Image.open(path) as im:
         assert im.format == "GIF"

@@ -39,7 +39,8 @@ def test_model_transfer_is_the_rigs_truth_at_the_layout_points():
     h = model_transfer(rig, n)
     assert h.shape == (n // 2 + 1, rig.layout.n_points, rig.layout.n_actuators)
     f = np.fft.rfftfreq(n, 1 / rig.fs)
-    np.testing.assert_array_equal(h[7], rig.transfer(rig.layout.points_xy, f[7:8])[0])
+    # One bin alone and the whole grid agree to round-off (the precursor sum takes two paths).
+    np.testing.assert_allclose(h[7], rig.transfer(rig.layout.points_xy, f[7:8])[0], rtol=1e-9)
 
 
 def test_noise_free_playback_matches_the_designs_prediction(quiet_result):

@@ -22,7 +22,7 @@ def _documented_rows() -> list[list[str]]:
 def test_documented_sensitivity_table_is_recomputed_by_the_code():
     documented = _documented_rows()
     computed = attenuation_sensitivity()
-    assert len(documented) == len(computed) == 3 * len(METHODS)
+    assert len(documented) == len(computed) == 4 * len(METHODS)
     for doc, row in zip(documented, computed):
         assert doc[0] == row["law"] and doc[3] == row["method"]
         # each printed number equals the computed one to its printed precision
@@ -39,11 +39,11 @@ def test_documented_sensitivity_table_is_recomputed_by_the_code():
 def test_attenuation_ends_bracket_the_nominal_law():
     rows = attenuation_sensitivity(methods=("inverse",))
     alpha = [r["alpha250_np_m"] for r in rows]
-    assert [r["law"] for r in rows] == ["low", "nominal", "high"]
-    assert alpha[0] < alpha[1] < alpha[2]
+    assert [r["law"] for r in rows] == ["low", "nominal", "high", "voigt-fit"]
+    assert alpha[0] < alpha[1] < alpha[2] < alpha[3]
     # More attenuation, less of the tap reaches the target for the same design.
     fidelity = np.array([r["fidelity"] for r in rows])
-    assert fidelity[0] > fidelity[2]
+    assert fidelity[0] > fidelity[2] > fidelity[3]
 
 
 def test_no_method_beats_the_bound_for_its_own_waveform():

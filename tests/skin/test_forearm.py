@@ -70,18 +70,25 @@ def test_default_participant_speed_is_plausible_and_dispersive():
     assert 2.0 <= speed[1] <= 8.0
     assert speed[0] < speed[1] < speed[2]  # low frequencies travel slower
     np.testing.assert_allclose(speed, p.phase_speed(freqs), rtol=0.05)
-    np.testing.assert_allclose(alpha, p.attenuation(freqs), rtol=0.05)
+    # The layered arm loses little; at 100 Hz (k r about 4) the far-field spreading
+    # correction of the estimate is off by a few Np/m, hence the absolute tolerance.
+    np.testing.assert_allclose(alpha, p.attenuation(freqs), rtol=0.05, atol=5.0)
 
 
-def test_default_participant_loses_30_to_45_db_by_35_mm():
-    rig = _quiet()
+@pytest.mark.parametrize(("skin", "low_db", "high_db"), [("voigt-fit", 30.0, 45.0), ("nominal", 10.0, 25.0)])
+def test_peak_loss_from_6_to_35_mm(skin, low_db, high_db):
+    # Cylindrical spreading alone gives 10 log10(35 / 6) = 7.7 dB. The homogeneous Voigt
+    # fit adds 190 Np/m at 250 Hz (30-45 dB in all); the layered arm's loss tangent of
+    # 0.14 adds about 28 Np/m (some 15 dB in all), so the tap is still there 4 cm away as
+    # Shah et al. 2019 (Appl. Sci. 9:4329) found above 150 Hz.
+    rig = _quiet(skin=skin)
     src = rig.layout.actuators_xy[2]
     drive = _single_actuator_drive(4, 2, amp=10.0, sigma=1e-3)  # the base stimulus
     down = np.array([0.0, -1.0])
     rec = rig.play_and_record(drive, np.array([src + 6e-3 * down, src + 35e-3 * down]))
     peaks = np.abs(rec).max(axis=1)
     loss_db = 20 * np.log10(peaks[0] / peaks[1])
-    assert 30.0 <= loss_db <= 45.0
+    assert low_db <= loss_db <= high_db
 
 
 def test_ten_volts_give_about_two_micrometres_next_to_a_nominal_actuator():
@@ -195,8 +202,9 @@ def test_field_matches_noise_free_recordings_and_instants():
     full = rig.field(rig.last_drive, pts, tail_s=0.05)
     assert full.shape == rec.shape
     # Playback samples the continuous response (impulse invariance); the field truncates
-    # the spectrum at Nyquist. They differ by the aliases above Nyquist, tiny at >= 6 mm.
-    np.testing.assert_allclose(full, rec, rtol=0, atol=1e-3 * np.abs(rec).max())
+    # the spectrum at Nyquist. They differ by the aliases above Nyquist, small at >= 6 mm
+    # (on the low-loss layered arm some 0.25 % of the peak, from the guard 9 mm away).
+    np.testing.assert_allclose(full, rec, rtol=0, atol=5e-3 * np.abs(rec).max())
     idx = np.array([0, 100, 321, 999])
     some = rig.field(rig.last_drive, pts, times=idx / FS)
     np.testing.assert_allclose(some, full[:, idx], rtol=0, atol=1e-9 * np.abs(full).max())
@@ -282,14 +290,41 @@ def _energy_before_zero(rig, points, oversampling=4, n=2**15, precursor_s=0.05):
     return e[m - k:].sum(axis=0) / e.sum(axis=0)
 
 
-@pytest.mark.parametrize("seed", [0, 3])
-def test_impulse_responses_are_causal_with_no_latency(seed):
-    rig = _quiet(seed=seed)
+@pytest.mark.parametrize(("skin", "seed"), [("voigt-fit", 0), ("voigt-fit", 3), ("nominal", 0), ("low", 3),
+                                          ("high", 3)])
+def test_impulse_responses_are_causal_with_no_latency(skin, seed):
+    rig = _quiet(seed=seed, skin=skin)
     assert rig.latency_s == 0.0
     a = rig.layout.actuators_xy
     # every layout point, under each actuator's centre and 1 mm, 3 mm and 6 mm from it
     pts = np.concatenate([rig.layout.points_xy, a, a + [1e-3, 0.0], a + [3e-3, 0.0], a + [0.0, 6e-3]])
     assert _energy_before_zero(rig, pts).max() < 1e-6
+
+
+def test_layered_transfer_is_the_causal_part_of_the_single_mode():
+    # One surface mode whose speed rises with frequency at low loss has a precursor
+    # (Kramers-Kronig); the layered presets subtract it (skin/precursor.py). Without the
+    # subtraction the share before t = 0 is large under the actuator; with it, nil; and
+    # what is taken out is small in the band.
+    rig = _quiet(skin="nominal")
+    a = rig.layout.actuators_xy[:1]
+    f = np.fft.rfftfreq(4096, 1 / FS)
+    corrected = rig.transfer(a, f)
+    single_mode = rig._transfer(a, f)
+    band = (f >= 10) & (f <= 1000)
+    change = np.abs(corrected - single_mode)[band].max() / np.abs(single_mode[band]).max()
+    assert 1e-5 < change < 0.05
+    ir_mode = np.fft.irfft(single_mode, 4096, axis=0)[:, 0, 0] ** 2
+    assert ir_mode[-400:].sum() / ir_mode.sum() > 1e-4  # the uncorrected mode is acausal
+
+
+def test_field_and_transfer_use_one_skin():
+    rig = _quiet(skin="high")
+    assert rig.skin == "high" and rig.describe()["skin"] == "high" and "high" in repr(rig)
+    with pytest.raises(ValidationError, match="contradicts"):
+        SimulatedForearm(participant=ForearmParameters.nominal(4), skin="nominal")
+    with pytest.raises(ValidationError, match="skin must be one of"):
+        SimulatedForearm(skin="firm")
 
 
 def test_arrival_times_follow_the_group_speed():

@@ -81,7 +81,7 @@ def test_sigkill_mid_study_loses_and_duplicates_nothing(tmp_path):
 
     with StudyStore(db) as store:
         info = store.sessions("sim-001")[0]
-        rig = make_rig("simulated", seed=info.config["participant_seed"])
+        rig = make_rig("simulated", seed=info.config["participant_seed"], skin=info.config["skin"])
         cal = load_calibration(store.verify_calibration(info.calibration_id))
         renderer = calibration_renderer(cal)
         model = SimulatedParticipant(rig, info.config["participant_seed"])

@@ -30,6 +30,8 @@ def calibrate_command(
         None, "--seed", min=0, max=SEED_MAX, show_default="derived from --participant",
         help="Participant seed of the simulated forearm; by default each participant id gets its own arm.",
     ),
+    skin: str | None = typer.Option(None, "--skin", show_default="nominal",
+                                    help="Skin preset of the simulated forearm: nominal | low | high | voigt-fit."),
     method: str = typer.Option(
         "mimo", "--method",
         help="mimo (all actuators at once with Hadamard-signed exponential sweeps, MIMO H1: about 1/3 of h1's time "
@@ -91,7 +93,9 @@ def calibrate_command(
             raise ValidationError(f"--out {out}: the folder {out.parent} does not exist")
         if seed is None and rig == "simulated":
             seed = participant_seed(participant)
-        with make_rig(rig, config=rig_config, seed=seed) as r:
+        with make_rig(rig, config=rig_config, seed=seed, skin=skin) as r:
+            if getattr(r, "skin", None):
+                console.print(f"simulated forearm: skin {r.skin}, seed {seed}", highlight=False)
             # Before the first sweep: a read-only folder or a full disk is found now, not
             # after the whole measurement.
             plan = plan_calibration(r, method=method, repeats=repeats, sweep_s=sweep_s, amplitude_v=amplitude_v)

@@ -26,6 +26,9 @@ def _fmt(value: float, digits: int = 2) -> str:
 @command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
 def demo_command(
     seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Simulated participant (forearm) seed."),
+    skin: str = typer.Option("nominal", "--skin",
+                             help="Skin preset of the simulated forearm: nominal | low | high | voigt-fit "
+                                  "(docs: How true is the simulated arm)."),
     out: Path = typer.Option(Path("demo-output"), "--out", "-o",
                              help="Folder for the figures (created; its parent must exist)."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Write the PNG figures."),
@@ -71,13 +74,16 @@ def demo_command(
 
         allow_overwrite(force)
         check_choice(design_from, "--design-from", ("calibration", "model"))
+        from ..skin import skin_preset
+
+        skin = skin_preset(skin).name
         if paper_figures:
-            _write_paper_figures(out, seed=seed, participants=participants, location=location)
+            _write_paper_figures(out, seed=seed, participants=participants, location=location, skin=skin)
             return
         if moving:
-            _write_moving_focus(out, seed=seed, speed_m_s=moving_speed, quiet=as_json)
+            _write_moving_focus(out, seed=seed, speed_m_s=moving_speed, quiet=as_json, skin=skin)
             return
-        rig = SimulatedForearm(seed=seed)
+        rig = SimulatedForearm(seed=seed, skin=skin)
         rig.layout.location_index(location)
         if design_from == "calibration" or figures:
             # Before the calibration starts: a read-only or full output folder is found now.
@@ -108,10 +114,13 @@ def demo_command(
                     interactive=False if as_json else None,
                 )
                 transfer = calibrated_transfer(cal)
+                from ..demo import calibration_trust
+
                 calibration_info = {
                     "file": str(cal_path),
                     "method": cal.method,
                     "median_relative_error": _relative_error_to_model(rig, cal),
+                    "trust": calibration_trust(cal, rig.transfer(rig.layout.points_xy, cal.freqs)),
                     "quality_ok": bool(cal.quality.ok),
                     "quality_issues": [f"{issue.severity}: {issue.message}" for issue in cal.quality.issues],
                 }
@@ -129,6 +138,7 @@ def demo_command(
             payload = {
                 "seed": seed,
                 "rig": "simulated",
+                "skin": rig.skin,
                 "participant": rig.participant.to_dict(),
                 "design_from": design_from,
                 "calibration": calibration_info or None,
@@ -144,7 +154,7 @@ def demo_command(
             return
         p = rig.participant
         console.print(
-            f"[bold]Simulated forearm[/], seed {seed}: c(250 Hz) = {p.c250_m_s:.2f} m/s, "
+            f"[bold]Simulated forearm[/], skin {rig.skin}, seed {seed}: c(250 Hz) = {p.c250_m_s:.2f} m/s, "
             f"alpha(250 Hz) = {p.alpha250_np_m:.0f} Np/m, contact {np.round(p.contact, 2).tolist()}"
         )
         if calibration_info:
@@ -152,6 +162,18 @@ def demo_command(
                 f"Calibrated ({calibration_info['method']}), saved to {calibration_info['file']}; "
                 f"median error of the measured H against the model's true H in band: "
                 f"{100 * calibration_info['median_relative_error']:.1f} %"
+            )
+            trust = calibration_info["trust"]
+            band = trust["coherent_band_hz"]
+            tap = trust["tap_band_hz"]
+            console.print(
+                ("coherence below 0.9 somewhere at every frequency" if band is None else
+                 f"coherence >= 0.9 at every point over {band[0]:.0f}-{band[1]:.0f} Hz")
+                + f" (the tap's band, within 20 dB of its peak: {tap[0]:.0f}-{tap[1]:.0f} Hz, "
+                f"{'covered' if trust['covers_tap_band'] else 'NOT covered'}); H error "
+                f"{100 * trust['error_inside']:.1f} % inside, "
+                + ("no calibrated bin outside" if trust["error_outside"] != trust["error_outside"]
+                   else f"{100 * trust['error_outside']:.1f} % outside")
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
         legend = ("All methods at the same peak drive (the drive limit). fid: correlation with the tap at its "
@@ -196,7 +218,7 @@ def _make_output_folder(out: Path) -> None:
     make_output_folder(out)
 
 
-def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int) -> None:
+def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int, skin: str) -> None:
     from ..demo.paper_figures import write_paper_figures
 
     _make_output_folder(out)
@@ -204,27 +226,27 @@ def _write_paper_figures(out: Path, *, seed: int, participants: int, location: i
                   transient=True) as progress:
         task = progress.add_task("starting", total=None)
         paths = write_paper_figures(out, seed=seed, participants=participants, location=location,
-                                    progress=lambda label: progress.update(task, description=label))
-    console.print("The source paper's figure layouts, drawn from the model (simulated forearm and simulated "
-                  "participants: not data):")
+                                    progress=lambda label: progress.update(task, description=label), skin=skin)
+    console.print(f"The source paper's figure layouts, drawn from the model (simulated forearm, skin {skin}, and "
+                  "simulated participants on the voigt-fit skin: not data):")
     for path in paths:
         console.print(f"wrote {path}")
 
 
-def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool) -> None:
+def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool, skin: str) -> None:
     """``demo --moving``: a moving focus rendered from the skin model fitted to a calibration."""
     from ..calibration import calibrate, fit_model
     from ..demo.moving import moving_focus, write_moving_gif
     from ..skin import SimulatedForearm
 
     _make_output_folder(out)
-    rig = SimulatedForearm(seed=seed)
+    rig = SimulatedForearm(seed=seed, skin=skin)
     cal = calibrate(rig, participant_id=f"simulated-{seed}")
     fitted = fit_model(cal)
     lay = rig.layout
     focus = moving_focus(fitted, lay, rig.fs, start_xy=lay.locations_xy[6], end_xy=lay.locations_xy[2],
                          speed_m_s=speed_m_s)
-    arm = SimulatedForearm(seed=seed, noise_m=0.0, dropout_rate=0.0)
+    arm = SimulatedForearm(seed=seed, noise_m=0.0, dropout_rate=0.0, skin=skin)
     path = write_moving_gif(focus, arm, out / "moving_focus.gif")
     if not quiet:
         console.print(f"fitted {fitted!r}")

@@ -22,6 +22,7 @@ def serve(
     rig_config: Path | None = typer.Option(None, "--rig-config", help="Hardware settings file of the audio or nidaq rig (see examples/rigs/)."),
     no_browser: bool = typer.Option(False, "--no-browser", help="Do not open the experimenter page."),
     pace: str = typer.Option("normal", "--pace", help="Trial timing: normal, or fast for demonstrations and tests."),
+    skin: str = typer.Option("nominal", "--skin", help="Skin preset of the simulated forearm: nominal | low | high | voigt-fit."),
     allow_host: list[str] = typer.Option([], "--allow-host", help="Another host name the pages may be opened at (e.g. this computer's name on the lab network); repeatable."),
     max_connections: int = typer.Option(1000, "--max-connections", min=4, max=1_000_000, help="Most connections open at once; beyond it the longest-idle one is closed, or the new one refused when all are busy."),
     header_timeout: float = typer.Option(10.0, "--header-timeout", min=0.1, max=600.0, help="Seconds a connection may take to send a request's headers before it is closed."),
@@ -55,6 +56,15 @@ def serve(
                 raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
         check_choice(pace, "pace", tuple(PACES))
         _check_database(db)
+        from ..rigs import make_rig
+        from ..skin import skin_preset
+
+        skin = skin_preset(skin).name
+
+        def rig_factory(kind: str, *, seed: int | None = None, **kwargs):
+            # The simulated forearm gets the chosen skin; hardware rigs measure a real arm.
+            return make_rig(kind, seed=seed, skin=skin if kind == "simulated" else None, **kwargs)
+
         token = os.environ.get("VIBROFOCUS_TOKEN") or secrets.token_urlsafe(24)
         if len(token) < 16:
             err_console.print("[bold red]error:[/] VIBROFOCUS_TOKEN must be at least 16 characters")
@@ -70,14 +80,14 @@ def serve(
         os.umask(0o077)
         extra_hosts = tuple(allow_host) + (() if host in _LOCAL_HOSTS + ("0.0.0.0", "::") else (host,))
         web_app = create_app(db, token=token, rig=rig, pace=pace, allowed_hosts=extra_hosts,
-                             rig_config=rig_config if rig != "simulated" else None)
+                             rig_config=rig_config if rig != "simulated" else None, rig_factory=rig_factory)
         sock = listen(host, port)  # a busy port is one error line, before any link is printed
         port = sock.getsockname()[1]
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
         base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
         login = f"{base}/login/{web_app.state.web.new_login_code()}"
         typer.echo(f"study database: {Path(db).resolve()}")
-        typer.echo(f"rig: {web_app.state.web.rig_label}")
+        typer.echo(f"rig: {web_app.state.web.rig_label} (simulated forearm: skin {skin})")
         typer.echo(f"experimenter page: {base}/")
         typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
         typer.echo(f"experimenter token (for the login page): {token}")

@@ -27,6 +27,9 @@ def simulate_study(
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     force: bool = force_option(),
+    skin: str = typer.Option("voigt-fit", "--skin",
+                             help="Skin preset of the simulated forearms: voigt-fit (the skin the perceptual model "
+                                  "was fitted on) | nominal | low | high."),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -92,10 +95,10 @@ def simulate_study(
 
             result = simulate_studies(
                 db, n_participants=participants, seed=seed, pace_s=pace,
-                calibration_dir=calibration_dir, progress=progress,
+                calibration_dir=calibration_dir, progress=progress, skin=skin,
             )
         summary = summarize_simulation(db)
-        table = Table(title="Simulated participants (model output, not data): main trials")
+        table = Table(title=f"Simulated participants on the {skin} skin (model output, not data): main trials")
         for col in ("study", "method", "trials", "mean error (mm)", "correct (%)", "locations selected"):
             table.add_column(col, justify="right" if col != "method" else "left")
         for row in summary:

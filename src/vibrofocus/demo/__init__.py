@@ -1,6 +1,8 @@
 """The ``vibrofocus demo``: every rendering method at every location on the simulated
 forearm, with focus metrics and figures."""
 
-from .run import DemoResult, calibrated_transfer, model_transfer, record_clean, run_demo, summarize
+from .run import DemoResult, calibrated_transfer, design_window, model_transfer, record_clean, run_demo, summarize
+from .trust import calibration_trust, tap_band
 
-__all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "record_clean", "run_demo", "summarize"]
+__all__ = ["DemoResult", "calibrated_transfer", "design_window", "model_transfer", "record_clean", "run_demo", "summarize",
+           "calibration_trust", "tap_band"]

@@ -27,6 +27,14 @@ def _pyplot():
     return plt
 
 
+def arm_label(rig) -> str:
+    """How figures name the arm they come from: ``"simulated forearm (skin nominal, seed 0)"``."""
+    skin = getattr(rig, "skin", None)
+    if skin:
+        return f"simulated forearm (skin {skin}, seed {getattr(rig, 'seed', '?')})"
+    return "simulated forearm" if rig is None else f"{getattr(rig, 'kind', 'unknown')} rig"
+
+
 def _reachable_upper_hz(freqs: np.ndarray, gain: np.ndarray, dynamic_range_db: float) -> float:
     """Highest frequency up to which ``gain`` stays within ``dynamic_range_db`` of its peak."""
     floor = gain.max() * 10 ** (-dynamic_range_db / 20)
@@ -98,7 +106,8 @@ def propagation_figure(rig, path: Path, *, actuator: int | None = None,
     for ax in axes:
         ax.set_xlabel("time from the stimulus centre (ms)")
         ax.grid(alpha=0.3)
-    fig.suptitle("Propagation on the simulated forearm: dispersion and attenuation, and their correction")
+    fig.suptitle(f"Propagation on the {arm_label(rig)}: dispersion and attenuation, and their correction",
+                 fontsize=10)
     fig.tight_layout()
     save_figure(fig, path, dpi=120)
     plt.close(fig)
@@ -164,7 +173,7 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
                 ax.set_xlabel("x (mm)")
     if im is not None:
         fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="displacement (µm)")
-    fig.suptitle(f"Field around location {location} on the simulated forearm (seed {getattr(rig, 'seed', '?')}); "
+    fig.suptitle(f"Field around location {location} on the {arm_label(rig)}; "
                  "t = 0: the tap asked at the target", fontsize=10)
     save_figure(fig, path, dpi=110)
     plt.close(fig)
@@ -203,7 +212,7 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     axes[0].legend(ncol=len(methods) + 1, fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
     axes[-1].set_xticks(range(len(locations)), [str(loc) for loc in locations])
     axes[-1].set_xlabel("location")
-    fig.suptitle("Focus metrics measured on the simulated forearm")
+    fig.suptitle(f"Focus metrics measured on the {arm_label(getattr(result, 'rig', None))}")
     fig.tight_layout(rect=(0, 0, 1, 0.97))
     save_figure(fig, path, dpi=120)
     plt.close(fig)

@@ -47,7 +47,7 @@ class MovingFocus:
 
 def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float = 0.1,
                  tap_interval_s: float = 0.04, method: str = "inverse", limit_v: float = DRIVE_LIMIT_V,
-                 n_samples: int = 4096) -> MovingFocus:
+                 n_samples: int | None = None) -> MovingFocus:
     """Taps along a straight path at a given speed, each designed at its own position.
 
     Parameters
@@ -67,8 +67,9 @@ def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float
         Rendering method of every tap.
     limit_v : float
         Drive limit, V; the summed drive is scaled down to it if needed.
-    n_samples : int
-        Window of each tap's design, samples.
+    n_samples : int, optional
+        Window of each tap's design, samples; default :func:`~vibrofocus.demo.design_window`
+        of the model (4096 for a model that does not know its response length).
 
     Returns
     -------
@@ -89,6 +90,10 @@ def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float
     frac = np.arange(n_taps) * speed * interval / length
     targets = start + frac[:, None] * (end - start)
     step = int(round(interval * fs))
+    if n_samples is None:
+        from .run import design_window
+
+        n_samples = design_window(model)
     total = np.zeros((layout.n_actuators, n_samples + step * (n_taps - 1)))
     onsets = np.zeros(n_taps)
     for i, xy in enumerate(targets):  # one design per position (each its own matrix)

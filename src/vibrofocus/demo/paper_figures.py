@@ -22,7 +22,7 @@ from .._atomic import save_figure
 from .._style import method_colors
 from ..defaults import BAND_HZ, N_SAMPLES, SIGMA_S, TARGET_PEAK_M
 from ..signals.ricker import ricker
-from .figures import _pyplot, _reachable_upper_hz, fields_around_the_tap
+from .figures import _pyplot, _reachable_upper_hz, arm_label, fields_around_the_tap
 from .run import DemoResult, record_clean
 
 __all__ = ["PAPER", "fig4_focusing_along_a_line", "fig5_focus_at_a_location", "fig6_localization", "fig7_counts",
@@ -109,7 +109,7 @@ def fig4_focusing_along_a_line(rig, path: Path, *, actuator: int | None = None,
                       "slower)", fontsize=10)
     axes[1].grid(alpha=0.3)
     fig.suptitle("Fig. 4 layout: focusing one actuator's tap along a line")
-    _caption(fig, f"Model: vibrofocus simulated forearm (seed {getattr(rig, 'seed', '?')}), vibrometer noise on; "
+    _caption(fig, f"Model: vibrofocus {arm_label(rig)}, vibrometer noise on; "
                   f"not a measurement. The paper ({PAPER}) measured this with a laser vibrometer on a forearm.")
     fig.tight_layout(rect=(0, 0.04, 1, 0.97))
     save_figure(fig, path, dpi=110)
@@ -175,7 +175,7 @@ def fig5_focus_at_a_location(result: DemoResult, path: Path, *, location: int = 
     fig.axes[-len(methods)].set_ylabel("µm")
     fig.suptitle(f"Fig. 5 layout: focus at location {location}, all methods at the same peak drive; "
                  "t = 0: the tap asked at the target", fontsize=10)
-    _caption(fig, f"Model: vibrofocus simulated forearm (seed {getattr(rig, 'seed', '?')}), designs from a simulated "
+    _caption(fig, f"Model: vibrofocus {arm_label(rig)}, designs from a simulated "
                   f"calibration; not a measurement. The paper ({PAPER}) measured the field with a vibrometer.")
     save_figure(fig, path, dpi=100)
     plt.close(fig)
@@ -211,7 +211,7 @@ def fig7_counts(counts, counts_hit, path: Path, *, n_participants: int) -> Path:
 
 
 def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12, location: int = 5,
-                        progress: Callable[[str], None] | None = None) -> list[Path]:
+                        progress: Callable[[str], None] | None = None, skin: str | None = None) -> list[Path]:
     """Draw Figs. 4–7 into ``out_dir``: ``paper_fig4.png`` ... ``paper_fig7.png``.
 
     Parameters
@@ -227,6 +227,9 @@ def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12,
         Focus location of Fig. 5.
     progress : callable, optional
         Called with a short label as each part starts.
+    skin : str, optional
+        Skin preset of the forearm of Figs. 4-5 (default ``"nominal"``). The simulated
+        study of Figs. 6-7 keeps the ``voigt-fit`` arms its perceptual model was fitted on.
 
     Returns
     -------
@@ -241,7 +244,7 @@ def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12,
     say = progress or (lambda _label: None)
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    rig = SimulatedForearm(seed=seed)
+    rig = SimulatedForearm(seed=seed, skin=skin)
     say("Fig. 4: focusing along a line")
     paths = [fig4_focusing_along_a_line(rig, out / "paper_fig4.png")]
     say("Fig. 5: calibrating, then focusing at the location")

@@ -17,7 +17,8 @@ from ..defaults import METHODS, N_SAMPLES
 from ..errors import ValidationError
 from ..rigs.base import Rig
 
-__all__ = ["DemoResult", "calibrated_transfer", "model_transfer", "run_demo", "record_clean", "summarize"]
+__all__ = ["DemoResult", "calibrated_transfer", "design_window", "model_transfer", "run_demo", "record_clean",
+           "summarize"]
 
 #: Metrics every result row carries (the ``--json`` contract, docs/file-formats.md, demo --json).
 ROW_KEYS = ("location", "method", "fidelity", "contrast_db", "peak_drive_v", "target_peak_m")
@@ -47,6 +48,22 @@ def model_transfer(rig: Rig, n: int) -> np.ndarray:
     if transfer is None:
         raise ValidationError(f"the {rig.kind} rig has no model transfer; calibrate it first")
     return transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
+
+
+def design_window(rig: Rig, minimum: int = N_SAMPLES) -> int:
+    """The design window of the demo: the rig's own when it knows its responses.
+
+    A simulated forearm's :meth:`~vibrofocus.skin.SimulatedForearm.design_window`
+    follows its impulse-response length; any other rig gets ``minimum``.
+
+    Parameters
+    ----------
+    rig : Rig
+    minimum : int
+        Shortest window, samples.
+    """
+    own = getattr(rig, "design_window", None)
+    return int(minimum) if own is None else int(own(minimum))
 
 
 def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: float = 0.0,
@@ -128,7 +145,7 @@ def run_demo(
     *,
     methods: Sequence[str] = METHODS,
     locations: Sequence[int] | None = None,
-    n_samples: int = N_SAMPLES,
+    n_samples: int | None = None,
     transfer: Callable[[Rig, int], np.ndarray] = model_transfer,
     progress: Callable[[str], None] | None = None,
 ) -> DemoResult:
@@ -142,8 +159,8 @@ def run_demo(
         Rendering methods (docs/method.md, rendering methods).
     locations : sequence of int, optional
         1-based locations; default all of the layout's.
-    n_samples : int
-        Design window, samples.
+    n_samples : int, optional
+        Design window, samples; default :func:`design_window` of the rig.
     transfer : callable
         ``transfer(rig, n) -> H``; default :func:`model_transfer`; pass
         :func:`calibrated_transfer` to design from a measurement.
@@ -162,7 +179,7 @@ def run_demo(
     locations = list(layout.location_numbers if locations is None else locations)
     for loc in locations:
         layout.location_index(loc)
-    H = transfer(rig, n_samples)
+    H = transfer(rig, design_window(rig) if n_samples is None else int(n_samples))
     points = layout.points_xy
     rows, renderings, recordings = [], {}, {}
     for loc in locations:

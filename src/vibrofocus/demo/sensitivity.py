@@ -1,8 +1,8 @@
 """How the focus metrics depend on the skin's attenuation: the documented sensitivity table.
 
-For each wave law (by default the low end, the nominal and the high end of the drawn
-attenuation range, :func:`vibrofocus.skin.parameters.attenuation_range_laws`), a nominal,
-noise-free simulated forearm is built, every method is designed from its exact transfer
+For each skin (by default the presets ``low``, ``nominal``, ``high`` and ``voigt-fit``,
+:data:`vibrofocus.skin.SKIN_PRESETS`, in order of attenuation), a nominal, noise-free
+simulated forearm is built, every method is designed from its exact transfer
 at every location and played, and the medians over the locations are reported. The
 table in ``docs/skin-model.md`` is this function's output; a test recomputes it.
 """
@@ -28,7 +28,7 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
     Parameters
     ----------
     laws : mapping of str to ViscoelasticLaw, optional
-        Label to law; default :func:`~vibrofocus.skin.parameters.attenuation_range_laws`.
+        Label to a homogeneous law; default: the skin presets (label = preset name).
     methods : sequence of str
         Rendering methods.
 
@@ -43,14 +43,16 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
         waveform the method delivers at the target), ``bound_db`` (the same for the
         asked tap) and ``target_peak_m`` (every method at the same 10 V peak drive).
     """
-    from ..skin import ForearmParameters, SimulatedForearm
-    from ..skin.parameters import attenuation_range_laws
+    from ..skin import SKIN_PRESETS, ForearmParameters, SimulatedForearm
     from .run import model_transfer, run_demo
 
-    laws = attenuation_range_laws() if laws is None else laws
+    if laws is None:
+        cases = {name: ForearmParameters.nominal(4, skin=name) for name in ("low", "nominal", "high", "voigt-fit")}
+        assert set(cases) == set(SKIN_PRESETS)
+    else:
+        cases = {label: ForearmParameters.from_law(law, 4) for label, law in laws.items()}
     rows = []
-    for label, law in laws.items():
-        params = ForearmParameters.from_law(law, 4)
+    for label, params in cases.items():
         rig = SimulatedForearm(participant=params, noise_m=0.0, dropout_rate=0.0)
         result = run_demo(rig, methods=methods, transfer=model_transfer)
         for method in methods:
@@ -65,7 +67,7 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
 def sensitivity_markdown(rows: Sequence[dict]) -> str:
     """The rows of :func:`attenuation_sensitivity` as a Markdown table."""
     lines = [
-        "| attenuation | c(250 Hz) m/s | α(250 Hz) Np/m | method | fidelity | contrast vs locations dB "
+        "| skin | c(250 Hz) m/s | α(250 Hz) Np/m | method | fidelity | contrast vs locations dB "
         "| contrast vs all points dB | energy contrast dB | bound, own waveform dB | bound, tap dB "
         "| target peak µm |",
         "|---|---|---|---|---|---|---|---|---|---|---|",

@@ -473,7 +473,8 @@ def _verdict(fraction: float, drives: np.ndarray, tol: float, action: str) -> fl
             f"the design window of {drives.shape[1]} samples is too short: played once from silence, "
             f"{100 * fraction:.2g}% of the response energy falls past the window's end "
             f"(tolerance {100 * tol:.2g}%), so the circular design would not be reproduced. "
-            "Use a longer window (n_samples), or move the target waveform away from the window's ends "
+            f"Use a longer window (try n_samples={2 * drives.shape[1]}), or move the target waveform away from "
+            "the window's ends "
             "(it needs room before it for the drive's pre-ringing and after it for the medium's ring-down)."
         )
         if action == "raise":

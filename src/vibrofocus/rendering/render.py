@@ -244,7 +244,8 @@ def render(
         object with ``transfer(points_xy, freqs)`` (a fitted
         :class:`~vibrofocus.calibration.FittedSkin`, or a ``SimulatedForearm`` for its
         true H), gives H at the layout's points (and the target) on
-        ``rfftfreq(n_samples, 1 / fs)``; a model with a ``band`` is tapered outside it
+        ``rfftfreq(n_samples, 1 / fs)`` (``n_samples`` default: the model's
+        ``design_window()`` if it has one, else 4096); a model with a ``band`` is tapered outside it
         like ``Calibration.transfer_for`` and sets ``calibrated_band``.
     fs : float
         Sample rate, Hz.
@@ -566,7 +567,9 @@ def _model_transfer(model: Any, layout: ArrayLayout, location: int | None, targe
                                  spacing_xy=layout.spacing_xy, actuator_names=layout.actuator_names,
                                  guard_names=layout.guard_names, name=f"{layout.name} + target")
             location = layout.n_locations
-    n = 4096 if n_samples is None else n_samples
+    # A model that knows its impulse responses (a simulated forearm) picks a window they fit in.
+    own_window = getattr(model, "design_window", None)
+    n = (4096 if own_window is None else int(own_window(4096))) if n_samples is None else n_samples
     if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 16 or n % 2:
         raise ValidationError(f"n_samples must be an even integer >= 16, got {n!r}")
     freqs = np.fft.rfftfreq(int(n), 1 / check_positive(fs, "fs"))

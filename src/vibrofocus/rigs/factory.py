@@ -16,7 +16,7 @@ RIG_KINDS = ("simulated", "audio", "nidaq")
 
 def make_rig(
     kind: str = "simulated", *, config: object | None = None, seed: int | None = None,
-    layout: ArrayLayout | None = None,
+    layout: ArrayLayout | None = None, skin: str | None = None,
 ) -> Rig:
     """Build a rig by name.
 
@@ -33,12 +33,17 @@ def make_rig(
         Participant seed of the simulated forearm (default 0).
     layout : ArrayLayout, optional
         The array; default the reference setup.
+    skin : str, optional
+        Skin preset of the simulated forearm (``nominal``, ``low``, ``high``,
+        ``voigt-fit``; default ``nominal``). Hardware rigs refuse it.
     """
     check_choice(kind, "rig", RIG_KINDS)
     if kind == "simulated":
         from ..skin import SimulatedForearm  # imported here: the model is not needed for hardware
 
-        return SimulatedForearm(seed=0 if seed is None else seed, layout=layout)
+        return SimulatedForearm(seed=0 if seed is None else seed, layout=layout, skin=skin)
+    if skin is not None:
+        raise ValidationError(f"--skin describes the simulated forearm; the {kind} rig measures a real arm")
     from .config import RigConfig, load_rig_config, parse_rig_config
 
     if config is None:

@@ -5,7 +5,8 @@ Model, per actuator ``q`` and skin point ``p`` (NumPy's ``exp(+i omega t)`` conv
 ``H_pq(f) = K g_q c_q E_q(f) (mu_1 / G(f)) sum_m Green(k(f), d_pqm, a_q)``
 
 with ``K`` the drive sensitivity (so that 10 V of the base Ricker on one nominal
-actuator gives 2 µm peak 6 mm away), ``g_q`` the actuator's gain, ``c_q`` its contact
+actuator gives 2 µm peak on the actuator, the paper's anchor; 6 mm away on the
+``voigt-fit`` preset), ``g_q`` the actuator's gain, ``c_q`` its contact
 (coupling), ``E_q`` the inertial-exciter resonance, ``G(f)`` the skin's complex shear
 modulus (a causal viscoelastic law, :mod:`.viscoelastic`; ``mu_1`` = 1 kPa), ``Green`` the
 finite-contact surface Green's function with the complex wavenumber ``k(f)`` that the
@@ -25,21 +26,23 @@ from scipy import fft as sp_fft
 from scipy import signal as sp_signal
 
 from .._validation import as_array, check_band, check_positive
-from ..defaults import BAND_HZ, FS_HZ, SIGMA_S
+from ..defaults import BAND_HZ, FS_HZ, N_SAMPLES, SIGMA_S
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from ..rigs.base import Rig
 from ..rigs.safety import SafetyLimits
 from .geometry import ForearmGeometry
 from .parameters import ForearmParameters
+from .precursor import precursor_spectrum
+from .presets import DEFAULT_SKIN, skin_preset
 from .propagation import _disc_factor, exciter_response, surface_green, wavenumber
 
 __all__ = ["SimulatedForearm", "drive_sensitivity"]
 
-#: Peak displacement 6 mm from one nominal actuator driven by a 10 V Ricker (docs/skin-model.md).
+#: Peak displacement of one nominal actuator driven by a 10 V Ricker, at the preset's anchor
+#: distance (on the actuator: de Vlam et al. 2023, sec. II.C and Fig. 4b).
 _REFERENCE_PEAK_M = 2e-6
 _REFERENCE_DRIVE_V = 10.0
-_REFERENCE_DISTANCE_M = 6e-3
 # Impulse responses kept per point set by play_and_record (calibration aims at a few
 # points at a time, so a small cache avoids recomputing the model for every repeat).
 _IR_CACHE_SIZE = 32
@@ -48,6 +51,9 @@ _IR_CACHE_SIZE = 32
 # from a distance table of this relative step (about 1e-6 relative error).
 _IR_OVERSAMPLING = 4
 _IR_TABLE_STEP = 5e-3
+# Length of the precursor (response before t = 0) that the layered presets take out of
+# their transfer, s: it holds all but ~1e-8 of the precursor's energy (tests/skin).
+_PRECURSOR_S = 0.05
 # Unit of the modulus in the compliance factor (any constant: K absorbs it).
 _MODULUS_UNIT_PA = 1e3
 
@@ -95,18 +101,21 @@ def _unit_transfer(freqs: np.ndarray, distances: np.ndarray, params: ForearmPara
 
 
 @lru_cache(maxsize=16)
-def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S) -> float:
+def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S, skin: str = "voigt-fit") -> float:
     """Drive sensitivity ``K`` of the model, m/V per unit Green's function.
 
     Chosen so that a 10 V peak Ricker (spread ``sigma``) on one nominal, fully coupled
-    actuator gives 2 µm peak displacement 6 mm from its centre on a flat arm (docs/skin-model.md:
-    "10 V on one actuator gives about 2 µm next to it"), the order of displacement
-    that small inertial exciters produce on the forearm.
+    actuator of the skin preset ``skin`` gives 2 µm peak displacement at the preset's
+    anchor distance on a flat arm: on the actuator for the evidence presets, as the
+    paper measured (about 2 µm on one exciter at the 10 V maximum, the reason for its
+    0.002 mm target; de Vlam et al. 2023, sec. II.C, Fig. 4b); 6 mm from its centre for
+    ``voigt-fit``, as the earlier model had it.
     """
     n = 4096
-    params = ForearmParameters.nominal(1)
+    preset = skin_preset(skin)
+    params = ForearmParameters.nominal(1, skin=skin)
     freqs = np.fft.rfftfreq(n, 1 / fs)
-    h = _unit_transfer(freqs, np.full((1, 1, 1), _REFERENCE_DISTANCE_M), params)[:, 0, 0]
+    h = _unit_transfer(freqs, np.full((1, 1, 1), preset.anchor_distance_m), params)[:, 0, 0]
     t = np.arange(n) / fs - 0.1
     pulse = _REFERENCE_DRIVE_V * (1 - t**2 / sigma**2) * np.exp(-(t**2) / (2 * sigma**2))
     response = np.fft.irfft(np.fft.rfft(pulse) * h, n)
@@ -147,7 +156,11 @@ class SimulatedForearm(Rig):
         Range of dropout durations, s (uniform).
     participant : ForearmParameters, optional
         Explicit parameters instead of drawing them from ``seed`` (for controlled
-        experiments, e.g. ``ForearmParameters.nominal(4)``).
+        experiments, e.g. ``ForearmParameters.nominal(4, skin="nominal")``).
+    skin : str, optional
+        Skin preset (:data:`vibrofocus.skin.SKIN_PRESETS`: ``"nominal"``, ``"low"``,
+        ``"high"``, ``"voigt-fit"``) around which ``seed`` draws the participant.
+        Default: the participant's preset when one is given, else ``"nominal"``.
     geometry : {"cylinder", "plane"}
         ``"cylinder"`` (default): the tapered forearm, waves come back around it.
         ``"plane"``: an unbounded flat skin, for checks of the propagation law.
@@ -160,10 +173,11 @@ class SimulatedForearm(Rig):
         kept part) with the last 10 % faded out.
     latency_s : float
         Fixed delay between drive and recording, s, to model the converter, amplifier
-        and vibrometer-decoder delays of a particular rig. Default 0: the wave law is
-        causal by construction (:mod:`.viscoelastic`), so no delay is needed to hide a
-        precursor; an impulse response holds less than 1e-6 of its energy before
-        ``t = 0``.
+        and vibrometer-decoder delays of a particular rig. Default 0: the ``voigt-fit``
+        law is causal by construction (:mod:`.viscoelastic`) and the layered presets'
+        transfer is the causal part of their surface mode (:mod:`.precursor`), so no
+        delay is needed to hide a precursor; an impulse response holds less than 1e-6
+        of its energy before ``t = 0``.
     noise_band : (float, float)
         Band in which ``noise_m`` is specified, Hz.
 
@@ -204,6 +218,7 @@ class SimulatedForearm(Rig):
         *,
         dropout_duration_s: tuple[float, float] = (1e-3, 10e-3),
         participant: ForearmParameters | None = None,
+        skin: str | None = None,
         geometry: str = "cylinder",
         n_images: int = 2,
         ir_duration_s: float = 0.4096,
@@ -214,10 +229,14 @@ class SimulatedForearm(Rig):
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValidationError(f"seed must be a non-negative integer, got {seed!r}")
         self.seed = int(seed)
+        if skin is not None:
+            skin = skin_preset(skin).name
         if participant is None:
-            participant = ForearmParameters.draw(self.seed, self.layout)
+            participant = ForearmParameters.draw(self.seed, self.layout, skin=skin or DEFAULT_SKIN)
         elif not isinstance(participant, ForearmParameters):
             raise ValidationError(f"participant must be a ForearmParameters, got {type(participant).__name__}")
+        elif skin is not None and skin != participant.skin:
+            raise ValidationError(f"skin={skin!r} contradicts the participant's skin {participant.skin!r}")
         if participant.n_actuators != self.layout.n_actuators:
             raise ValidationError(
                 f"participant describes {participant.n_actuators} actuators but the layout has "
@@ -236,9 +255,10 @@ class SimulatedForearm(Rig):
         if self.n_ir < 16:
             raise ValidationError(f"ir_duration_s must cover at least 16 samples, got {self.n_ir}")
         self.latency_s = check_positive(latency_s, "latency_s", allow_zero=True)
-        self.sensitivity = drive_sensitivity(self.fs)
+        self.sensitivity = drive_sensitivity(self.fs, skin=participant.skin)
         self._rng = np.random.default_rng([self.seed, 0xD0])
-        self._ir_cache: OrderedDict[bytes, np.ndarray] = OrderedDict()
+        # points -> (playback impulse responses, precursor samples or None)
+        self._ir_cache: OrderedDict[bytes, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._ir_lock = threading.Lock()
         self._ir_factors: tuple[np.ndarray, ...] | None = None
         self.last_drive: np.ndarray | None = None
@@ -247,6 +267,11 @@ class SimulatedForearm(Rig):
         self.last_dropout_mask: np.ndarray | None = None
 
     # ------------------------------------------------------------------ the model
+    @property
+    def skin(self) -> str:
+        """Name of the skin preset this arm was drawn on (in every output made from it)."""
+        return self._participant.skin
+
     @property
     def participant(self) -> ForearmParameters:
         """This participant's parameters (read-only: cached responses depend on them)."""
@@ -271,12 +296,24 @@ class SimulatedForearm(Rig):
         -------
         ndarray, complex, shape (n_freqs, n_points, n_actuators)
             m/V, NumPy's FFT sign convention (a delay is ``exp(-2j pi f tau)``).
+
+        Notes
+        -----
+        On a layered preset the transfer is that of the response's causal part: the
+        single surface mode's precursor (the response before ``t = 0``, see
+        :mod:`.precursor`), computed on the playback grid, is subtracted, so the true H
+        and playback agree and nothing arrives before the drive.
         """
         points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
         f = as_array(freqs, "freqs", ndim=1)
         if np.any(f < 0):
             raise ValidationError(f"freqs must be >= 0 Hz, got a minimum of {f.min():g} Hz")
-        return self._transfer(points, f)
+        h = self._transfer(points, f)
+        pre = self._responses(points)[1]
+        if pre is not None:
+            h -= precursor_spectrum(pre, _IR_OVERSAMPLING * self.fs, f)
+            h[f == 0] = 0.0  # the exciter exerts no static force (the precursor's mean is ~1e-4 of |H|)
+        return h
 
     def _transfer(self, points: np.ndarray, f: np.ndarray, max_nepers: float = 40.0,
                   table_step: float | None = None, factors: tuple[np.ndarray, ...] | None = None) -> np.ndarray:
@@ -299,7 +336,12 @@ class SimulatedForearm(Rig):
         the aliases ``H(f + m fs)``, which the skin's attenuation makes negligible
         except under the contact itself.
         """
-        points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
+        return self._responses(as_array(points_xy, "points_xy", ndim=2, shape=(None, 2)))[0]
+
+    def _responses(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """Playback impulse responses and, on a layered preset, the precursor samples
+        (the last ``_PRECURSOR_S`` of the fine grid's circular response, shape
+        (n_pre, n_points, n_actuators)); cached per point set."""
         key = points.tobytes()
         with self._ir_lock:
             if key in self._ir_cache:
@@ -313,16 +355,67 @@ class SimulatedForearm(Rig):
                 self._ir_factors = _frequency_factors(freqs[1:], self.participant)
             factors = self._ir_factors
         h = self._transfer(points, freqs, table_step=_IR_TABLE_STEP, factors=factors)
-        ir = r * np.fft.irfft(h, n_fft, axis=0)[: r * self.n_ir: r]
+        fine = np.fft.irfft(h, n_fft, axis=0)
+        ir = r * fine[: r * self.n_ir: r]
         n_fade = max(self.n_ir // 10, 1)
         ir[-n_fade:] *= np.hanning(2 * n_fade)[n_fade:, None, None]
         ir = np.ascontiguousarray(np.moveaxis(ir, 0, -1))
         ir.setflags(write=False)
+        pre = None
+        if self.participant.layered is not None:
+            pre = fine[-min(int(round(_PRECURSOR_S * r * self.fs)), n_fft // 4):].copy()
+            pre.setflags(write=False)
         with self._ir_lock:  # a web server may record from several threads
-            self._ir_cache[key] = ir
+            self._ir_cache[key] = (ir, pre)
             if len(self._ir_cache) > _IR_CACHE_SIZE:
                 self._ir_cache.popitem(last=False)
-        return ir
+        return ir, pre
+
+    def response_length(self, points_xy: np.ndarray | None = None, tol: float = 1e-4) -> int:
+        """Samples that hold all but ``tol`` of every playback impulse response's energy.
+
+        :meth:`design_window` makes a design window from it.
+
+        Parameters
+        ----------
+        points_xy : ndarray, shape (n_points, 2), optional
+            Points, m; default the layout's points.
+        tol : float
+            Share of energy allowed past the returned length, in (0, 1).
+
+        Returns
+        -------
+        int
+            Samples at ``fs`` (at most ``n_ir``).
+        """
+        from .._validation import check_in_range
+
+        tol = check_in_range(tol, "tol", 0.0, 1.0, inclusive=False)
+        points = self.layout.points_xy if points_xy is None else as_array(points_xy, "points_xy", ndim=2,
+                                                                         shape=(None, 2))
+        energy = np.cumsum(self.impulse_responses(points) ** 2, axis=2)
+        total = energy[..., -1:]
+        done = np.all((energy >= (1 - tol) * total) | (total == 0), axis=(0, 1))
+        return int(np.argmax(done)) + 1 if done.any() else self.n_ir
+
+    def design_window(self, minimum: int = N_SAMPLES, tol: float = 1e-5) -> int:
+        """A design window that follows this arm's impulse-response length, samples.
+
+        The tap sits mid-window: before it the inverse drive's pre-ringing, after it the
+        medium's ring-down, each about as long as the responses
+        (:meth:`response_length`). The window is four times that, rounded up to a power
+        of two and at least ``minimum``. ``render`` and the demo use it when no window is
+        given.
+
+        Parameters
+        ----------
+        minimum : int
+            Shortest window, samples.
+        tol : float
+            Share of each response's energy allowed past the ring-down length.
+        """
+        need = 4 * self.response_length(tol=tol)
+        return int(max(minimum, 2 ** int(np.ceil(np.log2(need)))))
 
     def field(
         self,
@@ -482,6 +575,7 @@ class SimulatedForearm(Rig):
         out = super().describe()
         out.update(
             seed=self.seed,
+            skin=self.skin,
             participant=self.participant.to_dict(),
             geometry=self.geometry.kind,
             n_images=self.geometry.n_images,
@@ -495,6 +589,6 @@ class SimulatedForearm(Rig):
     def __repr__(self) -> str:
         p = self.participant
         return (
-            f"SimulatedForearm(seed={self.seed}, c(250 Hz)={p.c250_m_s:.2f} m/s, alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, "
+            f"SimulatedForearm(seed={self.seed}, skin={self.skin!r}, c(250 Hz)={p.c250_m_s:.2f} m/s, alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, "
             f"contact={np.round(p.contact, 2).tolist()}, geometry={self.geometry.kind!r})"
         )

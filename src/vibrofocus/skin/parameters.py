@@ -17,6 +17,8 @@ import numpy as np
 from .._validation import as_array, check_in_range, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
+from .layered import LayeredLaw
+from .presets import skin_preset
 from .viscoelastic import RAYLEIGH_FACTOR_INCOMPRESSIBLE, ViscoelasticLaw
 
 __all__ = [
@@ -24,6 +26,7 @@ __all__ = [
     "NOMINAL_LAW",
     "STIFFNESS_SPREAD",
     "VISCOSITY_SPREAD",
+    "LOSS_SPREAD",
     "WRIST_CONTACT_RANGE",
     "ELBOW_CONTACT_RANGE",
     "GAIN_SPREAD",
@@ -44,6 +47,9 @@ STIFFNESS_SPREAD = 0.237
 #: Relative half-width of the uniform draw of the spring-pot (viscosity) coefficient: the
 #: relative SD of Zhang et al. 2011's forearm Voigt viscosity (0.60 / 5.03 Pa s).
 VISCOSITY_SPREAD = 0.119
+#: Relative half-width of the uniform draw of a layered arm's loss tangent (±25 %, the
+#: spread of attenuation between participants that SPEC §3 asks for: an assumption).
+LOSS_SPREAD = 0.25
 #: Coupling of wrist-side actuators, drawn uniformly in this range (an assumption of the
 #: model, see :class:`ForearmParameters`).
 WRIST_CONTACT_RANGE = (0.4, 1.0)
@@ -146,6 +152,12 @@ class ForearmParameters:
         Where the wrist and the elbow-side end of the modelled cylinder lie on the
         layout's y axis (y toward the wrist), m. Nominal +0.125 m and -0.125 m: the
         array sits mid-forearm on a 25 cm forearm, where the circumference is 0.21 m.
+    layered : LayeredLaw or None
+        A layered skin (:mod:`.layered`) whose law replaces the homogeneous one of the
+        fields above; None (default) for the homogeneous law.
+    skin : str
+        Name of the preset these parameters come from (:mod:`.presets`), carried into
+        every output made from them; ``"voigt-fit"`` for the homogeneous law.
     seed : int or None
         The seed that drew these parameters (None for hand-made ones).
 
@@ -172,6 +184,8 @@ class ForearmParameters:
     circumference_elbow_m: float = 0.25
     wrist_y_m: float = 0.125
     elbow_y_m: float = -0.125
+    layered: LayeredLaw | None = None
+    skin: str = "voigt-fit"
     seed: int | None = field(default=None)
 
     def __post_init__(self) -> None:
@@ -199,7 +213,11 @@ class ForearmParameters:
         object.__setattr__(self, "fractional_order",
                            check_in_range(self.fractional_order, "fractional_order", 0.0, 1.0, inclusive=False)
                            if self.fractional_order != 1.0 else 1.0)
-        law = ViscoelasticLaw(
+        if self.layered is not None and not isinstance(self.layered, LayeredLaw):
+            raise ValidationError(f"layered must be a LayeredLaw or None, got {type(self.layered).__name__}")
+        if not isinstance(self.skin, str) or not self.skin:
+            raise ValidationError(f"skin must be a preset name, got {self.skin!r}")
+        law = self.layered or ViscoelasticLaw(
             mu0_pa=self.shear_modulus_pa, eta_pa_sn=self.spring_pot_pa_sn, order=self.fractional_order,
             mu_inf_pa=self.unrelaxed_modulus_pa, density_kg_m3=self.density_kg_m3,
             rayleigh_factor=self.rayleigh_factor,
@@ -208,20 +226,26 @@ class ForearmParameters:
 
     # ------------------------------------------------------------------ factories
     @classmethod
-    def nominal(cls, n_actuators: int, **overrides: float) -> "ForearmParameters":
-        """The nominal forearm: identical, fully coupled actuators and the fitted law.
+    def nominal(cls, n_actuators: int, skin: str = "voigt-fit", **overrides: float) -> "ForearmParameters":
+        """The nominal forearm of a skin preset: identical, fully coupled actuators.
 
         Parameters
         ----------
         n_actuators : int
             Number of actuators.
+        skin : str
+            Skin preset (:data:`vibrofocus.skin.SKIN_PRESETS`); ``"voigt-fit"`` (default)
+            is the homogeneous law of the fields.
         **overrides
             Any scalar field (``shear_modulus_pa=8e3``, ...).
         """
         if isinstance(n_actuators, bool) or not isinstance(n_actuators, (int, np.integer)) or n_actuators < 1:
             raise ValidationError(f"n_actuators must be a positive integer, got {n_actuators!r}")
+        preset = skin_preset(skin)
         ones = np.ones(int(n_actuators))
-        return cls(contact=ones, gains=ones, f0_hz=500.0 * ones, q=ones, **overrides)
+        if preset.law is not None:
+            overrides.setdefault("layered", preset.law)
+        return cls(contact=ones, gains=ones, f0_hz=500.0 * ones, q=ones, skin=preset.name, **overrides)
 
     @classmethod
     def from_law(cls, law: ViscoelasticLaw, n_actuators: int, **overrides: float) -> "ForearmParameters":
@@ -233,7 +257,7 @@ class ForearmParameters:
         )
 
     @classmethod
-    def draw(cls, seed: int, layout: ArrayLayout) -> "ForearmParameters":
+    def draw(cls, seed: int, layout: ArrayLayout, skin: str = "voigt-fit") -> "ForearmParameters":
         """Draw one participant around the nominal forearm.
 
         Each quantity is uniform within its spread (module constants): the static shear
@@ -241,7 +265,9 @@ class ForearmParameters:
         (one SD of the published forearm values either way), contact of wrist-side actuators (y above
         the actuators' mean y) in ``WRIST_CONTACT_RANGE`` and of the others in
         ``ELBOW_CONTACT_RANGE``, gains ±``GAIN_SPREAD``, resonance frequency
-        ±``RESONANCE_SPREAD`` and Q in ``Q_RANGE``.
+        ±``RESONANCE_SPREAD`` and Q in ``Q_RANGE``. On a layered skin the same two draws
+        scale both layers' moduli (±``STIFFNESS_SPREAD``) and the loss tangent
+        (±``LOSS_SPREAD``).
 
         Parameters
         ----------
@@ -249,21 +275,29 @@ class ForearmParameters:
             Participant seed (>= 0); the same seed always gives the same participant.
         layout : ArrayLayout
             The array (decides which actuators are wrist-side).
+        skin : str
+            Skin preset around which to draw (:data:`vibrofocus.skin.SKIN_PRESETS`).
         """
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValidationError(f"seed must be a non-negative integer, got {seed!r}")
         rng = np.random.default_rng([int(seed), 0x5117])
         n = layout.n_actuators
-        nominal = cls.nominal(n)
+        nominal = cls.nominal(n, skin=skin)
         y = layout.actuators_xy[:, 1]
         wrist_side = y > y.mean() + 1e-9
         contact = np.where(
             wrist_side, rng.uniform(*WRIST_CONTACT_RANGE, n), rng.uniform(*ELBOW_CONTACT_RANGE, n)
         )
+        # The draws come in a fixed order, so a seed gives the same participant on every skin.
+        stiffness = rng.uniform(-STIFFNESS_SPREAD, STIFFNESS_SPREAD)
+        viscosity = rng.uniform(-VISCOSITY_SPREAD, VISCOSITY_SPREAD)
+        layered = None if nominal.layered is None else nominal.layered.scaled(
+            stiffness=1 + stiffness, loss=1 + viscosity * LOSS_SPREAD / VISCOSITY_SPREAD)
         return replace(
             nominal,
-            shear_modulus_pa=nominal.shear_modulus_pa * (1 + rng.uniform(-STIFFNESS_SPREAD, STIFFNESS_SPREAD)),
-            spring_pot_pa_sn=nominal.spring_pot_pa_sn * (1 + rng.uniform(-VISCOSITY_SPREAD, VISCOSITY_SPREAD)),
+            shear_modulus_pa=nominal.shear_modulus_pa * (1 + stiffness),
+            spring_pot_pa_sn=nominal.spring_pot_pa_sn * (1 + viscosity),
+            layered=layered,
             contact=contact,
             gains=1 + rng.uniform(-GAIN_SPREAD, GAIN_SPREAD, n),
             f0_hz=nominal.f0_hz * (1 + rng.uniform(-RESONANCE_SPREAD, RESONANCE_SPREAD, n)),
@@ -315,6 +349,8 @@ class ForearmParameters:
             value = getattr(self, name)
             if isinstance(value, np.ndarray):
                 value = value.tolist()
+            elif isinstance(value, LayeredLaw):
+                value = value.to_dict()
             elif isinstance(value, float) and np.isinf(value):
                 value = None
             out[name] = value

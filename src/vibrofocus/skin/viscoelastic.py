@@ -32,6 +32,7 @@ import numpy as np
 
 from .._validation import check_in_range, check_positive
 from ..errors import ValidationError
+from .wavelaw import WaveNumberMixin
 
 __all__ = ["ViscoelasticLaw", "RAYLEIGH_FACTOR_INCOMPRESSIBLE"]
 
@@ -42,7 +43,7 @@ RAYLEIGH_FACTOR_INCOMPRESSIBLE = 0.9553
 
 
 @dataclass(frozen=True)
-class ViscoelasticLaw:
+class ViscoelasticLaw(WaveNumberMixin):
     """A fractional Zener shear modulus and the surface wave it carries.
 
     Parameters
@@ -105,33 +106,12 @@ class ViscoelasticLaw:
         f = np.asarray(freqs, dtype=float)
         return self._modulus_of_s(2j * np.pi * f + 0.0j)
 
-    def wavenumber(self, freqs: np.ndarray) -> np.ndarray:
-        """Complex surface wavenumber in the physics convention, ``k = omega / c + i alpha``.
-
-        Parameters
-        ----------
-        freqs : ndarray
-            Frequencies, Hz, > 0.
-
-        Returns
-        -------
-        ndarray, complex, same shape as ``freqs``
-            rad/m (real part, ``2 pi f / c(f)``) and Np/m (imaginary part, ``alpha(f)``).
-        """
-        f = np.asarray(freqs, dtype=float)
+    def _wavenumber(self, f: np.ndarray) -> np.ndarray:
+        """Physics-convention wavenumber at ``f`` (float array, Hz); see :meth:`wavenumber`."""
         omega = 2 * np.pi * f
         # Physics convention exp(-i omega t) is the complex conjugate of NumPy's.
         g_phys = np.conj(self.modulus(f))
         return omega * np.sqrt(self.density_kg_m3 / g_phys) / self.rayleigh_factor
-
-    def phase_speed(self, freqs: np.ndarray) -> np.ndarray:
-        """Phase speed ``c(f) = 2 pi f / Re k``, m/s, for ``freqs`` > 0 Hz."""
-        f = np.asarray(freqs, dtype=float)
-        return 2 * np.pi * f / self.wavenumber(f).real
-
-    def attenuation(self, freqs: np.ndarray) -> np.ndarray:
-        """Attenuation ``alpha(f) = Im k``, Np/m (amplitude falls as ``exp(-alpha r)``)."""
-        return self.wavenumber(freqs).imag
 
     def group_speed(self, freqs: np.ndarray) -> np.ndarray:
         """Group speed ``d omega / d Re k``, m/s, from the analytic derivative of ``k``.

@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import StudyError, ValidationError
-from .perception import MODEL_VERSION, PerceptualModel, Traits, central_percepts, draw_answers
+from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, central_percepts, draw_answers
 
 __all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
 
@@ -130,7 +130,7 @@ def build_feature_bank(
     layout = points = None
     for k in range(1, n_forearms + 1):
         pseed = participant_seeds(seed, k)[0]
-        rig = make_rig("simulated", seed=pseed)
+        rig = make_rig("simulated", seed=pseed, skin=STUDY_SKIN)
         layout = rig.layout
         cal = calibrate(rig, participant_id=f"bank-{k:03d}")
         # Same drives as simulate-study; a design whose window is too short for the

@@ -108,8 +108,11 @@ class CalibrationRenderer:
     ----------
     calibration : Calibration
         The participant's calibration (``transfer_for``, ``fs``, ``layout``).
-    n_samples : int
-        Length of each drive, samples.
+    n_samples : int, optional
+        Length of each drive, samples. Default: 4096, doubled (up to 16384) whenever a
+        design does not fit its window (a :class:`~vibrofocus.errors.CausalityError`),
+        so the window follows the arm; designs made before keep their shorter window.
+        Given explicitly, a design that does not fit is refused.
     limit_v : float
         Drive limit, V peak; designs needing more are scaled down (the rendering layer's
         default ``on_limit="scale"``).
@@ -117,9 +120,14 @@ class CalibrationRenderer:
         Passed on to ``rendering.render``.
     """
 
-    def __init__(self, calibration: Any, *, n_samples: int = N_SAMPLES, limit_v: float = DRIVE_LIMIT_V, **render_options: Any) -> None:
+    #: Longest window the default grows to, samples.
+    MAX_SAMPLES = 4 * N_SAMPLES
+
+    def __init__(self, calibration: Any, *, n_samples: int | None = None, limit_v: float = DRIVE_LIMIT_V,
+                 **render_options: Any) -> None:
         self.calibration = calibration
-        self.n_samples = int(n_samples)
+        self._grow = n_samples is None
+        self.n_samples = N_SAMPLES if n_samples is None else int(n_samples)
         self.limit_v = float(limit_v)
         self._options = render_options
         self._lock = threading.Lock()
@@ -130,13 +138,21 @@ class CalibrationRenderer:
         """The :class:`~vibrofocus.rendering.Rendering` of ``method`` at location number ``target``."""
         from ..rendering import render  # imported here: planning and storage do not need it
 
+        from ..errors import CausalityError
+
         key = (str(method), int(target))
+        cal = self.calibration
         with self._lock:
-            if key not in self._cache:
+            while key not in self._cache:
                 if self._H is None:
-                    self._H = self.calibration.transfer_for(self.n_samples)
-                cal = self.calibration
-                self._cache[key] = render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
+                    self._H = cal.transfer_for(self.n_samples)
+                try:
+                    self._cache[key] = render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v,
+                                              **self._options)
+                except CausalityError:
+                    if not self._grow or 2 * self.n_samples > self.MAX_SAMPLES:
+                        raise
+                    self.n_samples, self._H = 2 * self.n_samples, None  # the window follows the arm
             return self._cache[key]
 
     def __call__(self, method: str, target: int) -> np.ndarray:
@@ -369,7 +385,7 @@ class StudyEngine:
         cue: Callable[[], None] | None = None,
         cue_by: str = "event-only",
         dry_run: bool = False,
-        n_samples: int = N_SAMPLES,
+        n_samples: int | None = None,
         limit_v: float = DRIVE_LIMIT_V,
     ) -> None:
         self.store = store

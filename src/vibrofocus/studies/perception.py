@@ -55,6 +55,7 @@ import numpy as np
 from ..errors import StudyError, ValidationError
 
 __all__ = [
+    "STUDY_SKIN",
     "MODEL_VERSION",
     "MODEL_LABEL",
     "PerceptualModel",
@@ -75,6 +76,10 @@ __all__ = [
 
 #: Version of the perceptual model; bump it whenever answers for the same seeds change.
 MODEL_VERSION = "2.0"
+#: Skin preset of the simulated participants' forearms. The perceptual model and its
+#: feature bank were fitted on the homogeneous Voigt arm; they stay on it until they are
+#: refitted on the layered presets (a model, not data; see docs/simulated-participants.md).
+STUDY_SKIN = "voigt-fit"
 #: The label every report made from simulated data carries.
 MODEL_LABEL = f"simulated participants: model v{MODEL_VERSION}, not data"
 

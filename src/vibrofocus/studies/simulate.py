@@ -17,6 +17,7 @@ import numpy as np
 
 from ..errors import CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
+from .perception import STUDY_SKIN
 from .storage import StudyStore
 
 __all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
@@ -73,6 +74,7 @@ def simulate_studies(
     studies: tuple[int, ...] = (1, 2),
     config: dict[str, Any] | None = None,
     progress: ProgressFn | None = None,
+    skin: str = STUDY_SKIN,
 ) -> dict[str, int]:
     """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
 
@@ -93,6 +95,10 @@ def simulate_studies(
         Which studies to run, in order.
     config : dict, optional
         Extra session config (design keys such as ``repetitions`` change the design).
+    skin : str
+        Skin preset of the participants' forearms (default ``voigt-fit``, the skin the
+        perceptual model was fitted on; another preset changes the stimuli under a
+        model not fitted to them). Stored in each session's config.
     progress : callable, optional
         ``progress(description, n_answered, n_total)`` after each answer.
 
@@ -107,8 +113,11 @@ def simulate_studies(
     The answers come from :class:`SimulatedParticipant`, a perceptual model, not data.
     """
     from ..rigs import make_rig
+    from ..skin import skin_preset
     from .engine import StudyEngine, calibration_renderer
     from .participants import SimulatedParticipant
+
+    skin = skin_preset(skin).name
 
     if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
         raise StudyError(f"n_participants must be an integer >= 1, got {n_participants!r}")
@@ -133,6 +142,11 @@ def simulate_studies(
                         f"{db} holds participant {pid} from a simulation with seed "
                         f"{info.config.get('simulation_seed')!r}, not {seed}; use that seed or another database"
                     )
+                if info.config.get("skin", STUDY_SKIN) != skin:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated on the {info.config.get('skin', STUDY_SKIN)!r} skin, "
+                        f"not {skin!r}; use that skin or another database"
+                    )
                 # The stored seed wins over the derivation: the participant stays who it was.
                 pseed = int(info.config.get("participant_seed", pseed))
             # Built lazily, once per participant and shared by both studies: the rig, the
@@ -141,7 +155,7 @@ def simulate_studies(
 
             def participant_parts(cid: int | None, _pid: str = pid, _pseed: int = pseed) -> dict[str, Any]:
                 if "rig" not in shared:
-                    shared["rig"] = make_rig("simulated", seed=_pseed)
+                    shared["rig"] = make_rig("simulated", seed=_pseed, skin=skin)
                 if cid is None:
                     cid, cal = _calibration_for(store, _pid, shared["rig"], cal_dir)
                     shared["cal"] = (cid, cal)
@@ -170,7 +184,7 @@ def simulate_studies(
                 else:
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
-                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed)
+                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin)
                     sid = store.create_session(
                         pid, study, seed=study_seeds[study - 1], calibration_id=parts["cal"][0], config=session_config,
                     )
