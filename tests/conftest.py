@@ -5,12 +5,18 @@ the checkout gained any file (``git status --porcelain --ignored``), apart from 
 and pytest's own caches (the README's test command turns those off too).
 """
 
+import os
 import subprocess
+import tempfile
 from pathlib import Path
 
-import numpy as np
-import pytest
-from hypothesis import settings
+# Hypothesis keeps what it learns (examples, constants) in a folder: a temporary one, never
+# the checkout's .hypothesis/ (read when hypothesis first stores something).
+os.environ.setdefault("HYPOTHESIS_STORAGE_DIRECTORY", tempfile.mkdtemp(prefix="vibrofocus-hypothesis-"))
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from hypothesis import settings  # noqa: E402
 
 # Property tests draw the same examples on every run (seeded, like every RNG here) and keep
 # no example database in the checkout.
