@@ -59,3 +59,13 @@ def test_power_files_are_whole_or_absent_on_a_full_disk(tmp_path, monkeypatch):
     res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--out", str(out)])
     assert_one_error(res, "power.csv", "no space")
     assert not (out / "power.csv").exists() and no_temp_files(out) == []
+
+
+def test_power_names_its_skin_and_refuses_one_its_model_was_not_fitted_on():
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    result = CliRunner().invoke(app, ["power", "--skin", "nominal", "-n", "10", "--studies", "2", "--no-dask"])
+    assert result.exit_code == 2
+    assert "fitted on the voigt-fit skin only" in result.output

@@ -50,6 +50,9 @@ def power_command(
     out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     force: bool = force_option(),
+    skin: str = typer.Option("voigt-fit", "--skin",
+                             help="Skin preset of the simulated forearms. Only voigt-fit for now: the perceptual "
+                                  "model and its feature bank are fitted on it (docs: simulated participants)."),
 ) -> None:
     """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
 
@@ -68,6 +71,17 @@ def power_command(
         from ..studies.power import TESTS, PowerDesign, run_power
 
         allow_overwrite(force)
+        from ..errors import ValidationError
+        from ..skin import skin_preset
+        from ..studies.perception import STUDY_SKIN
+
+        if skin_preset(skin).name != STUDY_SKIN:
+            # Its effect sizes come from a model fitted on one skin: on another, the numbers
+            # would look like power but rest on nothing fitted.
+            raise ValidationError(
+                f"--skin {skin}: the simulated participants' perceptual model and its feature bank are fitted on "
+                f"the {STUDY_SKIN} skin only; power on {skin} needs them refitted on it first"
+            )
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
         design = PowerDesign(
             n_participants=_ints(participants, "--participants"), n_studies=studies, repetitions=repetitions,
