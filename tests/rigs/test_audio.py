@@ -274,7 +274,7 @@ def test_ctrl_c_mid_play_silences_the_outputs(rig):
     t0 = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
         rig.play(_long_sine())
-    assert time.monotonic() - t0 < 1.0
+    assert time.monotonic() - t0 < 1.5  # the 2 s play did not run to its end
     assert not _loopback_input_now().any()  # every output is silent now
 
 
