@@ -361,3 +361,15 @@ def test_real_device_plays_records_and_stops_from_another_thread():
         with pytest.raises(DeviceError, match="stopped"):
             rig.play(long)
         timer.join()
+
+
+def test_a_stop_between_two_takes_ends_the_job(rig, device):
+    # A calibration holds the rig; the experimenter's stop comes while nothing plays.
+    with rig.reserve("the calibration of P01"):
+        rig.play_and_record(drive(), tail_s=0.0)
+        n_tasks = len(device.tasks)
+        rig.stop()  # as from another thread, between two takes
+        with pytest.raises(DeviceError, match="stopped .* during the calibration of P01"):
+            rig.play_and_record(drive(), tail_s=0.0)
+        assert all(not t.written or not np.any(t.written[0]) for t in device.tasks[n_tasks:])  # only zeros
+    rig.play(drive())  # a new job may start

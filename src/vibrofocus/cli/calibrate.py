@@ -136,9 +136,11 @@ def calibrate_command(
                     progress.start()
 
                 try:
-                    cal = calibrate(r, participant_id=participant, method=method, repeats=repeats, sweep_s=sweep_s,
-                                    amplitude_v=amplitude_v, prompt=None if not single_spot else prompt,
-                                    progress=on_progress, checkpoint=partial, resume=resume)
+                    with r.reserve(f"the calibration of {participant}"):  # one job on the hardware
+                        cal = calibrate(r, participant_id=participant, method=method, repeats=repeats,
+                                        sweep_s=sweep_s, amplitude_v=amplitude_v,
+                                        prompt=None if not single_spot else prompt, progress=on_progress,
+                                        checkpoint=partial, resume=resume)
                 except BaseException:
                     if partial is not None and partial.exists():
                         console.print(f"the completed points are kept in {partial}; continue with --resume",

@@ -26,7 +26,7 @@ from .._validation import as_array, check_positive
 from ..defaults import FS_HZ
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from .devices import DeviceBusyError
+from .devices import DeviceBusyError, DeviceError
 from .safety import EnergyBudget, SafetyLimits, check_drive
 
 __all__ = ["Rig"]
@@ -69,6 +69,8 @@ class Rig(ABC):
         # Who holds the hardware: a job (reserve) or a single play; never two at once.
         self._use_lock = threading.Lock()
         self._job_owner: str | None = None
+        # Set by stop() during a job: the job's further plays are refused until it ends.
+        self._job_stopped = False
         self._job_thread: int | None = None
         self._playing = False
 
@@ -96,7 +98,8 @@ class Rig(ABC):
 
         While it is held, plays and recordings from other threads, and a second
         ``reserve``, are refused with :class:`DeviceBusyError`. :meth:`stop` still works
-        from any thread.
+        from any thread, and it ends the job: the job's further plays and recordings
+        are refused (a stop between two takes of a calibration stops the calibration).
 
         Parameters
         ----------
@@ -109,10 +112,12 @@ class Rig(ABC):
             return
         self._acquire(owner)
         self._job_owner, self._job_thread = owner, threading.get_ident()
+        self._job_stopped = False
         try:
             yield self
         finally:
             self._job_owner = self._job_thread = None
+            self._job_stopped = False
             self._use_lock.release()
 
     @property
@@ -132,8 +137,14 @@ class Rig(ABC):
     @contextmanager
     def _exclusive(self, what: str) -> Iterator[None]:
         """Hold the hardware for one play: inside the caller's job, or alone."""
-        if not self.one_job_at_a_time or self._job_thread == threading.get_ident():
+        if self._job_thread == threading.get_ident():
+            if self._job_stopped:
+                raise DeviceError(f"the {self.kind} rig was stopped (rig.stop()) during {self._job_owner}; "
+                                  f"{what} was refused and the job ends here. Start it again when ready")
             yield  # this thread's own job holds the rig
+            return
+        if not self.one_job_at_a_time:
+            yield
             return
         self._acquire(what)
         self._playing = True
@@ -208,8 +219,11 @@ class Rig(ABC):
 
         A play or recording running in another thread ends with a
         :class:`DeviceError`. The outputs reach 0 V within 100 ms plus the interface's
-        own buffered output latency (:attr:`output_latency_s`).
+        own buffered output latency (:attr:`output_latency_s`). A job that holds the rig
+        (:meth:`reserve`) ends: its further plays are refused.
         """
+        if self._job_owner is not None:
+            self._job_stopped = True
         self._zero_outputs()
 
     @property
