@@ -3,7 +3,7 @@
 from .base import Rig
 from .config import AudioRigConfig, NidaqRigConfig, RigConfig, load_rig_config, parse_rig_config
 from .device_lock import DeviceLock
-from .devices import DeviceBusyError, DeviceError, list_audio_devices, list_nidaq_devices
+from .devices import DeviceBusyError, DeviceError, StoppedError, list_audio_devices, list_nidaq_devices
 from .factory import RIG_KINDS, make_rig
 from .hardware import HardwareRig
 from .force import ForceCurve, StrapReading, StrapSensors, check_straps, evaluate_straps, has_strap_sensors
@@ -13,7 +13,8 @@ from .vibrometer import Vibrometer
 # AudioRig and NidaqRig are imported lazily (make_rig, or vibrofocus.rigs.audio / .nidaq)
 # so importing vibrofocus does not load PortAudio or the NI driver.
 __all__ = [
-    "Rig", "HardwareRig", "SafetyLimits", "EnergyBudget", "check_drive", "DeviceLock", "DeviceBusyError", "make_rig", "RIG_KINDS",
+    "Rig", "HardwareRig", "SafetyLimits", "EnergyBudget", "check_drive", "make_rig", "RIG_KINDS",
+    "DeviceLock", "DeviceBusyError", "StoppedError",
     "RigConfig", "AudioRigConfig", "NidaqRigConfig", "load_rig_config", "parse_rig_config",
     "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps", "has_strap_sensors",
     "DeviceError", "list_audio_devices", "list_nidaq_devices",

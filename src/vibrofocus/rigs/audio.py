@@ -56,7 +56,7 @@ import scipy.signal
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .config import AudioRigConfig
-from .devices import DeviceError
+from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
 
 __all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface"]
@@ -185,12 +185,6 @@ def resolve_audio_device(name: str | int | None, hostapi: str | None = None, *, 
             f"channels up to {inputs}"
         )
     return int(dev["index"])
-
-
-class _Stopped(DeviceError):
-    def __init__(self, what: str = "recording") -> None:
-        super().__init__(f"the {what} was stopped before it ended (rig.stop()); outputs are silent"
-                         + ("; it is discarded" if what == "recording" else ""))
 
 
 class AudioRig(HardwareRig):
@@ -415,7 +409,7 @@ class AudioRig(HardwareRig):
                 finally:
                     stream.close()
         if self._abort.is_set():
-            raise _Stopped("recording" if record else "play")
+            raise StoppedError("recording" if record else "play")
         if state["pos"] < total:
             raise DeviceError(f"the audio interface took {state['pos']} of the {total} frames while {what}; "
                               "the rest never played")

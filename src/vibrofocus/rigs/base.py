@@ -218,7 +218,7 @@ class Rig(ABC):
         """Emergency stop: every output to zero now, from any thread.
 
         A play or recording running in another thread ends with a
-        :class:`DeviceError`. The outputs reach 0 V within 100 ms plus the interface's
+        :class:`~vibrofocus.rigs.StoppedError`. The outputs reach 0 V within 100 ms plus the interface's
         own buffered output latency (:attr:`output_latency_s`). A job that holds the rig
         (:meth:`reserve`) ends: its further plays are refused.
         """

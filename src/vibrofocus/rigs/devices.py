@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 from ..errors import VibrofocusError
 
-__all__ = ["DeviceError", "DeviceBusyError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
+__all__ = ["DeviceError", "DeviceBusyError", "StoppedError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
 
 
 class DeviceError(VibrofocusError):
@@ -19,6 +19,20 @@ class DeviceError(VibrofocusError):
 
 class DeviceBusyError(DeviceError):
     """Another job (in this process or another one) is using the device; nothing was played."""
+
+
+class StoppedError(DeviceError):
+    """A play or recording ended early because ``rig.stop()`` was called; the outputs are at zero.
+
+    Parameters
+    ----------
+    what : {"play", "recording"}
+        What was stopped; a stopped recording is discarded.
+    """
+
+    def __init__(self, what: str = "play") -> None:
+        super().__init__(f"the {what} was stopped before it ended (rig.stop()); the outputs are at zero"
+                         + ("; it is discarded" if what == "recording" else ""))
 
 
 @dataclass

@@ -44,7 +44,7 @@ import numpy as np
 
 from ..layout import ArrayLayout
 from .config import NidaqRigConfig
-from .devices import DeviceError
+from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
 
 __all__ = ["NidaqRig", "NidaqTasks"]
@@ -63,11 +63,6 @@ def _daq_error_types() -> tuple[type[BaseException], ...]:
     except ImportError:  # pragma: no cover - nidaqmx is a dependency
         return ()
     return (DaqError, DaqNotFoundError, DaqNotSupportedError)
-
-
-class _Stopped(DeviceError):
-    def __init__(self) -> None:
-        super().__init__("the play was stopped before it ended (rig.stop()); outputs are at 0 V")
 
 
 class NidaqTasks:
@@ -237,18 +232,20 @@ class NidaqTasks:
         return first
 
     @contextmanager
-    def _tasks(self, what: str, *, stoppable: bool = True) -> Iterator[list]:
+    def _tasks(self, what: str, *, stops: str | None = None) -> Iterator[list]:
         """Tasks made in the block are closed after it; driver errors become DeviceError.
 
-        A failure while closing never hides the error that ended the block.
+        ``stops`` names what ``stop()`` ends here ("play", "recording"): a driver error
+        after a stop (the task was aborted under it) is that :class:`StoppedError`. A
+        failure while closing never hides the error that ended the block.
         """
         tasks: list = []
         try:
             yield tasks
         except _daq_error_types() as exc:
             self._close_after_error(tasks)
-            if stoppable and self._stop_requested.is_set():  # the task was aborted under it by stop()
-                raise _Stopped() from exc
+            if stops is not None and self._stop_requested.is_set():
+                raise StoppedError(stops) from exc
             raise self._wrap(exc, what) from exc
         except BaseException:
             self._close_after_error(tasks)
@@ -274,14 +271,17 @@ class NidaqTasks:
         with self._active_lock:
             self._active_ao = task
 
-    def _run_output(self, ao, n: int) -> None:
-        """Start the written output task and wait for it, polling, so a stop or Ctrl-C ends it at once."""
+    def _run_output(self, ao, n: int, stops: str) -> None:
+        """Start the written output task and wait for it, polling, so a stop or Ctrl-C ends it at once.
+
+        ``stops`` names what a stop ends ("play", "recording"), for its :class:`StoppedError`.
+        """
         self._set_active(ao)
         ao.start()
         deadline = time.monotonic() + self._timeout(n)
         while True:
             if self._stop_requested.is_set():
-                raise _Stopped()
+                raise StoppedError(stops)
             if ao.is_task_done():
                 break
             if time.monotonic() > deadline:
@@ -293,12 +293,12 @@ class NidaqTasks:
         """Play output volts, shape (n_actuators, n), V at the analog outputs."""
         n = volts.shape[1]
         self._stop_requested.clear()
-        with self._tasks("playing") as tasks:
+        with self._tasks("playing", stops="play") as tasks:
             ao = self._ao_task()
             tasks.append(ao)
             self._finite(ao, n)
             ao.write(volts, auto_start=False)
-            self._run_output(ao, n)
+            self._run_output(ao, n, "play")
 
     def play_and_record(self, volts: np.ndarray, n_record: int) -> np.ndarray:
         """Play output volts and record the vibrometer input, sample-synchronously.
@@ -318,7 +318,7 @@ class NidaqTasks:
         cfg = self.config
         n = volts.shape[1]
         self._stop_requested.clear()
-        with self._tasks("recording") as tasks:
+        with self._tasks("recording", stops="recording") as tasks:
             ai = self._ai_task([cfg.channels.vibrometer], ["vibrometer"], cfg.ai_range_v)
             tasks.append(ai)
             self._finite(ai, n_record)
@@ -328,7 +328,7 @@ class NidaqTasks:
             tasks.insert(0, ao)  # the output is aborted first
             self._finite(ao, n)
             ao.write(volts, auto_start=False)
-            self._run_output(ao, n)
+            self._run_output(ao, n, "recording")
             data = ai.read(number_of_samples_per_channel=n_record, timeout=self._timeout(n_record))
         out = np.asarray(data, dtype=float).reshape(-1)
         if out.shape != (n_record,):
@@ -358,7 +358,7 @@ class NidaqTasks:
                         active.control(mode)
                     except _daq_error_types() as exc:  # already done and closing: zeros follow anyway
                         log.warning("%s of the running output task failed: %s", mode.name, exc)
-        with self._tasks("setting the outputs to zero", stoppable=False) as tasks:
+        with self._tasks("setting the outputs to zero") as tasks:
             ao = self._ao_task()
             tasks.append(ao)
             ao.write(np.zeros(self.config.n_actuators), auto_start=True)

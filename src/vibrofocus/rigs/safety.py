@@ -243,7 +243,6 @@ class EnergyBudget:
                     + _channel_message(rms, self.limits.rms_v, "V RMS", f" over {self.limits.rms_window_s:g} s")
                     + f"; wait {wait:.1f} s for the actuators to cool, or play less"
                 )
-            self._tail = history[:, -self.n_window:] if history.shape[1] >= self.n_window else np.pad(
-                history, ((0, 0), (self.n_window - history.shape[1], 0)))
+            self._tail = history[:, -self.n_window:]  # history always holds the window and the drive
             begin = start_s if self._end_s is None else max(start_s, self._end_s)
             self._end_s = begin + drive.shape[1] / self.fs
