@@ -19,8 +19,8 @@ Sources (each read in a stored copy; what was not verified is said so):
   Feng X, Li G-Y, Ramier A, Eltony AM, Yun S-H, "In vivo stiffness measurement of
   epidermis, dermis, and hypodermis using broadband Rayleigh-wave optical coherence
   elastography", Acta Biomater. 146:295-305, 2022 (arXiv preprint abstract read;
-  journal, pages and authors read on a bibliographic listing; DOI
-  10.1016/j.actbio.2022.04.030 read only second-hand): shear modulus E/3 = 5 kPa
+  journal, pages, authors and DOI 10.1016/j.actbio.2022.04.030 read on one
+  bibliographic listing): shear modulus E/3 = 5 kPa
   (incompressible; our arithmetic).
 - Loss, nominal and low: tan delta = 0.14 +/- 0.07 from the exponential decay of surface
   waves, Kirkpatrick SJ, Duncan DD, Fang L, "Low-frequency surface wave propagation and
