@@ -279,7 +279,7 @@ def test_simulated_participants_are_flagged_in_json_and_html(tmp_path, synthetic
     paths = write_report(analyze(load_trials(path)), tmp_path / "out")
     report = json.loads(paths["json"].read_text())
     assert report["simulated"]["any"] is True and report["simulated"]["participants"] == sims
-    assert "model v2" in report["simulated"]["model"] and "not data" in report["simulated"]["model"]
+    assert "model v3" in report["simulated"]["model"] and "not data" in report["simulated"]["model"]
     page = paths["html"].read_text()
     assert "id='simulated-banner'" in page and "SIMULATED DATA" in page and sims[0] in page
     # Without the column (or with only zeros): no flag, no banner.

@@ -137,9 +137,48 @@ def test_counts_and_target_restriction_by_hand():
     assert_allclose(c.loc[("P1", "inverse"), ["n_selected", "hit_rate"]].astype(float), [2.5, 0.5])
     assert c.loc[("P1", "inverse"), "n_trials"] == 2 and excluded == []
     hit, excluded = study2_counts(complete, contains_target=True)
-    assert set(hit["participant"]) == {"P2"}  # P1 never selected the target with funneling
-    assert excluded[0]["participant"] == "P1" and "1 of the 2 conditions" in excluded[0]["reason"]
-    assert_allclose(hit.set_index("method").loc["funneling", "n_selected"], 4.0)
+    # P1 never selected the target with funneling: that cell is empty, but P1 keeps its
+    # inverse cell (the tests use marginal means, so one empty cell drops nobody).
+    assert excluded == []
+    h = hit.set_index(["participant", "method"])
+    assert sorted(h.index) == [("P1", "inverse"), ("P2", "funneling"), ("P2", "inverse")]
+    assert_allclose(h.loc[("P1", "inverse"), "n_selected"], 2.0)
+    assert_allclose(h.loc[("P2", "funneling"), "n_selected"], 4.0)
+
+
+def test_target_containing_friedman_on_marginal_means_by_hand():
+    # Three participants, 3 locations x 2 methods; P3 has no target-containing trial at
+    # location 2 with the inverse filter (an empty cell), and none at all at location 3.
+    cells = {
+        ("P1", 1, "funneling"): 3.0, ("P1", 1, "inverse"): 1.0, ("P1", 2, "funneling"): 2.0,
+        ("P1", 2, "inverse"): 2.0, ("P1", 3, "funneling"): 4.0, ("P1", 3, "inverse"): 2.0,
+        ("P2", 1, "funneling"): 2.0, ("P2", 1, "inverse"): 1.0, ("P2", 2, "funneling"): 3.0,
+        ("P2", 2, "inverse"): 1.0, ("P2", 3, "funneling"): 1.0, ("P2", 3, "inverse"): 3.0,
+        ("P3", 1, "funneling"): 4.0, ("P3", 1, "inverse"): 2.0, ("P3", 2, "funneling"): 1.0,
+    }
+    counts = pd.DataFrame([(p, loc, m, v, 2) for (p, loc, m), v in cells.items()],
+                          columns=["participant", "location", "method", "n_selected", "n_trials"])
+    with pytest.raises(ValidationError, match="miss a level"):
+        friedman_tests(counts)
+    res = friedman_tests(counts, incomplete="drop")
+    # Method: every participant has both methods; P3's means are over the cells it has
+    # (funneling (4 + 1) / 2, inverse 2 / 1).
+    method = np.array([[3.0, 5 / 3], [2.0, 5 / 3], [2.5, 2.0]])
+    assert res.loc["method", "n"] == 3 and res.loc["method", "n_trials"] == 2 * len(cells)
+    assert_allclose(res.loc["method", "chi2"], _friedman_chi2(method), rtol=1e-10)
+    # Location: P3 lacks location 3 and is left out of this test only.
+    location = np.array([[2.0, 2.0, 3.0], [1.5, 2.0, 2.0]])
+    assert res.loc["location", "n"] == 2 and res.loc["location", "n_trials"] == 2 * 12
+    assert_allclose(res.loc["location", "chi2"], _friedman_chi2(location), rtol=1e-10)
+
+
+def _friedman_chi2(x: np.ndarray) -> float:
+    """Friedman's chi-square with the tie correction (Hollander & Wolfe), subjects x levels."""
+    n, k = x.shape
+    ranks = np.apply_along_axis(stats.rankdata, 1, x)
+    ties = sum(np.sum(c**3 - c) for c in (np.unique(row, return_counts=True)[1] for row in x))
+    return float((12 / (n * k * (k + 1)) * np.sum(ranks.sum(axis=0) ** 2) - 3 * n * (k + 1))
+                 / (1 - ties / (n * k * (k**2 - 1))))
 
 
 # --------------------------------------------------------------------------- planted / null effects

@@ -16,14 +16,14 @@ def test_power_writes_table_plot_and_json(tmp_path):
     out = tmp_path / "power"
     res = runner.invoke(app, ["power", "-n", "4,6", "--studies", "5", "--no-dask", "-q", "--out", str(out)])
     assert res.exit_code == 0, res.output
-    assert "model v2" in res.output and "not data" in res.output
+    assert "model v3" in res.output and "not data" in res.output
     assert "Study 1 RM-ANOVA, location (GG)" in res.output
     table = pd.read_csv(out / "power.csv")
     assert set(table["n_participants"]) == {4, 6} and len(table) == 14
     ran = table["n_studies"] > 0  # a test that never ran (too few participants kept) has no power
     assert table.loc[ran, "power"].between(0, 1).all() and table.loc[~ran, "power"].isna().all()
     assert ran[table["test"].str.startswith("s1_")].all()
-    assert (table["model"].str.contains("not data") & table["model"].str.contains("model v2")).all()
+    assert (table["model"].str.contains("not data") & table["model"].str.contains("model v3")).all()
     report = json.loads((out / "power.json").read_text())
     assert report["design"]["n_studies"] == 5 and "not data" in report["label"]
     assert (out / "power.png").stat().st_size > 1000
@@ -66,6 +66,6 @@ def test_power_names_its_skin_and_refuses_one_its_model_was_not_fitted_on():
 
     from vibrofocus.cli.main import app
 
-    result = CliRunner().invoke(app, ["power", "--skin", "nominal", "-n", "10", "--studies", "2", "--no-dask"])
+    result = CliRunner().invoke(app, ["power", "--skin", "voigt-fit", "-n", "10", "--studies", "2", "--no-dask"])
     assert result.exit_code == 2
-    assert "fitted on the voigt-fit skin only" in result.output
+    assert "fitted on the nominal skin only" in " ".join(result.output.split())

@@ -1,10 +1,11 @@
-"""The fitted model v2 beside the paper (de Vlam et al. 2023, as quoted in issue 16).
+"""The fitted model v3 beside the paper (de Vlam et al. 2023, Sec. III.B-C).
 
-Each row of the issue's table is checked in simulated 20-participant studies on seeds
-that neither the fit (1000-1015) nor the documented table (0-19) used; the criteria are
-written out here, independently of ``vibrofocus.studies.paper``. The shares observed when
-the model was fitted are in ``docs/simulated-participants.md``; the test asks for a
-majority of seeds per row (a row reproduced in fewer would fail it).
+Each finding is checked in simulated 20-participant studies on seeds that neither the fit
+(1000-1015) nor the documented table (0-19) used; the criteria are written out here,
+independently of ``vibrofocus.studies.paper``. The issue's aim is every finding in at
+least 2/3 of the seeds; the findings the model does not reach are listed in
+docs/simulated-participants.md ("What the model does not reproduce"), and a test checks
+that the list is still true.
 """
 
 from __future__ import annotations
@@ -23,73 +24,119 @@ from vibrofocus.studies.perception import MODEL_LABEL, PARAMETER_SOURCES, Percep
 from vibrofocus.studies.power import study_statistics
 
 ROOT = Path(__file__).resolve().parents[2]
-SEEDS = range(300, 340)  # 40 studies: about 1 s
+SEEDS = range(300, 340)  # 40 studies: a few seconds
 
 
 @pytest.fixture(scope="module")
 def stats():
     bank = default_bank()
-    return [study_statistics(simulate_cell_means(20, np.random.default_rng([s, 77]), bank=bank)) for s in SEEDS]
+    return [study_statistics(simulate_cell_means(20, np.random.default_rng([s, 77]), bank=bank), methods=bank.methods)
+            for s in SEEDS]
 
 
 def _share(stats, predicate) -> float:
     return float(np.mean([bool(predicate(s)) for s in stats]))
 
 
-# (row of the issue's table, criterion on one study, least share of seeds). Shares on these
-# 40 seeds with the fitted defaults: location 100 %, sphericity violated 98 %, method 100 %,
-# interaction 48 %, post hoc at 1, 3 or 9 98 %, 4, 5, 7, 8 below the others 100 %,
-# Study 2 location 100 %, target-containing location n.s. 52 %, method n.s. 65 %.
-# Most rows are reproduced in nearly every seed and must stay so (80 %). Three are
-# reproduced in only about half of the seeds, a shortfall of the model
-# (docs/simulated-participants.md): they are held at 40 % so that a change making them
-# worse fails, without claiming a majority the model does not reach. The two Study 2 rows
-# moreover rest on tests of very few participants (a median of 2 of 20 keep a
-# target-containing trial in every condition); a test that could not run counts as not
-# reproduced (its p is NaN).
-MOST, HALF = 0.8, 0.4
-ROWS = [
-    ("Study 1 location significant (GG)", lambda s: s["s1_location_p"] < 0.05, MOST),
-    ("Study 1 location: sphericity violated", lambda s: s["s1_location_p_mauchly"] < 0.05, MOST),
-    ("Study 1 method significant", lambda s: s["s1_method_p"] < 0.05, MOST),
-    ("Study 1 interaction significant", lambda s: s["s1_interaction_p"] < 0.05, HALF),
-    ("interaction post hoc at 1, 3 or 9",
-     lambda s: np.isin([0, 2, 8], s["s1_interaction_locations"]).any(), MOST),
+def _rank(s, location: int) -> int:
+    """0 = the lowest mean error."""
+    return int(np.argsort(np.argsort(s["s1_error_by_location"]))[location - 1])
+
+
+AIM = 2 / 3
+# (finding, criterion on one study). Each must hold in at least 2/3 of the 40 seeds.
+REPRODUCED = [
+    ("Study 1 location significant (GG)", lambda s: s["s1_location_p"] < 0.05),
+    ("Study 1 method significant", lambda s: s["s1_method_p"] < 0.05),
     ("locations 4, 5, 7, 8 below the others",
-     lambda s: s["s1_error_by_location"][[3, 4, 6, 7]].mean() < s["s1_error_by_location"][[0, 1, 2, 5, 8]].mean(), MOST),
-    ("Study 2 location significant", lambda s: s["s2_location_p"] < 0.05, MOST),
-    ("Study 2 with the target: location not significant", lambda s: s["s2_hit_location_p"] >= 0.05, HALF),
-    ("Study 2 with the target: method not significant", lambda s: s["s2_hit_method_p"] >= 0.05, HALF),
+     lambda s: s["s1_error_by_location"][[3, 4, 6, 7]].mean() < s["s1_error_by_location"][[0, 1, 2, 5, 8]].mean()),
+    ("location 1 among the five worst", lambda s: _rank(s, 1) >= 4),
+    ("Study 2 method significant, inverse fewer points",
+     lambda s: s["s2_method_p"] < 0.05 and s["s2_inverse_fewer"]),
+    ("Study 2 with the target: location not significant", lambda s: s["s2_hit_location_p"] >= 0.05),
 ]
+# Findings the docs say the model does not reproduce in two thirds of the seeds
+# (docs/simulated-participants.md, "What the model does not reproduce"):
+# (finding, criterion, the phrase that names it there).
+NOT_REPRODUCED = [
+    ("inverse lower error than funneling (Study 1)",
+     lambda s: s["s1_method_pairs"]["funneling vs inverse"] < 0.05
+     and s["s1_error_by_method"][1] < s["s1_error_by_method"][0],
+     "the direction of the method effect"),
+    ("only funneling vs inverse differ (Study 1 post hoc)", lambda s: s["s1_only_funneling_vs_inverse"],
+     "only funneling and the inverse filter differ"),
+    ("at 1, 3 and 9 the inverse differs from both others",
+     lambda s: np.isin([0, 2, 8], s["s1_inverse_differs_locations"]).all(),
+     "at locations 1, 3 and 9 the inverse filter differs from both other methods"),
+    ("best locations exactly 4, 5, 7, 8",
+     lambda s: set(np.argsort(s["s1_error_by_location"])[:4]) == {3, 4, 6, 7},
+     "the exact ranking 4, 5, 7, 8 is also rare"),
+    ("Study 1 location: sphericity violated", lambda s: s["s1_location_p_mauchly"] < 0.05,
+     "the sphericity violation"),
+    ("Study 2 location significant", lambda s: s["s2_location_p"] < 0.05,
+     "the study 2 location effect each hold in about half of the seeds"),
+    ("Study 2 with the target: method not significant", lambda s: s["s2_hit_method_p"] >= 0.05,
+     "the non-significance of the target-containing method test depends on the seed set"),
+]
+# Two of them sit near the 2/3 line on these seeds (Study 2 location 60 %, target-containing
+# method 53 %): a model change that lifts them past it fails the test below, and the
+# docs must then move them to the reproduced list.
 
 
-@pytest.mark.parametrize(("row", "criterion", "least"), ROWS, ids=[r[0] for r in ROWS])
-def test_fitted_model_reproduces_each_row_in_most_seeds(stats, row, criterion, least):
+@pytest.mark.parametrize(("row", "criterion"), REPRODUCED, ids=[r[0] for r in REPRODUCED])
+def test_fitted_model_reproduces_each_finding_in_two_thirds_of_the_seeds(stats, row, criterion):
     share = _share(stats, criterion)
-    assert share >= least, f"{row}: reproduced in {share:.0%} of {len(stats)} seeds (needs {least:.0%})"
+    assert share >= AIM, f"{row}: reproduced in {share:.0%} of {len(stats)} seeds (needs {AIM:.0%})"
+
+
+@pytest.mark.parametrize(("row", "criterion", "phrase"), NOT_REPRODUCED, ids=[r[0] for r in NOT_REPRODUCED])
+def test_the_documented_shortfalls_are_still_true(stats, row, criterion, phrase):
+    # The docs name each finding the model misses; if the model comes to reproduce one,
+    # this fails and the docs (and REPRODUCED) must change.
+    share = _share(stats, criterion)
+    assert share < AIM, f"{row}: now reproduced in {share:.0%} of the seeds; update the docs"
+    assert phrase in _shortfalls(), f"the docs no longer say: {phrase!r}"
+
+
+def _shortfalls() -> str:
+    text = (ROOT / "docs" / "simulated-participants.md").read_text(encoding="utf-8").lower()
+    return " ".join(text.split("what the model does not reproduce", 1)[1].split("<!--", 1)[0].split())
+
+
+def test_selected_points_fall_by_ten_to_thirty_percent(stats):
+    # The paper's headline (abstract): about 20 % fewer points with the inverse filter.
+    reduction = np.median([s["s2_reduction"] for s in stats])
+    assert 0.10 <= reduction <= 0.30, reduction
+
+
+def test_target_containing_tests_keep_most_participants(stats):
+    # Marginal means: no participant is dropped for one empty cell.
+    assert np.median([s["s2_hit_n"] for s in stats]) >= 15
 
 
 def test_fitted_statistics_are_near_the_papers(stats):
-    # The fit matches medians. Out of sample (these seeds): location F 2.1x the paper's,
-    # interaction F 0.50x, Study 2 location chi2 1.0x, each held within a factor 2.5. The
-    # method F is about 3x the paper's (the price of a significant interaction, see
-    # docs/simulated-participants.md): held between 1x and 5x.
-    med = {k: float(np.median([s[k] for s in stats])) for k in
-           ("s1_location_F", "s1_method_F", "s1_interaction_F", "s2_location_chi2")}
-    paper = {"s1_location_F": 10.96, "s1_method_F": 6.09, "s1_interaction_F": 3.92, "s2_location_chi2": 30.75}
-    for k in ("s1_location_F", "s1_interaction_F", "s2_location_chi2"):
-        assert 1 / 2.5 < med[k] / paper[k] < 2.5, (k, med[k], paper[k])
-    assert 1.0 < med["s1_method_F"] / paper["s1_method_F"] < 5.0, med["s1_method_F"]
+    # The fit matches medians. Out of sample (these seeds): location F 1.4x the paper's,
+    # method F 1.6x, interaction F 0.6x, Study 2 chi2 of location 0.6x and of method 0.8x:
+    # each held within a factor 2.5 of the paper's value (Sec. III.B-C).
+    paper = {"s1_location_F": 10.958, "s1_method_F": 6.090, "s1_interaction_F": 3.919,
+             "s2_location_chi2": 30.749, "s2_method_chi2": 15.797}
+    for k, v in paper.items():
+        med = float(np.median([s[k] for s in stats]))
+        assert 1 / 2.5 < med / v < 2.5, (k, med, v)
 
 
 def test_comparison_rows_match_the_criteria(stats):
     # The documented table's shares come from vibrofocus.studies.paper; they agree with the
     # criteria written out above on the same studies.
     rows = {r["label"]: r for r in compare(stats)}
-    assert rows["Study 1 location, F"]["share"] == _share(stats, ROWS[0][1])
-    assert rows["Study 1 method, F"]["share"] == _share(stats, ROWS[2][1])
-    assert rows["best locations"]["share"] == _share(stats, ROWS[5][1])
-    assert rows["Study 2, trials containing the target: method, chi2(2)"]["share"] == _share(stats, ROWS[8][1])
+    criteria = {row: criterion for row, criterion, *_ in REPRODUCED + NOT_REPRODUCED}
+    assert rows["Study 1 location, F"]["share"] == _share(stats, criteria["Study 1 location significant (GG)"])
+    assert rows["Study 1 method, F"]["share"] == _share(stats, criteria["Study 1 method significant"])
+    assert rows["best locations"]["share"] == _share(stats, criteria["locations 4, 5, 7, 8 below the others"])
+    assert rows["Study 2, trials containing the target: method, chi2(2)"]["share"] == _share(
+        stats, criteria["Study 2 with the target: method not significant"])
+    assert rows["Study 1 method, inverse vs funneling"]["share"] == _share(
+        stats, criteria["inverse lower error than funneling (Study 1)"])
     f = np.array([s["s1_location_F"] for s in stats])
     r = rows["Study 1 location, F"]
     assert r["median"] == pytest.approx(np.median(f)) and r["low"] == pytest.approx(np.percentile(f, 5))

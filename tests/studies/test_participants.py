@@ -1,4 +1,4 @@
-"""The simulated participants' perceptual model v2: each component against its cited
+"""The simulated participants' perceptual model v3: each component against its cited
 curve or law, seeded answers, and the engine responder interface."""
 
 import numpy as np
@@ -12,6 +12,7 @@ from vibrofocus.studies.participants import MODEL_NOTICE, PerceptualModel, Simul
 from vibrofocus.studies.perception import (
     MODEL_LABEL,
     Percepts,
+    actuator_energy,
     Traits,
     central_percepts,
     draw_answers,
@@ -65,6 +66,60 @@ def test_funneling_follows_the_energy_law():
         e = np.array([[1.0 - b, b]])  # energy ∝ amplitude²
         p = central_percepts(e, pts, model, traits)
         np.testing.assert_allclose(p.position_m[0], pts[0] + b * (pts[1] - pts[0]), atol=1e-6)
+
+
+def test_funneling_is_coded_from_what_the_actuators_deliver():
+    # The paper's Sec. IV: funneling is coded centrally. With the drive cue's weight 1 the
+    # place follows the energy law over the actuators' delivered energies, whatever the
+    # skin cue says; with weight 0.5 it lies halfway between the two cues, and the cues'
+    # distance is the conflict.
+    acts = np.array([[-0.0225, 0.0], [0.0225, 0.0]])
+    pts = np.array([[0.0, 0.01], [0.0, 0.02]])
+    skin = np.array([[1.0, 1.0]])  # skin cue at (0, 0.015)
+    for b in (0.2, 0.5, 0.9):
+        delivered = np.array([[1.0 - b, b]])
+        drive_cue = acts[0] + b * (acts[1] - acts[0])
+        for beta in (1.0, 0.5):
+            model = PerceptualModel(funneling_exponent=1.0, sl_ref_db=80.0, central_weight=beta)
+            p = central_percepts(skin, pts, model, Traits.draw(model, 0), delivered, acts)
+            np.testing.assert_allclose(p.position_m[0], (1 - beta) * np.array([0.0, 0.015]) + beta * drive_cue,
+                                       atol=1e-9)
+            np.testing.assert_allclose(p.conflict_m[0], np.hypot(drive_cue[0], 0.015), rtol=1e-6)  # threshold: 1e-8
+
+
+def test_cue_conflict_makes_a_less_certain_percept():
+    model = PerceptualModel(conflict_gain=1.0)
+    traits = Traits(0.0, 6e-3, 12e-3, np.zeros(2), 0.4, 1.0, spread_gain=0.0)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    target = np.array([-0.01, 0.01])
+    res = {}
+    for conflict in (0.0, 0.02):
+        p = Percepts(target[None], np.zeros(1), np.array([True]), np.array([conflict]))
+        a, sel, _ = draw_answers(p, np.zeros(4000, int), locs, np.zeros(2), model, traits, np.random.default_rng(1))
+        res[conflict] = (np.mean(a == 0), sel.sum(1).mean())
+    assert res[0.02][0] < res[0.0][0] - 0.1
+    assert res[0.02][1] > res[0.0][1] + 0.3
+
+
+def test_a_partly_coupled_actuator_delivers_less():
+    # The paper's Sec. IV: the wrist-side exciters were only partly in contact. The same
+    # participant's forearm with every actuator in full contact: each partly coupled
+    # actuator delivers less of the same drive at its contact; the fully coupled ones the same.
+    from dataclasses import replace
+
+    from vibrofocus.skin import SimulatedForearm
+
+    loose = make_rig("simulated", seed=3, skin="nominal")
+    contact = np.asarray(loose.participant.contact)
+    assert contact.min() < 0.5 and contact.max() < 1.0
+    firm = SimulatedForearm(seed=3, skin="nominal", participant=replace(loose.participant, contact=np.ones_like(contact)))
+    acts = np.asarray(loose.layout.actuators_xy, dtype=float)
+    tap = render("funneling", loose.transfer(loose.layout.points_xy, np.fft.rfftfreq(N, 1 / loose.fs)), loose.fs,
+                 loose.layout, 5).drives[None]
+    ratio = actuator_energy(loose, acts, tap)[0] / actuator_energy(firm, acts, tap)[0]
+    np.testing.assert_array_less(ratio, 1.0)  # every contact of this participant is < 1
+    assert np.array_equal(np.argsort(ratio), np.argsort(contact)), (ratio, contact)  # looser delivers less
+    assert ratio[np.argmin(contact)] < 0.5
 
 
 def test_detection_threshold_decides_what_is_felt():
@@ -179,7 +234,9 @@ def test_felt_energy_matches_the_skin_field(rig, drives):
 
 def test_data_file_has_the_paper_statistics():
     paper = psychophysics_data()["paper_statistics"]
-    assert paper["study1_location"]["F"] == 10.96 and paper["study2_location"]["chi2"] == 30.75
+    # As printed in the paper (Sec. III.B-C).
+    assert paper["study1_location"]["F"] == 10.958 and paper["study2_location"]["chi2"] == 30.749
+    assert paper["study2_method"]["chi2"] == 15.797 and paper["study2_method"]["reduction"] == 0.20
 
 
 # ---------------------------------------------------------------- responder
@@ -215,7 +272,7 @@ def test_design_limits_the_answers(participant, drives):
 def test_different_participants_differ_and_are_labelled(rig):
     a, b = SimulatedParticipant(rig, seed=1), SimulatedParticipant(rig, seed=2)
     assert a.traits.to_dict() != b.traits.to_dict()
-    assert a.describe()["model"] == MODEL_LABEL and "not data" in MODEL_LABEL and "v2" in MODEL_LABEL
+    assert a.describe()["model"] == MODEL_LABEL and "not data" in MODEL_LABEL and "v3" in MODEL_LABEL
     assert "not data" in MODEL_NOTICE or "not from people" in MODEL_NOTICE
 
 

@@ -105,11 +105,7 @@ def test_another_seed_on_the_same_database_is_refused(simulated):
 
 def test_analysis_reads_the_export(simulated, tmp_path):
     _, out, _ = simulated
-    try:
-        import vibrofocus.analysis  # noqa: F401
-        from vibrofocus.cli import analyze  # noqa: F401
-    except ImportError:  # pragma: no cover - the analysis package is built separately
-        pytest.skip("vibrofocus.analysis is not available")
+    # The analysis ships with the package: an import failure is a failure, not a skip.
     result = CliRunner().invoke(app, ["analyze", str(out), "--out", str(tmp_path / "report"), "--quiet"])
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "report" / "report.json").read_text())

@@ -281,7 +281,8 @@ def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
     participants = sorted(map(str, counts["participant"].unique())) if len(counts) else []
     n = len(participants)
     cell_means = _cell_means(counts, "n_selected") if n else pd.DataFrame()
-    friedman, why_f = _guarded("friedman", n, lambda: friedman_tests(counts))
+    incomplete = "drop" if contains_target else "raise"
+    friedman, why_f = _guarded("friedman", n, lambda: friedman_tests(counts, incomplete=incomplete))
     wilcoxon, why_w = _guarded(
         "wilcoxon", n, lambda: {factor: wilcoxon_posthoc(counts, factor) for factor in ("location", "method")}
     )
@@ -290,9 +291,9 @@ def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
         why_f = why_w = f"Friedman and Wilcoxon tests need at least 2 participants, got {n}"
         if contains_target:
             left = (
-                f"only {_participants(n)} left with a target-containing trial in every condition"
+                f"only {_participants(n)} with a target-containing trial"
                 if n
-                else "no participant has a target-containing trial in every condition"
+                else "no participant has a target-containing trial"
             )
             why_f = why_w = f"{left}; Friedman and Wilcoxon tests need at least 2"
     return Study2Counts(participants, counts, cell_means, friedman, wilcoxon or {}, excluded, why_f, why_w)

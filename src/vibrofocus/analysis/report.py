@@ -12,6 +12,9 @@ import os
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+import pandas as pd
+
 from ..io.jsonsafe import json_safe
 from ..io.report_json import FRIEDMAN_FACTORS, FRIEDMAN_KEYS, REPORT_JSON, write_report_json
 from .pipeline import AnalysisResult, Study2Counts
@@ -34,7 +37,8 @@ def _study2_part_dict(part: Study2Counts) -> dict:
         if part.friedman is None
         else {
             factor: {
-                "chi2": r["chi2"], "dof": int(r["dof"]), "p": r["p"], "kendall_w": r["kendall_w"], "n": int(r["n"])
+                "chi2": r["chi2"], "dof": int(r["dof"]), "p": r["p"], "kendall_w": r["kendall_w"], "n": int(r["n"]),
+                "n_trials": None if pd.isna(r.get("n_trials", np.nan)) else int(r["n_trials"]),
             }
             for factor, r in part.friedman.iterrows()
         }

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 
 from .pipeline import AnalysisResult, Study1Result, Study2Counts, Study2Result
 
@@ -153,6 +154,12 @@ def _study1_sentences(s1: Study1Result, alpha: float) -> list[str]:
     return out
 
 
+def _size(row) -> str:
+    """"N = 20" or "N = 20, 1512 trials": who and what entered a test."""
+    trials = row.get("n_trials", float("nan"))
+    return f"N = {int(row['n'])}" + ("" if pd.isna(trials) else f", {int(trials)} trials")
+
+
 def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str]:
     if part.friedman is None:
         return [f"Friedman tests {label} were not computed: {part.unavailable}."] + (
@@ -160,16 +167,18 @@ def _friedman_sentence(part: Study2Counts, label: str, alpha: float) -> list[str
             if part.wilcoxon_unavailable and part.wilcoxon_unavailable != part.unavailable
             else []
         )
-    n = int(part.friedman["n"].iloc[0])
+    sizes = {(int(r["n"]), r.get("n_trials", float("nan"))) for _, r in part.friedman.iterrows()}
     bits = []
     for factor, r in part.friedman.iterrows():
         verdict = "a significant" if r["p"] < alpha else "no significant"
+        size = "" if len(sizes) == 1 else f" ({_size(r)})"
         bits.append(
-            f"{verdict} effect of {factor}, χ²({int(r['dof'])}) = {r['chi2']:.2f}, {format_p(r['p'])}, "
+            f"{verdict} effect of {factor}{size}, χ²({int(r['dof'])}) = {r['chi2']:.2f}, {format_p(r['p'])}, "
             f"Kendall's W = {r['kendall_w']:.2f}"
         )
+    common = f" ({_size(part.friedman.iloc[0])})" if len(sizes) == 1 else ""
     out = [
-        f"Friedman tests on the mean number of selected locations per participant, {label} (N = {n}), showed "
+        f"Friedman tests on the mean number of selected locations per participant, {label}{common}, showed "
         + "; and ".join(bits) + "."
     ]
     if part.wilcoxon_unavailable:
@@ -199,7 +208,7 @@ def _study2_sentences(s2: Study2Result, alpha: float) -> list[str]:
         out.append(
             f"For the trials whose selection contains the target, "
             f"{_count(len(ct.excluded), 'participant')} ({', '.join(e['participant'] for e in ct.excluded)}) "
-            f"had no such trial in some condition and {'was' if len(ct.excluded) == 1 else 'were'} left out of "
+            f"had no such trial and {'was' if len(ct.excluded) == 1 else 'were'} left out of "
             f"that analysis."
         )
     out += _friedman_sentence(ct, label, alpha)

@@ -40,8 +40,11 @@ def study2_counts(trials: pd.DataFrame, *, contains_target: bool = False) -> tup
         count), ``n_trials``, ``hit_rate`` (fraction of the condition's trials whose
         selection contains the target; with ``contains_target`` this is 1).
     exclusions : list of dict
-        With ``contains_target``, the participants left with no such trial in some
-        condition (``participant``, ``reason``); they are dropped from ``counts``.
+        With ``contains_target``, the participants with no such trial at all
+        (``participant``, ``reason``). A participant with such trials in only some
+        conditions keeps those cells: the tests run on per-participant marginal means
+        (:func:`friedman_tests` with ``incomplete="drop"``), so one empty cell does not
+        drop a participant.
     """
     _require(trials, ("participant", "target", "method", "selection"), "study-2 trials")
     trials = _only_study(trials, 2)
@@ -59,20 +62,11 @@ def study2_counts(trials: pd.DataFrame, *, contains_target: bool = False) -> tup
         .rename(columns={"target": "location"})
     )
     if contains_target:
-        have = out.groupby("participant").size()
-        for participant in sorted(set(trials["participant"])):
-            n_have = int(have.get(participant, 0))
-            if n_have < len(conditions):
-                exclusions.append(
-                    {
-                        "participant": str(participant),
-                        "reason": (
-                            f"no trial whose selection contains the target in {len(conditions) - n_have} "
-                            f"of the {len(conditions)} conditions"
-                        ),
-                    }
-                )
-        out = out[~out["participant"].isin([e["participant"] for e in exclusions])]
+        have = set(out["participant"])
+        exclusions = [
+            {"participant": str(participant), "reason": "no trial whose selection contains the target"}
+            for participant in sorted(set(trials["participant"])) if participant not in have
+        ]
     if out.empty:
         return out.reset_index(drop=True), exclusions
     return _sort(out.reset_index(drop=True), ("participant", "location", "method")), exclusions
@@ -100,10 +94,13 @@ def friedman_tests(
     dv: str = "n_selected",
     factors: Sequence[str] = ("location", "method"),
     subject: str = "participant",
+    incomplete: str = "raise",
 ) -> pd.DataFrame:
     """Friedman test for each factor on the per-subject means over the other factors.
 
-    Uses :func:`pingouin.friedman` (chi-square version, corrected for ties).
+    Uses :func:`pingouin.friedman` (chi-square version, corrected for ties). A subject's
+    mean at one level of a factor is the mean of its cells at that level (its marginal
+    mean over the other factors' cells that it has).
 
     Parameters
     ----------
@@ -115,24 +112,37 @@ def friedman_tests(
         Within-subject factors, each tested separately.
     subject : str
         Subject column.
+    incomplete : {"raise", "drop"}
+        What to do with a subject that has no cell at some level of the tested factor:
+        refuse (``"raise"``), or leave it out of that factor's test (``"drop"``; the
+        target-containing tests, docs/method.md (Analysis)).
 
     Returns
     -------
     DataFrame
-        Indexed by factor: ``chi2``, ``dof``, ``p``, ``kendall_w``, ``n`` (subjects).
+        Indexed by factor: ``chi2``, ``dof``, ``p``, ``kendall_w``, ``n`` (subjects in the
+        test), ``n_trials`` (their trials, where ``counts`` has ``n_trials``; else NaN).
 
     Raises
     ------
     ValidationError
-        Missing columns, fewer than 2 subjects or levels, or a subject missing a level.
+        Missing columns, fewer than 2 subjects or levels, or (``incomplete="raise"``) a
+        subject missing a level.
     """
     import pingouin as pg
 
     _require(counts, (dv, subject, *factors), "counts")
+    if incomplete not in ("raise", "drop"):
+        raise ValidationError(f"incomplete must be 'raise' or 'drop', got {incomplete!r}")
     rows = {}
     for factor in factors:
         means = _per_subject_means(counts, dv, factor, subject)
         wide = means.pivot(index=subject, columns=factor, values=dv)
+        if incomplete == "drop":
+            wide = wide.dropna()
+            means = means[means[subject].isin(wide.index)]
+        kept = counts[counts[subject].isin(wide.index)]
+        n_trials = float(kept["n_trials"].sum()) if "n_trials" in counts else float("nan")
         if wide.isna().any().any():
             bad = sorted(map(str, wide.index[wide.isna().any(axis=1)]))
             raise ValidationError(f"Friedman test on {factor}: {subject}(s) {', '.join(bad)} miss a level of {factor}")
@@ -142,7 +152,8 @@ def friedman_tests(
             )
         if np.ptp(wide.to_numpy(), axis=1).max() == 0:
             # All values tied within every subject: the statistic is 0/0; no evidence of a difference.
-            rows[factor] = {"chi2": 0.0, "dof": wide.shape[1] - 1, "p": 1.0, "kendall_w": 0.0, "n": wide.shape[0]}
+            rows[factor] = {"chi2": 0.0, "dof": wide.shape[1] - 1, "p": 1.0, "kendall_w": 0.0, "n": wide.shape[0],
+                            "n_trials": n_trials}
             continue
         res = pg.friedman(data=means, dv=dv, within=factor, subject=subject, method="chisq")
         rows[factor] = {
@@ -151,6 +162,7 @@ def friedman_tests(
             "p": float(res["p_unc"].iloc[0]),
             "kendall_w": float(res["W"].iloc[0]),
             "n": int(wide.shape[0]),
+            "n_trials": n_trials,
         }
     out = pd.DataFrame.from_dict(rows, orient="index")
     out.index.name = "factor"

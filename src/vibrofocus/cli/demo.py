@@ -220,6 +220,7 @@ def _make_output_folder(out: Path) -> None:
 
 def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int, skin: str) -> None:
     from ..demo.paper_figures import write_paper_figures
+    from ..studies.perception import STUDY_SKIN
 
     _make_output_folder(out)
     with Progress(TextColumn("[progress.description]{task.description}"), TimeElapsedColumn(), console=err_console,
@@ -228,7 +229,7 @@ def _write_paper_figures(out: Path, *, seed: int, participants: int, location: i
         paths = write_paper_figures(out, seed=seed, participants=participants, location=location,
                                     progress=lambda label: progress.update(task, description=label), skin=skin)
     console.print(f"The source paper's figure layouts, drawn from the model (simulated forearm, skin {skin}, and "
-                  "simulated participants on the voigt-fit skin: not data):")
+                  f"simulated participants on the {STUDY_SKIN} skin: not data):")
     for path in paths:
         console.print(f"wrote {path}")
 

@@ -50,13 +50,13 @@ def power_command(
     out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     force: bool = force_option(),
-    skin: str = typer.Option("voigt-fit", "--skin",
-                             help="Skin preset of the simulated forearms. Only voigt-fit for now: the perceptual "
+    skin: str = typer.Option("nominal", "--skin",
+                             help="Skin preset of the simulated forearms. Only nominal for now: the perceptual "
                                   "model and its feature bank are fitted on it (docs: simulated participants)."),
 ) -> None:
     """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
 
-    Studies are simulated with the perceptual MODEL of simulated participants (model v2,
+    Studies are simulated with the perceptual MODEL of simulated participants (model v3,
     fitted to the source paper's statistics), not data: the power is that of the model's
     effect sizes.
     """

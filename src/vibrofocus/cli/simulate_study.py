@@ -27,9 +27,9 @@ def simulate_study(
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     force: bool = force_option(),
-    skin: str = typer.Option("voigt-fit", "--skin",
-                             help="Skin preset of the simulated forearms: voigt-fit (the skin the perceptual model "
-                                  "was fitted on) | nominal | low | high."),
+    skin: str = typer.Option("nominal", "--skin",
+                             help="Skin preset of the simulated forearms: nominal (the skin the perceptual model "
+                                  "was fitted on) | low | high | voigt-fit."),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 

@@ -229,7 +229,7 @@ def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12,
         Called with a short label as each part starts.
     skin : str, optional
         Skin preset of the forearm of Figs. 4-5 (default ``"nominal"``). The simulated
-        study of Figs. 6-7 keeps the ``voigt-fit`` arms its perceptual model was fitted on.
+        study of Figs. 6-7 uses the arms its perceptual model was fitted on (``STUDY_SKIN``, nominal).
 
     Returns
     -------

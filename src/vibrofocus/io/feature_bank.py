@@ -3,7 +3,9 @@
 Arrays: ``energy`` (n_forearms, n_methods, n_locations, n_points), float32, felt energy
 re the reference tap; ``points_xy`` (n_points, 2), m; ``locations_xy`` (n_locations, 2),
 m; ``centre_xy`` (2,), m; ``methods`` (n_methods,), str; ``forearm_seeds``
-(n_forearms,), int; ``seed`` (scalar), int; ``model_version`` (scalar), str: the
+(n_forearms,), int; ``seed`` (scalar), int; ``actuator_energy`` (n_forearms,
+n_methods, n_locations, n_actuators), float32, each actuator's own felt energy at its
+contact; ``actuators_xy`` (n_actuators, 2), m; ``model_version`` (scalar), str: the
 perceptual model that wrote it. The shipped bank is ``studies/data/feature_bank.npz``
 (``scripts/build_feature_bank.py``).
 """
@@ -52,7 +54,8 @@ def save_feature_bank(bank: FeatureBank, path: str | os.PathLike, *, model_versi
         np.savez_compressed(
             fh, energy=bank.energy.astype(np.float32), points_xy=bank.points_xy, locations_xy=bank.locations_xy,
             centre_xy=bank.centre_xy, methods=np.array(bank.methods), forearm_seeds=bank.forearm_seeds,
-            seed=np.int64(bank.seed), model_version=np.array(model_version),
+            seed=np.int64(bank.seed), actuator_energy=bank.actuator_energy.astype(np.float32),
+            actuators_xy=bank.actuators_xy, model_version=np.array(model_version),
         )
     return Path(path)
 
@@ -82,6 +85,7 @@ def load_feature_bank(path: str | os.PathLike) -> FeatureBank:
                 energy=z["energy"].astype(float), points_xy=z["points_xy"], locations_xy=z["locations_xy"],
                 centre_xy=z["centre_xy"], methods=tuple(str(m) for m in z["methods"]),
                 forearm_seeds=z["forearm_seeds"], seed=int(z["seed"]),
+                actuator_energy=z["actuator_energy"].astype(float), actuators_xy=z["actuators_xy"],
             )
     except (OSError, KeyError, ValueError) as exc:
         raise ValidationError(f"cannot read the feature bank {path}: {exc}") from exc

@@ -53,6 +53,12 @@ class FeatureBank:
         Participant seeds of the forearms (``participant_seeds(seed, k)[0]``).
     seed : int
         Simulation seed they were derived from.
+    actuator_energy : ndarray, shape (n_forearms, n_methods, n_locations, n_actuators)
+        Felt energy (re the reference tap) that each actuator's own drive makes at its own
+        contact, through its coupling to the skin: what the central (funneling) stage
+        integrates (:func:`~vibrofocus.studies.perception.actuator_energy`).
+    actuators_xy : ndarray, shape (n_actuators, 2)
+        Actuator centres, m.
     """
 
     energy: np.ndarray
@@ -62,6 +68,8 @@ class FeatureBank:
     methods: tuple[str, ...]
     forearm_seeds: np.ndarray
     seed: int
+    actuator_energy: np.ndarray
+    actuators_xy: np.ndarray
 
     @property
     def n_forearms(self) -> int:
@@ -120,13 +128,13 @@ def build_feature_bank(
     from ..defaults import N_SAMPLES
     from ..rigs import make_rig
     from .engine import calibration_renderer
-    from .perception import band_transfer, felt_energy, skin_grid
+    from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
     from .simulate import participant_seeds
 
     if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
         raise StudyError(f"n_forearms must be an integer >= 1, got {n_forearms!r}")
     m = model or PerceptualModel()
-    energies, seeds = [], []
+    energies, own, seeds = [], [], []
     layout = points = None
     for k in range(1, n_forearms + 1):
         pseed = participant_seeds(seed, k)[0]
@@ -143,6 +151,8 @@ def build_feature_bank(
         points = skin_grid(centre, m)
         H = band_transfer(rig, points, N_SAMPLES, m)
         energies.append(felt_energy(H, drives, rig.fs, m).reshape(len(methods), n_loc, len(points)))
+        actuators = np.asarray(layout.actuators_xy, dtype=float)
+        own.append(actuator_energy(rig, actuators, drives, m).reshape(len(methods), n_loc, len(actuators)))
         seeds.append(pseed)
         if progress is not None:
             progress(k, n_forearms)
@@ -151,6 +161,7 @@ def build_feature_bank(
         energy=np.stack(energies), points_xy=points, locations_xy=np.asarray(layout.locations_xy, dtype=float),
         centre_xy=np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), methods=tuple(methods),
         forearm_seeds=np.asarray(seeds, dtype=np.int64), seed=int(seed),
+        actuator_energy=np.stack(own), actuators_xy=np.asarray(layout.actuators_xy, dtype=float),
     )
 
 
@@ -245,7 +256,8 @@ def simulate_cell_means(
     for i in range(n_participants):
         traits = Traits.draw(m, rng)
         energy = b.energy[forearms[i]].reshape(-1, b.points_xy.shape[0])
-        per = central_percepts(energy, b.points_xy, m, traits)
+        own = b.actuator_energy[forearms[i]].reshape(-1, b.actuators_xy.shape[0])
+        per = central_percepts(energy, b.points_xy, m, traits, own, b.actuators_xy)
         a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         e = np.linalg.norm(locs_mm[a1] - locs_mm[targets], axis=1)

@@ -21,7 +21,7 @@ import numpy as np
 
 from .._validation import check_in_range
 from .bank import FeatureBank, default_bank, simulate_cell_means
-from .perception import MODEL_LABEL, PerceptualModel, psychophysics_data
+from .perception import MODEL_LABEL, MODEL_VERSION, PerceptualModel, psychophysics_data
 from .power import study_statistics
 
 __all__ = [
@@ -57,8 +57,15 @@ def _exact_best(s: dict[str, Any]) -> bool:
 
 
 def _interaction_at(s: dict[str, Any]) -> float:
-    """Share of the paper's interaction locations (1, 3, 9) where some method pair differs."""
-    return float(np.isin(INTERACTION_LOCATIONS, s["s1_interaction_locations"]).mean())
+    """Share of the paper's interaction locations (1, 3, 9) where the inverse filter differs
+    from both other methods (Bonferroni paired t-tests), as in the paper's post hoc tests."""
+    return float(np.isin(INTERACTION_LOCATIONS, s["s1_inverse_differs_locations"]).mean())
+
+
+def _location1_among_worst(s: dict[str, Any]) -> bool:
+    """Location 1 is among the five locations with the highest mean error (Fig. 6)."""
+    e = np.asarray(s["s1_error_by_location"])
+    return bool(np.argsort(np.argsort(e))[0] >= e.size - 5)
 
 
 @dataclass(frozen=True)
@@ -113,6 +120,7 @@ HIT_CRITERION = "p >= 0.05 (a test that could not run, too few participants kept
 def _rows() -> tuple[Row, ...]:
     p = psychophysics_data()["paper_statistics"]
     s1l, s1m, s1i, s2l = p["study1_location"], p["study1_method"], p["study1_interaction"], p["study2_location"]
+    s2m = p["study2_method"]
     eps = s1l["ddof1"] / 8.0
     rows = [
         Row("Study 1 location, F", f"F({s1l['ddof1']}, {s1l['ddof2']}) = {s1l['F']}, p < {s1l['p_max']} (GG)",
@@ -121,18 +129,32 @@ def _rows() -> tuple[Row, ...]:
             _key("s1_location_eps"), lambda s: bool(s["s1_location_p_mauchly"] < ALPHA), "Mauchly p < 0.05"),
         Row("Study 1 method, F", f"F({s1m['ddof1']}, {s1m['ddof2']}) = {s1m['F']}, p = {s1m['p']}",
             _key("s1_method_F"), _sig("s1_method"), "p (GG) < 0.05", short=True),
+        Row("Study 1 method, inverse vs funneling", "inverse lower error (p = 0.007)", None,
+            lambda s: s["s1_method_pairs"]["funneling vs inverse"] < ALPHA
+            and s["s1_error_by_method"][1] < s["s1_error_by_method"][0],
+            "Bonferroni paired t-test significant, inverse lower error", short=True),
+        Row("Study 1 method, post hoc", "only funneling vs inverse (p = 0.007), inverse lower", None,
+            lambda s: s["s1_only_funneling_vs_inverse"],
+            "Bonferroni paired t-tests: only that pair significant, inverse lower error", short=True),
         Row("Study 1 location x method, F", f"F({s1i['ddof1']}, {s1i['ddof2']}) = {s1i['F']}, p < {s1i['p_max']}",
             _key("s1_interaction_F"), _sig("s1_interaction"), "p (GG) < 0.05", short=True),
-        Row("interaction post hoc at locations 1, 3, 9", "method pairs differ at 1, 3, 9",
+        Row("interaction post hoc at locations 1, 3, 9", "inverse differs from both other methods at 1, 3, 9",
             None, _interaction_at,
-            "share of 1, 3, 9 with a Bonferroni-significant method pair (mean over seeds)"),
+            "share of 1, 3, 9 where the inverse differs from both others (Bonferroni; mean over seeds)", short=True),
         Row("best locations", "4, 5, 7, 8 (lowest error)", None, _best_first,
             "mean error over 4, 5, 7, 8 below that over the other five", short=True),
         Row("best locations, exactly", "4, 5, 7, 8", None, _exact_best, "the four lowest errors are at 4, 5, 7, 8"),
+        Row("location 1 among the worst", "1 is not among the best (Fig. 6)", None, _location1_among_worst,
+            "location 1 among the five highest mean errors"),
         Row("Study 2 location, chi2(8)", f"chi2({s2l['dof']}) = {s2l['chi2']}", _key("s2_location_chi2"),
             _sig("s2_location"), "p < 0.05", short=True),
-        Row("Study 2 method, chi2(2)", "not in the data file", _key("s2_method_chi2"), None, ""),
-        Row("Study 2, trials containing the target: participants kept", "not in the data file (20 tested)",
+        Row("Study 2 method, chi2(2)", f"chi2({s2m['dof']}) = {s2m['chi2']}, p < {s2m['p_max']}",
+            _key("s2_method_chi2"), _sig("s2_method"), "p < 0.05", short=True),
+        Row("Study 2, fewer points with the inverse filter than funneling",
+            f"{s2m['reduction']:.0%} fewer (p = {s2m['inverse_fewer_than_funneling_p']})",
+            lambda s: 100.0 * s["s2_reduction"], lambda s: s["s2_inverse_fewer"],
+            "Bonferroni Wilcoxon significant, inverse fewer; value: reduction in %", short=True, digits=0),
+        Row("Study 2, trials containing the target: participants kept", "not given (20 tested)",
             _key("s2_hit_n"), None, "", short=True, digits=0),
         Row("Study 2, trials containing the target: location, chi2(8)", "not significant",
             _key("s2_hit_location_chi2"), _ns("s2_hit_location"), HIT_CRITERION, short=True),
@@ -171,7 +193,8 @@ def seed_statistics(
     """
     b = bank if bank is not None else default_bank()
     m = model or PerceptualModel()
-    return [study_statistics(simulate_cell_means(n_participants, np.random.default_rng([int(s), 16]), bank=b, model=m))
+    return [study_statistics(simulate_cell_means(n_participants, np.random.default_rng([int(s), 16]), bank=b, model=m),
+                             methods=b.methods)
             for s in seeds]
 
 
@@ -242,9 +265,10 @@ def comparison_markdown(rows: list[dict[str, Any]], seeds: range, *, short: bool
             "share of seeds in which the row's direction and significance are those of the paper.")
     lines = [head, ""]
     if short:
-        lines += ["| statistic | paper | model v2 (simulated) | reproduced |", "|---|---|---|---:|"]
+        lines += [f"| statistic | paper | model v{MODEL_VERSION} (simulated) | reproduced |", "|---|---|---|---:|"]
     else:
-        lines += ["| statistic | paper | model v2 (simulated) | reproduced | criterion |", "|---|---|---|---:|---|"]
+        lines += [f"| statistic | paper | model v{MODEL_VERSION} (simulated) | reproduced | criterion |",
+                  "|---|---|---|---:|---|"]
     for r in rows:
         if short and not r["short"]:
             continue

@@ -1,4 +1,4 @@
-"""Simulated participants: a perceptual model (v2) that answers from the simulated skin.
+"""Simulated participants: a perceptual model (v3) that answers from the simulated skin.
 
 This is a **model, not data** (:data:`MODEL_NOTICE`). It lets a whole study run end to end
 without people; nothing it produces is evidence about how people perceive the stimuli.
@@ -27,6 +27,7 @@ from .perception import (
     PerceptualModel,
     Percepts,
     Traits,
+    actuator_energy,
     band_transfer,
     central_percepts,
     draw_answers,
@@ -41,8 +42,9 @@ __all__ = ["PerceptualModel", "Percepts", "SimulatedParticipant", "MODEL_NOTICE"
 #: What tools print next to results from simulated participants.
 MODEL_NOTICE = (
     f"{MODEL_LABEL}: answers come from a perceptual MODEL (Pacinian detection threshold, "
-    "energy-law funneling, central bias toward the array centre, localization noise; parameters "
-    "fitted to the source paper's statistics), not from people."
+    "energy-law funneling from the skin field and from what each actuator delivers through its contact, "
+    "central bias toward the array centre, localization noise; parameters fitted to the source paper's "
+    "statistics), not from people."
 )
 
 
@@ -56,7 +58,7 @@ class SimulatedParticipant:
     seed : int
         Participant seed for the participant's traits and per-trial noise.
     model : PerceptualModel, optional
-        Model parameters (default: model v2 as fitted).
+        Model parameters (default: model v3 as fitted).
 
     Notes
     -----
@@ -77,6 +79,7 @@ class SimulatedParticipant:
         self.locations_xy = np.asarray(layout.locations_xy, dtype=float)
         self.centre_xy = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
         self.grid_xy = skin_grid(self.centre_xy, self.model)
+        self.actuators_xy = np.asarray(layout.actuators_xy, dtype=float)
         self._H: dict[int, np.ndarray] = {}
         self._cache: dict[str, tuple[np.ndarray, Percepts]] = {}
 
@@ -114,7 +117,8 @@ class SimulatedParticipant:
             e = self.energy(drives)
             if not np.all(np.isfinite(e)) or e.max() <= 0:
                 raise StudyError("the stimulus produces no vibration on the skin: nothing to perceive")
-            self._cache[key] = (e, central_percepts(e[None], self.grid_xy, self.model, self.traits))
+            own = actuator_energy(self.forearm, self.actuators_xy, np.asarray(drives, dtype=float)[None], self.model)
+            self._cache[key] = (e, central_percepts(e[None], self.grid_xy, self.model, self.traits, own, self.actuators_xy))
         return self._cache[key][1]
 
     def answer(self, drives: np.ndarray, study: int, trial_index: int, design: StudyDesign | None = None) -> Response:

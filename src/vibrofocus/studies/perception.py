@@ -1,4 +1,4 @@
-"""The simulated participants' perceptual model, version 2 (a MODEL, not data).
+"""The simulated participants' perceptual model, version 3 (a MODEL, not data).
 
 A stimulus is felt in two stages, each from published psychophysics (sources in
 ``studies/data/SOURCES.md``; parameters that are assumptions or fitted are said so in
@@ -16,16 +16,28 @@ Central stage (cheap, per trial, :func:`draw_answers`)
     1. **Detection.** A point is felt where its sensation level
        ``L_p = 10 log10(E_p) + SL_ref - d_i`` exceeds 0 dB (``SL_ref``: sensation level of
        the reference tap, ``d_i`` a participant's threshold offset).
-    2. **Funneling (energy law).** The felt points are integrated centrally into one
-       percept at the energy-weighted mean of the supra-threshold energies
-       ``x_f = sum w_p x_p / sum w_p``, ``w_p = (E_p / E_threshold - 1)^gamma`` with
-       ``gamma = 1`` the energy law (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018 in
-       2D) and ``gamma`` fitted; ``s`` is the percept's spread (weighted RMS distance, m).
+    2. **Funneling, coded centrally.** Two position cues are integrated into one percept.
+       The skin cue is the energy-weighted mean of the supra-threshold skin points,
+       ``x_skin = sum w_p x_p / sum w_p``, ``w_p = (E_p / E_threshold - 1)^gamma``; the
+       drive cue is the same law over the actuators' contacts, weighted by the felt energy
+       each actuator delivers at its own contact through its coupling
+       (:func:`actuator_energy`): the funneling illusion's phantom between the sources.
+       ``gamma = 1`` is the energy law (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018
+       in 2D), ``gamma`` fitted. The percept is ``x_f = (1 - beta) x_skin + beta x_drive``;
+       ``beta`` (fitted) says how centrally the place is coded: the source paper (Sec. IV)
+       reads its result as funneling being coded centrally (Gardner & Spencer 1972; Chen et
+       al. 2003). A wrist-side actuator in partial contact delivers less than its drive
+       (:data:`vibrofocus.skin.parameters.WRIST_CONTACT_RANGE`, the paper's explanation of
+       locations 1 and 3): funneling's phantom moves away from it, while the inverse filter,
+       calibrated through the same contact, drives it harder. ``s`` is the skin cue's
+       spread (weighted RMS distance, m): how diffuse the stimulus feels.
     3. **Localization noise.** The sensed position is ``x_f + e``,
-       ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k_i s)^2``: a participant's
-       point-localization acuity on the mid-forearm (poor: fewer than half of the arm sites
-       uniquely identified, Cholewiak & Collins 2003) plus a diffuse percept's extra
-       uncertainty (phantoms are perceived over distributed positions, Park & Choi 2018).
+       ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k_i s)^2 + (k_c c)^2``: a
+       participant's point-localization acuity on the mid-forearm (poor: fewer than half of
+       the arm sites uniquely identified, Cholewiak & Collins 2003), a diffuse percept's
+       extra uncertainty (phantoms are perceived over distributed positions, Park & Choi
+       2018), and the conflict ``c`` between the skin and drive cues (an assumption, see
+       ``conflict_gain``).
     4. **Central bias.** A Gaussian prior around the array centre shifted by the
        participant's bias ``b_i`` (population mean toward the elbow: the forearm's
        perceived midpoint lies toward the elbow, Cholewiak et al. 2020) of SD
@@ -71,15 +83,17 @@ __all__ = [
     "draw_answers",
     "study2_rt",
     "band_transfer",
+    "actuator_energy",
     "PARAMETER_SOURCES",
 ]
 
 #: Version of the perceptual model; bump it whenever answers for the same seeds change.
-MODEL_VERSION = "2.0"
-#: Skin preset of the simulated participants' forearms. The perceptual model and its
-#: feature bank were fitted on the homogeneous Voigt arm; they stay on it until they are
-#: refitted on the layered presets (a model, not data; see docs/simulated-participants.md).
-STUDY_SKIN = "voigt-fit"
+MODEL_VERSION = "3.0"
+#: Skin preset of the simulated participants' forearms: the nominal layered arm, the one
+#: checked against the paper's own vibrometer recordings (docs/simulated-arm-truth.md).
+#: The perceptual model and its feature bank are fitted on it (a model, not data; see
+#: docs/simulated-participants.md).
+STUDY_SKIN = "nominal"
 #: The label every report made from simulated data carries.
 MODEL_LABEL = f"simulated participants: model v{MODEL_VERSION}, not data"
 
@@ -126,7 +140,7 @@ def threshold_weight(freqs_hz: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class PerceptualModel:
-    """Parameters of the perceptual model v2 (SI units). Each says where it comes from.
+    """Parameters of the perceptual model v3 (SI units). Each says where it comes from.
 
     Attributes
     ----------
@@ -137,6 +151,14 @@ class PerceptualModel:
         Frequencies counted, Hz (the vibrotactile range; the U-curve weights within it).
     sl_ref_db : float
         Sensation level of the reference tap (2 µm peak Ricker), dB. *Fitted.*
+    central_weight : float
+        ``beta``: weight of the drive cue (the actuators' delivered energies) against the
+        skin cue in the percept's place, 0-1. *Fitted* (the paper's Sec. IV: central coding).
+    conflict_gain : float
+        Extra localization noise SD per metre of distance between the skin cue and the
+        drive cue: two cues that disagree make a less certain percept. *Assumption* of
+        the form (cue conflict, as in causal-inference models of cue combination, Körding
+        et al. 2007, PLoS ONE 2(9):e943, doi:10.1371/journal.pone.0000943); size *fitted*.
     funneling_exponent : float
         ``gamma`` of the central integration weights ``w_p = (E_p / E_thr - 1)^gamma``:
         1 is the energy law of funneling (Alles 1970; Israr & Poupyrev 2011); smaller
@@ -174,16 +196,18 @@ class PerceptualModel:
     band_hz: tuple[float, float] = (10.0, 1000.0)
     # Fitted by scripts/fit_participants.py (docs/simulated-participants.md, "The fit"),
     # rounded to 3 digits.
-    sl_ref_db: float = 42.6
-    funneling_exponent: float = 0.476
+    sl_ref_db: float = 42.5
+    central_weight: float = 0.0
+    conflict_gain: float = 1.06
+    funneling_exponent: float = 0.665
     threshold_sd_db: float = 3.0
-    acuity_sd_m: tuple[float, float] = (15.2e-3, 19.2e-3)
-    spread_gain: tuple[float, float] = (0.255, 0.502)
-    prior_sd_m: tuple[float, float] = (6.55e-3, 28.1e-3)
-    bias_mean_m: tuple[float, float] = (-11.7e-3, -1.81e-3)
-    bias_sd_m: float = 3.43e-3
-    select_kappa: tuple[float, float] = (0.545, 0.571)
-    select_log_sd: float = 0.346
+    acuity_sd_m: tuple[float, float] = (0.00322, 0.00737)
+    spread_gain: tuple[float, float] = (0.0662, 0.0842)
+    prior_sd_m: tuple[float, float] = (0.0144, 0.0242)
+    bias_mean_m: tuple[float, float] = (-0.00357, -0.00583)
+    bias_sd_m: float = 0.0013
+    select_kappa: tuple[float, float] = (0.248, 0.922)
+    select_log_sd: float = 0.454
     rt_median_s: tuple[float, float] = (0.9, 1.4)
     rt_log_sd: float = 0.3
     rt_per_extra_location_s: float = 0.35
@@ -212,6 +236,8 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "grid_step_m": ("assumption", "half the 10 mm location pitch"),
     "band_hz": ("assumption", "the vibrotactile range; the U-curve weights within it"),
     "sl_ref_db": ("fitted", "sensation level of the reference tap"),
+    "central_weight": ("fitted", "place coded from the actuators' delivered energies (the paper, Sec. IV: central coding)"),
+    "conflict_gain": ("fitted", "form an assumption: cues that disagree add uncertainty (Körding et al. 2007)"),
     "funneling_exponent": ("fitted", "1 is the energy law (Alles 1970; Israr & Poupyrev 2011)"),
     "threshold_sd_db": ("assumption", "spread of detection thresholds across people"),
     "acuity_sd_m": ("fitted", "poor localization on the mid-forearm (Cholewiak & Collins 2003)"),
@@ -340,6 +366,35 @@ def felt_energy(
     return out[0] if single else out
 
 
+def actuator_energy(
+    forearm: Any, actuators_xy: np.ndarray, drives: np.ndarray, model: PerceptualModel | None = None
+) -> np.ndarray:
+    """Felt energy each actuator's own drive makes at its own contact, re the reference tap.
+
+    The central (funneling) stage integrates one input per actuator (the paper's
+    explanation, Sec. IV: funneling is coded centrally, Gardner & Spencer 1972; Chen et al.
+    2003): the skin under actuator ``q`` moved by actuator ``q`` alone, ``H_qq(f) D_q(f)``,
+    weighted as in :func:`felt_energy`. A partly coupled actuator (the wrist-side ones,
+    :data:`vibrofocus.skin.parameters.WRIST_CONTACT_RANGE`) delivers less than its drive.
+
+    Parameters
+    ----------
+    forearm : SimulatedForearm
+    actuators_xy : ndarray, shape (n_actuators, 2)
+        Actuator centres, m.
+    drives : ndarray, shape (n_stimuli, n_actuators, n_samples)
+        V.
+
+    Returns
+    -------
+    ndarray, shape (n_stimuli, n_actuators)
+    """
+    d = np.asarray(drives, dtype=float)
+    H = band_transfer(forearm, actuators_xy, d.shape[-1], model)
+    own = H * np.eye(H.shape[1], H.shape[2])[None]  # each point hears its own actuator only
+    return felt_energy(own, d, forearm.fs, model)
+
+
 def band_transfer(forearm: Any, points_xy: np.ndarray, n_samples: int, model: PerceptualModel | None = None) -> np.ndarray:
     """True transfer of ``forearm`` to ``points_xy`` on the model's band bins, (n_bins, n_points, n_act)."""
     m = model or PerceptualModel()
@@ -359,29 +414,66 @@ class Percepts:
         Weighted RMS distance of the felt points from it, m.
     felt : ndarray of bool, shape (n,)
         Whether any point is above threshold.
+    conflict_m : ndarray, shape (n,)
+        Distance between the skin cue and the drive cue, m (0 without a drive cue).
     """
 
     position_m: np.ndarray
     spread_m: np.ndarray
     felt: np.ndarray
+    conflict_m: np.ndarray | None = None
 
 
-def central_percepts(energy: np.ndarray, points_xy: np.ndarray, model: PerceptualModel, traits: Traits) -> Percepts:
-    """Detection and funneling (energy law) for stimuli of felt energies ``energy`` (n, n_points)."""
+def _energy_law(e: np.ndarray, e_thr: float, xy: np.ndarray, exponent: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Energy-law position (n, 2), spread (n,) and total weight (n,) of sources at ``xy``."""
+    w = np.clip(e / e_thr - 1.0, 0.0, None)
+    if exponent != 1.0:
+        w = w**exponent
+    total = w.sum(axis=1)
+    safe = np.where(total > 0, total, 1.0)[:, None]
+    pos = (w @ xy) / safe
+    d2 = np.sum((xy[None, :, :] - pos[:, None, :]) ** 2, axis=2)
+    return pos, np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0]), total
+
+
+def central_percepts(
+    energy: np.ndarray,
+    points_xy: np.ndarray,
+    model: PerceptualModel,
+    traits: Traits,
+    actuator_energy: np.ndarray | None = None,
+    actuators_xy: np.ndarray | None = None,
+) -> Percepts:
+    """Detection and central funneling for stimuli of felt energies ``energy``.
+
+    Parameters
+    ----------
+    energy : ndarray, shape (n, n_points)
+        Felt energy at the skin points (:func:`felt_energy`).
+    points_xy : ndarray, shape (n_points, 2)
+        m.
+    actuator_energy : ndarray, shape (n, n_actuators), optional
+        Felt energy each actuator delivers at its own contact (:func:`actuator_energy`);
+        without it the place is the skin cue alone (``beta = 0``).
+    actuators_xy : ndarray, shape (n_actuators, 2), optional
+        m.
+    """
     e = np.atleast_2d(np.asarray(energy, dtype=float))
     e_thr = 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)  # threshold, re reference
-    w = np.clip(e / e_thr - 1.0, 0.0, None)
-    if model.funneling_exponent != 1.0:
-        w = w**model.funneling_exponent
-    total = w.sum(axis=1)
+    pos, spread, total = _energy_law(e, e_thr, points_xy, model.funneling_exponent)
     felt = total > 0
-    safe = np.where(felt, total, 1.0)[:, None]
-    pos = (w @ points_xy) / safe
-    d2 = np.sum((points_xy[None, :, :] - pos[:, None, :]) ** 2, axis=2)
-    spread = np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0])
+    conflict = np.zeros(len(e))
+    if actuator_energy is not None:
+        a = np.atleast_2d(np.asarray(actuator_energy, dtype=float))
+        drive_pos, _, drive_total = _energy_law(a, e_thr, np.asarray(actuators_xy, dtype=float), model.funneling_exponent)
+        has = drive_total > 0
+        conflict = np.where(has, np.linalg.norm(drive_pos - pos, axis=1), 0.0)
+        beta = np.where(has, model.central_weight, 0.0)[:, None]
+        pos = (1.0 - beta) * pos + beta * drive_pos
     pos[~felt] = np.nan
     spread[~felt] = np.nan
-    return Percepts(pos, spread, felt)
+    conflict[~felt] = np.nan
+    return Percepts(pos, spread, felt, conflict)
 
 
 def draw_answers(
@@ -432,7 +524,9 @@ def draw_answers(
     pos = percepts.position_m[idx]
     spread = percepts.spread_m[idx]
     felt = percepts.felt[idx]
-    sig_s2 = traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
+    conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
+    sig_s2 = (traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
+              + (model.conflict_gain * np.nan_to_num(conflict)) ** 2)
     sp2 = traits.prior_sd_m**2
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
     sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)

@@ -1,7 +1,7 @@
 """Study power by simulation (``vibrofocus power``), on Dask.
 
 For a design (participants N, repetitions, methods, locations) and the perceptual model
-(its effect sizes are those of the model v2 as fitted, see
+(its effect sizes are those of the perceptual model as fitted, see
 ``docs/simulated-participants.md``), many studies are simulated per N with the fast path
 (:func:`~vibrofocus.studies.bank.simulate_cell_means`) and analysed with the vectorized
 statistics (:mod:`vibrofocus.analysis.fast`); the power of each test of docs/method.md (Analysis) is the
@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
+from ..defaults import STUDY_METHODS
 from ..errors import ValidationError
 from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
 from .perception import MODEL_LABEL, PerceptualModel
@@ -84,7 +85,6 @@ class PowerDesign:
 
     def __post_init__(self) -> None:
         from .._validation import shorten
-        from ..defaults import STUDY_METHODS
         from ..layout import ArrayLayout
 
         ns = tuple(int(n) for n in self.n_participants)
@@ -128,8 +128,35 @@ def _paired_t_p(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where(sd > 0, p, 1.0)
 
 
-def study_statistics(arrays: StudyArrays, alpha: float = 0.05) -> dict[str, Any]:
+def _wilcoxon_p(x: np.ndarray, y: np.ndarray) -> float:
+    """Two-sided Wilcoxon signed-rank p of paired samples (1 when they never differ)."""
+    d = x - y
+    if np.count_nonzero(d) < 2:
+        return 1.0
+    return float(stats.wilcoxon(x, y).pvalue)
+
+
+def _marginal_means(cells: np.ndarray, axis: int) -> np.ndarray:
+    """Per-participant means over ``axis`` of the cells that have trials (NaN where none has)."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        n = np.sum(np.isfinite(cells), axis=axis)
+        return np.where(n > 0, np.nansum(cells, axis=axis) / np.maximum(n, 1), np.nan)
+
+
+def study_statistics(
+    arrays: StudyArrays, alpha: float = 0.05, methods: Sequence[str] | None = None
+) -> dict[str, Any]:
     """The statistics of docs/method.md (Analysis) for one simulated study (fast path).
+
+    Parameters
+    ----------
+    arrays : StudyArrays
+        Cell means of one study.
+    alpha : float
+        Significance level of the post hoc tests.
+    methods : sequence of str, optional
+        Names of the methods along the arrays' last axis (default: the studies' three,
+        when there are three). The method-specific rows (funneling vs inverse) need them.
 
     Returns
     -------
@@ -138,8 +165,15 @@ def study_statistics(arrays: StudyArrays, alpha: float = 0.05) -> dict[str, Any]
         (``location``, ``method``, ``interaction``); ``s1_error_by_method`` (n_methods,) and
         ``s1_error_by_location`` (n_locations,), mm; ``s1_interaction_locations``: locations
         (0-based) with a Bonferroni-significant paired t-test between some methods;
-        ``s2_*`` / ``s2_hit_*``: ``chi2``, ``p`` of the Friedman tests; ``s2_hit_n``:
-        participants kept for the target-containing analysis.
+        ``s2_*`` / ``s2_hit_*``: ``chi2``, ``p`` of the Friedman tests; the target-containing
+        tests (``s2_hit_*``) run on per-participant marginal means over the other factor,
+        and ``s2_hit_n_location`` / ``s2_hit_n_method`` (``s2_hit_n``: the smaller) count
+        the participants they keep. With funneling and inverse among ``methods``:
+        ``s1_method_pairs`` (Bonferroni p of each method pair, by ``"a vs b"``),
+        ``s1_only_funneling_vs_inverse`` (only that pair significant, inverse lower),
+        ``s1_inverse_differs_locations`` (0-based locations where the inverse differs from
+        every other method), ``s2_reduction`` (1 - inverse / funneling mean count),
+        ``s2_inverse_fewer`` (Bonferroni Wilcoxon significant, inverse lower).
     """
     from ..analysis.fast import friedman_batch, rm_anova2_batch
 
@@ -155,21 +189,42 @@ def study_statistics(arrays: StudyArrays, alpha: float = 0.05) -> dict[str, Any]
     e = arrays.error_mm
     n_m = e.shape[2]
     pairs = [(i, j) for i in range(n_m) for j in range(i + 1, n_m)]
+    pair_p = {(i, j): np.minimum(_paired_t_p(e[:, :, i], e[:, :, j]) * len(pairs), 1.0) for i, j in pairs}
     sig = np.zeros(e.shape[1], dtype=bool)
-    for i, j in pairs:
-        sig |= np.minimum(_paired_t_p(e[:, :, i], e[:, :, j]) * len(pairs), 1.0) < alpha
+    for p_loc in pair_p.values():
+        sig |= p_loc < alpha
     out["s1_interaction_locations"] = np.flatnonzero(sig)
     for prefix, c in (("s2", arrays.count), ("s2_hit", arrays.count_hit)):
-        keep = np.all(np.isfinite(c), axis=(1, 2))
-        out[f"{prefix}_n"] = int(keep.sum())
-        c = c[keep]
         for factor, axis in (("location", 2), ("method", 1)):
-            if c.shape[0] < 2:
+            m = _marginal_means(c, axis)
+            keep = np.all(np.isfinite(m), axis=1)
+            out[f"{prefix}_n_{factor}"] = int(keep.sum())
+            if keep.sum() < 2:
                 out[f"{prefix}_{factor}_chi2"], out[f"{prefix}_{factor}_p"] = np.nan, np.nan
                 continue
-            f = friedman_batch(c.mean(axis=axis)[None])
+            f = friedman_batch(m[keep][None])
             out[f"{prefix}_{factor}_chi2"] = float(f["chi2"][0])
             out[f"{prefix}_{factor}_p"] = float(f["p"][0])
+        out[f"{prefix}_n"] = min(out[f"{prefix}_n_location"], out[f"{prefix}_n_method"])
+    names = tuple(methods) if methods is not None else (STUDY_METHODS if n_m == len(STUDY_METHODS) else ())
+    if "funneling" in names and "inverse" in names:
+        fun, inv = names.index("funneling"), names.index("inverse")
+        per = e.mean(axis=1)  # (n, n_methods): per-participant method means
+        p_pairs = {(i, j): min(1.0, float(_paired_t_p(per[:, i], per[:, j])) * len(pairs)) for i, j in pairs}
+        out["s1_method_pairs"] = {f"{names[i]} vs {names[j]}": v for (i, j), v in p_pairs.items()}
+        fi = tuple(sorted((fun, inv)))
+        out["s1_only_funneling_vs_inverse"] = bool(
+            p_pairs[fi] < alpha and all(v >= alpha for k, v in p_pairs.items() if k != fi)
+            and per[:, inv].mean() < per[:, fun].mean())
+        others = [k for k in range(n_m) if k != inv]
+        differs = np.ones(e.shape[1], dtype=bool)
+        for k in others:
+            differs &= pair_p[tuple(sorted((k, inv)))] < alpha
+        out["s1_inverse_differs_locations"] = np.flatnonzero(differs)
+        cm = arrays.count.mean(axis=1)
+        out["s2_reduction"] = float(1.0 - cm[:, inv].mean() / cm[:, fun].mean())
+        p_w = min(1.0, _wilcoxon_p(cm[:, inv], cm[:, fun]) * len(pairs))
+        out["s2_inverse_fewer"] = bool(p_w < alpha and cm[:, inv].mean() < cm[:, fun].mean())
     return out
 
 
@@ -188,7 +243,7 @@ def simulate_statistics(
             int(n), rng, bank=b, model=design.model, repetitions=design.repetitions,
             methods=design.methods, locations=design.locations,
         )
-        out.append(study_statistics(arrays, design.alpha))
+        out.append(study_statistics(arrays, design.alpha, design.methods or b.methods))
     return out
 
 
