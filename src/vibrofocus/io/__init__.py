@@ -1,7 +1,9 @@
 """File formats: one module per on-disk format, each the only writer and reader of it.
 
 :mod:`.calibration_nc`
-    Calibration files (netCDF4/HDF5): :func:`save_calibration`, :func:`load_calibration`.
+    Calibration files (netCDF4/HDF5), as plain records: :func:`write_calibration_file`,
+    :func:`read_calibration_file` (the :class:`~vibrofocus.calibration.Calibration` is built
+    above, by :func:`vibrofocus.calibration.load_calibration`).
 :mod:`.drives`
     Drives files (``.npz``, ``.csv``, ``.wav``): :func:`write_drives`,
     :func:`write_drives_wav`, :func:`read_drives`.
@@ -18,12 +20,13 @@
 :mod:`.jsonsafe`
     The one JSON sanitizer, :func:`json_safe`.
 
-This package sits just above :mod:`vibrofocus.layout`: it loads no other subpackage of
-vibrofocus (the calibration record types are imported when a file is read or written),
-so every layer can use it.
+This package is the bottom floor: it reads and writes plain arrays and records and
+imports nothing of vibrofocus but :mod:`~vibrofocus.errors`, :mod:`~vibrofocus.defaults`,
+:mod:`~vibrofocus._validation` and :mod:`~vibrofocus._atomic` (tests/test_layering.py), so
+every layer can use it and domain objects are built above it.
 """
 
-from .calibration_nc import load_calibration, save_calibration
+from .calibration_nc import read_calibration_file, write_calibration_file
 from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
 from .jsonsafe import json_safe
@@ -32,8 +35,8 @@ from .responses import format_response, parse_response_text
 from .trials_csv import TRIALS_COLUMNS, read_trials_csv, read_trials_table, write_trials_csv
 
 __all__ = [
-    "save_calibration",
-    "load_calibration",
+    "write_calibration_file",
+    "read_calibration_file",
     "write_drives",
     "write_drives_wav",
     "read_drives",
