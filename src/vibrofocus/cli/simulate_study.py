@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import SEED_MAX, force_option
+from ._options import SEED_MAX, force_option, lsl_option
 from ._command import command
 
 
@@ -30,6 +30,7 @@ def simulate_study(
     skin: str = typer.Option("voigt-fit", "--skin",
                              help="Skin preset of the simulated forearms: voigt-fit (the skin the perceptual model "
                                   "was fitted on) | nominal | low | high."),
+    lsl: bool = lsl_option(),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -42,6 +43,7 @@ def simulate_study(
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
         from rich.table import Table
 
+        from ..studies.markers import lsl_markers
         from ..studies.participants import MODEL_NOTICE
         from ..studies.simulate import simulate_studies, summarize_simulation
 
@@ -84,7 +86,7 @@ def simulate_study(
             raise
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE}[/]")
-        with Progress(
+        with lsl_markers(lsl), Progress(
             TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             console=console, disable=quiet, transient=False,
         ) as bar:
