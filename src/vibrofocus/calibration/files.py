@@ -17,13 +17,15 @@ import numpy as np
 
 from ..errors import CalibrationFileError, ValidationError
 from ..io.calibration_nc import read_calibration_file, write_calibration_file
+from ..io.sofa import read_sofa_tf, write_sofa_tf
 from ..layout import ArrayLayout
 from .calibrate import Calibration
 from .excitation import SweepSettings
 from .fitmodel import FittedSkin, parameter_names
 from .quality import QualityIssue, QualityReport, QualityThresholds
 
-__all__ = ["save_calibration", "load_calibration", "calibration_record", "calibration_from_record"]
+__all__ = ["save_calibration", "load_calibration", "calibration_record", "calibration_from_record", "export_sofa",
+           "import_sofa"]
 
 # QualityReport's array fields, stored as they are.
 _QUALITY_ARRAYS = ("snr_db", "noise_rms_m", "band_gain", "low_coherence_share", "coherent_to_hz", "clipped",
@@ -181,3 +183,59 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
         the file.
     """
     return calibration_from_record(read_calibration_file(path), path)
+
+
+def export_sofa(cal: Calibration, path: str | os.PathLike) -> Path:
+    """Write a calibration's transfer matrix to a SOFA ``GeneralTF-E`` file (:mod:`vibrofocus.io.sofa`).
+
+    Receivers are the skin points, emitters the actuators, with their positions (m);
+    ``H`` in m/V on the calibration's frequency grid (Hz). pyfar and any SOFA reader open
+    it; the measurement's recordings and quality stay in the calibration file.
+
+    Parameters
+    ----------
+    cal : Calibration
+    path : path-like
+        Destination, conventionally ``*.sofa``; its folder must exist.
+
+    Returns
+    -------
+    Path
+    """
+    rec = calibration_record(cal)
+    return write_sofa_tf({key: rec[key] for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels",
+                                                    "point_kinds", "actuator_names", "fs", "band", "participant_id",
+                                                    "layout")},
+                         path, title=f"vibrofocus calibration of {cal.participant_id}")
+
+
+def import_sofa(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a transfer matrix from a SOFA ``GeneralTF-E`` file (:func:`export_sofa`).
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    dict
+        ``H`` complex (n_freqs, n_points, n_actuators), m/V; ``freqs`` (n_freqs,), Hz;
+        ``fs`` and ``band`` (Hz); ``participant_id``; ``layout``: the
+        :class:`~vibrofocus.layout.ArrayLayout`, checked against the stored positions
+        and names (None for a file of another tool, which stores no layout).
+
+    Raises
+    ------
+    CalibrationFileError
+        An unreadable file, another convention, or positions that differ from the layout.
+    """
+    rec = read_sofa_tf(path)
+    layout = None
+    if rec["layout"] is not None:
+        try:
+            layout = ArrayLayout.from_dict(rec["layout"])
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+            raise _fail(Path(path), f"has an unreadable layout ({exc})") from exc
+        _check_against_layout(rec, layout, Path(path))
+    return {"H": rec["H"], "freqs": rec["freqs"], "fs": rec["fs"], "band": rec["band"],
+            "participant_id": rec["participant_id"], "layout": layout}
