@@ -25,12 +25,8 @@ def export_command(
     """
     with user_errors():
         from .._atomic import protect
-        from ..errors import ValidationError
         from ..studies.bids import export_bids
 
         protect(source, "study database or trials file")
-        inside = Path(source).resolve().is_relative_to(bids.resolve())
-        if inside:
-            raise ValidationError(f"--bids {bids} holds the input {source}: write the dataset to another folder")
         counts = export_bids(source, bids)
         typer.echo(f"wrote {counts['events']} trials of {counts['participants']} participant(s) to the BIDS dataset {bids}")

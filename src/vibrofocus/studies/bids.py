@@ -99,13 +99,16 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
     Raises
     ------
     StudyError
-        An unreadable source, or two participant ids with the same BIDS label.
+        An unreadable source, a source inside ``out_dir``, or two participant ids with
+        the same BIDS label.
     OutputError
         The folder cannot be written.
     """
     from .. import __version__
 
     source = Path(source)
+    if source.resolve().is_relative_to(Path(out_dir).resolve()):
+        raise StudyError(f"the BIDS folder {out_dir} would replace its input {source}: write the dataset elsewhere")
     if not source.is_file():
         raise StudyError(f"{source} is not a study database or a trials CSV file")
     from_db = _is_database(source)
