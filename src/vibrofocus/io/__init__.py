@@ -19,6 +19,14 @@
     :func:`load_feature_bank`.
 :mod:`.jsonsafe`
     The one JSON sanitizer, :func:`json_safe`.
+:mod:`.bids`
+    BIDS behavioural datasets (``vibrofocus export --bids``): :func:`write_bids_dataset`,
+    :func:`read_bids_trials_table`.
+:mod:`.lsl`
+    Lab Streaming Layer markers (``--lsl``, extra ``vibrofocus[lsl]``): :class:`MarkerOutlet`.
+:mod:`.sofa`
+    Transfer matrices as SOFA ``GeneralTF-E`` files (extra ``vibrofocus[sofa]``):
+    :func:`write_sofa_tf`, :func:`read_sofa_tf`.
 
 This package is the bottom floor: it reads and writes plain arrays and records and
 imports nothing of vibrofocus but :mod:`~vibrofocus.errors`, :mod:`~vibrofocus.defaults`,
@@ -26,12 +34,15 @@ imports nothing of vibrofocus but :mod:`~vibrofocus.errors`, :mod:`~vibrofocus.d
 every layer can use it and domain objects are built above it.
 """
 
+from .bids import read_bids_trials_table, write_bids_dataset
 from .calibration_nc import read_calibration_file, write_calibration_file
 from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
 from .jsonsafe import json_safe
+from .lsl import MarkerOutlet
 from .report_json import check_report, read_report_json, write_report_json
 from .responses import format_response, parse_response_text
+from .sofa import read_sofa_tf, write_sofa_tf
 from .trials_csv import TRIALS_COLUMNS, read_trials_csv, read_trials_table, write_trials_csv
 
 __all__ = [
@@ -52,4 +63,9 @@ __all__ = [
     "save_feature_bank",
     "load_feature_bank",
     "json_safe",
+    "write_bids_dataset",
+    "read_bids_trials_table",
+    "MarkerOutlet",
+    "write_sofa_tf",
+    "read_sofa_tf",
 ]
