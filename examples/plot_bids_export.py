@@ -15,8 +15,7 @@ from pathlib import Path
 
 import bids
 
-from vibrofocus.studies import simulate_studies
-from vibrofocus.studies.bids import export_bids
+from vibrofocus.studies import export_bids, simulate_studies
 
 with tempfile.TemporaryDirectory() as tmp:
     db = Path(tmp) / "study.sqlite"

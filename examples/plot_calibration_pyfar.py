@@ -20,7 +20,7 @@ import sofar as sf
 from vibrofocus.calibration import calibrate, export_sofa
 from vibrofocus.rigs import make_rig
 
-cal = calibrate(make_rig("simulated", seed=0), participant_id="S00", sweep_s=1.0, repeats=2)
+cal = calibrate(make_rig("simulated", seed=0), participant_id="S00", sweep_s=1.0, repeats=4)
 with tempfile.TemporaryDirectory() as tmp:
     path = export_sofa(cal, Path(tmp) / "S00.sofa")
     sofa = sf.read_sofa(str(path), verbose=False)

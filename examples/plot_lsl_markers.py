@@ -18,8 +18,7 @@ from pathlib import Path
 
 import pylsl
 
-from vibrofocus.studies import simulate_studies
-from vibrofocus.studies.markers import lsl_markers
+from vibrofocus.studies import lsl_markers, simulate_studies
 
 with tempfile.TemporaryDirectory() as tmp, lsl_markers() as outlet:
     # The inlet connects before the first trial: LSL keeps no marker sent to nobody.

@@ -139,27 +139,18 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
 
 
 def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
-    """Write a calibration to one netCDF4/HDF5 file (:mod:`vibrofocus.io.calibration_nc`).
+    """Write a calibration to one netCDF4/HDF5 file, atomically.
 
-    The file is built in memory, written next to its destination, fsynced and renamed over
-    it: a full disk, a read-only folder or an interrupt never leaves a half-written
-    calibration under ``path``, and a previous file there is unchanged.
+    Its record (:func:`calibration_record`) goes to
+    :func:`vibrofocus.io.calibration_nc.write_calibration_file`; on an ``OutputError``
+    (full disk, read-only folder, ...) a previous file at ``path`` is unchanged and
+    ``cal`` is untouched, so the caller can save it elsewhere.
 
     Parameters
     ----------
     cal : Calibration
     path : str or PathLike
-        Destination, conventionally ``*.nc``; its folder must exist.
-
-    Returns
-    -------
-    Path
-        ``path``.
-
-    Raises
-    ------
-    OutputError
-        The file cannot be written; ``cal`` is untouched, so the caller can save it elsewhere.
+        Destination ``*.nc``; its folder must exist. Returned as a Path.
     """
     return write_calibration_file(calibration_record(cal), path)
 

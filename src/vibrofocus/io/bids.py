@@ -39,10 +39,10 @@ BIDS_VERSION = "1.10.0"
 TASKS = {1: "localization1", 2: "localization2"}
 #: Columns of every events file, in order: BIDS's ``onset`` and ``duration`` first, then
 #: the trial (``trial_type``, ``method``, ``target``, ``response``, ``response_time``,
-#: ``phase``), then where it sits in the study (``trial``, ``session``, ``session_status``,
-#: ``dry_run``).
+#: ``phase``), then where it sits in the study (``trial``, ``session_id``,
+#: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity).
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
-                 "trial", "session", "session_status", "dry_run")
+                 "trial", "session_id", "session_status", "dry_run")
 #: The sidecar's description of each column of :data:`EVENT_COLUMNS` (BIDS "column
 #: description": LongName, Description, Units, Levels).
 EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
@@ -74,7 +74,7 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
     "phase": {"LongName": "phase", "Description": "Part of the study.",
               "Levels": {"training": "practice trials, not analysed", "main": "the trials analysed"}},
     "trial": {"LongName": "trial number", "Description": "1-based trial number within the phase."},
-    "session": {"LongName": "study session", "Description": "Id of the session in the study database (0: none)."},
+    "session_id": {"LongName": "study session", "Description": "Id of the session in the study database (0: none)."},
     "session_status": {"LongName": "session status",
                        "Description": "The session's status when exported.",
                        "Levels": {"planned": "not started", "running": "in progress", "paused": "paused",
@@ -262,7 +262,7 @@ def read_bids_trials_table(root: str | os.PathLike):
                 "participant": person.get("source_id") or sub.removeprefix("sub-"), "study": study,
                 "phase": ev["phase"], "trial": ev["trial"], "method": ev["method"], "target": ev["target"],
                 "response": ev["response"], "rt_s": ev["response_time"],
-                "session": "0" if ev["session"] == _NA else ev["session"],
+                "session": "0" if ev["session_id"] == _NA else ev["session_id"],
                 "session_status": "completed" if ev["session_status"] == _NA else ev["session_status"],
                 "dry_run": "0" if ev["dry_run"] == _NA else ev["dry_run"],
                 "simulated": "1" if person.get("simulated") == "true" else "0",

@@ -133,7 +133,7 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
             "target": int(t["target"]),
             "response": t["response"] if isinstance(t["response"], str) else format_response(t["response"]),
             "response_time": float(t["rt_s"]), "phase": t["phase"], "trial": int(t["trial"]),
-            "session": t.get("session"), "session_status": t.get("session_status"),
+            "session_id": t.get("session"), "session_status": t.get("session_status"),
             "dry_run": None if t.get("dry_run") is None else int(bool(t["dry_run"])),
         } for t in trials]
         sim = simulated.get(pid, False)
