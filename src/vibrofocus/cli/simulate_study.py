@@ -52,6 +52,10 @@ def simulate_study(
         from ..layout import ArrayLayout
 
         allow_overwrite(force)
+        if lsl:  # no pylsl: one error line before anything is created
+            from ..io.lsl import import_pylsl
+
+            import_pylsl()
         if trials_csv is not None and not trials_csv.parent.is_dir():
             # Checked first: the simulation takes minutes and the file is written last.
             from ..errors import ValidationError
