@@ -62,6 +62,18 @@ CHROMIUM_ARGS = [
 ]
 
 
+@pytest.fixture
+def lsl_config(tmp_path_factory, monkeypatch):
+    """liblsl on this machine only (ResolveScope = machine: resolve and stream over the
+    loopback), as in a sandbox without multicast. liblsl reads its configuration
+    (LSLAPICFG, its lsl_api.cfg) once per process, at its first use."""
+    cfg = tmp_path_factory.getbasetemp() / "lsl_api.cfg"
+    if not cfg.exists():
+        cfg.write_text("[multicast]\nResolveScope = machine\n[log]\nlevel = -3\n", encoding="utf-8")
+    monkeypatch.setenv("LSLAPICFG", str(cfg))
+    return cfg
+
+
 @pytest.fixture(scope="session")
 def chromium():
     """One headless chromium per test process (a second Playwright in one thread cannot start)."""

@@ -16,7 +16,8 @@ FORBIDDEN = {
     # The file formats sit just above layout: every layer may read and write files.
     "io": UPPER | {"signals"},
     **{f"io.{m}": UPPER | {"signals"}
-       for m in ("calibration_nc", "drives", "trials_csv", "responses", "report_json", "jsonsafe", "feature_bank")},
+       for m in ("calibration_nc", "drives", "trials_csv", "responses", "report_json", "jsonsafe", "feature_bank",
+                 "bids", "lsl", "sofa")},
     "signals": UPPER | {"io"},
     "rendering": UPPER - {"rendering"},
     "rigs": UPPER - {"rigs"},

@@ -249,7 +249,7 @@ def test_1_full_disk_while_saving_a_calibration_keeps_the_measurement(tmp_path, 
     real_fallbacks = _save.fallback_paths
     monkeypatch.setattr(_save, "fallback_paths", lambda out: [fallback_dir / real_fallbacks(out)[0].name])
     # Only the first save (into out/) fails: the disk holding out/ is full.
-    from vibrofocus.io import calibration_nc as cal_io
+    from vibrofocus import calibration as cal_io
 
     real_write_bytes = _atomic.write_bytes
 

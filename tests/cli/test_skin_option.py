@@ -7,7 +7,7 @@ import pytest
 from typer.testing import CliRunner
 
 from vibrofocus.cli.main import app
-from vibrofocus.io.calibration_nc import load_calibration
+from vibrofocus.calibration import load_calibration
 from vibrofocus.skin import SKIN_PRESETS
 
 

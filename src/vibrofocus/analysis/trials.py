@@ -20,6 +20,7 @@ import pandas as pd
 from .._validation import check_choice, integer_text
 from ..errors import ValidationError
 from ..io.responses import parse_response_text
+from ..io.bids import read_bids_trials_table
 from ..io.trials_csv import TRIALS_COLUMNS, read_trials_table
 from ..layout import ArrayLayout
 
@@ -307,7 +308,8 @@ def load_trials(
     Parameters
     ----------
     source : path or DataFrame
-        The CSV file, or a table with the same columns.
+        The CSV file, a BIDS dataset folder written by ``vibrofocus export --bids``
+        (:func:`vibrofocus.io.bids.read_bids_trials_table`), or a table with the same columns.
     layout : ArrayLayout, optional
         Layout whose locations the targets and responses refer to; default the
         reference layout (locations 1–9).
@@ -346,6 +348,9 @@ def load_trials(
         name = "<DataFrame>"
         if "line" not in raw.columns:
             raw["line"] = np.arange(2, len(raw) + 2)
+    elif os.path.isdir(source):  # a BIDS dataset (vibrofocus export --bids)
+        name = os.fspath(source)
+        raw = read_bids_trials_table(name)
     else:
         name = os.fspath(source)
         raw = read_trials_table(name)

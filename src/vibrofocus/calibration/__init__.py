@@ -7,7 +7,8 @@ from .estimate import MimoEstimate, mimo_h1
 from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes, make_excitation
 from .figures import plot_calibration
 from .fitmodel import FittedSkin, fit_model
-from ..io.calibration_nc import load_calibration, save_calibration
+from .files import (calibration_from_record, calibration_record, export_sofa, import_sofa, load_calibration,
+                    save_calibration)
 from .quality import QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
 
 __all__ = [
@@ -18,6 +19,10 @@ __all__ = [
     "Calibration",
     "save_calibration",
     "load_calibration",
+    "calibration_record",
+    "calibration_from_record",
+    "export_sofa",
+    "import_sofa",
     "plot_calibration",
     "SCHEMA_VERSION",
     "METHODS",

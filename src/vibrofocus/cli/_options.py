@@ -30,6 +30,16 @@ RIG_CONFIG_HELP = "Hardware settings file for audio/nidaq (refused with the simu
 FORCE_HELP = "Replace an existing output file of another kind (e.g. a calibration under a .csv name)."
 
 
+LSL_HELP = ("Send a JSON marker per cue, stimulus onset and answer to the Lab Streaming Layer outlet "
+            "'vibrofocus-markers' (type Markers), stamped with each event's own time on LSL's clock; needs "
+            "pip install 'vibrofocus[lsl]'.")
+
+
+def lsl_option() -> bool:
+    """The ``--lsl`` option of the commands that run trials (``study run``, ``simulate-study``, ``serve``)."""
+    return typer.Option(False, "--lsl", help=LSL_HELP)
+
+
 def force_option() -> bool:
     """The ``--force`` option of the commands that write files."""
     return typer.Option(False, "--force", help=FORCE_HELP)

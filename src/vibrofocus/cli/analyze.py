@@ -31,7 +31,7 @@ def _p(p: float) -> str:
 def analyze_command(
     trials: Path = typer.Argument(
         ...,
-        help="Trials CSV (docs/file-formats.md, trials file): participant, study, phase, trial, method, target, response, rt_s.",
+        help="Trials CSV (docs/file-formats.md, trials file): participant, study, phase, trial, method, target, response, rt_s; or a BIDS folder written by vibrofocus export --bids.",
         show_default=False,
     ),
     out: Path = typer.Option(

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from ._errors import err_console, user_errors
+from ._options import lsl_option
 from ._command import command
 
 _LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -27,6 +28,7 @@ def serve(
     max_connections: int = typer.Option(1000, "--max-connections", min=4, max=1_000_000, help="Most connections open at once; beyond it the longest-idle one is closed, or the new one refused when all are busy."),
     header_timeout: float = typer.Option(10.0, "--header-timeout", min=0.1, max=600.0, help="Seconds a connection may take to send a request's headers before it is closed."),
     keep_alive: float = typer.Option(5.0, "--keep-alive", min=0.1, max=3600.0, help="Seconds an idle connection is kept open between requests."),
+    lsl: bool = lsl_option(),
 ) -> None:
     """Run the experimenter and participant pages (FastAPI + uvicorn) on this computer.
 
@@ -56,6 +58,12 @@ def serve(
                 raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
         check_choice(pace, "pace", tuple(PACES))
         _check_database(db)
+        import contextlib
+
+        from ..studies.markers import lsl_markers
+
+        markers = contextlib.ExitStack()
+        outlet = markers.enter_context(lsl_markers(lsl))  # no pylsl: one error line before anything starts
         from ..rigs import make_rig
         from ..skin import skin_preset
 
@@ -92,11 +100,14 @@ def serve(
         typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
         typer.echo(f"experimenter token (for the login page): {token}")
         typer.echo("participant pages: linked from the experimenter page (one per session)")
+        if outlet is not None:
+            typer.echo(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})")
         if not no_browser:
             # A moment later, so that the page does not ask before uvicorn listens.
             threading.Timer(1.5, webbrowser.open, args=(login,)).start()
         limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive)
-        run(web_app, host=host, port=port, limits=limits, sock=sock)
+        with markers:
+            run(web_app, host=host, port=port, limits=limits, sock=sock)
 
 
 def _check_database(db: Path) -> None:

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import SEED_MAX, force_option
+from ._options import SEED_MAX, force_option, lsl_option
 from ._command import command
 
 
@@ -30,6 +30,7 @@ def simulate_study(
     skin: str = typer.Option("nominal", "--skin",
                              help="Skin preset of the simulated forearms: nominal (the skin the perceptual model "
                                   "was fitted on) | low | high | voigt-fit."),
+    lsl: bool = lsl_option(),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -42,6 +43,7 @@ def simulate_study(
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
         from rich.table import Table
 
+        from ..studies.markers import lsl_markers
         from ..studies.participants import MODEL_NOTICE
         from ..studies.simulate import simulate_studies, summarize_simulation
 
@@ -50,6 +52,10 @@ def simulate_study(
         from ..layout import ArrayLayout
 
         allow_overwrite(force)
+        if lsl:  # no pylsl: one error line before anything is created
+            from ..io.lsl import import_pylsl
+
+            import_pylsl()
         if trials_csv is not None and not trials_csv.parent.is_dir():
             # Checked first: the simulation takes minutes and the file is written last.
             from ..errors import ValidationError
@@ -84,7 +90,7 @@ def simulate_study(
             raise
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE}[/]")
-        with Progress(
+        with lsl_markers(lsl), Progress(
             TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             console=console, disable=quiet, transient=False,
         ) as bar:

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options, force_option
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options, force_option, lsl_option
 from ._command import command
 
 study_app = typer.Typer(
@@ -55,6 +55,7 @@ def run(
         help="Play the cue as a tone on this audio output (the participant's headphones; see `vibrofocus devices`). "
         "The rig's own actuator interface is refused.",
     ),
+    lsl: bool = lsl_option(),
 ) -> None:
     """Run a real participant: each trial beeps, plays the stimulus, then waits for the
     answer on the keypad — digits then Enter (Study 2: several digits, e.g. ``45``);
@@ -70,6 +71,7 @@ def run(
         from ..rigs import make_rig
         from ..studies import StudyStore
         from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
+        from ..studies.markers import lsl_markers
         from ..studies.terminal import InputEnded, TerminalResponder
         from .._validation import shorten
 
@@ -83,7 +85,7 @@ def run(
         # The rig first: a rig that cannot be made (no config, no device) leaves the
         # database as it was, with no participant or session planned for nothing.
         the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
-        with the_rig, StudyStore(db) as store:
+        with lsl_markers(lsl), the_rig, StudyStore(db) as store:
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
             open_sessions = [s for s in store.sessions(participant, study=study) if not s.finished]

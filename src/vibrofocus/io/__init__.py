@@ -1,7 +1,9 @@
 """File formats: one module per on-disk format, each the only writer and reader of it.
 
 :mod:`.calibration_nc`
-    Calibration files (netCDF4/HDF5): :func:`save_calibration`, :func:`load_calibration`.
+    Calibration files (netCDF4/HDF5), as plain records: :func:`write_calibration_file`,
+    :func:`read_calibration_file` (the :class:`~vibrofocus.calibration.Calibration` is built
+    above, by :func:`vibrofocus.calibration.load_calibration`).
 :mod:`.drives`
     Drives files (``.npz``, ``.csv``, ``.wav``): :func:`write_drives`,
     :func:`write_drives_wav`, :func:`read_drives`.
@@ -17,23 +19,35 @@
     :func:`load_feature_bank`.
 :mod:`.jsonsafe`
     The one JSON sanitizer, :func:`json_safe`.
+:mod:`.bids`
+    BIDS behavioural datasets (``vibrofocus export --bids``): :func:`write_bids_dataset`,
+    :func:`read_bids_trials_table`.
+:mod:`.lsl`
+    Lab Streaming Layer markers (``--lsl``, extra ``vibrofocus[lsl]``): :class:`MarkerOutlet`.
+:mod:`.sofa`
+    Transfer matrices as SOFA ``GeneralTF-E`` files (extra ``vibrofocus[sofa]``):
+    :func:`write_sofa_tf`, :func:`read_sofa_tf`.
 
-This package sits just above :mod:`vibrofocus.layout`: it loads no other subpackage of
-vibrofocus (the calibration record types are imported when a file is read or written),
-so every layer can use it.
+This package is the bottom floor: it reads and writes plain arrays and records and
+imports nothing of vibrofocus but :mod:`~vibrofocus.errors`, :mod:`~vibrofocus.defaults`,
+:mod:`~vibrofocus._validation` and :mod:`~vibrofocus._atomic` (tests/test_layering.py), so
+every layer can use it and domain objects are built above it.
 """
 
-from .calibration_nc import load_calibration, save_calibration
+from .bids import read_bids_trials_table, write_bids_dataset
+from .calibration_nc import read_calibration_file, write_calibration_file
 from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
 from .jsonsafe import json_safe
+from .lsl import MarkerOutlet
 from .report_json import check_report, read_report_json, write_report_json
 from .responses import format_response, parse_response_text
+from .sofa import read_sofa_tf, write_sofa_tf
 from .trials_csv import TRIALS_COLUMNS, read_trials_csv, read_trials_table, write_trials_csv
 
 __all__ = [
-    "save_calibration",
-    "load_calibration",
+    "write_calibration_file",
+    "read_calibration_file",
     "write_drives",
     "write_drives_wav",
     "read_drives",
@@ -49,4 +63,9 @@ __all__ = [
     "save_feature_bank",
     "load_feature_bank",
     "json_safe",
+    "write_bids_dataset",
+    "read_bids_trials_table",
+    "MarkerOutlet",
+    "write_sofa_tf",
+    "read_sofa_tf",
 ]

@@ -36,8 +36,14 @@ Attributes
 
 Version 2 added the ``mimo`` variables, ``recorded_s`` and two quality thresholds;
 version 1 files (``h1``/``paper`` only) load unchanged, their missing thresholds taking
-the defaults. :func:`load_calibration` checks all of it and raises
+the defaults. :func:`read_calibration_file` checks all of it and raises
 :class:`~vibrofocus.errors.CalibrationFileError` naming the file and what is wrong.
+
+This module reads and writes a *calibration record*: a plain mapping of arrays, numbers,
+strings and JSON-like dicts (:data:`RECORD_KEYS`), never a domain object. The
+:class:`~vibrofocus.calibration.Calibration` is built from the record one floor up, by
+:func:`vibrofocus.calibration.load_calibration`, which also checks the points and
+actuators against the layout.
 """
 
 from __future__ import annotations
@@ -49,19 +55,16 @@ import os
 import sys
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TYPE_CHECKING
+from collections.abc import Mapping
+from typing import Any
 
 import numpy as np
 
 from ..errors import CalibrationFileError, ValidationError
-from ..layout import ArrayLayout
 from .jsonsafe import json_safe
 
-if TYPE_CHECKING:  # the record types live in vibrofocus.calibration, above this module
-    from ..calibration.calibrate import Calibration
-
-__all__ = ["SCHEMA_VERSION", "FILE_KIND", "save_calibration", "load_calibration", "calibration_bytes",
-           "estimate_calibration_bytes"]
+__all__ = ["SCHEMA_VERSION", "FILE_KIND", "RECORD_KEYS", "write_calibration_file", "read_calibration_file",
+           "calibration_bytes", "estimate_calibration_bytes"]
 
 #: Version of the calibration file layout this vibrofocus writes (and the newest it reads).
 SCHEMA_VERSION = 2
@@ -87,91 +90,108 @@ _MIMO_VARS = {
     "input_condition": (("frequency", "point"), "1", "condition number of the input spectral matrix"),
     "input_correlation": (("frequency", "point"), "1", "largest normalised input cross-spectrum"),
 }
+#: Keys of a calibration record (what :func:`read_calibration_file` returns and
+#: :func:`write_calibration_file` takes): ``H`` complex (n_freqs, n_points, n_actuators),
+#: m/V; ``freqs`` (n_freqs,), Hz; ``coherence`` like ``H``, 1; ``drives`` (n_actuators,
+#: n_drive), V; ``recordings``, m; ``fs`` Hz; ``band`` (low, high) Hz; ``n_fft``;
+#: ``method``, ``participant_id``, ``created``, ``software_version`` str; ``schema_version``
+#: int; ``layout`` (dict, :meth:`ArrayLayout.to_dict`), ``point_labels``, ``point_kinds``,
+#: ``actuator_names`` (lists of str), ``points_xy`` (n_points, 2) and ``actuators_xy``
+#: (n_actuators, 2), m; ``rig`` and ``sweep`` (dicts); ``quality`` (dict of the quality
+#: arrays, named as :class:`~vibrofocus.calibration.QualityReport`'s fields, with
+#: ``issues`` a list of dicts and ``thresholds`` a dict); ``codes``, ``multiple_coherence``
+#: (``mimo``, else None); ``straps`` (dict or None); ``recorded_s`` (s, NaN: unknown);
+#: ``fit`` (None, or a dict with ``names``, ``values``, ``std``, ``log_covariance``,
+#: ``residual``, ``band``, ``fs``, ``fixed``, ``info``).
+RECORD_KEYS = ("H", "freqs", "coherence", "drives", "recordings", "fs", "band", "n_fft", "method", "participant_id",
+               "created", "software_version", "schema_version", "layout", "point_labels", "point_kinds",
+               "actuator_names", "points_xy", "actuators_xy", "rig", "sweep", "quality", "codes",
+               "multiple_coherence", "straps", "recorded_s", "fit")
 _REQUIRED_ATTRS = ("schema_version", "participant_id", "method", "fs", "band_low", "band_high", "n_fft",
                    "created", "software_version", "layout", "rig", "sweep", "quality_issues",
                    "quality_thresholds")
 
 
-def _to_dataset(cal: Calibration):
+def _to_dataset(rec: Mapping[str, Any]):
     import xarray as xr
 
-    lay = cal.layout
-    pts = lay.points_xy
-    kinds = ["location"] * lay.n_locations + ["guard"] * lay.n_guards
-    q = cal.quality
+    pts, act = np.asarray(rec["points_xy"], float), np.asarray(rec["actuators_xy"], float)
+    q = rec["quality"]
+    method = rec["method"]
     pa = ("point", "actuator")
     data_vars = {
-        "H_real": (("frequency", *pa), cal.H.real, {"units": "m/V", "long_name": "transfer matrix, real part"}),
-        "H_imag": (("frequency", *pa), cal.H.imag, {"units": "m/V", "long_name": "transfer matrix, imaginary part"}),
-        "coherence": (("frequency", *pa), cal.coherence,
+        "H_real": (("frequency", *pa), rec["H"].real, {"units": "m/V", "long_name": "transfer matrix, real part"}),
+        "H_imag": (("frequency", *pa), rec["H"].imag, {"units": "m/V", "long_name": "transfer matrix, imaginary part"}),
+        "coherence": (("frequency", *pa), rec["coherence"],
                       {"units": "1", "long_name": "coherence over repeats (NaN: not assessable)"}),
-        "drive": (("actuator", "drive_sample"), cal.drives,
+        "drive": (("actuator", "drive_sample"), rec["drives"],
                   {"units": "V", "long_name": "voltage on the measured actuator's channel (others zero)"}),
-        "recording": (_recording_dims(cal.method), cal.recordings,
+        "recording": (_recording_dims(method), rec["recordings"],
                       {"units": "m", "long_name": "raw displacement (NaN: dropout)"}),
-        "polarity": (("actuator",), q.polarity.astype(np.int8),
+        "polarity": (("actuator",), np.asarray(q["polarity"]).astype(np.int8),
                      {"units": "1", "long_name": "relative polarity (+1/-1, 0 not judged)"}),
     }
-    figures = {"snr_db": q.snr_db, "noise_rms": q.noise_rms_m, "band_gain": q.band_gain,
-               "low_coherence_share": q.low_coherence_share, "coherent_to_hz": q.coherent_to_hz,
-               "clipped": q.clipped.astype(np.int8),
-               "repeats_used": q.repeats_used.astype(np.int32), "dropouts": q.dropouts.astype(np.int32)}
+    figures = {"snr_db": q["snr_db"], "noise_rms": q["noise_rms_m"], "band_gain": q["band_gain"],
+               "low_coherence_share": q["low_coherence_share"], "coherent_to_hz": q["coherent_to_hz"],
+               "clipped": np.asarray(q["clipped"]).astype(np.int8),
+               "repeats_used": np.asarray(q["repeats_used"]).astype(np.int32),
+               "dropouts": np.asarray(q["dropouts"]).astype(np.int32)}
     for name, values in figures.items():
         units, long_name = _QUALITY_VARS[name]
         data_vars[name] = (pa, values, {"units": units, "long_name": long_name})
-    if cal.method == "mimo":
-        mimo = {"code": cal.codes.astype(np.int8), "multiple_coherence": cal.multiple_coherence,
-                "input_condition": q.input_condition, "input_correlation": q.input_correlation}
+    if method == "mimo":
+        mimo = {"code": np.asarray(rec["codes"]).astype(np.int8), "multiple_coherence": rec["multiple_coherence"],
+                "input_condition": q["input_condition"], "input_correlation": q["input_correlation"]}
         for name, values in mimo.items():
             dims, units, long_name = _MIMO_VARS[name]
             data_vars[name] = (dims, values, {"units": units, "long_name": long_name})
     coords = {}
-    if cal.fit is not None:
-        fit = cal.fit
-        coords["fit_parameter"] = ("fit_parameter", list(fit.names))
-        data_vars["fit_value"] = (("fit_parameter",), fit.values,
+    fit = rec["fit"]
+    if fit is not None:
+        coords["fit_parameter"] = ("fit_parameter", list(fit["names"]))
+        data_vars["fit_value"] = (("fit_parameter",), fit["values"],
                                   {"units": "SI", "long_name": "fitted skin-model parameter"})
-        data_vars["fit_std"] = (("fit_parameter",), fit.std, {"units": "SI", "long_name": "standard error"})
-        data_vars["fit_log_covariance"] = (("fit_parameter", "fit_parameter_b"), fit.log_covariance,
+        data_vars["fit_std"] = (("fit_parameter",), fit["std"], {"units": "SI", "long_name": "standard error"})
+        data_vars["fit_log_covariance"] = (("fit_parameter", "fit_parameter_b"), fit["log_covariance"],
                                            {"units": "1", "long_name": "covariance of log parameters"})
-        data_vars["fit_residual"] = (("point",), fit.residual,
+        data_vars["fit_residual"] = (("point",), fit["residual"],
                                      {"units": "1", "long_name": "relative fit residual per point"})
     coords |= {
-        "frequency": ("frequency", cal.freqs, {"units": "Hz"}),
-        "point": ("point", list(lay.point_labels)),
+        "frequency": ("frequency", rec["freqs"], {"units": "Hz"}),
+        "point": ("point", list(rec["point_labels"])),
         "point_x": ("point", pts[:, 0], {"units": "m", "long_name": "x, across the arm toward the thumb"}),
         "point_y": ("point", pts[:, 1], {"units": "m", "long_name": "y, along the arm toward the wrist"}),
-        "point_kind": ("point", kinds),
-        "actuator": ("actuator", list(lay.actuator_names)),
-        "actuator_x": ("actuator", lay.actuators_xy[:, 0], {"units": "m"}),
-        "actuator_y": ("actuator", lay.actuators_xy[:, 1], {"units": "m"}),
+        "point_kind": ("point", list(rec["point_kinds"])),
+        "actuator": ("actuator", list(rec["actuator_names"])),
+        "actuator_x": ("actuator", act[:, 0], {"units": "m"}),
+        "actuator_y": ("actuator", act[:, 1], {"units": "m"}),
     }
     attrs = {
-        "title": f"vibrofocus calibration of {cal.participant_id}",
+        "title": f"vibrofocus calibration of {rec['participant_id']}",
         "file_kind": FILE_KIND,
         "schema_version": np.int32(SCHEMA_VERSION),
         "software": "vibrofocus",
-        "software_version": cal.software_version,
-        "participant_id": cal.participant_id,
-        "method": cal.method,
-        "fs": float(cal.fs),
-        "band_low": float(cal.band[0]),
-        "band_high": float(cal.band[1]),
-        "n_fft": np.int32(cal.n_fft),
-        "created": cal.created,
-        "layout": json.dumps(lay.to_dict()),
-        "rig": _json_text(cal.rig),
-        "sweep": json.dumps(cal.sweep.to_dict()),
-        "quality_issues": json.dumps([i.to_dict() for i in q.issues]),
-        "quality_thresholds": json.dumps(q.thresholds.to_dict()),
+        "software_version": rec["software_version"],
+        "participant_id": rec["participant_id"],
+        "method": method,
+        "fs": float(rec["fs"]),
+        "band_low": float(rec["band"][0]),
+        "band_high": float(rec["band"][1]),
+        "n_fft": np.int32(rec["n_fft"]),
+        "created": rec["created"],
+        "layout": json.dumps(rec["layout"]),
+        "rig": _json_text(rec["rig"]),
+        "sweep": json.dumps(rec["sweep"]),
+        "quality_issues": json.dumps(list(q["issues"])),
+        "quality_thresholds": json.dumps(q["thresholds"]),
     }
-    if cal.straps is not None:
-        attrs["strap_forces"] = json.dumps(cal.straps)
-    if np.isfinite(cal.recorded_s):
-        attrs["recorded_s"] = float(cal.recorded_s)
-    if cal.fit is not None:
-        attrs["fit"] = _json_text({"band": list(cal.fit.band), "fs": cal.fit.fs, "fixed": cal.fit.fixed,
-                                   "info": cal.fit.info})
+    if rec["straps"] is not None:
+        attrs["strap_forces"] = json.dumps(rec["straps"])
+    if np.isfinite(rec["recorded_s"]):
+        attrs["recorded_s"] = float(rec["recorded_s"])
+    if fit is not None:
+        attrs["fit"] = _json_text({"band": list(fit["band"]), "fs": fit["fs"], "fixed": fit["fixed"],
+                                   "info": fit["info"]})
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
@@ -187,18 +207,18 @@ def _json_text(value) -> str:
     return json.dumps(json_safe(value, finite=False), default=str)
 
 
-def calibration_bytes(cal: Calibration) -> bytes:
-    """The calibration file's bytes (netCDF4/HDF5), built in memory.
+def calibration_bytes(record: Mapping[str, Any]) -> bytes:
+    """The calibration file's bytes (netCDF4/HDF5), built in memory from a record (:data:`RECORD_KEYS`).
 
     Serializing in memory first means the HDF5 library never writes to the disk itself:
     a full disk then surfaces as a plain, catchable ``OSError`` at the write, never as a
     crash inside the library.
     """
-    from ..calibration.calibrate import Calibration
-
-    if not isinstance(cal, Calibration):
-        raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
-    ds = _to_dataset(cal)
+    if not isinstance(record, Mapping) or set(RECORD_KEYS) - set(record):
+        missing = sorted(set(RECORD_KEYS) - set(record)) if isinstance(record, Mapping) else None
+        raise ValidationError(f"a calibration record must be a mapping with the keys RECORD_KEYS; "
+                              f"{'missing: ' + ', '.join(missing) if missing else 'got ' + type(record).__name__}")
+    ds = _to_dataset(record)
     # Raw recordings are mostly sensor noise, which hardly compresses: light, fast zlib.
     # Every array carries an HDF5 Fletcher-32 checksum: a flipped bit in H (a plausible,
     # finite, wrong value) then fails loading instead of silently changing the design.
@@ -234,8 +254,8 @@ def estimate_calibration_bytes(n_points: int, n_actuators: int, repeats: int, n_
     return int(1.1 * (recordings + matrices + drives + mimo)) + 64 * 1024
 
 
-def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
-    """Write a calibration to one netCDF4/HDF5 file (see the module docstring).
+def write_calibration_file(record: Mapping[str, Any], path: str | os.PathLike) -> Path:
+    """Write a calibration record (:data:`RECORD_KEYS`) to one netCDF4/HDF5 file (see the module docstring).
 
     The file is built in memory, written next to its destination, fsynced and renamed
     over it (:func:`vibrofocus._atomic.atomic_write`): a full disk, a read-only folder
@@ -244,7 +264,8 @@ def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
 
     Parameters
     ----------
-    cal : Calibration
+    record : mapping
+        The calibration's arrays and descriptions, keyed as :data:`RECORD_KEYS`.
     path : str or PathLike
         Destination, conventionally ``*.nc``; its folder must exist.
 
@@ -256,12 +277,12 @@ def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
     Raises
     ------
     OutputError
-        The file cannot be written (no space, read-only, missing folder, ...); ``cal``
-        is untouched, so the caller can save it elsewhere.
+        The file cannot be written (no space, read-only, missing folder, ...); the
+        record is untouched, so the caller can save it elsewhere.
     """
     from .._atomic import write_bytes
 
-    data = calibration_bytes(cal)
+    data = calibration_bytes(record)
     return write_bytes(Path(path), data, what="calibration")
 
 
@@ -269,8 +290,8 @@ def _fail(path: Path, what: str) -> CalibrationFileError:
     return CalibrationFileError(f"{path}: {what}")
 
 
-def load_calibration(path: str | os.PathLike) -> Calibration:
-    """Read and validate a calibration file.
+def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
+    """Read and validate a calibration file into a record (:data:`RECORD_KEYS`).
 
     Parameters
     ----------
@@ -278,7 +299,8 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
 
     Returns
     -------
-    Calibration
+    dict
+        The record: plain arrays, numbers, strings and JSON-like dicts.
 
     Raises
     ------
@@ -289,8 +311,9 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
         matrix (named with its frequency, point and actuator), or a finite one that no
         skin gives (a magnitude of H above :data:`~vibrofocus.defaults.H_MAX_M_PER_V` anywhere, or
         the whole array below :data:`~vibrofocus.defaults.H_MIN_PEAK_M_PER_V` in the
-        band; named likewise); a bad band; points or actuators that do not match the
-        layout. The message names the file.
+        band; named likewise); a bad band. The message names the file. (Points and
+        actuators are checked against the layout where the layout is built,
+        :func:`vibrofocus.calibration.load_calibration`.)
     """
     import xarray as xr
 
@@ -358,11 +381,7 @@ def _number_attr(attrs, name: str, path: Path) -> float:
         raise _fail(path, f"attribute {name} must be one number, got {raw!r}") from None
 
 
-def _from_dataset(ds, path: Path) -> Calibration:
-    from ..calibration.calibrate import Calibration
-    from ..calibration.excitation import SweepSettings
-    from ..calibration.quality import QualityIssue, QualityReport, QualityThresholds
-
+def _from_dataset(ds, path: Path) -> dict[str, Any]:
     attrs = ds.attrs
     if attrs.get("file_kind") != FILE_KIND:
         raise _fail(path, f"is an HDF5/netCDF file but not a vibrofocus calibration (file_kind is "
@@ -394,16 +413,19 @@ def _from_dataset(ds, path: Path) -> Calibration:
         raise _fail(path, f"lacks the variable(s) {', '.join(missing)}")
 
     try:
-        layout = ArrayLayout.from_dict(json.loads(attrs["layout"]))
+        layout = json.loads(attrs["layout"])
         rig = json.loads(attrs["rig"])
-        sweep = SweepSettings.from_dict(json.loads(attrs["sweep"]))
-        issues = [QualityIssue.from_dict(d) for d in json.loads(attrs["quality_issues"])]
-        thresholds = QualityThresholds(**json.loads(attrs["quality_thresholds"]))
+        sweep = json.loads(attrs["sweep"])
+        issues = json.loads(attrs["quality_issues"])
+        thresholds = json.loads(attrs["quality_thresholds"])
         straps = json.loads(attrs["strap_forces"]) if "strap_forces" in attrs else None
-    except (ValueError, TypeError, KeyError, AttributeError) as exc:  # JSONDecodeError is a ValueError
+    except (ValueError, TypeError) as exc:  # JSONDecodeError is a ValueError
         raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
-    if not isinstance(rig, dict):
-        raise _fail(path, f"attribute rig must describe the rig as a JSON object, got {type(rig).__name__}")
+    for name, value, kind in (("rig", rig, dict), ("layout", layout, dict), ("sweep", sweep, dict),
+                              ("quality_issues", issues, list), ("quality_thresholds", thresholds, dict)):
+        if not isinstance(value, kind):
+            raise _fail(path, f"has an unreadable description attribute (attribute {name} must be a JSON "
+                              f"{'object' if kind is dict else 'list'}, got {type(value).__name__})")
 
     fs = _number_attr(attrs, "fs", path)
     n_fft = _number_attr(attrs, "n_fft", path)
@@ -440,27 +462,11 @@ def _from_dataset(ds, path: Path) -> Calibration:
     if not np.allclose(freqs, np.fft.rfftfreq(n_fft, 1 / fs), rtol=1e-9, atol=1e-9):
         raise _fail(path, f"its frequency axis is not rfftfreq({n_fft}, 1/{fs:g})")
 
-    # Points and actuators against the layout.
+    # Points and actuators as stored (the layout's check is one floor up).
     labels = [str(v) for v in ds["point"].values]
-    if labels != list(layout.point_labels):
-        absent = [lab for lab in layout.point_labels if lab not in labels]
-        extra = [lab for lab in labels if lab not in layout.point_labels]
-        detail = []
-        if absent:
-            detail.append(f"point(s) {', '.join(absent)} of the layout are missing from the data")
-        if extra:
-            detail.append(f"point(s) {', '.join(extra)} are not in the layout")
-        raise _fail(path, "points do not match the layout: " + ("; ".join(detail) or
-                    f"order {labels} differs from {list(layout.point_labels)}"))
     pts = np.stack([ds["point_x"].values, ds["point_y"].values], axis=1).astype(float)
-    if not np.allclose(pts, layout.points_xy, atol=1e-9):
-        raise _fail(path, "point positions (point_x, point_y) differ from the layout's")
     names = [str(v) for v in ds["actuator"].values]
-    if names != list(layout.actuator_names):
-        raise _fail(path, f"actuators {names} do not match the layout's {list(layout.actuator_names)}")
     act = np.stack([ds["actuator_x"].values, ds["actuator_y"].values], axis=1).astype(float)
-    if not np.allclose(act, layout.actuators_xy, atol=1e-9):
-        raise _fail(path, "actuator positions (actuator_x, actuator_y) differ from the layout's")
     if ds.sizes["record_sample"] < ds.sizes["drive_sample"]:
         raise _fail(path, "recordings are shorter than the drives")
 
@@ -494,22 +500,25 @@ def _from_dataset(ds, path: Path) -> Calibration:
         correlation = ds["input_correlation"].values.astype(float)
     recorded_s = _number_attr(attrs, "recorded_s", path) if "recorded_s" in attrs else float("nan")
 
-    quality = QualityReport(
-        issues=issues, snr_db=ds["snr_db"].values, noise_rms_m=ds["noise_rms"].values,
-        band_gain=ds["band_gain"].values, low_coherence_share=ds["low_coherence_share"].values,
-        coherent_to_hz=ds["coherent_to_hz"].values,
-        clipped=ds["clipped"].values.astype(bool), repeats_used=ds["repeats_used"].values.astype(int),
-        dropouts=ds["dropouts"].values.astype(int), polarity=ds["polarity"].values.astype(int),
-        thresholds=thresholds, input_condition=condition, input_correlation=correlation,
-    )
-    fit = _fit_from_dataset(ds, attrs, layout, path) if "fit_value" in ds.variables else None
-    return Calibration(
-        H=H_real.astype(float) + 1j * H_imag.astype(float), freqs=freqs, fs=fs, coherence=coherence,
-        layout=layout, band=band, participant_id=str(attrs["participant_id"]), method=method,
-        quality=quality, drives=drive, recordings=ds["recording"].values, rig=rig, sweep=sweep,
-        created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
-        straps=straps, codes=codes, multiple_coherence=multiple, recorded_s=recorded_s, fit=fit,
-    )
+    quality = {
+        "issues": issues, "snr_db": ds["snr_db"].values, "noise_rms_m": ds["noise_rms"].values,
+        "band_gain": ds["band_gain"].values, "low_coherence_share": ds["low_coherence_share"].values,
+        "coherent_to_hz": ds["coherent_to_hz"].values,
+        "clipped": ds["clipped"].values.astype(bool), "repeats_used": ds["repeats_used"].values.astype(int),
+        "dropouts": ds["dropouts"].values.astype(int), "polarity": ds["polarity"].values.astype(int),
+        "thresholds": thresholds, "input_condition": condition, "input_correlation": correlation,
+    }
+    fit = _fit_from_dataset(ds, attrs, path) if "fit_value" in ds.variables else None
+    return {
+        "H": H_real.astype(float) + 1j * H_imag.astype(float), "freqs": freqs, "fs": fs, "coherence": coherence,
+        "band": band, "n_fft": n_fft, "participant_id": str(attrs["participant_id"]), "method": method,
+        "quality": quality, "drives": drive, "recordings": ds["recording"].values, "rig": rig, "sweep": sweep,
+        "created": str(attrs["created"]), "software_version": str(attrs["software_version"]),
+        "schema_version": version, "straps": straps, "codes": codes, "multiple_coherence": multiple,
+        "recorded_s": recorded_s, "fit": fit, "layout": layout, "point_labels": labels,
+        "point_kinds": [str(v) for v in ds["point_kind"].values] if "point_kind" in ds.variables else None,
+        "actuator_names": names, "points_xy": pts, "actuators_xy": act,
+    }
 
 
 def _check_plausible(H_real: np.ndarray, H_imag: np.ndarray, freqs: np.ndarray, band: tuple[float, float],
@@ -534,25 +543,20 @@ def _check_plausible(H_real: np.ndarray, H_imag: np.ndarray, freqs: np.ndarray, 
                           "actuator moved the skin measurably; check the rig and calibrate again")
 
 
-def _fit_from_dataset(ds, attrs, layout: ArrayLayout, path: Path):
-    """The stored :class:`.FittedSkin`, or CalibrationFileError naming what is wrong."""
-    from ..calibration.fitmodel import FittedSkin, parameter_names
-
+def _fit_from_dataset(ds, attrs, path: Path) -> dict[str, Any]:
+    """The stored skin-model fit as a dict of arrays and settings, or CalibrationFileError naming what is wrong."""
     missing = [v for v in ("fit_log_covariance", "fit_residual") if v not in ds.variables]
     if "fit" not in attrs:
         missing.append("attribute fit")
     if missing:
         raise _fail(path, f"has fit_value but lacks {', '.join(missing)}")
-    names = [str(v) for v in ds["fit_parameter"].values]
-    expected = list(parameter_names(layout.actuator_names))
-    if names != expected:
-        raise _fail(path, f"fit parameters {names} differ from the model's {expected}")
     try:
         meta = json.loads(attrs["fit"])
-        return FittedSkin(layout=layout, fs=float(meta["fs"]), band=tuple(meta["band"]),
-                          values=ds["fit_value"].values.astype(float),
-                          log_covariance=ds["fit_log_covariance"].values.astype(float),
-                          residual=ds["fit_residual"].values.astype(float), fixed=meta["fixed"],
-                          info=meta.get("info", {}))
-    except (ValueError, TypeError, KeyError, ValidationError) as exc:
+        return {"names": [str(v) for v in ds["fit_parameter"].values], "fs": float(meta["fs"]),
+                "band": tuple(meta["band"]), "values": ds["fit_value"].values.astype(float),
+                "std": ds["fit_std"].values.astype(float) if "fit_std" in ds.variables else None,
+                "log_covariance": ds["fit_log_covariance"].values.astype(float),
+                "residual": ds["fit_residual"].values.astype(float), "fixed": meta["fixed"],
+                "info": meta.get("info", {})}
+    except (ValueError, TypeError, KeyError) as exc:
         raise _fail(path, f"has an unreadable skin-model fit ({exc})") from exc

@@ -13,26 +13,31 @@ perceptual model that wrote it. The shipped bank is ``studies/data/feature_bank.
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
 from ..errors import ValidationError
 
-if TYPE_CHECKING:  # the record type lives in vibrofocus.studies, above this module
-    from ..studies.bank import FeatureBank
+__all__ = ["FEATURE_BANK_ARRAYS", "save_feature_bank", "load_feature_bank"]
 
-__all__ = ["save_feature_bank", "load_feature_bank"]
+#: The arrays of a feature bank, as :func:`save_feature_bank` takes them and
+#: :func:`load_feature_bank` returns them (besides ``model_version``).
+FEATURE_BANK_ARRAYS = ("energy", "points_xy", "locations_xy", "centre_xy", "methods", "forearm_seeds", "seed",
+                       "actuator_energy", "actuators_xy")
 
 
-def save_feature_bank(bank: FeatureBank, path: str | os.PathLike, *, model_version: str) -> Path:
-    """Write a feature bank to an ``.npz`` file, atomically (:func:`vibrofocus._atomic.atomic_write`).
+def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model_version: str) -> Path:
+    """Write a feature bank's arrays to an ``.npz`` file, atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     Parameters
     ----------
-    bank : FeatureBank
-        The bank (:func:`vibrofocus.studies.bank.build_feature_bank`).
+    bank : mapping
+        The arrays named :data:`FEATURE_BANK_ARRAYS` (see the module docstring for shapes
+        and units), e.g. ``dataclasses.asdict`` of a
+        :class:`~vibrofocus.studies.bank.FeatureBank`.
     path : path-like
         Destination ``.npz``; its folder must exist.
     model_version : str
@@ -50,18 +55,22 @@ def save_feature_bank(bank: FeatureBank, path: str | os.PathLike, *, model_versi
     """
     from .._atomic import atomic_write
 
+    missing = [name for name in FEATURE_BANK_ARRAYS if name not in bank]
+    if missing:
+        raise ValidationError(f"a feature bank needs the arrays {', '.join(missing)}")
     with atomic_write(path, "wb", what="feature bank") as fh:
         np.savez_compressed(
-            fh, energy=bank.energy.astype(np.float32), points_xy=bank.points_xy, locations_xy=bank.locations_xy,
-            centre_xy=bank.centre_xy, methods=np.array(bank.methods), forearm_seeds=bank.forearm_seeds,
-            seed=np.int64(bank.seed), actuator_energy=bank.actuator_energy.astype(np.float32),
-            actuators_xy=bank.actuators_xy, model_version=np.array(model_version),
+            fh, energy=np.asarray(bank["energy"]).astype(np.float32), points_xy=bank["points_xy"],
+            locations_xy=bank["locations_xy"], centre_xy=bank["centre_xy"], methods=np.array(bank["methods"]),
+            forearm_seeds=bank["forearm_seeds"], seed=np.int64(bank["seed"]),
+            actuator_energy=np.asarray(bank["actuator_energy"]).astype(np.float32), actuators_xy=bank["actuators_xy"],
+            model_version=np.array(model_version),
         )
     return Path(path)
 
 
-def load_feature_bank(path: str | os.PathLike) -> FeatureBank:
-    """Read a feature bank written by :func:`save_feature_bank`.
+def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a feature bank's arrays written by :func:`save_feature_bank`.
 
     Parameters
     ----------
@@ -70,22 +79,20 @@ def load_feature_bank(path: str | os.PathLike) -> FeatureBank:
 
     Returns
     -------
-    FeatureBank
+    dict
+        :data:`FEATURE_BANK_ARRAYS`: ``energy`` float, ``methods`` a tuple of str, ``seed``
+        an int, the others arrays; ready for ``FeatureBank(**...)``.
 
     Raises
     ------
     ValidationError
         The file cannot be read or lacks an array.
     """
-    from ..studies.bank import FeatureBank
-
     try:
         with np.load(path) as z:
-            return FeatureBank(
-                energy=z["energy"].astype(float), points_xy=z["points_xy"], locations_xy=z["locations_xy"],
-                centre_xy=z["centre_xy"], methods=tuple(str(m) for m in z["methods"]),
-                forearm_seeds=z["forearm_seeds"], seed=int(z["seed"]),
-                actuator_energy=z["actuator_energy"].astype(float), actuators_xy=z["actuators_xy"],
-            )
+            return {"energy": z["energy"].astype(float), "points_xy": z["points_xy"], "locations_xy": z["locations_xy"],
+                    "centre_xy": z["centre_xy"], "methods": tuple(str(m) for m in z["methods"]),
+                    "forearm_seeds": z["forearm_seeds"], "seed": int(z["seed"]),
+                    "actuator_energy": z["actuator_energy"].astype(float), "actuators_xy": z["actuators_xy"]}
     except (OSError, KeyError, ValueError) as exc:
         raise ValidationError(f"cannot read the feature bank {path}: {exc}") from exc

@@ -84,6 +84,8 @@ from .storage import (
     file_sha256,
 )
 from .simulate import participant_seeds, simulate_studies, summarize_simulation
+from .bids import export_bids
+from .markers import lsl_markers, send_marker, sending_markers
 from .terminal import TerminalResponder
 
 __all__ = [
@@ -133,4 +135,8 @@ __all__ = [
     "simulate_studies",
     "participant_seeds",
     "summarize_simulation",
+    "export_bids",
+    "lsl_markers",
+    "sending_markers",
+    "send_marker",
 ]

@@ -17,6 +17,7 @@ distribution, not trial by trial.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 from importlib import resources
@@ -26,6 +27,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import StudyError, ValidationError
+from ..io.feature_bank import load_feature_bank, save_feature_bank
 from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, central_percepts, draw_answers
 
 __all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
@@ -83,9 +85,7 @@ class FeatureBank:
         path : path-like
             Destination ``.npz``; its folder must exist.
         """
-        from ..io.feature_bank import save_feature_bank
-
-        save_feature_bank(self, path, model_version=MODEL_VERSION)
+        save_feature_bank(dataclasses.asdict(self), path, model_version=MODEL_VERSION)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "FeatureBank":
@@ -96,9 +96,7 @@ class FeatureBank:
         path : path-like
             A feature-bank ``.npz``.
         """
-        from ..io.feature_bank import load_feature_bank
-
-        return load_feature_bank(path)
+        return cls(**load_feature_bank(path))
 
 
 def build_feature_bank(

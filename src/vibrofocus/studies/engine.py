@@ -27,6 +27,7 @@ import numpy as np
 
 from ..defaults import DRIVE_LIMIT_V, N_SAMPLES
 from ..errors import StudyError, ValidationError
+from .markers import send_marker
 from .protocol import PlannedTrial, StudyDesign
 from .storage import AnswerReceipt, StudyStore
 
@@ -391,6 +392,7 @@ class StudyEngine:
         self.store = store
         info = store.session(session_id)  # unknown session -> StudyError now, not mid-run
         self.session_id = info.session_id
+        self.participant_id = info.participant_id
         self.study = info.study
         self.design = info.design
         self.rig = rig
@@ -423,6 +425,12 @@ class StudyEngine:
     def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
         self.store.log_event(self.session_id, kind, {"trial_index": trial.trial_index, **fields})
 
+    def _marker(self, event: str, host_time_s: float, trial: PlannedTrial, **fields: Any) -> None:
+        """Send the marker of a cue, stimulus onset or answer (:mod:`.markers`; ``--lsl``)."""
+        send_marker(event, host_time_s, participant=self.participant_id, study=self.study, session=self.session_id,
+                    trial=trial.trial, trial_index=trial.trial_index, phase=trial.phase, method=trial.method,
+                    target=trial.target, **{"response": None, **fields})
+
     def present(self, trial: PlannedTrial, responder: Any = None) -> Presentation | str | Again:
         """Cue, then play the trial's stimulus; both are logged before they happen.
 
@@ -431,6 +439,7 @@ class StudyEngine:
         """
         stim = self.stimulus(trial.method, trial.target)
         self._log("cue", trial, beep=self._beep)
+        self._marker("cue", time.monotonic(), trial)
         if self.cue is not None:
             self.cue()
         control = _hook(responder, "cue_shown", trial)
@@ -441,18 +450,26 @@ class StudyEngine:
             played=stim is not None, drive_sha256=None if stim is None else stim.sha256,
         )
         onset = time.monotonic()
+        self._marker("stimulus_onset", onset, trial, played=stim is not None)
         if stim is not None:
             self.rig.play(stim.drives)
         return Presentation(self.session_id, self.study, trial, stim, onset, self.design)
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
-        """Commit the answer to a presented trial (with the drive hash) before returning."""
+        """Commit the answer to a presented trial (with the drive hash and the onset) before returning.
+
+        The answer's marker is stamped with its own time: the stimulus onset plus the
+        response time.
+        """
         stim = presentation.stimulus
-        return self.store.record_answer(
+        receipt = self.store.record_answer(
             self.session_id, presentation.trial.trial_index, response.locations, response.rt_s,
             answer_id=answer_id or response.answer_id or uuid.uuid4().hex,
-            drive_sha256=None if stim is None else stim.sha256,
+            drive_sha256=None if stim is None else stim.sha256, onset_s=presentation.onset_s,
         )
+        self._marker("answer", presentation.onset_s + float(receipt.rt_s), presentation.trial,
+                     response=list(receipt.response), rt_s=float(receipt.rt_s))
+        return receipt
 
     def _trial(self, responder: Responder, trial: PlannedTrial) -> AnswerReceipt | str | Again:
         """Present one trial and commit its answer; or the control a responder returned."""

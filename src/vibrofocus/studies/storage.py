@@ -413,6 +413,7 @@ class StudyStore(StudyDatabase):
         answer_id: str,
         drive_sha256: str | None = None,
         require_presented: bool = False,
+        onset_s: float | None = None,
     ) -> AnswerReceipt:
         """Validate an answer and commit it in its own transaction before returning.
 
@@ -442,6 +443,9 @@ class StudyStore(StudyDatabase):
             Refuse an answer to a trial whose ``stimulus_onset`` is not logged (an answer
             sent before the stimulus is not data): for answers that arrive from outside
             the trial loop, such as the web participant page.
+        onset_s : float, optional
+            The stimulus onset, host ``time.monotonic()``, s (the study engine's; the time
+            its LSL marker carries), kept in the ``answer`` event's payload.
 
         Returns
         -------
@@ -523,6 +527,7 @@ class StudyStore(StudyDatabase):
             )
             self._insert_event(conn, sid, "answer", {
                 "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt,
+                **({} if onset_s is None else {"onset_s": float(onset_s)}),
             })
             new_status = status_after_answer(info.status, finished=info.n_answered + 1 >= info.n_trials)
             if new_status != info.status:

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 from .._atomic import write_text
+from .private import private_file
 
 __all__ = ["LoginSessions", "LOGIN_TTL_S"]
 
@@ -88,8 +89,6 @@ class LoginSessions:
         return {k: float(v) for k, v in dict(data.get("logins", {})).items() if isinstance(v, (int, float)) and v > now}
 
     def _save(self) -> None:
-        from .state import private_file
-
         now = time.time()
         self._ids = {k: v for k, v in self._ids.items() if v > now}
         private_file(self.path)  # 0600 before the first write; atomic writes keep the mode

@@ -24,6 +24,7 @@ from fastapi import HTTPException, Request
 from .._templates import template_environment
 from ..errors import StudyError, VibrofocusError
 from .logins import LoginSessions
+from .private import owner_only, private_dir, private_file, private_journal
 from .public_text import public_text
 from .security import same_secret
 from .session_runner import Pace, SessionRunner
@@ -510,44 +511,6 @@ def _as_dict(obj: Any) -> dict[str, Any]:
     return dict(obj)
 
 
-def private_dir(path: Path) -> None:
-    """Create a folder only its owner can enter (0700); tighten it if it exists."""
-    path.mkdir(mode=0o700, parents=True, exist_ok=True)
-    _owner_only(path, 0o700)
-
-
-def private_file(path: Path) -> None:
-    """Create an empty file only its owner can read (0600), or tighten an existing one.
-
-    The study database holds participant data: it is created 0600 before SQLite opens
-    it (SQLite gives its journal files the database's mode).
-    """
-    try:
-        os.close(os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
-    except FileExistsError:
-        _owner_only(path, 0o600)
-    except OSError:  # a read-only folder: the store says so in its own words
-        pass
-
-
-def _owner_only(path: Path, mode: int) -> None:
-    try:
-        st = path.stat()
-        if st.st_uid == os.getuid() and st.st_mode & 0o077:
-            os.chmod(path, mode)
-            log.warning("%s could be read by other users; it is now %s", path.name, oct(mode))
-    except OSError:  # not ours, or a file system without modes: leave it as it is
-        pass
-
-
-def private_journal(db_path: Path) -> None:
-    """Tighten the database's -wal and -shm to 0600 where they exist (a crashed writer's)."""
-    for suffix in ("-wal", "-shm", "-journal"):
-        path = db_path.with_name(db_path.name + suffix)
-        if path.exists():
-            _owner_only(path, 0o600)
-
-
 def login_cookie(cookie_header: str | None) -> str | None:
     """The login cookie's value in a ``Cookie`` header, if any."""
     for part in (cookie_header or "").split(";"):
@@ -561,7 +524,7 @@ def load_or_make_secret(db_path: Path) -> bytes:
     """The HMAC secret of participant keys, kept beside the database (mode 0600, enforced)."""
     path = db_path.with_name(db_path.name + ".web-secret")
     if path.exists():
-        _owner_only(path, 0o600)
+        owner_only(path, 0o600)
         return bytes.fromhex(path.read_text().strip())
     secret = secrets.token_bytes(32)
     # O_EXCL: two servers starting at once must not each write their own secret.

@@ -1,0 +1,232 @@
+"""Calibrations to and from their files: the domain objects built on the plain records of
+:mod:`vibrofocus.io.calibration_nc`.
+
+The file format reads and writes arrays and JSON-like dicts only; this module turns a
+:class:`~.calibrate.Calibration` into that record and back, and checks what only the domain
+knows: the stored points and actuators against the layout, the skin-model fit's parameter
+names.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import CalibrationFileError, ValidationError
+from ..io.calibration_nc import read_calibration_file, write_calibration_file
+from ..io.sofa import read_sofa_tf, write_sofa_tf
+from ..layout import ArrayLayout
+from .calibrate import Calibration
+from .excitation import SweepSettings
+from .fitmodel import FittedSkin, parameter_names
+from .quality import QualityIssue, QualityReport, QualityThresholds
+
+__all__ = ["save_calibration", "load_calibration", "calibration_record", "calibration_from_record", "export_sofa",
+           "import_sofa"]
+
+# QualityReport's array fields, stored as they are.
+_QUALITY_ARRAYS = ("snr_db", "noise_rms_m", "band_gain", "low_coherence_share", "coherent_to_hz", "clipped",
+                   "repeats_used", "dropouts", "polarity", "input_condition", "input_correlation")
+
+
+def calibration_record(cal: Calibration) -> dict[str, Any]:
+    """The plain record of a calibration (:data:`vibrofocus.io.calibration_nc.RECORD_KEYS`).
+
+    Parameters
+    ----------
+    cal : Calibration
+
+    Returns
+    -------
+    dict
+        Arrays, numbers, strings and JSON-like dicts; no vibrofocus object.
+    """
+    if not isinstance(cal, Calibration):
+        raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
+    lay, q, fit = cal.layout, cal.quality, cal.fit
+    quality = {name: getattr(q, name) for name in _QUALITY_ARRAYS}
+    quality |= {"issues": [i.to_dict() for i in q.issues], "thresholds": q.thresholds.to_dict()}
+    return {
+        "H": cal.H, "freqs": cal.freqs, "coherence": cal.coherence, "drives": cal.drives, "recordings": cal.recordings,
+        "fs": cal.fs, "band": tuple(cal.band), "n_fft": cal.n_fft, "method": cal.method,
+        "participant_id": cal.participant_id, "created": cal.created, "software_version": cal.software_version,
+        "schema_version": cal.schema_version, "layout": lay.to_dict(), "point_labels": list(lay.point_labels),
+        "point_kinds": ["location"] * lay.n_locations + ["guard"] * lay.n_guards,
+        "actuator_names": list(lay.actuator_names), "points_xy": lay.points_xy, "actuators_xy": lay.actuators_xy,
+        "rig": cal.rig, "sweep": cal.sweep.to_dict(), "quality": quality, "codes": cal.codes,
+        "multiple_coherence": cal.multiple_coherence, "straps": cal.straps, "recorded_s": cal.recorded_s,
+        "fit": None if fit is None else {
+            "names": list(fit.names), "values": fit.values, "std": fit.std, "log_covariance": fit.log_covariance,
+            "residual": fit.residual, "band": tuple(fit.band), "fs": fit.fs, "fixed": fit.fixed, "info": fit.info},
+    }
+
+
+def _fail(path: Path | None, what: str) -> CalibrationFileError:
+    return CalibrationFileError(f"{path}: {what}" if path is not None else what)
+
+
+def _check_against_layout(rec: dict[str, Any], layout: ArrayLayout, path: Path | None) -> None:
+    labels = list(rec["point_labels"])
+    if labels != list(layout.point_labels):
+        absent = [lab for lab in layout.point_labels if lab not in labels]
+        extra = [lab for lab in labels if lab not in layout.point_labels]
+        detail = []
+        if absent:
+            detail.append(f"point(s) {', '.join(absent)} of the layout are missing from the data")
+        if extra:
+            detail.append(f"point(s) {', '.join(extra)} are not in the layout")
+        raise _fail(path, "points do not match the layout: " + ("; ".join(detail) or
+                    f"order {labels} differs from {list(layout.point_labels)}"))
+    if not np.allclose(rec["points_xy"], layout.points_xy, atol=1e-9):
+        raise _fail(path, "point positions (point_x, point_y) differ from the layout's")
+    names = list(rec["actuator_names"])
+    if names != list(layout.actuator_names):
+        raise _fail(path, f"actuators {names} do not match the layout's {list(layout.actuator_names)}")
+    if not np.allclose(rec["actuators_xy"], layout.actuators_xy, atol=1e-9):
+        raise _fail(path, "actuator positions (actuator_x, actuator_y) differ from the layout's")
+
+
+def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None = None) -> Calibration:
+    """Build a :class:`Calibration` from a record read by :func:`~vibrofocus.io.calibration_nc.read_calibration_file`.
+
+    Parameters
+    ----------
+    rec : dict
+        The record (:data:`vibrofocus.io.calibration_nc.RECORD_KEYS`).
+    path : path-like, optional
+        The file it came from, named in errors.
+
+    Raises
+    ------
+    CalibrationFileError
+        The descriptions do not make a layout, sweep or quality report; points or
+        actuators differ from the layout; the fit's parameters are not the model's.
+    """
+    path = None if path is None else Path(path)
+    try:
+        layout = ArrayLayout.from_dict(rec["layout"])
+        sweep = SweepSettings.from_dict(rec["sweep"])
+        q = rec["quality"]
+        issues = [QualityIssue.from_dict(d) for d in q["issues"]]
+        thresholds = QualityThresholds(**q["thresholds"])
+    except (ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
+    _check_against_layout(rec, layout, path)
+    quality = QualityReport(issues=issues, thresholds=thresholds,
+                            **{name: q[name] for name in _QUALITY_ARRAYS})
+    fit = None
+    if rec["fit"] is not None:
+        stored = rec["fit"]
+        expected = list(parameter_names(layout.actuator_names))
+        if list(stored["names"]) != expected:
+            raise _fail(path, f"fit parameters {list(stored['names'])} differ from the model's {expected}")
+        try:
+            fit = FittedSkin(layout=layout, fs=float(stored["fs"]), band=tuple(stored["band"]),
+                             values=stored["values"], log_covariance=stored["log_covariance"],
+                             residual=stored["residual"], fixed=stored["fixed"], info=stored["info"])
+        except (ValueError, TypeError, KeyError, ValidationError) as exc:
+            raise _fail(path, f"has an unreadable skin-model fit ({exc})") from exc
+    return Calibration(
+        H=rec["H"], freqs=rec["freqs"], fs=rec["fs"], coherence=rec["coherence"], layout=layout,
+        band=tuple(rec["band"]), participant_id=rec["participant_id"], method=rec["method"], quality=quality,
+        drives=rec["drives"], recordings=rec["recordings"], rig=rec["rig"], sweep=sweep, created=rec["created"],
+        software_version=rec["software_version"], schema_version=rec["schema_version"], straps=rec["straps"],
+        codes=rec["codes"], multiple_coherence=rec["multiple_coherence"], recorded_s=rec["recorded_s"], fit=fit,
+    )
+
+
+def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
+    """Write a calibration to one netCDF4/HDF5 file, atomically.
+
+    Its record (:func:`calibration_record`) goes to
+    :func:`vibrofocus.io.calibration_nc.write_calibration_file`; on an ``OutputError``
+    (full disk, read-only folder, ...) a previous file at ``path`` is unchanged and
+    ``cal`` is untouched, so the caller can save it elsewhere.
+
+    Parameters
+    ----------
+    cal : Calibration
+    path : str or PathLike
+        Destination ``*.nc``; its folder must exist. Returned as a Path.
+    """
+    return write_calibration_file(calibration_record(cal), path)
+
+
+def load_calibration(path: str | os.PathLike) -> Calibration:
+    """Read and validate a calibration file.
+
+    Parameters
+    ----------
+    path : str or PathLike
+
+    Returns
+    -------
+    Calibration
+
+    Raises
+    ------
+    CalibrationFileError
+        Everything :func:`vibrofocus.io.calibration_nc.read_calibration_file` refuses, and
+        points, actuators or fit parameters that do not match the layout. The message names
+        the file.
+    """
+    return calibration_from_record(read_calibration_file(path), path)
+
+
+def export_sofa(cal: Calibration, path: str | os.PathLike) -> Path:
+    """Write a calibration's transfer matrix to a SOFA ``GeneralTF-E`` file (:mod:`vibrofocus.io.sofa`).
+
+    Receivers are the skin points, emitters the actuators, with their positions (m);
+    ``H`` in m/V on the calibration's frequency grid (Hz). pyfar and any SOFA reader open
+    it; the measurement's recordings and quality stay in the calibration file.
+
+    Parameters
+    ----------
+    cal : Calibration
+    path : path-like
+        Destination, conventionally ``*.sofa``; its folder must exist.
+
+    Returns
+    -------
+    Path
+    """
+    rec = calibration_record(cal)
+    return write_sofa_tf({key: rec[key] for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels",
+                                                    "point_kinds", "actuator_names", "fs", "band", "participant_id",
+                                                    "layout")},
+                         path, title=f"vibrofocus calibration of {cal.participant_id}")
+
+
+def import_sofa(path: str | os.PathLike) -> dict[str, Any]:
+    """Read a transfer matrix from a SOFA ``GeneralTF-E`` file (:func:`export_sofa`).
+
+    Parameters
+    ----------
+    path : path-like
+
+    Returns
+    -------
+    dict
+        ``H`` complex (n_freqs, n_points, n_actuators), m/V; ``freqs`` (n_freqs,), Hz;
+        ``fs`` and ``band`` (Hz); ``participant_id``; ``layout``: the
+        :class:`~vibrofocus.layout.ArrayLayout`, checked against the stored positions
+        and names (None for a file of another tool, which stores no layout).
+
+    Raises
+    ------
+    CalibrationFileError
+        An unreadable file, another convention, or positions that differ from the layout.
+    """
+    rec = read_sofa_tf(path)
+    layout = None
+    if rec["layout"] is not None:
+        try:
+            layout = ArrayLayout.from_dict(rec["layout"])
+        except (ValueError, TypeError, KeyError, AttributeError) as exc:
+            raise _fail(Path(path), f"has an unreadable layout ({exc})") from exc
+        _check_against_layout(rec, layout, Path(path))
+    return {"H": rec["H"], "freqs": rec["freqs"], "fs": rec["fs"], "band": rec["band"],
+            "participant_id": rec["participant_id"], "layout": layout}

@@ -1,0 +1,272 @@
+"""BIDS behavioural datasets: the localization studies as ``beh`` events files.
+
+Layout written by :func:`write_bids_dataset` (BIDS 1.10, the ``beh`` datatype)::
+
+    DIR/dataset_description.json       Name, BIDSVersion, DatasetType, GeneratedBy (vibrofocus, version)
+    DIR/README                         what the dataset is; that simulated participants are a model
+    DIR/participants.tsv, .json        participant_id (sub-<label>), source_id, simulated
+    DIR/sub-<label>/beh/sub-<label>_task-localization<1|2>_events.tsv
+    DIR/sub-<label>/beh/sub-<label>_task-localization<1|2>_events.json
+
+The events file has one row per answered trial with the columns :data:`EVENT_COLUMNS`;
+its JSON sidecar describes every column (units, levels) and records where the trials
+came from (rig, calibration hash, skin preset, simulated or not). This module writes and
+reads plain records (dicts and lists); the study side builds them
+(:mod:`vibrofocus.studies.bids`). :func:`read_bids_trials_table` turns a dataset back into
+the trials table the analysis reads.
+"""
+
+from __future__ import annotations
+
+import csv
+import io as _io
+import json
+import os
+import re
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+from ..errors import ValidationError
+from .jsonsafe import json_safe
+
+__all__ = ["BIDS_VERSION", "EVENT_COLUMNS", "EVENT_COLUMN_DESCRIPTIONS", "TASKS", "bids_label", "events_name",
+           "write_bids_dataset", "read_bids_trials_table"]
+
+#: The BIDS version the dataset follows.
+BIDS_VERSION = "1.10.0"
+#: Task label per study.
+TASKS = {1: "localization1", 2: "localization2"}
+#: Columns of every events file, in order: BIDS's ``onset`` and ``duration`` first, then
+#: the trial (``trial_type``, ``method``, ``target``, ``response``, ``response_time``,
+#: ``phase``), then where it sits in the study (``trial``, ``session_id``,
+#: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity).
+EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
+                 "trial", "session_id", "session_status", "dry_run")
+#: The sidecar's description of each column of :data:`EVENT_COLUMNS` (BIDS "column
+#: description": LongName, Description, Units, Levels).
+EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
+    "onset": {"LongName": "stimulus onset",
+              "Description": "Time of the stimulus onset from the first stimulus onset of this participant's study: "
+                             "when the stimulus_onset event was stored (UTC wall clock, microseconds), just before the "
+                             "drive went to the rig. n/a when the source (a trials CSV) records no times.",
+              "Units": "s"},
+    "duration": {"LongName": "stimulus duration",
+                 "Description": "n/a: the trials record no drive length; the tap itself lasts a few ms.",
+                 "Units": "s"},
+    "trial_type": {"LongName": "condition",
+                   "Description": "The condition: method and target location, '<method>_loc<target>'."},
+    "method": {"LongName": "rendering method",
+               "Description": "How the drive was designed.",
+               "Levels": {"funneling": "amplitude panning between actuators",
+                          "inverse": "spatio-temporal inverse filter from the calibration",
+                          "combination": "inverse filter reproducing funneling's field at the target",
+                          "time_reversal": "time-reversed transfer functions",
+                          "contrast": "acoustic contrast control",
+                          "constrained": "peak-contrast design with a fidelity constraint"}},
+    "target": {"LongName": "target location",
+               "Description": "The location (1-9 on the reference layout) the stimulus was focused at."},
+    "response": {"LongName": "chosen locations",
+                 "Description": "Locations the participant chose, ascending, separated by spaces "
+                                "(Study 1: one; Study 2: one or more)."},
+    "response_time": {"LongName": "response time",
+                      "Description": "From the stimulus onset to the answer.", "Units": "s"},
+    "phase": {"LongName": "phase", "Description": "Part of the study.",
+              "Levels": {"training": "practice trials, not analysed", "main": "the trials analysed"}},
+    "trial": {"LongName": "trial number", "Description": "1-based trial number within the phase."},
+    "session_id": {"LongName": "study session", "Description": "Id of the session in the study database (0: none)."},
+    "session_status": {"LongName": "session status",
+                       "Description": "The session's status when exported.",
+                       "Levels": {"planned": "not started", "running": "in progress", "paused": "paused",
+                                  "aborted": "ended early (left out of the analysis by default)",
+                                  "completed": "all trials answered"}},
+    "dry_run": {"LongName": "dry run",
+                "Description": "Whether the session ran without a calibration (nothing was played).",
+                "Levels": {"0": "stimuli were played", "1": "dry run: nothing was played"}},
+}
+_LABEL = re.compile(r"[^A-Za-z0-9]")
+_NA = "n/a"
+
+
+def bids_label(participant_id: str) -> str:
+    """The BIDS label of a participant id: its letters and digits (``P-01`` -> ``P01``).
+
+    Raises
+    ------
+    ValidationError
+        The id has no letter or digit.
+    """
+    label = _LABEL.sub("", str(participant_id))
+    if not label:
+        raise ValidationError(f"participant id {participant_id!r} has no letter or digit for a BIDS label")
+    return label
+
+
+def events_name(label: str, study: int) -> str:
+    """``sub-<label>_task-localization<study>_events`` (without suffix)."""
+    return f"sub-{label}_task-{TASKS[study]}_events"
+
+
+def _tsv(columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
+    buf = _io.StringIO()
+    writer = csv.writer(buf, delimiter="\t", lineterminator="\n")
+    writer.writerow(columns)
+    for row in rows:
+        writer.writerow([_NA if row.get(c) is None else _cell(row[c]) for c in columns])
+    return buf.getvalue()
+
+
+def _cell(value: Any) -> str:
+    if isinstance(value, bool):
+        return str(int(value))
+    if isinstance(value, float):
+        return _NA if value != value else repr(value)  # NaN -> n/a; repr keeps every digit
+    return str(value)
+
+
+def _json(value: Any) -> str:
+    return json.dumps(json_safe(value), indent=2, sort_keys=False) + "\n"
+
+
+def write_bids_dataset(
+    out_dir: str | os.PathLike,
+    *,
+    description: Mapping[str, Any],
+    readme: str,
+    participants: Sequence[Mapping[str, Any]],
+    participant_columns: Mapping[str, Mapping[str, Any]],
+    runs: Sequence[Mapping[str, Any]],
+) -> dict[str, int]:
+    """Write a BIDS behavioural dataset as a whole (:func:`vibrofocus._atomic.atomic_directory`).
+
+    The folder is built beside ``out_dir`` and put in place at once: a reader never sees
+    half a dataset, and after a failure a previous dataset there is unchanged. Files of
+    the user's own in ``out_dir`` (anything but the dataset's entries) are left alone.
+
+    Parameters
+    ----------
+    out_dir : path-like
+        The dataset folder; its parent must exist.
+    description : mapping
+        ``dataset_description.json`` (Name, BIDSVersion, GeneratedBy, ...).
+    readme : str
+        The README's text.
+    participants : sequence of mapping
+        One row of ``participants.tsv`` per participant, keys as ``participant_columns``
+        (the first is ``participant_id``, ``sub-<label>``).
+    participant_columns : mapping
+        Column name -> its description (``participants.json``), in column order.
+    runs : sequence of mapping
+        One per participant and study: ``label`` (str), ``study`` (1 or 2), ``events``
+        (rows keyed by :data:`EVENT_COLUMNS`; None or NaN is written ``n/a``) and
+        ``sidecar`` (extra keys of the events JSON besides the column descriptions).
+
+    Returns
+    -------
+    dict
+        ``participants`` and ``events`` (rows written).
+
+    Raises
+    ------
+    ValidationError
+        A run names a study other than 1 or 2, or two runs the same file.
+    OutputError
+        The folder cannot be written.
+    """
+    from .._atomic import atomic_directory, write_text
+
+    names = set()
+    for run in runs:
+        if run["study"] not in TASKS:
+            raise ValidationError(f"a BIDS run must be of study 1 or 2, got {run['study']!r}")
+        name = events_name(run["label"], run["study"])
+        if name in names:
+            raise ValidationError(f"two runs would both write {name}.tsv")
+        names.add(name)
+    owned: Callable[[str], bool] = lambda n: n in {"dataset_description.json", "README", "participants.tsv",  # noqa: E731
+                                                   "participants.json"} or n.startswith("sub-")
+    n_events = 0
+    with atomic_directory(out_dir, owned=owned, what="BIDS dataset") as build:
+        write_text(build / "dataset_description.json", _json(description), what="BIDS dataset description")
+        write_text(build / "README", readme, what="BIDS README")
+        write_text(build / "participants.tsv", _tsv(list(participant_columns), participants), what="participants.tsv")
+        write_text(build / "participants.json", _json(participant_columns), what="participants.json")
+        for run in runs:
+            folder = build / f"sub-{run['label']}" / "beh"
+            folder.mkdir(parents=True, exist_ok=True)
+            name = events_name(run["label"], run["study"])
+            write_text(folder / f"{name}.tsv", _tsv(EVENT_COLUMNS, run["events"]), what="BIDS events file")
+            sidecar = {"TaskName": TASKS[run["study"]], **EVENT_COLUMN_DESCRIPTIONS, **run["sidecar"]}
+            write_text(folder / f"{name}.json", _json(sidecar), what="BIDS events sidecar")
+            n_events += len(run["events"])
+    return {"participants": len(participants), "events": n_events}
+
+
+def _read_tsv(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh, delimiter="\t"))
+
+
+def read_bids_trials_table(root: str | os.PathLike):
+    """Read a dataset written by :func:`write_bids_dataset` as the trials table the analysis reads.
+
+    Parameters
+    ----------
+    root : path-like
+        The dataset folder (with ``dataset_description.json`` and ``participants.tsv``).
+
+    Returns
+    -------
+    DataFrame
+        Every value a str, with the trials-file columns (``participant``: the
+        ``source_id``, ``study``, ``phase``, ``trial``, ``method``, ``target``,
+        ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
+        ``dry_run``), ``simulated`` (``1``/``0``) and ``line`` (row number over all events
+        files, from 2), as :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
+
+    Raises
+    ------
+    ValidationError
+        Not a BIDS dataset, no events file, or an events file without a column of
+        :data:`EVENT_COLUMNS`.
+    """
+    import pandas as pd
+
+    from .._atomic import protect
+
+    root = Path(root)
+    if not (root / "dataset_description.json").is_file() or not (root / "participants.tsv").is_file():
+        raise ValidationError(f"{root} is not a BIDS dataset: it needs dataset_description.json and participants.tsv")
+    try:
+        people = {r["participant_id"]: r for r in _read_tsv(root / "participants.tsv")}
+    except (OSError, KeyError, csv.Error, UnicodeDecodeError) as exc:
+        raise ValidationError(f"cannot read {root / 'participants.tsv'}: {exc}") from exc
+    rows: list[dict[str, str]] = []
+    files = sorted(root.glob("sub-*/beh/sub-*_task-localization*_events.tsv"))
+    if not files:
+        raise ValidationError(f"the BIDS dataset {root} has no sub-*/beh/*_task-localization*_events.tsv")
+    for path in files:
+        protect(path, "BIDS events file")
+        sub = path.parent.parent.name
+        study = path.name.split("_task-localization", 1)[1].split("_", 1)[0]
+        person = people.get(sub, {})
+        try:
+            events = _read_tsv(path)
+        except (OSError, csv.Error, UnicodeDecodeError) as exc:
+            raise ValidationError(f"cannot read the events file {path}: {exc}") from exc
+        if events and set(EVENT_COLUMNS) - set(events[0]):
+            missing = sorted(set(EVENT_COLUMNS) - set(events[0]))
+            raise ValidationError(f"the events file {path} lacks the column(s) {', '.join(missing)}")
+        for ev in events:
+            rows.append({
+                "participant": person.get("source_id") or sub.removeprefix("sub-"), "study": study,
+                "phase": ev["phase"], "trial": ev["trial"], "method": ev["method"], "target": ev["target"],
+                "response": ev["response"], "rt_s": ev["response_time"],
+                "session": "0" if ev["session_id"] == _NA else ev["session_id"],
+                "session_status": "completed" if ev["session_status"] == _NA else ev["session_status"],
+                "dry_run": "0" if ev["dry_run"] == _NA else ev["dry_run"],
+                "simulated": "1" if person.get("simulated") == "true" else "0",
+            })
+    table = pd.DataFrame(rows, dtype=str)
+    table["line"] = range(2, len(table) + 2)
+    return table

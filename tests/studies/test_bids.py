@@ -1,0 +1,128 @@
+"""``vibrofocus export --bids``: a simulated study as a BIDS dataset that pybids loads, and back into analyze."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import pytest
+from typer.testing import CliRunner
+
+from vibrofocus import __version__
+from vibrofocus.cli.main import app
+from vibrofocus.errors import StudyError
+from vibrofocus.io.bids import EVENT_COLUMNS, bids_label
+from vibrofocus.studies import StudyStore
+from vibrofocus.studies.bids import export_bids
+
+bids = pytest.importorskip("bids")
+pytestmark = pytest.mark.slow
+runner = CliRunner()
+REQUIRED = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase")
+
+
+@pytest.fixture(scope="module")
+def study(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bids-study")
+    db, trials = root / "study.db", root / "trials.csv"
+    result = runner.invoke(app, ["simulate-study", "-n", "2", "--seed", "8", "--db", str(db), "--trials-csv",
+                                 str(trials), "--quiet"])
+    assert result.exit_code == 0, result.output
+    return root, db, trials
+
+
+def _events(layout):
+    return layout.get(suffix="events", extension=".tsv")
+
+
+def test_every_trial_of_a_simulated_study_is_an_events_row_in_pybids(study):
+    root, db, _ = study
+    out = root / "bids-db"
+    result = runner.invoke(app, ["export", str(db), "--bids", str(out)])
+    assert result.exit_code == 0, result.output
+    with StudyStore(db, create=False) as store:
+        rows = store.trial_rows()
+        sha = {c.calibration_id: c.sha256 for p in store.participants() for c in store.calibrations(p.participant_id)}
+    layout = bids.BIDSLayout(out, validate=True)
+    assert sorted(layout.get_subjects()) == sorted(bids_label(r["participant"]) for r in {r["participant"]: r for r in rows}.values())
+    assert sorted(layout.get_tasks()) == ["localization1", "localization2"]
+    files = _events(layout)
+    assert len(files) == 4  # 2 participants x 2 studies
+    n = 0
+    for f in files:
+        df = f.get_df()
+        meta = f.get_metadata()
+        ents = f.get_entities()
+        mine = [r for r in rows if bids_label(r["participant"]) == ents["subject"]
+                and f"localization{r['study']}" == ents["task"]]
+        assert len(df) == len(mine) > 0
+        assert list(df.columns) == list(EVENT_COLUMNS)
+        assert list(df["trial"]) == [r["trial"] for r in mine] and list(df["method"]) == [r["method"] for r in mine]
+        assert list(df["response_time"]) == pytest.approx([r["rt_s"] for r in mine], abs=0)
+        assert df["onset"].iloc[0] == 0 and (df["onset"].diff().iloc[1:] >= 0).all()
+        assert meta["Simulated"] is True and "not data" in meta["SimulatedModel"]
+        session = meta["Sessions"][0]
+        assert session["Rig"] == "simulated" and session["SkinPreset"] == "voigt-fit"
+        assert session["CalibrationSHA256"] == sha[mine[0]["calibration_id"]]
+        for column in REQUIRED:
+            assert meta[column]["Description"]
+        assert {meta[c]["Units"] for c in ("onset", "duration", "response_time")} == {"s"}
+        assert set(meta["phase"]["Levels"]) == {"training", "main"} and "inverse" in meta["method"]["Levels"]
+        n += len(df)
+    assert n == len(rows)
+    description = json.loads((out / "dataset_description.json").read_text())
+    assert description["GeneratedBy"][0]["Name"] == "vibrofocus" and description["GeneratedBy"][0]["Version"] == __version__
+    participants = layout.get(suffix="participants", extension=".tsv")[0].get_df()
+    assert set(participants["simulated"]) == {True} or set(participants["simulated"].astype(str)) == {"true", "True"}
+    assert "SIMULATED" in (out / "README").read_text()
+
+
+def test_a_trials_csv_exports_the_same_rows_without_times_and_analyze_reads_the_folder(study):
+    root, db, trials = study
+    out = root / "bids-csv"
+    assert runner.invoke(app, ["export", str(trials), "--bids", str(out)]).exit_code == 0
+    with open(trials, newline="") as fh:
+        n_csv = sum(1 for _ in csv.DictReader(fh))
+    layout = bids.BIDSLayout(out, validate=True)
+    dfs = [f.get_df() for f in _events(layout)]
+    assert sum(len(df) for df in dfs) == n_csv
+    assert all(df["onset"].isna().all() for df in dfs)  # a trials CSV stores no times: n/a
+    reports = {}
+    for name, source in (("csv", trials), ("bids", out)):
+        result = runner.invoke(app, ["analyze", str(source), "--out", str(root / f"report-{name}"), "-q"])
+        assert result.exit_code == 0, result.output
+        reports[name] = json.loads((root / f"report-{name}" / "report.json").read_text())
+        reports[name].pop("source")
+    assert reports["bids"] == reports["csv"]
+    assert reports["bids"]["simulated"]["any"] is True
+
+
+def test_the_export_never_replaces_its_input_and_keeps_the_users_files(study):
+    root, db, trials = study
+    inside = root / "holder"
+    inside.mkdir()
+    (inside / "notes.txt").write_text("mine")
+    copy = inside / "trials.csv"
+    copy.write_bytes(trials.read_bytes())
+    result = runner.invoke(app, ["export", str(copy), "--bids", str(inside)])
+    assert result.exit_code == 2 and result.output.count("error:") == 1 and "would replace its input" in result.output
+    result = runner.invoke(app, ["export", str(trials), "--bids", str(trials)])
+    assert result.exit_code == 2 and result.output.count("error:") == 1 and "would replace its input" in result.output
+    assert trials.is_file() and (inside / "trials.csv").is_file()
+    target = root / "again"
+    target.mkdir()
+    (target / "notes.txt").write_text("mine")
+    (target / "sub-old").mkdir()  # a previous export's entry: replaced with the new dataset
+    assert export_bids(trials, target)["events"] > 0
+    assert (target / "notes.txt").read_text() == "mine" and not (target / "sub-old").exists()
+    assert (target / "dataset_description.json").is_file()
+
+
+def test_participant_ids_become_bids_labels_and_a_clash_is_refused(tmp_path):
+    assert bids_label("sim-001") == "sim001" and bids_label("P_01.a") == "P01a"
+    path = tmp_path / "t.csv"
+    path.write_text("participant,study,phase,trial,method,target,response,rt_s\n"
+                    "P-1,1,main,1,inverse,5,5,0.5\nP1,1,main,1,inverse,5,4,0.5\n")
+    with pytest.raises(StudyError, match="would both be sub-P1"):
+        export_bids(path, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
