@@ -187,7 +187,8 @@ def test_feature_bank_round_trips_and_the_shipped_one_loads(tmp_path):
     rng = np.random.default_rng(1)
     bank = FeatureBank(energy=rng.random((2, 3, 9, 5)), points_xy=rng.random((5, 2)), locations_xy=rng.random((9, 2)),
                        centre_xy=np.array([0.0, 0.01]), methods=("funneling", "inverse", "combination"),
-                       forearm_seeds=np.array([11, 12]), seed=4)
+                       forearm_seeds=np.array([11, 12]), seed=4, actuator_energy=rng.random((2, 3, 9, 4)),
+                       actuators_xy=rng.random((4, 2)))
     import dataclasses
 
     save_feature_bank(dataclasses.asdict(bank), tmp_path / "b.npz", model_version="test")
@@ -195,6 +196,8 @@ def test_feature_bank_round_trips_and_the_shipped_one_loads(tmp_path):
     assert all(isinstance(v, (np.ndarray, tuple, int)) for v in load_feature_bank(tmp_path / "b.npz").values())
     np.testing.assert_allclose(back.energy, bank.energy, rtol=1e-6)  # stored as float32
     np.testing.assert_array_equal(back.points_xy, bank.points_xy)
+    np.testing.assert_allclose(back.actuator_energy, bank.actuator_energy, rtol=1e-6)
+    np.testing.assert_array_equal(back.actuators_xy, bank.actuators_xy)
     assert back.methods == bank.methods and back.seed == 4 and list(back.forearm_seeds) == [11, 12]
     with np.load(tmp_path / "b.npz") as z:
         assert str(z["model_version"]) == "test"
