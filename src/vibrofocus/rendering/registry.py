@@ -14,10 +14,11 @@ import warnings
 from importlib.metadata import entry_points
 from typing import Any
 
-from .._validation import check_choice
+from .._validation import check_choice, check_positive
 from ..defaults import METHODS
 from ..errors import ValidationError
-from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Method, TimeReversal
+from ._checks import check_regularization
+from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, Method, TimeReversal
 
 __all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "make_method"]
 
@@ -117,7 +118,21 @@ def make_method(name: str, **options: Any) -> Method:
     if unknown:
         raise ValidationError(f"method {name!r} has no option {', '.join(unknown)}; its options are "
                               f"{', '.join(sorted(fields))}")
+    _check_ignored({k: v for k, v in options.items() if k not in fields})
     return cls(**{k: v for k, v in options.items() if k in fields})
+
+
+def _check_ignored(ignored: dict[str, Any]) -> None:
+    """Refuse a bad value of an option the method ignores, as ``render`` always did: a
+    typo there is a mistake in the caller's settings whichever method it meets first."""
+    if "regularization" in ignored or "reg_param" in ignored:
+        check_regularization(ignored.get("regularization"), ignored.get("reg_param"))
+    if "control" in ignored and ignored["control"] is not None:
+        check_choice(ignored["control"], "control", CONTROL_SETS)
+    if "guard_weight" in ignored:
+        check_positive(ignored["guard_weight"], "guard_weight")
+    if "acc_reg" in ignored:
+        check_positive(ignored["acc_reg"], "acc_reg", allow_zero=True)
 
 
 for _name, _cls in zip(METHODS, (Funneling, Inverse, Combination, TimeReversal, Contrast, Constrained)):
