@@ -398,6 +398,23 @@ class SimulatedForearm(Rig):
         done = np.all((energy >= (1 - tol) * total) | (total == 0), axis=(0, 1))
         return int(np.argmax(done)) + 1 if done.any() else self.n_ir
 
+    def transfer_matrix(self, n_samples: int | None = None):
+        """This arm's true transfer at its layout's points, as a
+        :class:`~vibrofocus.rendering.TransferMatrix` (provenance: the seed and skin preset).
+
+        Parameters
+        ----------
+        n_samples : int, optional
+            Design window, samples; default :meth:`design_window`.
+
+        Returns
+        -------
+        TransferMatrix
+        """
+        from ..rendering.transfer import TransferMatrix
+
+        return TransferMatrix.from_model(self, self.layout, self.fs, n_samples)
+
     def design_window(self, minimum: int = N_SAMPLES, tol: float = 1e-5) -> int:
         """A design window that follows this arm's impulse-response length, samples.
 
