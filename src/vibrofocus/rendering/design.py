@@ -12,7 +12,7 @@ import numpy as np
 
 from .._validation import check_choice
 from ..layout import ArrayLayout
-from .contrast import ContrastBound
+from .bound import ContrastBound
 from .metrics import focus_metrics
 
 __all__ = ["Design", "Rendering"]

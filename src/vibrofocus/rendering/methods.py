@@ -21,12 +21,14 @@ from .._validation import as_array, check_band, check_choice, check_positive
 from ..defaults import BAND_HZ, DRIVE_LIMIT_V, FUNNELING_AMPLITUDE_V, SIGMA_S, TARGET_FRACTION, TARGET_PEAK_M
 from ..errors import CausalityError, ValidationError
 from ..signals.ricker import ricker
+from ._acc import DEFAULT_ACC_REG
 from ._checks import as_transfer, check_regularization
+from .bound import contrast_bound
 from .causality import DEFAULT_WRAPAROUND_TOL
 from .combination import combination_target
-from .contrast import DEFAULT_ACC_REG, constrained_drives, contrast_bound, contrast_drives, exact_target_spectra
-from .contrast import taper_drive_ends
+from .contrast import constrained_drives, contrast_drives, taper_drive_ends
 from .design import Design
+from .exact_target import exact_target_spectra
 from .funneling import funneling_gains
 from .inverse import apply_drive_limit, predict_response
 from .taper import design_grid

@@ -54,7 +54,8 @@ def register_method(name: str, cls: type[Method] | None = None, *, replace: bool
     Returns
     -------
     type
-        ``cls`` (its ``name`` set to ``name``).
+        ``cls``; its ``name`` (what ``Design.method`` says) is ``name`` unless the class
+        was registered under another name before.
     """
     if not isinstance(name, str) or not name.isidentifier():
         raise ValidationError(f"a method's name must be an identifier (letters, digits, _), got {name!r}")
@@ -66,7 +67,8 @@ def register_method(name: str, cls: type[Method] | None = None, *, replace: bool
         if name in _REGISTRY and _REGISTRY[name] is not cls and not replace:
             raise ValidationError(f"a method named {name!r} is registered already ({_REGISTRY[name].__name__}); "
                                   "pass replace=True to replace it")
-        cls.name = name
+        if "name" not in vars(cls):  # its first name (a subclass names itself anew)
+            cls.name = name
         _REGISTRY[name] = cls
         return cls
 
