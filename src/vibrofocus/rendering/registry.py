@@ -98,7 +98,23 @@ def available_methods() -> tuple[str, ...]:
 
 
 def method_class(name: str) -> type[Method]:
-    """The class registered under ``name`` (ValidationError for an unknown name)."""
+    """The class registered under ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A registered method's name.
+
+    Returns
+    -------
+    type
+        Its :class:`~.methods.Method` subclass.
+
+    Raises
+    ------
+    ValidationError
+        For a name nothing is registered under (the message lists the known names).
+    """
     check_choice(name, "method", available_methods())
     return _REGISTRY[name]
 
@@ -106,8 +122,18 @@ def method_class(name: str) -> type[Method]:
 def make_method(name: str, **options: Any) -> Method:
     """An instance of the method ``name`` with ``options``.
 
-    Options of the former ``render`` that this method does not have are ignored (see
-    ``LEGACY_OPTIONS``); any other unknown option is refused.
+    Parameters
+    ----------
+    name : str
+        A registered method's name.
+    **options
+        Its options (fields of its class). Options of the former ``render`` that this
+        method does not have are ignored (``LEGACY_OPTIONS``), their values still checked;
+        any other unknown option is refused.
+
+    Returns
+    -------
+    Method
     """
     cls = method_class(name)
     fields = {f.name for f in dataclasses.fields(cls) if f.init}
