@@ -83,6 +83,10 @@ class Problem:
     def n(self) -> int:
         return self.tm.n_samples
 
+    def control(self, control: str) -> np.ndarray:
+        """The target's row, then :meth:`others` (the points a design constrains)."""
+        return np.concatenate([[self.target_index], self.others(control)]).astype(int)
+
     def others(self, control: str) -> np.ndarray:
         """Rows held at zero or kept quiet besides the target, for a ``control`` set."""
         layout = self.tm.layout
@@ -385,8 +389,8 @@ class Inverse(Method):
         return self.target_peak_m * p.stimulus
 
     def solve(self, p: Problem) -> Solution:
-        others = p.others(self.control)
-        control = np.concatenate([[p.target_index], others]).astype(int)
+        control = p.control(self.control)
+        others = control[1:]
         gains = self.gains(p) if isinstance(self, Funneling) else None
         raw = self.raw_target(p, gains)
         if self.exact_target:
@@ -447,7 +451,7 @@ class TimeReversal(Method):
         self._set("control", _check_control(self, "guards", field_allowed=False))
 
     def solve(self, p: Problem) -> Solution:
-        control = np.concatenate([[p.target_index], p.others(self.control)]).astype(int)
+        control = p.control(self.control)
         targets = np.zeros((len(control), p.n))
         targets[0] = self.target_peak_m * p.stimulus
         drives = time_reversal_drives(p.tm.rows(control), targets, p.fs, max_drive=self.limit_v, band=p.band,
@@ -516,13 +520,13 @@ class Contrast(Method):
         return contrast_drives(p.tm, p.target_index, p.fs, **options)
 
     def solve(self, p: Problem) -> Solution:
-        others = p.others(self.control)
+        control = p.control(self.control)
+        others = control[1:]
         quiet_H = self.quiet_field(p)
         drives = self.energy_drives(p, quiet_indices=others if others.size else None, quiet_H=quiet_H, band=p.band,
                                     sigma=self.sigma, waveform=self.target_peak_m * p.stimulus,
                                     reg_param=self.acc_reg, taper_octaves=self.taper_octaves)
-        return Solution(drives, control_indices=np.concatenate([[p.target_index], others]).astype(int),
-                        quiet_H=quiet_H)
+        return Solution(drives, control_indices=control, quiet_H=quiet_H)
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -27,6 +27,15 @@ __all__ = ["TransferMatrix", "as_transfer_matrix", "target_on_model"]
 DEFAULT_WINDOW = 4096
 
 
+def _check_fits(shape: tuple[int, ...], layout: ArrayLayout) -> None:
+    """Refuse a transfer matrix whose points and actuators are not the layout's."""
+    if tuple(shape[1:]) != (layout.n_points, layout.n_actuators):
+        raise ValidationError(
+            f"H has shape {tuple(shape)} but layout {layout.name!r} has {layout.n_points} points and "
+            f"{layout.n_actuators} actuators: H must have shape (n_freqs, {layout.n_points}, {layout.n_actuators})"
+        )
+
+
 class TransferMatrix(ValidatedTransfer):
     """A calibrated (or modelled) transfer matrix with its grid, layout and provenance.
 
@@ -64,11 +73,7 @@ class TransferMatrix(ValidatedTransfer):
         if not isinstance(layout, ArrayLayout):
             raise ValidationError(f"layout must be an ArrayLayout, got {type(layout).__name__}")
         H = np.array(as_transfer(H), copy=True)
-        if H.shape[1:] != (layout.n_points, layout.n_actuators):
-            raise ValidationError(
-                f"H has shape {H.shape} but layout {layout.name!r} has {layout.n_points} points and "
-                f"{layout.n_actuators} actuators: H must have shape (n_freqs, {layout.n_points}, {layout.n_actuators})"
-            )
+        _check_fits(H.shape, layout)
         fs = check_positive(fs, "fs")
         n = samples_for(H.shape[0], n_samples)
         band = None if band is None else check_band(band, fs, name="calibrated_band")
@@ -247,11 +252,7 @@ def as_transfer_matrix(H: Any, fs: float, layout: ArrayLayout, *, n_samples: int
         tm = TransferMatrix.from_model(H, layout, fs, n_samples, taper_octaves=taper_octaves)
     else:
         return TransferMatrix(H, fs, layout, n_samples=n_samples, band=calibrated_band)
-    if tm.layout.n_points != layout.n_points or tm.layout.n_actuators != layout.n_actuators:
-        raise ValidationError(
-            f"H has shape {tm.shape} but layout {layout.name!r} has {layout.n_points} points and "
-            f"{layout.n_actuators} actuators: H must have shape (n_freqs, {layout.n_points}, {layout.n_actuators})"
-        )
+    _check_fits(tm.shape, layout)
     if tm.fs != fs:
         raise ValidationError(f"fs={fs:g} Hz differs from the transfer matrix's sample rate {tm.fs:g} Hz")
     if n_samples is not None:
