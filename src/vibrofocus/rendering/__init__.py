@@ -16,8 +16,9 @@ from .contrast import (
 from .funneling import funneling_gains, funneling_weights
 from .inverse import DesignReport, DriveScaledWarning, InverseOperator, inverse_filter, predict_response
 from .metrics import focus_metrics
-from .design import Design, Rendering
-from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Method, Problem, Solution, TimeReversal
+from .design import Design, Rendering  # noqa: F401 - Rendering: Design's former name, kept importable
+from .method import Method, Problem, Solution
+from .methods import Combination, Constrained, Contrast, Funneling, Inverse, TimeReversal
 from .registry import ENTRY_POINT_GROUP, available_methods, make_method, method_class, register_method
 from .render import render
 from .taper import band_taper
@@ -47,7 +48,6 @@ __all__ = [
     "CausalityWarning",
     "focus_metrics",
     "render",
-    "Rendering",
     "Design",
     "TransferMatrix",
     "Method",

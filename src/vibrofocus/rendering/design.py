@@ -21,7 +21,7 @@ __all__ = ["Design", "Rendering"]
 @dataclass(frozen=True, eq=False)
 class Design:
     """Drives for one tap and what they are predicted to do: what ``method.design(tm, target)``
-    returns (:class:`~vibrofocus.rendering.methods.Method`), and :func:`render`.
+    returns (:class:`~vibrofocus.rendering.method.Method`), and :func:`render`.
 
     The prediction at every calibrated point, the contrast bounds and, through
     :meth:`metrics`, the focus metrics come with the drives.

@@ -1,4 +1,4 @@
-"""The registry of rendering methods: names to :class:`~.methods.Method` classes.
+"""The registry of rendering methods: names to :class:`~.method.Method` classes.
 
 The six methods of SPEC §2 are registered when the package loads. A lab adds its own
 with :func:`register_method`, or from an installed package through the entry-point group
@@ -18,7 +18,8 @@ from .._validation import check_choice, check_positive
 from ..defaults import METHODS
 from ..errors import ValidationError
 from ._checks import check_regularization
-from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, Method, TimeReversal
+from .method import Method
+from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, TimeReversal
 
 __all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "make_method"]
 
@@ -40,7 +41,7 @@ LEGACY_OPTIONS = frozenset({
 
 
 def register_method(name: str, cls: type[Method] | None = None, *, replace: bool = False):
-    """Register a :class:`~.methods.Method` subclass under ``name``.
+    """Register a :class:`~.method.Method` subclass under ``name``.
 
     Parameters
     ----------
@@ -108,7 +109,7 @@ def method_class(name: str) -> type[Method]:
     Returns
     -------
     type
-        Its :class:`~.methods.Method` subclass.
+        Its :class:`~.method.Method` subclass.
 
     Raises
     ------

@@ -53,7 +53,7 @@ def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | 
     calibrated_band : (float, float), optional
         Band ``H`` is valid in, Hz; default the calibration's (or model's) own.
     **options
-        The method's options: those every method has (:class:`~.methods.Method`:
+        The method's options: those every method has (:class:`~.method.Method`:
         ``band``, ``sigma``, ``limit_v``, ``scale_to_limit``, ...) and its own (e.g.
         ``regularization`` of :class:`~.methods.Inverse`). Options of the former
         ``render`` a method does not have are ignored.
