@@ -55,7 +55,8 @@ def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | 
     **options
         The method's options: those every method has (:class:`~.method.Method`:
         ``band``, ``sigma``, ``limit_v``, ``scale_to_limit``, ...) and its own (e.g.
-        ``regularization`` of :class:`~.methods.Inverse`). Options of the former
+        ``regularization`` and ``guard_weight`` of :class:`~.methods.Inverse`,
+        ``min_contrast_db`` of :class:`~.methods.Constrained`). Options of the former
         ``render`` a method does not have are ignored.
 
     Returns

@@ -57,30 +57,8 @@ class SimulatedForearm(SimulatedArm, Rig):
         dropouts off.
     dropout_duration_s : (float, float)
         Range of dropout durations, s (uniform).
-    participant : ForearmParameters, optional
-        Explicit parameters instead of drawing them from ``seed`` (for controlled
-        experiments, e.g. ``ForearmParameters.nominal(4, skin="nominal")``).
-    skin : str, optional
-        Skin preset (:data:`vibrofocus.skin.SKIN_PRESETS`: ``"nominal"``, ``"low"``,
-        ``"high"``, ``"voigt-fit"``) around which ``seed`` draws the participant.
-        Default: the participant's preset when one is given, else ``"nominal"``.
-    geometry : {"cylinder", "plane"}
-        ``"cylinder"`` (default): the tapered forearm, waves come back around it.
-        ``"plane"``: an unbounded flat skin, for checks of the propagation law.
-    n_images : int
-        Turns around the arm summed in each direction (cylinder only).
-    ir_duration_s : float
-        Length of the impulse responses used for playback, s. Playback is the linear
-        convolution of the drive with these responses; they are the inverse FFT of
-        :meth:`transfer` computed over twice this length (so nothing wraps into the
-        kept part) with the last 10 % faded out.
-    latency_s : float
-        Fixed delay between drive and recording, s, to model the converter, amplifier
-        and vibrometer-decoder delays of a particular rig. Default 0: the ``voigt-fit``
-        law is causal by construction (:mod:`.viscoelastic`) and the layered presets'
-        transfer is the causal part of their surface mode (:mod:`.precursor`), so no
-        delay is needed to hide a precursor; an impulse response holds less than 1e-6
-        of its energy before ``t = 0``.
+    participant, skin, geometry, n_images, ir_duration_s, latency_s
+        The arm: as for :class:`vibrofocus.skin.SimulatedArm`.
     noise_band : (float, float)
         Band in which ``noise_m`` is specified, Hz.
 
