@@ -42,6 +42,10 @@ _LAZY_ATTRIBUTES = {
     "render": ".rendering",
     "contrast_bound": ".rendering",
     "Rendering": ".rendering",
+    "Design": ".rendering",
+    "TransferMatrix": ".rendering",
+    "register_method": ".rendering",
+    "available_methods": ".rendering",
     "calibrate": ".calibration",
     "Calibration": ".calibration",
     "load_calibration": ".calibration",
@@ -52,12 +56,16 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .calibration import Calibration, calibrate, load_calibration, save_calibration
     from .layout import ArrayLayout
     from .rendering import (
+        Design,
         InverseOperator,
         Rendering,
+        TransferMatrix,
+        available_methods,
         contrast_bound,
         focus_metrics,
         funneling_gains,
         inverse_filter,
+        register_method,
         render,
     )
     from .rigs import Rig, SafetyLimits
@@ -100,6 +108,10 @@ __all__ = [
     "focus_metrics",
     "render",
     "Rendering",
+    "Design",
+    "TransferMatrix",
+    "register_method",
+    "available_methods",
     "contrast_bound",
     "calibrate",
     "Calibration",

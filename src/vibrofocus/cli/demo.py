@@ -68,7 +68,6 @@ def demo_command(
         from .._atomic import allow_overwrite
         from .._validation import check_choice
         from ..calibration import calibrate, save_calibration
-        from ..defaults import METHODS
         from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
         from ..skin import SimulatedForearm
 
@@ -94,7 +93,10 @@ def demo_command(
             expected = estimate_calibration_bytes(rig.layout.n_points, rig.layout.n_actuators, 8,
                                                   int(3.0 * rig.fs), 4096) if design_from == "calibration" else 0
             check_writable(out / "calibration.nc", what="calibration", expected_bytes=expected)
-        total = rig.layout.n_locations * len(METHODS)
+        from ..rendering import available_methods
+
+        # Every registered method, a lab's own included (run_demo's default).
+        total = rig.layout.n_locations * len(available_methods())
         calibration_info: dict = {}
         with Progress(
             TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),

@@ -18,7 +18,10 @@ def render_command(
     location: int = typer.Option(..., "--location", "-l",
                                  help="Target location number (1-based; 1-9 on the reference layout)."),
     out: Path = typer.Option(..., "--out", "-o", help="Drives file: .npz (for vibrofocus play) or .csv."),
-    method: str = typer.Option("inverse", "--method", "-m", help="funneling | inverse | combination | time_reversal"),
+    method: str = typer.Option("inverse", "--method", "-m",
+                               help="A registered rendering method: funneling | inverse | combination | "
+                                    "time_reversal | contrast | constrained, or a lab's own (vibrofocus.methods "
+                                    "entry point)."),
     regularization: str | None = typer.Option(None, "--regularization", help="tikhonov | tsvd (default: plain "
                                                                               "pseudo-inverse)."),
     reg_param: float | None = typer.Option(None, "--reg-param", max=1e3,
@@ -54,7 +57,7 @@ def render_command(
         from ..defaults import DRIVE_LIMIT_V
         from ..errors import ValidationError
         from ..io.drives import DRIVES_SUFFIXES, write_drives, write_drives_wav
-        from ..rendering import render
+        from ..rendering import TransferMatrix, render
         from ..rigs.safety import PEAK_V_CEILING, SafetyLimits
 
         allow_overwrite(force)
@@ -94,8 +97,8 @@ def render_command(
                 f"measured on; such drives could not be played on it (give at most {rig_limit:g})"
             )
         limit = limit_v if limit_v is not None else rig_limit
-        H = cal.transfer_for(n_samples)
-        rendering = render(method, H, cal.fs, cal.layout, location, limit_v=limit,
+        tm = TransferMatrix.from_calibration(cal, n_samples)
+        rendering = render(method, tm, cal.fs, cal.layout, location, limit_v=limit,
                            on_limit="refuse" if refuse else "scale", regularization=regularization,
                            reg_param=reg_param, band=cal.band)
         drives = rendering.drives

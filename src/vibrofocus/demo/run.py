@@ -9,11 +9,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from .._validation import check_choice
-from ..defaults import METHODS, N_SAMPLES
+from ..defaults import N_SAMPLES
 from ..errors import ValidationError
 from ..rigs.base import Rig
 
@@ -123,7 +124,7 @@ class DemoResult:
     H: np.ndarray = field(repr=False)
 
 
-def calibrated_transfer(calibration) -> Callable[[Rig, int], np.ndarray]:
+def calibrated_transfer(calibration) -> Callable[[Rig, int], Any]:
     """A ``transfer(rig, n)`` callable that designs from a measured calibration.
 
     Parameters
@@ -132,10 +133,13 @@ def calibrated_transfer(calibration) -> Callable[[Rig, int], np.ndarray]:
         Measured on the rig the demo plays on, over ``rig.layout.points_xy``.
     """
 
-    def transfer(rig: Rig, n: int) -> np.ndarray:
+    def transfer(rig: Rig, n: int) -> Any:
         if calibration.layout != rig.layout:
             raise ValidationError("the calibration was measured on another layout than the rig's")
-        return calibration.transfer_for(n)
+        from ..rendering import TransferMatrix
+
+        # Its band, provenance and the calibration's kept wrap-around check come with it.
+        return TransferMatrix.from_calibration(calibration, n)
 
     return transfer
 
@@ -143,10 +147,10 @@ def calibrated_transfer(calibration) -> Callable[[Rig, int], np.ndarray]:
 def run_demo(
     rig: Rig,
     *,
-    methods: Sequence[str] = METHODS,
+    methods: Sequence[str] | None = None,
     locations: Sequence[int] | None = None,
     n_samples: int | None = None,
-    transfer: Callable[[Rig, int], np.ndarray] = model_transfer,
+    transfer: Callable[[Rig, int], Any] = model_transfer,
     progress: Callable[[str], None] | None = None,
 ) -> DemoResult:
     """Render every method at every location, play it and measure how well it focuses.
@@ -155,15 +159,18 @@ def run_demo(
     ----------
     rig : Rig
         Where to play (the simulated forearm).
-    methods : sequence of str
-        Rendering methods (docs/method.md, rendering methods).
+    methods : sequence of str, optional
+        Rendering methods (docs/method.md, rendering methods); default every registered
+        one (:func:`~vibrofocus.rendering.available_methods`: the built-in ones and a
+        lab's own).
     locations : sequence of int, optional
         1-based locations; default all of the layout's.
     n_samples : int, optional
         Design window, samples; default :func:`design_window` of the rig.
     transfer : callable
-        ``transfer(rig, n) -> H``; default :func:`model_transfer`; pass
-        :func:`calibrated_transfer` to design from a measurement.
+        ``transfer(rig, n) -> H`` (an array or a
+        :class:`~vibrofocus.rendering.TransferMatrix`); default :func:`model_transfer`;
+        pass :func:`calibrated_transfer` to design from a measurement.
     progress : callable, optional
         Called with a short label after each (location, method).
 
@@ -171,22 +178,27 @@ def run_demo(
     -------
     DemoResult
     """
-    from ..rendering import focus_metrics, render
+    from ..rendering import available_methods, focus_metrics, render
+    from ..rendering.transfer import as_transfer_matrix
 
+    methods = available_methods() if methods is None else tuple(methods)
     for m in methods:
-        check_choice(m, "method", METHODS)
+        check_choice(m, "method", available_methods())
     layout = rig.layout
     locations = list(layout.location_numbers if locations is None else locations)
     for loc in locations:
         layout.location_index(loc)
-    H = transfer(rig, design_window(rig) if n_samples is None else int(n_samples))
+    n = design_window(rig) if n_samples is None else int(n_samples)
+    # One TransferMatrix for every design: validated once, its check and operators kept.
+    tm = as_transfer_matrix(transfer(rig, n), rig.fs, layout, n_samples=n)
+    H = tm.H
     points = layout.points_xy
     rows, renderings, recordings = [], {}, {}
     for loc in locations:
         for method in methods:
             # Every method at equal peak drive: scaled to the rig's limit (render reports the
             # scale in the Rendering; it warns of nothing).
-            rendering = render(method, H, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale",
+            rendering = render(method, tm, rig.fs, layout, loc, limit_v=rig.limits.peak_v, on_limit="scale",
                                scale_to_limit=True)
             rec, repeats = record_clean(rig, rendering.drives, points)
             # Contrast against the other locations (the grid a participant names), as

@@ -1,6 +1,7 @@
 """Rendering methods of SPEC §2: funneling, inverse filter, combination, time reversal,
 the contrast designs (acoustic contrast control, constrained) and their bound, the
-wrap-around check, focus metrics and the high-level :func:`render`."""
+wrap-around check, focus metrics, the methods as objects with their registry, the
+:class:`TransferMatrix` they design through, and the high-level :func:`render`."""
 
 from .causality import CausalityWarning, WraparoundCheck, check_wraparound, wraparound_fraction
 from .combination import combination_target
@@ -15,9 +16,14 @@ from .contrast import (
 from .funneling import funneling_gains, funneling_weights
 from .inverse import DesignReport, DriveScaledWarning, InverseOperator, inverse_filter, predict_response
 from .metrics import focus_metrics
-from .render import Rendering, render
+from .design import Design, Rendering  # noqa: F401 - Rendering: Design's former name, kept importable
+from .method import Method, Problem, Solution
+from .methods import Combination, Constrained, Contrast, Funneling, Inverse, TimeReversal
+from .registry import ENTRY_POINT_GROUP, available_methods, make_method, method_class, register_method
+from .render import render
 from .taper import band_taper
 from .time_reversal import time_reversal_drives
+from .transfer import TransferMatrix
 
 __all__ = [
     "band_taper",
@@ -42,5 +48,20 @@ __all__ = [
     "CausalityWarning",
     "focus_metrics",
     "render",
-    "Rendering",
+    "Design",
+    "TransferMatrix",
+    "Method",
+    "Problem",
+    "Solution",
+    "Funneling",
+    "Inverse",
+    "Combination",
+    "TimeReversal",
+    "Contrast",
+    "Constrained",
+    "register_method",
+    "method_class",
+    "make_method",
+    "available_methods",
+    "ENTRY_POINT_GROUP",
 ]

@@ -10,18 +10,28 @@ from .._validation import as_array, check_choice, check_finite, check_in_range, 
 from ..errors import ValidationError
 from ._pinv import REGULARIZATIONS
 
-__all__ = ["as_transfer", "check_transfer_energy", "samples_for", "check_regularization", "check_grid", "as_indices"]
+__all__ = ["ValidatedTransfer", "as_transfer", "check_transfer_energy", "samples_for", "check_regularization", "check_grid", "as_indices"]
 
 #: Default ``reg_param`` of the regularized designs (relative to the largest singular value).
 DEFAULT_REG_PARAM = {"tikhonov": 1e-2, "tsvd": 1e-2}
+
+
+class ValidatedTransfer:
+    """Base of a transfer matrix validated when it was made (:class:`~.transfer.TransferMatrix`):
+    :func:`as_transfer` hands back its ``H`` without a second pass over the values."""
+
+    H: np.ndarray
 
 
 def as_transfer(H: Any, name: str = "H", *, values: bool = True) -> np.ndarray:
     """Complex transfer matrix, shape (n_freqs, n_points, n_actuators), finite, non-zero.
 
     ``values=False`` checks the shape only: the caller checks the values of the part it
-    uses (:func:`check_transfer_energy`), saving a pass over a large ``H``.
+    uses (:func:`check_transfer_energy`), saving a pass over a large ``H``. A
+    :class:`ValidatedTransfer` was checked when made: its ``H`` is returned as it is.
     """
+    if isinstance(H, ValidatedTransfer):
+        return H.H
     arr = as_array(H, name, ndim=3, dtype="complex", finite=False)
     if arr.size == 0:
         raise ValidationError(f"{name} is empty (shape {arr.shape}); a transfer matrix needs frequencies, points and actuators")

@@ -28,12 +28,12 @@ that is a concave objective over linear constraints, whose KKT conditions give t
 contrast do not change when all drives are scaled, so the peak-voltage constraint is met
 by scaling the drives to the limit, which also gives the largest target amplitude that
 design can reach within it.
+
+The designs are here; the bound is in :mod:`.bound`, the shared algebra in :mod:`._acc`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -42,11 +42,13 @@ import scipy.signal
 from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import BAND_HZ, SIGMA_S
 from ..errors import ValidationError
-from ..signals.ricker import ricker
-from ._checks import as_indices, as_transfer, check_grid, check_transfer_energy
-from ._pinv import _single_threaded_blas, gram_matrix
-from .taper import design_grid
+from ._acc import DEFAULT_ACC_REG, _parseval_weights, _quiet_gram, _tap, acc_filters, generalized_eigh_max
+from ._checks import as_transfer, check_grid, check_transfer_energy
+from .bound import ContrastBound, contrast_bound, energy_contrast_db
+from .exact_target import exact_target_spectra
 
+# The bound, the ACC algebra and the exact-target inverse design live in modules of their
+# own (.bound, ._acc, .exact_target); their public names stay importable from here.
 __all__ = [
     "ContrastBound",
     "contrast_bound",
@@ -61,9 +63,6 @@ __all__ = [
     "DEFAULT_ACC_REG",
 ]
 
-#: Default regularization ``delta`` of the contrast designs, relative to the mean
-#: eigenvalue ``trace(G) / n_actuators`` of the quiet points' Gram matrix at each frequency.
-DEFAULT_ACC_REG = 1e-3
 
 #: Share of the design window that ``render`` tapers (half at each end, a Tukey window
 #: centred on the tap) in the drives of a contrast design that would otherwise not fit
@@ -74,313 +73,6 @@ DEFAULT_ACC_REG = 1e-3
 #: the wrap-around check tolerates). The taper brings it to about 6e-6 and changed the
 #: medians of fidelity and energy contrast by less than 0.002 and 0.4 dB there.
 DRIVE_WINDOW_TAPER = 0.25
-
-
-def _parseval_weights(n: int) -> np.ndarray:
-    """Weight of each ``rfft`` bin in the signal energy: ``sum x^2 = sum w |X|^2 / n``."""
-    w = np.full(n // 2 + 1, 2.0)
-    w[0] = 1.0
-    if n % 2 == 0:
-        w[-1] = 1.0
-    return w
-
-
-def generalized_eigh_max(A: Any, B: Any) -> tuple[np.ndarray, np.ndarray]:
-    """Largest generalized eigenpair of Hermitian pencils ``A v = lambda B v``, batched.
-
-    Parameters
-    ----------
-    A : ndarray, complex, shape (..., m, m)
-        Hermitian matrices.
-    B : ndarray, complex, shape (..., m, m)
-        Hermitian positive definite matrices.
-
-    Returns
-    -------
-    lam : ndarray, shape (...)
-        Largest generalized eigenvalue of each pencil.
-    vec : ndarray, complex, shape (..., m)
-        Its eigenvector, normalized ``v^H B v = 1`` (phase arbitrary).
-
-    Raises
-    ------
-    ValidationError
-        If a ``B`` is not positive definite (Cholesky fails).
-    """
-    A = as_array(A, "A", dtype="complex")
-    B = as_array(B, "B", dtype="complex")
-    if A.ndim < 2 or A.shape != B.shape or A.shape[-1] != A.shape[-2]:
-        raise ValidationError(f"A and B must be stacks of square matrices of one shape, got {A.shape} and {B.shape}")
-    with _single_threaded_blas():
-        try:
-            L = np.linalg.cholesky(B)
-        except np.linalg.LinAlgError as exc:
-            raise ValidationError("B is not positive definite: regularize the quiet points' Gram matrix") from exc
-        Linv = np.linalg.inv(L)
-        C = Linv @ A @ np.conj(np.swapaxes(Linv, -1, -2))
-        C = 0.5 * (C + np.conj(np.swapaxes(C, -1, -2)))
-        w, v = np.linalg.eigh(C)
-    vec = (np.conj(np.swapaxes(Linv, -1, -2)) @ v[..., :, -1:])[..., 0]
-    return w[..., -1], vec
-
-
-def _gram(Hq: np.ndarray) -> np.ndarray:
-    """``H_q^H H_q`` per frequency, shape (F, n_act, n_act), exactly Hermitian (a real
-    ``dsyrk`` over ``H_q`` read as real, :func:`~vibrofocus.rendering._pinv.gram_matrix`)."""
-    with _single_threaded_blas():
-        return gram_matrix(Hq)
-
-
-def acc_filters(h: np.ndarray, G: np.ndarray, reg_param: float) -> tuple[np.ndarray, np.ndarray]:
-    """ACC eigenpair per frequency for a single target row.
-
-    Parameters
-    ----------
-    h : ndarray, complex, shape (F, n_actuators)
-        Transfer to the target.
-    G : ndarray, complex, shape (F, n_actuators, n_actuators)
-        Gram matrix ``H_q^H H_q`` of the quiet points.
-    reg_param : float
-        ``delta`` relative to ``trace(G) / n_actuators`` (>= 0).
-
-    Returns
-    -------
-    lam : ndarray, shape (F,)
-        Largest eigenvalue ``a^H B^-1 a`` (0 where ``h`` vanishes).
-    w : ndarray, complex, shape (F, n_actuators)
-        Eigenvector ``B^-1 a``, scaled so that ``h w = lam``.
-    """
-    n_act = h.shape[1]
-    delta = reg_param * np.trace(G, axis1=1, axis2=2).real / n_act
-    # Frequencies where the quiet points vanish entirely: only the regularization is left.
-    delta = np.where(delta > 0, delta, max(reg_param, 1e-300) * np.maximum(np.sum(np.abs(h) ** 2, axis=1), 1e-300))
-    B = G + delta[:, None, None] * np.eye(n_act)
-    a = np.conj(h)
-    with _single_threaded_blas():
-        w = np.linalg.solve(B, a[:, :, None])[:, :, 0]
-    lam = np.einsum("fq,fq->f", h, w).real
-    return lam, w
-
-
-@dataclass(frozen=True)
-class ContrastBound:
-    """The most energy contrast an array can give at one target (SPEC §2).
-
-    Attributes
-    ----------
-    freqs : ndarray, shape (F,)
-        Frequencies, Hz (``rfftfreq(n, 1 / fs)``).
-    lambda_max : ndarray, shape (F,)
-        Largest ratio of target energy over summed quiet-point energy any drive reaches
-        at each frequency (inf where the quiet points leave a direction free).
-    tap_spectrum : ndarray, complex, shape (F,)
-        Spectrum ``U`` of the desired target waveform, m (rfft of it).
-    quiet_energy_min : ndarray, shape (F,)
-        Exact-tap bound per frequency: the least summed quiet-point energy ``|U|^2 /
-        lambda_max`` for the tap's spectrum at the target (rfft units, m^2).
-    bound_db : float
-        Broadband energy contrast of the exact tap at its best,
-        ``10 log10(sum w |U|^2 / sum w |U|^2 / lambda_max)`` (Parseval weights ``w``): no
-        drive that puts this waveform at the target does better.
-    best_db : float
-        ``10 log10(max lambda_max)`` over the band's bins: no drive at all does better.
-    n_samples : int
-    """
-
-    freqs: np.ndarray
-    lambda_max: np.ndarray
-    tap_spectrum: np.ndarray
-    quiet_energy_min: np.ndarray
-    bound_db: float
-    best_db: float
-    n_samples: int
-
-    def bound_db_for(self, waveform: Any) -> float:
-        """Exact-tap bound for another target waveform, dB.
-
-        Parameters
-        ----------
-        waveform : ndarray, shape (n,)
-            Waveform at the target (any real signal), m. The energy contrast of any drive
-            that produces it there through the same ``H`` is at most this.
-        """
-        waveform = as_array(waveform, "waveform", ndim=1, shape=(self.n_samples,))
-        return _bound_db(np.fft.rfft(waveform), self.lambda_max, self.n_samples)
-
-
-def _bound_db(U: np.ndarray, lam: np.ndarray, n: int) -> float:
-    w = _parseval_weights(n) * np.abs(U) ** 2
-    target = float(np.sum(w))
-    if target == 0:
-        return float("nan")
-    # Bins carrying a negligible share of the energy (rounding where H vanishes) are left out.
-    reach = w > 1e-15 * target
-    if np.any(reach & (lam <= 0)):
-        return float("-inf")  # the waveform asks for energy where the target cannot move
-    with np.errstate(divide="ignore"):
-        quiet = float(np.sum(np.where(reach, w / np.where(reach, lam, 1.0), 0.0)))
-    return float("inf") if quiet == 0 else float(10 * np.log10(target / quiet))
-
-
-def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
-    """Unregularized ``lambda_max = a^H G^+ a`` (inf where ``a`` leaves ``G``'s range)."""
-    with _single_threaded_blas():
-        mu, V = np.linalg.eigh(G)
-    proj = np.abs(np.einsum("fqk,fq->fk", np.conj(V), np.conj(h))) ** 2  # |v_k^H a|^2
-    mu_max = mu[:, -1:]
-    tol = G.shape[-1] * 1e3 * np.finfo(float).eps * np.where(mu_max > 0, mu_max, 1.0)
-    null = mu <= tol
-    a2 = np.sum(np.abs(h) ** 2, axis=1, keepdims=True)
-    escapes = np.any(null & (proj > 1e-12 * np.maximum(a2, 1e-300)), axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        lam = np.sum(np.where(null, 0.0, proj / np.where(null, 1.0, mu)), axis=1)
-    return np.where(escapes, np.inf, lam)
-
-
-def _runs(indices: np.ndarray) -> list[tuple[int, int]]:
-    """``indices`` as runs ``[start, stop)`` of consecutive values, in their order."""
-    breaks = np.flatnonzero(np.diff(indices) != 1) + 1
-    starts, ends = np.r_[0, breaks], np.r_[breaks, len(indices)]
-    return [(int(indices[s]), int(indices[e - 1]) + 1) for s, e in zip(starts, ends)]
-
-
-def _quiet_gram(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any,
-                bins: slice = slice(None)) -> np.ndarray:
-    """Gram matrix ``H_q^H H_q`` of the quiet points at ``bins``, (F_bins, n_act, n_act),
-    from indices and/or a field H. Runs of consecutive quiet points (every other point,
-    the default, is two) are read from ``H`` in place, summing their Gram matrices: no
-    copy of the quiet points' transfer."""
-    parts = []
-    if quiet_indices is not None:
-        q = as_indices(quiet_indices, "quiet_indices", H.shape[1])
-        if np.any(q == target_index):
-            raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
-        runs = _runs(q)
-        parts += [H[bins, start:stop] for start, stop in runs] if len(runs) <= 8 else [H[bins][:, q, :]]
-    if quiet_H is not None:
-        Hf = as_transfer(quiet_H, "quiet_H")
-        if Hf.shape[0] != H.shape[0] or Hf.shape[2] != H.shape[2]:
-            raise ValidationError(
-                f"quiet_H has shape {Hf.shape} but H has {H.shape}: it must have shape "
-                f"({H.shape[0]}, n_grid, {H.shape[2]}) (same frequencies and actuators)"
-            )
-        parts.append(Hf[bins])
-    if not parts:
-        if H.shape[1] == 1:
-            raise ValidationError("H has a single point: there are no quiet points to compare the target with")
-        parts += [H[bins, :target_index], H[bins, target_index + 1:]]
-    grams = [_gram(part) for part in parts if part.shape[1]]
-    return grams[0] if len(grams) == 1 else np.sum(grams, axis=0)
-
-
-def _tap(n: int, fs: float, sigma: float, t0: float | None, band: tuple[float, float], taper_octaves: float,
-         waveform: Any) -> tuple[np.ndarray, np.ndarray]:
-    """(taper, U): the band taper and the spectrum of the band-limited desired waveform."""
-    taper = design_grid(n, fs, band, taper_octaves)[1]
-    if waveform is None:
-        t0 = n / fs / 2 if t0 is None else t0
-        waveform = ricker(fs, sigma, n / fs, t0)
-    else:
-        waveform = as_array(waveform, "waveform", ndim=1, shape=(n,))
-    return taper, np.fft.rfft(waveform) * taper
-
-
-def contrast_bound(
-    H: Any,
-    target_index: int,
-    quiet_indices: Any = None,
-    band: tuple[float, float] = BAND_HZ,
-    *,
-    fs: float,
-    sigma: float = SIGMA_S,
-    t0: float | None = None,
-    waveform: Any = None,
-    quiet_H: Any = None,
-    taper_octaves: float = 0.5,
-) -> ContrastBound:
-    """Acoustic-contrast bound: the most target energy over quiet-point energy possible.
-
-    Parameters
-    ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
-    target_index : int
-        Row of ``H`` of the target.
-    quiet_indices : sequence of int, optional
-        Rows of ``H`` whose summed energy is the denominator; default every other row
-        (unless ``quiet_H`` is given, then only its points).
-    band : (float, float)
-        Band of the tap, Hz; the tap is band-limited with :func:`band_taper`.
-    fs : float
-        Sample rate, Hz.
-    sigma, t0
-        Ricker spread and centre of the tap, s (t0 default: mid-window; the bound does
-        not depend on it).
-    waveform : ndarray, shape (n,), optional
-        Desired target waveform instead of the Ricker (band-limited here), m.
-    quiet_H : ndarray, complex, shape (n // 2 + 1, n_grid, n_actuators), optional
-        Transfer to further quiet points, e.g. a dense model-predicted skin grid.
-    taper_octaves : float
-        Taper roll-off, octaves.
-
-    Returns
-    -------
-    ContrastBound
-        ``lambda_max`` per frequency, the exact-tap bound per frequency and broadband.
-    """
-    H = as_transfer(H)
-    fs = check_positive(fs, "fs")
-    n = 2 * (H.shape[0] - 1) if waveform is None else as_array(waveform, "waveform", ndim=1).size
-    check_grid(H.shape[0], n, "waveform (n,)")
-    target_index = check_index(target_index, "target_index", H.shape[1], what="points of H")
-    band = check_band(band, fs)
-    taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
-    sigma = check_positive(sigma, "sigma")
-    G = _quiet_gram(H, target_index, quiet_indices, quiet_H)
-    taper, U = _tap(n, fs, sigma, t0, band, taper_octaves, waveform)
-    active = taper > 0
-    # Over every bin (not only the band's), so that bound_db_for can weigh any waveform.
-    lam = _exact_lambda(H[:, target_index, :], G)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        quiet_min = np.where(active & (lam > 0), np.abs(U) ** 2 / np.where(lam > 0, lam, 1.0), 0.0)
-    quiet_min = np.where(active & (lam <= 0) & (np.abs(U) > 0), np.inf, quiet_min)
-    best = float(np.max(lam[active])) if active.any() else 0.0
-    return ContrastBound(
-        freqs=np.fft.rfftfreq(n, 1 / fs),
-        lambda_max=lam,
-        tap_spectrum=U,
-        quiet_energy_min=quiet_min,
-        bound_db=_bound_db(U, lam, n),
-        best_db=float(10 * np.log10(best)) if best > 0 else float("-inf"),
-        n_samples=n,
-    )
-
-
-def energy_contrast_db(response: Any, target_index: int, compare_indices: Any = None) -> float:
-    """``10 log10(E_target / sum of E at the compared rows)``, dB (what ACC maximizes).
-
-    Parameters
-    ----------
-    response : ndarray, shape (n_points, n)
-        Displacement, m.
-    target_index : int
-    compare_indices : sequence of int, optional
-        Rows summed in the denominator (the target skipped); default every other row.
-    """
-    response = as_array(response, "response", ndim=2)
-    target_index = check_index(target_index, "target_index", response.shape[0], what="points of response")
-    compare = np.delete(np.arange(response.shape[0]), target_index) if compare_indices is None else \
-        np.asarray(compare_indices, int)
-    compare = compare[compare != target_index]
-    energy = np.sum(response**2, axis=1)
-    return _energy_db(energy[target_index], energy[compare])
-
-
-def _energy_db(target: float, others: np.ndarray) -> float:
-    if others.size == 0 or target == 0:
-        return float("nan")
-    total = float(np.sum(others))
-    return float("inf") if total == 0 else float(10 * np.log10(target / total))
 
 
 def _design(H, target_index, fs, quiet_indices, quiet_H, band, sigma, t0, waveform, target_peak, taper_octaves,
@@ -674,50 +366,3 @@ def constrained_drives(
     info = {"tradeoff": float(p_opt), "energy_contrast_db": float(10 * np.log10(contrast_at(np.array([p_opt]))[0])),
             "predicted_fidelity": fidelity}
     return drives, info
-
-
-def exact_target_spectra(H_active: np.ndarray, target_index: int, others: np.ndarray, U: np.ndarray,
-                         regularization: str | None = None, reg_param: float | None = None) -> np.ndarray:
-    """Drive spectra meeting the target exactly, other control points in least squares.
-
-    ``minimize sum_c |H_c s|^2 subject to h s = U`` per frequency by the null-space
-    method: ``s = s0 + N z`` with ``s0 = h^H U / |h|^2`` (so ``h s0 = U``), ``N`` an
-    orthonormal basis of the null space of ``h`` and ``z = -(H_c N)^+ H_c s0`` the
-    (regularized) batched pseudo-inverse of
-    :class:`~vibrofocus.rendering._pinv.SpectralPinv`. ``H_c N`` has full column rank
-    where the array can act: working in the null-space basis, rather than with the
-    rank-deficient projection ``H_c P``, keeps a numerically zero singular value from
-    being inverted into a tone that fills the window.
-
-    Parameters
-    ----------
-    H_active : ndarray, complex, shape (F, n_points, n_actuators)
-        Transfer matrix at the design's frequencies.
-    target_index : int
-    others : ndarray of int
-        Control points held at zero in least squares.
-    U : ndarray, complex, shape (F,)
-        Target spectrum.
-    regularization, reg_param
-        Of the least-squares fit of the others (see :class:`InverseOperator`).
-
-    Returns
-    -------
-    ndarray, complex, shape (F, n_actuators)
-    """
-    from ._pinv import SpectralPinv
-
-    h = H_active[:, target_index, :]
-    h2 = np.sum(np.abs(h) ** 2, axis=1)
-    ok = h2 > 0
-    a = np.conj(h) / np.where(ok, h2, 1.0)[:, None]  # h a = 1
-    s0 = a * np.where(ok, U, 0.0)[:, None]
-    if len(others) == 0 or h.shape[1] < 2:
-        return s0
-    # Rows 2.. of V^H of the 1 x A matrix h span its null space (orthonormal).
-    _, _, vh = np.linalg.svd(h[:, None, :], full_matrices=True)
-    null_basis = np.conj(np.swapaxes(vh[:, 1:, :], 1, 2))  # (F, A, A - 1)
-    Hc = H_active[:, others, :]
-    factors = SpectralPinv.factorize(Hc @ null_basis, regularization, reg_param)
-    z = factors.apply((Hc @ s0[:, :, None])[:, :, 0])
-    return s0 - (null_basis @ z[:, :, None])[:, :, 0]

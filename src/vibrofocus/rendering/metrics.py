@@ -9,7 +9,7 @@ import numpy as np
 from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import SIGMA_S
 from ..errors import ValidationError
-from .contrast import _energy_db
+from .bound import _energy_db
 from .taper import design_grid
 
 __all__ = ["focus_metrics"]

@@ -19,3 +19,13 @@ __all__ = [
     "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps", "has_strap_sensors",
     "DeviceError", "list_audio_devices", "list_nidaq_devices",
 ]
+
+
+def __getattr__(name: str):
+    # The simulated rig loads the arm's physics (vibrofocus.skin): on first use only, so
+    # that importing the rigs loads no model.
+    if name == "SimulatedForearm":
+        from .simulated import SimulatedForearm
+
+        return SimulatedForearm
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

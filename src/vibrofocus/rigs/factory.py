@@ -39,7 +39,7 @@ def make_rig(
     """
     check_choice(kind, "rig", RIG_KINDS)
     if kind == "simulated":
-        from ..skin import SimulatedForearm  # imported here: the model is not needed for hardware
+        from .simulated import SimulatedForearm  # imported here: the arm's model is not needed for hardware
 
         return SimulatedForearm(seed=0 if seed is None else seed, layout=layout, skin=skin)
     if skin is not None:

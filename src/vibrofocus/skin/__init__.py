@@ -1,4 +1,8 @@
-"""The simulated forearm: a physically based rig that runs without hardware.
+"""The simulated forearm's physics: a physically based arm that runs without hardware.
+
+:class:`SimulatedArm` is the physics and imports nothing from :mod:`vibrofocus.rigs`; the
+rig over it, :class:`~vibrofocus.rigs.simulated.SimulatedForearm`, is reachable here too
+(loaded on first use, so that importing the physics does not load the rigs).
 
 The skin's waves follow a named preset (``nominal``, ``low``, ``high``: a layered arm
 whose dispersion and loss come from separate published measurements; ``voigt-fit``: a
@@ -6,7 +10,7 @@ homogeneous Voigt law fitted to phase speeds); see ``docs/skin-model.md``.
 """
 
 from .fit import WaveLawFit, fit_wave_law, load_forearm_data
-from .forearm import SimulatedForearm, drive_sensitivity
+from .forearm import SimulatedArm, drive_sensitivity
 from .geometry import ForearmGeometry
 from .layered import LayeredLaw
 from .parameters import NOMINAL_LAW, ForearmParameters, attenuation_range_laws
@@ -16,6 +20,7 @@ from .viscoelastic import ViscoelasticLaw
 
 __all__ = [
     "SimulatedForearm",
+    "SimulatedArm",
     "ForearmParameters",
     "ForearmGeometry",
     "drive_sensitivity",
@@ -35,3 +40,13 @@ __all__ = [
     "load_forearm_data",
     "WaveLawFit",
 ]
+
+
+def __getattr__(name: str):
+    # The simulated rig lives in vibrofocus.rigs (an adapter over this physics); it is
+    # offered here under its long-standing name without the physics importing the rigs.
+    if name == "SimulatedForearm":
+        from ..rigs.simulated import SimulatedForearm
+
+        return SimulatedForearm
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

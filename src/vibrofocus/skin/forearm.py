@@ -1,4 +1,5 @@
-"""The simulated forearm: a physically based rig that needs no hardware (docs/skin-model.md).
+"""The simulated forearm's physics (docs/skin-model.md); the rig over it is
+:class:`vibrofocus.rigs.SimulatedForearm`.
 
 Model, per actuator ``q`` and skin point ``p`` (NumPy's ``exp(+i omega t)`` convention):
 
@@ -25,19 +26,17 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal as sp_signal
 
-from .._validation import as_array, check_band, check_positive
-from ..defaults import BAND_HZ, FS_HZ, N_SAMPLES, SIGMA_S
+from .._validation import as_array, check_positive
+from ..defaults import FS_HZ, N_SAMPLES, SIGMA_S
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from ..rigs.base import Rig
-from ..rigs.safety import SafetyLimits
 from .geometry import ForearmGeometry
 from .parameters import ForearmParameters
 from .precursor import precursor_spectrum
 from .presets import DEFAULT_SKIN, skin_preset
 from .propagation import _disc_factor, exciter_response, surface_green, wavenumber
 
-__all__ = ["SimulatedForearm", "drive_sensitivity"]
+__all__ = ["SimulatedArm", "drive_sensitivity"]
 
 #: Peak displacement of one nominal actuator driven by a 10 V Ricker, at the preset's anchor
 #: distance (on the actuator: de Vlam et al. 2023, sec. II.C and Fig. 4b).
@@ -122,38 +121,23 @@ def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S, skin: str = "vo
     return _REFERENCE_PEAK_M / float(np.abs(response).max())
 
 
-class SimulatedForearm(Rig):
-    """A simulated participant's forearm with the actuator array and a vibrometer.
+class SimulatedArm:
+    """A simulated participant's forearm with the actuator array: the physics alone.
+
+    The transfer of the skin from every actuator to any point (:meth:`transfer`), its
+    impulse responses and the response to a drive played once from silence
+    (:meth:`respond`). It knows nothing of rigs: :class:`vibrofocus.rigs.SimulatedForearm`
+    is the rig over it (safety layer, vibrometer noise and dropouts).
 
     Parameters
     ----------
     seed : int
-        Participant seed: draws the participant (:meth:`ForearmParameters.draw`) and
-        seeds the measurement noise. Same seed, same calls: identical results.
+        Participant seed: draws the participant (:meth:`ForearmParameters.draw`). Same
+        seed, same arm.
     layout : ArrayLayout, optional
         The array; default the reference setup (docs/method.md).
     fs : float
         Sample rate, Hz.
-    limits : SafetyLimits, optional
-        Drive limits of the safety layer.
-    noise_m : float
-        Vibrometer noise, m RMS within ``noise_band``. White Gaussian noise over the
-        whole recording bandwidth, scaled so its in-band RMS is ``noise_m`` (its total
-        RMS is larger by ``sqrt((fs/2) / bandwidth)``). Default 1 nm (docs/skin-model.md): an
-        assumption of the right order. The OFV-505/5000 specification could not be
-        checked; a related Polytec velocity decoder (PSV-500, DV-04) specifies a
-        resolution of 0.1-1 µm/s between 10 Hz and 5 kHz, which is 0.16-1.6 nm of
-        displacement at 100 Hz (``v / (2 pi f)``); on skin, less reflective than the
-        specified tape, a vibrometer does worse. 0 turns noise off.
-    dropout_rate : float
-        Expected vibrometer dropouts per second of recording per point (speckle or
-        signal loss of a laser vibrometer). Samples lost in a dropout are ``NaN`` in
-        the recording, and :attr:`last_dropout_mask` marks them. Calibration must check
-        for NaN and repeat the affected recording (or leave it out of its averages); it
-        must never interpolate across a dropout. Default 0.005 /s (rare); 0 turns
-        dropouts off.
-    dropout_duration_s : (float, float)
-        Range of dropout durations, s (uniform).
     participant : ForearmParameters, optional
         Explicit parameters instead of drawing them from ``seed`` (for controlled
         experiments, e.g. ``ForearmParameters.nominal(4, skin="nominal")``).
@@ -178,54 +162,23 @@ class SimulatedForearm(Rig):
         transfer is the causal part of their surface mode (:mod:`.precursor`), so no
         delay is needed to hide a precursor; an impulse response holds less than 1e-6
         of its energy before ``t = 0``.
-    noise_band : (float, float)
-        Band in which ``noise_m`` is specified, Hz.
-
-    Attributes
-    ----------
-    participant : ForearmParameters
-        This participant's parameters (read-only).
-    geometry : ForearmGeometry
-        Surface geometry (read-only).
-    last_drive : ndarray or None
-        The last drive played (after the safety layer's fades), shape
-        (n_actuators, n_samples), V; None until something plays.
-    n_played : int
-        Number of drives played so far.
-    outputs_v : ndarray, shape (n_actuators,)
-        Voltage now at each actuator; zero whenever the rig is idle.
-    last_dropout_mask : ndarray of bool or None
-        Dropout samples of the last recording, shape (n_points, n_samples).
-
-    Notes
-    -----
-    The simulated vibrometer measures anywhere at once (``max_points_per_recording``
-    is None); ``play_and_record(drive)`` without ``points_xy`` records at every point
-    of the layout (locations then guards).
     """
-
-    kind = "simulated"
-    max_points_per_recording = None
 
     def __init__(
         self,
         seed: int = 0,
         layout: ArrayLayout | None = None,
         fs: float = FS_HZ,
-        limits: SafetyLimits | None = None,
-        noise_m: float = 1e-9,
-        dropout_rate: float = 0.005,
         *,
-        dropout_duration_s: tuple[float, float] = (1e-3, 10e-3),
         participant: ForearmParameters | None = None,
         skin: str | None = None,
         geometry: str = "cylinder",
         n_images: int = 2,
         ir_duration_s: float = 0.4096,
         latency_s: float = 0.0,
-        noise_band: tuple[float, float] = BAND_HZ,
     ) -> None:
-        super().__init__(layout=layout, fs=fs, limits=limits)
+        self.layout = layout if layout is not None else ArrayLayout.reference()
+        self.fs = check_positive(fs, "fs")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValidationError(f"seed must be a non-negative integer, got {seed!r}")
         self.seed = int(seed)
@@ -244,27 +197,15 @@ class SimulatedForearm(Rig):
             )
         self._participant = participant
         self._geometry = ForearmGeometry.from_parameters(participant, kind=geometry, n_images=n_images)
-        self.noise_m = check_positive(noise_m, "noise_m", allow_zero=True)
-        self.dropout_rate = check_positive(dropout_rate, "dropout_rate", allow_zero=True)
-        lo, hi = (check_positive(v, "dropout_duration_s") for v in dropout_duration_s)
-        if hi < lo:
-            raise ValidationError(f"dropout_duration_s must be (shortest, longest), got {dropout_duration_s!r}")
-        self.dropout_duration_s = (lo, hi)
-        self.noise_band = check_band(noise_band, self.fs, "noise_band")
         self.n_ir = int(round(check_positive(ir_duration_s, "ir_duration_s") * self.fs))
         if self.n_ir < 16:
             raise ValidationError(f"ir_duration_s must cover at least 16 samples, got {self.n_ir}")
         self.latency_s = check_positive(latency_s, "latency_s", allow_zero=True)
         self.sensitivity = drive_sensitivity(self.fs, skin=participant.skin)
-        self._rng = np.random.default_rng([self.seed, 0xD0])
         # points -> (playback impulse responses, precursor samples or None)
         self._ir_cache: OrderedDict[bytes, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._ir_lock = threading.Lock()
         self._ir_factors: tuple[np.ndarray, ...] | None = None
-        self.last_drive: np.ndarray | None = None
-        self.n_played = 0
-        self.outputs_v = np.zeros(self.layout.n_actuators)
-        self.last_dropout_mask: np.ndarray | None = None
 
     # ------------------------------------------------------------------ the model
     @property
@@ -398,6 +339,23 @@ class SimulatedForearm(Rig):
         done = np.all((energy >= (1 - tol) * total) | (total == 0), axis=(0, 1))
         return int(np.argmax(done)) + 1 if done.any() else self.n_ir
 
+    def transfer_matrix(self, n_samples: int | None = None):
+        """This arm's true transfer at its layout's points, as a
+        :class:`~vibrofocus.rendering.TransferMatrix` (provenance: the seed and skin preset).
+
+        Parameters
+        ----------
+        n_samples : int, optional
+            Design window, samples; default :meth:`design_window`.
+
+        Returns
+        -------
+        TransferMatrix
+        """
+        from ..rendering.transfer import TransferMatrix
+
+        return TransferMatrix.from_model(self, self.layout, self.fs, n_samples)
+
     def design_window(self, minimum: int = N_SAMPLES, tol: float = 1e-5) -> int:
         """A design window that follows this arm's impulse-response length, samples.
 
@@ -505,38 +463,29 @@ class SimulatedForearm(Rig):
                 out[start:start + len(pts)] = (u @ phasor).real
         return out
 
-    # ------------------------------------------------------------------ Rig backend
-    def read_strap_forces(self) -> np.ndarray:
-        """Simulated strap force sensors, one per actuator strap, N.
+    # ------------------------------------------------------------------ playback
+    def respond(self, drive: np.ndarray, points_xy: np.ndarray | None = None, n_tail: int = 0) -> np.ndarray:
+        """Displacement at ``points_xy`` when ``drive`` plays once from silence, m.
 
-        A model, not a measurement: a strap tightened to the 1 N target reads close to it
-        where the actuator sits flat, and less where the arm narrows under it (partial
-        contact), ``F = 1 N * (0.6 + 0.4 * contact)``, plus a seeded reading scatter of
-        0.03 N. Used by ``vibrofocus straps`` and stored with each calibration, as the
-        force-sensing resistors of a real rig are.
+        The linear convolution of the drive with the impulse responses, zero-padded:
+        the response with its tail after the drive, never wrapped to the start.
+
+        Parameters
+        ----------
+        drive : ndarray, shape (n_actuators, n)
+            Drive, V.
+        points_xy : ndarray, shape (n_points, 2), optional
+            Points, m; default the layout's (locations then guards).
+        n_tail : int
+            Samples kept after the drive.
 
         Returns
         -------
-        ndarray, shape (n_actuators,)
+        ndarray, shape (n_points, n + n_tail)
         """
-        contact = np.asarray(self.participant.contact, dtype=float)
-        scatter = np.random.default_rng([self.participant.seed or 0, 7919]).normal(0.0, 0.03, contact.shape)
-        return 1.0 * (0.6 + 0.4 * contact) + scatter
-
-    def _play(self, drive: np.ndarray) -> None:
-        self.last_drive = np.array(drive, copy=True)
-        self.n_played += 1
-        # The outputs hold the drive's last value until the safety layer zeroes them.
-        self.outputs_v = self.last_drive[:, -1].copy()
-
-    def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
-        self._play(drive)
         points = self.layout.points_xy if points_xy is None else points_xy
         ir = self.impulse_responses(points)  # (n_points, n_act, n_ir)
-        n = drive.shape[1]
-        n_out = n + n_tail
-        # Linear convolution, zero-padded: the response of a drive played once from
-        # silence, with its tail after the drive, never wrapped to the start.
+        n_out = drive.shape[1] + n_tail
         # Silent channels contribute nothing (calibration plays one actuator at a time).
         active = np.flatnonzero(np.any(drive != 0, axis=1))
         out = np.zeros((len(points), n_out))
@@ -546,49 +495,18 @@ class SimulatedForearm(Rig):
             rec = conv.sum(axis=1)
             m = min(n_out, rec.shape[1])
             out[:, :m] = rec[:, :m]
-        return self._measure(out)
-
-    def _measure(self, clean: np.ndarray) -> np.ndarray:
-        """Add vibrometer noise and dropouts to a clean recording."""
-        out = clean.copy()
-        if self.noise_m > 0:
-            lo, hi = self.noise_band
-            white_rms = self.noise_m * np.sqrt((self.fs / 2) / (hi - lo))
-            out += white_rms * self._rng.standard_normal(out.shape)
-        mask = np.zeros(out.shape, dtype=bool)
-        if self.dropout_rate > 0:
-            duration = out.shape[1] / self.fs
-            counts = self._rng.poisson(self.dropout_rate * duration, size=out.shape[0])
-            for p in np.flatnonzero(counts):  # rare events: a loop over them is cheap
-                for _ in range(counts[p]):
-                    length = int(round(self._rng.uniform(*self.dropout_duration_s) * self.fs))
-                    start = int(self._rng.integers(0, out.shape[1]))
-                    mask[p, start:start + max(length, 1)] = True
-            out[mask] = np.nan
-        self.last_dropout_mask = mask
         return out
 
-    def _zero_outputs(self) -> None:
-        self.outputs_v = np.zeros(self.layout.n_actuators)
-
-    def describe(self) -> dict:
-        out = super().describe()
-        out.update(
-            seed=self.seed,
-            skin=self.skin,
-            participant=self.participant.to_dict(),
-            geometry=self.geometry.kind,
-            n_images=self.geometry.n_images,
-            noise_m=self.noise_m,
-            dropout_rate=self.dropout_rate,
-            ir_duration_s=self.n_ir / self.fs,
-            latency_s=self.latency_s,
-        )
-        return out
+    def describe_model(self) -> dict:
+        """The arm's description: seed, skin preset, participant, geometry, responses."""
+        return dict(seed=self.seed, skin=self.skin, participant=self.participant.to_dict(),
+                    geometry=self.geometry.kind, n_images=self.geometry.n_images,
+                    ir_duration_s=self.n_ir / self.fs, latency_s=self.latency_s)
 
     def __repr__(self) -> str:
         p = self.participant
         return (
-            f"SimulatedForearm(seed={self.seed}, skin={self.skin!r}, c(250 Hz)={p.c250_m_s:.2f} m/s, alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, "
-            f"contact={np.round(p.contact, 2).tolist()}, geometry={self.geometry.kind!r})"
+            f"{type(self).__name__}(seed={self.seed}, skin={self.skin!r}, c(250 Hz)={p.c250_m_s:.2f} m/s, "
+            f"alpha(250 Hz)={p.alpha250_np_m:.1f} Np/m, contact={np.round(p.contact, 2).tolist()}, "
+            f"geometry={self.geometry.kind!r})"
         )

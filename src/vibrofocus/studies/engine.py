@@ -100,10 +100,13 @@ def drive_sha256(drives: np.ndarray) -> str:
 class CalibrationRenderer:
     """``renderer(method, target) -> drives`` built on a participant's calibration, cached.
 
-    Every stimulus is ``rendering.render(method, H, fs, layout, target, limit_v=...)``
-    with ``H = calibration.transfer_for(n_samples)``, rendered on first use and kept (a
-    trial's stimulus is a pure function of the calibration and the condition). Safe to
-    share between threads (a web app's sessions and previews of one calibration).
+    Every stimulus is ``rendering.render(method, tm, fs, layout, target, limit_v=...)``
+    with ``tm = TransferMatrix.from_calibration(calibration, n_samples)``, rendered on
+    first use and kept (a trial's stimulus is a pure function of the calibration and the
+    condition). The transfer matrix is validated once and keeps its wrap-around check and
+    inverse operators for every condition. Methods are those of the registry
+    (:func:`~vibrofocus.rendering.available_methods`), a lab's own included. Safe to share
+    between threads (a web app's sessions and previews of one calibration).
 
     Parameters
     ----------
@@ -132,12 +135,13 @@ class CalibrationRenderer:
         self.limit_v = float(limit_v)
         self._options = render_options
         self._lock = threading.Lock()
-        self._H: np.ndarray | None = None
+        self._H: Any = None  # the TransferMatrix of the current window
         self._cache: dict[tuple[str, int], Any] = {}
 
     def rendering(self, method: str, target: int) -> Any:
         """The :class:`~vibrofocus.rendering.Rendering` of ``method`` at location number ``target``."""
-        from ..rendering import render  # imported here: planning and storage do not need it
+        # Imported here: planning and storage do not need the rendering layer.
+        from ..rendering import TransferMatrix, render
 
         from ..errors import CausalityError
 
@@ -146,7 +150,7 @@ class CalibrationRenderer:
         with self._lock:
             while key not in self._cache:
                 if self._H is None:
-                    self._H = cal.transfer_for(self.n_samples)
+                    self._H = TransferMatrix.from_calibration(cal, self.n_samples)
                 try:
                     self._cache[key] = render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v,
                                               **self._options)

@@ -74,9 +74,13 @@ class StudyDesign:
         methods = tuple(self.methods)
         if not methods:
             raise StudyError("a study needs at least one method, got none")
+        # The registry's methods: a lab's own, registered or installed, may be studied too.
+        from ..rendering.registry import available_methods
+
+        known = available_methods()
         for m in methods:
-            if m not in METHODS:
-                raise StudyError(f"unknown method {m!r} in the study design; known: {', '.join(METHODS)}")
+            if m not in known:
+                raise StudyError(f"unknown method {m!r} in the study design; known: {', '.join(known)}")
         if len(set(methods)) != len(methods):
             raise StudyError(f"methods are repeated in the study design: {methods}")
         locations = tuple(self.locations)

@@ -83,7 +83,11 @@ def experimenter_page(request: Request) -> Response:
     web = _web(request)
     if not web.cookie_ok(request.headers.get("cookie")):
         return _login_page()
-    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind, rig_label=web.rig_label))
+    from ..rendering.registry import available_methods
+
+    # The preview lists the registry's methods: a lab's own appear beside the built-in ones.
+    return HTMLResponse(render_template("experimenter.html", rig=web.rig_kind, rig_label=web.rig_label,
+                                        methods=available_methods()))
 
 
 @router.get("/login/{code}", include_in_schema=False)
@@ -318,11 +322,12 @@ def preview(
     web: WebState = Depends(require_token),
 ) -> Response:
     """Drive signals and predicted field of one method at one location (PNG)."""
-    from ..defaults import METHODS
+    from ..rendering.registry import available_methods
     from .figures import preview_png
 
-    if method not in METHODS:
-        raise HTTPException(422, detail=f"unknown method {method!r}; known: {', '.join(METHODS)}")
+    known = available_methods()
+    if method not in known:
+        raise HTTPException(422, detail=f"unknown method {method!r}; known: {', '.join(known)}")
     cal = web.calibration(calibration_id)
     n_loc = cal.layout.n_locations
     if location > n_loc:

@@ -1,0 +1,159 @@
+"""What a calibration will play, and for how long: :func:`plan_calibration`.
+
+Also the choice of points and actuators a calibration measures (a subset of the layout).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from .._validation import check_band, check_choice
+from ..defaults import BAND_HZ
+from ..errors import ValidationError
+from ..layout import ArrayLayout
+from ..rigs.base import Rig
+from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes
+
+__all__ = ["DEFAULT_METHOD", "CalibrationPlan", "plan_calibration"]
+
+#: Method of :func:`~.calibrate.calibrate` when none is given.
+DEFAULT_METHOD = "mimo"
+
+
+def _sub_layout(layout: ArrayLayout, points: Sequence[int] | None, actuators: Sequence[int] | None):
+    """The layout restricted to chosen point and actuator indices (order kept)."""
+    p_idx = _indices(points, layout.n_points, "points", "points of the layout")
+    a_idx = _indices(actuators, layout.n_actuators, "actuators", "actuators of the layout")
+    if points is None and actuators is None:
+        return layout, p_idx, a_idx
+    loc = p_idx[p_idx < layout.n_locations]
+    grd = p_idx[p_idx >= layout.n_locations] - layout.n_locations
+    if loc.size == 0:
+        raise ValidationError("points must include at least one location (not only guard points)")
+    sub = ArrayLayout(
+        layout.actuators_xy[a_idx], layout.locations_xy[loc], layout.guards_xy[grd],
+        spacing_xy=layout.spacing_xy, actuator_names=tuple(layout.actuator_names[i] for i in a_idx),
+        guard_names=tuple(layout.guard_names[i] for i in grd), name=f"{layout.name} (subset)",
+    )
+    # Locations come first in a layout, so keep that order for the recordings too.
+    return sub, np.concatenate([loc, grd + layout.n_locations]), a_idx
+
+
+def _indices(sel: Sequence[int] | None, n: int, name: str, what: str) -> np.ndarray:
+    if sel is None:
+        return np.arange(n)
+    idx = np.asarray(list(sel))
+    if idx.size == 0 or not np.issubdtype(idx.dtype, np.integer):
+        raise ValidationError(f"{name} must be a non-empty sequence of integer indices, got {sel!r}")
+    if idx.min() < 0 or idx.max() >= n:
+        raise ValidationError(f"{name} holds an index outside the {n} {what} (valid: 0..{n - 1}): {sel!r}")
+    if len(np.unique(idx)) != idx.size:
+        raise ValidationError(f"{name} lists an index twice: {sel!r}")
+    return np.sort(idx)
+
+
+@dataclass(frozen=True)
+class CalibrationPlan:
+    """What a calibration will play and how long the takes last (:func:`plan_calibration`).
+
+    Attributes
+    ----------
+    method : {"h1", "paper", "mimo"}
+    settings : SweepSettings
+    point_indices : tuple of int
+        Points of the rig's layout calibrated, in recording order.
+    actuator_indices : tuple of int
+        Actuators of the rig's layout calibrated.
+    positions : int
+        Vibrometer positions: 1 for a rig that records every point in each take, else
+        one per group of points it can record at once (the operator aims at each).
+    """
+
+    method: str
+    settings: SweepSettings
+    point_indices: tuple[int, ...]
+    actuator_indices: tuple[int, ...]
+    positions: int
+
+    @property
+    def takes_per_position(self) -> int:
+        """Takes at each vibrometer position: ``repeats`` per actuator, or ``repeats`` for
+        all actuators at once (``mimo``)."""
+        n_a = 1 if self.method == "mimo" else len(self.actuator_indices)
+        return n_a * self.settings.repeats
+
+    @property
+    def takes(self) -> int:
+        """Takes in all (without re-recordings after dropouts)."""
+        return self.positions * self.takes_per_position
+
+    @property
+    def duration_s(self) -> float:
+        """Real duration of the takes (silence, sweep and tail each), s; aiming the
+        vibrometer and re-recordings after dropouts come on top."""
+        return self.takes * self.settings.take_s
+
+    def describe(self) -> str:
+        """The plan in one line, e.g. ``"mimo: 8 takes of 2.4 s (...) = 19.2 s of sweeps"``."""
+        n_a, n_r = len(self.actuator_indices), self.settings.repeats
+        who = (f"all {n_a} actuators at once, {n_r} Hadamard-coded repeats" if self.method == "mimo"
+               else f"{n_a} actuator(s) one at a time x {n_r} repeat(s)")
+        where = ("every point in each take" if self.positions == 1
+                 else f"at each of {self.positions} vibrometer positions")
+        text = (f"{self.method}: {self.takes} takes of {self.settings.take_s:.3g} s ({who}, {where}) = "
+                f"{_format_duration(self.duration_s)} of sweeps")
+        if self.positions > 1:
+            text += f", plus aiming the vibrometer {self.positions} times"
+        return text
+
+
+def _format_duration(seconds: float) -> str:
+    if seconds < 120:
+        return f"{seconds:.1f} s"
+    minutes, rest = divmod(int(round(seconds)), 60)
+    return f"{minutes} min {rest:02d} s"
+
+
+def plan_calibration(
+    rig: Rig,
+    *,
+    method: str = DEFAULT_METHOD,
+    points: Sequence[int] | None = None,
+    actuators: Sequence[int] | None = None,
+    band: tuple[float, float] = BAND_HZ,
+    sweep_s: float | None = None,
+    repeats: int | None = None,
+    amplitude_v: float = 5.0,
+) -> CalibrationPlan:
+    """The takes :func:`calibrate` will record with these arguments, and their real duration.
+
+    Parameters
+    ----------
+    rig, method, points, actuators, band, sweep_s, repeats, amplitude_v
+        As for :func:`calibrate`.
+
+    Returns
+    -------
+    CalibrationPlan
+        ``plan.duration_s`` (s) and ``plan.describe()`` say how long the sweeps take.
+
+    Raises
+    ------
+    ValidationError
+        Bad arguments (nothing is played).
+    """
+    if not isinstance(rig, Rig):
+        raise ValidationError(f"rig must be a vibrofocus Rig, got {type(rig).__name__}")
+    check_choice(method, "method", METHODS)
+    band = check_band(band, rig.fs)
+    settings = default_settings(method, rig.fs, band, sweep_s=sweep_s, repeats=repeats, amplitude_v=amplitude_v)
+    _, p_idx, a_idx = _sub_layout(rig.layout, points, actuators)
+    if method == "mimo":
+        hadamard_codes(len(a_idx), settings.repeats)  # refuses repeats that cannot separate them
+    limit = rig.max_points_per_recording
+    positions = 1 if limit is None else -(-len(p_idx) // limit)
+    return CalibrationPlan(method=method, settings=settings, point_indices=tuple(int(i) for i in p_idx),
+                           actuator_indices=tuple(int(i) for i in a_idx), positions=positions)

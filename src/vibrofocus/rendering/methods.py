@@ -1,0 +1,294 @@
+"""The built-in rendering methods of SPEC §2, as objects: :class:`Funneling`,
+:class:`Inverse`, :class:`Combination`, :class:`TimeReversal`, :class:`Contrast` and
+:class:`Constrained`, each a :class:`~.method.Method` with its own options.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from dataclasses import field as _field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from .._validation import as_array, check_choice, check_positive
+from ..defaults import FUNNELING_AMPLITUDE_V
+from ..errors import ValidationError
+from ._acc import DEFAULT_ACC_REG
+from ._checks import as_transfer, check_regularization
+from .combination import combination_target
+from .contrast import constrained_drives, contrast_drives
+from .exact_target import exact_target_spectra
+from .funneling import funneling_gains
+from .method import Method, Problem, Solution
+from .taper import design_grid
+from .time_reversal import time_reversal_drives
+
+__all__ = ["Method", "Problem", "Solution", "Funneling", "Inverse", "Combination", "TimeReversal", "Contrast",
+           "Constrained", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
+
+#: Default weight of the quiet control points against the target (see :class:`Inverse`).
+DEFAULT_GUARD_WEIGHT = 1.0
+#: Which points a design constrains besides the target (see ``control`` of :class:`Inverse`).
+CONTROL_SETS = ("guards", "all", "locations", "field")
+
+
+def _check_control(method: Method, default: str, field_allowed: bool) -> str:
+    """Validate a method's ``control`` (None: ``default``) and return it."""
+    control = default if method.control is None else method.control
+    check_choice(control, "control", CONTROL_SETS)
+    if control == "field" and not field_allowed:
+        raise ValidationError(f"control='field' is for the contrast designs (contrast, constrained), "
+                              f"not {method.name or type(method).__name__!r}")
+    return control
+
+
+@dataclass(frozen=True, kw_only=True)
+class Funneling(Method):
+    """Funneling (SPEC §2): every actuator plays the tap, at a gain by its distance.
+
+    Parameters
+    ----------
+    funneling_law : {"linear", "energy"}
+        Gain law (:func:`~vibrofocus.rendering.funneling_gains`).
+    funneling_amplitude_v : float
+        Funneling amplitude ``A``, V.
+    **common
+        The options of :class:`Method`.
+    """
+
+    funneling_law: str = "linear"
+    funneling_amplitude_v: float = FUNNELING_AMPLITUDE_V
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        check_choice(self.funneling_law, "funneling_law", ("linear", "energy"))
+        self._set("funneling_amplitude_v", check_positive(self.funneling_amplitude_v, "funneling_amplitude_v"))
+
+    def gains(self, p: Problem) -> np.ndarray:
+        """Funneling amplitudes of the actuators for the problem's target, V."""
+        layout = p.tm.layout
+        return funneling_gains(layout.actuators_xy, layout.locations_xy[p.target_index], self.funneling_amplitude_v,
+                               self.funneling_law, spacing_xy=layout.spacing_xy)
+
+    def solve(self, p: Problem) -> Solution:
+        gains = self.gains(p)
+        return Solution(gains[:, None] * p.stimulus, gains=gains)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Inverse(Method):
+    """The inverse filter (SPEC §2): per-frequency pseudo-inverse at the control points.
+
+    Parameters
+    ----------
+    control : {"guards", "all", "locations"}, optional
+        Points held at zero besides the target. ``"guards"`` (default, SPEC §2): the
+        guard points, which keeps the system close to square so the target is met.
+        ``"all"``: every other calibrated point (a least-squares compromise).
+        ``"locations"``: the other locations.
+    regularization : {None, "tikhonov", "tsvd"}
+    reg_param : float, optional
+        See :func:`~vibrofocus.rendering.inverse_filter`.
+    guard_weight : float
+        Weight of the zero-displacement control points against the target (> 0). The
+        default ``DEFAULT_GUARD_WEIGHT = 1.0`` is the source paper's plain pseudo-inverse
+        (README, "Choosing the default design").
+    exact_target : bool, optional
+        Meet the target waveform exactly and fit the other control points in least
+        squares, instead of one weighted least-squares fit of all; default False (True
+        for :class:`Combination`).
+    **common
+        The options of :class:`Method`.
+
+    Notes
+    -----
+    The weighted design goes through the transfer matrix's kept
+    :class:`~vibrofocus.rendering.InverseOperator` (``tm.inverse_operator``): a second
+    design with the same options reuses its factorization.
+    """
+
+    control: str | None = None
+    regularization: str | None = None
+    reg_param: float | None = None
+    guard_weight: float = DEFAULT_GUARD_WEIGHT
+    exact_target: bool | None = None
+    #: Whether the target is exact when ``exact_target`` is not given.
+    exact_by_default: ClassVar[bool] = False
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._set("control", _check_control(self, "guards", field_allowed=False))
+        self._set("guard_weight", check_positive(self.guard_weight, "guard_weight"))
+        reg, param = check_regularization(self.regularization, self.reg_param)
+        self._set("regularization", reg)
+        self._set("reg_param", param)
+        self._set("exact_target", self.exact_by_default if self.exact_target is None else bool(self.exact_target))
+
+    def raw_target(self, p: Problem, gains: np.ndarray | None) -> np.ndarray:
+        """The target waveform before the band limit, m."""
+        return self.target_peak_m * p.stimulus
+
+    def solve(self, p: Problem) -> Solution:
+        control = p.control(self.control)
+        others = control[1:]
+        gains = self.gains(p) if isinstance(self, Funneling) else None
+        raw = self.raw_target(p, gains)
+        if self.exact_target:
+            n = p.n
+            taper = design_grid(n, p.fs, p.band, self.taper_octaves)[1]
+            desired = np.fft.irfft(np.fft.rfft(raw) * taper, n)
+            active = np.flatnonzero(taper > 0)
+            active = slice(int(active[0]), int(active[-1]) + 1)
+            spectra = np.zeros((len(taper), p.tm.n_actuators), complex)
+            spectra[active] = exact_target_spectra(p.tm.H[active], p.target_index, np.asarray(others, int),
+                                                   np.fft.rfft(desired)[active], self.regularization, self.reg_param)
+            return Solution(np.fft.irfft(spectra, n, axis=0).T, desired, control, gains)
+        weights = np.full(len(control), self.guard_weight)
+        weights[0] = 1.0
+        operator = p.tm.inverse_operator(control, band=p.band, regularization=self.regularization,
+                                         reg_param=self.reg_param, taper_octaves=self.taper_octaves, weights=weights)
+        # The operator applies the band taper itself: hand it the raw target waveform.
+        desired = operator.band_limit(raw) if gains is not None else p.reference
+        return Solution(operator.drives_for_point(p.target_index, raw), desired, control, gains)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Combination(Inverse, Funneling):
+    """Funneling and inverse filter combined (SPEC §2): the inverse design asks the target
+    for the displacement funneling gives there, and quiet at the control points.
+
+    Parameters
+    ----------
+    exact_target : bool, optional
+        Default True (the paper's condition: the target's displacement is the funneling
+        one); the other options are those of :class:`Inverse` and :class:`Funneling`.
+    """
+
+    exact_by_default: ClassVar[bool] = True
+
+    def raw_target(self, p: Problem, gains: np.ndarray | None) -> np.ndarray:
+        return combination_target(p.tm, p.target_index, gains, p.stimulus, p.fs, band=None)
+
+
+@dataclass(frozen=True, kw_only=True)
+class TimeReversal(Method):
+    """Time reversal (SPEC §2): the control points' impulse responses played backwards.
+
+    Parameters
+    ----------
+    control : {"guards", "all", "locations"}, optional
+        Control points besides the target (default ``"guards"``); their targets are zero.
+    **common
+        The options of :class:`Method`; the drives are normalized to ``limit_v`` by the
+        method itself (``Design.scale`` is 1).
+    """
+
+    self_normalized: ClassVar[bool] = True
+    control: str | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._set("control", _check_control(self, "guards", field_allowed=False))
+
+    def solve(self, p: Problem) -> Solution:
+        control = p.control(self.control)
+        targets = np.zeros((len(control), p.n))
+        targets[0] = self.target_peak_m * p.stimulus
+        drives = time_reversal_drives(p.tm.rows(control), targets, p.fs, max_drive=self.limit_v, band=p.band,
+                                      taper_octaves=self.taper_octaves)
+        return Solution(drives, control_indices=control)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Contrast(Method):
+    """Acoustic contrast control, phase-aligned so the target receives the tap exactly
+    (:func:`~vibrofocus.rendering.contrast_drives`).
+
+    Parameters
+    ----------
+    control : {"all", "guards", "locations", "field"}, optional
+        Points kept quiet (default ``"all"``: every other calibrated point); ``"field"``:
+        the points of a dense skin grid given by ``field``.
+    acc_reg : float
+        Regularization, relative to the mean eigenvalue of the quiet points' Gram matrix.
+    field : ndarray or callable, optional
+        ``control="field"``: transfer to the grid, complex, shape (n // 2 + 1, n_grid,
+        n_actuators), m/V, or a callable ``field(freqs) -> H_grid``.
+    field_xy : ndarray, shape (n_grid, 2), optional
+        The grid points, m; those within ``field_exclusion_m`` of the target are not
+        counted as quiet.
+    field_exclusion_m : float
+        See ``field_xy``, m.
+    **common
+        The options of :class:`Method`.
+    """
+
+    spreads_over_window: ClassVar[bool] = True
+    control: str | None = None
+    acc_reg: float = DEFAULT_ACC_REG
+    field: Any = _field(default=None, compare=False, repr=False)
+    field_xy: Any = _field(default=None, compare=False, repr=False)
+    field_exclusion_m: float = 5e-3
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._set("control", _check_control(self, "all", field_allowed=True))
+        if (self.control == "field") != (self.field is not None):
+            raise ValidationError("a dense quiet grid needs both control='field' and field=... (its transfer matrix)")
+        self._set("acc_reg", check_positive(self.acc_reg, "acc_reg", allow_zero=True))
+        self._set("field_exclusion_m", check_positive(self.field_exclusion_m, "field_exclusion_m", allow_zero=True))
+
+    def quiet_field(self, p: Problem) -> np.ndarray | None:
+        """Transfer to the quiet grid points away from the target (``control="field"``)."""
+        if self.field is None:
+            return None
+        H = p.tm.H
+        quiet_H = as_transfer(self.field(p.tm.freqs) if callable(self.field) else self.field, "field")
+        if quiet_H.shape[0] != H.shape[0] or quiet_H.shape[2] != H.shape[2]:
+            raise ValidationError(
+                f"field has shape {quiet_H.shape}; it must have shape ({H.shape[0]}, n_grid, {H.shape[2]}) like H")
+        if self.field_xy is None:
+            return quiet_H
+        field_xy = as_array(self.field_xy, "field_xy", ndim=2, shape=(quiet_H.shape[1], 2))
+        far = np.linalg.norm(field_xy - p.tm.layout.locations_xy[p.target_index], axis=1) > self.field_exclusion_m
+        if not far.any():
+            raise ValidationError(f"every field point lies within field_exclusion_m={self.field_exclusion_m:g} m "
+                                  "of the target")
+        return quiet_H[:, far, :]
+
+    def energy_drives(self, p: Problem, **options: Any) -> np.ndarray:
+        return contrast_drives(p.tm, p.target_index, p.fs, **options)
+
+    def solve(self, p: Problem) -> Solution:
+        control = p.control(self.control)
+        others = control[1:]
+        quiet_H = self.quiet_field(p)
+        drives = self.energy_drives(p, quiet_indices=others if others.size else None, quiet_H=quiet_H, band=p.band,
+                                    sigma=self.sigma, waveform=self.target_peak_m * p.stimulus,
+                                    reg_param=self.acc_reg, taper_octaves=self.taper_octaves)
+        return Solution(drives, control_indices=control, quiet_H=quiet_H)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Constrained(Contrast):
+    """The best fidelity for a required energy contrast, or a weighted trade-off
+    (:func:`~vibrofocus.rendering.constrained_drives`).
+
+    Parameters
+    ----------
+    contrast_weight : float, optional
+        Trade-off weight (relative, >= 0; 0 is the exact tap of :class:`Contrast`).
+    min_contrast_db : float, optional
+        Required energy contrast against the quiet points, dB. At most one of the two
+        (neither: ``contrast_weight=1``).
+    **common
+        The options of :class:`Contrast`.
+    """
+
+    contrast_weight: float | None = None
+    min_contrast_db: float | None = None
+
+    def energy_drives(self, p: Problem, **options: Any) -> np.ndarray:
+        return constrained_drives(p.tm, p.target_index, p.fs, contrast_weight=self.contrast_weight,
+                                  min_contrast_db=self.min_contrast_db, **options)
