@@ -90,52 +90,5 @@ def test_the_web_routers_do_not_import_the_app_factory():
         assert "app" not in relative, f"{path.name} imports the app factory"
 
 
-# Imports inside functions that still reach a layer above their own, each with its reason.
-# This set only shrinks.
-KNOWN_UPWARD_IMPORTS = {
-    # The calibration file's reader builds the Calibration (and its fitted model) it describes.
-    ("io/calibration_nc.py", "vibrofocus.calibration"),
-    # The feature-bank file's reader and writer use the bank's own record type.
-    ("io/feature_bank.py", "vibrofocus.studies"),
-    # The long-standing name vibrofocus.skin.SimulatedForearm of the rig over the physics,
-    # loaded on first use (importing vibrofocus.skin loads no rig: see FORBIDDEN).
-    ("skin/__init__.py", "vibrofocus.rigs"),
-    # The report reads the simulated participants' perceptual model; the power analysis
-    # reuses the fast analysis (both modules are being reworked elsewhere).
-    ("analysis/report.py", "vibrofocus.studies"),
-    ("studies/power.py", "vibrofocus.analysis"),
-}
-
-
-def _imported_modules(path, package: list[str]) -> set[str]:
-    """Every vibrofocus module ``path`` imports, at module level or inside a function."""
-    tree = ast.parse(path.read_text(encoding="utf-8"))
-    found = set()
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Import):
-            found.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            if node.level:
-                anchor = package[:len(package) - (node.level - 1)]
-                found.add(".".join(anchor + ([node.module] if node.module else [])))
-            elif node.module:
-                found.add(node.module)
-    return {name for name in found if name.startswith("vibrofocus.")}
-
-
-def test_imports_inside_functions_obey_the_same_floors():
-    import vibrofocus
-
-    root = Path(vibrofocus.__file__).parent
-    upward = set()
-    for name, forbidden in FORBIDDEN.items():
-        base = root.joinpath(*name.split("."))
-        files = sorted(base.rglob("*.py")) if base.is_dir() else [base.with_suffix(".py")]
-        for path in files:
-            package = ["vibrofocus", *path.relative_to(root).parent.parts]
-            for module in _imported_modules(path, package):
-                layer = module.split(".")[1]
-                if layer in forbidden:
-                    upward.add((path.relative_to(root).as_posix(), f"vibrofocus.{layer}"))
-    assert upward <= KNOWN_UPWARD_IMPORTS, f"imports above their layer: {sorted(upward - KNOWN_UPWARD_IMPORTS)}"
-    assert upward == KNOWN_UPWARD_IMPORTS, f"no longer needed, remove: {sorted(KNOWN_UPWARD_IMPORTS - upward)}"
+# Imports inside functions are checked against the package's floors by tests/test_layering.py,
+# which reads every import in the source (this file checks what a fresh interpreter loads).
