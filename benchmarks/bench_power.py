@@ -43,8 +43,8 @@ def _pingouin_analysis(arrays) -> None:
 
 
 def main() -> None:
-    from vibrofocus.studies.bank import default_bank, simulate_cell_means
-    from vibrofocus.studies.power import PowerDesign, run_power, study_statistics
+    from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+    from vibrofocus.simulation.power import PowerDesign, run_power, study_statistics
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--studies", type=int, default=40)

@@ -87,6 +87,7 @@ API_PACKAGES = {
     "vibrofocus.calibration": "Calibration",
     "vibrofocus.rigs": "Rigs",
     "vibrofocus.studies": "Studies",
+    "vibrofocus.simulation": "Simulated participants",
     "vibrofocus.analysis": "Analysis",
     "vibrofocus.demo": "Demo",
     "vibrofocus.errors": "Errors",

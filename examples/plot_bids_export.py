@@ -15,7 +15,8 @@ from pathlib import Path
 
 import bids
 
-from vibrofocus.studies import export_bids, simulate_studies
+from vibrofocus.simulation import simulate_studies
+from vibrofocus.studies import export_bids
 
 with tempfile.TemporaryDirectory() as tmp:
     db = Path(tmp) / "study.sqlite"

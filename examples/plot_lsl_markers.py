@@ -18,7 +18,8 @@ from pathlib import Path
 
 import pylsl
 
-from vibrofocus.studies import lsl_markers, simulate_studies
+from vibrofocus.simulation import simulate_studies
+from vibrofocus.studies import lsl_markers
 
 with tempfile.TemporaryDirectory() as tmp, lsl_markers() as outlet:
     # The inlet connects before the first trial: LSL keeps no marker sent to nobody.

@@ -12,7 +12,8 @@ import tempfile
 from pathlib import Path
 
 import vibrofocus.analysis as va
-from vibrofocus.studies import StudyStore, simulate_studies
+from vibrofocus.simulation import simulate_studies
+from vibrofocus.studies import StudyStore
 
 with tempfile.TemporaryDirectory() as tmp:
     db = Path(tmp) / "study.sqlite"

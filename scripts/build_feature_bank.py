@@ -1,4 +1,4 @@
-"""Build the feature bank shipped with vibrofocus (src/vibrofocus/studies/data/feature_bank.npz).
+"""Build the feature bank shipped with vibrofocus (src/vibrofocus/simulation/data/feature_bank.npz).
 
 Calibrates N simulated forearms (simulated participants sim-001.. of simulate-study
 --seed SEED), renders the 27 study stimuli on each and stores their felt energies on the
@@ -13,13 +13,13 @@ import argparse
 import time
 from pathlib import Path
 
-from vibrofocus.studies.bank import DEFAULT_BANK, build_feature_bank
+from vibrofocus.simulation.bank import DEFAULT_BANK, build_feature_bank
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=Path(__file__).parents[1] / "src/vibrofocus/studies" / DEFAULT_BANK)
+    ap.add_argument("--out", type=Path, default=Path(__file__).parents[1] / "src/vibrofocus/simulation" / DEFAULT_BANK)
     args = ap.parse_args()
     t0 = time.perf_counter()
     bank = build_feature_bank(args.n, seed=args.seed, progress=lambda k, n: print(f"forearm {k}/{n}", flush=True))

@@ -24,7 +24,7 @@ import pandas as pd
 import pingouin as pg
 from scipy import stats
 
-from vibrofocus.studies.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 
 ALPHA = 0.05
 METHODS = ("funneling", "inverse", "combination")

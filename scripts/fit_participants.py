@@ -2,8 +2,8 @@
 """Fit the perceptual model of the simulated participants to the paper; write its tables.
 
 Simulated participants are a MODEL, not data. The parameters marked *fitted* in
-:class:`vibrofocus.studies.perception.PerceptualModel` are fitted to the statistics of
-de Vlam et al. (IEEE ToH 16(4), 2023) kept in ``studies/data/psychophysics.json``
+:class:`vibrofocus.simulation.perception.PerceptualModel` are fitted to the statistics of
+de Vlam et al. (IEEE ToH 16(4), 2023) kept in ``simulation/data/psychophysics.json``
 (``paper_statistics``): a seeded random search, then a local refinement, each candidate
 judged on the same simulated 20-participant studies (seeds 1000.., fast path: feature
 bank + vectorized statistics; common random numbers make candidates comparable). One
@@ -39,8 +39,8 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus._atomic import write_text
-from vibrofocus.studies.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, compare, comparison_markdown, seed_statistics
-from vibrofocus.studies.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
+from vibrofocus.simulation.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, compare, comparison_markdown, seed_statistics
+from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGES = {"docs": ROOT / "docs" / "simulated-participants.md", "readme": ROOT / "README.md"}
@@ -225,7 +225,7 @@ POWER_SIZES, POWER_STUDIES = (10, 15, 20, 25, 30), 200
 
 def power_markdown() -> str:
     """Power of each test against N for the defaults (``vibrofocus power``'s numbers), as markdown."""
-    from vibrofocus.studies.power import TESTS, PowerDesign, run_power
+    from vibrofocus.simulation.power import TESTS, PowerDesign, run_power
 
     rows = run_power(PowerDesign(n_participants=POWER_SIZES, n_studies=POWER_STUDIES), local=True)["table"]
     power = {(r["test"], r["n_participants"]): r["power"] for r in rows}

@@ -33,7 +33,8 @@ FLOORS = (
     ("skin",),                                                # the simulated arm's physics
     ("rigs",),                                                # hardware, and the simulated rig over the physics
     ("calibration",),                                         # measures on a rig, fits the skin, designs
-    ("studies",),                                             # sessions, participants, their analysis
+    ("studies",),                                             # sessions, storage, export
+    ("simulation",),                                          # simulated participants (a model) on the engine
     ("demo", "web"),                                          # the two applications
     ("cli",),                                                 # the command line
     ("__main__",),                                            # python -m vibrofocus
@@ -45,9 +46,11 @@ ALLOWED = {
     ("vibrofocus.skin", "vibrofocus.rigs.simulated"):
         "the long-standing name vibrofocus.skin.SimulatedForearm of the rig over the physics, loaded on first "
         "use (importing vibrofocus.skin loads no rig: test_import_nesting)",
-    ("vibrofocus.analysis.report", "vibrofocus.studies.perception"):
+    ("vibrofocus.studies.bids", "vibrofocus.simulation.perception"):
+        "the BIDS sidecars name the perceptual model that answered for simulated participants",
+    ("vibrofocus.analysis.report", "vibrofocus.simulation.perception"):
         "report.json names the perceptual model (label, version) that answered for simulated participants; "
-        "the model's identity lives with the model, in studies.perception",
+        "the model's identity lives with the model, in simulation.perception",
 }
 
 

@@ -75,7 +75,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
 
 #: Subpackages reachable as attributes without importing them first (``vf.rigs.make_rig``).
 _SUBPACKAGES = frozenset({"analysis", "calibration", "defaults", "demo", "errors", "layout", "rendering", "rigs",
-                          "signals", "skin", "studies"})
+                          "signals", "simulation", "skin", "studies"})
 
 
 def __getattr__(name: str):

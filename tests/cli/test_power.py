@@ -43,7 +43,7 @@ def test_power_checks_the_output_folder_before_simulating(tmp_path, monkeypatch)
     out.mkdir()
     Faults(monkeypatch).read_only(out)
     calls = []
-    import vibrofocus.studies.power as power
+    import vibrofocus.simulation.power as power
 
     monkeypatch.setattr(power, "run_power", lambda *a, **k: calls.append(1))
     res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--out", str(out)])

@@ -182,7 +182,7 @@ def test_a_report_breaking_the_contract_is_refused_naming_the_key(tmp_path, brea
 # --------------------------------------------------------------------------- feature bank
 def test_feature_bank_round_trips_and_the_shipped_one_loads(tmp_path):
     from vibrofocus.io import load_feature_bank, save_feature_bank
-    from vibrofocus.studies.bank import FeatureBank, default_bank
+    from vibrofocus.simulation.bank import FeatureBank, default_bank
 
     rng = np.random.default_rng(1)
     bank = FeatureBank(energy=rng.random((2, 3, 9, 5)), points_xy=rng.random((5, 2)), locations_xy=rng.random((9, 2)),

@@ -12,6 +12,7 @@ from vibrofocus import __version__
 from vibrofocus.cli.main import app
 from vibrofocus.errors import StudyError
 from vibrofocus.io.bids import EVENT_COLUMNS, bids_label
+from vibrofocus.simulation import STUDY_SKIN
 from vibrofocus.studies import StudyStore
 from vibrofocus.studies.bids import export_bids
 
@@ -62,7 +63,7 @@ def test_every_trial_of_a_simulated_study_is_an_events_row_in_pybids(study):
         assert df["onset"].iloc[0] == 0 and (df["onset"].diff().iloc[1:] >= 0).all()
         assert meta["Simulated"] is True and "not data" in meta["SimulatedModel"]
         session = meta["Sessions"][0]
-        assert session["Rig"] == "simulated" and session["SkinPreset"] == "voigt-fit"
+        assert session["Rig"] == "simulated" and session["SkinPreset"] == STUDY_SKIN  # simulate-study's default
         assert session["CalibrationSHA256"] == sha[mine[0]["calibration_id"]]
         for column in REQUIRED:
             assert meta[column]["Description"]

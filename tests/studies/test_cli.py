@@ -77,7 +77,7 @@ def test_sigkill_mid_study_loses_and_duplicates_nothing(tmp_path):
     from vibrofocus.calibration import load_calibration
     from vibrofocus.rigs import make_rig
     from vibrofocus.studies.engine import calibration_renderer, drive_sha256
-    from vibrofocus.studies.participants import SimulatedParticipant
+    from vibrofocus.simulation.participants import SimulatedParticipant
 
     with StudyStore(db) as store:
         info = store.sessions("sim-001")[0]

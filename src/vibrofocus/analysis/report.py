@@ -56,7 +56,7 @@ def _uncomputed_friedman() -> dict:
 
 def _simulated(result: AnalysisResult) -> dict[str, Any]:
     """``report.json["simulated"]``: which participants are simulated, and the model label."""
-    from ..studies.perception import MODEL_LABEL, MODEL_VERSION
+    from ..simulation.perception import MODEL_LABEL, MODEL_VERSION
 
     sim = list(result.simulated_participants)
     return {

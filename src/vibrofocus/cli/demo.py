@@ -222,7 +222,7 @@ def _make_output_folder(out: Path) -> None:
 
 def _write_paper_figures(out: Path, *, seed: int, participants: int, location: int, skin: str) -> None:
     from ..demo.paper_figures import write_paper_figures
-    from ..studies.perception import STUDY_SKIN
+    from ..simulation.perception import STUDY_SKIN
 
     _make_output_folder(out)
     with Progress(TextColumn("[progress.description]{task.description}"), TimeElapsedColumn(), console=err_console,

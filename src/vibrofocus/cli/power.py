@@ -67,13 +67,13 @@ def power_command(
 
         from .._atomic import allow_overwrite
         from .._validation import check_in_range
-        from ..studies.perception import MODEL_LABEL
-        from ..studies.power import TESTS, PowerDesign, run_power
+        from ..simulation.perception import MODEL_LABEL
+        from ..simulation.power import TESTS, PowerDesign, run_power
 
         allow_overwrite(force)
         from ..errors import ValidationError
         from ..skin import skin_preset
-        from ..studies.perception import STUDY_SKIN
+        from ..simulation.perception import STUDY_SKIN
 
         if skin_preset(skin).name != STUDY_SKIN:
             # Its effect sizes come from a model fitted on one skin: on another, the numbers
@@ -136,7 +136,7 @@ def write_power(result: dict, out: Path) -> list[Path]:
     import pandas as pd
 
     from .._atomic import save_figure, write_text
-    from ..studies.power import TESTS
+    from ..simulation.power import TESTS
 
     table = pd.DataFrame(result["table"]).assign(model=result["label"])
     csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")

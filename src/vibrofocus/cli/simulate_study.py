@@ -44,8 +44,8 @@ def simulate_study(
         from rich.table import Table
 
         from ..studies.markers import lsl_markers
-        from ..studies.participants import MODEL_NOTICE
-        from ..studies.simulate import simulate_studies, summarize_simulation
+        from ..simulation.participants import MODEL_NOTICE
+        from ..simulation.simulate import simulate_studies, summarize_simulation
 
         from .._atomic import allow_overwrite, check_writable, output_error, protect
         from ..io.calibration_nc import estimate_calibration_bytes

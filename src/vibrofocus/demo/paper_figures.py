@@ -238,7 +238,8 @@ def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12,
     from ..analysis import analyze, load_trials
     from ..calibration import calibrate
     from ..skin import SimulatedForearm
-    from ..studies import StudyStore, simulate_studies
+    from ..simulation import simulate_studies
+    from ..studies import StudyStore
     from .run import calibrated_transfer, run_demo
 
     say = progress or (lambda _label: None)

@@ -6,7 +6,7 @@ m; ``centre_xy`` (2,), m; ``methods`` (n_methods,), str; ``forearm_seeds``
 (n_forearms,), int; ``seed`` (scalar), int; ``actuator_energy`` (n_forearms,
 n_methods, n_locations, n_actuators), float32, each actuator's own felt energy at its
 contact; ``actuators_xy`` (n_actuators, 2), m; ``model_version`` (scalar), str: the
-perceptual model that wrote it. The shipped bank is ``studies/data/feature_bank.npz``
+perceptual model that wrote it. The shipped bank is ``simulation/data/feature_bank.npz``
 (``scripts/build_feature_bank.py``).
 """
 
@@ -37,7 +37,7 @@ def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model
     bank : mapping
         The arrays named :data:`FEATURE_BANK_ARRAYS` (see the module docstring for shapes
         and units), e.g. ``dataclasses.asdict`` of a
-        :class:`~vibrofocus.studies.bank.FeatureBank`.
+        :class:`~vibrofocus.simulation.bank.FeatureBank`.
     path : path-like
         Destination ``.npz``; its folder must exist.
     model_version : str

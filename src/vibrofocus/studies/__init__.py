@@ -47,9 +47,9 @@ Running trials (:mod:`.engine`)
     page uses them). :func:`drive_sha256` (shape, then float64 bytes),
     :func:`calibration_renderer` / :class:`CalibrationRenderer`, :func:`terminal_beep`,
     :func:`headphone_beep`.
-Simulated participants (:mod:`.participants`, :mod:`.simulate`)
-    :class:`SimulatedParticipant` (a perceptual MODEL, not data), :class:`PerceptualModel`,
-    :func:`simulate_studies`, :func:`participant_seeds`, :func:`summarize_simulation`.
+Simulated participants
+    In :mod:`vibrofocus.simulation`, one floor up: it runs this package's engine with
+    a perceptual model in place of a person.
 """
 
 from .engine import (
@@ -69,7 +69,6 @@ from .engine import (
     headphone_beep,
 )
 from ..io.trials_csv import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
-from .participants import MODEL_LABEL, MODEL_NOTICE, MODEL_VERSION, Percepts, PerceptualModel, SimulatedParticipant
 from .protocol import PHASES, STUDIES, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .session_status import SESSION_STATUSES, TRANSITIONS, action_status
 from .storage import (
@@ -83,7 +82,6 @@ from .storage import (
     StudyStore,
     file_sha256,
 )
-from .simulate import participant_seeds, simulate_studies, summarize_simulation
 from .bids import export_bids
 from .markers import lsl_markers, send_marker, sending_markers
 from .terminal import TerminalResponder
@@ -126,15 +124,6 @@ __all__ = [
     "terminal_beep",
     "headphone_beep",
     "TerminalResponder",
-    "SimulatedParticipant",
-    "PerceptualModel",
-    "Percepts",
-    "MODEL_LABEL",
-    "MODEL_VERSION",
-    "MODEL_NOTICE",
-    "simulate_studies",
-    "participant_seeds",
-    "summarize_simulation",
     "export_bids",
     "lsl_markers",
     "sending_markers",

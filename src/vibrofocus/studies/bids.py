@@ -17,16 +17,18 @@ from ..errors import StudyError
 from ..io.bids import BIDS_VERSION, TASKS, bids_label, write_bids_dataset
 from ..io.responses import format_response
 from ..io.trials_csv import read_trials_csv
-from .perception import MODEL_LABEL
 
 __all__ = ["export_bids"]
 
-_PARTICIPANT_COLUMNS = {
-    "participant_id": {"Description": "BIDS participant label: the study id's letters and digits."},
-    "source_id": {"Description": "The participant's id in the study database or trials file."},
-    "simulated": {"Description": "Whether the answers come from vibrofocus's perceptual model, not from a person.",
-                  "Levels": {"true": f"simulated ({MODEL_LABEL})", "false": "a person"}},
-}
+
+def _participant_columns(model_label: str) -> dict[str, dict[str, Any]]:
+    """participants.json: each column of participants.tsv described."""
+    return {
+        "participant_id": {"Description": "BIDS participant label: the study id's letters and digits."},
+        "source_id": {"Description": "The participant's id in the study database or trials file."},
+        "simulated": {"Description": "Whether the answers come from vibrofocus's perceptual model, not from a person.",
+                      "Levels": {"true": f"simulated ({model_label})", "false": "a person"}},
+    }
 
 
 def _onsets(store: Any, session_id: int) -> dict[int, datetime]:
@@ -105,6 +107,9 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
         The folder cannot be written.
     """
     from .. import __version__
+    # The label of the model that answers for simulated participants (the simulation floor
+    # sits above the studies: imported here, where a sidecar names it).
+    from ..simulation.perception import MODEL_LABEL
 
     source = Path(source)
     if source.resolve().is_relative_to(Path(out_dir).resolve()):
@@ -160,4 +165,4 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
     participants = [{"participant_id": f"sub-{labels[pid]}", "source_id": pid,
                      "simulated": "true" if simulated[pid] else "false"} for pid in simulated]
     return write_bids_dataset(out_dir, description=description, readme=readme, participants=participants,
-                              participant_columns=_PARTICIPANT_COLUMNS, runs=runs)
+                              participant_columns=_participant_columns(MODEL_LABEL), runs=runs)

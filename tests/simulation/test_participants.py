@@ -8,8 +8,8 @@ from vibrofocus.errors import StudyError, ValidationError
 from vibrofocus.rendering import render
 from vibrofocus.rigs import make_rig
 from vibrofocus.studies import StudyDesign
-from vibrofocus.studies.participants import MODEL_NOTICE, PerceptualModel, SimulatedParticipant
-from vibrofocus.studies.perception import (
+from vibrofocus.simulation.participants import MODEL_NOTICE, PerceptualModel, SimulatedParticipant
+from vibrofocus.simulation.perception import (
     MODEL_LABEL,
     Percepts,
     actuator_energy,

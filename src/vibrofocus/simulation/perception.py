@@ -1,7 +1,7 @@
 """The simulated participants' perceptual model, version 3 (a MODEL, not data).
 
 A stimulus is felt in two stages, each from published psychophysics (sources in
-``studies/data/SOURCES.md``; parameters that are assumptions or fitted are said so in
+``simulation/data/SOURCES.md``; parameters that are assumptions or fitted are said so in
 :class:`PerceptualModel` and in ``docs/simulated-participants.md``).
 
 Peripheral stage (computed ONCE per stimulus, :func:`felt_energy`)
@@ -100,8 +100,8 @@ MODEL_LABEL = f"simulated participants: model v{MODEL_VERSION}, not data"
 
 @lru_cache(maxsize=1)
 def psychophysics_data() -> dict[str, Any]:
-    """The published points the model uses (``studies/data/psychophysics.json``)."""
-    text = resources.files("vibrofocus.studies").joinpath("data/psychophysics.json").read_text(encoding="utf-8")
+    """The published points the model uses (``simulation/data/psychophysics.json``)."""
+    text = resources.files("vibrofocus.simulation").joinpath("data/psychophysics.json").read_text(encoding="utf-8")
     return json.loads(text)
 
 

@@ -12,7 +12,7 @@ from vibrofocus.cli.main import app
 from vibrofocus.layout import ArrayLayout
 from vibrofocus.studies import TRIALS_COLUMNS, StudyStore
 from vibrofocus.studies.export import SESSION_COLUMNS
-from vibrofocus.studies.simulate import participant_seeds, simulate_studies
+from vibrofocus.simulation.simulate import participant_seeds, simulate_studies
 
 pytestmark = pytest.mark.slow
 

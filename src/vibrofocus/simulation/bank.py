@@ -3,12 +3,12 @@
 Simulating a study trial by trial through the engine renders every stimulus and plays it
 on the simulated forearm. For fitting the perceptual model and for power analysis that is
 far too slow, and needless: the peripheral stage of the model
-(:func:`~vibrofocus.studies.perception.felt_energy`) depends only on the participant's
+(:func:`~vibrofocus.simulation.perception.felt_energy`) depends only on the participant's
 forearm and the stimulus (method, location). A :class:`FeatureBank` holds it for a set of
 simulated forearms (each calibrated and rendered for exactly as in ``simulate-study``);
 :func:`simulate_cell_means` then draws whole studies from it with numpy only: new
 perceptual traits per simulated participant, a forearm drawn from the bank, every trial's
-answer from :func:`~vibrofocus.studies.perception.draw_answers`.
+answer from :func:`~vibrofocus.simulation.perception.draw_answers`.
 
 The answers are those of the same model as :class:`SimulatedParticipant` (a model, not
 data); they use other random streams than the engine path, so they agree in
@@ -43,7 +43,7 @@ class FeatureBank:
     Attributes
     ----------
     energy : ndarray, shape (n_forearms, n_methods, n_locations, n_points)
-        Felt energy re the reference tap (:func:`~vibrofocus.studies.perception.felt_energy`).
+        Felt energy re the reference tap (:func:`~vibrofocus.simulation.perception.felt_energy`).
     points_xy : ndarray, shape (n_points, 2)
         Skin grid, m.
     locations_xy : ndarray, shape (n_locations, 2)
@@ -58,7 +58,7 @@ class FeatureBank:
     actuator_energy : ndarray, shape (n_forearms, n_methods, n_locations, n_actuators)
         Felt energy (re the reference tap) that each actuator's own drive makes at its own
         contact, through its coupling to the skin: what the central (funneling) stage
-        integrates (:func:`~vibrofocus.studies.perception.actuator_energy`).
+        integrates (:func:`~vibrofocus.simulation.perception.actuator_energy`).
     actuators_xy : ndarray, shape (n_actuators, 2)
         Actuator centres, m.
     """
@@ -125,7 +125,7 @@ def build_feature_bank(
     from ..calibration import calibrate
     from ..defaults import N_SAMPLES
     from ..rigs import make_rig
-    from .engine import calibration_renderer
+    from ..studies.engine import calibration_renderer
     from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
     from .simulate import participant_seeds
 
@@ -170,7 +170,7 @@ def default_bank() -> FeatureBank:
     """The feature bank shipped with vibrofocus (reference layout, seed 0)."""
     global _DEFAULT
     if _DEFAULT is None:
-        ref = resources.files("vibrofocus.studies").joinpath(DEFAULT_BANK)
+        ref = resources.files("vibrofocus.simulation").joinpath(DEFAULT_BANK)
         with resources.as_file(ref) as path:
             if not Path(path).is_file():
                 raise StudyError(

@@ -1,10 +1,10 @@
 """The simulated participants beside the source paper: statistics over many seeds.
 
 The statistics of de Vlam et al. (IEEE ToH 16(4), 2023), as kept in
-``studies/data/psychophysics.json`` (``paper_statistics``), are compared with the same
+``simulation/data/psychophysics.json`` (``paper_statistics``), are compared with the same
 statistics of many simulated 20-participant studies (the fast path:
-:func:`~vibrofocus.studies.bank.simulate_cell_means` and
-:func:`~vibrofocus.studies.power.study_statistics`). For each row of the comparison the
+:func:`~vibrofocus.simulation.bank.simulate_cell_means` and
+:func:`~vibrofocus.simulation.power.study_statistics`). For each row of the comparison the
 model's median and 90 % interval over the seeds are given, and the share of seeds in
 which the row's direction and significance are reproduced. Used by
 ``scripts/fit_participants.py`` (fit, ``docs/simulated-participants.md`` and README
@@ -184,12 +184,12 @@ def seed_statistics(
     seeds : iterable of int
     n_participants : int
     bank : FeatureBank, optional
-        Default :func:`~vibrofocus.studies.bank.default_bank`.
+        Default :func:`~vibrofocus.simulation.bank.default_bank`.
 
     Returns
     -------
     list of dict
-        :func:`~vibrofocus.studies.power.study_statistics` of each study.
+        :func:`~vibrofocus.simulation.power.study_statistics` of each study.
     """
     b = bank if bank is not None else default_bank()
     m = model or PerceptualModel()

@@ -3,7 +3,7 @@
 This is a **model, not data** (:data:`MODEL_NOTICE`). It lets a whole study run end to end
 without people; nothing it produces is evidence about how people perceive the stimuli.
 The model itself — its stages, their sources and which parameters are fitted to the
-source paper's statistics — is :mod:`vibrofocus.studies.perception`; this module plugs it
+source paper's statistics — is :mod:`vibrofocus.simulation.perception`; this module plugs it
 into the study engine as a responder.
 
 Per stimulus (drive signals on the participant's simulated forearm) the peripheral
@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import StudyError
-from .engine import Presentation, Response, drive_sha256
+from ..studies.engine import Presentation, Response, drive_sha256
 from .perception import (
     MODEL_LABEL,
     MODEL_VERSION,
@@ -35,7 +35,7 @@ from .perception import (
     skin_grid,
     study2_rt,
 )
-from .protocol import StudyDesign
+from ..studies.protocol import StudyDesign
 
 __all__ = ["PerceptualModel", "Percepts", "SimulatedParticipant", "MODEL_NOTICE", "MODEL_VERSION", "MODEL_LABEL"]
 

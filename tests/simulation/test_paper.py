@@ -2,7 +2,7 @@
 
 Each finding is checked in simulated 20-participant studies on seeds that neither the fit
 (1000-1015) nor the documented table (0-19) used; the criteria are written out here,
-independently of ``vibrofocus.studies.paper``. The issue's aim is every finding in at
+independently of ``vibrofocus.simulation.paper``. The issue's aim is every finding in at
 least 2/3 of the seeds; the findings the model does not reach are listed in
 docs/simulated-participants.md ("What the model does not reproduce"), and a test checks
 that the list is still true.
@@ -18,10 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from vibrofocus.studies.bank import default_bank, simulate_cell_means
-from vibrofocus.studies.paper import compare, comparison_markdown, seed_statistics
-from vibrofocus.studies.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel
-from vibrofocus.studies.power import study_statistics
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.paper import compare, comparison_markdown, seed_statistics
+from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel
+from vibrofocus.simulation.power import study_statistics
 
 ROOT = Path(__file__).resolve().parents[2]
 SEEDS = range(300, 340)  # 40 studies: a few seconds
@@ -126,7 +126,7 @@ def test_fitted_statistics_are_near_the_papers(stats):
 
 
 def test_comparison_rows_match_the_criteria(stats):
-    # The documented table's shares come from vibrofocus.studies.paper; they agree with the
+    # The documented table's shares come from vibrofocus.simulation.paper; they agree with the
     # criteria written out above on the same studies.
     rows = {r["label"]: r for r in compare(stats)}
     criteria = {row: criterion for row, criterion, *_ in REPRODUCED + NOT_REPRODUCED}

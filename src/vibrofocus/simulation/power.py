@@ -3,7 +3,7 @@
 For a design (participants N, repetitions, methods, locations) and the perceptual model
 (its effect sizes are those of the perceptual model as fitted, see
 ``docs/simulated-participants.md``), many studies are simulated per N with the fast path
-(:func:`~vibrofocus.studies.bank.simulate_cell_means`) and analysed with the vectorized
+(:func:`~vibrofocus.simulation.bank.simulate_cell_means`) and analysed with the vectorized
 statistics (:mod:`vibrofocus.analysis.fast`); the power of each test of docs/method.md (Analysis) is the
 share of studies in which it is significant. Simulated participants: a model, not data.
 

@@ -18,7 +18,7 @@ import numpy as np
 from ..errors import CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
-from .storage import StudyStore
+from ..studies.storage import StudyStore
 
 __all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
 
@@ -114,7 +114,7 @@ def simulate_studies(
     """
     from ..rigs import make_rig
     from ..skin import skin_preset
-    from .engine import StudyEngine, calibration_renderer
+    from ..studies.engine import StudyEngine, calibration_renderer
     from .participants import SimulatedParticipant
 
     skin = skin_preset(skin).name

@@ -8,8 +8,8 @@ from scipy import stats
 
 from vibrofocus.analysis.fast import rm_anova2_batch
 from vibrofocus.errors import ValidationError
-from vibrofocus.studies.bank import default_bank, simulate_cell_means
-from vibrofocus.studies.power import TESTS, PowerDesign, power_table, run_power, study_statistics
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.power import TESTS, PowerDesign, power_table, run_power, study_statistics
 
 
 @pytest.mark.parametrize(("n", "effect"), [(10, 0.6), (20, 0.5)])

@@ -1,0 +1,51 @@
+"""Simulated participants: a perceptual MODEL that answers in place of a person (not data).
+
+The model's two stages and their sources are in :mod:`.perception`
+(docs/simulated-participants.md); :mod:`.participants` plugs it into the study engine of
+:mod:`vibrofocus.studies` as a responder. The simulated forearm it feels with is
+:mod:`vibrofocus.skin`.
+
+Public API
+----------
+Participants (:mod:`.participants`, :mod:`.perception`)
+    :class:`SimulatedParticipant`, :class:`PerceptualModel`, :class:`Percepts`,
+    :data:`MODEL_VERSION`, :data:`MODEL_LABEL` (what every record of simulated data
+    carries), :data:`MODEL_NOTICE`, :data:`STUDY_SKIN` (the arm the model is fitted on).
+Whole studies (:mod:`.simulate`)
+    :func:`simulate_studies`, :func:`participant_seeds`, :func:`summarize_simulation`.
+Fast studies and power (:mod:`.bank`, :mod:`.power`, :mod:`.paper`)
+    :class:`FeatureBank`, :func:`build_feature_bank`, :func:`default_bank`,
+    :func:`simulate_cell_means`; :class:`PowerDesign`, :func:`run_power`,
+    :func:`power_table`, :func:`study_statistics`; :func:`seed_statistics`,
+    :func:`compare` (the model beside the paper).
+"""
+
+from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
+from .paper import compare, seed_statistics
+from .participants import MODEL_NOTICE, SimulatedParticipant
+from .perception import MODEL_LABEL, MODEL_VERSION, STUDY_SKIN, Percepts, PerceptualModel
+from .power import PowerDesign, power_table, run_power, study_statistics
+from .simulate import participant_seeds, simulate_studies, summarize_simulation
+
+__all__ = [
+    "SimulatedParticipant",
+    "PerceptualModel",
+    "Percepts",
+    "MODEL_VERSION",
+    "MODEL_LABEL",
+    "MODEL_NOTICE",
+    "STUDY_SKIN",
+    "simulate_studies",
+    "participant_seeds",
+    "summarize_simulation",
+    "FeatureBank",
+    "build_feature_bank",
+    "default_bank",
+    "simulate_cell_means",
+    "PowerDesign",
+    "run_power",
+    "power_table",
+    "study_statistics",
+    "seed_statistics",
+    "compare",
+]
