@@ -33,7 +33,7 @@ FLOORS = (
     ("skin",),                                                # the simulated arm's physics
     ("rigs",),                                                # hardware, and the simulated rig over the physics
     ("calibration",),                                         # measures on a rig, fits the skin, designs
-    ("studies",),                                             # sessions, storage, export
+    ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine
     ("demo", "web"),                                          # the two applications
     ("cli",),                                                 # the command line

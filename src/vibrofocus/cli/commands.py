@@ -17,8 +17,8 @@ from ._command import marked_commands
 __all__ = ["COMMAND_MODULES", "register"]
 
 #: Command modules of this package, in ``--help`` order.
-COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "analyze", "study", "simulate_study", "export", "power",
-                   "play", "devices")
+COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "serve_osc", "analyze", "study", "simulate_study", "export",
+                   "power", "play", "devices")
 
 
 def register(app: typer.Typer) -> None:

@@ -1,0 +1,90 @@
+"""``vibrofocus serve-osc``: taps asked live by other programs over Open Sound Control."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._command import command
+from ._errors import err_console, user_errors
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options
+
+_LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+
+
+@command("serve-osc", epilog="Example: vibrofocus serve-osc --port 9000, then from a client: /tap 5, "
+                             "/tap_xy 3.5 -4 (mm), /method contrast, /stop")
+def serve_osc(
+    port: int = typer.Option(9000, "--port", "-p", min=0, max=65535, help="UDP port to listen on (0: any free one)."),
+    host: str = typer.Option("127.0.0.1", "--host", help="Address to bind. Keep 127.0.0.1 unless you know why not."),
+    rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
+    rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
+    calibration: Path | None = typer.Option(None, "--calibration", "-c",
+                                            help="Calibration file (.nc) the taps are designed from (required for "
+                                                 "audio/nidaq; default on the simulated rig: the arm's own transfer)."),
+    skin: str = typer.Option("nominal", "--skin", help="Skin preset of the simulated forearm: nominal | low | high | "
+                                                       "voigt-fit."),
+    method: str = typer.Option("inverse", "--method", "-m", help="Rendering method at start (/method changes it)."),
+    seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
+                                    help="Participant seed of the simulated forearm."),
+) -> None:
+    """Play taps that other programs (Unity, Max/MSP, Pure Data, Python) ask for over OSC/UDP.
+
+    Addresses: /tap <location>, /tap_xy <x_mm> <y_mm>, /method <name>, /stop. A played tap
+    is answered /played; every problem is answered /error <reason> to the sender and plays
+    nothing. /stop, Ctrl-C (SIGINT) or SIGTERM set every output to zero and end the server.
+    Needs pip install 'vibrofocus\\[osc]'.
+    """
+    with user_errors(interrupt_message="serve-osc stopped; all outputs at zero"):
+        from ..errors import ValidationError
+
+        try:
+            import pythonosc  # noqa: F401 - the optional extra, checked before anything starts
+        except ImportError:
+            raise ValidationError("serve-osc needs python-osc: pip install 'vibrofocus[osc]'") from None
+        from ..realtime import OscTapServer, TapDesigner
+        from ..rendering import TransferMatrix
+        from ..rigs import make_rig
+        from ..skin import skin_preset
+
+        check_rig_options(rig, rig_config)
+        if calibration is None and rig != "simulated":
+            raise ValidationError(f"the {rig} rig needs --calibration (a calibration measured on it)")
+        skin_name = skin_preset(skin).name
+        with make_rig(rig, config=rig_config, seed=seed, skin=skin_name if rig == "simulated" else None) as the_rig:
+            if calibration is not None:
+                from .._atomic import protect
+                from ..calibration import load_calibration
+
+                protect(calibration, "calibration")
+                cal = load_calibration(calibration)
+                if abs(cal.fs - the_rig.fs) > 1e-9 * the_rig.fs:
+                    raise ValidationError(f"--calibration {calibration} is at {cal.fs:g} Hz but the {rig} rig runs "
+                                          f"at {the_rig.fs:g} Hz")
+                if cal.layout.n_actuators != the_rig.layout.n_actuators:
+                    raise ValidationError(f"--calibration {calibration} has {cal.layout.n_actuators} actuators, the "
+                                          f"{rig} rig {the_rig.layout.n_actuators}")
+                tm, model = TransferMatrix.from_calibration(cal), cal.fit
+                source = f"calibration {calibration}"
+            else:
+                tm, model = TransferMatrix.from_model(the_rig, the_rig.layout, the_rig.fs), the_rig
+                source = f"the simulated arm's own transfer (skin {skin_name})"
+            designer = TapDesigner(tm, model, method=method, limit_v=the_rig.limits.peak_v)
+            if model is not None:
+                designer.prepare_grid()
+            if host not in _LOCAL_HOSTS:
+                err_console.print(f"[bold red]WARNING:[/] binding to {host}: anyone who can reach it can play taps.")
+            server = OscTapServer(the_rig, designer, host=host, port=port)
+            shown_host, shown_port = server.address
+            typer.echo(f"serve-osc: listening on osc.udp://{shown_host}:{shown_port} ({rig} rig, designs from "
+                       f"{source}, method {designer.method}, drive limit {designer.limit_v:g} V)")
+            typer.echo(f"taps: /tap 1..{designer.layout.n_locations}"
+                       + (f", /tap_xy in {designer.area.describe()}" if model is not None else
+                          " (no /tap_xy: the calibration has no fitted skin model)")
+                       + "; /method <name>; /stop", )
+            try:
+                who = server.serve()
+            finally:
+                server.close()
+        typer.echo(f"serve-osc stopped by {who}; all outputs at zero")
