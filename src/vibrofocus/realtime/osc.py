@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import VibrofocusError
+from ..errors import ValidationError, VibrofocusError
 from .designer import TapDesigner
 
 __all__ = ["OscTapServer", "TapRecord", "ADDRESSES"]
@@ -111,9 +111,10 @@ class OscTapServer:
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
         try:
             self._sock.bind((host, port))
-        except OSError:
+        except OSError as exc:
             self._sock.close()
-            raise
+            raise ValidationError(f"cannot listen on UDP {host}:{port}: {exc.strerror or exc} (another program may "
+                                  "use the port: give another --port)") from None
         self._sock.settimeout(0.1)
 
     @property

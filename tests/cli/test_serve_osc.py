@@ -1,0 +1,91 @@
+"""``vibrofocus serve-osc`` as a process: it plays a tap from a python-osc client, and ``/stop``,
+SIGINT or SIGTERM end it with one line and every output at zero."""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+
+import pytest
+
+pytest.importorskip("pythonosc")
+from pythonosc.osc_message import OscMessage  # noqa: E402
+from pythonosc.udp_client import SimpleUDPClient  # noqa: E402
+
+pytestmark = pytest.mark.slow
+
+
+def _start(tmp_path):
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", MPLBACKEND="Agg")
+    proc = subprocess.Popen([sys.executable, "-m", "vibrofocus", "serve-osc", "--port", "0"], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    line = proc.stdout.readline()
+    found = re.search(r"osc\.udp://127\.0\.0\.1:(\d+)", line)
+    if found is None:
+        proc.kill()
+        raise AssertionError(f"no listening line: {line!r} {proc.stderr.read()!r}")
+    proc.stdout.readline()  # the addresses
+    return proc, SimpleUDPClient("127.0.0.1", int(found.group(1)))
+
+
+def _ask(client, address, args):
+    client.send_message(address, args)
+    data = client.receive(60)
+    assert data, f"no reply to {address}"
+    return OscMessage(data)
+
+
+def test_stop_message_ends_it_with_one_line(tmp_path):
+    proc, client = _start(tmp_path)
+    try:
+        assert _ask(client, "/tap", 5).address == "/played"
+        assert _ask(client, "/tap_xy", ["x", 1]).address == "/error"
+        assert _ask(client, "/tap_xy", [-2.0, 7.5]).address == "/played"
+        assert _ask(client, "/stop", []).address == "/stopped"
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err
+    assert out.strip().splitlines() == [re.search(r"serve-osc stopped by /stop from 127\.0\.0\.1:\d+; all outputs at "
+                                                  r"zero", out).group(0)]
+    assert err == ""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_signal_ends_it_with_one_line(tmp_path, sig):
+    proc, client = _start(tmp_path)
+    try:
+        assert _ask(client, "/tap", 1).address == "/played"
+        proc.send_signal(sig)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130
+    assert out == ""
+    assert err.strip().splitlines() == ["interrupted: serve-osc stopped; all outputs at zero"]
+
+
+@pytest.mark.parametrize("args, needle", [
+    (["--method", "nope"], "unknown method 'nope'"),
+    (["--rig", "audio"], "the audio rig needs --calibration"),
+    (["--skin", "rubber"], "skin"),
+    (["--port", "BUSY"], "cannot listen on UDP 127.0.0.1"),
+])
+def test_bad_options_are_one_error_line(tmp_path, args, needle):
+    import socket
+
+    busy = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    busy.bind(("127.0.0.1", 0))
+    try:
+        args = [str(busy.getsockname()[1]) if a == "BUSY" else a for a in args]
+        done = subprocess.run([sys.executable, "-m", "vibrofocus", "serve-osc", *args], cwd=tmp_path,
+                              capture_output=True, text=True, timeout=300,
+                              env=dict(os.environ, PYTHONDONTWRITEBYTECODE="1"))
+    finally:
+        busy.close()
+    assert done.returncode == 2, done.stderr
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], lines
