@@ -206,7 +206,9 @@ class TapDesigner:
         layout = ArrayLayout(self.layout.actuators_xy, xy[None, :], self.layout.guards_xy,
                              spacing_xy=self.layout.spacing_xy, actuator_names=self.layout.actuator_names,
                              guard_names=self.layout.guard_names, name="tap")
-        tm = TransferMatrix(H, self.tm.fs, layout, n_samples=self.tm.n_samples, band=self.tm.band)
+        # Values from the grid, checked finite when it was made: no second pass over them.
+        H.flags.writeable = False
+        tm = TransferMatrix._trusted(H, self.tm.fs, layout, self.tm.n_samples, self.tm.band)
         return self._fast.design(tm, 1).drives
 
     def transfer_row(self, xy_m: np.ndarray) -> np.ndarray:
@@ -229,17 +231,20 @@ class TapDesigner:
         ax, ay = fx - i, fy - j
         corners = (grid[j, i], grid[j, i + 1], grid[j + 1, i], grid[j + 1, i + 1])
         weights = ((1 - ax) * (1 - ay), ax * (1 - ay), (1 - ax) * ay, ax * ay)
-        # Outside the design's band the taper zeroes the design: a plain bilinear mix.
-        row = sum(w * c for w, c in zip(weights, corners))
+        # Outside the design's band its taper zeroes the design: the nearest corner's values.
+        row = corners[int(np.argmax(weights))].copy()
         # Inside it, amplitude and phase are interpolated (the log of each corner's ratio
         # to the first): a wave's phase turns across the cell, which a plain mix of complex
         # values would average away.
         active = self._active
         base = corners[0][active]
         with np.errstate(divide="ignore", invalid="ignore"):
-            log_ratio = sum(w * np.log(c[active] / base) for w, c in zip(weights[1:], corners[1:]))
+            log_ratio = weights[1] * np.log(corners[1][active] / base)
+            log_ratio += weights[2] * np.log(corners[2][active] / base)
+            log_ratio += weights[3] * np.log(corners[3][active] / base)
             polar = base * np.exp(log_ratio)
-        row[active] = np.where(np.isfinite(polar), polar, row[active])
+        mixed = sum(w * c[active] for w, c in zip(weights, corners))
+        row[active] = np.where(np.isfinite(polar), polar, mixed)
         return row
 
     def prepare_grid(self) -> np.ndarray:
@@ -261,5 +266,7 @@ class TapDesigner:
             X, Y = np.meshgrid(self._grid_x, self._grid_y)
             points = np.column_stack([X.ravel(), Y.ravel()])
             H = np.asarray(self._model.transfer(points, self.tm.freqs))  # (n_freqs, n_points, n_actuators)
+            if not np.isfinite(H).all():
+                raise ValidationError("the skin model's transfer on the grid is not finite")
             self._grid_H = np.ascontiguousarray(np.moveaxis(H, 1, 0).reshape(ny, nx, *H[:, 0].shape))
         return self._grid_H
