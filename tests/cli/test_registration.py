@@ -12,8 +12,8 @@ import pytest
 
 from vibrofocus.cli.commands import COMMAND_MODULES
 
-ORDER = ["demo", "calibrate", "render", "serve", "serve-osc", "analyze", "simulate-study", "export", "power", "play", "devices",
-         "straps", "study"]
+ORDER = ["demo", "calibrate", "render", "serve", "serve-osc", "analyze", "simulate-study", "export", "power", "play",
+         "latency", "devices", "straps", "study"]
 
 PROBE = """
 import json, sys

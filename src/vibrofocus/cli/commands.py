@@ -18,7 +18,7 @@ __all__ = ["COMMAND_MODULES", "register"]
 
 #: Command modules of this package, in ``--help`` order.
 COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "serve_osc", "analyze", "study", "simulate_study", "export",
-                   "power", "play", "devices")
+                   "power", "play", "latency", "devices")
 
 
 def register(app: typer.Typer) -> None:

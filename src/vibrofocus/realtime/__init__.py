@@ -6,6 +6,8 @@ server handles its first datagram.
 """
 
 from .designer import GRID_PITCH_M, CalibratedArea, TapDesigner
+from .latency import LatencyReport, click_drive, latency_figure, measure_latency, onset_s
 from .osc import ADDRESSES, OscTapServer, TapRecord
 
-__all__ = ["TapDesigner", "CalibratedArea", "GRID_PITCH_M", "OscTapServer", "TapRecord", "ADDRESSES"]
+__all__ = ["TapDesigner", "CalibratedArea", "GRID_PITCH_M", "OscTapServer", "TapRecord", "ADDRESSES",
+           "LatencyReport", "click_drive", "onset_s", "measure_latency", "latency_figure"]

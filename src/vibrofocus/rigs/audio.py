@@ -463,6 +463,19 @@ class AudioRig(HardwareRig):
         volts = self._from_device(vib, n_total)
         return self.vibrometer.to_displacement(volts, self.fs)[None, :]
 
+    def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
+        # One duplex stream that records only the loopback input, unaligned: where the
+        # drive appears in it is the round trip of this stream.
+        block = self._padded(self._to_device(drive, n_tail=0))
+        kept = self._in_channels
+        self._in_channels = [input_channel]
+        try:
+            recorded, status = self._run_stream(block, record=True, what=f"recording input {input_channel}")
+        finally:
+            self._in_channels = kept
+        self._check_status(status, f"recording input {input_channel}")
+        return np.asarray(recorded[:, 0], dtype=float), self.device_fs
+
     def _zero_outputs(self) -> None:
         # Emergency stop from any thread: abort the running stream (pending buffers are
         # dropped); the callback also writes silence from the moment it sees the flag.

@@ -214,6 +214,39 @@ class Rig(ABC):
             out = self._run_guarded(self._play_and_record, safe, points_xy, n_tail)
         return np.asarray(out, dtype=float)
 
+    def play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
+        """Play a drive and record one input of the interface as it comes, unaligned (a loopback).
+
+        What ``vibrofocus latency`` measures with: the recording starts with the stream,
+        so where a click appears in it is the interface's round trip.
+
+        Parameters
+        ----------
+        drive : ndarray, shape (n_actuators, n_samples)
+            Voltages at the actuators, V (through the safety layer, as for :meth:`play`).
+        input_channel : int
+            1-based input channel the loopback cable comes back on.
+
+        Returns
+        -------
+        recording : ndarray, shape (n,)
+            The input, in the interface's units (full scale 1 for an audio interface).
+        fs : float
+            Its sample rate, Hz (the device's own).
+
+        Raises
+        ------
+        DeviceError
+            On a rig that cannot record an input as it comes.
+        """
+        if isinstance(input_channel, bool) or not isinstance(input_channel, (int, np.integer)) or input_channel < 1:
+            raise ValidationError(f"input_channel must be a channel number >= 1, got {input_channel!r}")
+        safe = self.check(drive)
+        with self._exclusive("a loopback recording"):
+            self.budget.admit(safe, self._clock())
+            recording, fs = self._run_guarded(self._play_and_capture, safe, int(input_channel))
+        return np.asarray(recording, dtype=float), float(fs)
+
     def stop(self) -> None:
         """Emergency stop: every output to zero now, from any thread.
 
@@ -268,6 +301,11 @@ class Rig(ABC):
     @abstractmethod
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         """Play a checked drive and return displacement, shape (n_points, n_samples + n_tail), m."""
+
+    def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
+        """Play a checked drive, return ``(recording of input_channel, its rate)``; not every rig can."""
+        raise DeviceError(f"the {self.kind} rig cannot record a loopback input as it comes (vibrofocus latency "
+                          "supports the simulated and audio rigs)")
 
     @abstractmethod
     def _zero_outputs(self) -> None:

@@ -150,6 +150,16 @@ class SimulatedForearm(SimulatedArm, Rig):
         self._play(drive)
         return self._measure(self.respond(drive, points_xy, n_tail))
 
+    def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
+        # A loopback cable on an ideal sample clock: the strongest output comes back on
+        # input 1 after the arm's modelled latency (latency_s), rounded to a sample.
+        if input_channel != 1:
+            raise ValidationError(f"the simulated rig has one loopback input, channel 1; got {input_channel}")
+        self._play(drive)
+        strongest = drive[int(np.argmax(np.abs(drive).max(axis=1)))]
+        lag = int(round(self.latency_s * self.fs))
+        return np.concatenate([np.zeros(lag), strongest, np.zeros(int(0.05 * self.fs))]), self.fs
+
     def _measure(self, clean: np.ndarray) -> np.ndarray:
         """Add vibrometer noise and dropouts to a clean recording."""
         out = clean.copy()
