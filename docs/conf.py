@@ -88,6 +88,7 @@ API_PACKAGES = {
     "vibrofocus.rigs": "Rigs",
     "vibrofocus.studies": "Studies",
     "vibrofocus.simulation": "Simulated participants",
+    "vibrofocus.realtime": "Real time (OSC taps, latency)",
     "vibrofocus.analysis": "Analysis",
     "vibrofocus.demo": "Demo",
     "vibrofocus.errors": "Errors",
