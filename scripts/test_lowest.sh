@@ -13,7 +13,7 @@ python3 -m venv "$work/venv"
 # Built from a copy: setuptools writes its build/ folder beside the sources.
 mkdir "$work/pkg"
 cp -r "$root/src" "$root/pyproject.toml" "$root/README.md" "$root/LICENSE" "$work/pkg/"
-"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$work/pkg[lsl,sofa]"
+"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$work/pkg[lsl,sofa,osc]"
 "$work/venv/bin/uv" pip list -q --python "$work/venv/bin/python" --format freeze > "$work/versions.txt" 2>/dev/null || true
 
 export PYTHONDONTWRITEBYTECODE=1 MPLBACKEND=Agg
@@ -21,8 +21,11 @@ cd "$work"  # nothing is written into the checkout
 vf="$work/venv/bin/vibrofocus"
 "$work/venv/bin/python" -c "import vibrofocus; print('vibrofocus', vibrofocus.__version__)"
 "$vf" --help > /dev/null
-# The optional extras at their minimums: pylsl loads its bundled liblsl, sofar knows GeneralTF-E.
-"$work/venv/bin/python" -c "import pylsl, sofar; pylsl.local_clock(); sofar.Sofa('GeneralTF-E')"
+# The optional extras at their minimums: pylsl loads its bundled liblsl, sofar knows GeneralTF-E,
+# python-osc's client reads replies (serve-osc's tests use it).
+"$work/venv/bin/python" -c "import pylsl, sofar; pylsl.local_clock(); sofar.Sofa('GeneralTF-E'); from pythonosc.udp_client import SimpleUDPClient; SimpleUDPClient.receive"
+"$vf" serve-osc --help > /dev/null
+"$vf" latency --count 3 --spacing 0 --json > "$work/latency.json"
 "$vf" serve --help > /dev/null
 "$work/venv/bin/python" -c "
 import sys
@@ -38,5 +41,5 @@ make_trials(8, seed=3).to_csv(sys.argv[1], index=False)" "$work/trials.csv"
 "$vf" analyze "$work/trials.csv" --out "$work/report" > /dev/null
 test -s "$work/report/report.json"
 echo "lowest-versions smoke test passed with:"
-grep -iE '^(click|numpy|scipy|xarray|h5netcdf|h5py|pandas|pingouin|matplotlib|fastapi|jinja2|uvicorn|typer|rich|pydantic|sounddevice|nidaqmx|dask|distributed|threadpoolctl|pylsl|sofar)==' "$work/versions.txt" | tr '\n' ' '
+grep -iE '^(click|numpy|scipy|xarray|h5netcdf|h5py|pandas|pingouin|matplotlib|fastapi|jinja2|uvicorn|typer|rich|pydantic|sounddevice|nidaqmx|dask|distributed|threadpoolctl|pylsl|sofar|python-osc)==' "$work/versions.txt" | tr '\n' ' '
 echo
