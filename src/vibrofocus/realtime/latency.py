@@ -48,6 +48,8 @@ class LatencyReport:
         The input channel recorded.
     spacing_s : float
         Time between clicks, s.
+    details : dict
+        Other settings of the run, JSON-ready (the output channel, the click's peak in V).
     """
 
     rig: str
