@@ -18,9 +18,9 @@ from pythonosc.udp_client import SimpleUDPClient  # noqa: E402
 pytestmark = pytest.mark.slow
 
 
-def _start(tmp_path):
+def _start(tmp_path, *extra):
     env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", MPLBACKEND="Agg")
-    proc = subprocess.Popen([sys.executable, "-m", "vibrofocus", "serve-osc", "--port", "0"], cwd=tmp_path,
+    proc = subprocess.Popen([sys.executable, "-m", "vibrofocus", "serve-osc", "--port", "0", *extra], cwd=tmp_path,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
     line = proc.stdout.readline()
     found = re.search(r"osc\.udp://127\.0\.0\.1:(\d+)", line)
@@ -52,6 +52,25 @@ def test_stop_message_ends_it_with_one_line(tmp_path):
     assert out.strip().splitlines() == [re.search(r"serve-osc stopped by /stop from 127\.0\.0\.1:\d+; all outputs at "
                                                   r"zero", out).group(0)]
     assert err == ""
+
+
+def test_taps_from_a_calibration_without_a_skin_model(tmp_path):
+    from vibrofocus.calibration import calibrate, save_calibration
+    from vibrofocus.rigs import make_rig
+
+    cal = tmp_path / "P01.nc"
+    save_calibration(calibrate(make_rig("simulated", seed=5), participant_id="P01"), cal)
+    proc, client = _start(tmp_path, "--calibration", str(cal), "--method", "funneling")
+    try:
+        assert _ask(client, "/tap", 4).params == [4]
+        reply = _ask(client, "/tap_xy", [1.0, 1.0])
+        assert reply.address == "/error" and "need a model of the skin" in reply.params[0]
+        assert _ask(client, "/tap", 6).address == "/played"
+        assert _ask(client, "/stop", []).address == "/stopped"
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0 and err == ""
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
