@@ -163,3 +163,41 @@ def test_designer_interpolates_the_model_between_grid_points(rig_and_designer):
     drives = designer.drives_xy(np.array([2e-3, -3e-3]))
     assert drives.shape == (rig.layout.n_actuators, tm.n_samples)
     assert 0 < np.abs(drives).max() <= rig.limits.peak_v + 1e-12
+
+
+def test_a_design_that_fails_unexpectedly_is_an_error_and_the_next_tap_plays(running, monkeypatch):
+    server, client, rig, thread, _ = running
+    before = rig.n_played
+
+    def broken(xy):
+        raise ZeroDivisionError("a bug in a design")
+
+    monkeypatch.setattr(server.designer, "drives_xy", broken)
+    reply = _ask(client, "/tap_xy", [1.0, 2.0])
+    assert reply.address == "/error" and "ZeroDivisionError" in reply.params[0]
+    assert rig.n_played == before and thread.is_alive()
+    assert _ask(client, "/tap", 3).address == "/played"
+    assert rig.n_played == before + 1
+
+
+def test_the_rigs_safety_layer_refuses_what_is_over_its_limit(rig_and_designer):
+    from vibrofocus.rigs import SafetyLimits
+    from vibrofocus.rigs.simulated import SimulatedForearm
+
+    _, designer = rig_and_designer
+    designer.set_method("inverse")  # designs at 10 V peak
+    strict = SimulatedForearm(seed=3, limits=SafetyLimits(peak_v=2.0))
+    server = OscTapServer(strict, designer, port=0)
+    thread = threading.Thread(target=server.serve, daemon=True)
+    thread.start()
+    client = SimpleUDPClient(*server.address)
+    try:
+        for address, args in (("/tap", 5), ("/tap_xy", [0.0, 0.0])):
+            reply = _ask(client, address, args)
+            assert reply.address == "/error" and "peak" in reply.params[0], reply.params
+        assert strict.n_played == 0 and np.all(strict.outputs_v == 0)
+        assert _ask(client, "/stop", []).address == "/stopped"
+    finally:
+        server.stop()
+        thread.join(10)
+        server.close()

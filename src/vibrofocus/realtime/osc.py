@@ -190,7 +190,8 @@ class OscTapServer:
             except VibrofocusError as exc:  # a refused design or drive: the safety layer's word
                 self._reply(sender, "/error", f"{message.address}: {exc}")
             except Exception as exc:  # noqa: BLE001 - the server keeps serving whatever one message does
-                self.rig.stop()
+                # A play that failed has set the outputs to zero itself (Rig.play); stopping the
+                # rig here would end the server's hold on it and refuse every later tap.
                 self._reply(sender, "/error", f"{message.address}: unexpected {type(exc).__name__}: {exc}")
             if self._stop:
                 return
