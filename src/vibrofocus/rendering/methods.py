@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_array, check_choice, check_positive
+from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import FUNNELING_AMPLITUDE_V
 from ..errors import ValidationError
 from ._acc import DEFAULT_ACC_REG
@@ -20,12 +20,14 @@ from .combination import combination_target
 from .contrast import constrained_drives, contrast_drives
 from .exact_target import exact_target_spectra
 from .funneling import funneling_gains
+from .inverse import predict_response
 from .method import Method, Problem, Solution
+from .minimax import minimax_filter
 from .taper import design_grid
 from .time_reversal import time_reversal_drives
 
 __all__ = ["Method", "Problem", "Solution", "Funneling", "Inverse", "Combination", "TimeReversal", "Contrast",
-           "Constrained", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
+           "Constrained", "Minimax", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
 
 #: Default weight of the quiet control points against the target (see :class:`Inverse`).
 DEFAULT_GUARD_WEIGHT = 1.0
@@ -292,3 +294,56 @@ class Constrained(Contrast):
     def energy_drives(self, p: Problem, **options: Any) -> np.ndarray:
         return constrained_drives(p.tm, p.target_index, p.fs, contrast_weight=self.contrast_weight,
                                   min_contrast_db=self.min_contrast_db, **options)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Minimax(Method):
+    """Peak-contrast (minimax) design (:func:`~vibrofocus.rendering.minimax_filter`): the
+    least largest ``|displacement|`` at the quiet points at a given target fidelity.
+
+    Needs the optional extra ``vibrofocus[minimax]`` (cvxpy, Clarabel).
+
+    Parameters
+    ----------
+    control : {"all", "guards", "locations"}, optional
+        Points kept quiet (default ``"all"``: every other calibrated point).
+    min_fidelity : float, optional
+        Least target fidelity, in (0, 1); default the pseudo-inverse's own (predicted
+        through the same ``H``, at most 0.999): equal fidelity, the peak contrast decides.
+    support_s : (float, float)
+        Drive support before and after the tap, s.
+    **common
+        The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
+        design's contrast and fidelity do not depend on its level).
+    """
+
+    control: str | None = None
+    min_fidelity: float | None = None
+    support_s: tuple[float, float] = (0.01, 0.005)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._set("control", _check_control(self, "all", field_allowed=False))
+        if self.min_fidelity is not None:
+            self._set("min_fidelity", check_in_range(self.min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False))
+        support = tuple(check_positive(s, "support_s") for s in self.support_s)
+        if len(support) != 2:
+            raise ValidationError(f"support_s must be (before, after) in s, got {self.support_s!r}")
+        self._set("support_s", support)
+
+    def pinv_fidelity(self, p: Problem) -> float:
+        """Fidelity of the paper's pseudo-inverse (all points controlled) through ``p.tm``."""
+        control = np.arange(p.tm.n_points)
+        op = p.tm.inverse_operator(control, band=p.band, taper_octaves=self.taper_octaves)
+        drives = op.drives_for_point(p.target_index, self.target_peak_m * p.stimulus)
+        y = predict_response(p.tm.H, drives)[p.target_index]
+        return float(np.dot(y, p.reference) / (np.linalg.norm(y) * np.linalg.norm(p.reference)))
+
+    def solve(self, p: Problem) -> Solution:
+        control = p.control(self.control)
+        fidelity = self.min_fidelity if self.min_fidelity is not None else min(self.pinv_fidelity(p), 0.999)
+        targets = np.zeros((p.tm.n_points, p.n))
+        targets[p.target_index] = self.target_peak_m * p.stimulus
+        drives = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity, quiet=control[1:],
+                                taper_octaves=self.taper_octaves, support_s=self.support_s)
+        return Solution(drives, control_indices=control)

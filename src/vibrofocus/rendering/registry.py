@@ -19,7 +19,7 @@ from ..defaults import METHODS
 from ..errors import ValidationError
 from ._checks import check_regularization
 from .method import Method
-from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, TimeReversal
+from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
 
 __all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "make_method"]
 
@@ -36,7 +36,7 @@ LEGACY_OPTIONS = frozenset({
     "limit_v", "on_limit", "sigma", "target_peak_m", "regularization", "reg_param", "band", "t0", "control",
     "funneling_law", "funneling_amplitude_v", "taper_octaves", "form", "check_wraparound", "wraparound_tol",
     "guard_weight", "scale_to_limit", "exact_target", "contrast_weight", "min_contrast_db", "acc_reg", "field",
-    "field_xy", "field_exclusion_m", "bounds",
+    "field_xy", "field_exclusion_m", "bounds", "min_fidelity", "support_s",
 })
 
 
@@ -166,3 +166,4 @@ def _check_ignored(ignored: dict[str, Any]) -> None:
 
 for _name, _cls in zip(METHODS, (Funneling, Inverse, Combination, TimeReversal, Contrast, Constrained)):
     register_method(_name, _cls)
+register_method("minimax", Minimax)
