@@ -146,3 +146,26 @@ def test_refuses_bad_input():
     two[1] = targets[0]
     with pytest.raises(ValidationError, match="one non-zero row"):
         minimax_filter(H, two, FS, band=BAND)
+
+
+@pytest.mark.slow
+def test_registered_method_beats_the_pseudo_inverse_at_equal_drive():
+    from vibrofocus import ArrayLayout, TransferMatrix, render
+    from vibrofocus.rendering import available_methods
+    from vibrofocus.rendering.registry import default_methods
+
+    from ._media import FS as MFS
+    from ._media import layout_medium
+
+    assert "minimax" in available_methods() and "minimax" not in default_methods()
+    ref = ArrayLayout.reference()
+    tm = TransferMatrix(layout_medium(ref, 2048, MFS), MFS, ref)
+    inv = render("inverse", tm, MFS, ref, 5)
+    mm = render("minimax", tm, MFS, ref, 5)
+    assert mm.method == "minimax"
+    assert np.max(np.abs(mm.drives)) == pytest.approx(10.0) and np.max(np.abs(inv.drives)) == pytest.approx(10.0)
+    a, b = inv.metrics(contrast_over="points"), mm.metrics(contrast_over="points")
+    assert b["fidelity"] >= a["fidelity"] - 2e-3
+    assert b["contrast_all_db"] >= a["contrast_all_db"] - 0.05
+    with pytest.raises(ValidationError):
+        render("minimax", tm, MFS, ref, 5, min_fidelity=1.0)

@@ -315,8 +315,14 @@ class Minimax(Method):
     **common
         The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
         design's contrast and fidelity do not depend on its level).
+
+    Notes
+    -----
+    Opt-in (:attr:`Method.opt_in`): the demo's default table leaves it out; name it
+    (``run_demo(methods=[..., "minimax"])``, ``render("minimax", ...)``).
     """
 
+    opt_in: ClassVar[bool] = True  # seconds per design, and the optional extra
     control: str | None = None
     min_fidelity: float | None = None
     support_s: tuple[float, float] = (0.01, 0.005)

@@ -21,7 +21,8 @@ from ._checks import check_regularization
 from .method import Method
 from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
 
-__all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "make_method"]
+__all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "default_methods",
+           "make_method"]
 
 #: Entry-point group of the methods installed packages add.
 ENTRY_POINT_GROUP = "vibrofocus.methods"
@@ -96,6 +97,12 @@ def available_methods() -> tuple[str, ...]:
     """Names of the registered methods: the built-in ones first, in SPEC order."""
     _read_entry_points()
     return tuple(_REGISTRY)
+
+
+def default_methods() -> tuple[str, ...]:
+    """Names of the registered methods a default run (the demo's table) renders: all but the
+    opt-in ones (:attr:`~.method.Method.opt_in`, e.g. ``"minimax"``)."""
+    return tuple(name for name in available_methods() if not _REGISTRY[name].opt_in)
 
 
 def method_class(name: str) -> type[Method]:
