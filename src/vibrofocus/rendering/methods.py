@@ -312,6 +312,11 @@ class Minimax(Method):
         through the same ``H``, at most 0.999): equal fidelity, the peak contrast decides.
     support_s : (float, float)
         Drive support before and after the tap, s.
+    drive_budget : float, optional
+        The drive's peak is at most this times the pseudo-inverse's for the same tap (a
+        constraint of the program; default 1: no more drive than the pseudo-inverse). It
+        keeps the design off the directions where ``H`` is small and a measured one is
+        mostly noise; ``None``: unconstrained.
     **common
         The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
         design's contrast and fidelity do not depend on its level).
@@ -326,6 +331,7 @@ class Minimax(Method):
     control: str | None = None
     min_fidelity: float | None = None
     support_s: tuple[float, float] = (0.01, 0.005)
+    drive_budget: float | None = 1.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -336,20 +342,35 @@ class Minimax(Method):
         if len(support) != 2:
             raise ValidationError(f"support_s must be (before, after) in s, got {self.support_s!r}")
         self._set("support_s", support)
+        if self.drive_budget is not None:
+            self._set("drive_budget", check_positive(self.drive_budget, "drive_budget"))
 
-    def pinv_fidelity(self, p: Problem) -> float:
-        """Fidelity of the paper's pseudo-inverse (all points controlled) through ``p.tm``."""
-        control = np.arange(p.tm.n_points)
+    def pinv(self, p: Problem) -> tuple[float, float]:
+        """Fidelity and peak drive (V) of the paper's pseudo-inverse (:class:`Inverse` with
+        its defaults: target and guards controlled) for this tap through ``p.tm``."""
+        control = p.control("guards")
         op = p.tm.inverse_operator(control, band=p.band, taper_octaves=self.taper_octaves)
         drives = op.drives_for_point(p.target_index, self.target_peak_m * p.stimulus)
         y = predict_response(p.tm.H, drives)[p.target_index]
-        return float(np.dot(y, p.reference) / (np.linalg.norm(y) * np.linalg.norm(p.reference)))
+        fid = float(np.dot(y, p.reference) / (np.linalg.norm(y) * np.linalg.norm(p.reference)))
+        return fid, float(np.max(np.abs(drives)))
 
     def solve(self, p: Problem) -> Solution:
         control = p.control(self.control)
-        fidelity = self.min_fidelity if self.min_fidelity is not None else min(self.pinv_fidelity(p), 0.999)
+        fid, peak = self.pinv(p) if (self.min_fidelity is None or self.drive_budget is not None) else (0.0, 0.0)
+        fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
+        max_drive = None if self.drive_budget is None else self.drive_budget * peak
         targets = np.zeros((p.tm.n_points, p.n))
         targets[p.target_index] = self.target_peak_m * p.stimulus
-        drives = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity, quiet=control[1:],
-                                taper_octaves=self.taper_octaves, support_s=self.support_s)
+        # A budget the short support cannot meet at this fidelity is doubled (twice), then dropped.
+        budgets = [None] if max_drive is None else [max_drive, 2 * max_drive, 4 * max_drive, None]
+        for i, budget in enumerate(budgets):
+            try:
+                drives = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity,
+                                        quiet=control[1:], max_drive=budget, taper_octaves=self.taper_octaves,
+                                        support_s=self.support_s)
+                break
+            except ValidationError as exc:
+                if "infeasible" not in str(exc) or i == len(budgets) - 1:
+                    raise
         return Solution(drives, control_indices=control)
