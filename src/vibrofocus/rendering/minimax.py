@@ -26,7 +26,7 @@ window); the response to the pulse at delay ``t_k`` is ``g_pa`` shifted by ``t_k
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -112,7 +112,6 @@ class MinimaxReport:
     ir_tail_energy: float
     support: tuple[int, int]
     decimation: int
-    metrics: dict = field(default_factory=dict)
 
 
 def _cvxpy():
