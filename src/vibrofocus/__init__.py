@@ -37,6 +37,7 @@ _LAZY_ATTRIBUTES = {
     "exponential_sweep": ".signals",
     "funneling_gains": ".rendering",
     "inverse_filter": ".rendering",
+    "minimax_filter": ".rendering",
     "InverseOperator": ".rendering",
     "focus_metrics": ".rendering",
     "render": ".rendering",
@@ -65,6 +66,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
         focus_metrics,
         funneling_gains,
         inverse_filter,
+        minimax_filter,
         register_method,
         render,
     )
@@ -104,6 +106,7 @@ __all__ = [
     "ricker",
     "funneling_gains",
     "inverse_filter",
+    "minimax_filter",
     "InverseOperator",
     "focus_metrics",
     "render",

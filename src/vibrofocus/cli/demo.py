@@ -93,10 +93,10 @@ def demo_command(
             expected = estimate_calibration_bytes(rig.layout.n_points, rig.layout.n_actuators, 8,
                                                   int(3.0 * rig.fs), 4096) if design_from == "calibration" else 0
             check_writable(out / "calibration.nc", what="calibration", expected_bytes=expected)
-        from ..rendering import available_methods
+        from ..rendering.registry import default_methods
 
-        # Every registered method, a lab's own included (run_demo's default).
-        total = rig.layout.n_locations * len(available_methods())
+        # Every registered method, a lab's own included, but the opt-in ones (run_demo's default).
+        total = rig.layout.n_locations * len(default_methods())
         calibration_info: dict = {}
         with Progress(
             TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),

@@ -162,7 +162,7 @@ def run_demo(
     methods : sequence of str, optional
         Rendering methods (docs/method.md, rendering methods); default every registered
         one (:func:`~vibrofocus.rendering.available_methods`: the built-in ones and a
-        lab's own).
+        lab's own) but the opt-in ones (``"minimax"``), which are rendered when named.
     locations : sequence of int, optional
         1-based locations; default all of the layout's.
     n_samples : int, optional
@@ -179,9 +179,10 @@ def run_demo(
     DemoResult
     """
     from ..rendering import available_methods, focus_metrics, render
+    from ..rendering.registry import default_methods
     from ..rendering.transfer import as_transfer_matrix
 
-    methods = available_methods() if methods is None else tuple(methods)
+    methods = default_methods() if methods is None else tuple(methods)
     for m in methods:
         check_choice(m, "method", available_methods())
     layout = rig.layout

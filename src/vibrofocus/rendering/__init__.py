@@ -18,7 +18,8 @@ from .inverse import DesignReport, DriveScaledWarning, InverseOperator, inverse_
 from .metrics import focus_metrics
 from .design import Design, Rendering  # noqa: F401 - Rendering: Design's former name, kept importable
 from .method import Method, Problem, Solution
-from .methods import Combination, Constrained, Contrast, Funneling, Inverse, TimeReversal
+from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
+from .minimax import MinimaxReport, minimax_filter
 from .registry import ENTRY_POINT_GROUP, available_methods, make_method, method_class, register_method
 from .render import render
 from .taper import band_taper
@@ -59,6 +60,9 @@ __all__ = [
     "TimeReversal",
     "Contrast",
     "Constrained",
+    "Minimax",
+    "minimax_filter",
+    "MinimaxReport",
     "register_method",
     "method_class",
     "make_method",

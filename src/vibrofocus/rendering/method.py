@@ -161,6 +161,9 @@ class Method:
     #: Whether the drives spread over the whole window (energy designs): a design that
     #: does not fit it has its ends tapered before the wrap-around check.
     spreads_over_window: ClassVar[bool] = False
+    #: Whether the method is left out of the default runs (the demo's table) unless named:
+    #: a slow design, or one that needs an optional extra.
+    opt_in: ClassVar[bool] = False
 
     band: tuple[float, float] = BAND_HZ
     sigma: float = SIGMA_S

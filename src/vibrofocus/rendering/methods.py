@@ -11,7 +11,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from .._validation import as_array, check_choice, check_positive
+from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import FUNNELING_AMPLITUDE_V
 from ..errors import ValidationError
 from ._acc import DEFAULT_ACC_REG
@@ -20,12 +20,14 @@ from .combination import combination_target
 from .contrast import constrained_drives, contrast_drives
 from .exact_target import exact_target_spectra
 from .funneling import funneling_gains
+from .inverse import predict_response
 from .method import Method, Problem, Solution
+from .minimax import minimax_filter
 from .taper import design_grid
 from .time_reversal import time_reversal_drives
 
 __all__ = ["Method", "Problem", "Solution", "Funneling", "Inverse", "Combination", "TimeReversal", "Contrast",
-           "Constrained", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
+           "Constrained", "Minimax", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
 
 #: Default weight of the quiet control points against the target (see :class:`Inverse`).
 DEFAULT_GUARD_WEIGHT = 1.0
@@ -292,3 +294,83 @@ class Constrained(Contrast):
     def energy_drives(self, p: Problem, **options: Any) -> np.ndarray:
         return constrained_drives(p.tm, p.target_index, p.fs, contrast_weight=self.contrast_weight,
                                   min_contrast_db=self.min_contrast_db, **options)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Minimax(Method):
+    """Peak-contrast (minimax) design (:func:`~vibrofocus.rendering.minimax_filter`): the
+    least largest ``|displacement|`` at the quiet points at a given target fidelity.
+
+    Needs the optional extra ``vibrofocus[minimax]`` (cvxpy, Clarabel).
+
+    Parameters
+    ----------
+    control : {"all", "guards", "locations"}, optional
+        Points kept quiet (default ``"all"``: every other calibrated point).
+    min_fidelity : float, optional
+        Least target fidelity, in (0, 1); default the pseudo-inverse's own (predicted
+        through the same ``H``, at most 0.999): equal fidelity, the peak contrast decides.
+    support_s : (float, float)
+        Drive support before and after the tap, s.
+    drive_budget : float, optional
+        The drive's peak is at most this times the pseudo-inverse's for the same tap (a
+        constraint of the program; default 1: no more drive than the pseudo-inverse). It
+        keeps the design off the directions where ``H`` is small and a measured one is
+        mostly noise; ``None``: unconstrained.
+    **common
+        The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
+        design's contrast and fidelity do not depend on its level).
+
+    Notes
+    -----
+    Opt-in (:attr:`Method.opt_in`): the demo's default table leaves it out; name it
+    (``run_demo(methods=[..., "minimax"])``, ``render("minimax", ...)``).
+    """
+
+    opt_in: ClassVar[bool] = True  # seconds per design, and the optional extra
+    control: str | None = None
+    min_fidelity: float | None = None
+    support_s: tuple[float, float] = (0.01, 0.005)
+    drive_budget: float | None = 1.0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self._set("control", _check_control(self, "all", field_allowed=False))
+        if self.min_fidelity is not None:
+            self._set("min_fidelity", check_in_range(self.min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False))
+        support = tuple(check_positive(s, "support_s") for s in self.support_s)
+        if len(support) != 2:
+            raise ValidationError(f"support_s must be (before, after) in s, got {self.support_s!r}")
+        self._set("support_s", support)
+        if self.drive_budget is not None:
+            self._set("drive_budget", check_positive(self.drive_budget, "drive_budget"))
+
+    def pinv(self, p: Problem) -> tuple[float, float]:
+        """Fidelity and peak drive (V) of the paper's pseudo-inverse (:class:`Inverse` with
+        its defaults: target and guards controlled) for this tap through ``p.tm``."""
+        control = p.control("guards")
+        op = p.tm.inverse_operator(control, band=p.band, taper_octaves=self.taper_octaves)
+        drives = op.drives_for_point(p.target_index, self.target_peak_m * p.stimulus)
+        y = predict_response(p.tm.H, drives)[p.target_index]
+        fid = float(np.dot(y, p.reference) / (np.linalg.norm(y) * np.linalg.norm(p.reference)))
+        return fid, float(np.max(np.abs(drives)))
+
+    def solve(self, p: Problem) -> Solution:
+        control = p.control(self.control)
+        fid, peak = self.pinv(p) if (self.min_fidelity is None or self.drive_budget is not None) else (0.0, 0.0)
+        fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
+        max_drive = None if self.drive_budget is None else self.drive_budget * peak
+        targets = np.zeros((p.tm.n_points, p.n))
+        targets[p.target_index] = self.target_peak_m * p.stimulus
+        # A budget the short support cannot meet at this fidelity is doubled (twice), then dropped.
+        budgets = [None] if max_drive is None else [max_drive, 2 * max_drive, 4 * max_drive, None]
+        for i, budget in enumerate(budgets):
+            try:
+                drives = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity,
+                                        quiet=control[1:], max_drive=budget, taper_octaves=self.taper_octaves,
+                                        support_s=self.support_s)
+                break
+            except ValidationError as exc:
+                if "infeasible" not in str(exc) or i == len(budgets) - 1:
+                    raise
+        return Solution(drives, control_indices=control)

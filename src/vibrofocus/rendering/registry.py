@@ -19,9 +19,10 @@ from ..defaults import METHODS
 from ..errors import ValidationError
 from ._checks import check_regularization
 from .method import Method
-from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, TimeReversal
+from .methods import CONTROL_SETS, Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
 
-__all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "make_method"]
+__all__ = ["ENTRY_POINT_GROUP", "register_method", "method_class", "available_methods", "default_methods",
+           "make_method"]
 
 #: Entry-point group of the methods installed packages add.
 ENTRY_POINT_GROUP = "vibrofocus.methods"
@@ -36,7 +37,7 @@ LEGACY_OPTIONS = frozenset({
     "limit_v", "on_limit", "sigma", "target_peak_m", "regularization", "reg_param", "band", "t0", "control",
     "funneling_law", "funneling_amplitude_v", "taper_octaves", "form", "check_wraparound", "wraparound_tol",
     "guard_weight", "scale_to_limit", "exact_target", "contrast_weight", "min_contrast_db", "acc_reg", "field",
-    "field_xy", "field_exclusion_m", "bounds",
+    "field_xy", "field_exclusion_m", "bounds", "min_fidelity", "support_s", "drive_budget",
 })
 
 
@@ -96,6 +97,12 @@ def available_methods() -> tuple[str, ...]:
     """Names of the registered methods: the built-in ones first, in SPEC order."""
     _read_entry_points()
     return tuple(_REGISTRY)
+
+
+def default_methods() -> tuple[str, ...]:
+    """Names of the registered methods a default run (the demo's table) renders: all but the
+    opt-in ones (:attr:`~.method.Method.opt_in`, e.g. ``"minimax"``)."""
+    return tuple(name for name in available_methods() if not _REGISTRY[name].opt_in)
 
 
 def method_class(name: str) -> type[Method]:
@@ -166,3 +173,4 @@ def _check_ignored(ignored: dict[str, Any]) -> None:
 
 for _name, _cls in zip(METHODS, (Funneling, Inverse, Combination, TimeReversal, Contrast, Constrained)):
     register_method(_name, _cls)
+register_method("minimax", Minimax)

@@ -1,0 +1,171 @@
+"""The peak-contrast (minimax) design: against an independent cvxpy program, the fidelity
+on the played response, the drive limit, analytic cases and the registered method."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+cp = pytest.importorskip("cvxpy")
+
+from vibrofocus.errors import ValidationError  # noqa: E402
+from vibrofocus.rendering import minimax_filter  # noqa: E402
+from vibrofocus.rendering.taper import design_grid  # noqa: E402
+
+FS, N, BAND = 2000.0, 256, (20.0, 300.0)
+SUPPORT = (0.02, 0.01)
+VERB = False
+
+
+def medium(n_points=3, n_act=2, taps=24, seed=0):
+    """A random causal medium: decaying FIR impulse responses (n_points, n_act, taps)."""
+    rng = np.random.default_rng(seed)
+    h = rng.standard_normal((n_points, n_act, taps)) * np.exp(-np.arange(taps) / 6.0)
+    H = np.fft.rfft(h, N, axis=-1).transpose(2, 0, 1)
+    return h, H
+
+
+def tap(target=0, n_points=3):
+    t = np.arange(N) / FS
+    sigma, t0 = 4e-3, N / FS / 2
+    a = ((t - t0) / sigma) ** 2
+    targets = np.zeros((n_points, N))
+    targets[target] = (1 - a) * np.exp(-a / 2)
+    return targets
+
+
+def band_limited(x):
+    taper = design_grid(N, FS, BAND, 0.5)[1]
+    return np.fft.irfft(np.fft.rfft(x) * taper, N)
+
+
+def played(h, drives):
+    """Linear convolution of the drives with the impulse responses, played once from silence."""
+    out = np.zeros((h.shape[0], N + h.shape[2] - 1))
+    for p in range(h.shape[0]):
+        for a in range(h.shape[1]):
+            out[p] += np.convolve(drives[a], h[p, a])
+    return out
+
+
+def fidelity(y, d):
+    return float(np.dot(y[: len(d)], d) / (np.linalg.norm(y) * np.linalg.norm(d)))
+
+
+def plain_cvxpy(h, targets, min_fidelity, max_drive=None):
+    """Independent formulation: every drive sample in the support a variable (band-limited by
+    the taper as a circulant filter), every response sample a constraint, the full responses."""
+    taper = design_grid(N, FS, BAND, 0.5)[1]
+    d = band_limited(targets[0])
+    t_peak = int(np.argmax(np.abs(d)))
+    first, last = t_peak - int(round(SUPPORT[0] * FS)), t_peak + int(round(SUPPORT[1] * FS))
+    sup = np.arange(first, last + 1)
+    pulse = np.fft.irfft(taper, N)
+    P = np.stack([np.roll(pulse, k) for k in sup], axis=1)  # (N, len(sup)): drive from pulses
+    # The drives the pulses span, in an orthonormal basis (the pulses overlap: many are idle).
+    U, sv, _ = np.linalg.svd(P, full_matrices=False)
+    P = U[:, sv > 1e-8 * sv[0]]
+    n_points, n_act, _ = h.shape
+    conv = [[np.stack([np.roll(np.concatenate([h[p, a], np.zeros(N - h.shape[2])]), k) for k in range(N)], 1)
+             for a in range(n_act)] for p in range(n_points)]  # circulant (N, N)
+    z = cp.Variable((n_act, P.shape[1]))
+    s = cp.Variable()
+    y = [sum(conv[p][a] @ (P @ z[a]) for a in range(n_act)) for p in range(n_points)]
+    cons = [d @ y[0] == d @ d, cp.norm(y[0]) <= np.linalg.norm(d) / min_fidelity]
+    cons += [cp.abs(y[p]) <= s for p in range(1, n_points)]
+    if max_drive is not None:
+        cons += [cp.abs(P @ z[a]) <= max_drive for a in range(n_act)]
+    cp.Problem(cp.Minimize(s), cons).solve(solver="CLARABEL", verbose=VERB)
+    return float(s.value)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_matches_an_independent_cvxpy_program(seed):
+    h, H = medium(seed=seed)
+    targets = tap()
+    drives, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, decimation=1,
+                                 stride=1, full_output=True)
+    ref = plain_cvxpy(h, targets, 0.9)
+    assert rep.status == "optimal"
+    assert rep.quiet_peak == pytest.approx(ref, rel=0.01)
+    assert drives.shape == (2, N)
+
+
+def test_fidelity_holds_on_the_played_response():
+    h, H = medium(seed=2)
+    targets = tap()
+    drives, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.95, support_s=SUPPORT, full_output=True)
+    y = played(h, drives)
+    assert fidelity(y[0], band_limited(targets[0])) >= 0.95 - 1e-4
+    # The report's prediction (through H, circular) is the played response inside the
+    # window, up to the band-limited pulses' tails that a 128 ms window cuts (a few %).
+    assert np.max(np.abs(rep.predicted - y[:, :N])) <= 0.05 * np.max(np.abs(y))
+    assert rep.fidelity >= 0.95 - 1e-4
+
+
+def test_drive_limit_holds():
+    h, H = medium(seed=3)
+    targets = tap()
+    free = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT)
+    limit = 0.8 * float(np.max(np.abs(free)))
+    drives, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, max_drive=limit,
+                                 decimation=1, stride=1, full_output=True)
+    assert np.max(np.abs(drives)) <= limit * (1 + 1e-9)
+    ref = plain_cvxpy(h, targets, 0.9, max_drive=limit)
+    assert rep.quiet_peak == pytest.approx(ref, rel=0.02)
+    assert rep.quiet_peak >= minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT,
+                                            full_output=True)[1].quiet_peak * (1 - 1e-3)
+
+
+def test_one_quiet_point_that_cancels():
+    """Target [1, 1], quiet [1, -1] at every frequency: equal drives put nothing at the quiet point."""
+    H = np.zeros((N // 2 + 1, 2, 2), complex)
+    H[:, 0] = [1, 1]
+    H[:, 1] = [1, -1]
+    drives, rep = minimax_filter(H, tap(n_points=2), FS, band=BAND, min_fidelity=0.99, support_s=SUPPORT,
+                                 full_output=True)
+    assert rep.quiet_peak <= 1e-4 * np.max(np.abs(rep.predicted[0]))
+    assert rep.fidelity >= 0.99 - 1e-4
+
+
+def test_one_quiet_point_scaled_copy():
+    """One actuator, the quiet point a copy of the target at gain 0.25: peak contrast is -20 log10(0.25) dB."""
+    H = np.zeros((N // 2 + 1, 2, 1), complex)
+    H[:, 0, 0] = 1.0
+    H[:, 1, 0] = 0.25
+    _, rep = minimax_filter(H, tap(n_points=2), FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, full_output=True)
+    assert rep.peak_contrast_db == pytest.approx(-20 * np.log10(0.25), abs=1e-6)
+
+
+def test_refuses_bad_input():
+    _, H = medium()
+    targets = tap()
+    with pytest.raises(ValidationError):
+        minimax_filter(H, targets, FS, band=BAND, min_fidelity=1.5)
+    two = targets.copy()
+    two[1] = targets[0]
+    with pytest.raises(ValidationError, match="one non-zero row"):
+        minimax_filter(H, two, FS, band=BAND)
+
+
+@pytest.mark.slow
+def test_registered_method_beats_the_pseudo_inverse_at_equal_drive():
+    from vibrofocus import ArrayLayout, TransferMatrix, render
+    from vibrofocus.rendering import available_methods
+    from vibrofocus.rendering.registry import default_methods
+
+    from ._media import FS as MFS
+    from ._media import layout_medium
+
+    assert "minimax" in available_methods() and "minimax" not in default_methods()
+    ref = ArrayLayout.reference()
+    tm = TransferMatrix(layout_medium(ref, 2048, MFS), MFS, ref)
+    inv = render("inverse", tm, MFS, ref, 5)
+    mm = render("minimax", tm, MFS, ref, 5)
+    assert mm.method == "minimax"
+    assert np.max(np.abs(mm.drives)) == pytest.approx(10.0) and np.max(np.abs(inv.drives)) == pytest.approx(10.0)
+    a, b = inv.metrics(contrast_over="points"), mm.metrics(contrast_over="points")
+    assert b["fidelity"] >= a["fidelity"] - 2e-3
+    assert b["contrast_all_db"] >= a["contrast_all_db"] - 0.05
+    with pytest.raises(ValidationError):
+        render("minimax", tm, MFS, ref, 5, min_fidelity=1.0)
