@@ -13,7 +13,9 @@ python3 -m venv "$work/venv"
 # Built from a copy: setuptools writes its build/ folder beside the sources.
 mkdir "$work/pkg"
 cp -r "$root/src" "$root/pyproject.toml" "$root/README.md" "$root/LICENSE" "$work/pkg/"
-"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$work/pkg[lsl,sofa,osc]"
+# The test extra's file readers (pybids, pyfar) at their minimums too: pyproject states them.
+"$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$work/pkg[lsl,sofa,osc,minimax]" \
+    "pybids==$(grep -oP '"pybids>=\K[0-9.]+' "$root/pyproject.toml")" "pyfar==$(grep -oP '"pyfar>=\K[0-9.]+' "$root/pyproject.toml")"
 "$work/venv/bin/uv" pip list -q --python "$work/venv/bin/python" --format freeze > "$work/versions.txt" 2>/dev/null || true
 
 export PYTHONDONTWRITEBYTECODE=1 MPLBACKEND=Agg
@@ -25,6 +27,17 @@ vf="$work/venv/bin/vibrofocus"
 # python-osc's client reads replies (serve-osc's tests use it).
 "$work/venv/bin/python" -c "import pylsl, sofar; pylsl.local_clock(); sofar.Sofa('GeneralTF-E'); from pythonosc.udp_client import SimpleUDPClient; SimpleUDPClient.receive"
 "$vf" serve-osc --help > /dev/null
+# cvxpy and Clarabel at their minimums solve a small peak-contrast design.
+"$work/venv/bin/python" -c "
+import numpy as np
+from vibrofocus.rendering import minimax_filter
+rng = np.random.default_rng(0)
+h = rng.standard_normal((3, 2, 24)) * np.exp(-np.arange(24) / 6.0)
+H = np.fft.rfft(h, 256, axis=-1).transpose(2, 0, 1)
+t = (np.arange(256) / 2000.0 - 0.064) / 4e-3
+targets = np.zeros((3, 256)); targets[0] = (1 - t**2) * np.exp(-t**2 / 2)
+_, rep = minimax_filter(H, targets, 2000.0, band=(20.0, 300.0), min_fidelity=0.9, support_s=(0.02, 0.01), full_output=True)
+assert rep.fidelity >= 0.9 - 1e-3, rep.fidelity"
 "$vf" latency --count 3 --spacing 0 --json > "$work/latency.json"
 "$vf" serve --help > /dev/null
 "$work/venv/bin/python" -c "
@@ -34,6 +47,12 @@ create_app(sys.argv[1], token='t' * 32)" "$work/s.sqlite"
 "$vf" demo --json --no-figures --out "$work/demo" > "$work/demo.json"
 "$work/venv/bin/python" -c "import json, sys; d = json.load(open(sys.argv[1])); assert len(d['results']) == 54" "$work/demo.json"
 "$vf" render --calibration "$work/demo/calibration.nc" --method inverse --location 5 --out "$work/tap.npz" > /dev/null
+# pyfar at its minimum reads a calibration exported as SOFA; pybids at its minimum imports.
+"$work/venv/bin/python" -c "
+import sys, bids, pyfar
+from vibrofocus.calibration import export_sofa, load_calibration
+export_sofa(load_calibration(sys.argv[1]), sys.argv[2])
+pyfar.io.read_sofa(sys.argv[2])" "$work/demo/calibration.nc" "$work/cal.sofa"
 PYTHONPATH="$root" "$work/venv/bin/python" -c "
 import sys
 from tests.analysis.synthetic import make_trials
@@ -41,5 +60,5 @@ make_trials(8, seed=3).to_csv(sys.argv[1], index=False)" "$work/trials.csv"
 "$vf" analyze "$work/trials.csv" --out "$work/report" > /dev/null
 test -s "$work/report/report.json"
 echo "lowest-versions smoke test passed with:"
-grep -iE '^(click|numpy|scipy|xarray|h5netcdf|h5py|pandas|pingouin|matplotlib|fastapi|jinja2|uvicorn|typer|rich|pydantic|sounddevice|nidaqmx|dask|distributed|threadpoolctl|pylsl|sofar|python-osc)==' "$work/versions.txt" | tr '\n' ' '
+grep -iE '^(click|numpy|scipy|xarray|h5netcdf|h5py|pandas|pingouin|matplotlib|fastapi|jinja2|uvicorn|typer|rich|pydantic|sounddevice|nidaqmx|dask|distributed|threadpoolctl|pylsl|sofar|python-osc|cvxpy|clarabel|pybids|pyfar)==' "$work/versions.txt" | tr '\n' ' '
 echo
