@@ -63,7 +63,7 @@ def targets() -> list[tuple[str, str, float]]:
 
 #: Range searched for the drive cue's weight (``--central-weight LO HI`` narrows it, e.g.
 #: to hold the paper's reading that funneling is coded centrally).
-CENTRAL_WEIGHT_RANGE = [0.0, 1.0]
+CENTRAL_WEIGHT_RANGE = (0.0, 1.0)
 
 #: Post hoc patterns: (label, share of studies reproducing it, from one study's statistics).
 PATTERNS = (
@@ -134,13 +134,14 @@ def residuals(stats: list[dict]) -> str:
     return "\n".join(lines)
 
 
-def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale: float = 1.0) -> PerceptualModel:
+def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale: float = 1.0,
+           central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE) -> PerceptualModel:
     """A candidate: drawn from broad ranges (``base`` None) or jittered around ``base``."""
     if base is None:
         lo_a, lo_p, lo_k = rng.uniform(3e-3, 12e-3), rng.uniform(5e-3, 25e-3), rng.uniform(0.05, 0.6)
         return PerceptualModel().replace(
             sl_ref_db=rng.uniform(10, 45), funneling_exponent=rng.uniform(0.2, 2.0),
-            central_weight=rng.uniform(*CENTRAL_WEIGHT_RANGE), conflict_gain=rng.uniform(0.0, 2.0),
+            central_weight=rng.uniform(*central_range), conflict_gain=rng.uniform(0.0, 2.0),
             acuity_sd_m=(lo_a, lo_a * rng.uniform(1.2, 2.0)), spread_gain=tuple(sorted(rng.uniform(0, 2, 2))),
             prior_sd_m=(lo_p, lo_p * rng.uniform(1.2, 2.0)),
             bias_mean_m=(rng.uniform(-8e-3, 8e-3), rng.uniform(-8e-3, 0.0)), bias_sd_m=rng.uniform(0, 4e-3),
@@ -153,7 +154,7 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
     b = base
     return b.replace(
         sl_ref_db=float(np.clip(b.sl_ref_db + rng.normal(0, 2 * scale), 5, 50)),
-        central_weight=float(np.clip(b.central_weight + rng.normal(0, 0.1 * scale), *CENTRAL_WEIGHT_RANGE)),
+        central_weight=float(np.clip(b.central_weight + rng.normal(0, 0.1 * scale), *central_range)),
         conflict_gain=float(abs(b.conflict_gain + rng.normal(0, 0.15 * scale))),
         funneling_exponent=float(np.clip(jit(b.funneling_exponent), 0.05, 1.5)),
         acuity_sd_m=tuple(sorted(jit(v) for v in b.acuity_sd_m)),
@@ -174,14 +175,15 @@ def _load(path: Path | None) -> PerceptualModel:
 
 
 def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: int,
-           weights: dict[str, float]) -> PerceptualModel:
+           weights: dict[str, float], central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE) -> PerceptualModel:
     rng = np.random.default_rng(rng_seed)
     best = _load(start)
     best_loss = loss(seed_statistics(best, FIT_SEEDS), weights)
     print(f"start: loss {best_loss:.4f}", flush=True)
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
-        cand = sample(rng) if i < n_eval else sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1))
+        cand = (sample(rng, central_range=central_range) if i < n_eval else
+                sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range))
         val = loss(seed_statistics(cand, FIT_SEEDS), weights)
         if val < best_loss:
             best, best_loss = cand, val
@@ -291,8 +293,6 @@ def main() -> int:
     t.add_argument("--check", action="store_true", help="only compare; exit 1 if a page is out of date")
     args = ap.parse_args()
     if args.cmd == "search":
-        if args.central_weight is not None:
-            CENTRAL_WEIGHT_RANGE[:] = sorted(args.central_weight)
         weights = {}
         for item in args.weight:
             key, _, value = item.partition("=")
@@ -300,7 +300,8 @@ def main() -> int:
             if key not in known:
                 ap.error(f"--weight {item}: unknown statistic (one of {', '.join(known)})")
             weights[key] = float(value)
-        best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights)
+        central_range = tuple(sorted(args.central_weight)) if args.central_weight else CENTRAL_WEIGHT_RANGE
+        best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range)
         print("\nfit seeds:\n" + residuals(seed_statistics(best, FIT_SEEDS)))
         print("\ntable seeds 0-19:\n" + residuals(seed_statistics(best, range(20))))
         return 0

@@ -27,11 +27,11 @@ from .perception import (
     PerceptualModel,
     Percepts,
     Traits,
-    actuator_energy,
     band_transfer,
     central_percepts,
     draw_answers,
     felt_energy,
+    own_transfer,
     skin_grid,
     study2_rt,
 )
@@ -80,7 +80,8 @@ class SimulatedParticipant:
         self.centre_xy = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
         self.grid_xy = skin_grid(self.centre_xy, self.model)
         self.actuators_xy = np.asarray(layout.actuators_xy, dtype=float)
-        self._H: dict[int, np.ndarray] = {}
+        # Per drive length: the transfer to the skin grid and to each actuator's own contact.
+        self._H: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._cache: dict[str, tuple[np.ndarray, Percepts]] = {}
 
     def describe(self) -> dict[str, Any]:
@@ -105,10 +106,13 @@ class SimulatedParticipant:
         n_act = self.forearm.layout.n_actuators
         if d.ndim != 2 or d.shape[0] != n_act or d.shape[1] < 16:
             raise StudyError(f"drives must have shape ({n_act}, n_samples >= 16), got {d.shape}")
-        n = d.shape[1]
+        return felt_energy(self._transfers(d.shape[1])[0], d, self.forearm.fs, self.model)
+
+    def _transfers(self, n: int) -> tuple[np.ndarray, np.ndarray]:
         if n not in self._H:
-            self._H[n] = band_transfer(self.forearm, self.grid_xy, n, self.model)
-        return felt_energy(self._H[n], d, self.forearm.fs, self.model)
+            self._H[n] = (band_transfer(self.forearm, self.grid_xy, n, self.model),
+                          own_transfer(self.forearm, self.actuators_xy, n, self.model))
+        return self._H[n]
 
     def percept(self, drives: np.ndarray) -> Percepts:
         """The noise-free central percept of a stimulus (cached per drive), one entry."""
@@ -117,7 +121,8 @@ class SimulatedParticipant:
             e = self.energy(drives)
             if not np.all(np.isfinite(e)) or e.max() <= 0:
                 raise StudyError("the stimulus produces no vibration on the skin: nothing to perceive")
-            own = actuator_energy(self.forearm, self.actuators_xy, np.asarray(drives, dtype=float)[None], self.model)
+            d = np.asarray(drives, dtype=float)
+            own = felt_energy(self._transfers(d.shape[1])[1], d[None], self.forearm.fs, self.model)
             self._cache[key] = (e, central_percepts(e[None], self.grid_xy, self.model, self.traits, own, self.actuators_xy))
         return self._cache[key][1]
 

@@ -84,6 +84,7 @@ __all__ = [
     "study2_rt",
     "band_transfer",
     "actuator_energy",
+    "own_transfer",
     "PARAMETER_SOURCES",
 ]
 
@@ -390,9 +391,20 @@ def actuator_energy(
     ndarray, shape (n_stimuli, n_actuators)
     """
     d = np.asarray(drives, dtype=float)
-    H = band_transfer(forearm, actuators_xy, d.shape[-1], model)
-    own = H * np.eye(H.shape[1], H.shape[2])[None]  # each point hears its own actuator only
-    return felt_energy(own, d, forearm.fs, model)
+    return felt_energy(own_transfer(forearm, actuators_xy, d.shape[-1], model), d, forearm.fs, model)
+
+
+def own_transfer(forearm: Any, actuators_xy: np.ndarray, n_samples: int, model: PerceptualModel | None = None) -> np.ndarray:
+    """Transfer from each actuator to its own contact only, on the model's band bins.
+
+    Returns
+    -------
+    ndarray, complex, shape (n_bins, n_actuators, n_actuators)
+        Diagonal in the last two axes (each contact hears its own actuator only), m/V:
+        with it :func:`felt_energy` gives :func:`actuator_energy`.
+    """
+    H = band_transfer(forearm, actuators_xy, n_samples, model)
+    return H * np.eye(H.shape[1], H.shape[2])[None]
 
 
 def band_transfer(forearm: Any, points_xy: np.ndarray, n_samples: int, model: PerceptualModel | None = None) -> np.ndarray:
