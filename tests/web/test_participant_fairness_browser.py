@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 
-import httpx
 import pytest
 
 from .test_participant_browser import open_page, pending, start, trial_events, wait_answers, wait_respond
@@ -154,18 +153,27 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
             second.unroute_all(behavior="ignoreErrors")
 
 
-#: Every answer a page sends is recorded (``window.vfSentAnswers``: answer ids), and while
-#: ``window.vfHoldAnswers`` is true the page's answer sends fail as a lost connection does.
-#: Both happen inside the page, so which tab sent what is known exactly, whatever the
-#: browser's and the test driver's timing.
+#: Every answer a page sends is recorded (``window.vfSentAnswers``: answer ids), and the
+#: page's answer sends can be held: with ``window.vfHoldAnswers = "fail"`` they fail as a
+#: lost connection does; with ``"lose-reply"`` the first reaches the server (and is
+#: committed) but its reply never reaches the page, and the later ones get no reply at
+#: all (each ends only when the page gives it up). Both happen inside the page, so which
+#: tab sent what is known exactly, whatever the browser's and the test driver's timing.
 SENT_ANSWERS = """
 window.vfSentAnswers = [];
 window.vfHoldAnswers = false;
 const vfFetch = window.fetch.bind(window);
+const vfNoReply = (options) => new Promise((_, reject) => {
+  if (options.signal) options.signal.addEventListener('abort', () => reject(new DOMException('aborted', 'AbortError')));
+});
 window.fetch = (url, options = {}) => {
   if (String(url).endsWith('/answer')) {
     window.vfSentAnswers.push(JSON.parse(options.body).answer_id);
-    if (window.vfHoldAnswers) return Promise.reject(new TypeError('Failed to fetch (held by the test)'));
+    if (window.vfHoldAnswers === 'fail') return Promise.reject(new TypeError('Failed to fetch (held by the test)'));
+    if (window.vfHoldAnswers === 'lose-reply') {
+      if (window.vfSentAnswers.length === 1) vfFetch(url, {...options, signal: undefined});
+      return vfNoReply(options);
+    }
   }
   return vfFetch(url, options);
 };
@@ -184,7 +192,7 @@ def test_two_tabs_each_report_only_their_own_answer(server, chromium):
         open_page(second, server, s)
         wait_respond(first, 0)
         wait_respond(second, 0)
-        first.evaluate("window.vfHoldAnswers = true")  # the first tab's sends fail for now
+        first.evaluate("window.vfHoldAnswers = 'fail'")  # the first tab's sends fail for now
         first.keyboard.press("3")
         first.wait_for_function("window.vfSentAnswers.length >= 2")  # sent, failed, and tried again
         answer_id = first.evaluate(f"{stored}[0].answer_id")
@@ -205,42 +213,26 @@ def test_two_tabs_each_report_only_their_own_answer(server, chromium):
 def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromium):
     s = start(server, "P35", 1)
     sid = s["session_id"]
-    with watched_context(chromium, "window.vfSendTimeoutMs = 800;") as context:
-        held = []
-        hold = {"on": True}
-
-        def answers(route):
-            if not hold["on"]:
-                route.continue_()
-            elif not held:
-                # The answer reaches the server and is committed, but the reply never
-                # reaches the page (sent from here so that the page's time-out cannot cut it).
-                r = httpx.post(route.request.url, content=route.request.post_data,
-                               headers={k: v for k, v in route.request.headers.items() if k.lower() in ("content-type", "x-participant-key")})
-                assert r.status_code == 200, r.text
-                held.append(route)
-            else:
-                held.append(route)  # no reply at all
-
+    with watched_context(chromium, "window.vfSendTimeoutMs = 800;" + SENT_ANSWERS) as context:
         page = context.new_page()
-        try:
-            open_page(page, server, s)
-            wait_respond(page, 0)
-            page.route("**/answer", answers)
-            page.keyboard.press("4")
-            page.wait_for_selector("#retry", state="visible")
-            assert "not replied yet" in page.inner_text("#message")
-            rows = wait_answers(server, sid, 1)
-            kept = pending(page, sid)
-            assert [(a["trial_index"], a["response"], a["answer_id"]) for a in kept] == [(0, [4], rows[0][3])], \
-                "the answer stays stored on the page until the server confirms it"
-            hold["on"] = False
-            page.click("#retry")
-            page.wait_for_function("document.getElementById('message').textContent.includes('Answer taken')")
-            assert page.is_hidden("#retry")
-            assert pending(page, sid) == []
-            wait_respond(page, 1)
-            assert server.rows("SELECT trial_index, response, answer_id FROM answers") == [(0, "4", rows[0][3])]
-            assert len(held) >= 1
-        finally:
-            page.unroute_all(behavior="ignoreErrors")
+        open_page(page, server, s)
+        wait_respond(page, 0)
+        # The answer reaches the server and is committed, but the reply never reaches the
+        # page; the page's sends after it get no reply at all.
+        page.evaluate("window.vfHoldAnswers = 'lose-reply'")
+        page.keyboard.press("4")
+        page.wait_for_selector("#retry", state="visible")
+        assert "not replied yet" in page.inner_text("#message")
+        rows = wait_answers(server, sid, 1)
+        kept = pending(page, sid)
+        assert [(a["trial_index"], a["response"], a["answer_id"]) for a in kept] == [(0, [4], rows[0][3])], \
+            "the answer stays stored on the page until the server confirms it"
+        page.evaluate("window.vfHoldAnswers = false")
+        page.click("#retry")
+        page.wait_for_function("document.getElementById('message').textContent.includes('Answer taken')")
+        assert page.is_hidden("#retry")
+        assert pending(page, sid) == []
+        wait_respond(page, 1)
+        assert server.rows("SELECT trial_index, response, answer_id FROM answers") == [(0, "4", rows[0][3])]
+        sent = page.evaluate("window.vfSentAnswers")
+        assert len(sent) >= 2 and set(sent) == {rows[0][3]}, sent  # the same answer id, sent again
