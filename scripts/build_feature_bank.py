@@ -5,6 +5,10 @@ Calibrates N simulated forearms (simulated participants sim-001.. of simulate-st
 perceptual model's skin grid. Usage:
 
     PYTHONPATH=src python scripts/build_feature_bank.py --n 60 --seed 0
+
+``--integration-ms W`` builds a bank whose felt intensities integrate over the W ms window
+of largest energy instead of the whole stimulus (``PerceptualModel.integration_s``; an
+explored alternative, not the model's default); write it elsewhere with ``--out``.
 """
 
 from __future__ import annotations
@@ -14,14 +18,19 @@ import time
 from pathlib import Path
 
 from vibrofocus.simulation.bank import DEFAULT_BANK, build_feature_bank
+from vibrofocus.simulation.perception import PerceptualModel
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--n", type=int, default=60)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", type=Path, default=Path(__file__).parents[1] / "src/vibrofocus/simulation" / DEFAULT_BANK)
+    ap.add_argument("--integration-ms", type=float, default=None,
+                    help="felt intensity over the W ms window of largest energy (default: the whole stimulus)")
     args = ap.parse_args()
+    model = PerceptualModel(integration_s=None if args.integration_ms is None else args.integration_ms * 1e-3)
     t0 = time.perf_counter()
-    bank = build_feature_bank(args.n, seed=args.seed, progress=lambda k, n: print(f"forearm {k}/{n}", flush=True))
+    bank = build_feature_bank(args.n, seed=args.seed, model=model,
+                              progress=lambda k, n: print(f"forearm {k}/{n}", flush=True))
     bank.save(args.out)
     print(f"wrote {args.out} ({bank.energy.shape}) in {time.perf_counter() - t0:.0f} s")

@@ -16,15 +16,18 @@ points (inverse vs funneling). Seeds used by the fit are 1000-1015; use others.
 from __future__ import annotations
 
 import argparse
+import json
 import warnings
 from itertools import combinations
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pingouin as pg
 from scipy import stats
 
-from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
+from vibrofocus.simulation.perception import PerceptualModel
 
 ALPHA = 0.05
 METHODS = ("funneling", "inverse", "combination")
@@ -124,12 +127,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs=2, default=(500, 520), metavar=("FIRST", "STOP"))
     ap.add_argument("--n", type=int, default=20, help="participants per study")
+    ap.add_argument("--fit", type=Path, default=None,
+                    help="a fit file written by scripts/fit_participants.py search (default: the model's defaults)")
+    ap.add_argument("--bank", type=Path, default=None,
+                    help="a feature bank built by scripts/build_feature_bank.py (default: the shipped one)")
     args = ap.parse_args()
-    bank = default_bank()
+    bank = FeatureBank.load(args.bank) if args.bank else default_bank()
+    model = (PerceptualModel().replace(**json.loads(args.fit.read_text(encoding="utf-8"))["model"])
+             if args.fit else PerceptualModel())
     seeds = range(*args.seeds)
     res = []
     for s in seeds:
-        arrays = simulate_cell_means(args.n, np.random.default_rng([s, 16]), bank=bank)
+        arrays = simulate_cell_means(args.n, np.random.default_rng([s, 16]), bank=bank, model=model)
         res.append(findings(arrays.error_mm, arrays.count, arrays.count_hit))
     print(f"simulated participants (a model, not data): {len(res)} studies of {args.n}, seeds {seeds.start}-{seeds.stop - 1}")
     print("| finding | holds in |\n|---|---|")

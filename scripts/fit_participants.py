@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus._atomic import write_text
+from vibrofocus.simulation.bank import FeatureBank
 from vibrofocus.simulation.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, compare, comparison_markdown, seed_statistics
 from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
 
@@ -175,16 +176,18 @@ def _load(path: Path | None) -> PerceptualModel:
 
 
 def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: int,
-           weights: dict[str, float], central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE) -> PerceptualModel:
+           weights: dict[str, float], central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE,
+           bank: FeatureBank | None = None, integration_s: float | None = None) -> PerceptualModel:
     rng = np.random.default_rng(rng_seed)
-    best = _load(start)
-    best_loss = loss(seed_statistics(best, FIT_SEEDS), weights)
+    best = _load(start).replace(integration_s=integration_s)
+    best_loss = loss(seed_statistics(best, FIT_SEEDS, bank=bank), weights)
     print(f"start: loss {best_loss:.4f}", flush=True)
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
         cand = (sample(rng, central_range=central_range) if i < n_eval else
                 sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range))
-        val = loss(seed_statistics(cand, FIT_SEEDS), weights)
+        cand = cand.replace(integration_s=integration_s)  # the bank's window, never searched
+        val = loss(seed_statistics(cand, FIT_SEEDS, bank=bank), weights)
         if val < best_loss:
             best, best_loss = cand, val
             print(f"{i}: loss {val:.4f} ({time.perf_counter() - t0:.0f} s) {json.dumps(cand.to_dict())}", flush=True)
@@ -283,6 +286,10 @@ def main() -> int:
     s.add_argument("--rng-seed", type=int, default=2023)
     s.add_argument("--central-weight", type=float, nargs=2, default=None, metavar=("LO", "HI"),
                    help="search the drive cue's weight in [LO, HI] only (default 0 1)")
+    s.add_argument("--bank", type=Path, default=None,
+                   help="a feature bank built by scripts/build_feature_bank.py (default: the shipped one)")
+    s.add_argument("--integration-ms", type=float, default=None,
+                   help="the integration window the --bank was built with (PerceptualModel.integration_s)")
     s.add_argument("--weight", action="append", default=[], metavar="KEY=W",
                    help="weight of one matched statistic's term (e.g. s1_interaction_F=3); repeatable")
     r = sub.add_parser("report", help="the paper beside the model, with residuals")
@@ -301,9 +308,13 @@ def main() -> int:
                 ap.error(f"--weight {item}: unknown statistic (one of {', '.join(known)})")
             weights[key] = float(value)
         central_range = tuple(sorted(args.central_weight)) if args.central_weight else CENTRAL_WEIGHT_RANGE
-        best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range)
-        print("\nfit seeds:\n" + residuals(seed_statistics(best, FIT_SEEDS)))
-        print("\ntable seeds 0-19:\n" + residuals(seed_statistics(best, range(20))))
+        bank = FeatureBank.load(args.bank) if args.bank else None
+        window = None if args.integration_ms is None else args.integration_ms * 1e-3
+        best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range,
+                      bank, window)
+        print("\nfit seeds:\n" + residuals(seed_statistics(best, FIT_SEEDS, bank=bank)))
+        print("\ntable seeds 0-19:\n" + residuals(seed_statistics(best, range(20), bank=bank)))
+        print("\nvalidation seeds 500-519:\n" + residuals(seed_statistics(best, range(500, 520), bank=bank)))
         return 0
     if args.cmd == "report":
         print(residuals(seed_statistics(_load(args.fit), range(args.seeds))))

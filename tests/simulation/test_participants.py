@@ -13,6 +13,7 @@ from vibrofocus.simulation.perception import (
     MODEL_LABEL,
     Percepts,
     actuator_energy,
+    band_transfer,
     Traits,
     central_percepts,
     draw_answers,
@@ -289,3 +290,31 @@ def test_bad_input_is_refused(rig, participant):
         threshold_db(np.array([0.0]))
     with pytest.raises(ValidationError):
         PerceptualModel().replace(nonsense=1)
+
+
+def test_short_integration_window_takes_the_largest_windowed_energy(rig, drives):
+    # Independent reference: the time-domain field, threshold-weighted in frequency, then a
+    # moving sum by np.convolve on a zero-padded (non-circular) record and its maximum.
+    fs, win = rig.fs, 2e-3
+    model = PerceptualModel(band_hz=(10.0, 1000.0), integration_s=win)
+    p = SimulatedParticipant(rig, seed=1, model=model)
+    d = drives[("inverse", 5)]
+    pts = p.grid_xy[::17]
+    n = 16384
+    u = rig.field(d, pts, tail_s=(n - d.shape[1]) / fs)[:, :n]
+    f = np.fft.rfftfreq(n, 1 / fs)
+    band = (f >= 10) & (f <= 1000)
+    U = np.fft.rfft(u, n, axis=1) * np.where(band, np.sqrt(threshold_weight(np.where(band, f, 1.0))), 0.0)
+    power = np.fft.irfft(U, n, axis=1) ** 2
+    k = int(round(win * fs))
+    want = np.array([np.convolve(row, np.ones(k), mode="valid").max() for row in power]) / fs
+    got = p.energy(d)[::17] * reference_felt_energy(fs, d.shape[1], model)
+    np.testing.assert_allclose(got, want, rtol=0.03)
+    # A window that spans the stimulus gives the whole energy; shorter ones never more.
+    whole = felt_energy(band_transfer(rig, pts, d.shape[1]), d, fs)
+    assert np.all(got <= whole * reference_felt_energy(fs, d.shape[1]) * (1 + 1e-9))
+
+
+def test_integration_window_must_be_positive():
+    with pytest.raises(ValidationError, match="integration_s"):
+        reference_felt_energy(10_000.0, 1024, PerceptualModel(integration_s=0.0))

@@ -118,7 +118,7 @@ def build_feature_bank(
     seed : int
     methods : tuple of str
     model : PerceptualModel, optional
-        Only its grid and band matter here.
+        Only its grid, band and integration window (``integration_s``) matter here.
     progress : callable, optional
         ``progress(done, total)`` after each forearm.
     """

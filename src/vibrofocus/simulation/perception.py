@@ -150,6 +150,13 @@ class PerceptualModel:
         location pitch).
     band_hz : (float, float)
         Frequencies counted, Hz (the vibrotactile range; the U-curve weights within it).
+    integration_s : float or None
+        Temporal integration of the felt intensity, s: a point's felt intensity is the
+        largest threshold-weighted displacement energy in any window of this length.
+        ``None`` (default) integrates the whole stimulus: the felt *energy* the model was
+        fitted with. Short windows (a few ms) make the intensity follow the displacement's
+        peak, which favours a focus that is sharp in time. *Assumption*, explored in
+        docs/simulated-participants.md ("What the model does not reproduce").
     sl_ref_db : float
         Sensation level of the reference tap (2 µm peak Ricker), dB. *Fitted.*
     central_weight : float
@@ -195,6 +202,7 @@ class PerceptualModel:
     grid_half_width_m: float = 25e-3
     grid_step_m: float = 5e-3
     band_hz: tuple[float, float] = (10.0, 1000.0)
+    integration_s: float | None = None
     # Fitted by scripts/fit_participants.py (docs/simulated-participants.md, "The fit"),
     # rounded to 3 digits.
     sl_ref_db: float = 42.5
@@ -236,6 +244,7 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "grid_half_width_m": ("assumption", "covers the array's area"),
     "grid_step_m": ("assumption", "half the 10 mm location pitch"),
     "band_hz": ("assumption", "the vibrotactile range; the U-curve weights within it"),
+    "integration_s": ("assumption", "None: the whole stimulus (felt energy); short windows explored, not adopted"),
     "sl_ref_db": ("fitted", "sensation level of the reference tap"),
     "central_weight": ("fitted", "place coded from the actuators' delivered energies (the paper, Sec. IV: central coding)"),
     "conflict_gain": ("fitted", "form an assumption: cues that disagree add uncertainty (Körding et al. 2007)"),
@@ -325,8 +334,28 @@ def reference_felt_energy(fs: float, n_samples: int, model: PerceptualModel | No
     m = model or PerceptualModel()
     u = ricker(fs, SIGMA_S, duration=n_samples / fs, amplitude=TARGET_PEAK_M)
     bins, f = _band_bins(len(u), fs, m.band_hz)
-    spec = np.fft.rfft(u)[bins]
-    return float(2.0 * np.sum(np.abs(spec) ** 2 * threshold_weight(f)) / (len(u) * fs))
+    return float(_felt(np.fft.rfft(u)[bins], bins, f, len(u), fs, m.integration_s))
+
+
+def _felt(spec: np.ndarray, bins: np.ndarray, f: np.ndarray, n: int, fs: float, integration_s: float | None) -> np.ndarray:
+    """Threshold-weighted energy of band spectra ``spec`` (..., n_bins), m² s.
+
+    Over the whole window (Parseval) when ``integration_s`` is None or spans it; else the
+    largest energy in any window of ``integration_s`` (circular, as the spectra are).
+    """
+    if integration_s is not None and not (np.isfinite(integration_s) and integration_s > 0):
+        raise ValidationError(f"integration_s must be None or a time > 0 s, got {integration_s!r}")
+    w = threshold_weight(f)
+    if integration_s is None or integration_s * fs >= n:
+        return 2.0 * np.sum(np.abs(spec) ** 2 * w, axis=-1) / (n * fs)
+    full = np.zeros(spec.shape[:-1] + (n // 2 + 1,), dtype=complex)
+    full[..., bins] = spec * np.sqrt(w)
+    power = np.fft.irfft(full, n=n, axis=-1) ** 2
+    k = max(1, int(round(integration_s * fs)))
+    # Sliding sums through a cumulative sum over the circularly extended signal.
+    c = np.cumsum(np.concatenate([power, power[..., : k - 1]], axis=-1), axis=-1)
+    c = np.concatenate([np.zeros(c.shape[:-1] + (1,)), c], axis=-1)
+    return (c[..., k:] - c[..., :-k]).max(axis=-1) / fs
 
 
 def felt_energy(
@@ -347,7 +376,9 @@ def felt_energy(
     Returns
     -------
     ndarray, shape (n_stimuli, n_points) (or (n_points,))
-        ``E_p / E_ref`` (dimensionless; 1 = as felt as the reference tap).
+        ``E_p / E_ref`` (dimensionless; 1 = as felt as the reference tap). With
+        ``model.integration_s`` set, both are the largest energy in any window of that
+        length instead of the whole stimulus's.
     """
     m = model or PerceptualModel()
     d = np.asarray(drives, dtype=float)
@@ -362,8 +393,7 @@ def felt_energy(
         raise StudyError("H_points was not computed on this drive length's band bins")
     spec = np.fft.rfft(d, axis=-1)[:, :, bins]  # (s, q, f)
     u = np.einsum("fpq,sqf->spf", H_points, spec)
-    e = 2.0 * np.sum(np.abs(u) ** 2 * threshold_weight(f), axis=-1) / (n * fs)
-    out = e / reference_felt_energy(fs, n, m)
+    out = _felt(u, bins, f, n, fs, m.integration_s) / reference_felt_energy(fs, n, m)
     return out[0] if single else out
 
 
