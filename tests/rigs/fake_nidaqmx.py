@@ -157,25 +157,21 @@ class _StartTrigger:
         if not self._task.device.timestamps:
             raise DaqError("Specified property is not supported by the device (FAKE)", UNSUPPORTED)
 
-    @property
-    def timestamp_enable(self):
-        self._supported()
-        return self._stamp_enabled
+    def _setting(attr):  # noqa: N805 - builds a property in the class body
+        # A start trigger property the device may not support (error -200452 there).
+        def get(self):
+            self._supported()
+            return getattr(self, attr)
 
-    @timestamp_enable.setter
-    def timestamp_enable(self, val):
-        self._supported()
-        self._stamp_enabled = bool(val)
+        def set_(self, val):
+            self._supported()
+            setattr(self, attr, val)
 
-    @property
-    def timestamp_timescale(self):
-        self._supported()
-        return self._timescale
+        return property(get, set_)
 
-    @timestamp_timescale.setter
-    def timestamp_timescale(self, val):
-        self._supported()
-        self._timescale = val
+    timestamp_enable = _setting("_stamp_enabled")
+    timestamp_timescale = _setting("_timescale")
+    del _setting
 
     @property
     def timestamp_val(self):
