@@ -57,8 +57,8 @@ def test_a_refused_drive_leaves_the_clock_where_it_was(rig):
 class _NoClock(SimulatedForearm):
     """A lab's own backend whose _play returns nothing (no device clock)."""
 
-    def _play(self, drive, n_after=0):
-        super()._play(drive, n_after)
+    def _play(self, drive):
+        super()._play(drive)
 
 
 def test_a_backend_without_a_device_clock_gives_the_host_time_only():

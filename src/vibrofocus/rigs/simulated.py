@@ -150,9 +150,13 @@ class SimulatedForearm(SimulatedArm, Rig):
         scatter = np.random.default_rng([self.participant.seed or 0, 7919]).normal(0.0, 0.03, contact.shape)
         return 1.0 * (0.6 + 0.4 * contact) + scatter
 
-    def _play(self, drive: np.ndarray, n_after: int = 0) -> DeviceOnset:
-        # The sample clock advances by every sample this play puts out (the drive, then
-        # n_after samples of silence); the onset is where it stood before.
+    def _play(self, drive: np.ndarray) -> DeviceOnset:
+        return self._output(drive, 0)
+
+    def _output(self, drive: np.ndarray, n_after: int) -> DeviceOnset:
+        """Put out a checked drive, then ``n_after`` samples of silence; return its onset."""
+        # The sample clock advances by every sample this play puts out; the onset is
+        # where it stood before.
         with self._clock_lock:
             start = self.samples_played
             self.samples_played += drive.shape[1] + n_after
@@ -164,7 +168,7 @@ class SimulatedForearm(SimulatedArm, Rig):
         return DeviceOnset(host, start / self.fs, SIMULATED_CLOCK)
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
-        self._play(drive, n_tail)
+        self._output(drive, n_tail)
         return self._measure(self.respond(drive, points_xy, n_tail))
 
     def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
@@ -173,7 +177,7 @@ class SimulatedForearm(SimulatedArm, Rig):
         if input_channel != 1:
             raise ValidationError(f"the simulated rig has one loopback input, channel 1; got {input_channel}")
         lag, tail = int(round(self.latency_s * self.fs)), int(0.05 * self.fs)
-        self._play(drive, lag + tail)
+        self._output(drive, lag + tail)
         strongest = drive[int(np.argmax(np.abs(drive).max(axis=1)))]
         return np.concatenate([np.zeros(lag), strongest, np.zeros(tail)]), self.fs
 
