@@ -488,8 +488,8 @@ class StudyEngine:
             answer_id=answer_id or response.answer_id or uuid.uuid4().hex,
             drive_sha256=None if stim is None else stim.sha256, **onsets,
         )
-        if receipt.duplicate and stim is not None:
-            # Committed before the play had ended (the web page's answer route): its onset apart.
+        if receipt.duplicate:
+            # Committed before the engine had the onset (the web page's answer route): its onset apart.
             self._log("answer_onset", presentation.trial, answer_id=receipt.answer_id, **onsets)
         self._marker("answer", presentation.onset_s + float(receipt.rt_s), presentation.trial,
                      response=list(receipt.response), rt_s=float(receipt.rt_s))

@@ -620,8 +620,9 @@ class StudyStore(StudyDatabase):
         participant is simulated, answers from the perceptual model), and the onset columns
         ``onset_host_s``, ``onset_device_s``, ``onset_clock`` (the stimulus onset on the
         host's ``time.monotonic()`` and on the rig's device clock, from the ``answer`` or
-        ``answer_onset`` event; None where the database holds none: a dry run, an answer
-        stored by an older vibrofocus). Ordered by participant (as added), study, session
+        ``answer_onset`` event; None where the database holds none: the device time of a
+        dry run or of a rig without a device clock, both times of an answer stored by
+        vibrofocus 0.1.0). Ordered by participant (as added), study, session
         and trial index.
         """
         with self._read("read the trials") as conn:
