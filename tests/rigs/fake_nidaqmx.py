@@ -182,6 +182,21 @@ class _StartTrigger:
         return self.stamp
 
 
+class _OutStream:
+    def __init__(self, task):
+        self._task = task
+
+    @property
+    def total_samp_per_chan_generated(self):
+        # The samples the sample clock has put out since the task started.
+        task = self._task
+        if task.t0 is None or task.data is None:
+            return 0
+        if task.state == "done":
+            return task.data.shape[1]
+        return min(task.data.shape[1], int((time.monotonic() - task.t0) * task.timing.samp_clk_rate))
+
+
 class FakeTask:
     """One FAKE ``nidaqmx.Task`` with the states of NI's task state model."""
 
@@ -192,6 +207,7 @@ class FakeTask:
         self.ai_channels = _AIChannels(self)
         self.timing = _Timing(self)
         self.triggers = SimpleNamespace(start_trigger=_StartTrigger(self))
+        self.out_stream = _OutStream(self)
         self.state = "verified"
         self.data: np.ndarray | None = None
         self.t0: float | None = None

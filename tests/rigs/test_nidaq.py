@@ -375,10 +375,17 @@ def test_a_stop_between_two_takes_ends_the_job(rig, device):
     rig.play(drive())  # a new job may start
 
 
-def test_fake_start_trigger_properties_exist_on_the_real_api():
-    for name in ("timestamp_enable", "timestamp_timescale", "timestamp_val"):
-        assert isinstance(getattr(StartTrigger, name), property), name
-        assert isinstance(getattr(_StartTrigger, name), property), name
+def test_fake_properties_exist_on_the_real_api():
+    from nidaqmx.task import OutStream
+
+    from .fake_nidaqmx import _OutStream
+
+    pairs = [(StartTrigger, _StartTrigger, ("timestamp_enable", "timestamp_timescale", "timestamp_val")),
+             (OutStream, _OutStream, ("total_samp_per_chan_generated",))]
+    for real, fake, names in pairs:
+        for name in names:
+            assert isinstance(getattr(real, name), property), name
+            assert isinstance(getattr(fake, name), property), name
 
 
 def test_onset_is_the_start_trigger_timestamp_where_the_device_gives_one():
@@ -398,11 +405,15 @@ def test_onset_is_the_start_trigger_timestamp_where_the_device_gives_one():
     assert rig.tasks.start_timestamp_supported is True
 
 
-def test_a_device_without_start_timestamps_gives_host_onsets_and_is_asked_once(device):
+def test_a_device_without_start_timestamps_counts_its_sample_clock_and_is_asked_once(device):
+    lengths = [1000, 250, 4000]
     with make(device) as rig:
-        onsets = [rig.play(drive()) for _ in range(2)]
-    assert [(o.device_s, o.clock) for o in onsets] == [(None, None)] * 2
-    assert onsets[1].host_s > onsets[0].host_s
+        onsets = [rig.play(drive(n)) for n in lengths]
+        assert rig.tasks.samples_generated == sum(lengths)  # read back from each task, not assumed
+    assert [o.clock for o in onsets] == ["nidaq_samples"] * 3
+    # Each onset is the samples the earlier plays generated over the rate.
+    assert [o.device_s for o in onsets] == [0.0, 1000 / FS, 1250 / FS]
+    assert onsets[2].host_s > onsets[1].host_s > onsets[0].host_s
     assert rig.tasks.start_timestamp_supported is False
     assert all(t.triggers.start_trigger.stamp is None for t in device.tasks)
 

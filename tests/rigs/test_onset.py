@@ -80,5 +80,5 @@ def test_an_onset_is_checked(kwargs, words):
 
 
 def test_every_clock_is_described():
-    assert set(CLOCKS) == {"simulated_samples", "portaudio_dac", "nidaq_start_trigger"}
+    assert set(CLOCKS) == {"simulated_samples", "portaudio_dac", "nidaq_start_trigger", "nidaq_samples"}
     assert all(isinstance(text, str) and text for text in CLOCKS.values())

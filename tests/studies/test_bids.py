@@ -64,7 +64,7 @@ def test_every_trial_of_a_simulated_study_is_an_events_row_in_pybids(study):
         # The onset on the rig's own clock, every digit as the database holds it.
         assert list(df["device_onset"]) == [r["onset_device_s"] for r in mine]
         assert set(df["device_clock"]) == {"simulated_samples"}
-        assert set(meta["device_clock"]["Levels"]) == {"simulated_samples", "portaudio_dac", "nidaq_start_trigger"}
+        assert set(meta["device_clock"]["Levels"]) == {"simulated_samples", "portaudio_dac", "nidaq_start_trigger", "nidaq_samples"}
         assert meta["device_onset"]["Units"] == "s"
         assert meta["Simulated"] is True and "not data" in meta["SimulatedModel"]
         session = meta["Sessions"][0]

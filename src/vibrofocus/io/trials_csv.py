@@ -35,9 +35,9 @@ SESSION_COLUMNS = ("session", "session_status", "dry_run")
 #: Columns of the stimulus onset a study database's export adds after :data:`SESSION_COLUMNS`:
 #: ``onset_host_s`` (host ``time.monotonic()``, s, what reaction times count from),
 #: ``onset_device_s`` (the first sample on the rig's device clock, s) and ``onset_clock``
-#: (that clock: ``simulated_samples``, ``portaudio_dac``, ``nidaq_start_trigger``). A cell
-#: is empty where no time was stored (a dry run; a rig without a device clock; an answer
-#: stored by an older vibrofocus).
+#: (that clock: ``simulated_samples``, ``portaudio_dac``, ``nidaq_start_trigger``,
+#: ``nidaq_samples``). A cell is empty where no time was stored (a dry run; a rig without a
+#: device clock; an answer stored by an older vibrofocus).
 ONSET_COLUMNS = ("onset_host_s", "onset_device_s", "onset_clock")
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.

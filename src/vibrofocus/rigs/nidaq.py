@@ -31,8 +31,10 @@ Where the device timestamps its start trigger (``StartTrigger.timestamp_enable``
 synchronised over TSN, such as the cDAQ-9185/9189), every play asks for it on the I/O
 device's timescale and reads it back after the task has run
 (:data:`~vibrofocus.rigs.onset.NIDAQ_CLOCK`). A device that does not support it (most PCI
-and USB devices) refuses the property once; from then on its onsets carry the host time
-only, with no device time.
+and USB devices) refuses the property once; from then on its onsets are on the sample
+clock's count instead (:data:`~vibrofocus.rigs.onset.NIDAQ_SAMPLES_CLOCK`): the samples the
+rig's completed output tasks generated before the play, read back from each task
+(``OutStream.total_samp_per_chan_generated``), over the rate.
 
 Voltage ranges
 --------------
@@ -56,7 +58,7 @@ from ..layout import ArrayLayout
 from .config import NidaqRigConfig
 from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
-from .onset import NIDAQ_CLOCK, DeviceOnset
+from .onset import NIDAQ_CLOCK, NIDAQ_SAMPLES_CLOCK, DeviceOnset
 
 __all__ = ["NidaqRig", "NidaqTasks"]
 
@@ -121,6 +123,8 @@ class NidaqTasks:
         self.idle_zero_supported: bool | None = None
         #: Whether the device timestamps the output task's start trigger (device-dependent).
         self.start_timestamp_supported: bool | None = None
+        #: Samples the completed output tasks generated, per channel (the sample clock's count).
+        self.samples_generated = 0
 
     # ------------------------------------------------------------------ setup checks
     def check_setup(self) -> list[str]:
@@ -317,7 +321,7 @@ class NidaqTasks:
 
         ``stops`` names what a stop ends ("play", "recording"), for its :class:`StoppedError`.
         Returns the onset: ``time.monotonic()`` at the start, and the start trigger's
-        timestamp where the device gives one.
+        timestamp where the device gives one, else the sample clock's count before it.
         """
         stamped = self._stamp_start(ao)
         self._set_active(ao)
@@ -332,7 +336,11 @@ class NidaqTasks:
             if time.monotonic() > deadline:
                 raise DeviceError(f"NI-DAQmx did not finish a {n / self.config.fs:.3f} s play in time")
             time.sleep(POLL_S)
-        return DeviceOnset(host, self._start_time_s(ao), NIDAQ_CLOCK) if stamped else DeviceOnset(host)
+        if stamped:
+            return DeviceOnset(host, self._start_time_s(ao), NIDAQ_CLOCK)
+        before = self.samples_generated
+        self.samples_generated += int(ao.out_stream.total_samp_per_chan_generated)
+        return DeviceOnset(host, before / self.config.fs, NIDAQ_SAMPLES_CLOCK)
 
     # ------------------------------------------------------------------ operations
     def play(self, volts: np.ndarray) -> DeviceOnset:

@@ -16,7 +16,11 @@ time is the clock the samples themselves run on, named by :data:`CLOCKS`:
 - ``nidaq_start_trigger``: the start trigger's timestamp of the NI-DAQmx output task
   (``StartTrigger.timestamp_val``, on the I/O device's timescale), as seconds since
   the Unix epoch. Only devices with timestamps give it (TSN-synchronised devices, such
-  as the cDAQ-9185/9189); on the others the device time is None.
+  as the cDAQ-9185/9189).
+- ``nidaq_samples``: on the other NI devices, the sample clock's count: the samples the
+  rig's output tasks generated before this play (``OutStream.total_samp_per_chan_generated``
+  of each completed play, summed) divided by the rate. Like the simulated clock, it
+  stands still between plays.
 """
 
 from __future__ import annotations
@@ -26,11 +30,12 @@ from dataclasses import dataclass
 
 from ..errors import ValidationError
 
-__all__ = ["DeviceOnset", "CLOCKS", "SIMULATED_CLOCK", "PORTAUDIO_CLOCK", "NIDAQ_CLOCK"]
+__all__ = ["DeviceOnset", "CLOCKS", "SIMULATED_CLOCK", "PORTAUDIO_CLOCK", "NIDAQ_CLOCK", "NIDAQ_SAMPLES_CLOCK"]
 
 SIMULATED_CLOCK = "simulated_samples"
 PORTAUDIO_CLOCK = "portaudio_dac"
 NIDAQ_CLOCK = "nidaq_start_trigger"
+NIDAQ_SAMPLES_CLOCK = "nidaq_samples"
 #: Every device clock an onset may name, with what its seconds count.
 CLOCKS: dict[str, str] = {
     SIMULATED_CLOCK: "the simulated rig's sample clock: samples played before this play / rate (stands still "
@@ -39,6 +44,8 @@ CLOCKS: dict[str, str] = {
                      "frame time since the stream opened / rate, plus the playback latency)",
     NIDAQ_CLOCK: "the NI-DAQmx output task's start trigger timestamp, on the I/O device's timescale, seconds since "
                  "the Unix epoch",
+    NIDAQ_SAMPLES_CLOCK: "the NI-DAQmx sample clock's count: samples the rig's completed output tasks generated "
+                         "before this play / rate (stands still between plays)",
 }
 
 

@@ -453,7 +453,7 @@ class StudyStore(StudyDatabase):
             (:class:`~vibrofocus.rigs.DeviceOnset`), kept beside ``onset_s``.
         onset_clock : str, optional
             That clock's name (``simulated_samples``, ``portaudio_dac``,
-            ``nidaq_start_trigger``); given with ``onset_device_s``.
+            ``nidaq_start_trigger``, ``nidaq_samples``); given with ``onset_device_s``.
 
         Returns
         -------
