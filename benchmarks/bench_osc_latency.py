@@ -32,6 +32,7 @@ from pythonosc.udp_client import SimpleUDPClient
 
 from vibrofocus.realtime import OscTapServer, TapDesigner
 from vibrofocus.rendering import TransferMatrix
+from vibrofocus.rigs import DeviceOnset
 from vibrofocus.rigs.simulated import SimulatedForearm
 
 
@@ -51,10 +52,11 @@ class TimedForearm(SimulatedForearm):
     def _clock(self) -> float:
         return self._t
 
-    def _play(self, drive: np.ndarray) -> None:
+    def _play(self, drive: np.ndarray) -> DeviceOnset:
         self.handed_s.append(time.perf_counter())
-        super()._play(drive)
+        onset = super()._play(drive)
         self._t += drive.shape[1] / self.fs
+        return onset
 
 
 @contextlib.contextmanager
@@ -68,10 +70,11 @@ def jack_rig():
             super().__init__(*args, **kwargs)
             self.handed_s: list[float] = []
 
-        def _play(self, drive: np.ndarray) -> None:
+        def _play(self, drive: np.ndarray) -> DeviceOnset:
             handed = time.perf_counter()
-            super()._play(drive)
+            onset = super()._play(drive)
             self.handed_s.append(handed)  # a play the stream lost (an xrun) is no tap played
+            return onset
 
     name = f"vibrofocus-bench-{os.getpid()}"
     os.environ["JACK_DEFAULT_SERVER"], os.environ["JACK_NO_START_SERVER"] = name, "1"

@@ -7,7 +7,11 @@ state; a write to channels another task reserved fails with error -50103; analog
 hold their last value when a task stops or aborts, unless the channel's idle output
 behaviour is zero volts on a device that supports it; the sample clock is coerced to a
 divisor of the timebase. Finite tasks take real time (``n / rate``), so a stop from
-another thread meets a task that is really running.
+another thread meets a task that is really running. A device made with ``timestamps=True``
+timestamps a task's start trigger when asked (on the others the property is unsupported,
+error -200452), and ``loopback`` wires an output to an input: an input task started on
+the output's start trigger reads what that output played, ``loopback_delay`` samples
+late.
 
 Every method here exists on the real ``nidaqmx`` classes with the same parameter names
 (checked by ``test_fake_matches_the_real_api``).
@@ -17,6 +21,7 @@ from __future__ import annotations
 
 import threading
 import time
+from datetime import datetime, timezone
 from types import SimpleNamespace
 
 import numpy as np
@@ -34,7 +39,7 @@ class FakeDevice:
 
     def __init__(self, name="Dev1", *, n_ao=4, n_ai=8, idle_zero=True, timebase_hz=100e6,
                  ao_max_rate=2e6, ai_max_rate=2e6, ao_ranges=(-10.0, 10.0, -5.0, 5.0, -1.0, 1.0),
-                 product_type="PCIe-6361 (FAKE)"):
+                 product_type="PCIe-6361 (FAKE)", timestamps=False, loopback=None, loopback_delay=0):
         self.name = name
         self.product_type = product_type
         self.ao_names = [f"{name}/ao{i}" for i in range(n_ao)]
@@ -51,6 +56,10 @@ class FakeDevice:
         self.fail: dict[str, DaqError] = {}  # method name -> error raised once by the next task calling it
         self.tasks: list[FakeTask] = []
         self.events: list[tuple[int, str]] = []
+        self.timestamps = timestamps
+        self.loopback: dict[str, str] = dict(loopback or {})  # "Dev1/ai3" -> "Dev1/ao1"
+        self.loopback_delay = loopback_delay
+        self.last_output: FakeTask | None = None  # the output task that started last
 
     def factory(self):
         task = FakeTask(self)
@@ -134,11 +143,58 @@ class _Timing:
 
 
 class _StartTrigger:
-    def __init__(self):
+    def __init__(self, task):
+        self._task = task
         self.source = None
+        self._stamp_enabled = False
+        self._timescale = None
+        self.stamp: datetime | None = None  # set when the task starts with timestamps enabled
 
     def cfg_dig_edge_start_trig(self, trigger_source, trigger_edge=None):
         self.source = trigger_source
+
+    def _supported(self):
+        if not self._task.device.timestamps:
+            raise DaqError("Specified property is not supported by the device (FAKE)", UNSUPPORTED)
+
+    def _setting(attr):  # noqa: N805 - builds a property in the class body
+        # A start trigger property the device may not support (error -200452 there).
+        def get(self):
+            self._supported()
+            return getattr(self, attr)
+
+        def set_(self, val):
+            self._supported()
+            setattr(self, attr, val)
+
+        return property(get, set_)
+
+    timestamp_enable = _setting("_stamp_enabled")
+    timestamp_timescale = _setting("_timescale")
+    del _setting
+
+    @property
+    def timestamp_val(self):
+        self._supported()
+        if self.stamp is None:
+            raise DaqError("The start trigger has no timestamp: the task did not start with it enabled (FAKE)",
+                           -209830)
+        return self.stamp
+
+
+class _OutStream:
+    def __init__(self, task):
+        self._task = task
+
+    @property
+    def total_samp_per_chan_generated(self):
+        # The samples the sample clock has put out since the task started.
+        task = self._task
+        if task.t0 is None or task.data is None:
+            return 0
+        if task.state == "done":
+            return task.data.shape[1]
+        return min(task.data.shape[1], int((time.monotonic() - task.t0) * task.timing.samp_clk_rate))
 
 
 class FakeTask:
@@ -150,7 +206,8 @@ class FakeTask:
         self.ao_channels = _AOChannels(self)
         self.ai_channels = _AIChannels(self)
         self.timing = _Timing(self)
-        self.triggers = SimpleNamespace(start_trigger=_StartTrigger())
+        self.triggers = SimpleNamespace(start_trigger=_StartTrigger(self))
+        self.out_stream = _OutStream(self)
         self.state = "verified"
         self.data: np.ndarray | None = None
         self.t0: float | None = None
@@ -231,6 +288,11 @@ class FakeTask:
             self._reserve()
             self.state = "running"
             self.t0 = time.monotonic()
+            trigger = self.triggers.start_trigger
+            if trigger._stamp_enabled:
+                trigger.stamp = datetime.now(timezone.utc)
+            if self.ao_channels.channels:
+                self.device.last_output = self
 
     def is_task_done(self):
         with self.device.lock:
@@ -245,7 +307,15 @@ class FakeTask:
         self._call("read")
         if self.device.reads:
             return self.device.reads.pop(0)
-        return np.zeros(number_of_samples_per_channel).tolist()
+        n = number_of_samples_per_channel
+        wired = [self.device.loopback.get(c.name) for c in self.ai_channels.channels]
+        source = self.device.last_output
+        out = np.zeros(n)
+        on_output_start = self.triggers.start_trigger.source == f"/{self.device.name}/ao/StartTrigger"
+        if len(wired) == 1 and wired[0] and source is not None and on_output_start:
+            played = np.concatenate([np.zeros(self.device.loopback_delay), source.data[source._channels().index(wired[0])]])
+            out[:min(n, played.size)] = played[:n]
+        return out.tolist()
 
     def stop(self):
         with self.device.lock:

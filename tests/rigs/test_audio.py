@@ -193,10 +193,10 @@ def _with_status(rig, flags_for_call):
     calls = []
 
     def run(block, record, what):
-        recorded, status = real(block, record, what)
+        recorded, status, onset = real(block, record, what)
         calls.append(status)
         status |= sd.CallbackFlags(flags_for_call(len(calls)))
-        return recorded, status
+        return recorded, status, onset
 
     return mock.patch.object(rig, "_run_stream", run), calls
 
@@ -317,6 +317,16 @@ def test_the_whole_drive_plays_including_its_fade_out(rig):
     played = rig.check(drive)[0] / (GAIN * VFS_OUT)  # digital level of what was asked
     expected_energy = np.sum(played**2) * JACK_RATE / FS
     np.testing.assert_allclose(np.sum(x.astype(float) ** 2), expected_energy, rtol=0.02)
+
+
+def test_every_play_returns_its_onset_on_the_portaudio_dac_clock(rig):
+    # Through JACK, PortAudio's stream clock is JACK's frame time since the stream opened:
+    # each play's own stream, so each onset is on a clock of its own, from zero.
+    onsets = [rig.play(pulse_drive()) for _ in range(2)]
+    for onset in onsets:
+        assert onset.clock == "portaudio_dac"
+        assert np.isfinite(onset.device_s) and onset.device_s >= 0.0
+    assert onsets[1].host_s > onsets[0].host_s
 
 
 def test_a_second_job_on_the_device_is_refused(rig, jack_server):

@@ -373,3 +373,70 @@ def test_a_stop_between_two_takes_ends_the_job(rig, device):
             rig.play_and_record(drive(), tail_s=0.0)
         assert all(not t.written or not np.any(t.written[0]) for t in device.tasks[n_tasks:])  # only zeros
     rig.play(drive())  # a new job may start
+
+
+def test_fake_properties_exist_on_the_real_api():
+    from nidaqmx.task import OutStream
+
+    from .fake_nidaqmx import _OutStream
+
+    pairs = [(StartTrigger, _StartTrigger, ("timestamp_enable", "timestamp_timescale", "timestamp_val")),
+             (OutStream, _OutStream, ("total_samp_per_chan_generated",))]
+    for real, fake, names in pairs:
+        for name in names:
+            assert isinstance(getattr(real, name), property), name
+            assert isinstance(getattr(fake, name), property), name
+
+
+def test_onset_is_the_start_trigger_timestamp_where_the_device_gives_one():
+    from nidaqmx.constants import Timescale
+
+    device = FakeDevice(timestamps=True, product_type="cDAQ-9185 (FAKE)")
+    with make(device) as rig:
+        first, second = rig.play(drive()), rig.play(drive())
+    plays = [t for t in ao_tasks(device) if t.triggers.start_trigger.stamp is not None]
+    assert len(plays) == 2
+    for onset, task in zip((first, second), plays):
+        trigger = task.triggers.start_trigger
+        assert (trigger.timestamp_enable, trigger.timestamp_timescale) == (True, Timescale.USE_IO_DEVICE)
+        assert onset.clock == "nidaq_start_trigger"
+        assert onset.device_s == trigger.stamp.timestamp()  # read back, to the microsecond it holds
+    assert second.device_s > first.device_s and second.host_s > first.host_s
+    assert rig.tasks.start_timestamp_supported is True
+
+
+def test_a_device_without_start_timestamps_counts_its_sample_clock_and_is_asked_once(device):
+    lengths = [1000, 250, 4000]
+    with make(device) as rig:
+        onsets = [rig.play(drive(n)) for n in lengths]
+        assert rig.tasks.samples_generated == sum(lengths)  # read back from each task, not assumed
+    assert [o.clock for o in onsets] == ["nidaq_samples"] * 3
+    # Each onset is the samples the earlier plays generated over the rate.
+    assert [o.device_s for o in onsets] == [0.0, 1000 / FS, 1250 / FS]
+    assert onsets[2].host_s > onsets[1].host_s > onsets[0].host_s
+    assert rig.tasks.start_timestamp_supported is False
+    assert all(t.triggers.start_trigger.stamp is None for t in device.tasks)
+
+
+def test_latency_through_a_loopback_is_its_delay_in_samples():
+    from vibrofocus.realtime import measure_latency
+
+    delay = 3
+    device = FakeDevice(loopback={"Dev1/ai5": "Dev1/ao1"}, loopback_delay=delay)
+    with make(device) as rig:
+        report = measure_latency(rig, count=3, spacing_s=0.0, loopback=6, channel=2, amplitude_v=1.0)
+    # The input starts on the output's start trigger: the only delay is the wire's.
+    np.testing.assert_allclose(report.latencies_s, delay / FS, atol=1e-9)
+    assert report.input_fs == FS
+    ai = [t for t in device.tasks if t.ai_channels.channels]
+    assert [c.name for t in ai for c in t.ai_channels.channels] == ["Dev1/ai5"] * 3
+    assert all(t.triggers.start_trigger.source == "/Dev1/ao/StartTrigger" for t in ai)
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+
+
+def test_latency_on_an_input_the_device_lacks_names_it(device):
+    from vibrofocus.realtime import measure_latency
+
+    with make(device) as rig, pytest.raises(DeviceError, match="Dev1/ai8 does not exist"):
+        measure_latency(rig, count=2, spacing_s=0.0, loopback=9, channel=1)
+    np.testing.assert_array_equal(device.output_vector(), 0.0)

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from vibrofocus.cli.main import app
 from vibrofocus.layout import ArrayLayout
 from vibrofocus.studies import TRIALS_COLUMNS, StudyStore
-from vibrofocus.studies.export import SESSION_COLUMNS
+from vibrofocus.studies.export import ONSET_COLUMNS, SESSION_COLUMNS
 from vibrofocus.simulation.simulate import participant_seeds, simulate_studies
 
 pytestmark = pytest.mark.slow
@@ -34,9 +34,13 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         reader = csv.reader(fh)
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
-    # A database export: the contract's columns, the session columns, then the flag that
-    # these participants are simulated (a model, not data).
-    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS + ("simulated",)
+    # A database export: the contract's columns, the session columns, the onset columns, then
+    # the flag that these participants are simulated (a model, not data).
+    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + ("simulated",)
+    assert {r["onset_clock"] for r in rows} == {"simulated_samples"}
+    for session in {r["session"] for r in rows}:  # the rig's sample clock runs on through a session
+        device = [float(r["onset_device_s"]) for r in rows if r["session"] == session]
+        assert all(b > a for a, b in zip(device, device[1:]))
     assert {r["dry_run"] for r in rows} == {"0"}, "simulated sessions are calibrated"
     assert {r["simulated"] for r in rows} == {"1"}
     assert len(rows) == 3 * 2 * 86

@@ -61,6 +61,11 @@ def test_every_trial_of_a_simulated_study_is_an_events_row_in_pybids(study):
         assert list(df["trial"]) == [r["trial"] for r in mine] and list(df["method"]) == [r["method"] for r in mine]
         assert list(df["response_time"]) == pytest.approx([r["rt_s"] for r in mine], abs=0)
         assert df["onset"].iloc[0] == 0 and (df["onset"].diff().iloc[1:] >= 0).all()
+        # The onset on the rig's own clock, every digit as the database holds it.
+        assert list(df["device_onset"]) == [r["onset_device_s"] for r in mine]
+        assert set(df["device_clock"]) == {"simulated_samples"}
+        assert set(meta["device_clock"]["Levels"]) == {"simulated_samples", "portaudio_dac", "nidaq_start_trigger", "nidaq_samples"}
+        assert meta["device_onset"]["Units"] == "s"
         assert meta["Simulated"] is True and "not data" in meta["SimulatedModel"]
         session = meta["Sessions"][0]
         assert session["Rig"] == "simulated" and session["SkinPreset"] == STUDY_SKIN  # simulate-study's default
@@ -96,6 +101,20 @@ def test_a_trials_csv_exports_the_same_rows_without_times_and_analyze_reads_the_
         reports[name].pop("source")
     assert reports["bids"] == reports["csv"]
     assert reports["bids"]["simulated"]["any"] is True
+
+
+def test_a_dataset_written_before_the_device_columns_is_still_read(study):
+    from vibrofocus.io.bids import read_bids_trials_table
+
+    root, db, _ = study
+    out = root / "bids-old"
+    assert runner.invoke(app, ["export", str(db), "--bids", str(out)]).exit_code == 0
+    new = read_bids_trials_table(out)
+    for path in out.glob("sub-*/beh/*_events.tsv"):  # as an older vibrofocus wrote it
+        lines = [line.split("\t")[:-2] for line in path.read_text().splitlines()]
+        path.write_text("".join("\t".join(cells) + "\n" for cells in lines))
+    old = read_bids_trials_table(out)
+    assert old.equals(new)
 
 
 def test_the_export_never_replaces_its_input_and_keeps_the_users_files(study):

@@ -215,3 +215,81 @@ def test_a_failing_rig_is_logged_and_the_session_resumes(store, renderer):
     (event,) = store.events(sid, kind="error")
     assert "interface unplugged" in event.payload["message"]
     assert store.session(sid).status == "running" and store.answers(sid) == []
+
+
+def test_device_onsets_reach_the_answers_and_the_trials_export(store, rig, renderer, tmp_path):
+    from vibrofocus.studies.export import read_trials_csv
+
+    sid = _small(store)
+    StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([4, 6]))
+    rows = store.trial_rows()
+    # The simulated sample clock: each trial starts after the N samples of every drive before it.
+    assert [r["onset_device_s"] for r in rows] == [0.0, N / rig.fs]
+    assert [r["onset_clock"] for r in rows] == ["simulated_samples"] * 2
+    answers = store.events(sid, kind="answer")
+    assert [r["onset_host_s"] for r in rows] == [e.payload["onset_s"] for e in answers]
+    assert rows[1]["onset_host_s"] > rows[0]["onset_host_s"]
+    assert [e.payload["onset_device_s"] for e in answers] == [0.0, N / rig.fs]
+    store.export_trials_csv(tmp_path / "t.csv")
+    back = read_trials_csv(tmp_path / "t.csv")
+    for key in ("onset_host_s", "onset_device_s", "onset_clock"):
+        assert [r[key] for r in back] == [r[key] for r in rows]  # every digit kept
+
+
+def test_a_dry_run_and_an_older_answer_have_no_onsets(store, tmp_path):
+    from vibrofocus.studies.export import read_trials_csv
+
+    dry = _small(store)
+    StudyEngine(store, dry, None, dry_run=True).run(Scripted([4, 6]))
+    old = _small(store)  # answered as an older vibrofocus did: no onset in the answer event
+    store.record_answer(old, 0, 4, 0.7, answer_id="old-0")
+    for row in store.trial_rows():
+        if row["session_id"] == dry:
+            assert row["onset_host_s"] is not None
+        assert (row["onset_device_s"], row["onset_clock"]) == (None, None)
+    assert [r["onset_host_s"] for r in store.trial_rows() if r["session_id"] == old] == [None]
+    store.export_trials_csv(tmp_path / "t.csv")
+    line = (tmp_path / "t.csv").read_text().splitlines()[-1]
+    assert line.endswith(",,,")  # the old answer: three empty onset cells
+    assert read_trials_csv(tmp_path / "t.csv")[-1]["onset_clock"] is None
+
+
+class CommitsItself(Scripted):
+    """A responder whose answers are committed before the play's onset is known (the web page's)."""
+
+    def __init__(self, store, script):
+        super().__init__(script)
+        self.store = store
+
+    def respond(self, presentation):
+        reply = super().respond(presentation)
+        answer_id = f"page-{presentation.trial.trial_index}"
+        self.store.record_answer(presentation.session_id, presentation.trial.trial_index, reply.locations, reply.rt_s,
+                                 answer_id=answer_id, require_presented=True)
+        return Response(reply.locations, reply.rt_s, answer_id=answer_id)
+
+
+def test_an_answer_committed_before_the_onset_gets_it_from_an_answer_onset_event(store, rig, renderer):
+    sid = _small(store)
+    StudyEngine(store, sid, rig, renderer=renderer).run(CommitsItself(store, [4, 6]))
+    assert all("onset_device_s" not in e.payload for e in store.events(sid, kind="answer"))
+    extra = store.events(sid, kind="answer_onset")
+    assert [(e.payload["answer_id"], e.payload["onset_device_s"]) for e in extra] == [("page-0", 0.0),
+                                                                                      ("page-1", N / rig.fs)]
+    rows = store.trial_rows()
+    assert [r["onset_device_s"] for r in rows] == [0.0, N / rig.fs]
+    assert [r["onset_host_s"] for r in rows] == [e.payload["onset_s"] for e in extra]
+
+
+@pytest.mark.parametrize("onsets, words", [
+    ({"onset_device_s": 1.0}, "come together"),
+    ({"onset_clock": "portaudio_dac"}, "come together"),
+    ({"onset_device_s": float("nan"), "onset_clock": "portaudio_dac"}, "finite"),
+    ({"onset_s": "soon"}, "finite"),
+    ({"onset_device_s": 1.0, "onset_clock": "Wall Clock"}, "clock's name"),
+])
+def test_a_bad_onset_stores_nothing(store, onsets, words):
+    sid = _small(store)
+    with pytest.raises(StudyError, match=words):
+        store.record_answer(sid, 0, 5, 0.5, answer_id="a0", **onsets)
+    assert store.answers(sid) == [] and store.events(sid, kind="answer") == []

@@ -84,6 +84,8 @@ def test_simulate_study_sends_one_marker_per_cue_onset_and_answer_at_the_stored_
     for (m, _), row in zip(onsets, rows):
         assert (m["participant"], m["study"], m["trial"], m["phase"], m["method"], m["target"], m["response"]) == (
             row["participant"], row["study"], row["trial"], row["phase"], row["method"], row["target"], None)
+        # The onset on the rig's own clock, as the database stores it (JSON keeps every digit).
+        assert (m["onset_device_s"], m["onset_clock"]) == (row["onset_device_s"], "simulated_samples")
     answered = [m for m, _ in markers if m["event"] == "answer"]
     assert [" ".join(map(str, m["response"])) for m in answered] == [r["response"] for r in rows]
     # Stamps: each onset's stored host time on LSL's clock; each answer at onset + response time.

@@ -228,8 +228,9 @@ def test_export_writes_only_answered_trials_in_order(store, session, tmp_path):
     out = tmp_path / "trials.csv"
     assert store.export_trials_csv(out) == 7
     lines = out.read_text().splitlines()
-    # The contract's columns first, in order, then the session's (id, status, dry run).
-    assert lines[0] == "participant,study,phase,trial,method,target,response,rt_s,session,session_status,dry_run"
+    # The contract's columns first, in order, then the session's (id, status, dry run), then the onset's.
+    assert lines[0] == ("participant,study,phase,trial,method,target,response,rt_s,session,session_status,dry_run,"
+                        "onset_host_s,onset_device_s,onset_clock")
     plan = store.planned_trials(session)
     fields = [line.split(",") for line in lines[1:]]
     assert [f[2] for f in fields] == ["training"] * 5 + ["main"] * 2

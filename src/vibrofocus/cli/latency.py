@@ -24,7 +24,7 @@ def latency(
     rig_config: Path | None = typer.Option(None, "--rig-config", help=RIG_CONFIG_HELP),
     loopback: int = typer.Option(1, "--loopback", min=1, max=256,
                                  help="Input channel the loopback cable comes back on (1-based; the simulated "
-                                      "rig has input 1)."),
+                                      "rig has input 1; on nidaq, input k is ai<k-1>)."),
     channel: int = typer.Option(1, "--channel", min=1, max=256, help="Actuator output the clicks play on (1-based)."),
     count: int = typer.Option(100, "--count", "-n", min=COUNT_RANGE[0], max=COUNT_RANGE[1], help="Clicks."),
     spacing: float = typer.Option(0.2, "--spacing", min=0.0, max=60.0,

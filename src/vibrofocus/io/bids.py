@@ -40,9 +40,13 @@ TASKS = {1: "localization1", 2: "localization2"}
 #: Columns of every events file, in order: BIDS's ``onset`` and ``duration`` first, then
 #: the trial (``trial_type``, ``method``, ``target``, ``response``, ``response_time``,
 #: ``phase``), then where it sits in the study (``trial``, ``session_id``,
-#: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity).
+#: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity), then the
+#: stimulus onset on the rig's own clock (``device_onset``, ``device_clock``; a dataset
+#: written before they existed is read without them).
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
-                 "trial", "session_id", "session_status", "dry_run")
+                 "trial", "session_id", "session_status", "dry_run", "device_onset", "device_clock")
+#: The columns :func:`read_bids_trials_table` needs (every events file has had them).
+_REQUIRED_COLUMNS = EVENT_COLUMNS[:-2]
 #: The sidecar's description of each column of :data:`EVENT_COLUMNS` (BIDS "column
 #: description": LongName, Description, Units, Levels).
 EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
@@ -83,6 +87,13 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
     "dry_run": {"LongName": "dry run",
                 "Description": "Whether the session ran without a calibration (nothing was played).",
                 "Levels": {"0": "stimuli were played", "1": "dry run: nothing was played"}},
+    "device_onset": {"LongName": "stimulus onset on the device clock",
+                     "Description": "The drive's first sample on the rig's own clock (device_clock says which), as "
+                                    "the rig reported it; n/a for a dry run, a rig without a device clock, or a "
+                                    "source that stored none.",
+                     "Units": "s"},
+    "device_clock": {"LongName": "device clock",
+                     "Description": "The clock device_onset is on."},
 }
 _LABEL = re.compile(r"[^A-Za-z0-9]")
 _NA = "n/a"
@@ -254,8 +265,8 @@ def read_bids_trials_table(root: str | os.PathLike):
             events = _read_tsv(path)
         except (OSError, csv.Error, UnicodeDecodeError) as exc:
             raise ValidationError(f"cannot read the events file {path}: {exc}") from exc
-        if events and set(EVENT_COLUMNS) - set(events[0]):
-            missing = sorted(set(EVENT_COLUMNS) - set(events[0]))
+        if events and set(_REQUIRED_COLUMNS) - set(events[0]):
+            missing = sorted(set(_REQUIRED_COLUMNS) - set(events[0]))
             raise ValidationError(f"the events file {path} lacks the column(s) {', '.join(missing)}")
         for ev in events:
             rows.append({

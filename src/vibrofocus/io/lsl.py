@@ -1,7 +1,8 @@
 """Lab Streaming Layer markers: one ``vibrofocus-markers`` outlet of type ``Markers``.
 
 Each marker is one JSON string (a plain record: ``event``, ``participant``, ``study``,
-``trial``, ``method``, ``target``, ``response``, ...) stamped with the time of the event
+``trial``, ``method``, ``target``, ``response``, ...; a stimulus onset also carries
+``onset_device_s`` and ``onset_clock``, the onset on the rig's own clock) stamped with the time of the event
 itself on LSL's clock (:func:`pylsl.local_clock`), not the time it was sent: the host's
 ``time.monotonic()`` of the event is mapped onto LSL's clock with an offset measured when
 the outlet opens. An EEG, EMG or motion-capture recording then has the stimulus onsets on

@@ -8,6 +8,8 @@ When some participant is simulated (key ``simulated`` of the rows, as the study
 database's rows have), a last column ``simulated`` (``1`` / ``0``) follows: answers of
 simulated participants come from a perceptual model, not from people, and the analysis
 flags them. A file of real participants only has exactly the columns above.
+A study database's export has :data:`SESSION_COLUMNS` and :data:`ONSET_COLUMNS` between
+the contract's columns and ``simulated``.
 """
 
 from __future__ import annotations
@@ -21,8 +23,8 @@ from typing import Any
 from ..errors import StudyError, ValidationError
 from .responses import format_response, parse_response_text
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv",
-           "read_trials_table"]
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv",
+           "read_trials_csv", "read_trials_table"]
 
 #: Columns of the trials file, in order.
 TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
@@ -30,12 +32,20 @@ TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", 
 #: its status (``planned``, ``running``, ``paused``, ``aborted``, ``completed``) and
 #: ``dry_run`` (1 when the session had no calibration, so nothing was played; else 0).
 SESSION_COLUMNS = ("session", "session_status", "dry_run")
+#: Columns of the stimulus onset a study database's export adds after :data:`SESSION_COLUMNS`:
+#: ``onset_host_s`` (host ``time.monotonic()``, s, what reaction times count from),
+#: ``onset_device_s`` (the first sample on the rig's device clock, s) and ``onset_clock``
+#: (that clock: ``simulated_samples``, ``portaudio_dac``, ``nidaq_start_trigger``,
+#: ``nidaq_samples``). A cell is empty where no time was stored (a dry run; a rig without a
+#: device clock; an answer stored by an older vibrofocus).
+ONSET_COLUMNS = ("onset_host_s", "onset_device_s", "onset_clock")
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
 
 
-def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False) -> int:
+def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
+                     onsets: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -54,6 +64,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
         Destination CSV file; its folder must exist.
     sessions : bool
         Also write :data:`SESSION_COLUMNS` (then each row needs those keys too).
+    onsets : bool
+        Also write :data:`ONSET_COLUMNS` (keys of the rows; a missing key or None is an
+        empty cell).
 
     Returns
     -------
@@ -70,7 +83,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + ((SIMULATED_COLUMN,) if with_flag else ()))
+        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
+                        + ((SIMULATED_COLUMN,) if with_flag else ()))
         for row in rows:
             response = row["response"]
             if not isinstance(response, str):
@@ -82,11 +96,19 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
             ]
             if sessions:
                 values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"]))]
+            if onsets:
+                values += [_seconds_cell(row.get("onset_host_s")), _seconds_cell(row.get("onset_device_s")),
+                           row.get("onset_clock") or ""]
             if with_flag:
                 values.append(int(bool(row.get(SIMULATED_COLUMN))))
             writer.writerow(values)
             n += 1
     return n
+
+
+def _seconds_cell(value: Any) -> str:
+    # repr keeps every digit: a stored time round-trips exactly; None is an empty cell.
+    return "" if value is None else repr(float(value))
 
 
 def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
@@ -113,7 +135,8 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS) for f in ((), (SIMULATED_COLUMN,))]
+            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS)
+                       for f in ((), (SIMULATED_COLUMN,))]
             if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
             columns = tuple(header)
@@ -128,6 +151,10 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                     if "session" in row:
                         row["session"] = int(row["session"])
                         row["dry_run"] = bool(int(row["dry_run"]))
+                    if "onset_clock" in row:
+                        for key in ("onset_host_s", "onset_device_s"):
+                            row[key] = float(row[key]) if row[key] else None
+                        row["onset_clock"] = row["onset_clock"] or None
                     row["study"] = int(row["study"])
                     row["trial"] = int(row["trial"])
                     row["target"] = int(row["target"])

@@ -149,13 +149,14 @@ def measure_latency(rig: Any, *, count: int, spacing_s: float, loopback: int, ch
     Parameters
     ----------
     rig : Rig
-        A rig with :meth:`~vibrofocus.rigs.Rig.play_and_capture` (simulated, audio).
+        A rig with :meth:`~vibrofocus.rigs.Rig.play_and_capture` (simulated, audio, nidaq).
     count : int
         Clicks, >= 2.
     spacing_s : float
         Time from one click's play to the next, s (a play longer than it follows at once).
     loopback : int
-        The input channel the loopback comes back on (1-based).
+        The input channel the loopback comes back on (1-based; on the nidaq rig, input
+        ``k`` is the device's ``ai<k-1>``).
     channel : int
         The actuator output the clicks play on (1-based).
     amplitude_v : float

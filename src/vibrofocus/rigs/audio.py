@@ -45,8 +45,10 @@ Audio interfaces are AC-coupled, so this rig cannot read strap force sensors.
 from __future__ import annotations
 
 import logging
+import math
 import re
 import threading
+import time
 from fractions import Fraction
 
 import numpy as np
@@ -58,6 +60,7 @@ from ..layout import ArrayLayout
 from .config import AudioRigConfig
 from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
+from .onset import PORTAUDIO_CLOCK, DeviceOnset
 
 __all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface"]
 
@@ -342,11 +345,13 @@ class AudioRig(HardwareRig):
         """Buffered output latency of the last stream, s (what a stop cannot recall)."""
         return self._output_latency_s
 
-    def _run_stream(self, block: np.ndarray, record: bool, what: str) -> tuple[np.ndarray | None, object]:
+    def _run_stream(self, block: np.ndarray, record: bool, what: str) -> tuple[np.ndarray | None, object, DeviceOnset]:
         """Play ``block`` (n_frames, n_out) through a stream of its own; record if asked.
 
-        Returns the recorded input (n_frames, n_in), zeros where nothing came, and the
-        stream's status flags over the whole run.
+        Returns the recorded input (n_frames, n_in), zeros where nothing came, the
+        stream's status flags over the whole run, and the onset of the block's first
+        frame: ``time.monotonic()`` in the first callback and that callback's
+        ``outputBufferDacTime`` (:data:`~vibrofocus.rigs.onset.PORTAUDIO_CLOCK`).
         """
         sd = _sounddevice()
         n_out, n_in = max(self._out_channels), max(self._in_channels)
@@ -354,11 +359,13 @@ class AudioRig(HardwareRig):
         in_cols = [c - 1 for c in self._in_channels]
         total = len(block)
         recorded = np.zeros((total, len(in_cols)), np.float32) if record else None
-        state = {"pos": 0, "status": sd.CallbackFlags()}
+        state = {"pos": 0, "status": sd.CallbackFlags(), "onset": None}
         done = threading.Event()
 
-        def fill(outdata, frames):
+        def fill(outdata, frames, time_info):
             pos = state["pos"]
+            if state["onset"] is None:  # the first callback: the block's first frame goes out now
+                state["onset"] = (time.monotonic(), float(time_info.outputBufferDacTime))
             outdata.fill(0)
             if self._abort.is_set():
                 raise sd.CallbackAbort
@@ -368,7 +375,7 @@ class AudioRig(HardwareRig):
 
         def duplex(indata, outdata, frames, time_info, status):
             state["status"] |= status
-            pos, n = fill(outdata, frames)
+            pos, n = fill(outdata, frames, time_info)
             recorded[pos:pos + n] = indata[:n, in_cols]
             state["pos"] = pos + n
             if state["pos"] >= total:
@@ -376,7 +383,7 @@ class AudioRig(HardwareRig):
 
         def output_only(outdata, frames, time_info, status):
             state["status"] |= status
-            pos, n = fill(outdata, frames)
+            pos, n = fill(outdata, frames, time_info)
             state["pos"] = pos + n
             if state["pos"] >= total:
                 raise sd.CallbackStop
@@ -413,7 +420,9 @@ class AudioRig(HardwareRig):
         if state["pos"] < total:
             raise DeviceError(f"the audio interface took {state['pos']} of the {total} frames while {what}; "
                               "the rest never played")
-        return recorded, state["status"]
+        host, dac = state["onset"]
+        onset = DeviceOnset(host, dac, PORTAUDIO_CLOCK) if math.isfinite(dac) else DeviceOnset(host)
+        return recorded, state["status"], onset
 
     def _padded(self, block: np.ndarray) -> np.ndarray:
         # Silence after the drive, longer than what the interface buffers: the fade-out
@@ -421,10 +430,11 @@ class AudioRig(HardwareRig):
         n_pad = int(np.ceil(max(self._output_latency_s, 0.05) * self.device_fs)) + 4096
         return np.concatenate([block, np.zeros((n_pad, block.shape[1]), np.float32)])
 
-    def _play(self, drive: np.ndarray) -> None:
+    def _play(self, drive: np.ndarray) -> DeviceOnset:
         block = self._padded(self._to_device(drive, n_tail=0))
-        _, status = self._run_stream(block, record=False, what="playing")
+        _, status, onset = self._run_stream(block, record=False, what="playing")
         self._check_status(status, "playing")
+        return onset
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         has_loopback = self.config.channels.loopback_output is not None
@@ -439,7 +449,7 @@ class AudioRig(HardwareRig):
         max_lag = int(np.ceil(self.config.max_latency_s * self.device_fs))
         padded = np.concatenate([block, np.zeros((max_lag, block.shape[1]), np.float32)])
         for attempt in range(self.config.xrun_retries + 1):
-            recorded, status = self._run_stream(padded, record=True, what="recording")
+            recorded, status, _ = self._run_stream(padded, record=True, what="recording")
             try:
                 self._check_status(status, "recording")
                 break
@@ -470,7 +480,7 @@ class AudioRig(HardwareRig):
         kept = self._in_channels
         self._in_channels = [input_channel]
         try:
-            recorded, status = self._run_stream(block, record=True, what=f"recording input {input_channel}")
+            recorded, status, _ = self._run_stream(block, record=True, what=f"recording input {input_channel}")
         finally:
             self._in_channels = kept
         self._check_status(status, f"recording input {input_channel}")

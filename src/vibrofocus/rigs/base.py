@@ -27,6 +27,7 @@ from ..defaults import FS_HZ
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .devices import DeviceBusyError, DeviceError
+from .onset import DeviceOnset
 from .safety import EnergyBudget, SafetyLimits, check_drive
 
 __all__ = ["Rig"]
@@ -161,13 +162,19 @@ class Rig(ABC):
     def _check_output_level(self, drive: np.ndarray) -> None:
         """A backend's own check of a checked drive (e.g. the voltage into its amplifier)."""
 
-    def play(self, drive: np.ndarray) -> None:
+    def play(self, drive: np.ndarray) -> DeviceOnset:
         """Play a drive on the actuators (participant stimulation).
 
         Parameters
         ----------
         drive : ndarray, shape (n_actuators, n_samples)
             Voltages at the actuators, V.
+
+        Returns
+        -------
+        DeviceOnset
+            When the play started: host ``time.monotonic()``, s, and the first sample on
+            the device's own clock where the rig has one (:mod:`vibrofocus.rigs.onset`).
 
         Raises
         ------
@@ -177,7 +184,10 @@ class Rig(ABC):
         safe = self.check(drive)
         with self._exclusive("a play"):
             self.budget.admit(safe, self._clock())
-            self._run_guarded(self._play, safe)
+            handed = time.monotonic()
+            onset = self._run_guarded(self._play, safe)
+        # A backend without a device clock returns nothing: its onset is when it got the drive.
+        return onset if isinstance(onset, DeviceOnset) else DeviceOnset(handed)
 
     def play_and_record(
         self, drive: np.ndarray, points_xy: np.ndarray | None = None, *, tail_s: float = 0.05
@@ -295,8 +305,8 @@ class Rig(ABC):
         return result
 
     @abstractmethod
-    def _play(self, drive: np.ndarray) -> None:
-        """Play a drive that has passed the safety layer."""
+    def _play(self, drive: np.ndarray) -> DeviceOnset | None:
+        """Play a drive that has passed the safety layer; return its onset if the device has a clock."""
 
     @abstractmethod
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
@@ -305,7 +315,7 @@ class Rig(ABC):
     def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
         """Play a checked drive, return ``(recording of input_channel, its rate)``; not every rig can."""
         raise DeviceError(f"the {self.kind} rig cannot record a loopback input as it comes (vibrofocus latency "
-                          "supports the simulated and audio rigs)")
+                          "supports the simulated, audio and nidaq rigs)")
 
     @abstractmethod
     def _zero_outputs(self) -> None:

@@ -25,6 +25,17 @@ written before it started stays committed and keeps its channels reserved, so a 
 written through a second task would fail with error -50103 while the outputs hold their
 last value.
 
+Onsets
+------
+Where the device timestamps its start trigger (``StartTrigger.timestamp_enable``; devices
+synchronised over TSN, such as the cDAQ-9185/9189), every play asks for it on the I/O
+device's timescale and reads it back after the task has run
+(:data:`~vibrofocus.rigs.onset.NIDAQ_CLOCK`). A device that does not support it (most PCI
+and USB devices) refuses the property once; from then on its onsets are on the sample
+clock's count instead (:data:`~vibrofocus.rigs.onset.NIDAQ_SAMPLES_CLOCK`): the samples the
+rig's completed output tasks generated before the play, read back from each task
+(``OutStream.total_samp_per_chan_generated``), over the rate.
+
 Voltage ranges
 --------------
 Drives are actuator volts; the analog outputs put out ``drive / amplifier_gain`` and are
@@ -38,6 +49,7 @@ import logging
 import threading
 import time
 from contextlib import contextmanager
+from datetime import timezone
 from typing import Callable, Iterator
 
 import numpy as np
@@ -46,6 +58,7 @@ from ..layout import ArrayLayout
 from .config import NidaqRigConfig
 from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
+from .onset import NIDAQ_CLOCK, NIDAQ_SAMPLES_CLOCK, DeviceOnset
 
 __all__ = ["NidaqRig", "NidaqTasks"]
 
@@ -55,6 +68,8 @@ log = logging.getLogger(__name__)
 POLL_S = 0.005
 #: DAQmx error of a property the device does not support.
 _UNSUPPORTED_PROPERTY = -200452
+#: A loopback capture (``vibrofocus latency``) records this long after the click, s.
+CAPTURE_TAIL_S = 0.05
 
 
 def _daq_error_types() -> tuple[type[BaseException], ...]:
@@ -106,6 +121,10 @@ class NidaqTasks:
         self._stop_requested = threading.Event()
         #: Whether the outputs go to 0 V by themselves when a task stops (device-dependent).
         self.idle_zero_supported: bool | None = None
+        #: Whether the device timestamps the output task's start trigger (device-dependent).
+        self.start_timestamp_supported: bool | None = None
+        #: Samples the completed output tasks generated, per channel (the sample clock's count).
+        self.samples_generated = 0
 
     # ------------------------------------------------------------------ setup checks
     def check_setup(self) -> list[str]:
@@ -271,12 +290,42 @@ class NidaqTasks:
         with self._active_lock:
             self._active_ao = task
 
-    def _run_output(self, ao, n: int, stops: str) -> None:
+    def _stamp_start(self, ao) -> bool:
+        """Ask the output task to timestamp its start trigger; False where the device cannot."""
+        if self.start_timestamp_supported is False:
+            return False
+        from nidaqmx.constants import Timescale
+
+        trigger = ao.triggers.start_trigger
+        try:
+            trigger.timestamp_enable = True
+            trigger.timestamp_timescale = Timescale.USE_IO_DEVICE
+        except _daq_error_types() as exc:
+            if getattr(exc, "error_code", None) != _UNSUPPORTED_PROPERTY:
+                raise
+            self.start_timestamp_supported = False  # asked once: the host time serves from now on
+            return False
+        self.start_timestamp_supported = True
+        return True
+
+    @staticmethod
+    def _start_time_s(ao) -> float:
+        """The output task's start trigger timestamp, s since the Unix epoch."""
+        stamp = ao.triggers.start_trigger.timestamp_val
+        if stamp.tzinfo is None:  # the I/O device's timescale is UTC
+            stamp = stamp.replace(tzinfo=timezone.utc)
+        return float(stamp.timestamp())
+
+    def _run_output(self, ao, n: int, stops: str) -> DeviceOnset:
         """Start the written output task and wait for it, polling, so a stop or Ctrl-C ends it at once.
 
         ``stops`` names what a stop ends ("play", "recording"), for its :class:`StoppedError`.
+        Returns the onset: ``time.monotonic()`` at the start, and the start trigger's
+        timestamp where the device gives one, else the sample clock's count before it.
         """
+        stamped = self._stamp_start(ao)
         self._set_active(ao)
+        host = time.monotonic()
         ao.start()
         deadline = time.monotonic() + self._timeout(n)
         while True:
@@ -287,10 +336,15 @@ class NidaqTasks:
             if time.monotonic() > deadline:
                 raise DeviceError(f"NI-DAQmx did not finish a {n / self.config.fs:.3f} s play in time")
             time.sleep(POLL_S)
+        if stamped:
+            return DeviceOnset(host, self._start_time_s(ao), NIDAQ_CLOCK)
+        before = self.samples_generated
+        self.samples_generated += int(ao.out_stream.total_samp_per_chan_generated)
+        return DeviceOnset(host, before / self.config.fs, NIDAQ_SAMPLES_CLOCK)
 
     # ------------------------------------------------------------------ operations
-    def play(self, volts: np.ndarray) -> None:
-        """Play output volts, shape (n_actuators, n), V at the analog outputs."""
+    def play(self, volts: np.ndarray) -> DeviceOnset:
+        """Play output volts, shape (n_actuators, n), V at the analog outputs; return the onset."""
         n = volts.shape[1]
         self._stop_requested.clear()
         with self._tasks("playing", stops="play") as tasks:
@@ -298,10 +352,12 @@ class NidaqTasks:
             tasks.append(ao)
             self._finite(ao, n)
             ao.write(volts, auto_start=False)
-            self._run_output(ao, n, "play")
+            onset = self._run_output(ao, n, "play")
+        return onset
 
-    def play_and_record(self, volts: np.ndarray, n_record: int) -> np.ndarray:
-        """Play output volts and record the vibrometer input, sample-synchronously.
+    def play_and_record(self, volts: np.ndarray, n_record: int, *, channel: str | None = None,
+                        name: str = "vibrometer") -> np.ndarray:
+        """Play output volts and record one analog input, sample-synchronously.
 
         Parameters
         ----------
@@ -309,17 +365,21 @@ class NidaqTasks:
             V at the analog outputs.
         n_record : int
             Input samples to take, >= n.
+        channel : str, optional
+            The input (``ai3`` or ``Dev1/ai3``); default the vibrometer's.
+        name : str
+            The name the task gives the input channel.
 
         Returns
         -------
         ndarray, shape (n_record,)
-            Vibrometer input, V.
+            The input, V.
         """
         cfg = self.config
         n = volts.shape[1]
         self._stop_requested.clear()
         with self._tasks("recording", stops="recording") as tasks:
-            ai = self._ai_task([cfg.channels.vibrometer], ["vibrometer"], cfg.ai_range_v)
+            ai = self._ai_task([cfg.channels.vibrometer if channel is None else channel], [name], cfg.ai_range_v)
             tasks.append(ai)
             self._finite(ai, n_record)
             ai.triggers.start_trigger.cfg_dig_edge_start_trig(self.start_trigger)
@@ -399,8 +459,8 @@ class NidaqRig(HardwareRig):
         self.last_clipped: np.ndarray | None = None
         self.last_dropout_mask: np.ndarray | None = None
 
-    def _play(self, drive: np.ndarray) -> None:
-        self.tasks.play(drive / self.config.amplifier_gain)
+    def _play(self, drive: np.ndarray) -> DeviceOnset:
+        return self.tasks.play(drive / self.config.amplifier_gain)
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         n_total = drive.shape[1] + n_tail
@@ -411,6 +471,14 @@ class NidaqRig(HardwareRig):
         self.last_clipped = np.array([bool(np.any(np.abs(volts) >= 0.999 * self.config.ai_range_v))])
         self.last_dropout_mask = np.zeros((1, volts.size), dtype=bool)
         return self.vibrometer.to_displacement(volts, self.fs)[None, :]
+
+    def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
+        # The input started by the output task's start trigger, on the same timebase: where
+        # the click appears in it is the round trip from the converters, not a buffer's.
+        n_record = drive.shape[1] + int(round(CAPTURE_TAIL_S * self.fs))
+        out = np.pad(drive / self.config.amplifier_gain, ((0, 0), (0, n_record - drive.shape[1])))
+        volts = self.tasks.play_and_record(out, n_record, channel=f"ai{input_channel - 1}", name="loopback")
+        return volts, self.fs
 
     def _zero_outputs(self) -> None:
         self.tasks.write_zeros()

@@ -7,6 +7,9 @@ and dropouts.
 
 from __future__ import annotations
 
+import threading
+import time
+
 import numpy as np
 
 from .._validation import check_band, check_positive
@@ -16,6 +19,7 @@ from ..layout import ArrayLayout
 from ..skin.forearm import SimulatedArm
 from ..skin.parameters import ForearmParameters
 from .base import Rig
+from .onset import SIMULATED_CLOCK, DeviceOnset
 from .safety import SafetyLimits
 
 __all__ = ["SimulatedForearm"]
@@ -73,6 +77,10 @@ class SimulatedForearm(SimulatedArm, Rig):
         (n_actuators, n_samples), V; None until something plays.
     n_played : int
         Number of drives played so far.
+    samples_played : int
+        The sample clock: samples played so far (drives, recording tails and loopback
+        captures), over all plays. A play's onset on the device clock
+        (:meth:`~vibrofocus.rigs.Rig.play`) is this count before it, divided by ``fs``.
     outputs_v : ndarray, shape (n_actuators,)
         Voltage now at each actuator; zero whenever the rig is idle.
     last_dropout_mask : ndarray of bool or None
@@ -119,6 +127,8 @@ class SimulatedForearm(SimulatedArm, Rig):
         self._rng = np.random.default_rng([self.seed, 0xD0])
         self.last_drive: np.ndarray | None = None
         self.n_played = 0
+        self.samples_played = 0
+        self._clock_lock = threading.Lock()  # the simulated rig may serve several threads at once
         self.outputs_v = np.zeros(self.layout.n_actuators)
         self.last_dropout_mask: np.ndarray | None = None
 
@@ -140,14 +150,25 @@ class SimulatedForearm(SimulatedArm, Rig):
         scatter = np.random.default_rng([self.participant.seed or 0, 7919]).normal(0.0, 0.03, contact.shape)
         return 1.0 * (0.6 + 0.4 * contact) + scatter
 
-    def _play(self, drive: np.ndarray) -> None:
+    def _play(self, drive: np.ndarray) -> DeviceOnset:
+        return self._output(drive, 0)
+
+    def _output(self, drive: np.ndarray, n_after: int) -> DeviceOnset:
+        """Put out a checked drive, then ``n_after`` samples of silence; return its onset."""
+        # The sample clock advances by every sample this play puts out; the onset is
+        # where it stood before.
+        with self._clock_lock:
+            start = self.samples_played
+            self.samples_played += drive.shape[1] + n_after
+            self.n_played += 1
+        host = time.monotonic()
         self.last_drive = np.array(drive, copy=True)
-        self.n_played += 1
         # The outputs hold the drive's last value until the safety layer zeroes them.
         self.outputs_v = self.last_drive[:, -1].copy()
+        return DeviceOnset(host, start / self.fs, SIMULATED_CLOCK)
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
-        self._play(drive)
+        self._output(drive, n_tail)
         return self._measure(self.respond(drive, points_xy, n_tail))
 
     def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
@@ -155,10 +176,10 @@ class SimulatedForearm(SimulatedArm, Rig):
         # input 1 after the arm's modelled latency (latency_s), rounded to a sample.
         if input_channel != 1:
             raise ValidationError(f"the simulated rig has one loopback input, channel 1; got {input_channel}")
-        self._play(drive)
+        lag, tail = int(round(self.latency_s * self.fs)), int(0.05 * self.fs)
+        self._output(drive, lag + tail)
         strongest = drive[int(np.argmax(np.abs(drive).max(axis=1)))]
-        lag = int(round(self.latency_s * self.fs))
-        return np.concatenate([np.zeros(lag), strongest, np.zeros(int(0.05 * self.fs))]), self.fs
+        return np.concatenate([np.zeros(lag), strongest, np.zeros(tail)]), self.fs
 
     def _measure(self, clean: np.ndarray) -> np.ndarray:
         """Add vibrometer noise and dropouts to a clean recording."""

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import StudyError
-from ..io.bids import BIDS_VERSION, TASKS, bids_label, write_bids_dataset
+from ..io.bids import BIDS_VERSION, EVENT_COLUMN_DESCRIPTIONS, TASKS, bids_label, write_bids_dataset
 from ..io.responses import format_response
 from ..io.trials_csv import read_trials_csv
 
@@ -116,6 +116,9 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
         raise StudyError(f"the BIDS folder {out_dir} would replace its input {source}: write the dataset elsewhere")
     if not source.is_file():
         raise StudyError(f"{source} is not a study database or a trials CSV file")
+    from ..rigs.onset import CLOCKS
+
+    clock_column = {**EVENT_COLUMN_DESCRIPTIONS["device_clock"], "Levels": CLOCKS}
     from_db = _is_database(source)
     rows, simulated, sessions = _from_database(source) if from_db else _from_trials_csv(source)
     labels: dict[str, str] = {}
@@ -140,9 +143,11 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
             "response_time": float(t["rt_s"]), "phase": t["phase"], "trial": int(t["trial"]),
             "session_id": t.get("session"), "session_status": t.get("session_status"),
             "dry_run": None if t.get("dry_run") is None else int(bool(t["dry_run"])),
+            "device_onset": t.get("onset_device_s"), "device_clock": t.get("onset_clock"),
         } for t in trials]
         sim = simulated.get(pid, False)
         runs.append({"label": labels[pid], "study": study, "events": events, "sidecar": {
+            "device_clock": clock_column,
             "SourceId": pid, "Study": study, "Simulated": sim,
             "SimulatedModel": MODEL_LABEL if sim else None,
             "Source": "study database" if from_db else "trials CSV",

@@ -254,9 +254,15 @@ class Presentation:
     stimulus : Stimulus or None
         What was played; ``None`` in a dry run (nothing is played).
     onset_s : float
-        Stimulus onset, ``time.monotonic()``, s.
+        Stimulus onset, ``time.monotonic()``, s: just before the drive went to the rig
+        (what reaction times count from).
     design : StudyDesign
         The session's design.
+    onset_device_s : float or None
+        The drive's first sample on the rig's device clock, s
+        (:class:`~vibrofocus.rigs.DeviceOnset`); None in a dry run or on a rig without one.
+    onset_clock : str or None
+        That clock's name (:data:`vibrofocus.rigs.CLOCKS`).
     """
 
     session_id: int
@@ -265,6 +271,8 @@ class Presentation:
     stimulus: Stimulus | None
     onset_s: float
     design: StudyDesign
+    onset_device_s: float | None = None
+    onset_clock: str | None = None
 
 
 @dataclass(frozen=True)
@@ -376,7 +384,10 @@ class StudyEngine:
     ``beep``), ``stimulus_onset`` (``trial_index``, ``method``, ``target``, ``played``,
     ``drive_sha256``), and when a responder asks for a trial again ``cue_cancelled`` or
     ``trial_restarted`` (``trial_index``, ``reason``); ``error`` (``message``) when the
-    run fails.
+    run fails. The ``answer`` event (the store's) carries the onset: ``onset_s`` (host),
+    ``onset_device_s`` and ``onset_clock`` (the rig's device clock). An answer committed
+    before the engine had the onset (the web page's, by its answer route) gets an
+    ``answer_onset`` event with them (``trial_index``, ``answer_id``, the same keys).
     """
 
     def __init__(
@@ -439,7 +450,9 @@ class StudyEngine:
         """Cue, then play the trial's stimulus; both are logged before they happen.
 
         With a ``responder`` that has the ``cue_shown`` hook, the stimulus waits for it
-        and is not played when it returns a control (returned here instead).
+        and is not played when it returns a control (returned here instead). The
+        stimulus onset's marker follows the play, stamped with the onset's host time and
+        carrying its device time (``onset_device_s``, ``onset_clock``).
         """
         stim = self.stimulus(trial.method, trial.target)
         self._log("cue", trial, beep=self._beep)
@@ -454,10 +467,12 @@ class StudyEngine:
             played=stim is not None, drive_sha256=None if stim is None else stim.sha256,
         )
         onset = time.monotonic()
-        self._marker("stimulus_onset", onset, trial, played=stim is not None)
-        if stim is not None:
-            self.rig.play(stim.drives)
-        return Presentation(self.session_id, self.study, trial, stim, onset, self.design)
+        played = self.rig.play(stim.drives) if stim is not None else None
+        # Rig.play's DeviceOnset; a rig of the caller's own may return nothing.
+        device_s, clock = getattr(played, "device_s", None), getattr(played, "clock", None)
+        self._marker("stimulus_onset", onset, trial, played=stim is not None, onset_device_s=device_s,
+                     onset_clock=clock)
+        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock)
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
         """Commit the answer to a presented trial (with the drive hash and the onset) before returning.
@@ -466,11 +481,16 @@ class StudyEngine:
         response time.
         """
         stim = presentation.stimulus
+        onsets = {"onset_s": presentation.onset_s, "onset_device_s": presentation.onset_device_s,
+                  "onset_clock": presentation.onset_clock}
         receipt = self.store.record_answer(
             self.session_id, presentation.trial.trial_index, response.locations, response.rt_s,
             answer_id=answer_id or response.answer_id or uuid.uuid4().hex,
-            drive_sha256=None if stim is None else stim.sha256, onset_s=presentation.onset_s,
+            drive_sha256=None if stim is None else stim.sha256, **onsets,
         )
+        if receipt.duplicate:
+            # Committed before the engine had the onset (the web page's answer route): its onset apart.
+            self._log("answer_onset", presentation.trial, answer_id=receipt.answer_id, **onsets)
         self._marker("answer", presentation.onset_s + float(receipt.rt_s), presentation.trial,
                      response=list(receipt.response), rt_s=float(receipt.rt_s))
         return receipt

@@ -1,5 +1,13 @@
 """The trials file, as the studies export it; its home is :mod:`vibrofocus.io.trials_csv`."""
 
-from ..io.trials_csv import SESSION_COLUMNS, SIMULATED_COLUMN, TRIALS_COLUMNS, read_trials_csv, write_trials_csv
+from ..io.trials_csv import (
+    ONSET_COLUMNS,
+    SESSION_COLUMNS,
+    SIMULATED_COLUMN,
+    TRIALS_COLUMNS,
+    read_trials_csv,
+    write_trials_csv,
+)
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv", "read_trials_csv"]
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv",
+           "read_trials_csv"]

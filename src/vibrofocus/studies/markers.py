@@ -55,7 +55,8 @@ def send_marker(event: str, host_time_s: float, **fields: Any) -> None:
         When it happened, ``time.monotonic()``, s.
     **fields
         ``participant``, ``study``, ``session``, ``trial``, ``trial_index``, ``phase``,
-        ``method``, ``target``, ``response`` (None before the answer), ...
+        ``method``, ``target``, ``response`` (None before the answer); a stimulus onset's
+        ``onset_device_s`` and ``onset_clock`` (the rig's device clock, None without one), ...
     """
     with _LOCK:
         sinks = list(_SINKS)

@@ -414,6 +414,8 @@ class StudyStore(StudyDatabase):
         drive_sha256: str | None = None,
         require_presented: bool = False,
         onset_s: float | None = None,
+        onset_device_s: float | None = None,
+        onset_clock: str | None = None,
     ) -> AnswerReceipt:
         """Validate an answer and commit it in its own transaction before returning.
 
@@ -446,6 +448,12 @@ class StudyStore(StudyDatabase):
         onset_s : float, optional
             The stimulus onset, host ``time.monotonic()``, s (the study engine's; the time
             its LSL marker carries), kept in the ``answer`` event's payload.
+        onset_device_s : float, optional
+            The stimulus onset on the rig's device clock, s
+            (:class:`~vibrofocus.rigs.DeviceOnset`), kept beside ``onset_s``.
+        onset_clock : str, optional
+            That clock's name (``simulated_samples``, ``portaudio_dac``,
+            ``nidaq_start_trigger``, ``nidaq_samples``); given with ``onset_device_s``.
 
         Returns
         -------
@@ -473,6 +481,7 @@ class StudyStore(StudyDatabase):
         if not isinstance(answer_id, str) or not _ANSWER_ID_RE.match(answer_id):
             raise AnswerRefused(f"answer_id must be 1-128 printable ASCII characters without spaces, got {answer_id!r}", "invalid")
         tidx = _as_int(trial_index, "trial index")
+        onsets = _check_onsets(onset_s, onset_device_s, onset_clock)
         if drive_sha256 is not None and (not isinstance(drive_sha256, str) or not re.fullmatch(r"[0-9a-f]{64}", drive_sha256)):
             raise StudyError(f"drive_sha256 must be 64 lowercase hex digits, got {drive_sha256!r}")
         with self._write(f"record the answer to trial {trial_index!r} of session {session_id!r}") as conn:
@@ -526,8 +535,7 @@ class StudyStore(StudyDatabase):
                 (answer_id, sid, tidx, format_response(locations), rt, drive_sha256, info.calibration_id, now),
             )
             self._insert_event(conn, sid, "answer", {
-                "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt,
-                **({} if onset_s is None else {"onset_s": float(onset_s)}),
+                "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt, **onsets,
             })
             new_status = status_after_answer(info.status, finished=info.n_answered + 1 >= info.n_trials)
             if new_status != info.status:
@@ -609,8 +617,13 @@ class StudyStore(StudyDatabase):
         ``drive_sha256``, ``calibration_id``, ``recorded_at``, the session columns of
         the trials file: ``session`` (id), ``session_status``, ``dry_run`` (1 for a session
         planned without a calibration: nothing was played), and ``simulated`` (1: the
-        participant is simulated, answers from the perceptual model). Ordered by participant
-        (as added), study, session and trial index.
+        participant is simulated, answers from the perceptual model), and the onset columns
+        ``onset_host_s``, ``onset_device_s``, ``onset_clock`` (the stimulus onset on the
+        host's ``time.monotonic()`` and on the rig's device clock, from the ``answer`` or
+        ``answer_onset`` event; None where the database holds none: the device time of a
+        dry run or of a rig without a device clock, both times of an answer stored by
+        vibrofocus 0.1.0). Ordered by participant (as added), study, session
+        and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -630,18 +643,61 @@ class StudyStore(StudyDatabase):
                 sql += "WHERE s.participant_id = ? "
                 args.append(participant_id)
             sql += "ORDER BY pt.rowid, s.study, s.session_id, p.trial_index"
-            return [dict(r) for r in conn.execute(sql, args).fetchall()]
+            rows = [dict(r) for r in conn.execute(sql, args).fetchall()]
+            onsets = self._answer_onsets(conn)
+        for row in rows:
+            row.update(onsets.get(row["answer_id"], _NO_ONSET))
+        return rows
+
+    @staticmethod
+    def _answer_onsets(conn: sqlite3.Connection) -> dict[str, dict[str, Any]]:
+        """Each answer's stimulus onset by answer id (the columns of :data:`_ONSET_KEYS`), from its events."""
+        out: dict[str, dict[str, Any]] = {}
+        for (text,) in conn.execute(
+            "SELECT payload FROM events WHERE kind IN ('answer', 'answer_onset') ORDER BY event_id"
+        ):
+            payload = json.loads(text)
+            slot = out.setdefault(payload.get("answer_id"), dict(_NO_ONSET))
+            for key, column in _ONSET_KEYS.items():
+                if payload.get(key) is not None:
+                    slot[column] = payload[key]
+        return out
 
     def export_trials_csv(self, path: str | os.PathLike, *, participant_id: str | None = None) -> int:
         """Write the trials file of docs/file-formats.md, trials file (every answered trial); returns the row count.
 
         The file has the session columns after the contract's (see
         :data:`~vibrofocus.io.trials_csv.SESSION_COLUMNS`), so that an analysis can leave
-        out aborted sessions and dry runs.
+        out aborted sessions and dry runs, then the onset columns
+        (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`).
         """
         from ..io.trials_csv import write_trials_csv
 
-        return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True)
+        return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True)
+
+
+#: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.
+_ONSET_KEYS = {"onset_s": "onset_host_s", "onset_device_s": "onset_device_s", "onset_clock": "onset_clock"}
+_NO_ONSET: dict[str, Any] = dict.fromkeys(_ONSET_KEYS.values())
+_CLOCK_RE = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
+
+
+def _check_onsets(onset_s: Any, onset_device_s: Any, onset_clock: Any) -> dict[str, Any]:
+    """The onset keys of an answer event (those given), checked: finite seconds, a clock with a device time."""
+    out: dict[str, Any] = {}
+    for key, value in (("onset_s", onset_s), ("onset_device_s", onset_device_s)):
+        if value is None:
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise StudyError(f"{key} must be a finite number of seconds or None, got {shorten(value)}")
+        out[key] = float(value)
+    if (onset_device_s is None) != (onset_clock is None):
+        raise StudyError("onset_device_s and onset_clock come together: give both or neither")
+    if onset_clock is not None:
+        if not isinstance(onset_clock, str) or not _CLOCK_RE.match(onset_clock):
+            raise StudyError(f"onset_clock must be a clock's name like 'portaudio_dac', got {shorten(onset_clock)}")
+        out["onset_clock"] = onset_clock
+    return out
 
 
 def _as_int(value: Any, name: str) -> int:
