@@ -84,12 +84,16 @@ def critical_section() -> Iterator[None]:
     (signals are handled in the main thread).
     """
     global _critical_depth
-    main = threading.current_thread() is threading.main_thread()
+    if threading.current_thread() is not threading.main_thread():
+        # The KeyboardInterrupt is raised in the main thread, never in this one, so there
+        # is nothing to defer; counting this section would hold back (and lose) a Ctrl-C
+        # meant for the main thread's work.
+        yield
+        return
     restore = None
-    if main:
-        with contextlib.suppress(ValueError, OSError):
-            if signal.getsignal(signal.SIGINT) is not _handler or signal.getsignal(signal.SIGTERM) is not _handler:
-                restore = install_signal_handlers()
+    with contextlib.suppress(ValueError, OSError):
+        if signal.getsignal(signal.SIGINT) is not _handler or signal.getsignal(signal.SIGTERM) is not _handler:
+            restore = install_signal_handlers()
     with _lock:
         _critical_depth += 1
     try:
@@ -104,5 +108,5 @@ def critical_section() -> Iterator[None]:
                 sig = _pending_signal
                 clear_interrupt()
                 signal.raise_signal(sig)
-        elif main and depth == 0 and _pending_signal is not None:
+        elif depth == 0 and _pending_signal is not None:
             raise KeyboardInterrupt(signal.Signals(_pending_signal).name)

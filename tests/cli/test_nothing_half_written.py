@@ -656,3 +656,31 @@ def test_8_shapiro_does_not_count_tied_conditions_as_rejections():
             for i in range(3) for loc in (1, 2) for m in ("funneling", "inverse")]
     res = shapiro_tests(pd.DataFrame(rows))
     assert res["p"].isna().all() and res["note"].str.contains("ties").all()
+
+
+def test_a_save_in_another_thread_does_not_hold_back_ctrl_c_in_the_main_thread():
+    # Signals are handled in the main thread: a commit running in a worker thread (a web
+    # request saving a file) must not defer, and so lose, the main thread's Ctrl-C.
+    import _thread
+    import threading
+
+    inside, release = threading.Event(), threading.Event()
+
+    def save_in_a_thread():
+        with _atomic.critical_section():
+            inside.set()
+            release.wait(10)
+
+    worker = threading.Thread(target=save_in_a_thread)
+    restore = _atomic.install_signal_handlers()
+    try:
+        worker.start()
+        assert inside.wait(10)
+        with pytest.raises(KeyboardInterrupt):
+            _thread.interrupt_main()
+            time.sleep(2.0)  # the interrupt arrives during this wait
+    finally:
+        release.set()
+        worker.join(10)
+        restore()
+        _atomic.clear_interrupt()
