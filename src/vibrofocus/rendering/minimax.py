@@ -168,7 +168,10 @@ def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndar
                 j1, j2 = 1 / (dcap - D @ u), 1 / (dcap + D @ u)
                 g[:nv] += D.T @ (j1 - j2)
                 Hm[:nv, :nv] += (D.T * (j1 * j1 + j2 * j2)) @ D
-            scale = 1 / np.sqrt(np.maximum(np.diag(Hm), 1e-300))
+            if not (np.all(np.isfinite(Hm)) and np.all(np.isfinite(g))):
+                return u, t, steps  # at the edge of the floating point: as good as it gets
+            diag = np.diag(Hm)
+            scale = 1 / np.sqrt(np.maximum(diag, 1e-20 * np.max(diag)))
             Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(nv + 1)
             try:
                 factor = sla.cho_factor(Hs, check_finite=False)
