@@ -38,12 +38,15 @@ from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response
 
-__all__ = ["minimax_filter", "MinimaxReport", "MINIMAX_EXTRA"]
+__all__ = ["minimax_filter", "minimax_frontier", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
 
 #: The pip extra that installs the convex solver (cvxpy with Clarabel).
 MINIMAX_EXTRA = "vibrofocus[minimax]"
 _VERBOSE = False
 _DROP = 0.5
+
+
+_SETUP_DEFAULTS = dict(taper_octaves=0.5, support_s=(0.01, 0.005), stride=32, ir_energy_tol=1e-4, decimation=None)
 
 
 @dataclass(frozen=True)
@@ -116,6 +119,32 @@ class MinimaxReport:
     decimation: int
 
 
+@dataclass(frozen=True)
+class MinimaxFrontier:
+    """The peak-contrast frontier of one tap (:func:`minimax_frontier`): for each asked
+    fidelity, the minimax design's achieved fidelity and peak contrast.
+
+    Attributes
+    ----------
+    min_fidelity : ndarray, shape (k,)
+        The asked least fidelities.
+    fidelity : ndarray, shape (k,)
+        Achieved zero-lag fidelity (NaN where the fidelity cannot be reached).
+    peak_contrast_db : ndarray, shape (k,)
+        Target peak over the largest quiet peak, dB (NaN where infeasible).
+    quiet_peak : ndarray, shape (k,)
+        Largest quiet ``|displacement|``, unit of the targets.
+    seconds : float
+        Wall time of the whole frontier, s.
+    """
+
+    min_fidelity: np.ndarray
+    fidelity: np.ndarray
+    peak_contrast_db: np.ndarray
+    quiet_peak: np.ndarray
+    seconds: float
+
+
 def _local_peaks(y: np.ndarray, floor: float, limit: int) -> np.ndarray:
     """Indices of the local maxima of ``|y|`` (1-D) above ``floor``, largest first, at most ``limit``."""
     a = np.abs(y)
@@ -152,60 +181,65 @@ def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndar
         slack = np.concatenate([t - Au, t + Au] + ([dcap - D @ u, dcap + D @ u] if has_d else []))
         return float(tau * t - np.sum(np.log(slack)) - np.log(e)) if e > 0 and np.all(slack > 0) else np.inf
 
-    steps = 0
-    while True:
-        for _ in range(60):
-            Au, Qu = A @ u, Q @ u
-            i1, i2 = 1 / (t - Au), 1 / (t + Au)
-            e = c2 - u @ Qu
-            w = i1 * i1 + i2 * i2
-            Hm = np.empty((nv + 1, nv + 1))
-            Hm[:nv, :nv] = (A.T * w) @ A + (2 / e) * Q + (4 / e**2) * np.outer(Qu, Qu)
-            Hm[:nv, nv] = Hm[nv, :nv] = A.T @ (i2 * i2 - i1 * i1)
-            Hm[nv, nv] = np.sum(w)
-            g = np.append(A.T @ (i1 - i2) + 2 * Qu / e, tau - np.sum(i1 + i2))
-            if has_d:
-                j1, j2 = 1 / (dcap - D @ u), 1 / (dcap + D @ u)
-                g[:nv] += D.T @ (j1 - j2)
-                Hm[:nv, :nv] += (D.T * (j1 * j1 + j2 * j2)) @ D
-            if not (np.all(np.isfinite(Hm)) and np.all(np.isfinite(g))):
-                return u, t, steps  # at the edge of the floating point: as good as it gets
-            diag = np.diag(Hm)
-            scale = 1 / np.sqrt(np.maximum(diag, 1e-20 * np.max(diag)))
-            Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(nv + 1)
-            try:
-                factor = sla.cho_factor(Hs, check_finite=False)
-                hg, hb = (sla.cho_solve(factor, np.stack([g, bb], 1) * scale[:, None], check_finite=False)
-                          * scale[:, None]).T
-            except (np.linalg.LinAlgError, ValueError):
-                hg, hb = (np.linalg.lstsq(Hs, np.stack([g, bb], 1) * scale[:, None], rcond=None)[0]
-                          * scale[:, None]).T
-            # The Newton step on {b.u = 1} (and back onto it, should rounding have moved u).
-            dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
-            dec = float(-g @ dz)
-            if dec < 0:  # rounding in a near-singular system: the eigen-solution instead
-                wh, vh = np.linalg.eigh(Hs)
-                inv = np.where(wh > wh[-1] * 1e-14, 1 / np.maximum(wh, 1e-300), 0.0)
-                hg, hb = ((vh * inv) @ (vh.T @ (np.stack([g, bb], 1) * scale[:, None])) * scale[:, None]).T
+    def _newton_loops() -> tuple[np.ndarray, float, int]:
+        nonlocal u, t, tau
+        steps = 0
+        while True:
+            for _ in range(60):
+                Au, Qu = A @ u, Q @ u
+                i1, i2 = 1 / (t - Au), 1 / (t + Au)
+                e = c2 - u @ Qu
+                w = i1 * i1 + i2 * i2
+                Hm = np.empty((nv + 1, nv + 1))
+                Hm[:nv, :nv] = (A.T * w) @ A + (2 / e) * Q + (4 / e**2) * np.outer(Qu, Qu)
+                Hm[:nv, nv] = Hm[nv, :nv] = A.T @ (i2 * i2 - i1 * i1)
+                Hm[nv, nv] = np.sum(w)
+                g = np.append(A.T @ (i1 - i2) + 2 * Qu / e, tau - np.sum(i1 + i2))
+                if has_d:
+                    j1, j2 = 1 / (dcap - D @ u), 1 / (dcap + D @ u)
+                    g[:nv] += D.T @ (j1 - j2)
+                    Hm[:nv, :nv] += (D.T * (j1 * j1 + j2 * j2)) @ D
+                if not (np.all(np.isfinite(Hm)) and np.all(np.isfinite(g))):
+                    return u, t, steps  # at the edge of the floating point: as good as it gets
+                diag = np.diag(Hm)
+                scale = 1 / np.sqrt(np.maximum(diag, 1e-20 * np.max(diag)))
+                Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(nv + 1)
+                try:
+                    factor = sla.cho_factor(Hs, check_finite=False)
+                    hg, hb = (sla.cho_solve(factor, np.stack([g, bb], 1) * scale[:, None], check_finite=False)
+                              * scale[:, None]).T
+                except (np.linalg.LinAlgError, ValueError):
+                    hg, hb = (np.linalg.lstsq(Hs, np.stack([g, bb], 1) * scale[:, None], rcond=None)[0]
+                              * scale[:, None]).T
+                # The Newton step on {b.u = 1} (and back onto it, should rounding have moved u).
                 dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
                 dec = float(-g @ dz)
-            steps += 1
-            if dec <= 2e-10 or steps >= max_newton:
-                break
-            f0, step = barrier(u, t), 1.0
-            while step > 1e-14:
-                un, tn = u + step * dz[:nv], t + step * dz[nv]
-                if barrier(un, tn) <= f0 - 0.25 * step * dec:
+                if dec < 0:  # rounding in a near-singular system: the eigen-solution instead
+                    wh, vh = np.linalg.eigh(Hs)
+                    inv = np.where(wh > wh[-1] * 1e-14, 1 / np.maximum(wh, 1e-300), 0.0)
+                    hg, hb = ((vh * inv) @ (vh.T @ (np.stack([g, bb], 1) * scale[:, None])) * scale[:, None]).T
+                    dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
+                    dec = float(-g @ dz)
+                steps += 1
+                if dec <= 2e-10 or steps >= max_newton:
                     break
-                step *= 0.5
-            else:
-                break
-            u, t = un, tn
-            if stop_below is not None and t < stop_below:
+                f0, step = barrier(u, t), 1.0
+                while step > 1e-14:
+                    un, tn = u + step * dz[:nv], t + step * dz[nv]
+                    if barrier(un, tn) <= f0 - 0.25 * step * dec:
+                        break
+                    step *= 0.5
+                else:
+                    break
+                u, t = un, tn
+                if stop_below is not None and t < stop_below:
+                    return u, t, steps
+            if theta / tau <= rel_gap * t + abs_gap or steps >= max_newton:
                 return u, t, steps
-        if theta / tau <= rel_gap * t + abs_gap or steps >= max_newton:
-            return u, t, steps
-        tau *= mu
+            tau *= mu
+
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # the edge is caught inside
+        return _newton_loops()
 
 
 def minimax_filter(
@@ -499,3 +533,52 @@ class _Program:
             ir_tail_energy=self.tail, support=(int(self.delays[0]), int(self.delays[-1])),
             decimation=self.decimation)
         return drives, report
+
+
+def minimax_frontier(H: Any, targets: Any, fs: float, fidelities: Any, *, band: tuple[float, float] = BAND_HZ,
+                     max_drive: float | None = None, quiet: Any = None, **options: Any) -> MinimaxFrontier:
+    """The peak-contrast frontier: :func:`minimax_filter` at each of ``fidelities``.
+
+    One set-up (basis, target norm, impulse responses) serves every fidelity, and each
+    design starts from the peak constraints the last one found.
+
+    Parameters
+    ----------
+    H, targets, fs, band, max_drive, quiet
+        As in :func:`minimax_filter`.
+    fidelities : sequence of float, shape (k,)
+        Least fidelities, each in (0, 1).
+    **options
+        The other keywords of :func:`minimax_filter` (``support_s``, ``tol``, ...), but
+        ``full_output`` and ``min_fidelity``.
+
+    Returns
+    -------
+    MinimaxFrontier
+        NaN where a fidelity is above the best the support reaches (or the drive limit
+        rules it out).
+    """
+    import time
+
+    fids = as_array(fidelities, "fidelities", ndim=1)
+    for f in fids:
+        check_in_range(float(f), "fidelities", 0.0, 1.0, inclusive=False)
+    setup = {k: options.pop(k) for k in ("taper_octaves", "support_s", "stride", "ir_energy_tol", "decimation")
+             if k in options}
+    solve = {"tol": 1e-3, "fidelity_margin": 1e-3, "max_iter": 30, **options}
+    if set(solve) - {"tol", "fidelity_margin", "max_iter"}:
+        raise ValidationError(f"minimax_frontier got unknown options {sorted(set(solve) - {'tol', 'fidelity_margin', 'max_iter'})}")
+    start = time.perf_counter()
+    out = np.full((3, fids.size), np.nan)
+    with _single_threaded_blas():
+        program = _Program(H, targets, fs, band=band, quiet=quiet, **{**_SETUP_DEFAULTS, **setup})
+        for i, f in enumerate(fids):
+            try:
+                _, rep = program.design(float(f), max_drive=max_drive, full_output=True, **solve)
+            except ValidationError as exc:
+                if "infeasible" not in str(exc):
+                    raise
+                continue
+            out[:, i] = rep.fidelity, rep.peak_contrast_db, rep.quiet_peak
+    return MinimaxFrontier(min_fidelity=fids, fidelity=out[0], peak_contrast_db=out[1], quiet_peak=out[2],
+                           seconds=time.perf_counter() - start)
