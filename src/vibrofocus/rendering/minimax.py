@@ -469,7 +469,7 @@ class _Program:
                                   f"model's best fidelity {1 / np.sqrt(self.u_best @ self.Q @ self.u_best):.4g} "
                                   "over this support): relax the fidelity")
         dcap = None if max_drive is None else max_drive / self.u_scale
-        u, value, it, inside, last_value = self.u_best.copy(), np.nan, 0, True, 0.0
+        u, value, it, inside, best_value = self.u_best.copy(), np.nan, 0, True, 0.0
         for it in range(1, max_iter + 1):
             D = None if dcap is None else np.kron(np.eye(self.n_act), self.D)
             u = 0.9 * u + 0.1 * self.u_best  # off the cone's edge, where the last solve ended
@@ -492,11 +492,12 @@ class _Program:
                                                for t in _local_peaks(x[a], max_drive * (1 + tol), 20)])
             if added == 0:
                 break
-            # Rows far below the peak leave the program while its optimum rises (so that no set
-            # of rows comes back for ever); the full response is checked every round.
+            # Rows far below the peak leave the program only when its optimum sets a record
+            # (by more than tol: finitely often, so no set of rows comes back for ever); the
+            # full response is checked every round.
             slack = np.abs(self.A[:-added] @ u) < _DROP * max(value, 0.0)
-            rising, last_value = value > last_value * (1 + tol), value
-            if _DROP > 0 and rising and slack.any():
+            record, best_value = value > best_value * (1 + tol), max(best_value, value)
+            if _DROP > 0 and record and slack.any():
                 keep = np.concatenate([~slack, np.ones(added, bool)])
                 self.A, self.listed = self.A[keep], self.listed[keep]
         else:
