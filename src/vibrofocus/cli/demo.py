@@ -60,6 +60,10 @@ def demo_command(
         "pseudo-inverse's, per location; tens of seconds), add the peak bound to the tables and write "
         "OUT/peak_frontier.png.",
     ),
+    with_minimax: bool = typer.Option(
+        False, "--minimax",
+        help="Also render the opt-in peak-contrast (minimax) design at every location (seconds each).",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Calibrate the simulated forearm, then render a tap at every location with every method, play it, measure it.
@@ -102,7 +106,8 @@ def demo_command(
         from ..rendering.registry import default_methods
 
         # Every registered method, a lab's own included, but the opt-in ones (run_demo's default).
-        total = rig.layout.n_locations * len(default_methods())
+        methods = (*default_methods(), *(("minimax",) if with_minimax else ()))
+        total = rig.layout.n_locations * len(methods)
         calibration_info: dict = {}
         with Progress(
             TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -133,11 +138,11 @@ def demo_command(
                     "quality_issues": [f"{issue.severity}: {issue.message}" for issue in cal.quality.issues],
                 }
             task = progress.add_task("rendering and playing", total=total)
-            result = run_demo(rig, transfer=transfer,
+            result = run_demo(rig, transfer=transfer, methods=methods,
                               progress=lambda label: progress.update(task, advance=1, description=label))
             paths = []
             if frontier:
-                from ..demo.frontier import peak_frontiers
+                from ..demo.frontier import FRONTIER_FIDELITIES, peak_frontiers
 
                 n_locations = len({r["location"] for r in result.rows})
                 front_task = progress.add_task("peak-contrast frontier", total=n_locations)
@@ -232,6 +237,9 @@ def demo_command(
         console.print(legend, style="dim")
         if not per_location:
             console.print("Per location: --per-location, --json, or the metrics figure.", style="dim")
+        if frontier:
+            console.print(f"Peak-contrast frontier: {sum(f.seconds for f in frontiers.values()):.0f} s for "
+                          f"{len(frontiers)} locations ({len(FRONTIER_FIDELITIES) + 1} fidelities each).")
         for path in paths:
             console.print(f"wrote {path}")
 
