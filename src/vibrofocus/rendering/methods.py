@@ -302,7 +302,7 @@ class Minimax(Method):
     """Peak-contrast (minimax) design (:func:`~vibrofocus.rendering.minimax_filter`): the
     least largest ``|displacement|`` at the quiet points at a given target fidelity.
 
-    Needs the optional extra ``vibrofocus[minimax]`` (cvxpy, Clarabel).
+    Seconds per design (no extra needed); :meth:`frontier` gives peak contrast against fidelity.
 
     Parameters
     ----------
@@ -328,7 +328,7 @@ class Minimax(Method):
     (``run_demo(methods=[..., "minimax"])``, ``render("minimax", ...)``).
     """
 
-    opt_in: ClassVar[bool] = True  # seconds per design, and the optional extra
+    opt_in: ClassVar[bool] = True  # seconds per design
     control: str | None = None
     min_fidelity: float | None = None
     support_s: tuple[float, float] = (0.01, 0.005)
