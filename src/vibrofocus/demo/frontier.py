@@ -93,7 +93,21 @@ def peak_frontiers(result: DemoResult, *, fidelities=FRONTIER_FIDELITIES,
 
 def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], path: Path) -> Path:
     """Peak contrast against fidelity per location: the minimax frontier and each method's
-    design (predicted through the design's ``H``); written atomically to ``path``."""
+    design (predicted through the design's ``H``).
+
+    Parameters
+    ----------
+    result : DemoResult
+        The demo run whose designs are marked.
+    frontiers : dict of int to LocationFrontier
+        From :func:`peak_frontiers` of the same run.
+    path : Path
+        The PNG to write (atomically).
+
+    Returns
+    -------
+    Path
+    """
     from .figures import _pyplot, arm_label
 
     plt = _pyplot()
