@@ -24,6 +24,7 @@ __all__ = ["FRONTIER_FIDELITIES", "LocationFrontier", "peak_frontiers", "frontie
 
 #: Fidelities of the demo's frontier (the pseudo-inverse's own is added per location).
 FRONTIER_FIDELITIES = (0.8, 0.85, 0.9, 0.95, 0.98)
+_LEFT = 0.78  # the figure's left edge: designs of lower fidelity are drawn there, hollow
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,8 @@ def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], 
     """Peak contrast against fidelity per location: the minimax frontier and each method's
     design (predicted through the design's ``H``). The program fixes the target's projection
     on the tap, so its quiet peak falls with the fidelity asked; the target's own peak may
-    move a little with it, so the peak contrast need not be monotone.
+    move a little with it, so the peak contrast need not be monotone. A design of fidelity
+    below 0.78 (funneling and the combination arrive late) is drawn hollow at the left edge.
 
     Parameters
     ----------
@@ -119,7 +121,6 @@ def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], 
     cols = 3
     rows = int(np.ceil(len(locations) / cols))
     fig, axes = plt.subplots(rows, cols, figsize=(10, 3 * rows + 0.8), sharex=True, squeeze=False)
-    lowest = 0.8
     for ax, loc in zip(axes.ravel(), locations):
         f = frontiers[loc]
         ok = np.isfinite(f.fidelity)
@@ -130,11 +131,14 @@ def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], 
             if rendering is None:
                 continue
             m = rendering.metrics(against="reference", contrast_over="points")
-            ax.plot([m["fidelity"]], [m["contrast_all_db"]], "o", color=colors[method], label=method)
-            lowest = min(lowest, float(m["fidelity"]))
+            # A design far below the frontier's fidelities (funneling, the combination: late
+            # arrivals) sits on the left edge, marked as off the axis.
+            off = m["fidelity"] < _LEFT
+            ax.plot([max(m["fidelity"], _LEFT)], [m["contrast_all_db"]], "<" if off else "o", color=colors[method],
+                    mfc="white" if off else colors[method], label=method)
         ax.set_title(f"location {loc}", fontsize=9)
         ax.grid(alpha=0.3)
-    axes[0, 0].set_xlim(lowest - 0.02, 1.005)
+    axes[0, 0].set_xlim(_LEFT - 0.005, 1.005)
     for ax in axes.ravel()[len(locations):]:
         ax.set_visible(False)
     for ax in axes[:, 0]:
