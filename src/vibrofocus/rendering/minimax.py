@@ -46,7 +46,7 @@ __all__ = ["minimax_filter", "minimax_frontier", "MinimaxReport", "MinimaxFronti
 #: The pip extra with cvxpy and Clarabel, for the reference formulation (tests, benchmark);
 #: the design itself needs neither.
 MINIMAX_EXTRA = "vibrofocus[minimax]"
-_VERBOSE = False
+#: Peak rows below this share of the optimum leave the program (when it sets a record).
 _DROP = 0.5
 
 
