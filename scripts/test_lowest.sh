@@ -27,8 +27,10 @@ vf="$work/venv/bin/vibrofocus"
 # python-osc's client reads replies (serve-osc's tests use it).
 "$work/venv/bin/python" -c "import pylsl, sofar; pylsl.local_clock(); sofar.Sofa('GeneralTF-E'); from pythonosc.udp_client import SimpleUDPClient; SimpleUDPClient.receive"
 "$vf" serve-osc --help > /dev/null
-# cvxpy and Clarabel at their minimums solve a small peak-contrast design.
+# A small peak-contrast design (its own solver); cvxpy and Clarabel at their minimums import
+# (the reference formulation of the tests and the benchmark).
 "$work/venv/bin/python" -c "
+import cvxpy, clarabel
 import numpy as np
 from vibrofocus.rendering import minimax_filter
 rng = np.random.default_rng(0)

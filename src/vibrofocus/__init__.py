@@ -38,6 +38,7 @@ _LAZY_ATTRIBUTES = {
     "funneling_gains": ".rendering",
     "inverse_filter": ".rendering",
     "minimax_filter": ".rendering",
+    "minimax_frontier": ".rendering",
     "InverseOperator": ".rendering",
     "focus_metrics": ".rendering",
     "render": ".rendering",
@@ -67,6 +68,7 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
         funneling_gains,
         inverse_filter,
         minimax_filter,
+        minimax_frontier,
         register_method,
         render,
     )
@@ -107,6 +109,7 @@ __all__ = [
     "funneling_gains",
     "inverse_filter",
     "minimax_filter",
+    "minimax_frontier",
     "InverseOperator",
     "focus_metrics",
     "render",

@@ -169,3 +169,20 @@ def test_registered_method_beats_the_pseudo_inverse_at_equal_drive():
     assert b["contrast_all_db"] >= a["contrast_all_db"] - 0.05
     with pytest.raises(ValidationError):
         render("minimax", tm, MFS, ref, 5, min_fidelity=1.0)
+
+
+def test_frontier_falls_with_fidelity_and_meets_the_single_design():
+    _, H = medium(seed=4)
+    targets = tap()
+    from vibrofocus.rendering import minimax_frontier
+
+    fids = [0.8, 0.9, 0.95]
+    front = minimax_frontier(H, targets, FS, fids, band=BAND, support_s=SUPPORT)
+    assert front.peak_contrast_db.shape == (3,) and np.all(np.isfinite(front.peak_contrast_db))
+    assert np.all(np.diff(front.peak_contrast_db) <= 1e-3)  # more fidelity, never more contrast
+    assert np.all(front.fidelity >= np.array(fids) - 1e-4)
+    _, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, full_output=True)
+    assert front.peak_contrast_db[1] == pytest.approx(rep.peak_contrast_db, abs=0.01)
+    # Out of reach (a drive limit far below what the tap needs): NaN, not an error.
+    tight = minimax_frontier(H, targets, FS, [0.9], band=BAND, support_s=SUPPORT, max_drive=1e-9)
+    assert np.isnan(tight.fidelity[0]) and np.isnan(tight.peak_contrast_db[0])

@@ -54,6 +54,16 @@ def demo_command(
         help="Design from a calibration measured first ('calibration', as a user would) or from the "
         "simulator's exact transfer ('model', what a perfect calibration would give).",
     ),
+    frontier: bool = typer.Option(
+        False, "--frontier",
+        help="Also compute the peak-contrast frontier (minimax designs at fidelity 0.8-0.98 and at the "
+        "pseudo-inverse's, per location; tens of seconds), add the peak bound to the tables and write "
+        "OUT/peak_frontier.png.",
+    ),
+    with_minimax: bool = typer.Option(
+        False, "--minimax",
+        help="Also render the opt-in peak-contrast (minimax) design at every location (seconds each).",
+    ),
     force: bool = force_option(),
 ) -> None:
     """Calibrate the simulated forearm, then render a tap at every location with every method, play it, measure it.
@@ -96,7 +106,8 @@ def demo_command(
         from ..rendering.registry import default_methods
 
         # Every registered method, a lab's own included, but the opt-in ones (run_demo's default).
-        total = rig.layout.n_locations * len(default_methods())
+        methods = (*default_methods(), *(("minimax",) if with_minimax else ()))
+        total = rig.layout.n_locations * len(methods)
         calibration_info: dict = {}
         with Progress(
             TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -127,14 +138,27 @@ def demo_command(
                     "quality_issues": [f"{issue.severity}: {issue.message}" for issue in cal.quality.issues],
                 }
             task = progress.add_task("rendering and playing", total=total)
-            result = run_demo(rig, transfer=transfer,
+            result = run_demo(rig, transfer=transfer, methods=methods,
                               progress=lambda label: progress.update(task, advance=1, description=label))
             paths = []
+            if frontier:
+                from ..demo.frontier import FRONTIER_FIDELITIES, peak_frontiers
+
+                n_locations = len({r["location"] for r in result.rows})
+                front_task = progress.add_task("peak-contrast frontier", total=n_locations)
+                frontiers = peak_frontiers(result, progress=lambda label: progress.update(
+                    front_task, advance=1, description=label))
+                for row in result.rows:
+                    row["peak_bound_db"] = frontiers[row["location"]].peak_bound_db
             if figures:
                 from ..demo.figures import write_figures
 
                 progress.update(task, description="writing figures")
                 paths = write_figures(result, out, location=location)
+                if frontier:
+                    from ..demo.frontier import frontier_figure
+
+                    paths.append(frontier_figure(result, frontiers, out / "peak_frontier.png"))
         summary = summarize(result.rows)
         if as_json:
             payload = {
@@ -182,14 +206,18 @@ def demo_command(
                   "time; shape: at the best lag (funneling arrives late); contrast: peak at the target over the "
                   "largest at the other locations; all pts: over every calibrated point; energy: energy contrast "
                   "against the other locations; bound: the most energy contrast any drive that gives the tap "
-                  "reaches there.")
-        columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB", "target\nµm", "drive\nV")
+                  "reaches there" + ("; peak bound: the most peak contrast against every calibrated point any "
+                                     "drive reaches at the pseudo-inverse's fidelity (minimax, predicted)."
+                                     if frontier else "."))
+        columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB",
+                   *(("peak bound\ndB",) if frontier else ()), "target\nµm", "drive\nV")
 
         def metric_cells(values: dict) -> list[str]:
             return [_fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
                     _fmt(values["contrast_all_points_db"], 1), _fmt(values["energy_contrast_db"], 1),
-                    _fmt(values["bound_db"], 1), _fmt(values["target_peak_m"] * 1e6, 3),
-                    _fmt(values["peak_drive_v"], 1)]
+                    _fmt(values["bound_db"], 1),
+                    *((_fmt(values.get("peak_bound_db", float("nan")), 1),) if frontier else ()),
+                    _fmt(values["target_peak_m"] * 1e6, 3), _fmt(values["peak_drive_v"], 1)]
 
         if per_location:
             table = Table(title=f"Per location, designed from {source}, measured on the arm (noise on)",
@@ -209,6 +237,9 @@ def demo_command(
         console.print(legend, style="dim")
         if not per_location:
             console.print("Per location: --per-location, --json, or the metrics figure.", style="dim")
+        if frontier:
+            console.print(f"Peak-contrast frontier: {sum(f.seconds for f in frontiers.values()):.0f} s for "
+                          f"{len(frontiers)} locations ({len(FRONTIER_FIDELITIES) + 1} fidelities each).")
         for path in paths:
             console.print(f"wrote {path}")
 

@@ -19,7 +19,7 @@ from .metrics import focus_metrics
 from .design import Design, Rendering  # noqa: F401 - Rendering: Design's former name, kept importable
 from .method import Method, Problem, Solution
 from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
-from .minimax import MinimaxReport, minimax_filter
+from .minimax import MinimaxFrontier, MinimaxReport, minimax_filter, minimax_frontier
 from .registry import ENTRY_POINT_GROUP, available_methods, make_method, method_class, register_method
 from .render import render
 from .taper import band_taper
@@ -63,6 +63,8 @@ __all__ = [
     "Minimax",
     "minimax_filter",
     "MinimaxReport",
+    "minimax_frontier",
+    "MinimaxFrontier",
     "register_method",
     "method_class",
     "make_method",

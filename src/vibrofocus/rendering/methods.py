@@ -22,9 +22,10 @@ from .exact_target import exact_target_spectra
 from .funneling import funneling_gains
 from .inverse import predict_response
 from .method import Method, Problem, Solution
-from .minimax import minimax_filter
+from .minimax import MinimaxFrontier, minimax_filter, minimax_frontier
 from .taper import design_grid
 from .time_reversal import time_reversal_drives
+from .transfer import TransferMatrix
 
 __all__ = ["Method", "Problem", "Solution", "Funneling", "Inverse", "Combination", "TimeReversal", "Contrast",
            "Constrained", "Minimax", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
@@ -301,7 +302,7 @@ class Minimax(Method):
     """Peak-contrast (minimax) design (:func:`~vibrofocus.rendering.minimax_filter`): the
     least largest ``|displacement|`` at the quiet points at a given target fidelity.
 
-    Needs the optional extra ``vibrofocus[minimax]`` (cvxpy, Clarabel).
+    Seconds per design (no extra needed); :meth:`frontier` gives peak contrast against fidelity.
 
     Parameters
     ----------
@@ -327,7 +328,7 @@ class Minimax(Method):
     (``run_demo(methods=[..., "minimax"])``, ``render("minimax", ...)``).
     """
 
-    opt_in: ClassVar[bool] = True  # seconds per design, and the optional extra
+    opt_in: ClassVar[bool] = True  # seconds per design
     control: str | None = None
     min_fidelity: float | None = None
     support_s: tuple[float, float] = (0.01, 0.005)
@@ -355,13 +356,39 @@ class Minimax(Method):
         fid = float(np.dot(y, p.reference) / (np.linalg.norm(y) * np.linalg.norm(p.reference)))
         return fid, float(np.max(np.abs(drives)))
 
+    def _targets(self, p: Problem) -> np.ndarray:
+        targets = np.zeros((p.tm.n_points, p.n))
+        targets[p.target_index] = self.target_peak_m * p.stimulus
+        return targets
+
+    def frontier(self, tm: TransferMatrix, target: int, fidelities: Any) -> MinimaxFrontier:
+        """Peak contrast against fidelity for the tap at location ``target`` through ``tm``
+        (:func:`~vibrofocus.rendering.minimax_frontier`, with this method's quiet points,
+        support and taper; no drive limit: contrast and fidelity do not depend on the level).
+
+        Parameters
+        ----------
+        tm : TransferMatrix
+        target : int
+            1-based location number.
+        fidelities : sequence of float
+            Least fidelities, each in (0, 1).
+
+        Returns
+        -------
+        MinimaxFrontier
+        """
+        p = self.problem(tm, target)
+        return minimax_frontier(p.tm.H, self._targets(p), p.fs, fidelities, band=p.band,
+                                quiet=p.control(self.control)[1:], taper_octaves=self.taper_octaves,
+                                support_s=self.support_s)
+
     def solve(self, p: Problem) -> Solution:
         control = p.control(self.control)
         fid, peak = self.pinv(p) if (self.min_fidelity is None or self.drive_budget is not None) else (0.0, 0.0)
         fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
         max_drive = None if self.drive_budget is None else self.drive_budget * peak
-        targets = np.zeros((p.tm.n_points, p.n))
-        targets[p.target_index] = self.target_peak_m * p.stimulus
+        targets = self._targets(p)
         # A budget the short support cannot meet at this fidelity is doubled (twice), then dropped.
         budgets = [None] if max_drive is None else [max_drive, 2 * max_drive, 4 * max_drive, None]
         for i, budget in enumerate(budgets):

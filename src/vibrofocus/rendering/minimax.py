@@ -17,7 +17,10 @@ Structure used for speed:
 * **Constraint generation.** The peak constraints start at the samples where the
   pseudo-inverse's quiet response peaks (the warm start) and on a coarse grid; after each
   solve, the full response (FFT) adds the samples that exceed the current peak, until
-  none does.
+  none does; rows far below the peak leave whenever the optimum sets a record.
+* **A solver for this program.** A few hundred coefficients and rows: a log-barrier
+  method with dense Newton steps (BLAS on one thread) solves it in about a second or less,
+  with no modelling layer to compile each round.
 
 Notation: ``g_pa`` is the band-limited impulse response from actuator ``a`` to point ``p``
 (``irfft(T H_pa)``, the whole circular window of ``n`` taps: no truncation inside the
@@ -35,13 +38,19 @@ from .._validation import as_array, check_in_range, check_positive
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
 from ._checks import as_indices, as_transfer, check_grid
+from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response
 
-__all__ = ["minimax_filter", "MinimaxReport", "MINIMAX_EXTRA"]
+__all__ = ["minimax_filter", "minimax_frontier", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
 
-#: The pip extra that installs the convex solver (cvxpy with Clarabel).
+#: The pip extra with cvxpy and Clarabel, for the reference formulation (tests, benchmark);
+#: the design itself needs neither.
 MINIMAX_EXTRA = "vibrofocus[minimax]"
-_VERBOSE = False
+#: Peak rows below this share of the optimum leave the program (when it sets a record).
+_DROP = 0.5
+
+
+_SETUP_DEFAULTS = dict(taper_octaves=0.5, support_s=(0.01, 0.005), stride=32, ir_energy_tol=1e-4, decimation=None)
 
 
 @dataclass(frozen=True)
@@ -71,8 +80,10 @@ class MinimaxReport:
     peak_drive : float
         Peak ``|drives|``.
     status : str
-        The solver's status of the last solve (``"optimal"`` when solved).
+        ``"optimal"`` when constraint generation converged (no sample over the program's
+        peak), ``"max_iter"`` when it stopped at ``max_iter`` rounds.
     solver : str
+        ``"barrier"``: the dense log-barrier Newton method of this module.
     iterations : int
         Constraint-generation rounds.
     n_constraints : int
@@ -114,21 +125,127 @@ class MinimaxReport:
     decimation: int
 
 
-def _cvxpy():
-    try:
-        import cvxpy as cp
-    except ImportError:  # pragma: no cover - exercised only without the extra
-        raise ImportError(f"minimax_filter needs cvxpy and Clarabel: pip install '{MINIMAX_EXTRA}'") from None
-    return cp
+@dataclass(frozen=True)
+class MinimaxFrontier:
+    """The peak-contrast frontier of one tap (:func:`minimax_frontier`): for each asked
+    fidelity, the minimax design's achieved fidelity and peak contrast.
+
+    Attributes
+    ----------
+    min_fidelity : ndarray, shape (k,)
+        The asked least fidelities.
+    fidelity : ndarray, shape (k,)
+        Achieved zero-lag fidelity (NaN where the fidelity cannot be reached).
+    peak_contrast_db : ndarray, shape (k,)
+        Target peak over the largest quiet peak, dB (NaN where infeasible).
+    quiet_peak : ndarray, shape (k,)
+        Largest quiet ``|displacement|``, unit of the targets.
+    seconds : float
+        Wall time of the whole frontier, s.
+    """
+
+    min_fidelity: np.ndarray
+    fidelity: np.ndarray
+    peak_contrast_db: np.ndarray
+    quiet_peak: np.ndarray
+    seconds: float
 
 
 def _local_peaks(y: np.ndarray, floor: float, limit: int) -> np.ndarray:
     """Indices of the local maxima of ``|y|`` (1-D) above ``floor``, largest first, at most ``limit``."""
     a = np.abs(y)
-    left = np.roll(a, 1)
-    right = np.roll(a, -1)
-    idx = np.flatnonzero((a >= left) & (a >= right) & (a > floor))
+    idx = np.flatnonzero((a >= np.roll(a, 1)) & (a >= np.roll(a, -1)) & (a > floor))
     return idx[np.argsort(a[idx])[::-1][:limit]]
+
+
+def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndarray | None, dcap: float | None,
+             u: np.ndarray, *, rel_gap: float = 1e-7, abs_gap: float = 1e-12, stop_below: float | None = None,
+             mu: float = 8.0, max_newton: int = 600) -> tuple[np.ndarray, float, int]:
+    """min t s.t. ``|A u| <= t``, ``b.u = 1``, ``u'Q u <= cap**2``, ``|D u| <= dcap``: a
+    log-barrier method with dense Newton steps (the program is small: a few hundred
+    coefficients, a few hundred to a few thousand rows).
+
+    ``A`` (n_rows, n_var), ``b`` (n_var,), ``Q`` (n_var, n_var) positive semi-definite, ``D``
+    (n_drive_rows, n_var) or ``None``; ``u`` (n_var,) must satisfy ``b.u = 1`` and be strictly
+    inside the cone and the drive rows. Stops when the barrier's gap bound (its parameter over
+    its weight) is below ``rel_gap * t + abs_gap``, or, with ``stop_below``, as soon as
+    ``t < stop_below``. Returns ``u``, ``t`` and the Newton steps taken.
+    """
+    import scipy.linalg as sla
+
+    nv = A.shape[1]
+    c2 = float(cap) ** 2
+    has_d = D is not None and len(D) > 0
+    t = float(np.max(np.abs(A @ u))) * 1.05 + abs_gap
+    theta = 2 * len(A) + (2 * len(D) if has_d else 0) + 2  # the barrier's parameter
+    tau = 0.1 * theta / t
+    bb = np.append(b, 0.0)
+
+    def barrier(u: np.ndarray, t: float) -> float:
+        Au = A @ u
+        e = c2 - u @ Q @ u
+        slack = np.concatenate([t - Au, t + Au] + ([dcap - D @ u, dcap + D @ u] if has_d else []))
+        return float(tau * t - np.sum(np.log(slack)) - np.log(e)) if e > 0 and np.all(slack > 0) else np.inf
+
+    def _newton_loops() -> tuple[np.ndarray, float, int]:
+        nonlocal u, t, tau
+        steps = 0
+        while True:
+            for _ in range(60):
+                Au, Qu = A @ u, Q @ u
+                i1, i2 = 1 / (t - Au), 1 / (t + Au)
+                e = c2 - u @ Qu
+                w = i1 * i1 + i2 * i2
+                Hm = np.empty((nv + 1, nv + 1))
+                Hm[:nv, :nv] = (A.T * w) @ A + (2 / e) * Q + (4 / e**2) * np.outer(Qu, Qu)
+                Hm[:nv, nv] = Hm[nv, :nv] = A.T @ (i2 * i2 - i1 * i1)
+                Hm[nv, nv] = np.sum(w)
+                g = np.append(A.T @ (i1 - i2) + 2 * Qu / e, tau - np.sum(i1 + i2))
+                if has_d:
+                    j1, j2 = 1 / (dcap - D @ u), 1 / (dcap + D @ u)
+                    g[:nv] += D.T @ (j1 - j2)
+                    Hm[:nv, :nv] += (D.T * (j1 * j1 + j2 * j2)) @ D
+                if not (np.all(np.isfinite(Hm)) and np.all(np.isfinite(g))):
+                    return u, t, steps  # at the edge of the floating point: as good as it gets
+                diag = np.diag(Hm)
+                scale = 1 / np.sqrt(np.maximum(diag, 1e-20 * np.max(diag)))
+                Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(nv + 1)
+                try:
+                    factor = sla.cho_factor(Hs, check_finite=False)
+                    hg, hb = (sla.cho_solve(factor, np.stack([g, bb], 1) * scale[:, None], check_finite=False)
+                              * scale[:, None]).T
+                except (np.linalg.LinAlgError, ValueError):
+                    hg, hb = (np.linalg.lstsq(Hs, np.stack([g, bb], 1) * scale[:, None], rcond=None)[0]
+                              * scale[:, None]).T
+                # The Newton step on {b.u = 1} (and back onto it, should rounding have moved u).
+                dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
+                dec = float(-g @ dz)
+                if dec < 0:  # rounding in a near-singular system: the eigen-solution instead
+                    wh, vh = np.linalg.eigh(Hs)
+                    inv = np.where(wh > wh[-1] * 1e-14, 1 / np.maximum(wh, 1e-300), 0.0)
+                    hg, hb = ((vh * inv) @ (vh.T @ (np.stack([g, bb], 1) * scale[:, None])) * scale[:, None]).T
+                    dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
+                    dec = float(-g @ dz)
+                steps += 1
+                if dec <= 2e-10 or steps >= max_newton:
+                    break
+                f0, step = barrier(u, t), 1.0
+                while step > 1e-14:
+                    un, tn = u + step * dz[:nv], t + step * dz[nv]
+                    if barrier(un, tn) <= f0 - 0.25 * step * dec:
+                        break
+                    step *= 0.5
+                else:
+                    break
+                u, t = un, tn
+                if stop_below is not None and t < stop_below:
+                    return u, t, steps
+            if theta / tau <= rel_gap * t + abs_gap or steps >= max_newton:
+                return u, t, steps
+            tau *= mu
+
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # the edge is caught inside
+        return _newton_loops()
 
 
 def minimax_filter(
@@ -143,13 +260,12 @@ def minimax_filter(
     full_output: bool = False,
     taper_octaves: float = 0.5,
     support_s: tuple[float, float] = (0.01, 0.005),
-    stride: int = 8,
+    stride: int = 32,
     ir_energy_tol: float = 1e-4,
     decimation: int | None = None,
     tol: float = 1e-3,
     fidelity_margin: float = 1e-3,
     max_iter: int = 30,
-    solver: str = "CLARABEL",
 ) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
     """Peak-contrast (minimax) drives: the least largest quiet-point ``|displacement|`` at
     a given target fidelity (SPEC §2, §8).
@@ -203,8 +319,6 @@ def minimax_filter(
         played response.
     max_iter : int
         Most constraint-generation rounds.
-    solver : str
-        cvxpy solver name (default Clarabel).
 
     Returns
     -------
@@ -220,194 +334,259 @@ def minimax_filter(
     left out: ``ir_energy_left_out``), and every later round checks the full response
     through the whole ``H``, which is also what ``predicted`` is: the truncation's error is
     in the prediction, and bounded by ``tol`` in the peak.
-    Needs the optional extra ``vibrofocus[minimax]`` (cvxpy, Clarabel).
+    Each round's program is solved by a dense log-barrier Newton method (one BLAS thread;
+    no cvxpy or conic solver needed).
     """
-    cp = _cvxpy()
-    H = as_transfer(H)
-    targets = as_array(targets, "targets", ndim=2)
-    n = targets.shape[1]
-    check_grid(H.shape[0], n, "targets (n_points, n)")
-    if targets.shape[0] != H.shape[1]:
-        raise ValidationError(f"targets has {targets.shape[0]} rows but H has {H.shape[1]} points")
-    rows = np.flatnonzero(np.any(targets != 0, axis=1))
-    if rows.size != 1:
-        raise ValidationError(f"targets must have exactly one non-zero row (the target), got {rows.size}")
-    ti = int(rows[0])
-    min_fidelity = check_in_range(min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False)
-    if max_drive is not None:
-        max_drive = check_positive(max_drive, "max_drive")
-    tol = check_positive(tol, "tol")
-    n_pts, n_act = H.shape[1], H.shape[2]
-    quiet_idx = np.delete(np.arange(n_pts), ti) if quiet is None else as_indices(quiet, "quiet", n_pts)
-    quiet_idx = quiet_idx[quiet_idx != ti]
-    if quiet_idx.size == 0:
-        raise ValidationError("minimax_filter needs at least one quiet point besides the target")
-    H, fs, n, band, taper, freqs, active = _prepare_design(H, fs, n, band, taper_octaves)
-    top = freqs[active][-1]
-    if decimation is None:
-        decimation = max(1, int(np.floor(fs / (2 * top) * 0.999)))
-    elif int(decimation) < 1 or fs / (2 * int(decimation)) < top:
-        raise ValidationError(f"decimation={decimation} puts the pulses' Nyquist below the taper's edge {top:g} Hz")
-    r = int(decimation)
+    with _single_threaded_blas():  # small dense algebra: BLAS threads only cost hand-offs
+        program = _Program(H, targets, fs, band=band, quiet=quiet, taper_octaves=taper_octaves,
+                           support_s=support_s, stride=stride, ir_energy_tol=ir_energy_tol, decimation=decimation)
+        return program.design(min_fidelity, max_drive=max_drive, full_output=full_output, tol=tol,
+                              fidelity_margin=fidelity_margin, max_iter=max_iter)
 
-    desired = np.fft.irfft(np.fft.rfft(targets[ti]) * taper, n)
-    d_norm = float(np.linalg.norm(desired))
-    if d_norm == 0:
-        raise ValidationError("the target's waveform has no energy inside the band")
-    t_peak = int(np.argmax(np.abs(desired)))
-    pre, post = (int(round(float(s) * fs)) for s in support_s)
-    first, last = max(0, t_peak - pre), min(n - 1, t_peak + post)
-    delays = np.arange(first, last + 1, r)
-    K = delays.size
 
-    # Band-limited impulse responses g[p, a, t] (pulse at t = 0), scaled to O(1).
-    G = H * taper[:, None, None]
-    g = np.fft.irfft(G, n, axis=0).transpose(1, 2, 0)  # (n_points, n_act, n)
-    gscale = float(np.max(np.abs(g[ti]))) or 1.0
-    g = g / gscale
-    energy = np.sum(g**2, axis=-1)
-    tail = float(np.sum(g[..., -n // 8:] ** 2) / np.sum(energy)) if np.sum(energy) > 0 else 0.0
-    # The peak constraints list the samples where the pulses' responses carry all but
-    # ir_energy_tol of their energy (the truncation), then add any sample found over.
-    cum = np.cumsum(np.sum(g[:, :, : n // 2] ** 2, axis=(0, 1)))
-    ir_taps = int(np.searchsorted(cum, (1 - ir_energy_tol) * np.sum(energy))) + 1
-    ir_taps = min(ir_taps, n // 2)
-    left_out = float(1 - cum[ir_taps - 1] / np.sum(energy))
+class _Program:
+    """The parts of the minimax program that do not depend on the fidelity or the drive
+    limit (basis, target norm, impulse responses) and the peak constraints found so far:
+    one set-up serves several designs (the frontier), each warm-started from the last."""
 
-    # Target: <y, d~> = b^T u and |y|^2 = u^T Q u (Q Toeplitz in the delays).
-    dn = desired / d_norm
-    Gt = np.fft.rfft(g[ti], axis=-1)  # (n_act, F)
-    xc = np.fft.irfft(np.conj(Gt) * np.fft.rfft(dn)[None], n, axis=-1)  # sum_t g_a(t) d(t + tau)
-    b = xc[:, delays % n].reshape(-1)
-    C = np.fft.irfft(np.conj(Gt)[:, None] * Gt[None, :], n, axis=-1)  # C_ab(tau)
-    lag = (delays[:, None] - delays[None, :]) % n  # t_k - t_l
-    # Q[(a,k),(b,l)] = C_ab(t_k - t_l).
-    Q = np.empty((n_act * K, n_act * K))
-    for a in range(n_act):
-        for bb in range(n_act):
-            Q[a * K:(a + 1) * K, bb * K:(bb + 1) * K] = C[a, bb][lag]
+    def __init__(self, H: Any, targets: Any, fs: float, *, band: tuple[float, float], quiet: Any,
+                 taper_octaves: float, support_s: tuple[float, float], stride: int, ir_energy_tol: float,
+                 decimation: int | None) -> None:
+        H = as_transfer(H)
+        targets = as_array(targets, "targets", ndim=2)
+        n = targets.shape[1]
+        check_grid(H.shape[0], n, "targets (n_points, n)")
+        if targets.shape[0] != H.shape[1]:
+            raise ValidationError(f"targets has {targets.shape[0]} rows but H has {H.shape[1]} points")
+        rows = np.flatnonzero(np.any(targets != 0, axis=1))
+        if rows.size != 1:
+            raise ValidationError(f"targets must have exactly one non-zero row (the target), got {rows.size}")
+        ti = int(rows[0])
+        n_pts, n_act = H.shape[1], H.shape[2]
+        quiet_idx = np.delete(np.arange(n_pts), ti) if quiet is None else as_indices(quiet, "quiet", n_pts)
+        quiet_idx = quiet_idx[quiet_idx != ti]
+        if quiet_idx.size == 0:
+            raise ValidationError("minimax_filter needs at least one quiet point besides the target")
+        stride = int(check_positive(stride, "stride"))
+        H, fs, n, band, taper, freqs, active = _prepare_design(H, fs, n, band, taper_octaves)
+        top = freqs[active][-1]
+        if decimation is None:
+            decimation = max(1, int(np.floor(fs / (2 * top) * 0.999)))
+        elif int(decimation) < 1 or fs / (2 * int(decimation)) < top:
+            raise ValidationError(f"decimation={decimation} puts the pulses' Nyquist below the taper's edge {top:g} Hz")
+        r = int(decimation)
 
-    # Unit pulse train -> drive (the taper's impulse response at each delay).
-    pulse = np.fft.irfft(taper, n)
-    # Reduced basis: the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
-    # 2 x bandwidth x support well-conditioned directions (the discrete prolate sequences
-    # of the band); the drives are combinations of those, with unit energy each.
-    acorr = np.fft.irfft(taper**2, n)
-    wp, Vp = np.linalg.eigh(acorr[lag])
-    kept = wp > wp[-1] * 1e-12
-    basis = Vp[:, kept] / np.sqrt(wp[kept])  # (K, m)
-    m = basis.shape[1]
-    b = np.einsum("ak,km->am", b.reshape(n_act, K), basis).reshape(-1)
-    Q = np.einsum("akbl,km,ln->ambn", Q.reshape(n_act, K, n_act, K), basis, basis).reshape(n_act * m, n_act * m)
-    w, V = np.linalg.eigh(0.5 * (Q + Q.T))
-    keep = w > w[-1] * 1e-12
-    R = (np.sqrt(w[keep])[:, None] * V[:, keep].T)
+        desired = np.fft.irfft(np.fft.rfft(targets[ti]) * taper, n)
+        d_norm = float(np.linalg.norm(desired))
+        if d_norm == 0:
+            raise ValidationError("the target's waveform has no energy inside the band")
+        t_peak = int(np.argmax(np.abs(desired)))
+        pre, post = (int(round(float(s) * fs)) for s in support_s)
+        first, last = max(0, t_peak - pre), min(n - 1, t_peak + post)
+        delays = np.arange(first, last + 1, r)
+        K = delays.size
 
-    def drives_of(u: np.ndarray) -> np.ndarray:
-        train = np.zeros((n_act, n))
-        train[:, delays] = u.reshape(n_act, m) @ basis.T
-        return np.fft.irfft(np.fft.rfft(train, axis=-1) * taper, n, axis=-1)
+        # Band-limited impulse responses g[p, a, t] (pulse at t = 0), scaled to O(1).
+        g = np.fft.irfft(H * taper[:, None, None], n, axis=0).transpose(1, 2, 0)  # (n_points, n_act, n)
+        gscale = float(np.max(np.abs(g[ti]))) or 1.0
+        g = g / gscale
+        energy = np.sum(g**2, axis=-1)
+        self.tail = float(np.sum(g[..., -n // 8:] ** 2) / np.sum(energy)) if np.sum(energy) > 0 else 0.0
+        # The first peak constraints list the samples where the pulses' responses carry all
+        # but ir_energy_tol of their energy (the truncation); any sample found over joins.
+        cum = np.cumsum(np.sum(g[:, :, : n // 2] ** 2, axis=(0, 1)))
+        ir_taps = min(int(np.searchsorted(cum, (1 - ir_energy_tol) * np.sum(energy))) + 1, n // 2)
+        self.left_out = float(1 - cum[ir_taps - 1] / np.sum(energy))
 
-    def quiet_response(u: np.ndarray) -> np.ndarray:
-        x = drives_of(u)
-        return np.fft.irfft(np.einsum("fpa,af->pf", H[:, quiet_idx], np.fft.rfft(x, axis=-1)), n, axis=-1) / gscale
+        # Target: <y, d~> = b^T u and |y|^2 = u^T Q u (Q Toeplitz in the delays).
+        dn = desired / d_norm
+        Gt = np.fft.rfft(g[ti], axis=-1)  # (n_act, F)
+        xc = np.fft.irfft(np.conj(Gt) * np.fft.rfft(dn)[None], n, axis=-1)  # sum_t g_a(t) d(t + tau)
+        C = np.fft.irfft(np.conj(Gt)[:, None] * Gt[None, :], n, axis=-1)  # C_ab(tau)
+        lag = (delays[:, None] - delays[None, :]) % n  # t_k - t_l
+        # Reduced basis: the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
+        # 2 x bandwidth x support well-conditioned directions (the discrete prolate sequences
+        # of the band); the drives are combinations of those, with unit energy each.
+        wp, Vp = np.linalg.eigh(np.fft.irfft(taper**2, n)[lag])
+        kept = wp > wp[-1] * 1e-12
+        basis = Vp[:, kept] / np.sqrt(wp[kept])  # (K, m)
+        m = basis.shape[1]
+        self.b = (xc[:, delays % n] @ basis).reshape(-1)
+        # Q[(a,k),(b,l)] = C_ab(t_k - t_l), in the basis.
+        Q = np.einsum("km,abkl,ln->ambn", basis, C[:, :, lag], basis, optimize=True).reshape(n_act * m, n_act * m)
+        w, V = np.linalg.eigh(0.5 * (Q + Q.T))
+        keep = w > w[-1] * 1e-12
+        self.Q = (V[:, keep] * w[keep]) @ V[:, keep].T
+        # The best fidelity's coefficients (least ||y|| at b.u = 1): the start of every solve.
+        qb = V[:, keep] @ ((V[:, keep].T @ self.b) / w[keep])
+        self.u_best = qb / (self.b @ qb)
+        self.H, self.n, self.fs, self.taper, self.g, self.gscale = H, n, fs, taper, g, gscale
+        self.ti, self.quiet, self.n_act, self.m, self.basis, self.delays = ti, quiet_idx, n_act, m, basis, delays
+        self.desired, self.d_norm, self.ir_taps, self.decimation = desired, d_norm, ir_taps, r
+        self.pulse = np.fft.irfft(taper, n)  # unit pulse -> drive
+        self.u_scale = d_norm / gscale  # drives = (u * u_scale) pulses
 
-    def rows_of(pairs: np.ndarray) -> np.ndarray:
-        """Rows of the peak constraints at (quiet j, sample t): the response there per coefficient."""
-        p, t = quiet_idx[pairs[:, 0]], pairs[:, 1]
-        lags = (t[:, None] - delays[None, :]) % n  # (N, K)
-        rows = g[p[:, None, None], np.arange(n_act)[None, :, None], lags[:, None, :]]  # (N, n_act, K)
-        return (rows @ basis).reshape(len(p), -1)
+        # Warm start: the samples where the pseudo-inverse's quiet response peaks, and a coarse grid.
+        from .inverse import inverse_filter
 
-    # Warm start: the active set where the pseudo-inverse's quiet response peaks, and a coarse grid.
-    from .inverse import inverse_filter
+        pinv = inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves, check_wraparound=False)
+        y0 = np.fft.irfft(np.einsum("fpa,af->pf", H[:, quiet_idx], np.fft.rfft(pinv, axis=-1)), n, axis=-1)
+        grid = np.arange(first, min(n, last + ir_taps), stride)
+        pairs = [(j, int(t)) for j in range(len(quiet_idx)) for t in _local_peaks(y0[j], 0.3 * np.max(np.abs(y0[j])), 10)]
+        pairs += [(j, int(t)) for j in range(len(quiet_idx)) for t in grid]
+        self.listed = np.zeros((0, 2), int)
+        self.A = np.zeros((0, n_act * m))
+        self._add_pairs(pairs)
+        self.drive_rows = np.zeros(0, int)
+        self.D = np.zeros((0, m))
+        self._add_drive_rows(np.arange(first, last + 1, 32))
 
-    pinv = inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves, check_wraparound=False)
-    spectra = np.fft.rfft(pinv, axis=-1)
-    y0 = np.fft.irfft(np.einsum("fpa,af->pf", H[:, quiet_idx], spectra), n, axis=-1)
-    pairs = set()
-    grid = np.arange(max(0, first), min(n, last + ir_taps), int(stride))
-    for j in range(len(quiet_idx)):
-        for t in _local_peaks(y0[j], 0.3 * np.max(np.abs(y0[j])), 10):
-            pairs.add((j, int(t)))
-        for t in grid:
-            pairs.add((j, int(t)))
-    drive_rows: set[int] = set()
-    if max_drive is not None:
-        drive_rows.update(int(t) for t in np.arange(first, last + 1, 32))
-    u_scale = d_norm / gscale  # drives = (u * u_scale) pulses
-
-    asked = min(min_fidelity + check_positive(fidelity_margin, "fidelity_margin", allow_zero=True),
-                (1 + min_fidelity) / 2)
-    u = cp.Variable(n_act * m)
-    s = cp.Variable()
-    status, it, value = "not solved", 0, np.nan
-    A_rows = np.zeros((0, n_act * m))
-    listed = np.zeros((0, 2), int)
-    for it in range(1, max_iter + 1):
-        new = np.array(sorted(pairs - {tuple(x) for x in listed}), int).reshape(-1, 2)
+    def _add_pairs(self, pairs: Any) -> int:
+        """Add the peak constraints at (quiet j, sample t) not listed yet; how many."""
+        new = np.array(sorted(set(map(tuple, pairs)) - set(map(tuple, self.listed.tolist()))), int).reshape(-1, 2)
         if new.size:
-            A_rows = np.vstack([A_rows, rows_of(new)])
-            listed = np.vstack([listed, new])
-        cons = [b @ u == 1.0, cp.SOC(cp.Constant(1.0 / asked), R @ u), A_rows @ u <= s, -(A_rows @ u) <= s]
-        if max_drive is not None and drive_rows:
-            tr = np.array(sorted(drive_rows))
-            P = np.stack([pulse[(t - delays) % n] for t in tr]) @ basis  # (n_rows, m)
-            Pfull = np.kron(np.eye(n_act), P)
-            cons += [Pfull @ u <= max_drive / u_scale, -(Pfull @ u) <= max_drive / u_scale]
-        prob = cp.Problem(cp.Minimize(s), cons)
-        for attempt in (solver, "SCS") if solver == "CLARABEL" else (solver,):
-            opts = (dict(tol_gap_rel=1e-7, tol_gap_abs=1e-9, tol_feas=1e-7) if attempt == "CLARABEL" else
-                    dict(eps_abs=1e-9, eps_rel=1e-9, max_iters=200_000) if attempt == "SCS" else {})
-            try:  # a degenerate optimum (a quiet peak of 0) can stall Clarabel: SCS then
-                prob.solve(solver=attempt, verbose=_VERBOSE, **opts)
+            p, t = self.quiet[new[:, 0]], new[:, 1]
+            lags = (t[:, None] - self.delays[None, :]) % self.n  # (N, K)
+            rows = self.g[p[:, None, None], np.arange(self.n_act)[None, :, None], lags[:, None, :]]  # (N, n_act, K)
+            self.A = np.vstack([self.A, (rows @ self.basis).reshape(len(p), -1)])
+            self.listed = np.vstack([self.listed, new])
+        return len(new)
+
+    def _add_drive_rows(self, samples: Any) -> int:
+        """Add the drive-limit constraints at these samples not listed yet; how many."""
+        new = np.setdiff1d(np.asarray(samples, int), self.drive_rows)
+        if new.size:
+            self.D = np.vstack([self.D, self.pulse[(new[:, None] - self.delays[None, :]) % self.n] @ self.basis])
+            self.drive_rows = np.concatenate([self.drive_rows, new])
+        return len(new)
+
+    def drives_of(self, u: np.ndarray) -> np.ndarray:
+        train = np.zeros((self.n_act, self.n))
+        train[:, self.delays] = u.reshape(self.n_act, self.m) @ self.basis.T
+        return np.fft.irfft(np.fft.rfft(train, axis=-1) * self.taper, self.n, axis=-1) * self.u_scale
+
+    def solve(self, min_fidelity: float, *, max_drive: float | None, tol: float, fidelity_margin: float,
+              max_iter: int) -> tuple[np.ndarray, float, str, int]:
+        """Drives (n_act, n), the program's quiet peak (unit of the targets), the status and
+        the rounds, by constraint generation from the constraints listed so far."""
+        asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
+        cap = 1.0 / asked
+        if self.u_best @ self.Q @ self.u_best >= cap**2 * (1 - 1e-9):
+            raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g} is above the "
+                                  f"model's best fidelity {1 / np.sqrt(self.u_best @ self.Q @ self.u_best):.4g} "
+                                  "over this support): relax the fidelity")
+        dcap = None if max_drive is None else max_drive / self.u_scale
+        u, value, it, inside, best_value = self.u_best.copy(), np.nan, 0, True, 0.0
+        for it in range(1, max_iter + 1):
+            D = None if dcap is None else np.kron(np.eye(self.n_act), self.D)
+            u = 0.9 * u + 0.1 * self.u_best  # off the cone's edge, where the last solve ended
+            if D is not None and np.max(np.abs(D @ u)) >= dcap * (1 - 1e-9):  # back inside the drive limit
+                u, over, _ = _barrier(D / dcap, self.b, self.Q, cap, None, None, u, stop_below=1 - 1e-3)
+                if over >= 1 - 1e-3:
+                    raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
+                                          f"max_drive={max_drive}): relax the fidelity or the drive limit")
+            u, value, _ = _barrier(self.A, self.b, self.Q, cap, D, dcap, u,
+                                   abs_gap=1e-12 * np.max(np.abs(self.desired)) / self.d_norm)
+            x = self.drives_of(u)
+            yq = np.fft.irfft(np.einsum("fpa,af->pf", self.H[:, self.quiet], np.fft.rfft(x, axis=-1)),
+                              self.n, axis=-1) / self.d_norm
+            floor = max(value, 0.0) * (1 + tol) + 1e-9 * np.max(np.abs(self.desired)) / self.d_norm
+            added = self._add_pairs([(int(j), int(t)) for j in np.flatnonzero(np.max(np.abs(yq), axis=1) > floor)
+                                     for t in _local_peaks(yq[j], floor, 20)])
+            if dcap is not None:
+                over = np.abs(x) > max_drive * (1 + tol)
+                added += self._add_drive_rows([t for a in np.flatnonzero(over.any(axis=1))
+                                               for t in _local_peaks(x[a], max_drive * (1 + tol), 20)])
+            if added == 0:
                 break
-            except cp.error.SolverError as exc:
-                error = exc
+            # Rows far below the peak leave the program only when its optimum sets a record
+            # (by more than tol: finitely often, so no set of rows comes back for ever); the
+            # full response is checked every round.
+            slack = np.abs(self.A[:-added] @ u) < _DROP * max(value, 0.0)
+            record, best_value = value > best_value * (1 + tol), max(best_value, value)
+            if _DROP > 0 and record and slack.any():
+                keep = np.concatenate([~slack, np.ones(added, bool)])
+                self.A, self.listed = self.A[keep], self.listed[keep]
         else:
-            raise ValidationError(f"the minimax program failed in {solver}: {error}") from None
-        status = prob.status
-        if status not in ("optimal", "optimal_inaccurate"):
-            raise ValidationError(f"the minimax program is {status} (min_fidelity={min_fidelity:g}, "
-                                  f"max_drive={max_drive}): relax the fidelity or the drive limit")
-        value = float(s.value)
-        uu = np.asarray(u.value, float)
-        yq = quiet_response(uu)
-        over = np.abs(yq) > value * (1 + tol)
-        added = 0
-        if over.any():
-            for j in np.flatnonzero(over.any(axis=1)):
-                for t in _local_peaks(yq[j], value * (1 + tol), 20):
-                    pairs.add((int(j), int(t)))
-                    added += 1
+            inside = False
+        return self.drives_of(u), value * self.d_norm, "optimal" if inside else "max_iter", it
+
+    def design(self, min_fidelity: float, *, max_drive: float | None, full_output: bool, tol: float,
+               fidelity_margin: float, max_iter: int) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
+        min_fidelity = check_in_range(min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False)
         if max_drive is not None:
-            x = drives_of(uu) * u_scale
-            bad = np.abs(x) > max_drive * (1 + tol)
-            for a in np.flatnonzero(bad.any(axis=1)):
-                for t in _local_peaks(x[a], max_drive * (1 + tol), 20):
-                    if int(t) not in drive_rows:
-                        drive_rows.add(int(t))
-                        added += 1
-        if added == 0:
-            break
-    drives = drives_of(uu) * u_scale
-    predicted = predict_response(H, drives)
-    if max_drive is not None:
-        peak = float(np.max(np.abs(drives)))
-        if peak > max_drive:  # within tol: trim to the limit exactly
-            drives = drives * (max_drive / peak)
-            predicted = predicted * (max_drive / peak)
-    if not full_output:
-        return drives
-    yt = predicted[ti]
-    fid = float(np.dot(yt, desired) / (np.linalg.norm(yt) * d_norm))
-    qpeak = float(np.max(np.abs(predicted[quiet_idx])))
-    tpeak = float(np.max(np.abs(yt)))
-    report = MinimaxReport(
-        predicted=predicted, desired=desired, target_index=ti, quiet=quiet_idx, fidelity=fid,
-        peak_contrast_db=float(20 * np.log10(tpeak / qpeak)) if qpeak > 0 else float("inf"),
-        quiet_peak=qpeak, model_quiet_peak=value * d_norm, peak_drive=float(np.max(np.abs(drives))),
-        status=str(status), solver=solver, iterations=it, n_constraints=len(listed), n_variables=n_act * m,
-        ir_taps=ir_taps, ir_energy_left_out=left_out, ir_tail_energy=tail, support=(int(delays[0]), int(delays[-1])),
-        decimation=r)
-    return drives, report
+            max_drive = check_positive(max_drive, "max_drive")
+        tol = check_positive(tol, "tol")
+        fidelity_margin = check_positive(fidelity_margin, "fidelity_margin", allow_zero=True)
+        drives, value, status, it = self.solve(min_fidelity, max_drive=max_drive, tol=tol,
+                                               fidelity_margin=fidelity_margin, max_iter=max_iter)
+        predicted = predict_response(self.H, drives)
+        if max_drive is not None:
+            peak = float(np.max(np.abs(drives)))
+            if peak > max_drive:  # within tol: trim to the limit exactly
+                drives = drives * (max_drive / peak)
+                predicted = predicted * (max_drive / peak)
+        if not full_output:
+            return drives
+        yt = predicted[self.ti]
+        fid = float(np.dot(yt, self.desired) / (np.linalg.norm(yt) * self.d_norm))
+        qpeak = float(np.max(np.abs(predicted[self.quiet])))
+        tpeak = float(np.max(np.abs(yt)))
+        report = MinimaxReport(
+            predicted=predicted, desired=self.desired, target_index=self.ti, quiet=self.quiet, fidelity=fid,
+            peak_contrast_db=float(20 * np.log10(tpeak / qpeak)) if qpeak > 0 else float("inf"),
+            quiet_peak=qpeak, model_quiet_peak=value, peak_drive=float(np.max(np.abs(drives))),
+            status=str(status), solver="barrier", iterations=it, n_constraints=len(self.listed),
+            n_variables=self.A.shape[1], ir_taps=self.ir_taps, ir_energy_left_out=self.left_out,
+            ir_tail_energy=self.tail, support=(int(self.delays[0]), int(self.delays[-1])),
+            decimation=self.decimation)
+        return drives, report
+
+
+def minimax_frontier(H: Any, targets: Any, fs: float, fidelities: Any, *, band: tuple[float, float] = BAND_HZ,
+                     max_drive: float | None = None, quiet: Any = None, **options: Any) -> MinimaxFrontier:
+    """The peak-contrast frontier: :func:`minimax_filter` at each of ``fidelities``.
+
+    One set-up (basis, target norm, impulse responses) serves every fidelity, and each
+    design starts from the peak constraints the last one found.
+
+    Parameters
+    ----------
+    H, targets, fs, band, max_drive, quiet
+        As in :func:`minimax_filter`.
+    fidelities : sequence of float, shape (k,)
+        Least fidelities, each in (0, 1).
+    **options
+        The other keywords of :func:`minimax_filter` (``support_s``, ``tol``, ...), but
+        ``full_output`` and ``min_fidelity``.
+
+    Returns
+    -------
+    MinimaxFrontier
+        NaN where a fidelity is above the best the support reaches (or the drive limit
+        rules it out).
+    """
+    import time
+
+    fids = as_array(fidelities, "fidelities", ndim=1)
+    for f in fids:
+        check_in_range(float(f), "fidelities", 0.0, 1.0, inclusive=False)
+    setup = {k: options.pop(k) for k in ("taper_octaves", "support_s", "stride", "ir_energy_tol", "decimation")
+             if k in options}
+    solve = {"tol": 1e-3, "fidelity_margin": 1e-3, "max_iter": 30, **options}
+    if set(solve) - {"tol", "fidelity_margin", "max_iter"}:
+        raise ValidationError(f"minimax_frontier got unknown options {sorted(set(solve) - {'tol', 'fidelity_margin', 'max_iter'})}")
+    start = time.perf_counter()
+    out = np.full((3, fids.size), np.nan)
+    with _single_threaded_blas():
+        program = _Program(H, targets, fs, band=band, quiet=quiet, **{**_SETUP_DEFAULTS, **setup})
+        for i, f in enumerate(fids):
+            try:
+                _, rep = program.design(float(f), max_drive=max_drive, full_output=True, **solve)
+            except ValidationError as exc:
+                if "infeasible" not in str(exc):
+                    raise
+                continue
+            out[:, i] = rep.fidelity, rep.peak_contrast_db, rep.quiet_peak
+    return MinimaxFrontier(min_fidelity=fids, fidelity=out[0], peak_contrast_db=out[1], quiet_peak=out[2],
+                           seconds=time.perf_counter() - start)
