@@ -7,7 +7,13 @@ through a measured calibration and then played through the true H. Peak contrast
 target's peak |u| over the largest |u| at any other calibrated point at any time, dB.
 Prints the mean fidelity, mean peak contrast and the mean energy-contrast bound.
 
+``--minimax`` names the minimax variants compared, each ``label=option:value,...`` (default
+``minimax=``: the method's defaults, robust from a calibration); e.g. ``budget=robust:none`` is
+the nominal program with the drive budget (1x the pseudo-inverse's peak drive), ``robust=`` the
+robust one (the quiet peak bounded over one standard error of the calibration, from its coherence).
+
 Usage: python scripts/minimax_table.py [--seeds 0 1 2 3] [--locations 1 ... 9] [--calibrated]
+       [--minimax budget=robust:none robust=]
 """
 
 from __future__ import annotations
@@ -30,16 +36,27 @@ def row(design, true_tm):
             design.wraparound_fraction)
 
 
+def variant(spec: str) -> tuple[str, dict]:
+    """``label=option:value,...`` -> (label, options); ``none`` -> None, numbers -> float."""
+    label, _, opts = spec.partition("=")
+    options = {}
+    for item in filter(None, opts.split(",")):
+        key, _, value = item.partition(":")
+        options[key] = None if value == "none" else float(value)
+    return label, options
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     ap.add_argument("--locations", type=int, nargs="+", default=list(range(1, 10)))
     ap.add_argument("--calibrated", action="store_true")
-    ap.add_argument("--drive-budget", default="1", help="minimax drive_budget (times the pseudo-inverse's "
-                    "peak drive), or 'none'")
+    ap.add_argument("--minimax", nargs="+", default=["minimax="],
+                    help="minimax variants, each label=option:value,... (drive_budget, robust; 'none')")
     args = ap.parse_args()
-    rows = {"inverse": [], "minimax": []}
-    times = []
+    variants = dict(variant(s) for s in args.minimax)
+    rows = {"inverse": [], **{label: [] for label in variants}}
+    times = {label: [] for label in variants}
     for seed in args.seeds:
         rig = SimulatedForearm(seed=seed, skin="nominal")
         tm = rig.transfer_matrix()
@@ -59,33 +76,34 @@ def main() -> None:
                     # From a calibration, the minimax drives hear its noise floor over the whole
                     # window: the wrap-around check warns (reported) instead of refusing.
                     extra = dict(check_wraparound="warn") if args.calibrated else {}
-                    if name == "minimax":
-                        extra["drive_budget"] = None if args.drive_budget == "none" else float(args.drive_budget)
-                    d = render(name, source, tm.fs, tm.layout, loc, **extra)
-                if name == "minimax":
-                    times.append(time.perf_counter() - t)
+                    d = render("inverse" if name == "inverse" else "minimax", source, tm.fs, tm.layout, loc,
+                               **extra, **variants.get(name, {}))
+                if name != "inverse":
+                    times[name].append(time.perf_counter() - t)
                 rows[name].append((seed, loc, *row(d, true_tm)))
-            i, mm = rows["inverse"][-1], rows["minimax"][-1]
-            print(f"seed {seed} loc {loc}: inverse fid {i[2]:.3f} peak {i[3]:6.2f} dB | minimax fid {mm[2]:.3f} "
-                  f"peak {mm[3]:6.2f} dB ({mm[3] - i[3]:+.2f}) | drive {mm[4]:.2f} V | energy bound {i[5]:.2f} dB "
-                  f"| wrap {mm[6]:.2g} | {times[-1]:.1f} s", flush=True)
+            i = rows["inverse"][-1]
+            print(f"seed {seed} loc {loc}: inverse fid {i[2]:.3f} peak {i[3]:6.2f} dB | " + " | ".join(
+                f"{name} fid {rows[name][-1][2]:.3f} peak {rows[name][-1][3]:6.2f} dB "
+                f"({rows[name][-1][3] - i[3]:+.2f}) drive {rows[name][-1][4]:.2f} V {times[name][-1]:.1f} s"
+                for name in variants), flush=True)
     src = "measured calibration, played on the true arm" if args.calibrated else "true H"
-    print(f"\nNominal arm, designed from {src}, 10 V peak, minimax drive_budget={args.drive_budget}; "
-          "peak contrast against every other calibrated point"
-          + ("; designed from the true H with no drive budget, minimax's peak contrast is the peak bound "
-             "(the least quiet peak at the pseudo-inverse's fidelity):" if not args.calibrated and
-             args.drive_budget == "none" else ":"))
-    print("| seed | pinv fidelity | minimax fidelity | pinv peak contrast | minimax peak contrast | mean delta "
-          "| worst focus delta | energy bound | minimax design time (mean / max) |")
-    print("|---|---|---|---|---|---|---|---|---|")
-    inv, mm = np.array(rows["inverse"], float), np.array(rows["minimax"], float)
-    tt = np.array(times)
+    print(f"\nNominal arm, designed from {src}, 10 V peak; peak contrast against every other calibrated point; "
+          f"minimax variants {variants}:")
+    print("| seed | design | mean fidelity | mean peak contrast | mean delta vs pinv | worst focus delta "
+          "| energy bound | design time (mean / max) |")
+    print("|---|---|---|---|---|---|---|---|")
+    inv = np.array(rows["inverse"], float)
     for seed in [*args.seeds, None]:
         sel = np.ones(len(inv), bool) if seed is None else inv[:, 0] == seed
-        delta = mm[sel, 3] - inv[sel, 3]
-        print(f"| {'all' if seed is None else seed} | {inv[sel, 2].mean():.3f} | {mm[sel, 2].mean():.3f} | "
-              f"{inv[sel, 3].mean():.2f} dB | {mm[sel, 3].mean():.2f} dB | {delta.mean():+.2f} dB | "
-              f"{delta.min():+.2f} dB | {inv[sel, 5].mean():.2f} dB | {tt[sel].mean():.1f} / {tt[sel].max():.1f} s |")
+        name = "all" if seed is None else seed
+        print(f"| {name} | pinv | {inv[sel, 2].mean():.3f} | {inv[sel, 3].mean():.2f} dB | | | "
+              f"{inv[sel, 5].mean():.2f} dB | |")
+        for label in variants:
+            mm, tt = np.array(rows[label], float), np.array(times[label])
+            delta = mm[sel, 3] - inv[sel, 3]
+            print(f"| {name} | {label} | {mm[sel, 2].mean():.3f} | {mm[sel, 3].mean():.2f} dB | "
+                  f"{delta.mean():+.2f} dB | {delta.min():+.2f} dB | | {tt[sel].mean():.1f} / {tt[sel].max():.1f} s |")
+
 
 if __name__ == "__main__":
     main()

@@ -186,3 +186,70 @@ def test_frontier_falls_with_fidelity_and_meets_the_single_design():
     # Out of reach (a drive limit far below what the tap needs): NaN, not an error.
     tight = minimax_frontier(H, targets, FS, [0.9], band=BAND, support_s=SUPPORT, max_drive=1e-9)
     assert np.isnan(tight.fidelity[0]) and np.isnan(tight.peak_contrast_db[0])
+
+
+def _worst_perturbation(H, rho, drives, point, t):
+    """The H within ``|dH| <= rho`` that pushes ``y[point](t)`` furthest from the nominal one:
+    every bin's error aligned with the drives' phase at sample ``t``."""
+    X = np.fft.rfft(drives, axis=-1).T  # (F, n_act)
+    phase = X * np.exp(2j * np.pi * np.arange(H.shape[0])[:, None] * t / N)
+    dH = np.zeros_like(H)
+    dH[:, point] = rho[:, point] * np.exp(-1j * np.angle(phase))
+    return H + dH
+
+
+def test_robust_with_no_radius_is_the_nominal_design():
+    _, H = medium(n_points=4, seed=0)
+    targets = tap(n_points=4)
+    kw = dict(band=BAND, min_fidelity=0.9, support_s=SUPPORT, full_output=True)
+    _, plain = minimax_filter(H, targets, FS, **kw)
+    _, robust = minimax_filter(H, targets, FS, h_radius=np.zeros(H.shape), **kw)
+    assert robust.quiet_peak == pytest.approx(plain.quiet_peak, rel=0.01)
+    assert robust.model_quiet_peak == pytest.approx(plain.model_quiet_peak, rel=0.01)
+
+
+def test_robust_bound_holds_within_the_radius_and_grows_with_it():
+    from vibrofocus.rendering import predict_response
+
+    _, H = medium(n_points=4, seed=1)
+    targets = tap(n_points=4)
+    kw = dict(band=BAND, min_fidelity=0.9, support_s=SUPPORT, full_output=True)
+    rng = np.random.default_rng(5)
+    bounds = []
+    for scale in (0.02, 0.05, 0.1):
+        rho = scale * np.abs(H) * (0.5 + rng.random(H.shape))
+        drives, rep = minimax_filter(H, targets, FS, h_radius=rho, **kw)
+        assert rep.status == "optimal" and rep.fidelity >= 0.9 - 1e-4
+        bound = rep.model_quiet_peak
+        assert rep.quiet_peak <= bound * (1 + 1e-3)  # the nominal peak sits inside the bound
+        played = []
+        for _ in range(10):  # random H within the radius
+            dH = rho * rng.random(H.shape) * np.exp(2j * np.pi * rng.random(H.shape))
+            played.append(np.max(np.abs(predict_response(H + dH, drives)[1:])))
+        y = predict_response(H, drives)
+        for p in range(1, 4):  # the worst H for each quiet point, at its nominal peak
+            t = int(np.argmax(np.abs(y[p])))
+            played.append(np.max(np.abs(predict_response(_worst_perturbation(H, rho, drives, p, t),
+                                                         drives)[p])))
+        assert max(played) <= bound * (1 + 1e-3)
+        bounds.append((rho, bound))
+    # A larger radius (the same pattern, doubled) never lowers the bound.
+    rho, bound = bounds[-1]
+    _, wider = minimax_filter(H, targets, FS, h_radius=2 * rho, **kw)
+    assert wider.model_quiet_peak >= bound * (1 - 1e-3)
+    assert wider.model_quiet_peak > bounds[0][1]
+
+
+def test_coherence_radius():
+    from vibrofocus.rendering import coherence_radius
+
+    _, H = medium(n_points=3, seed=2)
+    gamma2 = np.full((17, 3, 2), 0.8)
+    gamma2[:, 0] = 1.0
+    gamma2[:, 1, 1] = np.nan  # not assessable: no radius
+    rho = coherence_radius(H, gamma2, averages=5)
+    assert rho.shape == H.shape
+    assert np.all(rho[:, 0] == 0) and np.all(rho[:, 1, 1] == 0)
+    np.testing.assert_allclose(rho[:, 2], np.abs(H[:, 2]) * np.sqrt(0.2 / (5 * 0.8)), rtol=1e-12)
+    with pytest.raises(ValidationError):
+        coherence_radius(H, gamma2[:, :2], averages=5)

@@ -19,7 +19,7 @@ from .metrics import focus_metrics
 from .design import Design, Rendering  # noqa: F401 - Rendering: Design's former name, kept importable
 from .method import Method, Problem, Solution
 from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
-from .minimax import MinimaxFrontier, MinimaxReport, minimax_filter, minimax_frontier
+from .minimax import MinimaxFrontier, MinimaxReport, coherence_radius, minimax_filter, minimax_frontier
 from .registry import ENTRY_POINT_GROUP, available_methods, make_method, method_class, register_method
 from .render import render
 from .taper import band_taper
@@ -64,6 +64,7 @@ __all__ = [
     "minimax_filter",
     "MinimaxReport",
     "minimax_frontier",
+    "coherence_radius",
     "MinimaxFrontier",
     "register_method",
     "method_class",

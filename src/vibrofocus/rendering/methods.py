@@ -22,7 +22,7 @@ from .exact_target import exact_target_spectra
 from .funneling import funneling_gains
 from .inverse import predict_response
 from .method import Method, Problem, Solution
-from .minimax import MinimaxFrontier, minimax_filter, minimax_frontier
+from .minimax import MinimaxFrontier, coherence_radius, minimax_filter, minimax_frontier
 from .taper import design_grid
 from .time_reversal import time_reversal_drives
 from .transfer import TransferMatrix
@@ -313,11 +313,18 @@ class Minimax(Method):
         through the same ``H``, at most 0.999): equal fidelity, the peak contrast decides.
     support_s : (float, float)
         Drive support before and after the tap, s.
-    drive_budget : float, optional
+    drive_budget : float or "auto", optional
         The drive's peak is at most this times the pseudo-inverse's for the same tap (a
-        constraint of the program; default 1: no more drive than the pseudo-inverse). It
-        keeps the design off the directions where ``H`` is small and a measured one is
-        mostly noise; ``None``: unconstrained.
+        constraint of the program). It keeps the design off the directions where ``H`` is
+        small and a measured one is mostly noise; ``None``: unconstrained. ``"auto"``
+        (default): 1 (no more drive than the pseudo-inverse) for the nominal program, none
+        for the robust one (its norm term already keeps the drive off those directions).
+    robust : float, optional
+        Designing from a measured ``H`` (one with a coherence): the quiet peak is bounded
+        over every ``H`` within ``robust`` standard errors of the measurement (default 1;
+        :func:`~vibrofocus.rendering.coherence_radius` with the calibration's averages;
+        ``h_radius`` of :func:`~vibrofocus.rendering.minimax_filter`). ``None``, or a
+        transfer matrix with no coherence (a model, the true ``H``): the nominal program.
     **common
         The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
         design's contrast and fidelity do not depend on its level).
@@ -332,7 +339,8 @@ class Minimax(Method):
     control: str | None = None
     min_fidelity: float | None = None
     support_s: tuple[float, float] = (0.01, 0.005)
-    drive_budget: float | None = 1.0
+    drive_budget: float | str | None = "auto"
+    robust: float | None = 1.0
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -343,8 +351,19 @@ class Minimax(Method):
         if len(support) != 2:
             raise ValidationError(f"support_s must be (before, after) in s, got {self.support_s!r}")
         self._set("support_s", support)
-        if self.drive_budget is not None:
+        if self.drive_budget is not None and not (isinstance(self.drive_budget, str) and self.drive_budget == "auto"):
             self._set("drive_budget", check_positive(self.drive_budget, "drive_budget"))
+        if self.robust is not None:
+            self._set("robust", check_positive(self.robust, "robust", allow_zero=True))
+
+    def h_radius(self, tm: TransferMatrix) -> np.ndarray | None:
+        """The uncertainty radius of ``tm.H`` the design bounds its quiet peak over (unit of
+        ``H``, shape of ``tm.H``): ``robust`` standard errors from the coherence and the
+        calibration's averages (``tm.provenance["averages"]``, else 1); ``None`` with no
+        ``robust`` or no coherence."""
+        if self.robust is None or tm.coherence is None:
+            return None
+        return self.robust * coherence_radius(tm.H, tm.coherence, averages=int(tm.provenance.get("averages", 1)))
 
     def pinv(self, p: Problem) -> tuple[float, float]:
         """Fidelity and peak drive (V) of the paper's pseudo-inverse (:class:`Inverse` with
@@ -385,19 +404,21 @@ class Minimax(Method):
 
     def solve(self, p: Problem) -> Solution:
         control = p.control(self.control)
-        fid, peak = self.pinv(p) if (self.min_fidelity is None or self.drive_budget is not None) else (0.0, 0.0)
+        h_radius = self.h_radius(p.tm)
+        budget = self.drive_budget if self.drive_budget != "auto" else (1.0 if h_radius is None else None)
+        fid, peak = self.pinv(p) if (self.min_fidelity is None or budget is not None) else (0.0, 0.0)
         fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
-        max_drive = None if self.drive_budget is None else self.drive_budget * peak
+        max_drive = None if budget is None else budget * peak
         targets = self._targets(p)
         # A budget the short support cannot meet at this fidelity is doubled (twice), then dropped.
-        budgets = [None] if max_drive is None else [max_drive, 2 * max_drive, 4 * max_drive, None]
-        for i, budget in enumerate(budgets):
+        limits = [None] if max_drive is None else [max_drive, 2 * max_drive, 4 * max_drive, None]
+        for i, limit in enumerate(limits):
             try:
                 drives = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity,
-                                        quiet=control[1:], max_drive=budget, taper_octaves=self.taper_octaves,
-                                        support_s=self.support_s)
+                                        quiet=control[1:], max_drive=limit, taper_octaves=self.taper_octaves,
+                                        support_s=self.support_s, h_radius=h_radius)
                 break
             except ValidationError as exc:
-                if "infeasible" not in str(exc) or i == len(budgets) - 1:
+                if "infeasible" not in str(exc) or i == len(limits) - 1:
                     raise
         return Solution(drives, control_indices=control)

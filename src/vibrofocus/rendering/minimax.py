@@ -41,7 +41,7 @@ from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response
 
-__all__ = ["minimax_filter", "minimax_frontier", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
+__all__ = ["minimax_filter", "minimax_frontier", "coherence_radius", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
 
 #: The pip extra with cvxpy and Clarabel, for the reference formulation (tests, benchmark);
 #: the design itself needs neither.
@@ -158,49 +158,117 @@ def _local_peaks(y: np.ndarray, floor: float, limit: int) -> np.ndarray:
     return idx[np.argsort(a[idx])[::-1][:limit]]
 
 
+def coherence_radius(H: Any, coherence: Any, *, averages: int = 1) -> np.ndarray:
+    """Uncertainty radius of a measured transfer matrix from its coherence: the rms size of
+    an H1 estimate's complex error, ``|H| sqrt((1 - gamma2) / (averages gamma2))``
+    (Bendat & Piersol: ``sqrt((1 - gamma2) / (2 averages gamma2))`` per component).
+
+    Parameters
+    ----------
+    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+        Measured transfer matrix (m/V).
+    coherence : ndarray, real, shape (n_freqs', n_points, n_actuators)
+        Magnitude-squared coherence ``gamma2`` in [0, 1] on ``n_freqs'`` bins from 0 Hz to
+        Nyquist (the calibration's grid); linearly interpolated onto ``H``'s bins. NaN (not
+        assessable) counts as 1: no radius there.
+    averages : int
+        Independent averages behind the estimate: the repeats, less the other inputs for a
+        partial coherence (``repeats - n_actuators + 1`` for ``mimo``).
+
+    Returns
+    -------
+    ndarray, real, shape of ``H``
+        Radius, unit of ``H``.
+    """
+    H = as_transfer(H)
+    gam = as_array(coherence, "coherence", ndim=3, finite=False)
+    if gam.shape[1:] != H.shape[1:]:
+        raise ValidationError(f"coherence has {gam.shape[1:]} (points, actuators), H has {H.shape[1:]}")
+    averages = int(check_positive(averages, "averages"))
+    if gam.shape[0] != H.shape[0]:
+        x_old, x_new = np.linspace(0, 1, gam.shape[0]), np.linspace(0, 1, H.shape[0])
+        flat = gam.reshape(gam.shape[0], -1)
+        gam = np.stack([np.interp(x_new, x_old, c) for c in flat.T], 1).reshape(H.shape[0], *H.shape[1:])
+    gam = np.clip(np.where(np.isfinite(gam), gam, 1.0), 1e-6, 1.0)
+    return np.abs(H) * np.sqrt((1 - gam) / (averages * gam))
+
+
+def _row_radius(h_radius: Any, shape: tuple[int, ...], taper: np.ndarray) -> np.ndarray:
+    """Per quiet-candidate point, the bound ``r_p`` on ``|y_p(t) - y_p,nominal(t)|`` per unit
+    drive norm: ``sqrt(sum_{f,a} c_f rho[f, p, a]**2 / n)`` over the taper's bins (``c_f`` = 2,
+    1 at 0 Hz and Nyquist). Shape (n_points,); unit of ``h_radius``."""
+    rho = as_array(h_radius, "h_radius", ndim=3)
+    if rho.shape != tuple(shape):
+        raise ValidationError(f"h_radius must have H's shape {tuple(shape)}, got {rho.shape}")
+    if np.any(rho < 0):
+        raise ValidationError("h_radius must be non-negative")
+    n = 2 * (shape[0] - 1)
+    c = np.full(shape[0], 2.0)
+    c[0] = c[-1] = 1.0
+    c = c * (taper > 0)
+    return np.sqrt(np.einsum("f,fpa->p", c, rho**2) / n)
+
+
 def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndarray | None, dcap: float | None,
-             u: np.ndarray, *, rel_gap: float = 1e-7, abs_gap: float = 1e-12, stop_below: float | None = None,
-             mu: float = 8.0, max_newton: int = 600) -> tuple[np.ndarray, float, int]:
-    """min t s.t. ``|A u| <= t``, ``b.u = 1``, ``u'Q u <= cap**2``, ``|D u| <= dcap``: a
-    log-barrier method with dense Newton steps (the program is small: a few hundred
-    coefficients, a few hundred to a few thousand rows).
+             u: np.ndarray, *, r: np.ndarray | None = None, rel_gap: float = 1e-7, abs_gap: float = 1e-12,
+             stop_below: float | None = None, mu: float = 8.0, max_newton: int = 600) -> tuple[np.ndarray, float, int]:
+    """min t s.t. ``|A u| + r s <= t``, ``||u|| <= s``, ``b.u = 1``, ``u'Q u <= cap**2``,
+    ``|D u| <= dcap``: a log-barrier method with dense Newton steps (the program is small: a
+    few hundred coefficients, a few hundred to a few thousand rows).
 
     ``A`` (n_rows, n_var), ``b`` (n_var,), ``Q`` (n_var, n_var) positive semi-definite, ``D``
-    (n_drive_rows, n_var) or ``None``; ``u`` (n_var,) must satisfy ``b.u = 1`` and be strictly
-    inside the cone and the drive rows. Stops when the barrier's gap bound (its parameter over
-    its weight) is below ``rel_gap * t + abs_gap``, or, with ``stop_below``, as soon as
-    ``t < stop_below``. Returns ``u``, ``t`` and the Newton steps taken.
+    (n_drive_rows, n_var) or ``None``; ``r`` (n_rows,) non-negative per-row radii, or ``None``:
+    no ``s`` and no norm term (``|A u| <= t``). ``u`` (n_var,) must satisfy ``b.u = 1`` and be
+    strictly inside the cone and the drive rows. Stops when the barrier's gap bound (its
+    parameter over its weight) is below ``rel_gap * t + abs_gap``, or, with ``stop_below``, as
+    soon as ``t < stop_below``. Returns ``u``, ``t`` and the Newton steps taken.
     """
     import scipy.linalg as sla
 
     nv = A.shape[1]
     c2 = float(cap) ** 2
     has_d = D is not None and len(D) > 0
-    t = float(np.max(np.abs(A @ u))) * 1.05 + abs_gap
-    theta = 2 * len(A) + (2 * len(D) if has_d else 0) + 2  # the barrier's parameter
+    robust = r is not None
+    rr = np.zeros(len(A)) if r is None else np.asarray(r, float)
+    ns = nv + 1 if robust else nv  # index of t; s sits at nv when robust
+    s = float(np.linalg.norm(u)) * 1.1 + 1e-12 if robust else 0.0
+    t = float(np.max(np.abs(A @ u) + rr * s)) * 1.05 + abs_gap
+    theta = 2 * len(A) + (2 * len(D) if has_d else 0) + 2 + (2 if robust else 0)  # the barrier's parameter
     tau = 0.1 * theta / t
-    bb = np.append(b, 0.0)
+    bb = np.concatenate([b, np.zeros(ns + 1 - nv)])
 
-    def barrier(u: np.ndarray, t: float) -> float:
+    def barrier(u: np.ndarray, s: float, t: float) -> float:
         Au = A @ u
         e = c2 - u @ Q @ u
-        slack = np.concatenate([t - Au, t + Au] + ([dcap - D @ u, dcap + D @ u] if has_d else []))
-        return float(tau * t - np.sum(np.log(slack)) - np.log(e)) if e > 0 and np.all(slack > 0) else np.inf
+        phi = s * s - u @ u if robust else 1.0
+        slack = np.concatenate([t - rr * s - Au, t - rr * s + Au] + ([dcap - D @ u, dcap + D @ u] if has_d else []))
+        ok = e > 0 and phi > 0 and (s > 0 or not robust) and np.all(slack > 0)
+        return float(tau * t - np.sum(np.log(slack)) - np.log(e) - np.log(phi)) if ok else np.inf
 
     def _newton_loops() -> tuple[np.ndarray, float, int]:
-        nonlocal u, t, tau
+        nonlocal u, s, t, tau
         steps = 0
         while True:
             for _ in range(60):
                 Au, Qu = A @ u, Q @ u
-                i1, i2 = 1 / (t - Au), 1 / (t + Au)
+                i1, i2 = 1 / (t - rr * s - Au), 1 / (t - rr * s + Au)
                 e = c2 - u @ Qu
                 w = i1 * i1 + i2 * i2
-                Hm = np.empty((nv + 1, nv + 1))
+                Hm = np.empty((ns + 1, ns + 1))
                 Hm[:nv, :nv] = (A.T * w) @ A + (2 / e) * Q + (4 / e**2) * np.outer(Qu, Qu)
-                Hm[:nv, nv] = Hm[nv, :nv] = A.T @ (i2 * i2 - i1 * i1)
-                Hm[nv, nv] = np.sum(w)
-                g = np.append(A.T @ (i1 - i2) + 2 * Qu / e, tau - np.sum(i1 + i2))
+                Hm[:nv, ns] = Hm[ns, :nv] = A.T @ (i2 * i2 - i1 * i1)
+                Hm[ns, ns] = np.sum(w)
+                g = np.empty(ns + 1)
+                g[:nv] = A.T @ (i1 - i2) + 2 * Qu / e
+                g[ns] = tau - np.sum(i1 + i2)
+                if robust:  # the rows' r s and the cone ||u|| <= s (barrier -log(s^2 - u.u))
+                    phi = s * s - u @ u
+                    Hm[:nv, :nv] += (2 / phi) * np.eye(nv) + (4 / phi**2) * np.outer(u, u)
+                    Hm[:nv, nv] = Hm[nv, :nv] = A.T @ (rr * (i1 * i1 - i2 * i2)) - (4 * s / phi**2) * u
+                    Hm[nv, nv] = np.sum(rr * rr * w) - 2 / phi + 4 * s * s / phi**2
+                    Hm[nv, ns] = Hm[ns, nv] = -np.sum(rr * w)
+                    g[:nv] += 2 * u / phi
+                    g[nv] = np.sum(rr * (i1 + i2)) - 2 * s / phi
                 if has_d:
                     j1, j2 = 1 / (dcap - D @ u), 1 / (dcap + D @ u)
                     g[:nv] += D.T @ (j1 - j2)
@@ -209,7 +277,7 @@ def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndar
                     return u, t, steps  # at the edge of the floating point: as good as it gets
                 diag = np.diag(Hm)
                 scale = 1 / np.sqrt(np.maximum(diag, 1e-20 * np.max(diag)))
-                Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(nv + 1)
+                Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(ns + 1)
                 try:
                     factor = sla.cho_factor(Hs, check_finite=False)
                     hg, hb = (sla.cho_solve(factor, np.stack([g, bb], 1) * scale[:, None], check_finite=False)
@@ -229,15 +297,15 @@ def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndar
                 steps += 1
                 if dec <= 2e-10 or steps >= max_newton:
                     break
-                f0, step = barrier(u, t), 1.0
+                f0, step = barrier(u, s, t), 1.0
                 while step > 1e-14:
-                    un, tn = u + step * dz[:nv], t + step * dz[nv]
-                    if barrier(un, tn) <= f0 - 0.25 * step * dec:
+                    un, sn, tn = u + step * dz[:nv], s + step * dz[nv] if robust else s, t + step * dz[ns]
+                    if barrier(un, sn, tn) <= f0 - 0.25 * step * dec:
                         break
                     step *= 0.5
                 else:
                     break
-                u, t = un, tn
+                u, s, t = un, sn, tn
                 if stop_below is not None and t < stop_below:
                     return u, t, steps
             if theta / tau <= rel_gap * t + abs_gap or steps >= max_newton:
@@ -266,6 +334,7 @@ def minimax_filter(
     tol: float = 1e-3,
     fidelity_margin: float = 1e-3,
     max_iter: int = 30,
+    h_radius: Any = None,
 ) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
     """Peak-contrast (minimax) drives: the least largest quiet-point ``|displacement|`` at
     a given target fidelity (SPEC §2, §8).
@@ -319,6 +388,14 @@ def minimax_filter(
         played response.
     max_iter : int
         Most constraint-generation rounds.
+    h_radius : ndarray, real, shape (n // 2 + 1, n_points, n_actuators), optional
+        Uncertainty of ``H``: ``|H_true - H| <= h_radius`` at each frequency, point and
+        actuator (unit of ``H``; see :func:`coherence_radius`). Given, the design minimizes a
+        **robust** quiet peak, ``|y_q(t)| + r_q ||x||`` with ``r_q = sqrt(sum_{f,a} c_f
+        h_radius[f, q, a]**2 / n)`` (``c_f`` = 2, 1 at 0 Hz and Nyquist; over the band's
+        bins) and ``||x||`` the drives' Euclidean norm: the largest quiet ``|displacement|``
+        through any ``H`` within the radius (Cauchy-Schwarz over frequency and actuator).
+        ``None``: the nominal program (no norm term).
 
     Returns
     -------
@@ -339,7 +416,8 @@ def minimax_filter(
     """
     with _single_threaded_blas():  # small dense algebra: BLAS threads only cost hand-offs
         program = _Program(H, targets, fs, band=band, quiet=quiet, taper_octaves=taper_octaves,
-                           support_s=support_s, stride=stride, ir_energy_tol=ir_energy_tol, decimation=decimation)
+                           support_s=support_s, stride=stride, ir_energy_tol=ir_energy_tol, decimation=decimation,
+                           h_radius=h_radius)
         return program.design(min_fidelity, max_drive=max_drive, full_output=full_output, tol=tol,
                               fidelity_margin=fidelity_margin, max_iter=max_iter)
 
@@ -351,7 +429,7 @@ class _Program:
 
     def __init__(self, H: Any, targets: Any, fs: float, *, band: tuple[float, float], quiet: Any,
                  taper_octaves: float, support_s: tuple[float, float], stride: int, ir_energy_tol: float,
-                 decimation: int | None) -> None:
+                 decimation: int | None, h_radius: Any = None) -> None:
         H = as_transfer(H)
         targets = as_array(targets, "targets", ndim=2)
         n = targets.shape[1]
@@ -424,6 +502,9 @@ class _Program:
         self.ti, self.quiet, self.n_act, self.m, self.basis, self.delays = ti, quiet_idx, n_act, m, basis, delays
         self.desired, self.d_norm, self.ir_taps, self.decimation = desired, d_norm, ir_taps, r
         self.pulse = np.fft.irfft(taper, n)  # unit pulse -> drive
+        # Robust rows: |A u| + rq ||u|| (||x|| = u_scale ||u||: the basis has unit energy per
+        # coefficient, so ||y - y_nominal|| / d_norm <= r_q u_scale ||u|| / d_norm = r_q / gscale ||u||).
+        self.rq = None if h_radius is None else _row_radius(h_radius, H.shape, taper)[quiet_idx] / gscale
         self.u_scale = d_norm / gscale  # drives = (u * u_scale) pulses
 
         # Warm start: the samples where the pseudo-inverse's quiet response peaks, and a coarse grid.
@@ -485,14 +566,17 @@ class _Program:
                 if over >= 1 - 1e-3:
                     raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
                                           f"max_drive={max_drive}): relax the fidelity or the drive limit")
-            u, value, _ = _barrier(self.A, self.b, self.Q, cap, D, dcap, u,
+            r = None if self.rq is None else self.rq[self.listed[:, 0]]
+            u, value, _ = _barrier(self.A, self.b, self.Q, cap, D, dcap, u, r=r,
                                    abs_gap=1e-12 * np.max(np.abs(self.desired)) / self.d_norm)
             x = self.drives_of(u)
             yq = np.fft.irfft(np.einsum("fpa,af->pf", self.H[:, self.quiet], np.fft.rfft(x, axis=-1)),
                               self.n, axis=-1) / self.d_norm
             floor = max(value, 0.0) * (1 + tol) + 1e-9 * np.max(np.abs(self.desired)) / self.d_norm
-            added = self._add_pairs([(int(j), int(t)) for j in np.flatnonzero(np.max(np.abs(yq), axis=1) > floor)
-                                     for t in _local_peaks(yq[j], floor, 20)])
+            # Per quiet point, the nominal level over which a sample breaks the (robust) bound.
+            floors = floor - (0.0 if self.rq is None else self.rq * np.linalg.norm(u))
+            added = new_rows = self._add_pairs([(int(j), int(t)) for j in np.flatnonzero(np.max(np.abs(yq), axis=1) > floors)
+                                     for t in _local_peaks(yq[j], floors[j] if np.ndim(floors) else floors, 20)])
             if dcap is not None:
                 over = np.abs(x) > max_drive * (1 + tol)
                 added += self._add_drive_rows([t for a in np.flatnonzero(over.any(axis=1))
@@ -502,10 +586,11 @@ class _Program:
             # Rows far below the peak leave the program only when its optimum sets a record
             # (by more than tol: finitely often, so no set of rows comes back for ever); the
             # full response is checked every round.
-            slack = np.abs(self.A[:-added] @ u) < _DROP * max(value, 0.0)
+            old = len(self.A) - new_rows
+            slack = np.abs(self.A[:old] @ u) + (0 if r is None else r * np.linalg.norm(u)) < _DROP * max(value, 0.0)
             record, best_value = value > best_value * (1 + tol), max(best_value, value)
             if _DROP > 0 and record and slack.any():
-                keep = np.concatenate([~slack, np.ones(added, bool)])
+                keep = np.concatenate([~slack, np.ones(new_rows, bool)])
                 self.A, self.listed = self.A[keep], self.listed[keep]
         else:
             inside = False
@@ -571,7 +656,7 @@ def minimax_frontier(H: Any, targets: Any, fs: float, fidelities: Any, *, band: 
     fids = as_array(fidelities, "fidelities", ndim=1)
     for f in fids:
         check_in_range(float(f), "fidelities", 0.0, 1.0, inclusive=False)
-    setup = {k: options.pop(k) for k in ("taper_octaves", "support_s", "stride", "ir_energy_tol", "decimation")
+    setup = {k: options.pop(k) for k in ("taper_octaves", "support_s", "stride", "ir_energy_tol", "decimation", "h_radius")
              if k in options}
     solve = {"tol": 1e-3, "fidelity_margin": 1e-3, "max_iter": 30, **options}
     if set(solve) - {"tol", "fidelity_margin", "max_iter"}:

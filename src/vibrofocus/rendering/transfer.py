@@ -36,6 +36,14 @@ def _check_fits(shape: tuple[int, ...], layout: ArrayLayout) -> None:
         )
 
 
+def _averages(calibration: Any) -> int:
+    """Independent averages behind a calibration's coherence: its repeats, less the other
+    actuators for ``mimo`` (a partial coherence given them); at least 1."""
+    repeats = int(getattr(calibration.sweep, "repeats", 1) or 1)
+    others = calibration.n_actuators - 1 if calibration.method == "mimo" else 0
+    return max(1, repeats - others)
+
+
 class TransferMatrix(ValidatedTransfer):
     """A calibrated (or modelled) transfer matrix with its grid, layout and provenance.
 
@@ -58,7 +66,8 @@ class TransferMatrix(ValidatedTransfer):
         model.
     provenance : dict, optional
         Where ``H`` came from: ``rig`` (the rig's description), ``participant`` and
-        ``skin`` (the skin preset of a simulated arm), or anything a lab wants to keep.
+        ``skin`` (the skin preset of a simulated arm), ``averages`` (the independent averages
+        behind a calibration's coherence), or anything a lab wants to keep.
 
     Notes
     -----
@@ -121,7 +130,8 @@ class TransferMatrix(ValidatedTransfer):
                           check_band(calibration.band, calibration.fs, name="calibrated_band"),
                           calibration.coherence,
                           {"rig": rig, "participant": calibration.participant_id, "skin": rig.get("skin"),
-                           "calibration_created": calibration.created})
+                           "calibration_created": calibration.created,
+                           "averages": _averages(calibration)})
         tm._check = check
         return tm
 
