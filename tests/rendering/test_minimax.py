@@ -253,3 +253,23 @@ def test_coherence_radius():
     np.testing.assert_allclose(rho[:, 2], np.abs(H[:, 2]) * np.sqrt(0.2 / (5 * 0.8)), rtol=1e-12)
     with pytest.raises(ValidationError):
         coherence_radius(H, gamma2[:, :2], averages=5)
+
+
+def test_method_is_robust_from_a_measured_h_only():
+    from vibrofocus import ArrayLayout, TransferMatrix
+    from vibrofocus.rendering import Minimax, coherence_radius
+
+    from ._media import FS as MFS
+    from ._media import layout_medium
+
+    ref = ArrayLayout.reference()
+    H = layout_medium(ref, 256, MFS)
+    gamma2 = np.random.default_rng(7).uniform(0.5, 1.0, (65, *H.shape[1:]))
+    model = TransferMatrix(H, MFS, ref)
+    measured = TransferMatrix(H, MFS, ref, coherence=gamma2, provenance={"averages": 5})
+    assert Minimax().h_radius(model) is None  # a model or the true H: the nominal program
+    assert Minimax(robust=None).h_radius(measured) is None
+    np.testing.assert_allclose(Minimax(robust=2.0).h_radius(measured),
+                               2.0 * coherence_radius(H, gamma2, averages=5), rtol=1e-12)
+    with pytest.raises(ValidationError):
+        Minimax(drive_budget="more")

@@ -76,7 +76,9 @@ class MinimaxReport:
         Largest ``|predicted|`` at the quiet points.
     model_quiet_peak : float
         The same in the program's own model (its optimum, rescaled); differs from
-        ``quiet_peak`` by at most the constraint-generation tolerance.
+        ``quiet_peak`` by at most the constraint-generation tolerance. With ``h_radius``:
+        the robust bound, the largest quiet ``|displacement|`` through any ``H`` within the
+        radius (at least ``quiet_peak``).
     peak_drive : float
         Peak ``|drives|``.
     status : str
@@ -575,8 +577,10 @@ class _Program:
             floor = max(value, 0.0) * (1 + tol) + 1e-9 * np.max(np.abs(self.desired)) / self.d_norm
             # Per quiet point, the nominal level over which a sample breaks the (robust) bound.
             floors = floor - (0.0 if self.rq is None else self.rq * np.linalg.norm(u))
-            added = new_rows = self._add_pairs([(int(j), int(t)) for j in np.flatnonzero(np.max(np.abs(yq), axis=1) > floors)
-                                     for t in _local_peaks(yq[j], floors[j] if np.ndim(floors) else floors, 20)])
+            floors = np.broadcast_to(floors, len(self.quiet))
+            over_q = np.flatnonzero(np.max(np.abs(yq), axis=1) > floors)
+            added = new_rows = self._add_pairs([(int(j), int(t)) for j in over_q
+                                                for t in _local_peaks(yq[j], floors[j], 20)])
             if dcap is not None:
                 over = np.abs(x) > max_drive * (1 + tol)
                 added += self._add_drive_rows([t for a in np.flatnonzero(over.any(axis=1))
@@ -587,7 +591,8 @@ class _Program:
             # (by more than tol: finitely often, so no set of rows comes back for ever); the
             # full response is checked every round.
             old = len(self.A) - new_rows
-            slack = np.abs(self.A[:old] @ u) + (0 if r is None else r * np.linalg.norm(u)) < _DROP * max(value, 0.0)
+            level = np.abs(self.A[:old] @ u) + (0.0 if r is None else r * np.linalg.norm(u))
+            slack = level < _DROP * max(value, 0.0)
             record, best_value = value > best_value * (1 + tol), max(best_value, value)
             if _DROP > 0 and record and slack.any():
                 keep = np.concatenate([~slack, np.ones(new_rows, bool)])
