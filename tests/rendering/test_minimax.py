@@ -269,6 +269,8 @@ def test_method_is_robust_from_a_measured_h_only():
     measured = TransferMatrix(H, MFS, ref, coherence=gamma2, provenance={"averages": 5})
     assert Minimax().h_radius(model) is None  # a model or the true H: the nominal program
     assert Minimax(robust=None).h_radius(measured) is None
+    single = TransferMatrix(H, MFS, ref, coherence=np.full_like(gamma2, np.nan))  # one repeat: not assessable
+    assert Minimax().h_radius(single) is None
     np.testing.assert_allclose(Minimax(robust=2.0).h_radius(measured),
                                2.0 * coherence_radius(H, gamma2, averages=5), rtol=1e-12)
     with pytest.raises(ValidationError):

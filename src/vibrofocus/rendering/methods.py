@@ -324,7 +324,8 @@ class Minimax(Method):
         over every ``H`` within ``robust`` standard errors of the measurement (default 1;
         :func:`~vibrofocus.rendering.coherence_radius` with the calibration's averages;
         ``h_radius`` of :func:`~vibrofocus.rendering.minimax_filter`). ``None``, or a
-        transfer matrix with no coherence (a model, the true ``H``): the nominal program.
+        transfer matrix with no assessable coherence (a model, the true ``H``, a single repeat): the
+        nominal program.
     **common
         The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
         design's contrast and fidelity do not depend on its level).
@@ -360,9 +361,9 @@ class Minimax(Method):
         """The uncertainty radius of ``tm.H`` the design bounds its quiet peak over (unit of
         ``H``, shape of ``tm.H``): ``robust`` standard errors from the coherence and the
         calibration's averages (``tm.provenance["averages"]``, else 1); ``None`` with no
-        ``robust`` or no coherence."""
-        if self.robust is None or tm.coherence is None:
-            return None
+        ``robust`` or no coherence (none, or not assessable: a single repeat)."""
+        if self.robust is None or tm.coherence is None or not np.isfinite(tm.coherence).any():
+            return None  # no uncertainty known (a model, or one repeat): the nominal program
         return self.robust * coherence_radius(tm.H, tm.coherence, averages=int(tm.provenance.get("averages", 1)))
 
     def pinv(self, p: Problem) -> tuple[float, float]:
