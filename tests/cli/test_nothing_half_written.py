@@ -661,7 +661,6 @@ def test_8_shapiro_does_not_count_tied_conditions_as_rejections():
 def test_a_save_in_another_thread_does_not_hold_back_ctrl_c_in_the_main_thread():
     # Signals are handled in the main thread: a commit running in a worker thread (a web
     # request saving a file) must not defer, and so lose, the main thread's Ctrl-C.
-    import _thread
     import threading
 
     inside, release = threading.Event(), threading.Event()
@@ -677,7 +676,7 @@ def test_a_save_in_another_thread_does_not_hold_back_ctrl_c_in_the_main_thread()
         worker.start()
         assert inside.wait(10)
         with pytest.raises(KeyboardInterrupt):
-            _thread.interrupt_main()
+            signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)  # Ctrl-C
             time.sleep(2.0)  # the interrupt arrives during this wait
     finally:
         release.set()

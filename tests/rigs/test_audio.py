@@ -17,6 +17,8 @@ from vibrofocus.errors import SafetyError
 from vibrofocus.rigs import DeviceError, Rig, make_rig
 from vibrofocus.signals import ricker
 
+from .ctrl_c import ctrl_c_after
+
 
 pytestmark = pytest.mark.jack
 
@@ -266,11 +268,7 @@ def _long_sine(seconds=2.0, peak=2.0):
 
 
 def test_ctrl_c_mid_play_silences_the_outputs(rig):
-    import _thread
-    import threading
-
-    timer = threading.Timer(0.3, _thread.interrupt_main)
-    timer.start()
+    ctrl_c_after(0.3)
     t0 = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
         rig.play(_long_sine())

@@ -10,7 +10,6 @@ one (e.g. a simulated PCIe-6361 made in NI MAX).
 
 from __future__ import annotations
 
-import _thread
 import inspect
 import os
 import threading
@@ -30,6 +29,7 @@ from vibrofocus.errors import SafetyError, ValidationError
 from vibrofocus.rigs import DeviceBusyError, DeviceError, check_straps, parse_rig_config
 from vibrofocus.rigs.nidaq import NidaqRig
 
+from .ctrl_c import ctrl_c_after
 from .fake_nidaqmx import RESERVED, FakeDevice, FakeTask, _AIChannels, _AOChannels, _StartTrigger, _Timing
 
 FS = 10_000.0
@@ -202,8 +202,7 @@ def test_the_fake_refuses_a_zero_write_while_a_stopped_task_holds_its_channels(d
 def test_ctrl_c_interrupts_a_long_play_and_leaves_zeros(rig, device):
     d = np.full((4, int(5 * FS)), 0.0)
     d[:, 100:-100] = 2.0
-    timer = threading.Timer(0.2, _thread.interrupt_main)
-    timer.start()
+    ctrl_c_after(0.2)
     t0 = time.monotonic()
     with pytest.raises(KeyboardInterrupt):
         rig.play(d)
