@@ -2,21 +2,26 @@
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import threading
+from collections.abc import Iterator
 
 
-def ctrl_c_after(seconds: float) -> threading.Timer:
-    """Start a timer that sends SIGINT to the main thread after ``seconds``; returns it.
+@contextlib.contextmanager
+def ctrl_c_after(seconds: float) -> Iterator[None]:
+    """SIGINT to the main thread ``seconds`` into the block, as a terminal's Ctrl-C.
 
-    A real signal, as a terminal's Ctrl-C is, and delivered to the main thread so that
-    its C handler runs there and the interpreter checks for it at once. (``_thread.
-    interrupt_main`` called from another thread sets the flag without waking the main
-    thread's check; under a loaded parallel test run it was seen to arrive only after a
-    5 s play had ended.)
+    Python's own SIGINT handler is in place for the block: a test run started in the
+    background by a non-interactive shell inherits SIGINT ignored, and Python then keeps
+    it ignored, so no Ctrl-C could reach the code under test.
     """
-    main = threading.main_thread().ident
-    timer = threading.Timer(seconds, signal.pthread_kill, args=(main, signal.SIGINT))
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(seconds, signal.pthread_kill, args=(threading.main_thread().ident, signal.SIGINT))
     timer.daemon = True
     timer.start()
-    return timer
+    try:
+        yield
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)

@@ -268,9 +268,8 @@ def _long_sine(seconds=2.0, peak=2.0):
 
 
 def test_ctrl_c_mid_play_silences_the_outputs(rig):
-    ctrl_c_after(0.3)
     t0 = time.monotonic()
-    with pytest.raises(KeyboardInterrupt):
+    with ctrl_c_after(0.3), pytest.raises(KeyboardInterrupt):
         rig.play(_long_sine())
     assert time.monotonic() - t0 < 1.5  # the 2 s play did not run to its end
     assert not _loopback_input_now().any()  # every output is silent now

@@ -202,9 +202,8 @@ def test_the_fake_refuses_a_zero_write_while_a_stopped_task_holds_its_channels(d
 def test_ctrl_c_interrupts_a_long_play_and_leaves_zeros(rig, device):
     d = np.full((4, int(5 * FS)), 0.0)
     d[:, 100:-100] = 2.0
-    ctrl_c_after(0.2)
     t0 = time.monotonic()
-    with pytest.raises(KeyboardInterrupt):
+    with ctrl_c_after(0.2), pytest.raises(KeyboardInterrupt):
         rig.play(d)
     assert time.monotonic() - t0 < 3.0  # the 5 s play did not run to its end
     np.testing.assert_array_equal(device.output_vector(), 0.0)
