@@ -30,8 +30,11 @@ def test_after_a_reload_the_trial_restarts_and_the_rt_is_timed_from_its_new_onse
     rows = wait_answers(server, sid, 2)
     assert [(r[0], r[1]) for r in rows] == [(0, "2"), (1, "6")]
     assert rows[1][2] < 1.0, f"RT {rows[1][2]} s counts the time since the reload"
-    assert trial_events(server, sid, 1) == [
-        "cue", "stimulus_onset", "trial_restarted", "cue", "stimulus_onset", "answer"]
+    # The page commits the answer; the engine then adds its onset (answer_onset), which
+    # may land a moment after the answer: it may follow, nothing else may.
+    kinds = trial_events(server, sid, 1)
+    assert kinds[:6] == ["cue", "stimulus_onset", "trial_restarted", "cue", "stimulus_onset", "answer"], kinds
+    assert kinds[6:] in ([], ["answer_onset"]), kinds
 
 
 def cells_boxes(page) -> list[dict]:
