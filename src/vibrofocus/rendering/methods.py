@@ -22,6 +22,7 @@ from .exact_target import exact_target_spectra
 from .funneling import funneling_gains
 from .inverse import predict_response
 from .method import Method, Problem, Solution
+from .metrics import zero_lag_fidelity
 from .minimax import MinimaxFrontier, coherence_radius, minimax_filter, minimax_frontier
 from .taper import design_grid
 from .time_reversal import time_reversal_drives
@@ -373,8 +374,7 @@ class Minimax(Method):
         op = p.tm.inverse_operator(control, band=p.band, taper_octaves=self.taper_octaves)
         drives = op.drives_for_point(p.target_index, self.target_peak_m * p.stimulus)
         y = predict_response(p.tm.H, drives)[p.target_index]
-        fid = float(np.dot(y, p.reference) / (np.linalg.norm(y) * np.linalg.norm(p.reference)))
-        return fid, float(np.max(np.abs(drives)))
+        return zero_lag_fidelity(y, p.reference), float(np.max(np.abs(drives)))
 
     def _targets(self, p: Problem) -> np.ndarray:
         targets = np.zeros((p.tm.n_points, p.n))

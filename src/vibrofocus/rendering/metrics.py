@@ -12,7 +12,7 @@ from ..errors import ValidationError
 from .bound import _energy_db
 from .taper import design_grid
 
-__all__ = ["focus_metrics"]
+__all__ = ["focus_metrics", "zero_lag_fidelity"]
 
 
 def focus_metrics(
@@ -187,7 +187,7 @@ def focus_metrics(
     norm_achieved = float(np.linalg.norm(achieved))
     norm_desired = float(np.linalg.norm(desired))
     silent = norm_achieved == 0 or norm_desired == 0
-    fidelity = float("nan") if silent else float(np.dot(achieved, desired) / (norm_achieved * norm_desired))
+    fidelity = zero_lag_fidelity(achieved, desired)
     # In samples, with a little slack so that a window edge falling on a sample is kept
     # whatever the rounding of t0 * fs.
     window = np.abs(np.arange(n) - t0 * fs) <= 2 * sigma * fs * (1 + 1e-9)
@@ -220,3 +220,20 @@ def focus_metrics(
         "energy_contrast_all_db": energy_contrast_all,
         **extra,
     }
+
+
+def zero_lag_fidelity(achieved: np.ndarray, desired: np.ndarray) -> float:
+    """Zero-lag normalized correlation of two waveforms (the focus metrics' ``fidelity``).
+
+    Parameters
+    ----------
+    achieved, desired : ndarray, shape (n,)
+        The target's displacement and the desired one (any common unit).
+
+    Returns
+    -------
+    float
+        In [-1, 1]; NaN when either waveform is silent.
+    """
+    norm = float(np.linalg.norm(achieved)) * float(np.linalg.norm(desired))
+    return float("nan") if norm == 0 else float(np.dot(achieved, desired) / norm)

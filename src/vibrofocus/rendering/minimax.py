@@ -33,6 +33,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from scipy.interpolate import interp1d
 
 from .._validation import as_array, check_in_range, check_positive
 from ..defaults import BAND_HZ
@@ -40,6 +41,7 @@ from ..errors import ValidationError
 from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response
+from .metrics import zero_lag_fidelity
 
 __all__ = ["minimax_filter", "minimax_frontier", "coherence_radius", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
 
@@ -187,10 +189,8 @@ def coherence_radius(H: Any, coherence: Any, *, averages: int = 1) -> np.ndarray
     if gam.shape[1:] != H.shape[1:]:
         raise ValidationError(f"coherence has {gam.shape[1:]} (points, actuators), H has {H.shape[1:]}")
     averages = int(check_positive(averages, "averages"))
-    if gam.shape[0] != H.shape[0]:
-        x_old, x_new = np.linspace(0, 1, gam.shape[0]), np.linspace(0, 1, H.shape[0])
-        flat = gam.reshape(gam.shape[0], -1)
-        gam = np.stack([np.interp(x_new, x_old, c) for c in flat.T], 1).reshape(H.shape[0], *H.shape[1:])
+    if gam.shape[0] != H.shape[0]:  # both grids run from 0 Hz to Nyquist
+        gam = interp1d(np.linspace(0, 1, gam.shape[0]), gam, axis=0)(np.linspace(0, 1, H.shape[0]))
     gam = np.clip(np.where(np.isfinite(gam), gam, 1.0), 1e-6, 1.0)
     return np.abs(H) * np.sqrt((1 - gam) / (averages * gam))
 
@@ -619,7 +619,7 @@ class _Program:
         if not full_output:
             return drives
         yt = predicted[self.ti]
-        fid = float(np.dot(yt, self.desired) / (np.linalg.norm(yt) * self.d_norm))
+        fid = zero_lag_fidelity(yt, self.desired)
         qpeak = float(np.max(np.abs(predicted[self.quiet])))
         tpeak = float(np.max(np.abs(yt)))
         report = MinimaxReport(
