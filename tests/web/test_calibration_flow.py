@@ -36,7 +36,9 @@ def test_calibrate_preview_and_run_with_stimuli(server):
             break
         time.sleep(0.2)
     assert j["status"] == "done", j
-    assert any(0 < p < 1 for p in seen), "progress is reported while it runs"
+    # A fast machine may finish between two polls, so only the order is checked here;
+    # tests/web/test_hardware_jobs.py holds a calibration at a point and reads it mid-way.
+    assert seen == sorted(seen) and seen[-1] == 1.0, seen
     cid = j["calibration_id"]
     (path,) = server.rows("SELECT path FROM calibrations WHERE calibration_id = ?", cid)[0:1]
     cal = load_calibration(path[0])

@@ -78,3 +78,26 @@ def test_a_second_hardware_job_is_refused_and_the_emergency_stop_zeroes_the_outp
     r = client.post("/api/calibrations", json={"participant_id": "P01", "rig": "nidaq"})
     assert r.status_code == 202
     client.post(f"/api/calibrations/jobs/{r.json()['job_id']}/cancel")
+
+
+def test_progress_is_reported_while_a_calibration_runs(app_and_device):
+    # The single-spot rig stops before each point, which holds the job mid-way whatever
+    # the machine's speed: the page must then show a fraction strictly between 0 and 1.
+    client, _, _ = app_and_device
+    assert client.post("/api/participants", json={"participant_id": "P02"}).status_code == 201
+    job_id = client.post("/api/calibrations", json={"participant_id": "P02", "rig": "nidaq"}).json()["job_id"]
+    first = _wait(client, job_id, "waiting")
+    assert first["progress"] == 0.0 and "point" in first["prompt"]
+    assert client.post(f"/api/calibrations/jobs/{job_id}/continue").status_code == 200
+    # Whatever the speed, the job stops again at the next point with takes done.
+    deadline = time.monotonic() + 120.0
+    while True:
+        job = client.get(f"/api/calibrations/jobs/{job_id}").json()
+        if job["progress"] > 0.0 or job["status"] not in ("running", "waiting"):
+            break
+        assert time.monotonic() < deadline, job
+        time.sleep(0.02)
+    assert 0.0 < job["progress"] < 1.0, job
+    assert job["message"] != "starting", job
+    assert client.post(f"/api/calibrations/jobs/{job_id}/cancel").status_code == 200
+    assert _wait(client, job_id, "cancelled")["progress"] < 1.0
