@@ -211,111 +211,59 @@ def _row_radius(h_radius: Any, shape: tuple[int, ...], taper: np.ndarray) -> np.
     return np.sqrt(np.einsum("f,fpa->p", c, rho**2) / n)
 
 
-def _barrier(A: np.ndarray, b: np.ndarray, Q: np.ndarray, cap: float, D: np.ndarray | None, dcap: float | None,
-             u: np.ndarray, *, r: np.ndarray | None = None, rel_gap: float = 1e-7, abs_gap: float = 1e-12,
-             stop_below: float | None = None, mu: float = 8.0, max_newton: int = 600) -> tuple[np.ndarray, float, int]:
-    """min t s.t. ``|A u| + r s <= t``, ``||u|| <= s``, ``b.u = 1``, ``u'Q u <= cap**2``,
-    ``|D u| <= dcap``: a log-barrier method with dense Newton steps (the program is small: a
-    few hundred coefficients, a few hundred to a few thousand rows).
+def _solve_cone(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, cap: float, D: np.ndarray | None,
+                dcap: float | None, *, r: np.ndarray | None = None) -> tuple[np.ndarray | None, float, str, int]:
+    """min t s.t. ``|A u| + r s <= t``, ``||u|| <= s``, ``b.u = 1``, ``||Lt u|| <= cap``,
+    ``|D u| <= dcap``, by CVXOPT's primal-dual cone solver on the dense rows (no modelling
+    layer: this program is rebuilt every round).
 
-    ``A`` (n_rows, n_var), ``b`` (n_var,), ``Q`` (n_var, n_var) positive semi-definite, ``D``
-    (n_drive_rows, n_var) or ``None``; ``r`` (n_rows,) non-negative per-row radii, or ``None``:
-    no ``s`` and no norm term (``|A u| <= t``). ``u`` (n_var,) must satisfy ``b.u = 1`` and be
-    strictly inside the cone and the drive rows. Stops when the barrier's gap bound (its
-    parameter over its weight) is below ``rel_gap * t + abs_gap``, or, with ``stop_below``, as
-    soon as ``t < stop_below``. Returns ``u``, ``t`` and the Newton steps taken.
+    ``A`` (n_rows, n_var), ``b`` (n_var,), ``Lt`` (rank, n_var) with ``Lt' Lt`` the target's
+    Gram, ``D`` (n_drive_rows, n_var) or ``None``; ``r`` (n_rows,) non-negative per-row radii,
+    or ``None``: no ``s`` and no norm term. Returns ``u`` (``None`` if the solver gave no
+    point), ``t``, the solver's status and its iterations.
     """
-    import scipy.linalg as sla
+    from cvxopt import matrix, solvers
 
     nv = A.shape[1]
-    c2 = float(cap) ** 2
-    has_d = D is not None and len(D) > 0
     robust = r is not None
-    rr = np.zeros(len(A)) if r is None else np.asarray(r, float)
-    ns = nv + 1 if robust else nv  # index of t; s sits at nv when robust
-    s = float(np.linalg.norm(u)) * 1.1 + 1e-12 if robust else 0.0
-    t = float(np.max(np.abs(A @ u) + rr * s)) * 1.05 + abs_gap
-    theta = 2 * len(A) + (2 * len(D) if has_d else 0) + 2 + (2 if robust else 0)  # the barrier's parameter
-    tau = 0.1 * theta / t
-    bb = np.concatenate([b, np.zeros(ns + 1 - nv)])
-
-    def barrier(u: np.ndarray, s: float, t: float) -> float:
-        Au = A @ u
-        e = c2 - u @ Q @ u
-        phi = s * s - u @ u if robust else 1.0
-        slack = np.concatenate([t - rr * s - Au, t - rr * s + Au] + ([dcap - D @ u, dcap + D @ u] if has_d else []))
-        ok = e > 0 and phi > 0 and (s > 0 or not robust) and np.all(slack > 0)
-        return float(tau * t - np.sum(np.log(slack)) - np.log(e) - np.log(phi)) if ok else np.inf
-
-    def _newton_loops() -> tuple[np.ndarray, float, int]:
-        nonlocal u, s, t, tau
-        steps = 0
-        while True:
-            for _ in range(60):
-                Au, Qu = A @ u, Q @ u
-                i1, i2 = 1 / (t - rr * s - Au), 1 / (t - rr * s + Au)
-                e = c2 - u @ Qu
-                w = i1 * i1 + i2 * i2
-                Hm = np.empty((ns + 1, ns + 1))
-                Hm[:nv, :nv] = (A.T * w) @ A + (2 / e) * Q + (4 / e**2) * np.outer(Qu, Qu)
-                Hm[:nv, ns] = Hm[ns, :nv] = A.T @ (i2 * i2 - i1 * i1)
-                Hm[ns, ns] = np.sum(w)
-                g = np.empty(ns + 1)
-                g[:nv] = A.T @ (i1 - i2) + 2 * Qu / e
-                g[ns] = tau - np.sum(i1 + i2)
-                if robust:  # the rows' r s and the cone ||u|| <= s (barrier -log(s^2 - u.u))
-                    phi = s * s - u @ u
-                    Hm[:nv, :nv] += (2 / phi) * np.eye(nv) + (4 / phi**2) * np.outer(u, u)
-                    Hm[:nv, nv] = Hm[nv, :nv] = A.T @ (rr * (i1 * i1 - i2 * i2)) - (4 * s / phi**2) * u
-                    Hm[nv, nv] = np.sum(rr * rr * w) - 2 / phi + 4 * s * s / phi**2
-                    Hm[nv, ns] = Hm[ns, nv] = -np.sum(rr * w)
-                    g[:nv] += 2 * u / phi
-                    g[nv] = np.sum(rr * (i1 + i2)) - 2 * s / phi
-                if has_d:
-                    j1, j2 = 1 / (dcap - D @ u), 1 / (dcap + D @ u)
-                    g[:nv] += D.T @ (j1 - j2)
-                    Hm[:nv, :nv] += (D.T * (j1 * j1 + j2 * j2)) @ D
-                if not (np.all(np.isfinite(Hm)) and np.all(np.isfinite(g))):
-                    return u, t, steps  # at the edge of the floating point: as good as it gets
-                diag = np.diag(Hm)
-                scale = 1 / np.sqrt(np.maximum(diag, 1e-20 * np.max(diag)))
-                Hs = Hm * scale[:, None] * scale[None, :] + 1e-13 * np.eye(ns + 1)
-                try:
-                    factor = sla.cho_factor(Hs, check_finite=False)
-                    hg, hb = (sla.cho_solve(factor, np.stack([g, bb], 1) * scale[:, None], check_finite=False)
-                              * scale[:, None]).T
-                except (np.linalg.LinAlgError, ValueError):
-                    hg, hb = (np.linalg.lstsq(Hs, np.stack([g, bb], 1) * scale[:, None], rcond=None)[0]
-                              * scale[:, None]).T
-                # The Newton step on {b.u = 1} (and back onto it, should rounding have moved u).
-                dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
-                dec = float(-g @ dz)
-                if dec < 0:  # rounding in a near-singular system: the eigen-solution instead
-                    wh, vh = np.linalg.eigh(Hs)
-                    inv = np.where(wh > wh[-1] * 1e-14, 1 / np.maximum(wh, 1e-300), 0.0)
-                    hg, hb = ((vh * inv) @ (vh.T @ (np.stack([g, bb], 1) * scale[:, None])) * scale[:, None]).T
-                    dz = -hg + hb * ((bb @ hg + 1.0 - b @ u) / (bb @ hb))
-                    dec = float(-g @ dz)
-                steps += 1
-                if dec <= 2e-10 or steps >= max_newton:
-                    break
-                f0, step = barrier(u, s, t), 1.0
-                while step > 1e-14:
-                    un, sn, tn = u + step * dz[:nv], s + step * dz[nv] if robust else s, t + step * dz[ns]
-                    if barrier(un, sn, tn) <= f0 - 0.25 * step * dec:
-                        break
-                    step *= 0.5
-                else:
-                    break
-                u, s, t = un, sn, tn
-                if stop_below is not None and t < stop_below:
-                    return u, t, steps
-            if theta / tau <= rel_gap * t + abs_gap or steps >= max_newton:
-                return u, t, steps
-            tau *= mu
-
-    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):  # the edge is caught inside
-        return _newton_loops()
+    nx = nv + (2 if robust else 1)  # u, [s], t
+    rows = np.zeros((2, len(A), nx))
+    rows[0, :, :nv], rows[1, :, :nv] = A, -A
+    rows[:, :, -1] = -1.0
+    if robust:
+        rows[:, :, nv] = r
+    linear, h_lin = [rows.reshape(-1, nx)], [np.zeros(2 * len(A))]
+    if D is not None and len(D):
+        drive = np.zeros((len(D), nx))
+        drive[:, :nv] = D
+        linear += [drive, -drive]
+        h_lin.append(np.full(2 * len(D), float(dcap)))
+    # Second-order cones as h - G x: (cap, Lt u), and (s, u) when robust.
+    cone = np.zeros((1 + len(Lt), nx))
+    cone[1:, :nv] = -Lt
+    cones, h_cone = [cone], [np.concatenate([[cap], np.zeros(len(Lt))])]
+    if robust:
+        norm = np.zeros((1 + nv, nx))
+        norm[0, nv], norm[1:, :nv] = -1.0, -np.eye(nv)
+        cones.append(norm)
+        h_cone.append(np.zeros(1 + nv))
+    G = np.vstack(linear + cones)
+    h = np.concatenate(h_lin + h_cone)
+    c = np.zeros(nx)
+    c[-1] = 1.0
+    eq = np.zeros((1, nx))
+    eq[0, :nv] = b
+    dims = {"l": sum(len(x) for x in h_lin), "q": [len(x) for x in h_cone], "s": []}
+    args = (matrix(c), matrix(G), matrix(h), dims, matrix(eq), matrix([1.0]))
+    options = {"show_progress": False, "maxiters": 100}
+    try:  # Cholesky on the reduced system: fast, but it needs [G; A] of full column rank
+        if len(G) + 1 < nx:
+            raise ArithmeticError("fewer rows than coefficients")
+        sol = solvers.conelp(*args, options=options)
+    except (ArithmeticError, ValueError):  # rank-deficient (few rows): a regularized LDL
+        sol = solvers.conelp(*args, kktsolver="ldl", options={**options, "kktreg": 1e-9})
+    x = None if sol["x"] is None else np.asarray(sol["x"]).ravel()
+    return (None if x is None else x[:nv]), (np.nan if x is None else float(x[-1])), sol["status"], sol["iterations"]
 
 
 def minimax_filter(
@@ -497,6 +445,7 @@ class _Program:
         w, V = np.linalg.eigh(0.5 * (Q + Q.T))
         keep = w > w[-1] * 1e-12
         self.Q = (V[:, keep] * w[keep]) @ V[:, keep].T
+        self.Lt = np.sqrt(w[keep])[:, None] * V[:, keep].T  # |y_target|^2 = ||Lt u||^2
         # The best fidelity's coefficients (least ||y|| at b.u = 1): the start of every solve.
         qb = V[:, keep] @ ((V[:, keep].T @ self.b) / w[keep])
         self.u_best = qb / (self.b @ qb)
@@ -559,18 +508,17 @@ class _Program:
                                   f"model's best fidelity {1 / np.sqrt(self.u_best @ self.Q @ self.u_best):.4g} "
                                   "over this support): relax the fidelity")
         dcap = None if max_drive is None else max_drive / self.u_scale
-        u, value, it, inside, best_value = self.u_best.copy(), np.nan, 0, True, 0.0
+        u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
         for it in range(1, max_iter + 1):
             D = None if dcap is None else np.kron(np.eye(self.n_act), self.D)
-            u = 0.9 * u + 0.1 * self.u_best  # off the cone's edge, where the last solve ended
-            if D is not None and np.max(np.abs(D @ u)) >= dcap * (1 - 1e-9):  # back inside the drive limit
-                u, over, _ = _barrier(D / dcap, self.b, self.Q, cap, None, None, u, stop_below=1 - 1e-3)
-                if over >= 1 - 1e-3:
-                    raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
-                                          f"max_drive={max_drive}): relax the fidelity or the drive limit")
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
-            u, value, _ = _barrier(self.A, self.b, self.Q, cap, D, dcap, u, r=r,
-                                   abs_gap=1e-12 * np.max(np.abs(self.desired)) / self.d_norm)
+            found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r)
+            if status == "primal infeasible":
+                raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
+                                      f"max_drive={max_drive}): relax the fidelity or the drive limit")
+            if found is None or not np.isfinite(value):
+                raise ValidationError(f"the minimax solver failed ({status}) at round {it}")
+            u = found
             x = self.drives_of(u)
             yq = np.fft.irfft(np.einsum("fpa,af->pf", self.H[:, self.quiet], np.fft.rfft(x, axis=-1)),
                               self.n, axis=-1) / self.d_norm
@@ -599,7 +547,9 @@ class _Program:
                 self.A, self.listed = self.A[keep], self.listed[keep]
         else:
             inside = False
-        return self.drives_of(u), value * self.d_norm, "optimal" if inside else "max_iter", it
+        # "unknown": the cone solver stopped short of its tolerances (its last point is used).
+        final = "max_iter" if not inside else "optimal" if status == "optimal" else f"inaccurate ({status})"
+        return self.drives_of(u), value * self.d_norm, final, it
 
     def design(self, min_fidelity: float, *, max_drive: float | None, full_output: bool, tol: float,
                fidelity_margin: float, max_iter: int) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
@@ -626,7 +576,7 @@ class _Program:
             predicted=predicted, desired=self.desired, target_index=self.ti, quiet=self.quiet, fidelity=fid,
             peak_contrast_db=float(20 * np.log10(tpeak / qpeak)) if qpeak > 0 else float("inf"),
             quiet_peak=qpeak, model_quiet_peak=value, peak_drive=float(np.max(np.abs(drives))),
-            status=str(status), solver="barrier", iterations=it, n_constraints=len(self.listed),
+            status=str(status), solver="cvxopt.conelp", iterations=it, n_constraints=len(self.listed),
             n_variables=self.A.shape[1], ir_taps=self.ir_taps, ir_energy_left_out=self.left_out,
             ir_tail_energy=self.tail, support=(int(self.delays[0]), int(self.delays[-1])),
             decimation=self.decimation)
