@@ -1,5 +1,5 @@
-"""minimax_filter (reduced basis, Toeplitz target norm, constraint generation, a dense
-log-barrier Newton solver; no cvxpy) against a plain cvxpy + Clarabel program on the same
+"""minimax_filter (reduced basis, Toeplitz target norm, constraint generation, CVXOPT's cone
+solver called on the dense rows; no cvxpy) against a plain cvxpy + Clarabel program on the same
 inputs (every drive sample of the support a variable through an orthonormal basis of the
 band-limited pulses, every response sample a peak constraint, dense circulant convolutions).
 

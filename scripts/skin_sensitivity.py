@@ -1,7 +1,8 @@
 #!/usr/bin/env python
 """Write the attenuation sensitivity table into docs/skin-model.md.
 
-Recomputes :func:`vibrofocus.demo.sensitivity.attenuation_sensitivity` (about 10 s) and
+Recomputes :func:`vibrofocus.demo.sensitivity.attenuation_sensitivity` (about 90 s, most of it the
+peak bounds: a minimax design per location and skin) and
 replaces the table between the ``sensitivity-table`` markers of ``docs/skin-model.md``
 (atomically, through ``vibrofocus._atomic``). With ``--check`` it only
 compares and exits 1 if the page is out of date.

@@ -2,6 +2,8 @@
 
 import json
 
+import numpy as np
+
 from typer.testing import CliRunner
 
 from vibrofocus.cli.main import app
@@ -20,6 +22,19 @@ def test_demo_json_has_every_location_and_method(tmp_path):
                     "energy_contrast_db", "bound_db"):
             assert isinstance(row[key], float)
     assert set(payload["summary"]) == set(methods)
+    # The peak bound (on by default) is a property of the location, so every method's row
+    # there carries the same value; it is finite wherever the pseudo-inverse's fidelity is
+    # within the support's reach, as it is on this arm.
+    for loc in range(1, 10):
+        bounds = {r["peak_bound_db"] for r in rows if r["location"] == loc}
+        assert len(bounds) == 1 and all(isinstance(b, float) and np.isfinite(b) for b in bounds), bounds
+    assert np.isfinite(payload["summary"]["inverse"]["peak_bound_db"])
+
+
+def test_demo_without_the_peak_bound_leaves_the_column_out(tmp_path):
+    result = CliRunner().invoke(app, ["demo", "--no-figures", "--no-peak-bound", "--seed", "2", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    assert "peak bound" not in result.output and "bound" in result.output
 
 
 def test_demo_refuses_an_unknown_field_location(tmp_path):

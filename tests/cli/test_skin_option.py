@@ -14,7 +14,7 @@ from vibrofocus.skin import SKIN_PRESETS
 @pytest.mark.slow
 @pytest.mark.parametrize("skin", list(SKIN_PRESETS))
 def test_demo_runs_on_every_preset_and_names_it(skin, tmp_path):
-    result = CliRunner().invoke(app, ["demo", "--json", "--no-figures", "--skin", skin, "--out", str(tmp_path)])
+    result = CliRunner().invoke(app, ["demo", "--json", "--no-figures", "--no-peak-bound", "--skin", skin, "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     payload = json.loads(result.stdout)
     assert payload["skin"] == skin
@@ -34,7 +34,7 @@ def test_demo_runs_on_every_preset_and_names_it(skin, tmp_path):
 
 
 def test_demo_table_names_the_preset(tmp_path):
-    result = CliRunner().invoke(app, ["demo", "--no-figures", "--skin", "low", "--out", str(tmp_path)])
+    result = CliRunner().invoke(app, ["demo", "--no-figures", "--no-peak-bound", "--skin", "low", "--out", str(tmp_path)])
     assert result.exit_code == 0, result.output
     assert "skin low" in result.output
 

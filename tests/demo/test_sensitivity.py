@@ -31,13 +31,13 @@ def test_documented_sensitivity_table_is_recomputed_by_the_code():
             (doc[4], row["fidelity"], 0.005), (doc[5], row["contrast_db"], 0.05),
             (doc[6], row["contrast_all_points_db"], 0.05), (doc[7], row["predicted_energy_contrast_db"], 0.05),
             (doc[8], row["bound_own_db"], 0.05), (doc[9], row["bound_db"], 0.05),
-            (doc[10], 1e6 * row["target_peak_m"], 0.0005),
+            (doc[10], row["peak_bound_db"], 0.05), (doc[11], 1e6 * row["target_peak_m"], 0.0005),
         ):
             assert abs(float(cell) - value) <= half_unit * 1.001 + 1e-12, (doc, row)
 
 
 def test_attenuation_ends_bracket_the_nominal_law():
-    rows = attenuation_sensitivity(methods=("inverse",))
+    rows = attenuation_sensitivity(methods=("inverse",), peak_bounds=False)
     alpha = [r["alpha250_np_m"] for r in rows]
     assert [r["law"] for r in rows] == ["low", "nominal", "high", "voigt-fit"]
     assert alpha[0] < alpha[1] < alpha[2] < alpha[3]
@@ -47,6 +47,6 @@ def test_attenuation_ends_bracket_the_nominal_law():
 
 
 def test_no_method_beats_the_bound_for_its_own_waveform():
-    rows = attenuation_sensitivity(methods=("inverse", "contrast"))
+    rows = attenuation_sensitivity(methods=("inverse", "contrast"), peak_bounds=False)
     for r in rows:
         assert r["predicted_energy_contrast_db"] <= r["bound_own_db"] + 1e-6, r

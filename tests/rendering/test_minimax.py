@@ -117,6 +117,17 @@ def test_drive_limit_holds():
                                             full_output=True)[1].quiet_peak * (1 - 1e-3)
 
 
+def test_a_drive_limit_no_drive_can_meet_is_refused():
+    # The target must receive the tap at its amplitude: a thousandth of the drive it needs
+    # cannot give it, and the cone solver's infeasibility certificate becomes a clear error.
+    _, H = medium(seed=3)
+    targets = tap()
+    free = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT)
+    with pytest.raises(ValidationError, match="infeasible.*relax the fidelity or the drive limit"):
+        minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT,
+                       max_drive=1e-3 * float(np.max(np.abs(free))))
+
+
 def test_one_quiet_point_that_cancels():
     """Target [1, 1], quiet [1, -1] at every frequency: equal drives put nothing at the quiet point."""
     H = np.zeros((N // 2 + 1, 2, 2), complex)

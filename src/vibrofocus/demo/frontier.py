@@ -20,7 +20,7 @@ from .._atomic import save_figure
 from .._style import method_colors
 from .run import DemoResult
 
-__all__ = ["FRONTIER_FIDELITIES", "LocationFrontier", "peak_frontiers", "frontier_figure"]
+__all__ = ["FRONTIER_FIDELITIES", "LocationFrontier", "peak_bound", "peak_frontiers", "frontier_figure"]
 
 #: Fidelities of the demo's frontier (the pseudo-inverse's own is added per location).
 FRONTIER_FIDELITIES = (0.8, 0.85, 0.9, 0.95, 0.98)
@@ -71,25 +71,48 @@ def peak_frontiers(result: DemoResult, *, fidelities=FRONTIER_FIDELITIES,
     -------
     dict of int to LocationFrontier
     """
-    from ..rendering.methods import Minimax
     from ..rendering.transfer import as_transfer_matrix
 
     rig = result.rig
     tm = as_transfer_matrix(result.H, rig.fs, rig.layout, n_samples=result.H.shape[0] * 2 - 2)
-    method = Minimax()
     out = {}
     for loc in sorted({r["location"] for r in result.rows}):
-        pinv_fid = min(method.pinv(method.problem(tm, loc))[0], 0.999)
-        asked = np.array(sorted({*map(float, fidelities), pinv_fid}))
-        front = method.frontier(tm, loc, asked)
-        at = int(np.flatnonzero(asked == pinv_fid)[0])
-        out[loc] = LocationFrontier(location=int(loc), fidelity=front.fidelity,
-                                    peak_contrast_db=front.peak_contrast_db,
-                                    peak_bound_db=float(front.peak_contrast_db[at]), pinv_fidelity=pinv_fid,
-                                    seconds=front.seconds)
+        out[loc] = _location_frontier(tm, loc, fidelities)
         if progress is not None:
             progress(f"frontier, location {loc}")
     return out
+
+
+def peak_bound(tm, location: int) -> float:
+    """The peak bound at one location, dB: the most peak contrast against every other
+    calibrated point that any drive on the minimax support reaches at the pseudo-inverse's
+    fidelity, predicted through ``tm`` (the energy bound's counterpart for peaks).
+
+    Parameters
+    ----------
+    tm : TransferMatrix
+    location : int
+        1-based location number.
+
+    Returns
+    -------
+    float
+        NaN if the pseudo-inverse's fidelity is out of the support's reach.
+    """
+    return _location_frontier(tm, location, ()).peak_bound_db
+
+
+def _location_frontier(tm, location: int, fidelities) -> LocationFrontier:
+    from ..rendering.methods import Minimax
+
+    method = Minimax()
+    pinv_fid = min(method.pinv(method.problem(tm, location))[0], 0.999)
+    asked = np.array(sorted({*map(float, fidelities), pinv_fid}))
+    front = method.frontier(tm, location, asked)
+    at = int(np.flatnonzero(asked == pinv_fid)[0])
+    return LocationFrontier(location=int(location), fidelity=front.fidelity, peak_contrast_db=front.peak_contrast_db,
+                            peak_bound_db=float(front.peak_contrast_db[at]), pinv_fidelity=pinv_fid,
+                            seconds=front.seconds)
 
 
 def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], path: Path) -> Path:
