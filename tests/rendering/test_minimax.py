@@ -9,7 +9,7 @@ import pytest
 cp = pytest.importorskip("cvxpy")
 
 from vibrofocus.errors import ValidationError  # noqa: E402
-from vibrofocus.rendering import minimax_filter  # noqa: E402
+from vibrofocus.rendering import minimax_filter, minimax_frontier  # noqa: E402
 from vibrofocus.rendering.taper import design_grid  # noqa: E402
 
 FS, N, BAND = 2000.0, 256, (20.0, 300.0)
@@ -157,6 +157,8 @@ def test_refuses_bad_input():
     two[1] = targets[0]
     with pytest.raises(ValidationError, match="one non-zero row"):
         minimax_filter(H, two, FS, band=BAND)
+    with pytest.raises(ValidationError, match=r"unknown options \['full_output', 'suport_s'\]"):
+        minimax_frontier(H, targets, FS, [0.9], band=BAND, suport_s=SUPPORT, full_output=True)
 
 
 @pytest.mark.slow
@@ -185,7 +187,6 @@ def test_registered_method_beats_the_pseudo_inverse_at_equal_drive():
 def test_frontier_falls_with_fidelity_and_meets_the_single_design():
     _, H = medium(seed=4)
     targets = tap()
-    from vibrofocus.rendering import minimax_frontier
 
     fids = [0.8, 0.9, 0.95]
     front = minimax_frontier(H, targets, FS, fids, band=BAND, support_s=SUPPORT)

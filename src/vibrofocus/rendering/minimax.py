@@ -29,6 +29,7 @@ window); the response to the pulse at delay ``t_k`` is ``g_pa`` shifted by ``t_k
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass
 from typing import Any
 
@@ -52,7 +53,10 @@ MINIMAX_EXTRA = "vibrofocus[minimax]"
 _DROP = 0.5
 
 
-_SETUP_DEFAULTS = dict(taper_octaves=0.5, support_s=(0.01, 0.005), stride=32, ir_energy_tol=1e-4, decimation=None)
+#: minimax_filter's keywords that shape the program's set-up, and those of each solve
+#: (the frontier takes both; their defaults are minimax_filter's own).
+_SETUP_KEYS = ("taper_octaves", "support_s", "stride", "ir_energy_tol", "decimation", "h_radius")
+_SOLVE_KEYS = ("tol", "fidelity_margin", "max_iter")
 
 
 @dataclass(frozen=True)
@@ -613,15 +617,17 @@ def minimax_frontier(H: Any, targets: Any, fs: float, fidelities: Any, *, band: 
     fids = as_array(fidelities, "fidelities", ndim=1)
     for f in fids:
         check_in_range(float(f), "fidelities", 0.0, 1.0, inclusive=False)
-    setup = {k: options.pop(k) for k in ("taper_octaves", "support_s", "stride", "ir_energy_tol", "decimation", "h_radius")
-             if k in options}
-    solve = {"tol": 1e-3, "fidelity_margin": 1e-3, "max_iter": 30, **options}
-    if set(solve) - {"tol", "fidelity_margin", "max_iter"}:
-        raise ValidationError(f"minimax_frontier got unknown options {sorted(set(solve) - {'tol', 'fidelity_margin', 'max_iter'})}")
+    unknown = set(options) - {*_SETUP_KEYS, *_SOLVE_KEYS}
+    if unknown:
+        raise ValidationError(f"minimax_frontier got unknown options {sorted(unknown)}")
+    defaults = inspect.signature(minimax_filter).parameters
+    chosen = {k: options.get(k, defaults[k].default) for k in (*_SETUP_KEYS, *_SOLVE_KEYS)}
+    setup = {k: chosen[k] for k in _SETUP_KEYS}
+    solve = {k: chosen[k] for k in _SOLVE_KEYS}
     start = time.perf_counter()
     out = np.full((3, fids.size), np.nan)
     with _single_threaded_blas():
-        program = _Program(H, targets, fs, band=band, quiet=quiet, **{**_SETUP_DEFAULTS, **setup})
+        program = _Program(H, targets, fs, band=band, quiet=quiet, **setup)
         for i, f in enumerate(fids):
             try:
                 _, rep = program.design(float(f), max_drive=max_drive, full_output=True, **solve)
