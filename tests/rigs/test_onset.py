@@ -68,15 +68,31 @@ def test_a_backend_without_a_device_clock_gives_the_host_time_only():
 
 
 @pytest.mark.parametrize("kwargs, words", [
-    ({"host_s": float("nan")}, "host time must be finite"),
+    ({"host_s": float("nan")}, "host time must be a finite number of seconds"),
     ({"host_s": 1.0, "device_s": 2.0}, "come together"),
     ({"host_s": 1.0, "clock": SIMULATED_CLOCK}, "come together"),
-    ({"host_s": 1.0, "device_s": float("inf"), "clock": SIMULATED_CLOCK}, "device time must be finite"),
+    ({"host_s": 1.0, "device_s": float("inf"), "clock": SIMULATED_CLOCK}, "device time must be a finite number"),
     ({"host_s": 1.0, "device_s": 2.0, "clock": "wall"}, "unknown device clock 'wall'"),
 ])
 def test_an_onset_is_checked(kwargs, words):
     with pytest.raises(ValidationError, match=words):
         DeviceOnset(**kwargs)
+
+
+def test_a_labs_own_clock_is_registered_once_and_then_stored(tmp_path, monkeypatch):
+    from vibrofocus.rigs import register_clock
+    from vibrofocus.rigs import onset as onset_module
+
+    monkeypatch.setattr(onset_module, "CLOCKS", dict(CLOCKS))  # the registry is process-wide
+    with pytest.raises(ValidationError, match="unknown device clock 'lab_fpga'"):
+        DeviceOnset(1.0, 2.0, "lab_fpga")
+    register_clock("lab_fpga", "our FPGA's sample counter / rate")
+    assert DeviceOnset(1.0, 2.0, "lab_fpga").clock == "lab_fpga"
+    register_clock("lab_fpga", "our FPGA's sample counter / rate")  # the same again: no change
+    for name, meaning, words in (("Lab FPGA", "x", "lower-case"), ("lab_fpga", "another", "already named"),
+                                 ("portaudio_dac", "mine", "already named"), ("lab2", " ", "say what clock")):
+        with pytest.raises(ValidationError, match=words):
+            register_clock(name, meaning)
 
 
 def test_every_clock_is_described():

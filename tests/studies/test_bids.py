@@ -146,3 +146,27 @@ def test_participant_ids_become_bids_labels_and_a_clash_is_refused(tmp_path):
     with pytest.raises(StudyError, match="would both be sub-P1"):
         export_bids(path, tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_a_labs_own_clock_is_a_described_level(tmp_path, monkeypatch):
+    # Recorded by a process that named its clock; exported by one that did not.
+    from vibrofocus.rigs import onset as onset_module
+    from vibrofocus.rigs import register_clock
+
+    db = tmp_path / "own-clock.db"
+    monkeypatch.setattr(onset_module, "CLOCKS", dict(onset_module.CLOCKS))
+    register_clock("lab_fpga", "our FPGA's sample counter / rate")
+    with StudyStore(db) as store:
+        store.add_participant("p1")
+        sid = store.create_session("p1", 1, seed=5, config={"repetitions": 1, "n_training": 0, "methods": ["inverse"],
+                                                             "locations": [4, 6]})
+        store.record_answer(sid, 0, 4, 0.5, answer_id="a0", onset_s=10.0, onset_device_s=2.5, onset_clock="lab_fpga")
+        store.record_answer(sid, 1, 6, 0.5, answer_id="a1", onset_s=11.0, onset_device_s=3.5, onset_clock="lab_fpga")
+    monkeypatch.undo()
+    assert "lab_fpga" not in onset_module.CLOCKS
+    export_bids(db, tmp_path / "bids")
+    layout = bids.BIDSLayout(tmp_path / "bids", validate=True)
+    (events,) = _events(layout)
+    assert list(events.get_df()["device_clock"]) == ["lab_fpga", "lab_fpga"]
+    levels = events.get_metadata()["device_clock"]["Levels"]
+    assert "register_clock" in levels["lab_fpga"] and "portaudio_dac" in levels

@@ -286,7 +286,8 @@ def test_an_answer_committed_before_the_onset_gets_it_from_an_answer_onset_event
     ({"onset_clock": "portaudio_dac"}, "come together"),
     ({"onset_device_s": float("nan"), "onset_clock": "portaudio_dac"}, "finite"),
     ({"onset_s": "soon"}, "finite"),
-    ({"onset_device_s": 1.0, "onset_clock": "Wall Clock"}, "clock's name"),
+    ({"onset_device_s": 1.0, "onset_clock": "Wall Clock"}, "unknown device clock 'Wall Clock' for onset_clock"),
+    ({"onset_device_s": 1.0, "onset_clock": "wall"}, "unknown device clock 'wall'.*register_clock"),
 ])
 def test_a_bad_onset_stores_nothing(store, onsets, words):
     sid = _small(store)

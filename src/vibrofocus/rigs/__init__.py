@@ -6,7 +6,7 @@ from .device_lock import DeviceLock
 from .devices import DeviceBusyError, DeviceError, StoppedError, list_audio_devices, list_nidaq_devices
 from .factory import RIG_KINDS, make_rig
 from .hardware import HardwareRig
-from .onset import CLOCKS, DeviceOnset
+from .onset import CLOCKS, DeviceOnset, register_clock
 from .force import ForceCurve, StrapReading, StrapSensors, check_straps, evaluate_straps, has_strap_sensors
 from .safety import EnergyBudget, SafetyLimits, check_drive
 from .vibrometer import Vibrometer
@@ -14,7 +14,7 @@ from .vibrometer import Vibrometer
 # AudioRig and NidaqRig are imported lazily (make_rig, or vibrofocus.rigs.audio / .nidaq)
 # so importing vibrofocus does not load PortAudio or the NI driver.
 __all__ = [
-    "Rig", "HardwareRig", "DeviceOnset", "CLOCKS", "SafetyLimits", "EnergyBudget", "check_drive", "make_rig", "RIG_KINDS",
+    "Rig", "HardwareRig", "DeviceOnset", "CLOCKS", "register_clock", "SafetyLimits", "EnergyBudget", "check_drive", "make_rig", "RIG_KINDS",
     "DeviceLock", "DeviceBusyError", "StoppedError",
     "RigConfig", "AudioRigConfig", "NidaqRigConfig", "load_rig_config", "parse_rig_config",
     "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps", "has_strap_sensors",

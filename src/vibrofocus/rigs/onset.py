@@ -26,11 +26,15 @@ time is the clock the samples themselves run on, named by :data:`CLOCKS`:
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
+from typing import Any
 
+from .._validation import shorten
 from ..errors import ValidationError
 
-__all__ = ["DeviceOnset", "CLOCKS", "SIMULATED_CLOCK", "PORTAUDIO_CLOCK", "NIDAQ_CLOCK", "NIDAQ_SAMPLES_CLOCK"]
+__all__ = ["DeviceOnset", "CLOCKS", "SIMULATED_CLOCK", "PORTAUDIO_CLOCK", "NIDAQ_CLOCK", "NIDAQ_SAMPLES_CLOCK",
+           "register_clock", "check_onset"]
 
 SIMULATED_CLOCK = "simulated_samples"
 PORTAUDIO_CLOCK = "portaudio_dac"
@@ -47,6 +51,79 @@ CLOCKS: dict[str, str] = {
     NIDAQ_SAMPLES_CLOCK: "the NI-DAQmx sample clock's count: samples the rig's completed output tasks generated "
                          "before this play / rate (stands still between plays)",
 }
+
+
+_CLOCK_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
+
+
+def register_clock(name: str, meaning: str) -> None:
+    """Name the device clock of a lab's own rig backend, so its onsets can be stored.
+
+    Parameters
+    ----------
+    name : str
+        1-40 characters: lower-case letters, digits and ``_``, starting with a letter
+        (like the built-in names of :data:`CLOCKS`).
+    meaning : str
+        What its seconds count, as :data:`CLOCKS` says for the built-in clocks (it goes
+        into the BIDS sidecar of every export).
+
+    Raises
+    ------
+    ValidationError
+        A malformed name, an empty meaning, or a built-in clock's name with another
+        meaning.
+    """
+    if not isinstance(name, str) or not _CLOCK_NAME.fullmatch(name):
+        raise ValidationError(f"a clock's name is 1-40 lower-case letters, digits or '_', starting with a letter, "
+                              f"got {shorten(name)}")
+    if not isinstance(meaning, str) or not meaning.strip():
+        raise ValidationError(f"say what clock {name!r} counts (meaning), got {shorten(meaning)}")
+    if CLOCKS.get(name, meaning) != meaning:
+        raise ValidationError(f"clock {name!r} is already named, as {CLOCKS[name]!r}; choose another name")
+    CLOCKS[name] = meaning
+
+
+def check_onset(host_s: Any, device_s: Any, clock: Any, *, names: tuple[str, str, str] = ("host_s", "device_s", "clock"),
+                host_required: bool = True) -> tuple[float | None, float | None, str | None]:
+    """The one rule for an onset, wherever it is made or stored: finite seconds, a device
+    time only with its clock, and a clock of :data:`CLOCKS` (:func:`register_clock` adds
+    a lab's own).
+
+    Parameters
+    ----------
+    host_s, device_s : float or None
+        Seconds on the host's and on the device's clock.
+    clock : str or None
+        The device clock's name.
+    names : (str, str, str)
+        How errors name the three (the caller's argument names).
+    host_required : bool
+        Whether ``host_s`` may be None.
+
+    Returns
+    -------
+    (float or None, float or None, str or None)
+
+    Raises
+    ------
+    ValidationError
+    """
+    times = []
+    for value, name, required in ((host_s, names[0], host_required), (device_s, names[1], False)):
+        if value is None and not required:
+            times.append(None)
+            continue
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValidationError(f"{name} must be a finite number of seconds{'' if required else ' or None'}, "
+                                  f"got {shorten(value)}")
+        times.append(float(value))
+    if (device_s is None) != (clock is None):
+        raise ValidationError(f"{names[1]} and {names[2]} come together: give both or neither")
+    if clock is not None and (not isinstance(clock, str) or clock not in CLOCKS):
+        raise ValidationError(f"unknown device clock {shorten(clock)} for {names[2]}; expected one of "
+                              f"{', '.join(CLOCKS)}, or a lab's own named with vibrofocus.rigs.register_clock")
+    return times[0], times[1], clock
 
 
 @dataclass(frozen=True)
@@ -69,11 +146,5 @@ class DeviceOnset:
     clock: str | None = None
 
     def __post_init__(self) -> None:
-        if not math.isfinite(self.host_s):
-            raise ValidationError(f"an onset's host time must be finite, got {self.host_s!r}")
-        if (self.device_s is None) != (self.clock is None):
-            raise ValidationError("an onset's device time and clock come together: give both or neither")
-        if self.device_s is not None and not math.isfinite(self.device_s):
-            raise ValidationError(f"an onset's device time must be finite, got {self.device_s!r}")
-        if self.clock is not None and self.clock not in CLOCKS:
-            raise ValidationError(f"unknown device clock {self.clock!r}; expected one of {', '.join(CLOCKS)}")
+        check_onset(self.host_s, self.device_s, self.clock,
+                    names=("an onset's host time", "an onset's device time", "its clock"))

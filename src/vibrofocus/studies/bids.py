@@ -118,9 +118,13 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
         raise StudyError(f"{source} is not a study database or a trials CSV file")
     from ..rigs.onset import CLOCKS
 
-    clock_column = {**EVENT_COLUMN_DESCRIPTIONS["device_clock"], "Levels": CLOCKS}
     from_db = _is_database(source)
     rows, simulated, sessions = _from_database(source) if from_db else _from_trials_csv(source)
+    # Every clock the data names is a level: a lab's own, registered when it was recorded
+    # but not in this process, is described as such.
+    own = {c for r in rows if isinstance(c := r.get("onset_clock"), str) and c} - set(CLOCKS)
+    levels = {**CLOCKS, **dict.fromkeys(sorted(own), "a lab's own device clock (vibrofocus.rigs.register_clock)")}
+    clock_column = {**EVENT_COLUMN_DESCRIPTIONS["device_clock"], "Levels": levels}
     labels: dict[str, str] = {}
     for pid in simulated:
         label = bids_label(pid)

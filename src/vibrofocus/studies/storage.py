@@ -28,7 +28,7 @@ from pathlib import Path
 from typing import Any
 
 from .._validation import shorten
-from ..errors import AnswerRefused, StudyError
+from ..errors import AnswerRefused, StudyError, ValidationError
 from .database import APPLICATION_ID, SCHEMA_VERSION, StudyDatabase, now_utc, software_version
 from .protocol import PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .records import (
@@ -679,25 +679,18 @@ class StudyStore(StudyDatabase):
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.
 _ONSET_KEYS = {"onset_s": "onset_host_s", "onset_device_s": "onset_device_s", "onset_clock": "onset_clock"}
 _NO_ONSET: dict[str, Any] = dict.fromkeys(_ONSET_KEYS.values())
-_CLOCK_RE = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
 
 
 def _check_onsets(onset_s: Any, onset_device_s: Any, onset_clock: Any) -> dict[str, Any]:
-    """The onset keys of an answer event (those given), checked: finite seconds, a clock with a device time."""
-    out: dict[str, Any] = {}
-    for key, value in (("onset_s", onset_s), ("onset_device_s", onset_device_s)):
-        if value is None:
-            continue
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise StudyError(f"{key} must be a finite number of seconds or None, got {shorten(value)}")
-        out[key] = float(value)
-    if (onset_device_s is None) != (onset_clock is None):
-        raise StudyError("onset_device_s and onset_clock come together: give both or neither")
-    if onset_clock is not None:
-        if not isinstance(onset_clock, str) or not _CLOCK_RE.match(onset_clock):
-            raise StudyError(f"onset_clock must be a clock's name like 'portaudio_dac', got {shorten(onset_clock)}")
-        out["onset_clock"] = onset_clock
-    return out
+    """The onset keys of an answer event (those given), checked by the rigs' one rule for onsets."""
+    from ..rigs.onset import check_onset
+
+    try:
+        host, device, clock = check_onset(onset_s, onset_device_s, onset_clock, host_required=False,
+                                          names=("onset_s", "onset_device_s", "onset_clock"))
+    except ValidationError as exc:
+        raise StudyError(str(exc)) from None
+    return {k: v for k, v in (("onset_s", host), ("onset_device_s", device), ("onset_clock", clock)) if v is not None}
 
 
 def _as_int(value: Any, name: str) -> int:
