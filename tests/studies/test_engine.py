@@ -294,3 +294,21 @@ def test_a_bad_onset_stores_nothing(store, onsets, words):
     with pytest.raises(StudyError, match=words):
         store.record_answer(sid, 0, 5, 0.5, answer_id="a0", **onsets)
     assert store.answers(sid) == [] and store.events(sid, kind="answer") == []
+
+
+def test_one_participants_trials_carry_their_own_onsets(store):
+    # The onsets come from the named participant's events only: each answer keeps its own.
+    store.add_participant("p2")
+    sids = {pid: store.create_session(pid, 1, seed=5, config={"repetitions": 1, "n_training": 0,
+                                                               "methods": ["inverse"], "locations": [4, 6]})
+            for pid in ("p1", "p2")}
+    for k, (pid, sid) in enumerate(sids.items()):
+        for i, loc in enumerate((4, 6)):
+            store.record_answer(sid, i, loc, 0.5, answer_id=f"{pid}-{i}", onset_s=100.0 * k + i,
+                                onset_device_s=10.0 * k + i, onset_clock="simulated_samples")
+    every = store.trial_rows()
+    for k, pid in enumerate(sids):
+        mine = store.trial_rows(participant_id=pid)
+        assert mine == [r for r in every if r["participant"] == pid]
+        assert [(r["onset_host_s"], r["onset_device_s"]) for r in mine] == [(100.0 * k, 10.0 * k),
+                                                                           (100.0 * k + 1, 10.0 * k + 1)]

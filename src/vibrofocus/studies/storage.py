@@ -644,18 +644,22 @@ class StudyStore(StudyDatabase):
                 args.append(participant_id)
             sql += "ORDER BY pt.rowid, s.study, s.session_id, p.trial_index"
             rows = [dict(r) for r in conn.execute(sql, args).fetchall()]
-            onsets = self._answer_onsets(conn)
+            onsets = self._answer_onsets(conn, participant_id)
         for row in rows:
             row.update(onsets.get(row["answer_id"], _NO_ONSET))
         return rows
 
     @staticmethod
-    def _answer_onsets(conn: sqlite3.Connection) -> dict[str, dict[str, Any]]:
-        """Each answer's stimulus onset by answer id (the columns of :data:`_ONSET_KEYS`), from its events."""
+    def _answer_onsets(conn: sqlite3.Connection, participant_id: str | None = None) -> dict[str, dict[str, Any]]:
+        """Each answer's stimulus onset by answer id (the columns of :data:`_ONSET_KEYS`), from
+        its events; only the participant's sessions' events when one is named."""
+        sql = "SELECT payload FROM events WHERE kind IN ('answer', 'answer_onset') "
+        args: tuple[Any, ...] = ()
+        if participant_id is not None:  # through the session index, not the whole log
+            sql += "AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) "
+            args = (participant_id,)
         out: dict[str, dict[str, Any]] = {}
-        for (text,) in conn.execute(
-            "SELECT payload FROM events WHERE kind IN ('answer', 'answer_onset') ORDER BY event_id"
-        ):
+        for (text,) in conn.execute(sql + "ORDER BY event_id", args):
             payload = json.loads(text)
             slot = out.setdefault(payload.get("answer_id"), dict(_NO_ONSET))
             for key, column in _ONSET_KEYS.items():
