@@ -69,3 +69,23 @@ def test_power_names_its_skin_and_refuses_one_its_model_was_not_fitted_on():
     result = CliRunner().invoke(app, ["power", "--skin", "voigt-fit", "-n", "10", "--studies", "2", "--no-dask"])
     assert result.exit_code == 2
     assert "fitted on the nominal skin only" in " ".join(result.output.split())
+
+
+def test_power_from_a_bank_file_and_its_methods(tmp_path):
+    from vibrofocus.simulation.bank import default_bank
+
+    # A bank file with two of the shipped bank's methods, as scripts/build_feature_bank.py writes one.
+    shipped = default_bank()
+    keep = [shipped.methods.index(m) for m in ("inverse", "combination")]
+    bank = type(shipped)(**{**vars(shipped), "methods": ("inverse", "combination"),
+                            "energy": shipped.energy[:, keep], "actuator_energy": shipped.actuator_energy[:, keep]})
+    bank.save(tmp_path / "bank.npz")
+    res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--bank", str(tmp_path / "bank.npz"),
+                              "--out", str(tmp_path / "out")])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "out" / "power.json").read_text())["design"]["methods"] == ["inverse", "combination"]
+    res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--bank", str(tmp_path / "bank.npz"),
+                              "--methods", "inverse,minimax"])
+    assert res.exit_code != 0 and "no stimuli of minimax" in res.output and "Traceback" not in res.output
+    res = runner.invoke(app, ["power", "--bank", str(tmp_path / "missing.npz"), "--no-dask"])
+    assert res.exit_code != 0 and "cannot read the feature bank" in res.output

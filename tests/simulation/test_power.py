@@ -92,3 +92,33 @@ def test_bank_is_the_simulated_participants():
     bank = default_bank()
     assert bank.energy.shape[1:3] == (3, 9) and bank.n_forearms >= 20
     assert bank.methods == ("funneling", "inverse", "combination")
+
+
+def test_a_method_outside_the_bank_is_refused_with_the_way_to_a_bank_that_has_it():
+    design = PowerDesign(n_participants=(5,), n_studies=1, methods=("inverse", "minimax"))  # registered: accepted
+    with pytest.raises(ValidationError, match=r"no stimuli of minimax.*--methods funneling,inverse,combination,minimax"):
+        run_power(design, local=True)
+    with pytest.raises(ValidationError, match="unknown method"):
+        PowerDesign(methods=("inverse", "minimx"))
+
+
+@pytest.mark.slow
+def test_power_for_the_minimax_design_from_a_bank_that_renders_it(tmp_path):
+    from vibrofocus.simulation.bank import FeatureBank, build_feature_bank
+
+    # Two forearms (sim-001, sim-002 of seed 0) rendered with the inverse filter and minimax.
+    bank = build_feature_bank(2, seed=0, methods=("inverse", "minimax"))
+    bank.save(tmp_path / "bank.npz")
+    loaded = FeatureBank.load(tmp_path / "bank.npz")
+    assert loaded.methods == ("inverse", "minimax") and loaded.energy.shape[:3] == (2, 2, 9)
+    # The same forearms and calibrations as the shipped bank: the inverse filter's felt
+    # energies are the shipped bank's first two forearms'.
+    shipped = default_bank()
+    np.testing.assert_allclose(loaded.energy[:, 0], shipped.energy[:2, shipped.methods.index("inverse")], rtol=1e-6)
+    # A minimax drive is a different drive: its felt field differs.
+    assert not np.allclose(loaded.energy[:, 1], loaded.energy[:, 0], rtol=0.05)
+    design = PowerDesign(n_participants=(6,), n_studies=4, methods=("inverse", "minimax"))
+    result = run_power(design, local=True, bank=loaded)
+    assert result["design"]["methods"] == ["inverse", "minimax"]
+    rows = {r["test"]: r for r in result["table"]}
+    assert rows["s1_method"]["n_studies"] == 4 and 0.0 <= rows["s1_method"]["power"] <= 1.0

@@ -116,3 +116,22 @@ def test_analysis_reads_the_export(simulated, tmp_path):
     effects = {row["effect"] for row in report["study1"]["anova"]}
     assert {"location", "method"} <= effects
     assert set(report["study2"]["friedman"]) >= {"location", "method"}
+
+
+def test_other_methods_are_studied_and_a_resume_keeps_them(tmp_path):
+    # Any registered method can be compared, the minimax design among them; the stimuli
+    # are rendered from each participant's calibration as for the paper's methods.
+    db = tmp_path / "minimax.db"
+    result = CliRunner().invoke(app, ["simulate-study", "-n", "1", "--seed", "4", "--db", str(db), "--quiet",
+                                      "--methods", "inverse,minimax"])
+    assert result.exit_code == 0, result.output
+    with StudyStore(db, create=False) as store:
+        rows = store.trial_rows()
+    main = Counter((r["study"], r["method"]) for r in rows if r["phase"] == "main")
+    assert main == {(s, m): 27 for s in (1, 2) for m in ("inverse", "minimax")}
+    assert all(r["drive_sha256"] for r in rows)  # every stimulus was rendered and played
+    # The same database with the paper's methods would mix two designs: refused, nothing added.
+    again = CliRunner().invoke(app, ["simulate-study", "-n", "2", "--seed", "4", "--db", str(db), "--quiet"])
+    assert again.exit_code != 0 and "simulated with the methods inverse, minimax" in again.output
+    with StudyStore(db, create=False) as store:
+        assert len(store.trial_rows()) == len(rows) and [p.participant_id for p in store.participants()] == ["sim-001"]

@@ -34,8 +34,13 @@ def power_command(
                                      help="Sample sizes N, comma separated, each from 3 to 1000."),
     studies: int = typer.Option(200, "--studies", min=1, max=100_000, help="Simulated studies per N."),
     repetitions: int = typer.Option(3, "--repetitions", min=1, max=100, help="Trials per condition and study."),
-    methods: str | None = typer.Option(None, "--methods", help="Methods, comma separated: at least two of "
-                                                               "funneling, inverse, combination (default all three)."),
+    methods: str | None = typer.Option(None, "--methods", help="Methods, comma separated: at least two of the "
+                                                               "feature bank's (the shipped bank: funneling, inverse, "
+                                                               "combination, the default; others, such as minimax, "
+                                                               "from a bank of --bank)."),
+    bank: Path | None = typer.Option(None, "--bank", help="Feature bank (.npz) built by "
+                                                          "scripts/build_feature_bank.py --methods ... --out FILE "
+                                                          "(default the one shipped with vibrofocus)."),
     locations: str | None = typer.Option(None, "--locations", help="Location numbers 1-9, comma separated, at "
                                                                    "least two (default 1-9)."),
     alpha: float = typer.Option(0.05, "--alpha", help="Significance level, in (0, 1)."),
@@ -88,6 +93,11 @@ def power_command(
             methods=tuple(m.strip() for m in methods.split(",") if m.strip()) if methods else None,
             locations=_ints(locations, "--locations") if locations else None, alpha=alpha, seed=seed,
         )
+        feature_bank = None
+        if bank is not None:
+            from ..simulation.bank import FeatureBank
+
+            feature_bank = FeatureBank.load(bank)
         if out is not None:
             from .._atomic import check_writable, make_output_folder
 
@@ -101,7 +111,7 @@ def power_command(
         ) as bar:
             task = bar.add_task("studies", total=len(design.n_participants) * design.n_studies)
             result = run_power(
-                design, scheduler=scheduler, n_workers=workers, local=local,
+                design, scheduler=scheduler, n_workers=workers, local=local, bank=feature_bank,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
         table = Table(title=f"Power by simulation ({MODEL_LABEL}), {design.n_studies} studies per N, alpha {alpha}")

@@ -31,6 +31,11 @@ def simulate_study(
                              help="Skin preset of the simulated forearms: nominal (the skin the perceptual model "
                                   "was fitted on) | low | high | voigt-fit."),
     lsl: bool = lsl_option(),
+    methods: str | None = typer.Option(
+        None, "--methods",
+        help="Rendering methods the studies compare, comma separated: any registered ones, such as minimax "
+             "(default the paper's funneling, inverse, combination).",
+    ),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -52,6 +57,11 @@ def simulate_study(
         from ..layout import ArrayLayout
 
         allow_overwrite(force)
+        chosen = None
+        if methods is not None:  # checked now, before anything is created
+            from ..studies.protocol import StudyDesign
+
+            chosen = StudyDesign(methods=tuple(m.strip() for m in methods.split(",") if m.strip())).methods
         if lsl:  # no pylsl: one error line before anything is created
             from ..io.lsl import import_pylsl
 
@@ -101,7 +111,7 @@ def simulate_study(
 
             result = simulate_studies(
                 db, n_participants=participants, seed=seed, pace_s=pace,
-                calibration_dir=calibration_dir, progress=progress, skin=skin,
+                calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen,
             )
         summary = summarize_simulation(db)
         table = Table(title=f"Simulated participants on the {skin} skin (model output, not data): main trials")

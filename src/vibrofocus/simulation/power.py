@@ -63,7 +63,9 @@ class PowerDesign:
     repetitions : int
         Trials per condition and study.
     methods : tuple of str or None
-        Methods (default the bank's: funneling, inverse, combination).
+        Registered methods, each in the feature bank (default the bank's; the shipped
+        bank has funneling, inverse and combination, and one built with
+        ``scripts/build_feature_bank.py --methods`` may have others, such as minimax).
     locations : tuple of int or None
         Location numbers (default 1..9).
     alpha : float
@@ -99,10 +101,12 @@ class PowerDesign:
         if not 0 < self.alpha < 1:
             raise ValidationError(f"alpha must be in (0, 1), got {self.alpha!r}")
         if self.methods is not None:
-            unknown = [m for m in self.methods if m not in STUDY_METHODS]
+            from ..rendering.registry import available_methods
+
+            known = available_methods()
+            unknown = [m for m in self.methods if m not in known]
             if unknown:
-                raise ValidationError(f"methods: unknown method(s) {shorten(unknown)}; the studies use "
-                                      f"{', '.join(STUDY_METHODS)}")
+                raise ValidationError(f"methods: unknown method(s) {shorten(unknown)}; registered: {', '.join(known)}")
             if len(set(self.methods)) != len(self.methods):
                 raise ValidationError(f"methods: each method once, got {shorten(self.methods)}")
             if len(self.methods) < 2:
@@ -342,6 +346,12 @@ def run_power(
     if isinstance(chunk, bool) or not isinstance(chunk, (int, np.integer)) or chunk < 1:
         raise ValidationError(f"chunk must be an integer >= 1, got {chunk!r}")
     b = bank if bank is not None else default_bank()
+    missing = [m for m in design.methods or () if m not in b.methods]
+    if missing:
+        raise ValidationError(
+            f"methods: the feature bank has no stimuli of {', '.join(missing)} (it has {', '.join(b.methods)}); "
+            f"build one with scripts/build_feature_bank.py --methods {','.join(dict.fromkeys((*b.methods, *missing)))} "
+            "--out FILE and pass it (vibrofocus power --bank FILE)")
     tasks = [(n, list(range(s, min(s + chunk, design.n_studies))))
              for n in design.n_participants for s in range(0, design.n_studies, chunk)]
     total = len(design.n_participants) * design.n_studies

@@ -15,6 +15,7 @@ from typing import Any
 
 import numpy as np
 
+from ..defaults import STUDY_METHODS
 from ..errors import CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
@@ -75,6 +76,7 @@ def simulate_studies(
     config: dict[str, Any] | None = None,
     progress: ProgressFn | None = None,
     skin: str = STUDY_SKIN,
+    methods: tuple[str, ...] | None = None,
 ) -> dict[str, int]:
     """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
 
@@ -101,6 +103,9 @@ def simulate_studies(
         model not fitted to them). Stored in each session's config.
     progress : callable, optional
         ``progress(description, n_answered, n_total)`` after each answer.
+    methods : tuple of str, optional
+        Registered rendering methods the studies compare (default the paper's funneling,
+        inverse and combination); a resumed database must have been started with the same.
 
     Returns
     -------
@@ -125,6 +130,12 @@ def simulate_studies(
         raise StudyError(f"seed must be a non-negative integer, got {seed!r}")
     if not np.isfinite(pace_s) or pace_s < 0:
         raise StudyError(f"pace must be >= 0 s, got {pace_s!r}")
+    if methods is not None:  # checked (registered, each once) by the study design
+        from ..studies.protocol import StudyDesign
+
+        methods = StudyDesign(methods=tuple(methods)).methods
+        config = {**(config or {}), "methods": list(methods)}
+    asked_methods = tuple(methods or (config or {}).get("methods") or STUDY_METHODS)
     db = Path(db)
     cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
     with StudyStore(db) as store:
@@ -146,6 +157,12 @@ def simulate_studies(
                     raise StudyError(
                         f"{db} holds participant {pid} simulated on the {info.config.get('skin', STUDY_SKIN)!r} skin, "
                         f"not {skin!r}; use that skin or another database"
+                    )
+                stored = tuple(info.config.get("methods") or STUDY_METHODS)
+                if stored != asked_methods:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated with the methods {', '.join(stored)}, not "
+                        f"{', '.join(asked_methods)}; use those methods or another database"
                     )
                 # The stored seed wins over the derivation: the participant stays who it was.
                 pseed = int(info.config.get("participant_seed", pseed))
