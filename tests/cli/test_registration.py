@@ -71,3 +71,30 @@ def test_a_closed_pipe_ends_the_command_quietly(args, tmp_path):
         os.close(write)
     assert done.stderr == ""  # no traceback, no "error:", no "Exception ignored"
     assert done.returncode in (1, 141)  # rich's quiet exit, or ours (128 + SIGPIPE)
+
+
+def _commands(group, prefix=()):
+    for name, cmd in group.commands.items():
+        if hasattr(cmd, "commands"):
+            yield from _commands(cmd, (*prefix, name))
+        else:
+            yield (*prefix, name)
+
+
+def test_help_paragraphs_flow_as_one_text_in_every_command():
+    # A docstring's source line breaks must not survive into the wrapped help: there, each
+    # shows as a short line whose sentence goes on below (".csv has" / "a time column ...").
+    from typer.main import get_command
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    names = list(_commands(get_command(app)))
+    assert len(names) > len(ORDER)  # the study group's commands too
+    for name in names:
+        result = CliRunner().invoke(app, [*name, "--help"], terminal_width=80)
+        assert result.exit_code == 0, result.output
+        text = result.output.split("Options")[0].split("Commands")[0]
+        lines = [line.strip() for line in text.splitlines()]
+        ragged = [f"{a} | {b}" for a, b in zip(lines, lines[1:]) if a and len(a) < 50 and re.match(r"[a-z(]", b)]
+        assert not ragged, (name, ragged)
