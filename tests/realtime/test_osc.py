@@ -201,3 +201,28 @@ def test_the_rigs_safety_layer_refuses_what_is_over_its_limit(rig_and_designer):
         server.stop()
         thread.join(10)
         server.close()
+
+
+@pytest.mark.slow
+def test_a_method_of_slow_designs_is_served_only_at_locations_made_ahead(running):
+    server, client, rig, _, _ = running
+    # Not made ahead: switching would design nine taps while messages wait. Refused, and
+    # the server goes on with the method it had.
+    reply = _ask(client, "/method", "minimax")
+    assert reply.address == "/error" and "start serve-osc with --method minimax" in reply.params[0]
+    assert _ask(client, "/tap", 2).address == "/played" and server.records[-1].method == "inverse"
+    # Made ahead (as serve-osc --method minimax does at start-up): switching is free, taps at
+    # locations play, a tap at a new point is refused (a design takes seconds).
+    designer = server.designer
+    designer.set_method("minimax")
+    designer.set_method("inverse")
+    assert designer.designed_ahead("minimax")
+    assert _ask(client, "/method", "minimax").params == ["minimax"]
+    played = _ask(client, "/tap", 5)
+    assert played.address == "/played" and server.records[-1].method == "minimax"
+    # The design made ahead, as played (the rig ramps the window's first and last samples).
+    np.testing.assert_array_equal(rig.last_drive[:, 64:-64], designer.drives_at(5)[:, 64:-64])
+    assert np.abs(rig.last_drive).max() <= rig.limits.peak_v + 1e-12
+    n = len(server.records)
+    reply = _ask(client, "/tap_xy", [0.0, 0.0])
+    assert reply.address == "/error" and "takes seconds" in reply.params[0] and len(server.records) == n

@@ -25,7 +25,9 @@ def serve_osc(
                                                  "audio/nidaq; default on the simulated rig: the arm's own transfer)."),
     skin: str = typer.Option("nominal", "--skin", help="Skin preset of the simulated forearm: nominal | low | high | "
                                                        "voigt-fit."),
-    method: str = typer.Option("inverse", "--method", "-m", help="Rendering method at start (/method changes it)."),
+    method: str = typer.Option("inverse", "--method", "-m",
+                               help="Rendering method at start (/method changes it). A method whose designs take "
+                                    "seconds (minimax) is designed ahead at every location and then serves /tap only."),
     seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
                                     help="Participant seed of the simulated forearm."),
 ) -> None:
@@ -70,6 +72,11 @@ def serve_osc(
             else:
                 tm, model = TransferMatrix.from_model(the_rig, the_rig.layout, the_rig.fs), the_rig
                 source = f"the simulated arm's own transfer (skin {skin_name})"
+            from ..rendering import available_methods, method_class
+
+            if method in available_methods() and not method_class(method).live:
+                err_console.print(f"designing {method} at the {tm.layout.n_locations} locations ahead "
+                                  "(seconds each) ...")
             designer = TapDesigner(tm, model, method=method, limit_v=the_rig.limits.peak_v)
             if model is not None:
                 designer.prepare_grid()
@@ -80,7 +87,9 @@ def serve_osc(
             typer.echo(f"serve-osc: listening on osc.udp://{shown_host}:{shown_port} ({rig} rig, designs from "
                        f"{source}, method {designer.method}, drive limit {designer.limit_v:g} V)")
             typer.echo(f"taps: /tap 1..{designer.layout.n_locations}"
-                       + (f", /tap_xy in {designer.area.describe()}" if model is not None else
+                       + (f" (no /tap_xy with {designer.method}: a design takes seconds)"
+                          if not method_class(designer.method).live else
+                          f", /tap_xy in {designer.area.describe()}" if model is not None else
                           " (no /tap_xy: the calibration has no fitted skin model)")
                        + "; /method <name>; /stop", )
             try:

@@ -133,8 +133,22 @@ class TapDesigner:
         self.set_method(method)
 
     # -- the method ----------------------------------------------------------------------
+    def designed_ahead(self, name: str) -> bool:
+        """Whether method ``name``'s designs at every location are made (switching to it is free).
+
+        Parameters
+        ----------
+        name : str
+
+        Returns
+        -------
+        bool
+        """
+        return all((name, loc) in self._drives for loc in self.layout.location_numbers)
+
     def set_method(self, name: str) -> None:
-        """Use method ``name`` from now on; its designs at every location are made now.
+        """Use method ``name`` from now on; its designs at every location are made now (once:
+        a method used before is switched back to at no cost).
 
         Parameters
         ----------
@@ -153,9 +167,9 @@ class TapDesigner:
             options["band"] = self.tm.band
         full = make_method(name, **options)
         fast = make_method(name, **options, check_wraparound=False)
-        drives = {(name, loc): np.ascontiguousarray(full.design(self.tm, loc).drives)
-                  for loc in self.layout.location_numbers}
-        self._drives.update(drives)
+        if not self.designed_ahead(name):  # made once: switching back to a method is free
+            self._drives.update({(name, loc): np.ascontiguousarray(full.design(self.tm, loc).drives)
+                                 for loc in self.layout.location_numbers})
         self._full, self._fast, self.method = full, fast, name
         self._active = design_grid(self.tm.n_samples, self.tm.fs, full.band, full.taper_octaves)[1] > 0
 
@@ -195,6 +209,10 @@ class TapDesigner:
             For a point that is not finite or lies off the area, or without a model.
         """
         xy = as_array(xy_m, "xy", ndim=1, shape=(2,))
+        if not type(self._full).live:
+            raise ValidationError(f"a {self.method} design takes seconds, too long for a tap asked live at a new "
+                                  "point; tap a location (designed ahead) or use a method designed in milliseconds, "
+                                  "such as inverse")
         if not self.area.contains(xy):
             raise ValidationError(f"the point ({xy[0] * 1e3:g}, {xy[1] * 1e3:g}) mm is off the calibrated area "
                                   f"({self.area.describe()})")

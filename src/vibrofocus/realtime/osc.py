@@ -6,9 +6,11 @@ valid tap is played on the rig before the next datagram is read. The addresses:
 ``/tap <location>``
     A tap at a layout location (int, 1-based).
 ``/tap_xy <x_mm> <y_mm>``
-    A tap at a point of the calibrated area, mm in the layout frame (int or float).
+    A tap at a point of the calibrated area, mm in the layout frame (int or float), with
+    a method designed in milliseconds (not minimax, whose designs take seconds).
 ``/method <name>``
-    Use another registered rendering method from now on.
+    Use another registered rendering method from now on; a method whose designs take
+    seconds only if its location designs were made ahead (``serve-osc --method minimax``).
 ``/stop``
     All outputs to zero, and the server ends.
 
@@ -221,6 +223,13 @@ class OscTapServer:
             (name,) = _arity(address, args, 1)
             if not isinstance(name, str):
                 raise _Refused(f"/method takes one method name (a string), got {_type(name)}")
+            from ..rendering import available_methods, method_class
+
+            # A method whose designs take seconds is switched to only when they were made
+            # ahead: designing nine taps here would hold every message behind it.
+            if name in available_methods() and not method_class(name).live and not self.designer.designed_ahead(name):
+                raise _Refused(f"/method: {name} designs take seconds each, too long to make while serving; start "
+                               f"serve-osc with --method {name} to have them made ahead")
             try:
                 self.designer.set_method(name)
             except VibrofocusError as exc:

@@ -164,6 +164,9 @@ class Method:
     #: Whether the method is left out of the default runs (the demo's table) unless named:
     #: a slow design, or one that needs an optional extra.
     opt_in: ClassVar[bool] = False
+    #: Whether one design takes milliseconds (closed form per frequency), so a live server
+    #: may design a tap at a new point when it is asked (``serve-osc``'s ``/tap_xy``).
+    live: ClassVar[bool] = True
 
     band: tuple[float, float] = BAND_HZ
     sigma: float = SIGMA_S

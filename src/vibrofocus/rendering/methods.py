@@ -338,6 +338,7 @@ class Minimax(Method):
     """
 
     opt_in: ClassVar[bool] = True  # seconds per design
+    live: ClassVar[bool] = False  # ... so a live server makes its designs ahead, at the locations
     control: str | None = None
     min_fidelity: float | None = None
     support_s: tuple[float, float] = (0.01, 0.005)
