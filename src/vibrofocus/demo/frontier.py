@@ -169,12 +169,14 @@ def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], 
     for ax in axes[-1]:
         ax.set_xlabel("fidelity")
     handles, labels = axes.ravel()[0].get_legend_handles_labels()
-    fig.suptitle(f"Peak-contrast frontier on the {arm_label(getattr(result, 'rig', None))}")
-    # The title and the two legend rows take the top 0.85 in; the panels start below.
-    top = 1 - 0.85 / fig.get_figheight()
-    fig.tight_layout(rect=(0, 0, 1, top))
+    # The title and the two legend rows take the top 0.85 in; the panels start below. The
+    # title comes after the layout, which would otherwise leave room for it a second time.
+    height = fig.get_figheight()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.85 / height))
+    fig.suptitle(f"Peak-contrast frontier on the {arm_label(getattr(result, 'rig', None))}", y=1 - 0.08 / height,
+                 va="top")
     fig.legend(handles, labels, ncol=min(len(labels), 5), fontsize=8, loc="upper center", frameon=False,
-               bbox_to_anchor=(0.5, 1 - 0.35 / fig.get_figheight()))
+               bbox_to_anchor=(0.5, 1 - 0.35 / height))
     save_figure(fig, path, dpi=120)
     plt.close(fig)
     return Path(path)
