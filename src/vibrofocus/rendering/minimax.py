@@ -450,11 +450,11 @@ class _Program:
         Q = np.einsum("km,abkl,ln->ambn", basis, C[:, :, lag], basis, optimize=True).reshape(n_act * m, n_act * m)
         w, V = np.linalg.eigh(0.5 * (Q + Q.T))
         keep = w > w[-1] * 1e-12
-        self.Q = (V[:, keep] * w[keep]) @ V[:, keep].T
         self.Lt = np.sqrt(w[keep])[:, None] * V[:, keep].T  # |y_target|^2 = ||Lt u||^2
         # The best fidelity's coefficients (least ||y|| at b.u = 1): the start of every solve.
         qb = V[:, keep] @ ((V[:, keep].T @ self.b) / w[keep])
         self.u_best = qb / (self.b @ qb)
+        self.best_fidelity = 1 / float(np.linalg.norm(self.Lt @ self.u_best))  # what the support can reach
         self.H, self.n, self.fs, self.taper, self.g, self.gscale = H, n, fs, taper, g, gscale
         self.ti, self.quiet, self.n_act, self.m, self.basis, self.delays = ti, quiet_idx, n_act, m, basis, delays
         self.desired, self.d_norm, self.ir_taps, self.decimation = desired, d_norm, ir_taps, r
@@ -468,7 +468,7 @@ class _Program:
         from .inverse import inverse_filter
 
         pinv = inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves, check_wraparound=False)
-        y0 = np.fft.irfft(np.einsum("fpa,af->pf", H[:, quiet_idx], np.fft.rfft(pinv, axis=-1)), n, axis=-1)
+        y0 = predict_response(H[:, quiet_idx], pinv)
         grid = np.arange(first, min(n, last + ir_taps), stride)
         pairs = [(j, int(t)) for j in range(len(quiet_idx)) for t in _local_peaks(y0[j], 0.3 * np.max(np.abs(y0[j])), 10)]
         pairs += [(j, int(t)) for j in range(len(quiet_idx)) for t in grid]
@@ -509,10 +509,10 @@ class _Program:
         the rounds, by constraint generation from the constraints listed so far."""
         asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
         cap = 1.0 / asked
-        if self.u_best @ self.Q @ self.u_best >= cap**2 * (1 - 1e-9):
+        if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
             raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g} is above the "
-                                  f"model's best fidelity {1 / np.sqrt(self.u_best @ self.Q @ self.u_best):.4g} "
-                                  "over this support): relax the fidelity")
+                                  f"model's best fidelity {self.best_fidelity:.4g} over this support): relax the "
+                                  "fidelity")
         dcap = None if max_drive is None else max_drive / self.u_scale
         u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
         for it in range(1, max_iter + 1):
@@ -526,8 +526,7 @@ class _Program:
                 raise ValidationError(f"the minimax solver failed ({status}) at round {it}")
             u = found
             x = self.drives_of(u)
-            yq = np.fft.irfft(np.einsum("fpa,af->pf", self.H[:, self.quiet], np.fft.rfft(x, axis=-1)),
-                              self.n, axis=-1) / self.d_norm
+            yq = predict_response(self.H[:, self.quiet], x) / self.d_norm
             floor = max(value, 0.0) * (1 + tol) + 1e-9 * np.max(np.abs(self.desired)) / self.d_norm
             # Per quiet point, the nominal level over which a sample breaks the (robust) bound.
             floors = floor - (0.0 if self.rq is None else self.rq * np.linalg.norm(u))
@@ -548,7 +547,7 @@ class _Program:
             level = np.abs(self.A[:old] @ u) + (0.0 if r is None else r * np.linalg.norm(u))
             slack = level < _DROP * max(value, 0.0)
             record, best_value = value > best_value * (1 + tol), max(best_value, value)
-            if _DROP > 0 and record and slack.any():
+            if record and slack.any():
                 keep = np.concatenate([~slack, np.ones(new_rows, bool)])
                 self.A, self.listed = self.A[keep], self.listed[keep]
         else:
