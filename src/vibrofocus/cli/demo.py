@@ -114,6 +114,7 @@ def demo_command(
         # Every registered method, a lab's own included, but the opt-in ones (run_demo's default).
         methods = (*default_methods(), *(("minimax",) if with_minimax else ()))
         total = rig.layout.n_locations * len(methods)
+        bounds = frontier or peak_bound  # the frontier includes the peak bound
         calibration_info: dict = {}
         with Progress(
             TextColumn("[progress.description]{task.description}"), BarColumn(), MofNCompleteColumn(),
@@ -147,7 +148,7 @@ def demo_command(
             result = run_demo(rig, transfer=transfer, methods=methods,
                               progress=lambda label: progress.update(task, advance=1, description=label))
             paths = []
-            if frontier or peak_bound:
+            if bounds:
                 from ..demo.frontier import FRONTIER_FIDELITIES, peak_frontiers
 
                 n_locations = len({r["location"] for r in result.rows})
@@ -155,9 +156,7 @@ def demo_command(
                                                total=n_locations)
                 # Without --frontier only the pseudo-inverse's fidelity: the peak bound alone.
                 frontiers = peak_frontiers(result, fidelities=FRONTIER_FIDELITIES if frontier else (),
-                                           progress=lambda label: progress.update(
-                                               front_task, advance=1, description=label.replace(
-                                                   "frontier", "frontier" if frontier else "peak bound")))
+                                           progress=lambda _label: progress.update(front_task, advance=1))
                 for row in result.rows:
                     row["peak_bound_db"] = frontiers[row["location"]].peak_bound_db
             if figures:
@@ -218,15 +217,15 @@ def demo_command(
                   "against the other locations; bound: the most energy contrast any drive that gives the tap "
                   "reaches there" + ("; peak bound: the most peak contrast against every calibrated point any "
                                      "drive reaches at the pseudo-inverse's fidelity (minimax, predicted)."
-                                     if frontier or peak_bound else "."))
+                                     if bounds else "."))
         columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB",
-                   *(("peak bound\ndB",) if frontier or peak_bound else ()), "target\nµm", "drive\nV")
+                   *(("peak bound\ndB",) if bounds else ()), "target\nµm", "drive\nV")
 
         def metric_cells(values: dict) -> list[str]:
             return [_fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
                     _fmt(values["contrast_all_points_db"], 1), _fmt(values["energy_contrast_db"], 1),
                     _fmt(values["bound_db"], 1),
-                    *((_fmt(values.get("peak_bound_db", float("nan")), 1),) if frontier or peak_bound else ()),
+                    *((_fmt(values.get("peak_bound_db", float("nan")), 1),) if bounds else ()),
                     _fmt(values["target_peak_m"] * 1e6, 3), _fmt(values["peak_drive_v"], 1)]
 
         if per_location:

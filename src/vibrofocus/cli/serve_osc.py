@@ -88,7 +88,7 @@ def serve_osc(
                        f"{source}, method {designer.method}, drive limit {designer.limit_v:g} V)")
             typer.echo(f"taps: /tap 1..{designer.layout.n_locations}"
                        + (f" (no /tap_xy with {designer.method}: a design takes seconds)"
-                          if not method_class(designer.method).live else
+                          if not designer.live else
                           f", /tap_xy in {designer.area.describe()}" if model is not None else
                           " (no /tap_xy: the calibration has no fitted skin model)")
                        + "; /method <name>; /stop", )

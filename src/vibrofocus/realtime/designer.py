@@ -28,7 +28,7 @@ import numpy as np
 from .._validation import as_array, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from ..rendering import TransferMatrix, available_methods, make_method
+from ..rendering import TransferMatrix, available_methods, make_method, method_class
 from ..rendering.taper import design_grid
 
 __all__ = ["TapDesigner", "CalibratedArea", "GRID_PITCH_M"]
@@ -146,7 +146,13 @@ class TapDesigner:
         """
         return all((name, loc) in self._drives for loc in self.layout.location_numbers)
 
-    def set_method(self, name: str) -> None:
+    @property
+    def live(self) -> bool:
+        """Whether the method in use designs in milliseconds (:attr:`Method.live`), so a tap
+        at a new point (:meth:`drives_xy`) can be designed when it is asked."""
+        return type(self._full).live
+
+    def set_method(self, name: str, *, serving: bool = False) -> None:
         """Use method ``name`` from now on; its designs at every location are made now (once:
         a method used before is switched back to at no cost).
 
@@ -154,14 +160,22 @@ class TapDesigner:
         ----------
         name : str
             A registered method's name.
+        serving : bool
+            Taps are being served: a method whose designs take seconds (not
+            :attr:`Method.live`) is taken only if its location designs were made ahead, since
+            making nine of them now would hold every tap asked meanwhile.
 
         Raises
         ------
         ValidationError
-            For an unknown name (nothing changes).
+            For an unknown name, or a slow method not made ahead while serving (nothing
+            changes).
         """
         if not isinstance(name, str) or name not in available_methods():
             raise ValidationError(f"unknown method {str(name)[:80]!r}; known: {', '.join(available_methods())}")
+        if serving and not method_class(name).live and not self.designed_ahead(name):
+            raise ValidationError(f"{name} designs take seconds each, too long to make while serving; start "
+                                  f"serve-osc with --method {name} to have them made ahead")
         options: dict[str, Any] = {"limit_v": self.limit_v, "bounds": False}
         if self.tm.band is not None:
             options["band"] = self.tm.band
@@ -209,7 +223,7 @@ class TapDesigner:
             For a point that is not finite or lies off the area, or without a model.
         """
         xy = as_array(xy_m, "xy", ndim=1, shape=(2,))
-        if not type(self._full).live:
+        if not self.live:
             raise ValidationError(f"a {self.method} design takes seconds, too long for a tap asked live at a new "
                                   "point; tap a location (designed ahead) or use a method designed in milliseconds, "
                                   "such as inverse")

@@ -223,15 +223,8 @@ class OscTapServer:
             (name,) = _arity(address, args, 1)
             if not isinstance(name, str):
                 raise _Refused(f"/method takes one method name (a string), got {_type(name)}")
-            from ..rendering import available_methods, method_class
-
-            # A method whose designs take seconds is switched to only when they were made
-            # ahead: designing nine taps here would hold every message behind it.
-            if name in available_methods() and not method_class(name).live and not self.designer.designed_ahead(name):
-                raise _Refused(f"/method: {name} designs take seconds each, too long to make while serving; start "
-                               f"serve-osc with --method {name} to have them made ahead")
             try:
-                self.designer.set_method(name)
+                self.designer.set_method(name, serving=True)
             except VibrofocusError as exc:
                 raise _Refused(f"/method: {exc}") from None
             self._reply(sender, "/method", name)

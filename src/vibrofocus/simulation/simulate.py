@@ -135,7 +135,7 @@ def simulate_studies(
 
         methods = StudyDesign(methods=tuple(methods)).methods
         config = {**(config or {}), "methods": list(methods)}
-    asked_methods = tuple(methods or (config or {}).get("methods") or STUDY_METHODS)
+    asked_methods = tuple((config or {}).get("methods") or STUDY_METHODS)
     db = Path(db)
     cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
     with StudyStore(db) as store:
