@@ -9,6 +9,7 @@ from __future__ import annotations
 __all__ = [
     "VibrofocusError",
     "ValidationError",
+    "InfeasibleDesignError",
     "SafetyError",
     "DriveLimitError",
     "CausalityError",
@@ -25,6 +26,11 @@ class VibrofocusError(Exception):
 
 class ValidationError(VibrofocusError, ValueError):
     """An argument has the wrong shape, type, value range or contains NaN/Inf."""
+
+
+class InfeasibleDesignError(ValidationError):
+    """A constrained design has no solution (a fidelity out of reach, a drive limit too
+    tight): relax a constraint. Callers that relax and retry catch this type."""
 
 
 class SafetyError(VibrofocusError):

@@ -8,7 +8,7 @@ import pytest
 
 cp = pytest.importorskip("cvxpy")
 
-from vibrofocus.errors import ValidationError  # noqa: E402
+from vibrofocus.errors import InfeasibleDesignError, ValidationError  # noqa: E402
 from vibrofocus.rendering import minimax_filter, minimax_frontier  # noqa: E402
 from vibrofocus.rendering.taper import design_grid  # noqa: E402
 
@@ -123,7 +123,7 @@ def test_a_drive_limit_no_drive_can_meet_is_refused():
     _, H = medium(seed=3)
     targets = tap()
     free = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT)
-    with pytest.raises(ValidationError, match="infeasible.*relax the fidelity or the drive limit"):
+    with pytest.raises(InfeasibleDesignError, match="infeasible.*relax the fidelity or the drive limit"):
         minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT,
                        max_drive=1e-3 * float(np.max(np.abs(free))))
 

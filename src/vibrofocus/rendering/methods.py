@@ -13,7 +13,7 @@ import numpy as np
 
 from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import FUNNELING_AMPLITUDE_V
-from ..errors import ValidationError
+from ..errors import InfeasibleDesignError, ValidationError
 from ._acc import DEFAULT_ACC_REG
 from ._checks import as_transfer, check_regularization
 from .combination import combination_target
@@ -420,7 +420,7 @@ class Minimax(Method):
                                         quiet=control[1:], max_drive=limit, taper_octaves=self.taper_octaves,
                                         support_s=self.support_s, h_radius=h_radius)
                 break
-            except ValidationError as exc:
-                if "infeasible" not in str(exc) or i == len(limits) - 1:
+            except InfeasibleDesignError:
+                if i == len(limits) - 1:
                     raise
         return Solution(drives, control_indices=control)

@@ -38,7 +38,7 @@ from scipy.interpolate import interp1d
 
 from .._validation import as_array, check_in_range, check_positive
 from ..defaults import BAND_HZ
-from ..errors import ValidationError
+from ..errors import InfeasibleDesignError, ValidationError
 from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response
@@ -510,7 +510,7 @@ class _Program:
         asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
         cap = 1.0 / asked
         if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
-            raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g} is above the "
+            raise InfeasibleDesignError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g} is above the "
                                   f"model's best fidelity {self.best_fidelity:.4g} over this support): relax the "
                                   "fidelity")
         dcap = None if max_drive is None else max_drive / self.u_scale
@@ -520,7 +520,7 @@ class _Program:
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
             found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r)
             if status == "primal infeasible":
-                raise ValidationError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
+                raise InfeasibleDesignError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
                                       f"max_drive={max_drive}): relax the fidelity or the drive limit")
             if found is None or not np.isfinite(value):
                 raise ValidationError(f"the minimax solver failed ({status}) at round {it}")
@@ -630,9 +630,7 @@ def minimax_frontier(H: Any, targets: Any, fs: float, fidelities: Any, *, band: 
         for i, f in enumerate(fids):
             try:
                 _, rep = program.design(float(f), max_drive=max_drive, full_output=True, **solve)
-            except ValidationError as exc:
-                if "infeasible" not in str(exc):
-                    raise
+            except InfeasibleDesignError:
                 continue
             out[:, i] = rep.fidelity, rep.peak_contrast_db, rep.quiet_peak
     return MinimaxFrontier(min_fidelity=fids, fidelity=out[0], peak_contrast_db=out[1], quiet_peak=out[2],
