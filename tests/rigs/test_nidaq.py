@@ -161,7 +161,6 @@ def test_stop_from_another_thread_brings_the_outputs_to_zero(device):
     rig = make(device)
     d = np.full((4, int(2 * FS)), 0.0)
     d[:, 100:-100] = 3.0  # 0.3 V held at the outputs while it plays
-    rig.limits = type(rig.limits)(peak_v=10.0, rms_v=4.0)
     seen = {}
 
     def stopper():
@@ -224,14 +223,37 @@ def test_an_error_while_zeroing_does_not_hide_the_first_one(rig, device):
 
     def factory():
         task = original()
-        if len(device.tasks) == 3:  # the zero task after the failed recording
+        if len(device.tasks) >= 3:  # every zero task after the failed recording (the retry too)
             task.device.fail["add_ao_voltage_chan"] = DaqError("device gone", -201003)
         return task
 
-    rig.tasks._task_factory = factory
+    rig._daq._task_factory = factory
     with pytest.raises(DeviceError, match="read failed") as err:
         rig.play_and_record(drive())
     assert any("ALSO failed" in note and "device gone" in note for note in err.value.__notes__)
+    rig._daq._task_factory = original  # the device is back: the fixture's close zeroes it
+
+
+def test_a_zero_write_that_fails_once_is_tried_again(rig, device):
+    device.idle_zero = False
+    original = device.factory
+    failed = []
+
+    def factory():
+        task = original()
+        if len(device.tasks) == 2 and not failed:  # the zero task after the play, once
+            failed.append(task)
+            device.fail["add_ao_voltage_chan"] = DaqError("glitch", -200000)
+        elif failed:
+            device.fail.pop("add_ao_voltage_chan", None)
+        return task
+
+    rig._daq._task_factory = factory
+    d = np.zeros((4, 1000))
+    d[:, 100:-1] = 3.0  # ends held at 0.3 V: only an explicit zero brings it down
+    rig.play(d)
+    assert failed, "the first zero write did not fail: the test did not test the retry"
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
 
 
 def test_channel_creation_failure_closes_the_task(device):
@@ -400,19 +422,19 @@ def test_onset_is_the_start_trigger_timestamp_where_the_device_gives_one():
         assert onset.clock == "nidaq_start_trigger"
         assert onset.device_s == trigger.stamp.timestamp()  # read back, to the microsecond it holds
     assert second.device_s > first.device_s and second.host_s > first.host_s
-    assert rig.tasks.start_timestamp_supported is True
+    assert rig._daq.start_timestamp_supported is True
 
 
 def test_a_device_without_start_timestamps_counts_its_sample_clock_and_is_asked_once(device):
     lengths = [1000, 250, 4000]
     with make(device) as rig:
         onsets = [rig.play(drive(n)) for n in lengths]
-        assert rig.tasks.samples_generated == sum(lengths)  # read back from each task, not assumed
+        assert rig._daq.samples_generated == sum(lengths)  # read back from each task, not assumed
     assert [o.clock for o in onsets] == ["nidaq_samples"] * 3
     # Each onset is the samples the earlier plays generated over the rate.
     assert [o.device_s for o in onsets] == [0.0, 1000 / FS, 1250 / FS]
     assert onsets[2].host_s > onsets[1].host_s > onsets[0].host_s
-    assert rig.tasks.start_timestamp_supported is False
+    assert rig._daq.start_timestamp_supported is False
     assert all(t.triggers.start_trigger.stamp is None for t in device.tasks)
 
 

@@ -75,6 +75,8 @@ UNSTEADY_LATENCY_HOSTAPIS = ("mme", "directsound", "wasapi")
 CLIP_FRACTION = 0.999
 #: How often a waiting play looks whether it was stopped (and lets Ctrl-C in), s.
 POLL_S = 0.02
+#: A stream that has not ended this long after its block's length is given up, s.
+STREAM_MARGIN_S = 2.0
 # Words that say how a device is reached, not which interface it is.
 _GENERIC_WORDS = {
     "usb", "audio", "device", "devices", "output", "outputs", "input", "inputs", "speakers", "speaker",
@@ -268,7 +270,6 @@ class AudioRig(HardwareRig):
         # from racing the owner closing it.
         self._stream = None
         self._stream_lock = threading.Lock()
-        self._abort = threading.Event()
 
     # ------------------------------------------------------------------ scaling
     @property
@@ -359,15 +360,16 @@ class AudioRig(HardwareRig):
         in_cols = [c - 1 for c in self._in_channels]
         total = len(block)
         recorded = np.zeros((total, len(in_cols)), np.float32) if record else None
-        state = {"pos": 0, "status": sd.CallbackFlags(), "onset": None}
+        state = {"pos": 0, "status": sd.CallbackFlags(), "onset": None, "error": None}
         done = threading.Event()
+        stopped = self._stop_probe()  # the stop epoch of the play that called us (rigs.base)
 
         def fill(outdata, frames, time_info):
             pos = state["pos"]
             if state["onset"] is None:  # the first callback: the block's first frame goes out now
                 state["onset"] = (time.monotonic(), float(time_info.outputBufferDacTime))
             outdata.fill(0)
-            if self._abort.is_set():
+            if stopped():
                 raise sd.CallbackAbort
             n = min(frames, total - pos)
             outdata[:n, out_cols] = block[pos:pos + n]
@@ -388,34 +390,62 @@ class AudioRig(HardwareRig):
             if state["pos"] >= total:
                 raise sd.CallbackStop
 
-        self._abort.clear()
+        def keep_error(callback):
+            # sounddevice ends the stream on a callback's exception and drops it: keep it,
+            # so the error says why the stream ended short.
+            def wrapped(*args):
+                try:
+                    callback(*args)
+                except (sd.CallbackStop, sd.CallbackAbort):
+                    raise
+                except BaseException as exc:
+                    state["error"] = exc
+                    raise sd.CallbackAbort from exc
+            return wrapped
+
+        duplex, output_only = keep_error(duplex), keep_error(output_only)
+
         try:
+            kwargs = dict(samplerate=self.device_fs, device=self.device_index, dtype="float32",
+                          latency=self.config.latency, finished_callback=done.set)
             if record:
-                stream = sd.Stream(samplerate=self.device_fs, device=self.device_index, channels=(n_in, n_out),
-                                   dtype="float32", callback=duplex, finished_callback=done.set)
+                stream = sd.Stream(channels=(n_in, n_out), callback=duplex, **kwargs)
             else:
-                stream = sd.OutputStream(samplerate=self.device_fs, device=self.device_index, channels=n_out,
-                                         dtype="float32", callback=output_only, finished_callback=done.set)
+                stream = sd.OutputStream(channels=n_out, callback=output_only, **kwargs)
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface could not open a stream for {what}: {exc}") from None
+        hung = False
         try:
             latency = stream.latency
             self._output_latency_s = float(latency[1] if isinstance(latency, tuple) else latency)
+            # A dead server or a vanished device never finishes the stream: give up after
+            # the block's own length plus the latencies and a margin.
+            deadline = time.monotonic() + total / self.device_fs + 2 * self._output_latency_s + STREAM_MARGIN_S
             with self._stream_lock:
+                # Checked and started under the lock stop() aborts through: a stop before
+                # this line is seen here, one after it finds the stream to abort.
+                if stopped():
+                    raise StoppedError("recording" if record else "play")
                 self._stream = stream
-            stream.start()
-            while not done.wait(POLL_S):  # short waits: Ctrl-C gets in between them
-                pass
+                stream.start()
+            while not done.wait(POLL_S):  # short waits: Ctrl-C and a stop get in between them
+                if stopped():
+                    break
+                if time.monotonic() > deadline:
+                    hung = True
+                    raise DeviceError(
+                        f"the audio interface stopped answering while {what} (no end of the stream "
+                        f"{total / self.device_fs + STREAM_MARGIN_S:.1f} s after it started): is the audio "
+                        "server (JACK, the driver) still running? The stream was abandoned")
+            if state["error"] is not None:
+                raise DeviceError(f"the audio callback failed while {what}: {state['error']!r}") from state["error"]
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface failed while {what}: {exc}") from None
         finally:
             with self._stream_lock:
                 self._stream = None
-                try:
-                    stream.abort() if stream.active else None
-                finally:
-                    stream.close()
-        if self._abort.is_set():
+            self._end_stream(stream, wait_s=1.0 if hung else None)
+        if stopped():
             raise StoppedError("recording" if record else "play")
         if state["pos"] < total:
             raise DeviceError(f"the audio interface took {state['pos']} of the {total} frames while {what}; "
@@ -423,6 +453,34 @@ class AudioRig(HardwareRig):
         host, dac = state["onset"]
         onset = DeviceOnset(host, dac, PORTAUDIO_CLOCK) if math.isfinite(dac) else DeviceOnset(host)
         return recorded, state["status"], onset
+
+    @staticmethod
+    def _end_stream(stream, wait_s: float | None) -> None:
+        """Abort (if running) and close a stream; with ``wait_s``, give up on it after that long.
+
+        A stream whose server died can block in ``close`` for good: then it is closed in
+        a daemon thread, so Ctrl-C and the process's exit still work.
+        """
+        def end():
+            try:
+                if stream.active:
+                    stream.abort()
+            except Exception as exc:  # noqa: BLE001 - closing follows anyway
+                log.warning("aborting the audio stream: %s", exc)
+            finally:
+                try:
+                    stream.close()
+                except Exception as exc:  # noqa: BLE001
+                    log.warning("closing the audio stream: %s", exc)
+
+        if wait_s is None:
+            end()
+            return
+        closer = threading.Thread(target=end, name="vibrofocus-audio-close", daemon=True)
+        closer.start()
+        closer.join(wait_s)
+        if closer.is_alive():
+            log.error("the audio stream did not close within %.1f s; abandoned", wait_s)
 
     def _padded(self, block: np.ndarray) -> np.ndarray:
         # Silence after the drive, longer than what the interface buffers: the fade-out
@@ -449,6 +507,8 @@ class AudioRig(HardwareRig):
         max_lag = int(np.ceil(self.config.max_latency_s * self.device_fs))
         padded = np.concatenate([block, np.zeros((max_lag, block.shape[1]), np.float32)])
         for attempt in range(self.config.xrun_retries + 1):
+            if attempt:  # every take plays the drive again: each counts against the budget
+                self._admit(drive, "recording")
             recorded, status, _ = self._run_stream(padded, record=True, what="recording")
             try:
                 self._check_status(status, "recording")
@@ -488,8 +548,8 @@ class AudioRig(HardwareRig):
 
     def _zero_outputs(self) -> None:
         # Emergency stop from any thread: abort the running stream (pending buffers are
-        # dropped); the callback also writes silence from the moment it sees the flag.
-        self._abort.set()
+        # dropped); the callback also writes silence from the moment it sees the stop
+        # (Rig.stop has moved the stop epoch before this runs).
         with self._stream_lock:
             stream = self._stream
             if stream is not None and stream.active:

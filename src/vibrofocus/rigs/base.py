@@ -9,6 +9,13 @@ They also keep one job at a time on the hardware: a play or recording from a thr
 other than the one that holds :meth:`Rig.reserve` is refused with
 :class:`~vibrofocus.rigs.DeviceBusyError`, and so is a play while another is running.
 :meth:`Rig.stop` is the exception: it works from any thread, at any time.
+
+Stops are counted, never flagged: :meth:`Rig.stop` increments a stop epoch, and every
+play reads it when it is called. A stop at any moment after that, while the drive is
+checked, admitted, resampled or handed to the device, ends the play; nothing a backend
+does at its start can forget it (a flag that a backend cleared when it started would).
+Backends ask :meth:`Rig._stop_requested` (or pass :meth:`Rig._stop_probe` to the thread
+that feeds the device).
 """
 
 from __future__ import annotations
@@ -26,7 +33,7 @@ from .._validation import as_array, check_positive
 from ..defaults import FS_HZ
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from .devices import DeviceBusyError, DeviceError
+from .devices import DeviceBusyError, DeviceError, StoppedError
 from .onset import DeviceOnset
 from .safety import EnergyBudget, SafetyLimits, check_drive
 
@@ -65,8 +72,8 @@ class Rig(ABC):
     def __init__(self, layout: ArrayLayout | None = None, fs: float = FS_HZ, limits: SafetyLimits | None = None):
         self.layout = layout if layout is not None else ArrayLayout.reference()
         self.fs = check_positive(fs, "fs")
-        self.limits = limits if limits is not None else SafetyLimits()
         self._budget: EnergyBudget | None = None
+        self.limits = limits if limits is not None else SafetyLimits()
         # Who holds the hardware: a job (reserve) or a single play; never two at once.
         self._use_lock = threading.Lock()
         self._job_owner: str | None = None
@@ -74,6 +81,23 @@ class Rig(ABC):
         self._job_stopped = False
         self._job_thread: int | None = None
         self._playing = False
+        # The stop epoch (module docstring): stop() increments it; a play ends if it
+        # changed since the play was called. The entry epoch of the play running on
+        # each thread is kept per thread for the backend.
+        self._stop_epoch = 0
+        self._epoch_lock = threading.Lock()
+        self._entry = threading.local()
+
+    def __init_subclass__(cls, **kwargs: object) -> None:
+        super().__init_subclass__(**kwargs)
+        # The public methods hold the safety layer and the stop: a backend implements the
+        # private ones (_play, _play_and_record, ...), never these.
+        final = ("play", "play_and_record", "play_and_capture", "stop", "check", "reserve", "budget")
+        overridden = [name for name in final if name in cls.__dict__]
+        if overridden and cls.__module__ != __name__:
+            raise TypeError(f"{cls.__name__} overrides {', '.join(overridden)} of Rig; these are final (they run "
+                            "the safety layer and the emergency stop): implement _play, _play_and_record, "
+                            "_play_and_capture and _zero_outputs instead")
 
     # ------------------------------------------------------------------ public, final
     def check(self, drive: np.ndarray) -> np.ndarray:
@@ -87,11 +111,57 @@ class Rig(ABC):
         return safe
 
     @property
+    def limits(self) -> SafetyLimits:
+        """The limits at the actuator (:class:`SafetyLimits`)."""
+        return self._limits
+
+    @limits.setter
+    def limits(self, value: SafetyLimits) -> None:
+        if not isinstance(value, SafetyLimits):
+            raise ValidationError(f"limits must be SafetyLimits, got {type(value).__name__}")
+        if getattr(self, "_limits_frozen", False):
+            raise ValidationError(
+                f"the limits of a {self.kind} rig come from its configuration and cannot be changed on the "
+                "open rig (the energy budget's history would be lost); edit the configuration and open it again")
+        self._limits = value
+        self._budget = None
+
+    @property
     def budget(self) -> EnergyBudget:
-        """The RMS budget across this rig's consecutive plays (rebuilt if ``limits`` change)."""
-        if self._budget is None or self._budget.limits is not self.limits:
+        """The RMS budget across this rig's consecutive plays."""
+        if self._budget is None:
             self._budget = EnergyBudget(self.limits, self.layout.n_actuators, self.fs)
         return self._budget
+
+    # ------------------------------------------------------------------ the stop epoch
+    def _begin_play(self) -> int:
+        """Read the stop epoch at the entry of a play and keep it for this thread's backend."""
+        epoch = self._stop_epoch
+        self._entry.epoch = epoch
+        return epoch
+
+    def _stop_requested(self) -> bool:
+        """Whether :meth:`stop` was called since the play running on this thread was called."""
+        epoch = getattr(self._entry, "epoch", None)
+        return epoch is not None and self._stop_epoch != epoch
+
+    def _stop_probe(self):
+        """A callable for another thread (a device callback): True once this play is stopped."""
+        epoch = getattr(self._entry, "epoch", self._stop_epoch)
+        return lambda: self._stop_epoch != epoch
+
+    def _raise_if_stopped(self, what: str) -> None:
+        if self._stop_requested():
+            raise StoppedError(what)
+
+    def _admit(self, drive: np.ndarray, what: str) -> None:
+        """Admit a checked drive to the energy budget now; a stop before or during admission ends it.
+
+        Backends call it again before each retry of the same drive (every take counts).
+        """
+        self._raise_if_stopped(what)
+        self.budget.admit(drive, self._clock())
+        self._raise_if_stopped(what)
 
     @contextmanager
     def reserve(self, owner: str) -> Iterator["Rig"]:
@@ -181,9 +251,10 @@ class Rig(ABC):
         SafetyError
             Before anything is played, if the drive breaks a limit.
         """
+        self._begin_play()
         safe = self.check(drive)
         with self._exclusive("a play"):
-            self.budget.admit(safe, self._clock())
+            self._admit(safe, "play")
             handed = time.monotonic()
             onset = self._run_guarded(self._play, safe)
         # A backend without a device clock returns nothing: its onset is when it got the drive.
@@ -209,6 +280,7 @@ class Rig(ABC):
         ndarray, shape (n_points, n_samples + round(tail_s * fs))
             Displacement, m.
         """
+        self._begin_play()
         safe = self.check(drive)
         n_tail = int(round(check_positive(tail_s, "tail_s", allow_zero=True) * self.fs))
         if points_xy is not None:
@@ -220,7 +292,7 @@ class Rig(ABC):
                     f"{limit} point(s) per recording; record them one at a time"
                 )
         with self._exclusive("a recording"):
-            self.budget.admit(safe, self._clock())
+            self._admit(safe, "recording")
             out = self._run_guarded(self._play_and_record, safe, points_xy, n_tail)
         return np.asarray(out, dtype=float)
 
@@ -251,9 +323,10 @@ class Rig(ABC):
         """
         if isinstance(input_channel, bool) or not isinstance(input_channel, (int, np.integer)) or input_channel < 1:
             raise ValidationError(f"input_channel must be a channel number >= 1, got {input_channel!r}")
+        self._begin_play()
         safe = self.check(drive)
         with self._exclusive("a loopback recording"):
-            self.budget.admit(safe, self._clock())
+            self._admit(safe, "recording")
             recording, fs = self._run_guarded(self._play_and_capture, safe, int(input_channel))
         return np.asarray(recording, dtype=float), float(fs)
 
@@ -263,11 +336,14 @@ class Rig(ABC):
         A play or recording running in another thread ends with a
         :class:`~vibrofocus.rigs.StoppedError`. The outputs reach 0 V within 100 ms plus the interface's
         own buffered output latency (:attr:`output_latency_s`). A job that holds the rig
-        (:meth:`reserve`) ends: its further plays are refused.
+        (:meth:`reserve`) ends: its further plays are refused. A play that was called
+        before the stop and has not reached the device yet never plays.
         """
+        with self._epoch_lock:
+            self._stop_epoch += 1
         if self._job_owner is not None:
             self._job_stopped = True
-        self._zero_outputs()
+        self._zero_now()
 
     @property
     def output_latency_s(self) -> float:
@@ -295,14 +371,32 @@ class Rig(ABC):
             result = func(*args)
         except BaseException as exc:
             try:
-                self._zero_outputs()
+                self._zero_now()
             except Exception as zero_exc:  # noqa: BLE001 - the first error must not be hidden
                 log.critical("setting the outputs to zero failed: %s", zero_exc)
                 exc.add_note(f"Setting the outputs to zero afterwards ALSO failed ({zero_exc}): "
                              "switch the amplifier off.")
             raise
-        self._zero_outputs()
+        self._zero_now()
         return result
+
+    def _zero_now(self) -> None:
+        """Write zero to every output; interrupts wait until it is written, and a failure is tried once more.
+
+        A second Ctrl-C while the zero is being written would otherwise leave the last
+        voltage held on a device whose outputs keep their value (NI analog outputs).
+        """
+        from .._interrupts import critical_section
+
+        with critical_section():
+            try:
+                self._zero_outputs()
+            except BaseException as first:  # noqa: BLE001 - one more try, then the first error
+                log.error("setting the outputs to zero failed (%s); trying once more", first)
+                try:
+                    self._zero_outputs()
+                except BaseException:  # noqa: BLE001
+                    raise first from None
 
     @abstractmethod
     def _play(self, drive: np.ndarray) -> DeviceOnset | None:

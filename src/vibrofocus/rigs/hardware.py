@@ -45,6 +45,9 @@ class HardwareRig(Rig):
                 f"{layout.n_actuators} actuators"
             )
         super().__init__(layout, fs=config.fs, limits=config.limits.build())
+        # The limits come from the file; replacing them on the open rig would also drop
+        # the energy budget's history (Rig.limits).
+        self._limits_frozen = True
         self.config = config
         self.vibrometer = config.vibrometer.build()
         self.device_lock: DeviceLock | None = None

@@ -56,6 +56,7 @@ import numpy as np
 
 from ..layout import ArrayLayout
 from .config import NidaqRigConfig
+from ..errors import SafetyError
 from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
 from .onset import NIDAQ_CLOCK, NIDAQ_SAMPLES_CLOCK, DeviceOnset
@@ -118,7 +119,9 @@ class NidaqTasks:
         # abort it and free its channels; the lock keeps that from racing its closing.
         self._active_ao = None
         self._active_lock = threading.Lock()
-        self._stop_requested = threading.Event()
+        # Whether the operation running now was stopped: set per operation from the rig's
+        # stop epoch (rigs.base), never a flag that an operation clears when it starts.
+        self._stopped: Callable[[], bool] = lambda: False
         #: Whether the outputs go to 0 V by themselves when a task stops (device-dependent).
         self.idle_zero_supported: bool | None = None
         #: Whether the device timestamps the output task's start trigger (device-dependent).
@@ -263,7 +266,7 @@ class NidaqTasks:
             yield tasks
         except _daq_error_types() as exc:
             self._close_after_error(tasks)
-            if stops is not None and self._stop_requested.is_set():
+            if stops is not None and self._stopped():
                 raise StoppedError(stops) from exc
             raise self._wrap(exc, what) from exc
         except BaseException:
@@ -316,6 +319,20 @@ class NidaqTasks:
             stamp = stamp.replace(tzinfo=timezone.utc)
         return float(stamp.timestamp())
 
+    def _register(self, ao, stops: str, *, start: bool = False) -> None:
+        """Make ``ao`` the task a stop aborts (and start it), unless this operation was stopped.
+
+        Under the lock that :meth:`write_zeros` aborts through: a stop before this is
+        seen here; one after it finds the task registered (so it is aborted and unreserved,
+        and its zero write is not refused with -50103).
+        """
+        with self._active_lock:
+            if self._stopped():
+                raise StoppedError(stops)
+            self._active_ao = ao
+            if start:
+                ao.start()
+
     def _run_output(self, ao, n: int, stops: str) -> DeviceOnset:
         """Start the written output task and wait for it, polling, so a stop or Ctrl-C ends it at once.
 
@@ -324,12 +341,11 @@ class NidaqTasks:
         timestamp where the device gives one, else the sample clock's count before it.
         """
         stamped = self._stamp_start(ao)
-        self._set_active(ao)
         host = time.monotonic()
-        ao.start()
+        self._register(ao, stops, start=True)
         deadline = time.monotonic() + self._timeout(n)
         while True:
-            if self._stop_requested.is_set():
+            if self._stopped():
                 raise StoppedError(stops)
             if ao.is_task_done():
                 break
@@ -342,21 +358,43 @@ class NidaqTasks:
         self.samples_generated += int(ao.out_stream.total_samp_per_chan_generated)
         return DeviceOnset(host, before / self.config.fs, NIDAQ_SAMPLES_CLOCK)
 
+    def _checked_volts(self, volts: np.ndarray) -> np.ndarray:
+        """The last check before the driver: finite, the right channels, within the amplifier cap.
+
+        The rig's safety layer has run before this; the adapter still refuses anything
+        that would put more than ``amplifier_input_max_v`` into the amplifier, so no caller
+        of the adapter can hold a voltage on a coil past the cap.
+        """
+        arr = np.asarray(volts, dtype=float)
+        cap = self.config.amplifier_input_max_v
+        if arr.ndim != 2 or arr.shape[0] != self.config.n_actuators or arr.shape[1] < 2:
+            raise SafetyError(f"NI output refused: shape must be ({self.config.n_actuators}, n >= 2), got {arr.shape}")
+        if not np.all(np.isfinite(arr)) or np.abs(arr).max() > cap * (1 + 1e-9):
+            raise SafetyError(f"NI output refused: samples must be finite and within +-{cap:g} V "
+                              "(amplifier_input_max_v)")
+        return arr
+
     # ------------------------------------------------------------------ operations
-    def play(self, volts: np.ndarray) -> DeviceOnset:
-        """Play output volts, shape (n_actuators, n), V at the analog outputs; return the onset."""
+    def play(self, volts: np.ndarray, *, stopped: Callable[[], bool]) -> DeviceOnset:
+        """Play output volts, shape (n_actuators, n), V at the analog outputs; return the onset.
+
+        ``stopped`` tells whether the play was stopped since it was called (the rig's
+        stop epoch, :meth:`Rig._stop_probe`).
+        """
+        volts = self._checked_volts(volts)
         n = volts.shape[1]
-        self._stop_requested.clear()
+        self._stopped = stopped
         with self._tasks("playing", stops="play") as tasks:
             ao = self._ao_task()
             tasks.append(ao)
+            self._register(ao, "play")  # before the write: a stop now aborts and unreserves it
             self._finite(ao, n)
             ao.write(volts, auto_start=False)
             onset = self._run_output(ao, n, "play")
         return onset
 
-    def play_and_record(self, volts: np.ndarray, n_record: int, *, channel: str | None = None,
-                        name: str = "vibrometer") -> np.ndarray:
+    def play_and_record(self, volts: np.ndarray, n_record: int, *, stopped: Callable[[], bool],
+                        channel: str | None = None, name: str = "vibrometer") -> np.ndarray:
         """Play output volts and record one analog input, sample-synchronously.
 
         Parameters
@@ -369,6 +407,8 @@ class NidaqTasks:
             The input (``ai3`` or ``Dev1/ai3``); default the vibrometer's.
         name : str
             The name the task gives the input channel.
+        stopped : callable
+            Whether the recording was stopped since it was called (as for :meth:`play`).
 
         Returns
         -------
@@ -376,8 +416,9 @@ class NidaqTasks:
             The input, V.
         """
         cfg = self.config
+        volts = self._checked_volts(volts)
         n = volts.shape[1]
-        self._stop_requested.clear()
+        self._stopped = stopped
         with self._tasks("recording", stops="recording") as tasks:
             ai = self._ai_task([cfg.channels.vibrometer if channel is None else channel], [name], cfg.ai_range_v)
             tasks.append(ai)
@@ -386,6 +427,7 @@ class NidaqTasks:
             ai.start()  # armed: it waits for the output task's start trigger
             ao = self._ao_task()
             tasks.insert(0, ao)  # the output is aborted first
+            self._register(ao, "recording")
             self._finite(ao, n)
             ao.write(volts, auto_start=False)
             self._run_output(ao, n, "recording")
@@ -409,7 +451,6 @@ class NidaqTasks:
         """Emergency stop, from any thread: abort and unreserve the running output task, then write 0 V."""
         from nidaqmx.constants import TaskMode
 
-        self._stop_requested.set()
         with self._active_lock:
             active = self._active_ao
             if active is not None:
@@ -449,10 +490,11 @@ class NidaqRig(HardwareRig):
                  task_factory: Callable[[], object] | None = None, system: object | None = None):
         super().__init__(config, layout)
         self.strap_sensors = config.force_sensors.build() if config.force_sensors else None
-        self.tasks = NidaqTasks(config, task_factory, system)
-        self._lock_device(f"nidaq:{self.tasks.device}")
+        # Private: every drive reaches the adapter through Rig.play and its safety layer.
+        self._daq = NidaqTasks(config, task_factory, system)
+        self._lock_device(f"nidaq:{self._daq.device}")
         try:  # the same checks as `vibrofocus devices --check`, before the first play
-            self.setup_report = self.tasks.check_setup()
+            self.setup_report = self._daq.check_setup()
         except BaseException:
             self.device_lock.release()
             raise
@@ -460,13 +502,13 @@ class NidaqRig(HardwareRig):
         self.last_dropout_mask: np.ndarray | None = None
 
     def _play(self, drive: np.ndarray) -> DeviceOnset:
-        return self.tasks.play(drive / self.config.amplifier_gain)
+        return self._daq.play(drive / self.config.amplifier_gain, stopped=self._stop_probe())
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         n_total = drive.shape[1] + n_tail
         lag = self.config.latency_samples
         out = np.pad(drive / self.config.amplifier_gain, ((0, 0), (0, n_tail)))
-        volts = self.tasks.play_and_record(out, n_total + lag)[lag:]
+        volts = self._daq.play_and_record(out, n_total + lag, stopped=self._stop_probe())[lag:]
         # A converter at the end of its range clipped the vibrometer signal: H would be wrong.
         self.last_clipped = np.array([bool(np.any(np.abs(volts) >= 0.999 * self.config.ai_range_v))])
         self.last_dropout_mask = np.zeros((1, volts.size), dtype=bool)
@@ -477,11 +519,12 @@ class NidaqRig(HardwareRig):
         # the click appears in it is the round trip from the converters, not a buffer's.
         n_record = drive.shape[1] + int(round(CAPTURE_TAIL_S * self.fs))
         out = np.pad(drive / self.config.amplifier_gain, ((0, 0), (0, n_record - drive.shape[1])))
-        volts = self.tasks.play_and_record(out, n_record, channel=f"ai{input_channel - 1}", name="loopback")
+        volts = self._daq.play_and_record(out, n_record, channel=f"ai{input_channel - 1}", name="loopback",
+                                          stopped=self._stop_probe())
         return volts, self.fs
 
     def _zero_outputs(self) -> None:
-        self.tasks.write_zeros()
+        self._daq.write_zeros()
 
     def read_strap_forces(self) -> np.ndarray:
         """Mean force on each strap over ``force_sensors.averaging_s``, N, shape (n_straps,)."""
@@ -490,7 +533,7 @@ class NidaqRig(HardwareRig):
             raise DeviceError("this nidaq rig has no force_sensors configured")
         n = max(1, int(round(fcfg.averaging_s * self.fs)))
         with self._exclusive("a strap reading"):
-            volts = self.tasks.read_inputs(list(fcfg.channels), n)
+            volts = self._daq.read_inputs(list(fcfg.channels), n)
         return self.strap_sensors.curve(volts.mean(axis=1))
 
     def describe(self) -> dict:
