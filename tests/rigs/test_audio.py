@@ -448,3 +448,115 @@ def test_devices_check_opens_the_rig_and_plays_nothing(jack_server, tmp_path):
     r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(bad)],
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("error:") == 1 and "output channels up to 7" in r.stderr
+
+
+def _stop_from_another_thread(rig) -> None:
+    import threading
+
+    stopper = threading.Thread(target=rig.stop)
+    stopper.start()
+    stopper.join()
+
+
+@pytest.mark.parametrize("window", ["admission", "conversion"])
+def test_a_stop_while_the_play_is_prepared_plays_nothing(rig, window):
+    """A stop before the stream starts (the budget, the resampling) is never forgotten."""
+    from vibrofocus.rigs import StoppedError
+
+    if window == "admission":
+        real = rig.budget.admit
+        rig.budget.admit = lambda drive, start_s: (_stop_from_another_thread(rig), real(drive, start_s))
+    else:
+        real = rig._to_device
+        rig._to_device = lambda drive, n_tail: (_stop_from_another_thread(rig), real(drive, n_tail))[1]
+    with _LoopbackRecorder() as recorder:
+        with pytest.raises(StoppedError):
+            rig.play(_long_sine(seconds=5.0))
+        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    x = recorder.signal()[1]
+    assert np.abs(x).max() < 1e-4, "the drive reached the outputs after the stop"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay_ms", [0, 5, 15, 50])
+def test_a_stop_early_in_a_play_reaches_zero_within_one_period_plus_latency(rig, delay_ms):
+    """The done-when of the second hardware pass: stops 0-50 ms into a 5 s play, measured by a second client."""
+    import threading
+
+    from vibrofocus.rigs import StoppedError
+
+    stopped = {}
+
+    def stop_later():
+        time.sleep(delay_ms / 1e3)
+        stopped["t"] = recorder.now()
+        rig.stop()
+
+    with _LoopbackRecorder() as recorder:
+        thread = threading.Thread(target=stop_later)
+        thread.start()
+        t0 = time.monotonic()
+        with pytest.raises(StoppedError):
+            rig.play(_long_sine(seconds=5.0))
+        elapsed = time.monotonic() - t0
+        thread.join()
+        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    times, x = recorder.signal()
+    loud = np.flatnonzero(np.abs(x).max(axis=1) > 1e-4)
+    # One period plus the stream's output latency, plus the loopback's own period.
+    allowed = JACK_PERIOD / JACK_RATE + rig.output_latency_s + JACK_PERIOD / JACK_RATE
+    last = times[loud[-1]] - stopped["t"] if loud.size else 0.0
+    print(f"stop {delay_ms} ms in: last output {1e3 * last:.0f} ms after the stop (allowed {1e3 * allowed:.0f} ms), "
+          f"play returned after {elapsed:.2f} s")
+    assert elapsed < 1.0
+    assert last < allowed
+
+
+def test_every_take_of_a_recording_counts_against_the_energy_budget(rig):
+    """Retries after an xrun play the drive again: each is admitted (no 1 s window over the limit)."""
+    admitted = []
+    real = rig.budget.admit
+
+    def admit(drive, start_s):
+        admitted.append(float(np.sqrt(np.mean(drive**2))))
+        return real(drive, start_s)
+
+    rig.budget.admit = admit
+    patch, calls = _with_status(rig, lambda n: 2 if n < 3 else 0)  # two xruns, then a good take
+    with patch:
+        rig.play_and_record(pulse_drive(), tail_s=0.0)
+    assert len(calls) == 3
+    assert len(admitted) == 3
+
+
+def test_devices_check_tone_plays_one_percent_of_full_scale(jack_server, tmp_path):
+    """The volts_full_scale measurement: a 100 Hz sine at 1 % of digital full scale, measured by a second client."""
+    import json
+    import subprocess
+    import sys
+
+    cfg = tmp_path / "lab.json"
+    cfg.write_text(json.dumps(jack_config()))
+    with _LoopbackRecorder(channels=(1, 2)) as recorder:
+        r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(cfg), "--tone",
+                            "--tone-s", "1", "--json"], capture_output=True, text=True, timeout=60)
+        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    assert r.returncode == 0, r.stderr
+    tone = json.loads(r.stdout)["tone"]
+    assert tone["output_channel"] == 1 and tone["frequency_hz"] == 100.0
+    np.testing.assert_allclose(tone["expected_rms_v"], 0.01 * VFS_OUT / np.sqrt(2), rtol=1e-9)
+    x = recorder.signal()[1].astype(float)
+    np.testing.assert_allclose(np.abs(x[:, 0]).max(), 0.01, rtol=0.02)  # digital peak on output 1
+    assert np.abs(x[:, 1]).max() < 1e-6  # nothing on the other actuators
+    loud = x[np.abs(x[:, 0]) > 0.005, 0]
+    assert 0.9 < len(loud) / JACK_RATE / 0.5 < 1.6  # about half the samples of 1 s of sine are above half its peak
+
+
+def test_volts_full_scale_is_required_and_the_error_says_how_to_measure_it():
+    from vibrofocus.errors import ValidationError
+    from vibrofocus.rigs import parse_rig_config
+
+    cfg = jack_config()
+    del cfg["volts_full_scale"]
+    with pytest.raises(ValidationError, match=r"volts_full_scale: required.*devices --check --tone"):
+        parse_rig_config(cfg)

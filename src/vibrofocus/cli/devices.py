@@ -19,14 +19,27 @@ def devices(
         None, "--check", metavar="RIG_CONFIG",
         help="Open the rig of this config file and run its checks at setup (device, channels, rates, output "
              "range, timing, limits) without playing anything; exit 2 at the first problem."),
+    tone: bool = typer.Option(
+        False, "--tone",
+        help="With --check on an audio rig: after the checks, play a 100 Hz sine at 1 % of digital full scale "
+             "on the first actuator output, to measure volts_full_scale with a voltmeter (amplifier off; "
+             "docs/hardware.md, first-day checklist)."),
+    tone_s: float = typer.Option(10.0, "--tone-s", min=0.5, max=30.0, help="How long the --tone plays, s."),
 ) -> None:
     """List audio interfaces (PortAudio) and NI-DAQmx devices, with their channels.
 
     With --check FILE, open that rig as a calibration or study would, run the same checks
     it runs before its first play, print what they found, and close it: nothing is played.
+    With --tone as well (audio rigs), it then plays a known low digital level for a
+    voltmeter: the measurement that sets volts_full_scale.
     """
+    if tone and check is None:
+        with user_errors():
+            from ..errors import ValidationError
+
+            raise ValidationError("--tone plays on the rig of --check RIG_CONFIG; give the config file")
     if check is not None:
-        return _check_rig(check, as_json)
+        return _check_rig(check, as_json, tone_s if tone else None)
     with user_errors():
         from rich.console import Console
         from rich.table import Table
@@ -99,19 +112,63 @@ def straps(
             raise typer.Exit(code=1)
 
 
-def _check_rig(path: Path, as_json: bool) -> None:
+#: Digital level and frequency of ``devices --check --tone``: low enough to be harmless
+#: at any interface's full scale (1 % of 12 V is 0.12 V into the amplifier), high enough
+#: for a handheld meter's AC range.
+TONE_FRACTION = 0.01
+TONE_HZ = 100.0
+
+
+def _check_rig(path: Path, as_json: bool, tone_s: float | None = None) -> None:
     with user_errors():
         from rich.console import Console
 
+        from ..errors import ValidationError
         from ..rigs import load_rig_config, make_rig
 
         cfg = load_rig_config(path)
+        if tone_s is not None and cfg.kind != "audio":
+            raise ValidationError(f"--tone is for audio rigs, whose output level depends on volts_full_scale; "
+                                  f"a {cfg.kind} rig's outputs are set in volts already")
+        tone = None
         with make_rig(cfg.kind, config=cfg) as rig:
             lines = [*rig.setup_report, *rig.limits_report()]
+            if tone_s is not None:
+                tone = _play_tone(rig, cfg, tone_s)
         if as_json:
-            typer.echo(json.dumps({"rig": cfg.kind, "config": str(path), "ok": True, "found": lines}, indent=2))
+            out = {"rig": cfg.kind, "config": str(path), "ok": True, "found": lines}
+            if tone is not None:
+                out["tone"] = tone
+            typer.echo(json.dumps(out, indent=2))
             return
         console = Console()
-        console.print(f"{cfg.kind} rig from {path}: every check passed; nothing was played", highlight=False)
+        played = "nothing was played" if tone is None else "then the tone below played"
+        console.print(f"{cfg.kind} rig from {path}: every check passed; {played}", highlight=False)
         for line in lines:
             console.print(f"  {line}", highlight=False)
+        if tone is not None:
+            console.print(
+                f"Played {tone['frequency_hz']:g} Hz for {tone['duration_s']:g} s at {100 * TONE_FRACTION:g} % of "
+                f"digital full scale on output {tone['output_channel']}. Set volts_full_scale = (the meter's AC "
+                f"RMS reading, V) x {tone['volts_full_scale_per_rms_v']:.1f}. With the configured "
+                f"{cfg.volts_full_scale:g} V, the meter should read {tone['expected_rms_v']:.4g} V RMS; if it reads "
+                "more, every voltage into the amplifier is higher than the software computes.", highlight=False)
+
+
+def _play_tone(rig, cfg, seconds: float) -> dict:
+    """Play the volts_full_scale measuring tone on the first actuator output; describe it."""
+    import numpy as np
+
+    n = int(round(seconds * rig.fs))
+    digital_peak = TONE_FRACTION
+    # Actuator volts that the rig turns into this digital level: V / (gain * volts_full_scale).
+    actuator_peak_v = digital_peak * cfg.amplifier_gain * cfg.volts_full_scale
+    drive = np.zeros((rig.layout.n_actuators, n))
+    drive[0] = actuator_peak_v * np.sin(2 * np.pi * TONE_HZ * np.arange(n) / rig.fs)
+    rig.play(drive)
+    return {
+        "frequency_hz": TONE_HZ, "duration_s": n / rig.fs, "digital_peak": digital_peak,
+        "output_channel": cfg.channels.actuators[0],
+        "expected_rms_v": digital_peak * cfg.volts_full_scale / np.sqrt(2),
+        "volts_full_scale_per_rms_v": np.sqrt(2) / digital_peak,
+    }

@@ -12,7 +12,7 @@ Example (``examples/rigs/audio.toml``)::
     kind = "audio"
     fs = 10000.0
     amplifier_gain = 10.0          # V/V (20 dB)
-    volts_full_scale = 1.0         # V at the interface output for a digital 1.0
+    volts_full_scale = 1.0         # V peak at the interface output for a digital 1.0 (measured)
     [device]
     name = "loopback"
     hostapi = "JACK"
@@ -288,8 +288,12 @@ class AudioRigConfig(RigConfig):
     device : AudioDeviceConfig
     channels : AudioChannelsConfig
     volts_full_scale : float
-        Output voltage for a digital sample of 1.0, V (the interface's maximum output
-        level, e.g. 1.0 for a line output trimmed to 1 V peak).
+        Output voltage for a digital sample of 1.0, V peak. Required, and measured, not
+        read off a data sheet: professional interfaces put out several volts at digital
+        full scale (their output trims and level switches change it), and every limit
+        into the amplifier is only as right as this number. Measure it with
+        ``vibrofocus devices --check --tone`` and a voltmeter (docs/hardware.md,
+        first-day checklist).
     input_volts_full_scale : float
         Input voltage that reads as a digital 1.0, V.
     latency_samples : int, optional
@@ -300,17 +304,23 @@ class AudioRigConfig(RigConfig):
     xrun_retries : int
         A recording during which the stream lost samples (an input overflow or output
         underflow) is discarded and taken again up to this many times before the rig
-        raises. A participant stimulus (``play``) is never repeated.
+        raises. A participant stimulus (``play``) is never repeated. Every take counts
+        against the energy budget.
+    latency : {"low", "high"} or float
+        Output latency PortAudio opens streams with (its suggested latency, or seconds):
+        what a stop cannot recall. Default "low"; the setup report prints the latency
+        each stream really got.
     """
 
     kind: Literal["audio"]
     device: AudioDeviceConfig = AudioDeviceConfig()
     channels: AudioChannelsConfig
-    volts_full_scale: PositiveFloat = 1.0
+    volts_full_scale: PositiveFloat
     input_volts_full_scale: PositiveFloat = 1.0
     latency_samples: int | None = Field(None, ge=0)
     max_latency_s: PositiveFloat = 0.25
     xrun_retries: int = Field(2, ge=0, le=10)
+    latency: Literal["low", "high"] | Annotated[float, Field(gt=0, le=1.0)] = "low"
 
     @model_validator(mode="before")
     @classmethod
@@ -436,6 +446,10 @@ def _format_errors(exc: pydantic.ValidationError) -> str:
         msg = err["msg"].removeprefix("Value error, ")
         if err["type"] == "extra_forbidden":
             msg = "unknown setting (check the spelling)"
+        elif err["type"] == "missing" and loc == ["volts_full_scale"]:
+            msg = ("required: the interface's output in V peak at digital full scale. Measure it: "
+                   "`vibrofocus devices --check --tone --rig audio --rig-config FILE` plays a known low level; "
+                   "read it with a voltmeter (docs/hardware.md, first-day checklist)")
         elif err["type"] == "union_tag_invalid":
             where, msg = "kind", f"must be 'audio' or 'nidaq', got {err['ctx']['tag']!r}"
         parts.append(f"{where}: {msg}" if loc or err["type"] == "union_tag_invalid" else msg)
