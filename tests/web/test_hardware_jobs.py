@@ -6,6 +6,7 @@ here); the app, its routes and its calibration thread are the real ones, in proc
 
 from __future__ import annotations
 
+import threading
 import time
 
 import numpy as np
@@ -101,3 +102,37 @@ def test_progress_is_reported_while_a_calibration_runs(app_and_device):
     assert job["message"] != "starting", job
     assert client.post(f"/api/calibrations/jobs/{job_id}/cancel").status_code == 200
     assert _wait(client, job_id, "cancelled")["progress"] < 1.0
+
+
+def test_a_server_shut_down_mid_calibration_stops_the_rig_and_closes_it(tmp_path):
+    """SIGTERM/Ctrl-C of `vibrofocus serve` runs the app's shutdown: zero written last, job ended, rig closed."""
+    device = FakeDevice(idle_zero=False)  # outputs hold their last value: only a zero write brings them down
+    made = []
+
+    def factory(kind, seed=None, config=None):
+        rig = NidaqRig(parse_rig_config(nidaq_config(force_sensors=None)), task_factory=device.factory,
+                       system=device.system())
+        made.append(rig)
+        return rig
+
+    config = tmp_path / "lab.json"
+    config.write_text("{}")
+    app = create_app(tmp_path / "s.sqlite", token=TOKEN, rig="nidaq", rig_factory=factory, rig_config=config,
+                     allowed_hosts=("testserver",), resume=False)
+    with TestClient(app, headers={"X-Vibrofocus-Token": TOKEN, "Origin": "http://testserver"}) as client:
+        assert client.post("/api/participants", json={"participant_id": "P03"}).status_code == 201
+        job_id = client.post("/api/calibrations", json={"participant_id": "P03", "rig": "nidaq"}).json()["job_id"]
+        _wait(client, job_id, "waiting")
+        assert client.post(f"/api/calibrations/jobs/{job_id}/continue").status_code == 200
+        deadline = time.monotonic() + 10
+        while not (device.last_output is not None and device.last_output.state == "running"):
+            assert time.monotonic() < deadline, "the sweep never started"
+            time.sleep(0.005)
+        threads = [t for t in threading.enumerate() if t.name == f"calibration-{job_id}"]
+    # The lifespan's shutdown has run (as at SIGTERM): the sweep stopped, the rig closed.
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+    last_ao = [t for t in device.tasks if t.ao_channels.channels][-1]
+    assert last_ao.written and not np.any(last_ao.written[-1])  # the last write was zeros
+    assert not any(t.is_alive() for t in threads)
+    assert made[0].device_lock is None or not made[0].device_lock.held
+    assert all(t.state == "closed" for t in device.tasks)

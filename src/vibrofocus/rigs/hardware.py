@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
+import logging
+import weakref
+
 import numpy as np
 
 from ..errors import SafetyError, ValidationError
@@ -11,6 +15,23 @@ from .config import RigConfig
 from .device_lock import DeviceLock
 
 __all__ = ["HardwareRig"]
+
+log = logging.getLogger(__name__)
+
+# Every hardware rig not yet closed: at the interpreter's exit each gets a last zero
+# write, whatever thread was still playing (a daemon thread dies mid-play at exit, and an
+# NI output holds its last value after the process is gone).
+_OPEN_RIGS: "weakref.WeakSet[HardwareRig]" = weakref.WeakSet()
+
+
+@atexit.register
+def _zero_open_rigs() -> None:
+    for rig in list(_OPEN_RIGS):
+        try:
+            rig.close()
+        except Exception as exc:  # noqa: BLE001 - the others must still be zeroed
+            log.critical("the last zero write of a %s rig at exit failed (%s): switch the amplifier off",
+                         rig.kind, exc)
 
 
 class HardwareRig(Rig):
@@ -67,12 +88,14 @@ class HardwareRig(Rig):
     def _lock_device(self, device_id: str) -> None:
         """Take the device for this rig until :meth:`close` (subclasses call it once they know the device)."""
         self.device_lock = DeviceLock(device_id, owner=f"a {self.kind} rig").acquire()
+        _OPEN_RIGS.add(self)
 
     def close(self) -> None:
         """Release the device (outputs left at zero) and its lock."""
         try:
             super().close()
         finally:
+            _OPEN_RIGS.discard(self)
             if self.device_lock is not None:
                 self.device_lock.release()
 

@@ -206,7 +206,7 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
         if busy:
             raise HTTPException(409, detail=f"calibration {busy[0].job_id} of {busy[0].participant_id} is still running; wait for it")
         web.jobs[job.job_id] = job
-    threading.Thread(target=_calibrate, args=(web, job, rig), name=f"calibration-{job.job_id}", daemon=True).start()
+    web.start_job(_calibrate, web, job, rig, name=f"calibration-{job.job_id}")
     return {"job_id": job.job_id}
 
 

@@ -161,6 +161,7 @@ class WebState:
     banks: dict[tuple[int, float], Any] = field(default_factory=dict)
     jobs: dict[str, CalibrationJob] = field(default_factory=dict)
     rigs: dict[tuple[str, int], Any] = field(default_factory=dict)
+    job_threads: list[threading.Thread] = field(default_factory=list)
     planned: dict[int, list] = field(default_factory=dict)
     analyses: dict[str, dict] = field(default_factory=dict)
     lock: threading.RLock = field(default_factory=threading.RLock)
@@ -418,12 +419,44 @@ class WebState:
             done.append(f"session {sid} paused")
         return done
 
-    def shutdown(self) -> None:
-        """Stop every runner (their sessions stay 'running' in the store, to resume)."""
+    def start_job(self, target: Any, *args: Any, name: str) -> threading.Thread:
+        """Run a background job (a calibration) in a thread that :meth:`shutdown` waits for."""
+        thread = threading.Thread(target=target, args=args, name=name, daemon=True)
+        with self.lock:
+            self.job_threads = [t for t in self.job_threads if t.is_alive()]
+            self.job_threads.append(thread)
+        thread.start()
+        return thread
+
+    def shutdown(self, timeout_s: float = 5.0) -> None:
+        """The server is going (Ctrl-C, SIGTERM): every output to zero, every job ended, every rig closed.
+
+        The emergency stop comes first (a calibration's sweep must not go on while the
+        rest shuts down); then the runners stop (their sessions stay 'running' in the
+        store, to resume), the job threads are waited for, and each rig is closed, which
+        zeroes its outputs once more and releases its device.
+        """
+        done = self.emergency_stop()
+        if done:
+            log.warning("shutting down: %s", "; ".join(done))
         with self.lock:
             runners = list(self.runners.values())
+            threads = list(self.job_threads)
         for runner in runners:
             runner.stop(timeout=2.0)
+        deadline = time.monotonic() + timeout_s
+        for thread in threads:
+            thread.join(max(0.0, deadline - time.monotonic()))
+            if thread.is_alive():
+                log.error("the job %s did not end within %.0f s of the shutdown", thread.name, timeout_s)
+        with self.lock:
+            rigs = list(self.rigs.items())
+            self.rigs.clear()
+        for (kind, _), rig in rigs:
+            try:
+                rig.close()
+            except Exception:  # noqa: BLE001 - every rig must still be closed
+                log.exception("closing the %s rig at shutdown failed; switch the amplifier off", kind)
 
 
 #: What people call the fields of the requests, for the messages of refused requests.
