@@ -67,7 +67,7 @@ def test_json_and_toml_agree(tmp_path):
         (dict(amplifier_gain=1.0), r"needs 10 V into the amplifier .* amplifier_input_max_v = 1 V. Check amplifier_gain"),
         (dict(amplifier_input_max_v=20.0), r"amplifier_input_max_v: Input should be less than or equal to 10"),
         (dict(limits={"peak_v": 30.0}), r"limits.peak_v: Input should be less than or equal to 20"),
-        (dict(limits={"rms_v": 100.0}), r"limits.rms_v: Input should be less than or equal to 8"),
+        (dict(limits={"rms_v": 100.0}), r"limits.rms_v: Input should be less than or equal to 5.65"),
         (dict(limits={"max_duration_s": 1000.0}), r"limits.max_duration_s: Input should be less than or equal to 60"),
         (dict(limits={"fade_s": 0.0}), r"limits.fade_s: Input should be greater than or equal to 0.0001"),
         (dict(limits={"fade_s": 100.0}), r"limits.fade_s: Input should be less than or equal to 0.05"),

@@ -127,7 +127,8 @@ def test_the_budget_recovers_after_the_window():
 
 
 @pytest.mark.parametrize("field, value, words", [
-    ("peak_v", 25.0, "hard ceiling of 20"), ("rms_v", 9.0, "hard ceiling of 8"),
+    ("peak_v", 25.0, "hard ceiling of 20"), ("rms_v", 5.7, "hard ceiling of 5.66"),
+    ("sustained_rms_v", 4.01, "hard ceiling of 4"),
     ("max_duration_s", 61.0, "hard ceiling of 60"), ("fade_s", 0.0, r"fade_s must lie in \[0.0001, 0.05\]"),
     ("fade_s", 100.0, "fade_s must lie in"), ("peak_v", float("inf"), "peak_v must be > 0 and finite"),
 ])
@@ -143,3 +144,27 @@ def test_a_value_just_over_the_limit_never_reads_as_the_limit():
     d[0, 50] = 10.0 + 1e-6
     with pytest.raises(SafetyError, match=r"reaches 10.000001 V peak, over the limit of 10 V"):
         check_drive(d, FS, 4, SafetyLimits())
+
+
+def test_the_short_ceiling_is_twice_the_assumed_rating_in_power():
+    from vibrofocus.rigs.safety import ASSUMED_COIL_OHMS, ASSUMED_RATED_POWER_W, RMS_V_CEILING, SUSTAINED_RMS_V_CEILING
+
+    np.testing.assert_allclose(RMS_V_CEILING**2 / ASSUMED_COIL_OHMS, 2 * ASSUMED_RATED_POWER_W, rtol=1e-12)
+    np.testing.assert_allclose(SUSTAINED_RMS_V_CEILING**2 / ASSUMED_COIL_OHMS, ASSUMED_RATED_POWER_W, rtol=1e-12)
+
+
+def test_a_duty_cycle_over_the_sustained_limit_is_refused_after_about_one_window():
+    from vibrofocus.rigs.safety import EnergyBudget
+
+    limits = SafetyLimits(rms_v=4.0, sustained_rms_v=2.5, sustained_window_s=60.0)
+    burst = np.tile(_sine(3.0 * np.sqrt(2), 0.5), (4, 1))  # 3 V RMS for 0.5 s
+    budget = EnergyBudget(limits, 4, FS)
+    t, admitted = 0.0, 0
+    with pytest.raises(SafetyError, match=r"over 60 s, over the limit of 2.5 V RMS \(sustained_rms_v\)"):
+        while admitted < 1000:
+            budget.admit(burst, start_s=t)
+            admitted += 1
+            t += 0.6  # 0.5 s on, 0.1 s off: over 60 s, 3 * sqrt(0.5 / 0.6) = 2.74 V RMS
+    # Refused once the 60 s window holds more than (2.5 / 3)^2 * 60 = 41.7 s of the burst: about
+    # 83 plays of 0.5 s; the 10 ms bins may refuse slightly earlier, never later.
+    assert 80 <= admitted <= 84

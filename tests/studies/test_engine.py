@@ -312,3 +312,39 @@ def test_one_participants_trials_carry_their_own_onsets(store):
         assert mine == [r for r in every if r["participant"] == pid]
         assert [(r["onset_host_s"], r["onset_device_s"]) for r in mine] == [(100.0 * k, 10.0 * k),
                                                                            (100.0 * k + 1, 10.0 * k + 1)]
+
+
+def test_a_calibration_at_another_rate_than_the_rig_is_refused_before_any_trial(store, calibration_file):
+    from vibrofocus.calibration import load_calibration
+
+    cal = load_calibration(calibration_file)
+    sid = _small(store)
+    fast = make_rig("simulated", seed=3)
+    fast.fs = 2 * cal.fs  # a rig that plays at twice the rate the calibration was made at
+    with pytest.raises(StudyError, match=r"made at 10000 Hz but the simulated rig plays at 20000 Hz"):
+        StudyEngine(store, sid, fast, cal)
+    with pytest.raises(StudyError, match="wrong pitch"):
+        StudyEngine(store, sid, fast, renderer=calibration_renderer(cal))  # as the web runner builds it
+    assert store.events(sid, kind="stimulus_onset") == []
+
+
+def test_the_onset_is_when_the_device_took_the_first_sample(store, renderer):
+    """A rig whose device starts 60 ms after the call: the answer's onset is the device's, not the call's."""
+    from vibrofocus.rigs import DeviceOnset
+
+    class LateRig:
+        fs = 10_000.0
+        starts: list = []
+
+        def play(self, drives):
+            import time
+
+            self.starts.append(time.monotonic() + 0.060)
+            return DeviceOnset(self.starts[-1])
+
+    rig = LateRig()
+    sid = _small(store)
+    StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([4, 6]))
+    onsets = [e.payload["onset_s"] for e in store.events(sid, kind="answer")]
+    assert onsets == rig.starts  # not the time the play was called, 60 ms earlier
+    assert [r["onset_host_s"] for r in store.trial_rows()] == rig.starts

@@ -38,7 +38,8 @@ import pydantic
 from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validator, model_validator
 
 from ..errors import ValidationError
-from .safety import DURATION_S_CEILING, MAX_FADE_S, MIN_FADE_S, PEAK_V_CEILING, RMS_V_CEILING, SafetyLimits
+from .safety import (DURATION_S_CEILING, MAX_FADE_S, MIN_FADE_S, PEAK_V_CEILING, RMS_V_CEILING,
+                     SUSTAINED_RMS_V_CEILING, SafetyLimits)
 
 __all__ = [
     "RigConfig",
@@ -151,17 +152,22 @@ class ForceSensorsConfig(_Model):
 class LimitsConfig(_Model):
     """Safety limits at the actuator terminals (see :class:`~vibrofocus.rigs.safety.SafetyLimits`).
 
-    Each has a hard ceiling no file can raise: ``peak_v`` <= 20 V, ``rms_v`` <= 8 V,
-    ``max_duration_s`` <= 60 s, and ``fade_s`` in [0.1 ms, 50 ms].
+    Each has a hard ceiling no file can raise: ``peak_v`` <= 20 V, ``rms_v`` <= 5.66 V
+    (twice the assumed 2 W rating in power), ``sustained_rms_v`` <= 4 V over
+    ``sustained_window_s`` in [10, 600] s, ``max_duration_s`` <= 60 s, and ``fade_s`` in
+    [0.1 ms, 50 ms].
     """
 
     peak_v: float = Field(SafetyLimits.peak_v, gt=0, le=PEAK_V_CEILING)
     rms_v: float = Field(SafetyLimits.rms_v, gt=0, le=RMS_V_CEILING)
     max_duration_s: float = Field(SafetyLimits.max_duration_s, gt=0, le=DURATION_S_CEILING)
     fade_s: float = Field(SafetyLimits.fade_s, ge=MIN_FADE_S, le=MAX_FADE_S)
+    sustained_rms_v: float = Field(SafetyLimits.sustained_rms_v, gt=0, le=SUSTAINED_RMS_V_CEILING)
+    sustained_window_s: float = Field(SafetyLimits.sustained_window_s, ge=10.0, le=600.0)
 
     def build(self) -> SafetyLimits:
-        return SafetyLimits(peak_v=self.peak_v, rms_v=self.rms_v, max_duration_s=self.max_duration_s, fade_s=self.fade_s)
+        return SafetyLimits(peak_v=self.peak_v, rms_v=self.rms_v, max_duration_s=self.max_duration_s, fade_s=self.fade_s,
+                            sustained_rms_v=self.sustained_rms_v, sustained_window_s=self.sustained_window_s)
 
 
 class RigConfig(_Model):

@@ -6,13 +6,15 @@ Three parts (docs/hardware.md, "What the software guarantees"):
   shape, NaN/Inf, duration, peak, RMS over every 1 s window) that returns the faded copy
   to play;
 - :class:`EnergyBudget`: the same windowed RMS across consecutive plays of one rig, so
-  neither zero padding nor back-to-back plays can dilute it;
+  neither zero padding nor back-to-back plays can dilute it, and a second, sustained
+  limit over a long window (60 s by default) for the heat a coil builds up over minutes;
 - the hard ceilings (``*_CEILING``, ``MIN_FADE_S``): no configuration may loosen the
   limits beyond them.
 """
 
 from __future__ import annotations
 
+import math
 import threading
 from dataclasses import asdict, dataclass
 
@@ -30,18 +32,31 @@ __all__ = [
     "windowed_rms",
     "PEAK_V_CEILING",
     "RMS_V_CEILING",
+    "SUSTAINED_RMS_V_CEILING",
+    "ASSUMED_RATED_POWER_W",
+    "ASSUMED_COIL_OHMS",
     "DURATION_S_CEILING",
     "MIN_FADE_S",
     "MAX_FADE_S",
 ]
 
-# Hard ceilings. Assumption, not a measurement: twice the reference setup's limits (10 V
-# peak into the 8 ohm TEAX14C02-8 exciters of de Vlam et al., IEEE ToH 2023; 4 V RMS = 2 W).
-# A lab with larger actuators changes these constants in code, on purpose, not in a file.
-#: Largest peak limit any configuration may set, V at the actuator.
+# Hard ceilings. Assumptions, not measurements: the reference setup drives 8 ohm
+# TEAX14C02-8 exciters (de Vlam et al., IEEE ToH 2023) at up to 10 V peak; their power
+# rating is taken as 2 W (we could not check a data sheet: an assumption). A lab with
+# other actuators changes these constants in code, on purpose, not in a file.
+#: The continuous power an exciter is assumed to take, W (assumption, see above).
+ASSUMED_RATED_POWER_W = 2.0
+#: The coil's impedance the power figures assume, ohm (the TEAX14C02-8 is an 8 ohm part).
+ASSUMED_COIL_OHMS = 8.0
+#: Largest peak limit any configuration may set, V at the actuator (twice the reference).
 PEAK_V_CEILING = 20.0
-#: Largest RMS limit any configuration may set, V at the actuator.
-RMS_V_CEILING = 8.0
+#: Largest RMS limit over the short window any configuration may set, V at the actuator:
+#: twice the assumed rating in power, sqrt(2 * 2 W * 8 ohm) = 5.66 V.
+RMS_V_CEILING = math.sqrt(2 * ASSUMED_RATED_POWER_W * ASSUMED_COIL_OHMS)
+#: Largest sustained RMS limit (the long window), V: the assumed rating itself, 4 V = 2 W.
+SUSTAINED_RMS_V_CEILING = math.sqrt(ASSUMED_RATED_POWER_W * ASSUMED_COIL_OHMS)
+#: Resolution of the long window's energy history, s (a conservative bin: see EnergyBudget).
+SUSTAINED_BIN_S = 0.01
 #: Longest drive any configuration may allow, s.
 DURATION_S_CEILING = 60.0
 #: Shortest fade at each end of a drive, s: no drive starts or stops with a step.
@@ -74,6 +89,13 @@ class SafetyLimits:
         s, in [0.1 ms, 50 ms].
     rms_window_s : float
         Window of the RMS limit, s, in [0.1, 10]; default 1 s.
+    sustained_rms_v : float
+        Largest RMS voltage per channel over any window of ``sustained_window_s``, V, in
+        (0, 4]: the heat a coil pressed against skin builds up over minutes. Default 4 V
+        (2 W into 8 ohm, the assumed rating); a lab sets it from its exciters' rating
+        and a housing-temperature check (docs/hardware.md).
+    sustained_window_s : float
+        The long window, s, in [10, 600]; default 60 s.
     """
 
     peak_v: float = DRIVE_LIMIT_V
@@ -81,17 +103,21 @@ class SafetyLimits:
     max_duration_s: float = 30.0
     fade_s: float = 0.5e-3
     rms_window_s: float = RMS_WINDOW_S
+    sustained_rms_v: float = SUSTAINED_RMS_V_CEILING
+    sustained_window_s: float = 60.0
 
     def __post_init__(self) -> None:
         for name, ceiling in (("peak_v", PEAK_V_CEILING), ("rms_v", RMS_V_CEILING),
-                              ("max_duration_s", DURATION_S_CEILING)):
+                              ("max_duration_s", DURATION_S_CEILING),
+                              ("sustained_rms_v", SUSTAINED_RMS_V_CEILING)):
             value = check_positive(getattr(self, name), name)
             if value > ceiling:
                 raise ValidationError(
-                    f"{name} = {value:g} is above the hard ceiling of {ceiling:g} that no configuration may "
+                    f"{name} = {value:g} is above the hard ceiling of {ceiling:.3g} that no configuration may "
                     "exceed (docs/hardware.md, limits)")
         check_in_range(self.fade_s, "fade_s", MIN_FADE_S, MAX_FADE_S)
         check_in_range(self.rms_window_s, "rms_window_s", 0.1, 10.0)
+        check_in_range(self.sustained_window_s, "sustained_window_s", 10.0, 600.0)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -184,13 +210,51 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
     return apply_fades(arr, fs, limits.fade_s)
 
 
-class EnergyBudget:
-    """The RMS limit across consecutive plays of one rig (thread-safe).
+class _RmsWindow:
+    """One RMS limit over a sliding window, across plays: the energy history of one window.
 
-    Keeps the squared drive of the last ``rms_window_s`` seconds, at the drive's sample
-    rate, with the time the last play ends. A new drive is admitted only if no window of
-    ``rms_window_s`` over what was played before and the new drive, placed at the time it
-    starts, holds more than ``rms_v`` RMS on any channel.
+    The history is kept in bins of ``bin_samples`` samples (1 for the short window: exact).
+    With wider bins, a window of ``n_bins`` bins is checked over ``n_bins + 1`` bins
+    (any window of the samples lies inside that many bins) and gaps are rounded down: the
+    check can only be stricter than the exact one, never looser.
+    """
+
+    def __init__(self, rms_v: float, window_s: float, fs: float, n_channels: int, bin_samples: int, label: str):
+        self.rms_v, self.window_s, self.label = rms_v, window_s, label
+        self.bin = max(1, int(bin_samples))
+        self.n_window = max(1, int(round(window_s * fs)))
+        self.n_bins = max(1, -(-self.n_window // self.bin))
+        self.tail = np.zeros((n_channels, self.n_bins))
+
+    def history(self, squares: np.ndarray, gap_samples: int | None) -> np.ndarray:
+        n = squares.shape[1]
+        binned = squares if self.bin == 1 else np.pad(
+            squares, ((0, 0), (0, (-n) % self.bin))).reshape(len(squares), -1, self.bin).sum(axis=2)
+        gap = self.n_bins if gap_samples is None else gap_samples // self.bin
+        keep = max(0, self.n_bins - gap)
+        return np.concatenate([self.tail[:, self.n_bins - keep:], np.zeros((len(squares), min(gap, self.n_bins))),
+                               binned], axis=1)
+
+    def worst_rms(self, history: np.ndarray) -> np.ndarray:
+        span = self.n_bins + (1 if self.bin > 1 else 0)
+        csum = np.concatenate([np.zeros((len(history), 1)), np.cumsum(history, axis=1)], axis=1)
+        energy = csum[:, -1] if history.shape[1] <= span else (csum[:, span:] - csum[:, :-span]).max(axis=1)
+        return np.sqrt(np.maximum(energy, 0.0) / self.n_window)
+
+    def commit(self, history: np.ndarray) -> None:
+        self.tail = history[:, -self.n_bins:] if history.shape[1] >= self.n_bins else np.concatenate(
+            [np.zeros((len(history), self.n_bins - history.shape[1])), history], axis=1)
+
+
+class EnergyBudget:
+    """The RMS limits across consecutive plays of one rig (thread-safe).
+
+    Keeps the squared drive of the last ``rms_window_s`` seconds (exactly, at the drive's
+    sample rate) and of the last ``sustained_window_s`` seconds (in 10 ms bins, checked
+    conservatively), with the time the last play ends. A new drive is admitted only if no
+    window over what was played before and the new drive, placed at the time it starts,
+    holds more than ``rms_v`` RMS (short window) or ``sustained_rms_v`` RMS (long window)
+    on any channel.
 
     Parameters
     ----------
@@ -203,8 +267,12 @@ class EnergyBudget:
     def __init__(self, limits: SafetyLimits, n_channels: int, fs: float):
         self.limits = limits
         self.fs = float(fs)
-        self.n_window = max(1, int(round(limits.rms_window_s * self.fs)))
-        self._tail = np.zeros((n_channels, self.n_window))
+        self._windows = (
+            _RmsWindow(limits.rms_v, limits.rms_window_s, self.fs, n_channels, 1, "rms_v"),
+            _RmsWindow(limits.sustained_rms_v, limits.sustained_window_s, self.fs, n_channels,
+                       int(round(SUSTAINED_BIN_S * self.fs)), "sustained_rms_v"),
+        )
+        self.n_window = self._windows[0].n_window
         self._end_s: float | None = None
         self._lock = threading.Lock()
 
@@ -221,28 +289,26 @@ class EnergyBudget:
         Raises
         ------
         SafetyError
-            If it would exceed the RMS limit together with the plays before it; the
+            If it would exceed an RMS limit together with the plays before it; the
             budget is then left as it was.
         """
         squares = drive**2
         with self._lock:
-            if self._end_s is None:
-                gap = self.n_window
-            else:
-                gap = int(np.floor(max(0.0, start_s - self._end_s) * self.fs))
-            keep = max(0, self.n_window - gap)
-            history = np.concatenate(
-                [self._tail[:, self.n_window - keep:], np.zeros((len(squares), min(gap, self.n_window))), squares],
-                axis=1)
-            rms = windowed_rms(history, self.n_window)
-            if rms.max() > self.limits.rms_v * (1 + 1e-9):
-                wait = self.limits.rms_window_s if self._end_s is None else max(
-                    0.0, self._end_s + self.limits.rms_window_s - start_s)
-                raise SafetyError(
-                    "drive refused: together with the plays before it, "
-                    + _channel_message(rms, self.limits.rms_v, "V RMS", f" over {self.limits.rms_window_s:g} s")
-                    + f"; wait {wait:.1f} s for the actuators to cool, or play less"
-                )
-            self._tail = history[:, -self.n_window:]  # history always holds the window and the drive
+            gap = None if self._end_s is None else int(np.floor(max(0.0, start_s - self._end_s) * self.fs))
+            histories = []
+            for window in self._windows:
+                history = window.history(squares, gap)
+                rms = window.worst_rms(history)
+                if rms.max() > window.rms_v * (1 + 1e-9):
+                    wait = window.window_s if self._end_s is None else max(
+                        0.0, self._end_s + window.window_s - start_s)
+                    raise SafetyError(
+                        "drive refused: together with the plays before it, "
+                        + _channel_message(rms, window.rms_v, "V RMS", f" over {window.window_s:g} s")
+                        + f" ({window.label}); wait {wait:.1f} s for the actuators to cool, or play less"
+                    )
+                histories.append(history)
+            for window, history in zip(self._windows, histories):
+                window.commit(history)
             begin = start_s if self._end_s is None else max(start_s, self._end_s)
             self._end_s = begin + drive.shape[1] / self.fs

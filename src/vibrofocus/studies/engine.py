@@ -165,6 +165,23 @@ class CalibrationRenderer:
         return np.asarray(self.rendering(method, target).drives, dtype=float)
 
 
+def _check_rates(calibration: Any, rig: Any) -> None:
+    """Refuse a calibration made at another sample rate than the rig plays at.
+
+    Drives designed at one rate and played at another come out at another pitch and
+    duration (a 10 kHz design on a 20 kHz rig plays an octave up, in half the time).
+    """
+    cal_fs, rig_fs = getattr(calibration, "fs", None), getattr(rig, "fs", None)
+    if cal_fs is None or rig_fs is None:
+        return
+    if abs(float(cal_fs) - float(rig_fs)) > 1e-9 * float(rig_fs):
+        raise StudyError(
+            f"the calibration was made at {float(cal_fs):g} Hz but the {getattr(rig, 'kind', '')} rig plays at "
+            f"{float(rig_fs):g} Hz: its drives would play at the wrong pitch and duration. Calibrate on this rig, "
+            "or set the rig's fs to the calibration's"
+        )
+
+
 def calibration_renderer(calibration: Any, **options: Any) -> CalibrationRenderer:
     """A ``renderer(method, target) -> drives`` built on a participant's calibration.
 
@@ -421,6 +438,7 @@ class StudyEngine:
                 )
             renderer = calibration_renderer(calibration, n_samples=n_samples, limit_v=limit_v)
         self._renderer = None if dry_run else renderer
+        _check_rates(calibration if calibration is not None else getattr(renderer, "calibration", None), rig)
         self.cue = cue
         self._beep = "played" if cue is not None else str(cue_by)
         self._cache: dict[tuple[str, int], Stimulus] = {}
@@ -468,7 +486,12 @@ class StudyEngine:
         )
         onset = time.monotonic()
         played = self.rig.play(stim.drives) if stim is not None else None
-        # Rig.play's DeviceOnset; a rig of the caller's own may return nothing.
+        # Rig.play's DeviceOnset; a rig of the caller's own may return nothing. Its host
+        # time is when the device took the first sample (the audio rig's first callback,
+        # tens of ms after the call): reaction times count from there.
+        host_s = getattr(played, "host_s", None)
+        if isinstance(host_s, (int, float)) and np.isfinite(host_s):
+            onset = float(host_s)
         device_s, clock = getattr(played, "device_s", None), getattr(played, "clock", None)
         self._marker("stimulus_onset", onset, trial, played=stim is not None, onset_device_s=device_s,
                      onset_clock=clock)
