@@ -560,3 +560,31 @@ def test_volts_full_scale_is_required_and_the_error_says_how_to_measure_it():
     del cfg["volts_full_scale"]
     with pytest.raises(ValidationError, match=r"volts_full_scale: required.*devices --check --tone"):
         parse_rig_config(cfg)
+
+
+@pytest.mark.parametrize("rig_name, default_name, same_index, risk", [
+    ("MOTU Pro Audio", "Out 1-2 (MOTU Pro Audio)", False, "same"),
+    ("Focusrite USB ASIO", "Speakers (Focusrite USB Audio)", False, "same"),
+    ("MOTU Pro Audio", "default", False, "routing"),
+    ("MOTU Pro Audio", "pulse", False, "routing"),
+    ("MOTU Pro Audio", "Headphones (Realtek High Definition Audio)", False, None),
+    ("loopback", "loopback", True, "same"),
+])
+def test_the_page_beeps_default_output_is_checked_against_the_actuator_interface(rig_name, default_name,
+                                                                                  same_index, risk):
+    from vibrofocus.rigs.audio import default_output_risk
+
+    assert default_output_risk(rig_name, default_name, same_index=same_index) == risk
+
+
+def test_the_cue_plays_at_the_devices_own_rate(jack_server):
+    """A JACK server runs at one rate (48 kHz here): a cue fixed at 44.1 kHz could not open on it."""
+    from vibrofocus.rigs.cue import CUE_PEAK, CueTone
+
+    cue = CueTone("loopback")  # no rig: only the rate is under test here
+    assert cue.fs == JACK_RATE
+    with _LoopbackRecorder(channels=(1,)) as recorder:
+        cue()
+        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    x = recorder.signal()[1][:, 0].astype(float)
+    np.testing.assert_allclose(np.abs(x).max(), CUE_PEAK, rtol=0.02)

@@ -29,6 +29,11 @@ def serve(
     header_timeout: float = typer.Option(10.0, "--header-timeout", min=0.1, max=600.0, help="Seconds a connection may take to send a request's headers before it is closed."),
     keep_alive: float = typer.Option(5.0, "--keep-alive", min=0.1, max=3600.0, help="Seconds an idle connection is kept open between requests."),
     lsl: bool = lsl_option(),
+    participant_audio_elsewhere: bool = typer.Option(
+        False, "--participant-audio-elsewhere",
+        help="With an audio rig whose interface is this computer's default output: the participant page "
+             "plays its beep on another computer or device, never on this one (the beep is outside every "
+             "safety check)."),
 ) -> None:
     """Run the experimenter and participant pages (FastAPI + uvicorn) on this computer.
 
@@ -56,6 +61,8 @@ def serve(
             cfg = load_rig_config(rig_config)  # a bad file is reported now, not at the first calibration
             if cfg.kind != rig:
                 raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
+            if rig == "audio":
+                _check_page_beep_output(cfg, participant_audio_elsewhere)
         check_choice(pace, "pace", tuple(PACES))
         _check_database(db)
         import contextlib
@@ -126,3 +133,29 @@ def _check_database(db: Path) -> None:
             raise ValidationError(f"--db {db}: it holds a {kind}, not a study database; give a .sqlite file or a new name")
     elif not db.parent.is_dir():
         raise ValidationError(f"--db {db}: the folder {db.parent} does not exist")
+
+
+def _check_page_beep_output(cfg, audio_elsewhere: bool) -> None:
+    """Refuse an audio rig whose interface is the default output the participant page would beep on."""
+    from ..errors import ValidationError
+    from ..rigs.audio import _sounddevice, default_output_risk, resolve_audio_device
+
+    sd = _sounddevice()
+    rig_index = resolve_audio_device(cfg.device.name, cfg.device.hostapi, outputs=max(cfg.channels.actuators))
+    rig_name = str(sd.query_devices(rig_index)["name"])
+    try:
+        default = sd.query_devices(kind="output")
+    except sd.PortAudioError:  # no default output: the page has nowhere to beep here
+        return
+    risk = default_output_risk(rig_name, str(default["name"]), same_index=int(default["index"]) == rig_index)
+    if risk == "same" and not audio_elsewhere:
+        raise ValidationError(
+            f"this computer's default audio output ({default['name']}) is the interface that drives the "
+            f"actuators ({rig_name}): the participant page's beep would play on them, outside every safety "
+            "check. Make the participant's headphones the default output, or, if the participant page runs on "
+            "another computer, add --participant-audio-elsewhere (docs/hardware.md)")
+    if risk is not None:
+        err_console.print(
+            f"[bold yellow]warning:[/] the default audio output ({default['name']}) may reach the actuator "
+            f"interface ({rig_name}); the participant page's beep plays on it. Route it to headphones "
+            "(docs/hardware.md).", highlight=False)

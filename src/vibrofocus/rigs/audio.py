@@ -62,7 +62,8 @@ from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
 from .onset import PORTAUDIO_CLOCK, DeviceOnset
 
-__all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface"]
+__all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface",
+           "default_output_risk"]
 
 log = logging.getLogger(__name__)
 
@@ -111,6 +112,23 @@ def same_audio_interface(a: str, b: str) -> bool:
     if wa & _ROUTING_DEVICES or wb & _ROUTING_DEVICES or not wa or not wb:
         return True
     return bool(wa & wb)
+
+
+def default_output_risk(rig_device: str, default_device: str, *, same_index: bool = False) -> str | None:
+    """Whether the system's default output may be the actuator interface.
+
+    The participant page's beep plays on the browser's output, the system default,
+    outside every check of the rig. Returns ``"same"`` when the default output is the
+    interface (by index or by name), ``"routing"`` when it is a device that routes to the
+    system's mix (``default``, ``pulse``, ...), which may reach it, and None otherwise.
+    """
+    default_words = audio_interface_words(default_device)
+    if same_index:
+        return "same"
+    if default_words & _ROUTING_DEVICES or not default_words:
+        return "routing"
+    rig_words = audio_interface_words(rig_device)
+    return "same" if rig_words and default_words & rig_words else None
 
 
 def _sounddevice():

@@ -47,7 +47,11 @@ class CueTone:
 
         sd = _sounddevice()
         self.index = resolve_audio_device(device, outputs=1)
-        self.name = str(sd.query_devices(self.index)["name"])
+        info = sd.query_devices(self.index)
+        self.name = str(info["name"])
+        # The device's own rate: a rate it does not run at would be resampled by the host
+        # API, or refused (a JACK server at 48 kHz refuses 44.1 kHz streams).
+        self.fs = int(round(float(info.get("default_samplerate") or self.fs)))
         rig_index = getattr(rig, "device_index", None)
         rig_name = getattr(rig, "device_name", None)
         if rig_index is not None and (self.index == rig_index or same_audio_interface(self.name, rig_name or "")):
