@@ -65,9 +65,25 @@ class CueTone:
 
     def __call__(self) -> None:
         """Play the tone; returns when it has played."""
+        import threading
+
         from .audio import _sounddevice
 
         sd = _sounddevice()
-        with sd.OutputStream(samplerate=self.fs, device=self.index, channels=1, dtype="float32") as stream:
-            stream.write(self.tone[:, None])
-            stream.write(np.zeros((int(0.05 * self.fs), 1), np.float32))  # let the tone's end play out
+        # A callback stream, as the rigs use: PortAudio's blocking writes crash on some
+        # host APIs (JACK: a double free in its blocking-I/O ring buffer).
+        block = np.concatenate([self.tone, np.zeros(int(0.05 * self.fs), np.float32)])  # the tone's end plays out
+        pos = [0]
+        done = threading.Event()
+
+        def callback(outdata, frames, time_info, status):
+            n = min(frames, len(block) - pos[0])
+            outdata.fill(0)
+            outdata[:n, 0] = block[pos[0]:pos[0] + n]
+            pos[0] += n
+            if pos[0] >= len(block):
+                raise sd.CallbackStop
+
+        with sd.OutputStream(samplerate=self.fs, device=self.index, channels=1, dtype="float32",
+                             callback=callback, finished_callback=done.set):
+            done.wait(len(block) / self.fs + 2.0)
