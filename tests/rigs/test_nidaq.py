@@ -70,6 +70,12 @@ def drive(n=1000, amplitude=5.0):
     return d
 
 
+def square(seconds: float, volts: float) -> np.ndarray:
+    """A 100 Hz square wave of +-volts on every actuator: a drive that is never near 0 V while it plays."""
+    n = int(seconds * FS)
+    return np.tile(volts * np.sign(np.sin(2 * np.pi * 100 * (np.arange(n) + 0.5) / FS)), (4, 1))
+
+
 def ao_tasks(device):
     return [t for t in device.tasks if t.ao_channels.channels]
 
@@ -159,8 +165,7 @@ def test_stop_from_another_thread_brings_the_outputs_to_zero(device):
     """The fix of -50103: abort + unreserve the playing task before the zero write."""
     device.idle_zero = False  # the outputs hold their last value by themselves
     rig = make(device)
-    d = np.full((4, int(2 * FS)), 0.0)
-    d[:, 100:-100] = 3.0  # 0.3 V held at the outputs while it plays
+    d = square(2.0, 3.0)  # +-0.3 V at the outputs while it plays
     seen = {}
 
     def stopper():
@@ -199,8 +204,7 @@ def test_the_fake_refuses_a_zero_write_while_a_stopped_task_holds_its_channels(d
 
 
 def test_ctrl_c_interrupts_a_long_play_and_leaves_zeros(rig, device):
-    d = np.full((4, int(5 * FS)), 0.0)
-    d[:, 100:-100] = 2.0
+    d = square(5.0, 2.0)
     t0 = time.monotonic()
     with ctrl_c_after(0.2), pytest.raises(KeyboardInterrupt):
         rig.play(d)
@@ -249,10 +253,11 @@ def test_a_zero_write_that_fails_once_is_tried_again(rig, device):
         return task
 
     rig._daq._task_factory = factory
-    d = np.zeros((4, 1000))
-    d[:, 100:-1] = 3.0  # ends held at 0.3 V: only an explicit zero brings it down
-    rig.play(d)
+    rig.play(square(0.1, 3.0))
     assert failed, "the first zero write did not fail: the test did not test the retry"
+    zero_tasks = device.tasks[1:]
+    assert len(zero_tasks) == 2  # the failed zero write (its channel refused), and the one tried again
+    assert zero_tasks[-1].written and not np.any(zero_tasks[-1].written[-1])
     np.testing.assert_array_equal(device.output_vector(), 0.0)
 
 
@@ -374,8 +379,7 @@ def test_real_device_plays_records_and_stops_from_another_thread():
         rec = rig.play_and_record(drive(), tail_s=0.01)
         assert rec.shape == (1, 1100)
         assert np.isfinite(rec).all()
-        long = np.zeros((4, int(2 * FS)))
-        long[:, 100:-100] = 1.0
+        long = square(2.0, 1.0)
         timer = threading.Timer(0.2, rig.stop)
         timer.start()
         with pytest.raises(DeviceError, match="stopped"):

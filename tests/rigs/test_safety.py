@@ -168,3 +168,34 @@ def test_a_duty_cycle_over_the_sustained_limit_is_refused_after_about_one_window
     # Refused once the 60 s window holds more than (2.5 / 3)^2 * 60 = 41.7 s of the burst: about
     # 83 plays of 0.5 s; the 10 ms bins may refuse slightly earlier, never later.
     assert 80 <= admitted <= 84
+
+
+@pytest.mark.parametrize("n", [1, 2])
+def test_a_drive_too_short_for_its_fades_is_refused(n):
+    with pytest.raises(SafetyError, match="cannot hold its fades"):
+        check_drive(np.full((4, n), 1.0), FS, 4, SafetyLimits())
+
+
+def test_at_a_low_rate_the_fade_is_at_least_one_sample():
+    # 0.1 ms at 2 kHz is 0.2 samples: it must not round to no fade at all.
+    out = check_drive(np.full((4, 50), 1.0), 2000.0, 4, SafetyLimits(fade_s=1e-4))
+    np.testing.assert_array_equal(out[:, 0], 0.0)
+    np.testing.assert_array_equal(out[:, -1], 0.0)
+
+
+@pytest.mark.parametrize("drive, words", [
+    (np.full((4, int(30 * FS)), 3.9), "DC"),  # 30 s of 3.9 V DC: under every voltage limit
+    (np.tile(3.9 * np.sin(2 * np.pi * 2.0 * np.arange(int(5 * FS)) / FS), (4, 1)), "below 10 Hz"),
+])
+def test_dc_and_slow_drives_are_refused(drive, words):
+    with pytest.raises(SafetyError, match=words):
+        check_drive(drive, FS, 4, SafetyLimits(max_duration_s=30.0))
+
+
+def test_the_calibration_sweeps_pass_the_slow_content_check():
+    from vibrofocus.calibration.excitation import default_settings, make_excitation
+
+    for method in ("mimo", "h1", "paper"):
+        for band in ((10.0, 1000.0), (5.0, 1000.0)):
+            sweep = np.atleast_2d(make_excitation(default_settings(method, FS, band)))
+            check_drive(np.tile(sweep[:1], (4, 1)), FS, 4, SafetyLimits())

@@ -57,6 +57,15 @@ RMS_V_CEILING = math.sqrt(2 * ASSUMED_RATED_POWER_W * ASSUMED_COIL_OHMS)
 SUSTAINED_RMS_V_CEILING = math.sqrt(ASSUMED_RATED_POWER_W * ASSUMED_COIL_OHMS)
 #: Resolution of the long window's energy history, s (a conservative bin: see EnergyBudget).
 SUSTAINED_BIN_S = 0.01
+#: Largest mean voltage over any RMS window, V: a voice coil is not made for DC (it heats
+#: without moving, and pushes the cone off centre). Assumption: 0.5 V; the calibration
+#: sweeps' means stay under 0.06 V and the taps' under 0.01 V.
+DC_V_LIMIT = 0.5
+#: Below this frequency a drive is "slow", Hz (the paper's band starts at 10 Hz)...
+SLOW_HZ = 10.0
+#: ...and may hold at most this RMS there, V. Assumption: 2 V; the default calibration
+#: sweeps hold 0.8 V (band from 10 Hz) to 1.4 V (from 5 Hz) below 10 Hz, the taps < 0.01 V.
+SLOW_RMS_V_LIMIT = 2.0
 #: Longest drive any configuration may allow, s.
 DURATION_S_CEILING = 60.0
 #: Shortest fade at each end of a drive, s: no drive starts or stops with a step.
@@ -203,11 +212,37 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
     peaks = np.abs(arr).max(axis=1)
     if peaks.max() > limits.peak_v * (1 + 1e-9):
         raise SafetyError("drive refused: " + _channel_message(peaks, limits.peak_v, "V peak"))
-    rms = windowed_rms(arr**2, max(1, int(round(limits.rms_window_s * fs))))
+    n_window = max(1, int(round(limits.rms_window_s * fs)))
+    rms = windowed_rms(arr**2, n_window)
     if rms.max() > limits.rms_v * (1 + 1e-9):
         raise SafetyError("drive refused: " + _channel_message(
             rms, limits.rms_v, "V RMS", f" over {limits.rms_window_s:g} s"))
-    return apply_fades(arr, fs, limits.fade_s)
+    _check_slow_content(arr, fs, n_window, limits.rms_window_s)
+    # At least one sample of fade at each end (ceil: a fade shorter than a sample at a low
+    # rate must not round to none), and a drive long enough to hold both fades.
+    n_fade = max(1, math.ceil(limits.fade_s * fs - 1e-9))
+    if arr.shape[1] < 2 * n_fade:
+        raise SafetyError(f"drive refused: {arr.shape[1]} sample(s) cannot hold its fades ({n_fade} sample(s) at "
+                          f"each end at {fs:g} Hz); make it at least {2 * n_fade} samples long")
+    return apply_fades(arr, fs, n_fade / fs)
+
+
+def _check_slow_content(arr: np.ndarray, fs: float, n_window: int, window_s: float) -> None:
+    """Refuse DC and slow drives: a mean over any window above DC_V_LIMIT, or RMS below SLOW_HZ above SLOW_RMS_V_LIMIT."""
+    csum = np.concatenate([np.zeros((len(arr), 1)), np.cumsum(arr, axis=1)], axis=1)
+    n = arr.shape[1]
+    # A drive shorter than the window counts as followed by silence, as for the RMS.
+    sums = csum[:, -1:] if n <= n_window else csum[:, n_window:] - csum[:, :-n_window]
+    mean = np.abs(sums).max(axis=1) / n_window
+    if mean.max() > DC_V_LIMIT:
+        raise SafetyError("drive refused: DC, " + _channel_message(
+            mean, DC_V_LIMIT, "V", f" mean over {window_s:g} s") + " (a voice coil is not driven with DC)")
+    spectrum = np.fft.rfft(arr, axis=1)
+    spectrum[:, np.fft.rfftfreq(n, 1 / fs) >= SLOW_HZ] = 0
+    slow = np.sqrt(np.mean(np.fft.irfft(spectrum, n, axis=1) ** 2, axis=1))
+    if slow.max() > SLOW_RMS_V_LIMIT:
+        raise SafetyError("drive refused: " + _channel_message(
+            slow, SLOW_RMS_V_LIMIT, "V RMS", f" below {SLOW_HZ:g} Hz") + " (too slow for a vibrotactile actuator)")
 
 
 class _RmsWindow:
