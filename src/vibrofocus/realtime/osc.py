@@ -45,7 +45,7 @@ import numpy as np
 
 from ..errors import ValidationError, VibrofocusError
 from .designer import TapDesigner
-from .osc_framing import FramingError, check_framing
+from .osc_framing import FramingError, parse_datagram
 
 __all__ = ["OscTapServer", "TapRecord", "ADDRESSES", "MAX_WAIT_S", "MAX_QUEUED"]
 
@@ -292,11 +292,8 @@ class OscTapServer:
         receipt_s : float
             When it was read, s (:attr:`clock`).
         """
-        from pythonosc.osc_packet import OscPacket
-
         try:
-            check_framing(data)
-            messages = [timed.message for timed in OscPacket(data).messages]
+            messages = parse_datagram(data)
         except FramingError as exc:
             self._reply(sender, "/error", f"not an OSC packet ({len(data)} bytes: {exc}); nothing played")
             return

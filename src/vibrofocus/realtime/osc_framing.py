@@ -13,7 +13,7 @@ The walk moves forward only: each step passes at least 4 bytes, so it ends after
 
 from __future__ import annotations
 
-__all__ = ["FramingError", "check_framing", "MAX_BUNDLE_DEPTH", "MAX_ELEMENTS"]
+__all__ = ["FramingError", "check_framing", "parse_datagram", "MAX_BUNDLE_DEPTH", "MAX_ELEMENTS"]
 
 #: Deepest nesting of bundles accepted (a bundle in a bundle is depth 2).
 MAX_BUNDLE_DEPTH = 8
@@ -86,6 +86,32 @@ def check_framing(data: bytes) -> int:
         else:
             raise FramingError(f"bundle element at byte {pos} is neither a message nor a bundle")
     return n_messages
+
+
+def parse_datagram(data: bytes) -> list:
+    """The messages of one datagram, in python-osc's order, once its framing passed.
+
+    Parameters
+    ----------
+    data : bytes
+        The datagram.
+
+    Returns
+    -------
+    list of pythonosc.osc_message.OscMessage
+
+    Raises
+    ------
+    FramingError
+        From :func:`check_framing`.
+    Exception
+        Whatever python-osc raises for a datagram it cannot parse (its ``ParseError``,
+        a ``UnicodeDecodeError`` of a string argument).
+    """
+    from pythonosc.osc_packet import OscPacket
+
+    check_framing(data)
+    return [timed.message for timed in OscPacket(bytes(data)).messages]
 
 
 def _bundle_start(data: bytes, start: int, end: int) -> int:
