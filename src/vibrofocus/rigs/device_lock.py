@@ -102,6 +102,8 @@ class LockKey:
     shared: bool = False
 
     def path(self, folder: Path) -> Path:
+        """The lock file in ``folder``: the name with every run of other characters than
+        letters, digits, ``_``, ``.`` and ``-`` made one ``_``, cut at 100."""
         return folder / (re.sub(r"[^A-Za-z0-9_.-]+", "_", self.name)[:100] + ".lock")
 
 
