@@ -74,11 +74,27 @@ def print_error(message: str) -> None:
 
 
 def log_folder() -> Path:
-    """Where tracebacks of unexpected errors go: ``$VIBROFOCUS_LOG_DIR``, else ``vibrofocus-logs`` in the
-    temporary folder."""
+    """Where tracebacks of unexpected errors go: ``$VIBROFOCUS_LOG_DIR``, else a folder of the user's
+    own in the temporary folder, ``vibrofocus-logs-<uid>`` (mode 0700)."""
     import tempfile
 
-    return Path(os.environ.get("VIBROFOCUS_LOG_DIR") or Path(tempfile.gettempdir()) / "vibrofocus-logs")
+    env = os.environ.get("VIBROFOCUS_LOG_DIR")
+    if env:
+        return Path(env)
+    own = f"vibrofocus-logs-{os.getuid()}" if hasattr(os, "getuid") else "vibrofocus-logs"
+    return Path(tempfile.gettempdir()) / own
+
+
+def _ready_log_folder() -> tuple[Path, str | None]:
+    """The log folder, made if missing, and what is wrong with it (None when it may be written)."""
+    from .._safe_folders import private_folder_problem
+
+    folder = log_folder()
+    if os.environ.get("VIBROFOCUS_LOG_DIR"):
+        folder.mkdir(parents=True, exist_ok=True)  # the user's own choice
+        return folder, None
+    # In the shared temporary folder: another user may have made it first, or left a link.
+    return folder, private_folder_problem(folder)
 
 
 def report_unexpected() -> int:
@@ -99,13 +115,15 @@ def report_unexpected() -> int:
     text = "".join(traceback.format_exception(exc))
     where = "nowhere (the log folder cannot be written)"
     try:
-        folder = log_folder()
-        folder.mkdir(parents=True, exist_ok=True)
-        stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
-        fd, name = tempfile.mkstemp(prefix=f"error-{stamp}-", suffix=".log", dir=folder)
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(f"vibrofocus {' '.join(sys.argv[1:])[:MAX_MESSAGE_CHARS]}\n{text}")
-        where = name
+        folder, problem = _ready_log_folder()
+        if problem:
+            where = f"nowhere (the log folder {folder} {problem}; remove it, or set VIBROFOCUS_LOG_DIR)"
+        else:
+            stamp = _dt.datetime.now().strftime("%Y%m%d-%H%M%S")
+            fd, name = tempfile.mkstemp(prefix=f"error-{stamp}-", suffix=".log", dir=folder)
+            with os.fdopen(fd, "w", encoding="utf-8") as fh:
+                fh.write(f"vibrofocus {' '.join(sys.argv[1:])[:MAX_MESSAGE_CHARS]}\n{text}")
+            where = name
     except OSError:
         pass
     if DEBUG:

@@ -30,12 +30,17 @@ def serve_osc(
                                     "seconds (minimax) is designed ahead at every location and then serves /tap only."),
     seed: int | None = typer.Option(None, "--seed", min=0, max=SEED_MAX,
                                     help="Participant seed of the simulated forearm."),
+    max_wait_ms: float = typer.Option(500.0, "--max-wait-ms", min=1.0, max=60_000.0,
+                                      help="A tap that waited longer than this behind others is dropped and "
+                                           "answered /error stale (ms)."),
 ) -> None:
     """Play taps that other programs (Unity, Max/MSP, Pure Data, Python) ask for over OSC/UDP.
 
     Addresses: /tap <location>, /tap_xy <x_mm> <y_mm>, /method <name>, /stop. A played tap
     is answered /played; every problem is answered /error <reason> to the sender and plays
-    nothing. /stop, Ctrl-C (SIGINT) or SIGTERM set every output to zero and end the server.
+    nothing. Taps queue while one plays; one that waited longer than --max-wait-ms is dropped
+    (/error stale). /stop acts at once, ahead of the queued taps: like Ctrl-C (SIGINT) or
+    SIGTERM, it cuts the play under way, sets every output to zero and ends the server.
     Needs pip install 'vibrofocus\\[osc]'.
     """
     with user_errors(interrupt_message="serve-osc stopped; all outputs at zero"):
@@ -82,7 +87,7 @@ def serve_osc(
                 designer.prepare_grid()
             if host not in _LOCAL_HOSTS:
                 err_console.print(f"[bold red]WARNING:[/] binding to {host}: anyone who can reach it can play taps.")
-            server = OscTapServer(the_rig, designer, host=host, port=port)
+            server = OscTapServer(the_rig, designer, host=host, port=port, max_wait_s=max_wait_ms / 1e3)
             shown_host, shown_port = server.address
             typer.echo(f"serve-osc: listening on osc.udp://{shown_host}:{shown_port} ({rig} rig, designs from "
                        f"{source}, method {designer.method}, drive limit {designer.limit_v:g} V)")

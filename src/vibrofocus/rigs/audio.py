@@ -63,7 +63,7 @@ from .hardware import HardwareRig
 from .onset import PORTAUDIO_CLOCK, DeviceOnset
 
 __all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface",
-           "default_output_risk"]
+           "default_output_risk", "audio_lock_keys"]
 
 log = logging.getLogger(__name__)
 
@@ -95,11 +95,11 @@ def audio_interface_words(name: str) -> frozenset[str]:
     ``"Speakers (Focusrite USB Audio)"`` (MME), ``"Focusrite USB ASIO"`` and
     ``"Scarlett 2i2 USB: Audio (hw:1,0)"`` (ALSA) all give words that identify the
     interface ({"focusrite"}, {"scarlett", "2i2"}), leaving out host-API and generic words
-    and ALSA's ``hw:`` numbers.
+    and ALSA's ``hw:`` numbers, and channel numbers (``"Out 1-2"``).
     """
     text = re.sub(r"\(hw:[^)]*\)", " ", name.lower())
     words = re.findall(r"[a-z0-9]+(?:[-_][a-z0-9]+)*", text)
-    return frozenset(w for w in words if w not in _GENERIC_WORDS and not w.isdigit())
+    return frozenset(w for w in words if w not in _GENERIC_WORDS and not re.fullmatch(r"[0-9_-]+", w))
 
 
 def same_audio_interface(a: str, b: str) -> bool:
@@ -129,6 +129,31 @@ def default_output_risk(rig_device: str, default_device: str, *, same_index: boo
         return "routing"
     rig_words = audio_interface_words(rig_device)
     return "same" if rig_words and default_words & rig_words else None
+
+
+def audio_lock_keys(name: str) -> list:
+    """The device lock files of an audio interface, by the rule of :func:`same_audio_interface`.
+
+    Two names that share an identifying word lock a common file (one per word), so every
+    spelling of one interface is one lock. A name that only routes to the system's mix,
+    or has no identifying word, is the same as any interface: it locks a file that every
+    audio rig takes shared, exclusively.
+
+    Parameters
+    ----------
+    name : str
+        The device's name as its host API lists it.
+
+    Returns
+    -------
+    list of LockKey
+    """
+    from .device_lock import LockKey
+
+    words = audio_interface_words(name)
+    if not words or words & _ROUTING_DEVICES:
+        return [LockKey("audio-any")]
+    return [LockKey("audio-any", shared=True)] + [LockKey(f"audio-word:{w}") for w in sorted(words)]
 
 
 def _sounddevice():
@@ -270,7 +295,7 @@ class AudioRig(HardwareRig):
                 "and channels.loopback_input) or use ASIO, Core Audio, ALSA or JACK"
             )
         words = sorted(audio_interface_words(self.device_name)) or [self.device_name.lower()]
-        self._lock_device("audio:" + "-".join(words))
+        self._lock_device("audio:" + "-".join(words), keys=audio_lock_keys(self.device_name))
         self.setup_report = [
             f"device {self.device_index}: {self.device_name} ({self.hostapi_name})",
             f"rate: device {self.device_fs:g} Hz, rig {self.fs:g} Hz (resampled {self._up}/{self._down})"

@@ -12,7 +12,7 @@ from ..errors import SafetyError, ValidationError
 from ..layout import ArrayLayout
 from .base import Rig
 from .config import RigConfig
-from .device_lock import DeviceLock
+from .device_lock import DeviceLock, LockKey
 
 __all__ = ["HardwareRig"]
 
@@ -85,9 +85,13 @@ class HardwareRig(Rig):
             f"(across plays), drives up to {lim.max_duration_s:g} s, {1e3 * lim.fade_s:g} ms fades",
         ]
 
-    def _lock_device(self, device_id: str) -> None:
-        """Take the device for this rig until :meth:`close` (subclasses call it once they know the device)."""
-        self.device_lock = DeviceLock(device_id, owner=f"a {self.kind} rig").acquire()
+    def _lock_device(self, device_id: str, keys: "list[LockKey] | None" = None) -> None:
+        """Take the device for this rig until :meth:`close` (subclasses call it once they know the device).
+
+        ``keys``: the lock files that stand for the device, when one device has several names
+        (:class:`~vibrofocus.rigs.device_lock.LockKey`); default one, named after ``device_id``.
+        """
+        self.device_lock = DeviceLock(device_id, owner=f"a {self.kind} rig", keys=keys).acquire()
         _OPEN_RIGS.add(self)
 
     def close(self) -> None:
