@@ -51,10 +51,14 @@ class HeldRig(SimulatedForearm):
             self.events.append("played")
         return super()._play(drive)
 
-    def stop(self):
-        self.cut.set()
-        self.events.append("stop")
-        super().stop()
+    def _zero_outputs(self):
+        # Rig.stop() is final: a stop is seen here, as the stop epoch moving (Rig.stop
+        # moves it before it zeroes), unlike the zero write after every play.
+        if self._stop_epoch != getattr(self, "_epoch_seen", 0):
+            self._epoch_seen = self._stop_epoch
+            self.cut.set()
+            self.events.append("stop")
+        super()._zero_outputs()
 
 
 @pytest.fixture(scope="module")

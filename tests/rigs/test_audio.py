@@ -365,7 +365,7 @@ def test_a_clipped_vibrometer_input_is_reported(rig):
     rig.close()
     with make_rig("audio", config=cfg) as loud:
         drive = np.zeros((4, 2000))
-        drive[0, 500:1500] = 10.0  # a 10 V step: 1.0 digital, the end of the range
+        drive[0, 500:1500] = 10.0 * np.sign(np.sin(2 * np.pi * 50 * (np.arange(1000) + 0.5) / FS))  # +-10 V: 1.0 digital
         loud.play_and_record(drive, tail_s=0.0)
         assert loud.last_clipped.tolist() == [True]
 
