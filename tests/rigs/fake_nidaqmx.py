@@ -30,20 +30,37 @@ from nidaqmx.errors import DaqError
 
 RESERVED = -50103
 UNSUPPORTED = -200452
+#: A property value the device does not support (e.g. ZERO_VOLTS idle on some devices), and
+#: the code a finite output task of fewer than 2 samples gets here (NI documents a minimum
+#: buffer of 2 samples for finite generation; the exact code of that refusal is assumed).
+INVALID_VALUE = -200077
 OUT_OF_RANGE = -200561
 INVALID_TASK = -200088
 
 
 class FakeDevice:
-    """One NI device: its outputs (V), who reserved which channel, and what it supports."""
+    """One NI device: its outputs (V), who reserved which channel, and what it supports.
+
+    Default: a USB-6343 (4 analog outputs, 32 inputs; 8 modelled). With ``modules`` it is
+    a CompactDAQ chassis (``name`` = "cDAQ1") holding an output and an input module
+    (``{"cDAQ1Mod1": ("ao", 4), "cDAQ1Mod2": ("ai", 4)}``): channels live on the modules,
+    the start trigger on the chassis (``/cDAQ1/ao/StartTrigger``). ``idle_zero="refused"``
+    models a device that has the idle-output property but refuses ZERO_VOLTS (-200077).
+    """
 
     def __init__(self, name="Dev1", *, n_ao=4, n_ai=8, idle_zero=True, timebase_hz=100e6,
                  ao_max_rate=2e6, ai_max_rate=2e6, ao_ranges=(-10.0, 10.0, -5.0, 5.0, -1.0, 1.0),
-                 product_type="PCIe-6361 (FAKE)", timestamps=False, loopback=None, loopback_delay=0):
+                 product_type="USB-6343 (FAKE)", timestamps=False, loopback=None, loopback_delay=0,
+                 modules=None):
         self.name = name
         self.product_type = product_type
-        self.ao_names = [f"{name}/ao{i}" for i in range(n_ao)]
-        self.ai_names = [f"{name}/ai{i}" for i in range(n_ai)]
+        self.modules = dict(modules or {})
+        if self.modules:
+            self.ao_names = [f"{m}/ao{i}" for m, (kind, n) in self.modules.items() if kind == "ao" for i in range(n)]
+            self.ai_names = [f"{m}/ai{i}" for m, (kind, n) in self.modules.items() if kind == "ai" for i in range(n)]
+        else:
+            self.ao_names = [f"{name}/ao{i}" for i in range(n_ao)]
+            self.ai_names = [f"{name}/ai{i}" for i in range(n_ai)]
         self.outputs = {ch: 0.0 for ch in self.ao_names}
         self.reserved: dict[str, FakeTask] = {}
         self.idle_zero = idle_zero
@@ -66,17 +83,31 @@ class FakeDevice:
         self.tasks.append(task)
         return task
 
+    def forget_setup(self) -> None:
+        """Forget the tasks made so far (a rig's setup probe), so a test counts only its own; they must be closed."""
+        assert all(t.state == "closed" for t in self.tasks), "a setup task was left open"
+        self.tasks.clear()
+        self.events.clear()
+
     def output_vector(self) -> np.ndarray:
         return np.array([self.outputs[ch] for ch in self.ao_names])
 
     # what nidaqmx.system.System.local() offers, for check_setup
     def system(self):
-        dev = SimpleNamespace(
-            name=self.name, product_type=self.product_type,
-            ao_physical_chans=[SimpleNamespace(name=n) for n in self.ao_names],
-            ai_physical_chans=[SimpleNamespace(name=n) for n in self.ai_names],
-            ao_samp_clk_supported=True, ao_min_rate=0.1, ao_max_rate=self.ao_max_rate,
-            ai_max_single_chan_rate=self.ai_max_rate, ao_voltage_rngs=self.ao_ranges)
+        def device(name, product, ao, ai):
+            return SimpleNamespace(
+                name=name, product_type=product,
+                ao_physical_chans=[SimpleNamespace(name=n) for n in ao],
+                ai_physical_chans=[SimpleNamespace(name=n) for n in ai],
+                ao_samp_clk_supported=bool(ao), ao_min_rate=0.1, ao_max_rate=self.ao_max_rate,
+                ai_max_single_chan_rate=self.ai_max_rate, ao_voltage_rngs=self.ao_ranges if ao else [])
+
+        devices = [device(self.name, self.product_type, [] if self.modules else self.ao_names,
+                          [] if self.modules else self.ai_names)]
+        for module in self.modules:
+            devices.append(device(module, f"NI 9xxx module of {self.name} (FAKE)",
+                                  [n for n in self.ao_names if n.startswith(module + "/")],
+                                  [n for n in self.ai_names if n.startswith(module + "/")]))
 
         class Devices(list):
             def __getitem__(self, key):
@@ -84,7 +115,7 @@ class FakeDevice:
                     return next(d for d in self if d.name == key)
                 return list.__getitem__(self, key)
 
-        return SimpleNamespace(devices=Devices([dev]), driver_version="FAKE")
+        return SimpleNamespace(devices=Devices(devices), driver_version="FAKE")
 
 
 class FakeAOChannel:
@@ -98,6 +129,8 @@ class FakeAOChannel:
 
     @ao_idle_output_behavior.setter
     def ao_idle_output_behavior(self, value):
+        if self._task.device.idle_zero == "refused":
+            raise DaqError("Requested value is not a supported value for this property (FAKE)", INVALID_VALUE)
         if not self._task.device.idle_zero:
             raise DaqError("Specified property is not supported by the device (FAKE)", UNSUPPORTED)
         self._idle = value
@@ -137,6 +170,8 @@ class _Timing:
         self.samps_per_chan = None
 
     def cfg_samp_clk_timing(self, rate, source="", active_edge=None, sample_mode=None, samps_per_chan=1000):
+        if self._task.ao_channels.channels and samps_per_chan < 2:
+            raise DaqError("Finite generation needs at least 2 samples per channel (FAKE)", INVALID_VALUE)
         divisor = max(1, round(self._task.device.timebase_hz / rate))
         self.samp_clk_rate = self._task.device.timebase_hz / divisor  # coerced, as the driver does
         self.samps_per_chan = samps_per_chan

@@ -53,7 +53,9 @@ def device():
 
 
 def make(device, **extra) -> NidaqRig:
-    return NidaqRig(parse_rig_config(nidaq_config(**extra)), task_factory=device.factory, system=device.system())
+    rig = NidaqRig(parse_rig_config(nidaq_config(**extra)), task_factory=device.factory, system=device.system())
+    device.forget_setup()  # the setup's idle-output probe (closed): tests count their own tasks
+    return rig
 
 
 @pytest.fixture
@@ -464,3 +466,50 @@ def test_latency_on_an_input_the_device_lacks_names_it(device):
     with make(device) as rig, pytest.raises(DeviceError, match="Dev1/ai8 does not exist"):
         measure_latency(rig, count=2, spacing_s=0.0, loopback=9, channel=1)
     np.testing.assert_array_equal(device.output_vector(), 0.0)
+
+
+def test_a_compactdaq_chassis_with_output_and_input_modules_plays_and_records():
+    """The paper's own rig is a cDAQ-9174: AO and AI on separate modules, triggers on the chassis."""
+    device = FakeDevice("cDAQ1", modules={"cDAQ1Mod1": ("ao", 4), "cDAQ1Mod2": ("ai", 4)},
+                        product_type="cDAQ-9174 (FAKE)", loopback={"cDAQ1Mod2/ai0": "cDAQ1Mod1/ao1"})
+    cfg = nidaq_config(device="cDAQ1Mod1", force_sensors=None)
+    cfg["channels"] = {"actuators": ["ao0", "ao1", "ao2", "ao3"], "vibrometer": "cDAQ1Mod2/ai0"}
+    rig = NidaqRig(parse_rig_config(cfg), task_factory=device.factory, system=device.system())
+    try:
+        assert any("inputs on cDAQ1Mod2" in line and "chassis cDAQ1" in line for line in rig.setup_report)
+        d = drive()
+        rec = rig.play_and_record(d, tail_s=0.0)
+        ai = [t for t in device.tasks if t.ai_channels.channels][-1]
+        assert ai.triggers.start_trigger.source == "/cDAQ1/ao/StartTrigger"
+        # The loopback reads actuator 2's output through the chassis trigger: the drive itself, scaled.
+        expected = rig.check(d)[1] / GAIN * 1e-6  # volts at the output -> m through the decoder's 1e-6 m/V
+        np.testing.assert_allclose(rec[0], expected, atol=1e-12)
+    finally:
+        rig.close()
+
+
+def test_modules_of_two_chassis_are_refused():
+    cfg = nidaq_config(device="cDAQ1Mod1", force_sensors=None)
+    cfg["channels"] = {"actuators": ["ao0", "ao1", "ao2", "ao3"], "vibrometer": "cDAQ2Mod2/ai0"}
+    with pytest.raises(ValidationError, match="modules of one CompactDAQ chassis"):
+        parse_rig_config(cfg)
+
+
+@pytest.mark.parametrize("idle_zero, words", [(True, "go to 0 V by themselves"), (False, "HOLD their last value"),
+                                              ("refused", "HOLD their last value")])
+def test_the_setup_report_says_whether_outputs_idle_at_zero_and_a_refused_zero_idle_still_plays(idle_zero, words):
+    device = FakeDevice(idle_zero=idle_zero)
+    rig = make(device)
+    try:
+        assert any(words in line for line in rig.setup_report)
+        rig.play(drive())
+        np.testing.assert_array_equal(device.output_vector(), 0.0)
+    finally:
+        rig.close()
+
+
+def test_the_fake_refuses_a_one_sample_finite_output_task_as_daqmx_does(device):
+    task = device.factory()
+    task.ao_channels.add_ao_voltage_chan("Dev1/ao0", min_val=-1.0, max_val=1.0)
+    with pytest.raises(DaqError):
+        task.timing.cfg_samp_clk_timing(FS, sample_mode=AcquisitionType.FINITE, samps_per_chan=1)

@@ -30,6 +30,7 @@ channels are physical channel names (``"ao0"`` or ``"Dev1/ao0"``).
 from __future__ import annotations
 
 import json
+import re
 import tomllib
 from pathlib import Path
 from typing import Annotated, Any, Literal, Union
@@ -418,22 +419,40 @@ class NidaqRigConfig(RigConfig):
 
     @model_validator(mode="after")
     def _one_device(self) -> "NidaqRigConfig":
-        # Input and output are synchronised through one device's start trigger and
-        # timebase; channels on two devices would not be sample-synchronous.
+        # Input and output are synchronised through one timebase and one start trigger:
+        # one device, or the modules of one CompactDAQ chassis (cDAQ1Mod1, cDAQ1Mod2),
+        # whose triggers are routed through the chassis backplane.
+        devices = sorted({self.physical(ch).split("/")[0] for ch in self._all_channels()})
+        chassis = {_chassis_of(d) for d in devices}
+        if len(devices) > 1 and (len(chassis) > 1 or None in chassis):
+            raise ValueError(
+                f"channels are on {len(devices)} devices ({', '.join(devices)}): actuators and vibrometer must be "
+                f"on one device, or on modules of one CompactDAQ chassis (cDAQ1Mod1, cDAQ1Mod2), to be "
+                f"sample-synchronous; put them all on {self.device}"
+            )
+        return self
+
+    def _all_channels(self) -> list[str]:
         names = list(self.channels.actuators) + [self.channels.vibrometer]
         if self.force_sensors:
             names += list(self.force_sensors.channels)
-        devices = sorted({self.physical(ch).split("/")[0] for ch in names})
-        if len(devices) > 1:
-            raise ValueError(
-                f"channels are on {len(devices)} devices ({', '.join(devices)}): actuators and vibrometer must be "
-                f"on one device to be sample-synchronous; put them all on {self.device}"
-            )
-        return self
+        return names
 
     def physical(self, channel: str) -> str:
         """Full physical channel name, ``"Dev1/ao0"`` for ``"ao0"``."""
         return channel if "/" in channel else f"{self.device}/{channel}"
+
+    @property
+    def timing_device(self) -> str:
+        """The device whose timebase and triggers the tasks share: the chassis of cDAQ modules, else the device."""
+        first = self.physical(self.channels.actuators[0]).split("/")[0]
+        return _chassis_of(first) or first
+
+
+def _chassis_of(device: str) -> str | None:
+    """The CompactDAQ chassis of a module name (``"cDAQ1"`` for ``"cDAQ1Mod2"``), else None."""
+    match = re.fullmatch(r"(.+?)Mod\d+", device)
+    return match.group(1) if match else None
 
 
 _ANY_CONFIG = pydantic.TypeAdapter(

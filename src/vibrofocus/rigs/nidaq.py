@@ -69,6 +69,9 @@ log = logging.getLogger(__name__)
 POLL_S = 0.005
 #: DAQmx error of a property the device does not support.
 _UNSUPPORTED_PROPERTY = -200452
+#: DAQmx error of a property value the device does not support (a device with the idle
+#: output property may still refuse ZERO_VOLTS).
+_UNSUPPORTED_VALUE = -200077
 #: A loopback capture (``vibrofocus latency``) records this long after the click, s.
 CAPTURE_TAIL_S = 0.05
 
@@ -112,9 +115,12 @@ class NidaqTasks:
         self._task_factory = task_factory
         self._system = system
         first = config.physical(config.channels.actuators[0])
+        #: The device of the outputs (a module, on a CompactDAQ chassis).
         self.device = first.split("/")[0]
-        #: Terminal the input task starts on.
-        self.start_trigger = f"/{self.device}/ao/StartTrigger"
+        #: The device that times the tasks and routes their triggers: the chassis of cDAQ modules.
+        self.timing_device = config.timing_device
+        #: Terminal the input task starts on (on a chassis: its backplane's AO start trigger).
+        self.start_trigger = f"/{self.timing_device}/ao/StartTrigger"
         # The output task now generating, so an emergency stop from another thread can
         # abort it and free its channels; the lock keeps that from racing its closing.
         self._active_ao = None
@@ -148,20 +154,24 @@ class NidaqTasks:
             return ["NI-DAQmx: no system to query; setup not checked"]
         found = []
         names = [d.name for d in self._system.devices]
-        if self.device not in names:
-            raise DeviceError(f"NI device {self.device!r} not found; NI MAX lists: {', '.join(names) or 'none'}")
-        dev = self._system.devices[self.device]
-        found.append(f"device {self.device}: {dev.product_type}")
+        inputs = [cfg.channels.vibrometer] + (list(cfg.force_sensors.channels) if cfg.force_sensors else [])
+        ao_device, ai_device = self.device, cfg.physical(inputs[0]).split("/")[0]
+        for device in dict.fromkeys((ao_device, ai_device)):
+            if device not in names:
+                raise DeviceError(f"NI device {device!r} not found; NI MAX lists: {', '.join(names) or 'none'}")
+        dev, ai_dev = self._system.devices[ao_device], self._system.devices[ai_device]
+        found.append(f"device {ao_device}: {dev.product_type}" + (
+            f"; inputs on {ai_device}: {ai_dev.product_type} (chassis {self.timing_device})"
+            if ai_device != ao_device else ""))
         ao = {c.name for c in dev.ao_physical_chans}
-        ai = {c.name for c in dev.ai_physical_chans}
+        ai = {c.name for c in ai_dev.ai_physical_chans}
         missing = [cfg.physical(c) for c in cfg.channels.actuators if cfg.physical(c) not in ao]
         if missing:
-            raise DeviceError(f"{self.device} has no analog output {', '.join(missing)}; its outputs are "
+            raise DeviceError(f"{ao_device} has no analog output {', '.join(missing)}; its outputs are "
                               f"{', '.join(sorted(ao)) or 'none'}")
-        inputs = [cfg.channels.vibrometer] + (list(cfg.force_sensors.channels) if cfg.force_sensors else [])
         missing = [cfg.physical(c) for c in inputs if cfg.physical(c) not in ai]
         if missing:
-            raise DeviceError(f"{self.device} has no analog input {', '.join(missing)}; its inputs are "
+            raise DeviceError(f"{ai_device} has no analog input {', '.join(missing)}; its inputs are "
                               f"{', '.join(sorted(ai)) or 'none'}")
         found.append(f"channels: outputs {', '.join(cfg.physical(c) for c in cfg.channels.actuators)}, "
                      f"vibrometer {cfg.physical(cfg.channels.vibrometer)}")
@@ -170,17 +180,22 @@ class NidaqTasks:
         if not dev.ao_min_rate <= cfg.fs <= dev.ao_max_rate:
             raise DeviceError(f"fs = {cfg.fs:g} Hz is outside the output rates of {self.device} "
                               f"({dev.ao_min_rate:g}-{dev.ao_max_rate:g} Hz)")
-        if cfg.fs > dev.ai_max_single_chan_rate:
-            raise DeviceError(f"fs = {cfg.fs:g} Hz is above the input rate of {self.device} "
-                              f"({dev.ai_max_single_chan_rate:g} Hz)")
+        if cfg.fs > ai_dev.ai_max_single_chan_rate:
+            raise DeviceError(f"fs = {cfg.fs:g} Hz is above the input rate of {ai_device} "
+                              f"({ai_dev.ai_max_single_chan_rate:g} Hz)")
         found.append(f"rate: {cfg.fs:g} Hz (outputs {dev.ao_min_rate:g}-{dev.ao_max_rate:g} Hz, "
-                     f"input up to {dev.ai_max_single_chan_rate:g} Hz)")
+                     f"input up to {ai_dev.ai_max_single_chan_rate:g} Hz)")
         rngs = list(dev.ao_voltage_rngs)
         cap = cfg.amplifier_input_max_v
         pairs = [(rngs[i], rngs[i + 1]) for i in range(0, len(rngs) - 1, 2)]
         if not any(lo <= -cap and cap <= hi for lo, hi in pairs):
             raise DeviceError(f"no output range of {self.device} covers +-{cap:g} V (ranges {pairs})")
         found.append(f"output range: +-{cap:g} V into the amplifier (device ranges {pairs})")
+        probe = self._ao_task()  # asks for 0 V idle outputs; writes nothing
+        probe.close()
+        found.append("outputs go to 0 V by themselves when a task stops" if self.idle_zero_supported else
+                     "outputs HOLD their last value when a task stops (the device cannot idle at 0 V): an explicit "
+                     "zero is written after every play and at every stop")
         return found
 
     # ------------------------------------------------------------------ channels
@@ -207,7 +222,7 @@ class NidaqTasks:
             chan.ao_idle_output_behavior = AOIdleOutputBehavior.ZERO_VOLTS
             self.idle_zero_supported = True
         except _daq_error_types() as exc:
-            if getattr(exc, "error_code", None) != _UNSUPPORTED_PROPERTY:
+            if getattr(exc, "error_code", None) not in (_UNSUPPORTED_PROPERTY, _UNSUPPORTED_VALUE):
                 raise
             self.idle_zero_supported = False  # the explicit zero write still follows every play
 
@@ -492,7 +507,7 @@ class NidaqRig(HardwareRig):
         self.strap_sensors = config.force_sensors.build() if config.force_sensors else None
         # Private: every drive reaches the adapter through Rig.play and its safety layer.
         self._daq = NidaqTasks(config, task_factory, system)
-        self._lock_device(f"nidaq:{self._daq.device}")
+        self._lock_device(f"nidaq:{self._daq.timing_device}")
         try:  # the same checks as `vibrofocus devices --check`, before the first play
             self.setup_report = self._daq.check_setup()
         except BaseException:
