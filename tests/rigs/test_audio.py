@@ -588,3 +588,62 @@ def test_the_cue_plays_at_the_devices_own_rate(jack_server):
         time.sleep(3 * JACK_PERIOD / JACK_RATE)
     x = recorder.signal()[1][:, 0].astype(float)
     np.testing.assert_allclose(np.abs(x).max(), CUE_PEAK, rtol=0.02)
+
+
+_DYING_SERVER_SCRIPT = """
+import json, os, signal, sys, threading, time
+import numpy as np
+from vibrofocus.rigs import DeviceError, make_rig
+config = json.loads(sys.argv[1])
+n = int(3.0 * config["fs"])
+drive = np.tile(2.0 * np.sin(2 * np.pi * 200 * np.arange(n) / config["fs"]), (4, 1))
+with make_rig("audio", config=config) as rig:
+    threading.Timer(0.5, os.kill, args=(int(sys.argv[2]), signal.SIGKILL)).start()
+    t0 = time.monotonic()
+    try:
+        rig.play(drive)
+        outcome = "played to its end"
+    except DeviceError as exc:
+        outcome = "DeviceError: " + str(exc)
+    print(json.dumps({"outcome": outcome, "elapsed_s": time.monotonic() - t0}), flush=True)
+os._exit(0)  # PortAudio's own exit handler asserts on a JACK client whose server died
+"""
+
+
+@pytest.mark.slow
+def test_a_jack_server_that_dies_mid_play_gives_a_device_error_not_a_hang(jack_server, tmp_path):
+    """The server is killed 0.5 s into a 3 s play: the play ends with DeviceError within its deadline.
+
+    In a process of its own (with a JACK server of its own): PortAudio cannot be shut down
+    cleanly in a process whose JACK server died.
+    """
+    import json
+    import os
+    import subprocess
+    import sys
+
+    from .conftest import JACK_LOOPBACK_PORTS
+
+    name = f"vibrofocus-dying-{os.getpid()}"
+    proc = subprocess.Popen(["jackd", "-n", name, "--no-realtime", "-L", str(JACK_LOOPBACK_PORTS), "-d", "dummy",
+                             "-r", str(JACK_RATE), "-p", str(JACK_PERIOD), "-C", "2", "-P", "2"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 15
+        while True:
+            answer = subprocess.run(["jack_wait", "-s", name, "-c"], capture_output=True, text=True).stdout
+            if "running" in answer and "not" not in answer:
+                break
+            assert time.monotonic() < deadline, "the second jackd did not start"
+            time.sleep(0.1)
+        env = {**os.environ, "JACK_DEFAULT_SERVER": name, "JACK_NO_START_SERVER": "1"}
+        run = subprocess.run([sys.executable, "-c", _DYING_SERVER_SCRIPT, json.dumps(jack_config()), str(proc.pid)],
+                             capture_output=True, text=True, timeout=60, env=env)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        proc.wait()
+    result = json.loads(run.stdout.strip().splitlines()[-1])
+    print(f"the play ended {result['elapsed_s']:.1f} s after it began: {result['outcome'][:120]}")
+    assert result["outcome"].startswith("DeviceError")
+    assert result["elapsed_s"] < 3.0 + 2 * 0.5 + 2.0 + 1.5 + 1.0  # block, latencies, margin, abandoned close, slack

@@ -159,3 +159,35 @@ def test_a_backend_cannot_override_the_final_methods():
         class Unsafe(Rig):  # noqa: F841 - defining it is the test
             def play(self, drive):
                 return None
+
+
+def test_a_second_ctrl_c_while_the_outputs_are_zeroed_leaves_no_voltage():
+    """Ctrl-C mid-play, then Ctrl-C again while the zero is being written: the zero is still written."""
+    import signal
+
+    device = FakeDevice(idle_zero=False)  # outputs hold their last value
+    rig = _nidaq(device)
+    real_zero = rig._daq.write_zeros
+    calls = []
+
+    def write_zeros():
+        calls.append("zero")
+        if len(calls) == 1:
+            signal.raise_signal(signal.SIGINT)  # the second Ctrl-C, inside the zero write
+        real_zero()
+
+    def play(volts, *, stopped):
+        device.outputs.update({ch: 0.3 for ch in device.ao_names})  # mid-drive, held by the device
+        raise KeyboardInterrupt  # the first Ctrl-C
+
+    rig._daq.write_zeros = write_zeros
+    rig._daq.play = play
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            rig.play(_held_drive(0.2))
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    np.testing.assert_array_equal(device.output_vector(), 0.0)
+    rig._daq.write_zeros = real_zero
+    rig.close()
