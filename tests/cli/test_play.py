@@ -100,3 +100,36 @@ def test_boolean_drives_are_not_voltages(tmp_path):
     result = runner.invoke(app, ["play", str(path)])
     assert result.exit_code == 2, result.output
     assert "bool" in flat(result)
+
+
+def test_the_reported_rms_is_the_enforced_one_over_any_window(tmp_path):
+    """0.2 s of a 2 V peak tap: its RMS over 1 s (what the limit holds) is sqrt(energy / 1 s), not the file's own RMS."""
+    path = tmp_path / "tap.npz"
+    drives = write_drives(path)
+    result = runner.invoke(app, ["play", str(path), "--dry-run", "--json"])
+    assert result.exit_code == 0, result.output
+    out = json.loads(result.output)
+    from vibrofocus.rigs import SafetyLimits, check_drive
+
+    safe = check_drive(drives, FS, 4, SafetyLimits())
+    expected = np.sqrt(np.sum(safe**2, axis=1) / FS / 1.0)  # energy over a 1 s window of silence after it
+    np.testing.assert_allclose(out["rms_v"], expected, rtol=1e-5, atol=1e-9)
+    assert out["rms_window_s"] == 1.0
+
+
+def test_a_hardware_dry_run_needs_only_the_config_file(tmp_path):
+    """No interface is opened: the checks come from the lab's config (here an audio interface that is not there)."""
+    cfg = {"kind": "audio", "fs": FS, "amplifier_gain": 10.0, "volts_full_scale": 1.0,
+           "device": {"name": "an interface that is not plugged in"},
+           "channels": {"actuators": [1, 2, 3, 4], "vibrometer": 1},
+           "vibrometer": {"decoder": "displacement", "sensitivity": 1e-6}, "limits": {"peak_v": 5.0}}
+    lab = tmp_path / "lab.json"
+    lab.write_text(json.dumps(cfg))
+    ok, loud = tmp_path / "ok.npz", tmp_path / "loud.npz"
+    write_drives(ok, amplitude=4.0)
+    write_drives(loud, amplitude=6.0)
+    result = runner.invoke(app, ["play", str(ok), "--rig", "audio", "--rig-config", str(lab), "--dry-run", "--json"])
+    assert result.exit_code == 0, result.output
+    assert json.loads(result.output)["played"] is False
+    result = runner.invoke(app, ["play", str(loud), "--rig", "audio", "--rig-config", str(lab), "--dry-run"])
+    assert result.exit_code == 2 and "over the limit of 5 V" in result.output

@@ -647,3 +647,15 @@ def test_a_jack_server_that_dies_mid_play_gives_a_device_error_not_a_hang(jack_s
     print(f"the play ended {result['elapsed_s']:.1f} s after it began: {result['outcome'][:120]}")
     assert result["outcome"].startswith("DeviceError")
     assert result["elapsed_s"] < 3.0 + 2 * 0.5 + 2.0 + 1.5 + 1.0  # block, latencies, margin, abandoned close, slack
+
+
+@pytest.mark.parametrize("device_name, hostapi", [("default", "JACK Audio Connection Kit"),
+                                                  ("pipewire", "ALSA"), ("Speakers (MOTU)", "MME")])
+def test_a_routed_device_without_loopback_plays_stimuli_but_refuses_recordings(jack_server, device_name, hostapi):
+    """The loopback rule is a recording's: it keys on the device too, and it does not lock out play-only rigs."""
+    with make_rig("audio", config={**jack_config(loopback_output=None, loopback_input=None),
+                                   "latency_samples": JACK_PERIOD}) as rig:
+        rig.device_name, rig.hostapi_name = device_name, hostapi  # as PortAudio would name such a device
+        rig.play(pulse_drive())
+        with pytest.raises(DeviceError, match="does not keep one round-trip latency"):
+            rig.play_and_record(pulse_drive())

@@ -288,12 +288,6 @@ class AudioRig(HardwareRig):
         dev = sd.query_devices(self.device_index)
         self.device_name = str(dev["name"])
         self.hostapi_name = str(sd.query_hostapis(dev["hostapi"])["name"])
-        if ch.loopback_output is None and any(h in self.hostapi_name.lower() for h in UNSTEADY_LATENCY_HOSTAPIS):
-            raise DeviceError(
-                f"the {self.hostapi_name} host API does not keep one round-trip latency from recording to "
-                "recording, so latency_samples cannot align them; wire a loopback (channels.loopback_output "
-                "and channels.loopback_input) or use ASIO, Core Audio, ALSA or JACK"
-            )
         words = sorted(audio_interface_words(self.device_name)) or [self.device_name.lower()]
         self._lock_device("audio:" + "-".join(words), keys=audio_lock_keys(self.device_name))
         self.setup_report = [
@@ -537,8 +531,28 @@ class AudioRig(HardwareRig):
         self._check_status(status, "playing")
         return onset
 
+    @property
+    def unsteady_latency(self) -> bool:
+        """Whether this device's round trip may change from stream to stream (then recordings need a loopback).
+
+        Host APIs that resample or mix behind the program's back (MME, DirectSound, WASAPI
+        shared), and ALSA devices that route through the system's mixer (``default``,
+        ``pulse``, ``pipewire``, ``dmix``).
+        """
+        if any(h in self.hostapi_name.lower() for h in UNSTEADY_LATENCY_HOSTAPIS):
+            return True
+        return bool(set(re.findall(r"[a-z0-9]+", self.device_name.lower())) & _ROUTING_DEVICES)
+
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         has_loopback = self.config.channels.loopback_output is not None
+        if not has_loopback and self.unsteady_latency:
+            # Checked here, not when the rig opens: a play-only rig (stimuli, no recordings)
+            # does not need a steady round trip.
+            raise DeviceError(
+                f"{self.device_name} ({self.hostapi_name}) does not keep one round-trip latency from recording "
+                "to recording, so latency_samples cannot align them; wire a loopback (channels.loopback_output "
+                "and channels.loopback_input) or use ASIO, Core Audio, ALSA hw devices or JACK"
+            )
         if not has_loopback and self.config.latency_samples is None:
             raise DeviceError(
                 "the audio rig cannot align recordings: wire a loopback (channels.loopback_output and "

@@ -14,7 +14,7 @@ from .base import Rig
 from .config import RigConfig
 from .device_lock import DeviceLock, LockKey
 
-__all__ = ["HardwareRig"]
+__all__ = ["HardwareRig", "check_amplifier_input"]
 
 log = logging.getLogger(__name__)
 
@@ -109,10 +109,25 @@ class HardwareRig(Rig):
         return min(self.config.output_peak_v, self.config.amplifier_input_max_v)
 
     def _check_output_level(self, drive: np.ndarray) -> None:
-        # Independent of the limits at the actuator: the voltage into the amplifier.
-        volts = float(np.abs(drive).max(initial=0.0)) / self.config.amplifier_gain
-        cap = self.config.amplifier_input_max_v
-        if volts > cap * (1 + 1e-9):
-            raise SafetyError(
-                f"drive refused: it needs {volts:.4g} V into the amplifier, over amplifier_input_max_v = {cap:g} V"
-            )
+        check_amplifier_input(drive, self.config)
+
+
+def check_amplifier_input(drive: np.ndarray, config: RigConfig) -> None:
+    """Refuse a drive that needs more than ``amplifier_input_max_v`` into the amplifier.
+
+    Independent of the limits at the actuator (a wrong gain must not get through).
+    Used by every hardware rig before a play, and by ``play --dry-run`` from the config
+    file alone, before the interface is there.
+
+    Parameters
+    ----------
+    drive : ndarray, shape (n_actuators, n_samples)
+        Volts at the actuators, V.
+    config : RigConfig
+    """
+    volts = float(np.abs(drive).max(initial=0.0)) / config.amplifier_gain
+    cap = config.amplifier_input_max_v
+    if volts > cap * (1 + 1e-9):
+        raise SafetyError(
+            f"drive refused: it needs {volts:.4g} V into the amplifier, over amplifier_input_max_v = {cap:g} V"
+        )
