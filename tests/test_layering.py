@@ -24,7 +24,7 @@ PACKAGE = Path(vibrofocus.__file__).parent
 #: loads only :mod:`vibrofocus.errors`.
 FLOORS = (
     ("errors", "defaults", "_docs", "_style", "_templates", "_interrupts"),  # constants, messages, signals
-    ("_oserrors", "_validation"),                             # error wording, the shared checks
+    ("_oserrors", "_validation", "_safe_folders"),            # error wording, the shared checks, shared folders
     ("_output_rules",),                                       # what an output may replace
     ("_disk_checks", "_atomic_folders"),                      # free space, whole folders
     ("_atomic",),                                             # atomic files (re-exports the four above)

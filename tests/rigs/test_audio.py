@@ -130,16 +130,36 @@ def test_drive_reaches_output_scaled_by_gain_and_full_scale(rig):
     assert not block[:, 1:4].any()
 
 
-def test_resampling_overshoot_never_exceeds_the_limit(rig, caplog):
-    # Full-scale steps at the limit: the 10 kHz -> 48 kHz interpolation overshoots
-    # between the original samples (Gibbs); the device must still never see more.
+def test_a_tap_at_the_limit_is_scaled_under_it_after_resampling_not_clipped(rig, caplog):
+    """A Ricker tap whose samples sit at the limit peaks a little over it between them at 48 kHz."""
+    import logging
+
+    import scipy.signal
+
+    drive = np.zeros((4, 400))
+    drive[0] = ricker(FS, sigma=0.25e-3, duration=400 / FS, t0=0.02)  # a sharp tap: content up to about 2 kHz
+    drive[0] *= 10.0 / np.abs(drive[0]).max()
+    safe = rig.check(drive)
+    plain = scipy.signal.resample_poly(safe[0] / (GAIN * VFS_OUT), 24, 5)
+    ceiling = rig.limits.peak_v / (GAIN * VFS_OUT)
+    assert np.abs(plain).max() > ceiling  # the case under test: the resampled drive does overshoot
+    with caplog.at_level(logging.WARNING):
+        block = rig._to_device(safe, n_tail=0)
+    assert np.abs(block).max() <= ceiling * (1 + 1e-6)
+    # One gain for the whole drive (its shape kept), not a clip: proportional to the plain resampling.
+    np.testing.assert_allclose(block[:, 0], plain * ceiling / np.abs(plain).max(), rtol=1e-5, atol=1e-7)
+    assert "over the limit" not in caplog.text  # no warning on every tap
+
+
+def test_a_drive_that_overshoots_a_lot_when_resampled_is_refused(rig):
+    # Full-scale steps at the limit: the 10 kHz -> 48 kHz interpolation rings well past it (Gibbs).
+    from vibrofocus.errors import SafetyError
+
     drive = np.zeros((4, 400))
     drive[0, 100:110] = 10.0
     drive[0, 110:120] = -10.0
-    block = rig._to_device(rig.check(drive), n_tail=0)
-    ceiling = rig.limits.peak_v / (GAIN * VFS_OUT)
-    assert np.abs(block).max() <= ceiling * (1 + 1e-6)
-    assert "clipped" in caplog.text
+    with pytest.raises(SafetyError, match="peaks .* over the limit between its samples"):
+        rig._to_device(rig.check(drive), n_tail=0)
 
 
 def test_missing_loopback_signal_is_a_clear_error(jack_server):

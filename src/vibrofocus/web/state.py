@@ -135,6 +135,8 @@ class WebState:
         Calibration jobs in progress, by job id.
     rigs : dict
         Open rigs by (kind, seed).
+    job_threads : list of threading.Thread
+        The background jobs' threads (calibrations), which :meth:`shutdown` waits for.
     planned : dict
         Planned trials by session id.
     analyses : dict
