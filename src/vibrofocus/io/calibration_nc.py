@@ -62,6 +62,7 @@ import numpy as np
 
 from .._validation import shorten
 from ..errors import CalibrationFileError, ValidationError
+from ._headers import check_hdf5_sizes
 from .jsonsafe import json_safe
 
 __all__ = ["SCHEMA_VERSION", "FILE_KIND", "RECORD_KEYS", "write_calibration_file", "read_calibration_file",
@@ -337,7 +338,7 @@ def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
     problem = None
     with _quiet_half_open_files():
         try:
-            shapes, unknown = _check_declared_sizes(path)
+            shapes, unknown = check_hdf5_sizes(path, "a calibration file", _KNOWN_VARS)
             with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False, phony_dims="access",
                                  drop_variables=unknown) as ds:
                 _check_netcdf_shapes(ds, shapes, unknown)
@@ -356,63 +357,6 @@ def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
 _KNOWN_VARS = frozenset({*_REQUIRED_VARS, *_MIMO_VARS, "fit_value", "fit_std", "fit_log_covariance", "fit_residual",
                          "fit_parameter", "frequency", "point", "point_x", "point_y", "point_kind", "actuator",
                          "actuator_x", "actuator_y"})
-#: Largest total of the known variables any file may declare, bytes, whatever its size...
-_DECLARED_FLOOR_BYTES = 256 * 2**20
-#: ... and beyond it, at most this many times the file's size (raw recordings, the one
-#: compressed variable, are mostly noise, which hardly compresses).
-_DECLARED_PER_FILE_BYTE = 16
-#: How netCDF-4 marks an HDF5 dataset that is only a dimension (its NAME attribute, bytes).
-_DIMENSION_ONLY = "This is a netCDF dimension but not a netCDF variable"
-#: HDF5 filters that do not change the size of the data: shuffle and the Fletcher-32 checksum.
-_SIZE_KEEPING_FILTERS = frozenset({2, 3})
-
-
-def _check_declared_sizes(path: Path) -> tuple[dict[str, tuple[int, ...]], list[str]]:
-    """Check the known variables' declared sizes from the HDF5 header.
-
-    Returns the known variables' declared shapes and the other variables' names.
-
-    An HDF5 dataset that was never written costs a few hundred bytes on disk and reads
-    back as its fill value in full, so each variable's declared size is checked against
-    the bytes the file stores for it (:func:`vibrofocus._validation.check_declared_size`),
-    and all of them together against :data:`_DECLARED_FLOOR_BYTES` or
-    :data:`_DECLARED_PER_FILE_BYTE` times the file's size, before anything is read.
-    Variables this schema does not name are left unread (the caller drops them).
-
-    Raises
-    ------
-    ValidationError
-        A variable declared larger than the file can hold, or the sum above the cap.
-    """
-    import h5py
-
-    from .._validation import check_declared_size
-
-    file_bytes = path.stat().st_size
-    cap = max(_DECLARED_FLOOR_BYTES, _DECLARED_PER_FILE_BYTE * file_bytes)
-    unknown, total, shapes = [], 0, {}
-    with h5py.File(path, "r") as f:
-        for name, obj in f.items():
-            if not isinstance(obj, h5py.Dataset):
-                continue
-            if name not in _KNOWN_VARS:
-                label = obj.attrs.get("NAME", b"")
-                label = label.decode("latin-1") if isinstance(label, bytes) else str(label)
-                if not label.startswith(_DIMENSION_ONLY):
-                    unknown.append(name)  # a netCDF dimension without a variable holds no data: not named
-                continue
-            shapes[name] = tuple(obj.shape or ())
-            plist = obj.id.get_create_plist()
-            filters = {plist.get_filter(k)[0] for k in range(plist.get_nfilters())}
-            total += check_declared_size(obj.shape or (), obj.dtype.itemsize, f"variable {name}",
-                                         stored_bytes=obj.id.get_storage_size(),
-                                         compressed=bool(filters - _SIZE_KEEPING_FILTERS))
-    if total > cap:
-        raise ValidationError(f"its variables declare {total:,} bytes in all, more than a calibration file of "
-                              f"{file_bytes:,} bytes may ({cap:,} bytes: the larger of "
-                              f"{_DECLARED_FLOOR_BYTES // 2**20} MiB and {_DECLARED_PER_FILE_BYTE} x the file's "
-                              "size); refused before reading")
-    return shapes, unknown
 
 
 def _check_netcdf_shapes(ds, shapes: Mapping[str, tuple[int, ...]], unknown: list[str]) -> None:
