@@ -17,6 +17,7 @@ __all__ = [
     "as_array",
     "check_shape",
     "check_finite",
+    "check_nonnegative",
     "check_positive",
     "check_in_range",
     "check_choice",
@@ -114,6 +115,15 @@ def check_finite(arr: np.ndarray, name: str) -> None:
         raise ValidationError(
             f"{name} contains {int(bad.sum())} non-finite value(s) (NaN or Inf); first at index {first}"
         )
+
+
+def check_nonnegative(arr: np.ndarray, name: str) -> None:
+    """Raise if ``arr`` holds a negative value (or NaN), saying how many and where the first is."""
+    bad = ~(arr >= 0)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValidationError(f"{name} must be >= 0; it holds {int(bad.sum())} negative or NaN value(s); first at "
+                              f"index {first}")
 
 
 def check_positive(value: float, name: str, *, allow_zero: bool = False) -> float:

@@ -1,9 +1,9 @@
-"""Declared array sizes read from file headers, checked before any data is read.
+"""Declared array sizes read from file headers (HDF5, npz), checked before any data is read.
 
 A header is a claim: an HDF5 dataset that was never written costs a few hundred bytes
 on disk and reads back in full as its fill value; compressed zeros shrink a
-thousandfold. Every reader of an HDF5 format (calibration netCDF, SOFA) checks the
-datasets it will read here first, through the one helper
+thousandfold. Every reader of an HDF5 format (calibration netCDF, SOFA) or an ``.npz``
+(drives, feature banks) checks the arrays it will read here first, through the one helper
 :func:`vibrofocus._validation.check_declared_size`.
 """
 
@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Collection
 from pathlib import Path
+from typing import Any
 
 from ..errors import ValidationError
 
@@ -94,3 +95,65 @@ def check_hdf5_sizes(path: Path, what: str, known: Collection[str] | None = None
                               f"bytes may ({cap:,} bytes: the larger of {DECLARED_FLOOR_BYTES // 2**20} MiB and "
                               f"{DECLARED_PER_FILE_BYTE} x the file's size); refused before reading")
     return shapes, unknown
+
+
+def npy_member_header(zf: Any, name: str, what: str) -> tuple[tuple[int, ...], Any, int]:
+    """Shape, dtype and data size (bytes) of member ``name`` of an ``.npz``, from its header alone.
+
+    Nothing but the header is decompressed. The header's shape must match the size the
+    archive's directory gives for the member, and fit in the bytes the archive stores
+    for it (:func:`vibrofocus._validation.check_declared_size`), so a header that claims
+    more data than the file holds is refused here, before anything is allocated.
+
+    Parameters
+    ----------
+    zf : zipfile.ZipFile
+        The open archive.
+    name : str
+        The member (``"drives.npy"``).
+    what : str
+        The file, for the message (``"drives file d.npz"``).
+
+    Returns
+    -------
+    shape : tuple of int
+    dtype : numpy.dtype
+    n_bytes : int
+
+    Raises
+    ------
+    ValidationError
+        The header and the data disagree, or the data would not fit in memory.
+    ValueError
+        An npy format version numpy does not know, or an unreadable header.
+    """
+    import zipfile
+
+    import numpy as np
+
+    from .._validation import check_declared_size
+
+    info = zf.getinfo(name)
+    with zf.open(info) as fh:
+        version = np.lib.format.read_magic(fh)
+        if version == (1, 0):
+            shape, _, dtype = np.lib.format.read_array_header_1_0(fh)
+        elif version == (2, 0):
+            shape, _, dtype = np.lib.format.read_array_header_2_0(fh)
+        else:
+            raise ValueError(f"npy format version {version} of {name}")
+        header_bytes = fh.tell()
+    shape = tuple(int(n) for n in shape)
+    count = 1
+    for n in shape:
+        count *= n
+    data_bytes = count * dtype.itemsize
+    if data_bytes != info.file_size - header_bytes:
+        raise ValidationError(
+            f"{what}: the header of {name} claims shape {shape} ({data_bytes:,} bytes of {dtype}) but the file "
+            f"holds {max(info.file_size - header_bytes, 0):,} bytes for it; the file is corrupt or was not written "
+            "by numpy"
+        )
+    check_declared_size(shape, dtype.itemsize, f"{what}: {name}", stored_bytes=info.compress_size,
+                        compressed=info.compress_type != zipfile.ZIP_STORED)
+    return shape, dtype, data_bytes
