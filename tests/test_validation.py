@@ -109,6 +109,24 @@ def test_check_memory_against_what_the_machine_has():
         check_memory(4 * free, "--n-samples 1e20")
 
 
+def test_check_declared_size_against_the_stored_bytes_and_a_limit():
+    from vibrofocus._validation import MAX_EXPANSION, check_declared_size
+
+    assert check_declared_size((3, 4), 8, "x", stored_bytes=96) == 96
+    assert check_declared_size((10**6,), 4, "z", stored_bytes=4 * 10**6 // MAX_EXPANSION + 1, compressed=True) == 4 * 10**6
+    with pytest.raises(ValidationError, match=r"y declares shape \(1000, 1000\) \(8,000,000 bytes\) but the file holds "
+                                              r"96 bytes of it"):
+        check_declared_size((1000, 1000), 8, "y", stored_bytes=96)
+    with pytest.raises(ValidationError, match=r"holds 100 compressed bytes"):
+        check_declared_size((10**6,), 8, "z", stored_bytes=100, compressed=True)
+    with pytest.raises(ValidationError, match=r"w declares a negative length: shape \(-1, 3\)"):
+        check_declared_size((-1, 3), 8, "w")
+    with pytest.raises(ValidationError, match=r"more than 4 x the file \(1,000 bytes\); refused before reading"):
+        check_declared_size((200,), 8, "v", limit_bytes=1000, limit_reason="4 x the file")
+    with pytest.raises(ValidationError, match=r"needs about .* GiB"):  # no overflow: Python integers
+        check_declared_size((2**40, 2**40), 8, "u")
+
+
 @pytest.mark.parametrize("text", ["\u0663", "\uff15", "1\u0660", "\u00b2"])
 def test_integer_text_reads_ascii_digits_only(text):
     from vibrofocus._validation import integer_text

@@ -17,6 +17,7 @@ __all__ = [
     "as_array",
     "check_shape",
     "check_finite",
+    "check_nonnegative",
     "check_positive",
     "check_in_range",
     "check_choice",
@@ -26,12 +27,18 @@ __all__ = [
     "shorten",
     "available_memory_bytes",
     "check_memory",
+    "check_declared_size",
 ]
 
 #: Longest text of a user's value an error message repeats, characters.
 SHORTEN_CHARS = 80
 #: Share of the available memory one allocation may take.
 MEMORY_SHARE = 0.5
+#: Most a compressed array can grow when read back: deflate (zlib, gzip, zip) tops out
+#: near 1032:1, so data declared beyond this many times its stored bytes is not in the file.
+MAX_EXPANSION = 1100
+#: Bytes of headers, checksums and padding an uncompressed array may differ from its data by.
+_STORAGE_SLACK = 4096
 
 
 def _describe_shape(shape: Sequence[int | None]) -> str:
@@ -108,6 +115,15 @@ def check_finite(arr: np.ndarray, name: str) -> None:
         raise ValidationError(
             f"{name} contains {int(bad.sum())} non-finite value(s) (NaN or Inf); first at index {first}"
         )
+
+
+def check_nonnegative(arr: np.ndarray, name: str) -> None:
+    """Raise if ``arr`` holds a negative value (or NaN), saying how many and where the first is."""
+    bad = ~(arr >= 0)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValidationError(f"{name} must be >= 0; it holds {int(bad.sum())} negative or NaN value(s); first at "
+                              f"index {first}")
 
 
 def check_positive(value: float, name: str, *, allow_zero: bool = False) -> float:
@@ -244,3 +260,69 @@ def check_memory(n_bytes: float, what: str) -> None:
             f"{what} needs about {n_bytes / 2**30:.3g} GiB of memory; this machine has {free / 2**30:.3g} GiB "
             f"available (at most {MEMORY_SHARE:.0%} of it is used for one job)"
         )
+
+
+def check_declared_size(
+    shape: Sequence[int],
+    itemsize: int,
+    name: str,
+    *,
+    stored_bytes: int | None = None,
+    compressed: bool = False,
+    limit_bytes: int | None = None,
+    limit_reason: str = "",
+) -> int:
+    """Size of an array a file's header declares, refused before anything is read or allocated.
+
+    A header is a claim: a few bytes can declare terabytes (an HDF5 dataset that was
+    never written reads back as its fill value, an npy header names any shape). Readers
+    of hostile files call this with the header's shape before reading the data.
+
+    Parameters
+    ----------
+    shape : sequence of int
+        The declared shape.
+    itemsize : int
+        Bytes per element.
+    name : str
+        The array and its file, for the message (``"variable H_real of P01.nc"``).
+    stored_bytes : int, optional
+        Bytes the file actually holds for the array. Uncompressed data must fit in them
+        (give or take a few KiB of checksums); compressed data may be up to
+        :data:`MAX_EXPANSION` times larger, no more.
+    compressed : bool
+        Whether ``stored_bytes`` are compressed.
+    limit_bytes : int, optional
+        Largest size the caller accepts for this array, bytes.
+    limit_reason : str
+        What ``limit_bytes`` stands for (``"4 x the file's size"``), for the message.
+
+    Returns
+    -------
+    int
+        The declared size, bytes.
+
+    Raises
+    ------
+    ValidationError
+        A negative length, more than the file holds or ``limit_bytes`` allow, or more
+        memory than :func:`check_memory` grants.
+    """
+    dims = tuple(int(n) for n in shape)
+    if any(n < 0 for n in dims):
+        raise ValidationError(f"{name} declares a negative length: shape {dims}")
+    n_bytes = int(itemsize)
+    for n in dims:
+        n_bytes *= n  # Python integers: no overflow whatever the header says
+    said = f"{name} declares shape {dims} ({n_bytes:,} bytes)"
+    if stored_bytes is not None:
+        room = int(stored_bytes) * MAX_EXPANSION if compressed else int(stored_bytes) + _STORAGE_SLACK
+        if n_bytes > room:
+            held = f"{int(stored_bytes):,} {'compressed ' if compressed else ''}bytes"
+            raise ValidationError(f"{said} but the file holds {held} of it; the file is corrupt or was edited "
+                                  "(checked before reading)")
+    if limit_bytes is not None and n_bytes > limit_bytes:
+        raise ValidationError(f"{said}, more than {limit_reason or 'the limit'} ({int(limit_bytes):,} bytes); "
+                              "refused before reading")
+    check_memory(n_bytes, f"{name} (shape {dims})")
+    return n_bytes

@@ -65,3 +65,96 @@ def test_a_sofa_file_of_another_convention_or_broken_is_refused_by_name(tmp_path
         import_sofa(tmp_path / "junk.sofa")
     with pytest.raises(CalibrationFileError, match="no such SOFA file"):
         import_sofa(tmp_path / "none.sofa")
+
+
+# --------------------------------------------------------------------------- hostile files
+def _edited(sofa_file, tmp_path, name="hostile.sofa"):
+    import shutil
+
+    _, path = sofa_file
+    edited = tmp_path / name
+    shutil.copy2(path, edited)
+    return edited
+
+
+@pytest.mark.parametrize("attribute, text, words", [
+    ("SampleRate", '"abc"', r"GLOBAL_vibrofocusSampleRate must be a number \(Hz\), got str"),
+    ("SampleRate", '{"a": 1}', r"GLOBAL_vibrofocusSampleRate must be a number \(Hz\), got dict"),
+    ("SampleRate", "NaN", r"GLOBAL_vibrofocusSampleRate must be > 0 and finite, got nan"),
+    ("SampleRate", "-5", r"GLOBAL_vibrofocusSampleRate must be > 0 and finite, got -5"),
+    ("SampleRate", "not json", r"GLOBAL_vibrofocusSampleRate is not JSON"),
+    ("Band", "5", r"GLOBAL_vibrofocusBand must be a pair \[low_hz, high_hz\], got 5"),
+    ("Band", "[100]", r"GLOBAL_vibrofocusBand must be a pair \[low_hz, high_hz\], got \[100\]"),
+    ("Band", "[400, 50]", r"GLOBAL_vibrofocusBand must satisfy 0 < low < high <= fs/2 = 5000 Hz, got \(400, 50\)"),
+    ("PointLabels", "5", r"GLOBAL_vibrofocusPointLabels must be a list of 13 texts \(one per point\), got 5"),
+    ("PointLabels", '["1", "2"]', r"GLOBAL_vibrofocusPointLabels must name the 13 points, got 2"),
+    ("PointKinds", json.dumps(["spot"] * 13), r"GLOBAL_vibrofocusPointKinds must be one of 'location', 'guard'"),
+    ("ActuatorNames", "[1, 2, 3, 4]", r"GLOBAL_vibrofocusActuatorNames must be a list of 4 texts"),
+    ("ParticipantID", "[]", r"GLOBAL_vibrofocusParticipantID must be a text, got list"),
+    ("Layout", "[" * 100_000 + "]" * 100_000, r"GLOBAL_vibrofocusLayout is nested more than 16 levels deep"),
+    ("Layout", "[" * 100 + "]" * 100, r"GLOBAL_vibrofocusLayout is nested more than 16 levels deep"),
+    ("Layout", "[]", r"GLOBAL_vibrofocusLayout must be a JSON object, got list"),
+    ("Layout", '"' + "x" * 1_000_001 + '"', r"GLOBAL_vibrofocusLayout is 1,000,003 characters long"),
+])
+def test_every_description_attribute_is_checked_and_named(sofa_file, tmp_path, attribute, text, words):
+    """Raw ValueError/TypeError/RecursionError on main, or NaN, -5 Hz, [100] and [400, 50] accepted."""
+    import h5py
+
+    edited = _edited(sofa_file, tmp_path)
+    with h5py.File(edited, "r+") as f:  # netCDF global attribute GLOBAL_X is the HDF5 attribute X
+        f.attrs[f"vibrofocus{attribute}"] = text
+    with pytest.raises(CalibrationFileError, match="hostile.sofa: attribute " + words):
+        import_sofa(edited)
+
+
+def test_a_file_declaring_unwritten_arrays_is_refused_before_reading(sofa_file, tmp_path):
+    """A 1.2 MB file declaring 2 x 10 GB of never-written data: 21 GB RSS and the OOM killer on main."""
+    import h5py
+
+    edited = _edited(sofa_file, tmp_path)
+    with h5py.File(edited, "r+") as f:
+        _, n_r, _, n_e = f["Data.Real"].shape
+        del f["Data.Real"]
+        f.create_dataset("Data.Real", shape=(1, n_r, 25_000_000, n_e), dtype="f8", chunks=(1, n_r, 1000, n_e))
+    declared = n_r * 25_000_000 * n_e * 8
+    with pytest.raises(CalibrationFileError, match=rf"variable Data.Real declares shape \(1, {n_r}, 25000000, "
+                                                   rf"{n_e}\) \({declared:,} bytes\) but the file holds 0 bytes"):
+        import_sofa(edited)
+
+
+def test_compressed_filler_above_the_cap_is_refused_before_reading(sofa_file, tmp_path):
+    """Zeros deflate a thousandfold: a file of under 1 MB declaring 580 MB of data (3.5 GB RSS on main
+    for a 3.7 MB one)."""
+    import zlib
+
+    import h5py
+
+    edited = _edited(sofa_file, tmp_path)
+    chunk_n = 10_000
+    with h5py.File(edited, "r+") as f:
+        _, n_r, _, n_e = f["Data.Real"].shape
+        zeros = zlib.compress(bytes(n_r * chunk_n * n_e * 8), 9)  # one compressed chunk, written 70 times
+        for name in ("Data.Real", "Data.Imag"):
+            del f[name]
+            data = f.create_dataset(name, shape=(1, n_r, 70 * chunk_n, n_e), dtype="f8",
+                                    chunks=(1, n_r, chunk_n, n_e), compression="gzip")
+            for k in range(70):
+                data.id.write_direct_chunk((0, 0, k * chunk_n, 0), zeros)
+    size = edited.stat().st_size
+    assert size < 2**20
+    with pytest.raises(CalibrationFileError, match=rf"declare [\d,]+ bytes in all, more than a SOFA file of "
+                                                   rf"{size:,} bytes may \(268,435,456 bytes"):
+        import_sofa(edited)
+
+
+def test_a_file_of_another_tool_without_descriptions_still_reads(sofa_file, tmp_path):
+    import h5py
+
+    cal, _ = sofa_file
+    edited = _edited(sofa_file, tmp_path)
+    with h5py.File(edited, "r+") as f:
+        for name in [a for a in f.attrs if a.startswith("vibrofocus")]:
+            del f.attrs[name]
+    back = import_sofa(edited)
+    assert back["layout"] is None and back["fs"] == 2 * cal.freqs[-1]
+    assert back["band"] == (cal.freqs[0], cal.freqs[-1])

@@ -88,4 +88,27 @@ def test_power_from_a_bank_file_and_its_methods(tmp_path):
                               "--methods", "inverse,minimax"])
     assert res.exit_code != 0 and "no stimuli of minimax" in res.output and "Traceback" not in res.output
     res = runner.invoke(app, ["power", "--bank", str(tmp_path / "missing.npz"), "--no-dask"])
-    assert res.exit_code != 0 and "cannot read the feature bank" in res.output
+    assert res.exit_code != 0 and "missing.npz: no such file" in res.output
+
+
+def test_a_bank_that_lies_is_one_line_before_any_study(tmp_path):
+    """All-NaN energies printed a confident power table on main; a mismatched shape ended as
+    'unexpected ... this is a bug' (exit 1)."""
+    from importlib import resources
+
+    import numpy as np
+
+    from vibrofocus.simulation.bank import DEFAULT_BANK
+
+    with resources.as_file(resources.files("vibrofocus.simulation").joinpath(DEFAULT_BANK)) as shipped:
+        arrays = dict(np.load(shipped))
+    for name, edit, words in [
+        ("nan", dict(energy=np.full_like(arrays["energy"], np.nan)), "energy contains 130680 non-finite"),
+        ("shape", dict(energy=arrays["energy"][..., :100]), "points_xy must have shape (100, 2), got (121, 2)"),
+    ]:
+        path = tmp_path / f"{name}.npz"
+        np.savez(path, **{**arrays, **edit})
+        res = runner.invoke(app, ["power", "--bank", str(path), "-n", "4", "--studies", "2", "--no-dask", "-q"])
+        assert res.exit_code == 2, res.output
+        assert f"feature bank {path}: {words}" in res.output.replace("\n", "")
+        assert "this is a bug" not in res.output and "Power by simulation" not in res.output

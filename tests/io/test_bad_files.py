@@ -121,3 +121,67 @@ def test_one_implausible_value_is_named_with_its_place(tmp_path, calibration_fil
     with pytest.raises(CalibrationFileError, match=rf"0.002 m/V at {freqs[57]:g} Hz, point G2, actuator A4 "
                                                    r"\(1 value\(s\)"):
         load_calibration(edited)
+
+
+# --------------------------------------------------------------------------- declared but unwritten variables
+def _attach(f, dataset, dims):
+    for i, dim in enumerate(dims):
+        dataset.dims[i].attach_scale(f[dim])
+
+
+@pytest.mark.parametrize("kind", ["hdf5_extra", "hdf5_extra_5e9", "netcdf_extra"])
+def test_an_extra_unwritten_variable_is_never_read(tmp_path, calibration_file, kind):
+    """738 bytes of header declared GBs that ``ds.load()`` read (2.1 GB RSS, or 37 GiB asked)."""
+    import h5netcdf
+    import h5py
+
+    from vibrofocus.calibration import load_calibration
+
+    edited = tmp_path / "extra.nc"
+    shutil.copy2(calibration_file, edited)
+    if kind == "netcdf_extra":  # a well-formed netCDF variable: ignored, the calibration loads
+        with h5netcdf.File(edited, "a") as f:
+            f.dimensions["extra_dim"] = 5_000_000_000
+            f.create_variable("extra", ("extra_dim",), "f8", chunks=(1_000_000,))  # 37 GiB once read
+        cal = load_calibration(edited)
+        np.testing.assert_array_equal(cal.H, load_calibration(calibration_file).H)
+        return
+    with h5py.File(edited, "r+") as f:  # plain HDF5: no netCDF dimensions, so the reader invents some
+        if kind == "hdf5_extra":
+            f.create_dataset("extra", shape=(2049, 13, 4, 2500), dtype="f8")
+        else:
+            f.create_dataset("extra", shape=(5_000_000_000,), dtype="f8", chunks=(1_000_000,))
+    with pytest.raises(CalibrationFileError, match=r"extra.nc: variable frequency reads as shape .* but its HDF5 "
+                                                   r"header declares \(2049,\).* datasets this schema does not "
+                                                   r"name: extra"):
+        load_calibration(edited)
+
+
+@pytest.mark.parametrize("compressed_zeros", [False, True])
+def test_a_known_variable_declared_larger_than_the_file_is_refused_before_reading(tmp_path, calibration_file,
+                                                                                  compressed_zeros):
+    """The recording declared 300 times longer: unwritten (reads as fill values), or written as zeros
+    that deflate a thousandfold; either way GBs from a few MB of file."""
+    import h5py
+
+    from vibrofocus.calibration import load_calibration
+
+    edited = tmp_path / "long.nc"
+    shutil.copy2(calibration_file, edited)
+    with h5py.File(edited, "r+") as f:
+        take, point, n = f["recording"].shape
+        n *= 300
+        del f["recording"], f["record_sample"]
+        scale = f.create_dataset("record_sample", shape=(n,), dtype="f4")
+        scale.make_scale("This is a netCDF dimension but not a netCDF variable.%10d" % n)
+        rec = f.create_dataset("recording", shape=(take, point, n), dtype="f4", chunks=(1, 1, n // 300),
+                               compression="gzip")
+        if compressed_zeros:
+            rec[...] = 0.0
+        _attach(f, rec, ("take", "point", "record_sample"))
+    declared = take * point * n * 4
+    words = (rf"more than a calibration file of {edited.stat().st_size:,} bytes may" if compressed_zeros else
+             rf"variable recording declares shape \({take}, {point}, {n}\) \({declared:,} bytes\) but the file holds 0 "
+             "compressed bytes of it")
+    with pytest.raises(CalibrationFileError, match=words):
+        load_calibration(edited)

@@ -201,7 +201,7 @@ def test_feature_bank_round_trips_and_the_shipped_one_loads(tmp_path):
     assert back.methods == bank.methods and back.seed == 4 and list(back.forearm_seeds) == [11, 12]
     with np.load(tmp_path / "b.npz") as z:
         assert str(z["model_version"]) == "test"
-    with pytest.raises(ValidationError, match="cannot read the feature bank"):
+    with pytest.raises(ValidationError, match=r"feature bank .*none.npz: no such file"):
         load_feature_bank(tmp_path / "none.npz")
     shipped = default_bank()
     assert shipped.energy.ndim == 4 and shipped.n_forearms >= 1

@@ -287,3 +287,45 @@ def test_method_is_robust_from_a_measured_h_only():
                                2.0 * coherence_radius(H, gamma2, averages=5), rtol=1e-12)
     with pytest.raises(ValidationError):
         Minimax(drive_budget="more")
+
+
+# --------------------------------------------------------------------------- hostile arguments (issue 38)
+@pytest.mark.parametrize("options, error, words", [
+    (dict(support_s=(-1, 0.005)), ValidationError, r"support_s\[0\] \(before the tap, s\) must be >= 0 and finite, "
+                                                   r"got -1"),
+    (dict(support_s=(0, 0)), ValidationError, r"support_s must not be \(0, 0\)"),
+    (dict(support_s="long"), ValidationError, r"support_s must be \(before_s, after_s\)"),
+    (dict(support_s=(100, 100)), ValidationError, r"support_s=\(100, 100\) s gives 128 drive pulses per actuator "
+                                                  r"\(256 samples at fs=2000 Hz, decimation 2\) for 10 actuators: 1280 design "
+                                                  r"variables, more than the 1024"),
+    (dict(max_iter=0), ValidationError, r"max_iter must be an integer >= 5 .* got 0"),
+    (dict(max_iter=1), ValidationError, r"max_iter must be an integer >= 5 .* got 1"),
+    (dict(max_iter=5), InfeasibleDesignError, r"did not converge in max_iter=5 rounds .* raise max_iter"),
+    (dict(h_radius=np.full((N // 2 + 1, 3, 2), 1e6)), ValidationError, r"h_radius is too large to design under "
+                                                                       r"\(up to 1e\+06"),
+])
+def test_hostile_arguments_get_a_clear_error(options, error, words):
+    """On main: IndexError, cvxopt's raw ValueError ('domain error'), or unconverged drives returned."""
+    _, H = medium()
+    n_act = H.shape[2]
+    if "support_s" in options and options["support_s"] == (100, 100):
+        H = np.repeat(H, 5, axis=2)  # 10 actuators: the whole window is 10 x 128 pulses at decimation 2
+        assert n_act == 2
+    with pytest.raises(error, match=words):
+        minimax_filter(H, tap(), FS, band=BAND, min_fidelity=0.9, **{"support_s": SUPPORT, **options})
+
+
+@pytest.mark.slow
+def test_a_fidelity_the_solver_cannot_reach_numerically_is_an_infeasible_design():
+    """The reference arm, min_fidelity=0.9999: cvxopt's 'domain error' at round 2 was raised raw."""
+    from vibrofocus.skin import SimulatedForearm
+
+    rig = SimulatedForearm(seed=0, noise_m=0, dropout_rate=0)
+    n = 4096
+    H = rig.transfer(rig.layout.points_xy, np.fft.rfftfreq(n, 1 / rig.fs))
+    t = (np.arange(n) - n // 2) / rig.fs
+    a = (t / 1e-3) ** 2
+    targets = np.zeros((H.shape[1], n))
+    targets[4] = 1e-6 * (1 - a) * np.exp(-a / 2)
+    with pytest.raises(InfeasibleDesignError, match=r"min_fidelity=0.9999"):
+        minimax_filter(H, targets, rig.fs, min_fidelity=0.9999)

@@ -179,3 +179,28 @@ def test_bad_input(H_ref):
         render("inverse", H_ref, FS, REF, 1, guard_weight=0, scale_to_limit=False)
     with pytest.raises(ValidationError, match="control must be one of"):
         render("inverse", H_ref, FS, REF, 1, control="none", scale_to_limit=False)
+
+
+@pytest.mark.parametrize("n_samples, words", [
+    (2**40, r"n_samples=1099511627776 \(1\.1e\+08 s at 10000 Hz\) needs about 4\.26e\+06 GiB"),
+    (10**6, r"n_samples=1000000 \(100 s at 10000 Hz\) needs about 3\.87 GiB .* more than the 2 GiB a design window "
+            r"may take; the longest window of this layout is 262144 samples"),
+    (4097, r"n_samples must be an even integer >= 16, got 4097"),
+])
+def test_a_window_beyond_the_design_memory_is_refused_before_allocating(n_samples, words):
+    """On main 2**40 raised MemoryError, and 10**6 was designed after 32 s at 3.4 GB (128 s here)."""
+    from vibrofocus.skin import SimulatedForearm
+
+    arm = SimulatedForearm(seed=0)
+    assert arm.fs == 10_000.0 and (REF.n_points, REF.n_actuators) == (13, 4)
+    with pytest.raises(ValidationError, match=words):
+        render("inverse", arm, arm.fs, REF, 5, n_samples=n_samples)
+
+
+def test_the_longest_window_the_cap_admits_designs():
+    """2**18 samples (26 s at 10 kHz) on the reference layout: under the cap; twice that is not."""
+    from vibrofocus.rendering._checks import H_COPIES, MAX_DESIGN_BYTES, check_window
+
+    n = 2**18
+    assert H_COPIES * 16 * (n // 2 + 1) * 13 * 4 <= MAX_DESIGN_BYTES < H_COPIES * 16 * (n + 1) * 13 * 4
+    assert check_window(n, 13, 4, 10_000.0) == n

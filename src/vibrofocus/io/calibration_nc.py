@@ -60,7 +60,9 @@ from typing import Any
 
 import numpy as np
 
+from .._validation import shorten
 from ..errors import CalibrationFileError, ValidationError
+from ._headers import check_hdf5_sizes
 from .jsonsafe import json_safe
 
 __all__ = ["SCHEMA_VERSION", "FILE_KIND", "RECORD_KEYS", "write_calibration_file", "read_calibration_file",
@@ -336,14 +338,39 @@ def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
     problem = None
     with _quiet_half_open_files():
         try:
-            with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False, phony_dims="access") as ds:
+            shapes, unknown = check_hdf5_sizes(path, "a calibration file", _KNOWN_VARS)
+            with xr.open_dataset(path, engine="h5netcdf", mask_and_scale=False, phony_dims="access",
+                                 drop_variables=unknown) as ds:
+                _check_netcdf_shapes(ds, shapes, unknown)
                 ds = ds.load()
+        except ValidationError as exc:
+            raise _fail(path, str(exc)) from None
         except Exception as exc:  # h5py reports truncation as OSError, others as ValueError/KeyError
             problem = str(exc)[:300]
     if problem is not None:
         # Not chained: the traceback would keep h5netcdf's half-open file alive.
         raise _fail(path, f"is truncated or corrupt: the HDF5 library could not read it ({problem})")
     return _from_dataset(ds, path)
+
+
+#: Every variable and coordinate a calibration file of this schema may hold; others are never read.
+_KNOWN_VARS = frozenset({*_REQUIRED_VARS, *_MIMO_VARS, "fit_value", "fit_std", "fit_log_covariance", "fit_residual",
+                         "fit_parameter", "frequency", "point", "point_x", "point_y", "point_kind", "actuator",
+                         "actuator_x", "actuator_y"})
+
+
+def _check_netcdf_shapes(ds, shapes: Mapping[str, tuple[int, ...]], unknown: list[str]) -> None:
+    """Refuse, before loading, a known variable whose netCDF view differs from its HDF5 header.
+
+    A dataset added with plain HDF5 tools carries no netCDF dimensions; the reader then
+    makes up dimensions for it from its shape, which can resize a known variable (a
+    frequency axis of 5e9 values from an added 5e9-element dataset)."""
+    for name, shape in shapes.items():
+        if name in ds.variables and tuple(ds[name].shape) != shape:
+            foreign = f" (it holds datasets this schema does not name: {shorten(', '.join(unknown), as_text=True)})"
+            raise ValidationError(f"variable {name} reads as shape {tuple(ds[name].shape)} but its HDF5 header "
+                                  f"declares {shape}: the file's netCDF dimensions are inconsistent, as when "
+                                  f"datasets are added with plain HDF5 tools{foreign if unknown else ''}")
 
 
 @contextlib.contextmanager

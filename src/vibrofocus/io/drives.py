@@ -139,33 +139,11 @@ def write_drives_wav(
 
 
 def _npy_header(zf, name: str, path: Path) -> tuple[tuple[int, ...], np.dtype, int]:
-    """Shape, dtype and data size (bytes) of member ``name`` of an npz, from its header alone.
+    """Shape, dtype and data size (bytes) of member ``name`` of an npz, from its header alone
+    (:func:`vibrofocus.io._headers.npy_member_header`)."""
+    from ._headers import npy_member_header
 
-    Nothing but the header is decompressed. The header's shape is checked against the
-    size the archive's directory declares for the member, so a header that claims more
-    data than the file holds is refused here, before anything is allocated.
-    """
-    info = zf.getinfo(name)
-    with zf.open(info) as fh:
-        version = np.lib.format.read_magic(fh)
-        if version == (1, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_1_0(fh)
-        elif version == (2, 0):
-            shape, fortran, dtype = np.lib.format.read_array_header_2_0(fh)
-        else:
-            raise ValueError(f"npy format version {version} of {name}")
-        header_bytes = fh.tell()
-    count = 1
-    for n in shape:
-        count *= int(n)
-    data_bytes = count * dtype.itemsize
-    if data_bytes != info.file_size - header_bytes:
-        raise ValidationError(
-            f"drives file {path}: the header of {name} claims shape {tuple(shape)} ({data_bytes:,} bytes of "
-            f"{dtype}) but the file holds {max(info.file_size - header_bytes, 0):,} bytes for it; the file is "
-            "corrupt or was not written by numpy"
-        )
-    return tuple(int(n) for n in shape), dtype, data_bytes
+    return npy_member_header(zf, name, f"drives file {path}")
 
 
 def read_drives(path: str | os.PathLike, *, max_duration_s: float | None = None) -> tuple[np.ndarray, float]:

@@ -70,7 +70,12 @@ def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model
 
 
 def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
-    """Read a feature bank's arrays written by :func:`save_feature_bank`.
+    """Read and check a feature bank's arrays written by :func:`save_feature_bank`.
+
+    The file is untrusted: the arrays' npy headers are read first and checked against
+    the bytes the archive holds and against a cap from the file's size
+    (:mod:`vibrofocus.io._headers`), before any array is decompressed; then the arrays
+    are checked against each other and for their values.
 
     Parameters
     ----------
@@ -86,13 +91,85 @@ def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
     Raises
     ------
     ValidationError
-        The file cannot be read or lacks an array.
+        Naming the file and the problem: missing, a folder or not an npz; a missing
+        array; a header claiming more than the file holds, or more than the cap; shapes
+        that disagree (energy (n_forearms, n_methods, n_locations, n_points) with at
+        least one of each, and the positions and seeds to match); NaN/Inf or negative
+        energies; NaN/Inf positions; method names that are not distinct texts.
     """
+    import zipfile
+
+    from .._atomic import protect
+    from .._validation import shorten
+    from ._headers import declared_cap, npy_member_header
+
+    path = Path(path)
+    what = f"feature bank {path}"
+    protect(path, "feature bank")
+    if path.is_dir():
+        raise ValidationError(f"{what}: it is a folder; give the .npz written by scripts/build_feature_bank.py")
+    if not path.is_file():
+        raise ValidationError(f"{what}: no such file")
     try:
-        with np.load(path) as z:
-            return {"energy": z["energy"].astype(float), "points_xy": z["points_xy"], "locations_xy": z["locations_xy"],
-                    "centre_xy": z["centre_xy"], "methods": tuple(str(m) for m in z["methods"]),
-                    "forearm_seeds": z["forearm_seeds"], "seed": int(z["seed"]),
-                    "actuator_energy": z["actuator_energy"].astype(float), "actuators_xy": z["actuators_xy"]}
-    except (OSError, KeyError, ValueError) as exc:
-        raise ValidationError(f"cannot read the feature bank {path}: {exc}") from exc
+        with open(path, "rb") as fh:
+            head = fh.read(4)
+        if head[:2] != b"PK":  # an .npz is a zip archive
+            raise ValidationError(f"{what}: not an .npz file (it does not start as a zip archive)")
+        with zipfile.ZipFile(path) as zf:
+            held = [n.removesuffix(".npy") for n in zf.namelist()]
+            missing = [k for k in FEATURE_BANK_ARRAYS if k not in held]
+            if missing:
+                raise ValidationError(f"{what}: missing array(s) {', '.join(missing)} (it holds "
+                                      f"{shorten(', '.join(held) or 'nothing', 200, as_text=True)})")
+            headers = {k: npy_member_header(zf, f"{k}.npy", what) for k in FEATURE_BANK_ARRAYS}
+        total, cap = sum(h[2] for h in headers.values()), declared_cap(path.stat().st_size)
+        if total > cap:
+            raise ValidationError(f"{what}: its arrays declare {total:,} bytes in all, more than a feature bank of "
+                                  f"{path.stat().st_size:,} bytes may ({cap:,} bytes); refused before reading")
+        for k, (shape, dtype, _) in headers.items():
+            wanted = "U" if k == "methods" else ("iu" if k in ("forearm_seeds", "seed") else "iuf")
+            if dtype.kind not in wanted:
+                raise ValidationError(f"{what}: {k} has dtype {dtype}, expected "
+                                      f"{'texts' if k == 'methods' else 'integers' if wanted == 'iu' else 'numbers'}")
+        with np.load(path, allow_pickle=False) as z:
+            arrays = {k: z[k] for k in FEATURE_BANK_ARRAYS}
+    except ValidationError:
+        raise
+    except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:
+        raise ValidationError(f"{what}: not a readable .npz file ({str(exc)[:200]})") from None
+    return _check_bank(arrays, what)
+
+
+def _check_bank(z: Mapping[str, np.ndarray], what: str) -> dict[str, Any]:
+    """The bank's arrays checked against each other and for their values (ValidationError naming them)."""
+    from .._validation import as_array, check_nonnegative, check_shape
+
+    energy = as_array(z["energy"], f"{what}: energy", ndim=4)
+    n_f, n_m, n_l, n_p = energy.shape
+    for n, axis in zip(energy.shape, ("forearm", "method", "location", "point")):
+        if n < 1:
+            raise ValidationError(f"{what}: energy has shape {energy.shape}, no {axis}; a bank needs at least one "
+                                  "of each")
+    check_nonnegative(energy, f"{what}: energy")
+    own = as_array(z["actuator_energy"], f"{what}: actuator_energy", ndim=4)
+    check_shape(own, f"{what}: actuator_energy", (n_f, n_m, n_l, None))
+    check_nonnegative(own, f"{what}: actuator_energy")
+    n_a = own.shape[3]
+    if n_a < 1:
+        raise ValidationError(f"{what}: actuator_energy has shape {own.shape}, no actuator")
+    points = as_array(z["points_xy"], f"{what}: points_xy", shape=(n_p, 2))
+    locations = as_array(z["locations_xy"], f"{what}: locations_xy", shape=(n_l, 2))
+    centre = as_array(z["centre_xy"], f"{what}: centre_xy", shape=(2,))
+    actuators = as_array(z["actuators_xy"], f"{what}: actuators_xy", shape=(n_a, 2))
+    seeds = np.asarray(z["forearm_seeds"])
+    check_shape(seeds, f"{what}: forearm_seeds", (n_f,))
+    seed = np.asarray(z["seed"])
+    check_shape(seed, f"{what}: seed", ())
+    methods = np.asarray(z["methods"])
+    check_shape(methods, f"{what}: methods", (n_m,))
+    names = tuple(str(m) for m in methods)
+    if any(not m.strip() for m in names) or len(set(names)) != len(names):
+        raise ValidationError(f"{what}: methods must be {n_m} distinct names, got {list(names)}")
+    return {"energy": energy, "points_xy": points, "locations_xy": locations, "centre_xy": centre,
+            "methods": names, "forearm_seeds": seeds.astype(np.int64), "seed": int(seed),
+            "actuator_energy": own, "actuators_xy": actuators}

@@ -131,12 +131,82 @@ def _fail(path: Path, what: str) -> CalibrationFileError:
     return CalibrationFileError(f"{path}: {what}")
 
 
+#: Longest description attribute read, characters (a layout of hundreds of actuators is a few kB).
+_MAX_ATTR_CHARS = 1_000_000
+#: Deepest nesting of lists and objects a description attribute may have (a layout has 3).
+_MAX_ATTR_DEPTH = 16
+_HDF5_SIGNATURE = b"\x89HDF\r\n\x1a\n"
+
+
+def _depth(value: Any) -> int:
+    """Nesting depth of a JSON value (0 for a number or string), without recursion."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        item, level = stack.pop()
+        deepest = max(deepest, level)
+        if isinstance(item, dict):
+            stack.extend((v, level + 1) for v in item.values())
+        elif isinstance(item, list):
+            stack.extend((v, level + 1) for v in item)
+    return deepest
+
+
+def _json_attr(raw: Any, name: str) -> Any:
+    """One JSON description attribute, bounded in length and nesting (ValidationError naming it)."""
+    from .._validation import shorten
+
+    if isinstance(raw, bytes):
+        raw = raw.decode("utf-8", "replace")
+    if not isinstance(raw, str):
+        raise ValidationError(f"{name} must be JSON text, got {shorten(raw)}")
+    if len(raw) > _MAX_ATTR_CHARS:
+        raise ValidationError(f"{name} is {len(raw):,} characters long, more than a description needs "
+                              f"({_MAX_ATTR_CHARS:,})")
+    try:
+        value = json.loads(raw)
+    except RecursionError:  # nesting deeper than the parser's stack
+        raise ValidationError(f"{name} is nested more than {_MAX_ATTR_DEPTH} levels deep") from None
+    except ValueError:
+        raise ValidationError(f"{name} is not JSON: {shorten(raw)}") from None
+    if _depth(value) > _MAX_ATTR_DEPTH:
+        raise ValidationError(f"{name} is nested more than {_MAX_ATTR_DEPTH} levels deep")
+    return value
+
+
+def _names(value: Any, name: str, n: int, what: str, choices: tuple[str, ...] | None = None) -> list[str]:
+    """A list of ``n`` strings (or ``choices``), or ValidationError naming ``name``."""
+    from .._validation import check_choice, shorten
+
+    if not isinstance(value, list) or not all(isinstance(v, str) for v in value):
+        raise ValidationError(f"{name} must be a list of {n} texts (one per {what}), got {shorten(value)}")
+    if len(value) != n:
+        raise ValidationError(f"{name} must name the {n} {what}s, got {len(value)} name(s): {shorten(value)}")
+    if choices is not None:
+        for v in value:
+            check_choice(v, name, choices)
+    return value
+
+
+def _array(raw: Any, name: str) -> np.ndarray:
+    """A stored array as float64, or ValidationError naming it (text, objects, complex)."""
+    from .._validation import as_array
+
+    return as_array(np.ma.filled(raw, np.nan) if np.ma.isMaskedArray(raw) else raw, name, finite=False)
+
+
 def read_sofa_tf(path: str | os.PathLike) -> dict[str, Any]:
     """Read a SOFA ``GeneralTF-E`` file written by :func:`write_sofa_tf` into its record.
 
     A ``GeneralTF-E`` file of another tool (without the ``GLOBAL_vibrofocus*``
     attributes) reads too: points and actuators are then named by number, the band is
     the frequency axis's extent and ``fs`` twice its top frequency.
+
+    The file is treated as untrusted: before sofar reads it, every variable's declared
+    size is checked against the bytes the file stores for it and all together against a
+    cap from the file's size (:func:`vibrofocus.io._headers.check_hdf5_sizes`); every
+    description attribute is bounded in length and nesting and checked for its type and
+    range (``fs`` a positive number, ``band`` a pair ``0 < low < high <= fs/2``, one
+    label per point and one name per actuator).
 
     Parameters
     ----------
@@ -150,10 +220,13 @@ def read_sofa_tf(path: str | os.PathLike) -> dict[str, Any]:
     Raises
     ------
     CalibrationFileError
-        Missing or unreadable file, another convention, shapes that disagree, NaN/Inf,
-        or a frequency axis that does not rise. The message names the file.
+        Missing or unreadable file, not netCDF-4/HDF5, arrays declared larger than the
+        file holds, another convention, shapes that disagree, NaN/Inf, a frequency axis
+        that does not rise, or a description attribute of the wrong type, range or
+        size. The message names the file.
     """
     from .._atomic import protect
+    from ._headers import check_hdf5_sizes
 
     sofar = import_sofar()
     path = Path(path)
@@ -161,44 +234,94 @@ def read_sofa_tf(path: str | os.PathLike) -> dict[str, Any]:
     if not path.is_file():
         raise _fail(path, "no such SOFA file")
     try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError as exc:
+        raise _fail(path, f"cannot be read ({exc.strerror or exc})") from None
+    if head != _HDF5_SIGNATURE:
+        raise _fail(path, "is not a readable SOFA file (SOFA files are netCDF-4/HDF5; this one does not start "
+                          "with the HDF5 signature)")
+    try:
+        check_hdf5_sizes(path, "a SOFA file")
         sofa = sofar.read_sofa(str(path), verify=False, verbose=False)
+    except ValidationError as exc:
+        raise _fail(path, str(exc)) from None
     except Exception as exc:  # noqa: BLE001 - netCDF4 and sofar raise many kinds
         raise _fail(path, f"is not a readable SOFA file ({str(exc)[:200]})") from None
     convention = getattr(sofa, "GLOBAL_SOFAConventions", None)
     if convention != SOFA_CONVENTION:
-        raise _fail(path, f"is a SOFA {convention} file; vibrofocus reads {SOFA_CONVENTION} transfer matrices")
-    real, imag = np.asarray(sofa.Data_Real, float), np.asarray(sofa.Data_Imag, float)
-    freqs = np.atleast_1d(np.asarray(sofa.N, float))
-    receivers = np.atleast_2d(np.asarray(sofa.ReceiverPosition, float))
-    emitters = np.atleast_2d(np.asarray(sofa.EmitterPosition, float))
+        raise _fail(path, f"is a SOFA {str(convention)[:80]} file; vibrofocus reads {SOFA_CONVENTION} transfer "
+                          "matrices")
+    try:
+        return _record(sofa)
+    except ValidationError as exc:
+        raise _fail(path, str(exc)) from None
+
+
+def _record(sofa: Any) -> dict[str, Any]:
+    """The record of a read ``GeneralTF-E`` object, every field checked (ValidationError naming it)."""
+    from .._validation import check_band, check_positive
+
+    real, imag = _array(sofa.Data_Real, "Data.Real"), _array(sofa.Data_Imag, "Data.Imag")
+    freqs = np.atleast_1d(_array(sofa.N, "N"))
+    receivers = np.atleast_2d(_array(sofa.ReceiverPosition, "ReceiverPosition"))
+    emitters = np.atleast_2d(_array(sofa.EmitterPosition, "EmitterPosition"))
     if real.ndim != 4 or real.shape != imag.shape or real.shape[0] != 1:
-        raise _fail(path, f"Data.Real/Data.Imag have shapes {real.shape}/{imag.shape}; expected one measurement "
-                          "(1, receivers, frequencies, emitters)")
+        raise ValidationError(f"Data.Real/Data.Imag have shapes {real.shape}/{imag.shape}; expected one measurement "
+                              "(1, receivers, frequencies, emitters)")
+    for name, arr in (("ReceiverPosition", receivers), ("EmitterPosition", emitters)):
+        if arr.ndim != 2 or arr.shape[1] < 2:
+            raise ValidationError(f"{name} must have one row of coordinates (x, y, z) per position, got shape "
+                                  f"{arr.shape}")
     _, n_r, n_f, n_e = real.shape
-    if (n_f, n_r, n_e) != (len(freqs), len(receivers), len(emitters)):
-        raise _fail(path, f"the data ({n_r} receivers, {n_f} frequencies, {n_e} emitters) do not match "
-                          f"{len(receivers)} receiver positions, {len(freqs)} frequencies, {len(emitters)} emitter positions")
+    if freqs.ndim != 1 or (n_f, n_r, n_e) != (len(freqs), len(receivers), len(emitters)):
+        raise ValidationError(f"the data ({n_r} receivers, {n_f} frequencies, {n_e} emitters) do not match "
+                              f"{len(receivers)} receiver positions, {freqs.size} frequencies, {len(emitters)} "
+                              "emitter positions")
     for name, arr in (("Data.Real", real), ("Data.Imag", imag), ("N", freqs), ("ReceiverPosition", receivers),
                       ("EmitterPosition", emitters)):
         if not np.isfinite(arr).all():
-            raise _fail(path, f"{name} holds NaN/Inf")
+            raise ValidationError(f"{name} holds NaN/Inf")
     if n_f < 2 or (np.diff(freqs) <= 0).any():
-        raise _fail(path, "its frequency axis N must rise")
+        raise ValidationError("its frequency axis N must rise")
     attrs = {}
     for key in ("point_labels", "point_kinds", "actuator_names", "fs", "band", "participant_id", "layout"):
-        raw = getattr(sofa, f"{_ATTR}{_ATTRS[key]}", None)
-        try:
-            attrs[key] = None if raw is None else json.loads(raw)
-        except ValueError:
-            raise _fail(path, f"attribute {_ATTR}{_ATTRS[key]} is not JSON") from None
+        name = f"{_ATTR}{_ATTRS[key]}"
+        raw = getattr(sofa, name, None)
+        attrs[key] = None if raw is None else _json_attr(raw, f"attribute {name}")
+    fs_name, band_name = f"attribute {_ATTR}{_ATTRS['fs']}", f"attribute {_ATTR}{_ATTRS['band']}"
+    if attrs["fs"] is None:
+        fs = 2 * float(freqs[-1])
+    elif isinstance(attrs["fs"], bool) or not isinstance(attrs["fs"], (int, float)):
+        raise ValidationError(f"{fs_name} must be a number (Hz), got {type(attrs['fs']).__name__}")
+    else:
+        fs = check_positive(attrs["fs"], fs_name)
+    if attrs["band"] is None:
+        band = (float(freqs[0]), float(freqs[-1]))
+    else:
+        raw_band = attrs["band"]
+        if not isinstance(raw_band, list) or len(raw_band) != 2 or not all(
+                isinstance(b, (int, float)) and not isinstance(b, bool) for b in raw_band):
+            raise ValidationError(f"{band_name} must be a pair [low_hz, high_hz], got {raw_band!r:.80}")
+        band = check_band(raw_band, fs, band_name)
+    participant = attrs["participant_id"]
+    if participant is not None and not isinstance(participant, str):
+        raise ValidationError(f"attribute {_ATTR}{_ATTRS['participant_id']} must be a text, got "
+                              f"{type(participant).__name__}")
+    layout = attrs["layout"]
+    if layout is not None and not isinstance(layout, dict):
+        raise ValidationError(f"attribute {_ATTR}{_ATTRS['layout']} must be a JSON object, got "
+                              f"{type(layout).__name__}")
     H = (real[0] + 1j * imag[0]).transpose(1, 0, 2)
     return {
         "H": H, "freqs": freqs, "points_xy": receivers[:, :2], "actuators_xy": emitters[:, :2],
-        "point_labels": attrs["point_labels"] or [str(k + 1) for k in range(n_r)],
-        "point_kinds": attrs["point_kinds"] or ["location"] * n_r,
-        "actuator_names": attrs["actuator_names"] or [f"A{k + 1}" for k in range(n_e)],
-        "fs": float(attrs["fs"]) if attrs["fs"] is not None else 2 * float(freqs[-1]),
-        "band": tuple(attrs["band"]) if attrs["band"] is not None else (float(freqs[0]), float(freqs[-1])),
-        "participant_id": attrs["participant_id"] or "",
-        "layout": attrs["layout"],
+        "point_labels": (_names(attrs["point_labels"], f"attribute {_ATTR}{_ATTRS['point_labels']}", n_r, "point")
+                         if attrs["point_labels"] is not None else [str(k + 1) for k in range(n_r)]),
+        "point_kinds": (_names(attrs["point_kinds"], f"attribute {_ATTR}{_ATTRS['point_kinds']}", n_r, "point",
+                               ("location", "guard"))
+                        if attrs["point_kinds"] is not None else ["location"] * n_r),
+        "actuator_names": (_names(attrs["actuator_names"], f"attribute {_ATTR}{_ATTRS['actuator_names']}", n_e,
+                                  "actuator")
+                           if attrs["actuator_names"] is not None else [f"A{k + 1}" for k in range(n_e)]),
+        "fs": fs, "band": band, "participant_id": participant or "", "layout": layout,
     }

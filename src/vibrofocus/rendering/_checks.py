@@ -54,6 +54,57 @@ def check_transfer_energy(energy: float, arr: np.ndarray, name: str = "H", where
         raise ValidationError(f"{name} is all zero{where}: no actuator reaches any point (singular transfer matrix)")
 
 
+#: Most memory one design window may take, bytes: about ten copies of H (the window's
+#: transfer matrix, the batched solves, the responses), complex. The reference layout
+#: (13 points, 4 actuators) then designs on up to 2**18 samples (26 s at 10 kHz; its
+#: responses ring down in well under 1 s); 10**6 samples took 3.4 GB and 32 s.
+MAX_DESIGN_BYTES = 2 * 2**30
+#: Copies of H a design holds at once (the CLI's memory check counts the same).
+H_COPIES = 10
+
+
+def check_window(n_samples: Any, n_points: int, n_actuators: int, fs: float, name: str = "n_samples") -> int:
+    """A design window, samples: an even integer >= 16 whose design fits :data:`MAX_DESIGN_BYTES`.
+
+    Parameters
+    ----------
+    n_samples : int
+        The window asked for.
+    n_points, n_actuators : int
+        The layout's, which size H.
+    fs : float
+        Sample rate, Hz (for the message).
+    name : str
+        The argument, for the message.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValidationError
+        Not an even integer >= 16, more than :data:`MAX_DESIGN_BYTES`, or more than the
+        memory this machine has (:func:`vibrofocus._validation.check_memory`).
+    """
+    from .._validation import check_memory, shorten
+
+    if isinstance(n_samples, bool) or not isinstance(n_samples, (int, np.integer)) or n_samples < 16 or n_samples % 2:
+        raise ValidationError(f"{name} must be an even integer >= 16, got {shorten(n_samples)}")
+    n = int(n_samples)
+    per_bin = H_COPIES * 16 * n_points * n_actuators
+    need = per_bin * (n // 2 + 1)
+    if need > MAX_DESIGN_BYTES:
+        longest = 2 ** int(np.floor(np.log2(2 * (MAX_DESIGN_BYTES // per_bin - 1))))
+        raise ValidationError(
+            f"{name}={n} ({n / fs:.3g} s at {fs:g} Hz) needs about {need / 2**30:.3g} GiB for the design ({H_COPIES} "
+            f"copies of H: {n // 2 + 1} frequencies x {n_points} points x {n_actuators} actuators, complex), more "
+            f"than the {MAX_DESIGN_BYTES / 2**30:g} GiB a design window may take; the longest window of this layout "
+            f"is {longest} samples ({longest / fs:.3g} s), far longer than a tap and its ring-down")
+    check_memory(need, f"{name}={n}")
+    return n
+
+
 def samples_for(n_freqs: int, n_samples: Any, name: str = "n_samples") -> int:
     """Window length ``n`` of a transfer matrix with ``n_freqs = n // 2 + 1`` bins.
 

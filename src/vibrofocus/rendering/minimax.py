@@ -51,6 +51,23 @@ __all__ = ["minimax_filter", "minimax_frontier", "coherence_radius", "MinimaxRep
 MINIMAX_EXTRA = "vibrofocus[minimax]"
 #: Peak rows below this share of the optimum leave the program (when it sets a record).
 _DROP = 0.5
+#: How far below ``min_fidelity`` a design's fidelity may come out (the window cuts the
+#: pulses' band-limited tails; ``fidelity_margin`` leaves room for that).
+_FIDELITY_SLACK = 1e-4
+#: Largest robust row radius accepted, relative to the target's peak response per unit
+#: drive: beyond it the quiet points' uncertainty alone exceeds the tap 100 dB over (a
+#: coherence radius at the coherence floor, 1e-6, gives about 2e4), and the cone solver
+#: fails numerically after minutes.
+_MAX_ROW_RADIUS = 1e5
+#: Fewest constraint-generation rounds accepted: the first rounds only list the peaks the
+#: warm start missed (the reference designs converge in about 10; 0 or 1 round returned
+#: the unconstrained best-fidelity drives, 35 kV for a 1 um tap).
+MIN_ITER = 5
+#: Most design variables (drive pulses x actuators): the cone program is dense, so time
+#: and memory grow with their cube and square. The default support uses about 200;
+#: a support over the whole window (support_s=(100, 100)) asked for 5,000 and ran
+#: 151 s at 4.3 GB.
+MAX_VARIABLES = 1024
 
 
 #: minimax_filter's keywords that shape the program's set-up, and those of each solve
@@ -89,9 +106,11 @@ class MinimaxReport:
         Peak ``|drives|``.
     status : str
         ``"optimal"`` when constraint generation converged (no sample over the program's
-        peak), ``"max_iter"`` when it stopped at ``max_iter`` rounds, ``"inaccurate
-        (unknown)"`` when the cone solver's last round stopped short of its tolerances
-        (its last point is used).
+        peak), ``"inaccurate (unknown)"`` when the cone solver's last round stopped short
+        of its tolerances (its last point is used; it still meets ``min_fidelity``). A
+        design that did not converge in ``max_iter`` rounds, whose solver ended
+        infeasible or whose drives miss ``min_fidelity`` raises
+        :class:`~vibrofocus.errors.InfeasibleDesignError` instead.
     solver : str
         ``"cvxopt.conelp"``: CVXOPT's primal-dual cone solver, called on each round's rows.
     iterations : int
@@ -272,6 +291,29 @@ def _solve_cone(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, cap: float, D: np.
     return (None if x is None else x[:nv]), (np.nan if x is None else float(x[-1])), sol["status"], sol["iterations"]
 
 
+def _check_support(support_s: Any) -> tuple[float, float]:
+    """``support_s`` as two finite non-negative seconds, not both zero (ValidationError naming it)."""
+    from .._validation import shorten
+
+    try:
+        pre, post = support_s
+    except (TypeError, ValueError):
+        raise ValidationError(f"support_s must be (before_s, after_s), got {shorten(support_s)}") from None
+    pre = check_positive(pre, "support_s[0] (before the tap, s)", allow_zero=True)
+    post = check_positive(post, "support_s[1] (after the tap, s)", allow_zero=True)
+    if pre + post == 0:
+        raise ValidationError("support_s must not be (0, 0): the drives need some support")
+    return pre, post
+
+
+def _check_max_iter(max_iter: Any) -> int:
+    """``max_iter`` as an int >= :data:`MIN_ITER` (ValidationError naming it)."""
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < MIN_ITER:
+        raise ValidationError(f"max_iter must be an integer >= {MIN_ITER} (constraint-generation rounds; fewer "
+                              f"return drives the peak constraints never saw), got {max_iter!r}")
+    return int(max_iter)
+
+
 def minimax_filter(
     H: Any,
     targets: Any,
@@ -323,8 +365,10 @@ def minimax_filter(
     taper_octaves : float
         Taper roll-off outside each band edge, octaves.
     support_s : (float, float)
-        The drives' support before and after the tap's peak, s: causal drives played once
-        from silence, starting at most ``support_s[0]`` before the tap.
+        The drives' support before and after the tap's peak, s (each >= 0, not both 0):
+        causal drives played once from silence, starting at most ``support_s[0]`` before
+        the tap. At most :data:`MAX_VARIABLES` drive pulses over all actuators (the
+        support over ``decimation / fs`` times the actuators), or ValidationError.
     decimation : int, optional
         Spacing of the drive pulses, samples; default the largest that keeps the taper's
         upper edge below the pulses' Nyquist frequency.
@@ -343,7 +387,9 @@ def minimax_filter(
         room for what the drive pulses' band-limited tails, cut at the window, take off the
         played response.
     max_iter : int
-        Most constraint-generation rounds.
+        Most constraint-generation rounds, at least :data:`MIN_ITER`. A design that has
+        not converged by then raises :class:`~vibrofocus.errors.InfeasibleDesignError`
+        (it used to return the last round's drives, far over the quiet peak).
     h_radius : ndarray, real, shape (n // 2 + 1, n_points, n_actuators), optional
         Uncertainty of ``H``: ``|H_true - H| <= h_radius`` at each frequency, point and
         actuator (unit of ``H``; see :func:`coherence_radius`). Given, the design minimizes a
@@ -415,10 +461,17 @@ class _Program:
         if d_norm == 0:
             raise ValidationError("the target's waveform has no energy inside the band")
         t_peak = int(np.argmax(np.abs(desired)))
-        pre, post = (int(round(float(s) * fs)) for s in support_s)
+        pre, post = (int(round(s * fs)) for s in _check_support(support_s))
         first, last = max(0, t_peak - pre), min(n - 1, t_peak + post)
         delays = np.arange(first, last + 1, r)
         K = delays.size
+        if K * n_act > MAX_VARIABLES:
+            longest = MAX_VARIABLES // n_act * r / fs
+            raise ValidationError(
+                f"support_s={tuple(support_s)!r} s gives {K} drive pulses per actuator ({last - first + 1} samples at "
+                f"fs={fs:g} Hz, decimation {r}) for {n_act} actuators: {K * n_act} design variables, more than the "
+                f"{MAX_VARIABLES} the dense cone program handles (time and memory grow with their cube and square); "
+                f"give a support of at most {longest:.4g} s in all")
 
         # Band-limited impulse responses g[p, a, t] (pulse at t = 0), scaled to O(1).
         g = np.fft.irfft(H * taper[:, None, None], n, axis=0).transpose(1, 2, 0)  # (n_points, n_act, n)
@@ -462,6 +515,15 @@ class _Program:
         # Robust rows: |A u| + rq ||u|| (||x|| = u_scale ||u||: the basis has unit energy per
         # coefficient, so ||y - y_nominal|| / d_norm <= r_q u_scale ||u|| / d_norm = r_q / gscale ||u||).
         self.rq = None if h_radius is None else _row_radius(h_radius, H.shape, taper)[quiet_idx] / gscale
+        self.rho_max = None if h_radius is None else float(np.max(h_radius))
+        self.h_max = float(np.max(np.abs(H)))
+        if self.rq is not None and np.max(self.rq) > _MAX_ROW_RADIUS:
+            q = int(np.argmax(self.rq))
+            raise ValidationError(
+                f"h_radius is too large to design under (up to {self.rho_max:.3g}, against |H| up to {self.h_max:.3g}): "
+                f"at quiet point {int(quiet_idx[q])} the uncertainty bound is {self.rq[q]:.3g} times the target's "
+                f"peak response per unit drive, more than {_MAX_ROW_RADIUS:.0e}, so no drive focuses within it; "
+                "give the radius in the unit of H (m/V), e.g. coherence_radius(H, coherence)")
         self.u_scale = d_norm / gscale  # drives = (u * u_scale) pulses
 
         # Warm start: the samples where the pseudo-inverse's quiet response peaks, and a coarse grid.
@@ -518,12 +580,17 @@ class _Program:
         for it in range(1, max_iter + 1):
             D = None if dcap is None else np.kron(np.eye(self.n_act), self.D)
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
-            found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r)
+            try:
+                found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r)
+            except (ValueError, ArithmeticError) as exc:  # cvxopt: "domain error", "Rank(A) < p", singular KKT
+                raise InfeasibleDesignError(f"the minimax solver failed numerically at round {it} ({exc}): "
+                                            f"{self._asked(min_fidelity, max_drive)}") from None
             if status == "primal infeasible":
                 raise InfeasibleDesignError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g}, "
                                       f"max_drive={max_drive}): relax the fidelity or the drive limit")
             if found is None or not np.isfinite(value):
-                raise ValidationError(f"the minimax solver failed ({status}) at round {it}")
+                raise InfeasibleDesignError(f"the minimax solver failed ({status}) at round {it}: "
+                                            f"{self._asked(min_fidelity, max_drive)}")
             u = found
             x = self.drives_of(u)
             yq = predict_response(self.H[:, self.quiet], x) / self.d_norm
@@ -552,9 +619,27 @@ class _Program:
                 self.A, self.listed = self.A[keep], self.listed[keep]
         else:
             inside = False
+        if not inside:
+            raise InfeasibleDesignError(
+                f"the minimax design did not converge in max_iter={max_iter} rounds (quiet samples still over the "
+                f"program's peak; {len(self.listed)} peak constraints listed): raise max_iter or tol, or "
+                f"{self._asked(min_fidelity, max_drive)}")
+        if "infeasible" in status:  # the last point the solver gave is no solution
+            raise InfeasibleDesignError(f"the minimax solver ended {status} at round {it}: "
+                                        f"{self._asked(min_fidelity, max_drive)}")
         # "unknown": the cone solver stopped short of its tolerances (its last point is used).
-        final = "max_iter" if not inside else "optimal" if status == "optimal" else f"inaccurate ({status})"
+        final = "optimal" if status == "optimal" else f"inaccurate ({status})"
         return self.drives_of(u), value * self.d_norm, final, it
+
+    def _asked(self, min_fidelity: float, max_drive: float | None) -> str:
+        """What to relax, naming the parameters that make the program hard."""
+        best = f" (the best this support reaches is {self.best_fidelity:.6g})" if self.best_fidelity < 1 else ""
+        parts = [f"min_fidelity={min_fidelity:g}{best}"]
+        if max_drive is not None:
+            parts.append(f"max_drive={max_drive:g}")
+        if self.rq is not None:
+            parts.append(f"h_radius (up to {self.rho_max:.3g}, against |H| up to {self.h_max:.3g})")
+        return "relax " + ", or ".join(parts)
 
     def design(self, min_fidelity: float, *, max_drive: float | None, full_output: bool, tol: float,
                fidelity_margin: float, max_iter: int) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
@@ -563,6 +648,7 @@ class _Program:
             max_drive = check_positive(max_drive, "max_drive")
         tol = check_positive(tol, "tol")
         fidelity_margin = check_positive(fidelity_margin, "fidelity_margin", allow_zero=True)
+        max_iter = _check_max_iter(max_iter)
         drives, value, status, it = self.solve(min_fidelity, max_drive=max_drive, tol=tol,
                                                fidelity_margin=fidelity_margin, max_iter=max_iter)
         predicted = predict_response(self.H, drives)
@@ -571,10 +657,14 @@ class _Program:
             if peak > max_drive:  # within tol: trim to the limit exactly
                 drives = drives * (max_drive / peak)
                 predicted = predicted * (max_drive / peak)
-        if not full_output:
-            return drives
         yt = predicted[self.ti]
         fid = zero_lag_fidelity(yt, self.desired)
+        if not fid >= min_fidelity - _FIDELITY_SLACK:  # the solver's last point misses what it was asked
+            raise InfeasibleDesignError(f"the minimax solver's drives reach fidelity {fid:.4g}, below the asked "
+                                        f"{min_fidelity:g} (solver status {status}): "
+                                        f"{self._asked(min_fidelity, max_drive)}")
+        if not full_output:
+            return drives
         qpeak = float(np.max(np.abs(predicted[self.quiet])))
         tpeak = float(np.max(np.abs(yt)))
         report = MinimaxReport(

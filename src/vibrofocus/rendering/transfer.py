@@ -16,7 +16,7 @@ import numpy as np
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
-from ._checks import ValidatedTransfer, as_transfer, samples_for
+from ._checks import ValidatedTransfer, as_transfer, check_window, samples_for
 from .causality import WraparoundCheck
 from .inverse import InverseOperator
 from .taper import band_taper
@@ -116,11 +116,15 @@ class TransferMatrix(ValidatedTransfer):
         ----------
         calibration : Calibration
         n_samples : int, optional
-            Design window, samples (even, >= 16); default 4096.
+            Design window, samples (even, >= 16, at most what
+            :data:`~vibrofocus.rendering._checks.MAX_DESIGN_BYTES` of design memory
+            allows: 262144 for the reference layout); default 4096.
         taper_octaves : float
             Width of the taper outside the calibrated band, octaves.
         """
-        n = DEFAULT_WINDOW if n_samples is None else n_samples
+        lay = calibration.layout
+        n = check_window(DEFAULT_WINDOW if n_samples is None else n_samples, lay.n_points, lay.n_actuators,
+                         check_positive(calibration.fs, "fs"))
         # The calibration keeps this window's check: its H is the design's, validated
         # here once (no copy: the check owns it), and its cached spectra are reused.
         check = calibration.wraparound_check(n, taper_octaves=taper_octaves)
@@ -156,9 +160,8 @@ class TransferMatrix(ValidatedTransfer):
         """
         own_window = getattr(model, "design_window", None)
         n = (DEFAULT_WINDOW if own_window is None else int(own_window(DEFAULT_WINDOW))) if n_samples is None else n_samples
-        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 16 or n % 2:
-            raise ValidationError(f"n_samples must be an even integer >= 16, got {n!r}")
-        freqs = np.fft.rfftfreq(int(n), 1 / check_positive(fs, "fs"))
+        n = check_window(n, layout.n_points, layout.n_actuators, check_positive(fs, "fs"))
+        freqs = np.fft.rfftfreq(int(n), 1 / fs)
         H = np.asarray(model.transfer(layout.points_xy, freqs))
         band = getattr(model, "band", None)
         if band is not None:

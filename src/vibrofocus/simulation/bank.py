@@ -95,8 +95,22 @@ class FeatureBank:
         ----------
         path : path-like
             A feature-bank ``.npz``.
+
+        Raises
+        ------
+        ValidationError
+            What :func:`~vibrofocus.io.feature_bank.load_feature_bank` refuses, and
+            method names that no registered method has (:func:`vibrofocus.available_methods`).
         """
-        return cls(**load_feature_bank(path))
+        from ..rendering.registry import available_methods
+
+        arrays = load_feature_bank(path)
+        known = available_methods()
+        unknown = [m for m in arrays["methods"] if m not in known]
+        if unknown:
+            raise ValidationError(f"feature bank {path}: method(s) {', '.join(map(repr, unknown))} are not "
+                                  f"registered (registered: {', '.join(known)})")
+        return cls(**arrays)
 
 
 def build_feature_bank(
