@@ -450,18 +450,9 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
 @router.post("/api/emergency-stop")
 def emergency_stop(web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Every output to 0 V now; calibrations cancelled, running sessions paused (resume them later)."""
-    done = web.emergency_stop()
-    with web.lock:
-        session_ids = list(web.runners)
-    for sid in session_ids:
-        with web.db:
-            try:
-                if web.store.session(sid).status == "running":
-                    web.store.set_status(sid, "paused")
-            except StudyError:
-                continue
-    log.warning("emergency stop: %s", "; ".join(done))
-    return {"stopped": done}
+    from .emergency import stop_all
+
+    return {"stopped": stop_all(web)}
 
 
 # ---------------------------------------------------------------------- export and analysis
