@@ -168,3 +168,29 @@ def test_no_absolute_path_in_a_response(server):
         r = server.api("GET", url)
         assert r.status_code == 404, (url, r.status_code)
         assert root not in r.text and "studies.sqlite" in r.text, (url, r.text)  # its name only
+
+
+def test_x_forwarded_for_does_not_dodge_the_throttle(server):
+    # Issue 38, item 10: uvicorn trusted X-Forwarded-For from 127.0.0.1, so a local process
+    # could name a new client address with every wrong token.
+    base = server.base_url
+    with httpx.Client() as c:
+        codes = [c.post(f"{base}/login", data={"token": f"wrong-{i}"},
+                        headers={"X-Forwarded-For": f"10.0.{i // 250}.{i % 250}"}).status_code for i in range(200)]
+        assert codes[0] == 401 and codes[-1] == 429, codes
+        codes = [c.get(f"{base}/api/participants", headers={"X-Vibrofocus-Token": f"wrong-token-{i:04d}-xxxx",
+                                                            "X-Forwarded-For": f"10.1.0.{i}"}).status_code
+                 for i in range(30)]
+        assert codes[-1] == 429, codes
+
+
+def test_a_trusted_proxy_names_the_client(tmp_path):
+    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log", args=("--trusted-proxy", "127.0.0.1"))
+    srv.start()
+    try:
+        with httpx.Client() as c:
+            codes = [c.post(f"{srv.base_url}/login", data={"token": f"wrong-{i}"},
+                            headers={"X-Forwarded-For": f"10.0.0.{i}"}).status_code for i in range(30)]
+        assert set(codes) == {401}, "behind a named proxy, each forwarded client is counted on its own"
+    finally:
+        srv.stop()
