@@ -26,7 +26,7 @@ from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, Partic
 from .public_text import public_text
 from .state import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, login_cookie, private_dir, render_template, trial_position
 from .routes_participant import planned
-from .throttle import THROTTLED_MESSAGE
+from .throttle import THROTTLED_MESSAGE, counts_as_guess
 
 log = logging.getLogger(__name__)
 
@@ -59,14 +59,19 @@ def _logged_in(web: WebState) -> Response:
     return resp
 
 
-def _throttled(web: WebState, request: Request) -> Response | None:
-    """The login page with 429 while this client is throttled, else None."""
-    wait = web.throttle.retry_after(_client(request), "token")
-    if wait is None:
-        return None
-    resp = _login_page(THROTTLED_MESSAGE, status=429)
-    resp.headers["Retry-After"] = str(wait)
-    return resp
+def _wrong_secret(web: WebState, request: Request, kind: str, given: str, message: str) -> Response:
+    """The login page for a wrong secret of ``kind``: 401, or 429 while this client is throttled.
+
+    The wrong secret counts (see :mod:`.throttle`) unless another site's page sent it.
+    """
+    wait = web.throttle.retry_after(_client(request), kind)
+    if wait is not None:
+        resp = _login_page(THROTTLED_MESSAGE, status=429)
+        resp.headers["Retry-After"] = str(wait)
+        return resp
+    if given and counts_as_guess(request.headers.get("sec-fetch-site")):
+        web.throttle.failed(_client(request), kind)
+    return _login_page(message)
 
 
 def _client(request: Request) -> str:
@@ -94,12 +99,9 @@ def experimenter_page(request: Request) -> Response:
 def login_link(request: Request, code: str = FPath(..., max_length=64)) -> Response:
     """Exchange a one-time login link printed by ``vibrofocus serve`` for the login cookie."""
     web = _web(request)
-    throttled = _throttled(web, request)
-    if throttled is not None:
-        return throttled
     if not web.use_login_code(code):
-        web.throttle.failed(_client(request), "token")
-        return _login_page("That login link has been used already or has expired. Log in with the experimenter token instead.")
+        return _wrong_secret(web, request, "login-link", code, (
+            "That login link has been used already or has expired. Log in with the experimenter token instead."))
     return _logged_in(web)
 
 
@@ -109,18 +111,14 @@ async def login_form(request: Request) -> Response:
     from urllib.parse import parse_qs
 
     web = _web(request)
-    throttled = _throttled(web, request)
-    if throttled is not None:
-        return throttled
     try:
         fields = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=4)
     except ValueError:  # more fields than the form has
         return _login_page("The login form was not filled in as expected. Reload the page and try again.", status=400)
     given = (fields.get("token") or [""])[0].strip()
     if not web.token_ok(given):
-        if given:
-            web.throttle.failed(_client(request), "token")
-        return _login_page("That is not the experimenter token this server printed. Check it and try again.")
+        return _wrong_secret(web, request, "token", given,
+                             "That is not the experimenter token this server printed. Check it and try again.")
     return _logged_in(web)
 
 

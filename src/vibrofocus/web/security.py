@@ -17,9 +17,10 @@ It is a plain ASGI middleware, so that it acts before FastAPI reads or parses an
 3. **Authentication before the body.** Experimenter routes need the token (header) or
    the login cookie, participant routes the session's key, checked from the headers
    alone; a request that fails is answered before a byte of its body is read.
-   Wrong secrets are counted per client (:mod:`.throttle`): a client that gives too many
-   is refused (429) for a while, the right secret included. The login cookie, a random
-   id, is not throttled, so that a flood of wrong tokens does not log the experimenter out.
+   Wrong secrets are counted per client and kind (:mod:`.throttle`): a client that gives
+   too many has its further wrong ones answered 429 for a while. The right secret always
+   gets in, and wrong secrets in requests another site's page made are not counted, so
+   neither a local process nor a web page can lock the experimenter or a participant out.
 4. **Size limit and deadline.** A body longer than :data:`MAX_BODY_BYTES` is refused (413)
    while it is read, so a huge upload costs no memory; a body that has not arrived whole
    within ``body_timeout_s`` (:data:`BODY_TIMEOUT_S`) is refused (408), so a client that
@@ -41,7 +42,7 @@ from collections.abc import Awaitable, Callable, Iterable
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from .throttle import THROTTLED_MESSAGE
+from .throttle import THROTTLED_MESSAGE, counts_as_guess
 
 __all__ = [
     "MAX_BODY_BYTES",
@@ -207,11 +208,11 @@ class SecurityMiddleware:
                 key = headers.get("x-participant-key")
             else:
                 key = (parse_qs(query).get("key") or [None])[0]
-            return self._secret(client, "key", key, lambda: web.key_ok(int(sid), key), 403, web.KEY_MESSAGE)
+            return self._secret(client, "key", key, lambda: web.key_ok(int(sid), key), 403, web.KEY_MESSAGE, headers)
         if path.startswith(("/api/", "/reports/")):
             token = headers.get("x-vibrofocus-token")
             if token is not None:
-                return self._secret(client, "token", token, lambda: web.token_ok(token), 401, web.TOKEN_MESSAGE)
+                return self._secret(client, "token", token, lambda: web.token_ok(token), 401, web.TOKEN_MESSAGE, headers)
             if web.cookie_ok(headers.get("cookie")):
                 site = headers.get("sec-fetch-site")
                 if site is not None and site not in ("same-origin", "none"):
@@ -220,14 +221,19 @@ class SecurityMiddleware:
             return 401, web.TOKEN_MESSAGE
         return None
 
-    def _secret(self, client: str, kind: str, given: str | None, ok: Callable[[], bool], status: int, message: str) -> tuple | None:
-        """Check a secret under the client's throttle; a wrong one (not a missing one) counts."""
+    def _secret(self, client: str, kind: str, given: str | None, ok: Callable[[], bool], status: int, message: str,
+                headers: dict[str, str]) -> tuple | None:
+        """Check a secret under the client's throttle (see :mod:`.throttle`).
+
+        The right secret always passes; a wrong one (not a missing one) counts unless
+        another site's page sent it; over the limit, a wrong one gets 429.
+        """
+        if ok():
+            return None
         wait = self.web.throttle.retry_after(client, kind)
         if wait is not None:
             return 429, THROTTLED_MESSAGE, wait
-        if ok():
-            return None
-        if given:
+        if given and counts_as_guess(headers.get("sec-fetch-site")):
             self.web.throttle.failed(client, kind)
         return status, message
 
