@@ -98,6 +98,9 @@
   document.addEventListener("keydown", (ev) => {
     if (ev.key !== "Escape") return;
     const now = Date.now();
+    // One Esc closes an open "stop for good?" question (keeping the session); Esc twice
+    // is the emergency stop, whether a question was open or not.
+    if (pendingStop) pendingStop.cancel();
     if (now - lastEscape < 800) emergencyStop();
     lastEscape = now;
   });
@@ -329,13 +332,47 @@
     if (s.status === "planned") act("Start", "start");
     if (s.status === "running") act("Pause", "pause");
     if (s.status === "paused") act("Resume", "resume");  // a stop is final: a new session goes on
-    if (s.status === "running" || s.status === "paused") act("Stop", "stop");
+    if (s.status === "running" || s.status === "paused") {
+      // Stop is final (a stopped session never resumes), one button away from Pause: it
+      // asks first, in the row itself. Not window.confirm(): a modal dialog would swallow
+      // the keys, and Esc twice must always reach the emergency stop.
+      controls.append(el("button", { class: "small", "data-action": "stop", onclick: (ev) => {
+        ev.stopPropagation();
+        askStop(s, controls, ev.currentTarget);
+      } }, "Stop…"));
+    }
     const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
       el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
       el("td", { class: `status ${s.status}` }, s.status + (s.dry_run ? " · dry run" : "")), el("td", { class: "progress" }), el("td", { class: "live" }),
       el("td", {}, link, " ", copy), el("td", {}, controls));
     tr.addEventListener("click", () => { selectSession(s.session_id); loadSessions(); });
     return tr;
+  }
+
+  let pendingStop = null;  // {cancel}: the open confirmation of a stop, if any
+  function askStop(s, controls, opener) {
+    if (pendingStop) pendingStop.cancel();
+    const kept = [...controls.childNodes];
+    const cancel = () => {
+      pendingStop = null;
+      controls.replaceChildren(...kept);
+      opener.focus();
+    };
+    const question = el("span", { class: "confirm-stop", role: "alert" },
+      `Stop session ${s.session_id} for good? It cannot be resumed; use Pause for a break. `);
+    const yes = el("button", { class: "small danger", "data-action": "stop-confirm", onclick: async (ev) => {
+      ev.stopPropagation();
+      pendingStop = null;
+      try { await api(`/api/sessions/${s.session_id}/stop`, { method: "POST" }); flash(`Session ${s.session_id}: stopped.`); }
+      catch (e) { flash(e.message, true); controls.replaceChildren(...kept); }
+      selectSession(s.session_id);
+      loadSessions();
+    } }, "Stop for good");
+    const no = el("button", { class: "small", "data-action": "stop-cancel", onclick: (ev) => { ev.stopPropagation(); cancel(); } },
+      "Keep it");
+    controls.replaceChildren(question, yes, " ", no);
+    pendingStop = { cancel };
+    no.focus();  // Enter on the focused button keeps the session
   }
 
   $("new-session").addEventListener("submit", async (ev) => {
