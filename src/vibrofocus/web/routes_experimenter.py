@@ -196,7 +196,7 @@ def _check_participant(web: WebState, participant_id: str) -> None:
 def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Calibrate a participant on a rig in the background; poll the returned job."""
     _check_participant(web, body.participant_id)
-    rig = web.make_rig(body.rig, body.seed)
+    rig = web.make_rig(body.rig, _rig_seed(body.rig, body.seed, body.participant_id))
     _refuse_if_busy(rig)
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
     with web.lock:
@@ -206,6 +206,19 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
         web.jobs[job.job_id] = job
     threading.Thread(target=_calibrate, args=(web, job, rig), name=f"calibration-{job.job_id}", daemon=True).start()
     return {"job_id": job.job_id}
+
+
+def _rig_seed(rig: str, seed: int | None, participant_id: str) -> int | None:
+    """The simulated forearm's seed: the one given, else derived from the participant id.
+
+    As ``vibrofocus calibrate --rig simulated`` does: each participant gets an arm of
+    their own, and the same one every time. Hardware rigs take no seed.
+    """
+    if seed is not None or rig != "simulated":
+        return seed
+    from ..defaults import participant_seed
+
+    return participant_seed(participant_id)
 
 
 def _refuse_if_busy(rig: Any) -> None:
@@ -371,7 +384,11 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
     _check_participant(web, body.participant_id)
     if body.calibration_id is not None:
         web.calibration(body.calibration_id)  # 404 / 409 before anything is written
-    config: dict[str, Any] = {"rig": body.rig, "rig_seed": body.rig_seed}
+    if web.is_simulated(body.participant_id) and (body.calibration_id is None or body.rig != "simulated"):
+        raise HTTPException(409, detail=(
+            f"{body.participant_id} is a simulated participant: the perceptual model answers their sessions from what the "
+            "simulated forearm feels, so plan it with a calibration on the simulated rig."))
+    config: dict[str, Any] = {"rig": body.rig, "rig_seed": _rig_seed(body.rig, body.rig_seed, body.participant_id)}
     if body.repetitions is not None:
         config["repetitions"] = body.repetitions
     if body.n_training is not None:

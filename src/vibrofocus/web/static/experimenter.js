@@ -84,6 +84,12 @@
     return node;
   }
 
+  // The simulated forearm's seed; null (empty field): the server derives it from the participant id.
+  function rigSeed() {
+    const v = $("rig-seed").value.trim();
+    return v === "" ? null : Number(v);
+  }
+
   // ---------------------------------------------------------------- emergency stop
   async function emergencyStop() {
     try {
@@ -190,7 +196,8 @@
   $("calibration").addEventListener("change", onCalibration);
 
   function rigQuery() {
-    return `rig=${encodeURIComponent($("rig").value)}&seed=${Number($("rig-seed").value) || 0}`;
+    const seed = rigSeed();
+    return `rig=${encodeURIComponent($("rig").value)}` + (seed === null ? "" : `&seed=${seed}`);
   }
 
   async function readStraps() {
@@ -223,7 +230,7 @@
     if (!pid) { flash("Add or pick a participant first.", true); return; }
     try {
       const { job_id } = await api("/api/calibrations", { method: "POST", body: JSON.stringify({
-        participant_id: pid, rig: $("rig").value, seed: Number($("rig-seed").value) || 0 }) });
+        participant_id: pid, rig: $("rig").value, seed: rigSeed() }) });
       calJob = job_id;
       $("calibrate").disabled = true;
       $("cal-cancel").hidden = false;
@@ -383,7 +390,7 @@
     try {
       const s = await api("/api/sessions", { method: "POST", body: JSON.stringify({
         participant_id: pid, study: Number($("study").value), calibration_id: cal ? Number(cal) : null,
-        rig: $("rig").value, rig_seed: Number($("rig-seed").value) || 0,
+        rig: $("rig").value, rig_seed: rigSeed(),
         repetitions: Number($("repetitions").value), n_training: Number($("n-training").value) }) });
       selectSession(s.session_id);
       flash(`Session ${s.session_id} planned (${s.n_trials} trials)${cal ? "" : " — no calibration: a dry run, nothing is played"}.`);

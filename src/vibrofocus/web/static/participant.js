@@ -232,7 +232,7 @@
     const respond = next.state === "respond";
     // A trial waiting for an answer whose onset this page did not see (it was loaded or
     // reloaded after the stimulus) is asked for again, from "Get ready".
-    const restart = respond && audioReady && cueSeenFor !== next.trial_index && sentFor !== next.trial_index
+    const restart = !next.simulated && respond && audioReady && cueSeenFor !== next.trial_index && sentFor !== next.trial_index
       && !pendingHere && !refusedHere;
     if (restart && restartAskedAt !== next.seq) {
       restartAskedAt = next.seq;
@@ -245,7 +245,8 @@
     // closes, and when it opens again the reaction time goes on from where it stopped.
     const onBreak = Boolean(next.paused) && !["done", "stopped"].includes(next.state);
     if (onBreak && respondSince !== null && pausedAt === null) pausedAt = { t: performance.now(), trial: next.trial_index };
-    const answerable = respond && !onBreak && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
+    // A simulated participant's session: the perceptual model answers, this page watches.
+    const answerable = !next.simulated && respond && !onBreak && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
     const wasAnswerable = body.classList.contains("answerable");
     if (answerable && !wasAnswerable) {
       if (pausedAt !== null && respondSince !== null && pausedAt.trial === next.trial_index) respondSince += performance.now() - pausedAt.t;
@@ -267,6 +268,10 @@
       return;
     }
     if (!online) { setMessage("Connection lost — reconnecting…"); return; }
+    if (next.simulated && !["done", "stopped"].includes(next.state)) {
+      setMessage("A simulated participant (the perceptual model) answers this session; nothing to do here.");
+      return;
+    }
     if (onBreak) { setMessage("Short break. Please wait."); return; }
     switch (next.state) {
       case "waiting": setMessage("Please wait — the experimenter will start the session."); break;
