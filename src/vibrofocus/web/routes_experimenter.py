@@ -264,15 +264,19 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
                             prompt=prompt if single_spot else None)
         folder = web.data_dir / "calibrations"
         private_dir(folder)
-        path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
+        # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
+        path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.nc"
+        job.message = "saving"
         save_calibration(cal, path)
         with web.db:
             cal_id = web.store.add_calibration(job.participant_id, path)
         with web.lock:
             web.calibrations[cal_id] = cal
         job.calibration_id = cal_id
+        job.verdicts = _verdicts(cal)
+        job.n_errors = sum(v["severity"] == "error" for v in job.verdicts)
         job.progress = 1.0
-        job.message = "done"
+        job.message = "done" if not job.n_errors else f"done, with {job.n_errors} error verdict(s)"
         job.status = "done"
     except CalibrationCancelled:
         job.status = "cancelled"
@@ -315,6 +319,37 @@ def calibration_step(job_id: str, action: str, web: WebState = Depends(require_t
     else:
         raise HTTPException(404, detail="Unknown calibration action; use continue or cancel.")
     return job.to_dict()
+
+
+def _verdicts(cal: Any) -> list[dict[str, str]]:
+    """A calibration's quality verdicts, errors first: ``[{"severity", "check", "message"}]``."""
+    order = {"error": 0, "warning": 1, "info": 2}
+    issues = sorted(cal.quality.issues, key=lambda i: order.get(i.severity, 3))
+    return [{"severity": i.severity, "check": i.check, "message": public_text(i.message)} for i in issues]
+
+
+def _calibration_errors(web: WebState, calibration_id: int) -> list[str]:
+    """The error verdicts of a calibration (dead or reversed actuator, clipping, ...), as sentences."""
+    return [v["message"] for v in _verdicts(web.calibration(calibration_id)) if v["severity"] == "error"]
+
+
+def _refuse_calibration_errors(web: WebState, calibration_id: int, allowed: bool) -> list[str]:
+    """409 when a calibration has error verdicts and the experimenter has not accepted them; the errors."""
+    errors = _calibration_errors(web, calibration_id)
+    if errors and not allowed:
+        raise HTTPException(409, detail=(
+            f"Calibration {calibration_id} has {len(errors)} error verdict(s): {' '.join(errors)} "
+            "Fix the setup and calibrate again, or use it anyway by ticking 'use despite its errors' "
+            "(allow_calibration_errors)."))
+    return errors
+
+
+@router.get("/api/calibrations/{calibration_id}/quality")
+def calibration_quality(calibration_id: CalibrationId, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """The quality verdicts of a calibration (errors first) and how many are errors."""
+    verdicts = _verdicts(web.calibration(calibration_id))
+    return {"calibration_id": calibration_id, "verdicts": verdicts,
+            "n_errors": sum(v["severity"] == "error" for v in verdicts)}
 
 
 @router.get("/api/calibrations/{calibration_id}/figure.png")
@@ -382,8 +417,10 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         raise HTTPException(422, detail=f"Unknown rig {body.rig!r}; this server knows: {', '.join(RIG_KINDS)}.")
     web.check_rig_kind(body.rig)
     _check_participant(web, body.participant_id)
+    accepted: list[str] = []
     if body.calibration_id is not None:
         web.calibration(body.calibration_id)  # 404 / 409 before anything is written
+        accepted = _refuse_calibration_errors(web, body.calibration_id, body.allow_calibration_errors)
     if web.is_simulated(body.participant_id) and (body.calibration_id is None or body.rig != "simulated"):
         raise HTTPException(409, detail=(
             f"{body.participant_id} is a simulated participant: the perceptual model answers their sessions from what the "
@@ -393,6 +430,8 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         config["repetitions"] = body.repetitions
     if body.n_training is not None:
         config["n_training"] = body.n_training
+    if accepted:
+        config["calibration_errors_accepted"] = accepted  # the record of the override
     seed = body.seed if body.seed is not None else secrets.randbelow(2**31)
     try:
         with web.db:
@@ -439,6 +478,9 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
         status = action_status(action, session_id, info["status"])
         if status == "running" and info.get("calibration_id") is not None:
             web.calibration(int(info["calibration_id"]))  # its hash, before anything plays
+            # Error verdicts: only with the override recorded when the session was planned.
+            _refuse_calibration_errors(web, int(info["calibration_id"]),
+                                       bool((info.get("config") or {}).get("calibration_errors_accepted")))
         if status == "aborted":
             with web.lock:
                 runner = web.runners.pop(session_id, None)

@@ -62,6 +62,8 @@ class CalibrationJob:
     error: str | None = None
     prompt: str | None = None
     straps: dict | None = None
+    verdicts: list | None = None
+    n_errors: int = 0
     _go: threading.Event = field(default_factory=threading.Event, repr=False)
     _cancelled: bool = False
 

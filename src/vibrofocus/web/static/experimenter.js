@@ -180,17 +180,40 @@
     return true;
   }
 
+  let verdictsAsked = 0;  // only the latest selection's verdicts are shown
+  async function showVerdicts(id) {
+    const list = $("cal-verdicts");
+    const asked = ++verdictsAsked;
+    $("cal-override").checked = false;
+    $("cal-override-label").hidden = true;
+    if (!id) { list.hidden = true; list.replaceChildren(); return; }
+    let q;
+    try { q = await api(`/api/calibrations/${id}/quality`); } catch (e) { q = null; }
+    if (asked !== verdictsAsked) return;
+    if (!q) { list.replaceChildren(el("li", { class: "error" }, "The quality verdicts could not be read.")); list.hidden = false; return; }
+    const items = q.verdicts.filter((v) => v.severity !== "info").map((v) =>
+      el("li", { class: v.severity === "error" ? "error" : "warning" }, `${v.severity}: ${v.message}`));
+    if (!items.length) items.push(el("li", { class: "muted" }, "Quality: no warnings or errors."));
+    else if (q.n_errors) items.unshift(el("li", { class: "error" },
+      `${q.n_errors} error verdict(s): sessions on this calibration need 'use the calibration despite its errors'.`));
+    list.replaceChildren(...items);
+    list.hidden = false;
+    $("cal-override-label").hidden = !q.n_errors;
+  }
+
   function onCalibration() {
     const id = $("calibration").value;
     const img = $("cal-figure");
     $("preview-message").textContent = id ? "" : "A preview needs a calibration.";
+    showVerdicts(id);
     if (id) {
       showFigure(`/api/calibrations/${id}/figure.png`, img, $("cal-figure-message"), "Loading the figure…");
       return;
     }
     img.hidden = true;
     const some = $("calibration").options.length > 1;
-    $("cal-figure-message").textContent = some ? "No calibration chosen: sessions planned now are dry runs (nothing is played)."
+    $("cal-figure-message").textContent = calJob ? "Calibrating: the new calibration is shown when it is saved."
+      : some ? "No calibration chosen: sessions planned now are dry runs (nothing is played)."
       : "No calibration yet: press Calibrate.";
   }
   $("calibration").addEventListener("change", onCalibration);
@@ -247,14 +270,17 @@
         $("cal-prompt").hidden = !waiting;
         $("cal-prompt-text").textContent = waiting ? job.prompt : "";
         if (job.status === "done") {
-          flash(`Calibration #${job.calibration_id} saved.`);
+          $("cal-message").textContent = `Calibration #${job.calibration_id} saved` +
+            (job.n_errors ? ` with ${job.n_errors} error verdict(s): see below.` : ".");
+          flash(`Calibration #${job.calibration_id} saved` + (job.n_errors ? ` with ${job.n_errors} error verdict(s).` : "."), job.n_errors > 0);
+          calJob = null;
           await loadParticipants(pid);
           $("calibration").value = job.calibration_id;
           onCalibration();
           break;
         }
-        if (job.status === "failed") { flash(`Calibration failed: ${job.error}`, true); break; }
-        if (job.status === "cancelled") { flash("Calibration cancelled; nothing was saved."); break; }
+        if (job.status === "failed") { $("cal-message").textContent = "Calibration failed."; flash(`Calibration failed: ${job.error}`, true); break; }
+        if (job.status === "cancelled") { $("cal-message").textContent = "Calibration cancelled; nothing was saved."; flash("Calibration cancelled; nothing was saved."); break; }
         await new Promise((r) => setTimeout(r, 500));
       }
     } catch (e) { flash(e.message, true); }
@@ -391,7 +417,8 @@
       const s = await api("/api/sessions", { method: "POST", body: JSON.stringify({
         participant_id: pid, study: Number($("study").value), calibration_id: cal ? Number(cal) : null,
         rig: $("rig").value, rig_seed: rigSeed(),
-        repetitions: Number($("repetitions").value), n_training: Number($("n-training").value) }) });
+        repetitions: Number($("repetitions").value), n_training: Number($("n-training").value),
+        allow_calibration_errors: Boolean(cal) && $("cal-override").checked }) });
       selectSession(s.session_id);
       flash(`Session ${s.session_id} planned (${s.n_trials} trials)${cal ? "" : " — no calibration: a dry run, nothing is played"}.`);
       loadSessions();
