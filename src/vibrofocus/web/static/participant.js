@@ -240,6 +240,7 @@
     }
 
     $("progress").textContent = next.trial ? trialLabel(next) : "";
+    body.dataset.phase = next.phase || "";
 
     // A break (the experimenter paused) stops the trial's clock: the answer window
     // closes, and when it opens again the reaction time goes on from where it stopped.
@@ -276,14 +277,17 @@
     switch (next.state) {
       case "waiting": setMessage("Please wait — the experimenter will start the session."); break;
       case "paused": setMessage("Short break. Please wait."); break;
-      case "ready": setMessage("Get ready"); break;
+      case "ready":
+        // The first main trial after training: say that the training is over.
+        setMessage(firstMain(next) ? "Training is over. The main trials begin now. Get ready" : "Get ready");
+        break;
       case "cue": setMessage("●"); break;
       case "respond":
         if (restart) setMessage("Get ready");
         else if (waitingForServer) setMessage("Sending…");
         else if (confirmedFor === next.trial_index) showTaken();
         else {
-          setMessage(multi ? "Where did you feel it? Select, then Enter."
+          setMessage(multi ? "Where did you feel it? Choose every location you felt (one or several), then Confirm."
                            : "Where did you feel it most?");
         }
         break;
@@ -293,6 +297,11 @@
       case "error": setMessage("Please wait — the experimenter has been notified."); break;
       default: setMessage("Please wait.");
     }
+  }
+
+  function firstMain(next) {
+    // trial_index > 0: there were training trials before this first main trial.
+    return next.phase === "main" && next.trial === 1 && next.trial_index > 0;
   }
 
   function trialLabel(next) {
