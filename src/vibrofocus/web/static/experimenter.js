@@ -257,6 +257,7 @@
       calJob = job_id;
       $("calibrate").disabled = true;
       $("cal-cancel").hidden = false;
+      if (!$("calibration").value) onCalibration();  // "Calibrating…", not "No calibration yet"
       for (;;) {
         const job = await api(`/api/calibrations/jobs/${job_id}`);
         $("cal-progress").value = job.progress;
@@ -284,7 +285,9 @@
         await new Promise((r) => setTimeout(r, 500));
       }
     } catch (e) { flash(e.message, true); }
+    const wasRunning = calJob !== null;
     calJob = null;
+    if (wasRunning && !$("calibration").value) onCalibration();  // failed or cancelled: the card says so
     $("cal-prompt").hidden = true;
     $("cal-cancel").hidden = true;
     $("calibrate").disabled = false;
