@@ -1,5 +1,6 @@
 """``vibrofocus demo --json`` prints one JSON object with the results table."""
 
+import os
 import json
 
 import numpy as np
@@ -41,3 +42,25 @@ def test_demo_refuses_an_unknown_field_location(tmp_path):
     result = CliRunner().invoke(app, ["demo", "--field-location", "10", "--out", str(tmp_path)])
     assert result.exit_code == 2
     assert "location 10" in result.output
+
+
+def test_the_metrics_table_fits_80_columns_uncut():
+    # Issue 38: piped (or in a default terminal) the table was cut at 80 columns, funneling's
+    # fidelity shown as "-0.…".
+    from rich.console import Console
+
+    from vibrofocus.cli.demo import _fmt, metrics_table
+
+    columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB", "peak\nbound\ndB",
+               "target\nµm", "drive\nV")
+    worst = [_fmt(-0.999), _fmt(-0.999), _fmt(-38.25, 1), _fmt(-38.25, 1), _fmt(-38.25, 1), _fmt(-38.25, 1),
+             _fmt(-38.25, 1), _fmt(12.3456, 3), _fmt(10.0, 1)]
+    for location, first in ((False, ["time_reversal"]), (True, ["9", "time_reversal"])):
+        console = Console(width=80, record=True, file=open(os.devnull, "w"), color_system=None)
+        console.print(metrics_table("title", columns, [first + worst, [*first[:-1], "funneling", _fmt(-0.0004), *worst[1:]]],
+                                    location=location))
+        text = console.export_text()
+        assert "…" not in text, text
+        assert max(len(line.rstrip()) for line in text.splitlines()) <= 80, text
+        assert "-0.00" not in text and " 0.00 " in text, text  # funneling's fidelity reads 0.00, never -0.00
+        assert "time_reversal" in text and "-38.2" in text and "12.346" in text

@@ -108,3 +108,16 @@ def test_bad_options_are_one_error_line(tmp_path, args, needle):
     assert done.returncode == 2, done.stderr
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], lines
+
+
+def test_an_ipv6_address_is_shown_in_brackets(tmp_path):
+    # Issue 38: "--host ::1" printed osc.udp://::1:9124, which no OSC client can parse.
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", MPLBACKEND="Agg")
+    proc = subprocess.Popen([sys.executable, "-m", "vibrofocus", "serve-osc", "--host", "::1", "--port", "0"],
+                            cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env)
+    try:
+        line = proc.stdout.readline()
+    finally:
+        proc.kill()
+        proc.communicate(timeout=60)
+    assert re.search(r"osc\.udp://\[::1\]:\d+ ", line), line

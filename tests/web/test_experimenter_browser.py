@@ -70,6 +70,7 @@ def test_experimenter_runs_a_session_from_the_page(server, chromium):
         assert [r[1] for r in wait_answers(server, sid, 3)] == ["5", "6", "7"]
         wait_respond(part, 3)
         exp.click("#sessions button[data-action=stop]")
+        exp.click("#sessions button[data-action=stop-confirm]")
         exp.locator("#sessions td.status.aborted").wait_for()
         part.wait_for_function("document.body.dataset.state === 'stopped'")
         assert session_status(server, sid) == "aborted"
@@ -83,3 +84,43 @@ def test_experimenter_runs_a_session_from_the_page(server, chromium):
             assert kind in kinds
     finally:
         context.close()
+
+
+def test_stop_asks_first_and_esc_keeps_the_session_while_esc_twice_is_the_emergency_stop(server, page):
+    # Issue 38, item 12: Stop ends a session for good, one click from Pause.
+    s = server.plan("P11", 1, n_training=1, repetitions=1)
+    sid = s["session_id"]
+    assert server.api("POST", f"/api/sessions/{sid}/start").status_code == 200
+    login(page, server)
+    page.select_option("#participant", "P11")
+    page.locator("#sessions td.status.running").wait_for()
+
+    page.click("#sessions button[data-action=stop]")
+    question = page.locator("#sessions .confirm-stop")
+    question.wait_for()
+    assert "for good" in question.inner_text() and "Pause" in question.inner_text()
+    assert page.evaluate("document.activeElement.dataset.action") == "stop-cancel", "the safe answer has the focus"
+    page.wait_for_timeout(300)
+    assert session_status(server, sid) == "running", "one click on Stop stopped the session"
+
+    page.keyboard.press("Escape")  # one Esc: the question goes, the session stays
+    question.wait_for(state="detached")
+    page.wait_for_timeout(900)  # apart from the next Esc, so that it is not a double press
+    assert session_status(server, sid) == "running"
+
+    page.click("#sessions button[data-action=stop]")
+    page.click("#sessions button[data-action=stop-cancel]")  # "Keep it"
+    question.wait_for(state="detached")
+    assert session_status(server, sid) == "running"
+
+    page.click("#sessions button[data-action=stop]")
+    question.wait_for()
+    page.keyboard.press("Escape")
+    page.keyboard.press("Escape")  # Esc twice, question open or not: the emergency stop
+    page.locator("#sessions td.status.paused").wait_for()
+    assert session_status(server, sid) == "paused", "Esc twice is the emergency stop, never a Stop"
+
+    page.click("#sessions button[data-action=stop]")
+    page.click("#sessions button[data-action=stop-confirm]")
+    page.locator("#sessions td.status.aborted").wait_for()
+    assert session_status(server, sid) == "aborted"

@@ -158,3 +158,22 @@ def test_visible_focus_ring_and_legible_text(server, exp):
     wait_respond(part, 0)
     for selector in ("#progress", "#orientation"):
         assert contrast(part, selector) >= 4.5, selector
+
+
+@pytest.mark.slow
+def test_the_calibration_card_says_one_thing_at_a_time_and_shows_the_verdicts(server, exp):
+    # Issue 38: "100 % · take 8/8" beside "No calibration yet" once a calibration ended,
+    # and no quality verdicts on the page.
+    add_participant(exp, server, "P42")
+    exp.click("#calibrate")
+    exp.wait_for_function("document.getElementById('calibrate').disabled")
+    assert "No calibration yet" not in exp.inner_text("#cal-figure-message")
+    exp.wait_for_function("!document.getElementById('calibrate').disabled", timeout=180_000)
+    card = exp.inner_text("#calibration-card")
+    assert "No calibration yet" not in card and "take" not in exp.inner_text("#cal-message"), card
+    assert "saved" in exp.inner_text("#cal-message")
+    exp.wait_for_function("!document.getElementById('cal-verdicts').hidden")
+    verdicts = exp.inner_text("#cal-verdicts")
+    assert verdicts.strip(), "no quality verdicts shown"
+    assert exp.is_hidden("#cal-override-label"), "no override is offered for a calibration without errors"
+    exp.wait_for_function("document.getElementById('cal-figure').naturalWidth > 0")

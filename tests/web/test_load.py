@@ -159,3 +159,83 @@ def test_a_repeated_log_message_is_counted_not_written():
         assert "99995 more like this were left out" in last, last
     finally:
         logger.removeHandler(handler)
+
+
+# ---------------------------------------------------------------------- issue 38, item 9
+def _slow_bodies(port: int, n: int) -> list[socket.socket]:
+    """``n`` connections that each declare a 1000-byte body and send none of it."""
+    socks = []
+    for _ in range(n):
+        sock = socket.create_connection(("127.0.0.1", port))
+        sock.sendall(b"POST /login HTTP/1.1\r\nHost: 127.0.0.1\r\nContent-Type: application/x-www-form-urlencoded\r\n"
+                     b"Content-Length: 1000\r\n\r\n")
+        socks.append(sock)
+    return socks
+
+
+def test_a_body_that_never_comes_gets_408(tmp_path):
+    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log", args=("--body-timeout", "0.5"))
+    srv.start()
+    try:
+        (sock,) = _slow_bodies(srv.port, 1)
+        sock.settimeout(10)
+        answer = b""
+        try:
+            while chunk := sock.recv(4096):
+                answer += chunk
+        except (TimeoutError, socket.timeout):
+            pytest.fail("a request whose body never comes keeps its connection")
+        finally:
+            sock.close()
+        assert answer.startswith(b"HTTP/1.1 408"), answer[:200]
+        assert b"did not arrive in time" in answer
+    finally:
+        srv.stop()
+
+
+def test_the_emergency_stop_answers_during_a_slow_body_attack(capped):
+    srv = capped
+    held = _slow_bodies(srv.port, 3 * CAP)  # far beyond the cap, every one waiting for its body
+    stop = threading.Event()
+
+    def keep_attacking() -> None:
+        while not stop.is_set() and len(held) < 20 * CAP:
+            held.extend(_slow_bodies(srv.port, 5))
+            time.sleep(0.02)
+
+    attacker = threading.Thread(target=keep_attacking, daemon=True)
+    attacker.start()
+    try:
+        for _ in range(5):
+            r = httpx.post(f"{srv.base_url}/api/emergency-stop", headers=srv.headers, timeout=1.0)
+            assert r.status_code == 200, (r.status_code, r.text)
+            assert "stopped" in r.json()
+        r = httpx.get(f"{srv.base_url}/api/rigs", headers=srv.headers, timeout=1.0)
+        assert r.status_code == 200, "pages are locked out by stalled bodies"
+    finally:
+        stop.set()
+        attacker.join(5)
+        for sock in held:
+            sock.close()
+
+
+def test_a_reserved_slot_keeps_the_emergency_stop_when_every_connection_is_busy(capped):
+    srv = capped
+    s = srv.plan("P03", 1)
+    sid, key = s["session_id"], s["participant_url"].split("key=")[1]
+    busy = []
+    for _ in range(CAP):  # long-polls: real work in progress on every connection
+        sock = socket.create_connection(("127.0.0.1", srv.port))
+        sock.sendall(f"GET /api/participant/{sid}/state?after=0&wait=10 HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                     f"X-Participant-Key: {key}\r\n\r\n".encode())
+        busy.append(sock)
+    time.sleep(0.5)
+    try:
+        for _ in range(3):
+            r = httpx.post(f"{srv.base_url}/api/emergency-stop", headers=srv.headers, timeout=2.0)
+            assert r.status_code == 200, (r.status_code, r.text)
+        r = httpx.get(f"{srv.base_url}/api/rigs", headers=srv.headers, timeout=2.0)
+        assert r.status_code == 503, "a reserved slot answers only the emergency stop"
+    finally:
+        for sock in busy:
+            sock.close()

@@ -227,3 +227,42 @@ def test_no_answer_behind_the_begin_overlay_and_enter_never_repeats_a_click(serv
     wait_respond(page, 1)
     page.keyboard.press("2")
     assert [(r[0], r[1]) for r in wait_answers(server, sid, 2)] == [(0, "4"), (1, "2")]
+
+
+#: Left and right of the text itself (not its box) of an element, and the window's width, px.
+_INSIDE_JS = """(sel) => { const range = document.createRange();
+  range.selectNodeContents(document.querySelector(sel)); const r = range.getBoundingClientRect();
+  return [r.left, r.right, window.innerWidth]; }"""
+
+
+def test_study2_on_a_phone_says_several_may_be_chosen_and_marks_the_main_trials(server, chromium):
+    # Issue 38, bench items: the words of Study 2, a Confirm button to tap, the switch from
+    # training to the main trials, and texts clear of the screen's edges at 390 px.
+    s = start(server, "P40", 2, n_training=1, repetitions=1)
+    sid = s["session_id"]
+    context = chromium.new_context(viewport={"width": 390, "height": 844}, has_touch=True, is_mobile=True)
+    context.set_default_timeout(15_000)
+    try:
+        page = context.new_page()
+        page.goto(server.base_url + s["participant_url"])
+        intro = page.inner_text("#overlay-text")
+        assert "every" in intro and "several" in intro and "Confirm" in intro, intro
+        left, right, width = page.evaluate(_INSIDE_JS, "#overlay-text")
+        assert left >= 12 and right <= width - 12, (left, right, width)
+        page.tap("#begin")
+        wait_respond(page, 0)
+        message = page.inner_text("#message")
+        assert "several" in message and "Confirm" in message and "Enter" not in message, message
+        assert page.is_visible("#confirm") and page.inner_text("#confirm") == "Confirm"
+        left, right, width = page.evaluate(_INSIDE_JS, "#message")
+        assert left >= 12 and right <= width - 12, (left, right, width)
+        page.tap(".cell[data-loc='4']")
+        page.tap(".cell[data-loc='6']")
+        page.tap("#confirm")  # no Enter key on a phone
+        page.wait_for_function("document.body.dataset.phase === 'main' && document.body.dataset.state === 'ready'")
+        assert "main trials begin" in page.inner_text("#message"), page.inner_text("#message")
+        assert wait_answers(server, sid, 1)[0][1] == "4 6"
+        wait_respond(page, 1)
+        assert "main trials begin" not in page.inner_text("#message")
+    finally:
+        context.close()

@@ -254,3 +254,35 @@ def test_database_and_exports_are_private_and_one_analysis_at_a_time(server):
     assert [r.status_code for r in replies].count(202) == 1, [r.text for r in replies]
     assert all(r.status_code == 409 and "already running" in r.json()["detail"] for r in replies[1:])
     assert len(list((files / "reports").iterdir())) == 1
+
+
+@pytest.mark.parametrize("attacker_host", ["localhost", "127.0.0.1"])  # another site; another port of this one
+def test_a_web_page_of_junk_login_images_does_not_lock_the_experimenter_out(server, chromium, attacker_host):
+    # Issue 38, item 11: <img src="http://127.0.0.1:PORT/login/junk"> on any page the lab PC visits.
+    s = server.plan("P31", 1)
+    sid, key = s["session_id"], s["participant_url"].split("key=")[1]
+    target = server.base_url
+    images = "".join(f'<img src="{target}/login/junk-{i}"><img src="{target}/participant/{sid}?key=junk{i}">'
+                     for i in range(30))
+    evil = OtherLocalSite(f"""<!doctype html><html><body>{images}
+<script>window.addEventListener("load", () => {{ window.attackDone = true; }});</script></body></html>""")
+    evil.url = evil.url.replace("127.0.0.1", attacker_host)
+    context = chromium.new_context()
+    context.set_default_timeout(15_000)
+    try:
+        attack = context.new_page()
+        seen = []
+        attack.on("request", lambda req: seen.append(req.url) if req.url.startswith(target) else None)
+        attack.goto(evil.url)
+        attack.wait_for_function("window.attackDone === true")
+        assert len(seen) == 60, f"the page sent {len(seen)} of its 60 requests"
+        exp = context.new_page()
+        login(exp, server)  # the login form with the right token gets in
+        participant = context.new_page()
+        participant.goto(target + s["participant_url"])
+        r = participant.evaluate(f"""fetch("/api/participant/{sid}/state", {{headers: {{"X-Participant-Key": "{key}"}}}})
+                                     .then(r => r.status)""")
+        assert r == 200
+    finally:
+        context.close()
+        evil.close()

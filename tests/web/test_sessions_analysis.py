@@ -74,3 +74,7 @@ def test_analysis_with_an_aborted_session_a_new_one_and_a_dry_run(server):
     assert f"session {dry['session_id']} left out because it was a dry run" in reasons
     html = server.api("GET", f"/reports/{job['name']}/report.html").text
     assert f"session {aborted['session_id']} left out" in html
+    # Issue 38: the served report names its source by name, never by the account's folders.
+    root = str(server.db.parent)
+    assert root not in html and "Source: trials.csv" in html
+    assert root not in json.dumps(report) and report["source"] == "trials.csv"

@@ -137,7 +137,9 @@ def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_n
         "css": Markup((_TEMPLATES / "report.css").read_text(encoding="utf-8")),
         "simulated": ({"notice": simulated_notice or "", "participants": list(result.simulated_participants)}
                       if result.simulated_participants else None),
-        "source": result.source,
+        # The file's name: a report is a document to share, and the path of the folder it
+        # was made in says nothing to its readers (report.json keeps the path as given).
+        "source": Path(result.source).name if result.source != "<DataFrame>" else result.source,
         "n_trials": result.n_trials,
         "alpha": f"{result.alpha:g}",
         "version": __version__,

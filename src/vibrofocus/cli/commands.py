@@ -18,7 +18,7 @@ from ._command import marked_commands
 __all__ = ["COMMAND_MODULES", "register", "reflowed"]
 
 #: Command modules of this package, in ``--help`` order.
-COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "serve_osc", "analyze", "study", "simulate_study", "export",
+COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "stop", "serve_osc", "analyze", "study", "simulate_study", "export",
                    "power", "play", "latency", "devices")
 
 

@@ -20,7 +20,39 @@ err_console = Console(stderr=True)
 
 
 def _fmt(value: float, digits: int = 2) -> str:
-    return "—" if value != value else f"{value:.{digits}f}"  # NaN -> dash
+    if value != value:
+        return "—"  # NaN
+    text = f"{value:.{digits}f}"
+    return text[1:] if text.startswith("-") and float(text) == 0 else text  # never "-0.00"
+
+
+def metrics_table(title: str, columns: tuple[str, ...], rows: list[list[str]], *, location: bool = False) -> Table:
+    """A table of the demo's metrics that fits 80 columns (a pipe, a default terminal).
+
+    Parameters
+    ----------
+    title : str
+        The table's title.
+    columns : tuple of str
+        Headers of the metric columns (lines split by ``\\n``), after ``method``.
+    rows : list of list of str
+        One row of cells per method (with the location first when ``location``).
+    location : bool
+        Add a first ``loc`` column.
+
+    Returns
+    -------
+    rich.table.Table
+    """
+    # One space between columns (the box's own separator, no padding) and none at the edges: with
+    # every metric column, the longest method name (time_reversal) and signed values,
+    # a row is 78 characters wide.
+    table = Table(title=title, box=box.SIMPLE_HEAD, padding=0, pad_edge=False, show_edge=False)
+    for col in (("loc",) if location else ()) + ("method", *columns):
+        table.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
+    for row in rows:
+        table.add_row(*row)
+    return table
 
 
 @command("demo", epilog="Example: vibrofocus demo --seed 3 --out demo-output/   or   vibrofocus demo --json")
@@ -219,7 +251,7 @@ def demo_command(
                                      "drive reaches at the pseudo-inverse's fidelity (minimax, predicted)."
                                      if bounds else "."))
         columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB",
-                   *(("peak bound\ndB",) if bounds else ()), "target\nµm", "drive\nV")
+                   *(("peak\nbound\ndB",) if bounds else ()), "target\nµm", "drive\nV")
 
         def metric_cells(values: dict) -> list[str]:
             return [_fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),
@@ -229,20 +261,12 @@ def demo_command(
                     _fmt(values["target_peak_m"] * 1e6, 3), _fmt(values["peak_drive_v"], 1)]
 
         if per_location:
-            table = Table(title=f"Per location, designed from {source}, measured on the arm (noise on)",
-                          box=box.SIMPLE_HEAD, collapse_padding=True, pad_edge=False)
-            for col in ("loc", "method", *columns):
-                table.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
-            for row in result.rows:
-                table.add_row(str(row["location"]), row["method"], *metric_cells(row))
-            console.print(table)
-        med = Table(title=f"Median over locations, designed from {source}, measured on the arm (noise on)",
-                    box=box.SIMPLE_HEAD, collapse_padding=True, pad_edge=False)
-        for col in ("method", *columns):
-            med.add_column(col, justify="left" if col == "method" else "right", no_wrap=True)
-        for method, values in summary.items():
-            med.add_row(method, *metric_cells(values))
-        console.print(med)
+            console.print(metrics_table(
+                f"Per location, designed from {source}, measured on the arm (noise on)", columns,
+                [[str(row["location"]), row["method"], *metric_cells(row)] for row in result.rows], location=True))
+        console.print(metrics_table(
+            f"Median over locations, designed from {source}, measured on the arm (noise on)", columns,
+            [[method, *metric_cells(values)] for method, values in summary.items()]))
         console.print(legend, style="dim")
         if not per_location:
             console.print("Per location: --per-location, --json, or the metrics figure.", style="dim")

@@ -45,6 +45,7 @@ class _OneLineErrors(TyperGroup):
         windows_expand_args: bool = True,
         **extra: Any,
     ) -> Any:
+        _plain_help(self)
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
         try:
@@ -96,6 +97,37 @@ def _quiet_after_closed_pipe() -> None:
     except (OSError, ValueError):  # stdout is not a real file (a test runner's capture)
         pass
     sys.exit(EXIT_CLOSED_PIPE)
+
+
+def _plain_help(group: Any) -> None:
+    """Help that shows what it says: brackets kept, no value placeholder after a flag.
+
+    - Typer reads help texts as Rich markup, so ``pip install 'vibrofocus[lsl]'`` lost
+      its ``[lsl]`` and ``[seed, N, j]`` vanished; no help here uses markup, so every
+      command's and option's help is escaped (:func:`rich.markup.escape`).
+    - A flag takes no value: ``--force <bool>`` reads as if it wanted one. An empty
+    ``metavar`` (the option's public attribute, which typer's help shows in place of the
+    type) leaves the column blank, for every command, sub-command and their ``--help``.
+    Typer carries its own copy of click, so the options are recognised by their
+    attributes, not by class.
+    """
+    from rich.markup import escape
+
+    todo = [group]
+    while todo:
+        cmd = todo.pop()
+        if getattr(cmd, "_vibrofocus_plain", False):
+            continue  # escaped once: a second pass would escape the escapes
+        cmd._vibrofocus_plain = True
+        if cmd.help:
+            cmd.help = escape(cmd.help)
+        help_option = cmd.get_help_option(cmd.context_class(cmd))
+        for param in [*cmd.params, *([help_option] if help_option is not None else [])]:
+            if getattr(param, "help", None):
+                param.help = escape(param.help)
+            if getattr(param, "is_flag", False) and getattr(param, "metavar", "") is None:
+                param.metavar = ""
+        todo.extend(getattr(cmd, "commands", {}).values())
 
 
 app = typer.Typer(

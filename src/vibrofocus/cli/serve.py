@@ -28,6 +28,8 @@ def serve(
     max_connections: int = typer.Option(1000, "--max-connections", min=4, max=1_000_000, help="Most connections open at once; beyond it the longest-idle one is closed, or the new one refused when all are busy."),
     header_timeout: float = typer.Option(10.0, "--header-timeout", min=0.1, max=600.0, help="Seconds a connection may take to send a request's headers before it is closed."),
     keep_alive: float = typer.Option(5.0, "--keep-alive", min=0.1, max=3600.0, help="Seconds an idle connection is kept open between requests."),
+    body_timeout: float = typer.Option(10.0, "--body-timeout", min=0.1, max=600.0, help="Seconds a request may take to send its body once its headers are in; then it gets 408 and its connection is closed."),
+    trusted_proxy: str | None = typer.Option(None, "--trusted-proxy", metavar="ADDR", help="Address of a reverse proxy in front of this server whose X-Forwarded-For header names the real client (comma-separated for several). Without it, forwarding headers are ignored."),
     lsl: bool = lsl_option(),
     participant_audio_elsewhere: bool = typer.Option(
         False, "--participant-audio-elsewhere",
@@ -39,7 +41,8 @@ def serve(
 
     Prints a one-time login link (opened in the browser) and the experimenter token,
     which the login page also accepts. Set VIBROFOCUS_TOKEN to reuse a token across
-    restarts.
+    restarts. 'vibrofocus stop --db DB' (same user) stops every output of this server,
+    also when its port or page does not answer.
     """
     with user_errors():
         import secrets
@@ -95,7 +98,8 @@ def serve(
         os.umask(0o077)
         extra_hosts = tuple(allow_host) + (() if host in _LOCAL_HOSTS + ("0.0.0.0", "::") else (host,))
         web_app = create_app(db, token=token, rig=rig, pace=pace, allowed_hosts=extra_hosts,
-                             rig_config=rig_config if rig != "simulated" else None, rig_factory=rig_factory)
+                             rig_config=rig_config if rig != "simulated" else None, rig_factory=rig_factory,
+                             body_timeout_s=body_timeout, stop_socket=True)
         sock = listen(host, port)  # a busy port is one error line, before any link is printed
         port = sock.getsockname()[1]
         shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
@@ -107,14 +111,16 @@ def serve(
         typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
         typer.echo(f"experimenter token (for the login page): {token}")
         typer.echo("participant pages: linked from the experimenter page (one per session)")
+        typer.echo(f"emergency stop from a terminal: vibrofocus stop --db {Path(db).resolve()}")
         if outlet is not None:
             typer.echo(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})")
         if not no_browser:
             # A moment later, so that the page does not ask before uvicorn listens.
             threading.Timer(1.5, webbrowser.open, args=(login,)).start()
-        limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive)
+        limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive,
+                              body_timeout_s=body_timeout)
         with markers:
-            run(web_app, host=host, port=port, limits=limits, sock=sock)
+            run(web_app, host=host, port=port, limits=limits, sock=sock, trusted_proxy=trusted_proxy)
 
 
 def _check_database(db: Path) -> None:

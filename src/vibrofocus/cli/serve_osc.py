@@ -89,6 +89,8 @@ def serve_osc(
                 err_console.print(f"[bold red]WARNING:[/] binding to {host}: anyone who can reach it can play taps.")
             server = OscTapServer(the_rig, designer, host=host, port=port, max_wait_s=max_wait_ms / 1e3)
             shown_host, shown_port = server.address
+            if ":" in str(shown_host):  # an IPv6 address goes in brackets in a URL: osc.udp://[::1]:9124
+                shown_host = f"[{shown_host}]"
             typer.echo(f"serve-osc: listening on osc.udp://{shown_host}:{shown_port} ({rig} rig, designs from "
                        f"{source}, method {designer.method}, drive limit {designer.limit_v:g} V)")
             typer.echo(f"taps: /tap 1..{designer.layout.n_locations}"

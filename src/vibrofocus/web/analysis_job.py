@@ -31,9 +31,15 @@ def report_lines(trials: str, out_dir: str) -> list[str]:
     list of str
         What was analysed, excluded and written.
     """
+    import os
+
     from ..analysis import report_trials_file
 
-    result, paths = report_trials_file(Path(trials), Path(out_dir))
+    # From inside the report folder, with relative paths: the report names its source
+    # "trials.csv", never the account's folders (it is served to the browser). The child
+    # is a process of its own, so changing its folder touches nothing else.
+    os.chdir(out_dir)
+    result, paths = report_trials_file(Path(os.path.relpath(trials, out_dir)), Path("."))
     lines = [f"analysed {result.n_trials} rows"]
     lines += [f"excluded {e.participant}: {e.reason}" for e in result.exclusions.itertuples(index=False)]
     lines += [f"note: {w}" for w in result.warnings]

@@ -117,6 +117,8 @@ class SessionIn(_Strict):
     # Shorter designs for pilots and demonstrations; the defaults are docs/file-formats.md, trials file's.
     repetitions: int | None = Field(default=None, ge=1, le=10)
     n_training: int | None = Field(default=None, ge=0, le=30)
+    # The experimenter has read the calibration's error verdicts and uses it anyway.
+    allow_calibration_errors: bool = False
 
 
 class AnalysisIn(_Strict):

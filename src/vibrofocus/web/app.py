@@ -27,7 +27,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ..errors import StudyError
 from . import routes_experimenter, routes_participant
-from .security import LOCAL_HOSTS, SecurityMiddleware
+from .security import BODY_TIMEOUT_S, LOCAL_HOSTS, SecurityMiddleware
 from .session_runner import PACES, Pace
 from .state import (
     KEY_HEADER,
@@ -58,6 +58,8 @@ def create_app(
     rig_config: str | os.PathLike | None = None,
     resume: bool = True,
     allowed_hosts: tuple[str, ...] = (),
+    body_timeout_s: float = BODY_TIMEOUT_S,
+    stop_socket: bool = False,
 ) -> FastAPI:
     """Build the web app.
 
@@ -82,6 +84,11 @@ def create_app(
     allowed_hosts : tuple of str
         Host names the server answers to besides 127.0.0.1, localhost and ::1 (the
         ``--host`` it is bound to); requests naming any other host are refused.
+    body_timeout_s : float
+        Longest wait for a whole request body, s; a body that does not come in time gets 408.
+    stop_socket : bool
+        Answer ``vibrofocus stop`` on an owner-only Unix socket beside the database while
+        the app runs (:mod:`.emergency`; ``vibrofocus serve`` turns it on).
 
     Returns
     -------
@@ -109,11 +116,26 @@ def create_app(
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
+        listener = None
+        if stop_socket:
+            from .emergency import StopListener, stop_socket_path
+
+            where = stop_socket_path(db_path)
+            if where is None:
+                log.warning("'vibrofocus stop' is not available: the database's path is too long for a Unix socket "
+                            "and XDG_RUNTIME_DIR is not set; the page's emergency stop still is")
+            else:
+                state.data_dir  # noqa: B018 - creates the files folder 0700 before the socket goes in it
+                listener = StopListener(state, where)
+                if not listener.start():
+                    listener = None
         if resume:
             started = state.resume_running_sessions()
             if started:
                 log.warning("resumed sessions %s at their first unanswered trial", started)
         yield
+        if listener is not None:
+            listener.close()
         state.shutdown()
         close = getattr(store, "close", None)
         if close is not None:
@@ -121,7 +143,8 @@ def create_app(
 
     app = FastAPI(title="vibrofocus", lifespan=lifespan, docs_url=None, redoc_url=None, openapi_url=None)
     app.state.web = state
-    app.add_middleware(SecurityMiddleware, web=state, allowed_hosts=(*LOCAL_HOSTS, *allowed_hosts))
+    app.add_middleware(SecurityMiddleware, web=state, allowed_hosts=(*LOCAL_HOSTS, *allowed_hosts),
+                       body_timeout_s=body_timeout_s)
     app.mount("/static", StaticFiles(directory=str(_HERE / "static")), name="static")
 
     @app.exception_handler(RequestValidationError)

@@ -26,7 +26,7 @@ from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, Partic
 from .public_text import public_text
 from .state import TOKEN_COOKIE, CalibrationCancelled, CalibrationJob, WebState, login_cookie, private_dir, render_template, trial_position
 from .routes_participant import planned
-from .throttle import THROTTLED_MESSAGE
+from .throttle import THROTTLED_MESSAGE, counts_as_guess
 
 log = logging.getLogger(__name__)
 
@@ -59,14 +59,19 @@ def _logged_in(web: WebState) -> Response:
     return resp
 
 
-def _throttled(web: WebState, request: Request) -> Response | None:
-    """The login page with 429 while this client is throttled, else None."""
-    wait = web.throttle.retry_after(_client(request), "token")
-    if wait is None:
-        return None
-    resp = _login_page(THROTTLED_MESSAGE, status=429)
-    resp.headers["Retry-After"] = str(wait)
-    return resp
+def _wrong_secret(web: WebState, request: Request, kind: str, given: str, message: str) -> Response:
+    """The login page for a wrong secret of ``kind``: 401, or 429 while this client is throttled.
+
+    The wrong secret counts (see :mod:`.throttle`) unless another site's page sent it.
+    """
+    wait = web.throttle.retry_after(_client(request), kind)
+    if wait is not None:
+        resp = _login_page(THROTTLED_MESSAGE, status=429)
+        resp.headers["Retry-After"] = str(wait)
+        return resp
+    if given and counts_as_guess(request.headers.get("sec-fetch-site")):
+        web.throttle.failed(_client(request), kind)
+    return _login_page(message)
 
 
 def _client(request: Request) -> str:
@@ -94,12 +99,9 @@ def experimenter_page(request: Request) -> Response:
 def login_link(request: Request, code: str = FPath(..., max_length=64)) -> Response:
     """Exchange a one-time login link printed by ``vibrofocus serve`` for the login cookie."""
     web = _web(request)
-    throttled = _throttled(web, request)
-    if throttled is not None:
-        return throttled
     if not web.use_login_code(code):
-        web.throttle.failed(_client(request), "token")
-        return _login_page("That login link has been used already or has expired. Log in with the experimenter token instead.")
+        return _wrong_secret(web, request, "login-link", code, (
+            "That login link has been used already or has expired. Log in with the experimenter token instead."))
     return _logged_in(web)
 
 
@@ -109,18 +111,14 @@ async def login_form(request: Request) -> Response:
     from urllib.parse import parse_qs
 
     web = _web(request)
-    throttled = _throttled(web, request)
-    if throttled is not None:
-        return throttled
     try:
         fields = parse_qs((await request.body()).decode("utf-8", "replace"), max_num_fields=4)
     except ValueError:  # more fields than the form has
         return _login_page("The login form was not filled in as expected. Reload the page and try again.", status=400)
     given = (fields.get("token") or [""])[0].strip()
     if not web.token_ok(given):
-        if given:
-            web.throttle.failed(_client(request), "token")
-        return _login_page("That is not the experimenter token this server printed. Check it and try again.")
+        return _wrong_secret(web, request, "token", given,
+                             "That is not the experimenter token this server printed. Check it and try again.")
     return _logged_in(web)
 
 
@@ -198,7 +196,7 @@ def _check_participant(web: WebState, participant_id: str) -> None:
 def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Calibrate a participant on a rig in the background; poll the returned job."""
     _check_participant(web, body.participant_id)
-    rig = web.make_rig(body.rig, body.seed)
+    rig = web.make_rig(body.rig, _rig_seed(body.rig, body.seed, body.participant_id))
     _refuse_if_busy(rig)
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
     with web.lock:
@@ -208,6 +206,19 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
         web.jobs[job.job_id] = job
     web.start_job(_calibrate, web, job, rig, name=f"calibration-{job.job_id}")
     return {"job_id": job.job_id}
+
+
+def _rig_seed(rig: str, seed: int | None, participant_id: str) -> int | None:
+    """The simulated forearm's seed: the one given, else derived from the participant id.
+
+    As ``vibrofocus calibrate --rig simulated`` does: each participant gets an arm of
+    their own, and the same one every time. Hardware rigs take no seed.
+    """
+    if seed is not None or rig != "simulated":
+        return seed
+    from ..defaults import participant_seed
+
+    return participant_seed(participant_id)
 
 
 def _refuse_if_busy(rig: Any) -> None:
@@ -253,15 +264,19 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
                             prompt=prompt if single_spot else None)
         folder = web.data_dir / "calibrations"
         private_dir(folder)
-        path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.h5"
+        # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
+        path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.nc"
+        job.message = "saving"
         save_calibration(cal, path)
         with web.db:
             cal_id = web.store.add_calibration(job.participant_id, path)
         with web.lock:
             web.calibrations[cal_id] = cal
         job.calibration_id = cal_id
+        job.verdicts = _verdicts(cal)
+        job.n_errors = sum(v["severity"] == "error" for v in job.verdicts)
         job.progress = 1.0
-        job.message = "done"
+        job.message = "done" if not job.n_errors else f"done, with {job.n_errors} error verdict(s)"
         job.status = "done"
     except CalibrationCancelled:
         job.status = "cancelled"
@@ -304,6 +319,37 @@ def calibration_step(job_id: str, action: str, web: WebState = Depends(require_t
     else:
         raise HTTPException(404, detail="Unknown calibration action; use continue or cancel.")
     return job.to_dict()
+
+
+def _verdicts(cal: Any) -> list[dict[str, str]]:
+    """A calibration's quality verdicts, errors first: ``[{"severity", "check", "message"}]``."""
+    order = {"error": 0, "warning": 1, "info": 2}
+    issues = sorted(cal.quality.issues, key=lambda i: order.get(i.severity, 3))
+    return [{"severity": i.severity, "check": i.check, "message": public_text(i.message)} for i in issues]
+
+
+def _calibration_errors(web: WebState, calibration_id: int) -> list[str]:
+    """The error verdicts of a calibration (dead or reversed actuator, clipping, ...), as sentences."""
+    return [v["message"] for v in _verdicts(web.calibration(calibration_id)) if v["severity"] == "error"]
+
+
+def _refuse_calibration_errors(web: WebState, calibration_id: int, allowed: bool) -> list[str]:
+    """409 when a calibration has error verdicts and the experimenter has not accepted them; the errors."""
+    errors = _calibration_errors(web, calibration_id)
+    if errors and not allowed:
+        raise HTTPException(409, detail=(
+            f"Calibration {calibration_id} has {len(errors)} error verdict(s): {' '.join(errors)} "
+            "Fix the setup and calibrate again, or use it anyway by ticking 'use despite its errors' "
+            "(allow_calibration_errors)."))
+    return errors
+
+
+@router.get("/api/calibrations/{calibration_id}/quality")
+def calibration_quality(calibration_id: CalibrationId, web: WebState = Depends(require_token)) -> dict[str, Any]:
+    """The quality verdicts of a calibration (errors first) and how many are errors."""
+    verdicts = _verdicts(web.calibration(calibration_id))
+    return {"calibration_id": calibration_id, "verdicts": verdicts,
+            "n_errors": sum(v["severity"] == "error" for v in verdicts)}
 
 
 @router.get("/api/calibrations/{calibration_id}/figure.png")
@@ -371,13 +417,21 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         raise HTTPException(422, detail=f"Unknown rig {body.rig!r}; this server knows: {', '.join(RIG_KINDS)}.")
     web.check_rig_kind(body.rig)
     _check_participant(web, body.participant_id)
+    accepted: list[str] = []
     if body.calibration_id is not None:
         web.calibration(body.calibration_id)  # 404 / 409 before anything is written
-    config: dict[str, Any] = {"rig": body.rig, "rig_seed": body.rig_seed}
+        accepted = _refuse_calibration_errors(web, body.calibration_id, body.allow_calibration_errors)
+    if web.is_simulated(body.participant_id) and (body.calibration_id is None or body.rig != "simulated"):
+        raise HTTPException(409, detail=(
+            f"{body.participant_id} is a simulated participant: the perceptual model answers their sessions from what the "
+            "simulated forearm feels, so plan it with a calibration on the simulated rig."))
+    config: dict[str, Any] = {"rig": body.rig, "rig_seed": _rig_seed(body.rig, body.rig_seed, body.participant_id)}
     if body.repetitions is not None:
         config["repetitions"] = body.repetitions
     if body.n_training is not None:
         config["n_training"] = body.n_training
+    if accepted:
+        config["calibration_errors_accepted"] = accepted  # the record of the override
     seed = body.seed if body.seed is not None else secrets.randbelow(2**31)
     try:
         with web.db:
@@ -424,6 +478,9 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
         status = action_status(action, session_id, info["status"])
         if status == "running" and info.get("calibration_id") is not None:
             web.calibration(int(info["calibration_id"]))  # its hash, before anything plays
+            # Error verdicts: only with the override recorded when the session was planned.
+            _refuse_calibration_errors(web, int(info["calibration_id"]),
+                                       bool((info.get("config") or {}).get("calibration_errors_accepted")))
         if status == "aborted":
             with web.lock:
                 runner = web.runners.pop(session_id, None)
@@ -450,18 +507,9 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
 @router.post("/api/emergency-stop")
 def emergency_stop(web: WebState = Depends(require_token)) -> dict[str, Any]:
     """Every output to 0 V now; calibrations cancelled, running sessions paused (resume them later)."""
-    done = web.emergency_stop()
-    with web.lock:
-        session_ids = list(web.runners)
-    for sid in session_ids:
-        with web.db:
-            try:
-                if web.store.session(sid).status == "running":
-                    web.store.set_status(sid, "paused")
-            except StudyError:
-                continue
-    log.warning("emergency stop: %s", "; ".join(done))
-    return {"stopped": done}
+    from .emergency import stop_all
+
+    return {"stopped": stop_all(web)}
 
 
 # ---------------------------------------------------------------------- export and analysis

@@ -74,6 +74,7 @@ def _state(web: WebState, session_id: int) -> dict[str, Any]:
         "n_trials": len(trials),
         "n_answered": int(info["n_answered"]),
         "error": snap.get("error"),
+        "simulated": web.is_simulated(info["participant_id"]),
     }
 
 
@@ -162,6 +163,11 @@ _REFUSALS: dict[str, tuple[int, str | None]] = {
 }
 
 
+#: What a participant page of a simulated participant's session reads.
+SIMULATED_MESSAGE = ("This session belongs to a simulated participant: the perceptual model answers it, "
+                     "so answers from this page are not recorded.")
+
+
 @router.post("/api/participant/{session_id}/answer", response_model=AnswerReceipt)
 def participant_answer(
     request: Request,
@@ -179,8 +185,12 @@ def participant_answer(
     web.check_key(session_id, key)
     if body.session_id != session_id:
         raise HTTPException(422, detail=f"body.session_id {body.session_id} does not match the session {session_id} of the URL")
-    if web.session(session_id)["status"] == "aborted":  # 404 for an unknown session
+    info = web.session(session_id)  # 404 for an unknown session
+    if info["status"] == "aborted":
         raise HTTPException(409, detail="The experimenter has ended this session, so this answer was not recorded.")
+    if web.is_simulated(info["participant_id"]):
+        # Its answers are the perceptual model's: one from a person would be stored as model output.
+        raise HTTPException(409, detail=SIMULATED_MESSAGE)
     try:
         receipt = web.store.record_answer(
             session_id, body.trial_index, list(body.response), float(body.rt_s),

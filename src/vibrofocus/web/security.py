@@ -17,11 +17,14 @@ It is a plain ASGI middleware, so that it acts before FastAPI reads or parses an
 3. **Authentication before the body.** Experimenter routes need the token (header) or
    the login cookie, participant routes the session's key, checked from the headers
    alone; a request that fails is answered before a byte of its body is read.
-   Wrong secrets are counted per client (:mod:`.throttle`): a client that gives too many
-   is refused (429) for a while, the right secret included. The login cookie, a random
-   id, is not throttled, so that a flood of wrong tokens does not log the experimenter out.
-4. **Size limit.** A body longer than :data:`MAX_BODY_BYTES` is refused (413) while it is
-   read, so a huge upload costs no memory.
+   Wrong secrets are counted per client and kind (:mod:`.throttle`): a client that gives
+   too many has its further wrong ones answered 429 for a while. The right secret always
+   gets in, and wrong secrets in requests another site's page made are not counted, so
+   neither a local process nor a web page can lock the experimenter or a participant out.
+4. **Size limit and deadline.** A body longer than :data:`MAX_BODY_BYTES` is refused (413)
+   while it is read, so a huge upload costs no memory; a body that has not arrived whole
+   within ``body_timeout_s`` (:data:`BODY_TIMEOUT_S`) is refused (408), so a client that
+   declares a body and never sends it cannot hold a connection for ever.
 5. **Headers on every answer.** ``Content-Security-Policy`` (``frame-ancestors 'none'``:
    no other page can frame these pages; forms post only to this server),
    ``X-Frame-Options: DENY``, ``X-Content-Type-Options: nosniff``,
@@ -33,15 +36,17 @@ which also accepts text that is not ASCII instead of raising.
 
 from __future__ import annotations
 
+import asyncio
 import json
 from collections.abc import Awaitable, Callable, Iterable
 from typing import Any
 from urllib.parse import parse_qs, urlsplit
 
-from .throttle import THROTTLED_MESSAGE
+from .throttle import THROTTLED_MESSAGE, counts_as_guess
 
 __all__ = [
     "MAX_BODY_BYTES",
+    "BODY_TIMEOUT_S",
     "LOCAL_HOSTS",
     "SecurityMiddleware",
     "same_secret",
@@ -50,6 +55,10 @@ __all__ = [
 
 #: Longest request body accepted, bytes (an answer is about 150 bytes).
 MAX_BODY_BYTES = 64 * 1024
+#: Longest wait for a whole request body once the head is in, s.
+BODY_TIMEOUT_S = 10.0
+#: What a client whose body did not come in time reads.
+BODY_TIMEOUT_MESSAGE = "The request's body did not arrive in time, so it was dropped. Try again."
 #: Host names that always reach this server.
 LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 
@@ -123,13 +132,17 @@ class SecurityMiddleware:
         Host names accepted in the ``Host`` header (lower case, no port).
     max_body_bytes : int
         Largest request body accepted.
+    body_timeout_s : float
+        Longest wait for a whole request body, s.
     """
 
-    def __init__(self, app: Any, web: Any, *, allowed_hosts: Iterable[str], max_body_bytes: int = MAX_BODY_BYTES) -> None:
+    def __init__(self, app: Any, web: Any, *, allowed_hosts: Iterable[str], max_body_bytes: int = MAX_BODY_BYTES,
+                 body_timeout_s: float = BODY_TIMEOUT_S) -> None:
         self.app = app
         self.web = web
         self.allowed_hosts = frozenset(h.strip("[]").lower() for h in allowed_hosts)
         self.max_body_bytes = int(max_body_bytes)
+        self.body_timeout_s = float(body_timeout_s)
 
     async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
         if scope["type"] != "http":
@@ -167,10 +180,16 @@ class SecurityMiddleware:
             if declared is not None and (not declared.isdigit() or int(declared) > self.max_body_bytes):
                 await _refuse(send, 413, "This request is too large for the study server.")
                 return
-            body, ok = await self._read_body(receive)
+            try:
+                body, ok = await asyncio.wait_for(self._read_body(receive), self.body_timeout_s)
+            except asyncio.TimeoutError:
+                await _refuse(send, 408, BODY_TIMEOUT_MESSAGE)
+                return
             if not ok:
                 await _refuse(send, 413, "This request is too large for the study server.")
                 return
+            if body and body[-1]["type"] == "http.disconnect":
+                return  # the client left (or was closed to make room) before its body came
             receive = _replay(body, receive)
 
         await self.app(scope, receive, _with_headers(send, path))
@@ -189,11 +208,11 @@ class SecurityMiddleware:
                 key = headers.get("x-participant-key")
             else:
                 key = (parse_qs(query).get("key") or [None])[0]
-            return self._secret(client, "key", key, lambda: web.key_ok(int(sid), key), 403, web.KEY_MESSAGE)
+            return self._secret(client, "key", key, lambda: web.key_ok(int(sid), key), 403, web.KEY_MESSAGE, headers)
         if path.startswith(("/api/", "/reports/")):
             token = headers.get("x-vibrofocus-token")
             if token is not None:
-                return self._secret(client, "token", token, lambda: web.token_ok(token), 401, web.TOKEN_MESSAGE)
+                return self._secret(client, "token", token, lambda: web.token_ok(token), 401, web.TOKEN_MESSAGE, headers)
             if web.cookie_ok(headers.get("cookie")):
                 site = headers.get("sec-fetch-site")
                 if site is not None and site not in ("same-origin", "none"):
@@ -202,14 +221,19 @@ class SecurityMiddleware:
             return 401, web.TOKEN_MESSAGE
         return None
 
-    def _secret(self, client: str, kind: str, given: str | None, ok: Callable[[], bool], status: int, message: str) -> tuple | None:
-        """Check a secret under the client's throttle; a wrong one (not a missing one) counts."""
+    def _secret(self, client: str, kind: str, given: str | None, ok: Callable[[], bool], status: int, message: str,
+                headers: dict[str, str]) -> tuple | None:
+        """Check a secret under the client's throttle (see :mod:`.throttle`).
+
+        The right secret always passes; a wrong one (not a missing one) counts unless
+        another site's page sent it; over the limit, a wrong one gets 429.
+        """
+        if ok():
+            return None
         wait = self.web.throttle.retry_after(client, kind)
         if wait is not None:
             return 429, THROTTLED_MESSAGE, wait
-        if ok():
-            return None
-        if given:
+        if given and counts_as_guess(headers.get("sec-fetch-site")):
             self.web.throttle.failed(client, kind)
         return status, message
 

@@ -9,10 +9,20 @@ accept writes a line to the log. Here each connection is held to:
   is closed;
 - a **keep-alive timeout**: a connection idle between requests is closed after
   ``keep_alive_s`` (uvicorn's own);
+- a **body deadline**: a request whose body has not arrived whole within
+  ``body_timeout_s`` gets ``408`` and its connection is closed (checked by
+  :class:`~vibrofocus.web.security.SecurityMiddleware`, which reads every body);
 - a **cap** on open connections (below the file-descriptor limit): a connection beyond
-  it closes the longest-idle connection (one with no request in progress), so idle
-  sockets cannot lock out a participant; when every connection is busy, the new one
-  gets ``503`` with a sentence saying why, and is closed.
+  it closes the longest-idle connection (one with no request in progress), or else the
+  one that has waited longest for a request body that does not come (a client that
+  declared a body and sends nothing holds a connection without doing anything), so
+  neither idle sockets nor stalled bodies can lock out a participant or the
+  experimenter; when every connection is busy with real work, the new one gets ``503``
+  with a sentence saying why, and is closed;
+- **reserved slots for the emergency stop**: beyond the cap, :data:`RESERVED_SLOTS` more
+  connections are accepted that answer only ``POST /api/emergency-stop`` (everything else
+  on them gets the ``503``), so the stop button works whatever the load.
+  ``vibrofocus stop`` reaches the same stop without TCP at all (:mod:`.emergency`).
 
 Log records pass through :class:`FloodFilter`: a message repeated faster than a few times
 a minute is counted, not written, and the count is written once the burst is over.
@@ -30,12 +40,17 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["ServerLimits", "FloodFilter", "guarded_protocol", "effective_cap", "run"]
+__all__ = ["ServerLimits", "FloodFilter", "guarded_protocol", "effective_cap", "run", "RESERVED_SLOTS"]
 
 log = logging.getLogger(__name__)
 
 #: File descriptors kept free for the database, calibrations, reports and the listener.
 FD_RESERVE = 128
+
+#: Connections beyond the cap kept for ``POST /api/emergency-stop`` only.
+RESERVED_SLOTS = 8
+#: The one request a reserved connection may carry.
+EMERGENCY_STOP = ("POST", "/api/emergency-stop")
 
 #: What a connection beyond the cap reads.
 FULL_MESSAGE = (
@@ -56,17 +71,20 @@ class ServerLimits:
         Longest wait for a whole request head on a connection, s.
     keep_alive_s : float
         Longest idle time between two requests on one connection, s.
+    body_timeout_s : float
+        Longest wait for the whole body of a request once its head is in, s (then 408).
     """
 
     max_connections: int = 1000
     header_timeout_s: float = 10.0
     keep_alive_s: float = 5.0
+    body_timeout_s: float = 10.0
 
     def __post_init__(self) -> None:
         if self.max_connections < 4:
             raise ValueError(f"max_connections must be at least 4, got {self.max_connections}")
-        if not self.header_timeout_s > 0 or not self.keep_alive_s > 0:
-            raise ValueError("header_timeout_s and keep_alive_s must be positive")
+        if not self.header_timeout_s > 0 or not self.keep_alive_s > 0 or not self.body_timeout_s > 0:
+            raise ValueError("header_timeout_s, keep_alive_s and body_timeout_s must be positive")
 
 
 def effective_cap(limits: ServerLimits) -> int:
@@ -122,15 +140,17 @@ def guarded_protocol(limits: ServerLimits, cap: int | None = None) -> type:
 
         _idle_since: float = 0.0
         _head_timer: Any = None
+        _reserved: bool = False
 
         def connection_made(self, transport: Any) -> None:  # noqa: D102 - asyncio's
             super().connection_made(transport)
             self._idle_since = time.monotonic()
-            if len(self.connections) > cap and not self._evict_idle():
-                self.connections.discard(self)
-                transport.write(full_response)
-                transport.close()
-                return
+            if len(self.connections) > cap and not self._evict():
+                if not self._reserve():
+                    self.connections.discard(self)
+                    transport.write(full_response)
+                    transport.close()
+                    return
             self._arm_head_timer()
 
         def data_received(self, data: bytes) -> None:  # noqa: D102 - asyncio's
@@ -154,12 +174,40 @@ def guarded_protocol(limits: ServerLimits, cap: int | None = None) -> type:
             """A request is in progress (its head is read, its response not finished)."""
             return self.cycle is not None and not self.cycle.response_complete
 
-        def _evict_idle(self) -> bool:
-            """Close the longest-idle other connection; False if every one is busy."""
-            idle = [c for c in self.connections if c is not self and isinstance(c, GuardedH11Protocol) and not c._busy()]
-            if not idle:
-                return False
-            min(idle, key=lambda c: c._idle_since)._close()
+        def _stalled(self) -> bool:
+            """Busy only waiting for the client's request body (the route has not begun)."""
+            return self._busy() and self.conn.their_state is h11.SEND_BODY
+
+        def _others(self) -> list[GuardedH11Protocol]:
+            return [c for c in self.connections if c is not self and isinstance(c, GuardedH11Protocol)]
+
+        def _evict(self) -> bool:
+            """Make room: close the longest-idle other connection, else the longest-stalled body.
+
+            False if every other connection is busy with a request it has whole.
+            """
+            others = self._others()
+            for pick in (lambda c: not c._busy(), GuardedH11Protocol._stalled):
+                chosen = [c for c in others if pick(c)]
+                if chosen:
+                    min(chosen, key=lambda c: c._idle_since)._close()
+                    return True
+            return False
+
+        def _reserve(self) -> bool:
+            """Take one of the slots kept for the emergency stop; False if none is left.
+
+            A reserved connection that has not sent its request head yet gives way to a
+            newer one, so silent sockets cannot hold the reserve either.
+            """
+            reserved = [c for c in self._others() if c._reserved]
+            if len(reserved) >= RESERVED_SLOTS:
+                waiting = [c for c in reserved if c.cycle is None]
+                if not waiting:
+                    return False
+                min(waiting, key=lambda c: c._idle_since)._close()
+            self._reserved = True
+            self.app = _only_emergency_stop(self.app)
             return True
 
         def _arm_head_timer(self) -> None:
@@ -184,6 +232,20 @@ def guarded_protocol(limits: ServerLimits, cap: int | None = None) -> type:
                 except h11.LocalProtocolError:
                     pass  # mid-request head: nothing to tell the peer
                 self.transport.close()
+
+    def _only_emergency_stop(app: Any) -> Any:
+        """An ASGI app passing only the emergency stop to ``app``; the rest gets the 503."""
+
+        async def reserved(scope: dict, receive: Any, send: Any) -> None:
+            if (scope.get("method", "").upper(), scope.get("path")) == EMERGENCY_STOP:
+                await app(scope, receive, send)
+                return
+            await send({"type": "http.response.start", "status": 503, "headers": [
+                (b"content-type", b"application/json"), (b"retry-after", b"5"), (b"connection", b"close"),
+                (b"content-length", str(len(full_body)).encode())]})
+            await send({"type": "http.response.body", "body": full_body})
+
+        return reserved
 
     return GuardedH11Protocol
 
@@ -282,7 +344,7 @@ def listen(host: str, port: int) -> socket.socket:
 
 
 def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits(),
-        sock: socket.socket | None = None) -> None:
+        sock: socket.socket | None = None, trusted_proxy: str | None = None) -> None:
     """Serve ``app`` with uvicorn under ``limits`` until interrupted.
 
     Parameters
@@ -297,6 +359,11 @@ def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits()
         Connection limits.
     sock : socket.socket, optional
         A socket already listening (:func:`listen`); default: uvicorn binds ``host:port``.
+    trusted_proxy : str, optional
+        Address (or comma-separated addresses) of a reverse proxy whose
+        ``X-Forwarded-For`` names the real client. Default None: forwarding headers are
+        ignored, so the client is always the TCP peer (a local process cannot pose as
+        another address to dodge or aim the throttle of wrong secrets).
     """
     import uvicorn
 
@@ -307,5 +374,9 @@ def run(app: Any, *, host: str, port: int, limits: ServerLimits = ServerLimits()
     config = uvicorn.Config(
         app, host=host, port=port, log_config=None, log_level="warning", access_log=False,
         http=guarded_protocol(limits, cap), timeout_keep_alive=limits.keep_alive_s,
+        # uvicorn trusts X-Forwarded-For from 127.0.0.1 by default: any local process could
+        # then choose the client address the throttle counts.
+        proxy_headers=trusted_proxy is not None,
+        forwarded_allow_ips=trusted_proxy if trusted_proxy is not None else "",
     )
     uvicorn.Server(config).run(sockets=None if sock is None else [sock])

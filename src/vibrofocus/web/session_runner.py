@@ -88,6 +88,12 @@ class SessionRunner:
         play the stimulus only while a page is showing that cue, so that no stimulus is
         played to nobody (the experimenter may press Start before the participant page
         is open, or the page may be closed or reloaded during "get ready" or the cue).
+    model : Responder, optional
+        A simulated participant
+        (:class:`~vibrofocus.simulation.SimulatedParticipant`) who answers every trial
+        instead of a participant page: no page is waited for, and the answer route
+        refuses answers for the session. The trial timing (``pace``) stays, so the
+        experimenter page shows the session running as it would with a person.
     """
 
     def __init__(
@@ -100,6 +106,7 @@ class SessionRunner:
         rig: Any = None,
         pace: Pace = PACES["normal"],
         require_page: bool = True,
+        model: Any = None,
     ) -> None:
         if stimulus is not None and renderer is None:
             renderer = lambda method, target: stimulus(_Condition(method, target))  # noqa: E731
@@ -123,7 +130,8 @@ class SessionRunner:
             "state": "idle", "trial_index": None, "phase": None, "seq": int(time.time() * 1000), "error": None,
         }
         self._thread: threading.Thread | None = None
-        self.require_page = bool(require_page)
+        self.model = model
+        self.require_page = bool(require_page) and model is None
         self._polls: dict[int, int] = {}  # open state requests of ready pages: token -> seq they have seen
         self._next_poll = 0
 
@@ -266,6 +274,11 @@ class SessionRunner:
             with self._cond:
                 self._drive_sha[index] = presentation.stimulus.sha256
         self._set("respond", trial_index=index, phase=presentation.trial.phase)
+        if self.model is not None:
+            held = self._held()
+            if held == STOP:
+                return STOP
+            return self.model.respond(presentation)  # the engine commits it
         with self._cond:
             while not self._stopping and index not in self._answered and self._restart != index:
                 self._cond.wait(1.0)

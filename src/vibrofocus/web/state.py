@@ -62,6 +62,8 @@ class CalibrationJob:
     error: str | None = None
     prompt: str | None = None
     straps: dict | None = None
+    verdicts: list | None = None
+    n_errors: int = 0
     _go: threading.Event = field(default_factory=threading.Event, repr=False)
     _cancelled: bool = False
 
@@ -363,14 +365,40 @@ class WebState:
                 return runner
         info = self.session(session_id)
         config = info.get("config") or {}
-        renderer = rig = None
+        renderer = rig = model = None
         cal_id = info.get("calibration_id")
         if cal_id is not None:
             rig = self.make_rig(config.get("rig", self.rig_kind), config.get("rig_seed"))
             renderer = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None))
-        runner = SessionRunner(self.store, session_id, renderer=renderer, rig=rig, pace=self.pace)
+        if self.is_simulated(info["participant_id"]):
+            model = self.simulated_participant(info, rig)
+        runner = SessionRunner(self.store, session_id, renderer=renderer, rig=rig, pace=self.pace, model=model)
         with self.lock:
             return self.runners.setdefault(session_id, runner)
+
+    def is_simulated(self, participant_id: str) -> bool:
+        """Whether a participant is simulated: the perceptual model answers their sessions."""
+        with self.db:
+            try:
+                return bool(self.store.participant(participant_id).simulated)
+            except StudyError:
+                return False
+
+    def simulated_participant(self, info: dict[str, Any], rig: Any) -> Any:
+        """The perceptual model answering a simulated participant's session, on its simulated forearm.
+
+        As in ``vibrofocus simulate-study``: a :class:`~vibrofocus.simulation.SimulatedParticipant`
+        seeded like the forearm it feels with (the session's ``rig_seed``). 409 for a
+        session the model cannot answer (no calibration, or not the simulated rig).
+        """
+        config = info.get("config") or {}
+        if rig is None or config.get("rig", "simulated") != "simulated":
+            raise HTTPException(409, detail=(
+                f"Session {info['session_id']} of the simulated participant {info['participant_id']} needs a calibration on "
+                "the simulated rig: the perceptual model answers it from what the simulated forearm feels."))
+        from ..simulation import SimulatedParticipant
+
+        return SimulatedParticipant(rig, int(getattr(rig, "seed", config.get("rig_seed") or 0)))
 
     def resume_running_sessions(self) -> list[int]:
         """After a restart: start a runner for every session stored as running."""

@@ -84,6 +84,12 @@
     return node;
   }
 
+  // The simulated forearm's seed; null (empty field): the server derives it from the participant id.
+  function rigSeed() {
+    const v = $("rig-seed").value.trim();
+    return v === "" ? null : Number(v);
+  }
+
   // ---------------------------------------------------------------- emergency stop
   async function emergencyStop() {
     try {
@@ -98,6 +104,9 @@
   document.addEventListener("keydown", (ev) => {
     if (ev.key !== "Escape") return;
     const now = Date.now();
+    // One Esc closes an open "stop for good?" question (keeping the session); Esc twice
+    // is the emergency stop, whether a question was open or not.
+    if (pendingStop) pendingStop.cancel();
     if (now - lastEscape < 800) emergencyStop();
     lastEscape = now;
   });
@@ -171,23 +180,47 @@
     return true;
   }
 
+  let verdictsAsked = 0;  // only the latest selection's verdicts are shown
+  async function showVerdicts(id) {
+    const list = $("cal-verdicts");
+    const asked = ++verdictsAsked;
+    $("cal-override").checked = false;
+    $("cal-override-label").hidden = true;
+    if (!id) { list.hidden = true; list.replaceChildren(); return; }
+    let q;
+    try { q = await api(`/api/calibrations/${id}/quality`); } catch (e) { q = null; }
+    if (asked !== verdictsAsked) return;
+    if (!q) { list.replaceChildren(el("li", { class: "error" }, "The quality verdicts could not be read.")); list.hidden = false; return; }
+    const items = q.verdicts.filter((v) => v.severity !== "info").map((v) =>
+      el("li", { class: v.severity === "error" ? "error" : "warning" }, `${v.severity}: ${v.message}`));
+    if (!items.length) items.push(el("li", { class: "muted" }, "Quality: no warnings or errors."));
+    else if (q.n_errors) items.unshift(el("li", { class: "error" },
+      `${q.n_errors} error verdict(s): sessions on this calibration need 'use the calibration despite its errors'.`));
+    list.replaceChildren(...items);
+    list.hidden = false;
+    $("cal-override-label").hidden = !q.n_errors;
+  }
+
   function onCalibration() {
     const id = $("calibration").value;
     const img = $("cal-figure");
     $("preview-message").textContent = id ? "" : "A preview needs a calibration.";
+    showVerdicts(id);
     if (id) {
       showFigure(`/api/calibrations/${id}/figure.png`, img, $("cal-figure-message"), "Loading the figure…");
       return;
     }
     img.hidden = true;
     const some = $("calibration").options.length > 1;
-    $("cal-figure-message").textContent = some ? "No calibration chosen: sessions planned now are dry runs (nothing is played)."
+    $("cal-figure-message").textContent = calJob ? "Calibrating: the new calibration is shown when it is saved."
+      : some ? "No calibration chosen: sessions planned now are dry runs (nothing is played)."
       : "No calibration yet: press Calibrate.";
   }
   $("calibration").addEventListener("change", onCalibration);
 
   function rigQuery() {
-    return `rig=${encodeURIComponent($("rig").value)}&seed=${Number($("rig-seed").value) || 0}`;
+    const seed = rigSeed();
+    return `rig=${encodeURIComponent($("rig").value)}` + (seed === null ? "" : `&seed=${seed}`);
   }
 
   async function readStraps() {
@@ -220,10 +253,11 @@
     if (!pid) { flash("Add or pick a participant first.", true); return; }
     try {
       const { job_id } = await api("/api/calibrations", { method: "POST", body: JSON.stringify({
-        participant_id: pid, rig: $("rig").value, seed: Number($("rig-seed").value) || 0 }) });
+        participant_id: pid, rig: $("rig").value, seed: rigSeed() }) });
       calJob = job_id;
       $("calibrate").disabled = true;
       $("cal-cancel").hidden = false;
+      if (!$("calibration").value) onCalibration();  // "Calibrating…", not "No calibration yet"
       for (;;) {
         const job = await api(`/api/calibrations/jobs/${job_id}`);
         $("cal-progress").value = job.progress;
@@ -237,18 +271,23 @@
         $("cal-prompt").hidden = !waiting;
         $("cal-prompt-text").textContent = waiting ? job.prompt : "";
         if (job.status === "done") {
-          flash(`Calibration #${job.calibration_id} saved.`);
+          $("cal-message").textContent = `Calibration #${job.calibration_id} saved` +
+            (job.n_errors ? ` with ${job.n_errors} error verdict(s): see below.` : ".");
+          flash(`Calibration #${job.calibration_id} saved` + (job.n_errors ? ` with ${job.n_errors} error verdict(s).` : "."), job.n_errors > 0);
+          calJob = null;
           await loadParticipants(pid);
           $("calibration").value = job.calibration_id;
           onCalibration();
           break;
         }
-        if (job.status === "failed") { flash(`Calibration failed: ${job.error}`, true); break; }
-        if (job.status === "cancelled") { flash("Calibration cancelled; nothing was saved."); break; }
+        if (job.status === "failed") { $("cal-message").textContent = "Calibration failed."; flash(`Calibration failed: ${job.error}`, true); break; }
+        if (job.status === "cancelled") { $("cal-message").textContent = "Calibration cancelled; nothing was saved."; flash("Calibration cancelled; nothing was saved."); break; }
         await new Promise((r) => setTimeout(r, 500));
       }
     } catch (e) { flash(e.message, true); }
+    const wasRunning = calJob !== null;
     calJob = null;
+    if (wasRunning && !$("calibration").value) onCalibration();  // failed or cancelled: the card says so
     $("cal-prompt").hidden = true;
     $("cal-cancel").hidden = true;
     $("calibrate").disabled = false;
@@ -329,13 +368,47 @@
     if (s.status === "planned") act("Start", "start");
     if (s.status === "running") act("Pause", "pause");
     if (s.status === "paused") act("Resume", "resume");  // a stop is final: a new session goes on
-    if (s.status === "running" || s.status === "paused") act("Stop", "stop");
+    if (s.status === "running" || s.status === "paused") {
+      // Stop is final (a stopped session never resumes), one button away from Pause: it
+      // asks first, in the row itself. Not window.confirm(): a modal dialog would swallow
+      // the keys, and Esc twice must always reach the emergency stop.
+      controls.append(el("button", { class: "small", "data-action": "stop", onclick: (ev) => {
+        ev.stopPropagation();
+        askStop(s, controls, ev.currentTarget);
+      } }, "Stop…"));
+    }
     const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
       el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
       el("td", { class: `status ${s.status}` }, s.status + (s.dry_run ? " · dry run" : "")), el("td", { class: "progress" }), el("td", { class: "live" }),
       el("td", {}, link, " ", copy), el("td", {}, controls));
     tr.addEventListener("click", () => { selectSession(s.session_id); loadSessions(); });
     return tr;
+  }
+
+  let pendingStop = null;  // {cancel}: the open confirmation of a stop, if any
+  function askStop(s, controls, opener) {
+    if (pendingStop) pendingStop.cancel();
+    const kept = [...controls.childNodes];
+    const cancel = () => {
+      pendingStop = null;
+      controls.replaceChildren(...kept);
+      opener.focus();
+    };
+    const question = el("span", { class: "confirm-stop", role: "alert" },
+      `Stop session ${s.session_id} for good? It cannot be resumed; use Pause for a break. `);
+    const yes = el("button", { class: "small danger", "data-action": "stop-confirm", onclick: async (ev) => {
+      ev.stopPropagation();
+      pendingStop = null;
+      try { await api(`/api/sessions/${s.session_id}/stop`, { method: "POST" }); flash(`Session ${s.session_id}: stopped.`); }
+      catch (e) { flash(e.message, true); controls.replaceChildren(...kept); }
+      selectSession(s.session_id);
+      loadSessions();
+    } }, "Stop for good");
+    const no = el("button", { class: "small", "data-action": "stop-cancel", onclick: (ev) => { ev.stopPropagation(); cancel(); } },
+      "Keep it");
+    controls.replaceChildren(question, yes, " ", no);
+    pendingStop = { cancel };
+    no.focus();  // Enter on the focused button keeps the session
   }
 
   $("new-session").addEventListener("submit", async (ev) => {
@@ -346,8 +419,9 @@
     try {
       const s = await api("/api/sessions", { method: "POST", body: JSON.stringify({
         participant_id: pid, study: Number($("study").value), calibration_id: cal ? Number(cal) : null,
-        rig: $("rig").value, rig_seed: Number($("rig-seed").value) || 0,
-        repetitions: Number($("repetitions").value), n_training: Number($("n-training").value) }) });
+        rig: $("rig").value, rig_seed: rigSeed(),
+        repetitions: Number($("repetitions").value), n_training: Number($("n-training").value),
+        allow_calibration_errors: Boolean(cal) && $("cal-override").checked }) });
       selectSession(s.session_id);
       flash(`Session ${s.session_id} planned (${s.n_trials} trials)${cal ? "" : " — no calibration: a dry run, nothing is played"}.`);
       loadSessions();

@@ -232,7 +232,7 @@
     const respond = next.state === "respond";
     // A trial waiting for an answer whose onset this page did not see (it was loaded or
     // reloaded after the stimulus) is asked for again, from "Get ready".
-    const restart = respond && audioReady && cueSeenFor !== next.trial_index && sentFor !== next.trial_index
+    const restart = !next.simulated && respond && audioReady && cueSeenFor !== next.trial_index && sentFor !== next.trial_index
       && !pendingHere && !refusedHere;
     if (restart && restartAskedAt !== next.seq) {
       restartAskedAt = next.seq;
@@ -240,12 +240,14 @@
     }
 
     $("progress").textContent = next.trial ? trialLabel(next) : "";
+    body.dataset.phase = next.phase || "";
 
     // A break (the experimenter paused) stops the trial's clock: the answer window
     // closes, and when it opens again the reaction time goes on from where it stopped.
     const onBreak = Boolean(next.paused) && !["done", "stopped"].includes(next.state);
     if (onBreak && respondSince !== null && pausedAt === null) pausedAt = { t: performance.now(), trial: next.trial_index };
-    const answerable = respond && !onBreak && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
+    // A simulated participant's session: the perceptual model answers, this page watches.
+    const answerable = !next.simulated && respond && !onBreak && audioReady && !restart && sentFor !== next.trial_index && !pendingHere && !refusedHere;
     const wasAnswerable = body.classList.contains("answerable");
     if (answerable && !wasAnswerable) {
       if (pausedAt !== null && respondSince !== null && pausedAt.trial === next.trial_index) respondSince += performance.now() - pausedAt.t;
@@ -267,18 +269,25 @@
       return;
     }
     if (!online) { setMessage("Connection lost — reconnecting…"); return; }
+    if (next.simulated && !["done", "stopped"].includes(next.state)) {
+      setMessage("A simulated participant (the perceptual model) answers this session; nothing to do here.");
+      return;
+    }
     if (onBreak) { setMessage("Short break. Please wait."); return; }
     switch (next.state) {
       case "waiting": setMessage("Please wait — the experimenter will start the session."); break;
       case "paused": setMessage("Short break. Please wait."); break;
-      case "ready": setMessage("Get ready"); break;
+      case "ready":
+        // The first main trial after training: say that the training is over.
+        setMessage(firstMain(next) ? "Training is over. The main trials begin now. Get ready" : "Get ready");
+        break;
       case "cue": setMessage("●"); break;
       case "respond":
         if (restart) setMessage("Get ready");
         else if (waitingForServer) setMessage("Sending…");
         else if (confirmedFor === next.trial_index) showTaken();
         else {
-          setMessage(multi ? "Where did you feel it? Select, then Enter."
+          setMessage(multi ? "Where did you feel it? Choose every location you felt (one or several), then Confirm."
                            : "Where did you feel it most?");
         }
         break;
@@ -288,6 +297,11 @@
       case "error": setMessage("Please wait — the experimenter has been notified."); break;
       default: setMessage("Please wait.");
     }
+  }
+
+  function firstMain(next) {
+    // trial_index > 0: there were training trials before this first main trial.
+    return next.phase === "main" && next.trial === 1 && next.trial_index > 0;
   }
 
   function trialLabel(next) {
