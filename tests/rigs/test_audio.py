@@ -385,7 +385,7 @@ def test_a_clipped_vibrometer_input_is_reported(rig):
     rig.close()
     with make_rig("audio", config=cfg) as loud:
         drive = np.zeros((4, 2000))
-        drive[0, 500:1500] = 10.0 * np.sign(np.sin(2 * np.pi * 50 * (np.arange(1000) + 0.5) / FS))  # +-10 V: 1.0 digital
+        drive[0, 500:1500] = 10.0 * np.sin(2 * np.pi * 50 * np.arange(1000) / FS)  # 10 V peak: 1.0 digital
         loud.play_and_record(drive, tail_s=0.0)
         assert loud.last_clipped.tolist() == [True]
 
@@ -565,6 +565,7 @@ def test_devices_check_tone_plays_one_percent_of_full_scale(jack_server, tmp_pat
     tone = json.loads(r.stdout)["tone"]
     assert tone["output_channel"] == 1 and tone["frequency_hz"] == 100.0
     np.testing.assert_allclose(tone["expected_rms_v"], 0.01 * VFS_OUT / np.sqrt(2), rtol=1e-9)
+    assert 0 < tone["stream_output_latency_s"] < 1.0
     x = recorder.signal()[1].astype(float)
     np.testing.assert_allclose(np.abs(x[:, 0]).max(), 0.01, rtol=0.02)  # digital peak on output 1
     assert np.abs(x[:, 1]).max() < 1e-6  # nothing on the other actuators
@@ -679,3 +680,11 @@ def test_a_routed_device_without_loopback_plays_stimuli_but_refuses_recordings(j
         rig.play(pulse_drive())
         with pytest.raises(DeviceError, match="does not keep one round-trip latency"):
             rig.play_and_record(pulse_drive())
+
+
+def test_a_callback_error_is_named_in_the_devices_error(rig):
+    """The stream ends early when its callback raises: the error says why, with the exception chained."""
+    bad_block = np.zeros((4800, 2), np.float32)  # two columns for five output channels: the callback fails
+    with pytest.raises(DeviceError, match="the audio callback failed while playing: ValueError") as err:
+        rig._run_stream(bad_block, record=False, what="playing")
+    assert isinstance(err.value.__cause__, ValueError)

@@ -152,7 +152,9 @@ def _check_rig(path: Path, as_json: bool, tone_s: float | None = None) -> None:
                 f"digital full scale on output {tone['output_channel']}. Set volts_full_scale = (the meter's AC "
                 f"RMS reading, V) x {tone['volts_full_scale_per_rms_v']:.1f}. With the configured "
                 f"{cfg.volts_full_scale:g} V, the meter should read {tone['expected_rms_v']:.4g} V RMS; if it reads "
-                "more, every voltage into the amplifier is higher than the software computes.", highlight=False)
+                "more, every voltage into the amplifier is higher than the software computes. The stream's output "
+                f"latency (what an emergency stop cannot recall) was {1e3 * tone['stream_output_latency_s']:.0f} ms.",
+                highlight=False)
 
 
 def _play_tone(rig, cfg, seconds: float) -> dict:
@@ -171,4 +173,6 @@ def _play_tone(rig, cfg, seconds: float) -> dict:
         "output_channel": cfg.channels.actuators[0],
         "expected_rms_v": digital_peak * cfg.volts_full_scale / np.sqrt(2),
         "volts_full_scale_per_rms_v": np.sqrt(2) / digital_peak,
+        # What a stop cannot recall on this interface: the stream's own output latency.
+        "stream_output_latency_s": float(rig.output_latency_s),
     }
