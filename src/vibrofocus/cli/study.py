@@ -88,21 +88,20 @@ def run(
         with lsl_markers(lsl), the_rig, StudyStore(db) as store:
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
-            open_sessions = [s for s in store.sessions(participant, study=study) if not s.finished]
-            if open_sessions:
-                info = open_sessions[-1]
+            # Check and create in one transaction: two `study run`s at once get one session.
+            sid, created = store.open_session(
+                participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
+                calibration_id=cid, config={"rig": rig}, reuse="open",
+            )
+            info = store.session(sid)
+            if not created:
                 if info.calibration_id != cid:
                     raise StudyError(
                         f"session {info.session_id} of {participant} (study {study}) was started with calibration "
                         f"{info.calibration_id} ({store.calibration(info.calibration_id).path}); resume it with that file"
                     )
-                sid = info.session_id
                 console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
             else:
-                sid = store.create_session(
-                    participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
-                    calibration_id=cid, config={"rig": rig},
-                )
                 console.print(f"new session {sid} for {participant}, study {study}")
             if not beep:
                 cue = None

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..defaults import STUDY_METHODS
-from ..errors import CalibrationFileError, StudyError
+from ..errors import AnswerRefused, CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
 from ..studies.storage import StudyStore
@@ -202,9 +202,19 @@ def simulate_studies(
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
                     session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin)
-                    sid = store.create_session(
+                    # Check and create in one transaction: another process simulating into
+                    # the same database may have created this session since the check above.
+                    sid, created = store.open_session(
                         pid, study, seed=study_seeds[study - 1], calibration_id=parts["cal"][0], config=session_config,
+                        reuse="latest",
                     )
+                    if not created:
+                        info = store.session(sid)
+                        if info.finished:
+                            answered += info.n_answered
+                            continue
+                        if info.calibration_id != parts["cal"][0]:
+                            parts = participant_parts(info.calibration_id)
                 info = store.session(sid)
                 answered += info.n_answered
                 # Later participants have no sessions yet: every session has the same design,
@@ -223,7 +233,18 @@ def simulate_studies(
                 if progress is not None:
                     progress(label, answered, total_est)
                 engine = StudyEngine(store, sid, parts["rig"], renderer=parts["renderer"])
-                engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
+                try:
+                    engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
+                except AnswerRefused as exc:
+                    if exc.reason not in ("answered", "not_current"):
+                        raise
+                    # Another process runs this session (its answers came first): stop
+                    # rather than answer the participant's trials twice.
+                    raise StudyError(
+                        f"another process is running session {sid} of {pid} (study {study}) in {db}: a trial this "
+                        f"run presented was answered by it meanwhile ({exc}). Every answer is stored once; run the "
+                        "command again when the other one has finished"
+                    ) from None
         answered = total = 0
         for info in store.sessions():
             if info.config.get("simulation_seed") is not None:

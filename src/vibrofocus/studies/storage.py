@@ -287,7 +287,55 @@ class StudyStore(StudyDatabase):
         -------
         int
             The session id. Status ``planned``.
+
+        Notes
+        -----
+        A participant may have several sessions of a study (the web app plans them,
+        tests run them side by side). To run "the" session of a participant, as the
+        commands do, use :meth:`open_session`: its check and its creation are one
+        transaction.
         """
+        session_id, _ = self._plan_session(participant_id, study, seed=seed, calibration_id=calibration_id,
+                                           config=config, reuse=None)
+        return session_id
+
+    def open_session(
+        self,
+        participant_id: str,
+        study: int,
+        *,
+        seed: int,
+        calibration_id: int | None = None,
+        config: Mapping[str, Any] | None = None,
+        reuse: str = "open",
+    ) -> tuple[int, bool]:
+        """The participant's session of ``study`` to run: an existing one, or a new one; atomic.
+
+        The check and the creation are one ``BEGIN IMMEDIATE`` transaction, so two
+        processes on one database never both create a session (the loser gets the
+        winner's).
+
+        Parameters
+        ----------
+        participant_id, study, seed, calibration_id, config
+            As :meth:`create_session`, for a new session.
+        reuse : {"open", "latest"}
+            ``"open"``: the latest open session (planned, running, paused), else a new
+            one (``study run``); ``"latest"``: the latest session whatever its status,
+            else a new one (``simulate-study``, which runs each study once).
+
+        Returns
+        -------
+        (int, bool)
+            The session id, and whether it was created now.
+        """
+        if reuse not in ("open", "latest"):
+            raise StudyError(f"reuse must be 'open' or 'latest', got {reuse!r}")
+        return self._plan_session(participant_id, study, seed=seed, calibration_id=calibration_id, config=config,
+                                  reuse=reuse)
+
+    def _plan_session(self, participant_id: str, study: int, *, seed: int, calibration_id: int | None,
+                      config: Mapping[str, Any] | None, reuse: str | None) -> tuple[int, bool]:
         if isinstance(study, bool) or study not in (1, 2):
             raise StudyError(f"study must be 1 or 2, got {study!r}")
         design = StudyDesign.from_config(int(study), config)
@@ -301,6 +349,17 @@ class StudyStore(StudyDatabase):
         now = now_utc()
         with self._write(f"create a study {study} session for {shorten(participant_id)}") as conn:
             self._require_participant(conn, participant_id)
+            if reuse is not None:
+                # Inside the write transaction (BEGIN IMMEDIATE): no other process can
+                # create a session between this check and the insert below.
+                statuses = "('planned', 'running', 'paused')" if reuse == "open" else \
+                    "('planned', 'running', 'paused', 'aborted', 'completed')"
+                prior = conn.execute(
+                    f"SELECT session_id FROM sessions WHERE participant_id = ? AND study = ? AND status IN {statuses} "
+                    "ORDER BY session_id DESC LIMIT 1", (participant_id, int(study)),
+                ).fetchone()
+                if prior is not None:
+                    return int(prior[0]), False
             if calibration_id is not None:
                 cal = conn.execute(
                     "SELECT participant_id FROM calibrations WHERE calibration_id = ?",
@@ -324,7 +383,7 @@ class StudyStore(StudyDatabase):
                 [(session_id, t.trial_index, t.phase, t.trial, t.method, t.target) for t in trials],
             )
             self._insert_event(conn, session_id, "created", {"study": int(study), "seed": int(seed), "n_trials": len(trials)})
-        return session_id
+        return session_id, True
 
     def session(self, session_id: int) -> SessionInfo:
         """A session with its progress; StudyError if unknown."""
