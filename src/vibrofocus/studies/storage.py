@@ -61,9 +61,10 @@ __all__ = [
     "check_participant_id",
 ]
 
-_PARTICIPANT_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
-_EVENT_RE = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
-_ANSWER_ID_RE = re.compile(r"^[\x21-\x7e]{1,128}$")  # printable ASCII, no spaces
+# Used with fullmatch: "$" also matches before a trailing newline, so "P01\n" passed re.match.
+_PARTICIPANT_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+_EVENT_RE = re.compile(r"[a-z][a-z0-9_]{0,39}")
+_ANSWER_ID_RE = re.compile(r"[\x21-\x7e]{1,128}")  # printable ASCII, no spaces
 
 
 def check_participant_id(participant_id: Any) -> str:
@@ -83,7 +84,7 @@ def check_participant_id(participant_id: Any) -> str:
     StudyError
         Naming the rule and (cut to a few dozen characters) the id given.
     """
-    if not isinstance(participant_id, str) or not _PARTICIPANT_RE.match(participant_id):
+    if not isinstance(participant_id, str) or not _PARTICIPANT_RE.fullmatch(participant_id):
         raise StudyError(
             f"participant id must be 1-64 letters, digits, '_', '.' or '-' starting with a "
             f"letter or digit, got {shorten(participant_id)}"
@@ -537,7 +538,7 @@ class StudyStore(StudyDatabase):
         answer starts a planned session, the last completes it), in the same
         transaction. Each answer is also logged as an ``answer`` event.
         """
-        if not isinstance(answer_id, str) or not _ANSWER_ID_RE.match(answer_id):
+        if not isinstance(answer_id, str) or not _ANSWER_ID_RE.fullmatch(answer_id):
             raise AnswerRefused(f"answer_id must be 1-128 printable ASCII characters without spaces, got {answer_id!r}", "invalid")
         tidx = _as_int(trial_index, "trial index")
         onsets = _check_onsets(onset_s, onset_device_s, onset_clock)
@@ -639,7 +640,7 @@ class StudyStore(StudyDatabase):
         int
             The event id (increasing).
         """
-        if not isinstance(kind, str) or not _EVENT_RE.match(kind):
+        if not isinstance(kind, str) or not _EVENT_RE.fullmatch(kind):
             raise StudyError(f"event kind must be a lower-case identifier like 'cue', got {kind!r}")
         with self._write(f"log a {kind!r} event") as conn:
             info = self._session(conn, session_id)
