@@ -52,6 +52,7 @@ def participant_seeds(seed: int, k: int) -> tuple[int, int, int]:
 def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tuple[int, Any]:
     """The participant's registered calibration, or a new one (file written before it is registered)."""
     from ..calibration import calibrate, load_calibration, save_calibration
+    from ..calibration.replacing import reserve_free_name
 
     for rec in reversed(store.calibrations(pid)):
         try:
@@ -60,8 +61,15 @@ def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tu
             continue  # file gone, changed or unreadable: calibrate again rather than trust it
     cal = calibrate(rig, participant_id=pid)
     cal_dir.mkdir(parents=True, exist_ok=True)
-    final = cal_dir / f"{pid}.nc"
-    save_calibration(cal, final)  # atomic: a kill or a full disk leaves no half file under the final name
+    # Never over a file already there: it may be another database's registered
+    # calibration (a shared --calibration-dir). The name is reserved exclusively, so a
+    # process simulating at the same time takes another one (sim-001.1.nc).
+    final = reserve_free_name(cal_dir / f"{pid}.nc")
+    try:
+        save_calibration(cal, final, keep_previous=False)  # atomic, over the empty reservation
+    except BaseException:
+        final.unlink(missing_ok=True)
+        raise
     return store.add_calibration(pid, final), cal
 
 
