@@ -21,11 +21,17 @@ SUB_APPS = {"study": study_app}
 @study_app.command("export")
 def export(
     db: Path = typer.Option(..., "--db", help="Study database."),
-    out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns: see docs/file-formats.md, trials file)."),
+    out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns above; docs/file-formats.md, trials file)."),
     participant: str | None = typer.Option(None, "--participant", help="Only this participant."),
     force: bool = force_option(),
 ) -> None:
-    """Write every answered trial as ``participant,study,phase,trial,method,target,response,rt_s``."""
+    """Write every answered trial as a trials CSV, one row per answer.
+
+    Columns: participant, study, phase, trial, method, target, response, rt_s (the
+    trial); session, session_status, dry_run (its session); onset_host_s,
+    onset_device_s, onset_clock (the stimulus onset); and simulated, last, when some
+    participant is simulated. For a BIDS dataset use: vibrofocus export DB --bids DIR.
+    """
     with user_errors():
         from .._atomic import allow_overwrite
         from ..errors import StudyError

@@ -113,13 +113,16 @@ def simulate_studies(
         ``progress(description, n_answered, n_total)`` after each answer.
     methods : tuple of str, optional
         Registered rendering methods the studies compare (default the paper's funneling,
-        inverse and combination); a resumed database must have been started with the same.
+        inverse and combination); a resumed database must have been started with the same
+        (in any order: the stored order is kept).
 
     Returns
     -------
     dict
-        ``n_answered`` (all answers in the simulated sessions), ``n_total`` (planned
-        trials), ``n_new`` (answers added by this call).
+        ``n_answered`` (all answers in the simulated sessions of the database),
+        ``n_total`` (their planned trials), ``n_new`` (answers added by this call) and
+        ``n_participants`` (the simulated participants those sessions belong to, which
+        may be more than ``n_participants``).
 
     Notes
     -----
@@ -167,6 +170,11 @@ def simulate_studies(
                         f"not {skin!r}; use that skin or another database"
                     )
                 stored = tuple(info.config.get("methods") or STUDY_METHODS)
+                if stored != asked_methods and sorted(stored) == sorted(asked_methods):
+                    # The same methods in another order: the same study. The stored order
+                    # is kept, so every participant's plan is drawn from the same design.
+                    asked_methods = stored
+                    config = {**(config or {}), "methods": list(stored)}
                 if stored != asked_methods:
                     raise StudyError(
                         f"{db} holds participant {pid} simulated with the methods {', '.join(stored)}, not "
@@ -254,11 +262,13 @@ def simulate_studies(
                         "command again when the other one has finished"
                     ) from None
         answered = total = 0
+        people = set()
         for info in store.sessions():
             if info.config.get("simulation_seed") is not None:
                 answered += info.n_answered
                 total += info.n_trials
-        return {"n_answered": answered, "n_total": total, "n_new": n_new}
+                people.add(info.participant_id)
+        return {"n_answered": answered, "n_total": total, "n_new": n_new, "n_participants": len(people)}
 
 
 def summarize_simulation(db: str | os.PathLike) -> list[dict[str, Any]]:
