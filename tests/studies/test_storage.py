@@ -323,7 +323,9 @@ def test_open_session_checks_and_creates_in_one_transaction(tmp_path):
     assert len({sid for sid, _ in out}) == 1
     with StudyStore(db) as store:
         (info,) = store.sessions("P01", study=1)
-        store.record_answer(info.session_id, 0, 4, 0.5, answer_id="a-0")  # completed
+        store.set_status(info.session_id, "aborted")  # unfinished: still the one to resume
+        assert store.open_session("P01", 1, seed=1, config=design) == (info.session_id, False)
+        store.record_answer(info.session_id, 0, 4, 0.5, answer_id="a-0")  # every trial answered
         # "open": a finished session is not resumed; "latest": it is the one.
         assert store.open_session("P01", 1, seed=1, config=design, reuse="latest") == (info.session_id, False)
         sid, created = store.open_session("P01", 1, seed=1, config=design)

@@ -321,9 +321,10 @@ class StudyStore(StudyDatabase):
         participant_id, study, seed, calibration_id, config
             As :meth:`create_session`, for a new session.
         reuse : {"open", "latest"}
-            ``"open"``: the latest open session (planned, running, paused), else a new
-            one (``study run``); ``"latest"``: the latest session whatever its status,
-            else a new one (``simulate-study``, which runs each study once).
+            ``"open"``: the latest unfinished session (a trial unanswered, whatever its
+            status: an aborted session is resumed too), else a new one (``study run``);
+            ``"latest"``: the latest session, finished or not, else a new one
+            (``simulate-study``, which runs each study once).
 
         Returns
         -------
@@ -353,11 +354,12 @@ class StudyStore(StudyDatabase):
             if reuse is not None:
                 # Inside the write transaction (BEGIN IMMEDIATE): no other process can
                 # create a session between this check and the insert below.
-                statuses = "('planned', 'running', 'paused')" if reuse == "open" else \
-                    "('planned', 'running', 'paused', 'aborted', 'completed')"
+                unfinished = (" AND (SELECT COUNT(*) FROM answers a WHERE a.session_id = s.session_id) < "
+                              "(SELECT COUNT(*) FROM planned_trials p WHERE p.session_id = s.session_id)"
+                              if reuse == "open" else "")
                 prior = conn.execute(
-                    f"SELECT session_id FROM sessions WHERE participant_id = ? AND study = ? AND status IN {statuses} "
-                    "ORDER BY session_id DESC LIMIT 1", (participant_id, int(study)),
+                    "SELECT session_id FROM sessions s WHERE participant_id = ? AND study = ?" + unfinished
+                    + " ORDER BY session_id DESC LIMIT 1", (participant_id, int(study)),
                 ).fetchone()
                 if prior is not None:
                     return int(prior[0]), False
