@@ -154,3 +154,16 @@ def test_ids_bids_cannot_label_are_refused_with_the_reason(tmp_path):
     with pytest.raises(StudyError, match="control character"):
         export_bids(_trials(tmp_path / "t.csv", '"P\t01"'), tmp_path / "out")
     assert not (tmp_path / "out").exists()
+
+
+def test_the_same_label_from_another_study_is_a_file_in_the_way(tmp_path):
+    ds = tmp_path / "ds"
+    export_bids(_trials(tmp_path / "a.csv", "sim-001"), ds)
+    events = ds / "sub-sim001/beh/sub-sim001_task-localization1_events.tsv"
+    before = events.read_bytes()
+    other = _trials(tmp_path / "b.csv", "sim-001", target=4, n=3)  # another study's sim-001
+    with pytest.raises(OutputError, match="vibrofocus did not write"):
+        export_bids(other, ds)
+    assert events.read_bytes() == before
+    export_bids(other, ds, force=True)
+    assert len(read_bids_trials_table(ds)) == 3

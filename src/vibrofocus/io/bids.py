@@ -158,6 +158,7 @@ def write_bids_dataset(
     participants: Sequence[Mapping[str, Any]],
     participant_columns: Mapping[str, Mapping[str, Any]],
     runs: Sequence[Mapping[str, Any]],
+    source: str | None = None,
     force: bool = False,
 ) -> dict[str, Any]:
     """Write a BIDS behavioural dataset, or add it to an existing one without touching anything else.
@@ -189,9 +190,14 @@ def write_bids_dataset(
         One per participant and study: ``label`` (str), ``study`` (1 or 2), ``events``
         (rows keyed by :data:`EVENT_COLUMNS`; None or NaN is written ``n/a``) and
         ``sidecar`` (extra keys of the events JSON besides the column descriptions).
+    source : str, optional
+        Where the data comes from (the source file's resolved path), recorded in the
+        manifest: an events file is replaced only by an export of the same source (the
+        same label from another study is a file in the way).
     force : bool
         Replace files at the paths the export writes that vibrofocus did not write (or
-        that were edited since); without it such a file is refused and nothing changes.
+        that were edited since, or another source's); without it such a file is refused
+        and nothing changes.
 
     Returns
     -------
@@ -231,7 +237,7 @@ def write_bids_dataset(
     if out.exists():
         kept = merge_into_dataset(out, files=files, shared=shared, participant_columns=participant_columns,
                                   participant_rows=rows, participants_tsv=_tsv(columns, participants),
-                                  participants_json=_json(participant_columns), force=force)
+                                  participants_json=_json(participant_columns), source=source, force=force)
         return {**counts, "merged": True, "kept": kept}
     with atomic_directory(out, what="BIDS dataset") as build:
         texts = {**shared, "participants.tsv": _tsv(columns, participants),
@@ -239,7 +245,8 @@ def write_bids_dataset(
         for rel, text in texts.items():
             (build / rel).parent.mkdir(parents=True, exist_ok=True)
             write_text(build / rel, text, what="BIDS file")
-        write_manifest(build, {rel: text_sha256(text) for rel, text in texts.items()})
+        write_manifest(build, {rel: text_sha256(text) for rel, text in texts.items()},
+                       {rel: source for rel in files} if source is not None else None)
     return {**counts, "merged": False, "kept": []}
 
 

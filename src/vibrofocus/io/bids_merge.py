@@ -5,11 +5,12 @@ its own (``age``, ``sex``). :func:`merge_into_dataset` adds or replaces only wha
 vibrofocus wrote:
 
 - a manifest, ``DIR/.vibrofocus-bids.json`` (a dotfile: BIDS tools ignore it), lists each
-  file vibrofocus wrote with the SHA-256 of its bytes. A file at a path vibrofocus
-  would write is replaced only if the manifest lists it with its current hash (an
-  earlier export's, unedited); any other file there (a lab's own, an edited one, an
-  export of a vibrofocus without the manifest) is a conflict: nothing is written unless
-  ``force``;
+  file vibrofocus wrote with the SHA-256 of its bytes and the source it was exported
+  from. A file at a path vibrofocus would write is replaced only if the manifest lists
+  it with its current hash and the same source (an earlier export of the same study,
+  unedited); any other file there (a lab's own, an edited one, another study's
+  participant of the same label, an export of a vibrofocus without the manifest) is a
+  conflict: nothing is written unless ``force``;
 - ``participants.tsv`` is merged: its header and every row are kept, cell for cell;
   vibrofocus's columns are added where missing (``n/a`` in other rows), its own cells
   in the rows of its participants are set, and new participants are appended;
@@ -54,20 +55,26 @@ def text_sha256(text: str) -> str:
     return _sha256(text.encode("utf-8"))
 
 
-def read_manifest(root: str | os.PathLike) -> dict[str, str]:
-    """The files vibrofocus wrote into the dataset ``root``: relative path -> SHA-256 (empty if none).
+def read_manifest(root: str | os.PathLike) -> tuple[dict[str, str], dict[str, str]]:
+    """The files vibrofocus wrote into the dataset ``root`` (empty if none).
 
-    An unreadable or foreign manifest counts as none: every file is then treated as
-    the lab's own.
+    Returns
+    -------
+    (dict, dict)
+        Relative path -> SHA-256, and relative path -> the source it was exported
+        from (absent for the shared files). An unreadable or foreign manifest counts
+        as none: every file is then treated as the lab's own.
     """
     try:
         data = json.loads((Path(root) / MANIFEST_NAME).read_text(encoding="utf-8"))
     except (OSError, ValueError):
-        return {}
-    files = data.get("files") if isinstance(data, dict) and data.get("format") == _MANIFEST_FORMAT else None
+        return {}, {}
+    ok = isinstance(data, dict) and data.get("format") == _MANIFEST_FORMAT
+    files, sources = (data.get("files"), data.get("sources")) if ok else (None, None)
     if not isinstance(files, dict):
-        return {}
-    return {k: v for k, v in files.items() if isinstance(k, str) and isinstance(v, str)}
+        return {}, {}
+    pick = lambda d: {k: v for k, v in d.items() if isinstance(k, str) and isinstance(v, str)}  # noqa: E731
+    return pick(files), pick(sources) if isinstance(sources, dict) else {}
 
 
 def _file_sha256(path: Path) -> str | None:
@@ -155,7 +162,7 @@ def merge_participants_json(existing: str, columns: Mapping[str, Any]) -> str | 
 def _conflict_message(root: Path, conflicts: list[str]) -> str:
     shown = ", ".join(conflicts[:3]) + (f" and {len(conflicts) - 3} more" if len(conflicts) > 3 else "")
     return (f"the BIDS dataset {root} already holds {len(conflicts)} file(s) where the export would write, which "
-            f"vibrofocus did not write there (or which were edited since): {shown}; nothing was changed. Pass --force "
+            f"vibrofocus did not write there (or which were edited since, or were exported from another source): {shown}; nothing was changed. Pass --force "
             f"(force=True) to replace them, or export into another folder")
 
 
@@ -168,6 +175,7 @@ def merge_into_dataset(
     participant_rows: Sequence[Mapping[str, str]],
     participants_tsv: str,
     participants_json: str,
+    source: str | None = None,
     force: bool = False,
 ) -> list[str]:
     """Write vibrofocus's files into the existing dataset folder ``root`` (see the module's rules).
@@ -185,6 +193,9 @@ def merge_into_dataset(
         vibrofocus's columns (descriptions) and rows (formatted cells) of the participants files.
     participants_tsv, participants_json : str
         The files' text where the dataset has none.
+    source : str, optional
+        Where the data comes from (the source file's resolved path): a file of
+        ``files`` is replaced only if an export of the same source wrote it.
     force : bool
         Replace files in the way (not vibrofocus's, or edited since it wrote them).
 
@@ -201,10 +212,12 @@ def merge_into_dataset(
     """
     from .._atomic import output_error, output_target, write_text
 
-    manifest = read_manifest(root)
+    manifest, sources = read_manifest(root)
 
-    def ours(rel: str) -> bool:
+    def ours(rel: str, *, same_source: bool = True) -> bool:
         path = root / rel
+        if same_source and sources.get(rel) != source:
+            return False
         return rel in manifest and _file_sha256(path) == manifest[rel]
 
     plan: dict[str, str] = {}
@@ -218,7 +231,7 @@ def merge_into_dataset(
         plan[rel] = text
     for name, text in shared.items():
         path = root / name
-        if not (path.exists() or path.is_symlink()) or ours(name):
+        if not (path.exists() or path.is_symlink()) or ours(name, same_source=False):
             plan[name] = text
         else:
             kept.append(name)
@@ -243,6 +256,10 @@ def merge_into_dataset(
     if conflicts and not force:
         raise OutputError(_conflict_message(root, conflicts), path=str(root))
     written: dict[str, str] = {}
+
+    def new_sources(done: Mapping[str, str]) -> dict[str, str]:
+        return {rel: source for rel in done if rel in files and source is not None}
+
     try:
         for rel, text in plan.items():
             path = root / rel
@@ -256,14 +273,14 @@ def merge_into_dataset(
         # What was written is vibrofocus's: listed, so a second try replaces it.
         if written:
             with contextlib.suppress(OutputError):
-                write_manifest(root, {**manifest, **written})
+                write_manifest(root, {**manifest, **written}, {**sources, **new_sources(written)})
         raise
-    write_manifest(root, {**manifest, **written})
+    write_manifest(root, {**manifest, **written}, {**sources, **new_sources(written)})
     return kept
 
 
-def write_manifest(root: Path, files: Mapping[str, str]) -> None:
-    """Write the manifest of ``root``: the files vibrofocus wrote (relative path -> SHA-256).
+def write_manifest(root: Path, files: Mapping[str, str], sources: Mapping[str, str] | None = None) -> None:
+    """Write the manifest of ``root``: the files vibrofocus wrote (relative path -> SHA-256, and -> source).
 
     The participants files are left out: they are merged, never owned.
     """
@@ -273,5 +290,7 @@ def write_manifest(root: Path, files: Mapping[str, str]) -> None:
     text = json.dumps({"format": _MANIFEST_FORMAT, "version": 1,
                        "note": "Files vibrofocus wrote into this BIDS dataset and their SHA-256; vibrofocus "
                                "replaces only these, unedited. Keep this file.",
-                       "files": dict(sorted(files.items()))}, indent=2) + "\n"
+                       "files": dict(sorted(files.items())),
+                       "sources": dict(sorted((k, v) for k, v in (sources or {}).items() if k in files))},
+                      indent=2) + "\n"
     write_text(root / MANIFEST_NAME, text, what="BIDS export manifest")

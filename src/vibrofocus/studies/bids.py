@@ -187,7 +187,8 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
     participants = [{"participant_id": f"sub-{labels[pid]}", "source_id": pid,
                      "simulated": "true" if simulated[pid] else "false"} for pid in simulated]
     return write_bids_dataset(out_dir, description=description, readme=readme, participants=participants,
-                              participant_columns=_participant_columns(MODEL_LABEL), runs=runs, force=force)
+                              participant_columns=_participant_columns(MODEL_LABEL), runs=runs,
+                              source=str(source.resolve()), force=force)
 
 
 def _dataset_has_simulated(root: Path) -> bool:
