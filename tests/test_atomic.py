@@ -128,3 +128,22 @@ def test_a_file_protected_before_it_existed_stays_protected_once_created(tmp_pat
         with pytest.raises(OutputError, match="same file"):
             _atomic.write_text(db, "participant\n")
     assert db.read_bytes() == b"SQLite format 3\x00 created after"
+
+
+def test_a_folder_given_as_a_symbolic_link_is_written_through(tmp_path):
+    target = tmp_path / "reports" / "r1"
+    target.mkdir(parents=True)
+    (target / "report.json").write_text("old")
+    link = tmp_path / "latest"
+    link.symlink_to(target, target_is_directory=True)
+    for text in ("new", "newer"):
+        with _atomic.atomic_directory(link, owned={"report.json"}, what="report folder") as build:
+            (build / "report.json").write_text(text)
+        assert link.is_symlink() and (target / "report.json").read_text() == text
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["latest", "reports"]  # no .latest.*.tmp
+    assert sorted(p.name for p in target.parent.iterdir()) == ["r1"]
+    (tmp_path / "gone").symlink_to(tmp_path / "missing")
+    with pytest.raises(OutputError, match="symbolic link to a missing folder"):
+        with _atomic.atomic_directory(tmp_path / "gone", what="report folder") as build:
+            (build / "report.json").write_text("x")
+    assert not (tmp_path / "missing").exists()

@@ -21,7 +21,7 @@ from ._oserrors import output_error
 from ._output_rules import _check_parent, _fsync_dir, _umask
 from .errors import OutputError
 
-__all__ = ["atomic_directory", "make_output_folder"]
+__all__ = ["atomic_directory", "make_output_folder", "resolve_folder_link"]
 
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
@@ -54,6 +54,28 @@ def _fsync_tree(folder: Path) -> None:
     _fsync_dir(folder)
 
 
+def resolve_folder_link(path: str | os.PathLike, *, what: str = "folder") -> Path:
+    """``path``, or the folder it points to when it is a symbolic link (the link stays).
+
+    A folder given as a link is written through, as a single file is (see
+    :func:`vibrofocus._atomic.output_target`): the target's content is replaced or
+    merged, and no folder takes the link's place.
+
+    Raises
+    ------
+    OutputError
+        ``path`` is a link to nothing.
+    """
+    path = Path(path)
+    if not path.is_symlink():
+        return path
+    real = Path(os.path.realpath(path))
+    if not real.exists():
+        raise OutputError(f"cannot write the {what} {path}: it is a symbolic link to a missing folder ({real}); "
+                          "give the folder's own name or create it", errno=_errno.ENOENT, path=str(path))
+    return real
+
+
 @contextlib.contextmanager
 def atomic_directory(
     path: str | os.PathLike,
@@ -64,7 +86,8 @@ def atomic_directory(
     """Build a folder beside ``path`` and put it in place as a whole, or not at all.
 
     The body writes plain files into the yielded temporary folder (a sibling of
-    ``path``). On success:
+    ``path``; a symbolic link to a folder is written through: the folder it points to
+    is the one produced, and the link stays). On success:
 
     - if ``path`` is missing, or holds only entries this writer owns (``owned``), the
       new folder replaces it in one atomic swap (``renameat2(RENAME_EXCHANGE)``; where
@@ -92,7 +115,7 @@ def atomic_directory(
     ------
     OutputError
     """
-    path = Path(path)
+    path = resolve_folder_link(path, what=what)
     _check_parent(path, what)
     if path.exists() and not path.is_dir():
         raise OutputError(f"cannot write the {what} {path}: a file of that name is in the way",

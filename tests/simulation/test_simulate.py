@@ -97,7 +97,32 @@ def test_sessions_store_seeds_calibration_and_status(simulated):
 def test_running_again_on_a_finished_database_adds_nothing(simulated):
     db, _, _ = simulated
     result = simulate_studies(db, n_participants=3, seed=11)
-    assert result == {"n_answered": 516, "n_total": 516, "n_new": 0}
+    assert result == {"n_answered": 516, "n_total": 516, "n_new": 0, "n_participants": 3}
+
+
+def test_a_run_over_fewer_participants_reports_the_databases_count(simulated):
+    db, _, _ = simulated
+    result = CliRunner().invoke(app, ["simulate-study", "-n", "1", "--seed", "11", "--db", str(db), "--quiet"])
+    assert result.exit_code == 0, result.output
+    text = " ".join(result.output.split())
+    assert "516 answers stored" in text and "for 3 simulated participant(s) (1 in this run)" in text
+
+
+def test_a_database_keeps_its_participants_and_methods_in_any_order(tmp_path):
+    from vibrofocus.defaults import STUDY_METHODS
+
+    db = tmp_path / "two.db"
+    small = {"repetitions": 1, "n_training": 0, "locations": [4, 6]}
+    first = simulate_studies(db, n_participants=2, seed=5, config=dict(small))
+    # The same methods in another order are the same study: nothing refused, nothing added.
+    again = simulate_studies(db, n_participants=2, seed=5, config=dict(small), methods=tuple(reversed(STUDY_METHODS)))
+    assert again == {**first, "n_new": 0}
+    # Without -n, a database of 2 keeps 2 (the default 3 added one silently).
+    result = CliRunner().invoke(app, ["simulate-study", "--seed", "5", "--db", str(db), "--quiet"])
+    assert result.exit_code == 0, result.output
+    assert "for 2 simulated participant(s)." in " ".join(result.output.split())
+    with StudyStore(db, create=False) as store:
+        assert [p.participant_id for p in store.participants()] == ["sim-001", "sim-002"]
 
 
 def test_another_seed_on_the_same_database_is_refused(simulated):

@@ -132,9 +132,9 @@ def test_the_export_never_replaces_its_input_and_keeps_the_users_files(study):
     target = root / "again"
     target.mkdir()
     (target / "notes.txt").write_text("mine")
-    (target / "sub-old").mkdir()  # a previous export's entry: replaced with the new dataset
+    (target / "sub-old").mkdir()  # not written by vibrofocus (not in its manifest): kept
     assert export_bids(trials, target)["events"] > 0
-    assert (target / "notes.txt").read_text() == "mine" and not (target / "sub-old").exists()
+    assert (target / "notes.txt").read_text() == "mine" and (target / "sub-old").is_dir()
     assert (target / "dataset_description.json").is_file()
 
 

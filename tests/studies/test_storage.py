@@ -298,3 +298,37 @@ def test_each_refusal_says_which_rule(store, session, call, reason):
         call(store, session)
     assert refused.value.reason == reason
     assert [a.answer_id for a in store.answers(session)] == ["first"]
+
+
+def test_open_session_checks_and_creates_in_one_transaction(tmp_path):
+    import threading
+
+    db = tmp_path / "s.sqlite"
+    design = {"repetitions": 1, "n_training": 0, "methods": ["inverse"], "locations": [4]}
+    with StudyStore(db) as store:
+        store.add_participant("P01")
+    barrier, out = threading.Barrier(4), []
+
+    def run():
+        with StudyStore(db) as store:  # a connection of its own, as another process has
+            barrier.wait(timeout=30)
+            out.append(store.open_session("P01", 1, seed=len(out), config=design))
+
+    threads = [threading.Thread(target=run) for _ in range(4)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join()
+    assert sorted(created for _, created in out) == [False, False, False, True]
+    assert len({sid for sid, _ in out}) == 1
+    with StudyStore(db) as store:
+        (info,) = store.sessions("P01", study=1)
+        store.set_status(info.session_id, "aborted")  # unfinished: still the one to resume
+        assert store.open_session("P01", 1, seed=1, config=design) == (info.session_id, False)
+        store.record_answer(info.session_id, 0, 4, 0.5, answer_id="a-0")  # every trial answered
+        # "open": a finished session is not resumed; "latest": it is the one.
+        assert store.open_session("P01", 1, seed=1, config=design, reuse="latest") == (info.session_id, False)
+        sid, created = store.open_session("P01", 1, seed=1, config=design)
+        assert created and sid != info.session_id
+        with pytest.raises(StudyError, match="reuse must be"):
+            store.open_session("P01", 1, seed=1, reuse="any")

@@ -9,6 +9,8 @@ names.
 
 from __future__ import annotations
 
+import contextlib
+
 import os
 from pathlib import Path
 from typing import Any
@@ -138,21 +140,51 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
     )
 
 
-def save_calibration(cal: Calibration, path: str | os.PathLike) -> Path:
-    """Write a calibration to one netCDF4/HDF5 file, atomically.
+def save_calibration(cal: Calibration, path: str | os.PathLike, *, force: bool = False,
+                     keep_previous: bool = True) -> Path:
+    """Write a calibration to one netCDF4/HDF5 file, atomically, never losing one already there.
 
     Its record (:func:`calibration_record`) goes to
     :func:`vibrofocus.io.calibration_nc.write_calibration_file`; on an ``OutputError``
     (full disk, read-only folder, ...) a previous file at ``path`` is unchanged and
-    ``cal`` is untouched, so the caller can save it elsewhere.
+    ``cal`` is untouched, so the caller can save it elsewhere. What may be replaced
+    (:mod:`vibrofocus.calibration.replacing`): a file of another kind (a study database)
+    or another participant's calibration only with ``force``; a calibration replaced is
+    kept as ``<stem>.1.nc`` (the next free number).
 
     Parameters
     ----------
     cal : Calibration
     path : str or PathLike
         Destination ``*.nc``; its folder must exist. Returned as a Path.
+    force : bool
+        Replace a file of another kind or another participant's calibration.
+    keep_previous : bool
+        Keep a calibration replaced under the next free numbered name (default).
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written, or is one the rules above keep.
     """
-    return write_calibration_file(calibration_record(cal), path)
+    return save_calibration_keeping(cal, path, force=force, keep_previous=keep_previous)[0]
+
+
+def save_calibration_keeping(cal: Calibration, path: str | os.PathLike, *, force: bool = False,
+                             keep_previous: bool = True) -> tuple[Path, Path | None]:
+    """:func:`save_calibration`, also returning where the previous calibration was kept (or None)."""
+    from .replacing import check_calibration_target
+    from .replacing import keep_previous as keep
+
+    check_calibration_target(path, cal.participant_id, force=force)
+    kept = keep(path) if keep_previous else None
+    try:
+        return write_calibration_file(calibration_record(cal), path), kept
+    except BaseException:
+        if kept is not None:  # the previous file is still at ``path``: drop its second name
+            with contextlib.suppress(OSError):
+                os.unlink(kept)
+        raise
 
 
 def load_calibration(path: str | os.PathLike) -> Calibration:
@@ -176,7 +208,7 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
     return calibration_from_record(read_calibration_file(path), path)
 
 
-def export_sofa(cal: Calibration, path: str | os.PathLike) -> Path:
+def export_sofa(cal: Calibration, path: str | os.PathLike, *, force: bool = False) -> Path:
     """Write a calibration's transfer matrix to a SOFA ``GeneralTF-E`` file (:mod:`vibrofocus.io.sofa`).
 
     Receivers are the skin points, emitters the actuators, with their positions (m);
@@ -188,11 +220,22 @@ def export_sofa(cal: Calibration, path: str | os.PathLike) -> Path:
     cal : Calibration
     path : path-like
         Destination, conventionally ``*.sofa``; its folder must exist.
+    force : bool
+        Replace a file of another kind (a study database, a CSV) or a calibration; an
+        earlier SOFA file is replaced without it.
 
     Returns
     -------
     Path
+
+    Raises
+    ------
+    OutputError
+        The file cannot be written, or holds another kind of file or a calibration.
     """
+    from .replacing import check_calibration_target
+
+    check_calibration_target(path, None, force=force, what="SOFA file")
     rec = calibration_record(cal)
     return write_sofa_tf({key: rec[key] for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels",
                                                     "point_kinds", "actuator_names", "fs", "band", "participant_id",

@@ -74,7 +74,10 @@ def calibrate_command(
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
         from .._atomic import allow_overwrite, check_writable
-        from ..calibration import calibrate, plan_calibration, save_calibration
+        from ..calibration import calibrate, plan_calibration
+        import os
+
+        from ..calibration.files import save_calibration_keeping
         from ..calibration.checkpoint import partial_path
         from ..io.calibration_nc import estimate_calibration_bytes
         from ..defaults import participant_seed
@@ -91,6 +94,11 @@ def calibrate_command(
             raise ValidationError(f"--out {out}: use a .nc file name (the calibration is a netCDF4/HDF5 file)")
         if not out.parent.exists():
             raise ValidationError(f"--out {out}: the folder {out.parent} does not exist")
+        from ..calibration.replacing import check_calibration_target
+
+        # Before the measurement: another participant's calibration (or another kind of
+        # file) at --out is refused now, not after an hour of a person's time.
+        check_calibration_target(out, participant, force=force)
         if seed is None and rig == "simulated":
             seed = participant_seed(participant)
         with make_rig(rig, config=rig_config, seed=seed, skin=skin) as r:
@@ -162,14 +170,33 @@ def calibrate_command(
                 f"again (or keep it anyway with --force){kept}"
             )
         # The measurement stays in memory until it is on disk somewhere.
-        out = save_or_offer_another_path(lambda path: save_calibration(cal, path), out, what="calibration")
+        kept: dict[str, Path | None] = {}
+
+        def save(path: Path) -> Path:
+            written, kept["nc"] = save_calibration_keeping(cal, path, force=force)
+            return written
+
+        out = save_or_offer_another_path(save, out, what="calibration")
         console.print(f"wrote {out}")
+        if kept.get("nc") is not None:
+            console.print(f"kept the previous calibration as {kept['nc']}", highlight=False)
         if partial is not None:
             partial.unlink(missing_ok=True)  # the whole calibration is on disk now
         if figure:
             from ..calibration.figures import plot_calibration
 
             png = out.with_suffix(".png")
+            if kept.get("nc") is not None and png.is_file():
+                # The previous figure goes with the previous calibration (P01.1.nc, P01.1.png).
+                old_png = kept["nc"].with_suffix(".png")
+                if not old_png.exists():
+                    import shutil
+
+                    try:
+                        os.link(png, old_png)
+                    except OSError:
+                        shutil.copy2(png, old_png)
+                    console.print(f"kept the previous figure as {old_png}", highlight=False)
             plot_calibration(cal, png)
             console.print(f"wrote {png}")
 

@@ -161,8 +161,16 @@ def demo_command(
                 )
                 from ._save import save_or_offer_another_path
 
+                from ..calibration.replacing import calibration_owner
+
+                def save_demo_calibration(path: Path) -> Path:
+                    # An earlier demo's simulated calibration is replaced as it was; a
+                    # participant's is kept (refused if another's, else kept as .1.nc).
+                    demo = path.is_file() and (calibration_owner(path) or "").startswith("simulated-")
+                    return save_calibration(cal, path, force=demo, keep_previous=not demo)
+
                 cal_path = save_or_offer_another_path(
-                    lambda path: save_calibration(cal, path), out / "calibration.nc", what="calibration",
+                    save_demo_calibration, out / "calibration.nc", what="calibration",
                     interactive=False if as_json else None,
                 )
                 transfer = calibrated_transfer(cal)

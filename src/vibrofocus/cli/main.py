@@ -65,7 +65,7 @@ class _OneLineErrors(TyperGroup):
             ctx = getattr(exc, "ctx", None)
             if exc.exit_code == EXIT_USER_ERROR:
                 where = ctx.command_path if ctx is not None else "vibrofocus"
-                print_error(f"{where}: {exc.format_message()} (see '{where} --help')")
+                print_error(f"{where}: {exc.format_message()}{_hint(where, exc)} (see '{where} --help')")
             else:
                 print_error(exc.format_message())
             sys.exit(exc.exit_code)
@@ -77,6 +77,22 @@ class _OneLineErrors(TyperGroup):
         except Exception:  # noqa: BLE001 - the last resort: one line and a log, never a bare traceback
             sys.exit(report_unexpected())
         sys.exit(rv if isinstance(rv, int) else 0)
+
+
+#: Options people look for under another command: (command path's end, option) -> where it is.
+_OPTION_HINTS = {
+    ("study export", "--bids"): "a BIDS dataset is written by 'vibrofocus export SRC --bids DIR' (SRC: the study "
+                                "database or a trials CSV)",
+}
+
+
+def _hint(where: str, exc: Exception) -> str:
+    """``"; <hint>"`` for an unknown option that another command has, else ``""``."""
+    option = getattr(exc, "option_name", None)
+    for (command_end, name), hint in _OPTION_HINTS.items():
+        if option == name and where.endswith(command_end):
+            return f"; {hint}"
+    return ""
 
 
 #: Exit status of a command whose reader closed the pipe (128 + SIGPIPE, as ``git log | head``).

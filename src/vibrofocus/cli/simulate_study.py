@@ -13,8 +13,10 @@ from ._command import command
 
 @command("simulate-study")
 def simulate_study(
-    participants: int = typer.Option(3, "--participants", "-n", min=1, max=1000,
-                                     help="Number of simulated participants."),
+    participants: int | None = typer.Option(
+        None, "--participants", "-n", min=1, max=1000, show_default=False,
+        help="Number of simulated participants (sim-001 ...); default 3 for a new database, and for an existing "
+             "one the number it holds (a larger number adds participants, and says so)."),
     seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX,
                              help="Seed of the whole simulation (participants, trial orders, answers)."),
     db: Path = typer.Option(..., "--db", help="Study database (SQLite); an unfinished one is resumed."),
@@ -76,11 +78,20 @@ def simulate_study(
         # minutes of simulation (and nothing is created for a refused run).
         check_writable(db, what="study database")
         protect(db, "study database")
+        held = 0
         if db.exists():
+            from ..simulation.simulate import SIMULATED_PREFIX
             from ..studies import StudyStore
 
             # A foreign file is refused now; an open store protects the calibrations it lists.
-            StudyStore(db, create=False).close()
+            with StudyStore(db, create=False) as store:
+                held = len({s.participant_id for s in store.sessions()
+                            if s.participant_id.startswith(SIMULATED_PREFIX) and s.config.get("simulation_seed") is not None})
+        if participants is None:
+            participants = held or 3
+        elif participants > held > 0:
+            typer.echo(f"adding simulated participant(s) sim-{held + 1:03d} to sim-{participants:03d}: the database held "
+                       f"{held}", err=True)
         if trials_csv is not None:
             check_writable(trials_csv, what="trials file", written_as=".csv")
         cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
@@ -123,9 +134,11 @@ def simulate_study(
                 f"{100 * row['correct']:.0f}", f"{row['mean_n_selected']:.2f}",
             )
         Console().print(table)
+        held_now = result["n_participants"]
         console.print(
-            f"{result['n_answered']} answers stored in {db} "
-            f"({result['n_new']} new this run) for {participants} simulated participant(s)."
+            f"{result['n_answered']} answers stored in {db} ({result['n_new']} new this run) for {held_now} "
+            f"simulated participant(s)"
+            + (f" ({participants} in this run)." if held_now != participants else ".")
         )
         if trials_csv is not None:
             from ..studies import StudyStore

@@ -21,11 +21,17 @@ SUB_APPS = {"study": study_app}
 @study_app.command("export")
 def export(
     db: Path = typer.Option(..., "--db", help="Study database."),
-    out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns: see docs/file-formats.md, trials file)."),
+    out: Path = typer.Option(..., "--out", help="Trials CSV to write (columns above; docs/file-formats.md, trials file)."),
     participant: str | None = typer.Option(None, "--participant", help="Only this participant."),
     force: bool = force_option(),
 ) -> None:
-    """Write every answered trial as ``participant,study,phase,trial,method,target,response,rt_s``."""
+    """Write every answered trial as a trials CSV, one row per answer.
+
+    Columns: participant, study, phase, trial, method, target, response, rt_s (the
+    trial); session, session_status, dry_run (its session); onset_host_s,
+    onset_device_s, onset_clock (the stimulus onset); and simulated, last, when some
+    participant is simulated. For a BIDS dataset use: vibrofocus export DB --bids DIR.
+    """
     with user_errors():
         from .._atomic import allow_overwrite
         from ..errors import StudyError
@@ -88,21 +94,20 @@ def run(
         with lsl_markers(lsl), the_rig, StudyStore(db) as store:
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
-            open_sessions = [s for s in store.sessions(participant, study=study) if not s.finished]
-            if open_sessions:
-                info = open_sessions[-1]
+            # Check and create in one transaction: two `study run`s at once get one session.
+            sid, created = store.open_session(
+                participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
+                calibration_id=cid, config={"rig": rig}, reuse="open",
+            )
+            info = store.session(sid)
+            if not created:
                 if info.calibration_id != cid:
                     raise StudyError(
                         f"session {info.session_id} of {participant} (study {study}) was started with calibration "
                         f"{info.calibration_id} ({store.calibration(info.calibration_id).path}); resume it with that file"
                     )
-                sid = info.session_id
                 console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
             else:
-                sid = store.create_session(
-                    participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
-                    calibration_id=cid, config={"rig": rig},
-                )
                 console.print(f"new session {sid} for {participant}, study {study}")
             if not beep:
                 cue = None

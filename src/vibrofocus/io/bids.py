@@ -23,10 +23,11 @@ import io as _io
 import json
 import os
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from .._validation import shorten
 from ..errors import ValidationError
 from .jsonsafe import json_safe
 
@@ -100,16 +101,26 @@ _NA = "n/a"
 
 
 def bids_label(participant_id: str) -> str:
-    """The BIDS label of a participant id: its letters and digits (``P-01`` -> ``P01``).
+    """The BIDS label of a participant id: its ASCII letters and digits (``P-01`` -> ``P01``).
+
+    BIDS labels are alphanumeric ASCII only (``[0-9a-zA-Z]+``, BIDS 1.10, "Entities"):
+    other characters, letters of other scripts included, are dropped.
 
     Raises
     ------
     ValidationError
-        The id has no letter or digit.
+        The id holds a control character (tab, newline, ...), or has no ASCII letter
+        or digit (``'李'``): BIDS cannot name such a subject.
     """
-    label = _LABEL.sub("", str(participant_id))
+    text = str(participant_id)
+    if not text.isprintable():
+        raise ValidationError(f"participant id {shorten(text)} holds a control character (tab, newline, ...); "
+                              "rename the participant")
+    label = _LABEL.sub("", text)
     if not label:
-        raise ValidationError(f"participant id {participant_id!r} has no letter or digit for a BIDS label")
+        raise ValidationError(f"participant id {shorten(text)} has no ASCII letter or digit: BIDS subject labels "
+                              "allow only A-Z, a-z and 0-9, so this participant cannot be a BIDS subject; give "
+                              "the participant an id with some of those")
     return label
 
 
@@ -147,12 +158,20 @@ def write_bids_dataset(
     participants: Sequence[Mapping[str, Any]],
     participant_columns: Mapping[str, Mapping[str, Any]],
     runs: Sequence[Mapping[str, Any]],
-) -> dict[str, int]:
-    """Write a BIDS behavioural dataset as a whole (:func:`vibrofocus._atomic.atomic_directory`).
+    source: str | None = None,
+    force: bool = False,
+) -> dict[str, Any]:
+    """Write a BIDS behavioural dataset, or add it to an existing one without touching anything else.
 
-    The folder is built beside ``out_dir`` and put in place at once: a reader never sees
-    half a dataset, and after a failure a previous dataset there is unchanged. Files of
-    the user's own in ``out_dir`` (anything but the dataset's entries) are left alone.
+    A new folder is built beside ``out_dir`` and put in place at once
+    (:func:`vibrofocus._atomic.atomic_directory`). Into an existing folder (a lab's
+    dataset with EEG or MRI, an earlier export, another study's) the files are merged
+    by :func:`vibrofocus.io.bids_merge.merge_into_dataset`: only files vibrofocus wrote
+    (listed with their SHA-256 in ``.vibrofocus-bids.json``) are replaced;
+    ``participants.tsv`` and ``participants.json`` are merged, keeping the lab's columns
+    and rows; ``dataset_description.json`` and ``README`` are written only where
+    missing or vibrofocus's own; nothing is deleted. A folder given as a symbolic link
+    is written through (the link stays).
 
     Parameters
     ----------
@@ -171,46 +190,64 @@ def write_bids_dataset(
         One per participant and study: ``label`` (str), ``study`` (1 or 2), ``events``
         (rows keyed by :data:`EVENT_COLUMNS`; None or NaN is written ``n/a``) and
         ``sidecar`` (extra keys of the events JSON besides the column descriptions).
+    source : str, optional
+        Where the data comes from (the source file's resolved path), recorded in the
+        manifest: an events file is replaced only by an export of the same source (the
+        same label from another study is a file in the way).
+    force : bool
+        Replace files at the paths the export writes that vibrofocus did not write (or
+        that were edited since, or another source's); without it such a file is refused
+        and nothing changes.
 
     Returns
     -------
     dict
-        ``participants`` and ``events`` (rows written).
+        ``participants`` and ``events`` (rows written), ``merged`` (True when added to
+        an existing folder) and ``kept`` (the dataset's own ``dataset_description.json``
+        or ``README``, left as they were).
 
     Raises
     ------
     ValidationError
         A run names a study other than 1 or 2, or two runs the same file.
     OutputError
-        The folder cannot be written.
+        The folder cannot be written, or holds a file in the way (not ``force``).
     """
     from .._atomic import atomic_directory, write_text
+    from .._atomic_folders import resolve_folder_link
+    from .bids_merge import merge_into_dataset, text_sha256, write_manifest
 
-    names = set()
+    files: dict[str, str] = {}
     for run in runs:
         if run["study"] not in TASKS:
             raise ValidationError(f"a BIDS run must be of study 1 or 2, got {run['study']!r}")
         name = events_name(run["label"], run["study"])
-        if name in names:
+        folder = f"sub-{run['label']}/beh"
+        if f"{folder}/{name}.tsv" in files:
             raise ValidationError(f"two runs would both write {name}.tsv")
-        names.add(name)
-    owned: Callable[[str], bool] = lambda n: n in {"dataset_description.json", "README", "participants.tsv",  # noqa: E731
-                                                   "participants.json"} or n.startswith("sub-")
-    n_events = 0
-    with atomic_directory(out_dir, owned=owned, what="BIDS dataset") as build:
-        write_text(build / "dataset_description.json", _json(description), what="BIDS dataset description")
-        write_text(build / "README", readme, what="BIDS README")
-        write_text(build / "participants.tsv", _tsv(list(participant_columns), participants), what="participants.tsv")
-        write_text(build / "participants.json", _json(participant_columns), what="participants.json")
-        for run in runs:
-            folder = build / f"sub-{run['label']}" / "beh"
-            folder.mkdir(parents=True, exist_ok=True)
-            name = events_name(run["label"], run["study"])
-            write_text(folder / f"{name}.tsv", _tsv(EVENT_COLUMNS, run["events"]), what="BIDS events file")
-            sidecar = {"TaskName": TASKS[run["study"]], **EVENT_COLUMN_DESCRIPTIONS, **run["sidecar"]}
-            write_text(folder / f"{name}.json", _json(sidecar), what="BIDS events sidecar")
-            n_events += len(run["events"])
-    return {"participants": len(participants), "events": n_events}
+        sidecar = {"TaskName": TASKS[run["study"]], **EVENT_COLUMN_DESCRIPTIONS, **run["sidecar"]}
+        files[f"{folder}/{name}.tsv"] = _tsv(EVENT_COLUMNS, run["events"])
+        files[f"{folder}/{name}.json"] = _json(sidecar)
+    n_events = sum(len(run["events"]) for run in runs)
+    shared = {"dataset_description.json": _json(description), "README": readme}
+    columns = list(participant_columns)
+    rows = [{c: _NA if p.get(c) is None else _cell(p[c]) for c in columns} for p in participants]
+    out = resolve_folder_link(out_dir, what="BIDS dataset")
+    counts: dict[str, Any] = {"participants": len(participants), "events": n_events}
+    if out.exists():
+        kept = merge_into_dataset(out, files=files, shared=shared, participant_columns=participant_columns,
+                                  participant_rows=rows, participants_tsv=_tsv(columns, participants),
+                                  participants_json=_json(participant_columns), source=source, force=force)
+        return {**counts, "merged": True, "kept": kept}
+    with atomic_directory(out, what="BIDS dataset") as build:
+        texts = {**shared, "participants.tsv": _tsv(columns, participants),
+                 "participants.json": _json(participant_columns), **files}
+        for rel, text in texts.items():
+            (build / rel).parent.mkdir(parents=True, exist_ok=True)
+            write_text(build / rel, text, what="BIDS file")
+        write_manifest(build, {rel: text_sha256(text) for rel, text in texts.items()},
+                       {rel: source for rel in files} if source is not None else None)
+    return {**counts, "merged": False, "kept": []}
 
 
 def _read_tsv(path: Path) -> list[dict[str, str]]:

@@ -20,6 +20,7 @@ from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
+from .._validation import shorten
 from ..errors import StudyError, ValidationError
 from .responses import format_response, parse_response_text
 
@@ -145,6 +146,10 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                 if len(rec) != len(columns):
                     raise StudyError(f"{path}:{line_no}: expected {len(columns)} fields, got {len(rec)}")
                 row = dict(zip(columns, rec))
+                if not row["participant"] or not row["participant"].isprintable():
+                    # A tab or newline would become a quoted cell downstream (TSV, BIDS).
+                    raise StudyError(f"{path}:{line_no}: participant id {shorten(row['participant'])} is empty or "
+                                     "holds a control character (tab, newline, ...)")
                 if SIMULATED_COLUMN in row:
                     row[SIMULATED_COLUMN] = row[SIMULATED_COLUMN].strip() in ("1", "true", "True")
                 try:

@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from ..defaults import STUDY_METHODS
-from ..errors import CalibrationFileError, StudyError
+from ..errors import AnswerRefused, CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
 from ..studies.storage import StudyStore
@@ -52,6 +52,7 @@ def participant_seeds(seed: int, k: int) -> tuple[int, int, int]:
 def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tuple[int, Any]:
     """The participant's registered calibration, or a new one (file written before it is registered)."""
     from ..calibration import calibrate, load_calibration, save_calibration
+    from ..calibration.replacing import reserve_free_name
 
     for rec in reversed(store.calibrations(pid)):
         try:
@@ -60,8 +61,15 @@ def _calibration_for(store: StudyStore, pid: str, rig: Any, cal_dir: Path) -> tu
             continue  # file gone, changed or unreadable: calibrate again rather than trust it
     cal = calibrate(rig, participant_id=pid)
     cal_dir.mkdir(parents=True, exist_ok=True)
-    final = cal_dir / f"{pid}.nc"
-    save_calibration(cal, final)  # atomic: a kill or a full disk leaves no half file under the final name
+    # Never over a file already there: it may be another database's registered
+    # calibration (a shared --calibration-dir). The name is reserved exclusively, so a
+    # process simulating at the same time takes another one (sim-001.1.nc).
+    final = reserve_free_name(cal_dir / f"{pid}.nc")
+    try:
+        save_calibration(cal, final, keep_previous=False)  # atomic, over the empty reservation
+    except BaseException:
+        final.unlink(missing_ok=True)
+        raise
     return store.add_calibration(pid, final), cal
 
 
@@ -105,13 +113,16 @@ def simulate_studies(
         ``progress(description, n_answered, n_total)`` after each answer.
     methods : tuple of str, optional
         Registered rendering methods the studies compare (default the paper's funneling,
-        inverse and combination); a resumed database must have been started with the same.
+        inverse and combination); a resumed database must have been started with the same
+        (in any order: the stored order is kept).
 
     Returns
     -------
     dict
-        ``n_answered`` (all answers in the simulated sessions), ``n_total`` (planned
-        trials), ``n_new`` (answers added by this call).
+        ``n_answered`` (all answers in the simulated sessions of the database),
+        ``n_total`` (their planned trials), ``n_new`` (answers added by this call) and
+        ``n_participants`` (the simulated participants those sessions belong to, which
+        may be more than ``n_participants``).
 
     Notes
     -----
@@ -159,6 +170,11 @@ def simulate_studies(
                         f"not {skin!r}; use that skin or another database"
                     )
                 stored = tuple(info.config.get("methods") or STUDY_METHODS)
+                if stored != asked_methods and sorted(stored) == sorted(asked_methods):
+                    # The same methods in another order: the same study. The stored order
+                    # is kept, so every participant's plan is drawn from the same design.
+                    asked_methods = stored
+                    config = {**(config or {}), "methods": list(stored)}
                 if stored != asked_methods:
                     raise StudyError(
                         f"{db} holds participant {pid} simulated with the methods {', '.join(stored)}, not "
@@ -202,9 +218,19 @@ def simulate_studies(
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
                     session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin)
-                    sid = store.create_session(
+                    # Check and create in one transaction: another process simulating into
+                    # the same database may have created this session since the check above.
+                    sid, created = store.open_session(
                         pid, study, seed=study_seeds[study - 1], calibration_id=parts["cal"][0], config=session_config,
+                        reuse="latest",
                     )
+                    if not created:
+                        info = store.session(sid)
+                        if info.finished:
+                            answered += info.n_answered
+                            continue
+                        if info.calibration_id != parts["cal"][0]:
+                            parts = participant_parts(info.calibration_id)
                 info = store.session(sid)
                 answered += info.n_answered
                 # Later participants have no sessions yet: every session has the same design,
@@ -223,13 +249,26 @@ def simulate_studies(
                 if progress is not None:
                     progress(label, answered, total_est)
                 engine = StudyEngine(store, sid, parts["rig"], renderer=parts["renderer"])
-                engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
+                try:
+                    engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
+                except AnswerRefused as exc:
+                    if exc.reason not in ("answered", "not_current"):
+                        raise
+                    # Another process runs this session (its answers came first): stop
+                    # rather than answer the participant's trials twice.
+                    raise StudyError(
+                        f"another process is running session {sid} of {pid} (study {study}) in {db}: a trial this "
+                        f"run presented was answered by it meanwhile ({exc}). Every answer is stored once; run the "
+                        "command again when the other one has finished"
+                    ) from None
         answered = total = 0
+        people = set()
         for info in store.sessions():
             if info.config.get("simulation_seed") is not None:
                 answered += info.n_answered
                 total += info.n_trials
-        return {"n_answered": answered, "n_total": total, "n_new": n_new}
+                people.add(info.participant_id)
+        return {"n_answered": answered, "n_total": total, "n_new": n_new, "n_participants": len(people)}
 
 
 def summarize_simulation(db: str | os.PathLike) -> list[dict[str, Any]]:

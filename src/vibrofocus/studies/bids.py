@@ -78,33 +78,42 @@ def _is_database(path: Path) -> bool:
         raise StudyError(f"cannot read {path}: {exc.strerror or exc}") from exc
 
 
-def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[str, int]:
-    """Write a study database or a trials CSV as a BIDS behavioural dataset.
+def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force: bool = False) -> dict[str, Any]:
+    """Write a study database or a trials CSV as a BIDS behavioural dataset, or add it to one.
 
     One ``sub-<label>/beh/sub-<label>_task-localization<study>_events.tsv`` per participant
     and study, one row per answered trial (both phases), with its JSON sidecar; see
-    :mod:`vibrofocus.io.bids` for the layout and the columns.
+    :mod:`vibrofocus.io.bids` for the layout and the columns. Into an existing dataset
+    (EEG, MRI, another study's export) only files vibrofocus wrote are replaced and the
+    participants files are merged (:mod:`vibrofocus.io.bids_merge`); nothing is deleted.
 
     Parameters
     ----------
     source : path-like
         A study database (SQLite) or a trials CSV (docs/file-formats.md, trials file).
     out_dir : path-like
-        The dataset folder; its parent must exist. Built beside it and put in place as a
-        whole.
+        The dataset folder; its parent must exist. A new one is built beside it and put
+        in place as a whole; a symbolic link to a folder is written through.
+    force : bool
+        Replace files in the way: at a path the export writes, but not written by
+        vibrofocus (or edited since). Without it they are refused and nothing changes.
 
     Returns
     -------
     dict
-        ``participants`` and ``events`` (rows written; one per answered trial).
+        ``participants`` and ``events`` (rows written; one per answered trial),
+        ``merged`` and ``kept`` (see :func:`vibrofocus.io.write_bids_dataset`).
 
     Raises
     ------
     StudyError
         An unreadable source, a source inside ``out_dir``, or two participant ids with
         the same BIDS label.
+    ValidationError
+        A participant id that cannot be a BIDS label (no ASCII letter or digit, a
+        control character).
     OutputError
-        The folder cannot be written.
+        The folder cannot be written, or holds a file in the way (not ``force``).
     """
     from .. import __version__
     # The label of the model that answers for simulated participants (the simulation floor
@@ -154,18 +163,22 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
             "device_clock": clock_column,
             "SourceId": pid, "Study": study, "Simulated": sim,
             "SimulatedModel": MODEL_LABEL if sim else None,
-            "Source": "study database" if from_db else "trials CSV",
+            "Source": "study database" if from_db else "trials CSV", "SourceFile": source.name,
             "Sessions": sessions.get((pid, study), []),
         }})
-    any_sim = any(simulated.values())
+    # The README speaks for the whole dataset: simulated participants of an earlier
+    # export into it count too.
+    any_sim = any(simulated.values()) or _dataset_has_simulated(Path(out_dir))
     description = {
-        "Name": f"vibrofocus localization studies ({source.name})", "BIDSVersion": BIDS_VERSION,
+        "Name": "vibrofocus localization studies", "BIDSVersion": BIDS_VERSION,
         "DatasetType": "raw",
         "GeneratedBy": [{"Name": "vibrofocus", "Version": __version__,
                          "Description": "vibrofocus export --bids: localization studies with focused vibrotactile "
                                         "stimuli (Study 1: one location per trial; Study 2: several)."}],
     }
-    readme = (f"Localization studies run with vibrofocus {__version__}, exported from {source.name}.\n"
+    # One README for every export into the dataset: each events sidecar names its source file.
+    readme = (f"Localization studies run with vibrofocus {__version__} (vibrofocus export --bids; each events "
+              "sidecar names its source file).\n"
               f"Tasks: {', '.join(TASKS.values())} (Study 1: one location per trial; Study 2: one or more).\n")
     if any_sim:
         readme += (f"\nSIMULATED: participants marked simulated=true in participants.tsv are {MODEL_LABEL}. "
@@ -174,4 +187,16 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
     participants = [{"participant_id": f"sub-{labels[pid]}", "source_id": pid,
                      "simulated": "true" if simulated[pid] else "false"} for pid in simulated]
     return write_bids_dataset(out_dir, description=description, readme=readme, participants=participants,
-                              participant_columns=_participant_columns(MODEL_LABEL), runs=runs)
+                              participant_columns=_participant_columns(MODEL_LABEL), runs=runs,
+                              source=str(source.resolve()), force=force)
+
+
+def _dataset_has_simulated(root: Path) -> bool:
+    """Whether an existing dataset's participants.tsv marks someone ``simulated`` (``true``)."""
+    import csv
+
+    try:
+        with open(root / "participants.tsv", newline="", encoding="utf-8") as fh:
+            return any(row.get("simulated") == "true" for row in csv.DictReader(fh, delimiter="\t"))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return False

@@ -258,6 +258,10 @@ class StudyDatabase:
             raise StudyError(f"the study database {self.path} cannot use WAL journaling (got {mode!r})")
         if version == 0:
             with self._write("create the study database"):
+                if conn.execute("PRAGMA user_version").fetchone()[0] != 0:
+                    # Another process created it between our first look and this
+                    # transaction (two commands started on a new database at once).
+                    return
                 # Statement by statement: executescript() would COMMIT our transaction early.
                 for statement in (_SCHEMA + _TRIGGERS).split(";\n"):
                     if statement.strip():

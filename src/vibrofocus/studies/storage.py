@@ -61,9 +61,10 @@ __all__ = [
     "check_participant_id",
 ]
 
-_PARTICIPANT_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}$")
-_EVENT_RE = re.compile(r"^[a-z][a-z0-9_]{0,39}$")
-_ANSWER_ID_RE = re.compile(r"^[\x21-\x7e]{1,128}$")  # printable ASCII, no spaces
+# Used with fullmatch: "$" also matches before a trailing newline, so "P01\n" passed re.match.
+_PARTICIPANT_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.\-]{0,63}")
+_EVENT_RE = re.compile(r"[a-z][a-z0-9_]{0,39}")
+_ANSWER_ID_RE = re.compile(r"[\x21-\x7e]{1,128}")  # printable ASCII, no spaces
 
 
 def check_participant_id(participant_id: Any) -> str:
@@ -83,7 +84,7 @@ def check_participant_id(participant_id: Any) -> str:
     StudyError
         Naming the rule and (cut to a few dozen characters) the id given.
     """
-    if not isinstance(participant_id, str) or not _PARTICIPANT_RE.match(participant_id):
+    if not isinstance(participant_id, str) or not _PARTICIPANT_RE.fullmatch(participant_id):
         raise StudyError(
             f"participant id must be 1-64 letters, digits, '_', '.' or '-' starting with a "
             f"letter or digit, got {shorten(participant_id)}"
@@ -287,7 +288,56 @@ class StudyStore(StudyDatabase):
         -------
         int
             The session id. Status ``planned``.
+
+        Notes
+        -----
+        A participant may have several sessions of a study (the web app plans them,
+        tests run them side by side). To run "the" session of a participant, as the
+        commands do, use :meth:`open_session`: its check and its creation are one
+        transaction.
         """
+        session_id, _ = self._plan_session(participant_id, study, seed=seed, calibration_id=calibration_id,
+                                           config=config, reuse=None)
+        return session_id
+
+    def open_session(
+        self,
+        participant_id: str,
+        study: int,
+        *,
+        seed: int,
+        calibration_id: int | None = None,
+        config: Mapping[str, Any] | None = None,
+        reuse: str = "open",
+    ) -> tuple[int, bool]:
+        """The participant's session of ``study`` to run: an existing one, or a new one; atomic.
+
+        The check and the creation are one ``BEGIN IMMEDIATE`` transaction, so two
+        processes on one database never both create a session (the loser gets the
+        winner's).
+
+        Parameters
+        ----------
+        participant_id, study, seed, calibration_id, config
+            As :meth:`create_session`, for a new session.
+        reuse : {"open", "latest"}
+            ``"open"``: the latest unfinished session (a trial unanswered, whatever its
+            status: an aborted session is resumed too), else a new one (``study run``);
+            ``"latest"``: the latest session, finished or not, else a new one
+            (``simulate-study``, which runs each study once).
+
+        Returns
+        -------
+        (int, bool)
+            The session id, and whether it was created now.
+        """
+        if reuse not in ("open", "latest"):
+            raise StudyError(f"reuse must be 'open' or 'latest', got {reuse!r}")
+        return self._plan_session(participant_id, study, seed=seed, calibration_id=calibration_id, config=config,
+                                  reuse=reuse)
+
+    def _plan_session(self, participant_id: str, study: int, *, seed: int, calibration_id: int | None,
+                      config: Mapping[str, Any] | None, reuse: str | None) -> tuple[int, bool]:
         if isinstance(study, bool) or study not in (1, 2):
             raise StudyError(f"study must be 1 or 2, got {study!r}")
         design = StudyDesign.from_config(int(study), config)
@@ -301,6 +351,18 @@ class StudyStore(StudyDatabase):
         now = now_utc()
         with self._write(f"create a study {study} session for {shorten(participant_id)}") as conn:
             self._require_participant(conn, participant_id)
+            if reuse is not None:
+                # Inside the write transaction (BEGIN IMMEDIATE): no other process can
+                # create a session between this check and the insert below.
+                unfinished = (" AND (SELECT COUNT(*) FROM answers a WHERE a.session_id = s.session_id) < "
+                              "(SELECT COUNT(*) FROM planned_trials p WHERE p.session_id = s.session_id)"
+                              if reuse == "open" else "")
+                prior = conn.execute(
+                    "SELECT session_id FROM sessions s WHERE participant_id = ? AND study = ?" + unfinished
+                    + " ORDER BY session_id DESC LIMIT 1", (participant_id, int(study)),
+                ).fetchone()
+                if prior is not None:
+                    return int(prior[0]), False
             if calibration_id is not None:
                 cal = conn.execute(
                     "SELECT participant_id FROM calibrations WHERE calibration_id = ?",
@@ -324,7 +386,7 @@ class StudyStore(StudyDatabase):
                 [(session_id, t.trial_index, t.phase, t.trial, t.method, t.target) for t in trials],
             )
             self._insert_event(conn, session_id, "created", {"study": int(study), "seed": int(seed), "n_trials": len(trials)})
-        return session_id
+        return session_id, True
 
     def session(self, session_id: int) -> SessionInfo:
         """A session with its progress; StudyError if unknown."""
@@ -478,7 +540,7 @@ class StudyStore(StudyDatabase):
         answer starts a planned session, the last completes it), in the same
         transaction. Each answer is also logged as an ``answer`` event.
         """
-        if not isinstance(answer_id, str) or not _ANSWER_ID_RE.match(answer_id):
+        if not isinstance(answer_id, str) or not _ANSWER_ID_RE.fullmatch(answer_id):
             raise AnswerRefused(f"answer_id must be 1-128 printable ASCII characters without spaces, got {answer_id!r}", "invalid")
         tidx = _as_int(trial_index, "trial index")
         onsets = _check_onsets(onset_s, onset_device_s, onset_clock)
@@ -580,7 +642,7 @@ class StudyStore(StudyDatabase):
         int
             The event id (increasing).
         """
-        if not isinstance(kind, str) or not _EVENT_RE.match(kind):
+        if not isinstance(kind, str) or not _EVENT_RE.fullmatch(kind):
             raise StudyError(f"event kind must be a lower-case identifier like 'cue', got {kind!r}")
         with self._write(f"log a {kind!r} event") as conn:
             info = self._session(conn, session_id)

@@ -514,18 +514,28 @@ def emergency_stop(web: WebState = Depends(require_token)) -> dict[str, Any]:
 
 # ---------------------------------------------------------------------- export and analysis
 @router.get("/api/export/trials.csv")
-def export_trials(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> FileResponse:
+def export_trials(participant_id: str | None = Query(None, max_length=64), web: WebState = Depends(require_token)) -> Response:
     """Every answered trial as the docs/file-formats.md, trials file trials file."""
+    import shutil
+    import tempfile
+
     folder = web.data_dir / "exports"
     private_dir(folder)
-    path = folder / f"trials-{time.strftime('%Y%m%d-%H%M%S')}.csv"
+    # Each request writes in a folder of its own (mkdtemp: a unique name, mode 0700) and
+    # is served from memory: two exports at once never read each other's file.
+    scratch = tempfile.mkdtemp(prefix="trials-", dir=folder)
     try:
+        path = os.path.join(scratch, "trials.csv")
         with web.db:
             web.store.export_trials_csv(path, participant_id=participant_id)
-        os.chmod(path, 0o600)  # participant data: this user only, whatever the umask
+        with open(path, "rb") as fh:
+            content = fh.read()
     except StudyError as exc:
         raise _study_error(exc, 404 if "unknown participant" in str(exc) else 409) from None
-    return FileResponse(path, media_type="text/csv", filename="trials.csv")
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    return Response(content, media_type="text/csv",
+                    headers={"Content-Disposition": 'attachment; filename="trials.csv"'})
 
 
 @router.post("/api/analysis", status_code=202)
