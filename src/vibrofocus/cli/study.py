@@ -56,6 +56,12 @@ def run(
         "The rig's own actuator interface is refused.",
     ),
     lsl: bool = lsl_option(),
+    levels: str = typer.Option(
+        "paper", "--levels",
+        help="Level rule of a new session's stimuli: paper (funneling by eq. 3 at A = the drive limit, the inverse "
+        "filter asking 2 um, the combination funneling's displacement, each scaled down only over the limit) | "
+        "equal-peak (every method at the drive limit). A resumed session keeps its own.",
+    ),
 ) -> None:
     """Run a real participant: each trial beeps, plays the stimulus, then waits for the
     answer on the keypad — digits then Enter (Study 2: several digits, e.g. ``45``);
@@ -70,7 +76,8 @@ def run(
         from ..errors import StudyError
         from ..rigs import make_rig
         from ..studies import StudyStore
-        from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
+        from ..studies.engine import StudyEngine, calibration_renderer, headphone_beep, terminal_beep
+        from ..studies.protocol import StudyDesign
         from ..studies.markers import lsl_markers
         from ..studies.terminal import InputEnded, TerminalResponder
         from .._validation import shorten
@@ -89,6 +96,7 @@ def run(
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
             open_sessions = [s for s in store.sessions(participant, study=study) if not s.finished]
+            renderer = None
             if open_sessions:
                 info = open_sessions[-1]
                 if info.calibration_id != cid:
@@ -99,18 +107,23 @@ def run(
                 sid = info.session_id
                 console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
             else:
+                config = {"rig": rig, "levels": levels}
+                # Every stimulus before the session is planned: one that cannot fit is refused now.
+                design = StudyDesign.from_config(study, config)
+                renderer = calibration_renderer(cal, levels=design.levels)
+                renderer.prepare(design.methods, design.locations)
                 sid = store.create_session(
                     participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
-                    calibration_id=cid, config={"rig": rig},
+                    calibration_id=cid, config=config,
                 )
-                console.print(f"new session {sid} for {participant}, study {study}")
+                console.print(f"new session {sid} for {participant}, study {study} ({design.levels} levels)")
             if not beep:
                 cue = None
             elif beep_device is not None:
                 cue = headphone_beep(beep_device, rig=the_rig)
             else:
                 cue = terminal_beep
-            engine = StudyEngine(store, sid, the_rig, cal, cue=cue)
+            engine = StudyEngine(store, sid, the_rig, cal, cue=cue, renderer=renderer)
             responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
             try:
                 summary = engine.run(responder)

@@ -41,12 +41,14 @@ TASKS = {1: "localization1", 2: "localization2"}
 #: the trial (``trial_type``, ``method``, ``target``, ``response``, ``response_time``,
 #: ``phase``), then where it sits in the study (``trial``, ``session_id``,
 #: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity), then the
-#: stimulus onset on the rig's own clock (``device_onset``, ``device_clock``; a dataset
-#: written before they existed is read without them).
+#: stimulus onset on the rig's own clock (``device_onset``, ``device_clock``), then the
+#: stimulus played (``levels``, ``drive_peak_v``, ``target_peak_um``); a dataset written
+#: before those existed is read without them.
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
-                 "trial", "session_id", "session_status", "dry_run", "device_onset", "device_clock")
+                 "trial", "session_id", "session_status", "dry_run", "device_onset", "device_clock",
+                 "levels", "drive_peak_v", "target_peak_um")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
-_REQUIRED_COLUMNS = EVENT_COLUMNS[:-2]
+_REQUIRED_COLUMNS = EVENT_COLUMNS[:12]
 #: The sidecar's description of each column of :data:`EVENT_COLUMNS` (BIDS "column
 #: description": LongName, Description, Units, Levels).
 EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
@@ -94,6 +96,20 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
                      "Units": "s"},
     "device_clock": {"LongName": "device clock",
                      "Description": "The clock device_onset is on."},
+    "levels": {"LongName": "level rule",
+               "Description": "How the stimuli's levels were set (the session's protocol).",
+               "Levels": {"paper": "each method at the source paper's level: funneling by eq. 3 with A at the drive "
+                                   "limit, the inverse filter asking 2 um at the target, the combination funneling's "
+                                   "displacement there, each scaled down only over the drive limit",
+                          "equal-peak": "every method scaled to the drive limit"}},
+    "drive_peak_v": {"LongName": "peak drive",
+                     "Description": "Largest absolute drive over the actuators of the stimulus played; n/a where "
+                                    "none was stored (a dry run, an older database, a trials CSV without it).",
+                     "Units": "V"},
+    "target_peak_um": {"LongName": "predicted peak at the target",
+                       "Description": "Peak displacement at the target predicted from the participant's calibration; "
+                                      "n/a where none was stored.",
+                       "Units": "um"},
 }
 _LABEL = re.compile(r"[^A-Za-z0-9]")
 _NA = "n/a"

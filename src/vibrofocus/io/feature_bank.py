@@ -6,7 +6,11 @@ m; ``centre_xy`` (2,), m; ``methods`` (n_methods,), str; ``forearm_seeds``
 (n_forearms,), int; ``seed`` (scalar), int; ``actuator_energy`` (n_forearms,
 n_methods, n_locations, n_actuators), float32, each actuator's own felt energy at its
 contact; ``actuators_xy`` (n_actuators, 2), m; ``model_version`` (scalar), str: the
-perceptual model that wrote it. The shipped bank is ``simulation/data/feature_bank.npz``
+perceptual model that wrote it; ``levels`` (scalar), str: the level rule the stimuli were
+rendered with (a bank written before it was stored: ``equal-peak``); ``drive_peak_v``
+(n_forearms, n_methods, n_locations), V, and ``target_peak_m`` (the same shape), m: each
+stimulus's largest |drive| and its peak at the target predicted from the calibration
+(absent in a bank written before them). The shipped bank is ``simulation/data/feature_bank.npz``
 (``scripts/build_feature_bank.py``).
 """
 
@@ -21,12 +25,15 @@ import numpy as np
 
 from ..errors import ValidationError
 
-__all__ = ["FEATURE_BANK_ARRAYS", "save_feature_bank", "load_feature_bank"]
+__all__ = ["FEATURE_BANK_ARRAYS", "FEATURE_BANK_OPTIONAL", "save_feature_bank", "load_feature_bank"]
 
 #: The arrays of a feature bank, as :func:`save_feature_bank` takes them and
 #: :func:`load_feature_bank` returns them (besides ``model_version``).
 FEATURE_BANK_ARRAYS = ("energy", "points_xy", "locations_xy", "centre_xy", "methods", "forearm_seeds", "seed",
                        "actuator_energy", "actuators_xy")
+#: Optional entries (``levels``, then the stimulus peaks): a bank without them is read
+#: with ``levels="equal-peak"`` and no peaks (None).
+FEATURE_BANK_OPTIONAL = ("levels", "drive_peak_v", "target_peak_m")
 
 
 def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model_version: str) -> Path:
@@ -58,9 +65,10 @@ def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model
     missing = [name for name in FEATURE_BANK_ARRAYS if name not in bank]
     if missing:
         raise ValidationError(f"a feature bank needs the arrays {', '.join(missing)}")
+    extra = {name: np.asarray(bank[name]) for name in FEATURE_BANK_OPTIONAL if bank.get(name) is not None}
     with atomic_write(path, "wb", what="feature bank") as fh:
         np.savez_compressed(
-            fh, energy=np.asarray(bank["energy"]).astype(np.float32), points_xy=bank["points_xy"],
+            fh, **extra, energy=np.asarray(bank["energy"]).astype(np.float32), points_xy=bank["points_xy"],
             locations_xy=bank["locations_xy"], centre_xy=bank["centre_xy"], methods=np.array(bank["methods"]),
             forearm_seeds=bank["forearm_seeds"], seed=np.int64(bank["seed"]),
             actuator_energy=np.asarray(bank["actuator_energy"]).astype(np.float32), actuators_xy=bank["actuators_xy"],
@@ -80,8 +88,9 @@ def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
     Returns
     -------
     dict
-        :data:`FEATURE_BANK_ARRAYS`: ``energy`` float, ``methods`` a tuple of str, ``seed``
-        an int, the others arrays; ready for ``FeatureBank(**...)``.
+        :data:`FEATURE_BANK_ARRAYS` and :data:`FEATURE_BANK_OPTIONAL`: ``energy`` float,
+        ``methods`` a tuple of str, ``seed`` an int, ``levels`` a str, the others arrays
+        (the peaks None when absent); ready for ``FeatureBank(**...)``.
 
     Raises
     ------
@@ -93,6 +102,9 @@ def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
             return {"energy": z["energy"].astype(float), "points_xy": z["points_xy"], "locations_xy": z["locations_xy"],
                     "centre_xy": z["centre_xy"], "methods": tuple(str(m) for m in z["methods"]),
                     "forearm_seeds": z["forearm_seeds"], "seed": int(z["seed"]),
-                    "actuator_energy": z["actuator_energy"].astype(float), "actuators_xy": z["actuators_xy"]}
+                    "actuator_energy": z["actuator_energy"].astype(float), "actuators_xy": z["actuators_xy"],
+                    "levels": str(z["levels"]) if "levels" in z.files else "equal-peak",
+                    "drive_peak_v": z["drive_peak_v"].astype(float) if "drive_peak_v" in z.files else None,
+                    "target_peak_m": z["target_peak_m"].astype(float) if "target_peak_m" in z.files else None}
     except (OSError, KeyError, ValueError) as exc:
         raise ValidationError(f"cannot read the feature bank {path}: {exc}") from exc

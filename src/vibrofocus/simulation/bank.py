@@ -61,6 +61,14 @@ class FeatureBank:
         integrates (:func:`~vibrofocus.simulation.perception.actuator_energy`).
     actuators_xy : ndarray, shape (n_actuators, 2)
         Actuator centres, m.
+    levels : str
+        The level rule the stimuli were rendered with
+        (:func:`~vibrofocus.studies.protocol.level_options`); ``"equal-peak"`` for a bank
+        written before banks stored it.
+    drive_peak_v : ndarray, shape (n_forearms, n_methods, n_locations), optional
+        Each stimulus's largest |drive|, V (None in an older bank).
+    target_peak_m : ndarray, shape (n_forearms, n_methods, n_locations), optional
+        Each stimulus's peak at the target predicted from the calibration, m.
     """
 
     energy: np.ndarray
@@ -72,6 +80,9 @@ class FeatureBank:
     seed: int
     actuator_energy: np.ndarray
     actuators_xy: np.ndarray
+    levels: str = "equal-peak"
+    drive_peak_v: np.ndarray | None = None
+    target_peak_m: np.ndarray | None = None
 
     @property
     def n_forearms(self) -> int:
@@ -106,6 +117,7 @@ def build_feature_bank(
     methods: tuple[str, ...] = ("funneling", "inverse", "combination"),
     model: PerceptualModel | None = None,
     progress: Any = None,
+    levels: str = "paper",
 ) -> FeatureBank:
     """Calibrate ``n_forearms`` simulated forearms, render every stimulus, compute felt energies.
 
@@ -121,9 +133,11 @@ def build_feature_bank(
         Only its grid, band and integration window (``integration_s``) matter here.
     progress : callable, optional
         ``progress(done, total)`` after each forearm.
+    levels : {"paper", "equal-peak"}
+        The level rule of the stimuli (a study protocol's; default the paper's), stored
+        in the bank.
     """
     from ..calibration import calibrate
-    from ..defaults import N_SAMPLES
     from ..rigs import make_rig
     from ..studies.engine import calibration_renderer
     from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
@@ -132,7 +146,7 @@ def build_feature_bank(
     if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
         raise StudyError(f"n_forearms must be an integer >= 1, got {n_forearms!r}")
     m = model or PerceptualModel()
-    energies, own, seeds = [], [], []
+    energies, own, seeds, peaks, reached = [], [], [], [], []
     layout = points = None
     for k in range(1, n_forearms + 1):
         pseed = participant_seeds(seed, k)[0]
@@ -142,12 +156,16 @@ def build_feature_bank(
         # Same drives as simulate-study; a design whose window is too short for the
         # wrap-around check is kept with a CausalityWarning (the bank needs every cell),
         # and the contrast bounds (not part of the drives) are not computed.
-        render = calibration_renderer(cal, bounds=False, check_wraparound="warn")
+        render = calibration_renderer(cal, bounds=False, check_wraparound="warn", levels=levels)
         n_loc = len(layout.locations_xy)
+        render.prepare(methods, range(1, n_loc + 1))  # one window every stimulus fits, as a study's
         drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
+        peaks.append(np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc))
+        reached.append(np.array([render.rendering(meth, loc).reached_peak_m for meth in methods
+                                 for loc in range(1, n_loc + 1)]).reshape(len(methods), n_loc))
         centre = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
         points = skin_grid(centre, m)
-        H = band_transfer(rig, points, N_SAMPLES, m)
+        H = band_transfer(rig, points, drives.shape[-1], m)  # the window the stimuli fit
         energies.append(felt_energy(H, drives, rig.fs, m).reshape(len(methods), n_loc, len(points)))
         actuators = np.asarray(layout.actuators_xy, dtype=float)
         own.append(actuator_energy(rig, actuators, drives, m).reshape(len(methods), n_loc, len(actuators)))
@@ -160,6 +178,7 @@ def build_feature_bank(
         centre_xy=np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), methods=tuple(methods),
         forearm_seeds=np.asarray(seeds, dtype=np.int64), seed=int(seed),
         actuator_energy=np.stack(own), actuators_xy=np.asarray(layout.actuators_xy, dtype=float),
+        levels=str(levels), drive_peak_v=np.stack(peaks), target_peak_m=np.stack(reached),
     )
 
 

@@ -7,7 +7,6 @@ running again on the same database resumes exactly where a killed run stopped.
 
 from __future__ import annotations
 
-import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -120,7 +119,14 @@ def simulate_studies(
     from ..rigs import make_rig
     from ..skin import skin_preset
     from ..studies.engine import StudyEngine, calibration_renderer
+    from ..studies.protocol import StudyDesign
     from .participants import SimulatedParticipant
+
+    def renderer_for(parts: dict[str, Any], levels: str) -> Any:
+        """The participant's renderer of a level rule (its stimuli rendered once, cached)."""
+        if levels not in parts["renderer"]:
+            parts["renderer"][levels] = calibration_renderer(parts["cal"][1], levels=levels)
+        return parts["renderer"][levels]
 
     skin = skin_preset(skin).name
 
@@ -182,7 +188,7 @@ def simulate_studies(
                     shared["cal"] = (cid, load_calibration(store.verify_calibration(cid)))
                     shared.pop("renderer", None)
                 if "renderer" not in shared:
-                    shared["renderer"] = functools.lru_cache(maxsize=None)(calibration_renderer(shared["cal"][1]))
+                    shared["renderer"] = {}  # one per level rule (both studies share one normally)
                 if "participant" not in shared:
                     shared["participant"] = SimulatedParticipant(shared["rig"], _pseed)
                 return shared
@@ -202,6 +208,10 @@ def simulate_studies(
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
                     session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin)
+                    # Every stimulus is rendered (and a design that cannot fit this arm refused)
+                    # before the session is planned.
+                    design = StudyDesign.from_config(study, session_config)
+                    renderer_for(parts, design.levels).prepare(design.methods, design.locations)
                     sid = store.create_session(
                         pid, study, seed=study_seeds[study - 1], calibration_id=parts["cal"][0], config=session_config,
                     )
@@ -222,7 +232,7 @@ def simulate_studies(
 
                 if progress is not None:
                     progress(label, answered, total_est)
-                engine = StudyEngine(store, sid, parts["rig"], renderer=parts["renderer"])
+                engine = StudyEngine(store, sid, parts["rig"], renderer=renderer_for(parts, info.design.levels))
                 engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
         answered = total = 0
         for info in store.sessions():

@@ -117,6 +117,8 @@ class SessionIn(_Strict):
     # Shorter designs for pilots and demonstrations; the defaults are docs/file-formats.md, trials file's.
     repetitions: int | None = Field(default=None, ge=1, le=10)
     n_training: int | None = Field(default=None, ge=0, le=30)
+    # The level rule of the stimuli (vibrofocus.studies.protocol.level_options); None: the paper's.
+    levels: Literal["paper", "equal-peak"] | None = None
 
 
 class AnalysisIn(_Strict):
