@@ -115,10 +115,14 @@ class CalibrationRenderer:
         The participant's calibration (``transfer_for``, ``fs``, ``layout``).
     n_samples : int, optional
         Length of each drive, samples. Default: the window this participant's stimuli
-        fit (:meth:`prepare`): 4096, doubled (up to :attr:`MAX_SAMPLES`) until every
-        stimulus asked fits it (no :class:`~vibrofocus.errors.CausalityError`), every
-        stimulus then rendered on that one window. Given explicitly, a design that does not
-        fit is refused.
+        fit (:meth:`prepare`), from the calibration: its own resolution (``n_fft``, where
+        its ``H`` is what was measured; 4096 without one), doubled (up to
+        :attr:`MAX_SAMPLES`) until every stimulus asked fits it, every stimulus then
+        rendered on that one window. A design that does not fit its window (a
+        :class:`~vibrofocus.errors.CausalityError`) is first made again with the window's
+        ends tapered (``taper_ends=True``: noise in a measured ``H`` spreads a little of an
+        inverse design's drive over the whole window). Given explicitly, a window that a
+        design does not fit even so is refused.
     limit_v : float
         Drive limit, V peak; designs needing more are scaled down (the rendering layer's
         default ``on_limit="scale"``).
@@ -136,7 +140,9 @@ class CalibrationRenderer:
                  levels: str = DEFAULT_LEVELS, **render_options: Any) -> None:
         self.calibration = calibration
         self._grow = n_samples is None
-        self.n_samples = N_SAMPLES if n_samples is None else int(n_samples)
+        own = getattr(calibration, "n_fft", None)  # the calibration's resolution: its H as measured
+        start = int(own) if isinstance(own, (int, np.integer)) and own >= 16 and own % 2 == 0 else N_SAMPLES
+        self.n_samples = start if n_samples is None else int(n_samples)
         self.limit_v = float(limit_v)
         self.levels = str(levels)
         self._options = {**level_options(self.levels, self.limit_v), **render_options}
@@ -147,10 +153,19 @@ class CalibrationRenderer:
     def _render(self, key: tuple[str, int]) -> Any:
         from ..rendering import TransferMatrix, render
 
+        from ..errors import CausalityError
+
         cal = self.calibration
         if self._H is None:
             self._H = TransferMatrix.from_calibration(cal, self.n_samples)
-        return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
+        try:
+            return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
+        except CausalityError:
+            if "taper_ends" in self._options:
+                raise
+            # Noise in the measured H spreads a little drive over the whole window: taper its ends.
+            return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, taper_ends=True,
+                          **self._options)
 
     def prepare(self, methods: Any, locations: Any) -> int:
         """Render every (method, location) stimulus now, on one window they all fit.
