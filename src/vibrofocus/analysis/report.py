@@ -90,6 +90,9 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
     ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
     these keys are always present and null when the statistic was computed.
+    ``stimulus_levels`` lists each method's median peak drive (V) and predicted peak at
+    the target (µm) per location with the level rule (null when the trials do not record
+    them).
 
     Parameters
     ----------
@@ -156,6 +159,8 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
             "contains_target": _study2_part_dict(s2.contains_target),
             "sentences": sentences["study2"],
         }
+    # Each method's peak drive and predicted peak at the target per location (null: not recorded).
+    d["stimulus_levels"] = result.stimulus_levels
     d["figures"] = figures or {}
     return json_safe(d)
 

@@ -255,6 +255,11 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     # A study database's export names the session of each row: trial numbers repeat
     # across two sessions of one participant, and are unique within a session.
     by_session = {"session": df["session"][good]} if "session" in df.columns else {}
+    # The stimulus columns of a study database's export (the level rule, the peaks), kept as they are.
+    stimulus = {}
+    if {"levels", "drive_peak_v", "target_peak_um"} <= set(df.columns):
+        stimulus = {"levels": df["levels"][good].astype(str).str.strip(),
+                    **{c: pd.to_numeric(df[c][good], errors="coerce") for c in ("drive_peak_v", "target_peak_um")}}
     trials = pd.DataFrame(
         {
             "participant": df["participant"][good],
@@ -269,6 +274,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
             "rt_s": rt[good],
             "line": df["line"][good],
             **by_session,
+            **stimulus,
         }
     ).reset_index(drop=True)
     if len(trials):

@@ -123,6 +123,16 @@ def simulate_study(
                 f"{100 * row['correct']:.0f}", f"{row['mean_n_selected']:.2f}",
             )
         Console().print(table)
+        import pandas as pd
+
+        from ..analysis.levels import stimulus_levels
+        from ..studies import StudyStore
+        from ._levels import levels_table
+
+        with StudyStore(db) as store:
+            levels = stimulus_levels(pd.DataFrame(store.trial_rows()))
+        if levels is not None:
+            Console().print(levels_table(levels, title="Stimuli played (main trials, median over participants)"))
         console.print(
             f"{result['n_answered']} answers stored in {db} "
             f"({result['n_new']} new this run) for {participants} simulated participant(s)."
