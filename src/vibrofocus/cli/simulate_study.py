@@ -36,6 +36,12 @@ def simulate_study(
         help="Rendering methods the studies compare, comma separated: any registered ones, such as minimax "
              "(default the paper's funneling, inverse, combination).",
     ),
+    levels: str = typer.Option(
+        "paper", "--levels",
+        help="Level rule of the stimuli: paper (funneling by eq. 3 at A = 10 V, the inverse filter asking 2 um, the "
+             "combination funneling's displacement, each scaled down only over 10 V) | equal-peak (every method at "
+             "10 V). Stored with each session; a resumed database keeps its own.",
+    ),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -57,6 +63,9 @@ def simulate_study(
         from ..layout import ArrayLayout
 
         allow_overwrite(force)
+        from ..studies.protocol import level_options
+
+        level_options(levels, 10.0)  # a bad rule: one error line before anything is created
         chosen = None
         if methods is not None:  # checked now, before anything is created
             from ..studies.protocol import StudyDesign
@@ -111,7 +120,7 @@ def simulate_study(
 
             result = simulate_studies(
                 db, n_participants=participants, seed=seed, pace_s=pace,
-                calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen,
+                calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen, levels=levels,
             )
         summary = summarize_simulation(db)
         table = Table(title=f"Simulated participants on the {skin} skin (model output, not data): main trials")

@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..defaults import STUDY_METHODS
+from ..studies.protocol import DEFAULT_LEVELS
 from ..errors import CalibrationFileError, StudyError
 from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
@@ -76,6 +77,7 @@ def simulate_studies(
     progress: ProgressFn | None = None,
     skin: str = STUDY_SKIN,
     methods: tuple[str, ...] | None = None,
+    levels: str | None = None,
 ) -> dict[str, int]:
     """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
 
@@ -95,16 +97,21 @@ def simulate_studies(
     studies : tuple of int
         Which studies to run, in order.
     config : dict, optional
-        Extra session config (design keys such as ``repetitions`` change the design).
+        Extra session config (design keys such as ``repetitions`` or ``levels`` change the
+        design; ``levels`` default the paper's, :data:`~vibrofocus.studies.DEFAULT_LEVELS`).
     skin : str
-        Skin preset of the participants' forearms (default ``voigt-fit``, the skin the
-        perceptual model was fitted on; another preset changes the stimuli under a
-        model not fitted to them). Stored in each session's config.
+        Skin preset of the participants' forearms (default :data:`STUDY_SKIN`,
+        ``nominal``, the skin the perceptual model was fitted on; another preset changes the
+        stimuli under a model not fitted to them). Stored in each session's config.
     progress : callable, optional
         ``progress(description, n_answered, n_total)`` after each answer.
     methods : tuple of str, optional
         Registered rendering methods the studies compare (default the paper's funneling,
         inverse and combination); a resumed database must have been started with the same.
+    levels : {"paper", "equal-peak"}, optional
+        The level rule of the stimuli (:func:`~vibrofocus.studies.protocol.level_options`;
+        default the paper's, or ``config["levels"]``); a resumed database must have been
+        started with the same.
 
     Returns
     -------
@@ -141,7 +148,13 @@ def simulate_studies(
 
         methods = StudyDesign(methods=tuple(methods)).methods
         config = {**(config or {}), "methods": list(methods)}
+    if levels is not None:
+        from ..studies.protocol import level_options
+
+        level_options(levels, 1.0)  # checked: one of the rules
+        config = {**(config or {}), "levels": levels}
     asked_methods = tuple((config or {}).get("methods") or STUDY_METHODS)
+    asked_levels = str((config or {}).get("levels", DEFAULT_LEVELS))
     db = Path(db)
     cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
     with StudyStore(db) as store:
@@ -169,6 +182,11 @@ def simulate_studies(
                     raise StudyError(
                         f"{db} holds participant {pid} simulated with the methods {', '.join(stored)}, not "
                         f"{', '.join(asked_methods)}; use those methods or another database"
+                    )
+                if info.design.levels != asked_levels:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated at {info.design.levels!r} levels, not "
+                        f"{asked_levels!r}; use those levels or another database"
                     )
                 # The stored seed wins over the derivation: the participant stays who it was.
                 pseed = int(info.config.get("participant_seed", pseed))
