@@ -73,7 +73,7 @@ def power_command(
         from .._atomic import allow_overwrite
         from .._validation import check_in_range
         from ..simulation.perception import MODEL_LABEL
-        from ..simulation.power import TESTS, PowerDesign, run_power
+        from ..simulation.power import DIRECTIONAL_TESTS, TESTS, PowerDesign, run_power
 
         allow_overwrite(force)
         from ..errors import ValidationError
@@ -114,12 +114,15 @@ def power_command(
                 design, scheduler=scheduler, n_workers=workers, local=local, bank=feature_bank,
                 progress=lambda done, total: bar.update(task, completed=done, total=total),
             )
-        table = Table(title=f"Power by simulation ({MODEL_LABEL}), {design.n_studies} studies per N, alpha {alpha}")
+        table = Table(title=f"Power by simulation ({MODEL_LABEL}; stimuli at {result['levels']} levels), "
+                            f"{design.n_studies} studies per N, alpha {alpha}")
         table.add_column("test")
         for n in design.n_participants:
             table.add_column(f"N={n}", justify="right")
         by = {(r["test"], r["n_participants"]): r for r in result["table"]}
-        for key, label in TESTS:
+        for key, label in TESTS + DIRECTIONAL_TESTS:
+            if (key, design.n_participants[0]) not in by:
+                continue  # a directional claim without funneling and the inverse filter
             table.add_row(label, *[f"{by[(key, n)]['power']:.2f}" if by[(key, n)]["n_studies"] else "not run"
                                    for n in design.n_participants])
         Console().print(table)
@@ -146,22 +149,26 @@ def write_power(result: dict, out: Path) -> list[Path]:
     import pandas as pd
 
     from .._atomic import save_figure, write_text
-    from ..simulation.power import TESTS
+    from ..simulation.power import DIRECTIONAL_TESTS, TESTS
 
     table = pd.DataFrame(result["table"]).assign(model=result["label"])
     csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")
-    js = write_text(out / "power.json", json.dumps({k: result[k] for k in ("label", "design", "table", "elapsed_s")},
-                                                   indent=1), what="power results")
+    js = write_text(out / "power.json",
+                    json.dumps({k: result[k] for k in ("label", "levels", "design", "table", "elapsed_s") if k in result},
+                               indent=1), what="power results")
     fig, ax = plt.subplots(figsize=(7, 4.5))
     try:
-        for key, label in TESTS:
+        for key, label in TESTS + DIRECTIONAL_TESTS:
             t = table[table["test"] == key]
+            if t.empty:
+                continue
             ax.errorbar(t["n_participants"], t["power"], yerr=t["se"], marker="o", capsize=3, label=label)
         ax.axhline(0.8, color="grey", lw=0.8, ls="--")
         ax.set_xlabel("participants N")
         ax.set_ylabel("power")
         ax.set_ylim(-0.02, 1.02)
-        ax.set_title(f"Power by simulation — {result['label']}", fontsize=9)
+        levels = f"; stimuli at {result['levels']} levels" if "levels" in result else ""
+        ax.set_title(f"Power by simulation — {result['label']}{levels}", fontsize=9)
         ax.legend(fontsize=7, loc="lower right")
         fig.tight_layout()
         png = save_figure(fig, out / "power.png", what="power plot", dpi=120)

@@ -26,7 +26,7 @@ from ..errors import ValidationError
 from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
 from .perception import MODEL_LABEL, PerceptualModel
 
-__all__ = ["TESTS", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
+__all__ = ["TESTS", "DIRECTIONAL_TESTS", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
@@ -37,6 +37,13 @@ TESTS: tuple[tuple[str, str], ...] = (
     ("s2_method", "Study 2 Friedman, method"),
     ("s2_hit_location", "Study 2 Friedman, location (trials containing the target)"),
     ("s2_hit_method", "Study 2 Friedman, method (trials containing the target)"),
+)
+#: The paper's directional claims (Sec. III.B-C), reported beside the omnibus tests: an
+#: omnibus test is significant whichever method wins, these only in the paper's direction.
+#: They need funneling and the inverse filter among the methods.
+DIRECTIONAL_TESTS: tuple[tuple[str, str], ...] = (
+    ("s1_inverse_below", "Study 1 inverse error below funneling (Bonferroni paired t; the paper's direction)"),
+    ("s2_inverse_fewer", "Study 2 fewer points with the inverse filter (Bonferroni Wilcoxon; the paper's direction)"),
 )
 
 
@@ -177,7 +184,10 @@ def study_statistics(
         ``s1_only_funneling_vs_inverse`` (only that pair significant, inverse lower),
         ``s1_inverse_differs_locations`` (0-based locations where the inverse differs from
         every other method), ``s2_reduction`` (1 - inverse / funneling mean count),
-        ``s2_inverse_fewer`` (Bonferroni Wilcoxon significant, inverse lower).
+        ``s2_inverse_fewer`` (Bonferroni Wilcoxon significant, inverse lower), and the
+        directional claims' p values of :data:`DIRECTIONAL_TESTS` (``s1_inverse_below_p``,
+        ``s2_inverse_fewer_p``: the Bonferroni p where the inverse filter is on the paper's
+        side, else 1).
     """
     from ..analysis.fast import friedman_batch, rm_anova2_batch
 
@@ -229,6 +239,10 @@ def study_statistics(
         out["s2_reduction"] = float(1.0 - cm[:, inv].mean() / cm[:, fun].mean())
         p_w = min(1.0, _wilcoxon_p(cm[:, inv], cm[:, fun]) * len(pairs))
         out["s2_inverse_fewer"] = bool(p_w < alpha and cm[:, inv].mean() < cm[:, fun].mean())
+        # The directional claims as p values: the Bonferroni p where the inverse filter is
+        # on the paper's side, 1 where it is not (significant only in the paper's direction).
+        out["s1_inverse_below_p"] = p_pairs[fi] if per[:, inv].mean() < per[:, fun].mean() else 1.0
+        out["s2_inverse_fewer_p"] = p_w if cm[:, inv].mean() < cm[:, fun].mean() else 1.0
     return out
 
 
@@ -254,7 +268,7 @@ def simulate_statistics(
 def power_table(
     results: dict[int, list[dict[str, Any]]],
     alpha: float = 0.05,
-    tests: Sequence[tuple[str, str]] = TESTS,
+    tests: Sequence[tuple[str, str]] = TESTS + DIRECTIONAL_TESTS,
 ) -> list[dict[str, Any]]:
     """Power per N and test: share of studies with p < alpha and its binomial standard error.
 
@@ -264,7 +278,8 @@ def power_table(
         ``{N: [statistics of each study]}``; each study's dict holds ``<test>_p``.
     alpha : float
     tests : sequence of (key, label)
-        Default :data:`TESTS`.
+        Default :data:`TESTS` then :data:`DIRECTIONAL_TESTS`; a test no study computed
+        (the directional ones without funneling and the inverse filter) is left out.
 
     Returns
     -------
@@ -276,7 +291,9 @@ def power_table(
     for n in sorted(results):
         res = results[n]
         for key, label in tests:
-            p = np.array([r[f"{key}_p"] for r in res], dtype=float)
+            if not any(f"{key}_p" in r for r in res):
+                continue
+            p = np.array([r.get(f"{key}_p", np.nan) for r in res], dtype=float)
             ok = np.isfinite(p)
             power = float(np.mean(p[ok] < alpha)) if ok.any() else float("nan")
             k = int(ok.sum())
@@ -338,7 +355,7 @@ def run_power(
     Returns
     -------
     dict
-        ``label`` (the model notice), ``design`` (JSON-ready), ``results`` ({N: list of
+        ``label`` (the model notice), ``levels`` (the bank's level rule), ``design`` (JSON-ready), ``results`` ({N: list of
         per-study statistics}), ``table`` (:func:`power_table`), ``elapsed_s``.
     """
     import time
@@ -400,6 +417,7 @@ def run_power(
         results[n].extend(res)
     return {
         "label": MODEL_LABEL,
+        "levels": b.levels,
         "design": {
             "n_participants": list(design.n_participants), "n_studies": design.n_studies,
             "repetitions": design.repetitions, "methods": list(design.methods or b.methods),
