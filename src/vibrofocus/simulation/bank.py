@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import StudyError, ValidationError
 from ..io.feature_bank import load_feature_bank, save_feature_bank
-from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, central_percepts, draw_answers
+from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, draw_answers
 
 __all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
 
@@ -228,6 +228,7 @@ def simulate_cell_means(
     methods: tuple[str, ...] | None = None,
     locations: tuple[int, ...] | None = None,
     forearms: np.ndarray | None = None,
+    hypothesis: Any = None,
 ) -> StudyArrays:
     """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
 
@@ -246,7 +247,13 @@ def simulate_cell_means(
     forearms : ndarray of int, optional
         Bank rows to use per participant (default: drawn without replacement when the
         bank is large enough, else with replacement).
+    hypothesis : str or Hypothesis, optional
+        How the participants read the felt field
+        (:func:`~vibrofocus.simulation.hypotheses.hypothesis`; default v3's centroid).
     """
+    from .hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
     b = bank if bank is not None else default_bank()
     m = model or PerceptualModel()
     if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
@@ -274,7 +281,7 @@ def simulate_cell_means(
         traits = Traits.draw(m, rng)
         energy = b.energy[forearms[i]].reshape(-1, b.points_xy.shape[0])
         own = b.actuator_energy[forearms[i]].reshape(-1, b.actuators_xy.shape[0])
-        per = central_percepts(energy, b.points_xy, m, traits, own, b.actuators_xy)
+        per = h.percepts(energy, b.points_xy, m, traits, own, b.actuators_xy, b.locations_xy)
         a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         e = np.linalg.norm(locs_mm[a1] - locs_mm[targets], axis=1)

@@ -24,9 +24,9 @@ from scipy import stats
 from ..defaults import STUDY_METHODS
 from ..errors import ValidationError
 from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
-from .perception import MODEL_LABEL, PerceptualModel
+from .perception import PerceptualModel
 
-__all__ = ["TESTS", "DIRECTIONAL_TESTS", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
+__all__ = ["TESTS", "DIRECTIONAL_TESTS", "ROBUST_POWER", "robust_conclusions", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
@@ -81,6 +81,9 @@ class PowerDesign:
         Master seed.
     model : PerceptualModel
         The perceptual model (its effect sizes).
+    hypothesis : str
+        How the simulated participants read the felt field
+        (:mod:`vibrofocus.simulation.hypotheses`; default v3's centroid).
     """
 
     n_participants: tuple[int, ...] = (10, 15, 20, 25, 30)
@@ -91,10 +94,14 @@ class PowerDesign:
     alpha: float = 0.05
     seed: int = 0
     model: PerceptualModel = field(default_factory=PerceptualModel)
+    hypothesis: str = "v3-centroid"
 
     def __post_init__(self) -> None:
         from .._validation import shorten
         from ..layout import ArrayLayout
+        from .hypotheses import hypothesis as find_hypothesis
+
+        object.__setattr__(self, "hypothesis", find_hypothesis(self.hypothesis).name)
 
         ns = tuple(int(n) for n in self.n_participants)
         if not ns or min(ns) < 3 or max(ns) > MAX_PARTICIPANTS:
@@ -259,7 +266,7 @@ def simulate_statistics(
         rng = np.random.default_rng([int(design.seed), int(n), int(j)])
         arrays = simulate_cell_means(
             int(n), rng, bank=b, model=design.model, repetitions=design.repetitions,
-            methods=design.methods, locations=design.locations,
+            methods=design.methods, locations=design.locations, hypothesis=design.hypothesis,
         )
         out.append(study_statistics(arrays, design.alpha, design.methods or b.methods))
     return out
@@ -302,6 +309,44 @@ def power_table(
                 "se": float(np.sqrt(power * (1 - power) / k)) if k else float("nan"),
             })
     return rows
+
+
+#: A test is "powered" at N when its power reaches this (the usual 80 %).
+ROBUST_POWER = 0.8
+
+
+def robust_conclusions(tables: dict[str, list[dict[str, Any]]], threshold: float = ROBUST_POWER) -> list[dict[str, Any]]:
+    """Where every hypothesis agrees: per test and N, whether the test is powered under all.
+
+    Parameters
+    ----------
+    tables : dict
+        ``{hypothesis name: power_table(...) rows}``, every table over the same tests and N.
+    threshold : float
+        Power at which a test counts as powered.
+
+    Returns
+    -------
+    list of dict
+        ``test``, ``label``, ``n_participants``, ``power`` ({hypothesis: power}),
+        ``conclusion`` (``"powered"``, ``"not powered"`` or ``"depends on the hypothesis"``)
+        and ``robust`` (True only where every hypothesis gives the same conclusion).
+    """
+    names = list(tables)
+    if not names:
+        return []
+    keyed = {h: {(r["test"], r["n_participants"]): r for r in tables[h]} for h in names}
+    out = []
+    for r in tables[names[0]]:
+        key = (r["test"], r["n_participants"])
+        powers = {h: keyed[h][key]["power"] if key in keyed[h] else float("nan") for h in names}
+        verdicts = {bool(p >= threshold) for p in powers.values() if np.isfinite(p)}
+        complete = all(np.isfinite(p) for p in powers.values())
+        robust = complete and len(verdicts) == 1
+        conclusion = ("powered" if verdicts == {True} else "not powered") if robust else "depends on the hypothesis"
+        out.append({"test": r["test"], "label": r["label"], "n_participants": r["n_participants"], "power": powers,
+                    "conclusion": conclusion, "robust": robust})
+    return out
 
 
 def _connect(client_cls: Any, scheduler: str) -> Any:
@@ -415,14 +460,18 @@ def run_power(
                     cluster.close()
     for (n, _start), res in sorted(parts.items()):
         results[n].extend(res)
+    from .hypotheses import hypothesis as find_hypothesis
+
     return {
-        "label": MODEL_LABEL,
+        "label": find_hypothesis(design.hypothesis).label(),
+        "hypothesis": find_hypothesis(design.hypothesis).to_dict(),
         "levels": b.levels,
         "design": {
             "n_participants": list(design.n_participants), "n_studies": design.n_studies,
             "repetitions": design.repetitions, "methods": list(design.methods or b.methods),
             "locations": list(design.locations or range(1, len(b.locations_xy) + 1)),
             "alpha": design.alpha, "seed": design.seed, "model": design.model.to_dict(),
+            "hypothesis": design.hypothesis,
         },
         "results": results,
         "table": power_table(results, design.alpha),

@@ -78,6 +78,7 @@ def simulate_studies(
     skin: str = STUDY_SKIN,
     methods: tuple[str, ...] | None = None,
     levels: str | None = None,
+    hypothesis: str | None = None,
 ) -> dict[str, int]:
     """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
 
@@ -112,6 +113,11 @@ def simulate_studies(
         The level rule of the stimuli (:func:`~vibrofocus.studies.protocol.level_options`;
         default the paper's, or ``config["levels"]``); a resumed database must have been
         started with the same.
+    hypothesis : str, optional
+        How the simulated participants read the felt field
+        (:mod:`vibrofocus.simulation.hypotheses`; default v3's centroid), stored with
+        each session (name and version); a resumed database must have been started with
+        the same.
 
     Returns
     -------
@@ -155,6 +161,9 @@ def simulate_studies(
         config = {**(config or {}), "levels": levels}
     asked_methods = tuple((config or {}).get("methods") or STUDY_METHODS)
     asked_levels = str((config or {}).get("levels", DEFAULT_LEVELS))
+    from .hypotheses import hypothesis as find_hypothesis
+
+    chosen = find_hypothesis(hypothesis)
     db = Path(db)
     cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
     with StudyStore(db) as store:
@@ -188,6 +197,12 @@ def simulate_studies(
                         f"{db} holds participant {pid} simulated at {info.design.levels!r} levels, not "
                         f"{asked_levels!r}; use those levels or another database"
                     )
+                stored_h = info.config.get("hypothesis", "v3-centroid")  # before hypotheses were stored: v3
+                if stored_h != chosen.name:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated under the hypothesis {stored_h!r}, not "
+                        f"{chosen.name!r}; use that hypothesis or another database"
+                    )
                 # The stored seed wins over the derivation: the participant stays who it was.
                 pseed = int(info.config.get("participant_seed", pseed))
             # Built lazily, once per participant and shared by both studies: the rig, the
@@ -208,7 +223,7 @@ def simulate_studies(
                 if "renderer" not in shared:
                     shared["renderer"] = {}  # one per level rule (both studies share one normally)
                 if "participant" not in shared:
-                    shared["participant"] = SimulatedParticipant(shared["rig"], _pseed)
+                    shared["participant"] = SimulatedParticipant(shared["rig"], _pseed, hypothesis=chosen)
                 return shared
 
             for study in studies:
@@ -225,7 +240,9 @@ def simulate_studies(
                 else:
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
-                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin)
+                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin,
+                                          hypothesis=chosen.name, hypothesis_version=chosen.version,
+                                          model=chosen.label())
                     # Every stimulus is rendered (and a design that cannot fit this arm refused)
                     # before the session is planned.
                     design = StudyDesign.from_config(study, session_config)
