@@ -167,6 +167,9 @@ class AnalysisResult:
     simulated_participants : list of str
         Participants marked simulated in the trials (answers from the perceptual model,
         not from people).
+    simulated_models : list of str
+        Labels of the models (version and hypothesis) that answered for them, as the trials
+        name them (empty: not named; model v3 then).
     stimulus_levels : DataFrame or None
         Each method's peak drive and predicted peak at the target per location
         (:func:`~vibrofocus.analysis.levels.stimulus_levels`); None when the trials do
@@ -184,6 +187,7 @@ class AnalysisResult:
     layout: ArrayLayout | None = None
     simulated_participants: list[str] = field(default_factory=list)
     stimulus_levels: pd.DataFrame | None = None
+    simulated_models: list[str] = field(default_factory=list)
 
 
 def _cell_means(df: pd.DataFrame, dv: str) -> pd.DataFrame:
@@ -392,4 +396,5 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
         layout=layout,
         simulated_participants=list(trials.attrs.get("simulated_participants", [])),
         stimulus_levels=stimulus_levels(trials),
+        simulated_models=list(trials.attrs.get("simulated_models", [])),
     )

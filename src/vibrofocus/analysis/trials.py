@@ -388,7 +388,18 @@ def load_trials(
     trials.attrs["exclusions"] = exclusions
     trials.attrs["source"] = name
     trials.attrs["simulated_participants"] = simulated_participants(raw)
+    trials.attrs["simulated_models"] = simulated_models(raw)
     return trials
+
+
+def simulated_models(raw: pd.DataFrame) -> list[str]:
+    """The labels of the models that answered for the simulated participants (column
+    ``model`` of a study database's export: model version and hypothesis), sorted; empty
+    when the trials do not name them."""
+    if "model" not in raw.columns or "simulated" not in raw.columns:
+        return []
+    flag = raw["simulated"].astype(str).str.strip().str.lower().isin(("1", "true", "yes", "1.0"))
+    return sorted({str(m).strip() for m in raw.loc[flag, "model"] if str(m).strip()})
 
 
 def simulated_participants(raw: pd.DataFrame) -> list[str]:

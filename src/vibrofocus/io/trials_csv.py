@@ -23,7 +23,8 @@ from typing import Any
 from ..errors import StudyError, ValidationError
 from .responses import format_response, parse_response_text
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv",
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
+           "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
 
 #: Columns of the trials file, in order.
@@ -48,6 +49,10 @@ STIMULUS_COLUMNS = ("levels", "drive_peak_v", "target_peak_um")
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
+#: Column after :data:`SIMULATED_COLUMN` when rows name the model that answered for the
+#: simulated participants (key ``model``: ``simulated participants: model v3.0, hypothesis
+#: grid-peak v1.0 ..., not data``; empty for a real participant).
+MODEL_COLUMN = "model"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
@@ -63,8 +68,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     rows : iterable of mapping
         Each with at least the keys of :data:`TRIALS_COLUMNS`. When some row has a true
         ``simulated`` (a simulated participant), the column :data:`SIMULATED_COLUMN` is
-        written too (1 / 0 per row); without one the file has exactly the contract's
-        columns. Other keys are ignored.
+        written too (1 / 0 per row), and :data:`MODEL_COLUMN` after it when some row has a
+        ``model`` (the label of the model that answered); without one the file has exactly
+        the contract's columns. Other keys are ignored.
         ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
     path : path-like
         Destination CSV file; its folder must exist.
@@ -90,10 +96,12 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     n = 0
     rows = list(rows)
     with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
+    with_model = with_flag and any(row.get(MODEL_COLUMN) for row in rows)
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
-                        + (STIMULUS_COLUMNS if stimuli else ()) + ((SIMULATED_COLUMN,) if with_flag else ()))
+                        + (STIMULUS_COLUMNS if stimuli else ()) + ((SIMULATED_COLUMN,) if with_flag else ())
+                        + ((MODEL_COLUMN,) if with_model else ()))
         for row in rows:
             response = row["response"]
             if not isinstance(response, str):
@@ -113,6 +121,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
                            _seconds_cell(row.get("target_peak_um"))]
             if with_flag:
                 values.append(int(bool(row.get(SIMULATED_COLUMN))))
+            if with_model:
+                values.append(row.get(MODEL_COLUMN) or "")
             writer.writerow(values)
             n += 1
     return n
@@ -150,7 +160,7 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
             header = next(reader, None)
             headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS,
                                                         SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS)
-                       for f in ((), (SIMULATED_COLUMN,))]
+                       for f in ((), (SIMULATED_COLUMN,), (SIMULATED_COLUMN, MODEL_COLUMN))]
             if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
             columns = tuple(header)

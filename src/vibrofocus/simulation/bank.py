@@ -153,10 +153,10 @@ def build_feature_bank(
         rig = make_rig("simulated", seed=pseed, skin=STUDY_SKIN)
         layout = rig.layout
         cal = calibrate(rig, participant_id=f"bank-{k:03d}")
-        # Same drives as simulate-study; a design whose window is too short for the
-        # wrap-around check is kept with a CausalityWarning (the bank needs every cell),
-        # and the contrast bounds (not part of the drives) are not computed.
-        render = calibration_renderer(cal, bounds=False, check_wraparound="warn", levels=levels)
+        # Same drives as simulate-study: the study renderer's window, its tapered ends where a
+        # design needs them, the same level rule (the contrast bounds, not part of the
+        # drives, are not computed).
+        render = calibration_renderer(cal, bounds=False, levels=levels)
         n_loc = len(layout.locations_xy)
         render.prepare(methods, range(1, n_loc + 1))  # one window every stimulus fits, as a study's
         drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])

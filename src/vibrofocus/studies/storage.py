@@ -625,8 +625,9 @@ class StudyStore(StudyDatabase):
         vibrofocus 0.1.0), and the stimulus columns ``levels`` (the session's level rule),
         ``drive_peak_v`` (largest |drive| of the stimulus played, V) and ``target_peak_um``
         (its peak at the target predicted from the calibration, µm), from the trial's
-        ``stimulus_onset`` event (None where none holds them). Ordered by participant
-        (as added), study, session and trial index.
+        ``stimulus_onset`` event (None where none holds them), and for a simulated
+        participant ``model`` (the label of the model and hypothesis that answered, from the
+        session). Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -649,23 +650,31 @@ class StudyStore(StudyDatabase):
             rows = [dict(r) for r in conn.execute(sql, args).fetchall()]
             onsets = self._answer_onsets(conn, participant_id)
             stimuli = self._played_stimuli(conn, participant_id)
+        # The simulation floor sits above the studies: its label imported where a row names it.
+        from ..simulation.perception import MODEL_LABEL as legacy_model
+
         for row in rows:
             row.update(onsets.get(row["answer_id"], _NO_ONSET))
             row.update(stimuli.get((row["session_id"], row["trial_index"]), _NO_STIMULUS))
-            row["levels"] = stimuli.get(row["session_id"], LEGACY_LEVELS)
+            row["levels"], model = stimuli.get(row["session_id"], (LEGACY_LEVELS, None))
+            if row["simulated"]:
+                # A simulated session stored before sessions named their model: v3, its only one then.
+                row["model"] = model or legacy_model
         return rows
 
     @staticmethod
     def _played_stimuli(conn: sqlite3.Connection, participant_id: str | None = None) -> dict[Any, Any]:
-        """The level rule of each session (by session id) and the stimulus columns of each
-        trial's last ``stimulus_onset`` event (by (session id, trial index))."""
+        """The level rule and the simulated participants' model label (None: not stored) of
+        each session (by session id), and the stimulus columns of each trial's last
+        ``stimulus_onset`` event (by (session id, trial index))."""
         where, args = "", ()
         if participant_id is not None:
             where, args = "WHERE participant_id = ? ", (participant_id,)
         out: dict[Any, Any] = {}
         for sid, text in conn.execute("SELECT session_id, config FROM sessions " + where, args):
             config = json.loads(text)  # the stored rule as it is (the design's rules: StudyDesign.from_config)
-            out[sid] = str(config.get("levels", LEGACY_LEVELS)) if isinstance(config, dict) else LEGACY_LEVELS
+            config = config if isinstance(config, dict) else {}
+            out[sid] = (str(config.get("levels", LEGACY_LEVELS)), config.get("model"))
         sql = ("SELECT session_id, payload FROM events WHERE kind = 'stimulus_onset' "
                + ("AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) " if args else ""))
         for sid, text in conn.execute(sql + "ORDER BY event_id", args):
