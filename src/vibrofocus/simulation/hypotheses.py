@@ -193,6 +193,15 @@ def available_hypotheses() -> tuple[str, ...]:
 def hypothesis(name: str | Hypothesis | None = None) -> Hypothesis:
     """The hypothesis registered under ``name`` (None: :data:`DEFAULT_HYPOTHESIS`).
 
+    Parameters
+    ----------
+    name : str or Hypothesis, optional
+        A registered name (a :class:`Hypothesis` is returned as it is).
+
+    Returns
+    -------
+    Hypothesis
+
     Raises
     ------
     ValidationError
