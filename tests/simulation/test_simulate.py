@@ -36,9 +36,13 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
     # A database export: the contract's columns, the session columns, the onset columns, the
-    # stimulus columns, then the flag that these participants are simulated (a model, not data).
-    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS + ("simulated",)
+    # stimulus columns, then the flag that these participants are simulated (a model, not
+    # data) and the model's label.
+    assert tuple(header) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
+                             + ("simulated", "model"))
     assert {r["levels"] for r in rows} == {"paper"}
+    # Every row names the model and the hypothesis that answered.
+    assert {r["model"] for r in rows} == {"simulated participants: model v3.0, hypothesis v3-centroid v3.0, not data"}
     assert {r["onset_clock"] for r in rows} == {"simulated_samples"}
     for session in {r["session"] for r in rows}:  # the rig's sample clock runs on through a session
         device = [float(r["onset_device_s"]) for r in rows if r["session"] == session]
