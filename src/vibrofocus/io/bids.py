@@ -248,8 +248,11 @@ def read_bids_trials_table(root: str | os.PathLike):
         Every value a str, with the trials-file columns (``participant``: the
         ``source_id``, ``study``, ``phase``, ``trial``, ``method``, ``target``,
         ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
-        ``dry_run``), ``simulated`` (``1``/``0``) and ``line`` (row number over all events
-        files, from 2), as :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
+        ``dry_run``), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
+        ``drive_peak_v``, ``target_peak_um``) and, for a simulated participant, ``model``
+        (the sidecar's ``SimulatedModel``) where the events files have them, and ``line``
+        (row number over all events files, from 2), as
+        :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
 
     Raises
     ------
@@ -284,7 +287,17 @@ def read_bids_trials_table(root: str | os.PathLike):
         if events and set(_REQUIRED_COLUMNS) - set(events[0]):
             missing = sorted(set(_REQUIRED_COLUMNS) - set(events[0]))
             raise ValidationError(f"the events file {path} lacks the column(s) {', '.join(missing)}")
+        model = None
+        if person.get("simulated") == "true":  # the sidecar names the model that answered
+            try:
+                model = json.loads(path.with_suffix(".json").read_text(encoding="utf-8")).get("SimulatedModel")
+            except (OSError, ValueError, AttributeError):
+                model = None
         for ev in events:
+            stimulus = {c: ("" if ev[c] == _NA else ev[c]) for c in ("levels", "drive_peak_v", "target_peak_um")
+                        if c in ev}
+            if model:
+                stimulus["model"] = str(model)
             rows.append({
                 "participant": person.get("source_id") or sub.removeprefix("sub-"), "study": study,
                 "phase": ev["phase"], "trial": ev["trial"], "method": ev["method"], "target": ev["target"],
@@ -293,7 +306,8 @@ def read_bids_trials_table(root: str | os.PathLike):
                 "session_status": "completed" if ev["session_status"] == _NA else ev["session_status"],
                 "dry_run": "0" if ev["dry_run"] == _NA else ev["dry_run"],
                 "simulated": "1" if person.get("simulated") == "true" else "0",
+                **stimulus,
             })
-    table = pd.DataFrame(rows, dtype=str)
+    table = pd.DataFrame(rows, dtype=str).fillna("")  # a column some events files lack: empty cells
     table["line"] = range(2, len(table) + 2)
     return table

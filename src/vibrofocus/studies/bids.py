@@ -156,7 +156,8 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike) -> dict[s
         runs.append({"label": labels[pid], "study": study, "events": events, "sidecar": {
             "device_clock": clock_column,
             "SourceId": pid, "Study": study, "Simulated": sim,
-            "SimulatedModel": MODEL_LABEL if sim else None,
+            # The rows' own label (model and hypothesis) where the source names it.
+            "SimulatedModel": next((t["model"] for t in trials if t.get("model")), MODEL_LABEL) if sim else None,
             "Source": "study database" if from_db else "trials CSV",
             "Sessions": sessions.get((pid, study), []),
         }})
