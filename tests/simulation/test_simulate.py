@@ -122,6 +122,12 @@ def test_analysis_reads_the_export(simulated, tmp_path):
     effects = {row["effect"] for row in report["study1"]["anova"]}
     assert {"location", "method"} <= effects
     assert set(report["study2"]["friedman"]) >= {"location", "method"}
+    # The report says at which levels the methods played: per method and location.
+    levels = {(r["method"], r["target"]): r for r in report["stimulus_levels"]}
+    assert len(levels) == 27 and {r["levels"] for r in levels.values()} == {"paper"}
+    assert levels[("funneling", 5)]["drive_peak_v"] == pytest.approx(2.5)
+    assert all(levels[("inverse", t)]["drive_peak_v"] > levels[("funneling", t)]["drive_peak_v"] for t in range(1, 10))
+    assert "hypothesis v3-centroid" in report["simulated"]["model"]
 
 
 def test_other_methods_are_studied_and_a_resume_keeps_them(tmp_path):
