@@ -83,3 +83,17 @@ def test_a_hypothesis_must_be_a_word_with_a_known_readout():
         Hypothesis(name="two words", version="1", title="t", sources="s")
     with pytest.raises(ValidationError, match="readout"):
         Hypothesis(name="x", version="1", title="t", sources="s", readout="guess")
+
+
+@pytest.mark.slow
+def test_the_documented_hypotheses_table_is_that_of_the_code():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    res = subprocess.run([sys.executable, str(root / "scripts" / "hypotheses_table.py"), "--print"],
+                         capture_output=True, text=True, timeout=900, check=True)
+    page = (root / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
+    block = page.split("<!-- hypotheses-measured:start -->\n", 1)[1].split("\n<!-- hypotheses-measured:end -->", 1)[0]
+    assert block == res.stdout.rstrip("\n")
