@@ -10,6 +10,9 @@ perceptual model's skin grid. Usage:
 of largest energy instead of the whole stimulus (``PerceptualModel.integration_s``; an
 explored alternative, not the model's default); write it elsewhere with ``--out``.
 
+``--levels paper|equal-peak`` is the level rule of the stimuli (a study protocol's; default
+the paper's), stored in the bank.
+
 ``--methods a,b,...`` renders other registered methods too (for example
 ``funneling,inverse,combination,minimax``), for ``vibrofocus power --bank FILE --methods
 inverse,minimax``; write such a bank elsewhere with ``--out``.
@@ -34,6 +37,8 @@ if __name__ == "__main__":
                     help="felt intensity over the W ms window of largest energy (default: the whole stimulus)")
     ap.add_argument("--methods", default=",".join(STUDY_METHODS),
                     help="registered methods, comma separated (default the studies' three)")
+    ap.add_argument("--levels", default="paper", choices=("paper", "equal-peak"),
+                    help="level rule of the stimuli, as a study protocol's (default the paper's; stored in the bank)")
     args = ap.parse_args()
     methods = tuple(m.strip() for m in args.methods.split(",") if m.strip())
     shipped = Path(__file__).parents[1] / "src/vibrofocus/simulation" / DEFAULT_BANK
@@ -41,7 +46,7 @@ if __name__ == "__main__":
         ap.error("a bank with other methods than the studies' three goes elsewhere: give --out")
     model = PerceptualModel(integration_s=None if args.integration_ms is None else args.integration_ms * 1e-3)
     t0 = time.perf_counter()
-    bank = build_feature_bank(args.n, seed=args.seed, model=model, methods=methods,
+    bank = build_feature_bank(args.n, seed=args.seed, model=model, methods=methods, levels=args.levels,
                               progress=lambda k, n: print(f"forearm {k}/{n}", flush=True))
     bank.save(args.out)
     print(f"wrote {args.out} ({bank.energy.shape}) in {time.perf_counter() - t0:.0f} s")

@@ -18,14 +18,23 @@ def test_power_writes_table_plot_and_json(tmp_path):
     assert res.exit_code == 0, res.output
     assert "model v3" in res.output and "not data" in res.output
     assert "Study 1 RM-ANOVA, location (GG)" in res.output
+    # The paper's directional claims beside the omnibus tests, for every hypothesis.
+    assert "inverse error below funneling" in " ".join(res.output.split())
     table = pd.read_csv(out / "power.csv")
-    assert set(table["n_participants"]) == {4, 6} and len(table) == 14
+    assert set(table["hypothesis"]) == {"v3-centroid", "grid-peak", "level-reliability"}
+    assert set(table["n_participants"]) == {4, 6} and len(table) == 3 * 2 * (7 + 2)
+    assert {"s1_inverse_below", "s2_inverse_fewer"} <= set(table["test"])
+    # Robust only where every hypothesis agrees on powered (>= 0.8) or not.
+    for (test, n), rows in table.groupby(["test", "n_participants"]):
+        verdicts = set(rows["power"].dropna() >= 0.8)
+        assert rows["robust"].iloc[0] == (len(verdicts) == 1 and rows["power"].notna().all())
     ran = table["n_studies"] > 0  # a test that never ran (too few participants kept) has no power
     assert table.loc[ran, "power"].between(0, 1).all() and table.loc[~ran, "power"].isna().all()
     assert ran[table["test"].str.startswith("s1_")].all()
     assert (table["model"].str.contains("not data") & table["model"].str.contains("model v3")).all()
     report = json.loads((out / "power.json").read_text())
     assert report["design"]["n_studies"] == 5 and "not data" in report["label"]
+    assert set(report["hypotheses"]) == set(table["hypothesis"]) and report["levels"] == "equal-peak"
     assert (out / "power.png").stat().st_size > 1000
 
 

@@ -193,7 +193,16 @@ def test_feature_bank_round_trips_and_the_shipped_one_loads(tmp_path):
 
     save_feature_bank(dataclasses.asdict(bank), tmp_path / "b.npz", model_version="test")
     back = FeatureBank(**load_feature_bank(tmp_path / "b.npz"))
-    assert all(isinstance(v, (np.ndarray, tuple, int)) for v in load_feature_bank(tmp_path / "b.npz").values())
+    loaded = load_feature_bank(tmp_path / "b.npz")
+    assert all(isinstance(v, (np.ndarray, tuple, int, str, type(None))) for v in loaded.values())
+    # A bank written before banks stored their level rule was rendered at equal peak drive.
+    assert (loaded["levels"], loaded["drive_peak_v"], loaded["target_peak_m"]) == ("equal-peak", None, None)
+    paper = dataclasses.replace(bank, levels="paper", drive_peak_v=rng.random((2, 3, 9)),
+                                target_peak_m=rng.random((2, 3, 9)))
+    save_feature_bank(dataclasses.asdict(paper), tmp_path / "p.npz", model_version="test")
+    again = FeatureBank(**load_feature_bank(tmp_path / "p.npz"))
+    assert again.levels == "paper"
+    np.testing.assert_array_equal(again.drive_peak_v, paper.drive_peak_v)
     np.testing.assert_allclose(back.energy, bank.energy, rtol=1e-6)  # stored as float32
     np.testing.assert_array_equal(back.points_xy, bank.points_xy)
     np.testing.assert_allclose(back.actuator_energy, bank.actuator_energy, rtol=1e-6)

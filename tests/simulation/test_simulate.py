@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 from vibrofocus.cli.main import app
 from vibrofocus.layout import ArrayLayout
 from vibrofocus.studies import TRIALS_COLUMNS, StudyStore
+from vibrofocus.io.trials_csv import STIMULUS_COLUMNS
 from vibrofocus.studies.export import ONSET_COLUMNS, SESSION_COLUMNS
 from vibrofocus.simulation.simulate import participant_seeds, simulate_studies
 
@@ -34,9 +35,14 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         reader = csv.reader(fh)
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
-    # A database export: the contract's columns, the session columns, the onset columns, then
-    # the flag that these participants are simulated (a model, not data).
-    assert tuple(header) == TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + ("simulated",)
+    # A database export: the contract's columns, the session columns, the onset columns, the
+    # stimulus columns, then the flag that these participants are simulated (a model, not
+    # data) and the model's label.
+    assert tuple(header) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
+                             + ("simulated", "model"))
+    assert {r["levels"] for r in rows} == {"paper"}
+    # Every row names the model and the hypothesis that answered.
+    assert {r["model"] for r in rows} == {"simulated participants: model v3.0, hypothesis v3-centroid v3.0, not data"}
     assert {r["onset_clock"] for r in rows} == {"simulated_samples"}
     for session in {r["session"] for r in rows}:  # the rig's sample clock runs on through a session
         device = [float(r["onset_device_s"]) for r in rows if r["session"] == session]
@@ -141,6 +147,12 @@ def test_analysis_reads_the_export(simulated, tmp_path):
     effects = {row["effect"] for row in report["study1"]["anova"]}
     assert {"location", "method"} <= effects
     assert set(report["study2"]["friedman"]) >= {"location", "method"}
+    # The report says at which levels the methods played: per method and location.
+    levels = {(r["method"], r["target"]): r for r in report["stimulus_levels"]}
+    assert len(levels) == 27 and {r["levels"] for r in levels.values()} == {"paper"}
+    assert levels[("funneling", 5)]["drive_peak_v"] == pytest.approx(2.5)
+    assert all(levels[("inverse", t)]["drive_peak_v"] > levels[("funneling", t)]["drive_peak_v"] for t in range(1, 10))
+    assert "hypothesis v3-centroid" in report["simulated"]["model"]
 
 
 def test_other_methods_are_studied_and_a_resume_keeps_them(tmp_path):
@@ -160,3 +172,33 @@ def test_other_methods_are_studied_and_a_resume_keeps_them(tmp_path):
     assert again.exit_code != 0 and "simulated with the methods inverse, minimax" in again.output
     with StudyStore(db, create=False) as store:
         assert len(store.trial_rows()) == len(rows) and [p.participant_id for p in store.participants()] == ["sim-001"]
+
+
+def test_the_paper_levels_reach_the_trials_file(simulated):
+    # Issue 42's check, from the trials file alone: funneling by eq. 3 at A = 10 V (the
+    # paper's 2.5 V at the centre, (1 - 12.5/45)^2 * 10 = 5.22 V at a corner's nearest
+    # exciter), the inverse filter within 10 V and above funneling at every location.
+    _, out, _ = simulated
+    with open(out, newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    peak = {}
+    for r in rows:
+        peak.setdefault((r["participant"], r["method"], int(r["target"])), set()).add(float(r["drive_peak_v"]))
+    assert all(len(v) == 1 for v in peak.values())  # one stimulus per condition and participant
+    peak = {k: v.pop() for k, v in peak.items()}
+    for pid in ("sim-001", "sim-002", "sim-003"):
+        assert peak[(pid, "funneling", 5)] == pytest.approx(2.50, abs=0.05)
+        for corner in (1, 3, 7, 9):
+            assert peak[(pid, "funneling", corner)] == pytest.approx(10 * (1 - 12.5 / 45) ** 2, abs=1e-6)
+            assert peak[(pid, "funneling", corner)] == pytest.approx(5.22, abs=0.1)
+        for loc in range(1, 10):
+            assert peak[(pid, "funneling", loc)] < peak[(pid, "inverse", loc)] <= 10.0 + 1e-9
+    assert all(float(r["target_peak_um"]) > 0 for r in rows)
+
+
+def test_other_levels_on_the_same_database_are_refused(simulated):
+    db, _, _ = simulated
+    result = CliRunner().invoke(app, ["simulate-study", "-n", "1", "--seed", "11", "--db", str(db), "--quiet",
+                                      "--levels", "equal-peak"])
+    assert result.exit_code == 2
+    assert "simulated at 'paper' levels, not 'equal-peak'" in " ".join(result.output.split())

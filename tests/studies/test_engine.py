@@ -123,9 +123,9 @@ def test_calibration_renderer_uses_the_calibration(calibration_file):
     from vibrofocus.calibration import load_calibration
 
     cal = load_calibration(calibration_file)
-    drives = calibration_renderer(cal, n_samples=N)("inverse", 5)
+    drives = calibration_renderer(cal, n_samples=N, levels="equal-peak")("inverse", 5)
     H = cal.transfer_for(N)
-    expected = render("inverse", H, cal.fs, cal.layout, 5).drives
+    expected = render("inverse", H, cal.fs, cal.layout, 5).drives  # render's default: equal peak drive
     np.testing.assert_allclose(drives, expected, rtol=1e-12, atol=0)
     assert drives.shape == (cal.layout.n_actuators, N)
 
@@ -250,7 +250,8 @@ def test_a_dry_run_and_an_older_answer_have_no_onsets(store, tmp_path):
     assert [r["onset_host_s"] for r in store.trial_rows() if r["session_id"] == old] == [None]
     store.export_trials_csv(tmp_path / "t.csv")
     line = (tmp_path / "t.csv").read_text().splitlines()[-1]
-    assert line.endswith(",,,")  # the old answer: three empty onset cells
+    # The old answer: three empty onset cells; its session's level rule, and no peaks (nothing was played).
+    assert line.endswith(",,,,paper,,")
     assert read_trials_csv(tmp_path / "t.csv")[-1]["onset_clock"] is None
 
 

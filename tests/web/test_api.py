@@ -160,3 +160,15 @@ def test_a_session_with_an_unknown_rig_is_refused_and_nothing_is_stored(server):
     assert r.status_code == 422, r.text
     assert "no-such-rig" in r.json()["detail"] and "simulated" in r.json()["detail"]
     assert snapshot(server.db) == before
+
+
+def test_a_session_keeps_its_level_rule_and_a_bad_one_is_refused(server):
+    assert server.api("POST", "/api/participants", json={"participant_id": "P11"}).status_code == 201
+    r = server.api("POST", "/api/sessions", json={"participant_id": "P11", "study": 1, "levels": "equal-peak"})
+    assert r.status_code == 201, r.text
+    assert r.json()["config"]["levels"] == "equal-peak"
+    r = server.api("POST", "/api/sessions", json={"participant_id": "P11", "study": 2})
+    assert r.status_code == 201 and r.json()["config"]["levels"] == "paper"  # the paper's, by default
+    before = snapshot(server.db)
+    r = server.api("POST", "/api/sessions", json={"participant_id": "P11", "study": 1, "levels": "loud"})
+    assert r.status_code == 422 and snapshot(server.db) == before

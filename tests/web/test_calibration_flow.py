@@ -65,9 +65,12 @@ def test_calibrate_preview_and_run_with_stimuli(server):
         assert r.status_code == 200, r.text
     rows = server.rows("SELECT trial_index, drive_sha256, calibration_id FROM answers WHERE session_id = ? ORDER BY trial_index", sid)
     assert [r[2] for r in rows] == [cid, cid]
-    # The stored hash is that of the drive rendered independently from the saved calibration.
+    # The stored hash is that of the drive rendered independently from the saved calibration,
+    # at the paper's levels (the session's default rule): funneling by eq. 3 at A = 10 V,
+    # the others at their own level, scaled down only over 10 V.
     for (i, method, target), (_, sha, _) in zip(planned, rows):
-        rendering = render(method, cal.transfer_for(4096), cal.fs, cal.layout, target, limit_v=10.0)
+        rendering = render(method, cal.transfer_for(4096), cal.fs, cal.layout, target, limit_v=10.0,
+                           scale_to_limit=False, funneling_amplitude_v=10.0)
         assert sha == drive_sha256(rendering.drives)
         assert np.abs(rendering.drives).max() <= 10.0
     onsets = server.rows("SELECT json_extract(payload, '$.drive_sha256') FROM events WHERE session_id = ? AND kind = 'stimulus_onset' ORDER BY event_id", sid)

@@ -16,6 +16,7 @@ Each step is also available on its own (:func:`study1_errors`, :func:`study1_ano
 
 from .figures import method_colors, plot_counts, plot_errors, plot_localization, save_figure
 from .pipeline import AnalysisResult, Study1Result, Study2Counts, Study2Result, analyze
+from .levels import stimulus_levels
 from .report import format_p, report_dict, report_trials_file, results_sentences, write_report
 from .study1 import (
     localization_summary,
@@ -29,6 +30,7 @@ from .study2 import friedman_tests, study2_counts, wilcoxon_posthoc
 from .trials import REQUIRED_COLUMNS, check_design, load_trials, main_trials, method_order, trial_problems
 
 __all__ = [
+    "stimulus_levels",
     "REQUIRED_COLUMNS",
     "load_trials",
     "trial_problems",

@@ -13,6 +13,7 @@ from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .study1 import localization_summary, shapiro_tests, study1_anova, study1_errors, study1_posthoc
 from .study2 import friedman_tests, study2_counts, wilcoxon_posthoc
+from .levels import stimulus_levels
 from .trials import check_design, method_order
 
 #: Below this many complete participants a study's results carry a warning.
@@ -166,6 +167,13 @@ class AnalysisResult:
     simulated_participants : list of str
         Participants marked simulated in the trials (answers from the perceptual model,
         not from people).
+    simulated_models : list of str
+        Labels of the models (version and hypothesis) that answered for them, as the trials
+        name them (empty: not named; model v3 then).
+    stimulus_levels : DataFrame or None
+        Each method's peak drive and predicted peak at the target per location
+        (:func:`~vibrofocus.analysis.levels.stimulus_levels`); None when the trials do
+        not record them.
     """
 
     source: str
@@ -178,6 +186,8 @@ class AnalysisResult:
     alpha: float = 0.05
     layout: ArrayLayout | None = None
     simulated_participants: list[str] = field(default_factory=list)
+    stimulus_levels: pd.DataFrame | None = None
+    simulated_models: list[str] = field(default_factory=list)
 
 
 def _cell_means(df: pd.DataFrame, dv: str) -> pd.DataFrame:
@@ -385,4 +395,6 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
         alpha=alpha,
         layout=layout,
         simulated_participants=list(trials.attrs.get("simulated_participants", [])),
+        stimulus_levels=stimulus_levels(trials),
+        simulated_models=list(trials.attrs.get("simulated_models", [])),
     )

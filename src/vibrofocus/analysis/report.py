@@ -59,13 +59,14 @@ def _simulated(result: AnalysisResult) -> dict[str, Any]:
     from ..simulation.perception import MODEL_LABEL, MODEL_VERSION
 
     sim = list(result.simulated_participants)
+    label = "; ".join(result.simulated_models) or MODEL_LABEL  # the trials' own labels (hypotheses) first
     return {
         "any": bool(sim),
         "participants": sim,
-        "model": MODEL_LABEL if sim else None,
+        "model": label if sim else None,
         "model_version": MODEL_VERSION if sim else None,
         "notice": (
-            f"{len(sim)} participant(s) are simulated ({MODEL_LABEL}): their answers come from a "
+            f"{len(sim)} participant(s) are simulated ({label}): their answers come from a "
             "perceptual model, not from people; statistics that include them are not evidence about perception."
             if sim else None
         ),
@@ -90,6 +91,9 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
     ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
     these keys are always present and null when the statistic was computed.
+    ``stimulus_levels`` lists each method's median peak drive (V) and predicted peak at
+    the target (µm) per location with the level rule (null when the trials do not record
+    them).
 
     Parameters
     ----------
@@ -156,6 +160,8 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
             "contains_target": _study2_part_dict(s2.contains_target),
             "sentences": sentences["study2"],
         }
+    # Each method's peak drive and predicted peak at the target per location (null: not recorded).
+    d["stimulus_levels"] = result.stimulus_levels
     d["figures"] = figures or {}
     return json_safe(d)
 
@@ -198,17 +204,25 @@ def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str
 
     out = Path(out_dir)
     names = {"localization": "study1_localization.png", "errors": "study1_errors.png", "counts": "study2_counts.png"}
+    simulated = _simulated(result)
+    # A figure made from simulated participants says so, with the model and hypothesis, in a footer.
+    footer = f"SIMULATED: {simulated['model']}" if simulated["any"] else None
+
+    def save(fig, path: Path) -> Path:
+        if footer is not None:
+            fig.text(0.01, 0.005, footer, fontsize=7, color="#b45309", ha="left", va="bottom")
+        return save_figure(fig, path)
+
     with atomic_directory(out, owned=REPORT_FILES, what="report folder") as build:
         figures: dict[str, Path] = {}
         if result.study1 is not None:
-            figures["localization"] = save_figure(
-                plot_localization(result.study1.positions, result.layout), build / names["localization"]
-            )
-            figures["errors"] = save_figure(plot_errors(result.study1.errors), build / names["errors"])
+            figures["localization"] = save(plot_localization(result.study1.positions, result.layout),
+                                           build / names["localization"])
+            figures["errors"] = save(plot_errors(result.study1.errors), build / names["errors"])
         if result.study2 is not None:
             hit = result.study2.contains_target.counts
             hit = hit if len(hit) else None
-            figures["counts"] = save_figure(plot_counts(result.study2.all_trials.counts, hit), build / names["counts"])
+            figures["counts"] = save(plot_counts(result.study2.all_trials.counts, hit), build / names["counts"])
         report = report_dict(result, figures={k: p.name for k, p in figures.items()})
         write_report_json(report, build / REPORT_JSON)
         write_text(build / "report.html", render_html(result, figures, simulated_notice=report["simulated"]["notice"]),

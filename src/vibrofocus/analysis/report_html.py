@@ -153,5 +153,6 @@ def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_n
                    _study2_part(s2.contains_target, "trials whose selection contains the target")]
         if s2 is not None else None,
         "figures": {name: _figure(path) for name, path in figures.items()},
+        "stimulus_levels": _table(result.stimulus_levels) if result.stimulus_levels is not None else None,
     }
     return template_environment(_TEMPLATES).get_template("report.html").render(context)

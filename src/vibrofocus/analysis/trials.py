@@ -255,6 +255,11 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     # A study database's export names the session of each row: trial numbers repeat
     # across two sessions of one participant, and are unique within a session.
     by_session = {"session": df["session"][good]} if "session" in df.columns else {}
+    # The stimulus columns of a study database's export (the level rule, the peaks), kept as they are.
+    stimulus = {}
+    if {"levels", "drive_peak_v", "target_peak_um"} <= set(df.columns):
+        stimulus = {"levels": df["levels"][good].astype(str).str.strip(),
+                    **{c: pd.to_numeric(df[c][good], errors="coerce") for c in ("drive_peak_v", "target_peak_um")}}
     trials = pd.DataFrame(
         {
             "participant": df["participant"][good],
@@ -269,6 +274,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
             "rt_s": rt[good],
             "line": df["line"][good],
             **by_session,
+            **stimulus,
         }
     ).reset_index(drop=True)
     if len(trials):
@@ -382,7 +388,18 @@ def load_trials(
     trials.attrs["exclusions"] = exclusions
     trials.attrs["source"] = name
     trials.attrs["simulated_participants"] = simulated_participants(raw)
+    trials.attrs["simulated_models"] = simulated_models(raw)
     return trials
+
+
+def simulated_models(raw: pd.DataFrame) -> list[str]:
+    """The labels of the models that answered for the simulated participants (column
+    ``model`` of a study database's export: model version and hypothesis), sorted; empty
+    when the trials do not name them."""
+    if "model" not in raw.columns or "simulated" not in raw.columns:
+        return []
+    flag = raw["simulated"].astype(str).str.strip().str.lower().isin(("1", "true", "yes", "1.0"))
+    return sorted({str(m).strip() for m in raw.loc[flag, "model"] if str(m).strip()})
 
 
 def simulated_participants(raw: pd.DataFrame) -> list[str]:

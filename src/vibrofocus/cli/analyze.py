@@ -84,6 +84,10 @@ def analyze_command(
         console.print(f"[yellow]note[/] {w}")
     for reason in result.unavailable.values():
         console.print(f"[bold yellow]{reason}[/]")
+    if result.stimulus_levels is not None:
+        from ._levels import levels_table
+
+        console.print(levels_table(result.stimulus_levels))
     s1 = result.study1
     if s1 is not None:
         n1 = len(s1.participants)

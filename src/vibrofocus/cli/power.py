@@ -55,6 +55,12 @@ def power_command(
     out: Path | None = typer.Option(None, "--out", "-o", help="Folder for power.json, power.csv and power.png."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     force: bool = force_option(),
+    hypotheses: str = typer.Option(
+        "all", "--hypotheses",
+        help="Hypotheses of how simulated participants read the felt field, comma separated, or all (default): "
+             "each is simulated with the same seeds, side by side, and a conclusion (a test powered at 80 % or "
+             "not) is marked robust only where all agree.",
+    ),
     skin: str = typer.Option("nominal", "--skin",
                              help="Skin preset of the simulated forearms. Only nominal for now: the perceptual "
                                   "model and its feature bank are fitted on it (docs: simulated participants)."),
@@ -62,8 +68,10 @@ def power_command(
     """Power of each test of docs/method.md (Analysis) against the number of participants, by simulation.
 
     Studies are simulated with the perceptual MODEL of simulated participants (model v3,
-    fitted to the source paper's statistics), not data: the power is that of the model's
-    effect sizes.
+    fitted to the source paper's statistics), not data, under each hypothesis of how they
+    read the felt field (--hypotheses): the power is that of the model's effect sizes. The
+    paper's directional claims (inverse below funneling; fewer points with the inverse
+    filter) are reported beside the omnibus tests.
     """
     with user_errors():
         from rich.console import Console
@@ -73,7 +81,7 @@ def power_command(
         from .._atomic import allow_overwrite
         from .._validation import check_in_range
         from ..simulation.perception import MODEL_LABEL
-        from ..simulation.power import TESTS, PowerDesign, run_power
+        from ..simulation.power import DIRECTIONAL_TESTS, TESTS, PowerDesign, run_power
 
         allow_overwrite(force)
         from ..errors import ValidationError
@@ -88,10 +96,17 @@ def power_command(
                 f"the {STUDY_SKIN} skin only; power on {skin} needs them refitted on it first"
             )
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
+        from ..simulation.hypotheses import available_hypotheses, hypothesis as find_hypothesis
+
+        names = (available_hypotheses() if hypotheses.strip() == "all"
+                 else tuple(dict.fromkeys(find_hypothesis(h.strip()).name for h in hypotheses.split(",") if h.strip())))
+        if not names:
+            raise ValidationError("--hypotheses: name at least one (or all)")
         design = PowerDesign(
             n_participants=_ints(participants, "--participants"), n_studies=studies, repetitions=repetitions,
             methods=tuple(m.strip() for m in methods.split(",") if m.strip()) if methods else None,
             locations=_ints(locations, "--locations") if locations else None, alpha=alpha, seed=seed,
+            hypothesis=names[0],
         )
         feature_bank = None
         if bank is not None:
@@ -105,37 +120,62 @@ def power_command(
             check_writable(out / "power.json", what="power results")  # before the simulations, not after
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_LABEL}[/]")
+        import dataclasses
+
+        from ..simulation.power import robust_conclusions
+
+        per: dict[str, dict] = {}
         with Progress(
             TextColumn("studies"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             console=console, disable=quiet,
         ) as bar:
-            task = bar.add_task("studies", total=len(design.n_participants) * design.n_studies)
-            result = run_power(
-                design, scheduler=scheduler, n_workers=workers, local=local, bank=feature_bank,
-                progress=lambda done, total: bar.update(task, completed=done, total=total),
-            )
-        table = Table(title=f"Power by simulation ({MODEL_LABEL}), {design.n_studies} studies per N, alpha {alpha}")
+            each = len(design.n_participants) * design.n_studies
+            task = bar.add_task("studies", total=each * len(names))
+            for k, name in enumerate(names):
+                per[name] = run_power(
+                    dataclasses.replace(design, hypothesis=name), scheduler=scheduler, n_workers=workers, local=local,
+                    bank=feature_bank,
+                    progress=lambda done, total, _k=k: bar.update(task, completed=_k * each + done),
+                )
+        result = dict(per[names[0]])
+        result["hypotheses"] = {name: {"label": r["label"], "hypothesis": r["hypothesis"], "table": r["table"]}
+                                for name, r in per.items()}
+        result["robust"] = robust_conclusions({name: r["table"] for name, r in per.items()})
+        result["elapsed_s"] = sum(r["elapsed_s"] for r in per.values())
+        robust = {(r["test"], r["n_participants"]): r for r in result["robust"]}
+        table = Table(title=f"Power by simulation ({MODEL_LABEL}; stimuli at {result['levels']} levels), "
+                            f"{design.n_studies} studies per N, alpha {alpha}; *: robust, every hypothesis agrees "
+                            f"on powered (>= 0.8) or not")
         table.add_column("test")
+        table.add_column("hypothesis")
         for n in design.n_participants:
             table.add_column(f"N={n}", justify="right")
-        by = {(r["test"], r["n_participants"]): r for r in result["table"]}
-        for key, label in TESTS:
-            table.add_row(label, *[f"{by[(key, n)]['power']:.2f}" if by[(key, n)]["n_studies"] else "not run"
-                                   for n in design.n_participants])
+        for key, label in TESTS + DIRECTIONAL_TESTS:
+            for name in names:
+                by = {(r["test"], r["n_participants"]): r for r in per[name]["table"]}
+                if (key, design.n_participants[0]) not in by:
+                    continue  # a directional claim without funneling and the inverse filter
+                cells = []
+                for n in design.n_participants:
+                    cell = f"{by[(key, n)]['power']:.2f}" if by[(key, n)]["n_studies"] else "not run"
+                    cells.append(cell + ("*" if robust.get((key, n), {}).get("robust") else ""))
+                table.add_row(label if name == names[0] else "", name, *cells)
         Console().print(table)
-        console.print(f"{len(design.n_participants) * design.n_studies} studies in {result['elapsed_s']:.1f} s")
+        console.print(f"{len(names) * each} studies in {result['elapsed_s']:.1f} s")
         if out is not None:
             paths = write_power(result, out)
             console.print("wrote " + ", ".join(str(p) for p in paths))
-        console.print(f"[yellow]{MODEL_LABEL}[/]")
+        for name in names:
+            console.print(f"[yellow]{per[name]['label']}[/]")
 
 
 def write_power(result: dict, out: Path) -> list[Path]:
     """Write power.json, power.csv (the table) and power.png (power against N per test).
 
     Each file appears whole or not at all (:mod:`vibrofocus._atomic`) and says it comes
-    from simulated participants: ``label`` in the JSON, a ``model`` column in the CSV,
-    the title of the plot.
+    from simulated participants: ``label`` in the JSON, ``hypothesis`` and ``model``
+    columns in the CSV (one block of rows per hypothesis, with ``robust``: every hypothesis
+    agrees), the title of the plot (the first hypothesis').
     """
     import json
 
@@ -146,22 +186,33 @@ def write_power(result: dict, out: Path) -> list[Path]:
     import pandas as pd
 
     from .._atomic import save_figure, write_text
-    from ..simulation.power import TESTS
+    from ..simulation.power import DIRECTIONAL_TESTS, TESTS
 
-    table = pd.DataFrame(result["table"]).assign(model=result["label"])
+    hyps = result.get("hypotheses") or {result.get("hypothesis", {}).get("name", "v3-centroid"):
+                                         {"label": result["label"], "table": result["table"]}}
+    robust = {(r["test"], r["n_participants"]): r["robust"] for r in result.get("robust", [])}
+    table = pd.concat([pd.DataFrame(h["table"]).assign(hypothesis=name, model=h["label"]) for name, h in hyps.items()],
+                      ignore_index=True)
+    table["robust"] = [robust.get((t, n)) for t, n in zip(table["test"], table["n_participants"])]
     csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")
-    js = write_text(out / "power.json", json.dumps({k: result[k] for k in ("label", "design", "table", "elapsed_s")},
-                                                   indent=1), what="power results")
+    keys = ("label", "levels", "hypothesis", "design", "table", "hypotheses", "robust", "elapsed_s")
+    js = write_text(out / "power.json", json.dumps({k: result[k] for k in keys if k in result}, indent=1),
+                    what="power results")
+    first = next(iter(hyps))
+    table = table[table["hypothesis"] == first]
     fig, ax = plt.subplots(figsize=(7, 4.5))
     try:
-        for key, label in TESTS:
+        for key, label in TESTS + DIRECTIONAL_TESTS:
             t = table[table["test"] == key]
+            if t.empty:
+                continue
             ax.errorbar(t["n_participants"], t["power"], yerr=t["se"], marker="o", capsize=3, label=label)
         ax.axhline(0.8, color="grey", lw=0.8, ls="--")
         ax.set_xlabel("participants N")
         ax.set_ylabel("power")
         ax.set_ylim(-0.02, 1.02)
-        ax.set_title(f"Power by simulation — {result['label']}", fontsize=9)
+        levels = f"; stimuli at {result['levels']} levels" if "levels" in result else ""
+        ax.set_title(f"Power by simulation — {result['label']}{levels}", fontsize=9)
         ax.legend(fontsize=7, loc="lower right")
         fig.tight_layout()
         png = save_figure(fig, out / "power.png", what="power plot", dpi=120)

@@ -38,6 +38,18 @@ def simulate_study(
         help="Rendering methods the studies compare, comma separated: any registered ones, such as minimax "
              "(default the paper's funneling, inverse, combination).",
     ),
+    hypothesis: str = typer.Option(
+        "v3-centroid", "--hypothesis",
+        help="How the simulated participants read the felt field: v3-centroid (the fitted model v3) | grid-peak "
+             "(where it felt most intense inside the grid area) | level-reliability (weak taps localized less "
+             "reliably); see docs/simulated-participants.md. Stored with each session.",
+    ),
+    levels: str = typer.Option(
+        "paper", "--levels",
+        help="Level rule of the stimuli: paper (funneling by eq. 3 at A = 10 V, the inverse filter asking 2 um, the "
+             "combination funneling's displacement, each scaled down only over 10 V) | equal-peak (every method at "
+             "10 V). Stored with each session; a resumed database keeps its own.",
+    ),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
 
@@ -59,6 +71,12 @@ def simulate_study(
         from ..layout import ArrayLayout
 
         allow_overwrite(force)
+        from ..studies.protocol import level_options
+
+        level_options(levels, 10.0)  # a bad rule: one error line before anything is created
+        from ..simulation.hypotheses import hypothesis as find_hypothesis
+
+        chosen_h = find_hypothesis(hypothesis)  # an unknown name: one error line, nothing created
         chosen = None
         if methods is not None:  # checked now, before anything is created
             from ..studies.protocol import StudyDesign
@@ -110,7 +128,7 @@ def simulate_study(
                 cal_dir.rmdir()
             raise
         console = Console(stderr=True)
-        console.print(f"[yellow]{MODEL_NOTICE}[/]")
+        console.print(f"[yellow]{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.[/]")
         with lsl_markers(lsl), Progress(
             TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             console=console, disable=quiet, transient=False,
@@ -122,10 +140,11 @@ def simulate_study(
 
             result = simulate_studies(
                 db, n_participants=participants, seed=seed, pace_s=pace,
-                calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen,
+                calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen, levels=levels,
+                hypothesis=chosen_h.name,
             )
         summary = summarize_simulation(db)
-        table = Table(title=f"Simulated participants on the {skin} skin (model output, not data): main trials")
+        table = Table(title=f"Simulated participants on the {skin} skin ({chosen_h.label()}): main trials")
         for col in ("study", "method", "trials", "mean error (mm)", "correct (%)", "locations selected"):
             table.add_column(col, justify="right" if col != "method" else "left")
         for row in summary:
@@ -134,6 +153,16 @@ def simulate_study(
                 f"{100 * row['correct']:.0f}", f"{row['mean_n_selected']:.2f}",
             )
         Console().print(table)
+        import pandas as pd
+
+        from ..analysis.levels import stimulus_levels
+        from ..studies import StudyStore
+        from ._levels import levels_table
+
+        with StudyStore(db) as store:
+            levels = stimulus_levels(pd.DataFrame(store.trial_rows()))
+        if levels is not None:
+            Console().print(levels_table(levels, title="Stimuli played (main trials, median over participants)"))
         held_now = result["n_participants"]
         console.print(
             f"{result['n_answered']} answers stored in {db} ({result['n_new']} new this run) for {held_now} "
@@ -146,4 +175,4 @@ def simulate_study(
             with StudyStore(db) as store:
                 n = store.export_trials_csv(trials_csv)
             console.print(f"wrote {n} trials to {trials_csv}")
-        console.print(f"[yellow]{MODEL_NOTICE}[/]")
+        console.print(f"[yellow]{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.[/]")

@@ -62,6 +62,12 @@ def run(
         "The rig's own actuator interface is refused.",
     ),
     lsl: bool = lsl_option(),
+    levels: str = typer.Option(
+        "paper", "--levels",
+        help="Level rule of a new session's stimuli: paper (funneling by eq. 3 at A = the drive limit, the inverse "
+        "filter asking 2 um, the combination funneling's displacement, each scaled down only over the limit) | "
+        "equal-peak (every method at the drive limit). A resumed session keeps its own.",
+    ),
 ) -> None:
     """Run a real participant: each trial beeps, plays the stimulus, then waits for the
     answer on the keypad — digits then Enter (Study 2: several digits, e.g. ``45``);
@@ -76,7 +82,8 @@ def run(
         from ..errors import StudyError
         from ..rigs import make_rig
         from ..studies import StudyStore
-        from ..studies.engine import StudyEngine, headphone_beep, terminal_beep
+        from ..studies.engine import StudyEngine, calibration_renderer, headphone_beep, terminal_beep
+        from ..studies.protocol import StudyDesign
         from ..studies.markers import lsl_markers
         from ..studies.terminal import InputEnded, TerminalResponder
         from .._validation import shorten
@@ -94,13 +101,22 @@ def run(
         with lsl_markers(lsl), the_rig, StudyStore(db) as store:
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
+            config = {"rig": rig, "levels": levels}
+            design = StudyDesign.from_config(study, config)
+            renderer = None
+            if not any(not s.finished for s in store.sessions(participant, study=study)):
+                # A new session: every stimulus is rendered before it is planned, so one
+                # that cannot fit this calibration is refused now, never mid-study.
+                renderer = calibration_renderer(cal, levels=design.levels)
+                renderer.prepare(design.methods, design.locations)
             # Check and create in one transaction: two `study run`s at once get one session.
             sid, created = store.open_session(
                 participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
-                calibration_id=cid, config={"rig": rig}, reuse="open",
+                calibration_id=cid, config=config, reuse="open",
             )
             info = store.session(sid)
             if not created:
+                renderer = None  # the session's own level rule, from its stored design
                 if info.calibration_id != cid:
                     raise StudyError(
                         f"session {info.session_id} of {participant} (study {study}) was started with calibration "
@@ -108,14 +124,14 @@ def run(
                     )
                 console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
             else:
-                console.print(f"new session {sid} for {participant}, study {study}")
+                console.print(f"new session {sid} for {participant}, study {study} ({design.levels} levels)")
             if not beep:
                 cue = None
             elif beep_device is not None:
                 cue = headphone_beep(beep_device, rig=the_rig)
             else:
                 cue = terminal_beep
-            engine = StudyEngine(store, sid, the_rig, cal, cue=cue)
+            engine = StudyEngine(store, sid, the_rig, cal, cue=cue, renderer=renderer)
             responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
             try:
                 summary = engine.run(responder)

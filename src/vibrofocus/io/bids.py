@@ -42,12 +42,14 @@ TASKS = {1: "localization1", 2: "localization2"}
 #: the trial (``trial_type``, ``method``, ``target``, ``response``, ``response_time``,
 #: ``phase``), then where it sits in the study (``trial``, ``session_id``,
 #: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity), then the
-#: stimulus onset on the rig's own clock (``device_onset``, ``device_clock``; a dataset
-#: written before they existed is read without them).
+#: stimulus onset on the rig's own clock (``device_onset``, ``device_clock``), then the
+#: stimulus played (``levels``, ``drive_peak_v``, ``target_peak_um``); a dataset written
+#: before those existed is read without them.
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
-                 "trial", "session_id", "session_status", "dry_run", "device_onset", "device_clock")
+                 "trial", "session_id", "session_status", "dry_run", "device_onset", "device_clock",
+                 "levels", "drive_peak_v", "target_peak_um")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
-_REQUIRED_COLUMNS = EVENT_COLUMNS[:-2]
+_REQUIRED_COLUMNS = EVENT_COLUMNS[:12]
 #: The sidecar's description of each column of :data:`EVENT_COLUMNS` (BIDS "column
 #: description": LongName, Description, Units, Levels).
 EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
@@ -95,6 +97,20 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
                      "Units": "s"},
     "device_clock": {"LongName": "device clock",
                      "Description": "The clock device_onset is on."},
+    "levels": {"LongName": "level rule",
+               "Description": "How the stimuli's levels were set (the session's protocol).",
+               "Levels": {"paper": "each method at the source paper's level: funneling by eq. 3 with A at the drive "
+                                   "limit, the inverse filter asking 2 um at the target, the combination funneling's "
+                                   "displacement there, each scaled down only over the drive limit",
+                          "equal-peak": "every method scaled to the drive limit"}},
+    "drive_peak_v": {"LongName": "peak drive",
+                     "Description": "Largest absolute drive over the actuators of the stimulus played; n/a where "
+                                    "none was stored (a dry run, an older database, a trials CSV without it).",
+                     "Units": "V"},
+    "target_peak_um": {"LongName": "predicted peak at the target",
+                       "Description": "Peak displacement at the target predicted from the participant's calibration; "
+                                      "n/a where none was stored.",
+                       "Units": "um"},
 }
 _LABEL = re.compile(r"[^A-Za-z0-9]")
 _NA = "n/a"
@@ -269,8 +285,11 @@ def read_bids_trials_table(root: str | os.PathLike):
         Every value a str, with the trials-file columns (``participant``: the
         ``source_id``, ``study``, ``phase``, ``trial``, ``method``, ``target``,
         ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
-        ``dry_run``), ``simulated`` (``1``/``0``) and ``line`` (row number over all events
-        files, from 2), as :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
+        ``dry_run``), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
+        ``drive_peak_v``, ``target_peak_um``) and, for a simulated participant, ``model``
+        (the sidecar's ``SimulatedModel``) where the events files have them, and ``line``
+        (row number over all events files, from 2), as
+        :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
 
     Raises
     ------
@@ -305,7 +324,17 @@ def read_bids_trials_table(root: str | os.PathLike):
         if events and set(_REQUIRED_COLUMNS) - set(events[0]):
             missing = sorted(set(_REQUIRED_COLUMNS) - set(events[0]))
             raise ValidationError(f"the events file {path} lacks the column(s) {', '.join(missing)}")
+        model = None
+        if person.get("simulated") == "true":  # the sidecar names the model that answered
+            try:
+                model = json.loads(path.with_suffix(".json").read_text(encoding="utf-8")).get("SimulatedModel")
+            except (OSError, ValueError, AttributeError):
+                model = None
         for ev in events:
+            stimulus = {c: ("" if ev[c] == _NA else ev[c]) for c in ("levels", "drive_peak_v", "target_peak_um")
+                        if c in ev}
+            if model:
+                stimulus["model"] = str(model)
             rows.append({
                 "participant": person.get("source_id") or sub.removeprefix("sub-"), "study": study,
                 "phase": ev["phase"], "trial": ev["trial"], "method": ev["method"], "target": ev["target"],
@@ -314,7 +343,8 @@ def read_bids_trials_table(root: str | os.PathLike):
                 "session_status": "completed" if ev["session_status"] == _NA else ev["session_status"],
                 "dry_run": "0" if ev["dry_run"] == _NA else ev["dry_run"],
                 "simulated": "1" if person.get("simulated") == "true" else "0",
+                **stimulus,
             })
-    table = pd.DataFrame(rows, dtype=str)
+    table = pd.DataFrame(rows, dtype=str).fillna("")  # a column some events files lack: empty cells
     table["line"] = range(2, len(table) + 2)
     return table

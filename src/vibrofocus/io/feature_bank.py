@@ -6,7 +6,11 @@ m; ``centre_xy`` (2,), m; ``methods`` (n_methods,), str; ``forearm_seeds``
 (n_forearms,), int; ``seed`` (scalar), int; ``actuator_energy`` (n_forearms,
 n_methods, n_locations, n_actuators), float32, each actuator's own felt energy at its
 contact; ``actuators_xy`` (n_actuators, 2), m; ``model_version`` (scalar), str: the
-perceptual model that wrote it. The shipped bank is ``simulation/data/feature_bank.npz``
+perceptual model that wrote it; ``levels`` (scalar), str: the level rule the stimuli were
+rendered with (a bank written before it was stored: ``equal-peak``); ``drive_peak_v``
+(n_forearms, n_methods, n_locations), V, and ``target_peak_m`` (the same shape), m: each
+stimulus's largest |drive| and its peak at the target predicted from the calibration
+(absent in a bank written before them). The shipped bank is ``simulation/data/feature_bank.npz``
 (``scripts/build_feature_bank.py``).
 """
 
@@ -21,12 +25,15 @@ import numpy as np
 
 from ..errors import ValidationError
 
-__all__ = ["FEATURE_BANK_ARRAYS", "save_feature_bank", "load_feature_bank"]
+__all__ = ["FEATURE_BANK_ARRAYS", "FEATURE_BANK_OPTIONAL", "save_feature_bank", "load_feature_bank"]
 
 #: The arrays of a feature bank, as :func:`save_feature_bank` takes them and
 #: :func:`load_feature_bank` returns them (besides ``model_version``).
 FEATURE_BANK_ARRAYS = ("energy", "points_xy", "locations_xy", "centre_xy", "methods", "forearm_seeds", "seed",
                        "actuator_energy", "actuators_xy")
+#: Optional entries (``levels``, then the stimulus peaks): a bank without them is read
+#: with ``levels="equal-peak"`` and no peaks (None).
+FEATURE_BANK_OPTIONAL = ("levels", "drive_peak_v", "target_peak_m")
 
 
 def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model_version: str) -> Path:
@@ -58,9 +65,10 @@ def save_feature_bank(bank: Mapping[str, Any], path: str | os.PathLike, *, model
     missing = [name for name in FEATURE_BANK_ARRAYS if name not in bank]
     if missing:
         raise ValidationError(f"a feature bank needs the arrays {', '.join(missing)}")
+    extra = {name: np.asarray(bank[name]) for name in FEATURE_BANK_OPTIONAL if bank.get(name) is not None}
     with atomic_write(path, "wb", what="feature bank") as fh:
         np.savez_compressed(
-            fh, energy=np.asarray(bank["energy"]).astype(np.float32), points_xy=bank["points_xy"],
+            fh, **extra, energy=np.asarray(bank["energy"]).astype(np.float32), points_xy=bank["points_xy"],
             locations_xy=bank["locations_xy"], centre_xy=bank["centre_xy"], methods=np.array(bank["methods"]),
             forearm_seeds=bank["forearm_seeds"], seed=np.int64(bank["seed"]),
             actuator_energy=np.asarray(bank["actuator_energy"]).astype(np.float32), actuators_xy=bank["actuators_xy"],
@@ -85,8 +93,9 @@ def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
     Returns
     -------
     dict
-        :data:`FEATURE_BANK_ARRAYS`: ``energy`` float, ``methods`` a tuple of str, ``seed``
-        an int, the others arrays; ready for ``FeatureBank(**...)``.
+        :data:`FEATURE_BANK_ARRAYS` and :data:`FEATURE_BANK_OPTIONAL`: ``energy`` float,
+        ``methods`` a tuple of str, ``seed`` an int, ``levels`` a str, the others arrays
+        (the peaks None when absent); ready for ``FeatureBank(**...)``.
 
     Raises
     ------
@@ -122,17 +131,18 @@ def load_feature_bank(path: str | os.PathLike) -> dict[str, Any]:
                 raise ValidationError(f"{what}: missing array(s) {', '.join(missing)} (it holds "
                                       f"{shorten(', '.join(held) or 'nothing', 200, as_text=True)})")
             headers = {k: npy_member_header(zf, f"{k}.npy", what) for k in FEATURE_BANK_ARRAYS}
+            headers.update({k: npy_member_header(zf, f"{k}.npy", what) for k in FEATURE_BANK_OPTIONAL if k in held})
         total, cap = sum(h[2] for h in headers.values()), declared_cap(path.stat().st_size)
         if total > cap:
             raise ValidationError(f"{what}: its arrays declare {total:,} bytes in all, more than a feature bank of "
                                   f"{path.stat().st_size:,} bytes may ({cap:,} bytes); refused before reading")
         for k, (shape, dtype, _) in headers.items():
-            wanted = "U" if k == "methods" else ("iu" if k in ("forearm_seeds", "seed") else "iuf")
+            wanted = "U" if k in ("methods", "levels") else ("iu" if k in ("forearm_seeds", "seed") else "iuf")
             if dtype.kind not in wanted:
                 raise ValidationError(f"{what}: {k} has dtype {dtype}, expected "
                                       f"{'texts' if k == 'methods' else 'integers' if wanted == 'iu' else 'numbers'}")
         with np.load(path, allow_pickle=False) as z:
-            arrays = {k: z[k] for k in FEATURE_BANK_ARRAYS}
+            arrays = {k: z[k] for k in headers}
     except ValidationError:
         raise
     except (OSError, KeyError, ValueError, zipfile.BadZipFile, EOFError) as exc:
@@ -170,6 +180,15 @@ def _check_bank(z: Mapping[str, np.ndarray], what: str) -> dict[str, Any]:
     names = tuple(str(m) for m in methods)
     if any(not m.strip() for m in names) or len(set(names)) != len(names):
         raise ValidationError(f"{what}: methods must be {n_m} distinct names, got {list(names)}")
+    levels = np.asarray(z["levels"]) if "levels" in z else np.asarray("equal-peak")
+    check_shape(levels, f"{what}: levels", ())
+    peaks = {}
+    for k in ("drive_peak_v", "target_peak_m"):
+        if k in z:
+            peaks[k] = as_array(z[k], f"{what}: {k}", shape=(n_f, n_m, n_l))
+            check_nonnegative(peaks[k], f"{what}: {k}")
+        else:
+            peaks[k] = None
     return {"energy": energy, "points_xy": points, "locations_xy": locations, "centre_xy": centre,
             "methods": names, "forearm_seeds": seeds.astype(np.int64), "seed": int(seed),
-            "actuator_energy": own, "actuators_xy": actuators}
+            "actuator_energy": own, "actuators_xy": actuators, "levels": str(levels), **peaks}

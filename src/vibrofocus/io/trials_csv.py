@@ -8,8 +8,8 @@ When some participant is simulated (key ``simulated`` of the rows, as the study
 database's rows have), a last column ``simulated`` (``1`` / ``0``) follows: answers of
 simulated participants come from a perceptual model, not from people, and the analysis
 flags them. A file of real participants only has exactly the columns above.
-A study database's export has :data:`SESSION_COLUMNS` and :data:`ONSET_COLUMNS` between
-the contract's columns and ``simulated``.
+A study database's export has :data:`SESSION_COLUMNS`, :data:`ONSET_COLUMNS` and
+:data:`STIMULUS_COLUMNS` between the contract's columns and ``simulated``.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from .._validation import shorten
 from ..errors import StudyError, ValidationError
 from .responses import format_response, parse_response_text
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "SIMULATED_COLUMN", "write_trials_csv",
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
+           "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
 
 #: Columns of the trials file, in order.
@@ -40,13 +41,23 @@ SESSION_COLUMNS = ("session", "session_status", "dry_run")
 #: ``nidaq_samples``). A cell is empty where no time was stored (a dry run; a rig without a
 #: device clock; an answer stored by an older vibrofocus).
 ONSET_COLUMNS = ("onset_host_s", "onset_device_s", "onset_clock")
+#: Columns of the stimulus played a study database's export adds after :data:`ONSET_COLUMNS`:
+#: ``levels`` (the session's level rule: ``paper`` or ``equal-peak``), ``drive_peak_v``
+#: (the largest |drive| over the actuators, V) and ``target_peak_um`` (the peak displacement
+#: at the target predicted from the calibration, µm). A peak cell is empty where none was
+#: stored (a dry run; an answer stored by an older vibrofocus).
+STIMULUS_COLUMNS = ("levels", "drive_peak_v", "target_peak_um")
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
+#: Column after :data:`SIMULATED_COLUMN` when rows name the model that answered for the
+#: simulated participants (key ``model``: ``simulated participants: model v3.0, hypothesis
+#: grid-peak v1.0 ..., not data``; empty for a real participant).
+MODEL_COLUMN = "model"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
-                     onsets: bool = False) -> int:
+                     onsets: bool = False, stimuli: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -58,8 +69,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     rows : iterable of mapping
         Each with at least the keys of :data:`TRIALS_COLUMNS`. When some row has a true
         ``simulated`` (a simulated participant), the column :data:`SIMULATED_COLUMN` is
-        written too (1 / 0 per row); without one the file has exactly the contract's
-        columns. Other keys are ignored.
+        written too (1 / 0 per row), and :data:`MODEL_COLUMN` after it when some row has a
+        ``model`` (the label of the model that answered); without one the file has exactly
+        the contract's columns. Other keys are ignored.
         ``response`` may be a string or a sequence of location numbers; ``rt_s`` in s.
     path : path-like
         Destination CSV file; its folder must exist.
@@ -68,6 +80,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     onsets : bool
         Also write :data:`ONSET_COLUMNS` (keys of the rows; a missing key or None is an
         empty cell).
+    stimuli : bool
+        Also write :data:`STIMULUS_COLUMNS` (after the onset columns; a missing key or None
+        is an empty cell).
 
     Returns
     -------
@@ -82,10 +97,12 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     n = 0
     rows = list(rows)
     with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
+    with_model = with_flag and any(row.get(MODEL_COLUMN) for row in rows)
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
-                        + ((SIMULATED_COLUMN,) if with_flag else ()))
+                        + (STIMULUS_COLUMNS if stimuli else ()) + ((SIMULATED_COLUMN,) if with_flag else ())
+                        + ((MODEL_COLUMN,) if with_model else ()))
         for row in rows:
             response = row["response"]
             if not isinstance(response, str):
@@ -100,8 +117,13 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
             if onsets:
                 values += [_seconds_cell(row.get("onset_host_s")), _seconds_cell(row.get("onset_device_s")),
                            row.get("onset_clock") or ""]
+            if stimuli:
+                values += [row.get("levels") or "", _seconds_cell(row.get("drive_peak_v")),
+                           _seconds_cell(row.get("target_peak_um"))]
             if with_flag:
                 values.append(int(bool(row.get(SIMULATED_COLUMN))))
+            if with_model:
+                values.append(row.get(MODEL_COLUMN) or "")
             writer.writerow(values)
             n += 1
     return n
@@ -126,7 +148,8 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
         tuple of int; the rest as str. A file with :data:`SESSION_COLUMNS` also gives
         ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
-        :data:`SIMULATED_COLUMN` gives ``simulated`` (bool).
+        :data:`SIMULATED_COLUMN` gives ``simulated`` (bool); the onset and stimulus
+        columns' numbers are floats (None for an empty cell).
     """
     from .._atomic import protect
 
@@ -136,8 +159,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS)
-                       for f in ((), (SIMULATED_COLUMN,))]
+            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS,
+                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS)
+                       for f in ((), (SIMULATED_COLUMN,), (SIMULATED_COLUMN, MODEL_COLUMN))]
             if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
             columns = tuple(header)
@@ -160,6 +184,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                         for key in ("onset_host_s", "onset_device_s"):
                             row[key] = float(row[key]) if row[key] else None
                         row["onset_clock"] = row["onset_clock"] or None
+                    if "levels" in row:
+                        for key in ("drive_peak_v", "target_peak_um"):
+                            row[key] = float(row[key]) if row[key] else None
                     row["study"] = int(row["study"])
                     row["trial"] = int(row["trial"])
                     row["target"] = int(row["target"])

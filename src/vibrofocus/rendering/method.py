@@ -146,6 +146,12 @@ class Method:
         Tolerated share of the response energy past the window.
     bounds : bool
         Compute the array's energy-contrast bounds (``Design.bound``, ``bound_all``).
+    taper_ends : bool
+        A design that does not fit its window has the window's ends tapered (a Tukey
+        window over ``DRIVE_WINDOW_TAPER`` of it, centred on the tap) before the
+        wrap-around check, as the energy designs always do: noise in a measured ``H``
+        spreads a little of an inverse design's drive over the whole window. Default
+        False: such a design is refused (or warned about).
 
     Notes
     -----
@@ -180,6 +186,7 @@ class Method:
     check_wraparound: bool | str = True
     wraparound_tol: float = DEFAULT_WRAPAROUND_TOL
     bounds: bool = True
+    taper_ends: bool = False
 
     def __post_init__(self) -> None:
         self._set("sigma", check_positive(self.sigma, "sigma"))
@@ -247,7 +254,7 @@ class Method:
         fraction = float("nan")
         if self.check_wraparound:
             check = tm.wraparound_check()
-            if self.spreads_over_window and check._exceeds(drives, self.wraparound_tol)[0]:
+            if (self.spreads_over_window or self.taper_ends) and check._exceeds(drives, self.wraparound_tol)[0]:
                 # Noise in a measured H spreads a little of these designs' drive over the
                 # whole window (DRIVE_WINDOW_TAPER): taper the window's ends, then check.
                 drives = taper_drive_ends(drives, int(np.argmax(np.abs(desired))))

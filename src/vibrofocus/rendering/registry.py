@@ -37,7 +37,7 @@ LEGACY_OPTIONS = frozenset({
     "limit_v", "on_limit", "sigma", "target_peak_m", "regularization", "reg_param", "band", "t0", "control",
     "funneling_law", "funneling_amplitude_v", "taper_octaves", "form", "check_wraparound", "wraparound_tol",
     "guard_weight", "scale_to_limit", "exact_target", "contrast_weight", "min_contrast_db", "acc_reg", "field",
-    "field_xy", "field_exclusion_m", "bounds", "min_fidelity", "support_s", "drive_budget",
+    "field_xy", "field_exclusion_m", "bounds", "min_fidelity", "support_s", "drive_budget", "taper_ends",
 })
 
 

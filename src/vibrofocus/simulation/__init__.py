@@ -21,14 +21,21 @@ Fast studies and power (:mod:`.bank`, :mod:`.power`, :mod:`.paper`)
 """
 
 from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
+from .hypotheses import DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis
 from .paper import compare, seed_statistics
 from .participants import MODEL_NOTICE, SimulatedParticipant
 from .perception import MODEL_LABEL, MODEL_VERSION, STUDY_SKIN, Percepts, PerceptualModel
-from .power import PowerDesign, power_table, run_power, study_statistics
+from .power import PowerDesign, power_table, robust_conclusions, run_power, study_statistics
 from .simulate import participant_seeds, simulate_studies, summarize_simulation
 
 __all__ = [
     "SimulatedParticipant",
+    "Hypothesis",
+    "hypothesis",
+    "available_hypotheses",
+    "register_hypothesis",
+    "DEFAULT_HYPOTHESIS",
+    "robust_conclusions",
     "PerceptualModel",
     "Percepts",
     "MODEL_VERSION",

@@ -28,7 +28,7 @@ import numpy as np
 
 from ..errors import StudyError, ValidationError
 from ..io.feature_bank import load_feature_bank, save_feature_bank
-from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, central_percepts, draw_answers
+from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, draw_answers
 
 __all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
 
@@ -61,6 +61,14 @@ class FeatureBank:
         integrates (:func:`~vibrofocus.simulation.perception.actuator_energy`).
     actuators_xy : ndarray, shape (n_actuators, 2)
         Actuator centres, m.
+    levels : str
+        The level rule the stimuli were rendered with
+        (:func:`~vibrofocus.studies.protocol.level_options`); ``"equal-peak"`` for a bank
+        written before banks stored it.
+    drive_peak_v : ndarray, shape (n_forearms, n_methods, n_locations), optional
+        Each stimulus's largest |drive|, V (None in an older bank).
+    target_peak_m : ndarray, shape (n_forearms, n_methods, n_locations), optional
+        Each stimulus's peak at the target predicted from the calibration, m.
     """
 
     energy: np.ndarray
@@ -72,6 +80,9 @@ class FeatureBank:
     seed: int
     actuator_energy: np.ndarray
     actuators_xy: np.ndarray
+    levels: str = "equal-peak"
+    drive_peak_v: np.ndarray | None = None
+    target_peak_m: np.ndarray | None = None
 
     @property
     def n_forearms(self) -> int:
@@ -120,6 +131,7 @@ def build_feature_bank(
     methods: tuple[str, ...] = ("funneling", "inverse", "combination"),
     model: PerceptualModel | None = None,
     progress: Any = None,
+    levels: str = "paper",
 ) -> FeatureBank:
     """Calibrate ``n_forearms`` simulated forearms, render every stimulus, compute felt energies.
 
@@ -135,9 +147,11 @@ def build_feature_bank(
         Only its grid, band and integration window (``integration_s``) matter here.
     progress : callable, optional
         ``progress(done, total)`` after each forearm.
+    levels : {"paper", "equal-peak"}
+        The level rule of the stimuli (a study protocol's; default the paper's), stored
+        in the bank.
     """
     from ..calibration import calibrate
-    from ..defaults import N_SAMPLES
     from ..rigs import make_rig
     from ..studies.engine import calibration_renderer
     from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
@@ -146,22 +160,26 @@ def build_feature_bank(
     if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
         raise StudyError(f"n_forearms must be an integer >= 1, got {n_forearms!r}")
     m = model or PerceptualModel()
-    energies, own, seeds = [], [], []
+    energies, own, seeds, peaks, reached = [], [], [], [], []
     layout = points = None
     for k in range(1, n_forearms + 1):
         pseed = participant_seeds(seed, k)[0]
         rig = make_rig("simulated", seed=pseed, skin=STUDY_SKIN)
         layout = rig.layout
         cal = calibrate(rig, participant_id=f"bank-{k:03d}")
-        # Same drives as simulate-study; a design whose window is too short for the
-        # wrap-around check is kept with a CausalityWarning (the bank needs every cell),
-        # and the contrast bounds (not part of the drives) are not computed.
-        render = calibration_renderer(cal, bounds=False, check_wraparound="warn")
+        # Same drives as simulate-study: the study renderer's window, its tapered ends where a
+        # design needs them, the same level rule (the contrast bounds, not part of the
+        # drives, are not computed).
+        render = calibration_renderer(cal, bounds=False, levels=levels)
         n_loc = len(layout.locations_xy)
+        render.prepare(methods, range(1, n_loc + 1))  # one window every stimulus fits, as a study's
         drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
+        peaks.append(np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc))
+        reached.append(np.array([render.rendering(meth, loc).reached_peak_m for meth in methods
+                                 for loc in range(1, n_loc + 1)]).reshape(len(methods), n_loc))
         centre = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
         points = skin_grid(centre, m)
-        H = band_transfer(rig, points, N_SAMPLES, m)
+        H = band_transfer(rig, points, drives.shape[-1], m)  # the window the stimuli fit
         energies.append(felt_energy(H, drives, rig.fs, m).reshape(len(methods), n_loc, len(points)))
         actuators = np.asarray(layout.actuators_xy, dtype=float)
         own.append(actuator_energy(rig, actuators, drives, m).reshape(len(methods), n_loc, len(actuators)))
@@ -174,6 +192,7 @@ def build_feature_bank(
         centre_xy=np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), methods=tuple(methods),
         forearm_seeds=np.asarray(seeds, dtype=np.int64), seed=int(seed),
         actuator_energy=np.stack(own), actuators_xy=np.asarray(layout.actuators_xy, dtype=float),
+        levels=str(levels), drive_peak_v=np.stack(peaks), target_peak_m=np.stack(reached),
     )
 
 
@@ -223,6 +242,7 @@ def simulate_cell_means(
     methods: tuple[str, ...] | None = None,
     locations: tuple[int, ...] | None = None,
     forearms: np.ndarray | None = None,
+    hypothesis: Any = None,
 ) -> StudyArrays:
     """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
 
@@ -241,7 +261,13 @@ def simulate_cell_means(
     forearms : ndarray of int, optional
         Bank rows to use per participant (default: drawn without replacement when the
         bank is large enough, else with replacement).
+    hypothesis : str or Hypothesis, optional
+        How the participants read the felt field
+        (:func:`~vibrofocus.simulation.hypotheses.hypothesis`; default v3's centroid).
     """
+    from .hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
     b = bank if bank is not None else default_bank()
     m = model or PerceptualModel()
     if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
@@ -269,7 +295,7 @@ def simulate_cell_means(
         traits = Traits.draw(m, rng)
         energy = b.energy[forearms[i]].reshape(-1, b.points_xy.shape[0])
         own = b.actuator_energy[forearms[i]].reshape(-1, b.actuators_xy.shape[0])
-        per = central_percepts(energy, b.points_xy, m, traits, own, b.actuators_xy)
+        per = h.percepts(energy, b.points_xy, m, traits, own, b.actuators_xy, b.locations_xy)
         a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         e = np.linalg.norm(locs_mm[a1] - locs_mm[targets], axis=1)

@@ -28,7 +28,6 @@ from .perception import (
     Percepts,
     Traits,
     band_transfer,
-    central_percepts,
     draw_answers,
     felt_energy,
     own_transfer,
@@ -59,6 +58,9 @@ class SimulatedParticipant:
         Participant seed for the participant's traits and per-trial noise.
     model : PerceptualModel, optional
         Model parameters (default: model v3 as fitted).
+    hypothesis : str or Hypothesis, optional
+        How the participant reads the felt field (:mod:`vibrofocus.simulation.hypotheses`;
+        default v3's centroid).
 
     Notes
     -----
@@ -66,7 +68,9 @@ class SimulatedParticipant:
     (``respond``, ``wait_resume``) so a :class:`StudyEngine` can run it.
     """
 
-    def __init__(self, forearm: Any, seed: int, model: PerceptualModel | None = None) -> None:
+    def __init__(self, forearm: Any, seed: int, model: PerceptualModel | None = None, hypothesis: Any = None) -> None:
+        from .hypotheses import hypothesis as find_hypothesis
+
         if not hasattr(forearm, "transfer"):
             raise StudyError("a simulated participant needs the simulated forearm rig (with .transfer)")
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -74,6 +78,7 @@ class SimulatedParticipant:
         self.forearm = forearm
         self.seed = int(seed)
         self.model = model if model is not None else PerceptualModel()
+        self.hypothesis = find_hypothesis(hypothesis)
         self.traits = Traits.draw(self.model, self.seed)
         layout = forearm.layout
         self.locations_xy = np.asarray(layout.locations_xy, dtype=float)
@@ -88,6 +93,7 @@ class SimulatedParticipant:
         """The participant's traits and the model parameters (JSON-serialisable)."""
         return {
             "model": MODEL_LABEL,
+            "hypothesis": self.hypothesis.to_dict(),
             "seed": self.seed,
             "traits": self.traits.to_dict(),
             "parameters": self.model.to_dict(),
@@ -123,7 +129,8 @@ class SimulatedParticipant:
                 raise StudyError("the stimulus produces no vibration on the skin: nothing to perceive")
             d = np.asarray(drives, dtype=float)
             own = felt_energy(self._transfers(d.shape[1])[1], d[None], self.forearm.fs, self.model)
-            self._cache[key] = (e, central_percepts(e[None], self.grid_xy, self.model, self.traits, own, self.actuators_xy))
+            self._cache[key] = (e, self.hypothesis.percepts(e[None], self.grid_xy, self.model, self.traits, own,
+                                                            self.actuators_xy, self.locations_xy))
         return self._cache[key][1]
 
     def answer(self, drives: np.ndarray, study: int, trial_index: int, design: StudyDesign | None = None) -> Response:

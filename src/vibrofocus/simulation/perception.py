@@ -458,12 +458,17 @@ class Percepts:
         Whether any point is above threshold.
     conflict_m : ndarray, shape (n,)
         Distance between the skin cue and the drive cue, m (0 without a drive cue).
+    reliability : ndarray, shape (n,), optional
+        Reliability of the sensed position in (0, 1]: its noise variance is divided by it
+        (a hypothesis in which weak taps are localized less reliably,
+        :mod:`vibrofocus.simulation.hypotheses`); None: 1.
     """
 
     position_m: np.ndarray
     spread_m: np.ndarray
     felt: np.ndarray
     conflict_m: np.ndarray | None = None
+    reliability: np.ndarray | None = None
 
 
 def _energy_law(e: np.ndarray, e_thr: float, xy: np.ndarray, exponent: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -569,6 +574,8 @@ def draw_answers(
     conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
     sig_s2 = (traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
               + (model.conflict_gain * np.nan_to_num(conflict)) ** 2)
+    if percepts.reliability is not None:
+        sig_s2 = sig_s2 / np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
     sp2 = traits.prior_sd_m**2
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
     sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)

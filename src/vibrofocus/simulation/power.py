@@ -24,9 +24,9 @@ from scipy import stats
 from ..defaults import STUDY_METHODS
 from ..errors import ValidationError
 from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
-from .perception import MODEL_LABEL, PerceptualModel
+from .perception import PerceptualModel
 
-__all__ = ["TESTS", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
+__all__ = ["TESTS", "DIRECTIONAL_TESTS", "ROBUST_POWER", "robust_conclusions", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
@@ -37,6 +37,13 @@ TESTS: tuple[tuple[str, str], ...] = (
     ("s2_method", "Study 2 Friedman, method"),
     ("s2_hit_location", "Study 2 Friedman, location (trials containing the target)"),
     ("s2_hit_method", "Study 2 Friedman, method (trials containing the target)"),
+)
+#: The paper's directional claims (Sec. III.B-C), reported beside the omnibus tests: an
+#: omnibus test is significant whichever method wins, these only in the paper's direction.
+#: They need funneling and the inverse filter among the methods.
+DIRECTIONAL_TESTS: tuple[tuple[str, str], ...] = (
+    ("s1_inverse_below", "Study 1 inverse error below funneling (Bonferroni paired t; the paper's direction)"),
+    ("s2_inverse_fewer", "Study 2 fewer points with the inverse filter (Bonferroni Wilcoxon; the paper's direction)"),
 )
 
 
@@ -74,6 +81,9 @@ class PowerDesign:
         Master seed.
     model : PerceptualModel
         The perceptual model (its effect sizes).
+    hypothesis : str
+        How the simulated participants read the felt field
+        (:mod:`vibrofocus.simulation.hypotheses`; default v3's centroid).
     """
 
     n_participants: tuple[int, ...] = (10, 15, 20, 25, 30)
@@ -84,10 +94,14 @@ class PowerDesign:
     alpha: float = 0.05
     seed: int = 0
     model: PerceptualModel = field(default_factory=PerceptualModel)
+    hypothesis: str = "v3-centroid"
 
     def __post_init__(self) -> None:
         from .._validation import shorten
         from ..layout import ArrayLayout
+        from .hypotheses import hypothesis as find_hypothesis
+
+        object.__setattr__(self, "hypothesis", find_hypothesis(self.hypothesis).name)
 
         ns = tuple(int(n) for n in self.n_participants)
         if not ns or min(ns) < 3 or max(ns) > MAX_PARTICIPANTS:
@@ -177,7 +191,10 @@ def study_statistics(
         ``s1_only_funneling_vs_inverse`` (only that pair significant, inverse lower),
         ``s1_inverse_differs_locations`` (0-based locations where the inverse differs from
         every other method), ``s2_reduction`` (1 - inverse / funneling mean count),
-        ``s2_inverse_fewer`` (Bonferroni Wilcoxon significant, inverse lower).
+        ``s2_inverse_fewer`` (Bonferroni Wilcoxon significant, inverse lower), and the
+        directional claims' p values of :data:`DIRECTIONAL_TESTS` (``s1_inverse_below_p``,
+        ``s2_inverse_fewer_p``: the Bonferroni p where the inverse filter is on the paper's
+        side, else 1).
     """
     from ..analysis.fast import friedman_batch, rm_anova2_batch
 
@@ -229,6 +246,10 @@ def study_statistics(
         out["s2_reduction"] = float(1.0 - cm[:, inv].mean() / cm[:, fun].mean())
         p_w = min(1.0, _wilcoxon_p(cm[:, inv], cm[:, fun]) * len(pairs))
         out["s2_inverse_fewer"] = bool(p_w < alpha and cm[:, inv].mean() < cm[:, fun].mean())
+        # The directional claims as p values: the Bonferroni p where the inverse filter is
+        # on the paper's side, 1 where it is not (significant only in the paper's direction).
+        out["s1_inverse_below_p"] = p_pairs[fi] if per[:, inv].mean() < per[:, fun].mean() else 1.0
+        out["s2_inverse_fewer_p"] = p_w if cm[:, inv].mean() < cm[:, fun].mean() else 1.0
     return out
 
 
@@ -245,7 +266,7 @@ def simulate_statistics(
         rng = np.random.default_rng([int(design.seed), int(n), int(j)])
         arrays = simulate_cell_means(
             int(n), rng, bank=b, model=design.model, repetitions=design.repetitions,
-            methods=design.methods, locations=design.locations,
+            methods=design.methods, locations=design.locations, hypothesis=design.hypothesis,
         )
         out.append(study_statistics(arrays, design.alpha, design.methods or b.methods))
     return out
@@ -254,7 +275,7 @@ def simulate_statistics(
 def power_table(
     results: dict[int, list[dict[str, Any]]],
     alpha: float = 0.05,
-    tests: Sequence[tuple[str, str]] = TESTS,
+    tests: Sequence[tuple[str, str]] = TESTS + DIRECTIONAL_TESTS,
 ) -> list[dict[str, Any]]:
     """Power per N and test: share of studies with p < alpha and its binomial standard error.
 
@@ -264,7 +285,8 @@ def power_table(
         ``{N: [statistics of each study]}``; each study's dict holds ``<test>_p``.
     alpha : float
     tests : sequence of (key, label)
-        Default :data:`TESTS`.
+        Default :data:`TESTS` then :data:`DIRECTIONAL_TESTS`; a test no study computed
+        (the directional ones without funneling and the inverse filter) is left out.
 
     Returns
     -------
@@ -276,7 +298,9 @@ def power_table(
     for n in sorted(results):
         res = results[n]
         for key, label in tests:
-            p = np.array([r[f"{key}_p"] for r in res], dtype=float)
+            if not any(f"{key}_p" in r for r in res):
+                continue
+            p = np.array([r.get(f"{key}_p", np.nan) for r in res], dtype=float)
             ok = np.isfinite(p)
             power = float(np.mean(p[ok] < alpha)) if ok.any() else float("nan")
             k = int(ok.sum())
@@ -285,6 +309,44 @@ def power_table(
                 "se": float(np.sqrt(power * (1 - power) / k)) if k else float("nan"),
             })
     return rows
+
+
+#: A test is "powered" at N when its power reaches this (the usual 80 %).
+ROBUST_POWER = 0.8
+
+
+def robust_conclusions(tables: dict[str, list[dict[str, Any]]], threshold: float = ROBUST_POWER) -> list[dict[str, Any]]:
+    """Where every hypothesis agrees: per test and N, whether the test is powered under all.
+
+    Parameters
+    ----------
+    tables : dict
+        ``{hypothesis name: power_table(...) rows}``, every table over the same tests and N.
+    threshold : float
+        Power at which a test counts as powered.
+
+    Returns
+    -------
+    list of dict
+        ``test``, ``label``, ``n_participants``, ``power`` ({hypothesis: power}),
+        ``conclusion`` (``"powered"``, ``"not powered"`` or ``"depends on the hypothesis"``)
+        and ``robust`` (True only where every hypothesis gives the same conclusion).
+    """
+    names = list(tables)
+    if not names:
+        return []
+    keyed = {h: {(r["test"], r["n_participants"]): r for r in tables[h]} for h in names}
+    out = []
+    for r in tables[names[0]]:
+        key = (r["test"], r["n_participants"])
+        powers = {h: keyed[h][key]["power"] if key in keyed[h] else float("nan") for h in names}
+        verdicts = {bool(p >= threshold) for p in powers.values() if np.isfinite(p)}
+        complete = all(np.isfinite(p) for p in powers.values())
+        robust = complete and len(verdicts) == 1
+        conclusion = ("powered" if verdicts == {True} else "not powered") if robust else "depends on the hypothesis"
+        out.append({"test": r["test"], "label": r["label"], "n_participants": r["n_participants"], "power": powers,
+                    "conclusion": conclusion, "robust": robust})
+    return out
 
 
 def _connect(client_cls: Any, scheduler: str) -> Any:
@@ -338,7 +400,7 @@ def run_power(
     Returns
     -------
     dict
-        ``label`` (the model notice), ``design`` (JSON-ready), ``results`` ({N: list of
+        ``label`` (the model notice), ``levels`` (the bank's level rule), ``design`` (JSON-ready), ``results`` ({N: list of
         per-study statistics}), ``table`` (:func:`power_table`), ``elapsed_s``.
     """
     import time
@@ -398,13 +460,18 @@ def run_power(
                     cluster.close()
     for (n, _start), res in sorted(parts.items()):
         results[n].extend(res)
+    from .hypotheses import hypothesis as find_hypothesis
+
     return {
-        "label": MODEL_LABEL,
+        "label": find_hypothesis(design.hypothesis).label(),
+        "hypothesis": find_hypothesis(design.hypothesis).to_dict(),
+        "levels": b.levels,
         "design": {
             "n_participants": list(design.n_participants), "n_studies": design.n_studies,
             "repetitions": design.repetitions, "methods": list(design.methods or b.methods),
             "locations": list(design.locations or range(1, len(b.locations_xy) + 1)),
             "alpha": design.alpha, "seed": design.seed, "model": design.model.to_dict(),
+            "hypothesis": design.hypothesis,
         },
         "results": results,
         "table": power_table(results, design.alpha),

@@ -7,7 +7,6 @@ running again on the same database resumes exactly where a killed run stopped.
 
 from __future__ import annotations
 
-import functools
 import os
 from collections.abc import Callable
 from pathlib import Path
@@ -17,6 +16,7 @@ import numpy as np
 
 from ..defaults import STUDY_METHODS
 from ..errors import AnswerRefused, CalibrationFileError, StudyError
+from ..studies.protocol import DEFAULT_LEVELS
 from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
 from ..studies.storage import StudyStore
@@ -85,6 +85,8 @@ def simulate_studies(
     progress: ProgressFn | None = None,
     skin: str = STUDY_SKIN,
     methods: tuple[str, ...] | None = None,
+    levels: str | None = None,
+    hypothesis: str | None = None,
 ) -> dict[str, int]:
     """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
 
@@ -104,17 +106,27 @@ def simulate_studies(
     studies : tuple of int
         Which studies to run, in order.
     config : dict, optional
-        Extra session config (design keys such as ``repetitions`` change the design).
+        Extra session config (design keys such as ``repetitions`` or ``levels`` change the
+        design; ``levels`` default the paper's, :data:`~vibrofocus.studies.DEFAULT_LEVELS`).
     skin : str
-        Skin preset of the participants' forearms (default ``voigt-fit``, the skin the
-        perceptual model was fitted on; another preset changes the stimuli under a
-        model not fitted to them). Stored in each session's config.
+        Skin preset of the participants' forearms (default :data:`STUDY_SKIN`,
+        ``nominal``, the skin the perceptual model was fitted on; another preset changes the
+        stimuli under a model not fitted to them). Stored in each session's config.
     progress : callable, optional
         ``progress(description, n_answered, n_total)`` after each answer.
     methods : tuple of str, optional
         Registered rendering methods the studies compare (default the paper's funneling,
         inverse and combination); a resumed database must have been started with the same
         (in any order: the stored order is kept).
+    levels : {"paper", "equal-peak"}, optional
+        The level rule of the stimuli (:func:`~vibrofocus.studies.protocol.level_options`;
+        default the paper's, or ``config["levels"]``); a resumed database must have been
+        started with the same.
+    hypothesis : str, optional
+        How the simulated participants read the felt field
+        (:mod:`vibrofocus.simulation.hypotheses`; default v3's centroid), stored with
+        each session (name and version); a resumed database must have been started with
+        the same.
 
     Returns
     -------
@@ -131,7 +143,14 @@ def simulate_studies(
     from ..rigs import make_rig
     from ..skin import skin_preset
     from ..studies.engine import StudyEngine, calibration_renderer
+    from ..studies.protocol import StudyDesign
     from .participants import SimulatedParticipant
+
+    def renderer_for(parts: dict[str, Any], levels: str) -> Any:
+        """The participant's renderer of a level rule (its stimuli rendered once, cached)."""
+        if levels not in parts["renderer"]:
+            parts["renderer"][levels] = calibration_renderer(parts["cal"][1], levels=levels)
+        return parts["renderer"][levels]
 
     skin = skin_preset(skin).name
 
@@ -146,7 +165,16 @@ def simulate_studies(
 
         methods = StudyDesign(methods=tuple(methods)).methods
         config = {**(config or {}), "methods": list(methods)}
+    if levels is not None:
+        from ..studies.protocol import level_options
+
+        level_options(levels, 1.0)  # checked: one of the rules
+        config = {**(config or {}), "levels": levels}
     asked_methods = tuple((config or {}).get("methods") or STUDY_METHODS)
+    asked_levels = str((config or {}).get("levels", DEFAULT_LEVELS))
+    from .hypotheses import hypothesis as find_hypothesis
+
+    chosen = find_hypothesis(hypothesis)
     db = Path(db)
     cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
     with StudyStore(db) as store:
@@ -180,6 +208,17 @@ def simulate_studies(
                         f"{db} holds participant {pid} simulated with the methods {', '.join(stored)}, not "
                         f"{', '.join(asked_methods)}; use those methods or another database"
                     )
+                if info.design.levels != asked_levels:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated at {info.design.levels!r} levels, not "
+                        f"{asked_levels!r}; use those levels or another database"
+                    )
+                stored_h = info.config.get("hypothesis", "v3-centroid")  # before hypotheses were stored: v3
+                if stored_h != chosen.name:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated under the hypothesis {stored_h!r}, not "
+                        f"{chosen.name!r}; use that hypothesis or another database"
+                    )
                 # The stored seed wins over the derivation: the participant stays who it was.
                 pseed = int(info.config.get("participant_seed", pseed))
             # Built lazily, once per participant and shared by both studies: the rig, the
@@ -198,9 +237,9 @@ def simulate_studies(
                     shared["cal"] = (cid, load_calibration(store.verify_calibration(cid)))
                     shared.pop("renderer", None)
                 if "renderer" not in shared:
-                    shared["renderer"] = functools.lru_cache(maxsize=None)(calibration_renderer(shared["cal"][1]))
+                    shared["renderer"] = {}  # one per level rule (both studies share one normally)
                 if "participant" not in shared:
-                    shared["participant"] = SimulatedParticipant(shared["rig"], _pseed)
+                    shared["participant"] = SimulatedParticipant(shared["rig"], _pseed, hypothesis=chosen)
                 return shared
 
             for study in studies:
@@ -217,7 +256,13 @@ def simulate_studies(
                 else:
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
-                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin)
+                    session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin,
+                                          hypothesis=chosen.name, hypothesis_version=chosen.version,
+                                          model=chosen.label())
+                    # Every stimulus is rendered (and a design that cannot fit this arm refused)
+                    # before the session is planned.
+                    design = StudyDesign.from_config(study, session_config)
+                    renderer_for(parts, design.levels).prepare(design.methods, design.locations)
                     # Check and create in one transaction: another process simulating into
                     # the same database may have created this session since the check above.
                     sid, created = store.open_session(
@@ -248,7 +293,7 @@ def simulate_studies(
 
                 if progress is not None:
                     progress(label, answered, total_est)
-                engine = StudyEngine(store, sid, parts["rig"], renderer=parts["renderer"])
+                engine = StudyEngine(store, sid, parts["rig"], renderer=renderer_for(parts, info.design.levels))
                 try:
                     engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
                 except AnswerRefused as exc:

@@ -69,7 +69,8 @@ from .engine import (
     headphone_beep,
 )
 from ..io.trials_csv import TRIALS_COLUMNS, read_trials_csv, write_trials_csv
-from .protocol import PHASES, STUDIES, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
+from .protocol import (DEFAULT_LEVELS, LEGACY_LEVELS, LEVEL_RULES, PHASES, STUDIES, PlannedTrial,
+                       level_options, StudyDesign, format_response, parse_response, plan_trials)
 from .session_status import SESSION_STATUSES, TRANSITIONS, action_status
 from .storage import (
     APPLICATION_ID,
@@ -88,6 +89,10 @@ from .terminal import TerminalResponder
 
 __all__ = [
     "STUDIES",
+    "LEVEL_RULES",
+    "DEFAULT_LEVELS",
+    "LEGACY_LEVELS",
+    "level_options",
     "PHASES",
     "StudyDesign",
     "PlannedTrial",

@@ -52,6 +52,7 @@ def _from_database(db: Path) -> tuple[list[dict[str, Any]], dict[str, bool], dic
                 "Session": info.session_id, "Status": info.status,
                 "Rig": info.config.get("rig", "simulated" if simulated.get(info.participant_id) else None),
                 "SkinPreset": info.config.get("skin"),
+                "LevelRule": info.design.levels,
                 "CalibrationSHA256": None if cal is None else cal.sha256,
                 "CalibrationFile": None if cal is None else Path(cal.path).name,
                 "SoftwareVersion": info.software_version,
@@ -157,12 +158,15 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
             "session_id": t.get("session"), "session_status": t.get("session_status"),
             "dry_run": None if t.get("dry_run") is None else int(bool(t["dry_run"])),
             "device_onset": t.get("onset_device_s"), "device_clock": t.get("onset_clock"),
+            "levels": t.get("levels") or None, "drive_peak_v": t.get("drive_peak_v"),
+            "target_peak_um": t.get("target_peak_um"),
         } for t in trials]
         sim = simulated.get(pid, False)
         runs.append({"label": labels[pid], "study": study, "events": events, "sidecar": {
             "device_clock": clock_column,
             "SourceId": pid, "Study": study, "Simulated": sim,
-            "SimulatedModel": MODEL_LABEL if sim else None,
+            # The rows' own label (model and hypothesis) where the source names it.
+            "SimulatedModel": next((t["model"] for t in trials if t.get("model")), MODEL_LABEL) if sim else None,
             "Source": "study database" if from_db else "trials CSV", "SourceFile": source.name,
             "Sessions": sessions.get((pid, study), []),
         }})

@@ -28,7 +28,7 @@ import numpy as np
 from ..defaults import DRIVE_LIMIT_V, N_SAMPLES
 from ..errors import StudyError, ValidationError
 from .markers import send_marker
-from .protocol import PlannedTrial, StudyDesign
+from .protocol import DEFAULT_LEVELS, PlannedTrial, StudyDesign, level_options
 from .storage import AnswerReceipt, StudyStore
 
 __all__ = [
@@ -100,64 +100,124 @@ def drive_sha256(drives: np.ndarray) -> str:
 class CalibrationRenderer:
     """``renderer(method, target) -> drives`` built on a participant's calibration, cached.
 
-    Every stimulus is ``rendering.render(method, tm, fs, layout, target, limit_v=...)``
-    with ``tm = TransferMatrix.from_calibration(calibration, n_samples)``, rendered on
-    first use and kept (a trial's stimulus is a pure function of the calibration and the
-    condition). The transfer matrix is validated once and keeps its wrap-around check and
-    inverse operators for every condition. Methods are those of the registry
-    (:func:`~vibrofocus.rendering.available_methods`), a lab's own included. Safe to share
-    between threads (a web app's sessions and previews of one calibration).
+    Every stimulus is ``rendering.render(method, tm, fs, layout, target, limit_v=...,
+    **level_options(levels, limit_v))`` with ``tm = TransferMatrix.from_calibration(calibration,
+    n_samples)``, rendered on first use and kept (a trial's stimulus is a pure function of
+    the calibration, the level rule and the condition). The transfer matrix is validated
+    once and keeps its wrap-around check and inverse operators for every condition. Methods
+    are those of the registry (:func:`~vibrofocus.rendering.available_methods`), a lab's own
+    included. Safe to share between threads (a web app's sessions and previews of one
+    calibration).
 
     Parameters
     ----------
     calibration : Calibration
         The participant's calibration (``transfer_for``, ``fs``, ``layout``).
     n_samples : int, optional
-        Length of each drive, samples. Default: 4096, doubled (up to 16384) whenever a
-        design does not fit its window (a :class:`~vibrofocus.errors.CausalityError`),
-        so the window follows the arm; designs made before keep their shorter window.
-        Given explicitly, a design that does not fit is refused.
+        Length of each drive, samples. Default: the window this participant's stimuli
+        fit (:meth:`prepare`), from the calibration: its own resolution (``n_fft``, where
+        its ``H`` is what was measured; 4096 without one), doubled (up to
+        :attr:`MAX_SAMPLES`) until every stimulus asked fits it, every stimulus then
+        rendered on that one window. A design that does not fit its window (a
+        :class:`~vibrofocus.errors.CausalityError`) is first made again with the window's
+        ends tapered (``taper_ends=True``: noise in a measured ``H`` spreads a little of an
+        inverse design's drive over the whole window). Given explicitly, a window that a
+        design does not fit even so is refused.
     limit_v : float
         Drive limit, V peak; designs needing more are scaled down (the rendering layer's
         default ``on_limit="scale"``).
+    levels : {"paper", "equal-peak"}
+        The level rule (:func:`~vibrofocus.studies.protocol.level_options`); default the
+        paper's.
     **render_options
-        Passed on to ``rendering.render``.
+        Passed on to ``rendering.render`` (over the level rule's options).
     """
 
-    #: Longest window the default grows to, samples.
-    MAX_SAMPLES = 4 * N_SAMPLES
+    #: Longest window the default grows to, samples (6.6 s at 10 kHz).
+    MAX_SAMPLES = 16 * N_SAMPLES
 
     def __init__(self, calibration: Any, *, n_samples: int | None = None, limit_v: float = DRIVE_LIMIT_V,
-                 **render_options: Any) -> None:
+                 levels: str = DEFAULT_LEVELS, **render_options: Any) -> None:
         self.calibration = calibration
         self._grow = n_samples is None
-        self.n_samples = N_SAMPLES if n_samples is None else int(n_samples)
+        own = getattr(calibration, "n_fft", None)  # the calibration's resolution: its H as measured
+        start = int(own) if isinstance(own, (int, np.integer)) and own >= 16 and own % 2 == 0 else N_SAMPLES
+        self.n_samples = start if n_samples is None else int(n_samples)
         self.limit_v = float(limit_v)
-        self._options = render_options
-        self._lock = threading.Lock()
+        self.levels = str(levels)
+        self._options = {**level_options(self.levels, self.limit_v), **render_options}
+        self._lock = threading.RLock()
         self._H: Any = None  # the TransferMatrix of the current window
         self._cache: dict[tuple[str, int], Any] = {}
 
-    def rendering(self, method: str, target: int) -> Any:
-        """The :class:`~vibrofocus.rendering.Rendering` of ``method`` at location number ``target``."""
-        # Imported here: planning and storage do not need the rendering layer.
+    def _render(self, key: tuple[str, int]) -> Any:
         from ..rendering import TransferMatrix, render
 
         from ..errors import CausalityError
 
-        key = (str(method), int(target))
         cal = self.calibration
+        if self._H is None:
+            self._H = TransferMatrix.from_calibration(cal, self.n_samples)
+        try:
+            return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
+        except CausalityError:
+            if "taper_ends" in self._options:
+                raise
+            # Noise in the measured H spreads a little drive over the whole window: taper its ends.
+            return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, taper_ends=True,
+                          **self._options)
+
+    def prepare(self, methods: Any, locations: Any) -> int:
+        """Render every (method, location) stimulus now, on one window they all fit.
+
+        A study calls this when its session is planned, so that a stimulus that cannot
+        be played is refused then, never mid-study. With the default window, the window
+        is doubled (every stimulus rendered again on it) until every stimulus fits.
+
+        Parameters
+        ----------
+        methods : iterable of str
+        locations : iterable of int
+            Location numbers.
+
+        Returns
+        -------
+        int
+            The window, samples.
+
+        Raises
+        ------
+        StudyError
+            A stimulus does not fit the longest window (:attr:`MAX_SAMPLES`, or the
+            ``n_samples`` given), naming the method, the location and why.
+        """
+        from ..errors import CausalityError
+
+        keys = [(str(m), int(loc)) for m in methods for loc in locations]
         with self._lock:
-            while key not in self._cache:
-                if self._H is None:
-                    self._H = TransferMatrix.from_calibration(cal, self.n_samples)
+            while True:
                 try:
-                    self._cache[key] = render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v,
-                                              **self._options)
-                except CausalityError:
+                    for key in keys:
+                        if key not in self._cache:
+                            self._cache[key] = self._render(key)
+                    return self.n_samples
+                except CausalityError as exc:
                     if not self._grow or 2 * self.n_samples > self.MAX_SAMPLES:
-                        raise
-                    self.n_samples, self._H = 2 * self.n_samples, None  # the window follows the arm
+                        longest = self.n_samples
+                        raise StudyError(
+                            f"this participant's stimuli do not fit a {longest}-sample design window "
+                            f"({longest / self.calibration.fs:g} s, the longest allowed): {exc}. Recalibrate (a "
+                            "calibration whose responses ring this long is suspect) or study fewer methods"
+                        ) from None
+                    # The window follows the arm: every stimulus again, on one longer window.
+                    self.n_samples, self._H, self._cache = 2 * self.n_samples, None, {}
+
+    def rendering(self, method: str, target: int) -> Any:
+        """The :class:`~vibrofocus.rendering.Rendering` of ``method`` at location number ``target``."""
+        key = (str(method), int(target))
+        with self._lock:
+            if key not in self._cache:
+                self.prepare([key[0]], [key[1]])
             return self._cache[key]
 
     def __call__(self, method: str, target: int) -> np.ndarray:
@@ -190,7 +250,8 @@ def calibration_renderer(calibration: Any, **options: Any) -> CalibrationRendere
     calibration : Calibration
         The participant's calibration.
     **options
-        ``n_samples``, ``limit_v`` and rendering options, as :class:`CalibrationRenderer` takes them.
+        ``n_samples``, ``limit_v``, ``levels`` and rendering options, as
+        :class:`CalibrationRenderer` takes them.
 
     Returns
     -------
@@ -250,12 +311,24 @@ class Stimulus:
         V.
     sha256 : str
         :func:`drive_sha256` of ``drives``, stored with the answer.
+    drive_peak_v : float or None
+        Largest ``|drive|`` over the actuators, V (computed from ``drives`` when None).
+    target_peak_m : float or None
+        Peak displacement at the target predicted from the calibration, m; None when the
+        renderer gives no prediction.
     """
 
     method: str
     target: int
     drives: np.ndarray
     sha256: str
+    drive_peak_v: float | None = None
+    target_peak_m: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.drive_peak_v is None:
+            peak = float(np.max(np.abs(self.drives))) if np.size(self.drives) else 0.0
+            object.__setattr__(self, "drive_peak_v", peak)
 
 
 @dataclass(frozen=True)
@@ -392,6 +465,14 @@ class StudyEngine:
     n_samples, limit_v :
         Drive length (samples) and limit (V peak) for the calibration renderer.
 
+    Raises
+    ------
+    StudyError
+        A stimulus of the session's design does not fit the participant
+        (:meth:`CalibrationRenderer.prepare`: every stimulus is rendered when the engine
+        is made, before any trial), or a given renderer plays another level rule than the
+        session's.
+
     Notes
     -----
     Drives are rendered once per (method, target) and cached: a trial's stimulus is a
@@ -399,7 +480,7 @@ class StudyEngine:
 
     Events written for each presentation (payload keys): ``cue`` (``trial_index``,
     ``beep``), ``stimulus_onset`` (``trial_index``, ``method``, ``target``, ``played``,
-    ``drive_sha256``), and when a responder asks for a trial again ``cue_cancelled`` or
+    ``drive_sha256``, ``levels``, ``drive_peak_v``, ``target_peak_um``), and when a responder asks for a trial again ``cue_cancelled`` or
     ``trial_restarted`` (``trial_index``, ``reason``); ``error`` (``message``) when the
     run fails. The ``answer`` event (the store's) carries the onset: ``onset_s`` (host),
     ``onset_device_s`` and ``onset_clock`` (the rig's device clock). An answer committed
@@ -436,7 +517,16 @@ class StudyEngine:
                     f"the calibration's layout has {calibration.layout.n_locations} locations, but the "
                     f"study uses locations up to {max(self.design.locations)}"
                 )
-            renderer = calibration_renderer(calibration, n_samples=n_samples, limit_v=limit_v)
+            renderer = calibration_renderer(calibration, n_samples=n_samples, limit_v=limit_v,
+                                            levels=self.design.levels)
+        if renderer is not None and not dry_run:
+            own = getattr(renderer, "levels", None)
+            if own is not None and own != self.design.levels:
+                raise StudyError(f"session {self.session_id} was planned with the {self.design.levels!r} level rule, "
+                                 f"but its renderer plays {own!r}")
+            prepare = getattr(renderer, "prepare", None)
+            if prepare is not None:  # every stimulus now, never a refusal mid-study
+                prepare(self.design.methods, self.design.locations)
         self._renderer = None if dry_run else renderer
         _check_rates(calibration if calibration is not None else getattr(renderer, "calibration", None), rig)
         self.cue = cue
@@ -452,7 +542,10 @@ class StudyEngine:
         if key not in self._cache:
             drives = np.asarray(self._renderer(*key), dtype=float)
             drives.setflags(write=False)
-            self._cache[key] = Stimulus(key[0], key[1], drives, drive_sha256(drives))
+            rendering = getattr(self._renderer, "rendering", None)
+            reached = getattr(rendering(*key), "reached_peak_m", None) if rendering is not None else None
+            self._cache[key] = Stimulus(key[0], key[1], drives, drive_sha256(drives),
+                                        target_peak_m=None if reached is None else float(reached))
         return self._cache[key]
 
     def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
@@ -483,6 +576,8 @@ class StudyEngine:
         self._log(
             "stimulus_onset", trial, method=trial.method, target=trial.target,
             played=stim is not None, drive_sha256=None if stim is None else stim.sha256,
+            levels=self.design.levels, drive_peak_v=None if stim is None else stim.drive_peak_v,
+            target_peak_um=None if stim is None or stim.target_peak_m is None else stim.target_peak_m * 1e6,
         )
         onset = time.monotonic()
         played = self.rig.play(stim.drives) if stim is not None else None

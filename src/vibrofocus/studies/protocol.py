@@ -26,6 +26,10 @@ from ..layout import ArrayLayout
 __all__ = [
     "STUDIES",
     "PHASES",
+    "LEVEL_RULES",
+    "DEFAULT_LEVELS",
+    "LEGACY_LEVELS",
+    "level_options",
     "REFERENCE_LOCATIONS",
     "StudyDesign",
     "PlannedTrial",
@@ -41,6 +45,43 @@ PHASES = ("training", "main")
 #: Location numbers of the reference setup (docs/method.md): the default design's
 #: locations. A design names its own (any layout's ``location_numbers``).
 REFERENCE_LOCATIONS: tuple[int, ...] = ArrayLayout.reference().location_numbers
+#: Level rules of a study protocol (:func:`level_options`): ``"paper"`` plays each method
+#: at the level the source paper gave it (Sec. II.C); ``"equal-peak"`` plays every method
+#: at the drive limit.
+LEVEL_RULES = ("paper", "equal-peak")
+#: The level rule of a new session: the paper's (its Study 1 and Study 2 protocols).
+DEFAULT_LEVELS = "paper"
+#: The rule of a session stored before sessions kept their level rule (vibrofocus up to
+#: 0.x without the ``levels`` key): every method was played at the drive limit then.
+LEGACY_LEVELS = "equal-peak"
+
+
+def level_options(levels: str, limit_v: float) -> dict[str, Any]:
+    """The rendering options of a level rule (keywords of ``rendering.render``).
+
+    Parameters
+    ----------
+    levels : {"paper", "equal-peak"}
+        ``"paper"`` (de Vlam et al. 2023, Sec. II.C): funneling by eq. 3 unscaled with
+        ``A = limit_v`` (2.5 V on each exciter for the centre of a square cell); the
+        inverse filter asks its ``target_peak_m`` (2 µm) and is scaled down only where it
+        would need more than ``limit_v``; the combination asks the displacement funneling
+        makes at the target, capped the same way; any other method at its own level,
+        capped the same way. ``"equal-peak"``: every method scaled up or down to exactly
+        ``limit_v`` (``render``'s own default, for comparing designs at equal drive).
+    limit_v : float
+        Drive limit, V peak.
+
+    Returns
+    -------
+    dict
+        ``scale_to_limit`` and, for ``"paper"``, ``funneling_amplitude_v``.
+    """
+    if levels not in LEVEL_RULES:
+        raise StudyError(f"levels must be one of {', '.join(LEVEL_RULES)}, got {shorten(levels)}")
+    if levels == "equal-peak":
+        return {"scale_to_limit": True}
+    return {"scale_to_limit": False, "funneling_amplitude_v": float(limit_v)}
 
 
 @dataclass(frozen=True)
@@ -60,6 +101,9 @@ class StudyDesign:
         Times each (method, location) condition appears in the main phase.
     n_training : int
         Training trials before the main phase, drawn from the same conditions.
+    levels : {"paper", "equal-peak"}
+        The level rule of the stimuli (:func:`level_options`); default
+        :data:`DEFAULT_LEVELS`, the paper's.
     """
 
     study: int = 1
@@ -67,6 +111,7 @@ class StudyDesign:
     locations: tuple[int, ...] = REFERENCE_LOCATIONS
     repetitions: int = 3
     n_training: int = 5
+    levels: str = DEFAULT_LEVELS
 
     def __post_init__(self) -> None:
         if isinstance(self.study, bool) or self.study not in STUDIES:
@@ -94,6 +139,8 @@ class StudyDesign:
                 raise StudyError(f"{name} must be an integer >= 0, got {value!r}")
         if self.repetitions < 1:
             raise StudyError(f"repetitions must be >= 1, got {self.repetitions}")
+        if self.levels not in LEVEL_RULES:
+            raise StudyError(f"levels must be one of {', '.join(LEVEL_RULES)}, got {shorten(self.levels)}")
         object.__setattr__(self, "methods", methods)
         object.__setattr__(self, "locations", tuple(int(x) for x in locations))
         object.__setattr__(self, "study", int(self.study))
@@ -121,15 +168,19 @@ class StudyDesign:
         return d
 
     @classmethod
-    def from_config(cls, study: int, config: Mapping[str, Any] | None) -> "StudyDesign":
+    def from_config(cls, study: int, config: Mapping[str, Any] | None, *, stored: bool = False) -> "StudyDesign":
         """The design of ``study`` with the design keys found in ``config`` applied.
 
-        Keys other than ``methods``, ``locations``, ``repetitions`` and ``n_training``
-        are ignored here (they are stored with the session as they are).
+        Keys other than ``methods``, ``locations``, ``repetitions``, ``n_training`` and
+        ``levels`` are ignored here (they are stored with the session as they are).
+        ``stored=True``: ``config`` is a stored session's, and one without ``levels``
+        was planned before sessions kept it, so its rule is :data:`LEGACY_LEVELS`.
         """
         config = dict(config or {})
         kwargs: dict[str, Any] = {}
-        for key in ("methods", "locations", "repetitions", "n_training"):
+        if stored and "levels" not in config:
+            kwargs["levels"] = LEGACY_LEVELS
+        for key in ("methods", "locations", "repetitions", "n_training", "levels"):
             if key in config:
                 value = config[key]
                 kwargs[key] = tuple(value) if key in ("methods", "locations") else value

@@ -95,7 +95,7 @@ class SessionInfo:
     @property
     def design(self) -> StudyDesign:
         """The study design the session was planned with."""
-        return StudyDesign.from_config(self.study, self.config)
+        return StudyDesign.from_config(self.study, self.config, stored=True)
 
     @property
     def finished(self) -> bool:

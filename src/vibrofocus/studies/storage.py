@@ -30,7 +30,7 @@ from typing import Any
 from .._validation import shorten
 from ..errors import AnswerRefused, StudyError, ValidationError
 from .database import APPLICATION_ID, SCHEMA_VERSION, StudyDatabase, now_utc, software_version
-from .protocol import PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
+from .protocol import LEGACY_LEVELS, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .records import (
     AnswerReceipt,
     CalibrationRecord,
@@ -684,8 +684,12 @@ class StudyStore(StudyDatabase):
         host's ``time.monotonic()`` and on the rig's device clock, from the ``answer`` or
         ``answer_onset`` event; None where the database holds none: the device time of a
         dry run or of a rig without a device clock, both times of an answer stored by
-        vibrofocus 0.1.0). Ordered by participant (as added), study, session
-        and trial index.
+        vibrofocus 0.1.0), and the stimulus columns ``levels`` (the session's level rule),
+        ``drive_peak_v`` (largest |drive| of the stimulus played, V) and ``target_peak_um``
+        (its peak at the target predicted from the calibration, µm), from the trial's
+        ``stimulus_onset`` event (None where none holds them), and for a simulated
+        participant ``model`` (the label of the model and hypothesis that answered, from the
+        session). Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -707,9 +711,38 @@ class StudyStore(StudyDatabase):
             sql += "ORDER BY pt.rowid, s.study, s.session_id, p.trial_index"
             rows = [dict(r) for r in conn.execute(sql, args).fetchall()]
             onsets = self._answer_onsets(conn, participant_id)
+            stimuli = self._played_stimuli(conn, participant_id)
+        # The simulation floor sits above the studies: its label imported where a row names it.
+        from ..simulation.perception import MODEL_LABEL as legacy_model
+
         for row in rows:
             row.update(onsets.get(row["answer_id"], _NO_ONSET))
+            row.update(stimuli.get((row["session_id"], row["trial_index"]), _NO_STIMULUS))
+            row["levels"], model = stimuli.get(row["session_id"], (LEGACY_LEVELS, None))
+            if row["simulated"]:
+                # A simulated session stored before sessions named their model: v3, its only one then.
+                row["model"] = model or legacy_model
         return rows
+
+    @staticmethod
+    def _played_stimuli(conn: sqlite3.Connection, participant_id: str | None = None) -> dict[Any, Any]:
+        """The level rule and the simulated participants' model label (None: not stored) of
+        each session (by session id), and the stimulus columns of each trial's last
+        ``stimulus_onset`` event (by (session id, trial index))."""
+        where, args = "", ()
+        if participant_id is not None:
+            where, args = "WHERE participant_id = ? ", (participant_id,)
+        out: dict[Any, Any] = {}
+        for sid, text in conn.execute("SELECT session_id, config FROM sessions " + where, args):
+            config = json.loads(text)  # the stored rule as it is (the design's rules: StudyDesign.from_config)
+            config = config if isinstance(config, dict) else {}
+            out[sid] = (str(config.get("levels", LEGACY_LEVELS)), config.get("model"))
+        sql = ("SELECT session_id, payload FROM events WHERE kind = 'stimulus_onset' "
+               + ("AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) " if args else ""))
+        for sid, text in conn.execute(sql + "ORDER BY event_id", args):
+            payload = json.loads(text)
+            out[(sid, payload.get("trial_index"))] = {key: payload.get(key) for key in _NO_STIMULUS}
+        return out
 
     @staticmethod
     def _answer_onsets(conn: sqlite3.Connection, participant_id: str | None = None) -> dict[str, dict[str, Any]]:
@@ -735,16 +768,20 @@ class StudyStore(StudyDatabase):
         The file has the session columns after the contract's (see
         :data:`~vibrofocus.io.trials_csv.SESSION_COLUMNS`), so that an analysis can leave
         out aborted sessions and dry runs, then the onset columns
-        (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`).
+        (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`) and the stimulus columns
+        (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`).
         """
         from ..io.trials_csv import write_trials_csv
 
-        return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True)
+        return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True,
+                                stimuli=True)
 
 
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.
 _ONSET_KEYS = {"onset_s": "onset_host_s", "onset_device_s": "onset_device_s", "onset_clock": "onset_clock"}
 _NO_ONSET: dict[str, Any] = dict.fromkeys(_ONSET_KEYS.values())
+#: Stimulus columns of :meth:`StudyStore.trial_rows` from the ``stimulus_onset`` event (None: not stored).
+_NO_STIMULUS: dict[str, Any] = {"drive_peak_v": None, "target_peak_um": None}
 
 
 def _check_onsets(onset_s: Any, onset_device_s: Any, onset_clock: Any) -> dict[str, Any]:

@@ -119,6 +119,8 @@ class SessionIn(_Strict):
     n_training: int | None = Field(default=None, ge=0, le=30)
     # The experimenter has read the calibration's error verdicts and uses it anyway.
     allow_calibration_errors: bool = False
+    # The level rule of the stimuli (vibrofocus.studies.protocol.level_options); None: the paper's.
+    levels: Literal["paper", "equal-peak"] | None = None
 
 
 class AnalysisIn(_Strict):

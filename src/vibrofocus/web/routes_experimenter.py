@@ -432,8 +432,17 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         config["n_training"] = body.n_training
     if accepted:
         config["calibration_errors_accepted"] = accepted  # the record of the override
+    if body.levels is not None:
+        config["levels"] = body.levels
     seed = body.seed if body.seed is not None else secrets.randbelow(2**31)
     try:
+        if body.calibration_id is not None:
+            # Every stimulus now: a design that cannot fit this participant is refused when the
+            # session is planned, never mid-study.
+            from ..studies.protocol import StudyDesign
+
+            design = StudyDesign.from_config(body.study, config)
+            web.bank(body.calibration_id, levels=design.levels).prepare(design.methods, design.locations)
         with web.db:
             sid = web.store.create_session(body.participant_id, body.study, seed=seed, calibration_id=body.calibration_id, config=config)
     except StudyError as exc:

@@ -132,7 +132,7 @@ class WebState:
     calibrations : dict
         Loaded calibrations, by calibration id.
     banks : dict
-        Renderers (cached stimuli) by (calibration id, drive limit in V).
+        Renderers (cached stimuli) by (calibration id, drive limit in V, level rule).
     jobs : dict
         Calibration jobs in progress, by job id.
     rigs : dict
@@ -329,7 +329,7 @@ class WebState:
             self.calibrations[calibration_id] = cal
         return cal
 
-    def bank(self, calibration_id: int, limit_v: float | None = None):
+    def bank(self, calibration_id: int, limit_v: float | None = None, levels: str | None = None):
         """The renderer of a calibration (renders each condition once; previews and sessions share it).
 
         Parameters
@@ -338,6 +338,9 @@ class WebState:
             A registered calibration.
         limit_v : float, optional
             Drive limit, V peak (a rig's limit); default the rendering layer's.
+        levels : {"paper", "equal-peak"}, optional
+            The level rule (a session's); default the paper's
+            (:data:`~vibrofocus.studies.protocol.DEFAULT_LEVELS`).
 
         Returns
         -------
@@ -345,14 +348,16 @@ class WebState:
         """
         from ..defaults import DRIVE_LIMIT_V
         from ..studies.engine import CalibrationRenderer
+        from ..studies.protocol import DEFAULT_LEVELS
 
         limit = DRIVE_LIMIT_V if limit_v is None else float(limit_v)
-        key = (int(calibration_id), limit)
+        levels = DEFAULT_LEVELS if levels is None else str(levels)
+        key = (int(calibration_id), limit, levels)
         cal = self.calibration(calibration_id)  # the hash, checked at every use
         with self.lock:
             bank = self.banks.get(key)
         if bank is None:
-            bank = CalibrationRenderer(cal, limit_v=limit)
+            bank = CalibrationRenderer(cal, limit_v=limit, levels=levels)
             with self.lock:
                 bank = self.banks.setdefault(key, bank)
         return bank
@@ -363,13 +368,16 @@ class WebState:
             runner = self.runners.get(session_id)
             if runner is not None or not create:
                 return runner
+        from ..studies.protocol import LEGACY_LEVELS
+
         info = self.session(session_id)
         config = info.get("config") or {}
         renderer = rig = model = None
         cal_id = info.get("calibration_id")
         if cal_id is not None:
             rig = self.make_rig(config.get("rig", self.rig_kind), config.get("rig_seed"))
-            renderer = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None))
+            renderer = self.bank(int(cal_id), limit_v=getattr(getattr(rig, "limits", None), "peak_v", None),
+                                 levels=config.get("levels", LEGACY_LEVELS))  # a session planned before: equal-peak
         if self.is_simulated(info["participant_id"]):
             model = self.simulated_participant(info, rig)
         runner = SessionRunner(self.store, session_id, renderer=renderer, rig=rig, pace=self.pace, model=model)

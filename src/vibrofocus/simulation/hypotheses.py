@@ -1,0 +1,239 @@
+"""Simulated participants as competing hypotheses: registered readouts of the felt field.
+
+The paper's data cannot single out how a person turns a felt skin field into an answer
+(docs/simulated-participants.md, "Hypotheses"). Each :class:`Hypothesis` is one such
+readout, named, versioned and cited, registered as rendering methods are
+(:func:`register_hypothesis`; :func:`hypothesis` finds one by name). All share the
+peripheral stage (felt energies, :func:`~vibrofocus.simulation.perception.felt_energy`),
+the participants' traits and the central prior of
+:class:`~vibrofocus.simulation.perception.PerceptualModel`; they differ in where the
+percept lies and how reliable it is (:meth:`Hypothesis.percepts`). Every one is
+level-aware: it reads felt energies relative to the reference tap and to the
+participant's threshold, so a stimulus played louder is felt louder.
+
+A MODEL, not data: every output made from simulated participants names its hypothesis
+and model version (:meth:`Hypothesis.label`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .._validation import check_choice
+from ..errors import ValidationError
+from .perception import MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts
+
+__all__ = ["Hypothesis", "register_hypothesis", "hypothesis", "available_hypotheses", "DEFAULT_HYPOTHESIS",
+           "GRID_MARGIN_M", "PEAK_SOFTNESS_DB"]
+
+#: Margin of the grid area beyond the outer locations, m (half the 10 mm pitch): the
+#: area the participant sees numbered on the foil (the paper's Sec. II.D).
+GRID_MARGIN_M = 5e-3
+#: Softness of the "most intense" readout, dB: points within a few dB of the field's
+#: largest felt level share the percept (an assumption).
+PEAK_SOFTNESS_DB = 1.5
+
+_REGISTRY: dict[str, "Hypothesis"] = {}
+
+
+@dataclass(frozen=True)
+class Hypothesis:
+    """One hypothesis of how a simulated participant reads the felt field.
+
+    Attributes
+    ----------
+    name : str
+        Registered name (``simulate-study --hypothesis NAME``).
+    version : str
+        Version of the hypothesis' model; bump it whenever answers for the same seeds change.
+    title : str
+        One line: what the participant does.
+    sources : str
+        Its sources, or its assumption stated as one.
+    readout : {"centroid", "grid-peak"}
+        Where the percept lies: the energy-law centroid of the whole felt field (v3), or
+        the soft peak of the felt field inside the grid area.
+    level_reliability : bool
+        Whether the sensed position's reliability grows with the recruited activity (the
+        summed supra-threshold weights): a weak tap is localized less reliably, so the
+        central prior pulls it harder toward the array centre.
+    fitted : bool
+        Whether the model's parameters were fitted under this hypothesis (False: v3's
+        parameters, fitted under ``v3-centroid``, are used as they are).
+    """
+
+    name: str
+    version: str
+    title: str
+    sources: str
+    readout: str = "centroid"
+    level_reliability: bool = False
+    fitted: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name or any(c.isspace() for c in self.name):
+            raise ValidationError(f"a hypothesis' name must be a word, got {self.name!r}")
+        check_choice(self.readout, "readout", ("centroid", "grid-peak"))
+
+    def label(self) -> str:
+        """What every output made under this hypothesis says of itself."""
+        fit = "" if self.fitted else " with v3's parameters, not refitted"
+        return f"simulated participants: model v{MODEL_VERSION}, hypothesis {self.name} v{self.version}{fit}, not data"
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready description."""
+        return {"name": self.name, "version": self.version, "title": self.title, "sources": self.sources,
+                "readout": self.readout, "level_reliability": self.level_reliability, "fitted": self.fitted,
+                "label": self.label()}
+
+    def percepts(
+        self,
+        energy: np.ndarray,
+        points_xy: np.ndarray,
+        model: PerceptualModel,
+        traits: Traits,
+        actuator_energy: np.ndarray | None = None,
+        actuators_xy: np.ndarray | None = None,
+        locations_xy: np.ndarray | None = None,
+    ) -> Percepts:
+        """Noise-free percepts of stimuli of felt energies ``energy`` under this hypothesis.
+
+        Parameters
+        ----------
+        energy : ndarray, shape (n, n_points)
+            Felt energy at the skin points, re the reference tap.
+        points_xy : ndarray, shape (n_points, 2)
+            m.
+        model : PerceptualModel
+        traits : Traits
+        actuator_energy : ndarray, shape (n, n_actuators), optional
+            Felt energy each actuator delivers at its own contact (the drive cue).
+        actuators_xy : ndarray, shape (n_actuators, 2), optional
+            m.
+        locations_xy : ndarray, shape (n_locations, 2), optional
+            m; the grid area of the ``grid-peak`` readout (required there).
+
+        Returns
+        -------
+        Percepts
+            With ``reliability`` (n,) when ``level_reliability``.
+        """
+        base = central_percepts(energy, points_xy, model, traits, actuator_energy, actuators_xy)
+        e = np.atleast_2d(np.asarray(energy, dtype=float))
+        e_thr = 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)
+        position, spread, felt = base.position_m, base.spread_m, base.felt
+        if self.readout == "grid-peak":
+            if locations_xy is None:
+                raise ValidationError(f"hypothesis {self.name!r} needs the locations (the grid area)")
+            position, spread, felt = _grid_peak(e, e_thr, np.asarray(points_xy, float), np.asarray(locations_xy, float))
+        reliability = None
+        if self.level_reliability:
+            # Recruited activity in units of the reference tap felt at one point: a stimulus
+            # recruiting as much has half the full reliability (an assumption of form).
+            w = np.clip(e / e_thr - 1.0, 0.0, None) ** model.funneling_exponent
+            ref = max(1.0 / e_thr - 1.0, 0.0) ** model.funneling_exponent
+            activity = w.sum(axis=1)
+            reliability = np.where(felt, activity / (activity + max(ref, 1e-12)), np.nan)
+        conflict = base.conflict_m
+        if conflict is not None:
+            conflict = np.where(felt, np.nan_to_num(conflict), np.nan)
+        return Percepts(position, spread, felt, conflict, reliability)
+
+
+def _grid_peak(e: np.ndarray, e_thr: float, xy: np.ndarray, locations: np.ndarray):
+    """Soft peak of the felt level inside the grid area: position (n, 2), spread (n,), felt (n,)."""
+    lo, hi = locations.min(axis=0) - GRID_MARGIN_M, locations.max(axis=0) + GRID_MARGIN_M
+    inside = np.all((xy >= lo - 1e-12) & (xy <= hi + 1e-12), axis=1)
+    level = 10.0 * np.log10(np.maximum(e[:, inside], 1e-30) / e_thr)  # dB above threshold
+    above = level > 0
+    felt = above.any(axis=1)
+    top = np.where(above, level, -np.inf).max(axis=1, initial=-np.inf)
+    with np.errstate(invalid="ignore", over="ignore"):
+        w = np.where(above, np.exp((level - np.where(felt, top, 0.0)[:, None]) / PEAK_SOFTNESS_DB), 0.0)
+    total = w.sum(axis=1)
+    safe = np.where(total > 0, total, 1.0)[:, None]
+    pts = xy[inside]
+    pos = (w @ pts) / safe
+    d2 = np.sum((pts[None, :, :] - pos[:, None, :]) ** 2, axis=2)
+    spread = np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0])
+    pos[~felt] = np.nan
+    spread[~felt] = np.nan
+    return pos, spread, felt
+
+
+def register_hypothesis(h: Hypothesis, *, replace: bool = False) -> Hypothesis:
+    """Register a hypothesis under its name.
+
+    Parameters
+    ----------
+    h : Hypothesis
+    replace : bool
+        Allow replacing one registered under the same name.
+
+    Returns
+    -------
+    Hypothesis
+    """
+    if not isinstance(h, Hypothesis):
+        raise ValidationError(f"a hypothesis must be a Hypothesis, got {type(h).__name__}")
+    if h.name in _REGISTRY and _REGISTRY[h.name] != h and not replace:
+        raise ValidationError(f"a hypothesis named {h.name!r} is registered already; pass replace=True to replace it")
+    _REGISTRY[h.name] = h
+    return h
+
+
+def available_hypotheses() -> tuple[str, ...]:
+    """Names of the registered hypotheses, the default first."""
+    return tuple(_REGISTRY)
+
+
+def hypothesis(name: str | Hypothesis | None = None) -> Hypothesis:
+    """The hypothesis registered under ``name`` (None: :data:`DEFAULT_HYPOTHESIS`).
+
+    Parameters
+    ----------
+    name : str or Hypothesis, optional
+        A registered name (a :class:`Hypothesis` is returned as it is).
+
+    Returns
+    -------
+    Hypothesis
+
+    Raises
+    ------
+    ValidationError
+        For a name nothing is registered under (the message lists the known names).
+    """
+    if isinstance(name, Hypothesis):
+        return name
+    check_choice(DEFAULT_HYPOTHESIS if name is None else name, "hypothesis", available_hypotheses())
+    return _REGISTRY[DEFAULT_HYPOTHESIS if name is None else name]
+
+
+register_hypothesis(Hypothesis(
+    name="v3-centroid", version=MODEL_VERSION, fitted=True, readout="centroid",
+    title="the place is the energy-law centroid of the whole felt field (perceptual model v3)",
+    sources="energy-law funneling (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018), central prior "
+            "(Cholewiak et al. 2020), cue conflict (Koerding et al. 2007); fitted to de Vlam et al. 2023, Sec. III",
+))
+register_hypothesis(Hypothesis(
+    name="grid-peak", version="1.0", readout="grid-peak",
+    title="the place is where it felt most intense inside the grid area (a soft peak of the felt level)",
+    sources="the paper's instruction: the participant types the grid number where the stimulus felt most "
+            "intense, on a foil over the grid (de Vlam et al. 2023, Sec. II.D); the softness "
+            f"({PEAK_SOFTNESS_DB:g} dB) and the area (the locations plus {GRID_MARGIN_M * 1e3:g} mm) are assumptions",
+))
+register_hypothesis(Hypothesis(
+    name="level-reliability", version="1.0", readout="centroid", level_reliability=True,
+    title="v3's centroid, with a reliability that grows with the recruited activity, so weak taps are pulled "
+          "to the centre",
+    sources="reliability-weighted cue combination with a prior (Koerding et al. 2007); localization improves "
+            "with intensity (an assumption of form here: reliability activity / (activity + one reference tap))",
+))
+
+#: The hypothesis simulated participants use unless told: v3's, the only one fitted so far
+#: (docs/simulated-participants.md, "Hypotheses", says how the default is to be chosen).
+DEFAULT_HYPOTHESIS = "v3-centroid"

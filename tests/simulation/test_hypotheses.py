@@ -1,0 +1,99 @@
+"""Simulated participants as registered hypotheses of how the felt field is read."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from vibrofocus.errors import ValidationError
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.hypotheses import (
+    DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis)
+from vibrofocus.simulation.perception import PerceptualModel, Traits, central_percepts
+
+MODEL = PerceptualModel()
+TRAITS = Traits(threshold_offset_db=0.0, acuity_sd_m=0.004, prior_sd_m=0.02, bias_m=np.zeros(2), kappa=0.5,
+                rt_median_s=1.0, spread_gain=0.07)
+AXIS = np.arange(-25e-3, 25e-3 + 1e-9, 5e-3)
+GRID = np.column_stack([g.ravel() for g in np.meshgrid(AXIS, AXIS)])
+LOCATIONS = np.array([(x, y) for y in (10e-3, 0.0, -10e-3) for x in (-10e-3, 0.0, 10e-3)])
+
+
+def bump(xy, peak, width=3e-3):
+    """A felt field (re the reference tap) with one Gaussian bump at ``xy``."""
+    return peak * np.exp(-np.sum((GRID - np.asarray(xy)) ** 2, axis=1) / (2 * width**2)) + 1e-6
+
+
+def test_the_registry_names_three_cited_hypotheses_and_refuses_unknown_ones():
+    assert available_hypotheses()[:3] == ("v3-centroid", "grid-peak", "level-reliability")
+    assert hypothesis().name == DEFAULT_HYPOTHESIS == "v3-centroid"
+    for name in available_hypotheses():
+        h = hypothesis(name)
+        assert h.sources and h.title
+        label = h.label()
+        assert name in label and f"v{h.version}" in label and "model v3" in label and label.endswith("not data")
+    with pytest.raises(ValidationError, match="hypothesis"):
+        hypothesis("telepathy")
+    with pytest.raises(ValidationError, match="registered already"):
+        register_hypothesis(dataclasses.replace(hypothesis("grid-peak"), title="another"))
+
+
+def test_v3_is_the_model_v3_readout_unchanged():
+    e = np.stack([bump((5e-3, 5e-3), 30.0), bump((-20e-3, 0.0), 3.0) + bump((0.0, 0.0), 10.0)])
+    ours = hypothesis("v3-centroid").percepts(e, GRID, MODEL, TRAITS, locations_xy=LOCATIONS)
+    v3 = central_percepts(e, GRID, MODEL, TRAITS)
+    np.testing.assert_array_equal(ours.position_m, v3.position_m)
+    np.testing.assert_array_equal(ours.spread_m, v3.spread_m)
+    assert ours.reliability is None
+
+
+def test_the_grid_peak_is_where_it_felt_most_intense_inside_the_grid_area():
+    # A strong field under an actuator (outside the grid area) and a weaker focus at (5, 5) mm
+    # inside it: the centroid lands between them, the grid peak on the focus.
+    e = (bump((-25e-3, 25e-3), 300.0) + bump((5e-3, 5e-3), 30.0))[None]
+    peak = hypothesis("grid-peak").percepts(e, GRID, MODEL, TRAITS, locations_xy=LOCATIONS)
+    np.testing.assert_allclose(peak.position_m[0], (5e-3, 5e-3), atol=1e-3)
+    centroid = central_percepts(e, GRID, MODEL, TRAITS).position_m[0]
+    assert np.linalg.norm(centroid - (5e-3, 5e-3)) > 5e-3
+    with pytest.raises(ValidationError, match="needs the locations"):
+        hypothesis("grid-peak").percepts(e, GRID, MODEL, TRAITS)
+
+
+def test_level_reliability_grows_with_the_recruited_activity():
+    h = hypothesis("level-reliability")
+    quiet, loud = bump((0.0, 0.0), 3.0), bump((0.0, 0.0), 300.0)
+    r = h.percepts(np.stack([quiet, loud]), GRID, MODEL, TRAITS, locations_xy=LOCATIONS).reliability
+    assert 0 < r[0] < r[1] < 1
+    # The same place either way: only how sure the participant is changes.
+    p = h.percepts(np.stack([quiet, loud]), GRID, MODEL, TRAITS, locations_xy=LOCATIONS).position_m
+    np.testing.assert_allclose(p[0], p[1], atol=1e-9)
+
+
+def test_the_fast_path_takes_a_hypothesis_and_v3_is_its_default():
+    bank = default_bank()
+    a = simulate_cell_means(4, np.random.default_rng(3), bank=bank)
+    b = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis="v3-centroid")
+    np.testing.assert_array_equal(a.error_mm, b.error_mm)
+    c = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis="grid-peak")
+    assert not np.array_equal(a.error_mm, c.error_mm)
+
+
+def test_a_hypothesis_must_be_a_word_with_a_known_readout():
+    with pytest.raises(ValidationError):
+        Hypothesis(name="two words", version="1", title="t", sources="s")
+    with pytest.raises(ValidationError, match="readout"):
+        Hypothesis(name="x", version="1", title="t", sources="s", readout="guess")
+
+
+@pytest.mark.slow
+def test_the_documented_hypotheses_table_is_that_of_the_code():
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    res = subprocess.run([sys.executable, str(root / "scripts" / "hypotheses_table.py"), "--print"],
+                         capture_output=True, text=True, timeout=900, check=True)
+    page = (root / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
+    block = page.split("<!-- hypotheses-measured:start -->\n", 1)[1].split("\n<!-- hypotheses-measured:end -->", 1)[0]
+    assert block == res.stdout.rstrip("\n")
