@@ -22,9 +22,8 @@ from vibrofocus.web.app import create_app
 TOKEN = "t" * 32
 
 
-@pytest.fixture
-def app_and_device(tmp_path):
-    device = FakeDevice()
+def _nidaq_app(tmp_path, device):
+    """The web app on the NI rig over ``device`` (a FAKE NI device); returns (app, the rigs it made)."""
     made = []
 
     def factory(kind, seed=None, config=None):
@@ -41,7 +40,18 @@ def app_and_device(tmp_path):
     config.write_text("{}")
     app = create_app(tmp_path / "s.sqlite", token=TOKEN, rig="nidaq", rig_factory=factory, rig_config=config,
                      allowed_hosts=("testserver",), resume=False)
-    with TestClient(app, headers={"X-Vibrofocus-Token": TOKEN, "Origin": "http://testserver"}) as client:
+    return app, made
+
+
+def _client(app):
+    return TestClient(app, headers={"X-Vibrofocus-Token": TOKEN, "Origin": "http://testserver"})
+
+
+@pytest.fixture
+def app_and_device(tmp_path):
+    device = FakeDevice()
+    app, made = _nidaq_app(tmp_path, device)
+    with _client(app) as client:
         yield client, device, made
     for rig in made:
         rig.close()
@@ -107,19 +117,8 @@ def test_progress_is_reported_while_a_calibration_runs(app_and_device):
 def test_a_server_shut_down_mid_calibration_stops_the_rig_and_closes_it(tmp_path):
     """SIGTERM/Ctrl-C of `vibrofocus serve` runs the app's shutdown: zero written last, job ended, rig closed."""
     device = FakeDevice(idle_zero=False)  # outputs hold their last value: only a zero write brings them down
-    made = []
-
-    def factory(kind, seed=None, config=None):
-        rig = NidaqRig(parse_rig_config(nidaq_config(force_sensors=None)), task_factory=device.factory,
-                       system=device.system())
-        made.append(rig)
-        return rig
-
-    config = tmp_path / "lab.json"
-    config.write_text("{}")
-    app = create_app(tmp_path / "s.sqlite", token=TOKEN, rig="nidaq", rig_factory=factory, rig_config=config,
-                     allowed_hosts=("testserver",), resume=False)
-    with TestClient(app, headers={"X-Vibrofocus-Token": TOKEN, "Origin": "http://testserver"}) as client:
+    app, made = _nidaq_app(tmp_path, device)
+    with _client(app) as client:
         assert client.post("/api/participants", json={"participant_id": "P03"}).status_code == 201
         job_id = client.post("/api/calibrations", json={"participant_id": "P03", "rig": "nidaq"}).json()["job_id"]
         _wait(client, job_id, "waiting")
