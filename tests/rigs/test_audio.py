@@ -512,9 +512,17 @@ def test_a_stop_early_in_a_play_reaches_zero_within_one_period_plus_latency(rig,
         stopped["t"] = recorder.now()
         rig.stop()
 
-    with _LoopbackRecorder() as recorder:
-        thread = threading.Thread(target=stop_later)
+    # The clock starts when the play is under way (its conversion for the device begins):
+    # a stop before play() is called is an old stop, which does not end a new play.
+    real = rig._to_device
+    thread = threading.Thread(target=stop_later)
+
+    def to_device(drive, n_tail):
         thread.start()
+        return real(drive, n_tail)
+
+    rig._to_device = to_device
+    with _LoopbackRecorder() as recorder:
         t0 = time.monotonic()
         with pytest.raises(StoppedError):
             rig.play(_long_sine(seconds=5.0))

@@ -15,12 +15,14 @@ TOKEN = "t" * 32
 
 
 def _dead_a2(kind, seed=None, **kwargs):
-    """The simulated forearm with actuator A2 barely driven (as tests/calibration/test_forearm.py)."""
+    """The simulated forearm with actuator A2 weak enough to read as dead."""
     from vibrofocus.skin import ForearmParameters, SimulatedForearm
 
     lay = SimulatedForearm(seed=4).layout
     params = ForearmParameters.draw(4, lay)
-    weak = replace(params, gains=params.gains * np.array([1.0, 1e-3, 1.0, 1.0]))
+    # 26 dB down: under the dead-actuator verdict (a tenth of the strongest) while the designs still
+    # fit a window, so that using it with the override can be tested.
+    weak = replace(params, gains=params.gains * np.array([1.0, 0.05, 1.0, 1.0]))
     return SimulatedForearm(seed=4, participant=weak)
 
 
