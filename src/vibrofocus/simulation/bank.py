@@ -66,7 +66,7 @@ class FeatureBank:
         (:func:`~vibrofocus.studies.protocol.level_options`); ``"equal-peak"`` for a bank
         written before banks stored it.
     drive_peak_v : ndarray, shape (n_forearms, n_methods, n_locations), optional
-        Each stimulus's largest |drive|, V (None in an older bank).
+        Each stimulus's largest drive magnitude (absolute value over actuators and samples), V (None in an older bank).
     target_peak_m : ndarray, shape (n_forearms, n_methods, n_locations), optional
         Each stimulus's peak at the target predicted from the calibration, m.
     """
