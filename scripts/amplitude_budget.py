@@ -28,7 +28,6 @@ from vibrofocus.skin import ForearmParameters, SimulatedForearm
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-arm-truth.md"
-START, END = "<!-- amplitude-budget:start -->", "<!-- amplitude-budget:end -->"
 N = 8192
 DISTANCES_MM = (8.0, 16.0, 24.0, 32.0)
 PRESETS = ("nominal", "low", "high")
@@ -98,11 +97,9 @@ def main() -> int:
     table = markdown([budget(skin) for skin in PRESETS])
     print(table)
     if not args.print:
-        from vibrofocus._atomic import write_text
+        from _markers import write_between_markers
 
-        text = PAGE.read_text(encoding="utf-8")
-        head, rest = text.split(START, 1)
-        write_text(PAGE, f"{head}{START}\n{table}\n{END}{rest.split(END, 1)[1]}")
+        write_between_markers(PAGE, "amplitude-budget", table)
     return 0
 
 

@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus._atomic import write_text
+from _markers import replace_between_markers
 from vibrofocus.simulation.bank import FeatureBank
 from vibrofocus.simulation.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, compare, comparison_markdown, seed_statistics
 from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
@@ -195,16 +196,6 @@ def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: 
                                 "model": best.to_dict()}, indent=1), what="fit")
     print(f"best loss {best_loss:.4f} after {n_eval + n_refine} candidates ({time.perf_counter() - t0:.0f} s) -> {out}")
     return best
-
-
-def replace_between_markers(text: str, name: str, block: str, page: Path) -> str:
-    """``text`` with ``block`` between the ``<!-- name:start -->`` / ``<!-- name:end -->`` markers."""
-    start, end = f"<!-- {name}:start -->", f"<!-- {name}:end -->"
-    if start not in text or end not in text:
-        raise SystemExit(f"{page} has no {start} ... {end} markers")
-    head, rest = text.split(start, 1)
-    _, tail = rest.split(end, 1)
-    return f"{head}{start}\n{block}\n{end}{tail}"
 
 
 def _value(v) -> str:

@@ -26,7 +26,6 @@ from vibrofocus.simulation.power import study_statistics
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-participants.md"
-START, END = "<!-- hypotheses-measured:start -->", "<!-- hypotheses-measured:end -->"
 SEEDS = range(500, 520)
 N = 20
 
@@ -65,11 +64,9 @@ def main() -> int:
     table = markdown(bank)
     print(table)
     if not args.print:
-        from vibrofocus._atomic import write_text
+        from _markers import write_between_markers
 
-        text = PAGE.read_text(encoding="utf-8")
-        head, rest = text.split(START, 1)
-        write_text(PAGE, f"{head}{START}\n{table}\n{END}{rest.split(END, 1)[1]}")
+        write_between_markers(PAGE, "hypotheses-measured", table)
     return 0
 
 
