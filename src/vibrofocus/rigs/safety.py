@@ -148,13 +148,19 @@ def windowed_rms(squares: np.ndarray, n_window: int) -> np.ndarray:
     ndarray, shape (n_channels,)
         V.
     """
-    n = squares.shape[-1]
-    csum = np.concatenate([np.zeros(squares.shape[:-1] + (1,)), np.cumsum(squares, axis=-1)], axis=-1)
-    if n <= n_window:
-        energy = csum[..., -1]
-    else:
-        energy = (csum[..., n_window:] - csum[..., :-n_window]).max(axis=-1)
+    energy = _window_sums(squares, n_window).max(axis=-1)
     return np.sqrt(np.maximum(energy, 0.0) / n_window)
+
+
+def _window_sums(values: np.ndarray, span: int) -> np.ndarray:
+    """Sums of ``values`` over every window of ``span`` entries along the last axis.
+
+    A signal no longer than the window gives its one total (as followed by silence).
+    Shape (..., n - span + 1), or (..., 1).
+    """
+    n = values.shape[-1]
+    csum = np.concatenate([np.zeros(values.shape[:-1] + (1,)), np.cumsum(values, axis=-1)], axis=-1)
+    return csum[..., -1:] if n <= span else csum[..., span:] - csum[..., :-span]
 
 
 def _channel_message(values: np.ndarray, limit: float, unit: str, over: str = "") -> str:
@@ -229,11 +235,9 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
 
 def _check_slow_content(arr: np.ndarray, fs: float, n_window: int, window_s: float) -> None:
     """Refuse DC and slow drives: a mean over any window above DC_V_LIMIT, or RMS below SLOW_HZ above SLOW_RMS_V_LIMIT."""
-    csum = np.concatenate([np.zeros((len(arr), 1)), np.cumsum(arr, axis=1)], axis=1)
     n = arr.shape[1]
     # A drive shorter than the window counts as followed by silence, as for the RMS.
-    sums = csum[:, -1:] if n <= n_window else csum[:, n_window:] - csum[:, :-n_window]
-    mean = np.abs(sums).max(axis=1) / n_window
+    mean = np.abs(_window_sums(arr, n_window)).max(axis=1) / n_window
     if mean.max() > DC_V_LIMIT:
         raise SafetyError("drive refused: DC, " + _channel_message(
             mean, DC_V_LIMIT, "V", f" mean over {window_s:g} s") + " (a voice coil is not driven with DC)")
@@ -272,8 +276,7 @@ class _RmsWindow:
 
     def worst_rms(self, history: np.ndarray) -> np.ndarray:
         span = self.n_bins + (1 if self.bin > 1 else 0)
-        csum = np.concatenate([np.zeros((len(history), 1)), np.cumsum(history, axis=1)], axis=1)
-        energy = csum[:, -1] if history.shape[1] <= span else (csum[:, span:] - csum[:, :-span]).max(axis=1)
+        energy = _window_sums(history, span).max(axis=1)
         return np.sqrt(np.maximum(energy, 0.0) / self.n_window)
 
     def commit(self, history: np.ndarray) -> None:
