@@ -679,7 +679,8 @@ def test_a_jack_server_that_dies_mid_play_gives_a_device_error_not_a_hang(jack_s
 
 
 @pytest.mark.parametrize("device_name, hostapi", [("default", "JACK Audio Connection Kit"),
-                                                  ("pipewire", "ALSA"), ("Speakers (MOTU)", "MME")])
+                                                  ("pipewire", "ALSA"), ("Speakers (MOTU)", "MME"),
+                                                  ("sysdefault:CARD=MOTU", "ALSA")])
 def test_a_routed_device_without_loopback_plays_stimuli_but_refuses_recordings(jack_server, device_name, hostapi):
     """The loopback rule is a recording's: it keys on the device too, and it does not lock out play-only rigs."""
     with make_rig("audio", config={**jack_config(loopback_output=None, loopback_input=None),
@@ -696,3 +697,12 @@ def test_a_callback_error_is_named_in_the_devices_error(rig):
     with pytest.raises(DeviceError, match="the audio callback failed while playing: ValueError") as err:
         rig._run_stream(bad_block, record=False, what="playing")
     assert isinstance(err.value.__cause__, ValueError)
+
+
+def test_jacks_system_ports_keep_one_round_trip_and_record_without_a_loopback(jack_server):
+    """JACK is steady whatever its device is called: only system-mix devices need the loopback."""
+    with make_rig("audio", config={**jack_config(loopback_output=None, loopback_input=None),
+                                   "latency_samples": JACK_PERIOD}) as rig:
+        rig.device_name = "system"  # as PortAudio names JACK's hardware ports
+        assert not rig.unsteady_latency
+        assert rig.play_and_record(pulse_drive(), tail_s=0.0).shape == (1, 2000)

@@ -89,6 +89,9 @@ _GENERIC_WORDS = {
 }
 # Devices that route to whatever the system mixes to: never a safe cue beside an audio rig.
 _ROUTING_DEVICES = {"default", "sysdefault", "pulse", "pipewire", "dmix", "system"}
+# Of those, the ones that mix through the system's sound server, whose round trip changes
+# from stream to stream (JACK's "system" ports keep one: JACK is steady).
+_MIXED_DEVICES = _ROUTING_DEVICES - {"system"}
 
 
 def audio_interface_words(name: str) -> frozenset[str]:
@@ -552,7 +555,7 @@ class AudioRig(HardwareRig):
         """
         if any(h in self.hostapi_name.lower() for h in UNSTEADY_LATENCY_HOSTAPIS):
             return True
-        return bool(set(re.findall(r"[a-z0-9]+", self.device_name.lower())) & _ROUTING_DEVICES)
+        return bool(audio_interface_words(self.device_name) & _MIXED_DEVICES)
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         has_loopback = self.config.channels.loopback_output is not None
