@@ -7,10 +7,13 @@ only, independently of ``vibrofocus.analysis`` and of the statistics the fit opt
 The findings are those of de Vlam et al. (IEEE ToH 16(4), 2023, doi:10.1109/TOH.2023.3270362),
 Sec. III.B-C:
 
-    PYTHONPATH=src python scripts/check_findings.py --seeds 500 520
+    PYTHONPATH=src python scripts/check_findings.py --seeds 500 520 [--hypothesis NAME]
 
 prints, per finding, in how many seeds it holds, and the median reduction of selected
-points (inverse vs funneling). Seeds used by the fit are 1000-1015; use others.
+points (inverse vs funneling), under one hypothesis of how the participants read the felt
+field (default the default one, with its fitted parameters). Seeds used by the fit are
+1000-1015; use others. ``scripts/hypotheses_table.py`` writes the same check for every
+hypothesis into docs/simulated-participants.md.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ import pingouin as pg
 from scipy import stats
 
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
+from vibrofocus.simulation.hypotheses import hypothesis
 from vibrofocus.simulation.perception import PerceptualModel
 
 ALPHA = 0.05
@@ -123,6 +127,18 @@ ROWS = [
 ]
 
 
+def held_out(seeds: range, n: int, bank: FeatureBank, name: str | None = None,
+             model: PerceptualModel | None = None) -> list[dict[str, float | bool]]:
+    """The findings of one study per seed (study ``s`` draws from ``default_rng([s, 16])``)."""
+    h = hypothesis(name)
+    res = []
+    for s in seeds:
+        arrays = simulate_cell_means(n, np.random.default_rng([s, 16]), bank=bank, model=model or h.model(),
+                                     hypothesis=h)
+        res.append(findings(arrays.error_mm, arrays.count, arrays.count_hit))
+    return res
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", type=int, nargs=2, default=(500, 520), metavar=("FIRST", "STOP"))
@@ -131,16 +147,15 @@ def main() -> None:
                     help="a fit file written by scripts/fit_participants.py search (default: the model's defaults)")
     ap.add_argument("--bank", type=Path, default=None,
                     help="a feature bank built by scripts/build_feature_bank.py (default: the shipped one)")
+    ap.add_argument("--hypothesis", default=None,
+                    help="how the participants read the felt field (default: the default hypothesis)")
     args = ap.parse_args()
     bank = FeatureBank.load(args.bank) if args.bank else default_bank()
     model = (PerceptualModel().replace(**json.loads(args.fit.read_text(encoding="utf-8"))["model"])
-             if args.fit else PerceptualModel())
+             if args.fit else None)
     seeds = range(*args.seeds)
-    res = []
-    for s in seeds:
-        arrays = simulate_cell_means(args.n, np.random.default_rng([s, 16]), bank=bank, model=model)
-        res.append(findings(arrays.error_mm, arrays.count, arrays.count_hit))
-    print(f"simulated participants (a model, not data): {len(res)} studies of {args.n}, seeds {seeds.start}-{seeds.stop - 1}")
+    res = held_out(seeds, args.n, bank, args.hypothesis, model)
+    print(f"{hypothesis(args.hypothesis).label()}: {len(res)} studies of {args.n}, seeds {seeds.start}-{seeds.stop - 1}")
     print("| finding | holds in |\n|---|---|")
     for label, key in ROWS:
         print(f"| {label} | {sum(bool(r[key]) for r in res)} of {len(res)} |")

@@ -16,12 +16,19 @@ violation; the inverse filter differing from both other methods at locations 1, 
 fewer points with the inverse filter in Study 2) and the ranking of the locations (4, 5,
 7, 8 best; 1 among the worst).
 
-    PYTHONPATH=src python scripts/fit_participants.py search --out fit.json   # ~7 min on one core
-    PYTHONPATH=src python scripts/fit_participants.py report [--fit fit.json]
+    PYTHONPATH=src python scripts/fit_participants.py search --hypothesis NAME --out fit.json   # ~15 min
+    PYTHONPATH=src python scripts/fit_participants.py adopt fit-a.json fit-b.json ...
+    PYTHONPATH=src python scripts/fit_participants.py report [--fit fit.json] [--hypothesis NAME]
     PYTHONPATH=src python scripts/fit_participants.py table [--seeds 20] [--check]
 
-``search`` prints each improvement, then the paper beside the best model and the
-residuals; its result goes into the defaults of ``PerceptualModel`` by hand (rounded).
+``search`` fits one hypothesis (``vibrofocus.simulation.hypotheses``; default the default
+one) on the feature bank (default the shipped one, whose level rule it records) and prints
+each improvement, then the paper beside the best model and the residuals. Every
+hypothesis is fitted with the same budget (the defaults of ``--n-eval`` and
+``--n-refine``) and the same seeds. ``adopt`` rounds the fits to 3 digits, evaluates each on
+the held-out seeds 500-519 with the same loss, and writes them all to
+``simulation/data/hypotheses_fit.json`` (atomically), with the default hypothesis: the one
+of lowest held-out loss.
 ``report`` prints the same for the defaults (or a fit file) on the table's seeds.
 ``table`` evaluates the defaults on seeds 0..N-1 and writes the side-by-side table between
 the ``participants-table`` markers of ``docs/simulated-participants.md`` and its short
@@ -40,7 +47,8 @@ import numpy as np
 
 from vibrofocus._atomic import write_text
 from _markers import replace_between_markers
-from vibrofocus.simulation.bank import FeatureBank
+from vibrofocus.simulation.bank import FeatureBank, default_bank
+from vibrofocus.simulation.hypotheses import hypothesis
 from vibrofocus.simulation.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, compare, comparison_markdown, seed_statistics
 from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
 
@@ -170,29 +178,40 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
     )
 
 
-def _load(path: Path | None) -> PerceptualModel:
+def _load(path: Path | None, name: str | None = None) -> PerceptualModel:
     if path is None:
-        return PerceptualModel()
+        return hypothesis(name).model()
     return PerceptualModel().replace(**json.loads(path.read_text(encoding="utf-8"))["model"])
+
+
+#: Seeds of the held-out check (never used by the fit), as scripts/check_findings.py.
+HELD_OUT_SEEDS = range(500, 520)
 
 
 def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: int,
            weights: dict[str, float], central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE,
-           bank: FeatureBank | None = None, integration_s: float | None = None) -> PerceptualModel:
+           bank: FeatureBank | None = None, integration_s: float | None = None,
+           name: str | None = None) -> PerceptualModel:
+    h = hypothesis(name)
+    b = bank if bank is not None else default_bank()
     rng = np.random.default_rng(rng_seed)
-    best = _load(start).replace(integration_s=integration_s)
-    best_loss = loss(seed_statistics(best, FIT_SEEDS, bank=bank), weights)
+    best = _load(start, h.name).replace(integration_s=integration_s)
+    best_loss = loss(seed_statistics(best, FIT_SEEDS, bank=b, hypothesis=h), weights)
     print(f"start: loss {best_loss:.4f}", flush=True)
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
         cand = (sample(rng, central_range=central_range) if i < n_eval else
                 sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range))
         cand = cand.replace(integration_s=integration_s)  # the bank's window, never searched
-        val = loss(seed_statistics(cand, FIT_SEEDS, bank=bank), weights)
+        val = loss(seed_statistics(cand, FIT_SEEDS, bank=b, hypothesis=h), weights)
         if val < best_loss:
             best, best_loss = cand, val
             print(f"{i}: loss {val:.4f} ({time.perf_counter() - t0:.0f} s) {json.dumps(cand.to_dict())}", flush=True)
-    write_text(out, json.dumps({"loss": best_loss, "weights": weights, "fit_seeds": [FIT_SEEDS.start, FIT_SEEDS.stop],
+    write_text(out, json.dumps({"hypothesis": h.name, "levels": b.levels, "bank_forearms": b.n_forearms,
+                                "budget": {"n_eval": n_eval, "n_refine": n_refine, "rng_seed": rng_seed,
+                                           "start": (json.loads(start.read_text(encoding="utf-8")).get("budget")
+                                                     if start is not None else None)},
+                                "loss": best_loss, "weights": weights, "fit_seeds": [FIT_SEEDS.start, FIT_SEEDS.stop],
                                 "model": best.to_dict()}, indent=1), what="fit")
     print(f"best loss {best_loss:.4f} after {n_eval + n_refine} candidates ({time.perf_counter() - t0:.0f} s) -> {out}")
     return best
@@ -205,48 +224,112 @@ def _value(v) -> str:
 
 
 def parameters_markdown() -> str:
-    """The parameters of the model's defaults with their kind and note, as markdown."""
-    model = PerceptualModel()
-    lines = [f"*{MODEL_LABEL}.* Values of `PerceptualModel()` (SI units: m, s, dB, Hz); ranges (lo, hi) are "
+    """The parameters of every hypothesis' fitted model with their kind and note, as markdown."""
+    from vibrofocus.simulation.hypotheses import available_hypotheses
+
+    names = available_hypotheses()
+    models = {h: hypothesis(h).model() for h in names}
+    lines = [f"*{MODEL_LABEL}.* Values of each hypothesis' model (`hypothesis(name).model()`: the defaults of "
+             "`PerceptualModel()` changed by the hypothesis' fit; SI units: m, s, dB, Hz); ranges (lo, hi) are "
              "uniform across simulated participants.", "",
-             "| parameter | value | kind | note |", "|---|---|---|---|"]
+             "| parameter | " + " | ".join(f"`{h}`" for h in names) + " | `PerceptualModel()` | kind | note |",
+             "|---|" + "---|" * (len(names) + 3)]
     for name, (kind, note) in PARAMETER_SOURCES.items():
-        lines.append(f"| `{name}` | {_value(getattr(model, name))} | {kind} | {note} |")
+        values = [_value(getattr(models[h], name)) for h in names] + [_value(getattr(PerceptualModel(), name))]
+        lines.append(f"| `{name}` | " + " | ".join(values) + f" | {kind} | {note} |")
     return "\n".join(lines)
 
 
 #: The power table of the README and docs: sample sizes and studies per size.
-POWER_SIZES, POWER_STUDIES = (10, 15, 20, 25, 30), 200
+POWER_SIZES, POWER_STUDIES = (10, 20, 30), 200
 
 
 def power_markdown() -> str:
-    """Power of each test against N for the defaults (``vibrofocus power``'s numbers), as markdown."""
-    from vibrofocus.simulation.power import TESTS, PowerDesign, run_power
+    """Power of each test against N under every hypothesis (``vibrofocus power``'s numbers), as markdown."""
+    from vibrofocus.simulation.bank import default_bank
+    from vibrofocus.simulation.hypotheses import available_hypotheses
+    from vibrofocus.simulation.power import DIRECTIONAL_TESTS, ROBUST_POWER, TESTS, PowerDesign, robust_conclusions, run_power
 
-    rows = run_power(PowerDesign(n_participants=POWER_SIZES, n_studies=POWER_STUDIES), local=True)["table"]
-    power = {(r["test"], r["n_participants"]): r["power"] for r in rows}
-    lines = [f"*{MODEL_LABEL}.* Power (share of {POWER_STUDIES} simulated studies with p < 0.05; binomial SE at "
-             "most 3.5 points) of each test against the number of participants N, from "
-             f"`vibrofocus power --participants {','.join(map(str, POWER_SIZES))} --studies {POWER_STUDIES}`.", "",
-             "| test | " + " | ".join(f"N = {n}" for n in POWER_SIZES) + " |",
-             "|---|" + "---:|" * len(POWER_SIZES)]
-    for key, label in TESTS:
-        lines.append(f"| {label} | " + " | ".join(f"{power[(key, n)]:.2f}" for n in POWER_SIZES) + " |")
+    names = available_hypotheses()
+    tables = {h: run_power(PowerDesign(n_participants=POWER_SIZES, n_studies=POWER_STUDIES, hypothesis=h),
+                           local=True)["table"] for h in names}
+    robust = {(r["test"], r["n_participants"]): r for r in robust_conclusions(tables)}
+    sizes = " / ".join(map(str, POWER_SIZES))
+    lines = ["*Simulated participants (a model, not data): " + "; ".join(hypothesis(h).label() for h in names)
+             + f".* Power (share of {POWER_STUDIES} simulated studies with p < 0.05; binomial SE at most 3.5 points) "
+             f"of each test at N = {sizes} participants, under each hypothesis, stimuli at {default_bank().levels} "
+             f"levels, from `vibrofocus power --participants {','.join(map(str, POWER_SIZES))} --studies "
+             f"{POWER_STUDIES}`. A conclusion (powered at {ROBUST_POWER:.0%} or not) is *robust* where every "
+             "hypothesis agrees; the last column gives them.", "",
+             "| test | " + " | ".join(f"`{h}`, N = {sizes}" for h in names) + " | robust conclusions |",
+             "|---|" + "---:|" * len(names) + "---|"]
+    for key, label in TESTS + DIRECTIONAL_TESTS:
+        powers = {h: {r["n_participants"]: r["power"] for r in tables[h] if r["test"] == key} for h in names}
+        verdicts = [f"N = {n}: {robust[(key, n)]['conclusion']}" for n in POWER_SIZES if robust[(key, n)]["robust"]]
+        lines.append(f"| {label} | " + " | ".join(" / ".join(f"{powers[h][n]:.2f}" for n in POWER_SIZES) for h in names)
+                     + f" | {'; '.join(verdicts) or 'none: the hypotheses disagree'} |")
     return "\n".join(lines)
+
+
+#: Where ``adopt`` writes the shipped fits.
+FITS_FILE = ROOT / "src" / "vibrofocus" / "simulation" / "data" / "hypotheses_fit.json"
+
+
+def _rounded(value):
+    if isinstance(value, (list, tuple)):
+        return [_rounded(v) for v in value]
+    return float(f"{value:.3g}") if isinstance(value, float) else value
+
+
+def adopt(paths: list[Path], versions: list[str]) -> int:
+    """Round the fits, score each on the held-out seeds, write hypotheses_fit.json; 0 on success."""
+    bank = default_bank()
+    wanted = dict(v.partition("=")[::2] for v in versions)
+    fits, scores = {}, {}
+    for path in paths:
+        fit = json.loads(path.read_text(encoding="utf-8"))
+        if fits and (fit["weights"], fit["budget"]) != (first["weights"], first["budget"]):
+            raise SystemExit(f"{path}: fitted with another budget or weights than {paths[0]}; fit all alike")
+        first = first if fits else fit
+        name = hypothesis(fit["hypothesis"]).name
+        if fit["levels"] != bank.levels:
+            raise SystemExit(f"{path}: fitted at {fit['levels']} levels, the shipped bank is at {bank.levels} levels")
+        fixed = {k: _rounded(v) for k, v in fit["model"].items()
+                 if k not in ("version", "integration_s") and v != getattr(PerceptualModel(), k)}
+        model = PerceptualModel().replace(**fixed)
+        held = loss(seed_statistics(model, HELD_OUT_SEEDS, bank=bank, hypothesis=name), fit["weights"])
+        fitted = loss(seed_statistics(model, FIT_SEEDS, bank=bank, hypothesis=name), fit["weights"])
+        scores[name] = held
+        fits[name] = {"version": wanted.get(name, hypothesis(name).version), "levels": fit["levels"],
+                      "bank_forearms": bank.n_forearms, "budget": fit["budget"], "weights": fit["weights"],
+                      "fit_seeds": fit["fit_seeds"],
+                      "loss_fit": round(fitted, 4), "held_out_seeds": [HELD_OUT_SEEDS.start, HELD_OUT_SEEDS.stop],
+                      "loss_held_out": round(held, 4), "model": fixed}
+        print(f"{name}: loss {fitted:.4f} on the fit seeds, {held:.4f} held out")
+    default = min(scores, key=scores.get)
+    doc = {"about": "Fits of the simulated participants' hypotheses (a MODEL, not data), written by "
+                    "scripts/fit_participants.py adopt; model: changes to PerceptualModel's defaults. The default "
+                    "hypothesis is the one of lowest held-out loss.",
+           "default": default, "hypotheses": fits}
+    write_text(FITS_FILE, json.dumps(doc, indent=1) + "\n", what="fits")
+    print(f"default: {default}; wrote {FITS_FILE}")
+    return 0
 
 
 def table(n_seeds: int, check: bool) -> int:
     seeds = range(n_seeds)
-    stats = seed_statistics(PerceptualModel(), seeds)
+    stats = seed_statistics(None, seeds)
     rows = compare(stats)
-    resid = (f"`scripts/fit_participants.py report` ({MODEL_LABEL}; the defaults, the table's {n_seeds} seeds; "
+    label = hypothesis().label()
+    resid = (f"`scripts/fit_participants.py report` ({label}; the default hypothesis, the table's {n_seeds} seeds; "
              "model: median over seeds):\n\n```\n" + residuals(stats) + "\n```")
     power = power_markdown()
     blocks = {
-        PAGES["docs"]: {"participants-table": comparison_markdown(rows, seeds),
+        PAGES["docs"]: {"participants-table": comparison_markdown(rows, seeds, label=label),
                         "participants-parameters": parameters_markdown(), "fit-residuals": resid,
                         "power-table": power},
-        PAGES["readme"]: {"participants-table": comparison_markdown(rows, seeds, short=True), "power-table": power},
+        PAGES["readme"]: {"participants-table": comparison_markdown(rows, seeds, short=True, label=label),
+                          "power-table": power},
     }
     stale = []
     for page, parts in blocks.items():
@@ -283,8 +366,14 @@ def main() -> int:
                    help="the integration window the --bank was built with (PerceptualModel.integration_s)")
     s.add_argument("--weight", action="append", default=[], metavar="KEY=W",
                    help="weight of one matched statistic's term (e.g. s1_interaction_F=3); repeatable")
+    s.add_argument("--hypothesis", default=None, help="the hypothesis to fit (default: the default one)")
+    a = sub.add_parser("adopt", help="ship fits: held-out losses, the default hypothesis, hypotheses_fit.json")
+    a.add_argument("fits", type=Path, nargs="+", help="fit files written by search, one per hypothesis")
+    a.add_argument("--version", action="append", default=[], metavar="NAME=V",
+                   help="version of a hypothesis' fitted model (bump it when its answers change); repeatable")
     r = sub.add_parser("report", help="the paper beside the model, with residuals")
-    r.add_argument("--fit", type=Path, default=None, help="a fit file (default: the model's defaults)")
+    r.add_argument("--fit", type=Path, default=None, help="a fit file (default: the hypothesis' fitted model)")
+    r.add_argument("--hypothesis", default=None, help="the hypothesis (default: the default one)")
     r.add_argument("--seeds", type=int, default=20)
     t = sub.add_parser("table", help="write the tables of docs/simulated-participants.md and README.md")
     t.add_argument("--seeds", type=int, default=20)
@@ -302,13 +391,15 @@ def main() -> int:
         bank = FeatureBank.load(args.bank) if args.bank else None
         window = None if args.integration_ms is None else args.integration_ms * 1e-3
         best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range,
-                      bank, window)
-        print("\nfit seeds:\n" + residuals(seed_statistics(best, FIT_SEEDS, bank=bank)))
-        print("\ntable seeds 0-19:\n" + residuals(seed_statistics(best, range(20), bank=bank)))
-        print("\nvalidation seeds 500-519:\n" + residuals(seed_statistics(best, range(500, 520), bank=bank)))
+                      bank, window, args.hypothesis)
+        for title, seeds in (("fit seeds", FIT_SEEDS), ("table seeds 0-19", range(20)),
+                             ("held-out seeds 500-519", HELD_OUT_SEEDS)):
+            print(f"\n{title}:\n" + residuals(seed_statistics(best, seeds, bank=bank, hypothesis=args.hypothesis)))
         return 0
+    if args.cmd == "adopt":
+        return adopt(args.fits, args.version)
     if args.cmd == "report":
-        print(residuals(seed_statistics(_load(args.fit), range(args.seeds))))
+        print(residuals(seed_statistics(_load(args.fit, args.hypothesis), range(args.seeds), hypothesis=args.hypothesis)))
         return 0
     return table(args.seeds, args.check)
 

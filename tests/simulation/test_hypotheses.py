@@ -8,7 +8,7 @@ import pytest
 from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import (
-    DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis)
+    DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, hypothesis_fits, register_hypothesis)
 from vibrofocus.simulation.perception import PerceptualModel, Traits, central_percepts
 
 MODEL = PerceptualModel()
@@ -25,8 +25,8 @@ def bump(xy, peak, width=3e-3):
 
 
 def test_the_registry_names_three_cited_hypotheses_and_refuses_unknown_ones():
-    assert available_hypotheses()[:3] == ("v3-centroid", "grid-peak", "level-reliability")
-    assert hypothesis().name == DEFAULT_HYPOTHESIS == "v3-centroid"
+    assert set(available_hypotheses()[:3]) == {"v3-centroid", "grid-peak", "level-reliability"}
+    assert hypothesis().name == DEFAULT_HYPOTHESIS == available_hypotheses()[0]
     for name in available_hypotheses():
         h = hypothesis(name)
         assert h.sources and h.title
@@ -69,13 +69,52 @@ def test_level_reliability_grows_with_the_recruited_activity():
     np.testing.assert_allclose(p[0], p[1], atol=1e-9)
 
 
-def test_the_fast_path_takes_a_hypothesis_and_v3_is_its_default():
+def test_the_fast_path_takes_a_hypothesis_with_its_fitted_model_and_the_default_is_the_default():
     bank = default_bank()
     a = simulate_cell_means(4, np.random.default_rng(3), bank=bank)
-    b = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis="v3-centroid")
+    b = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis=DEFAULT_HYPOTHESIS)
     np.testing.assert_array_equal(a.error_mm, b.error_mm)
-    c = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis="grid-peak")
+    other = next(n for n in available_hypotheses() if n != DEFAULT_HYPOTHESIS)
+    c = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis=other)
     assert not np.array_equal(a.error_mm, c.error_mm)
+    # Without a model, a hypothesis runs with its own fitted parameters, not the defaults'.
+    h = hypothesis(other)
+    d = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis=h, model=h.model())
+    np.testing.assert_array_equal(c.error_mm, d.error_mm)
+    if h.parameters:
+        e = simulate_cell_means(4, np.random.default_rng(3), bank=bank, hypothesis=h, model=PerceptualModel())
+        assert not np.array_equal(c.error_mm, e.error_mm)
+
+
+def test_a_hypothesis_model_is_the_defaults_changed_by_its_parameters():
+    h = Hypothesis(name="probe", version="1", title="t", sources="s", fitted=True, levels="paper",
+                   parameters={"sl_ref_db": 30.0, "acuity_sd_m": [0.002, 0.004]})
+    m = h.model()
+    assert m.sl_ref_db == 30.0 and m.acuity_sd_m == (0.002, 0.004)
+    assert m.prior_sd_m == PerceptualModel().prior_sd_m
+    assert "fitted at paper levels" in h.label() and h.to_dict()["parameters"]["sl_ref_db"] == 30.0
+    with pytest.raises(ValidationError, match="unknown perceptual model parameter"):
+        Hypothesis(name="probe", version="1", title="t", sources="s", parameters={"telepathy": 1.0})
+    unfitted = Hypothesis(name="probe", version="1", title="t", sources="s")
+    assert unfitted.model() == PerceptualModel() and "not refitted" in unfitted.label()
+
+
+def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_and_the_default_holds_best():
+    fits = hypothesis_fits()
+    shipped = fits["hypotheses"]
+    assert set(shipped) == set(available_hypotheses())
+    assert {f["levels"] for f in shipped.values()} == {default_bank().levels} == {"paper"}
+    assert len({tuple(sorted(f["budget"].items())) for f in shipped.values()}) == 1
+    assert len({tuple(sorted(f["weights"].items())) for f in shipped.values()}) == 1
+    assert len({tuple(f["fit_seeds"]) for f in shipped.values()}) == 1
+    held = {n: f["loss_held_out"] for n, f in shipped.items()}
+    assert DEFAULT_HYPOTHESIS == fits["default"] == min(held, key=held.get)
+    for name, fit in shipped.items():
+        h = hypothesis(name)
+        assert h.fitted and h.version == fit["version"] and "fitted at paper levels" in h.label()
+        assert h.model() == PerceptualModel().replace(**fit["model"])
+        # Held-out seeds are disjoint from the fit's.
+        assert set(range(*fit["held_out_seeds"])).isdisjoint(range(*fit["fit_seeds"]))
 
 
 def test_a_hypothesis_must_be_a_word_with_a_known_readout():
@@ -95,5 +134,25 @@ def test_the_documented_hypotheses_table_is_that_of_the_code():
     res = subprocess.run([sys.executable, str(root / "scripts" / "hypotheses_table.py"), "--print"],
                          capture_output=True, text=True, timeout=900, check=True)
     page = (root / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
-    block = page.split("<!-- hypotheses-measured:start -->\n", 1)[1].split("\n<!-- hypotheses-measured:end -->", 1)[0]
-    assert block == res.stdout.rstrip("\n")
+    blocks = [page.split(f"<!-- {name}:start -->\n", 1)[1].split(f"\n<!-- {name}:end -->", 1)[0]
+              for name in ("hypotheses-measured", "hypotheses-findings")]
+    assert "\n\n".join(blocks) == res.stdout.rstrip("\n")
+
+
+@pytest.mark.slow
+def test_the_recorded_held_out_losses_and_so_the_default_are_reproduced():
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
+    try:
+        from fit_participants import HELD_OUT_SEEDS, loss
+    finally:
+        sys.path.pop(0)
+    from vibrofocus.simulation.paper import seed_statistics
+
+    fits = hypothesis_fits()["hypotheses"]
+    for name, fit in fits.items():
+        assert tuple(fit["held_out_seeds"]) == (HELD_OUT_SEEDS.start, HELD_OUT_SEEDS.stop)
+        again = loss(seed_statistics(None, HELD_OUT_SEEDS, hypothesis=name), fit["weights"])
+        np.testing.assert_allclose(again, fit["loss_held_out"], rtol=1e-3, atol=1e-4)

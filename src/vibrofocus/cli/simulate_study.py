@@ -38,11 +38,12 @@ def simulate_study(
         help="Rendering methods the studies compare, comma separated: any registered ones, such as minimax "
              "(default the paper's funneling, inverse, combination).",
     ),
-    hypothesis: str = typer.Option(
-        "v3-centroid", "--hypothesis",
-        help="How the simulated participants read the felt field: v3-centroid (the fitted model v3) | grid-peak "
-             "(where it felt most intense inside the grid area) | level-reliability (weak taps localized less "
-             "reliably); see docs/simulated-participants.md. Stored with each session.",
+    hypothesis: str | None = typer.Option(
+        None, "--hypothesis",
+        help="How the simulated participants read the felt field: v3-centroid (the energy centroid of the whole "
+             "felt field) | grid-peak (where it felt most intense inside the grid area) | level-reliability (weak "
+             "taps localized less reliably). Default: the hypothesis whose fit holds best on held-out seeds; see "
+             "docs/simulated-participants.md, Hypotheses. Stored with each session.",
     ),
     levels: str = typer.Option(
         "paper", "--levels",

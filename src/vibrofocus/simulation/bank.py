@@ -254,6 +254,7 @@ def simulate_cell_means(
     bank : FeatureBank, optional
         Default :func:`default_bank`.
     model : PerceptualModel, optional
+        Default: the hypothesis' fitted model (:meth:`Hypothesis.model`).
     repetitions : int
         Trials per condition and study.
     methods, locations : tuple, optional
@@ -263,13 +264,14 @@ def simulate_cell_means(
         bank is large enough, else with replacement).
     hypothesis : str or Hypothesis, optional
         How the participants read the felt field
-        (:func:`~vibrofocus.simulation.hypotheses.hypothesis`; default v3's centroid).
+        (:func:`~vibrofocus.simulation.hypotheses.hypothesis`; default
+        :data:`~vibrofocus.simulation.hypotheses.DEFAULT_HYPOTHESIS`).
     """
     from .hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(hypothesis)
     b = bank if bank is not None else default_bank()
-    m = model or PerceptualModel()
+    m = model or h.model()
     if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
         raise ValidationError(f"n_participants must be an integer >= 1, got {n_participants!r}")
     if isinstance(repetitions, bool) or not isinstance(repetitions, (int, np.integer)) or repetitions < 1:

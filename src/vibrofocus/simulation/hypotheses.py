@@ -17,8 +17,10 @@ and model version (:meth:`Hypothesis.label`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+import json
+from dataclasses import dataclass, field
+from importlib import resources
+from typing import Any, Mapping
 
 import numpy as np
 
@@ -27,7 +29,7 @@ from ..errors import ValidationError
 from .perception import MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts
 
 __all__ = ["Hypothesis", "register_hypothesis", "hypothesis", "available_hypotheses", "DEFAULT_HYPOTHESIS",
-           "GRID_MARGIN_M", "PEAK_SOFTNESS_DB"]
+           "GRID_MARGIN_M", "PEAK_SOFTNESS_DB", "hypothesis_fits"]
 
 #: Margin of the grid area beyond the outer locations, m (half the 10 mm pitch): the
 #: area the participant sees numbered on the foil (the paper's Sec. II.D).
@@ -61,8 +63,14 @@ class Hypothesis:
         summed supra-threshold weights): a weak tap is localized less reliably, so the
         central prior pulls it harder toward the array centre.
     fitted : bool
-        Whether the model's parameters were fitted under this hypothesis (False: v3's
-        parameters, fitted under ``v3-centroid``, are used as they are).
+        Whether the model's parameters were fitted under this hypothesis (False: the
+        defaults of :class:`~vibrofocus.simulation.perception.PerceptualModel` are used as
+        they are).
+    parameters : mapping
+        The fitted parameters: changes to the defaults of
+        :class:`~vibrofocus.simulation.perception.PerceptualModel` (:meth:`model`).
+    levels : str or None
+        The level rule of the stimuli the parameters were fitted at (``"paper"``), or None.
     """
 
     name: str
@@ -72,22 +80,38 @@ class Hypothesis:
     readout: str = "centroid"
     level_reliability: bool = False
     fitted: bool = False
+    parameters: Mapping[str, Any] = field(default_factory=dict, hash=False)
+    levels: str | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or any(c.isspace() for c in self.name):
             raise ValidationError(f"a hypothesis' name must be a word, got {self.name!r}")
         check_choice(self.readout, "readout", ("centroid", "grid-peak"))
+        self.model()  # unknown parameter names fail here, at registration
+
+    def model(self) -> PerceptualModel:
+        """The perceptual model with this hypothesis' fitted parameters.
+
+        Returns
+        -------
+        PerceptualModel
+            The defaults changed by :attr:`parameters`.
+        """
+        return PerceptualModel().replace(**dict(self.parameters)) if self.parameters else PerceptualModel()
 
     def label(self) -> str:
         """What every output made under this hypothesis says of itself."""
-        fit = "" if self.fitted else " with v3's parameters, not refitted"
+        if not self.fitted:
+            fit = " with the model's default parameters, not refitted"
+        else:
+            fit = f" fitted at {self.levels} levels" if self.levels else ""
         return f"simulated participants: model v{MODEL_VERSION}, hypothesis {self.name} v{self.version}{fit}, not data"
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description."""
         return {"name": self.name, "version": self.version, "title": self.title, "sources": self.sources,
                 "readout": self.readout, "level_reliability": self.level_reliability, "fitted": self.fitted,
-                "label": self.label()}
+                "levels": self.levels, "parameters": dict(self.parameters), "label": self.label()}
 
     def percepts(
         self,
@@ -187,7 +211,7 @@ def register_hypothesis(h: Hypothesis, *, replace: bool = False) -> Hypothesis:
 
 def available_hypotheses() -> tuple[str, ...]:
     """Names of the registered hypotheses, the default first."""
-    return tuple(_REGISTRY)
+    return tuple(sorted(_REGISTRY, key=lambda n: n != DEFAULT_HYPOTHESIS))
 
 
 def hypothesis(name: str | Hypothesis | None = None) -> Hypothesis:
@@ -213,27 +237,54 @@ def hypothesis(name: str | Hypothesis | None = None) -> Hypothesis:
     return _REGISTRY[DEFAULT_HYPOTHESIS if name is None else name]
 
 
-register_hypothesis(Hypothesis(
-    name="v3-centroid", version=MODEL_VERSION, fitted=True, readout="centroid",
+def hypothesis_fits() -> dict[str, dict[str, Any]]:
+    """The fits of the hypotheses shipped with vibrofocus (``simulation/data/hypotheses_fit.json``).
+
+    Written by ``scripts/fit_participants.py adopt``: per hypothesis name, its version,
+    the fitted parameters (``model``), the level rule and feature bank they were fitted
+    on, the search budget, and the fit loss on the fit seeds and on held-out seeds.
+
+    Returns
+    -------
+    dict
+        ``{"default": name, "hypotheses": {name: fit}}``; empty ``hypotheses`` if none.
+    """
+    try:
+        text = resources.files("vibrofocus.simulation").joinpath("data/hypotheses_fit.json").read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return {"default": "v3-centroid", "hypotheses": {}}
+    return json.loads(text)
+
+
+def _builtin(name: str, **kw: Any) -> Hypothesis:
+    fit = hypothesis_fits()["hypotheses"].get(name)
+    if fit is not None:
+        kw.update(version=fit["version"], fitted=True, parameters=fit["model"], levels=fit["levels"])
+    return register_hypothesis(Hypothesis(name=name, **kw))
+
+
+_builtin(
+    "v3-centroid", version=MODEL_VERSION, fitted=True, readout="centroid",
     title="the place is the energy-law centroid of the whole felt field (perceptual model v3)",
     sources="energy-law funneling (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018), central prior "
             "(Cholewiak et al. 2020), cue conflict (Koerding et al. 2007); fitted to de Vlam et al. 2023, Sec. III",
-))
-register_hypothesis(Hypothesis(
-    name="grid-peak", version="1.0", readout="grid-peak",
+)
+_builtin(
+    "grid-peak", version="1.0", readout="grid-peak",
     title="the place is where it felt most intense inside the grid area (a soft peak of the felt level)",
     sources="the paper's instruction: the participant types the grid number where the stimulus felt most "
             "intense, on a foil over the grid (de Vlam et al. 2023, Sec. II.D); the softness "
             f"({PEAK_SOFTNESS_DB:g} dB) and the area (the locations plus {GRID_MARGIN_M * 1e3:g} mm) are assumptions",
-))
-register_hypothesis(Hypothesis(
-    name="level-reliability", version="1.0", readout="centroid", level_reliability=True,
+)
+_builtin(
+    "level-reliability", version="1.0", readout="centroid", level_reliability=True,
     title="v3's centroid, with a reliability that grows with the recruited activity, so weak taps are pulled "
           "to the centre",
     sources="reliability-weighted cue combination with a prior (Koerding et al. 2007); localization improves "
             "with intensity (an assumption of form here: reliability activity / (activity + one reference tap))",
-))
+)
 
-#: The hypothesis simulated participants use unless told: v3's, the only one fitted so far
-#: (docs/simulated-participants.md, "Hypotheses", says how the default is to be chosen).
-DEFAULT_HYPOTHESIS = "v3-centroid"
+#: The hypothesis simulated participants use unless told: the one whose fit, at the paper's
+#: levels, holds best on held-out seeds (``hypothesis_fits()["default"]``; how it is chosen:
+#: docs/simulated-participants.md, "Hypotheses").
+DEFAULT_HYPOTHESIS: str = hypothesis_fits()["default"]

@@ -174,17 +174,21 @@ def seed_statistics(
     *,
     n_participants: int = N_PARTICIPANTS,
     bank: FeatureBank | None = None,
+    hypothesis: Any = None,
 ) -> list[dict[str, Any]]:
     """Statistics of one simulated study per seed (study ``s`` draws from ``default_rng([s, 16])``).
 
     Parameters
     ----------
     model : PerceptualModel, optional
-        Default: the fitted model (the defaults).
+        Default: the hypothesis' fitted model.
     seeds : iterable of int
     n_participants : int
     bank : FeatureBank, optional
         Default :func:`~vibrofocus.simulation.bank.default_bank`.
+    hypothesis : str or Hypothesis, optional
+        How the participants read the felt field (default
+        :data:`~vibrofocus.simulation.hypotheses.DEFAULT_HYPOTHESIS`).
 
     Returns
     -------
@@ -192,8 +196,12 @@ def seed_statistics(
         :func:`~vibrofocus.simulation.power.study_statistics` of each study.
     """
     b = bank if bank is not None else default_bank()
-    m = model or PerceptualModel()
-    return [study_statistics(simulate_cell_means(n_participants, np.random.default_rng([int(s), 16]), bank=b, model=m),
+    from .hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
+    m = model or h.model()
+    return [study_statistics(simulate_cell_means(n_participants, np.random.default_rng([int(s), 16]), bank=b, model=m,
+                                                 hypothesis=h),
                              methods=b.methods)
             for s in seeds]
 
@@ -249,7 +257,8 @@ def _num(row: dict[str, Any]) -> str:
     return f"{row['median']:.{d}f} [{row['low']:.{d}f}, {row['high']:.{d}f}]"
 
 
-def comparison_markdown(rows: list[dict[str, Any]], seeds: range, *, short: bool = False) -> str:
+def comparison_markdown(rows: list[dict[str, Any]], seeds: range, *, short: bool = False,
+                        label: str = MODEL_LABEL) -> str:
     """A markdown table of :func:`compare` rows, headed by the model notice.
 
     Parameters
@@ -259,8 +268,11 @@ def comparison_markdown(rows: list[dict[str, Any]], seeds: range, *, short: bool
         Seeds of the simulated studies the rows summarize (for the heading).
     short : bool
         Only the rows marked ``short`` and no criterion column (README).
+    label : str
+        The notice (default the model's; pass the hypothesis' label,
+        :meth:`~vibrofocus.simulation.hypotheses.Hypothesis.label`).
     """
-    head = (f"*{MODEL_LABEL}.* {len(seeds)} simulated studies of {N_PARTICIPANTS} participants "
+    head = (f"*{label}.* {len(seeds)} simulated studies of {N_PARTICIPANTS} participants "
             f"(seeds {seeds.start}-{seeds.stop - 1}); model: median [90 % interval] over the seeds; reproduced: "
             "share of seeds in which the row's direction and significance are those of the paper.")
     lines = [head, ""]

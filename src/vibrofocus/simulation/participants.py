@@ -77,8 +77,8 @@ class SimulatedParticipant:
             raise StudyError(f"participant seed must be a non-negative integer, got {seed!r}")
         self.forearm = forearm
         self.seed = int(seed)
-        self.model = model if model is not None else PerceptualModel()
         self.hypothesis = find_hypothesis(hypothesis)
+        self.model = model if model is not None else self.hypothesis.model()
         self.traits = Traits.draw(self.model, self.seed)
         layout = forearm.layout
         self.locations_xy = np.asarray(layout.locations_xy, dtype=float)

@@ -15,7 +15,7 @@ split into tasks, nor on the scheduler (one process, a LocalCluster or a cluster
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -79,11 +79,11 @@ class PowerDesign:
         Significance level.
     seed : int
         Master seed.
-    model : PerceptualModel
-        The perceptual model (its effect sizes).
-    hypothesis : str
+    model : PerceptualModel or None
+        The perceptual model (its effect sizes); None: the hypothesis' fitted model.
+    hypothesis : str or None
         How the simulated participants read the felt field
-        (:mod:`vibrofocus.simulation.hypotheses`; default v3's centroid).
+        (:mod:`vibrofocus.simulation.hypotheses`; None: the default hypothesis).
     """
 
     n_participants: tuple[int, ...] = (10, 15, 20, 25, 30)
@@ -93,8 +93,8 @@ class PowerDesign:
     locations: tuple[int, ...] | None = None
     alpha: float = 0.05
     seed: int = 0
-    model: PerceptualModel = field(default_factory=PerceptualModel)
-    hypothesis: str = "v3-centroid"
+    model: PerceptualModel | None = None
+    hypothesis: str | None = None
 
     def __post_init__(self) -> None:
         from .._validation import shorten
@@ -470,7 +470,8 @@ def run_power(
             "n_participants": list(design.n_participants), "n_studies": design.n_studies,
             "repetitions": design.repetitions, "methods": list(design.methods or b.methods),
             "locations": list(design.locations or range(1, len(b.locations_xy) + 1)),
-            "alpha": design.alpha, "seed": design.seed, "model": design.model.to_dict(),
+            "alpha": design.alpha, "seed": design.seed,
+            "model": (design.model or find_hypothesis(design.hypothesis).model()).to_dict(),
             "hypothesis": design.hypothesis,
         },
         "results": results,

@@ -214,10 +214,11 @@ def simulate_studies(
                         f"{asked_levels!r}; use those levels or another database"
                     )
                 stored_h = info.config.get("hypothesis", "v3-centroid")  # before hypotheses were stored: v3
-                if stored_h != chosen.name:
+                stored_v = info.config.get("hypothesis_version", chosen.version)
+                if stored_h != chosen.name or stored_v != chosen.version:
                     raise StudyError(
-                        f"{db} holds participant {pid} simulated under the hypothesis {stored_h!r}, not "
-                        f"{chosen.name!r}; use that hypothesis or another database"
+                        f"{db} holds participant {pid} simulated under the hypothesis {stored_h!r} v{stored_v}, not "
+                        f"{chosen.name!r} v{chosen.version}; use that hypothesis or another database"
                     )
                 # The stored seed wins over the derivation: the participant stays who it was.
                 pseed = int(info.config.get("participant_seed", pseed))
