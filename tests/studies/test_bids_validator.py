@@ -68,7 +68,7 @@ def _minimax_database(path: Path) -> Path:
 
 def _onset_csv(path: Path) -> Path:
     path.write_text(CSV_HEADER + "".join(
-        f"P01,1,main,{k + 1},{'minimax' if k % 2 else 'inverse'},5,5,0.4,3,completed,0,{500.25 + 2.5 * k!r},"
+        f"P01,1,main,{k + 1},{('inverse', 'minimax', 'lab_taps', 'inverse')[k]},5,5,0.4,3,completed,0,{500.25 + 2.5 * k!r},"
         f"{1.0 + 2.5 * k!r},simulated_samples\n" for k in range(4)))
     return path
 
@@ -132,6 +132,14 @@ def test_mne_bids_reads_every_event_of_a_csv_with_onsets(tmp_path):
     (events,) = out.glob("sub-P01/ses-3/beh/sub-P01_ses-3_task-localization1_events.tsv")
     onsets = [float(line.split("\t")[0]) for line in events.read_text().splitlines()[1:]]
     assert onsets == pytest.approx([0.0, 2.5, 5.0, 7.5], abs=1e-12)  # onset_host_s - the first
+
+
+def test_a_labs_own_method_is_a_described_level(tmp_path):
+    out = tmp_path / "bids"
+    export_bids(_onset_csv(tmp_path / "t.csv"), out)
+    (sidecar,) = out.glob("sub-P01/ses-3/beh/*_events.json")
+    levels = json.loads(sidecar.read_text())["method"]["Levels"]
+    assert set(levels) == {"inverse", "minimax", "lab_taps"} and "lab's own" in levels["lab_taps"]
 
 
 def test_levels_come_from_the_data_and_no_column_is_named_like_an_entity(tmp_path):

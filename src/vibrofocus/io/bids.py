@@ -208,6 +208,19 @@ def levels_from_data(values: Iterable[Any], described: Mapping[str, str], unknow
 def check_bids_metadata(metadata: Mapping[str, Any] | None, name: str = "metadata") -> dict[str, Any]:
     """The dataset's metadata checked: keys of :data:`METADATA_KEYS`, texts or lists of texts.
 
+    Parameters
+    ----------
+    metadata : mapping or None
+        Key -> text, or list of texts for ``Authors``, ``Funding``, ``EthicsApprovals``,
+        ``ReferencesAndLinks`` and ``Keywords``.
+    name : str
+        What the messages call it (an option, a file).
+
+    Returns
+    -------
+    dict
+        The metadata, texts stripped of surrounding blanks (``{}`` for None).
+
     Raises
     ------
     ValidationError
@@ -248,6 +261,16 @@ def read_bids_metadata_file(path: str | os.PathLike) -> dict[str, Any]:
     ``BIDSVersion``, ``DatasetType`` and ``GeneratedBy`` are skipped (vibrofocus writes
     them); any other key must be one of :data:`METADATA_KEYS`.
 
+    Parameters
+    ----------
+    path : path-like
+        The JSON file (an input: no output of the command may replace it).
+
+    Returns
+    -------
+    dict
+        As :func:`check_bids_metadata` returns.
+
     Raises
     ------
     ValidationError
@@ -281,6 +304,16 @@ def read_bids_metadata(root: str | os.PathLike) -> dict[str, Any]:
     Read from ``dataset_description.json`` and from the events sidecars vibrofocus wrote
     there (listed in its manifest); what is unreadable or of the wrong type is skipped.
     A missing folder gives ``{}``.
+
+    Parameters
+    ----------
+    root : path-like
+        The dataset folder.
+
+    Returns
+    -------
+    dict
+        Key of :data:`METADATA_KEYS` -> its value.
     """
     from .bids_merge import read_manifest
 

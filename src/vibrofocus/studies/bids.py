@@ -223,12 +223,12 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         infos = [s for s in sessions.get((pid, study), []) if session is None or s["Session"] == session]
         columns: dict[str, Any] = {
             "method": {**EVENT_COLUMN_DESCRIPTIONS["method"], "Levels": _method_levels([e["method"] for e in events])},
-            "levels": {**EVENT_COLUMN_DESCRIPTIONS["levels"],
-                       "Levels": levels_from_data([e["levels"] for e in events],
-                                                  EVENT_COLUMN_DESCRIPTIONS["levels"]["Levels"],
-                                                  "a level rule of the session's protocol")},
             "device_clock": clock_column,
         }
+        rules = levels_from_data([e["levels"] for e in events], EVENT_COLUMN_DESCRIPTIONS["levels"]["Levels"],
+                                 "a level rule of the session's protocol")
+        if rules:  # else every cell is n/a: the known rules stay described
+            columns["levels"] = {**EVENT_COLUMN_DESCRIPTIONS["levels"], "Levels": rules}
         if _ONSET_NOTE[clock]:
             columns["onset"] = {**EVENT_COLUMN_DESCRIPTIONS["onset"], "Description": _ONSET_NOTE[clock]}
         versions = sorted({str(i["SoftwareVersion"]) for i in infos if i.get("SoftwareVersion")})
