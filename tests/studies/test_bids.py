@@ -111,6 +111,25 @@ def test_a_trials_csv_exports_the_same_rows_and_onsets_and_analyze_reads_the_fol
     assert reports["bids"]["simulated"]["any"] is True
 
 
+def test_the_official_validator_accepts_the_database_and_csv_exports_and_mne_bids_reads_every_event(study):
+    from tests.studies.test_bids_validator import METADATA, every_event_read_by_mne_bids, expected_warnings, validate
+
+    root, db, trials = study
+    expected = expected_warnings()["always"]
+    template = root / "template.json"
+    template.write_text(json.dumps({"BIDSVersion": "1.9.0", "InstitutionAddress": METADATA["InstitutionAddress"],
+                                    "InstitutionalDepartmentName": "Haptics"}))
+    for name, source in (("db", db), ("csv", trials)):
+        out = root / f"bids-validated-{name}"
+        result = runner.invoke(app, ["export", str(source), "--bids", str(out), "--author", "Ada Lovelace",
+                                     "--author", "Alan Turing", "--license", "CC0", "--institution", "Example Lab",
+                                     "--metadata", str(template)])
+        assert result.exit_code == 0, result.output
+        status, issues = validate(out)
+        assert status == 0 and {i[1:] for i in issues} <= expected, issues
+        every_event_read_by_mne_bids(out)
+
+
 def test_a_dataset_written_before_the_device_columns_and_sessions_is_still_read(study):
     from vibrofocus.io.bids import read_bids_trials_table
 

@@ -33,14 +33,14 @@ def _validator() -> str:
     return found
 
 
-def _validate(folder: Path) -> tuple[int, list[tuple[str, str, str]]]:
+def validate(folder: Path) -> tuple[int, list[tuple[str, str, str]]]:
     """The validator's exit status and its issues as (severity, code, subCode)."""
     out = subprocess.run([_validator(), str(folder), "--json"], capture_output=True, text=True, timeout=300)
     issues = json.loads(out.stdout)["issues"]["issues"]
     return out.returncode, [(i["severity"], i["code"], i.get("subCode") or "") for i in issues]
 
 
-def _expected_warnings() -> dict[str, set[tuple[str, str]]]:
+def expected_warnings() -> dict[str, set[tuple[str, str]]]:
     """docs/bids.md's table of the warnings behaviour-only data keeps: 'always' and 'without metadata'."""
     rows = re.findall(r"^\| `([A-Z_]+)` \|\s*`?([A-Za-z]*)`?\s*\| (always|without metadata) \|", DOCS.read_text(),
                       re.MULTILINE)
@@ -74,45 +74,25 @@ def _onset_csv(path: Path) -> Path:
 
 
 def test_the_official_validator_accepts_every_export_with_only_the_documented_warnings(tmp_path):
-    expected = _expected_warnings()
+    expected = expected_warnings()
     db = _minimax_database(tmp_path / "minimax.db")
     csv_path = _onset_csv(tmp_path / "trials.csv")
     for name, source in (("minimax", db), ("csv", csv_path)):
         out = tmp_path / f"bids-{name}"
         export_bids(source, out, metadata=METADATA)
-        status, issues = _validate(out)
+        status, issues = validate(out)
         assert status == 0 and [i for i in issues if i[0] == "error"] == [], issues
         assert {i[1:] for i in issues} <= expected["always"], issues
         # Without metadata: still no error, and the warnings the docs list for that.
         bare = tmp_path / f"bare-{name}"
         export_bids(source, bare)
-        status, issues = _validate(bare)
+        status, issues = validate(bare)
         assert status == 0 and [i for i in issues if i[0] == "error"] == [], issues
         assert {i[1:] for i in issues} <= expected["always"] | expected["without metadata"], issues
         assert ("NO_AUTHORS", "Authors") in {i[1:] for i in issues}
 
 
-@pytest.mark.slow
-def test_the_validator_accepts_a_simulated_study_from_its_database_and_its_csv(tmp_path):
-    db, trials = tmp_path / "study.db", tmp_path / "trials.csv"
-    result = runner.invoke(app, ["simulate-study", "-n", "1", "--seed", "3", "--db", str(db), "--trials-csv",
-                                 str(trials), "--quiet"])
-    assert result.exit_code == 0, result.output
-    expected = _expected_warnings()["always"]
-    for name, source in (("db", db), ("csv", trials)):
-        out = tmp_path / f"bids-{name}"
-        args = ["export", str(source), "--bids", str(out), "--author", "Ada Lovelace", "--author", "Alan Turing",
-                "--license", "CC0", "--institution", "Example Lab"]
-        template = tmp_path / "template.json"
-        template.write_text(json.dumps({"BIDSVersion": "1.9.0", "InstitutionAddress": METADATA["InstitutionAddress"],
-                                        "InstitutionalDepartmentName": "Haptics"}))
-        assert runner.invoke(app, [*args, "--metadata", str(template)]).exit_code == 0
-        status, issues = _validate(out)
-        assert status == 0 and {i[1:] for i in issues} <= expected, issues
-        _every_event_read_by_mne_bids(out)
-
-
-def _every_event_read_by_mne_bids(folder: Path) -> None:
+def every_event_read_by_mne_bids(folder: Path) -> None:
     """mne-bids reads each events file's rows with numeric onsets (it drops rows whose onset is n/a)."""
     mne_bids = pytest.importorskip("mne_bids")
     files = sorted(folder.glob("sub-*/ses-*/beh/*_events.tsv"))
@@ -128,7 +108,7 @@ def test_mne_bids_reads_every_event_of_a_csv_with_onsets(tmp_path):
     csv_path = _onset_csv(tmp_path / "trials.csv")
     out = tmp_path / "bids"
     export_bids(csv_path, out)
-    _every_event_read_by_mne_bids(out)
+    every_event_read_by_mne_bids(out)
     (events,) = out.glob("sub-P01/ses-3/beh/sub-P01_ses-3_task-localization1_events.tsv")
     onsets = [float(line.split("\t")[0]) for line in events.read_text().splitlines()[1:]]
     assert onsets == pytest.approx([0.0, 2.5, 5.0, 7.5], abs=1e-12)  # onset_host_s - the first
