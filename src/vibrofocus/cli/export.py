@@ -27,7 +27,7 @@ def export_command(
     band_only: bool = typer.Option(False, "--band-only", help="With --sofa: only the calibrated band, with the "
                                                               "coherence beside H (the variable Coherence)."),
     force: bool = typer.Option(False, "--force", help=_FORCE_HELP),
-    author: list[str] = typer.Option(None, "--author", show_default=False,
+    author: list[str] = typer.Option(None, "--author", show_default=False, metavar="<str>",
                                      help="An author of the dataset (dataset_description.json Authors); repeat "
                                           "for each, in order. With --sofa: GLOBAL_AuthorContact."),
     license_: str = typer.Option(None, "--license", show_default=False,
@@ -45,16 +45,16 @@ def export_command(
 ) -> None:
     """Export the localization studies as a BIDS behavioural dataset, or a calibration as a SOFA file.
 
-    Writes dataset_description.json, participants.tsv/.json and, per participant and study,
-    sub-<id>/beh/sub-<id>_task-localization<1|2>_events.tsv with its JSON sidecar: one row per
-    answered trial. A new DIR is built beside it and put in place as a whole. Into an
+    Writes dataset_description.json, participants.tsv/.json and, per participant and study
+    session, sub-<id>/ses-<n>/beh/..._task-localization<1|2>_events.tsv with its JSON
+    sidecar: one row per answered trial. A new DIR is built beside it and put in place as a whole. Into an
     existing dataset (EEG, MRI, another study's export) the behavioural files are added:
     only files vibrofocus wrote there (listed with their hashes in DIR/.vibrofocus-bids.json)
     are replaced, participants.tsv/.json are merged keeping every column and row of
     yours, and nothing is deleted; a file of yours where the export would write is
     refused unless --force. Simulated participants are labelled as a model.
 
-    Each study session is a BIDS session (sub-<id>/ses-<session>/beh/...); onset counts
+    A source without sessions (a trials CSV without a session column) has no ses-. Onset counts
     from the session's first stimulus on the host's monotonic clock (a trials CSV with
     onset_host_s has it too). Authors, License and the institution come from the options
     or a --metadata template, and a re-export keeps what the dataset holds; docs/bids.md
