@@ -3,8 +3,8 @@ A study as a BIDS dataset, opened with pybids
 =============================================
 
 ``vibrofocus export study.sqlite --bids bids/`` writes the answered trials as a BIDS
-behavioural dataset: ``participants.tsv`` and, per participant and study,
-``sub-<id>/beh/sub-<id>_task-localization<1|2>_events.tsv`` with a JSON sidecar that
+behavioural dataset: ``participants.tsv`` and, per participant and study session,
+``sub-<id>/ses-<n>/beh/sub-<id>_ses-<n>_task-localization<1|2>_events.tsv`` with a JSON sidecar that
 describes every column and records the rig, the calibration's hash, the skin preset and
 whether the participant is simulated. pybids opens it like any other dataset. The
 participant here is simulated: a perceptual model, not data.
@@ -21,7 +21,8 @@ from vibrofocus.studies import export_bids
 with tempfile.TemporaryDirectory() as tmp:
     db = Path(tmp) / "study.sqlite"
     simulate_studies(db, n_participants=1, seed=3)
-    counts = export_bids(db, Path(tmp) / "bids")
+    counts = export_bids(db, Path(tmp) / "bids", metadata={"Authors": ["A. Researcher", "B. Researcher"],
+                                                             "License": "CC0"})
     layout = bids.BIDSLayout(Path(tmp) / "bids")
     print(layout)
     print(f"exported {counts['events']} trials")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from vibrofocus.calibration import export_sofa, import_sofa
-from vibrofocus.errors import CalibrationFileError
+from vibrofocus.errors import CalibrationFileError, ValidationError
 
 sofar = pytest.importorskip("sofar")
 pyfar = pytest.importorskip("pyfar")
@@ -158,3 +158,80 @@ def test_a_file_of_another_tool_without_descriptions_still_reads(sofa_file, tmp_
     back = import_sofa(edited)
     assert back["layout"] is None and back["fs"] == 2 * cal.freqs[-1]
     assert back["band"] == (cal.freqs[0], cal.freqs[-1])
+
+
+# --------------------------------------------------------------------------- units, dates, band, CLI
+def _sofar_verify_for_writing(path):
+    """sofar's strictest check: the convention as for writing a file (units in lower case and all)."""
+    sofa = sofar.read_sofa(str(path), verify=True, verbose=False)
+    sofa.verify(issue_handling="raise", mode="write")
+    return sofa
+
+
+def test_units_date_and_authorship_are_in_the_file(sofa_file, tmp_path):
+    from datetime import datetime
+
+    cal, _ = sofa_file
+    path = export_sofa(cal, tmp_path / "who.sofa", author_contact="Ada Lovelace <ada@example.org>",
+                       organization="Example Lab", license="CC-BY-4.0")
+    sofa = _sofar_verify_for_writing(path)
+    assert (sofa.Data_Real_Units, sofa.Data_Imag_Units) == ("metre/volt", "metre/volt")
+    assert (sofa.N_Units, sofa.ReceiverPosition_Units, sofa.EmitterPosition_Units) == ("hertz", "metre", "metre")
+    created = datetime.fromisoformat(cal.created)
+    assert sofa.GLOBAL_DateCreated == created.strftime("%Y-%m-%d %H:%M:%S")  # the calibration's, not the export's
+    assert sofa.GLOBAL_AuthorContact == "Ada Lovelace <ada@example.org>"
+    assert (sofa.GLOBAL_Organization, sofa.GLOBAL_License) == ("Example Lab", "CC-BY-4.0")
+    assert not hasattr(sofa, "Coherence")
+    with pytest.raises(ValidationError, match="organization must be a text without control characters"):
+        export_sofa(cal, tmp_path / "bad.sofa", organization="Lab\nname")
+    assert not (tmp_path / "bad.sofa").exists()
+
+
+def test_the_band_option_keeps_the_calibrated_band_with_its_coherence(sofa_file, tmp_path):
+    cal, _ = sofa_file
+    path = export_sofa(cal, tmp_path / "band.sofa", band_only=True)
+    sofa = _sofar_verify_for_writing(path)
+    inside = (cal.freqs >= cal.band[0]) & (cal.freqs <= cal.band[1])
+    assert 2 <= inside.sum() < len(cal.freqs)
+    np.testing.assert_array_equal(sofa.N, cal.freqs[inside])
+    assert sofa.Coherence.shape == sofa.Data_Real.shape == (1, cal.layout.n_points, inside.sum(),
+                                                            cal.layout.n_actuators)
+    assert sofa.Coherence_Units == "1"
+    back = import_sofa(path)
+    assert np.max(np.abs(back["H"] - cal.H[inside])) <= 1e-12 * np.max(np.abs(cal.H))
+    np.testing.assert_allclose(back["coherence"], cal.coherence[inside], rtol=0, atol=1e-15)
+    assert tuple(back["band"]) == tuple(cal.band) and back["layout"] == cal.layout
+    data, _, _ = pyfar.io.convert_sofa(sofar.read_sofa(str(path), verbose=False))
+    np.testing.assert_allclose(data.frequencies, cal.freqs[inside], rtol=0, atol=1e-12)
+
+
+def test_the_export_command_writes_a_sofa_file_from_a_calibration(sofa_file, tmp_path):
+    from typer.testing import CliRunner
+
+    from vibrofocus.calibration import save_calibration
+    from vibrofocus.cli.main import app
+
+    cal, _ = sofa_file
+    nc = tmp_path / "FIR.nc"
+    save_calibration(cal, nc)
+    runner = CliRunner()
+    out = tmp_path / "FIR.sofa"
+    result = runner.invoke(app, ["export", str(nc), "--sofa", str(out), "--band-only", "--author", "Ada Lovelace",
+                                 "--institution", "Example Lab", "--license", "CC0"])
+    assert result.exit_code == 0, result.output
+    assert "calibrated band" in result.output
+    sofa = _sofar_verify_for_writing(out)
+    assert (sofa.GLOBAL_AuthorContact, sofa.GLOBAL_Organization, sofa.GLOBAL_License) == (
+        "Ada Lovelace", "Example Lab", "CC0")
+    assert hasattr(sofa, "Coherence")
+    sofa_out = ["--sofa", str(tmp_path / "x.sofa")]
+    for args, words in (([*sofa_out, "--bids", str(tmp_path / "b")], "give one of --bids"),
+                        ([], "give one of --bids"),
+                        ([*sofa_out, "--metadata", str(nc)], "--metadata is a BIDS template")):
+        result = runner.invoke(app, ["export", str(nc), *args])
+        assert result.exit_code == 2 and result.output.count("error:") == 1 and words in result.output, result.output
+    # The calibration itself is never the output.
+    before = nc.read_bytes()
+    result = runner.invoke(app, ["export", str(nc), "--sofa", str(nc)])
+    assert result.exit_code == 2 and nc.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["FIR.nc", "FIR.sofa"]

@@ -60,7 +60,10 @@ def test_every_trial_of_a_simulated_study_is_an_events_row_in_pybids(study):
         assert list(df.columns) == list(EVENT_COLUMNS)
         assert list(df["trial"]) == [r["trial"] for r in mine] and list(df["method"]) == [r["method"] for r in mine]
         assert list(df["response_time"]) == pytest.approx([r["rt_s"] for r in mine], abs=0)
-        assert df["onset"].iloc[0] == 0 and (df["onset"].diff().iloc[1:] >= 0).all()
+        # onset: the monotonic onset the database stores, from the session's first (not the wall clock).
+        host = [r["onset_host_s"] for r in mine]
+        assert list(df["onset"]) == pytest.approx([h - min(host) for h in host], abs=1e-9)
+        assert ents["session"] == str(mine[0]["session"]) and {r["session"] for r in mine} == {mine[0]["session"]}
         # The onset on the rig's own clock, every digit as the database holds it.
         assert list(df["device_onset"]) == [r["onset_device_s"] for r in mine]
         assert set(df["device_clock"]) == {"simulated_samples"}
@@ -83,7 +86,7 @@ def test_every_trial_of_a_simulated_study_is_an_events_row_in_pybids(study):
     assert "SIMULATED" in (out / "README").read_text()
 
 
-def test_a_trials_csv_exports_the_same_rows_without_times_and_analyze_reads_the_folder(study):
+def test_a_trials_csv_exports_the_same_rows_and_onsets_and_analyze_reads_the_folder(study):
     root, db, trials = study
     out = root / "bids-csv"
     assert runner.invoke(app, ["export", str(trials), "--bids", str(out)]).exit_code == 0
@@ -92,7 +95,12 @@ def test_a_trials_csv_exports_the_same_rows_without_times_and_analyze_reads_the_
     layout = bids.BIDSLayout(out, validate=True)
     dfs = [f.get_df() for f in _events(layout)]
     assert sum(len(df) for df in dfs) == n_csv
-    assert all(df["onset"].isna().all() for df in dfs)  # a trials CSV stores no times: n/a
+    # The CSV's onset_host_s gives the same onsets as the database.
+    assert runner.invoke(app, ["export", str(db), "--bids", str(root / "bids-db-onsets")]).exit_code == 0
+    from_db = {f.filename: f.get_df()["onset"] for f in _events(bids.BIDSLayout(root / "bids-db-onsets"))}
+    for f in _events(layout):
+        assert f.get_df()["onset"].notna().all()
+        assert list(f.get_df()["onset"]) == pytest.approx(list(from_db[f.filename]), abs=1e-9)
     reports = {}
     for name, source in (("csv", trials), ("bids", out)):
         result = runner.invoke(app, ["analyze", str(source), "--out", str(root / f"report-{name}"), "-q"])
@@ -103,21 +111,48 @@ def test_a_trials_csv_exports_the_same_rows_without_times_and_analyze_reads_the_
     assert reports["bids"]["simulated"]["any"] is True
 
 
-def test_a_dataset_written_before_the_device_columns_is_still_read(study):
+def test_the_official_validator_accepts_the_database_and_csv_exports_and_mne_bids_reads_every_event(study):
+    from tests.studies.test_bids_validator import METADATA, every_event_read_by_mne_bids, expected_warnings, validate
+
+    root, db, trials = study
+    expected = expected_warnings()["always"]
+    template = root / "template.json"
+    template.write_text(json.dumps({"BIDSVersion": "1.9.0", "InstitutionAddress": METADATA["InstitutionAddress"],
+                                    "InstitutionalDepartmentName": "Haptics"}))
+    for name, source in (("db", db), ("csv", trials)):
+        out = root / f"bids-validated-{name}"
+        result = runner.invoke(app, ["export", str(source), "--bids", str(out), "--author", "Ada Lovelace",
+                                     "--author", "Alan Turing", "--license", "CC0", "--institution", "Example Lab",
+                                     "--metadata", str(template)])
+        assert result.exit_code == 0, result.output
+        status, issues = validate(out)
+        assert status == 0 and {i[1:] for i in issues} <= expected, issues
+        every_event_read_by_mne_bids(out)
+
+
+def test_a_dataset_written_before_the_device_columns_and_sessions_is_still_read(study):
     from vibrofocus.io.bids import read_bids_trials_table
 
     root, db, _ = study
     out = root / "bids-old"
     assert runner.invoke(app, ["export", str(db), "--bids", str(out)]).exit_code == 0
     new = read_bids_trials_table(out)
-    for path in out.glob("sub-*/beh/*_events.tsv"):  # as an older vibrofocus wrote it
-        # Without the device columns and the stimulus columns (levels, drive_peak_v, target_peak_um).
+    for path in list(out.glob("sub-*/ses-*/beh/*_events.tsv")):  # as an older vibrofocus wrote it
+        # No ses- (a session_id column instead), no device or stimulus columns.
+        session = path.parent.parent.name.removeprefix("ses-")
         lines = [line.split("\t")[:-5] for line in path.read_text().splitlines()]
         assert lines[0][-1] == "dry_run"
-        path.write_text("".join("\t".join(cells) + "\n" for cells in lines))
+        lines = [cells[:9] + [session if k else "session_id"] + cells[9:] for k, cells in enumerate(lines)]
+        old_path = path.parent.parent.parent / "beh" / path.name.replace(f"_ses-{session}", "")
+        old_path.parent.mkdir(exist_ok=True)
+        old_path.write_text("".join("\t".join(cells) + "\n" for cells in lines))
+        path.with_suffix(".json").rename(old_path.with_suffix(".json"))
+        path.unlink()
     old = read_bids_trials_table(out)
     assert set(new.columns) - set(old.columns) == {"levels", "drive_peak_v", "target_peak_um"}
-    assert old.equals(new[list(old.columns)])
+    key = ["participant", "study", "phase", "trial"]
+    assert old.drop(columns="line").sort_values(key).reset_index(drop=True).equals(
+        new[list(old.columns)].drop(columns="line").sort_values(key).reset_index(drop=True))
 
 
 def test_the_export_never_replaces_its_input_and_keeps_the_users_files(study):

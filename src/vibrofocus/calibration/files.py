@@ -208,12 +208,14 @@ def load_calibration(path: str | os.PathLike) -> Calibration:
     return calibration_from_record(read_calibration_file(path), path)
 
 
-def export_sofa(cal: Calibration, path: str | os.PathLike, *, force: bool = False) -> Path:
+def export_sofa(cal: Calibration, path: str | os.PathLike, *, force: bool = False, band_only: bool = False,
+                author_contact: str = "", organization: str = "", license: str | None = None) -> Path:
     """Write a calibration's transfer matrix to a SOFA ``GeneralTF-E`` file (:mod:`vibrofocus.io.sofa`).
 
     Receivers are the skin points, emitters the actuators, with their positions (m);
-    ``H`` in m/V on the calibration's frequency grid (Hz). pyfar and any SOFA reader open
-    it; the measurement's recordings and quality stay in the calibration file.
+    ``H`` in m/V (``Units`` ``metre/volt``) on the calibration's frequency grid (Hz);
+    ``GLOBAL_DateCreated`` is the calibration's date. pyfar and any SOFA reader open it;
+    the measurement's recordings and quality stay in the calibration file.
 
     Parameters
     ----------
@@ -223,6 +225,18 @@ def export_sofa(cal: Calibration, path: str | os.PathLike, *, force: bool = Fals
     force : bool
         Replace a file of another kind (a study database, a CSV) or a calibration; an
         earlier SOFA file is replaced without it.
+    band_only : bool
+        Export only the frequencies inside the calibrated band (``cal.band``, where
+        ``H`` is valid), with the calibration's coherence of each transfer function
+        beside ``H`` (the custom variable ``Coherence``, same dimensions as ``Data``).
+        Without it the whole grid, 0 Hz to fs/2, and no coherence.
+    author_contact : str
+        ``GLOBAL_AuthorContact``: who to ask about the data.
+    organization : str
+        ``GLOBAL_Organization``.
+    license : str, optional
+        ``GLOBAL_License`` (sofar's default, "No license provided, ask the author for
+        permission", without it).
 
     Returns
     -------
@@ -230,17 +244,27 @@ def export_sofa(cal: Calibration, path: str | os.PathLike, *, force: bool = Fals
 
     Raises
     ------
+    ValidationError
+        A text with a control character, or a band without two frequencies of the grid.
     OutputError
         The file cannot be written, or holds another kind of file or a calibration.
     """
+    from .._validation import shorten
     from .replacing import check_calibration_target
 
     check_calibration_target(path, None, force=force, what="SOFA file")
     rec = calibration_record(cal)
-    return write_sofa_tf({key: rec[key] for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels",
-                                                    "point_kinds", "actuator_names", "fs", "band", "participant_id",
-                                                    "layout")},
-                         path, title=f"vibrofocus calibration of {cal.participant_id}")
+    out = {key: rec[key] for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels", "point_kinds",
+                                     "actuator_names", "fs", "band", "participant_id", "layout", "created")}
+    if band_only:
+        low, high = cal.band
+        inside = (cal.freqs >= low) & (cal.freqs <= high)
+        if inside.sum() < 2:
+            raise ValidationError(f"the calibrated band {shorten(tuple(cal.band))} Hz holds fewer than two "
+                                  "frequencies of the grid")
+        out.update(H=cal.H[inside], freqs=cal.freqs[inside], coherence=np.asarray(cal.coherence)[inside])
+    return write_sofa_tf(out, path, title=f"vibrofocus calibration of {cal.participant_id}",
+                         author_contact=author_contact, organization=organization, license=license)
 
 
 def import_sofa(path: str | os.PathLike) -> dict[str, Any]:
@@ -256,7 +280,9 @@ def import_sofa(path: str | os.PathLike) -> dict[str, Any]:
         ``H`` complex (n_freqs, n_points, n_actuators), m/V; ``freqs`` (n_freqs,), Hz;
         ``fs`` and ``band`` (Hz); ``participant_id``; ``layout``: the
         :class:`~vibrofocus.layout.ArrayLayout`, checked against the stored positions
-        and names (None for a file of another tool, which stores no layout).
+        and names (None for a file of another tool, which stores no layout);
+        ``coherence`` (n_freqs, n_points, n_actuators), or None where the file has none
+        (exported without ``band_only``).
 
     Raises
     ------
@@ -272,4 +298,4 @@ def import_sofa(path: str | os.PathLike) -> dict[str, Any]:
             raise _fail(Path(path), f"has an unreadable layout ({exc})") from exc
         _check_against_layout(rec, layout, Path(path))
     return {"H": rec["H"], "freqs": rec["freqs"], "fs": rec["fs"], "band": rec["band"],
-            "participant_id": rec["participant_id"], "layout": layout}
+            "participant_id": rec["participant_id"], "layout": layout, "coherence": rec["coherence"]}

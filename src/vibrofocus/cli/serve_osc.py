@@ -41,7 +41,7 @@ def serve_osc(
     nothing. Taps queue while one plays; one that waited longer than --max-wait-ms is dropped
     (/error stale). /stop acts at once, ahead of the queued taps: like Ctrl-C (SIGINT) or
     SIGTERM, it cuts the play under way, sets every output to zero and ends the server.
-    Needs pip install 'vibrofocus\\[osc]'.
+    Needs pip install 'vibrofocus[osc]'.
     """
     with user_errors(interrupt_message="serve-osc stopped; all outputs at zero"):
         from ..errors import ValidationError

@@ -5,8 +5,11 @@ Layout written by :func:`write_bids_dataset` (BIDS 1.10, the ``beh`` datatype)::
     DIR/dataset_description.json       Name, BIDSVersion, DatasetType, GeneratedBy (vibrofocus, version)
     DIR/README                         what the dataset is; that simulated participants are a model
     DIR/participants.tsv, .json        participant_id (sub-<label>), source_id, simulated
-    DIR/sub-<label>/beh/sub-<label>_task-localization<1|2>_events.tsv
-    DIR/sub-<label>/beh/sub-<label>_task-localization<1|2>_events.json
+    DIR/sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-localization<1|2>_events.tsv
+    DIR/sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-localization<1|2>_events.json
+
+(``ses-<session>`` is the study session's id; a source without sessions, such as a
+trials CSV without a ``session`` column, writes ``sub-<label>/beh/...`` without it.)
 
 The events file has one row per answered trial with the columns :data:`EVENT_COLUMNS`;
 its JSON sidecar describes every column (units, levels) and records where the trials
@@ -23,7 +26,7 @@ import io as _io
 import json
 import os
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +34,8 @@ from .._validation import shorten
 from ..errors import ValidationError
 from .jsonsafe import json_safe
 
-__all__ = ["BIDS_VERSION", "EVENT_COLUMNS", "EVENT_COLUMN_DESCRIPTIONS", "TASKS", "bids_label", "events_name",
+__all__ = ["BIDS_VERSION", "EVENT_COLUMNS", "EVENT_COLUMN_DESCRIPTIONS", "TASKS", "TASK_INFO", "METADATA_KEYS",
+           "bids_label", "events_name", "check_bids_metadata", "read_bids_metadata", "read_bids_metadata_file", "levels_from_data",
            "write_bids_dataset", "read_bids_trials_table"]
 
 #: The BIDS version the dataset follows.
@@ -40,23 +44,52 @@ BIDS_VERSION = "1.10.0"
 TASKS = {1: "localization1", 2: "localization2"}
 #: Columns of every events file, in order: BIDS's ``onset`` and ``duration`` first, then
 #: the trial (``trial_type``, ``method``, ``target``, ``response``, ``response_time``,
-#: ``phase``), then where it sits in the study (``trial``, ``session_id``,
-#: ``session_status``, ``dry_run``; not ``session``, which is a BIDS entity), then the
-#: stimulus onset on the rig's own clock (``device_onset``, ``device_clock``), then the
+#: ``phase``), then where it sits in the study (``trial``, ``session_status``, ``dry_run``;
+#: the session itself is the file's ``ses-`` entity, so no column is named like one), then
+#: the stimulus onset on the rig's own clock (``device_onset``, ``device_clock``), then the
 #: stimulus played (``levels``, ``drive_peak_v``, ``target_peak_um``); a dataset written
-#: before those existed is read without them.
+#: before those existed (with a ``session_id`` column and no ``ses-``) is read too.
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
-                 "trial", "session_id", "session_status", "dry_run", "device_onset", "device_clock",
+                 "trial", "session_status", "dry_run", "device_onset", "device_clock",
                  "levels", "drive_peak_v", "target_peak_um")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
-_REQUIRED_COLUMNS = EVENT_COLUMNS[:12]
+_REQUIRED_COLUMNS = EVENT_COLUMNS[:11]
+#: What each task asks (the events sidecar's ``TaskDescription`` and ``Instructions``, as
+#: the participant page words them).
+TASK_INFO = {
+    1: {"TaskDescription": "Localization of single focused vibrotactile taps: each trial plays one tap, rendered by "
+                           "one method at one of the locations of a 3 x 3 grid on the forearm, and the participant "
+                           "names the one location where it felt most intense.",
+        "Instructions": "The page goes full screen and plays a short beep before each stimulus. Answer with the keys "
+                        "1-9 or by tapping or clicking a location: where did you feel it most? The first trials are "
+                        "training; the page says when the main trials begin."},
+    2: {"TaskDescription": "Localization with several answers: each trial plays one focused vibrotactile tap, and the "
+                           "participant chooses every location of the 3 x 3 grid on the forearm where it was felt.",
+        "Instructions": "The page goes full screen and plays a short beep before each stimulus. After each stimulus, "
+                        "choose every location where you felt it (one or several): tap or click them, or press the "
+                        "keys 1-9, then press Confirm (or Enter). The first trials are training; the page says when "
+                        "the main trials begin."},
+}
+#: Metadata a lab gives (``export_bids(metadata=...)``, ``--author``, ``--license``,
+#: ``--institution``, ``--metadata FILE``): key -> (file it goes to, ``list`` or ``str``).
+#: ``dataset_description.json`` keys are the dataset's; the ``Institution*`` keys go into
+#: every events sidecar (BIDS's place for them).
+METADATA_KEYS: dict[str, tuple[str, type]] = {
+    "Name": ("dataset_description.json", str), "Authors": ("dataset_description.json", list),
+    "License": ("dataset_description.json", str), "Acknowledgements": ("dataset_description.json", str),
+    "HowToAcknowledge": ("dataset_description.json", str), "Funding": ("dataset_description.json", list),
+    "EthicsApprovals": ("dataset_description.json", list), "ReferencesAndLinks": ("dataset_description.json", list),
+    "DatasetDOI": ("dataset_description.json", str), "Keywords": ("dataset_description.json", list),
+    "InstitutionName": ("events", str), "InstitutionAddress": ("events", str),
+    "InstitutionalDepartmentName": ("events", str),
+}
 #: The sidecar's description of each column of :data:`EVENT_COLUMNS` (BIDS "column
 #: description": LongName, Description, Units, Levels).
 EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
     "onset": {"LongName": "stimulus onset",
-              "Description": "Time of the stimulus onset from the first stimulus onset of this participant's study: "
-                             "when the stimulus_onset event was stored (UTC wall clock, microseconds), just before the "
-                             "drive went to the rig. n/a when the source (a trials CSV) records no times.",
+              "Description": "Time of the stimulus onset from the first stimulus onset of this file's session, on "
+                             "the host's monotonic clock (onset_host_s: when the drive was handed to the rig, what "
+                             "response times count from). n/a when the source stores no onset.",
               "Units": "s"},
     "duration": {"LongName": "stimulus duration",
                  "Description": "n/a: the trials record no drive length; the tap itself lasts a few ms.",
@@ -70,7 +103,8 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
                           "combination": "inverse filter reproducing funneling's field at the target",
                           "time_reversal": "time-reversed transfer functions",
                           "contrast": "acoustic contrast control",
-                          "constrained": "peak-contrast design with a fidelity constraint"}},
+                          "constrained": "energy-contrast design with a fidelity constraint",
+                          "minimax": "peak-contrast (minimax) design with a fidelity constraint"}},
     "target": {"LongName": "target location",
                "Description": "The location (1-9 on the reference layout) the stimulus was focused at."},
     "response": {"LongName": "chosen locations",
@@ -81,7 +115,6 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
     "phase": {"LongName": "phase", "Description": "Part of the study.",
               "Levels": {"training": "practice trials, not analysed", "main": "the trials analysed"}},
     "trial": {"LongName": "trial number", "Description": "1-based trial number within the phase."},
-    "session_id": {"LongName": "study session", "Description": "Id of the session in the study database (0: none)."},
     "session_status": {"LongName": "session status",
                        "Description": "The session's status when exported.",
                        "Levels": {"planned": "not started", "running": "in progress", "paused": "paused",
@@ -140,9 +173,170 @@ def bids_label(participant_id: str) -> str:
     return label
 
 
-def events_name(label: str, study: int) -> str:
-    """``sub-<label>_task-localization<study>_events`` (without suffix)."""
-    return f"sub-{label}_task-{TASKS[study]}_events"
+def events_name(label: str, study: int, session: int | str | None = None) -> str:
+    """``sub-<label>[_ses-<session>]_task-localization<study>_events`` (without suffix)."""
+    ses = "" if session is None else f"_ses-{session}"
+    return f"sub-{label}{ses}_task-{TASKS[study]}_events"
+
+
+def _events_folder(label: str, session: int | str | None) -> str:
+    return f"sub-{label}/beh" if session is None else f"sub-{label}/ses-{session}/beh"
+
+
+def levels_from_data(values: Iterable[Any], described: Mapping[str, str], unknown: str) -> dict[str, str]:
+    """A sidecar's ``Levels``: each value the column holds, described.
+
+    Parameters
+    ----------
+    values : iterable
+        The column's cells (None and ``n/a`` are skipped).
+    described : mapping
+        Known value -> its description.
+    unknown : str
+        The description of a value ``described`` lacks (a lab's own method, say).
+
+    Returns
+    -------
+    dict
+        Value (as written in the TSV) -> description, in sorted order: every value of
+        the data is a level, so the validator accepts each cell.
+    """
+    present = sorted({_cell(v) for v in values if v is not None and _cell(v) != _NA})
+    return {v: described.get(v, unknown) for v in present}
+
+
+def check_bids_metadata(metadata: Mapping[str, Any] | None, name: str = "metadata") -> dict[str, Any]:
+    """The dataset's metadata checked: keys of :data:`METADATA_KEYS`, texts or lists of texts.
+
+    Parameters
+    ----------
+    metadata : mapping or None
+        Key -> text, or list of texts for ``Authors``, ``Funding``, ``EthicsApprovals``,
+        ``ReferencesAndLinks`` and ``Keywords``.
+    name : str
+        What the messages call it (an option, a file).
+
+    Returns
+    -------
+    dict
+        The metadata, texts stripped of surrounding blanks (``{}`` for None).
+
+    Raises
+    ------
+    ValidationError
+        Not a mapping, an unknown key, a value of the wrong type, an empty text or list,
+        or a control character (which would break the files' lines).
+    """
+    if metadata is None:
+        return {}
+    if not isinstance(metadata, Mapping):
+        raise ValidationError(f"{name} must be a JSON object of BIDS metadata, got {shorten(metadata)}")
+    out: dict[str, Any] = {}
+    for key, value in metadata.items():
+        if key not in METADATA_KEYS:
+            raise ValidationError(f"{name} has the key {shorten(key)}, which vibrofocus does not write; use one of "
+                                  f"{', '.join(METADATA_KEYS)}")
+        kind = METADATA_KEYS[key][1]
+        items = value if kind is list and isinstance(value, list) else [value]
+        if kind is list and not isinstance(value, list):
+            raise ValidationError(f"{name} {key} must be a list of texts, got {shorten(value)}")
+        if not items or not all(isinstance(v, str) and v.strip() and v.isprintable()
+                                for v in items):
+            raise ValidationError(f"{name} {key} must be {'non-empty texts' if kind is list else 'a non-empty text'} "
+                                  f"without control characters, got {shorten(value)}")
+        out[key] = [v.strip() for v in items] if kind is list else value.strip()
+    return out
+
+
+#: Keys of a metadata template vibrofocus sets itself (a lab's ``dataset_description.json``
+#: given as the template has them): skipped.
+_OWN_DESCRIPTION_KEYS = ("BIDSVersion", "DatasetType", "GeneratedBy")
+#: Largest metadata template read, bytes.
+_MAX_TEMPLATE_BYTES = 1_000_000
+
+
+def read_bids_metadata_file(path: str | os.PathLike) -> dict[str, Any]:
+    """A metadata template: a JSON object of :data:`METADATA_KEYS` (a lab's ``dataset_description.json`` reads too).
+
+    ``BIDSVersion``, ``DatasetType`` and ``GeneratedBy`` are skipped (vibrofocus writes
+    them); any other key must be one of :data:`METADATA_KEYS`.
+
+    Parameters
+    ----------
+    path : path-like
+        The JSON file (an input: no output of the command may replace it).
+
+    Returns
+    -------
+    dict
+        As :func:`check_bids_metadata` returns.
+
+    Raises
+    ------
+    ValidationError
+        Missing, unreadable, larger than 1 MB, not a JSON object, or holding an
+        unknown key or a value of the wrong type; the message names the file.
+    """
+    from .._atomic import protect
+
+    path = Path(path)
+    protect(path, "BIDS metadata template")
+    try:
+        with open(path, "rb") as fh:
+            raw = fh.read(_MAX_TEMPLATE_BYTES + 1)
+    except OSError as exc:
+        raise ValidationError(f"cannot read the BIDS metadata file {path}: {exc.strerror or exc}") from None
+    if len(raw) > _MAX_TEMPLATE_BYTES:
+        raise ValidationError(f"the BIDS metadata file {path} is larger than {_MAX_TEMPLATE_BYTES:,} bytes")
+    try:
+        data = json.loads(raw.decode("utf-8"))
+    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
+        raise ValidationError(f"the BIDS metadata file {path} is not UTF-8 JSON ({shorten(str(exc))})") from None
+    if not isinstance(data, dict):
+        raise ValidationError(f"the BIDS metadata file {path} must hold a JSON object, got {type(data).__name__}")
+    return check_bids_metadata({k: v for k, v in data.items() if k not in _OWN_DESCRIPTION_KEYS},
+                               f"the BIDS metadata file {path}:")
+
+
+def read_bids_metadata(root: str | os.PathLike) -> dict[str, Any]:
+    """The metadata of :data:`METADATA_KEYS` an existing dataset holds, so a re-export keeps it.
+
+    Read from ``dataset_description.json`` and from the events sidecars vibrofocus wrote
+    there (listed in its manifest); what is unreadable or of the wrong type is skipped.
+    A missing folder gives ``{}``.
+
+    Parameters
+    ----------
+    root : path-like
+        The dataset folder.
+
+    Returns
+    -------
+    dict
+        Key of :data:`METADATA_KEYS` -> its value.
+    """
+    from .bids_merge import read_manifest
+
+    root = Path(root)
+    found: dict[str, Any] = {}
+    sources = [root / "dataset_description.json"]
+    manifest, _ = read_manifest(root) if root.is_dir() else ({}, {})
+    sources += [root / rel for rel in sorted(manifest) if rel.endswith("_events.json")]
+    for path in sources:
+        try:
+            data = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError, UnicodeDecodeError):
+            continue
+        if not isinstance(data, dict):
+            continue
+        for key, (where, _kind) in METADATA_KEYS.items():
+            if key in found or key not in data or (where == "events") == (path.name == "dataset_description.json"):
+                continue
+            try:
+                found.update(check_bids_metadata({key: data[key]}))
+            except ValidationError:
+                continue
+    return found
 
 
 def _tsv(columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
@@ -203,9 +397,10 @@ def write_bids_dataset(
     participant_columns : mapping
         Column name -> its description (``participants.json``), in column order.
     runs : sequence of mapping
-        One per participant and study: ``label`` (str), ``study`` (1 or 2), ``events``
-        (rows keyed by :data:`EVENT_COLUMNS`; None or NaN is written ``n/a``) and
-        ``sidecar`` (extra keys of the events JSON besides the column descriptions).
+        One per participant, study and session: ``label`` (str), ``study`` (1 or 2),
+        ``session`` (the ``ses-`` label, or None for none), ``events`` (rows keyed by
+        :data:`EVENT_COLUMNS`; None or NaN is written ``n/a``) and ``sidecar`` (extra keys
+        of the events JSON besides the column descriptions, which it may replace).
     source : str, optional
         Where the data comes from (the source file's resolved path), recorded in the
         manifest: an events file is replaced only by an export of the same source (the
@@ -237,8 +432,8 @@ def write_bids_dataset(
     for run in runs:
         if run["study"] not in TASKS:
             raise ValidationError(f"a BIDS run must be of study 1 or 2, got {run['study']!r}")
-        name = events_name(run["label"], run["study"])
-        folder = f"sub-{run['label']}/beh"
+        name = events_name(run["label"], run["study"], run.get("session"))
+        folder = _events_folder(run["label"], run.get("session"))
         if f"{folder}/{name}.tsv" in files:
             raise ValidationError(f"two runs would both write {name}.tsv")
         sidecar = {"TaskName": TASKS[run["study"]], **EVENT_COLUMN_DESCRIPTIONS, **run["sidecar"]}
@@ -309,13 +504,16 @@ def read_bids_trials_table(root: str | os.PathLike):
     except (OSError, KeyError, csv.Error, UnicodeDecodeError) as exc:
         raise ValidationError(f"cannot read {root / 'participants.tsv'}: {exc}") from exc
     rows: list[dict[str, str]] = []
-    files = sorted(root.glob("sub-*/beh/sub-*_task-localization*_events.tsv"))
+    files = sorted([*root.glob("sub-*/beh/sub-*_task-localization*_events.tsv"),
+                    *root.glob("sub-*/ses-*/beh/sub-*_ses-*_task-localization*_events.tsv")])
     if not files:
-        raise ValidationError(f"the BIDS dataset {root} has no sub-*/beh/*_task-localization*_events.tsv")
+        raise ValidationError(f"the BIDS dataset {root} has no sub-*/[ses-*/]beh/*_task-localization*_events.tsv")
     for path in files:
         protect(path, "BIDS events file")
-        sub = path.parent.parent.name
+        sub = path.name.split("_", 1)[0]
         study = path.name.split("_task-localization", 1)[1].split("_", 1)[0]
+        # The session: the file's ses- entity (an older export: its session_id column).
+        ses = path.name.split("_ses-", 1)[1].split("_", 1)[0] if "_ses-" in path.name else None
         person = people.get(sub, {})
         try:
             events = _read_tsv(path)
@@ -339,7 +537,8 @@ def read_bids_trials_table(root: str | os.PathLike):
                 "participant": person.get("source_id") or sub.removeprefix("sub-"), "study": study,
                 "phase": ev["phase"], "trial": ev["trial"], "method": ev["method"], "target": ev["target"],
                 "response": ev["response"], "rt_s": ev["response_time"],
-                "session": "0" if ev["session_id"] == _NA else ev["session_id"],
+                "session": ses if ses is not None else (
+                    "0" if ev.get("session_id", _NA) in (_NA, None) else ev["session_id"]),
                 "session_status": "completed" if ev["session_status"] == _NA else ev["session_status"],
                 "dry_run": "0" if ev["dry_run"] == _NA else ev["dry_run"],
                 "simulated": "1" if person.get("simulated") == "true" else "0",

@@ -13,6 +13,14 @@ which other readers ignore. pyfar reads the file
 (``pyfar.io.convert_sofa(sofar.read_sofa(path))`` gives a ``FrequencyData`` of cshape
 (E, M, R)).
 
+The files follow AES69-2020/2022 (SOFA 2.x, as sofar writes them). ``Data.Real`` and
+``Data.Imag`` carry ``Units`` = ``metre/volt`` (m/V in SOFA's spelling: SOFA units are
+written in lower case); ``GLOBAL_DateCreated`` is the calibration's date,
+``GLOBAL_AuthorContact``, ``GLOBAL_Organization`` and ``GLOBAL_License`` what the caller
+gives. Optional ``Coherence`` (M, R, N, E), units ``1``: the calibration's coherence of
+each transfer function, a custom variable beside ``Data`` (SOFA readers that do not know
+it ignore it).
+
 This module reads and writes a plain record (:data:`SOFA_KEYS`); the calibration side
 (:func:`vibrofocus.calibration.export_sofa`, :func:`~vibrofocus.calibration.import_sofa`)
 builds it. Needs the optional extra ``vibrofocus[sofa]`` (sofar).
@@ -31,7 +39,7 @@ import numpy as np
 
 from ..errors import CalibrationFileError, ValidationError
 
-__all__ = ["SOFA_CONVENTION", "SOFA_KEYS", "write_sofa_tf", "read_sofa_tf", "import_sofar"]
+__all__ = ["SOFA_CONVENTION", "SOFA_KEYS", "SOFA_H_UNITS", "write_sofa_tf", "read_sofa_tf", "import_sofar"]
 
 #: The SOFA convention written and read.
 SOFA_CONVENTION = "GeneralTF-E"
@@ -41,6 +49,8 @@ SOFA_CONVENTION = "GeneralTF-E"
 #: ``band`` (low, high), Hz; ``participant_id`` str; ``layout`` dict (JSON-able).
 SOFA_KEYS = ("H", "freqs", "points_xy", "actuators_xy", "point_labels", "point_kinds", "actuator_names", "fs",
              "band", "participant_id", "layout")
+#: ``Units`` of ``Data.Real`` and ``Data.Imag``: m/V, spelt as SOFA spells units (lower case).
+SOFA_H_UNITS = "metre/volt"
 _ATTR = "GLOBAL_vibrofocus"
 # Record key -> attribute name after GLOBAL_vibrofocus (SOFA names hold one underscore).
 _ATTRS = {"point_labels": "PointLabels", "point_kinds": "PointKinds", "actuator_names": "ActuatorNames",
@@ -61,21 +71,47 @@ def _positions(xy: np.ndarray) -> np.ndarray:
     return np.column_stack([xy, np.zeros(len(xy))])
 
 
-def write_sofa_tf(record: Mapping[str, Any], path: str | os.PathLike, *, title: str = "") -> Path:
+def _sofa_date(text: str) -> str:
+    """An ISO 8601 time (the calibration's ``created``) as SOFA writes dates: ``yyyy-mm-dd HH:MM:SS`` (UTC)."""
+    from datetime import UTC, datetime
+
+    try:
+        when = datetime.fromisoformat(str(text))
+    except ValueError:
+        raise ValidationError(f"the calibration's date {str(text)[:80]!r} is not an ISO 8601 time") from None
+    if when.tzinfo is not None:
+        when = when.astimezone(UTC)
+    return when.strftime("%Y-%m-%d %H:%M:%S")
+
+
+def write_sofa_tf(record: Mapping[str, Any], path: str | os.PathLike, *, title: str = "", author_contact: str = "",
+                  organization: str = "", license: str | None = None) -> Path:
     """Write a transfer-matrix record to a SOFA ``GeneralTF-E`` file, atomically.
 
-    sofar writes to a file name of its own; the bytes then go to ``path`` with
+    sofar writes to a file name of its own; the variables' units that sofar cannot set
+    (``Data.Real``/``Data.Imag`` ``Units``, see below) are added there with netCDF4
+    (sofar's own backend); the bytes then go to ``path`` with
     :func:`vibrofocus._atomic.write_bytes`, so a reader never sees half a file and a
     previous file at ``path`` is unchanged after a failure.
 
     Parameters
     ----------
     record : mapping
-        :data:`SOFA_KEYS`.
+        :data:`SOFA_KEYS`, and optionally ``created`` (ISO 8601 time of the
+        measurement: ``GLOBAL_DateCreated``; without it, the time of writing) and
+        ``coherence`` (real, same shape as ``H``, 0..1: written as the custom variable
+        ``Coherence``).
     path : path-like
         Destination, conventionally ``*.sofa``; its folder must exist.
     title : str
         ``GLOBAL_Title``.
+    author_contact : str
+        ``GLOBAL_AuthorContact`` (who to ask about the data: a name, an e-mail).
+    organization : str
+        ``GLOBAL_Organization``.
+    license : str, optional
+        ``GLOBAL_License``; None keeps sofar's default ("No license provided, ask the
+        author for permission").
 
     Returns
     -------
@@ -85,25 +121,41 @@ def write_sofa_tf(record: Mapping[str, Any], path: str | os.PathLike, *, title: 
     Raises
     ------
     ValidationError
-        A record whose shapes do not agree, or sofar missing.
+        A record whose shapes do not agree, a text with a control character, or sofar
+        missing.
     OutputError
         The file cannot be written.
     """
     from .._atomic import write_bytes
+    from .._validation import shorten
 
     sofar = import_sofar()
     missing = [k for k in SOFA_KEYS if k not in record]
     if missing:
         raise ValidationError(f"a SOFA record needs {', '.join(missing)}")
+    for name, text in (("title", title), ("author_contact", author_contact), ("organization", organization),
+                       ("license", license or "")):
+        if not isinstance(text, str) or not text.isprintable():
+            raise ValidationError(f"{name} must be a text without control characters, got {shorten(text)}")
     H = np.asarray(record["H"])
     freqs = np.asarray(record["freqs"], float)
     n_f, n_r, n_e = H.shape if H.ndim == 3 else (None, None, None)
     if n_f != len(freqs) or n_r != len(record["points_xy"]) or n_e != len(record["actuators_xy"]):
         raise ValidationError(f"H has shape {H.shape}, but there are {len(freqs)} frequencies, "
                               f"{len(record['points_xy'])} points and {len(record['actuators_xy'])} actuators")
+    coherence = record.get("coherence")
+    if coherence is not None:
+        coherence = np.asarray(coherence, float)
+        if coherence.shape != H.shape:
+            raise ValidationError(f"the coherence has shape {coherence.shape}, H {H.shape}")
     sofa = sofar.Sofa(SOFA_CONVENTION)
     sofa.GLOBAL_Title = title
-    sofa.GLOBAL_Comment = "vibrofocus transfer matrix: skin displacement per actuator voltage (m/V)"
+    sofa.GLOBAL_Comment = ("vibrofocus transfer matrix: skin displacement per actuator voltage (Data.Real and "
+                           f"Data.Imag in {SOFA_H_UNITS}, i.e. m/V)")
+    sofa.GLOBAL_AuthorContact = author_contact
+    sofa.GLOBAL_Organization = organization
+    if license:
+        sofa.GLOBAL_License = license
     sofa.GLOBAL_RoomType = "free field"
     sofa.ListenerPosition = np.zeros((1, 3))
     sofa.SourcePosition = np.zeros((1, 3))
@@ -114,6 +166,10 @@ def write_sofa_tf(record: Mapping[str, Any], path: str | os.PathLike, *, title: 
     # (N, R, E) -> (M=1, R, N, E)
     sofa.Data_Real = np.real(H).transpose(1, 0, 2)[None].astype(float)
     sofa.Data_Imag = np.imag(H).transpose(1, 0, 2)[None].astype(float)
+    if coherence is not None:
+        sofa.add_variable("Coherence", coherence.transpose(1, 0, 2)[None], "double", "MRNE")
+        sofa.add_attribute("Coherence_Units", "1")
+        sofa.add_attribute("Coherence_LongName", "coherence of each transfer function (0..1)")
     described = {"point_labels": list(record["point_labels"]), "point_kinds": list(record["point_kinds"]),
                  "actuator_names": list(record["actuator_names"]), "fs": float(record["fs"]),
                  "band": [float(b) for b in record["band"]], "participant_id": str(record["participant_id"]),
@@ -122,7 +178,16 @@ def write_sofa_tf(record: Mapping[str, Any], path: str | os.PathLike, *, title: 
         sofa.add_attribute(f"{_ATTR}{_ATTRS[key]}", json.dumps(value))
     with tempfile.TemporaryDirectory(prefix="vibrofocus-sofa-") as folder:
         built = Path(folder) / "transfer.sofa"
-        sofar.write_sofa(str(built), sofa)
+        sofar.write_sofa(str(built), sofa)  # sets DateCreated and DateModified to now
+        import netCDF4  # sofar's backend: installed with it
+
+        with netCDF4.Dataset(str(built), "a") as nc:
+            # sofar refuses attributes of Data.Real (its name check allows one "_"), so
+            # the units are set on the written variables.
+            nc["Data.Real"].Units = SOFA_H_UNITS
+            nc["Data.Imag"].Units = SOFA_H_UNITS
+            if record.get("created"):
+                nc.DateCreated = _sofa_date(record["created"])
         data = built.read_bytes()
     return write_bytes(Path(path), data, what="SOFA file")
 
@@ -215,7 +280,8 @@ def read_sofa_tf(path: str | os.PathLike) -> dict[str, Any]:
     Returns
     -------
     dict
-        :data:`SOFA_KEYS`.
+        :data:`SOFA_KEYS`, and ``coherence`` (n_freqs, n_points, n_actuators), or None
+        where the file has no ``Coherence``.
 
     Raises
     ------
@@ -313,7 +379,15 @@ def _record(sofa: Any) -> dict[str, Any]:
         raise ValidationError(f"attribute {_ATTR}{_ATTRS['layout']} must be a JSON object, got "
                               f"{type(layout).__name__}")
     H = (real[0] + 1j * imag[0]).transpose(1, 0, 2)
-    return {
+    coherence = getattr(sofa, "Coherence", None)
+    if coherence is not None:
+        coherence = _array(coherence, "Coherence")
+        if coherence.shape != real.shape:
+            raise ValidationError(f"Coherence has shape {coherence.shape}, Data.Real {real.shape}")
+        if not np.isfinite(coherence).all() or (coherence < 0).any() or (coherence > 1 + 1e-9).any():
+            raise ValidationError("Coherence must hold numbers from 0 to 1")
+        coherence = coherence[0].transpose(1, 0, 2)
+    return {"coherence": coherence,
         "H": H, "freqs": freqs, "points_xy": receivers[:, :2], "actuators_xy": emitters[:, :2],
         "point_labels": (_names(attrs["point_labels"], f"attribute {_ATTR}{_ATTRS['point_labels']}", n_r, "point")
                          if attrs["point_labels"] is not None else [str(k + 1) for k in range(n_r)]),

@@ -1,8 +1,9 @@
 """Export the studies as a BIDS behavioural dataset (``vibrofocus export --bids DIR``).
 
 Builds the plain records of :mod:`vibrofocus.io.bids` from a study database (with the
-onsets, rigs, calibration hashes and skin presets it stores) or from a trials CSV (which
-stores no times: onsets are ``n/a``), and writes them.
+onsets, rigs, calibration hashes and skin presets it stores) or from a trials CSV (with
+the onsets it has: ``onset_host_s``), one events file per participant, study and
+session, and writes them.
 """
 
 from __future__ import annotations
@@ -14,7 +15,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import StudyError
-from ..io.bids import BIDS_VERSION, EVENT_COLUMN_DESCRIPTIONS, TASKS, bids_label, write_bids_dataset
+from ..io.bids import (BIDS_VERSION, EVENT_COLUMN_DESCRIPTIONS, METADATA_KEYS, TASK_INFO, TASKS, bids_label,
+                       check_bids_metadata, levels_from_data, read_bids_metadata, write_bids_dataset)
 from ..io.responses import format_response
 from ..io.trials_csv import read_trials_csv
 
@@ -67,7 +69,7 @@ def _from_trials_csv(path: Path) -> tuple[list[dict[str, Any]], dict[str, bool],
     simulated: dict[str, bool] = {}
     for row in rows:
         simulated[row["participant"]] = simulated.get(row["participant"], False) or bool(row.get("simulated"))
-        row["onset_time"] = None
+        row["onset_time"] = None  # a CSV has no wall clock; its onset_host_s, where it has one, is used
     return rows, simulated, {}
 
 
@@ -79,11 +81,58 @@ def _is_database(path: Path) -> bool:
         raise StudyError(f"cannot read {path}: {exc.strerror or exc}") from exc
 
 
-def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force: bool = False) -> dict[str, Any]:
+def _method_levels(methods: list[Any]) -> dict[str, str]:
+    """``method``'s Levels: every method of the data, a lab's own described by its class."""
+    from ..rendering.registry import available_methods, method_class
+
+    known = dict(EVENT_COLUMN_DESCRIPTIONS["method"]["Levels"])
+    registered = set(available_methods())
+    for name in ({str(m) for m in methods if m is not None} - set(known)) & registered:
+        doc = (method_class(name).__doc__ or "").strip().splitlines()
+        known[name] = f"a lab's own rendering method: {doc[0].strip()}" if doc and doc[0].strip() else \
+            "a lab's own rendering method (vibrofocus.rendering.register_method)"
+    return levels_from_data(methods, known, "a rendering method not registered in the exporting process (a "
+                                            "lab's own, vibrofocus.rendering.register_method)")
+
+
+def _onsets_s(trials: list[dict[str, Any]]) -> tuple[list[float | None], str | None]:
+    """Each trial's onset from the first of the file, s, and which clock gave it.
+
+    The host's monotonic onset (``onset_host_s``, what response times count from) where
+    the source has it; else the wall clock of the stored ``stimulus_onset`` event (a
+    database older than the monotonic onsets); else None (n/a).
+    """
+    host = [t.get("onset_host_s") for t in trials]
+    if any(h is not None for h in host):
+        first = min(h for h in host if h is not None)
+        return [None if h is None else float(h) - first for h in host], "host"
+    walls = [t.get("onset_time") for t in trials]
+    if any(w is not None for w in walls):
+        first_wall = min(w for w in walls if w is not None)
+        return [None if w is None else (w - first_wall).total_seconds() for w in walls], "wall"
+    return [None] * len(trials), None
+
+
+_ONSET_NOTE = {
+    "host": None,  # the column's own description
+    "wall": "Time of the stimulus onset from the first stimulus onset of this file's session, from the UTC wall "
+            "clock of the stored stimulus_onset event (the database holds no monotonic onset): within some ms.",
+    None: "n/a: the source stores no onset times.",
+}
+
+
+def _session_key(row: dict[str, Any]) -> int | None:
+    session = row.get("session")
+    return int(session) if session not in (None, "", 0, "0") else None
+
+
+def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force: bool = False,
+                metadata: dict[str, Any] | None = None) -> dict[str, Any]:
     """Write a study database or a trials CSV as a BIDS behavioural dataset, or add it to one.
 
-    One ``sub-<label>/beh/sub-<label>_task-localization<study>_events.tsv`` per participant
-    and study, one row per answered trial (both phases), with its JSON sidecar; see
+    One ``sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-localization<study>_events.tsv``
+    per participant, study and session (no ``ses-`` for a source without sessions), one
+    row per answered trial (both phases), with its JSON sidecar; see
     :mod:`vibrofocus.io.bids` for the layout and the columns. Into an existing dataset
     (EEG, MRI, another study's export) only files vibrofocus wrote are replaced and the
     participants files are merged (:mod:`vibrofocus.io.bids_merge`); nothing is deleted.
@@ -98,6 +147,12 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
     force : bool
         Replace files in the way: at a path the export writes, but not written by
         vibrofocus (or edited since). Without it they are refused and nothing changes.
+    metadata : dict, optional
+        BIDS metadata (:data:`vibrofocus.io.bids.METADATA_KEYS`): ``Authors``,
+        ``License``, ``Funding``, ... for ``dataset_description.json``, and
+        ``InstitutionName``, ``InstitutionAddress``, ``InstitutionalDepartmentName`` for
+        every events sidecar. What the dataset at ``out_dir`` already holds of these is
+        kept unless given here, so a re-export never drops it.
 
     Returns
     -------
@@ -112,7 +167,7 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         the same BIDS label.
     ValidationError
         A participant id that cannot be a BIDS label (no ASCII letter or digit, a
-        control character).
+        control character), or metadata of an unknown key or the wrong type.
     OutputError
         The folder cannot be written, or holds a file in the way (not ``force``).
     """
@@ -126,6 +181,10 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         raise StudyError(f"the BIDS folder {out_dir} would replace its input {source}: write the dataset elsewhere")
     if not source.is_file():
         raise StudyError(f"{source} is not a study database or a trials CSV file")
+    given = check_bids_metadata(metadata)
+    # What the dataset holds already (an earlier export's Authors, License, institution)
+    # stays unless given anew.
+    meta = {**read_bids_metadata(out_dir), **given}
     from ..rigs.onset import CLOCKS
 
     from_db = _is_database(source)
@@ -142,40 +201,56 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         if clash:
             raise StudyError(f"participants {clash[0]!r} and {pid!r} would both be sub-{label} in BIDS")
         labels[pid] = label
-    grouped: dict[tuple[str, int], list[dict[str, Any]]] = defaultdict(list)
+    grouped: dict[tuple[str, int, int | None], list[dict[str, Any]]] = defaultdict(list)
     for row in rows:
-        grouped[(row["participant"], int(row["study"]))].append(row)
+        grouped[(row["participant"], int(row["study"]), _session_key(row))].append(row)
+    institution = {k: v for k, v in meta.items() if METADATA_KEYS[k][0] == "events"}
     runs = []
-    for (pid, study), trials in grouped.items():
-        starts = [t["onset_time"] for t in trials if t["onset_time"] is not None]
-        first = min(starts) if starts else None
+    for (pid, study, session), trials in grouped.items():
+        onsets, clock = _onsets_s(trials)
         events = [{
-            "onset": None if t["onset_time"] is None else (t["onset_time"] - first).total_seconds(),
-            "duration": None, "trial_type": f"{t['method']}_loc{int(t['target'])}", "method": t["method"],
-            "target": int(t["target"]),
+            "onset": onset, "duration": None, "trial_type": f"{t['method']}_loc{int(t['target'])}",
+            "method": t["method"], "target": int(t["target"]),
             "response": t["response"] if isinstance(t["response"], str) else format_response(t["response"]),
             "response_time": float(t["rt_s"]), "phase": t["phase"], "trial": int(t["trial"]),
-            "session_id": t.get("session"), "session_status": t.get("session_status"),
+            "session_status": t.get("session_status"),
             "dry_run": None if t.get("dry_run") is None else int(bool(t["dry_run"])),
             "device_onset": t.get("onset_device_s"), "device_clock": t.get("onset_clock"),
             "levels": t.get("levels") or None, "drive_peak_v": t.get("drive_peak_v"),
             "target_peak_um": t.get("target_peak_um"),
-        } for t in trials]
+        } for t, onset in zip(trials, onsets, strict=True)]
         sim = simulated.get(pid, False)
-        runs.append({"label": labels[pid], "study": study, "events": events, "sidecar": {
+        infos = [s for s in sessions.get((pid, study), []) if session is None or s["Session"] == session]
+        columns: dict[str, Any] = {
+            "method": {**EVENT_COLUMN_DESCRIPTIONS["method"], "Levels": _method_levels([e["method"] for e in events])},
             "device_clock": clock_column,
+        }
+        rules = levels_from_data([e["levels"] for e in events], EVENT_COLUMN_DESCRIPTIONS["levels"]["Levels"],
+                                 "a level rule of the session's protocol")
+        if rules:  # else every cell is n/a: the known rules stay described
+            columns["levels"] = {**EVENT_COLUMN_DESCRIPTIONS["levels"], "Levels": rules}
+        if _ONSET_NOTE[clock]:
+            columns["onset"] = {**EVENT_COLUMN_DESCRIPTIONS["onset"], "Description": _ONSET_NOTE[clock]}
+        versions = sorted({str(i["SoftwareVersion"]) for i in infos if i.get("SoftwareVersion")})
+        runs.append({"label": labels[pid], "study": study, "session": session, "events": events, "sidecar": {
+            **columns, **TASK_INFO[study],
+            # The software that presented the stimuli: the recording's vibrofocus.
+            "StimulusPresentation": {"SoftwareName": "vibrofocus",
+                                     "SoftwareVersion": ", ".join(versions) if versions else __version__},
+            **institution,
             "SourceId": pid, "Study": study, "Simulated": sim,
             # The rows' own label (model and hypothesis) where the source names it.
             "SimulatedModel": next((t["model"] for t in trials if t.get("model")), MODEL_LABEL) if sim else None,
             "Source": "study database" if from_db else "trials CSV", "SourceFile": source.name,
-            "Sessions": sessions.get((pid, study), []),
+            "Sessions": infos,
         }})
     # The README speaks for the whole dataset: simulated participants of an earlier
     # export into it count too.
     any_sim = any(simulated.values()) or _dataset_has_simulated(Path(out_dir))
     description = {
-        "Name": "vibrofocus localization studies", "BIDSVersion": BIDS_VERSION,
+        "Name": meta.get("Name", "vibrofocus localization studies"), "BIDSVersion": BIDS_VERSION,
         "DatasetType": "raw",
+        **{k: v for k, v in meta.items() if METADATA_KEYS[k][0] == "dataset_description.json" and k != "Name"},
         "GeneratedBy": [{"Name": "vibrofocus", "Version": __version__,
                          "Description": "vibrofocus export --bids: localization studies with focused vibrotactile "
                                         "stimuli (Study 1: one location per trial; Study 2: several)."}],
