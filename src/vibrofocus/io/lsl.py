@@ -60,6 +60,10 @@ CODES: dict[str, str] = {
     "answer": "the participant's answer (the locations are in the detail stream)",
 }
 
+#: How long :meth:`MarkerOutlet.wait_for_consumers` waits for the detail stream's inlet
+#: once the code stream has one, s.
+DETAIL_GRACE_S = 5.0
+
 _TOKEN = re.compile(r"[^A-Za-z0-9_.+-]+")
 _SOURCE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.:+-]{0,99}")
 
@@ -287,8 +291,18 @@ class MarkerOutlet:
         return bool(self._outlet.have_consumers())
 
     def wait_for_consumers(self, timeout_s: float) -> bool:
-        """Wait up to ``timeout_s`` for an inlet on the code stream; whether one is connected."""
-        return bool(self._outlet.wait_for_consumers(timeout_s))
+        """Wait up to ``timeout_s`` for an inlet on the code stream; whether one is connected.
+
+        Once it is, the detail stream gets up to :data:`DETAIL_GRACE_S` more (within
+        ``timeout_s``) for its own inlet: a recorder connects to the streams it records one
+        after the other, and one that records the codes alone is not waited for long.
+        """
+        deadline = time.monotonic() + float(timeout_s)
+        if not self._outlet.wait_for_consumers(float(timeout_s)):
+            return False
+        if self._detail is not None:
+            self._detail.wait_for_consumers(max(0.0, min(DETAIL_GRACE_S, deadline - time.monotonic())))
+        return True
 
     def close(self) -> None:
         """Close the outlets (the streams disappear from the network)."""
