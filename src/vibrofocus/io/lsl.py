@@ -184,8 +184,12 @@ def clock_offset(lsl_clock: Callable[[], float], host_clock: Callable[[], float]
 
 def _describe(info: Any, *, channel: tuple[str, str], source: str, detail: str | None) -> None:
     """The stream's metadata: channel, acquisition/software block, vocabulary."""
-    from .. import __version__
+    from importlib.metadata import PackageNotFoundError, version
 
+    try:  # as vibrofocus.__version__ (io imports nothing above it)
+        __version__ = version("vibrofocus")
+    except PackageNotFoundError:
+        __version__ = "0.0.0+unknown"
     desc = info.desc()
     ch = desc.append_child("channels").append_child("channel")
     ch.append_child_value("label", channel[0])
