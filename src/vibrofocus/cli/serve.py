@@ -75,7 +75,9 @@ def serve(
         from ..studies.markers import lsl_markers
 
         markers = contextlib.ExitStack()
-        outlet = markers.enter_context(lsl_markers(lsl, source_id=lsl_source(lsl, lsl_source_id, db), wait_s=lsl_wait))  # no pylsl: one error line before anything starts
+        # A bad id or no pylsl: one error line before anything starts.
+        source_id = lsl_source(lsl, lsl_source_id, db)
+        outlet = markers.enter_context(lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait))
         from ..rigs import make_rig
         from ..skin import skin_preset
 

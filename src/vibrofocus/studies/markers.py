@@ -56,7 +56,8 @@ def send_marker(event: str, host_time_s: float, **fields: Any) -> None:
     **fields
         ``participant``, ``study``, ``session``, ``trial``, ``trial_index``, ``phase``,
         ``method``, ``target``, ``response`` (None before the answer); a stimulus onset's
-        ``onset_device_s`` and ``onset_clock`` (the rig's device clock, None without one), ...
+        ``onset_device_s`` and ``onset_clock`` (the rig's device clock, None without one) and
+        ``onset_latency_s`` (the output latency its time includes, None where unknown), ...
     """
     with _LOCK:
         sinks = list(_SINKS)
