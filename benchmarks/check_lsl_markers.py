@@ -20,6 +20,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import signal
 import sqlite3
 import subprocess
@@ -117,6 +118,7 @@ def main() -> None:
     print(f"distinct marker strings: {len(set(samples))}")
     print(f"answers stamped after the next cue: {after_next_cue} of {sum(e == 'answer' for e, _ in ordered)}")
     print(f"largest backwards step of the stamps: {back:.3f} s")
+    shutil.rmtree(tmp, ignore_errors=True)
 
 
 if __name__ == "__main__":
