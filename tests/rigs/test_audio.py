@@ -343,6 +343,12 @@ def test_every_play_returns_its_onset_on_the_portaudio_dac_clock(rig):
     for onset in onsets:
         assert onset.clock == "portaudio_dac"
         assert np.isfinite(onset.device_s) and onset.device_s >= 0.0
+        # The first sample reaches the converter PortAudio's output latency after the first
+        # callback: the stream's latency (JACK's playback latency, here one 4096-frame period),
+        # and at most one more period of PortAudio's own buffer.
+        period = JACK_PERIOD / JACK_RATE
+        assert period <= rig.output_latency_s <= onset.latency_s <= rig.output_latency_s + period + 1e-9
+        assert onset.output_host_s == onset.host_s + onset.latency_s
     assert onsets[1].host_s > onsets[0].host_s
 
 

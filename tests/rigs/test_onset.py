@@ -28,6 +28,7 @@ def test_the_simulated_clock_advances_by_exactly_the_samples_each_play_put_out(r
     lengths = [400, 1234, 77, 4096]
     onsets = [rig.play(_drive(n)) for n in lengths]
     assert [o.clock for o in onsets] == [SIMULATED_CLOCK] * len(lengths)
+    assert [o.latency_s for o in onsets] == [0.0] * len(lengths)  # no output buffer
     assert onsets[0].device_s == 0.0
     # Each onset is the samples played before it over the rate: the running sum of the lengths.
     expected = np.concatenate([[0], np.cumsum(lengths[:-1])]) / FS
@@ -63,7 +64,8 @@ class _NoClock(SimulatedForearm):
 
 def test_a_backend_without_a_device_clock_gives_the_host_time_only():
     onset = _NoClock(seed=1, noise_m=0.0, dropout_rate=0.0).play(_drive(100))
-    assert (onset.device_s, onset.clock) == (None, None)
+    assert (onset.device_s, onset.clock, onset.latency_s) == (None, None, None)
+    assert onset.output_host_s == onset.host_s
     assert math.isfinite(onset.host_s)
 
 
@@ -73,6 +75,9 @@ def test_a_backend_without_a_device_clock_gives_the_host_time_only():
     ({"host_s": 1.0, "clock": SIMULATED_CLOCK}, "come together"),
     ({"host_s": 1.0, "device_s": float("inf"), "clock": SIMULATED_CLOCK}, "device time must be a finite number"),
     ({"host_s": 1.0, "device_s": 2.0, "clock": "wall"}, "unknown device clock 'wall'"),
+    ({"host_s": 1.0, "latency_s": -0.01}, "latency must be None or 0-2 s"),
+    ({"host_s": 1.0, "latency_s": float("nan")}, "latency must be None or 0-2 s"),
+    ({"host_s": 1.0, "latency_s": True}, "latency must be None or 0-2 s"),
 ])
 def test_an_onset_is_checked(kwargs, words):
     with pytest.raises(ValidationError, match=words):

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import json
-import os
 import threading
 
 import pytest
 from typer.testing import CliRunner
 
 from vibrofocus.cli.main import app
-from vibrofocus.io.lsl import clock_offset
+from vibrofocus.io.lsl import clock_offset, stable_source_id
 from vibrofocus.studies import StudyStore
 from vibrofocus.studies.markers import send_marker, sending_markers
 
@@ -25,8 +24,9 @@ class Receiver(threading.Thread):
     the first one until the inlet is connected: no marker is sent to nobody.
     """
 
-    def __init__(self):
+    def __init__(self, source_id: str):
         super().__init__(daemon=True)
+        self.source_id = source_id
         self.connected = threading.Event()
         self.markers: list[tuple[dict, float]] = []
         self.sent = 0
@@ -39,7 +39,8 @@ class Receiver(threading.Thread):
 
     def run(self):
         try:
-            pred = f"name='vibrofocus-markers' and type='Markers' and starts-with(source_id,'vibrofocus-{os.getpid()}-')"
+            # The detail stream (JSON), whose source id follows the database's.
+            pred = f"name='vibrofocus-markers-detail' and source_id='{self.source_id}-detail'"
             streams = pylsl.resolve_bypred(pred, 1, 60.0)
             assert streams, "the marker outlet was not found"
             inlet = pylsl.StreamInlet(streams[0], max_buflen=3600)
@@ -59,7 +60,7 @@ class Receiver(threading.Thread):
 
 def test_simulate_study_sends_one_marker_per_cue_onset_and_answer_at_the_stored_onsets(tmp_path, lsl_config):
     db = tmp_path / "study.db"
-    receiver = Receiver()
+    receiver = Receiver(stable_source_id(db))
     receiver.start()
     with sending_markers(receiver.sink):
         result = CliRunner().invoke(app, ["simulate-study", "-n", "1", "--seed", "4", "--db", str(db), "--quiet", "--lsl"])
@@ -91,11 +92,18 @@ def test_simulate_study_sends_one_marker_per_cue_onset_and_answer_at_the_stored_
     # Stamps: each onset's stored host time on LSL's clock; each answer at onset + response time.
     errors = [abs(t - (answers[(m["session"], m["trial_index"])]["onset_s"] + offset)) for m, t in onsets]
     assert max(errors) < 1e-3
+    # Each answer at onset + response time, or earlier where that time had not yet come
+    # (--pace 0: the model's response times are longer than the run takes), never before
+    # its stimulus or after the next cue: the stamps never step back.
     answer_stamps = [t for m, t in markers if m["event"] == "answer"]
-    expected = [answers[k]["onset_s"] + answers[k]["rt_s"] + offset for k in keys]
-    assert answer_stamps == pytest.approx(expected, abs=1e-3)
-    cue_stamps = [t for m, t in markers if m["event"] == "cue"]
-    assert all(c <= o for c, (_, o) in zip(cue_stamps, onsets))
+    latest = [answers[k]["onset_s"] + answers[k]["rt_s"] + offset for k in keys]
+    assert all(a <= b + 1e-9 for a, b in zip(answer_stamps, latest))
+    assert [m["code"] for m, _ in markers] == [
+        code for r in rows for code in ("cue", f"tap/{r['method']}/{r['phase']}/study{r['study']}", "answer")]
+    stamps = [t for _, t in markers]
+    assert stamps == sorted(stamps)
+    # The simulated rig knows its latency: none (the marker is at the hand-over).
+    assert {m["onset_latency_s"] for m, _ in onsets} == {0.0}
     print(f"markers {len(markers)}, trials {len(rows)}, onset stamp max error {max(errors):.3g} s")
 
 
@@ -112,3 +120,4 @@ def test_a_failing_sink_never_stops_a_study(caplog):
     send_marker("cue", 3.0, trial=3)  # no sink: nothing happens
     assert [c["trial"] for c in calls] == [1, 2]
     assert sum("could not be sent" in r.message for r in caplog.records) == 1
+

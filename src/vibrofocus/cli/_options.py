@@ -30,14 +30,56 @@ RIG_CONFIG_HELP = "Hardware settings file for audio/nidaq (refused with the simu
 FORCE_HELP = "Replace an existing output file of another kind (e.g. a calibration under a .csv name)."
 
 
-LSL_HELP = ("Send a JSON marker per cue, stimulus onset and answer to the Lab Streaming Layer outlet "
-            "'vibrofocus-markers' (type Markers), stamped with each event's own time on LSL's clock; needs "
-            "pip install 'vibrofocus[lsl]'.")
+LSL_HELP = ("Send a marker per cue, stimulus onset and answer to the Lab Streaming Layer outlet "
+            "'vibrofocus-markers' (type Markers): a short event code (cue, tap/METHOD/PHASE/studyN, answer), "
+            "with each marker's JSON detail on 'vibrofocus-markers-detail', stamped with each event's own time on "
+            "LSL's clock (an onset at the device's output); needs pip install 'vibrofocus[lsl]'.")
+LSL_SOURCE_ID_HELP = ("Source id of the LSL streams (letters, digits, _.:+-). Default: derived from the study "
+                      "database and this machine, the same in every run, so a recorder (LabRecorder) recovers the "
+                      "stream of a killed run when it is resumed.")
+LSL_WAIT_HELP = ("Wait up to this long, s, for a recorder to connect to the LSL stream before the first trial "
+                 "(0: do not wait); a recorder recovering a killed run's stream then misses no marker.")
+#: Longest ``--lsl-wait``, s.
+LSL_WAIT_MAX_S = 600.0
 
 
 def lsl_option() -> bool:
     """The ``--lsl`` option of the commands that run trials (``study run``, ``simulate-study``, ``serve``)."""
     return typer.Option(False, "--lsl", help=LSL_HELP)
+
+
+def lsl_source_id_option() -> str | None:
+    """The ``--lsl-source-id`` option of the commands that take ``--lsl``."""
+    return typer.Option(None, "--lsl-source-id", show_default=False, help=LSL_SOURCE_ID_HELP)
+
+
+def lsl_wait_option() -> float:
+    """The ``--lsl-wait`` option of the commands that take ``--lsl``."""
+    return typer.Option(0.0, "--lsl-wait", min=0.0, max=LSL_WAIT_MAX_S, help=LSL_WAIT_HELP)
+
+
+def lsl_source(lsl: bool, source_id: str | None, db: Path, study: int | None = None) -> str | None:
+    """The source id of a command's marker streams: ``--lsl-source-id`` (checked) or the database's.
+
+    Parameters
+    ----------
+    lsl : bool
+        Whether ``--lsl`` was given (``--lsl-source-id`` alone is refused).
+    source_id : str or None
+        ``--lsl-source-id``.
+    db : Path
+        The study database.
+    study : int, optional
+        The study the command runs, when it runs one.
+    """
+    from ..errors import ValidationError
+    from ..io.lsl import check_source_id, stable_source_id
+
+    if not lsl:
+        if source_id is not None:
+            raise ValidationError("--lsl-source-id needs --lsl")
+        return None
+    return check_source_id(source_id) if source_id is not None else stable_source_id(db, study)
 
 
 def force_option() -> bool:

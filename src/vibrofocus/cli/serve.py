@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from ._errors import err_console, user_errors
-from ._options import lsl_option
+from ._options import lsl_option, lsl_source, lsl_source_id_option, lsl_wait_option
 from ._command import command
 
 _LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
@@ -31,6 +31,8 @@ def serve(
     body_timeout: float = typer.Option(10.0, "--body-timeout", min=0.1, max=600.0, help="Seconds a request may take to send its body once its headers are in; then it gets 408 and its connection is closed."),
     trusted_proxy: str | None = typer.Option(None, "--trusted-proxy", metavar="ADDR", help="Address of a reverse proxy in front of this server whose X-Forwarded-For header names the real client (comma-separated for several). Without it, forwarding headers are ignored."),
     lsl: bool = lsl_option(),
+    lsl_source_id: str | None = lsl_source_id_option(),
+    lsl_wait: float = lsl_wait_option(),
     participant_audio_elsewhere: bool = typer.Option(
         False, "--participant-audio-elsewhere",
         help="With an audio rig whose interface is this computer's default output: the participant page "
@@ -73,7 +75,9 @@ def serve(
         from ..studies.markers import lsl_markers
 
         markers = contextlib.ExitStack()
-        outlet = markers.enter_context(lsl_markers(lsl))  # no pylsl: one error line before anything starts
+        # A bad id or no pylsl: one error line before anything starts.
+        source_id = lsl_source(lsl, lsl_source_id, db)
+        outlet = markers.enter_context(lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait))
         from ..rigs import make_rig
         from ..skin import skin_preset
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import SEED_MAX, force_option, lsl_option
+from ._options import SEED_MAX, force_option, lsl_option, lsl_source, lsl_source_id_option, lsl_wait_option
 from ._command import command
 
 
@@ -33,6 +33,8 @@ def simulate_study(
                              help="Skin preset of the simulated forearms: nominal (the skin the perceptual model "
                                   "was fitted on) | low | high | voigt-fit."),
     lsl: bool = lsl_option(),
+    lsl_source_id: str | None = lsl_source_id_option(),
+    lsl_wait: float = lsl_wait_option(),
     methods: str | None = typer.Option(
         None, "--methods",
         help="Rendering methods the studies compare, comma separated: any registered ones, such as minimax "
@@ -83,6 +85,7 @@ def simulate_study(
             from ..studies.protocol import StudyDesign
 
             chosen = StudyDesign(methods=tuple(m.strip() for m in methods.split(",") if m.strip())).methods
+        source_id = lsl_source(lsl, lsl_source_id, db)  # a bad id: one error line before anything is created
         if lsl:  # no pylsl: one error line before anything is created
             from ..io.lsl import import_pylsl
 
@@ -130,7 +133,9 @@ def simulate_study(
             raise
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.[/]")
-        with lsl_markers(lsl), Progress(
+        if source_id is not None:
+            console.print(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {source_id})", markup=False)
+        with lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait), Progress(
             TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
             console=console, disable=quiet, transient=False,
         ) as bar:

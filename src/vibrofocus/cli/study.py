@@ -7,7 +7,8 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options, force_option, lsl_option
+from ._options import (RIG_CONFIG_HELP, SEED_MAX, check_rig_options, force_option, lsl_option, lsl_source,
+                       lsl_source_id_option, lsl_wait_option)
 from ._command import command
 
 study_app = typer.Typer(
@@ -62,6 +63,8 @@ def run(
         "The rig's own actuator interface is refused.",
     ),
     lsl: bool = lsl_option(),
+    lsl_source_id: str | None = lsl_source_id_option(),
+    lsl_wait: float = lsl_wait_option(),
     levels: str = typer.Option(
         "paper", "--levels",
         help="Level rule of a new session's stimuli: paper (funneling by eq. 3 at A = the drive limit, the inverse "
@@ -90,6 +93,7 @@ def run(
 
         console = Console()
         check_rig_options(rig, rig_config)
+        source_id = lsl_source(lsl, lsl_source_id, db, study)  # a bad id: refused before the rig is made
         cal = load_calibration(calibration)
         if getattr(cal, "participant_id", participant) != participant:
             raise StudyError(
@@ -98,7 +102,10 @@ def run(
         # The rig first: a rig that cannot be made (no config, no device) leaves the
         # database as it was, with no participant or session planned for nothing.
         the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
-        with lsl_markers(lsl), the_rig, StudyStore(db) as store:
+        with lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait) as outlet, the_rig, StudyStore(db) as store:
+            if outlet is not None:
+                console.print(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})",
+                              markup=False)
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
             config = {"rig": rig, "levels": levels}

@@ -23,7 +23,8 @@
     BIDS behavioural datasets (``vibrofocus export --bids``): :func:`write_bids_dataset`,
     :func:`read_bids_trials_table`.
 :mod:`.lsl`
-    Lab Streaming Layer markers (``--lsl``, extra ``vibrofocus[lsl]``): :class:`MarkerOutlet`.
+    Lab Streaming Layer markers (``--lsl``, extra ``vibrofocus[lsl]``): :class:`MarkerOutlet`,
+    :func:`marker_code` (the event codes), :func:`stable_source_id`.
 :mod:`.sofa`
     Transfer matrices as SOFA ``GeneralTF-E`` files (extra ``vibrofocus[sofa]``):
     :func:`write_sofa_tf`, :func:`read_sofa_tf`.
@@ -39,7 +40,7 @@ from .calibration_nc import read_calibration_file, write_calibration_file
 from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
 from .jsonsafe import json_safe
-from .lsl import MarkerOutlet
+from .lsl import MarkerOutlet, marker_code, stable_source_id
 from .report_json import check_report, read_report_json, write_report_json
 from .responses import format_response, parse_response_text
 from .sofa import read_sofa_tf, write_sofa_tf
@@ -66,6 +67,8 @@ __all__ = [
     "write_bids_dataset",
     "read_bids_trials_table",
     "MarkerOutlet",
+    "marker_code",
+    "stable_source_id",
     "write_sofa_tf",
     "read_sofa_tf",
 ]

@@ -1,34 +1,153 @@
-"""Lab Streaming Layer markers: one ``vibrofocus-markers`` outlet of type ``Markers``.
+"""Lab Streaming Layer markers: the ``vibrofocus-markers`` outlet (type ``Markers``) and its detail stream.
 
-Each marker is one JSON string (a plain record: ``event``, ``participant``, ``study``,
-``trial``, ``method``, ``target``, ``response``, ...; a stimulus onset also carries
-``onset_device_s`` and ``onset_clock``, the onset on the rig's own clock) stamped with the time of the event
-itself on LSL's clock (:func:`pylsl.local_clock`), not the time it was sent: the host's
-``time.monotonic()`` of the event is mapped onto LSL's clock with an offset measured when
-the outlet opens. An EEG, EMG or motion-capture recording then has the stimulus onsets on
-its own time axis (LabRecorder, ``pyxdf``).
+Each event goes out twice, with the same timestamp:
+
+- on ``vibrofocus-markers`` (type ``Markers``) as a short **event code** from a small
+  vocabulary (:func:`marker_code`: ``cue``, ``tap/<method>/<phase>/study<N>``, ``answer``),
+  what an EEG pipeline makes its event types of (EEGLAB, ``mne.Annotations``);
+- on ``vibrofocus-markers-detail`` (type ``MarkerDetails``) as one JSON record (``code``,
+  ``event``, ``participant``, ``study``, ``trial``, ``method``, ``target``, ``response``,
+  ...; a stimulus onset also carries ``onset_device_s``, ``onset_clock`` and
+  ``onset_latency_s``).
+
+Both are stamped with the time of the event itself on LSL's clock
+(:func:`pylsl.local_clock`), not the time it was sent: the host's ``time.monotonic()`` of
+the event is mapped onto LSL's clock with an offset measured when the outlet opens. An EEG,
+EMG or motion-capture recording then has the stimulus onsets on its own time axis
+(LabRecorder, ``pyxdf``).
+
+The source id is what lets a recorder (LabRecorder's inlets, ``recover=True``) find the
+stream again after its sender crashed: :func:`stable_source_id` derives one from the study
+database, so a run that is killed and resumed keeps one stream.
 
 Needs the optional extra ``vibrofocus[lsl]`` (pylsl, whose wheels bundle liblsl).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import re
+import socket
 import threading
 import time
 import uuid
 from collections.abc import Callable, Mapping
+from pathlib import Path
 from typing import Any
 
+from .._validation import shorten
 from ..errors import ValidationError
 from .jsonsafe import json_safe
 
-__all__ = ["STREAM_NAME", "STREAM_TYPE", "MarkerOutlet", "clock_offset", "import_pylsl"]
+__all__ = ["STREAM_NAME", "STREAM_TYPE", "DETAIL_STREAM_NAME", "DETAIL_STREAM_TYPE", "CODES", "MarkerOutlet",
+           "clock_offset", "import_pylsl", "marker_code", "stable_source_id", "check_source_id"]
 
-#: Name and type of the marker stream.
+#: Name and type of the marker stream (event codes).
 STREAM_NAME = "vibrofocus-markers"
 STREAM_TYPE = "Markers"
+#: Name and type of the detail stream (one JSON record per marker, same timestamps).
+DETAIL_STREAM_NAME = "vibrofocus-markers-detail"
+DETAIL_STREAM_TYPE = "MarkerDetails"
+
+#: The event codes, with what each marks (``<method>``: the rendering method, ``<phase>``:
+#: ``main`` or ``training``, ``<N>``: the study, 1 or 2).
+CODES: dict[str, str] = {
+    "cue": "the cue (beep) of a trial",
+    "tap/<method>/<phase>/study<N>": "the stimulus onset: the drive's first sample at the actuators",
+    "dry/<method>/<phase>/study<N>": "a dry run's stimulus onset (nothing is played)",
+    "answer": "the participant's answer (the locations are in the detail stream)",
+}
+
+#: How long :meth:`MarkerOutlet.wait_for_consumers` waits for the detail stream's inlet
+#: once the code stream has one, s.
+DETAIL_GRACE_S = 5.0
+
+_TOKEN = re.compile(r"[^A-Za-z0-9_.+-]+")
+_SOURCE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.:+-]{0,99}")
+
+
+def _token(value: Any) -> str:
+    """One part of an event code: no '/' or spaces (MNE splits tags at '/')."""
+    return _TOKEN.sub("_", str(value)).strip("_")[:40] or "_"
+
+
+def marker_code(marker: Mapping[str, Any]) -> str:
+    """The short event code of a marker (:data:`CODES`).
+
+    ``cue`` and ``answer`` as they are; a stimulus onset (``event`` ``stimulus_onset`` or
+    ``tap``) as ``tap/<method>``, then ``/<phase>`` and ``/study<N>`` where the marker has
+    them (``dry/...`` when ``played`` is false); any other event by its name; a marker with
+    its own ``code`` keeps it.
+
+    Parameters
+    ----------
+    marker : mapping
+        The marker's fields (``event``, ``method``, ``phase``, ``study``, ``played``, ...).
+
+    Returns
+    -------
+    str
+    """
+    if marker.get("code"):
+        return str(marker["code"])
+    event = str(marker.get("event", "marker"))
+    if event not in ("stimulus_onset", "tap"):
+        return _token(event)
+    parts = ["dry" if marker.get("played") is False else "tap", _token(marker.get("method", "unknown"))]
+    if marker.get("phase") is not None:
+        parts.append(_token(marker["phase"]))
+    if marker.get("study") is not None:
+        parts.append(f"study{_token(marker['study'])}")
+    return "/".join(parts)
+
+
+def check_source_id(source_id: Any, name: str = "--lsl-source-id") -> str:
+    """A source id a recorder can find again: 1-100 letters, digits and ``_ . : + -``.
+
+    Parameters
+    ----------
+    source_id : str
+        The id.
+    name : str
+        How errors name it.
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    ValidationError
+    """
+    if not isinstance(source_id, str) or not _SOURCE_ID.fullmatch(source_id):
+        raise ValidationError(f"{name} must be 1-100 letters, digits or '_.:+-', starting with a letter or digit, "
+                              f"got {shorten(source_id)}")
+    return source_id
+
+
+def stable_source_id(database: str | os.PathLike[str], study: int | None = None) -> str:
+    """The source id of a study database's marker stream: the same in every run on this machine.
+
+    ``vibrofocus-<16 hex digits>`` (``-study<N>`` added for one study): a hash of this
+    machine's name and the database's resolved path, so a run that is killed and resumed
+    on the same database sends on the same stream, which a recorder's inlet recovers.
+
+    Parameters
+    ----------
+    database : path
+        The study database.
+    study : int, optional
+        The study the process runs, when it runs one.
+
+    Returns
+    -------
+    str
+    """
+    where = f"{socket.gethostname()}\0{Path(os.fspath(database)).expanduser().resolve()}"
+    digest = hashlib.sha256(where.encode("utf-8", "surrogateescape")).hexdigest()[:16]
+    return f"vibrofocus-{digest}" + (f"-study{int(study)}" if study is not None else "")
 
 
 def import_pylsl() -> Any:
@@ -63,31 +182,76 @@ def clock_offset(lsl_clock: Callable[[], float], host_clock: Callable[[], float]
     return best[1]
 
 
+def _describe(info: Any, *, channel: tuple[str, str], source: str, detail: str | None) -> None:
+    """The stream's metadata: channel, acquisition/software block, vocabulary."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:  # as vibrofocus.__version__ (io imports nothing above it)
+        __version__ = version("vibrofocus")
+    except PackageNotFoundError:
+        __version__ = "0.0.0+unknown"
+    desc = info.desc()
+    ch = desc.append_child("channels").append_child("channel")
+    ch.append_child_value("label", channel[0])
+    ch.append_child_value("type", channel[1])
+    # XDF's meta-data conventions: who made the stream and with what.
+    acq = desc.append_child("acquisition")
+    acq.append_child_value("manufacturer", "vibrofocus")
+    acq.append_child_value("model", "vibrofocus study engine")
+    acq.append_child_value("software", "vibrofocus")
+    acq.append_child_value("version", __version__)
+    acq.append_child_value("compensated_lag", "0")
+    own = desc.append_child("vibrofocus")
+    own.append_child_value("source_id_from", source)
+    own.append_child_value("timestamps", "each event's own time on LSL's clock; stimulus onsets at the device's "
+                                         "output (host time + the rig's output latency, where it knows it)")
+    if detail is not None:
+        own.append_child_value("detail_stream", detail)
+    codes = own.append_child("codes")
+    for code, meaning in CODES.items():
+        entry = codes.append_child("code")
+        entry.append_child_value("name", code)
+        entry.append_child_value("meaning", meaning)
+
+
 class MarkerOutlet:
-    """An LSL outlet that sends JSON markers stamped with their events' own times.
+    """LSL outlets sending event codes, and their JSON detail, stamped with their events' own times.
 
     Parameters
     ----------
     source_id : str, optional
-        LSL source id (default: unique per outlet), so that a recorder can tell apart
-        two vibrofocus processes and reconnect to the same one.
+        LSL source id of the code stream (the detail stream's is this plus ``-detail``),
+        so that a recorder can tell apart two vibrofocus processes and find the same one
+        again after a crash (:func:`stable_source_id`). Default: unique per outlet.
     name : str
-        Stream name (default :data:`STREAM_NAME`).
+        Name of the code stream (default :data:`STREAM_NAME`).
+    detail : bool
+        Also open the detail stream (:data:`DETAIL_STREAM_NAME`, or ``name`` + ``-detail``).
 
     Attributes
     ----------
     offset_s : float
         LSL clock minus host ``time.monotonic()``, s, measured when the outlet opened.
+    source_id : str
+        The code stream's source id.
     """
 
-    def __init__(self, *, source_id: str | None = None, name: str = STREAM_NAME) -> None:
+    def __init__(self, *, source_id: str | None = None, name: str = STREAM_NAME, detail: bool = True) -> None:
         pylsl = import_pylsl()
-        self.source_id = source_id or f"vibrofocus-{os.getpid()}-{uuid.uuid4().hex[:8]}"
+        given = source_id is not None
+        self.source_id = (check_source_id(source_id, "source_id") if given
+                          else f"vibrofocus-{os.getpid()}-{uuid.uuid4().hex[:8]}")
+        detail_name = (DETAIL_STREAM_NAME if name == STREAM_NAME else f"{name}-detail") if detail else None
+        origin = "given" if given else "random (this process)"
         info = pylsl.StreamInfo(name, STREAM_TYPE, 1, pylsl.IRREGULAR_RATE, pylsl.cf_string, self.source_id)
-        channel = info.desc().append_child("channels").append_child("channel")
-        channel.append_child_value("label", "marker")
-        channel.append_child_value("type", "JSON")
+        _describe(info, channel=("code", "Marker"), source=origin, detail=detail_name)
         self._outlet = pylsl.StreamOutlet(info)
+        self._detail = None
+        if detail_name is not None:
+            dinfo = pylsl.StreamInfo(detail_name, DETAIL_STREAM_TYPE, 1, pylsl.IRREGULAR_RATE, pylsl.cf_string,
+                                     f"{self.source_id}-detail")
+            _describe(dinfo, channel=("detail", "JSON"), source=origin, detail=None)
+            self._detail = pylsl.StreamOutlet(dinfo)
         self._pylsl = pylsl
         self.offset_s = clock_offset(pylsl.local_clock)
         self._lock = threading.Lock()
@@ -99,10 +263,13 @@ class MarkerOutlet:
     def push(self, marker: Mapping[str, Any], host_time_s: float) -> float:
         """Send one marker stamped with its event's host time, mapped to LSL's clock.
 
+        The code stream gets :func:`marker_code` of it, the detail stream the whole
+        record as JSON (with ``code``), both with the same timestamp.
+
         Parameters
         ----------
         marker : mapping
-            JSON-able fields (NaN/Inf become null).
+            JSON-able fields (NaN/Inf become null); ``event`` names the event.
         host_time_s : float
             When the event happened, ``time.monotonic()``, s.
 
@@ -112,25 +279,39 @@ class MarkerOutlet:
             The LSL timestamp sent, s.
         """
         stamp = self.lsl_time(host_time_s)
-        text = json.dumps(json_safe(dict(marker)), sort_keys=True)
+        code = marker_code(marker)
+        text = json.dumps(json_safe({**marker, "code": code}), sort_keys=True)
         with self._lock:
-            self._outlet.push_sample([text], stamp)
+            self._outlet.push_sample([code], stamp)
+            if self._detail is not None:
+                self._detail.push_sample([text], stamp)
         return stamp
 
     def __call__(self, marker: Mapping[str, Any], host_time_s: float) -> float:
         return self.push(marker, host_time_s)
 
     def have_consumers(self) -> bool:
-        """Whether some inlet is connected."""
+        """Whether some inlet is connected to the code stream."""
         return bool(self._outlet.have_consumers())
 
     def wait_for_consumers(self, timeout_s: float) -> bool:
-        """Wait up to ``timeout_s`` for an inlet; whether one is connected."""
-        return bool(self._outlet.wait_for_consumers(timeout_s))
+        """Wait up to ``timeout_s`` for an inlet on the code stream; whether one is connected.
+
+        Once it is, the detail stream gets up to :data:`DETAIL_GRACE_S` more (within
+        ``timeout_s``) for its own inlet: a recorder connects to the streams it records one
+        after the other, and one that records the codes alone is not waited for long.
+        """
+        deadline = time.monotonic() + float(timeout_s)
+        if not self._outlet.wait_for_consumers(float(timeout_s)):
+            return False
+        if self._detail is not None:
+            self._detail.wait_for_consumers(max(0.0, min(DETAIL_GRACE_S, deadline - time.monotonic())))
+        return True
 
     def close(self) -> None:
-        """Close the outlet (the stream disappears from the network)."""
+        """Close the outlets (the streams disappear from the network)."""
         self._outlet = None
+        self._detail = None
 
     def __enter__(self) -> "MarkerOutlet":
         return self

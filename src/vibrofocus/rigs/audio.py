@@ -60,7 +60,7 @@ from ..layout import ArrayLayout
 from .config import AudioRigConfig
 from .devices import DeviceError, StoppedError
 from .hardware import HardwareRig
-from .onset import PORTAUDIO_CLOCK, DeviceOnset
+from .onset import MAX_LATENCY_S, PORTAUDIO_CLOCK, DeviceOnset
 
 __all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface",
            "default_output_risk", "audio_lock_keys"]
@@ -402,8 +402,9 @@ class AudioRig(HardwareRig):
 
         Returns the recorded input (n_frames, n_in), zeros where nothing came, the
         stream's status flags over the whole run, and the onset of the block's first
-        frame: ``time.monotonic()`` in the first callback and that callback's
-        ``outputBufferDacTime`` (:data:`~vibrofocus.rigs.onset.PORTAUDIO_CLOCK`).
+        frame: ``time.monotonic()`` in the first callback, that callback's
+        ``outputBufferDacTime`` (:data:`~vibrofocus.rigs.onset.PORTAUDIO_CLOCK`) and how far
+        ahead of the callback that is (``outputBufferDacTime - currentTime``, the latency).
         """
         sd = _sounddevice()
         n_out, n_in = max(self._out_channels), max(self._in_channels)
@@ -418,7 +419,8 @@ class AudioRig(HardwareRig):
         def fill(outdata, frames, time_info):
             pos = state["pos"]
             if state["onset"] is None:  # the first callback: the block's first frame goes out now
-                state["onset"] = (time.monotonic(), float(time_info.outputBufferDacTime))
+                state["onset"] = (time.monotonic(), float(time_info.outputBufferDacTime),
+                                  float(time_info.outputBufferDacTime) - float(time_info.currentTime))
             outdata.fill(0)
             if stopped():
                 raise sd.CallbackAbort
@@ -501,8 +503,13 @@ class AudioRig(HardwareRig):
         if state["pos"] < total:
             raise DeviceError(f"the audio interface took {state['pos']} of the {total} frames while {what}; "
                               "the rest never played")
-        host, dac = state["onset"]
-        onset = DeviceOnset(host, dac, PORTAUDIO_CLOCK) if math.isfinite(dac) else DeviceOnset(host)
+        host, dac, ahead = state["onset"]
+        # How far ahead of the callback the first sample reaches the converter, by the
+        # stream's own clock; where the host API gives no such times, the stream's latency.
+        latency = ahead if math.isfinite(ahead) and 0.0 <= ahead <= MAX_LATENCY_S else self._output_latency_s
+        latency = latency if math.isfinite(latency) and 0.0 <= latency <= MAX_LATENCY_S else None
+        onset = (DeviceOnset(host, dac, PORTAUDIO_CLOCK, latency_s=latency) if math.isfinite(dac)
+                 else DeviceOnset(host, latency_s=latency))
         return recorded, state["status"], onset
 
     @staticmethod

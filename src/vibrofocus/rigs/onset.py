@@ -53,6 +53,9 @@ CLOCKS: dict[str, str] = {
 }
 
 
+#: Longest output latency an onset may state, s (audio interfaces buffer tens of ms).
+MAX_LATENCY_S = 2.0
+
 _CLOCK_NAME = re.compile(r"[a-z][a-z0-9_]{0,39}")
 
 
@@ -139,12 +142,28 @@ class DeviceOnset:
         clock (or the device gives no time).
     clock : str or None
         The device clock's name, a key of :data:`CLOCKS`; None with ``device_s``.
+    latency_s : float or None
+        How long after ``host_s`` the first sample leaves the device's output, s, where the
+        rig knows it (the audio rig: PortAudio's ``outputBufferDacTime - currentTime`` of
+        the first callback; the simulated rig: 0); None where it does not. The LSL onset
+        marker is stamped at ``host_s + latency_s``.
     """
 
     host_s: float
     device_s: float | None = None
     clock: str | None = None
+    latency_s: float | None = None
 
     def __post_init__(self) -> None:
         check_onset(self.host_s, self.device_s, self.clock,
                     names=("an onset's host time", "an onset's device time", "its clock"))
+        lat = self.latency_s
+        if lat is not None and (isinstance(lat, bool) or not isinstance(lat, (int, float))
+                                or not math.isfinite(lat) or not 0.0 <= lat <= MAX_LATENCY_S):
+            raise ValidationError(f"an onset's latency must be None or 0-{MAX_LATENCY_S:g} s, got {shorten(lat)}")
+
+    @property
+    def output_host_s(self) -> float:
+        """When the first sample left the device, on the host's clock, s (``host_s`` plus the
+        latency where it is known)."""
+        return self.host_s + (self.latency_s or 0.0)

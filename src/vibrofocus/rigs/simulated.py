@@ -165,7 +165,7 @@ class SimulatedForearm(SimulatedArm, Rig):
         self.last_drive = np.array(drive, copy=True)
         # The outputs hold the drive's last value until the safety layer zeroes them.
         self.outputs_v = self.last_drive[:, -1].copy()
-        return DeviceOnset(host, start / self.fs, SIMULATED_CLOCK)
+        return DeviceOnset(host, start / self.fs, SIMULATED_CLOCK, latency_s=0.0)  # no output buffer
 
     def _play_and_record(self, drive: np.ndarray, points_xy: np.ndarray | None, n_tail: int) -> np.ndarray:
         self._output(drive, n_tail)

@@ -353,6 +353,9 @@ class Presentation:
         (:class:`~vibrofocus.rigs.DeviceOnset`); None in a dry run or on a rig without one.
     onset_clock : str or None
         That clock's name (:data:`vibrofocus.rigs.CLOCKS`).
+    onset_latency_s : float or None
+        How long after ``onset_s`` the drive left the device's output, s, where the rig
+        knows it (:attr:`vibrofocus.rigs.DeviceOnset.latency_s`).
     """
 
     session_id: int
@@ -363,6 +366,7 @@ class Presentation:
     design: StudyDesign
     onset_device_s: float | None = None
     onset_clock: str | None = None
+    onset_latency_s: float | None = None
 
 
 @dataclass(frozen=True)
@@ -588,15 +592,22 @@ class StudyEngine:
         if isinstance(host_s, (int, float)) and np.isfinite(host_s):
             onset = float(host_s)
         device_s, clock = getattr(played, "device_s", None), getattr(played, "clock", None)
-        self._marker("stimulus_onset", onset, trial, played=stim is not None, onset_device_s=device_s,
-                     onset_clock=clock)
-        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock)
+        latency = getattr(played, "latency_s", None)
+        latency = float(latency) if isinstance(latency, (int, float)) and np.isfinite(latency) else None
+        # The marker at the drive's first sample leaving the device: the hand-over plus the
+        # output latency where the rig knows it.
+        self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=stim is not None,
+                     onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency)
+        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency)
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
         """Commit the answer to a presented trial (with the drive hash and the onset) before returning.
 
-        The answer's marker is stamped with its own time: the stimulus onset plus the
-        response time.
+        The answer's marker is stamped with its own time, the stimulus onset plus the
+        response time, kept between the stimulus onset's marker and now: a simulated
+        participant's modelled response time may be longer than the time that really
+        passed (``--pace 0``), and no answer is stamped before its stimulus or after the
+        next cue.
         """
         stim = presentation.stimulus
         onsets = {"onset_s": presentation.onset_s, "onset_device_s": presentation.onset_device_s,
@@ -609,8 +620,9 @@ class StudyEngine:
         if receipt.duplicate:
             # Committed before the engine had the onset (the web page's answer route): its onset apart.
             self._log("answer_onset", presentation.trial, answer_id=receipt.answer_id, **onsets)
-        self._marker("answer", presentation.onset_s + float(receipt.rt_s), presentation.trial,
-                     response=list(receipt.response), rt_s=float(receipt.rt_s))
+        shown = presentation.onset_s + (presentation.onset_latency_s or 0.0)
+        stamp = min(max(presentation.onset_s + float(receipt.rt_s), shown), max(time.monotonic(), shown))
+        self._marker("answer", stamp, presentation.trial, response=list(receipt.response), rt_s=float(receipt.rt_s))
         return receipt
 
     def _trial(self, responder: Responder, trial: PlannedTrial) -> AnswerReceipt | str | Again:

@@ -56,7 +56,8 @@ def send_marker(event: str, host_time_s: float, **fields: Any) -> None:
     **fields
         ``participant``, ``study``, ``session``, ``trial``, ``trial_index``, ``phase``,
         ``method``, ``target``, ``response`` (None before the answer); a stimulus onset's
-        ``onset_device_s`` and ``onset_clock`` (the rig's device clock, None without one), ...
+        ``onset_device_s`` and ``onset_clock`` (the rig's device clock, None without one) and
+        ``onset_latency_s`` (the output latency its time includes, None where unknown), ...
     """
     with _LOCK:
         sinks = list(_SINKS)
@@ -73,13 +74,20 @@ def send_marker(event: str, host_time_s: float, **fields: Any) -> None:
 
 
 @contextlib.contextmanager
-def lsl_markers(enabled: bool = True) -> Iterator[Any]:
+def lsl_markers(enabled: bool = True, *, source_id: str | None = None, wait_s: float = 0.0) -> Iterator[Any]:
     """Open the LSL outlet ``vibrofocus-markers`` and send every engine's markers to it (``--lsl``).
 
     Parameters
     ----------
     enabled : bool
         False: do nothing (yields None), so a command can write ``with lsl_markers(lsl):``.
+    source_id : str, optional
+        The streams' source id (:func:`vibrofocus.io.lsl.stable_source_id` of the study
+        database, or ``--lsl-source-id``); default: unique per process.
+    wait_s : float
+        Wait up to this long, s, for a recorder's inlet before the block runs (``--lsl-wait``):
+        a recorder that is recovering the stream of a killed run is connected before the
+        resumed run's first marker.
 
     Yields
     ------
@@ -90,5 +98,7 @@ def lsl_markers(enabled: bool = True) -> Iterator[Any]:
         return
     from ..io.lsl import MarkerOutlet
 
-    with MarkerOutlet() as outlet, sending_markers(outlet):
+    with MarkerOutlet(source_id=source_id) as outlet, sending_markers(outlet):
+        if wait_s > 0 and not outlet.wait_for_consumers(float(wait_s)):
+            log.warning("no LSL recorder connected to %s within %g s; the run goes on", outlet.source_id, wait_s)
         yield outlet
