@@ -256,8 +256,7 @@ def power_markdown() -> str:
                            local=True)["table"] for h in names}
     robust = {(r["test"], r["n_participants"]): r for r in robust_conclusions(tables)}
     sizes = " / ".join(map(str, POWER_SIZES))
-    lines = ["*Simulated participants (a model, not data): " + "; ".join(hypothesis(h).label() for h in names)
-             + f".* Power (share of {POWER_STUDIES} simulated studies with p < 0.05; binomial SE at most 3.5 points) "
+    lines = ["*" + "; ".join(hypothesis(h).label() for h in names) + f".* Power (share of {POWER_STUDIES} simulated studies with p < 0.05; binomial SE at most 3.5 points) "
              f"of each test at N = {sizes} participants, under each hypothesis, stimuli at {default_bank().levels} "
              f"levels, from `vibrofocus power --participants {','.join(map(str, POWER_SIZES))} --studies "
              f"{POWER_STUDIES}`. A conclusion (powered at {ROBUST_POWER:.0%} or not) is *robust* where every "

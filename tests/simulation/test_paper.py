@@ -161,7 +161,7 @@ def test_every_parameter_says_where_it_comes_from():
 
 def test_documented_tables_are_those_of_the_code():
     res = subprocess.run([sys.executable, str(ROOT / "scripts" / "fit_participants.py"), "table", "--check"],
-                         capture_output=True, text=True, timeout=300,
+                         capture_output=True, text=True, timeout=1200,
                          env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
     assert res.returncode == 0, res.stdout[-2000:] + res.stderr[-2000:]
     assert "up to date" in res.stdout

@@ -57,10 +57,11 @@ class SimulatedParticipant:
     seed : int
         Participant seed for the participant's traits and per-trial noise.
     model : PerceptualModel, optional
-        Model parameters (default: model v3 as fitted).
+        Model parameters (default: the hypothesis' fitted parameters,
+        :meth:`~vibrofocus.simulation.hypotheses.Hypothesis.model`).
     hypothesis : str or Hypothesis, optional
         How the participant reads the felt field (:mod:`vibrofocus.simulation.hypotheses`;
-        default v3's centroid).
+        default :data:`~vibrofocus.simulation.hypotheses.DEFAULT_HYPOTHESIS`).
 
     Notes
     -----

@@ -124,7 +124,7 @@ def simulate_studies(
         started with the same.
     hypothesis : str, optional
         How the simulated participants read the felt field
-        (:mod:`vibrofocus.simulation.hypotheses`; default v3's centroid), stored with
+        (:mod:`vibrofocus.simulation.hypotheses`; default the default hypothesis, with its fitted parameters), stored with
         each session (name and version); a resumed database must have been started with
         the same.
 
