@@ -22,7 +22,7 @@ args = parser.parse_args()
 win = visual.Window(size=(800, 600), units="height", fullscr=False)
 text = visual.TextStim(win, text="+")
 exp = data.ExperimentHandler(name="tap_coder", dataFileName=args.out)
-tap = (TapStimulus.in_process("simulated", seed=1, name="tap") if args.in_process
+tap = (TapStimulus.in_process("simulated", seed=1, anywhere=False, name="tap") if args.in_process
        else TapStimulus.osc(port=args.port, name="tap"))
 
 for trial in range(args.trials):

@@ -31,7 +31,7 @@ stairs = data.StairHandler(startVal=-6.0, stepType="lin", stepSizes=[4.0, 2.0, 1
                            nTrials=20, nReversals=6, minVal=-40.0, maxVal=0.0, name="stairs")
 exp.addLoop(stairs)
 tap = (TapStimulus.osc(port=args.port, name="tap") if args.port
-       else TapStimulus.in_process("simulated", seed=args.seed, name="tap"))
+       else TapStimulus.in_process("simulated", seed=args.seed, anywhere=False, name="tap"))
 
 for level in stairs:
     tap.set(location=5, level_db=float(level))

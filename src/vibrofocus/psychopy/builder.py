@@ -111,9 +111,11 @@ class VibrofocusTapComponent(BaseComponent):
         if p["backend"].val == "in-process":
             # Blank settings are None (the simulated arm's own transfer, no hardware file, no seed).
             given = {k: str(p[k]) if str(p[k].val).strip() else "None" for k in ("calibration", "rigConfig", "seed")}
+            # Taps at points need the skin model evaluated at start (seconds); locations do not.
+            anywhere = bool(str(p["x_mm"].val).strip() and str(p["y_mm"].val).strip())
             code += ("%(name)s = TapStimulus.in_process(%(rig)s, calibration=" + given["calibration"]
                      + ", rig_config=" + given["rigConfig"] + ", seed=" + given["seed"]
-                     + ", name='%(name)s', method=%(method)s)\n")
+                     + f", anywhere={anywhere}, name='%(name)s', method=%(method)s)\n")
         else:
             code += "%(name)s = TapStimulus.osc(host=%(host)s, port=%(port)s, name='%(name)s', method=%(method)s)\n"
         buff.writeIndentedLines(code % p)

@@ -152,7 +152,8 @@ class TapStimulus:
 
     @classmethod
     def in_process(cls, rig: Any = "simulated", *, calibration: str | os.PathLike | None = None,
-                   rig_config: Any = None, seed: int | None = None, **kwargs: Any) -> "TapStimulus":
+                   rig_config: Any = None, seed: int | None = None, anywhere: bool = True,
+                   grid_pitch_m: float | None = None, **kwargs: Any) -> "TapStimulus":
         """Taps played on a rig this process opens (and closes with :meth:`close`).
 
         Parameters
@@ -167,6 +168,12 @@ class TapStimulus:
             The hardware settings of an audio or nidaq rig.
         seed : int, optional
             The simulated arm's participant seed.
+        anywhere : bool
+            Evaluate the skin model for taps at points (``x_mm``, ``y_mm``) now, as
+            ``serve-osc`` does at start (seconds), so that no such tap waits for it.
+        grid_pitch_m : float, optional
+            Pitch of that evaluation grid, m (default
+            :data:`vibrofocus.realtime.GRID_PITCH_M`).
         **kwargs
             ``name``, ``method``, ``timeout_s`` of :class:`TapStimulus`.
 
@@ -174,7 +181,9 @@ class TapStimulus:
         -------
         TapStimulus
         """
-        return cls(_RigBackend(rig, calibration, rig_config, seed, kwargs.get("method", "inverse")), **kwargs)
+        backend = _RigBackend(rig, calibration, rig_config, seed, kwargs.get("method", "inverse"), anywhere,
+                              grid_pitch_m)
+        return cls(backend, **kwargs)
 
     # -- the next tap --------------------------------------------------------------------
     def set(self, *, location: int | None = None, x_mm: float | None = None, y_mm: float | None = None,
@@ -389,8 +398,9 @@ class _OscBackend:
 class _RigBackend:
     """Plays on a rig of this process, each play on a worker thread (in the order asked)."""
 
-    def __init__(self, rig: Any, calibration: Any, rig_config: Any, seed: int | None, method: str) -> None:
-        from ..realtime import TapDesigner
+    def __init__(self, rig: Any, calibration: Any, rig_config: Any, seed: int | None, method: str,
+                 anywhere: bool = True, grid_pitch_m: float | None = None) -> None:
+        from ..realtime import GRID_PITCH_M, TapDesigner
         from ..rendering import TransferMatrix
         from ..rigs import make_rig
 
@@ -411,7 +421,10 @@ class _RigBackend:
                 tm, model = TransferMatrix.from_model(self._rig, self._rig.layout, self._rig.fs), self._rig
             else:
                 raise ValidationError("a hardware rig needs the calibration its taps are designed from")
-            self.designer = TapDesigner(tm, model, method=method, limit_v=self._rig.limits.peak_v)
+            self.designer = TapDesigner(tm, model, method=method, limit_v=self._rig.limits.peak_v,
+                                        grid_pitch_m=grid_pitch_m or GRID_PITCH_M)
+            if anywhere and model is not None:
+                self.designer.prepare_grid()
         except BaseException:
             if self._owned:
                 self._rig.close()
