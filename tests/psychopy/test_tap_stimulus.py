@@ -78,6 +78,13 @@ def test_through_serve_osc_with_its_tap_ids_and_onsets():
             tap.set(location=1, level_db=-2.0, method="inverse").play()
             tap.set(location=9, level_db=-4.0).play()
             results += [tap.result(), tap.result()]
+            # A method the server refuses (minimax was not designed ahead) raises at once and
+            # changes nothing: the next tap is recorded under the method it plays with.
+            with pytest.raises(ValidationError, match="refused method 'minimax'.*--method minimax"):
+                tap.set(method="minimax")
+            tap.set(location=3).play()
+            after = tap.result()
+            assert after.played and after.method == "inverse"
     finally:
         server.stop()
         thread.join(10)
@@ -85,13 +92,15 @@ def test_through_serve_osc_with_its_tap_ids_and_onsets():
     played = [r for r in results if r.played]
     assert [r.tap_id for r in played] == [1, 2, 3, 4, 5]
     assert [(r.onset_host_s, r.onset_device_s, r.onset_clock) for r in played] == [
-        (rec.onset_host_s, rec.onset_device_s, rec.onset_clock) for rec in server.records]
-    assert [rec.method for rec in server.records] == ["inverse", "inverse", "funneling", "inverse", "inverse"]
-    assert [rec.level_db for rec in server.records] == [-6.0, -1.0, 0.0, -2.0, -4.0]
+        (rec.onset_host_s, rec.onset_device_s, rec.onset_clock) for rec in server.records[:5]]
+    assert [rec.method for rec in server.records] == ["inverse", "inverse", "funneling", "inverse", "inverse",
+                                                      "inverse"]
+    assert [r.method for r in played] == [rec.method for rec in server.records[:5]]
+    assert [rec.level_db for rec in server.records] == [-6.0, -1.0, 0.0, -2.0, -4.0, -4.0]
     assert not results[3].played and "drive refused" in results[3].error
 
 
-def test_no_server_is_an_error_in_the_result_not_a_hang():
+def test_no_server_is_one_clear_error_at_the_start_not_a_hang():
     pytest.importorskip("pythonosc")
     import socket
 
@@ -99,10 +108,13 @@ def test_no_server_is_an_error_in_the_result_not_a_hang():
     free.bind(("127.0.0.1", 0))
     port = free.getsockname()[1]
     free.close()
-    with TapStimulus.osc(port=port, timeout_s=0.5) as tap:
-        tap.play()
-        result = tap.result()
-    assert not result.played and "serve-osc" in result.error
+    with pytest.raises(ValidationError, match=f"serve-osc at 127.0.0.1:{port}"):
+        TapStimulus.osc(port=port, timeout_s=0.5)
+
+
+class _Nothing:
+    def set_method(self, name, timeout_s):
+        pass
 
 
 @pytest.mark.parametrize("kwargs, needle", [
@@ -114,10 +126,10 @@ def test_no_server_is_an_error_in_the_result_not_a_hang():
     ({"method": ""}, "method"),
 ])
 def test_bad_settings_are_one_clear_error(kwargs, needle):
-    tap = TapStimulus(backend=None)
+    tap = TapStimulus(backend=_Nothing())
     with pytest.raises(ValidationError, match=needle):
         tap.set(**kwargs)
     with pytest.raises(ValidationError, match="identifier"):
-        TapStimulus(backend=None, name="my tap")
+        TapStimulus(backend=_Nothing(), name="my tap")
     with pytest.raises(ValidationError, match="call play"):
         tap.result()

@@ -124,6 +124,7 @@ class TapStimulus:
         self.name = _name(name)
         self.timeout_s = check_positive(timeout_s, "timeout_s")
         self.method = _method(method)
+        backend.set_method(self.method, self.timeout_s)  # at once: a server that is not there is said now
         self.location: int | None = 1
         self.xy_mm: tuple[float, float] | None = None
         self.level_db = 0.0
@@ -199,12 +200,18 @@ class TapStimulus:
         level_db : float, optional
             dB re the calibrated design (0: the design as made; -6: half its amplitude).
         method : str, optional
-            A registered rendering method.
+            A registered rendering method; switched now (a server or rig makes its
+            location designs when it switches).
 
         Returns
         -------
         TapStimulus
             Itself.
+
+        Raises
+        ------
+        ValidationError
+            Bad settings, or a method the server or rig refuses (nothing changes).
         """
         if location is not None and (x_mm is not None or y_mm is not None):
             raise ValidationError("give a location or a point (x_mm, y_mm), not both")
@@ -219,7 +226,10 @@ class TapStimulus:
         if level_db is not None:
             self.level_db = _finite(level_db, "level_db")
         if method is not None:
-            self.method = _method(method)
+            # Switched now, at a routine's start, and confirmed: a method the server or the
+            # rig refuses raises here, rather than a tap recorded under a method it was not.
+            self._backend.set_method(_method(method), self.timeout_s)
+            self.method = method
         return self
 
     def play(self) -> None:
@@ -304,6 +314,14 @@ def _result(asked: _Asked, **fields: Any) -> TapResult:
                      location=asked.location, x_mm=xy[0], y_mm=xy[1], asked_host_s=asked.asked_host_s, **fields)
 
 
+class _MethodAsked:
+    """A ``/method`` waiting for its answer."""
+
+    def __init__(self, name: str) -> None:
+        self.name = name
+        self.reply: Any = None
+
+
 class _OscBackend:
     """Asks a ``serve-osc`` over UDP; its answers come back in the order asked."""
 
@@ -314,12 +332,17 @@ class _OscBackend:
             raise ValidationError("playing through serve-osc needs python-osc: pip install 'vibrofocus[osc]'") from None
         if isinstance(port, bool) or not isinstance(port, int) or not 1 <= port <= 65535:
             raise ValidationError(f"port must be an integer from 1 to 65535, got {shorten(port)}")
+        if not isinstance(host, str) or not host:
+            raise ValidationError(f"host must be an address, got {shorten(host)}")
         self._server = (host, port)
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.socket(family, socket.SOCK_DGRAM)  # bound to a free port by the first send
         self._method = ""
-        self._waiting: deque[tuple[str, _Asked | None]] = deque()
+        self._waiting: deque[_Asked | _MethodAsked] = deque()
         self._lock = threading.Lock()
+
+    def _where(self) -> str:
+        return f"serve-osc at {self._server[0]}:{self._server[1]}"
 
     def _send(self, address: str, *args: Any) -> None:
         from pythonosc.osc_message_builder import OscMessageBuilder
@@ -329,40 +352,59 @@ class _OscBackend:
             builder.add_arg(arg)
         self._sock.sendto(builder.build().dgram, self._server)
 
+    def set_method(self, name: str, timeout_s: float) -> None:
+        """Switch the server's method now and wait for its answer (not on a flip: a server
+        makes a new method's nine location designs when it switches)."""
+        if name == self._method:
+            return
+        asked = _MethodAsked(name)
+        with self._lock:
+            self._send("/method", name)
+            self._waiting.append(asked)
+        self._pump(asked, timeout_s)
+        if asked.reply is None:
+            with self._lock:
+                self._drop(asked)
+            raise ValidationError(f"no answer from {self._where()} in {timeout_s:g} s (is it running, on that "
+                                  "port?)")
+        if asked.reply.address != "/method":
+            # The server keeps its method: a tap recorded under this name would be false.
+            reason = asked.reply.params[0] if asked.reply.params else asked.reply.address
+            raise ValidationError(f"{self._where()} refused method {name!r}: {reason}")
+        self._method = name
+
     def play(self, asked: _Asked) -> None:
         with self._lock:
-            if asked.method != self._method:
-                self._send("/method", asked.method)
-                self._waiting.append(("/method", None))
-                self._method = asked.method
             if asked.location is not None:
                 self._send("/tap", asked.location, float(asked.level_db))
             else:
                 self._send("/tap_xy", float(asked.xy_mm[0]), float(asked.xy_mm[1]), float(asked.level_db))
-            self._waiting.append(("/tap", asked))
+            self._waiting.append(asked)
 
     def wait(self, asked: _Asked, timeout_s: float) -> None:
+        error = self._pump(asked, timeout_s)
+        if asked.result is None:
+            asked.result = _result(asked, error=error or f"no answer from {self._where()} in {timeout_s:g} s")
+            with self._lock:
+                self._drop(asked)
+
+    def _pump(self, until: Any, timeout_s: float) -> str | None:
+        """Read answers, each to the oldest waiting message, until ``until`` has its own;
+        a socket error (no server: ICMP port unreachable) is returned."""
         from pythonosc.osc_message import OscMessage
 
         deadline = time.monotonic() + timeout_s
-        while asked.result is None:
+        while (until.result if isinstance(until, _Asked) else until.reply) is None:
             left = deadline - time.monotonic()
-            if left <= 0 or not self._waiting:
-                asked.result = _result(asked, error=f"no answer from serve-osc at {self._server[0]}:"
-                                                    f"{self._server[1]} in {timeout_s:g} s")
-                with self._lock:
-                    self._drop(asked)
-                return
+            if left <= 0:
+                return None
             self._sock.settimeout(left)
             try:
                 data = self._sock.recv(65536)
             except (TimeoutError, socket.timeout):
                 continue
-            except OSError as exc:  # e.g. ICMP port unreachable: no server
-                asked.result = _result(asked, error=f"serve-osc at {self._server[0]}:{self._server[1]}: {exc}")
-                with self._lock:
-                    self._drop(asked)
-                return
+            except OSError as exc:
+                return f"{self._where()}: {exc}"
             try:
                 message = OscMessage(data)
             except Exception:  # noqa: BLE001 - not an answer of serve-osc
@@ -370,15 +412,15 @@ class _OscBackend:
             with self._lock:
                 if not self._waiting:
                     continue
-                kind, owner = self._waiting.popleft()
-            if owner is None:  # the answer to a /method
-                if message.address == "/error":
-                    self._method = ""  # asked again with the next tap, and refused there too
-                continue
-            owner.result = self._answer(owner, message)
+                owner = self._waiting.popleft()
+            if isinstance(owner, _MethodAsked):
+                owner.reply = message
+            else:
+                owner.result = self._answer(owner, message)
+        return None
 
-    def _drop(self, asked: _Asked) -> None:
-        self._waiting = deque(w for w in self._waiting if w[1] is not asked)
+    def _drop(self, asked: Any) -> None:
+        self._waiting = deque(w for w in self._waiting if w is not asked)
 
     @staticmethod
     def _answer(asked: _Asked, message: Any) -> TapResult:
@@ -432,6 +474,17 @@ class _RigBackend:
         self._tap_id = 0
         self._lock = threading.Lock()  # one play at a time, in the order asked
 
+    def set_method(self, name: str, timeout_s: float) -> None:
+        from ..errors import VibrofocusError
+
+        if name == self.designer.method:
+            return
+        with self._lock:  # after the plays under way
+            try:
+                self.designer.set_method(name)
+            except VibrofocusError as exc:
+                raise ValidationError(f"method {name!r}: {exc}") from None
+
     def play(self, asked: _Asked) -> None:
         asked.done = threading.Event()
         threading.Thread(target=self._play, args=(asked,), name="vibrofocus tap", daemon=True).start()
@@ -444,8 +497,6 @@ class _RigBackend:
         try:
             with self._lock:
                 try:
-                    if asked.method != self.designer.method:
-                        self.designer.set_method(asked.method)
                     drives = (self.designer.drives_at(asked.location) if asked.location is not None
                               else self.designer.drives_xy(np.asarray(asked.xy_mm, float) * 1e-3))
                     if asked.level_db != 0.0:
