@@ -86,3 +86,32 @@ def test_serve_osc_lsl_log_records_every_tap_with_its_onsets(tmp_path, lsl_confi
     errors = [abs(stamp - (row["onset_host_s"] + offset)) for (_, stamp), row in zip(markers, rows)]
     assert max(errors) < 1e-3, errors
     assert "serve-osc stopped by /stop" in out
+
+
+def test_without_pylsl_lsl_is_one_error_line_and_nothing_starts(tmp_path, monkeypatch):
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    monkeypatch.setitem(sys.modules, "pylsl", None)  # import pylsl raises ImportError
+    result = CliRunner().invoke(app, ["serve-osc", "--port", "0", "--lsl", "--log", str(tmp_path / "taps.csv")])
+    assert result.exit_code == 2, result.output
+    errors = [line for line in result.output.splitlines() if line.startswith("error:")]
+    assert len(errors) == 1 and "vibrofocus[lsl]" in errors[0]
+    assert list(tmp_path.iterdir()) == []  # no tap log
+
+
+@pytest.mark.parametrize("name, needle", [("taps.txt", ".csv or a SQLite file"), ("study.db", "another kind")])
+def test_a_log_that_cannot_be_a_tap_log_is_one_error_line(tmp_path, name, needle):
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    if name == "study.db":
+        from vibrofocus.studies import StudyStore
+
+        StudyStore(tmp_path / name).close()
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir()}
+    result = CliRunner().invoke(app, ["serve-osc", "--port", "0", "--log", str(tmp_path / name)])
+    assert result.exit_code != 0 and needle in result.output, result.output
+    assert {p.name: p.read_bytes() for p in tmp_path.iterdir()} == before
