@@ -152,6 +152,7 @@ def test_a_tap_that_cannot_be_logged_is_an_error_and_stops_the_server(serve, tmp
     assert reply.address == "/error" and "not recorded" in reply.params[0] and "stops" in reply.params[0]
     assert np.all(rig.outputs_v == 0)
     assert server.stopped_by.startswith("the tap log")
+    assert isinstance(server.log_error, OSError) and len(server.records) == 1
 
 
 def test_markers_go_to_the_sink_stamped_with_the_host_onset(serve):

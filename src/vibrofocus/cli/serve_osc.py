@@ -135,4 +135,9 @@ def serve_osc(
                 who = server.serve()
             finally:
                 server.close()
+            if server.log_error is not None:
+                from ..errors import OutputError
+
+                raise OutputError(f"serve-osc stopped: tap {server.records[-1].tap_id} played but could not be "
+                                  f"written to {log} ({server.log_error}); all outputs at zero")
         typer.echo(f"serve-osc stopped by {who}; all outputs at zero")

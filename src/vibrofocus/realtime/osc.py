@@ -225,6 +225,8 @@ class OscTapServer:
         The taps played, in order.
     n_errors : int
         Messages answered with ``/error``.
+    log_error : Exception or None
+        Why the tap log could not keep a tap (the server stopped then).
     """
 
     def __init__(self, rig: Any, designer: TapDesigner, *, host: str = "127.0.0.1", port: int = 0,
@@ -244,6 +246,7 @@ class OscTapServer:
         self.tap_log = tap_log
         self.marker_sink = marker_sink
         self._marker_failed = False
+        self.log_error: Exception | None = None
         self._last_tap_id = int(tap_log.last_tap_id) if tap_log is not None else 0
         self.n_errors = 0
         self.stopped_by: str | None = None
@@ -506,6 +509,7 @@ class OscTapServer:
             try:
                 self.tap_log.append(record)
             except Exception as exc:  # noqa: BLE001 - answered, and no tap plays unrecorded after it
+                self.log_error = exc
                 self.stopped_by = f"the tap log ({type(exc).__name__}: {exc})"
                 self.stop()
                 raise _Refused(f"{job.address} {job.target}: played as tap {record.tap_id} but not recorded in "
