@@ -160,3 +160,28 @@ def test_the_staircase_example_on_psychopys_own_data_handlers(tmp_path):
     rows = _taps(tmp_path / "stairs.csv")  # written by PsychoPy's ExperimentHandler
     _check_staircase(rows)
     assert [float(r["tap.level_db"]) for r in rows] == [float(r["stairs.intensity"]) for r in rows]
+
+
+def test_psychopys_plugin_loader_finds_the_component(tmp_path):
+    import importlib.metadata
+
+    psychopy = _psychopy_path()
+    if psychopy is None:
+        pytest.skip("PsychoPy's wheel is not at hand (scripts/test.sh installs it, VIBROFOCUS_TEST_PSYCHOPY)")
+    if not importlib.metadata.entry_points(group="psychopy.experiment.components", name="VibrofocusTapComponent"):
+        pytest.skip("the installed vibrofocus predates its entry point: pip install -e . again")
+    loader = tmp_path / "load.py"
+    loader.write_text(
+        "from psychopy import plugins\n"
+        "plugins.scanPlugins()\n"
+        "assert 'vibrofocus' in plugins.listPlugins(), plugins.listPlugins()\n"
+        "assert plugins.loadPlugin('vibrofocus')\n"
+        "from psychopy.experiment import components\n"
+        "print('component:', components.getAllComponents()['VibrofocusTapComponent'].__module__)\n",
+        encoding="utf-8")
+    # Not SRC first on the path: the installed distribution (its entry points) is what PsychoPy reads.
+    env = dict(os.environ, PYTHONPATH=str(psychopy), HOME=str(tmp_path), PYTHONDONTWRITEBYTECODE="1")
+    proc = subprocess.run([sys.executable, str(loader)], cwd=tmp_path, env=env, capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "component: vibrofocus.psychopy.builder" in proc.stdout.splitlines(), proc.stdout[-2000:]
