@@ -89,6 +89,7 @@ API_PACKAGES = {
     "vibrofocus.studies": "Studies",
     "vibrofocus.simulation": "Simulated participants",
     "vibrofocus.realtime": "Real time (OSC taps, latency)",
+    "vibrofocus.psychopy": "PsychoPy (taps in experiments)",
     "vibrofocus.analysis": "Analysis",
     "vibrofocus.demo": "Demo",
     "vibrofocus.errors": "Errors",

@@ -23,6 +23,13 @@ fi
 [ -x .venv/bin/python ] || python3 -m venv .venv
 .venv/bin/python -m pip install -q --upgrade pip
 .venv/bin/python -m pip install -q -e '.[test]'
+# PsychoPy's own wheel without its dependencies (PyQt6, psychtoolbox, opencv, MeshPy... too heavy
+# for CI), in a folder of its own: enough for its Builder compiler and psychopy.data, which
+# tests/psychopy run in child processes (docs/psychopy.md). Not importable from the venv itself.
+psychopy_dir=.venv/psychopy-nodeps
+[ -d "$psychopy_dir/psychopy" ] || .venv/bin/python -m pip install -q --no-deps --target "$psychopy_dir" \
+    'psychopy==2026.2.5' 'six>=1.16' 'json-tricks>=3.17' 'i18next>=0.0.3' 'astunparse>=1.6' 'esprima>=4.0'
+export VIBROFOCUS_TEST_PSYCHOPY="$PWD/$psychopy_dir"
 
 # Everything but the browser tests in parallel on every core (pytest-xdist), then the
 # browser tests in one process: their pages keep real time (timeouts, pauses), which two

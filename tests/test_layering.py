@@ -35,7 +35,7 @@ FLOORS = (
     ("calibration",),                                         # measures on a rig, fits the skin, designs
     ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine
-    ("demo", "web"),                                          # the two applications
+    ("demo", "web", "psychopy"),                              # the two applications; taps in PsychoPy
     ("cli",),                                                 # the command line
     ("__main__",),                                            # python -m vibrofocus
 )

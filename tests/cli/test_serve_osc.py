@@ -62,7 +62,7 @@ def test_taps_from_a_calibration_without_a_skin_model(tmp_path):
     save_calibration(calibrate(make_rig("simulated", seed=5), participant_id="P01"), cal)
     proc, client = _start(tmp_path, "--calibration", str(cal), "--method", "funneling")
     try:
-        assert _ask(client, "/tap", 4).params == [4]
+        assert _ask(client, "/tap", 4).params[:1] == [4]
         reply = _ask(client, "/tap_xy", [1.0, 1.0])
         assert reply.address == "/error" and "need a model of the skin" in reply.params[0]
         assert _ask(client, "/tap", 6).address == "/played"

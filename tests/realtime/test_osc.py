@@ -65,12 +65,12 @@ def test_tap_and_tap_xy_play_within_the_limit(running):
     server, client, rig, _, _ = running
     before = rig.n_played
     reply = _ask(client, "/tap", 5)
-    assert reply.address == "/played" and reply.params == [5]
+    assert reply.address == "/played" and reply.params[:1] == [5]
     assert rig.n_played == before + 1
     expected = rig.check(server.designer.drives_at(5))
     np.testing.assert_array_equal(rig.last_drive, expected)
     reply = _ask(client, "/tap_xy", [3.5, -4.0])
-    assert reply.address == "/played" and reply.params == [3.5, -4.0]
+    assert reply.address == "/played" and reply.params[:2] == [3.5, -4.0]
     assert rig.n_played == before + 2
     assert np.abs(rig.last_drive).max() <= rig.limits.peak_v + 1e-12
     # Integers are millimetres too.
@@ -79,11 +79,17 @@ def test_tap_and_tap_xy_play_within_the_limit(running):
 
 
 MALFORMED = [
-    ("/tap", [], "takes 1 argument"),
+    ("/tap", [], "takes 1 or 2 arguments"),
     ("/tap", "5", "integer location"),
     ("/tap", 5.0, "integer location"),
     ("/tap", True, "integer location"),
-    ("/tap", [5, 6], "takes 1 argument"),
+    ("/tap", [5, 6, 7], "takes 1 or 2 arguments"),
+    ("/tap", [5, "loud"], "the level is a number"),
+    ("/tap", [5, math.nan], "the level must be a finite number"),
+    ("/tap", [5, math.inf], "the level must be a finite number"),
+    ("/tap", [5, 41.0], "from -100 to 40"),
+    ("/tap", [5, -1000], "from -100 to 40"),
+    ("/tap", [5, 6.0], "drive refused"),
     ("/tap", 0, "unknown location"),
     ("/tap", 99, "unknown location"),
     ("/tap_xy", [math.nan, 0.0], "finite"),
@@ -91,7 +97,9 @@ MALFORMED = [
     ("/tap_xy", [-math.inf, 0.0], "finite"),
     ("/tap_xy", [100.0, 0.0], "off the calibrated area"),
     ("/tap_xy", [0.0, -15.5], "off the calibrated area"),
-    ("/tap_xy", [1.0], "takes 2 arguments"),
+    ("/tap_xy", [1.0], "takes 2 or 3 arguments"),
+    ("/tap_xy", [1.0, 1.0, True], "the level is a number"),
+    ("/tap_xy", [1.0, 1.0, 12.0], "drive refused"),
     ("/tap_xy", ["a", "b"], "two numbers"),
     ("/method", "no_such_method", "unknown method"),
     ("/method", 3, "method name"),

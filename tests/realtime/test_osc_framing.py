@@ -176,7 +176,7 @@ def test_a_server_answers_the_negative_size_datagram_error_and_the_next_tap_play
             assert reply.address == "/error" and "size -4 is not positive" in reply.params[0], reply.params
             raw.sendto(TAP5, server.address)
             reply = OscMessage(raw.recv(65536))
-            assert reply.address == "/played" and reply.params == [5]
+            assert reply.address == "/played" and reply.params[:1] == [5]
         assert caplog.records == []
         assert rig.n_played == 1 and server.n_errors == 1
     finally:

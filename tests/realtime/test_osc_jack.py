@@ -104,6 +104,6 @@ def test_the_negative_size_datagram_is_an_error_and_the_next_tap_plays(served):
         client.sendto(TAP5, server.address)
         reply = OscMessage(client.recv(65536))
         time.sleep(3 * JACK_PERIOD / JACK_RATE)
-    assert reply.address == "/played" and reply.params == [5]
+    assert reply.address == "/played" and reply.params[:1] == [5]
     assert np.abs(recorder.signal()[1]).max() > LOUD
     assert thread.is_alive()

@@ -169,13 +169,13 @@ def test_a_tap_that_waited_too_long_is_dropped_as_stale_and_a_fresh_one_plays(de
         now[0] = 0.501  # taps 2 and 3 have now waited past the bound
         rig.let_go.set()
         replies = [OscMessage(client.recv(65536)) for _ in range(3)]
-        assert replies[0].address == "/played" and replies[0].params == [1]
+        assert replies[0].address == "/played" and replies[0].params[:1] == [1]
         for reply, location in zip(replies[1:], (2, 3)):
             assert reply.address == "/error"
             assert reply.params[0].startswith(f"stale: /tap location {location} waited 501 ms"), reply.params
         client.sendto(_message("/tap", 4).dgram, server.address)  # received at 0.501: fresh
         reply = OscMessage(client.recv(65536))
-        assert reply.address == "/played" and reply.params == [4]
+        assert reply.address == "/played" and reply.params[:1] == [4]
         assert [r.target for r in server.records] == ["location 1", "location 4"]
         assert rig.events.count("begin") == 2
     finally:

@@ -11,10 +11,13 @@ from ._errors import err_console, user_errors
 from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options
 
 _LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+_LSL_HELP = ("Send one JSON stimulus-onset marker per played tap to the Lab Streaming Layer outlet "
+             "'vibrofocus-markers' (type Markers), stamped with the tap's onset on LSL's clock; needs "
+             "pip install 'vibrofocus[lsl]'.")
 
 
-@command("serve-osc", epilog="Example: vibrofocus serve-osc --port 9000, then from a client: /tap 5, "
-                             "/tap_xy 3.5 -4 (mm), /method contrast, /stop")
+@command("serve-osc", epilog="Example: vibrofocus serve-osc --port 9000 --log taps.csv, then from a client: "
+                             "/tap 5, /tap 5 -6 (6 dB below the design), /tap_xy 3.5 -4 (mm), /method contrast, /stop")
 def serve_osc(
     port: int = typer.Option(9000, "--port", "-p", min=0, max=65535, help="UDP port to listen on (0: any free one)."),
     host: str = typer.Option("127.0.0.1", "--host", help="Address to bind. Keep 127.0.0.1 unless you know why not."),
@@ -33,24 +36,34 @@ def serve_osc(
     max_wait_ms: float = typer.Option(500.0, "--max-wait-ms", min=1.0, max=60_000.0,
                                       help="A tap that waited longer than this behind others is dropped and "
                                            "answered /error stale (ms)."),
+    log: Path | None = typer.Option(None, "--log", help="Keep every played tap in this file (.csv, or SQLite: .db, "
+                                                       ".sqlite, .sqlite3): id, what was asked, level, method, onset "
+                                                       "on the host and device clocks. Each tap is on disk before "
+                                                       "its /played is sent; an existing tap log is continued."),
+    lsl: bool = typer.Option(False, "--lsl", help=_LSL_HELP),
 ) -> None:
     """Play taps that other programs (Unity, Max/MSP, Pure Data, Python) ask for over OSC/UDP.
 
-    Addresses: /tap <location>, /tap_xy <x_mm> <y_mm>, /method <name>, /stop. A played tap
-    is answered /played; every problem is answered /error <reason> to the sender and plays
-    nothing. Taps queue while one plays; one that waited longer than --max-wait-ms is dropped
+    Addresses: /tap <location> [level_db], /tap_xy <x_mm> <y_mm> [level_db], /method <name>,
+    /stop. The level is in dB re the design (0: as designed; -6: half the amplitude); the
+    safety layer still checks the drive. A played tap is answered /played with what was
+    asked, then its tap id, onset on the host clock (s), onset on the device clock (s, NaN
+    without one), the device clock's name and the level; every problem is answered
+    /error <reason> to the sender and plays nothing. Taps queue while one plays; one that waited longer than --max-wait-ms is dropped
     (/error stale). /stop acts at once, ahead of the queued taps: like Ctrl-C (SIGINT) or
     SIGTERM, it cuts the play under way, sets every output to zero and ends the server.
     Needs pip install 'vibrofocus[osc]'.
     """
     with user_errors(interrupt_message="serve-osc stopped; all outputs at zero"):
+        import contextlib
+
         from ..errors import ValidationError
 
         try:
             import pythonosc  # noqa: F401 - the optional extra, checked before anything starts
         except ImportError:
             raise ValidationError("serve-osc needs python-osc: pip install 'vibrofocus[osc]'") from None
-        from ..realtime import OscTapServer, TapDesigner
+        from ..realtime import OscTapServer, TapDesigner, TapLog
         from ..rendering import TransferMatrix
         from ..rigs import make_rig
         from ..skin import skin_preset
@@ -59,7 +72,13 @@ def serve_osc(
         if calibration is None and rig != "simulated":
             raise ValidationError(f"the {rig} rig needs --calibration (a calibration measured on it)")
         skin_name = skin_preset(skin).name
-        with make_rig(rig, config=rig_config, seed=seed, skin=skin_name if rig == "simulated" else None) as the_rig:
+        if lsl:
+            from ..io.lsl import import_pylsl
+
+            import_pylsl()  # before the rig opens: a missing pylsl is one line, nothing started
+        with contextlib.ExitStack() as stack:
+            the_rig = stack.enter_context(make_rig(rig, config=rig_config, seed=seed,
+                                                   skin=skin_name if rig == "simulated" else None))
             if calibration is not None:
                 from .._atomic import protect
                 from ..calibration import load_calibration
@@ -77,6 +96,13 @@ def serve_osc(
             else:
                 tm, model = TransferMatrix.from_model(the_rig, the_rig.layout, the_rig.fs), the_rig
                 source = f"the simulated arm's own transfer (skin {skin_name})"
+            # Opened before the designs (seconds): a log that cannot be written is said at once.
+            tap_log = stack.enter_context(TapLog(log)) if log is not None else None
+            outlet = None
+            if lsl:
+                from ..io.lsl import MarkerOutlet
+
+                outlet = stack.enter_context(MarkerOutlet())
             from ..rendering import available_methods, method_class
 
             if method in available_methods() and not method_class(method).live:
@@ -87,7 +113,8 @@ def serve_osc(
                 designer.prepare_grid()
             if host not in _LOCAL_HOSTS:
                 err_console.print(f"[bold red]WARNING:[/] binding to {host}: anyone who can reach it can play taps.")
-            server = OscTapServer(the_rig, designer, host=host, port=port, max_wait_s=max_wait_ms / 1e3)
+            server = OscTapServer(the_rig, designer, host=host, port=port, max_wait_s=max_wait_ms / 1e3,
+                                  tap_log=tap_log, marker_sink=None if outlet is None else outlet.push)
             shown_host, shown_port = server.address
             if ":" in str(shown_host):  # an IPv6 address goes in brackets in a URL: osc.udp://[::1]:9124
                 shown_host = f"[{shown_host}]"
@@ -98,9 +125,19 @@ def serve_osc(
                           if not designer.live else
                           f", /tap_xy in {designer.area.describe()}" if model is not None else
                           " (no /tap_xy: the calibration has no fitted skin model)")
-                       + "; /method <name>; /stop", )
+                       + " (each with an optional level, dB re the design); /method <name>; /stop", )
+            kept = ([f"taps logged to {log}" + (f" after tap {tap_log.last_tap_id}" if tap_log.last_tap_id else "")]
+                    if tap_log is not None else [])
+            kept += [f"LSL markers on 'vibrofocus-markers' (source_id {outlet.source_id})"] if outlet is not None else []
+            if kept:
+                typer.echo("recording: " + "; ".join(kept))
             try:
                 who = server.serve()
             finally:
                 server.close()
+            if server.log_error is not None:
+                from ..errors import OutputError
+
+                raise OutputError(f"serve-osc stopped: tap {server.records[-1].tap_id} played but could not be "
+                                  f"written to {log} ({server.log_error}); all outputs at zero")
         typer.echo(f"serve-osc stopped by {who}; all outputs at zero")

@@ -7,9 +7,9 @@ one that holds the rig) designs and plays the queued taps in order. So ``/stop``
 never behind a tap: it empties the queue and stops the rig at once, in the middle of a
 play. The addresses:
 
-``/tap <location>``
+``/tap <location> [<level_db>]``
     A tap at a layout location (int, 1-based).
-``/tap_xy <x_mm> <y_mm>``
+``/tap_xy <x_mm> <y_mm> [<level_db>]``
     A tap at a point of the calibrated area, mm in the layout frame (int or float), with
     a method designed in milliseconds (not minimax, whose designs take seconds).
 ``/method <name>``
@@ -20,14 +20,25 @@ play. The addresses:
     All outputs to zero now (a play under way is cut), the taps still queued are
     dropped, and the server ends.
 
-A played tap is answered ``/played`` with what was asked; every problem is answered
+The optional level is in dB re the design (0: the design as made, scaled to the drive
+limit; -6: half its amplitude); the safety layer still checks the scaled drive, so a
+level that would break a limit is answered ``/error`` and plays nothing.
+
+A played tap is answered ``/played`` with what was asked (the location, or x and y)
+followed by five fixed fields: the tap's id (1, 2, ... on this server, or after the
+last tap of its log), its onset on the host's clock (``time.monotonic()``, s), its onset
+on the device's clock (s; NaN where the rig has none), that clock's name (``""`` where
+none) and the level played (dB re the design). Every problem is answered
 ``/error <reason>`` to the sender, and nothing plays: a datagram that is no OSC packet
 (framing included: a bundle element of a negative size, too deep a nesting, too many
-elements), an unknown address, a wrong type or number of arguments, NaN or Inf, a point
-off the calibrated area, an unknown location or method, a drive the safety layer
-refuses; a tap that waited longer than ``max_wait_s`` behind others (``/error stale:
-...``), a tap when ``max_queued`` already wait (``/error busy: ...``), and the taps that
-a stop dropped (``/error stopped: ...``).
+elements), an unknown address, a wrong type or number of arguments, NaN or Inf, a level
+out of range, a point off the calibrated area, an unknown location or method, a drive
+the safety layer refuses; a tap that waited longer than ``max_wait_s`` behind others
+(``/error stale: ...``), a tap when ``max_queued`` already wait (``/error busy: ...``),
+and the taps that a stop dropped (``/error stopped: ...``).
+
+Each played tap goes to the server's tap log (:class:`~vibrofocus.realtime.taplog.TapLog`,
+committed before ``/played`` is sent) and marker sink (an LSL outlet) when it has them.
 """
 
 from __future__ import annotations
@@ -47,12 +58,13 @@ from ..errors import ValidationError, VibrofocusError
 from .designer import TapDesigner
 from .osc_framing import FramingError, parse_datagram
 
-__all__ = ["OscTapServer", "TapRecord", "ADDRESSES", "MAX_WAIT_S", "MAX_QUEUED"]
+__all__ = ["OscTapServer", "TapRecord", "ADDRESSES", "MAX_WAIT_S", "MAX_QUEUED", "LEVEL_DB_RANGE",
+           "PLAYED_FIELDS"]
 
 #: The addresses the server answers, with their arguments.
 ADDRESSES = {
-    "/tap": "<location: int>",
-    "/tap_xy": "<x_mm: float> <y_mm: float>",
+    "/tap": "<location: int> [<level_db: float>]",
+    "/tap_xy": "<x_mm: float> <y_mm: float> [<level_db: float>]",
     "/method": "<name: str>",
     "/stop": "(no arguments)",
 }
@@ -65,8 +77,17 @@ MAX_DATAGRAM = 65536
 MAX_WAIT_S = 0.5
 #: Most taps and method changes waiting at once; more are refused (``/error busy``).
 MAX_QUEUED = 256
+#: Levels a tap may ask, dB re the design: outside them a level is a mistake (a linear
+#: gain, a level in dB SPL), refused before the safety layer sees it.
+LEVEL_DB_RANGE = (-100.0, 40.0)
+#: The fixed fields ``/played`` carries after what was asked.
+PLAYED_FIELDS = ("tap_id", "onset_host_s", "onset_device_s", "onset_clock", "level_db")
 #: How often the threads look whether the server was stopped (and let Ctrl-C in), s.
 POLL_S = 0.05
+
+
+class _Double(float):
+    """A number sent as an OSC double (``d``), not python-osc's default 32-bit float."""
 
 
 class _Refused(Exception):
@@ -87,12 +108,59 @@ class TapRecord:
         What was asked (``"location 5"``, ``"x 3 mm, y -4 mm"``).
     method : str
         The method of its design.
+    tap_id : int
+        The tap's number: 1, 2, ... on this server (after the last tap of its log).
+    address : str
+        ``"/tap"`` or ``"/tap_xy"``.
+    location : int or None
+        The layout location of a ``/tap``.
+    x_mm, y_mm : float or None
+        The point of a ``/tap_xy``, mm.
+    level_db : float
+        The level played, dB re the design.
+    onset_host_s : float
+        The onset on the host's clock (``time.monotonic()``), s: the rig's
+        :class:`~vibrofocus.rigs.DeviceOnset`.
+    onset_device_s : float or None
+        The onset on the device's clock, s (None where the rig has none).
+    onset_clock : str or None
+        That clock's name (:data:`vibrofocus.rigs.CLOCKS`).
+    sender : str
+        Who asked (``"127.0.0.1:50123"``).
+    drive_peak_v : float
+        Peak of the played drive, V.
     """
 
     receipt_s: float
     played_s: float
     target: str
     method: str
+    tap_id: int = 0
+    address: str = "/tap"
+    location: int | None = None
+    x_mm: float | None = None
+    y_mm: float | None = None
+    level_db: float = 0.0
+    onset_host_s: float = float("nan")
+    onset_device_s: float | None = None
+    onset_clock: str | None = None
+    sender: str = ""
+    drive_peak_v: float = float("nan")
+
+    def played_args(self) -> list:
+        """The fixed fields of ``/played`` (:data:`PLAYED_FIELDS`), as OSC sends them: a
+        missing device onset is NaN, a missing clock ``""``; the onsets are doubles (OSC type
+        ``d``: a 32-bit float would keep only milliseconds of an hour-old clock)."""
+        device = float("nan") if self.onset_device_s is None else float(self.onset_device_s)
+        return [int(self.tap_id), _Double(self.onset_host_s), _Double(device), self.onset_clock or "",
+                float(self.level_db)]
+
+    def marker(self) -> dict[str, Any]:
+        """The tap as a stimulus-onset marker (the fields of the study engine's, where they apply)."""
+        return {"event": "stimulus_onset", "source": "serve-osc", "tap_id": self.tap_id, "method": self.method,
+                "target": self.location, "x_mm": self.x_mm, "y_mm": self.y_mm, "level_db": self.level_db,
+                "played": True, "onset_device_s": self.onset_device_s, "onset_clock": self.onset_clock,
+                "response": None}
 
 
 @dataclass(frozen=True)
@@ -105,6 +173,7 @@ class _Job:
     echo: list
     sender: tuple
     receipt_s: float
+    level_db: float = 0.0
 
 
 def _quiet_pythonosc() -> None:
@@ -139,6 +208,16 @@ class OscTapServer:
     max_queued : int
         Most taps and method changes waiting at once; one more is answered
         ``/error busy: ...``.
+    tap_log : TapLog, optional
+        Where every played tap is kept (:class:`~vibrofocus.realtime.taplog.TapLog`,
+        ``serve-osc --log``): each tap is committed there before its ``/played`` is sent,
+        and tap ids go on from the log's last one. A tap that cannot be kept is answered
+        ``/error`` and stops the server (outputs at zero): no tap plays unrecorded after it.
+    marker_sink : callable, optional
+        ``marker_sink(marker, host_time_s)``, given every played tap's
+        :meth:`TapRecord.marker` and its onset on the host's clock
+        (:meth:`vibrofocus.io.lsl.MarkerOutlet.push`, ``serve-osc --lsl``). A failing sink
+        is logged once and stops nothing.
 
     Attributes
     ----------
@@ -146,11 +225,14 @@ class OscTapServer:
         The taps played, in order.
     n_errors : int
         Messages answered with ``/error``.
+    log_error : Exception or None
+        Why the tap log could not keep a tap (the server stopped then).
     """
 
     def __init__(self, rig: Any, designer: TapDesigner, *, host: str = "127.0.0.1", port: int = 0,
                  clock: Callable[[], float] = time.perf_counter, max_wait_s: float = MAX_WAIT_S,
-                 max_queued: int = MAX_QUEUED) -> None:
+                 max_queued: int = MAX_QUEUED, tap_log: Any = None,
+                 marker_sink: Callable[[dict, float], Any] | None = None) -> None:
         from .._validation import check_positive
 
         self.rig = rig
@@ -161,6 +243,11 @@ class OscTapServer:
             raise ValidationError(f"max_queued must be an integer >= 1, got {max_queued!r}")
         self.max_queued = max_queued
         self.records: list[TapRecord] = []
+        self.tap_log = tap_log
+        self.marker_sink = marker_sink
+        self._marker_failed = False
+        self.log_error: Exception | None = None
+        self._last_tap_id = int(tap_log.last_tap_id) if tap_log is not None else 0
         self.n_errors = 0
         self.stopped_by: str | None = None
         self._stop = False
@@ -312,15 +399,17 @@ class OscTapServer:
 
     def _dispatch(self, address: str, args: list, sender: tuple, receipt_s: float) -> None:
         if address == "/tap":
-            (location,) = _arity(address, args, 1)
+            args, level_db = _level(address, args, 1)
+            (location,) = args
             if isinstance(location, bool) or not isinstance(location, int):
                 raise _Refused(f"/tap takes one integer location, got {_type(location)}")
             if not 1 <= location <= self.designer.layout.n_locations:
                 raise _Refused(f"/tap: unknown location {location}; the locations are 1.."
                                f"{self.designer.layout.n_locations}")
-            self._enqueue(_Job(address, location, f"location {location}", [location], sender, receipt_s))
+            self._enqueue(_Job(address, location, f"location {location}", [location], sender, receipt_s, level_db))
         elif address == "/tap_xy":
-            x, y = _arity(address, args, 2)
+            args, level_db = _level(address, args, 2)
+            x, y = args
             for value in (x, y):
                 if isinstance(value, bool) or not isinstance(value, (int, float)):
                     raise _Refused(f"/tap_xy takes two numbers (x_mm, y_mm), got {_type(value)}")
@@ -329,7 +418,8 @@ class OscTapServer:
             xy = np.array([x, y], float) * 1e-3
             if not self.designer.area.contains(xy):
                 raise _Refused(f"/tap_xy: ({x:g}, {y:g}) mm is off the calibrated area ({self.designer.area.describe()})")
-            self._enqueue(_Job(address, xy, f"x {x:g} mm, y {y:g} mm", [float(x), float(y)], sender, receipt_s))
+            self._enqueue(_Job(address, xy, f"x {x:g} mm, y {y:g} mm", [float(x), float(y)], sender, receipt_s,
+                               level_db))
         elif address == "/method":
             (name,) = _arity(address, args, 1)
             if not isinstance(name, str):
@@ -380,11 +470,17 @@ class OscTapServer:
                                f"over the {1e3 * self.max_wait_s:g} ms bound; not played")
             drives = (self.designer.drives_at(job.value) if job.address == "/tap"
                       else self.designer.drives_xy(job.value))
+            if job.level_db != 0.0:
+                # The level scales the design; the rig's safety layer checks what results.
+                drives = drives * 10.0 ** (job.level_db / 20.0)
             if self._stop:
                 raise _Refused(f"stopped: {job.address} {job.target} was not played")
-            self.rig.play(drives)
-            self.records.append(TapRecord(job.receipt_s, self.clock(), job.target, self.designer.method))
-            self._reply(job.sender, "/played", *job.echo)
+            onset = self.rig.play(drives)
+            played_s = self.clock()
+            record = self._record(job, onset, played_s, float(np.max(np.abs(drives))))
+            self.records.append(record)
+            self._keep(job, record)
+            self._reply(job.sender, "/played", *job.echo, *record.played_args())
         except _Refused as exc:
             self._reply(job.sender, "/error", str(exc))
         except VibrofocusError as exc:  # a refused design or drive: the safety layer's word
@@ -393,6 +489,39 @@ class OscTapServer:
             # A play that failed has set the outputs to zero itself (Rig.play); stopping the
             # rig here would end the server's hold on it and refuse every later tap.
             self._reply(job.sender, "/error", f"{job.address}: unexpected {type(exc).__name__}: {exc}")
+
+    def _record(self, job: _Job, onset: Any, played_s: float, peak_v: float) -> TapRecord:
+        self._last_tap_id += 1
+        host_s = getattr(onset, "host_s", None)
+        device_s, clock = getattr(onset, "device_s", None), getattr(onset, "clock", None)
+        point = job.address == "/tap_xy"
+        return TapRecord(
+            job.receipt_s, played_s, job.target, self.designer.method, tap_id=self._last_tap_id,
+            address=job.address, location=int(job.value) if job.address == "/tap" else None,
+            x_mm=float(job.echo[0]) if point else None, y_mm=float(job.echo[1]) if point else None,
+            level_db=float(job.level_db), onset_host_s=float(host_s) if host_s is not None else time.monotonic(),
+            onset_device_s=None if device_s is None else float(device_s), onset_clock=clock,
+            sender=_where(job.sender), drive_peak_v=peak_v)
+
+    def _keep(self, job: _Job, record: TapRecord) -> None:
+        """The tap to the log (or the server stops) and to the marker sink, before ``/played``."""
+        if self.tap_log is not None:
+            try:
+                self.tap_log.append(record)
+            except Exception as exc:  # noqa: BLE001 - answered, and no tap plays unrecorded after it
+                self.log_error = exc
+                self.stopped_by = f"the tap log ({type(exc).__name__}: {exc})"
+                self.stop()
+                raise _Refused(f"{job.address} {job.target}: played as tap {record.tap_id} but not recorded in "
+                               f"the tap log ({exc}); the server stops") from None
+        if self.marker_sink is not None:
+            try:
+                self.marker_sink(record.marker(), record.onset_host_s)
+            except Exception as exc:  # noqa: BLE001 - a marker stream never stops the taps
+                if not self._marker_failed:
+                    self._marker_failed = True
+                    logging.getLogger(__name__).warning("a tap's marker could not be sent (%s: %s); taps go on",
+                                                        type(exc).__name__, exc)
 
     def _reply(self, sender: tuple, address: str, *args: Any) -> None:
         from pythonosc.osc_message_builder import OscMessageBuilder
@@ -403,11 +532,27 @@ class OscTapServer:
             args = (_clean(args[0]),)
         builder = OscMessageBuilder(address=address)
         for arg in args:
-            builder.add_arg(arg)
+            builder.add_arg(float(arg), "d") if isinstance(arg, _Double) else builder.add_arg(arg)
         try:
             self._sock.sendto(builder.build().dgram, sender)
         except OSError:  # a sender that went away, or a socket closed meanwhile: nothing to tell
             pass
+
+
+def _level(address: str, args: list, n: int) -> tuple[list, float]:
+    """The ``n`` arguments of a tap and its optional level (dB re the design; 0 without one)."""
+    if len(args) not in (n, n + 1):
+        raise _Refused(f"{address} takes {n} or {n + 1} arguments {ADDRESSES[address]}, got {len(args)}")
+    if len(args) == n:
+        return args, 0.0
+    level = args[n]
+    if isinstance(level, bool) or not isinstance(level, (int, float)):
+        raise _Refused(f"{address}: the level is a number of dB re the design, got {_type(level)}")
+    lo, hi = LEVEL_DB_RANGE
+    if not (np.isfinite(level) and lo <= level <= hi):
+        raise _Refused(f"{address}: the level must be a finite number of dB re the design from {lo:g} to {hi:g}, "
+                       f"got {level}")
+    return args[:n], float(level)
 
 
 def _arity(address: str, args: list, n: int) -> list:

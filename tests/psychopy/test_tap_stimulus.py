@@ -1,0 +1,135 @@
+"""``TapStimulus``: in-process on the simulated rig and through a real ``OscTapServer`` over
+UDP; levels scale the played drive by their decibels, onsets reach the data file."""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+import pytest
+
+from vibrofocus.errors import ValidationError
+from vibrofocus.psychopy import DATA_FIELDS, TapStimulus
+from vibrofocus.rigs import make_rig
+
+
+class Recorder:
+    """The one method of PsychoPy's ExperimentHandler that ``store`` calls."""
+
+    def __init__(self):
+        self.rows = [{}]
+
+    def addData(self, name, value):  # noqa: N802 - PsychoPy's name
+        self.rows[-1][name] = value
+
+    def nextEntry(self):  # noqa: N802
+        self.rows.append({})
+
+
+def test_in_process_levels_onsets_and_the_data_file():
+    rig = make_rig("simulated", seed=4)
+    exp = Recorder()
+    with TapStimulus.in_process(rig, name="vib", grid_pitch_m=5e-3) as tap:
+        design = rig.check(tap._backend.designer.drives_at(5))
+        for level in (0.0, -6.0, -12.0):
+            tap.set(location=5, level_db=level).play()
+            result = tap.store(exp)
+            exp.nextEntry()
+            assert result.played and result.level_db == level
+            np.testing.assert_allclose(rig.last_drive, design * 10 ** (level / 20), rtol=1e-12, atol=0)
+        tap.set(x_mm=2.0, y_mm=-1.0, level_db=-3.0).play()
+        point = tap.result()
+        refused = tap.set(location=5, level_db=6.0)
+        refused.play()
+        over = tap.result()
+    rows = exp.rows[:3]
+    assert [r["vib.tap_id"] for r in rows] == [1, 2, 3]
+    assert [r["vib.level_db"] for r in rows] == [0.0, -6.0, -12.0]
+    assert set(rows[0]) == {f"vib.{f}" for f in DATA_FIELDS}
+    n = design.shape[1]
+    assert [r["vib.onset_device_s"] for r in rows] == [k * n / rig.fs for k in range(3)]
+    assert all(r["vib.asked_host_s"] <= r["vib.onset_host_s"] for r in rows)
+    assert rows[0]["vib.x_mm"] == "" and rows[0]["vib.error"] == ""  # empty cells, not "None"
+    assert (point.location, point.x_mm, point.y_mm, point.tap_id) == (None, 2.0, -1.0, 4)
+    # Over the limit: the safety layer refuses, nothing plays, the reason is kept.
+    assert not over.played and over.tap_id is None and "drive refused" in over.error
+    assert rig.n_played == 4
+
+
+def test_through_serve_osc_with_its_tap_ids_and_onsets():
+    pytest.importorskip("pythonosc")
+    from vibrofocus.realtime import OscTapServer, TapDesigner
+    from vibrofocus.rendering import TransferMatrix
+
+    rig = make_rig("simulated", seed=3)
+    designer = TapDesigner(TransferMatrix.from_model(rig, rig.layout, rig.fs), rig, limit_v=rig.limits.peak_v,
+                           grid_pitch_m=5e-3)
+    server = OscTapServer(rig, designer, port=0)
+    thread = threading.Thread(target=server.serve, daemon=True)
+    thread.start()
+    try:
+        with TapStimulus.osc(port=server.address[1], timeout_s=30.0) as tap:
+            results = []
+            for kwargs in ({"location": 2, "level_db": -6.0}, {"x_mm": 1.0, "y_mm": 3.0, "level_db": -1.0},
+                           {"location": 4, "level_db": 0.0, "method": "funneling"}, {"location": 4, "level_db": 1.0}):
+                tap.set(**kwargs).play()
+                results.append(tap.result())
+            # Two taps asked before either answer is read: answers are matched in order.
+            tap.set(location=1, level_db=-2.0, method="inverse").play()
+            tap.set(location=9, level_db=-4.0).play()
+            results += [tap.result(), tap.result()]
+            # A method the server refuses (minimax was not designed ahead) raises at once and
+            # changes nothing: the next tap is recorded under the method it plays with.
+            with pytest.raises(ValidationError, match="refused method 'minimax'.*--method minimax"):
+                tap.set(method="minimax")
+            tap.set(location=3).play()
+            after = tap.result()
+            assert after.played and after.method == "inverse"
+    finally:
+        server.stop()
+        thread.join(10)
+        server.close()
+    played = [r for r in results if r.played]
+    assert [r.tap_id for r in played] == [1, 2, 3, 4, 5]
+    assert [(r.onset_host_s, r.onset_device_s, r.onset_clock) for r in played] == [
+        (rec.onset_host_s, rec.onset_device_s, rec.onset_clock) for rec in server.records[:5]]
+    assert [rec.method for rec in server.records] == ["inverse", "inverse", "funneling", "inverse", "inverse",
+                                                      "inverse"]
+    assert [r.method for r in played] == [rec.method for rec in server.records[:5]]
+    assert [rec.level_db for rec in server.records] == [-6.0, -1.0, 0.0, -2.0, -4.0, -4.0]
+    assert not results[3].played and "drive refused" in results[3].error
+
+
+def test_no_server_is_one_clear_error_at_the_start_not_a_hang():
+    pytest.importorskip("pythonosc")
+    import socket
+
+    free = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    free.bind(("127.0.0.1", 0))
+    port = free.getsockname()[1]
+    free.close()
+    with pytest.raises(ValidationError, match=f"serve-osc at 127.0.0.1:{port}"):
+        TapStimulus.osc(port=port, timeout_s=0.5)
+
+
+class _Nothing:
+    def set_method(self, name, timeout_s):
+        pass
+
+
+@pytest.mark.parametrize("kwargs, needle", [
+    ({"location": 2, "x_mm": 1.0, "y_mm": 1.0}, "not both"),
+    ({"x_mm": 1.0}, "both x_mm and y_mm"),
+    ({"location": 2.5}, "integer"),
+    ({"level_db": float("nan")}, "finite"),
+    ({"level_db": "loud"}, "finite"),
+    ({"method": ""}, "method"),
+])
+def test_bad_settings_are_one_clear_error(kwargs, needle):
+    tap = TapStimulus(backend=_Nothing())
+    with pytest.raises(ValidationError, match=needle):
+        tap.set(**kwargs)
+    with pytest.raises(ValidationError, match="identifier"):
+        TapStimulus(backend=_Nothing(), name="my tap")
+    with pytest.raises(ValidationError, match="call play"):
+        tap.result()
