@@ -16,7 +16,7 @@ pylsl = pytest.importorskip("pylsl")
 from pythonosc.osc_message import OscMessage  # noqa: E402
 from pythonosc.udp_client import SimpleUDPClient  # noqa: E402
 
-from vibrofocus.io.lsl import clock_offset  # noqa: E402
+from vibrofocus.io.lsl import clock_offset, stable_source_id  # noqa: E402
 from vibrofocus.realtime import PLAYED_FIELDS, read_tap_log  # noqa: E402
 
 pytestmark = pytest.mark.slow
@@ -44,17 +44,24 @@ def test_serve_osc_lsl_log_records_every_tap_with_its_onsets(tmp_path, lsl_confi
         port = re.search(r"osc\.udp://127\.0\.0\.1:(\d+)", lines[0])
         source = re.search(r"source_id (\S+)\)", lines[2])
         assert port and source and f"taps logged to {log}" in lines[2], (lines, proc.stderr.read())
-        streams = pylsl.resolve_bypred(f"source_id='{source.group(1)}'", 1, 60.0)
-        assert streams, "the marker outlet was not found"
-        inlet = pylsl.StreamInlet(streams[0], max_buflen=60)
-        inlet.open_stream(timeout=60.0)  # connected before the first tap: no marker is sent to nobody
+        # The stream is named after the log: a restarted server keeps it (LabRecorder recovers it).
+        assert source.group(1) == stable_source_id(log)
+        inlets = []
+        for sid in (source.group(1), source.group(1) + "-detail"):  # the codes, then the JSON details
+            streams = pylsl.resolve_bypred(f"source_id='{sid}'", 1, 60.0)
+            assert streams, f"the marker outlet {sid} was not found"
+            inlets.append(pylsl.StreamInlet(streams[0], max_buflen=60))
+            inlets[-1].open_stream(timeout=60.0)  # connected before the first tap: no marker is sent to nobody
         client = SimpleUDPClient("127.0.0.1", int(port.group(1)))
         replies = [_ask(client, address, args) for address, args in TAPS]
         refused = _ask(client, "/tap", [5, 3.0])  # over the limit: not played, not logged, no marker
-        markers = []
+        markers, codes = [], []
         for _ in TAPS:
-            sample, stamp = inlet.pull_sample(timeout=60.0)
-            assert sample is not None, "a tap's marker was lost"
+            code, code_stamp = inlets[0].pull_sample(timeout=60.0)
+            sample, stamp = inlets[1].pull_sample(timeout=60.0)
+            assert code is not None and sample is not None, "a tap's marker was lost"
+            assert code_stamp == stamp
+            codes.append(code[0])
             markers.append((json.loads(sample[0]), stamp))
         assert _ask(client, "/stop", []).address == "/stopped"
         out, err = proc.communicate(timeout=60)
@@ -81,6 +88,7 @@ def test_serve_osc_lsl_log_records_every_tap_with_its_onsets(tmp_path, lsl_confi
     offset = clock_offset(pylsl.local_clock)  # CLOCK_MONOTONIC and LSL's clock are machine-wide
     assert [m["tap_id"] for m, _ in markers] == [r["tap_id"] for r in rows]
     assert {m["event"] for m, _ in markers} == {"stimulus_onset"}
+    assert codes == [f"tap/{m['method']}" for m, _ in markers]
     assert [m["level_db"] for m, _ in markers] == [r["level_db"] for r in rows]
     assert [m["onset_device_s"] for m, _ in markers] == [r["onset_device_s"] for r in rows]
     errors = [abs(stamp - (row["onset_host_s"] + offset)) for (_, stamp), row in zip(markers, rows)]

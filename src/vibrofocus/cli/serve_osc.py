@@ -8,12 +8,14 @@ import typer
 
 from ._command import command
 from ._errors import err_console, user_errors
-from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options
+from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options, lsl_source_id_option
 
 _LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
-_LSL_HELP = ("Send one JSON stimulus-onset marker per played tap to the Lab Streaming Layer outlet "
-             "'vibrofocus-markers' (type Markers), stamped with the tap's onset on LSL's clock; needs "
-             "pip install 'vibrofocus[lsl]'.")
+_LSL_HELP = ("Send one stimulus-onset marker per played tap to the Lab Streaming Layer outlet "
+             "'vibrofocus-markers' (type Markers; the short code tap/<method>, its JSON detail on "
+             "'vibrofocus-markers-detail'), stamped with the tap's onset on LSL's clock; needs "
+             "pip install 'vibrofocus[lsl]'. The source id comes from the --log file when given "
+             "(a restarted server keeps its stream), else --lsl-source-id, else a new one.")
 
 
 @command("serve-osc", epilog="Example: vibrofocus serve-osc --port 9000 --log taps.csv, then from a client: "
@@ -41,6 +43,7 @@ def serve_osc(
                                                        "on the host and device clocks. Each tap is on disk before "
                                                        "its /played is sent; an existing tap log is continued."),
     lsl: bool = typer.Option(False, "--lsl", help=_LSL_HELP),
+    lsl_source_id: str | None = lsl_source_id_option(),
 ) -> None:
     """Play taps that other programs (Unity, Max/MSP, Pure Data, Python) ask for over OSC/UDP.
 
@@ -72,9 +75,14 @@ def serve_osc(
         if calibration is None and rig != "simulated":
             raise ValidationError(f"the {rig} rig needs --calibration (a calibration measured on it)")
         skin_name = skin_preset(skin).name
+        if lsl_source_id is not None and not lsl:
+            raise ValidationError("--lsl-source-id needs --lsl")
         if lsl:
-            from ..io.lsl import import_pylsl
+            from ..io.lsl import check_source_id, import_pylsl, stable_source_id
 
+            # Checked before the rig opens; a log names the stream, so a restarted server keeps it.
+            stream_id = (check_source_id(lsl_source_id) if lsl_source_id is not None
+                         else stable_source_id(log) if log is not None else None)
             import_pylsl()  # before the rig opens: a missing pylsl is one line, nothing started
         with contextlib.ExitStack() as stack:
             the_rig = stack.enter_context(make_rig(rig, config=rig_config, seed=seed,
@@ -102,7 +110,7 @@ def serve_osc(
             if lsl:
                 from ..io.lsl import MarkerOutlet
 
-                outlet = stack.enter_context(MarkerOutlet())
+                outlet = stack.enter_context(MarkerOutlet(source_id=stream_id))
             from ..rendering import available_methods, method_class
 
             if method in available_methods() and not method_class(method).live:
