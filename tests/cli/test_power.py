@@ -34,7 +34,7 @@ def test_power_writes_table_plot_and_json(tmp_path):
     assert (table["model"].str.contains("not data") & table["model"].str.contains("model v3")).all()
     report = json.loads((out / "power.json").read_text())
     assert report["design"]["n_studies"] == 5 and "not data" in report["label"]
-    assert set(report["hypotheses"]) == set(table["hypothesis"]) and report["levels"] == "equal-peak"
+    assert set(report["hypotheses"]) == set(table["hypothesis"]) and report["levels"] == "paper"
     assert (out / "power.png").stat().st_size > 1000
 
 
@@ -86,8 +86,9 @@ def test_power_from_a_bank_file_and_its_methods(tmp_path):
     # A bank file with two of the shipped bank's methods, as scripts/build_feature_bank.py writes one.
     shipped = default_bank()
     keep = [shipped.methods.index(m) for m in ("inverse", "combination")]
-    bank = type(shipped)(**{**vars(shipped), "methods": ("inverse", "combination"),
-                            "energy": shipped.energy[:, keep], "actuator_energy": shipped.actuator_energy[:, keep]})
+    per_stimulus = {k: getattr(shipped, k)[:, keep] for k in ("energy", "actuator_energy", "drive_peak_v", "target_peak_m")
+                    if getattr(shipped, k) is not None}
+    bank = type(shipped)(**{**vars(shipped), "methods": ("inverse", "combination"), **per_stimulus})
     bank.save(tmp_path / "bank.npz")
     res = runner.invoke(app, ["power", "-n", "4", "--studies", "2", "--no-dask", "-q", "--bank", str(tmp_path / "bank.npz"),
                               "--out", str(tmp_path / "out")])

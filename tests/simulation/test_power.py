@@ -107,17 +107,15 @@ def test_power_for_the_minimax_design_from_a_bank_that_renders_it(tmp_path):
     from vibrofocus.simulation.bank import FeatureBank, build_feature_bank
 
     # Two forearms (sim-001, sim-002 of seed 0) rendered with the inverse filter and minimax.
-    bank = build_feature_bank(2, seed=0, methods=("inverse", "minimax"), levels="equal-peak")
+    bank = build_feature_bank(2, seed=0, methods=("inverse", "minimax"), levels="paper")
     bank.save(tmp_path / "bank.npz")
     loaded = FeatureBank.load(tmp_path / "bank.npz")
     assert loaded.methods == ("inverse", "minimax") and loaded.energy.shape[:3] == (2, 2, 9)
-    # The same forearms and calibrations as the shipped bank: the inverse filter's felt
-    # energies are the shipped bank's first two forearms' (it was rendered at the same
-    # equal-peak levels, but on the former per-design windows, without the tapered ends a
-    # study's renderer gives a design that does not fit: within a few per cent).
+    # The same forearms, calibrations, levels and renderer as the shipped bank: the inverse
+    # filter's felt energies are the shipped bank's first two forearms'.
     shipped = default_bank()
-    assert shipped.levels == loaded.levels == "equal-peak"
-    np.testing.assert_allclose(loaded.energy[:, 0], shipped.energy[:2, shipped.methods.index("inverse")], rtol=0.05)
+    assert shipped.levels == loaded.levels == "paper"
+    np.testing.assert_allclose(loaded.energy[:, 0], shipped.energy[:2, shipped.methods.index("inverse")], rtol=1e-6)
     # A minimax drive is a different drive: its felt field differs.
     assert not np.allclose(loaded.energy[:, 1], loaded.energy[:, 0], rtol=0.05)
     design = PowerDesign(n_participants=(6,), n_studies=4, methods=("inverse", "minimax"))
