@@ -242,8 +242,8 @@ def demo_command(
             band = trust["coherent_band_hz"]
             tap = trust["tap_band_hz"]
             console.print(
-                ("coherence below 0.9 somewhere at every frequency" if band is None else
-                 f"coherence >= 0.9 at every point over {band[0]:.0f}-{band[1]:.0f} Hz")
+                (f"coherence below {trust['min_coherence']:g} somewhere at every frequency" if band is None else
+                 f"coherence >= {trust['min_coherence']:g} at every point over {band[0]:.0f}-{band[1]:.0f} Hz")
                 + f" (the tap's band, within 20 dB of its peak: {tap[0]:.0f}-{tap[1]:.0f} Hz, "
                 f"{'covered' if trust['covers_tap_band'] else 'NOT covered'}); H error "
                 f"{100 * trust['error_inside']:.1f} % inside, "
