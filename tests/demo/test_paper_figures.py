@@ -84,3 +84,16 @@ def test_fig5_says_why_the_combination_looks_like_funneling_at_the_centre(tmp_pa
     fig5_focus_at_a_location(result, tmp_path / "fig5_1.png", location=1, methods=methods, n_grid=5, offsets_ms=(0.0,))
     assert "symmetry" not in keep_figures[-1].texts[-1].get_text()
     assert "not a measurement" in keep_figures[-1].texts[-1].get_text()
+
+
+def test_fig4_names_the_drive_by_its_lobes(tmp_path, keep_figures):
+    """The drive's title is measured from it: a Ricker has 3 lobes; the lossy voigt-fit
+    path asks a ringing burst, which the title must not call one wavelet."""
+    from vibrofocus.demo.paper_figures import _lobes
+    from vibrofocus.signals.ricker import ricker
+
+    assert _lobes(ricker(10_000.0, 1e-3, 0.2, 0.1)) == 3
+    fig4_focusing_along_a_line(SimulatedForearm(seed=0, skin="voigt-fit", noise_m=0.0, dropout_rate=0.0),
+                               tmp_path / "fig4.png")
+    title = keep_figures[-1].axes[1].get_title()
+    assert "burst of" in title and "one wavelet" not in title
