@@ -82,7 +82,7 @@ def point_styles(n_locations: int, n_guards: int) -> list[tuple[str, object]]:
     return out
 
 
-def model_footer(fig, text: str) -> None:
+def model_footer(fig, text: str, *, color: str = "0.25") -> None:
     """Write ``text`` (what in the figure is a model) in small grey type at the figure's foot.
 
     Keeps room for it under a constrained layout; under ``tight_layout`` the caller leaves
@@ -94,8 +94,10 @@ def model_footer(fig, text: str) -> None:
         The figure.
     text : str
         The footer, one line.
+    color : str
+        Its colour (matplotlib colour).
     """
     engine = fig.get_layout_engine()
     if engine is not None and hasattr(engine, "set") and "rect" in getattr(engine, "get", dict)():
         engine.set(rect=(0, 0.04, 1, 0.96))
-    fig.text(0.01, 0.005, text, fontsize=7.5, color="0.25", ha="left", va="bottom", gid="model-footer")
+    fig.text(0.01, 0.005, text, fontsize=7.5, color=color, ha="left", va="bottom", gid="model-footer")

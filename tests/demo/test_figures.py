@@ -26,7 +26,7 @@ def test_figures_are_written(tmp_path):
     assert np.isfinite([r["fidelity"] for r in result.rows]).all()
 
 
-def test_peak_frontier_figure_and_bound(tmp_path):
+def test_peak_frontier_figure_and_bound(tmp_path, keep_figures):
     """The frontier at one location: the peak bound is minimax at the pseudo-inverse's fidelity, and
     no demo design predicts more peak contrast than the frontier at its own fidelity."""
     from vibrofocus.demo.frontier import frontier_figure, peak_frontiers
@@ -41,6 +41,8 @@ def test_peak_frontier_figure_and_bound(tmp_path):
     assert front.peak_bound_db >= inv["contrast_all_db"] - 0.05
     path = frontier_figure(result, {5: front}, tmp_path / "frontier.png")
     assert path.stat().st_size > 1000 and _is_png(path)
+    assert "Model" in _footer(keep_figures[-1])
+    assert keep_figures[-1].axes[0].get_xlabel() == "fidelity to the tap"  # one meaning of "fidelity"
     for row in result.rows:
         row["peak_bound_db"] = front.peak_bound_db
     assert summarize(result.rows)["inverse"]["peak_bound_db"] == pytest.approx(front.peak_bound_db)
