@@ -252,7 +252,8 @@ def demo_command(
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
         legend = ("All methods at the same peak drive (the drive limit). fid: correlation with the tap at its "
-                  "time (combination: with funneling's displacement there); shape: at the best lag (funneling arrives late); contrast: peak at the target over the "
+                  "time (combination: with funneling's displacement there); shape: at the best lag (funneling arrives "
+                  "late); contrast: peak at the target over the "
                   "largest at the other locations; all pts: over every calibrated point; energy: energy contrast "
                   "against the other locations; bound: the most energy contrast any drive that gives the tap "
                   "reaches there" + ("; peak bound: the most peak contrast against every calibrated point any "
