@@ -104,9 +104,11 @@ def test_metrics_contrast_axis_and_neutral_shape_legend(tmp_path, keep_figures):
     from vibrofocus._style import METHOD_COLORS
     from matplotlib.colors import to_hex
 
-    result = run_demo(SimulatedForearm(seed=0), methods=("funneling", "inverse"), locations=(5,))
+    result = run_demo(SimulatedForearm(seed=0), methods=("funneling", "inverse", "combination"), locations=(5,))
     metrics_figure(result, tmp_path / "m.png")
     fig = keep_figures[-1]
+    note = [t.get_text() for t in fig.texts if t.get_gid() == "fidelity-note"]
+    assert len(note) == 1 and "funneling's displacement" in note[0]
     assert "other locations" in fig.axes[1].get_ylabel()
     legend = fig.axes[0].get_legend()
     entries = dict(zip((t.get_text() for t in legend.get_texts()), legend.legend_handles))

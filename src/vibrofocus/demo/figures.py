@@ -252,6 +252,12 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     if rig is None or getattr(rig, "kind", "simulated") == "simulated":
         model_footer(fig, arm_footer(rig))
         bottom = 0.03
+    if "combination" in methods:
+        # One meaning per name: say which waveform the combination's fidelity is measured to.
+        fig.text(0.01, bottom + 0.003, "Fidelity: zero-lag correlation with the tap; for the combination, with "
+                 "funneling's displacement at the target (the waveform it asks).", fontsize=7.5, color="0.25",
+                 ha="left", va="bottom", gid="fidelity-note")
+        bottom += 0.025
     fig.tight_layout(rect=(0, bottom, 1, 0.97))
     save_figure(fig, path, dpi=120)
     plt.close(fig)
