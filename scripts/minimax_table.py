@@ -1,5 +1,5 @@
 """Peak contrast of the minimax design against the paper's pseudo-inverse on the nominal
-simulated arm (issue 32's done-when), at equal peak drive (10 V).
+simulated arm, at equal peak drive (10 V).
 
 For each seed and location: the pseudo-inverse ("inverse") and the minimax design (default:
 fidelity >= the pseudo-inverse's), both rendered through the arm's true H, or (--calibrated)

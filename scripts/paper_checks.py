@@ -1,5 +1,5 @@
 #!/usr/bin/env python
-"""Print the checks of issue 24: the simulated arm against the paper's own measurements.
+"""Print the checks of the simulated arm against the paper's own measurements.
 
 For each skin preset (``--skin``, all presets by default) and participant seeds 0-3:
 

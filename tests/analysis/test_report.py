@@ -307,3 +307,29 @@ def test_html_shows_ids_and_method_names_as_text_never_as_markup(tmp_path, synth
     assert "&lt;script&gt;alert(" in page and "&lt;img src=x onerror=alert(1)&gt;" in page
     report = json.loads(paths["json"].read_text(encoding="utf-8"))
     assert evil_id in report["simulated"]["participants"] and evil_method in report["study1"]["methods"]
+
+
+def test_the_simulated_footer_sits_below_every_axis_label(tmp_path, synthetic, monkeypatch):
+    """The 'SIMULATED' footer of a report figure has its own room: it covers no axis or label."""
+    import vibrofocus.analysis.figures as figures
+
+    saved = []
+    real_save = figures.save_figure
+    monkeypatch.setattr(figures, "save_figure", lambda fig, path, **kw: saved.append(fig) or real_save(fig, path, **kw))
+    df = synthetic(3, seed=3)
+    df["simulated"] = 1
+    path = tmp_path / "trials.csv"
+    df.to_csv(path, index=False)
+    write_report(analyze(load_trials(path)), tmp_path / "out")
+    assert saved
+    for fig in saved:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()  # the layout as saved: the constrained engine runs again
+        renderer = canvas.get_renderer()
+        footers = [t for t in fig.texts if t.get_text().startswith("SIMULATED: ")]
+        assert len(footers) == 1
+        top = footers[0].get_window_extent(renderer).y1
+        lowest = min(ax.get_tightbbox(renderer).y0 for ax in fig.axes if ax.get_visible())
+        assert top <= lowest + 0.5, (fig.axes[0].get_title(), top, lowest)

@@ -41,10 +41,17 @@ def test_fig4_one_drive_focuses_the_tap_at_the_farthest_point(tmp_path, keep_fig
     # The plain tap reaches 16 mm late (a few m/s); the focused one at the asked instant.
     assert peak_time(plain_ax) > 2.0
     assert abs(peak_time(focused_ax)) < 0.5
-    # Low frequencies travel slower on skin, so the drive sends them first: most of its
-    # energy comes before the instant the tap is asked.
+    # The drive leaves ahead of the instant the tap is asked (the travel time): most of its
+    # energy comes before t = 0, and the title states the lead of its peak.
     t, drive = next(li for li in drive_ax.get_lines() if li.get_gid() == "drive").get_data()
     assert np.sum(drive[t < 0] ** 2) > np.sum(drive[t > 0] ** 2)
+    lead = -t[np.argmax(np.abs(drive))]
+    assert lead > 0 and f"{lead:.1f} ms early" in drive_ax.get_title()
+    assert "low frequencies first" not in drive_ax.get_title()
+    # The asked Ricker is drawn dashed above the recorded trace, so both show.
+    asked = next(li for li in focused_ax.get_lines() if li.get_gid() == "asked")
+    trace = next(li for li in focused_ax.get_lines() if li.get_gid() == f"trace:{far}")
+    assert asked.get_zorder() > trace.get_zorder() and asked.get_linestyle() == "--"
     assert fig.texts[-1].get_gid() == "caption" and "not a measurement" in fig.texts[-1].get_text()
 
 
@@ -64,3 +71,29 @@ def test_fig5_shares_one_time_axis_so_funneling_shows_late(tmp_path, keep_figure
     # One colour scale for every snapshot.
     limits = {im.get_clim() for ax in fig.axes for im in ax.get_images()}
     assert len(limits) == 1
+
+
+def test_fig5_says_why_the_combination_looks_like_funneling_at_the_centre(tmp_path, keep_figures):
+    rig = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0)
+    methods = ("funneling", "combination")
+    result = run_demo(rig, methods=methods, locations=(5, 1), transfer=model_transfer)
+    fig5_focus_at_a_location(result, tmp_path / "fig5.png", location=5, methods=methods, n_grid=5, offsets_ms=(0.0,))
+    caption = keep_figures[-1].texts[-1].get_text()
+    assert "by symmetry" in caption and "location 5" in caption
+    # Location 1 is not symmetric: its combination differs from funneling and no note is added.
+    fig5_focus_at_a_location(result, tmp_path / "fig5_1.png", location=1, methods=methods, n_grid=5, offsets_ms=(0.0,))
+    assert "symmetry" not in keep_figures[-1].texts[-1].get_text()
+    assert "not a measurement" in keep_figures[-1].texts[-1].get_text()
+
+
+def test_fig4_names_the_drive_by_its_lobes(tmp_path, keep_figures):
+    """The drive's title is measured from it: a Ricker has 3 lobes; the lossy voigt-fit
+    path asks a ringing burst, which the title must not call one wavelet."""
+    from vibrofocus.demo.paper_figures import _lobes
+    from vibrofocus.signals.ricker import ricker
+
+    assert _lobes(ricker(10_000.0, 1e-3, 0.2, 0.1)) == 3
+    fig4_focusing_along_a_line(SimulatedForearm(seed=0, skin="voigt-fit", noise_m=0.0, dropout_rate=0.0),
+                               tmp_path / "fig4.png")
+    title = keep_figures[-1].axes[1].get_title()
+    assert "burst of" in title and "one wavelet" not in title

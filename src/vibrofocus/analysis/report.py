@@ -210,7 +210,10 @@ def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str
 
     def save(fig, path: Path) -> Path:
         if footer is not None:
-            fig.text(0.01, 0.005, footer, fontsize=7, color="#b45309", ha="left", va="bottom")
+            from .._style import model_footer
+
+            # Room kept under the constrained layout, so the footer never covers an axis label.
+            model_footer(fig, footer, color="#b45309")
         return save_figure(fig, path)
 
     with atomic_directory(out, owned=REPORT_FILES, what="report folder") as build:

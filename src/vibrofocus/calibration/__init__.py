@@ -9,9 +9,10 @@ from .figures import plot_calibration
 from .fitmodel import FittedSkin, fit_model
 from .files import (calibration_from_record, calibration_record, export_sofa, import_sofa, load_calibration,
                     save_calibration)
-from .quality import QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
+from .quality import TRUSTED_COHERENCE, QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
 
 __all__ = [
+    "TRUSTED_COHERENCE",
     "calibrate",
     "plan_calibration",
     "CalibrationPlan",

@@ -66,9 +66,16 @@ import numpy as np
 
 from ..layout import ArrayLayout
 
-__all__ = ["QualityThresholds", "QualityIssue", "QualityReport", "assess_quality", "detect_clipping"]
+__all__ = ["TRUSTED_COHERENCE", "QualityThresholds", "QualityIssue", "QualityReport", "assess_quality",
+           "detect_clipping"]
 
 SEVERITIES = ("info", "warning", "error")
+
+#: Coherence a frequency needs at every point for the calibration to be trusted there: the
+#: demo's "coherent band" and the line drawn on the calibration figure. Stricter than the
+#: quality check's ``coherence_min`` (0.5), which flags a path only where noise is as large
+#: as the response.
+TRUSTED_COHERENCE = 0.9
 
 
 @dataclass(frozen=True)
@@ -250,15 +257,16 @@ class QualityReport:
 
     def table(self, layout: ArrayLayout, title: str = "Calibration quality"):
         """A rich table: one row per point, one column per actuator, the verdict in each
-        cell with the SNR."""
+        cell with the SNR (in-band response over the noise floor before the sweep, dB)."""
         from rich.table import Table
 
         verdicts = self.verdicts()
-        table = Table(title=title)
+        table = Table(title=title, caption="ok (dB): the in-band signal-to-noise ratio, the response over the "
+                                           "noise floor measured before each sweep")
         table.add_column("point")
         table.add_column("x, y (mm)", justify="right", no_wrap=True)
         for name in layout.actuator_names:
-            table.add_column(name)
+            table.add_column(f"{name} (SNR)")
         for p, (label, xy) in enumerate(zip(layout.point_labels, layout.points_xy)):
             cells = []
             for a in range(layout.n_actuators):

@@ -242,8 +242,8 @@ def demo_command(
             band = trust["coherent_band_hz"]
             tap = trust["tap_band_hz"]
             console.print(
-                ("coherence below 0.9 somewhere at every frequency" if band is None else
-                 f"coherence >= 0.9 at every point over {band[0]:.0f}-{band[1]:.0f} Hz")
+                (f"coherence below {trust['min_coherence']:g} somewhere at every frequency" if band is None else
+                 f"coherence >= {trust['min_coherence']:g} at every point over {band[0]:.0f}-{band[1]:.0f} Hz")
                 + f" (the tap's band, within 20 dB of its peak: {tap[0]:.0f}-{tap[1]:.0f} Hz, "
                 f"{'covered' if trust['covers_tap_band'] else 'NOT covered'}); H error "
                 f"{100 * trust['error_inside']:.1f} % inside, "
@@ -252,7 +252,8 @@ def demo_command(
             )
         source = "a measured calibration" if design_from == "calibration" else "the model's exact transfer"
         legend = ("All methods at the same peak drive (the drive limit). fid: correlation with the tap at its "
-                  "time; shape: at the best lag (funneling arrives late); contrast: peak at the target over the "
+                  "time (combination: with funneling's displacement there); shape: at the best lag (funneling arrives "
+                  "late); contrast: peak at the target over the "
                   "largest at the other locations; all pts: over every calibrated point; energy: energy contrast "
                   "against the other locations; bound: the most energy contrast any drive that gives the tap "
                   "reaches there" + ("; peak bound: the most peak contrast against every calibrated point any "

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from .._atomic import save_figure
-from .._style import method_colors
+from .._style import method_colors, model_footer
 from ..defaults import BAND_HZ, N_SAMPLES, SIGMA_S, TARGET_PEAK_M
 from ..signals.taper import band_taper
 from ..signals.ricker import ricker
@@ -33,6 +33,29 @@ def arm_label(rig) -> str:
     if skin:
         return f"simulated forearm (skin {skin}, seed {getattr(rig, 'seed', '?')})"
     return "simulated forearm" if rig is None else f"{getattr(rig, 'kind', 'unknown')} rig"
+
+
+def arm_footer(rig) -> str:
+    """The footer of a figure drawn from the simulated forearm: it is a model, not data."""
+    return (f"Model: vibrofocus {arm_label(rig)}, simulated vibrometer noise; not a measurement on a person.")
+
+
+def target_ring(ax, xy_m, radius_m: float = 0.005) -> None:
+    """Mark the target with a thin dashed circle around it, leaving the focal spot itself visible.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        Axes in mm.
+    xy_m : array-like, shape (2,)
+        The target, m.
+    radius_m : float
+        Radius of the circle, m (half the locations' 10 mm spacing by default).
+    """
+    from matplotlib.patches import Circle
+
+    ax.add_patch(Circle(tuple(np.asarray(xy_m, dtype=float) * 1e3), radius_m * 1e3, fill=False, ec="k", lw=0.7,
+                        ls=(0, (2, 1.5)), zorder=4, gid="target-ring"))
 
 
 def _reachable_upper_hz(freqs: np.ndarray, gain: np.ndarray, dynamic_range_db: float) -> float:
@@ -95,20 +118,22 @@ def propagation_figure(rig, path: Path, *, actuator: int | None = None,
             ax.plot(time_ms[view], rec[view] / peak * 0.45 + i, color="k", lw=1)
             ax.text(time_ms[view][-1], i + 0.15, f"{peak * 1e6:.3g} µm", ha="right", fontsize=8)
         desired = np.fft.irfft(np.fft.rfft(stimulus) * band_taper(freqs, band, 0.5), n)
-        axes[1].plot(time_ms[view], desired[view] / np.abs(desired).max() * 0.45 + i, color="tab:red", lw=0.8,
-                     ls="--", zorder=0)
+        # Above the recorded trace and dashed: where the two agree, both stay visible.
+        axes[1].plot(time_ms[view], desired[view] / np.abs(desired).max() * 0.45 + i, color="tab:red", lw=1.1,
+                     ls=(0, (3, 2)), zorder=3, gid=f"asked:{i}")
         axes[1].text(time_ms[view][0], i + 0.3, f"up to {band[1]:.0f} Hz", fontsize=7, color="tab:red")
     axes[0].set_yticks(range(len(distances_m)), [f"{d * 1e3:.0f} mm" for d in distances_m])
     axes[0].set_ylabel("distance from the actuator")
     axes[0].set_title(f"{layout.actuator_names[actuator]} plays a {limit:g} V Ricker\n", fontsize=10)
-    axes[1].set_title(f"inverse filtered at each point\n(red: the Ricker, up to {dynamic_range_db:g} dB of extra "
-                      "path loss)", fontsize=10)
+    axes[1].set_title(f"inverse filtered at each point\n(red dashed: the Ricker asked, up to {dynamic_range_db:g} dB "
+                      "of extra path loss)", fontsize=10)
     for ax in axes:
         ax.set_xlabel("time from the stimulus centre (ms)")
         ax.grid(alpha=0.3)
     fig.suptitle(f"Propagation on the {arm_label(rig)}: dispersion and attenuation, and their correction",
                  fontsize=10)
-    fig.tight_layout()
+    model_footer(fig, arm_footer(rig))
+    fig.tight_layout(rect=(0, 0.035, 1, 1))
     save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path
@@ -165,7 +190,7 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
                            extent=np.array([-1, 1, -1, 1]) * half_width_m * 1e3)
             ax.plot(*(layout.actuators_xy.T * 1e3), "ks", ms=5, mfc="none")
             ax.plot(*(layout.locations_xy.T * 1e3), "k.", ms=2)
-            ax.plot(*(layout.locations_xy[location - 1] * 1e3), "o", ms=7, mfc="none", mec="gold")
+            target_ring(ax, layout.locations_xy[location - 1])
             ax.set_title(f"{method}, t = {offset * 1e3:+.0f} ms", fontsize=9)
             if col == 0:
                 ax.set_ylabel("y (mm, to wrist)")
@@ -174,7 +199,8 @@ def field_figure(result: DemoResult, path: Path, *, location: int = 5,
     if im is not None:
         fig.colorbar(im, ax=axes.ravel().tolist(), shrink=0.8, label="displacement (µm)")
     fig.suptitle(f"Field around location {location} on the {arm_label(rig)}; "
-                 "t = 0: the tap asked at the target", fontsize=10)
+                 "t = 0: the tap asked at the target (dashed circle)", fontsize=10)
+    model_footer(fig, arm_footer(rig) + " Squares: actuators; dots: the nine locations.")
     save_figure(fig, path, dpi=110)
     plt.close(fig)
     return path
@@ -185,6 +211,8 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
 
     The fidelity panel also marks each method's shape fidelity (best lag) with a dot:
     funneling has the right shape but arrives late, which zero-lag fidelity cannot show.
+    The contrast is the peak contrast against the other locations (the target's peak
+    displacement over the largest peak at the other locations).
     """
     plt = _pyplot()
     rows = result.rows
@@ -193,7 +221,7 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
     width = 0.8 / max(len(methods), 1)
     colors = method_colors(methods)
     fig, axes = plt.subplots(3, 1, figsize=(9, 8), sharex=True)
-    keys = (("fidelity", "fidelity", 1.0), ("contrast_db", "contrast (dB)", 1.0),
+    keys = (("fidelity", "fidelity", 1.0), ("contrast_db", "peak contrast vs\nother locations (dB)", 1.0),
             ("target_peak_m", "target peak (µm)", 1e6))
     for ax, (key, label, factor) in zip(axes, keys):
         for j, method in enumerate(methods):
@@ -204,16 +232,33 @@ def metrics_figure(result: DemoResult, path: Path) -> Path:
             if key == "fidelity":
                 shape = [next((r.get("shape_fidelity", np.nan) for r in rows
                                if r["location"] == loc and r["method"] == method), np.nan) for loc in locations]
-                ax.plot(x, shape, "o", ms=4, mfc="white", color=colors[method],
-                        label="shape (best lag)" if j == 0 else None)
+                ax.plot(x, shape, "o", ms=4, mfc="white", color=colors[method])
         ax.set_ylabel(label)
         ax.axhline(0, color="k", lw=0.5)
         ax.grid(axis="y", alpha=0.3)
-    axes[0].legend(ncol=len(methods) + 1, fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0), frameon=False)
+    # The shape marker takes each method's colour in the panel; its legend entry is neutral.
+    from matplotlib.lines import Line2D
+
+    handles, names = axes[0].get_legend_handles_labels()
+    handles.append(Line2D([], [], ls="none", marker="o", ms=4, mfc="white", color="0.3"))
+    names.append("shape (best lag)")
+    axes[0].legend(handles, names, ncol=len(methods) + 1, fontsize=8, loc="lower center", bbox_to_anchor=(0.5, 1.0),
+                   frameon=False)
     axes[-1].set_xticks(range(len(locations)), [str(loc) for loc in locations])
     axes[-1].set_xlabel("location")
-    fig.suptitle(f"Focus metrics measured on the {arm_label(getattr(result, 'rig', None))}")
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    rig = getattr(result, "rig", None)
+    fig.suptitle(f"Focus metrics measured on the {arm_label(rig)}")
+    bottom = 0.0
+    if rig is None or getattr(rig, "kind", "simulated") == "simulated":
+        model_footer(fig, arm_footer(rig))
+        bottom = 0.03
+    if "combination" in methods:
+        # One meaning per name: say which waveform the combination's fidelity is measured to.
+        fig.text(0.01, bottom + 0.003, "Fidelity: zero-lag correlation with the tap; for the combination, with "
+                 "funneling's displacement at the target (the waveform it asks).", fontsize=7.5, color="0.25",
+                 ha="left", va="bottom", gid="fidelity-note")
+        bottom += 0.025
+    fig.tight_layout(rect=(0, bottom, 1, 0.97))
     save_figure(fig, path, dpi=120)
     plt.close(fig)
     return path

@@ -135,7 +135,8 @@ def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], 
     -------
     Path
     """
-    from .figures import _pyplot, arm_label
+    from .._style import model_footer
+    from .figures import _pyplot, arm_footer, arm_label
 
     plt = _pyplot()
     locations = sorted(frontiers)
@@ -167,12 +168,16 @@ def frontier_figure(result: DemoResult, frontiers: dict[int, LocationFrontier], 
     for ax in axes[:, 0]:
         ax.set_ylabel("peak contrast, all points (dB)")
     for ax in axes[-1]:
-        ax.set_xlabel("fidelity")
+        ax.set_xlabel("fidelity to the tap")
     handles, labels = axes.ravel()[0].get_legend_handles_labels()
     # The title and the two legend rows take the top 0.85 in; the panels start below. The
     # title comes after the layout, which would otherwise leave room for it a second time.
     height = fig.get_figheight()
-    fig.tight_layout(rect=(0, 0, 1, 1 - 0.85 / height))
+    rig = getattr(result, "rig", None)
+    simulated = rig is None or getattr(rig, "kind", "simulated") == "simulated"
+    if simulated:
+        model_footer(fig, arm_footer(rig))
+    fig.tight_layout(rect=(0, 0.3 / height if simulated else 0, 1, 1 - 0.85 / height))
     fig.suptitle(f"Peak-contrast frontier on the {arm_label(getattr(result, 'rig', None))}", y=1 - 0.08 / height,
                  va="top")
     fig.legend(handles, labels, ncol=min(len(labels), 5), fontsize=8, loc="upper center", frameon=False,

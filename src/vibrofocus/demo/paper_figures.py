@@ -22,7 +22,7 @@ from .._atomic import save_figure
 from .._style import method_colors
 from ..defaults import BAND_HZ, N_SAMPLES, SIGMA_S, TARGET_PEAK_M
 from ..signals.ricker import ricker
-from .figures import _pyplot, _reachable_upper_hz, arm_label, fields_around_the_tap
+from .figures import _pyplot, _reachable_upper_hz, arm_label, fields_around_the_tap, target_ring
 from .run import DemoResult, record_clean
 
 __all__ = ["PAPER", "fig4_focusing_along_a_line", "fig5_focus_at_a_location", "fig6_localization", "fig7_counts",
@@ -39,6 +39,16 @@ def _caption(fig, text: str) -> None:
     if engine is not None and hasattr(engine, "set") and "rect" in getattr(engine, "get", dict)():
         engine.set(rect=(0, 0.035, 1, 0.965))
     fig.text(0.01, 0.005, text, fontsize=7.5, color="0.25", ha="left", va="bottom", wrap=True, gid="caption")
+
+
+def _lobes(x: np.ndarray, share: float = 0.2) -> int:
+    """Lobes of ``x`` (runs of one sign) whose peak reaches ``share`` of the largest; a Ricker has 3."""
+    x = np.asarray(x, dtype=float)
+    if not np.any(x):
+        return 0
+    edges = np.flatnonzero(np.diff(np.signbit(x))) + 1
+    peaks = np.array([np.abs(seg).max() for seg in np.split(x, edges) if seg.size])
+    return int(np.sum(peaks >= share * peaks.max()))
 
 
 def fig4_focusing_along_a_line(rig, path: Path, *, actuator: int | None = None,
@@ -97,7 +107,8 @@ def fig4_focusing_along_a_line(rig, path: Path, *, actuator: int | None = None,
         ax.set_title(title, fontsize=10)
         ax.grid(alpha=0.3)
     axes[2].plot(time_ms[view], desired[view] / np.abs(desired).max() * 0.45 + len(distances_m) - 1,
-                 color="tab:red", lw=0.8, ls="--", zorder=0, label=f"asked (Ricker up to {band[1]:.0f} Hz)")
+                 color="tab:red", lw=1.1, ls=(0, (3, 2)), zorder=3, gid="asked",
+                 label=f"asked (Ricker up to {band[1]:.0f} Hz)")
     axes[2].legend(loc="lower right", fontsize=7, frameon=False)
     axes[0].set_ylabel("distance from the actuator")
     drive_view = (time_ms > -60) & (time_ms < 20)
@@ -105,8 +116,15 @@ def fig4_focusing_along_a_line(rig, path: Path, *, actuator: int | None = None,
                  gid="drive")
     axes[1].set_xlabel("time from the stimulus centre (ms)")
     axes[1].set_ylabel("drive (V)")
-    axes[1].set_title(f"one drive, focused at {distances_m[-1] * 1e3:.0f} mm\n(low frequencies first: they travel "
-                      "slower)", fontsize=10)
+    # What the drive shows, measured from it: how early its peak leaves (the travel time) and
+    # how many lobes it has (the Ricker has 3): on a short, mildly lossy path nearly one
+    # wavelet, on a lossy one a burst that boosts the top of the band.
+    lead_ms = -float(time_ms[np.argmax(np.abs(single[0]))])
+    lobes = _lobes(single[0])
+    shape = ("nearly one wavelet; " if lobes <= 4 else
+             f"a burst of {lobes} lobes, the band's top boosted against the path's loss;\n")
+    axes[1].set_title(f"one drive, focused at {distances_m[-1] * 1e3:.0f} mm\n({shape}its peak "
+                      f"{lead_ms:.1f} ms early: the travel time)", fontsize=10)
     axes[1].grid(alpha=0.3)
     fig.suptitle("Fig. 4 layout: focusing one actuator's tap along a line")
     _caption(fig, f"Model: vibrofocus {arm_label(rig)}, vibrometer noise on; "
@@ -145,7 +163,7 @@ def fig5_focus_at_a_location(result: DemoResult, path: Path, *, location: int = 
                            vmax=scale, interpolation="bilinear", extent=np.array([-1, 1, -1, 1]) * half_width_m * 1e3)
             ax.plot(*(layout.actuators_xy.T * 1e3), "ks", ms=4, mfc="none")
             ax.plot(*(layout.locations_xy.T * 1e3), "k.", ms=2)
-            ax.plot(*(layout.locations_xy[location - 1] * 1e3), "o", ms=6, mfc="none", mec="gold")
+            target_ring(ax, layout.locations_xy[location - 1])
             ax.set_xticks([])
             ax.set_yticks([])
             if row == 0:
@@ -175,11 +193,38 @@ def fig5_focus_at_a_location(result: DemoResult, path: Path, *, location: int = 
     fig.axes[-len(methods)].set_ylabel("µm")
     fig.suptitle(f"Fig. 5 layout: focus at location {location}, all methods at the same peak drive; "
                  "t = 0: the tap asked at the target", fontsize=10)
+    note = _symmetry_note(result, location, methods)
     _caption(fig, f"Model: vibrofocus {arm_label(rig)}, designs from a simulated "
-                  f"calibration; not a measurement. The paper ({PAPER}) measured the field with a vibrometer.")
+                  f"calibration; not a measurement. The paper ({PAPER}) measured the field with a vibrometer."
+                  + (f"\n{note}" if note else ""))
     save_figure(fig, path, dpi=100)
     plt.close(fig)
     return path
+
+
+def _symmetry_note(result: DemoResult, location: int, methods: Sequence[str]) -> str:
+    """A caption line when the combination keeps funneling's drive waveforms (a symmetric location).
+
+    At a location equally far from every actuator, funneling plays the same tap on each,
+    and the combination (funneling's own displacement at the target, the guards kept
+    quiet) is met by the same waveforms, rebalanced only for the actuators' unequal
+    coupling: the two rows then look alike by symmetry, not by a fault. Said only when
+    every actuator's two drives correlate at 0.95 or more.
+    """
+    if not {"funneling", "combination"} <= set(methods):
+        return ""
+    a = np.asarray(result.renderings[(location, "funneling")].drives, dtype=float)
+    b = np.asarray(result.renderings[(location, "combination")].drives, dtype=float)
+    if a.shape != b.shape or not (np.std(a, axis=1) > 0).all() or not (np.std(b, axis=1) > 0).all():
+        return ""
+    corr = min(float(np.corrcoef(x, y)[0, 1]) for x, y in zip(a, b))
+    if corr < 0.95:
+        return ""
+    levels = np.abs(b).max(axis=1)
+    return (f"At location {location}, equally far from every actuator, the combination keeps funneling's drive "
+            f"waveforms by symmetry (correlation >= {np.floor(corr * 100) / 100:.2f} per actuator), only "
+            f"rebalanced for the actuators' coupling ({levels.min():.1f}-{levels.max():.1f} V): so the rows look "
+            "alike.")
 
 
 def fig6_localization(positions, layout, path: Path, *, n_participants: int) -> Path:

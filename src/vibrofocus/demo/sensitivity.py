@@ -38,7 +38,8 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
     -------
     list of dict
         One per (law, method): ``law``, ``c250_m_s``, ``alpha250_np_m``, ``method`` and
-        the medians over the locations of ``fidelity``, ``contrast_db`` (against the
+        the medians over the locations of ``fidelity`` (to the desired waveform: the tap,
+        or for ``combination`` funneling's displacement at the target), ``contrast_db`` (against the
         other locations), ``contrast_all_points_db`` (against every calibrated point),
         ``predicted_energy_contrast_db`` (target energy over the other locations', in
         the design window), ``bound_own_db`` (the most any drive allows for the
@@ -76,7 +77,8 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
 def sensitivity_markdown(rows: Sequence[dict]) -> str:
     """The rows of :func:`attenuation_sensitivity` as a Markdown table."""
     lines = [
-        "| skin | c(250 Hz) m/s | α(250 Hz) Np/m | method | fidelity | contrast vs locations dB "
+        "| skin | c(250 Hz) m/s | α(250 Hz) Np/m | method | fidelity to the tap (combination: to funneling's "
+        "displacement) | contrast vs locations dB "
         "| contrast vs all points dB | energy contrast dB | bound, own waveform dB | bound, tap dB "
         "| peak bound dB | target peak µm |",
         "|---|---|---|---|---|---|---|---|---|---|---|---|",

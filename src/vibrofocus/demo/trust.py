@@ -44,7 +44,7 @@ def _longest_run(mask: np.ndarray) -> tuple[int, int] | None:
     return int(starts[k]), int(stops[k])
 
 
-def calibration_trust(calibration, truth: np.ndarray, *, min_coherence: float = 0.9) -> dict:
+def calibration_trust(calibration, truth: np.ndarray, *, min_coherence: float | None = None) -> dict:
     """The calibrated band over which every point is coherent, and the H error in and out of it.
 
     Parameters
@@ -54,9 +54,10 @@ def calibration_trust(calibration, truth: np.ndarray, *, min_coherence: float = 
         ``multiple_coherence``).
     truth : ndarray, complex, shape (n_freqs, n_points, n_actuators)
         The true transfer on ``calibration.freqs`` (a simulator knows it), m/V.
-    min_coherence : float
+    min_coherence : float, optional
         Coherence a bin needs at every point (multiple coherence for ``mimo``, the
-        least over actuators otherwise).
+        least over actuators otherwise); default
+        :data:`~vibrofocus.calibration.quality.TRUSTED_COHERENCE` (0.9).
 
     Returns
     -------
@@ -66,7 +67,10 @@ def calibration_trust(calibration, truth: np.ndarray, *, min_coherence: float = 
         ``error_inside`` and ``error_outside`` (median relative H error, NaN where no
         bins), ``min_coherence``.
     """
-    from ..calibration import transfer_error
+    from ..calibration import TRUSTED_COHERENCE, transfer_error
+
+    if min_coherence is None:
+        min_coherence = TRUSTED_COHERENCE
 
     f = np.asarray(calibration.freqs, dtype=float)
     low, high = calibration.band

@@ -193,7 +193,7 @@ class PerceptualModel:
     select_log_sd : float
         Per-trial log-normal jitter of the criterion. *Fitted.*
     rt_median_s, rt_log_sd, rt_per_extra_location_s
-        Response times (assumption, as model v1).
+        Response times (an assumption).
     version : str
         Version of the model (:data:`MODEL_VERSION`), kept with the parameters in every
         record of simulated data.
