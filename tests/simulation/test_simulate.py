@@ -42,7 +42,12 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
                              + ("simulated", "model"))
     assert {r["levels"] for r in rows} == {"paper"}
     # Every row names the model and the hypothesis that answered.
-    assert {r["model"] for r in rows} == {"simulated participants: model v3.0, hypothesis v3-centroid v3.0, not data"}
+    from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS, hypothesis
+
+    (label,) = {r["model"] for r in rows}
+    assert label == hypothesis().label()  # the default hypothesis, with its version and fit
+    assert f"hypothesis {DEFAULT_HYPOTHESIS} v{hypothesis().version} fitted at paper levels" in label
+    assert label.startswith("simulated participants: model v3.0") and label.endswith("not data")
     assert {r["onset_clock"] for r in rows} == {"simulated_samples"}
     for session in {r["session"] for r in rows}:  # the rig's sample clock runs on through a session
         device = [float(r["onset_device_s"]) for r in rows if r["session"] == session]
