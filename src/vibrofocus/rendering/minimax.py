@@ -511,8 +511,9 @@ class _Program:
         K = delays.size
         if K * n_act > MAX_VARIABLES:
             longest = MAX_VARIABLES // n_act * r / fs
+            shown = tuple(support_s if asked_support is None else asked_support)
             raise ValidationError(
-                f"support_s={tuple(support_s if asked_support is None else asked_support)!r} s gives {K} drive pulses per actuator ({last - first + 1} samples at "
+                f"support_s={shown!r} s gives {K} drive pulses per actuator ({last - first + 1} samples at "
                 f"fs={fs:g} Hz, decimation {r}) for {n_act} actuators: {K * n_act} design variables, more than the "
                 f"{MAX_VARIABLES} the dense cone program handles (time and memory grow with their cube and square); "
                 f"give a support of at most {longest:.4g} s in all")
