@@ -603,13 +603,15 @@ class _Program:
                 continue
             if self.best_fidelity_for(cand) > asked * (1 + 1e-6):
                 why = (f"shorter than the waves' arrival at the target (~{arrival:.3g} s)" if pre < arrival
-                       else f"too short for min_fidelity={min_fidelity:.6g}")
+                       else f"too short for min_fidelity={min_fidelity:.10g}")
                 given = "support_s" if self.given else "the default support_s"
                 return (f"{given}=({pre:g}, {post:g}) is {why}: it reaches fidelity {self.best_fidelity:.4g} at best; "
                         f"use support_s=({cand[0]:g}, {cand[1]:g})")
-        return (f"min_fidelity={min_fidelity:.6g} is above the model's best fidelity {self.best_fidelity:.6g} over this "
-                f"support (support_s=({pre:g}, {post:g}); longer ones, up to the program's "
-                f"{MAX_VARIABLES} variables reach no more): relax the fidelity")
+        longest = max(tries, key=sum)
+        longer = (f"; longer ones, up to support_s=({longest[0]:g}, {longest[1]:g}), reach no more"
+                  if sum(longest) > pre + post + 1e-9 else "")
+        return (f"min_fidelity={min_fidelity:.10g} is above the model's best fidelity {self.best_fidelity:.6g} "
+                f"over this support (support_s=({pre:g}, {post:g}){longer}): relax the fidelity")
 
     def _add_pairs(self, pairs: Any) -> int:
         """Add the peak constraints at (quiet j, sample t) not listed yet; how many."""
@@ -642,7 +644,8 @@ class _Program:
         asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
         cap = 1.0 / asked
         if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
-            raise InfeasibleDesignError(f"the minimax program is infeasible: {self._support_advice(min_fidelity, asked)}")
+            raise InfeasibleDesignError("the minimax program is infeasible: "
+                                        + self._support_advice(min_fidelity, asked))
         dcap = None if max_drive is None else max_drive / self.u_scale
         u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
         for it in range(1, max_iter + 1):
