@@ -156,3 +156,25 @@ def test_calibrate_help_names_mimo_as_the_default():
     result = runner.invoke(app, ["calibrate", "--help"], env={"COLUMNS": "200"})
     assert result.exit_code == 0
     assert "mimo (all actuators at once" in text(result) and "default: mimo" in text(result)
+
+
+@pytest.mark.slow
+def test_render_fits_the_window_of_seed_7103s_arm_without_a_window_option(tmp_path):
+    """Participant 11 of ``simulate-study -n 20 --seed 7103``: on main ``render`` took a
+    4096-sample window and refused the inverse design at location 4 (0.14 % of its response
+    past the window, 'try n_samples=8192', where no longer window fits either); the
+    studies' renderer tapered the window's ends. ``render`` now does as the study does."""
+    from vibrofocus.simulation.simulate import participant_seeds
+
+    cal = tmp_path / "sim-011.nc"
+    made = runner.invoke(app, ["calibrate", "--rig", "simulated", "--participant", "sim-011", "--out", str(cal),
+                               "--seed", str(participant_seeds(7103, 11)[0]), "--skin", "nominal", "--yes"])
+    assert made.exit_code == 0, made.output
+    out = tmp_path / "d.npz"
+    result = runner.invoke(app, ["render", "--calibration", str(cal), "--method", "inverse", "--location", "4",
+                                 "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    with np.load(out) as data:
+        drives, meta = data["drives"], json.loads(str(data["metadata"]))
+    assert drives.shape == (4, load_calibration(cal).n_fft)  # the calibration's own resolution
+    assert meta["predicted_fidelity"] > 0.8

@@ -27,8 +27,11 @@ def render_command(
     reg_param: float | None = typer.Option(None, "--reg-param", max=1e3,
                                            help="Regularization relative to the largest singular value "
                                                 "(0 < value <= 1000)."),
-    n_samples: int = typer.Option(4096, "--n-samples", min=N_SAMPLES_RANGE[0], max=N_SAMPLES_RANGE[1],
-                                  help="Window length, samples."),
+    n_samples: int | None = typer.Option(None, "--n-samples", min=N_SAMPLES_RANGE[0], max=N_SAMPLES_RANGE[1],
+                                         show_default=False,
+                                         help="Window length, samples; default the calibration's own resolution "
+                                              "(its n_fft: 4096 for the reference setup), where its H holds the "
+                                              "impulse responses as measured."),
     limit_v: float | None = typer.Option(None, "--limit-v", min=LIMIT_V_MIN,
                                          help="Drive limit, V peak: at most the rig's limit stored in the calibration, "
                                               "itself never above the rig's own (10 V for the simulated rig, 20 V "
@@ -46,6 +49,9 @@ def render_command(
     for audio-interface rigs: sample value 1.0 means the drive limit (e.g. 10 V) at the
     actuator, so set the interface and amplifier gain so that digital full scale gives
     that voltage; the scale is written in the metadata (volts_per_full_scale).
+
+    A design that does not fit its window (noise in the measured H spreads a little drive
+    over all of it) is made again with the window's ends tapered, as a study does.
     """
     with user_errors():
         import numpy as np
@@ -57,7 +63,9 @@ def render_command(
         from ..defaults import DRIVE_LIMIT_V
         from ..errors import ValidationError
         from ..io.drives import DRIVES_SUFFIXES, write_drives, write_drives_wav
-        from ..rendering import TransferMatrix, render
+        from ..rendering import TransferMatrix
+        from ..rendering.render import render_fitted
+        from ..rendering.transfer import calibration_window
         from ..rigs.safety import PEAK_V_CEILING, SafetyLimits
 
         allow_overwrite(force)
@@ -72,6 +80,8 @@ def render_command(
             if path is not None:
                 check_writable(path, what=what)
         cal = load_calibration(calibration)
+        if n_samples is None:
+            n_samples = calibration_window(cal)
         # H on the window, the designs' batched solves and the responses: about ten
         # copies of H (n/2+1 frequencies x points x actuators, complex).
         check_memory(10 * 16 * (n_samples // 2 + 1) * cal.layout.n_points * cal.layout.n_actuators,
@@ -98,7 +108,7 @@ def render_command(
             )
         limit = limit_v if limit_v is not None else rig_limit
         tm = TransferMatrix.from_calibration(cal, n_samples)
-        rendering = render(method, tm, cal.fs, cal.layout, location, limit_v=limit,
+        rendering = render_fitted(method, tm, cal.fs, cal.layout, location, limit_v=limit,
                            on_limit="refuse" if refuse else "scale", regularization=regularization,
                            reg_param=reg_param, band=cal.band)
         drives = rendering.drives

@@ -21,10 +21,11 @@ from .method import Method, Problem, Solution
 from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
 from .minimax import MinimaxFrontier, MinimaxReport, coherence_radius, minimax_filter, minimax_frontier
 from .registry import ENTRY_POINT_GROUP, available_methods, make_method, method_class, register_method
-from .render import render
+from .render import render, render_fitted
 from .taper import band_taper
 from .time_reversal import time_reversal_drives
-from .transfer import TransferMatrix
+from .timing import ResponseTiming, response_timing
+from .transfer import TransferMatrix, calibration_window
 
 __all__ = [
     "band_taper",
@@ -49,6 +50,10 @@ __all__ = [
     "CausalityWarning",
     "focus_metrics",
     "render",
+    "render_fitted",
+    "response_timing",
+    "ResponseTiming",
+    "calibration_window",
     "Design",
     "TransferMatrix",
     "Method",

@@ -312,8 +312,10 @@ class Minimax(Method):
     min_fidelity : float, optional
         Least target fidelity, in (0, 1); default the pseudo-inverse's own (predicted
         through the same ``H``, at most 0.999): equal fidelity, the peak contrast decides.
-    support_s : (float, float)
-        Drive support before and after the tap, s.
+    support_s : (float, float), optional
+        Drive support before and after the tap, s; default from ``H``, as
+        :func:`~vibrofocus.rendering.minimax_filter` picks it (twice the waves' arrival at
+        the target before the tap, at least 10 ms; 5 ms after).
     drive_budget : float or "auto", optional
         The drive's peak is at most this times the pseudo-inverse's for the same tap (a
         constraint of the program). It keeps the design off the directions where ``H`` is
@@ -341,7 +343,7 @@ class Minimax(Method):
     live: ClassVar[bool] = False  # ... so a live server makes its designs ahead, at the locations
     control: str | None = None
     min_fidelity: float | None = None
-    support_s: tuple[float, float] = (0.01, 0.005)
+    support_s: tuple[float, float] | None = None
     drive_budget: float | str | None = "auto"
     robust: float | None = 1.0
 
@@ -350,10 +352,11 @@ class Minimax(Method):
         self._set("control", _check_control(self, "all", field_allowed=False))
         if self.min_fidelity is not None:
             self._set("min_fidelity", check_in_range(self.min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False))
-        support = tuple(check_positive(s, "support_s") for s in self.support_s)
-        if len(support) != 2:
-            raise ValidationError(f"support_s must be (before, after) in s, got {self.support_s!r}")
-        self._set("support_s", support)
+        if self.support_s is not None:
+            support = tuple(check_positive(s, "support_s") for s in self.support_s)
+            if len(support) != 2:
+                raise ValidationError(f"support_s must be (before, after) in s, got {self.support_s!r}")
+            self._set("support_s", support)
         if self.drive_budget is not None and not (isinstance(self.drive_budget, str) and self.drive_budget == "auto"):
             self._set("drive_budget", check_positive(self.drive_budget, "drive_budget"))
         if self.robust is not None:

@@ -43,6 +43,7 @@ from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response
 from .metrics import zero_lag_fidelity
+from .timing import response_timing
 
 __all__ = ["minimax_filter", "minimax_frontier", "coherence_radius", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
 
@@ -286,11 +287,40 @@ def _solve_cone(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, cap: float, D: np.
     try:  # Cholesky on the reduced system: fast, but it needs [G; A] of full column rank
         if len(G) + 1 < nx:
             raise ArithmeticError("fewer rows than coefficients")
-        sol = solvers.conelp(*args, options=options)
+        sol = solvers.conelp(*args, kktsolver="chol", options=options)
     except (ArithmeticError, ValueError):  # rank-deficient (few rows): a regularized LDL
         sol = solvers.conelp(*args, kktsolver="ldl", options={**options, "kktreg": 1e-9})
     x = None if sol["x"] is None else np.asarray(sol["x"]).ravel()
     return (None if x is None else x[:nv]), (np.nan if x is None else float(x[-1])), sol["status"], sol["iterations"]
+
+
+def _target_norm(xc: np.ndarray, C: np.ndarray, taper: np.ndarray, delays: np.ndarray,
+                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+    """The target's part of the program on pulses at ``delays``: the basis (K, m), ``b``
+    (projection on the waveform), ``Lt`` (``||Lt u||`` = the target's norm), the best
+    fidelity's coefficients and that fidelity (what the support can reach).
+
+    ``xc`` (n_act, n): cross-correlations of the target's responses with the waveform;
+    ``C`` (n_act, n_act, n): their auto- and cross-correlations."""
+    n_act = xc.shape[0]
+    lag = (delays[:, None] - delays[None, :]) % n  # t_k - t_l
+    # Reduced basis: the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
+    # 2 x bandwidth x support well-conditioned directions (the discrete prolate sequences
+    # of the band); the drives are combinations of those, with unit energy each.
+    wp, Vp = np.linalg.eigh(np.fft.irfft(taper**2, n)[lag])
+    kept = wp > wp[-1] * 1e-12
+    basis = Vp[:, kept] / np.sqrt(wp[kept])  # (K, m)
+    m = basis.shape[1]
+    b = (xc[:, delays % n] @ basis).reshape(-1)
+    # Q[(a,k),(b,l)] = C_ab(t_k - t_l), in the basis.
+    Q = np.einsum("km,abkl,ln->ambn", basis, C[:, :, lag], basis, optimize=True).reshape(n_act * m, n_act * m)
+    w, V = np.linalg.eigh(0.5 * (Q + Q.T))
+    keep = w > w[-1] * 1e-12
+    Lt = np.sqrt(w[keep])[:, None] * V[:, keep].T  # |y_target|^2 = ||Lt u||^2
+    # The best fidelity's coefficients (least ||y|| at b.u = 1): the start of every solve.
+    qb = V[:, keep] @ ((V[:, keep].T @ b) / w[keep])
+    u_best = qb / (b @ qb)
+    return basis, b, Lt, u_best, 1 / float(np.linalg.norm(Lt @ u_best))
 
 
 def _check_support(support_s: Any) -> tuple[float, float]:
@@ -327,7 +357,7 @@ def minimax_filter(
     quiet: Any = None,
     full_output: bool = False,
     taper_octaves: float = 0.5,
-    support_s: tuple[float, float] = (0.01, 0.005),
+    support_s: tuple[float, float] | None = None,
     stride: int = 32,
     ir_energy_tol: float = 1e-4,
     decimation: int | None = None,
@@ -366,11 +396,17 @@ def minimax_filter(
         the truncation used).
     taper_octaves : float
         Taper roll-off outside each band edge, octaves.
-    support_s : (float, float)
+    support_s : (float, float), optional
         The drives' support before and after the tap's peak, s (each >= 0, not both 0):
         causal drives played once from silence, starting at most ``support_s[0]`` before
         the tap. At most :data:`MAX_VARIABLES` drive pulses over all actuators (the
         support over ``decimation / fs`` times the actuators), or ValidationError.
+        Default: from ``H`` (:meth:`ResponseTiming.support_s
+        <vibrofocus.rendering.ResponseTiming.support_s>`): twice the latest arrival of an
+        actuator's wave at the target before the tap, 5 ms after it, and at least the
+        reference setup's (10 ms, 5 ms); shortened to :data:`MAX_VARIABLES` pulses if
+        needed. A support too short for ``min_fidelity`` is refused naming ``support_s``
+        and a support that reaches it.
     decimation : int, optional
         Spacing of the drive pulses, samples; default the largest that keeps the taper's
         upper edge below the pulses' Nyquist frequency.
@@ -463,14 +499,21 @@ class _Program:
         if d_norm == 0:
             raise ValidationError("the target's waveform has no energy inside the band")
         t_peak = int(np.argmax(np.abs(desired)))
-        pre, post = (int(round(s * fs)) for s in _check_support(support_s))
+        # The support H asks for: the waves' arrival at the target sets how early drives start.
+        self.timing = response_timing(H, fs, band=band, taper_octaves=taper_octaves)
+        self.suggested = self._fit_support(self.timing.support_s(ti), n_act, r, fs)
+        self.given = support_s is not None
+        asked_support = support_s
+        support_s = self.suggested if support_s is None else _check_support(support_s)
+        pre, post = (int(round(s * fs)) for s in support_s)
         first, last = max(0, t_peak - pre), min(n - 1, t_peak + post)
         delays = np.arange(first, last + 1, r)
         K = delays.size
         if K * n_act > MAX_VARIABLES:
             longest = MAX_VARIABLES // n_act * r / fs
+            shown = tuple(support_s if asked_support is None else asked_support)
             raise ValidationError(
-                f"support_s={tuple(support_s)!r} s gives {K} drive pulses per actuator ({last - first + 1} samples at "
+                f"support_s={shown!r} s gives {K} drive pulses per actuator ({last - first + 1} samples at "
                 f"fs={fs:g} Hz, decimation {r}) for {n_act} actuators: {K * n_act} design variables, more than the "
                 f"{MAX_VARIABLES} the dense cone program handles (time and memory grow with their cube and square); "
                 f"give a support of at most {longest:.4g} s in all")
@@ -492,24 +535,10 @@ class _Program:
         Gt = np.fft.rfft(g[ti], axis=-1)  # (n_act, F)
         xc = np.fft.irfft(np.conj(Gt) * np.fft.rfft(dn)[None], n, axis=-1)  # sum_t g_a(t) d(t + tau)
         C = np.fft.irfft(np.conj(Gt)[:, None] * Gt[None, :], n, axis=-1)  # C_ab(tau)
-        lag = (delays[:, None] - delays[None, :]) % n  # t_k - t_l
-        # Reduced basis: the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
-        # 2 x bandwidth x support well-conditioned directions (the discrete prolate sequences
-        # of the band); the drives are combinations of those, with unit energy each.
-        wp, Vp = np.linalg.eigh(np.fft.irfft(taper**2, n)[lag])
-        kept = wp > wp[-1] * 1e-12
-        basis = Vp[:, kept] / np.sqrt(wp[kept])  # (K, m)
+        self._xc, self._C, self._t_peak = xc, C, t_peak
+        basis, self.b, self.Lt, self.u_best, self.best_fidelity = _target_norm(xc, C, taper, delays, n)
         m = basis.shape[1]
-        self.b = (xc[:, delays % n] @ basis).reshape(-1)
-        # Q[(a,k),(b,l)] = C_ab(t_k - t_l), in the basis.
-        Q = np.einsum("km,abkl,ln->ambn", basis, C[:, :, lag], basis, optimize=True).reshape(n_act * m, n_act * m)
-        w, V = np.linalg.eigh(0.5 * (Q + Q.T))
-        keep = w > w[-1] * 1e-12
-        self.Lt = np.sqrt(w[keep])[:, None] * V[:, keep].T  # |y_target|^2 = ||Lt u||^2
-        # The best fidelity's coefficients (least ||y|| at b.u = 1): the start of every solve.
-        qb = V[:, keep] @ ((V[:, keep].T @ self.b) / w[keep])
-        self.u_best = qb / (self.b @ qb)
-        self.best_fidelity = 1 / float(np.linalg.norm(self.Lt @ self.u_best))  # what the support can reach
+        self.support_s = (float(support_s[0]), float(support_s[1]))
         self.H, self.n, self.fs, self.taper, self.g, self.gscale = H, n, fs, taper, g, gscale
         self.ti, self.quiet, self.n_act, self.m, self.basis, self.delays = ti, quiet_idx, n_act, m, basis, delays
         self.desired, self.d_norm, self.ir_taps, self.decimation = desired, d_norm, ir_taps, r
@@ -543,6 +572,47 @@ class _Program:
         self.D = np.zeros((0, m))
         self._add_drive_rows(np.arange(first, last + 1, 32))
 
+    @staticmethod
+    def _fit_support(support: tuple[float, float], n_act: int, r: int, fs: float) -> tuple[float, float]:
+        """``support`` (s before, after the tap), its before-part shortened to the most
+        pulses the program takes (:data:`MAX_VARIABLES`) over ``n_act`` actuators."""
+        pre, post = support
+        most = (MAX_VARIABLES // n_act - 1) * r / fs  # the longest support in all, s
+        if pre + post > most:
+            pre = max(np.floor((most - post) * 1e3) / 1e3, 0.0)
+        return (float(pre), float(post))
+
+    def best_fidelity_for(self, support_s: tuple[float, float]) -> float:
+        """The best fidelity drives on another support reach (same taper, pulses and target)."""
+        pre, post = (int(round(s * self.fs)) for s in support_s)
+        first, last = max(0, self._t_peak - pre), min(self.n - 1, self._t_peak + post)
+        delays = np.arange(first, last + 1, self.decimation)
+        return _target_norm(self._xc, self._C, self.taper, delays, self.n)[4]
+
+    def _support_advice(self, min_fidelity: float, asked: float) -> str:
+        """Why the asked fidelity is out of reach, naming the parameter to change and a
+        value that works: ``support_s`` when a longer support reaches it, else the fidelity."""
+        arrival = float(np.max(self.timing.arrival_s[self.ti]))
+        pre, post = self.support_s
+        # Longer supports to try, shortest first: H's own, then twice and four times it,
+        # each within the program's size.
+        tries = [self.suggested] + [self._fit_support((k * self.suggested[0], self.suggested[1]), self.n_act,
+                                                      self.decimation, self.fs) for k in (2, 4)]
+        for cand in tries:
+            if cand[0] + cand[1] <= pre + post + 1e-9:
+                continue
+            if self.best_fidelity_for(cand) > asked * (1 + 1e-6):
+                why = (f"shorter than the waves' arrival at the target (~{arrival:.3g} s)" if pre < arrival
+                       else f"too short for min_fidelity={min_fidelity:.10g}")
+                given = "support_s" if self.given else "the default support_s"
+                return (f"{given}=({pre:g}, {post:g}) is {why}: it reaches fidelity {self.best_fidelity:.4g} at best; "
+                        f"use support_s=({cand[0]:g}, {cand[1]:g})")
+        longest = max(tries, key=sum)
+        longer = (f"; longer ones, up to support_s=({longest[0]:g}, {longest[1]:g}), reach no more"
+                  if sum(longest) > pre + post + 1e-9 else "")
+        return (f"min_fidelity={min_fidelity:.10g} is above the model's best fidelity {self.best_fidelity:.6g} "
+                f"over this support (support_s=({pre:g}, {post:g}){longer}): relax the fidelity")
+
     def _add_pairs(self, pairs: Any) -> int:
         """Add the peak constraints at (quiet j, sample t) not listed yet; how many."""
         new = np.array(sorted(set(map(tuple, pairs)) - set(map(tuple, self.listed.tolist()))), int).reshape(-1, 2)
@@ -574,9 +644,8 @@ class _Program:
         asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
         cap = 1.0 / asked
         if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
-            raise InfeasibleDesignError(f"the minimax program is infeasible (min_fidelity={min_fidelity:g} is above the "
-                                  f"model's best fidelity {self.best_fidelity:.4g} over this support): relax the "
-                                  "fidelity")
+            raise InfeasibleDesignError("the minimax program is infeasible: "
+                                        + self._support_advice(min_fidelity, asked))
         dcap = None if max_drive is None else max_drive / self.u_scale
         u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
         for it in range(1, max_iter + 1):

@@ -9,14 +9,14 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import ValidationError
+from ..errors import CausalityError, ValidationError
 from ..layout import ArrayLayout
 from .design import Design, Rendering
 from .methods import CONTROL_SETS, DEFAULT_GUARD_WEIGHT
 from .registry import make_method
 from .transfer import as_transfer_matrix, target_on_model
 
-__all__ = ["Design", "Rendering", "render", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
+__all__ = ["Design", "Rendering", "render", "render_fitted", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
 
 
 def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | None = None, *,
@@ -34,8 +34,9 @@ def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | 
     H : TransferMatrix, Calibration, skin model or ndarray
         The transfer matrix, m/V. A :class:`~vibrofocus.rendering.TransferMatrix` is used
         as it is (its kept caches with it); a ``Calibration`` gives
-        ``TransferMatrix.from_calibration(cal, n_samples)`` (default 4096 samples, its band
-        the calibrated band); a model of the skin (``transfer(points_xy, freqs)``: a
+        ``TransferMatrix.from_calibration(cal, n_samples)`` (default the calibration's own
+        resolution, ``n_fft``: :func:`~vibrofocus.rendering.transfer.calibration_window`;
+        its band the calibrated band); a model of the skin (``transfer(points_xy, freqs)``: a
         ``FittedSkin``, a ``SimulatedForearm``) gives ``TransferMatrix.from_model``; an
         array, shape (n // 2 + 1, n_points, n_actuators), on ``rfftfreq(n, 1 / fs)``, rows
         in the order of ``layout.points_xy``, is validated into one.
@@ -48,8 +49,9 @@ def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | 
         A target anywhere on the skin, m, designed with a model of the skin (a calibration's
         ``fit``, or a model as ``H``); it joins the layout as location ``n_locations + 1``.
     n_samples : int, optional
-        Design window, samples; default ``2 (n_freqs - 1)`` of an array, 4096 for a
-        calibration, the model's ``design_window()``.
+        Design window, samples; default ``2 (n_freqs - 1)`` of an array, the
+        calibration's ``n_fft`` (4096 for the reference setup's), the model's
+        ``design_window()``.
     calibrated_band : (float, float), optional
         Band ``H`` is valid in, Hz; default the calibration's (or model's) own.
     **options
@@ -74,3 +76,35 @@ def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | 
     tm = as_transfer_matrix(H, fs, layout, n_samples=n_samples, calibrated_band=calibrated_band,
                             taper_octaves=options.get("taper_octaves", 0.5))
     return chosen.design(tm, location)
+
+
+def render_fitted(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | None = None,
+                  **options: Any) -> Design:
+    """:func:`render`, made again with the window's ends tapered if the design does not fit.
+
+    A measured ``H`` carries noise, which spreads a little of an inverse design's drive over
+    the whole window: played once from silence, such a drive may leave more of its response
+    past the window than the wrap-around check allows
+    (:class:`~vibrofocus.errors.CausalityError`), on any window (a longer one only pads the
+    measured impulse responses). The design is then made again with ``taper_ends=True``, as
+    the contrast designs always are; a design that does not fit even so is refused.
+    ``vibrofocus render`` and the studies' renderer
+    (:class:`~vibrofocus.studies.engine.CalibrationRenderer`) render through this.
+
+    Parameters
+    ----------
+    method, H, fs, layout, location
+        As in :func:`render`.
+    **options
+        As in :func:`render`; given ``taper_ends``, no second try.
+
+    Returns
+    -------
+    Design
+    """
+    try:
+        return render(method, H, fs, layout, location, **options)
+    except CausalityError:
+        if "taper_ends" in options:
+            raise
+        return render(method, H, fs, layout, location, taper_ends=True, **options)

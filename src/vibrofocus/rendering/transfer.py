@@ -21,10 +21,32 @@ from .causality import WraparoundCheck
 from .inverse import InverseOperator
 from .taper import band_taper
 
-__all__ = ["TransferMatrix", "as_transfer_matrix", "target_on_model"]
+__all__ = ["TransferMatrix", "as_transfer_matrix", "target_on_model", "calibration_window"]
 
 #: Window of a design when neither the caller nor the source says one, samples.
 DEFAULT_WINDOW = 4096
+
+
+def calibration_window(calibration: Any) -> int:
+    """The design window a calibration's ``H`` gives, samples: its own resolution.
+
+    A calibration stores ``H`` on ``rfftfreq(n_fft, 1 / fs)``: its impulse responses, as
+    measured, are ``n_fft`` samples long, ring-down included (a longer window only pads
+    them with zeros, a shorter one cuts them). A calibration without ``n_fft`` (or an odd
+    one) gets :data:`DEFAULT_WINDOW`.
+
+    Parameters
+    ----------
+    calibration : Calibration
+
+    Returns
+    -------
+    int
+        Samples at the calibration's ``fs``.
+    """
+    own = getattr(calibration, "n_fft", None)
+    ok = isinstance(own, (int, np.integer)) and not isinstance(own, bool) and own >= 16 and own % 2 == 0
+    return int(own) if ok else DEFAULT_WINDOW
 
 
 def _check_fits(shape: tuple[int, ...], layout: ArrayLayout) -> None:
@@ -118,13 +140,15 @@ class TransferMatrix(ValidatedTransfer):
         n_samples : int, optional
             Design window, samples (even, >= 16, at most what
             :data:`~vibrofocus.rendering._checks.MAX_DESIGN_BYTES` of design memory
-            allows: 262144 for the reference layout); default 4096.
+            allows: 262144 for the reference layout); default :func:`calibration_window`:
+            the calibration's own resolution (``n_fft``), where its ``H`` holds the
+            impulse responses as measured.
         taper_octaves : float
             Width of the taper outside the calibrated band, octaves.
         """
         lay = calibration.layout
-        n = check_window(DEFAULT_WINDOW if n_samples is None else n_samples, lay.n_points, lay.n_actuators,
-                         check_positive(calibration.fs, "fs"))
+        n = check_window(calibration_window(calibration) if n_samples is None else n_samples, lay.n_points,
+                         lay.n_actuators, check_positive(calibration.fs, "fs"))
         # The calibration keeps this window's check: its H is the design's, validated
         # here once (no copy: the check owns it), and its cached spectra are reused.
         check = calibration.wraparound_check(n, taper_octaves=taper_octaves)

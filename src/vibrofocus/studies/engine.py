@@ -140,9 +140,10 @@ class CalibrationRenderer:
                  levels: str = DEFAULT_LEVELS, **render_options: Any) -> None:
         self.calibration = calibration
         self._grow = n_samples is None
-        own = getattr(calibration, "n_fft", None)  # the calibration's resolution: its H as measured
-        start = int(own) if isinstance(own, (int, np.integer)) and own >= 16 and own % 2 == 0 else N_SAMPLES
-        self.n_samples = start if n_samples is None else int(n_samples)
+        from ..rendering.transfer import calibration_window
+
+        # The calibration's resolution: its H as measured.
+        self.n_samples = calibration_window(calibration) if n_samples is None else int(n_samples)
         self.limit_v = float(limit_v)
         self.levels = str(levels)
         self._options = {**level_options(self.levels, self.limit_v), **render_options}
@@ -151,21 +152,15 @@ class CalibrationRenderer:
         self._cache: dict[tuple[str, int], Any] = {}
 
     def _render(self, key: tuple[str, int]) -> Any:
-        from ..rendering import TransferMatrix, render
-
-        from ..errors import CausalityError
+        from ..rendering import TransferMatrix
+        from ..rendering.render import render_fitted
 
         cal = self.calibration
         if self._H is None:
             self._H = TransferMatrix.from_calibration(cal, self.n_samples)
-        try:
-            return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
-        except CausalityError:
-            if "taper_ends" in self._options:
-                raise
-            # Noise in the measured H spreads a little drive over the whole window: taper its ends.
-            return render(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, taper_ends=True,
-                          **self._options)
+        # Noise in the measured H spreads a little drive over the whole window: a design that
+        # does not fit is made again with the window's ends tapered.
+        return render_fitted(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
 
     def prepare(self, methods: Any, locations: Any) -> int:
         """Render every (method, location) stimulus now, on one window they all fit.
