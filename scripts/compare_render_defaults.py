@@ -10,9 +10,9 @@ drive reaches at the pseudo-inverse's fidelity: a minimax design per participant
 location), peak contrast against a dense skin grid (model-predicted), the target's peak
 displacement and the peak drive. Prints a markdown table.
 
-Usage: python scripts/compare_render_defaults.py [--seeds 0 1 2 3] [--n 4096] [--readme]
+Usage: python scripts/compare_render_defaults.py [--seeds 0 1 2 3] [--n 4096] [--write]
 
-``--readme`` also writes the table into README.md between its ``compare-table`` markers
+``--write`` also writes the table into docs/design-choices.md between its ``compare-table`` markers
 (atomically).
 """
 
@@ -54,7 +54,7 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1, 2, 3])
     parser.add_argument("--n", type=int, default=4096, help="design window, samples")
     parser.add_argument("--grid-mm", type=float, default=4.0, help="pitch of the dense skin grid, mm")
-    parser.add_argument("--readme", action="store_true", help="write the table into README.md")
+    parser.add_argument("--write", action="store_true", help="write the table into docs/design-choices.md")
     args = parser.parse_args()
     start = time.perf_counter()
     results: dict[str, list[dict]] = {label: [] for label, _, _ in CANDIDATES}
@@ -91,7 +91,7 @@ def main() -> None:
           "target's waveform and may pass it). Fidelity is against the tap at t0 (funneling and combination "
           "arrive late and score near 0 there). Peak bound: the most peak contrast against every calibrated point "
           "that any drive reaches at the pseudo-inverse's fidelity (minimax), beside the contrast vs all points.\n")
-    header = ["candidate", "fidelity", "contrast vs locations dB", "contrast vs all points dB", "energy contrast dB",
+    header = ["candidate", "fidelity to the tap at t0", "contrast vs locations dB", "contrast vs all points dB", "energy contrast dB",
               "bound dB", "peak bound dB", "contrast vs skin grid dB", "target peak µm", "peak drive V"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] + ["---:"] * (len(header) - 1)) + "|"]
     for label, rows in results.items():
@@ -102,8 +102,8 @@ def main() -> None:
                      f"{med['target_peak_m'] * 1e6:.3f} | {med['peak_drive_v']:.1f} |")
     table = "\n".join(lines)
     print(table)
-    if args.readme:
-        readme = Path(__file__).resolve().parent.parent / "README.md"
+    if args.write:
+        readme = Path(__file__).resolve().parent.parent / "docs" / "design-choices.md"
         text = readme.read_text(encoding="utf-8")
         head, rest = text.split(START, 1)
         tail = rest.split(END, 1)[1]

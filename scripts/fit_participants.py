@@ -31,9 +31,9 @@ weights: every pattern weighted alike, whatever weights the search used), and wr
 all to ``simulation/data/hypotheses_fit.json`` (atomically), with the default hypothesis:
 the one of lowest held-out loss.
 ``report`` prints the same for the defaults (or a fit file) on the table's seeds.
-``table`` evaluates the defaults on seeds 0..N-1 and writes the side-by-side table between
-the ``participants-table`` markers of ``docs/simulated-participants.md`` and its short
-version into README.md (atomically); ``--check`` only compares.
+``table`` evaluates the default hypothesis on seeds 0..N-1 and writes the side-by-side table,
+the parameters, the residuals and the power table between their markers in
+``docs/simulated-participants.md`` (atomically); ``--check`` only compares.
 """
 
 from __future__ import annotations
@@ -54,7 +54,7 @@ from vibrofocus.simulation.paper import BEST_LOCATIONS, INTERACTION_LOCATIONS, c
 from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel, psychophysics_data
 
 ROOT = Path(__file__).resolve().parent.parent
-PAGES = {"docs": ROOT / "docs" / "simulated-participants.md", "readme": ROOT / "README.md"}
+PAGES = {"docs": ROOT / "docs" / "simulated-participants.md"}
 FIT_SEEDS = range(1000, 1016)  # the tables use seeds 0..
 
 
@@ -241,7 +241,7 @@ def parameters_markdown() -> str:
     return "\n".join(lines)
 
 
-#: The power table of the README and docs: sample sizes and studies per size.
+#: The power table of the docs: sample sizes and studies per size.
 POWER_SIZES, POWER_STUDIES = (10, 20, 30), 200
 
 
@@ -334,8 +334,6 @@ def table(n_seeds: int, check: bool) -> int:
         PAGES["docs"]: {"participants-table": comparison_markdown(rows, seeds, label=label),
                         "participants-parameters": parameters_markdown(), "fit-residuals": resid,
                         "power-table": power},
-        PAGES["readme"]: {"participants-table": comparison_markdown(rows, seeds, short=True, label=label),
-                          "power-table": power},
     }
     stale = []
     for page, parts in blocks.items():
@@ -381,7 +379,7 @@ def main() -> int:
     r.add_argument("--fit", type=Path, default=None, help="a fit file (default: the hypothesis' fitted model)")
     r.add_argument("--hypothesis", default=None, help="the hypothesis (default: the default one)")
     r.add_argument("--seeds", type=int, default=20)
-    t = sub.add_parser("table", help="write the tables of docs/simulated-participants.md and README.md")
+    t = sub.add_parser("table", help="write the tables of docs/simulated-participants.md")
     t.add_argument("--seeds", type=int, default=20)
     t.add_argument("--check", action="store_true", help="only compare; exit 1 if a page is out of date")
     args = ap.parse_args()
