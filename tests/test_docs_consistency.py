@@ -215,8 +215,6 @@ def test_package_text_states_what_the_code_has(part):
 def test_no_internal_issue_numbers_in_docs_help_or_package():
     hits = []
     for path in PAGES + _user_facing_sources():
-        if _rel(path) in ISSUE_NUMBERS_PENDING:
-            continue
         for lineno, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
             hits += [f"{_rel(path)}:{lineno}: {hit}" for hit in issue_numbers(line)]
     assert not hits, "internal issue numbers in user-facing text:\n" + "\n".join(hits)
