@@ -17,7 +17,7 @@ from vibrofocus.skin import SimulatedForearm
 @pytest.fixture(scope="module")
 def fitted(forearm_calibration):
     rig, cal = forearm_calibration
-    return fit_model(cal)
+    return fit_model(cal, law="homogeneous")
 
 
 def _truth(rig, layout) -> np.ndarray:

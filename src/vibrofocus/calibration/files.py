@@ -23,7 +23,7 @@ from ..io.sofa import read_sofa_tf, write_sofa_tf
 from ..layout import ArrayLayout
 from .calibrate import Calibration
 from .excitation import SweepSettings
-from .fitmodel import FittedSkin, parameter_names
+from .fitmodel import FIT_LAWS, FittedSkin, parameter_names
 from .quality import QualityIssue, QualityReport, QualityThresholds
 
 __all__ = ["save_calibration", "load_calibration", "calibration_record", "calibration_from_record", "export_sofa",
@@ -122,7 +122,10 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
     fit = None
     if rec["fit"] is not None:
         stored = rec["fit"]
-        expected = list(parameter_names(layout.actuator_names))
+        law = dict(stored["fixed"]).get("law", "homogeneous") if isinstance(stored["fixed"], dict) else None
+        if law not in FIT_LAWS:
+            raise _fail(path, f"has a skin-model fit of an unknown law {law!r} (known: {', '.join(FIT_LAWS)})")
+        expected = list(parameter_names(layout.actuator_names, law))
         if list(stored["names"]) != expected:
             raise _fail(path, f"fit parameters {list(stored['names'])} differ from the model's {expected}")
         try:
