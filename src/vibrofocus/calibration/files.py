@@ -60,7 +60,7 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         "actuator_names": list(lay.actuator_names), "points_xy": lay.points_xy, "actuators_xy": lay.actuators_xy,
         "rig": cal.rig, "sweep": cal.sweep.to_dict(), "quality": quality, "codes": cal.codes,
         "multiple_coherence": cal.multiple_coherence, "straps": cal.straps, "recorded_s": cal.recorded_s,
-        "fit": None if fit is None else {
+        "measured": cal.measured, "fit": None if fit is None else {
             "names": list(fit.names), "values": fit.values, "std": fit.std, "log_covariance": fit.log_covariance,
             "residual": fit.residual, "band": tuple(fit.band), "fs": fit.fs, "fixed": fit.fixed, "info": fit.info},
     }
@@ -140,6 +140,7 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
         drives=rec["drives"], recordings=rec["recordings"], rig=rec["rig"], sweep=sweep, created=rec["created"],
         software_version=rec["software_version"], schema_version=rec["schema_version"], straps=rec["straps"],
         codes=rec["codes"], multiple_coherence=rec["multiple_coherence"], recorded_s=rec["recorded_s"], fit=fit,
+        measured=None if rec.get("measured") is None or rec["measured"].all() else rec["measured"],
     )
 
 

@@ -523,8 +523,9 @@ def fit_model(cal, *, law: str = "layered", points=None, band=None, max_nfev: in
     # Residual per point, over every point (left-out ones too, where they were measured).
     w2 = np.where(sigma > 0, 1.0 / np.where(sigma > 0, sigma, 1.0), 0.0) ** 2
     diff = np.abs(model(res.x) - Hb) ** 2
-    residual = np.sqrt(np.sum(w2 * diff, axis=(0, 2)) / np.maximum(np.sum(w2 * np.abs(Hb) ** 2, axis=(0, 2)), 1e-300))
-    residual[~finite_rows] = np.nan
+    residual = np.full(layout.n_points, np.nan)
+    residual[finite_rows] = np.sqrt(np.sum((w2 * diff)[:, finite_rows], axis=(0, 2)) / np.maximum(
+        np.sum((w2 * np.abs(Hb) ** 2)[:, finite_rows], axis=(0, 2)), 1e-300))
     info = {"chi2_per_dof": float(s2), "n_residuals": int(m_res), "nfev": nfev, "status": int(res.status),
             "message": str(res.message), "points": idx.tolist(), "fit_band": list(band)}
     return FittedSkin(layout=layout, fs=float(cal.fs), band=cal_band, values=np.exp(res.x), log_covariance=cov,
