@@ -291,7 +291,13 @@ class QualityReport:
     def lines(self) -> list[str]:
         """The issues as ``severity: message`` lines (errors first)."""
         order = {s: i for i, s in enumerate(reversed(SEVERITIES))}
-        return [f"{i.severity}: {i.message}" for i in sorted(self.issues, key=lambda i: order[i.severity])]
+        lines = [f"{i.severity}: {i.message}" for i in sorted(self.issues, key=lambda i: order[i.severity])
+                 if i.check != "predicted"]
+        predicted = [i.message.split(" was not measured")[0].removeprefix("point ") for i in self.by_check("predicted")]
+        if predicted:  # one line for all of them
+            first = self.by_check("predicted")[0].message
+            lines.append(f"info: point(s) {', '.join(predicted)} were not measured" + first.split(" was not measured")[1])
+        return lines
 
 
 def _is_error(verdict: str) -> bool:
