@@ -438,7 +438,7 @@ def fit_model(cal, *, law: str = "layered", points=None, band=None, max_nfev: in
     """
     from scipy import optimize
 
-    from .calibrate import Calibration
+    from .result import Calibration
 
     law = _check_law(law)
     if not isinstance(cal, Calibration):
