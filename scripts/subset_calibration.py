@@ -5,7 +5,7 @@ reference array with the default (``mimo``) method, the simulator's vibrometer n
 and dropouts on, measuring K points (``calibrate(..., measure=K)``; K = 13 is the full
 calibration) and predicting H at the others from the fitted skin model. At each of the
 nine locations, design the inverse filter and the minimax (peak-contrast) drives from
-that calibration on the arm's design window and play them on the noise-free arm
+that calibration on the arm's design window (doubled where a calibration's H rings longer) and play them on the noise-free arm
 (``play_and_record``): fidelity and peak contrast against the other locations
 (``focus_metrics``) of the recordings. Medians over the nine locations and the
 participants, per K, beside the full calibration's; the aiming count and the sweep
@@ -28,6 +28,7 @@ import numpy as np
 
 from vibrofocus import ArrayLayout
 from vibrofocus.calibration import calibrate, plan_calibration
+from vibrofocus.errors import CausalityError
 from vibrofocus.rendering import focus_metrics, render
 from vibrofocus.skin import SimulatedForearm
 
@@ -47,6 +48,17 @@ def played(rendering, arm: SimulatedForearm, layout: ArrayLayout) -> dict[str, f
     return {"fidelity": float(m["fidelity"]), "contrast_db": float(m["contrast_db"])}
 
 
+def design(method: str, cal, arm: SimulatedForearm, layout: ArrayLayout, location: int, n: int):
+    """``render`` on window ``n``, doubled (up to twice) when a measured H rings longer than
+    the arm's own window allows (the render's CausalityError says so)."""
+    for attempt in range(3):
+        try:
+            return render(method, cal, arm.fs, layout, location, n_samples=n * 2**attempt)
+        except CausalityError:
+            if attempt == 2:
+                raise
+
+
 def participant_rows(seed: int, ks, methods=METHODS, locations=None) -> list[dict]:
     """One row per K, location and method."""
     layout = ArrayLayout.reference()
@@ -60,7 +72,7 @@ def participant_rows(seed: int, ks, methods=METHODS, locations=None) -> list[dic
         for loc in locations:
             for method in methods:
                 rows.append({"seed": seed, "k": k, "location": loc, "method": method,
-                             **played(render(method, cal, arm.fs, layout, loc, n_samples=n), arm, layout)})
+                             **played(design(method, cal, arm, layout, loc, n), arm, layout)})
         print(f"seed {seed} K={k} done", file=sys.stderr, flush=True)
     return rows
 
@@ -98,7 +110,10 @@ def main() -> None:
     if 13 not in args.points:
         parser.error("--points must include 13 (the full calibration every K is compared with)")
     t0 = time.perf_counter()
-    rows = [row for seed in args.seeds for row in participant_rows(seed, args.points)]
+    rows = []
+    for seed in args.seeds:
+        rows += participant_rows(seed, args.points)
+        print(table(rows), file=sys.stderr, flush=True)  # what is done so far, should a later seed fail
     block = table(rows)
     print(block)
     print(f"\n{len(args.seeds)} participants x {len(args.points)} calibrations in {time.perf_counter() - t0:.0f} s")
