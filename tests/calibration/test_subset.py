@@ -170,3 +170,25 @@ def test_a_hostile_point_measured_is_refused(fir_calibration, tmp_path, values, 
                    lambda ds: ds.assign(point_measured=("point", np.asarray(values, np.int8))))
     with pytest.raises(CalibrationFileError, match=match):
         load_calibration(bad)
+
+
+@pytest.mark.parametrize("fixed, match", [
+    ({"law": "bogus"}, "law"),
+    ({"law": "layered", "skin": "bogus"}, "skin"),
+    ({"law": "layered", "reference_hz": -1.0}, "reference_hz"),
+])
+def test_a_fitted_model_with_unusable_settings_is_refused_when_built(fixed, match):
+    # What a stored fit with edited settings gives: refused at load, not at the first prediction.
+    from vibrofocus.calibration import FittedSkin
+    from vibrofocus.calibration.fitmodel import _nominal_law_values
+
+    lay = ArrayLayout.reference()
+    n = 4 + 4 * lay.n_actuators
+    values = np.concatenate([_nominal_law_values("layered"), np.ones(4), np.full(4, 3e-3), np.full(4, 500.0),
+                             np.ones(4)])
+    with pytest.raises(ValidationError, match=match):
+        FittedSkin(layout=lay, fs=10_000.0, band=(10.0, 1000.0), values=values, log_covariance=np.eye(n),
+                   residual=np.zeros(lay.n_points), fixed=fixed)
+    fine = FittedSkin(layout=lay, fs=10_000.0, band=(10.0, 1000.0), values=values, log_covariance=np.eye(n),
+                      residual=np.full(lay.n_points, np.nan), fixed={"law": "layered"})
+    assert fine.law == "layered" and fine.participant.layered is not None

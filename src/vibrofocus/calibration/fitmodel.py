@@ -180,6 +180,15 @@ class FittedSkin:
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "band", tuple(float(b) for b in self.band))
         object.__setattr__(self, "fixed", {**_default_fixed(self.law), **dict(self.fixed)})
+        # A model that cannot be built (a stored fit's settings edited) is refused here,
+        # not at its first prediction.
+        from ..skin import skin_preset
+
+        try:
+            skin_preset(self.fixed["skin"])
+            _participant(np.log(self.values), self.layout.n_actuators, self.fixed)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ValidationError(f"fixed settings {self.fixed} do not make a skin model: {exc}") from None
 
     # ------------------------------------------------------------------ parameters
     @property
