@@ -309,7 +309,7 @@ class FittedSkin:
                  "substrate_shear_pa": "mu_sub", "top_depth_m": "h", "loss_tangent": "tan_delta"}
         law = ", ".join(f"{short[n]}={v:.4g} ± {s:.2g}" for n, v, s in
                         zip(FIT_LAW_PARAMETERS[self.law], self.values, self.std))
-        return (f"FittedSkin({self.law}: {law} (SI), median residual={np.median(self.residual):.3g}, "
+        return (f"FittedSkin({self.law}: {law} (SI), median residual={np.nanmedian(self.residual):.3g}, "
                 f"band={self.band})")
 
 
