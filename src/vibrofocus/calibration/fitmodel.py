@@ -459,7 +459,6 @@ def fit_model(cal, *, law: str = "layered", points=None, band=None, max_nfev: in
         raise ValidationError(f"points must name at least two of the {layout.n_points} calibrated points, got "
                               f"{None if points is None else list(points)}")
     H = np.asarray(cal.H)
-    fitted_rows = np.isin(np.arange(layout.n_points), idx)
     finite_rows = np.isfinite(H).all(axis=(0, 2))
     if not finite_rows[idx].all():
         raise ValidationError("cal.H holds NaN/Inf at a fitted point: the fit needs a finite transfer matrix")
@@ -476,9 +475,8 @@ def fit_model(cal, *, law: str = "layered", points=None, band=None, max_nfev: in
     bins = np.flatnonzero((freqs >= band[0]) & (freqs <= band[1]) & (freqs > 0))
     f = freqs[bins]
     Hb = H[bins]
-    coherence = np.where(fitted_rows[None, :, None], cal.coherence[bins], 1.0)
     peak = np.abs(Hb).max(axis=1, keepdims=True)
-    sigma = np.hypot(_bin_errors(cal, coherence) * np.abs(Hb), DYNAMIC_RANGE * peak)
+    sigma = np.hypot(_bin_errors(cal, cal.coherence[bins]) * np.abs(Hb), DYNAMIC_RANGE * peak)
     weight = np.where(sigma > 0, 1.0 / np.where(sigma > 0, sigma, 1.0), 0.0)
     weight[:, np.setdiff1d(np.arange(layout.n_points), idx)] = 0.0
     use = weight > 0
