@@ -192,3 +192,21 @@ def test_a_fitted_model_with_unusable_settings_is_refused_when_built(fixed, matc
     fine = FittedSkin(layout=lay, fs=10_000.0, band=(10.0, 1000.0), values=values, log_covariance=np.eye(n),
                       residual=np.full(lay.n_points, np.nan), fixed={"law": "layered"})
     assert fine.law == "layered" and fine.participant.layered is not None
+
+
+@pytest.mark.slow
+def test_a_single_spot_rig_is_aimed_at_the_measured_points_by_their_own_labels(monkeypatch):
+    # The prompts and the progress name the layout's points (location 5, G1..G4), not a
+    # renumbered subset.
+    rig = SimulatedForearm(seed=2)
+    monkeypatch.setattr(type(rig), "max_points_per_recording", 1, raising=False)
+    prompts, messages = [], []
+    cal = calibrate(rig, participant_id="S02", measure=5, repeats=4, sweep_s=0.5,
+                    prompt=lambda label, xy: prompts.append((label, tuple(np.round(xy, 6)))),
+                    progress=lambda done, total, message: messages.append(message))
+    lay = rig.layout
+    assert [p[0] for p in prompts] == ["5", "G1", "G2", "G3", "G4"]
+    assert [p[1] for p in prompts] == [tuple(np.round(lay.points_xy[i], 6)) for i in (4, 9, 10, 11, 12)]
+    assert "aiming the vibrometer 5 times" in messages[0] and "8 aiming(s)" in messages[0]
+    assert any("point G3" in m for m in messages) and not any("point 6," in m or m.endswith("point 6") for m in messages)
+    assert_array_equal(np.flatnonzero(cal.measured), [4, 9, 10, 11, 12])
