@@ -29,8 +29,8 @@ def fir_calibration(layout, firs):
 @pytest.fixture(scope="module")
 def forearm_calibration():
     """The default (mimo) calibration of simulated participant 0 (noise and dropouts on),
-    on the voigt-fit skin: the fitted model (calibration.fit_model) is the homogeneous
-    law, so its tests need an arm of that family."""
+    on the voigt-fit skin, for the tests of fit_model's homogeneous law (an arm of that
+    family; test_fit_model_layered.py tests the layered law on the nominal skin)."""
     from vibrofocus.skin import SimulatedForearm
 
     rig = SimulatedForearm(seed=0, skin="voigt-fit")

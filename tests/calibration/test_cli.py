@@ -178,3 +178,33 @@ def test_render_fits_the_window_of_seed_7103s_arm_without_a_window_option(tmp_pa
         drives, meta = data["drives"], json.loads(str(data["metadata"]))
     assert drives.shape == (4, load_calibration(cal).n_fft)  # the calibration's own resolution
     assert meta["predicted_fidelity"] > 0.8
+
+
+def test_calibrate_refuses_more_points_than_the_layout_has_before_any_sweep(tmp_path):
+    out = tmp_path / "K.nc"
+    result = runner.invoke(app, ["calibrate", "--participant", "K", "--out", str(out), "--points", "14", "--yes"])
+    assert result.exit_code == 2, result.output
+    assert "from 2 to the layout's 13 points, got 14" in text(result)
+    assert not out.exists()
+    result = runner.invoke(app, ["calibrate", "--participant", "K", "--out", str(out), "--points", "1", "--yes"])
+    assert result.exit_code == 2 and not out.exists()
+
+
+@pytest.mark.slow
+def test_calibrate_points_measures_a_subset_and_marks_the_predicted_points(tmp_path):
+    out = tmp_path / "S.nc"
+    result = runner.invoke(app, ["calibrate", "--participant", "S", "--out", str(out), "--seed", "3", "--points", "7",
+                                 "--repeats", "4", "--sweep-s", "0.5", "--yes", "--no-figure"])
+    assert result.exit_code == 0, result.output
+    printed = text(result)
+    assert "measures 7 of 13 points and predicts the other 6 from the fitted skin model" in printed
+    assert "point(s) 1, 3, 6, 7, 8, 9 were not measured" in printed and "predicted" in printed
+    cal = load_calibration(out)
+    assert cal.measured.tolist() == [False, True, False, True, True, False, False, False, False] + [True] * 4
+    assert cal.fit is not None and cal.fit.law == "layered"
+
+
+def test_calibrate_help_explains_points():
+    result = runner.invoke(app, ["calibrate", "--help"], env={"COLUMNS": "200"})
+    assert result.exit_code == 0
+    assert "--points" in text(result) and "predict H at the others" in text(result)

@@ -17,7 +17,7 @@ from vibrofocus.skin import SimulatedForearm
 @pytest.fixture(scope="module")
 def fitted(forearm_calibration):
     rig, cal = forearm_calibration
-    return fit_model(cal)
+    return fit_model(cal, law="homogeneous")
 
 
 def _truth(rig, layout) -> np.ndarray:
@@ -27,7 +27,7 @@ def _truth(rig, layout) -> np.ndarray:
 def test_noise_free_exact_transfer_gives_the_true_parameters(forearm_calibration):
     rig, cal = forearm_calibration
     exact = replace(cal, H=rig.transfer(cal.layout.points_xy, cal.freqs), coherence=np.ones(cal.H.shape))
-    fit = fit_model(exact)
+    fit = fit_model(exact, law="homogeneous")
     assert_allclose(fit.values, _truth(rig, cal.layout), rtol=1e-6)
     assert np.all(fit.residual < 1e-6)
 
@@ -57,7 +57,7 @@ def test_leave_one_point_out_predicts_the_held_out_point(forearm_calibration):
     rig, cal = forearm_calibration
     exact_arm = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0, skin="voigt-fit")
     p = 4  # location 5, the centre
-    fit = fit_model(cal, points=np.delete(np.arange(cal.layout.n_points), p))
+    fit = fit_model(cal, law="homogeneous", points=np.delete(np.arange(cal.layout.n_points), p))
     assert p not in fit.info["points"]
     band = (cal.freqs >= 30) & (cal.freqs <= 1000)
     pt = cal.layout.points_xy[p:p + 1]
@@ -101,7 +101,7 @@ def test_the_fit_travels_with_the_calibration_file(tmp_path, forearm_calibration
     with_fit = replace(cal, fit=fitted)
     back = load_calibration(save_calibration(with_fit, tmp_path / "fit.nc"))
     assert isinstance(back.fit, FittedSkin)
-    assert back.fit.names == fitted.names == parameter_names(cal.layout.actuator_names)
+    assert back.fit.names == fitted.names == parameter_names(cal.layout.actuator_names, "homogeneous")
     assert_allclose(back.fit.values, fitted.values, rtol=0)
     assert_allclose(back.fit.log_covariance, fitted.log_covariance, rtol=0)
     assert_allclose(back.fit.residual, fitted.residual, rtol=0)

@@ -130,3 +130,18 @@ def test_render_on_a_model_picks_a_window_its_responses_fit_in(skin):
     for loc in (2, 4, 5):  # at a fixed 4096 samples, 2 of 54 designs on nominal arms 0-1 were refused
         r = render("inverse", arm, arm.fs, arm.layout, loc)
         assert r.n_samples == n and r.wraparound_fraction < 1e-3
+
+
+def test_mode_transfer_is_the_transfer_before_its_causal_correction():
+    # What fit_model iterates on: equal to transfer on the homogeneous law (no precursor
+    # to take out); on a layered skin the precursor's 0.1-0.4 % of |H|, not more.
+    f = np.linspace(30.0, 1000.0, 40)
+    voigt = SimulatedForearm(seed=0, skin="voigt-fit", noise_m=0.0)
+    pts = voigt.layout.points_xy
+    np.testing.assert_allclose(voigt.mode_transfer(pts, f), voigt.transfer(pts, f), rtol=1e-12, atol=0)
+    arm = SimulatedForearm(seed=0, noise_m=0.0)
+    mode, causal = arm.mode_transfer(pts, f), arm.transfer(pts, f)
+    rel = np.linalg.norm(mode - causal, axis=(0, 2)) / np.linalg.norm(causal, axis=(0, 2))
+    assert np.all(rel < 0.01) and np.all(rel > 1e-5), rel
+    with pytest.raises(ValidationError, match="freqs"):
+        arm.mode_transfer(pts, -f)

@@ -6,7 +6,8 @@ from .calibrate import DEFAULT_METHOD, SCHEMA_VERSION, Calibration, CalibrationP
 from .estimate import MimoEstimate, mimo_h1
 from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes, make_excitation
 from .figures import plot_calibration
-from .fitmodel import FittedSkin, fit_model
+from .fitmodel import FIT_LAWS, FittedSkin, fit_model
+from .plan import subset_points
 from .files import (calibration_from_record, calibration_record, export_sofa, import_sofa, load_calibration,
                     save_calibration)
 from .quality import TRUSTED_COHERENCE, QualityIssue, QualityReport, QualityThresholds, assess_quality, detect_clipping
@@ -15,6 +16,7 @@ __all__ = [
     "TRUSTED_COHERENCE",
     "calibrate",
     "plan_calibration",
+    "subset_points",
     "CalibrationPlan",
     "DEFAULT_METHOD",
     "Calibration",
@@ -41,4 +43,5 @@ __all__ = [
     "transfer_error",
     "fit_model",
     "FittedSkin",
+    "FIT_LAWS",
 ]

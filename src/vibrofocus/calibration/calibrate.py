@@ -22,7 +22,7 @@ from ..rigs.base import Rig
 from .estimate import estimate_repeats, h1_average, mimo_h1, noise_and_snr, split_snr
 from .excitation import METHODS, hadamard_codes, make_excitation
 from .quality import QualityThresholds, assess_quality, detect_clipping
-from .plan import DEFAULT_METHOD, CalibrationPlan, _sub_layout, plan_calibration
+from .plan import DEFAULT_METHOD, CalibrationPlan, _sub_layout, measured_indices, plan_calibration
 from .recording import ProgressFn, _read_straps, _record_mimo, _record_one_at_a_time, _Takes
 from .result import Calibration
 
@@ -54,6 +54,8 @@ def calibrate(
     checkpoint: str | os.PathLike | None = None,
     resume: bool = False,
     thresholds: QualityThresholds | None = None,
+    measure: int | Sequence[int] | None = None,
+    fit_law: str = "layered",
 ) -> Calibration:
     """Measure the transfer matrix from every actuator to every skin point.
 
@@ -124,6 +126,16 @@ def calibrate(
         must come from the same plan on the same rig, or it is refused.
     thresholds : QualityThresholds, optional
         Thresholds of the quality verdicts.
+    measure : int or sequence of int, optional
+        Measure only some points and predict the others: a count ``K`` (the points
+        :func:`~.plan.subset_points` spreads over the array) or the indices of the
+        points to measure. The skin model is fitted to the measured points
+        (:func:`~.fitmodel.fit_model`, kept as ``cal.fit``) and predicts ``H`` at the
+        rest; the result still holds every point of the layout, ``cal.measured`` says
+        which rows were measured, and the quality report names the predicted ones.
+        Default: measure every point. Not with ``points``.
+    fit_law : {"layered", "homogeneous"}
+        With ``measure``: the wave law of the fitted model (:func:`~.fitmodel.fit_model`).
 
     Returns
     -------
@@ -153,10 +165,17 @@ def calibrate(
             f"edge {band[0]:g} Hz; use n_fft >= {int(np.ceil(fs / band[0]))}"
         )
     plan = plan_calibration(rig, method=method, points=points, actuators=actuators, band=band, sweep_s=sweep_s,
-                            repeats=repeats, amplitude_v=amplitude_v)
+                            repeats=repeats, amplitude_v=amplitude_v, measure=measure)
     settings = plan.settings
     thresholds = thresholds or QualityThresholds()
     layout, p_idx, a_idx = _sub_layout(rig.layout, points, actuators)
+    rows = None  # rows of the layout measured, when the rest are predicted
+    if measure is not None:
+        from .fitmodel import _check_law
+
+        _check_law(fit_law)
+        rows = measured_indices(layout, measure)
+        p_idx = p_idx[rows]
     mimo = method == "mimo"
     excitation = make_excitation(settings)
     # Refuse an unsafe sweep before the first recording, not halfway through.
@@ -172,7 +191,7 @@ def calibrate(
         ) from exc
 
     points_xy = rig.layout.points_xy[p_idx]
-    labels = layout.point_labels
+    labels = layout.point_labels if rows is None else tuple(layout.point_labels[i] for i in rows)
     limit = rig.max_points_per_recording
     if limit is None:
         groups = [np.arange(len(p_idx))]
@@ -241,12 +260,27 @@ def calibrate(
                                   sensor_range_m=getattr(rig, "sensor_range_m", None)).any(axis=1).T
         clipped = clipped | session.adc_clipped  # (P, A)
 
+    measured = fit = None
+    if rows is not None:
+        # Every figure of a recording gets the layout's rows, NaN (nothing) where not measured.
+        measured = np.zeros(layout.n_points, bool)
+        measured[rows] = True
+        H, coherence, multiple, condition, correlation = (
+            None if x is None else _rows(x, rows, layout.n_points, axis=1, fill=np.nan)
+            for x in (H, coherence, multiple, condition, correlation))
+        snr, noise = (_rows(x, rows, layout.n_points, axis=0, fill=np.nan) for x in (snr, noise))
+        n_used, dropouts = (_rows(x, rows, layout.n_points, axis=0, fill=0) for x in (n_used, dropouts))
+        clipped = _rows(clipped, rows, layout.n_points, axis=0, fill=False)
+        recordings = _rows(recordings, rows, layout.n_points, axis=recordings.ndim - 2, fill=np.nan)
+        fit, H = _predict_rows(H, coherence, freqs, fs, band, layout, rows, fit_law, participant_id, method,
+                               settings, recordings, played, n_a, rig)
     quality = assess_quality(
         H, coherence, freqs, band, layout,
         snr_db=snr, noise_rms_m=noise, clipped=clipped,
         repeats_used=n_used, dropouts=dropouts, drive_peak_v=float(np.abs(played).max()),
         peak_limit_v=rig.limits.peak_v, thresholds=thresholds,
         multiple_coherence=multiple, input_condition=condition, input_correlation=correlation,
+        measured=measured, fit_residual=None if fit is None else fit.residual,
     )
     drives = np.repeat(played[None, :], n_a, axis=0)
     return Calibration(
@@ -254,4 +288,40 @@ def calibrate(
         participant_id=participant_id, method=method, quality=quality, drives=drives,
         recordings=recordings, rig=rig.describe(), sweep=settings, straps=_read_straps(rig),
         codes=codes, multiple_coherence=multiple, recorded_s=session.n_takes * settings.take_s,
+        fit=fit, measured=measured,
     )
+
+
+def _rows(x: np.ndarray, rows: np.ndarray, n_points: int, *, axis: int, fill) -> np.ndarray:
+    """``x`` (the measured rows along ``axis``) spread to all ``n_points`` rows, ``fill`` elsewhere."""
+    x = np.asarray(x)
+    shape = list(x.shape)
+    shape[axis] = n_points
+    out = np.full(shape, fill, dtype=x.dtype)  # NaN for float and complex, 0 / False otherwise
+    index = [slice(None)] * x.ndim
+    index[axis] = rows
+    out[tuple(index)] = x
+    return out
+
+
+def _predict_rows(H, coherence, freqs, fs, band, layout, rows, law, participant_id, method, settings, recordings,
+                  played, n_a, rig):
+    """The skin model fitted to the measured rows of ``H``, and ``H`` with the others predicted by it."""
+    from .fitmodel import fit_model
+    from .quality import QualityReport
+
+    n_p = layout.n_points
+    empty = np.full((n_p, n_a), np.nan)
+    placeholder = QualityReport(issues=[], snr_db=empty, noise_rms_m=empty, band_gain=empty,
+                                low_coherence_share=empty, coherent_to_hz=empty, clipped=np.zeros((n_p, n_a), bool),
+                                repeats_used=np.zeros((n_p, n_a), int), dropouts=np.zeros((n_p, n_a), int),
+                                polarity=np.zeros(n_a, int))
+    partial = Calibration(H=H, freqs=freqs, fs=fs, coherence=coherence, layout=layout, band=band,
+                          participant_id=participant_id, method=method, quality=placeholder,
+                          drives=np.repeat(played[None, :], n_a, axis=0), recordings=recordings,
+                          rig=rig.describe(), sweep=settings)
+    fit = fit_model(partial, law=law, points=rows)
+    predicted = np.setdiff1d(np.arange(n_p), rows)
+    H = H.copy()
+    H[:, predicted] = fit.transfer(layout.points_xy[predicted], freqs)
+    return fit, H

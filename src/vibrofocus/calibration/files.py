@@ -23,7 +23,7 @@ from ..io.sofa import read_sofa_tf, write_sofa_tf
 from ..layout import ArrayLayout
 from .calibrate import Calibration
 from .excitation import SweepSettings
-from .fitmodel import FittedSkin, parameter_names
+from .fitmodel import FIT_LAWS, FittedSkin, parameter_names
 from .quality import QualityIssue, QualityReport, QualityThresholds
 
 __all__ = ["save_calibration", "load_calibration", "calibration_record", "calibration_from_record", "export_sofa",
@@ -60,7 +60,7 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
         "actuator_names": list(lay.actuator_names), "points_xy": lay.points_xy, "actuators_xy": lay.actuators_xy,
         "rig": cal.rig, "sweep": cal.sweep.to_dict(), "quality": quality, "codes": cal.codes,
         "multiple_coherence": cal.multiple_coherence, "straps": cal.straps, "recorded_s": cal.recorded_s,
-        "fit": None if fit is None else {
+        "measured": cal.measured, "fit": None if fit is None else {
             "names": list(fit.names), "values": fit.values, "std": fit.std, "log_covariance": fit.log_covariance,
             "residual": fit.residual, "band": tuple(fit.band), "fs": fit.fs, "fixed": fit.fixed, "info": fit.info},
     }
@@ -122,7 +122,10 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
     fit = None
     if rec["fit"] is not None:
         stored = rec["fit"]
-        expected = list(parameter_names(layout.actuator_names))
+        law = dict(stored["fixed"]).get("law", "homogeneous") if isinstance(stored["fixed"], dict) else None
+        if law not in FIT_LAWS:
+            raise _fail(path, f"has a skin-model fit of an unknown law {law!r} (known: {', '.join(FIT_LAWS)})")
+        expected = list(parameter_names(layout.actuator_names, law))
         if list(stored["names"]) != expected:
             raise _fail(path, f"fit parameters {list(stored['names'])} differ from the model's {expected}")
         try:
@@ -137,6 +140,7 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
         drives=rec["drives"], recordings=rec["recordings"], rig=rec["rig"], sweep=sweep, created=rec["created"],
         software_version=rec["software_version"], schema_version=rec["schema_version"], straps=rec["straps"],
         codes=rec["codes"], multiple_coherence=rec["multiple_coherence"], recorded_s=rec["recorded_s"], fit=fit,
+        measured=None if rec.get("measured") is None or rec["measured"].all() else rec["measured"],
     )
 
 

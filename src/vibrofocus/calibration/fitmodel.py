@@ -2,9 +2,13 @@
 
 A calibration measures ``H`` at a few skin points. :func:`fit_model` fits the
 per-participant parameters of the simulated forearm's model (docs/skin-model.md) to
-that measurement: the wave law (static shear modulus ``mu0`` and spring-pot
-coefficient ``eta``) and, per actuator, its amplitude (gain times contact), contact
-radius and the resonance frequency and quality factor of the inertial exciter. The
+that measurement: the wave law and, per actuator, its amplitude (gain times contact),
+contact radius and the resonance frequency and quality factor of the inertial exciter.
+Two wave laws (``law=``): ``"layered"`` (default; the law of the ``nominal``, ``low``
+and ``high`` skins, :class:`~vibrofocus.skin.LayeredLaw`: the top layer's and the
+substrate's shear moduli, the top layer's effective depth and the constant loss
+tangent) and ``"homogeneous"`` (the ``voigt-fit`` skin's fractional Kelvin-Voigt law:
+static shear modulus ``mu0`` and spring-pot coefficient ``eta``). The
 fitted :class:`FittedSkin` then predicts ``H`` at any point of the skin
 (:meth:`FittedSkin.transfer`), for a tap where nothing was measured
 (``render(..., target_xy=...)``).
@@ -21,9 +25,16 @@ Uncertainties are the usual linearised ones, ``cov = s^2 (J^T J)^-1`` with
 ``s^2 = sum(r^2) / (m - n)``.
 
 Held fixed (not fitted), each an assumption stated where its value is defined: the
-fractional order, density and Rayleigh factor of the law (only ``mu0 / rho`` and
-``eta / rho`` matter for the waves), the arm's geometry (nominal circumferences and
-ends, :class:`~vibrofocus.skin.ForearmParameters`), and the drive sensitivity ``K``.
+density and Rayleigh factor (only moduli over density matter for the waves), the
+homogeneous law's fractional order and the layered law's reference frequency, the
+arm's geometry (nominal circumferences and ends, :class:`~vibrofocus.skin.ForearmParameters`),
+and the drive sensitivity ``K``.
+
+The layered law's transfer is the causal part of its surface mode (the precursor taken
+out, :mod:`vibrofocus.skin.precursor`), which costs a fine time grid per evaluation.
+The fit iterates on the mode itself (:meth:`~vibrofocus.skin.SimulatedArm.mode_transfer`,
+0.1-0.4 % away) and then once more with the precursor of its first answer held fixed,
+so the answer is the causal model's.
 """
 
 from __future__ import annotations
@@ -36,11 +47,17 @@ from .._validation import as_array, check_band
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 
-__all__ = ["FittedSkin", "fit_model", "FIT_GLOBAL_PARAMETERS", "FIT_ACTUATOR_PARAMETERS", "parameter_names",
-           "true_parameters"]
+__all__ = ["FittedSkin", "fit_model", "FIT_LAWS", "FIT_LAW_PARAMETERS", "FIT_ACTUATOR_PARAMETERS",
+           "parameter_names", "true_parameters"]
 
-#: Wave-law parameters fitted once per participant (SI units).
-FIT_GLOBAL_PARAMETERS = ("shear_modulus_pa", "spring_pot_pa_sn")
+#: The wave laws :func:`fit_model` fits; the first is the default.
+FIT_LAWS = ("layered", "homogeneous")
+#: Wave-law parameters fitted once per participant, per law (SI units; the loss tangent
+#: is a ratio).
+FIT_LAW_PARAMETERS = {
+    "layered": ("top_shear_pa", "substrate_shear_pa", "top_depth_m", "loss_tangent"),
+    "homogeneous": ("shear_modulus_pa", "spring_pot_pa_sn"),
+}
 #: Parameters fitted per actuator: amplitude (gain x contact, 1 = nominal), contact radius
 #: (m), exciter resonance (Hz) and quality factor.
 FIT_ACTUATOR_PARAMETERS = ("amplitude", "contact_radius_m", "f0_hz", "q")
@@ -68,24 +85,40 @@ _MIN_COHERENCE = 1e-4
 #: +-23.7 % and +-11.9 % (docs/skin-model.md); the grid reaches a little beyond.
 _START_MU0 = np.linspace(-0.35, 0.35, 11)
 _START_ETA = np.linspace(-0.2, 0.2, 5)
+#: The same for the layered law: both moduli scaled together (the draw spans +-23.7 %)
+#: and the loss tangent (the draw spans +-25 %; the presets' loss tangents 0.07-0.42
+#: are reached by the least-squares stage).
+_START_STIFFNESS = np.linspace(-0.35, 0.35, 11)
+_START_LOSS = np.linspace(-0.4, 0.4, 5)
+#: Largest loss tangent the layered fit may reach (:class:`~vibrofocus.skin.LayeredLaw` takes < 10).
+_MAX_LOSS_TANGENT = 9.0
 #: Starting contact of every actuator: the middle of the drawn ranges (an assumption).
 _START_CONTACT = 0.85
 
 
-def parameter_names(actuator_names) -> tuple[str, ...]:
+def _check_law(law: str) -> str:
+    from .._validation import check_choice
+
+    return check_choice(law, "law", FIT_LAWS)
+
+
+def parameter_names(actuator_names, law: str = "layered") -> tuple[str, ...]:
     """Names of the fitted parameters, in the order of :attr:`FittedSkin.values`.
 
     Parameters
     ----------
     actuator_names : sequence of str
+    law : {"layered", "homogeneous"}
+        The fitted wave law (:data:`FIT_LAWS`).
 
     Returns
     -------
     tuple of str
-        ``FIT_GLOBAL_PARAMETERS`` then ``"<parameter>[<actuator>]"`` for each actuator
+        ``FIT_LAW_PARAMETERS[law]`` then ``"<parameter>[<actuator>]"`` for each actuator
         parameter and actuator.
     """
-    return FIT_GLOBAL_PARAMETERS + tuple(f"{p}[{a}]" for p in FIT_ACTUATOR_PARAMETERS for a in actuator_names)
+    return FIT_LAW_PARAMETERS[_check_law(law)] + tuple(
+        f"{p}[{a}]" for p in FIT_ACTUATOR_PARAMETERS for a in actuator_names)
 
 
 @dataclass(frozen=True, eq=False)
@@ -112,11 +145,14 @@ class FittedSkin:
         Relative fit residual per calibrated point,
         ``sqrt(sum w |H_fit - H| ^ 2 / sum w |H| ^ 2)`` over actuators and band
         frequencies, with ``w`` the coherence-based weights of the fit (1 = nothing
-        explained).
+        explained); NaN at a point whose ``H`` was not measured (NaN in the calibration).
     fixed : dict
-        The model's fixed settings: ``fractional_order``, ``density_kg_m3``,
-        ``rayleigh_factor``, ``circumference_wrist_m``, ``circumference_elbow_m``,
-        ``wrist_y_m``, ``elbow_y_m``, ``geometry``, ``n_images``.
+        The model's fixed settings: ``law`` (:data:`FIT_LAWS`; ``"homogeneous"`` when
+        absent, as in files written before the layered fit), ``skin`` (the preset whose
+        drive sensitivity the model uses), ``density_kg_m3``, ``rayleigh_factor``,
+        ``fractional_order`` (homogeneous) or ``reference_hz`` (layered),
+        ``circumference_wrist_m``, ``circumference_elbow_m``, ``wrist_y_m``,
+        ``elbow_y_m``, ``geometry``, ``n_images``.
     info : dict
         Fit diagnostics: ``chi2_per_dof`` (``s^2``), ``n_residuals``, ``nfev``, ``status``,
         ``message``, ``points`` (indices fitted) and ``fit_band`` (Hz).
@@ -132,24 +168,38 @@ class FittedSkin:
     info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
-        n = len(self.names)
+        n = len(parameter_names(self.layout.actuator_names, self.law))
         values = as_array(self.values, "values", ndim=1, shape=(n,))
         if np.any(values <= 0):
             raise ValidationError(f"values must be > 0 (every fitted parameter is positive), got {values.tolist()}")
         cov = as_array(self.log_covariance, "log_covariance", ndim=2, shape=(n, n))
-        res = as_array(self.residual, "residual", ndim=1, shape=(self.layout.n_points,))
+        res = as_array(self.residual, "residual", ndim=1, shape=(self.layout.n_points,), finite=False)
         for name, arr in (("values", values), ("log_covariance", cov), ("residual", res)):
             arr = arr.copy()
             arr.setflags(write=False)
             object.__setattr__(self, name, arr)
         object.__setattr__(self, "band", tuple(float(b) for b in self.band))
-        object.__setattr__(self, "fixed", {**_default_fixed(), **dict(self.fixed)})
+        object.__setattr__(self, "fixed", {**_default_fixed(self.law), **dict(self.fixed)})
+        # A model that cannot be built (a stored fit's settings edited) is refused here,
+        # not at its first prediction.
+        from ..skin import skin_preset
+
+        try:
+            skin_preset(self.fixed["skin"])
+            _participant(np.log(self.values), self.layout.n_actuators, self.fixed)
+        except (TypeError, ValueError, KeyError) as exc:
+            raise ValidationError(f"fixed settings {self.fixed} do not make a skin model: {exc}") from None
 
     # ------------------------------------------------------------------ parameters
     @property
+    def law(self) -> str:
+        """str: the fitted wave law, ``"layered"`` or ``"homogeneous"`` (:data:`FIT_LAWS`)."""
+        return _check_law(dict(self.fixed).get("law", "homogeneous"))
+
+    @property
     def names(self) -> tuple[str, ...]:
         """tuple of str: names of :attr:`values` (:func:`parameter_names`)."""
-        return parameter_names(self.layout.actuator_names)
+        return parameter_names(self.layout.actuator_names, self.law)
 
     @property
     def std(self) -> np.ndarray:
@@ -255,19 +305,30 @@ class FittedSkin:
                 "fixed": dict(self.fixed), "info": dict(self.info)}
 
     def __repr__(self) -> str:
-        mu, eta = self.values[:2]
-        s_mu, s_eta = self.std[:2]
-        return (f"FittedSkin(mu0={mu:.5g} ± {s_mu:.2g} Pa, eta={eta:.4g} ± {s_eta:.2g} Pa s^n, "
-                f"median residual={np.median(self.residual):.3g}, band={self.band})")
+        short = {"shear_modulus_pa": "mu0", "spring_pot_pa_sn": "eta", "top_shear_pa": "mu_top",
+                 "substrate_shear_pa": "mu_sub", "top_depth_m": "h", "loss_tangent": "tan_delta"}
+        law = ", ".join(f"{short[n]}={v:.4g} ± {s:.2g}" for n, v, s in
+                        zip(FIT_LAW_PARAMETERS[self.law], self.values, self.std))
+        return (f"FittedSkin({self.law}: {law} (SI), median residual={np.nanmedian(self.residual):.3g}, "
+                f"band={self.band})")
 
 
-def _default_fixed() -> dict:
+def _default_fixed(law: str = "layered") -> dict:
     from ..skin import ForearmParameters
 
-    nominal = ForearmParameters.nominal(1)
-    return {name: float(getattr(nominal, name)) for name in (
-        "fractional_order", "density_kg_m3", "rayleigh_factor", "circumference_wrist_m",
-        "circumference_elbow_m", "wrist_y_m", "elbow_y_m")} | {"geometry": "cylinder", "n_images": 2}
+    law = _check_law(law)
+    skin = "nominal" if law == "layered" else "voigt-fit"
+    nominal = ForearmParameters.nominal(1, skin=skin)
+    out = {name: float(getattr(nominal, name)) for name in (
+        "density_kg_m3", "rayleigh_factor", "circumference_wrist_m", "circumference_elbow_m", "wrist_y_m",
+        "elbow_y_m")}
+    if law == "layered":
+        out |= {"density_kg_m3": float(nominal.layered.density_kg_m3),
+                "rayleigh_factor": float(nominal.layered.rayleigh_factor),
+                "reference_hz": float(nominal.layered.reference_hz)}
+    else:
+        out["fractional_order"] = float(nominal.fractional_order)
+    return {"law": law, "skin": skin, **out, "geometry": "cylinder", "n_images": 2}
 
 
 def true_parameters(participant, actuator_names) -> dict[str, float]:
@@ -276,6 +337,8 @@ def true_parameters(participant, actuator_names) -> dict[str, float]:
     Parameters
     ----------
     participant : ForearmParameters
+        A layered participant gives the layered law's parameters, a homogeneous one
+        the homogeneous law's.
     actuator_names : sequence of str
 
     Returns
@@ -286,23 +349,38 @@ def true_parameters(participant, actuator_names) -> dict[str, float]:
     p = participant
     per = {"amplitude": p.gains * p.contact, "contact_radius_m": p.contact_radius_m * np.sqrt(p.contact),
            "f0_hz": p.f0_hz, "q": p.q}
-    values = [p.shear_modulus_pa, p.spring_pot_pa_sn] + [v for name in FIT_ACTUATOR_PARAMETERS for v in per[name]]
-    return dict(zip(parameter_names(actuator_names), map(float, values)))
+    if p.layered is not None:
+        law = "layered"
+        values = [getattr(p.layered, name) for name in FIT_LAW_PARAMETERS[law]]
+    else:
+        law = "homogeneous"
+        values = [p.shear_modulus_pa, p.spring_pot_pa_sn]
+    values += [v for name in FIT_ACTUATOR_PARAMETERS for v in per[name]]
+    return dict(zip(parameter_names(actuator_names, law), map(float, values)))
 
 
 def _participant(log_values: np.ndarray, n_act: int, fixed: dict):
-    from ..skin import ForearmParameters
+    from ..skin import ForearmParameters, LayeredLaw
 
+    law = fixed.get("law", "homogeneous")
+    n_law = len(FIT_LAW_PARAMETERS[law])
     v = np.exp(log_values)
-    amp, radius, f0, q = v[2:].reshape(len(FIT_ACTUATOR_PARAMETERS), n_act)
+    amp, radius, f0, q = v[n_law:].reshape(len(FIT_ACTUATOR_PARAMETERS), n_act)
     r_max = float(radius.max())
     contact = (radius / r_max) ** 2
     geo = {k: fixed[k] for k in ("circumference_wrist_m", "circumference_elbow_m", "wrist_y_m", "elbow_y_m")}
-    return ForearmParameters(
-        contact=contact, gains=amp / contact, f0_hz=f0, q=q, shear_modulus_pa=float(v[0]),
-        spring_pot_pa_sn=float(v[1]), fractional_order=fixed["fractional_order"],
-        density_kg_m3=fixed["density_kg_m3"], rayleigh_factor=fixed["rayleigh_factor"],
-        contact_radius_m=r_max, **geo)
+    common = dict(contact=contact, gains=amp / contact, f0_hz=f0, q=q, density_kg_m3=fixed["density_kg_m3"],
+                  rayleigh_factor=fixed["rayleigh_factor"], contact_radius_m=r_max, **geo)
+    if law == "layered":
+        top, sub, depth, tan_delta = (float(x) for x in v[:4])
+        # The law needs a stiff layer over a soft one: a trial step past that sees the
+        # two moduli equal (a flat cost there, which the fit leaves).
+        layered = LayeredLaw(top_shear_pa=top, substrate_shear_pa=min(sub, top), top_depth_m=depth,
+                             loss_tangent=min(tan_delta, _MAX_LOSS_TANGENT), reference_hz=fixed["reference_hz"],
+                             density_kg_m3=fixed["density_kg_m3"], rayleigh_factor=fixed["rayleigh_factor"])
+        return ForearmParameters(**common, layered=layered, skin=fixed["skin"])
+    return ForearmParameters(**common, shear_modulus_pa=float(v[0]), spring_pot_pa_sn=float(v[1]),
+                             fractional_order=fixed["fractional_order"], skin=fixed.get("skin", "voigt-fit"))
 
 
 def _forearm(participant, layout: ArrayLayout, fs: float, fixed: dict):
@@ -312,9 +390,9 @@ def _forearm(participant, layout: ArrayLayout, fs: float, fixed: dict):
                             geometry=fixed["geometry"], n_images=int(fixed["n_images"]))
 
 
-def _bin_errors(cal, band_bins: np.ndarray) -> np.ndarray:
-    """Relative random error of each band bin of ``cal.H``, shape (n_band, n_points, n_act)."""
-    g2 = np.asarray(cal.coherence[band_bins], dtype=float)
+def _bin_errors(cal, coherence: np.ndarray) -> np.ndarray:
+    """Relative random error of band bins of ``cal.H`` from their ``coherence``, same shape."""
+    g2 = np.asarray(coherence, dtype=float)
     g2 = np.where(np.isfinite(g2), g2, 1.0)  # not assessable (one repeat): trust as measured
     g2 = np.clip(g2, _MIN_COHERENCE, 1.0)
     repeats = int(getattr(cal.sweep, "repeats", 1) or 1)
@@ -323,23 +401,28 @@ def _bin_errors(cal, band_bins: np.ndarray) -> np.ndarray:
     return np.maximum(eps, MIN_RELATIVE_ERROR)
 
 
-def fit_model(cal, *, points=None, band=None, max_nfev: int = 200) -> FittedSkin:
+def fit_model(cal, *, law: str = "layered", points=None, band=None, max_nfev: int = 200) -> FittedSkin:
     """Fit the skin model's per-participant parameters to a calibration.
 
     Parameters
     ----------
     cal : Calibration
         A measured transfer matrix with its layout, band and coherence.
+    law : {"layered", "homogeneous"}
+        Wave law of the model (:data:`FIT_LAWS`): ``"layered"`` (default), a stiff top
+        layer over a soft substrate with one constant loss tangent, the law of the
+        simulated arm's ``nominal``, ``low`` and ``high`` skins; ``"homogeneous"``, the
+        fractional Kelvin-Voigt law of the ``voigt-fit`` skin.
     points : sequence of int, optional
         Indices (into ``cal.layout.points_xy``) of the points to fit; default all.
-        Leaving one out is how :mod:`scripts/validate_fit_model.py` validates the
+        Leaving one out is how ``scripts/validate_fit_model.py`` validates the
         prediction at an unmeasured point. The residual of a left-out point is still
         reported.
     band : (float, float), optional
         Band to fit, Hz, inside ``cal.band``; default ``cal.band`` with its low edge
         raised to ``FIT_LOW_HZ`` (30 Hz).
     max_nfev : int
-        Most model evaluations of the least-squares stage.
+        Most model evaluations of each least-squares stage.
 
     Returns
     -------
@@ -348,32 +431,39 @@ def fit_model(cal, *, points=None, band=None, max_nfev: int = 200) -> FittedSkin
     Raises
     ------
     ValidationError
-        ``cal`` is not a calibration, holds NaN/Inf, has fewer than two points to fit,
-        or no band frequency with a usable weight.
+        ``cal`` is not a calibration, holds NaN/Inf at a fitted point, has fewer than
+        two points to fit, an unknown ``law``, or no band frequency with a usable weight.
 
     Notes
     -----
-    Steps: (1) a grid over ``mu0`` and ``eta`` around the nominal law, each actuator's
-    amplitude solved in closed form (a real factor of its column), picks the start;
-    (2) ``least_squares`` (trust-region reflective, ``x_scale="jac"``) refines all
-    ``2 + 4 n_actuators`` log-parameters on the complex residuals
-    ``(H_model - H) / sigma`` of every band bin, vectorized over frequencies.
+    Steps: (1) a grid over the law's stiffness and loss around its nominal values
+    (:data:`~vibrofocus.skin.LAYERED_NOMINAL` or :data:`~vibrofocus.skin.NOMINAL_LAW`),
+    each actuator's amplitude solved in closed form (a real factor of its column),
+    picks the start; (2) ``least_squares`` (trust-region reflective, ``x_scale="jac"``)
+    refines all log-parameters (4 + 4 ``n_actuators`` layered, 2 + 4 ``n_actuators``
+    homogeneous) on the complex residuals ``(H_model - H) / sigma`` of every band bin,
+    vectorized over frequencies; (3) layered only: the same again from (2)'s answer
+    with the precursor of (2)'s model held fixed (see the module docstring).
     """
     from scipy import optimize
 
-    from .calibrate import Calibration
+    from .result import Calibration
 
+    law = _check_law(law)
     if not isinstance(cal, Calibration):
         raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
-    H = np.asarray(cal.H)
-    if not np.isfinite(H).all():
-        raise ValidationError("cal.H holds NaN/Inf: the fit needs a finite transfer matrix")
     layout = cal.layout
     n_act = layout.n_actuators
     idx = np.arange(layout.n_points) if points is None else np.unique(np.asarray(points, dtype=int))
     if idx.size < 2 or idx.min() < 0 or idx.max() >= layout.n_points:
         raise ValidationError(f"points must name at least two of the {layout.n_points} calibrated points, got "
                               f"{None if points is None else list(points)}")
+    H = np.asarray(cal.H)
+    finite_rows = np.isfinite(H).all(axis=(0, 2))
+    if not finite_rows[idx].all():
+        raise ValidationError("cal.H holds NaN/Inf at a fitted point: the fit needs a finite transfer matrix")
+    # A row not fitted may hold NaN (not measured); it counts as zero and gets no residual.
+    H = np.where(finite_rows[None, :, None], H, 0.0)
     cal_band = check_band(cal.band, cal.fs, name="cal.band")
     if band is None:
         band = (min(max(cal_band[0], FIT_LOW_HZ), cal_band[1] / 2), cal_band[1])
@@ -386,59 +476,80 @@ def fit_model(cal, *, points=None, band=None, max_nfev: int = 200) -> FittedSkin
     f = freqs[bins]
     Hb = H[bins]
     peak = np.abs(Hb).max(axis=1, keepdims=True)
-    sigma = np.hypot(_bin_errors(cal, bins) * np.abs(Hb), DYNAMIC_RANGE * peak)
+    sigma = np.hypot(_bin_errors(cal, cal.coherence[bins]) * np.abs(Hb), DYNAMIC_RANGE * peak)
     weight = np.where(sigma > 0, 1.0 / np.where(sigma > 0, sigma, 1.0), 0.0)
     weight[:, np.setdiff1d(np.arange(layout.n_points), idx)] = 0.0
     use = weight > 0
     if not use.any():
         raise ValidationError("no band frequency of cal has a usable weight (|H| is zero everywhere)")
-    fixed = _default_fixed()
+    fixed = _default_fixed(law)
     pts = layout.points_xy
     wH = (weight * Hb)[use]
+    precursor = np.zeros_like(Hb)  # the causal correction held fixed in stage (3)
 
     def model(log_values):
         rig = _forearm(_participant(log_values, n_act, fixed), layout, cal.fs, fixed)
-        return rig.transfer(pts, f)
+        return rig.mode_transfer(pts, f) + precursor
 
     def residuals(log_values):
         r = (weight * model(log_values))[use] - wH
         return np.concatenate([r.real, r.imag])
 
     # (1) the start: a grid over the law, amplitudes in closed form.
+    n_law = len(FIT_LAW_PARAMETERS[law])
     base = np.concatenate([
-        np.log([8.65e3, 5.61]), np.zeros(n_act),
+        np.log(_nominal_law_values(law)), np.zeros(n_act),
         np.full(n_act, np.log(3e-3 * np.sqrt(_START_CONTACT))), np.full(n_act, np.log(500.0)), np.zeros(n_act)])
-    from ..skin import NOMINAL_LAW
-
-    base[:2] = np.log([NOMINAL_LAW.mu0_pa, NOMINAL_LAW.eta_pa_sn])
     best = (np.inf, base)
-    for dm in _START_MU0:
-        for de in _START_ETA:
-            x = base.copy()
-            x[:2] += np.log1p([dm, de])
-            m = weight * model(x)
-            num = np.einsum("fpa,fpa->a", m.conj(), weight * Hb).real
-            den = np.einsum("fpa,fpa->a", m.conj(), m).real
-            amp = np.clip(num / np.where(den > 0, den, 1.0), 1e-6, None)
-            x[2:2 + n_act] = np.log(amp)
-            cost = float(np.sum(np.abs((m * amp - weight * Hb)[use]) ** 2))
-            if cost < best[0]:
-                best = (cost, x)
-    # (2) all parameters.
-    res = optimize.least_squares(residuals, best[1], method="trf", x_scale="jac", max_nfev=max_nfev,
-                                 xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    for steps in _start_grid(law):
+        x = base.copy()
+        x[:n_law] += np.log1p(steps)
+        m = weight * model(x)
+        num = np.einsum("fpa,fpa->a", m.conj(), weight * Hb).real
+        den = np.einsum("fpa,fpa->a", m.conj(), m).real
+        amp = np.clip(num / np.where(den > 0, den, 1.0), 1e-6, None)
+        x[n_law:n_law + n_act] = np.log(amp)
+        cost = float(np.sum(np.abs((m * amp - weight * Hb)[use]) ** 2))
+        if cost < best[0]:
+            best = (cost, x)
+    # (2) all parameters; (3) layered: again with the precursor of (2)'s answer.
+    solve = dict(method="trf", x_scale="jac", max_nfev=max_nfev, xtol=1e-10, ftol=1e-10, gtol=1e-10)
+    res = optimize.least_squares(residuals, best[1], **solve)
+    nfev = int(res.nfev)
+    if law == "layered":
+        arm = _forearm(_participant(res.x, n_act, fixed), layout, cal.fs, fixed)
+        precursor = arm.transfer(pts, f) - arm.mode_transfer(pts, f)
+        res = optimize.least_squares(residuals, res.x, **solve)
+        nfev += int(res.nfev)
     m_res = res.fun.size
     dof = max(m_res - res.x.size, 1)
     s2 = 2 * res.cost / dof
     _, sv, vt = np.linalg.svd(res.jac, full_matrices=False)
     keep = sv > sv[0] * 1e-12
     cov = (vt[keep].T / sv[keep] ** 2) @ vt[keep] * s2
-    # Residual per point, over every point (left-out ones too).
-    w2 = np.where(sigma > 0, 1.0 / np.where(sigma > 0, sigma, 1.0), 0.0) ** 2  # left-out points too
+    # Residual per point, over every point (left-out ones too, where they were measured).
+    w2 = np.where(sigma > 0, 1.0 / np.where(sigma > 0, sigma, 1.0), 0.0) ** 2
     diff = np.abs(model(res.x) - Hb) ** 2
-    residual = np.sqrt(np.sum(w2 * diff, axis=(0, 2)) / np.maximum(np.sum(w2 * np.abs(Hb) ** 2, axis=(0, 2)), 1e-300))
-    info = {"chi2_per_dof": float(s2), "n_residuals": int(m_res), "nfev": int(res.nfev), "status": int(res.status),
+    residual = np.full(layout.n_points, np.nan)
+    residual[finite_rows] = np.sqrt(np.sum((w2 * diff)[:, finite_rows], axis=(0, 2)) / np.maximum(
+        np.sum((w2 * np.abs(Hb) ** 2)[:, finite_rows], axis=(0, 2)), 1e-300))
+    info = {"chi2_per_dof": float(s2), "n_residuals": int(m_res), "nfev": nfev, "status": int(res.status),
             "message": str(res.message), "points": idx.tolist(), "fit_band": list(band)}
     return FittedSkin(layout=layout, fs=float(cal.fs), band=cal_band, values=np.exp(res.x), log_covariance=cov,
                       residual=residual, fixed=fixed, info=info)
 
+
+def _nominal_law_values(law: str) -> list[float]:
+    """The law's fitted parameters at their nominal values (the start's centre), SI units."""
+    from ..skin import LAYERED_NOMINAL, NOMINAL_LAW
+
+    if law == "layered":
+        return [getattr(LAYERED_NOMINAL, name) for name in FIT_LAW_PARAMETERS[law]]
+    return [NOMINAL_LAW.mu0_pa, NOMINAL_LAW.eta_pa_sn]
+
+
+def _start_grid(law: str):
+    """Relative steps of the law's parameters tried for the start, one array per try."""
+    if law == "layered":  # both moduli together, and the loss tangent; the depth stays
+        return (np.array([ds, ds, 0.0, dl]) for ds in _START_STIFFNESS for dl in _START_LOSS)
+    return (np.array([dm, de]) for dm in _START_MU0 for de in _START_ETA)

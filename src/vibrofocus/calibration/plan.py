@@ -17,10 +17,64 @@ from ..layout import ArrayLayout
 from ..rigs.base import Rig
 from .excitation import METHODS, SweepSettings, default_settings, hadamard_codes
 
-__all__ = ["DEFAULT_METHOD", "CalibrationPlan", "plan_calibration"]
+__all__ = ["DEFAULT_METHOD", "CalibrationPlan", "plan_calibration", "subset_points", "MIN_MEASURED_POINTS"]
 
 #: Method of :func:`~.calibrate.calibrate` when none is given.
 DEFAULT_METHOD = "mimo"
+
+
+#: Fewest points a calibration of a subset measures: the skin model's fit
+#: (:func:`~.fitmodel.fit_model`) needs two at least, and five (with four actuators:
+#: every actuator seen from near and far) kept the inverse filter's fidelity within
+#: 0.03 of the full calibration on simulated participants (docs/method.md).
+MIN_MEASURED_POINTS = 2
+
+
+def subset_points(layout: ArrayLayout, k: int) -> np.ndarray:
+    """Which ``k`` points of a layout to measure when the rest are predicted.
+
+    The points spread over the array (a greedy farthest-point choice): first the point
+    nearest the actuators' centroid, then each time the point farthest from every point
+    already chosen (ties: the lower index). On the reference layout that is location
+    5, the four guards (9 mm from each actuator), then the edge locations 2, 4, 6, 8,
+    then the corners: each actuator is seen close by and from across the array, which
+    the fit of its contact and resonance needs.
+
+    Parameters
+    ----------
+    layout : ArrayLayout
+    k : int
+        Points to measure, ``MIN_MEASURED_POINTS`` .. ``layout.n_points``.
+
+    Returns
+    -------
+    ndarray of int, shape (k,)
+        Indices into ``layout.points_xy``, sorted.
+    """
+    n = layout.n_points
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not MIN_MEASURED_POINTS <= k <= n:
+        raise ValidationError(f"the number of points to measure must be an integer from {MIN_MEASURED_POINTS} to "
+                              f"the layout's {n} points, got {k!r}")
+    pts = layout.points_xy
+    centre = layout.actuators_xy.mean(axis=0)
+    chosen = [int(np.argmin(np.linalg.norm(pts - centre, axis=1)))]
+    nearest = np.linalg.norm(pts - pts[chosen[0]], axis=1)
+    while len(chosen) < k:
+        nxt = int(np.argmax(np.where(np.isin(np.arange(n), chosen), -np.inf, np.round(nearest, 9))))
+        chosen.append(nxt)
+        nearest = np.minimum(nearest, np.linalg.norm(pts - pts[nxt], axis=1))
+    return np.sort(np.asarray(chosen, dtype=int))
+
+
+def measured_indices(layout: ArrayLayout, measure) -> np.ndarray:
+    """``measure`` (a count, or point indices) as sorted indices into ``layout.points_xy``."""
+    if isinstance(measure, (int, np.integer)) and not isinstance(measure, bool):
+        return subset_points(layout, int(measure))
+    idx = _indices(measure, layout.n_points, "measure", "points of the layout")
+    if idx.size < MIN_MEASURED_POINTS:
+        raise ValidationError(f"measure must name at least {MIN_MEASURED_POINTS} points (the model's fit needs "
+                              f"them), got {list(idx)}")
+    return idx
 
 
 def _sub_layout(layout: ArrayLayout, points: Sequence[int] | None, actuators: Sequence[int] | None):
@@ -70,6 +124,11 @@ class CalibrationPlan:
     positions : int
         Vibrometer positions: 1 for a rig that records every point in each take, else
         one per group of points it can record at once (the operator aims at each).
+    predicted_indices : tuple of int
+        Points of the rig's layout not measured but predicted from the skin model
+        fitted to the measured ones (``measure=``); empty when every point is measured.
+    positions_saved : int
+        Vibrometer positions the predicted points save against measuring every point.
     """
 
     method: str
@@ -77,6 +136,13 @@ class CalibrationPlan:
     point_indices: tuple[int, ...]
     actuator_indices: tuple[int, ...]
     positions: int
+    predicted_indices: tuple[int, ...] = ()
+    positions_saved: int = 0
+
+    @property
+    def seconds_saved(self) -> float:
+        """Sweep time the predicted points save, s (aiming saved comes on top)."""
+        return self.positions_saved * self.takes_per_position * self.settings.take_s
 
     @property
     def takes_per_position(self) -> int:
@@ -107,6 +173,13 @@ class CalibrationPlan:
                 f"{_format_duration(self.duration_s)} of sweeps")
         if self.positions > 1:
             text += f", plus aiming the vibrometer {self.positions} times"
+        if self.predicted_indices:
+            n = len(self.point_indices) + len(self.predicted_indices)
+            text += (f"; measures {len(self.point_indices)} of {n} points and predicts the other "
+                     f"{len(self.predicted_indices)} from the fitted skin model")
+            if self.positions_saved:
+                text += (f" ({self.positions_saved} aiming(s) and {_format_duration(self.seconds_saved)} "
+                         "of sweeps saved)")
         return text
 
 
@@ -127,12 +200,13 @@ def plan_calibration(
     sweep_s: float | None = None,
     repeats: int | None = None,
     amplitude_v: float = 5.0,
+    measure: int | Sequence[int] | None = None,
 ) -> CalibrationPlan:
     """The takes :func:`calibrate` will record with these arguments, and their real duration.
 
     Parameters
     ----------
-    rig, method, points, actuators, band, sweep_s, repeats, amplitude_v
+    rig, method, points, actuators, band, sweep_s, repeats, amplitude_v, measure
         As for :func:`calibrate`.
 
     Returns
@@ -150,10 +224,22 @@ def plan_calibration(
     check_choice(method, "method", METHODS)
     band = check_band(band, rig.fs)
     settings = default_settings(method, rig.fs, band, sweep_s=sweep_s, repeats=repeats, amplitude_v=amplitude_v)
-    _, p_idx, a_idx = _sub_layout(rig.layout, points, actuators)
+    if measure is not None and points is not None:
+        raise ValidationError("give points (a smaller layout) or measure (predict the rest), not both")
+    layout, p_idx, a_idx = _sub_layout(rig.layout, points, actuators)
+    predicted = np.zeros(0, int)
+    if measure is not None:
+        rows = measured_indices(layout, measure)
+        predicted = np.setdiff1d(p_idx, p_idx[rows])
+        p_idx = p_idx[rows]
     if method == "mimo":
         hadamard_codes(len(a_idx), settings.repeats)  # refuses repeats that cannot separate them
     limit = rig.max_points_per_recording
-    positions = 1 if limit is None else -(-len(p_idx) // limit)
+
+    def positions(n_points: int) -> int:
+        return 1 if limit is None else -(-n_points // limit)
+
     return CalibrationPlan(method=method, settings=settings, point_indices=tuple(int(i) for i in p_idx),
-                           actuator_indices=tuple(int(i) for i in a_idx), positions=positions)
+                           actuator_indices=tuple(int(i) for i in a_idx), positions=positions(len(p_idx)),
+                           predicted_indices=tuple(int(i) for i in predicted),
+                           positions_saved=positions(len(p_idx) + len(predicted)) - positions(len(p_idx)))

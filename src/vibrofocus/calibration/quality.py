@@ -38,6 +38,13 @@ a point that barely moves
     (default 0.1) of the median over points: usually a mis-aimed vibrometer.
 dropouts
     Recordings with NaN/Inf samples were left out of the estimate; reported as info.
+predicted points
+    A calibration that measures a subset of the points (``calibrate(..., measure=K)``)
+    predicts ``H`` at the others from the skin model fitted to the measured ones: each
+    is reported as info (``predicted``), every other check reads the measured points
+    only, and a fit whose residual at a measured point exceeds ``fit_residual_max``
+    (default 0.05) is a warning (``fit_residual``): the model does not describe that
+    arm well, so its predictions are not to be trusted.
 
 With all actuators at once (``mimo``) the per-pair checks read the same figures (the
 coherence is each actuator's partial coherence, the SNR each actuator's share of the
@@ -64,6 +71,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from ..errors import ValidationError
 from ..layout import ArrayLayout
 
 __all__ = ["TRUSTED_COHERENCE", "QualityThresholds", "QualityIssue", "QualityReport", "assess_quality",
@@ -102,6 +110,10 @@ class QualityThresholds:
     input_correlation_max : float
         ``mimo``: largest normalised cross-spectrum between two actuators' inputs before
         a warning (0 when every take is kept: the Hadamard signs are orthogonal).
+    fit_residual_max : float
+        A calibration with predicted points: largest relative residual of the skin-model
+        fit at a measured point before a warning (:attr:`FittedSkin.residual`; the
+        simulated arms give about 0.005 with the default noise).
     """
 
     coherence_min: float = 0.5
@@ -112,6 +124,7 @@ class QualityThresholds:
     clip_samples: int = 4
     condition_max: float = 10.0
     input_correlation_max: float = 0.5
+    fit_residual_max: float = 0.05
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -125,9 +138,10 @@ class QualityIssue:
     ----------
     check : str
         ``low_coherence``, ``coherence_limit``, ``dead_actuator``, ``reversed_actuator``, ``clipping``,
-        ``drive_at_limit``, ``low_snr``, ``still_point``, ``dropouts``, or for ``mimo``
+        ``drive_at_limit``, ``low_snr``, ``still_point``, ``dropouts``, for ``mimo``
         ``ill_conditioned``, ``input_correlation``, ``low_multiple_coherence`` and
-        ``multiple_coherence_limit``.
+        ``multiple_coherence_limit``, and for a calibration of a subset of the points
+        ``predicted`` and ``fit_residual``.
     severity : {"info", "warning", "error"}
     message : str
         What was found and what to do, in words.
@@ -235,6 +249,9 @@ class QualityReport:
             elif issue.check == "ill_conditioned":
                 for a in range(n_a):
                     tags[issue.point][a].append("not separable")
+            elif issue.check == "predicted":
+                for a in range(n_a):
+                    tags[issue.point][a].append("predicted")
         t = self.thresholds
         for p in range(n_p):
             for a in range(n_a):
@@ -272,9 +289,9 @@ class QualityReport:
             for a in range(layout.n_actuators):
                 v = verdicts[p, a]
                 style = "green" if v == "ok" else ("red" if _is_error(v) else
-                                                   "cyan" if v.startswith("to ") else "yellow")
+                                                   "cyan" if v.startswith(("to ", "predicted")) else "yellow")
                 snr = self.snr_db[p, a]
-                cells.append(f"[{style}]{v}[/] ({snr:.0f} dB)" if v == "ok"
+                cells.append(f"[{style}]{v}[/] ({snr:.0f} dB)" if v == "ok" and np.isfinite(snr)
                              else f"[{style}]{v}[/]")
             table.add_row(label, f"{xy[0] * 1e3:+.1f}, {xy[1] * 1e3:+.1f}", *cells)
         return table
@@ -282,7 +299,13 @@ class QualityReport:
     def lines(self) -> list[str]:
         """The issues as ``severity: message`` lines (errors first)."""
         order = {s: i for i, s in enumerate(reversed(SEVERITIES))}
-        return [f"{i.severity}: {i.message}" for i in sorted(self.issues, key=lambda i: order[i.severity])]
+        lines = [f"{i.severity}: {i.message}" for i in sorted(self.issues, key=lambda i: order[i.severity])
+                 if i.check != "predicted"]
+        predicted = [i.message.split(" was not measured")[0].removeprefix("point ") for i in self.by_check("predicted")]
+        if predicted:  # one line for all of them
+            first = self.by_check("predicted")[0].message
+            lines.append(f"info: point(s) {', '.join(predicted)} were not measured" + first.split(" was not measured")[1])
+        return lines
 
 
 def _is_error(verdict: str) -> bool:
@@ -338,11 +361,13 @@ def _format_ranges(ranges: list[tuple[float, float]], limit: int = 4) -> str:
 
 
 def _polarity(
-    H: np.ndarray, in_band: np.ndarray, layout: ArrayLayout, live: np.ndarray
+    H: np.ndarray, in_band: np.ndarray, layout: ArrayLayout, live: np.ndarray, measured: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Relative polarity from the near-field transfer functions (module docstring)."""
+    """Relative polarity from the near-field transfer functions (module docstring), at
+    the nearest measured point."""
     points = layout.points_xy
     dist = np.linalg.norm(points[:, None, :] - layout.actuators_xy[None, :, :], axis=-1)
+    dist[~measured] = np.inf
     nearest = dist.argmin(axis=0)  # (n_actuators,)
     g = H[in_band][:, nearest, np.arange(layout.n_actuators)].T  # (n_act, n_band)
     norms = np.linalg.norm(g, axis=1, keepdims=True)
@@ -377,6 +402,8 @@ def assess_quality(
     multiple_coherence: np.ndarray | None = None,
     input_condition: np.ndarray | None = None,
     input_correlation: np.ndarray | None = None,
+    measured: np.ndarray | None = None,
+    fit_residual: np.ndarray | None = None,
 ) -> QualityReport:
     """Run every check on an estimated transfer matrix.
 
@@ -405,6 +432,15 @@ def assess_quality(
     multiple_coherence, input_condition, input_correlation : ndarray, shape (n_freqs, n_points), optional
         ``mimo`` only (:class:`vibrofocus.calibration.estimate.MimoEstimate`): given
         together, they add the separation checks and are kept in the report.
+    measured : ndarray of bool, shape (n_points,), optional
+        Which rows of ``H`` were measured (default all); the others were predicted by a
+        fitted skin model and hold NaN in the figures of the recordings. Each predicted
+        point is reported (``predicted``, info) and the other checks read the measured
+        points only.
+    fit_residual : ndarray, shape (n_points,), optional
+        With ``measured``: the fit's relative residual per point
+        (:attr:`FittedSkin.residual`); above ``fit_residual_max`` at a measured point, a
+        warning.
 
     Returns
     -------
@@ -415,11 +451,14 @@ def assess_quality(
     in_band = (freqs >= band[0]) & (freqs <= band[1])
     band_gain = np.sqrt(np.mean(np.abs(H[in_band]) ** 2, axis=0))  # (P, A)
     issues: list[QualityIssue] = []
+    m = np.ones(layout.n_points, bool) if measured is None else np.asarray(measured, bool).reshape(layout.n_points)
+    if not m.any():
+        raise ValidationError("measured must mark at least one point as measured")
 
     # Dead actuators: compared with the strongest one (not the median, which is zero when
     # most are unconnected and would then call every actuator dead), or never above the
     # noise floor.
-    best = band_gain.max(axis=0)
+    best = band_gain[m].max(axis=0)
     strongest = int(np.argmax(best))
     reference = best[strongest]
     dead = (best < t.dead_ratio * reference) | (np.nanmax(snr_db, axis=0) < t.snr_min_db / 2)
@@ -436,7 +475,7 @@ def assess_quality(
             actuator=int(a)))
 
     # Reversed actuators.
-    polarity, corr, nearest = _polarity(H, in_band, layout, ~dead)
+    polarity, corr, nearest = _polarity(H, in_band, layout, ~dead, m)
     live = np.flatnonzero(~dead)
     reversed_ = np.flatnonzero(polarity < 0)
     if live.size == 2 and reversed_.size:
@@ -462,8 +501,8 @@ def assess_quality(
 
     # Points that barely move.
     point_best = band_gain.max(axis=1)
-    point_ref = np.median(point_best)
-    for p in np.flatnonzero(point_best < t.still_ratio * point_ref):
+    point_ref = np.median(point_best[m])
+    for p in np.flatnonzero(m & (point_best < t.still_ratio * point_ref)):
         ratio_db = 20 * np.log10(max(point_best[p], 1e-300) / point_ref)
         xy = layout.points_xy[p] * 1e3
         issues.append(QualityIssue(
@@ -533,6 +572,10 @@ def assess_quality(
             f"{int(missing[missing > 0].sum())} recording(s) with vibrometer dropouts (NaN samples) were "
             f"left out: point/actuator {pairs}{f' and {more} more' if more > 0 else ''}"))
 
+    if not m.all():
+        issues = [i for i in issues if i.point is None or m[i.point]]  # no figures of a recording there
+        issues += _predicted_issues(layout, m, fit_residual, t)
+
     return QualityReport(
         issues=issues, snr_db=np.asarray(snr_db, float), noise_rms_m=np.asarray(noise_rms_m, float),
         band_gain=band_gain, low_coherence_share=share, coherent_to_hz=coherent_to, clipped=np.asarray(clipped, bool),
@@ -540,6 +583,26 @@ def assess_quality(
         input_condition=None if input_condition is None else np.asarray(input_condition, float),
         input_correlation=None if input_correlation is None else np.asarray(input_correlation, float),
     )
+
+
+def _predicted_issues(layout: ArrayLayout, measured: np.ndarray, fit_residual: np.ndarray | None,
+                      t: QualityThresholds) -> list[QualityIssue]:
+    """One ``predicted`` info per point not measured, and ``fit_residual`` warnings."""
+    labels = layout.point_labels
+    k = int(measured.sum())
+    issues = [QualityIssue(
+        "predicted", "info",
+        f"point {labels[p]} was not measured: its H is predicted by the skin model fitted to the {k} measured "
+        "point(s)", point=int(p)) for p in np.flatnonzero(~measured)]
+    if fit_residual is not None:
+        res = np.asarray(fit_residual, float).reshape(layout.n_points)
+        for p in np.flatnonzero(measured & (res > t.fit_residual_max)):
+            issues.append(QualityIssue(
+                "fit_residual", "warning",
+                f"point {labels[p]}: the skin model fitted to the measured points misses its H by {res[p]:.1%} "
+                f"(limit {t.fit_residual_max:.0%}), so the predicted points are not to be trusted; measure every "
+                "point", point=int(p)))
+    return issues
 
 
 def _low_coherence(f_band: np.ndarray, coh: np.ndarray, band_top: float, t: QualityThresholds,

@@ -87,8 +87,8 @@ class _Takes:
         return y
 
 
-def _where(layout: ArrayLayout, group: np.ndarray, aimed: bool) -> str:
-    return "point " + ", ".join(layout.point_labels[p] for p in group) if aimed else "all points"
+def _where(labels, group: np.ndarray, aimed: bool) -> str:
+    return "point " + ", ".join(labels[p] for p in group) if aimed else "all points"
 
 
 def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layout, prompt):
@@ -113,7 +113,7 @@ def _record_one_at_a_time(session, excitation, a_idx, n_r, groups, labels, layou
             drive = np.zeros((rig.layout.n_actuators, excitation.size))
             drive[channel] = excitation
             for r in range(n_r):
-                what = f"{layout.actuator_names[a]}, {_where(layout, group, session.aimed)}, take {r + 1}/{n_r}"
+                what = f"{layout.actuator_names[a]}, {_where(labels, group, session.aimed)}, take {r + 1}/{n_r}"
                 session.tell(what + ": playing")
                 recordings[a, r, group] = session.record(drive, group, a)
                 session.tell(what, took=1)
@@ -187,7 +187,7 @@ def _record_mimo(session, excitation, a_idx, codes, groups, labels, layout, thre
             for p in group:
                 prompt(labels[p], session.points_xy[p].copy())
         for r in range(n_r):
-            what = f"all {n_a} actuators, {_where(layout, group, session.aimed)}, take {r + 1}/{n_r}"
+            what = f"all {n_a} actuators, {_where(labels, group, session.aimed)}, take {r + 1}/{n_r}"
             session.tell(what + ": playing")
             recordings[r, group] = session.record(take(r), group, None)
             session.tell(what, took=1)

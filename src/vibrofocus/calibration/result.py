@@ -73,6 +73,9 @@ class Calibration:
     fit : FittedSkin or None
         The skin model fitted to ``H`` (``cal.fit = fit_model(cal)``), stored with the
         calibration file when set; None otherwise.
+    measured : ndarray of bool, shape (n_points,), or None
+        Which rows of ``H`` were measured; False where ``H`` was predicted by ``fit``
+        (``calibrate(..., measure=K)``). None: every row measured.
     """
 
     H: np.ndarray
@@ -96,6 +99,29 @@ class Calibration:
     multiple_coherence: np.ndarray | None = None
     recorded_s: float = float("nan")
     fit: Any = None
+    measured: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.measured is not None:
+            m = np.asarray(self.measured)
+            if m.dtype != bool or m.shape != (np.shape(self.H)[1],):
+                raise ValidationError(f"measured must be a bool array of one flag per point ({np.shape(self.H)[1]}), "
+                                      f"got {m.dtype} of shape {m.shape}")
+            if not m.all() and self.fit is None:
+                raise ValidationError("measured marks predicted points, but fit (the model that predicted them) "
+                                      "is None")
+            self.measured = m.copy()
+
+    @property
+    def measured_points(self) -> np.ndarray:
+        """ndarray of bool, shape (n_points,): True where ``H`` was measured (all when
+        :attr:`measured` is None)."""
+        return np.ones(self.n_points, bool) if self.measured is None else self.measured.copy()
+
+    @property
+    def predicted_points(self) -> np.ndarray:
+        """ndarray of int: indices of the points whose ``H`` the fitted model predicted."""
+        return np.flatnonzero(~self.measured_points)
 
     @property
     def n_fft(self) -> int:

@@ -46,6 +46,12 @@ def calibrate_command(
                                               "drive, 30 s on the simulated rig)."),
     amplitude_v: float = typer.Option(5.0, "--amplitude-v", min=AMPLITUDE_V_MIN,
                                       help="Sweep peak at the actuator, V (at most the rig's peak limit)."),
+    points: int | None = typer.Option(
+        None, "--points", min=2, show_default="every point",
+        help="Measure only this many points, spread over the array (reference layout: 5 = location 5 and the four "
+             "guards, 7 adds locations 2 and 4, 9 adds 6 and 8), fit the skin model to them and predict H at the "
+             "others. The file marks each point measured or predicted (point_measured); the quality table shows "
+             "the predicted ones. Saves one vibrometer aim per point on a single-spot rig."),
     yes: bool = typer.Option(False, "--yes", "-y", help="Do not ask before each point (only for rigs that "
                                                         "record every point at once)."),
     figure: bool = typer.Option(True, "--figure/--no-figure", help="Save |H| and coherence next to the file (.png)."),
@@ -64,6 +70,9 @@ def calibrate_command(
     OUT is checked for room and write permission before the first sweep. If it still
     cannot be written at the end, the measurement is not lost: you are asked for another
     path (at a terminal) or it is saved to a fallback file that the error names.
+
+    With --points K only K points are measured; the skin model fitted to them predicts
+    H at the others (docs/method.md, "Calibrating fewer points").
 
     On a single-spot rig every completed point is kept in OUT.partial.npz as it is
     measured: after an interruption, the same command with --resume continues from the
@@ -106,7 +115,8 @@ def calibrate_command(
                 console.print(f"simulated forearm: skin {r.skin}, seed {seed}", highlight=False)
             # Before the first sweep: a read-only folder or a full disk is found now, not
             # after the whole measurement.
-            plan = plan_calibration(r, method=method, repeats=repeats, sweep_s=sweep_s, amplitude_v=amplitude_v)
+            plan = plan_calibration(r, method=method, repeats=repeats, sweep_s=sweep_s, amplitude_v=amplitude_v,
+                                    measure=points)
             n_record = int(round((plan.settings.take_s + 0.5) * r.fs))
             check_writable(out, what="calibration", expected_bytes=estimate_calibration_bytes(
                 r.layout.n_points, r.layout.n_actuators, plan.settings.repeats, n_record, 4096,
@@ -148,7 +158,7 @@ def calibrate_command(
                         cal = calibrate(r, participant_id=participant, method=method, repeats=repeats,
                                         sweep_s=sweep_s, amplitude_v=amplitude_v,
                                         prompt=None if not single_spot else prompt, progress=on_progress,
-                                        checkpoint=partial, resume=resume)
+                                        checkpoint=partial, resume=resume, measure=points)
                 except BaseException:
                     if partial is not None and partial.exists():
                         console.print(f"the completed points are kept in {partial}; continue with --resume",

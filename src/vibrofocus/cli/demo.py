@@ -318,7 +318,8 @@ def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool, 
     _make_output_folder(out)
     rig = SimulatedForearm(seed=seed, skin=skin)
     cal = calibrate(rig, participant_id=f"simulated-{seed}")
-    fitted = fit_model(cal)
+    # The model's law is the arm's: layered on the evidence presets, homogeneous on voigt-fit.
+    fitted = fit_model(cal, law="layered" if rig.participant.layered is not None else "homogeneous")
     lay = rig.layout
     focus = moving_focus(fitted, lay, rig.fs, start_xy=lay.locations_xy[6], end_xy=lay.locations_xy[2],
                          speed_m_s=speed_m_s)

@@ -27,6 +27,12 @@ Variables
     natural logarithms) and ``fit_residual`` (point), with the attribute ``fit`` (JSON:
     band, fs, fixed settings, diagnostics). Files without them load as before, and
     readers that do not know them ignore them.
+    ``point_measured`` (point; int8, 1 = measured, 0 = predicted): which rows of H were
+    measured and which the fitted skin model predicted (a calibration of a subset of
+    the points, ``calibrate(..., measure=K)``; its ``fit_*`` variables hold the model).
+    A predicted row's recordings are NaN and its figures of a recording (SNR,
+    coherence, ...) NaN or 0. Written by every calibration; a file without it has every
+    row measured.
 Attributes
     ``file_kind = "vibrofocus calibration"``, ``schema_version``, ``software``,
     ``software_version``, ``participant_id``, ``method``, ``fs`` (Hz), ``band_low``,
@@ -104,11 +110,12 @@ _MIMO_VARS = {
 #: ``issues`` a list of dicts and ``thresholds`` a dict); ``codes``, ``multiple_coherence``
 #: (``mimo``, else None); ``straps`` (dict or None); ``recorded_s`` (s, NaN: unknown);
 #: ``fit`` (None, or a dict with ``names``, ``values``, ``std``, ``log_covariance``,
-#: ``residual``, ``band``, ``fs``, ``fixed``, ``info``).
+#: ``residual``, ``band``, ``fs``, ``fixed``, ``info``); ``measured`` (None: every row
+#: measured, or bool (n_points,): False where H was predicted by the fit).
 RECORD_KEYS = ("H", "freqs", "coherence", "drives", "recordings", "fs", "band", "n_fft", "method", "participant_id",
                "created", "software_version", "schema_version", "layout", "point_labels", "point_kinds",
                "actuator_names", "points_xy", "actuators_xy", "rig", "sweep", "quality", "codes",
-               "multiple_coherence", "straps", "recorded_s", "fit")
+               "multiple_coherence", "straps", "recorded_s", "fit", "measured")
 _REQUIRED_ATTRS = ("schema_version", "participant_id", "method", "fs", "band_low", "band_high", "n_fft",
                    "created", "software_version", "layout", "rig", "sweep", "quality_issues",
                    "quality_thresholds")
@@ -158,6 +165,11 @@ def _to_dataset(rec: Mapping[str, Any]):
                                            {"units": "1", "long_name": "covariance of log parameters"})
         data_vars["fit_residual"] = (("point",), fit["residual"],
                                      {"units": "1", "long_name": "relative fit residual per point"})
+    measured = rec.get("measured")
+    measured = np.ones(len(rec["point_labels"]), bool) if measured is None else np.asarray(measured, bool)
+    data_vars["point_measured"] = (("point",), measured.astype(np.int8), {
+        "units": "1", "long_name": "1 if H at the point was measured, 0 if predicted by the fitted skin model",
+        "flag_values": np.array([0, 1], np.int8), "flag_meanings": "predicted measured"})
     coords |= {
         "frequency": ("frequency", rec["freqs"], {"units": "Hz"}),
         "point": ("point", list(rec["point_labels"])),
@@ -355,6 +367,7 @@ def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
 
 #: Every variable and coordinate a calibration file of this schema may hold; others are never read.
 _KNOWN_VARS = frozenset({*_REQUIRED_VARS, *_MIMO_VARS, "fit_value", "fit_std", "fit_log_covariance", "fit_residual",
+                         "point_measured",
                          "fit_parameter", "frequency", "point", "point_x", "point_y", "point_kind", "actuator",
                          "actuator_x", "actuator_y"})
 
@@ -536,13 +549,24 @@ def _from_dataset(ds, path: Path) -> dict[str, Any]:
         "thresholds": thresholds, "input_condition": condition, "input_correlation": correlation,
     }
     fit = _fit_from_dataset(ds, attrs, path) if "fit_value" in ds.variables else None
+    measured = None
+    if "point_measured" in ds.variables:
+        flags = ds["point_measured"].values
+        if flags.shape != (len(labels),) or not np.isin(flags, (0, 1)).all():
+            raise _fail(path, "variable point_measured must hold 0 (predicted) or 1 (measured) for every point")
+        if not flags.any():
+            raise _fail(path, "variable point_measured marks no point as measured")
+        measured = flags.astype(bool)
+        if not measured.all() and fit is None:
+            raise _fail(path, "variable point_measured marks predicted points, but the file holds no fitted skin "
+                              "model (fit_value) that predicted them")
     return {
         "H": H_real.astype(float) + 1j * H_imag.astype(float), "freqs": freqs, "fs": fs, "coherence": coherence,
         "band": band, "n_fft": n_fft, "participant_id": str(attrs["participant_id"]), "method": method,
         "quality": quality, "drives": drive, "recordings": ds["recording"].values, "rig": rig, "sweep": sweep,
         "created": str(attrs["created"]), "software_version": str(attrs["software_version"]),
         "schema_version": version, "straps": straps, "codes": codes, "multiple_coherence": multiple,
-        "recorded_s": recorded_s, "fit": fit, "layout": layout, "point_labels": labels,
+        "recorded_s": recorded_s, "fit": fit, "measured": measured, "layout": layout, "point_labels": labels,
         "point_kinds": [str(v) for v in ds["point_kind"].values] if "point_kind" in ds.variables else None,
         "actuator_names": names, "points_xy": pts, "actuators_xy": act,
     }

@@ -103,6 +103,9 @@ class CalibrationIn(_Strict):
     participant_id: ParticipantId
     rig: str = Field(default="simulated", min_length=1, max_length=32)
     seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
+    #: Measure only this many points and predict the rest (``calibrate(measure=...)``);
+    #: None measures every point.
+    points: int | None = Field(default=None, ge=2, le=1000)
 
 
 class SessionIn(_Strict):

@@ -198,7 +198,9 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     _check_participant(web, body.participant_id)
     rig = web.make_rig(body.rig, _rig_seed(body.rig, body.seed, body.participant_id))
     _refuse_if_busy(rig)
-    job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig)
+    _plan(rig, body.points)  # a subset the layout cannot give is refused now, not in the job
+    job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig,
+                         points=body.points)
     with web.lock:
         busy = [j for j in web.jobs.values() if j.status in ("running", "waiting")]
         if busy:
@@ -206,6 +208,45 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
         web.jobs[job.job_id] = job
     web.start_job(_calibrate, web, job, rig, name=f"calibration-{job.job_id}")
     return {"job_id": job.job_id}
+
+
+def _plan(rig: Any, points: int | None) -> Any:
+    """The calibration plan measuring ``points`` points (None: all), or 422 saying why not."""
+    from ..calibration import plan_calibration
+
+    try:
+        return plan_calibration(rig, measure=points)
+    except VibrofocusError as exc:
+        raise HTTPException(422, detail=public_text(str(exc))) from None
+
+
+@router.get("/api/calibrations/plans")
+def calibration_plans(
+    rig: str = Query(..., min_length=1, max_length=32),
+    seed: int | None = Query(None, ge=0, le=2**32 - 1),
+    web: WebState = Depends(require_token),
+) -> dict[str, Any]:
+    """The calibration plans the page offers: every point, or a subset with the rest predicted.
+
+    ``{"plans": [{"points": K or None, "label", "description", "measured": [labels],
+    "predicted": [labels], "aims_saved", "seconds_saved"}]}``: every point first, then
+    9, 7 and 5 points (those the layout has).
+    """
+    from ..calibration.plan import MIN_MEASURED_POINTS
+
+    r = web.make_rig(rig, seed)
+    labels = r.layout.point_labels
+    n = r.layout.n_points
+    plans = []
+    for k in [None, *(k for k in (9, 7, 5) if MIN_MEASURED_POINTS <= k < n)]:
+        plan = _plan(r, k)
+        measured = [labels[i] for i in plan.point_indices]
+        predicted = [labels[i] for i in plan.predicted_indices]
+        plans.append({
+            "points": k, "label": f"all {n} points" if k is None else f"{k} points, predict {n - k}",
+            "description": plan.describe(), "measured": measured, "predicted": predicted,
+            "aims_saved": plan.positions_saved, "seconds_saved": plan.seconds_saved})
+    return {"plans": plans}
 
 
 def _rig_seed(rig: str, seed: int | None, participant_id: str) -> int | None:
@@ -261,7 +302,7 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         single_spot = getattr(rig, "max_points_per_recording", None) is not None
         with rig.reserve(f"the calibration of {job.participant_id}"):
             cal = calibrate(rig, participant_id=job.participant_id, progress=progress,
-                            prompt=prompt if single_spot else None)
+                            prompt=prompt if single_spot else None, measure=job.points)
         folder = web.data_dir / "calibrations"
         private_dir(folder)
         # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
@@ -346,10 +387,15 @@ def _refuse_calibration_errors(web: WebState, calibration_id: int, allowed: bool
 
 @router.get("/api/calibrations/{calibration_id}/quality")
 def calibration_quality(calibration_id: CalibrationId, web: WebState = Depends(require_token)) -> dict[str, Any]:
-    """The quality verdicts of a calibration (errors first) and how many are errors."""
-    verdicts = _verdicts(web.calibration(calibration_id))
+    """The quality verdicts of a calibration (errors first), how many are errors, and which
+    points were measured and which predicted by the fitted skin model (labels)."""
+    cal = web.calibration(calibration_id)
+    verdicts = _verdicts(cal)
+    labels = cal.layout.point_labels
     return {"calibration_id": calibration_id, "verdicts": verdicts,
-            "n_errors": sum(v["severity"] == "error" for v in verdicts)}
+            "n_errors": sum(v["severity"] == "error" for v in verdicts),
+            "measured": [label for label, m in zip(labels, cal.measured_points) if m],
+            "predicted": [labels[i] for i in cal.predicted_points]}
 
 
 @router.get("/api/calibrations/{calibration_id}/figure.png")

@@ -64,6 +64,7 @@ class CalibrationJob:
     straps: dict | None = None
     verdicts: list | None = None
     n_errors: int = 0
+    points: int | None = None  # points measured (the rest predicted); None: every point
     _go: threading.Event = field(default_factory=threading.Event, repr=False)
     _cancelled: bool = False
 

@@ -160,6 +160,7 @@
     $("rig").replaceChildren(...rigs.kinds.map((k) => el("option", { value: k }, k === rigs.default ? rigs.label : k)));
     $("rig").value = rigs.default;
     $("rig-label").textContent = rigs.label;
+    loadPlans();  // the plan list follows the rig
   }
 
   async function showFigure(url, img, message, busy) {
@@ -194,6 +195,9 @@
     const items = q.verdicts.filter((v) => v.severity !== "info").map((v) =>
       el("li", { class: v.severity === "error" ? "error" : "warning" }, `${v.severity}: ${v.message}`));
     if (!items.length) items.push(el("li", { class: "muted" }, "Quality: no warnings or errors."));
+    if (q.predicted && q.predicted.length) items.push(el("li", { class: "muted", id: "cal-predicted" },
+      `Measured ${q.measured.length} of ${q.measured.length + q.predicted.length} points; H at point(s) ` +
+      `${q.predicted.join(", ")} is predicted by the skin model fitted to them.`));
     else if (q.n_errors) items.unshift(el("li", { class: "error" },
       `${q.n_errors} error verdict(s): sessions on this calibration need 'use the calibration despite its errors'.`));
     list.replaceChildren(...items);
@@ -235,6 +239,24 @@
   }
   $("straps").addEventListener("click", readStraps);
 
+  // The plans offered: every point, or a subset with the rest predicted by the fitted model.
+  let calPlans = [];
+  function showPlan() {
+    const plan = calPlans.find((p) => String(p.points ?? "") === $("cal-points").value);
+    $("cal-plan").textContent = plan ? `Plan: ${plan.description}.` : "";
+  }
+  async function loadPlans() {
+    let d;
+    try { d = await api(`/api/calibrations/plans?${rigQuery()}`); } catch (e) { $("cal-plan").textContent = ""; return; }
+    const keep = $("cal-points").value;
+    calPlans = d.plans;
+    $("cal-points").replaceChildren(...calPlans.map((p) => el("option", { value: p.points ?? "" }, p.label)));
+    if (calPlans.some((p) => String(p.points ?? "") === keep)) $("cal-points").value = keep;
+    showPlan();
+  }
+  $("cal-points").addEventListener("change", showPlan);
+  $("rig").addEventListener("change", loadPlans);
+
   let calJob = null;
   $("cal-continue").addEventListener("click", async () => {
     if (!calJob) return;
@@ -253,7 +275,8 @@
     if (!pid) { flash("Add or pick a participant first.", true); return; }
     try {
       const { job_id } = await api("/api/calibrations", { method: "POST", body: JSON.stringify({
-        participant_id: pid, rig: $("rig").value, seed: rigSeed() }) });
+        participant_id: pid, rig: $("rig").value, seed: rigSeed(),
+        points: $("cal-points").value ? Number($("cal-points").value) : null }) });
       calJob = job_id;
       $("calibrate").disabled = true;
       $("cal-cancel").hidden = false;
