@@ -26,7 +26,8 @@ import numpy as np
 
 from .._validation import check_choice
 from ..errors import ValidationError
-from .perception import MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts
+from .perception import (MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts, felt_threshold,
+                         funneling_weights, weighted_centre)
 
 __all__ = ["Hypothesis", "register_hypothesis", "hypothesis", "available_hypotheses", "DEFAULT_HYPOTHESIS",
            "GRID_MARGIN_M", "PEAK_SOFTNESS_DB", "hypothesis_fits"]
@@ -147,7 +148,7 @@ class Hypothesis:
         """
         base = central_percepts(energy, points_xy, model, traits, actuator_energy, actuators_xy)
         e = np.atleast_2d(np.asarray(energy, dtype=float))
-        e_thr = 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)
+        e_thr = felt_threshold(model, traits)
         position, spread, felt = base.position_m, base.spread_m, base.felt
         if self.readout == "grid-peak":
             if locations_xy is None:
@@ -157,9 +158,8 @@ class Hypothesis:
         if self.level_reliability:
             # Recruited activity in units of the reference tap felt at one point: a stimulus
             # recruiting as much has half the full reliability (an assumption of form).
-            w = np.clip(e / e_thr - 1.0, 0.0, None) ** model.funneling_exponent
-            ref = max(1.0 / e_thr - 1.0, 0.0) ** model.funneling_exponent
-            activity = w.sum(axis=1)
+            activity = funneling_weights(e, e_thr, model.funneling_exponent).sum(axis=1)
+            ref = float(funneling_weights(np.ones((1, 1)), e_thr, model.funneling_exponent)[0, 0])
             reliability = np.where(felt, activity / (activity + max(ref, 1e-12)), np.nan)
         conflict = base.conflict_m
         if conflict is not None:
@@ -177,12 +177,7 @@ def _grid_peak(e: np.ndarray, e_thr: float, xy: np.ndarray, locations: np.ndarra
     top = np.where(above, level, -np.inf).max(axis=1, initial=-np.inf)
     with np.errstate(invalid="ignore", over="ignore"):
         w = np.where(above, np.exp((level - np.where(felt, top, 0.0)[:, None]) / PEAK_SOFTNESS_DB), 0.0)
-    total = w.sum(axis=1)
-    safe = np.where(total > 0, total, 1.0)[:, None]
-    pts = xy[inside]
-    pos = (w @ pts) / safe
-    d2 = np.sum((pts[None, :, :] - pos[:, None, :]) ** 2, axis=2)
-    spread = np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0])
+    pos, spread, _ = weighted_centre(w, xy[inside])
     pos[~felt] = np.nan
     spread[~felt] = np.nan
     return pos, spread, felt

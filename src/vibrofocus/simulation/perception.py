@@ -471,16 +471,29 @@ class Percepts:
     reliability: np.ndarray | None = None
 
 
-def _energy_law(e: np.ndarray, e_thr: float, xy: np.ndarray, exponent: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Energy-law position (n, 2), spread (n,) and total weight (n,) of sources at ``xy``."""
+def felt_threshold(model: PerceptualModel, traits: Traits) -> float:
+    """A participant's detection threshold as a felt energy re the reference tap (linear)."""
+    return 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)
+
+
+def funneling_weights(e: np.ndarray, e_thr: float, exponent: float) -> np.ndarray:
+    """Central integration weights ``(E / E_thr - 1)^gamma`` of felt energies, 0 below threshold."""
     w = np.clip(e / e_thr - 1.0, 0.0, None)
-    if exponent != 1.0:
-        w = w**exponent
+    return w**exponent if exponent != 1.0 else w
+
+
+def weighted_centre(w: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Weighted position (n, 2), RMS spread (n,) and total weight (n,) of points ``xy`` (m)."""
     total = w.sum(axis=1)
     safe = np.where(total > 0, total, 1.0)[:, None]
     pos = (w @ xy) / safe
     d2 = np.sum((xy[None, :, :] - pos[:, None, :]) ** 2, axis=2)
     return pos, np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0]), total
+
+
+def _energy_law(e: np.ndarray, e_thr: float, xy: np.ndarray, exponent: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Energy-law position (n, 2), spread (n,) and total weight (n,) of sources at ``xy``."""
+    return weighted_centre(funneling_weights(e, e_thr, exponent), xy)
 
 
 def central_percepts(
@@ -506,7 +519,7 @@ def central_percepts(
         m.
     """
     e = np.atleast_2d(np.asarray(energy, dtype=float))
-    e_thr = 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)  # threshold, re reference
+    e_thr = felt_threshold(model, traits)
     pos, spread, total = _energy_law(e, e_thr, points_xy, model.funneling_exponent)
     felt = total > 0
     conflict = np.zeros(len(e))
