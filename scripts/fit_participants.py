@@ -285,16 +285,15 @@ def adopt(paths: list[Path], versions: list[str]) -> int:
     """Round the fits, score each on the held-out seeds, write hypotheses_fit.json; 0 on success."""
     bank = default_bank()
     wanted = dict(v.partition("=")[::2] for v in versions)
+    loaded = {path: json.loads(path.read_text(encoding="utf-8")) for path in paths}
+    default = PerceptualModel().to_dict()
     fits, scores = {}, {}
-    for path in paths:
-        fit = json.loads(path.read_text(encoding="utf-8"))
-        if fits and (fit["weights"], fit["budget"]) != (first["weights"], first["budget"]):
+    for path, fit in loaded.items():
+        if (fit["weights"], fit["budget"]) != (loaded[paths[0]]["weights"], loaded[paths[0]]["budget"]):
             raise SystemExit(f"{path}: fitted with another budget or weights than {paths[0]}; fit all alike")
-        first = first if fits else fit
         name = hypothesis(fit["hypothesis"]).name
         if fit["levels"] != bank.levels:
             raise SystemExit(f"{path}: fitted at {fit['levels']} levels, the shipped bank is at {bank.levels} levels")
-        default = PerceptualModel().to_dict()
         fixed = {k: _rounded(v) for k, v in fit["model"].items()
                  if k not in ("version", "integration_s") and _rounded(v) != _rounded(default[k])}
         model = PerceptualModel().replace(**fixed)

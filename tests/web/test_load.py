@@ -115,16 +115,23 @@ def test_idle_connections_up_to_the_cap_do_not_stop_a_participant(capped):
     assert srv.log.stat().st_size < 20_000, "the log grew under idle connections"
 
 
-def test_beyond_the_cap_of_busy_connections_a_clear_refusal(capped):
-    srv = capped
-    s = srv.plan("P02", 1)
+def _busy_long_polls(srv, participant: str) -> list[socket.socket]:
+    """CAP connections, each with a participant long-poll in progress (a planned session's
+    state does not change, so none of them returns before its 10 s wait)."""
+    s = srv.plan(participant, 1)
     sid, key = s["session_id"], s["participant_url"].split("key=")[1]
     busy = []
-    for _ in range(CAP):  # long-polls: each connection has a request in progress
+    for _ in range(CAP):
         sock = socket.create_connection(("127.0.0.1", srv.port))
         sock.sendall(f"GET /api/participant/{sid}/state?after=0&wait=10 HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                      f"X-Participant-Key: {key}\r\n\r\n".encode())
         busy.append(sock)
+    return busy
+
+
+def test_beyond_the_cap_of_busy_connections_a_clear_refusal(capped):
+    srv = capped
+    busy = _busy_long_polls(srv, "P02")
     # A planned session's state does not change: every long-poll stays open.
     time.sleep(0.5)
     try:
@@ -221,14 +228,7 @@ def test_the_emergency_stop_answers_during_a_slow_body_attack(capped):
 
 def test_a_reserved_slot_keeps_the_emergency_stop_when_every_connection_is_busy(capped):
     srv = capped
-    s = srv.plan("P03", 1)
-    sid, key = s["session_id"], s["participant_url"].split("key=")[1]
-    busy = []
-    for _ in range(CAP):  # long-polls: real work in progress on every connection
-        sock = socket.create_connection(("127.0.0.1", srv.port))
-        sock.sendall(f"GET /api/participant/{sid}/state?after=0&wait=10 HTTP/1.1\r\nHost: 127.0.0.1\r\n"
-                     f"X-Participant-Key: {key}\r\n\r\n".encode())
-        busy.append(sock)
+    busy = _busy_long_polls(srv, "P03")
     time.sleep(0.5)
     try:
         for _ in range(3):
