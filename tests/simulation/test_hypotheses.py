@@ -59,6 +59,34 @@ def test_the_grid_peak_is_where_it_felt_most_intense_inside_the_grid_area():
         hypothesis("grid-peak").percepts(e, GRID, MODEL, TRAITS)
 
 
+def test_a_tap_felt_only_under_an_actuator_is_felt_and_placed_on_the_grid_area_nearest_it():
+    # Felt far above threshold under the actuator at (-25, 25) mm, below threshold everywhere
+    # inside the grid area (+-15 mm): the participant felt it, and the most intense place on
+    # the numbered area is its corner nearest that actuator, not a guess from the prior.
+    thr = 10.0 ** (-MODEL.sl_ref_db / 10.0)  # TRAITS has no threshold offset
+    d2 = np.sum((GRID - (-25e-3, 25e-3)) ** 2, axis=1)
+    e = (30.0 * thr * np.exp(-d2 / (2 * 4e-3**2)) + 1e-9 * thr)[None]
+    inside = np.all(np.abs(GRID) <= 15e-3 + 1e-12, axis=1)
+    assert e[0, inside].max() < thr < e[0].max()
+    peak = hypothesis("grid-peak").percepts(e, GRID, MODEL, TRAITS, locations_xy=LOCATIONS)
+    assert peak.felt[0]
+    x, y = peak.position_m[0]
+    assert -15e-3 <= x < -10e-3 and 10e-3 < y <= 15e-3
+    # Nothing felt anywhere: not felt (the answer comes from the prior).
+    quiet = hypothesis("grid-peak").percepts(1e-3 * thr * np.ones((1, GRID.shape[0])), GRID, MODEL, TRAITS,
+                                             locations_xy=LOCATIONS)
+    assert not quiet.felt[0] and np.isnan(quiet.position_m[0]).all()
+
+
+def test_the_fast_path_records_the_share_of_taps_felt():
+    bank = default_bank()
+    loud = simulate_cell_means(3, np.random.default_rng(5), bank=bank, model=PerceptualModel().replace(sl_ref_db=60.0))
+    np.testing.assert_array_equal(loud.felt, np.ones(3))
+    # A reference tap at threshold: the bank's taps (all weaker than it at most points) go unfelt.
+    faint = simulate_cell_means(3, np.random.default_rng(5), bank=bank, model=PerceptualModel().replace(sl_ref_db=-20.0))
+    assert faint.felt.shape == (3,) and faint.felt.max() < 0.5
+
+
 def test_level_reliability_grows_with_the_recruited_activity():
     h = hypothesis("level-reliability")
     quiet, loud = bump((0.0, 0.0), 3.0), bump((0.0, 0.0), 300.0)
@@ -117,6 +145,15 @@ def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_and_the_d
         assert h.model() == PerceptualModel().replace(**fit["model"])
         # Held-out seeds are disjoint from the fit's.
         assert set(range(*fit["held_out_seeds"])).isdisjoint(range(*fit["fit_seeds"]))
+
+
+def test_under_every_shipped_hypothesis_the_participants_feel_the_papers_taps():
+    # The paper's participants answered every tap (no "not felt" answer, no missed taps
+    # reported): a fit whose participants guess on unfelt taps is refused by its objective.
+    bank = default_bank()
+    for name in available_hypotheses():
+        felt = simulate_cell_means(20, np.random.default_rng(11), bank=bank, hypothesis=name).felt
+        assert felt.mean() >= 0.99, (name, felt.mean())
 
 
 def test_a_hypothesis_must_be_a_word_with_a_known_readout():

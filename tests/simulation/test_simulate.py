@@ -157,7 +157,9 @@ def test_analysis_reads_the_export(simulated, tmp_path):
     assert len(levels) == 27 and {r["levels"] for r in levels.values()} == {"paper"}
     assert levels[("funneling", 5)]["drive_peak_v"] == pytest.approx(2.5)
     assert all(levels[("inverse", t)]["drive_peak_v"] > levels[("funneling", t)]["drive_peak_v"] for t in range(1, 10))
-    assert "hypothesis v3-centroid" in report["simulated"]["model"]
+    from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS
+
+    assert f"hypothesis {DEFAULT_HYPOTHESIS} v" in report["simulated"]["model"]
 
 
 def test_other_methods_are_studied_and_a_resume_keeps_them(tmp_path):

@@ -225,11 +225,15 @@ class StudyArrays:
         Study 2: mean number of selected locations.
     count_hit : ndarray, shape (n_participants, n_locations, n_methods)
         Study 2, trials whose selection contains the target only (NaN: no such trial).
+    felt : ndarray, shape (n_participants,), optional
+        Share of the stimuli each participant felt (anywhere on the skin); None where not
+        recorded.
     """
 
     error_mm: np.ndarray
     count: np.ndarray
     count_hit: np.ndarray
+    felt: np.ndarray | None = None
 
 
 def simulate_cell_means(
@@ -290,6 +294,7 @@ def simulate_cell_means(
     targets = loc_idx[cell_l]
     shape = (n_participants, n_l, n_m)
     err, cnt, cnt_hit = np.empty(shape), np.empty(shape), np.empty(shape)
+    felt = np.empty(n_participants)
     locs_mm = b.locations_xy * 1e3
     n_cell = n_l * n_m
     flat = cell_l * n_m + cell_m
@@ -298,6 +303,7 @@ def simulate_cell_means(
         energy = b.energy[forearms[i]].reshape(-1, b.points_xy.shape[0])
         own = b.actuator_energy[forearms[i]].reshape(-1, b.actuators_xy.shape[0])
         per = h.percepts(energy, b.points_xy, m, traits, own, b.actuators_xy, b.locations_xy)
+        felt[i] = per.felt[stim].mean()
         a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
         e = np.linalg.norm(locs_mm[a1] - locs_mm[targets], axis=1)
@@ -308,4 +314,4 @@ def simulate_cell_means(
         nh = np.bincount(flat[hit], minlength=n_cell)
         with np.errstate(invalid="ignore", divide="ignore"):
             cnt_hit[i] = (np.bincount(flat[hit], k[hit], n_cell) / nh).reshape(n_l, n_m)
-    return StudyArrays(err, cnt, cnt_hit)
+    return StudyArrays(err, cnt, cnt_hit, felt)

@@ -153,7 +153,9 @@ class Hypothesis:
         if self.readout == "grid-peak":
             if locations_xy is None:
                 raise ValidationError(f"hypothesis {self.name!r} needs the locations (the grid area)")
-            position, spread, felt = _grid_peak(e, e_thr, np.asarray(points_xy, float), np.asarray(locations_xy, float))
+            position, spread = _grid_peak(e, np.asarray(points_xy, float), np.asarray(locations_xy, float))
+            position[~felt] = np.nan
+            spread[~felt] = np.nan
         reliability = None
         if self.level_reliability:
             # Recruited activity in units of the reference tap felt at one point: a stimulus
@@ -167,20 +169,19 @@ class Hypothesis:
         return Percepts(position, spread, felt, conflict, reliability)
 
 
-def _grid_peak(e: np.ndarray, e_thr: float, xy: np.ndarray, locations: np.ndarray):
-    """Soft peak of the felt level inside the grid area: position (n, 2), spread (n,), felt (n,)."""
+def _grid_peak(e: np.ndarray, xy: np.ndarray, locations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Soft peak of the felt level inside the grid area: position (n, 2) and spread (n,), m.
+
+    Whether a stimulus is felt is decided on the whole skin (a tap felt under a cone is
+    felt); where it felt most intense is read on the grid area the participant answers
+    on, relative to the largest level there, whether or not that level is above threshold.
+    """
     lo, hi = locations.min(axis=0) - GRID_MARGIN_M, locations.max(axis=0) + GRID_MARGIN_M
     inside = np.all((xy >= lo - 1e-12) & (xy <= hi + 1e-12), axis=1)
-    level = 10.0 * np.log10(np.maximum(e[:, inside], 1e-30) / e_thr)  # dB above threshold
-    above = level > 0
-    felt = above.any(axis=1)
-    top = np.where(above, level, -np.inf).max(axis=1, initial=-np.inf)
-    with np.errstate(invalid="ignore", over="ignore"):
-        w = np.where(above, np.exp((level - np.where(felt, top, 0.0)[:, None]) / PEAK_SOFTNESS_DB), 0.0)
+    level = 10.0 * np.log10(np.maximum(e[:, inside], 1e-30))  # dB re the reference tap
+    w = np.exp((level - level.max(axis=1, keepdims=True)) / PEAK_SOFTNESS_DB)
     pos, spread, _ = weighted_centre(w, xy[inside])
-    pos[~felt] = np.nan
-    spread[~felt] = np.nan
-    return pos, spread, felt
+    return pos, spread
 
 
 def register_hypothesis(h: Hypothesis, *, replace: bool = False) -> Hypothesis:

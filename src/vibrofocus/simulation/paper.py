@@ -193,17 +193,19 @@ def seed_statistics(
     Returns
     -------
     list of dict
-        :func:`~vibrofocus.simulation.power.study_statistics` of each study.
+        :func:`~vibrofocus.simulation.power.study_statistics` of each study, with
+        ``felt_share``: the share of the trials whose stimulus the participant felt.
     """
     b = bank if bank is not None else default_bank()
     from .hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(hypothesis)
     m = model or h.model()
-    return [study_statistics(simulate_cell_means(n_participants, np.random.default_rng([int(s), 16]), bank=b, model=m,
-                                                 hypothesis=h),
-                             methods=b.methods)
-            for s in seeds]
+    out = []
+    for s in seeds:
+        arrays = simulate_cell_means(n_participants, np.random.default_rng([int(s), 16]), bank=b, model=m, hypothesis=h)
+        out.append({**study_statistics(arrays, methods=b.methods), "felt_share": float(np.mean(arrays.felt))})
+    return out
 
 
 def _interval(values: np.ndarray, level: float) -> tuple[float, float, float]:
