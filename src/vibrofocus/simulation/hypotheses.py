@@ -163,10 +163,9 @@ class Hypothesis:
             activity = funneling_weights(e, e_thr, model.funneling_exponent).sum(axis=1)
             ref = float(funneling_weights(np.ones((1, 1)), e_thr, model.funneling_exponent)[0, 0])
             reliability = np.where(felt, activity / (activity + max(ref, 1e-12)), np.nan)
-        conflict = base.conflict_m
-        if conflict is not None:
-            conflict = np.where(felt, np.nan_to_num(conflict), np.nan)
-        return Percepts(position, spread, felt, conflict, reliability)
+        # Every hypothesis detects on the whole skin, so v3's conflict (NaN where nothing is
+        # felt) serves as it is.
+        return Percepts(position, spread, felt, base.conflict_m, reliability)
 
 
 def _grid_peak(e: np.ndarray, xy: np.ndarray, locations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
