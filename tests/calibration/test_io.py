@@ -8,20 +8,14 @@ import xarray as xr
 from vibrofocus.calibration import SCHEMA_VERSION, load_calibration, save_calibration
 from vibrofocus.errors import CalibrationFileError
 
+from ._netcdf import rewrite_netcdf
+
 
 @pytest.fixture(scope="module")
 def saved(fir_calibration, tmp_path_factory):
     path = tmp_path_factory.mktemp("cal") / "P01.nc"
     save_calibration(fir_calibration[1], path)
     return path
-
-
-def _rewrite(src, dst, edit):
-    """Load the file with xarray, change it, write it back as netCDF4."""
-    with xr.open_dataset(src, engine="h5netcdf") as ds:
-        ds = edit(ds.load())
-    ds.to_netcdf(dst, engine="h5netcdf")
-    return dst
 
 
 def test_round_trip_is_identical(fir_calibration, saved):
@@ -102,7 +96,7 @@ def test_unknown_schema_version(saved, tmp_path, version, match):
         ds.attrs["schema_version"] = np.int32(version)
         return ds
 
-    bad = _rewrite(saved, tmp_path / "v.nc", edit)
+    bad = rewrite_netcdf(saved, tmp_path / "v.nc", edit)
     with pytest.raises(CalibrationFileError, match=f"schema version {version}.*{match}"):
         load_calibration(bad)
 
@@ -112,14 +106,14 @@ def test_nan_in_stored_matrix_is_named_with_its_location(saved, tmp_path):
         ds["H_imag"][100, 4, 2] = np.nan
         return ds
 
-    bad = _rewrite(saved, tmp_path / "nan.nc", edit)
+    bad = rewrite_netcdf(saved, tmp_path / "nan.nc", edit)
     f = np.fft.rfftfreq(4096, 1e-4)[100]
     with pytest.raises(CalibrationFileError, match=rf"H_imag holds 1 NaN/Inf.*{f:g} Hz, point 5, actuator A3"):
         load_calibration(bad)
 
 
 def test_point_missing_from_the_data(saved, tmp_path):
-    bad = _rewrite(saved, tmp_path / "missing.nc", lambda ds: ds.drop_sel(point="G2"))
+    bad = rewrite_netcdf(saved, tmp_path / "missing.nc", lambda ds: ds.drop_sel(point="G2"))
     with pytest.raises(CalibrationFileError, match="point.s. G2 of the layout are missing from the data"):
         load_calibration(bad)
 
@@ -130,7 +124,7 @@ def test_point_moved(saved, tmp_path):
         return ds
 
     with pytest.raises(CalibrationFileError, match="point positions"):
-        load_calibration(_rewrite(saved, tmp_path / "moved.nc", edit))
+        load_calibration(rewrite_netcdf(saved, tmp_path / "moved.nc", edit))
 
 
 @pytest.mark.parametrize(
@@ -147,7 +141,7 @@ def test_point_moved(saved, tmp_path):
 )
 def test_inconsistent_contents_are_refused(saved, tmp_path, edit, match):
     with pytest.raises(CalibrationFileError, match=match):
-        load_calibration(_rewrite(saved, tmp_path / "bad.nc", edit))
+        load_calibration(rewrite_netcdf(saved, tmp_path / "bad.nc", edit))
 
 
 def test_save_into_a_missing_folder_is_refused(fir_calibration, tmp_path):

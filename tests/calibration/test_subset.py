@@ -13,6 +13,8 @@ from vibrofocus.demo.trust import tap_band
 from vibrofocus.errors import CalibrationFileError, ValidationError
 from vibrofocus.skin import SimulatedForearm
 
+from ._netcdf import rewrite_netcdf
+
 
 def _labels(layout, idx):
     return [layout.point_labels[i] for i in idx]
@@ -139,13 +141,6 @@ def test_the_file_says_which_rows_are_measured(subset, tmp_path):
     assert back.quality.by_check("predicted") == subset.quality.by_check("predicted")
 
 
-def _rewrite(src, dst, edit):
-    with xr.open_dataset(src, engine="h5netcdf") as ds:
-        ds = edit(ds.load())
-    ds.to_netcdf(dst, engine="h5netcdf")
-    return dst
-
-
 def test_a_full_calibration_file_marks_every_row_measured(fir_calibration, tmp_path):
     _, cal = fir_calibration
     assert cal.measured is None and cal.measured_points.all() and cal.predicted_points.size == 0
@@ -154,7 +149,7 @@ def test_a_full_calibration_file_marks_every_row_measured(fir_calibration, tmp_p
         assert (ds["point_measured"].values == 1).all()
     assert load_calibration(path).measured is None
     # A file from before the variable loads as every row measured.
-    old = _rewrite(path, tmp_path / "old.nc", lambda ds: ds.drop_vars("point_measured"))
+    old = rewrite_netcdf(path, tmp_path / "old.nc", lambda ds: ds.drop_vars("point_measured"))
     assert load_calibration(old).measured is None
 
 
@@ -166,7 +161,7 @@ def test_a_full_calibration_file_marks_every_row_measured(fir_calibration, tmp_p
 def test_a_hostile_point_measured_is_refused(fir_calibration, tmp_path, values, match):
     _, cal = fir_calibration
     path = save_calibration(cal, tmp_path / "full.nc")
-    bad = _rewrite(path, tmp_path / "bad.nc",
+    bad = rewrite_netcdf(path, tmp_path / "bad.nc",
                    lambda ds: ds.assign(point_measured=("point", np.asarray(values, np.int8))))
     with pytest.raises(CalibrationFileError, match=match):
         load_calibration(bad)

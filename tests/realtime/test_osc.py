@@ -17,18 +17,15 @@ from pythonosc.udp_client import SimpleUDPClient  # noqa: E402
 
 from vibrofocus.realtime import OscTapServer, TapDesigner  # noqa: E402
 from vibrofocus.rendering import TransferMatrix  # noqa: E402
-from vibrofocus.rigs import make_rig  # noqa: E402
 
-#: A coarse model grid keeps the fixture quick; the designer's own test checks the fine one.
-PITCH_M = 5e-3
+from ._designer import simulated_designer  # noqa: E402
+
 REPLY_S = 30.0
 
 
 @pytest.fixture(scope="module")
 def rig_and_designer():
-    rig = make_rig("simulated", seed=3)
-    tm = TransferMatrix.from_model(rig, rig.layout, rig.fs)
-    designer = TapDesigner(tm, rig, method="inverse", limit_v=rig.limits.peak_v, grid_pitch_m=PITCH_M)
+    rig, designer = simulated_designer()
     designer.prepare_grid()
     return rig, designer
 

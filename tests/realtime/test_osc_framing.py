@@ -20,11 +20,11 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 from pythonosc.osc_message import OscMessage  # noqa: E402
 
-from vibrofocus.realtime import OscTapServer, TapDesigner  # noqa: E402
+from vibrofocus.realtime import OscTapServer  # noqa: E402
 from vibrofocus.realtime.osc_framing import (MAX_BUNDLE_DEPTH, MAX_ELEMENTS, FramingError,  # noqa: E402
                                              check_framing, parse_datagram)
-from vibrofocus.rendering import TransferMatrix  # noqa: E402
-from vibrofocus.rigs import make_rig  # noqa: E402
+
+from ._designer import simulated_designer  # noqa: E402
 
 #: A parse that has not returned after this long never will (a few ms is the norm), s.
 PARSE_BOUND_S = 10.0
@@ -161,9 +161,7 @@ def test_fuzz_every_datagram_is_parsed_or_refused_in_bounded_time_and_silently(d
 
 
 def test_a_server_answers_the_negative_size_datagram_error_and_the_next_tap_plays(caplog):
-    rig = make_rig("simulated", seed=3)
-    tm = TransferMatrix.from_model(rig, rig.layout, rig.fs)
-    designer = TapDesigner(tm, rig, method="inverse", limit_v=rig.limits.peak_v, grid_pitch_m=5e-3)
+    rig, designer = simulated_designer()
     server = OscTapServer(rig, designer, port=0)
     thread = threading.Thread(target=server.serve, daemon=True)
     thread.start()

@@ -13,19 +13,17 @@ pytest.importorskip("pythonosc")
 from pythonosc.osc_message import OscMessage  # noqa: E402
 from pythonosc.udp_client import SimpleUDPClient  # noqa: E402
 
-from vibrofocus.realtime import PLAYED_FIELDS, OscTapServer, TapDesigner, TapLog, read_tap_log  # noqa: E402
-from vibrofocus.rendering import TransferMatrix  # noqa: E402
+from vibrofocus.realtime import PLAYED_FIELDS, OscTapServer, TapLog, read_tap_log  # noqa: E402
 from vibrofocus.rigs import make_rig  # noqa: E402
 
-PITCH_M = 5e-3
+from ._designer import simulated_designer  # noqa: E402
+
 REPLY_S = 30.0
 
 
 @pytest.fixture(scope="module")
 def designer():
-    rig = make_rig("simulated", seed=3)
-    tm = TransferMatrix.from_model(rig, rig.layout, rig.fs)
-    designer = TapDesigner(tm, rig, method="inverse", limit_v=rig.limits.peak_v, grid_pitch_m=PITCH_M)
+    _, designer = simulated_designer()
     designer.prepare_grid()
     return designer
 
