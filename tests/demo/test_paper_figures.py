@@ -97,3 +97,21 @@ def test_fig4_names_the_drive_by_its_lobes(tmp_path, keep_figures):
                                tmp_path / "fig4.png")
     title = keep_figures[-1].axes[1].get_title()
     assert "burst of" in title and "one wavelet" not in title
+
+
+@pytest.mark.slow
+def test_figs_6_and_7_name_the_simulated_participants_model_and_hypothesis(tmp_path, monkeypatch):
+    from vibrofocus.demo import paper_figures
+    from vibrofocus.simulation.hypotheses import hypothesis
+
+    saved = []  # every figure the module saves (Figs. 6-7 are not pyplot's, so nothing closes them)
+    original = paper_figures.save_figure
+    monkeypatch.setattr(paper_figures, "save_figure", lambda fig, path, **kw: saved.append(fig) or original(fig, path, **kw))
+    paths = paper_figures.write_paper_figures(tmp_path, participants=1)
+    assert [p.name for p in paths][-2:] == ["paper_fig6.png", "paper_fig7.png"]
+    label = hypothesis().label()  # the default hypothesis, with its version and fit
+    captions = [t.get_text() for fig in saved for t in fig.texts if t.get_gid() == "caption"]
+    simulated = [c for c in captions if "reports 20 people" in c]  # Figs. 6 and 7
+    assert len(simulated) == 2
+    for caption in simulated:
+        assert label[1:] in caption and "model v3" in caption and "not data" in caption

@@ -41,6 +41,11 @@ def _caption(fig, text: str) -> None:
     fig.text(0.01, 0.005, text, fontsize=7.5, color="0.25", ha="left", va="bottom", wrap=True, gid="caption")
 
 
+def _model_caption(model: str) -> str:
+    """Caption of a figure drawn from simulated participants: their model and hypothesis."""
+    return f"{model[:1].upper()}{model[1:]}. The paper ({PAPER}) reports 20 people."
+
+
 def _lobes(x: np.ndarray, share: float = 0.2) -> int:
     """Lobes of ``x`` (runs of one sign) whose peak reaches ``share`` of the largest; a Ricker has 3."""
     x = np.asarray(x, dtype=float)
@@ -227,31 +232,32 @@ def _symmetry_note(result: DemoResult, location: int, methods: Sequence[str]) ->
             "alike.")
 
 
-def fig6_localization(positions, layout, path: Path, *, n_participants: int) -> Path:
+def fig6_localization(positions, layout, path: Path, *, n_participants: int, model: str) -> Path:
     """Fig. 6: mean perceived position and 1-SD ellipse per target and method.
 
     The figure of ``vibrofocus analyze`` (:func:`~vibrofocus.analysis.plot_localization`),
-    captioned as model output.
+    captioned as model output with ``model``: the label of the simulated participants'
+    model and hypothesis (the trials' ``model`` column).
     """
     from ..analysis.figures import plot_localization
 
     fig = plot_localization(positions, layout, title="Fig. 6 layout: Study 1, perceived positions "
                                                      f"({n_participants} simulated participants)")
-    _caption(fig, f"Simulated participants: a perceptual model, not data. The paper ({PAPER}) reports 20 people.")
+    _caption(fig, _model_caption(model))
     return save_figure(fig, path)
 
 
-def fig7_counts(counts, counts_hit, path: Path, *, n_participants: int) -> Path:
+def fig7_counts(counts, counts_hit, path: Path, *, n_participants: int, model: str) -> Path:
     """Fig. 7: selected-location counts per target and method (Study 2).
 
     The figure of ``vibrofocus analyze`` (:func:`~vibrofocus.analysis.plot_counts`),
-    captioned as model output.
+    captioned as model output with ``model`` (as :func:`fig6_localization`).
     """
     from ..analysis.figures import plot_counts
 
     fig = plot_counts(counts, counts_hit)
     fig.suptitle(f"Fig. 7 layout: Study 2, locations selected ({n_participants} simulated participants)")
-    _caption(fig, f"Simulated participants: a perceptual model, not data. The paper ({PAPER}) reports 20 people.")
+    _caption(fig, _model_caption(model))
     return save_figure(fig, path)
 
 
@@ -304,11 +310,13 @@ def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12,
         with StudyStore(db) as store:
             store.export_trials_csv(Path(tmp) / "trials.csv")
         analysis = analyze(load_trials(Path(tmp) / "trials.csv"))
+    model = "; ".join(analysis.simulated_models)  # the trials' own label: model, hypothesis, version
     if analysis.study1 is not None:
         paths.append(fig6_localization(analysis.study1.positions, analysis.layout, out / "paper_fig6.png",
-                                       n_participants=len(analysis.study1.participants)))
+                                       n_participants=len(analysis.study1.participants), model=model))
     if analysis.study2 is not None:
         hit = analysis.study2.contains_target.counts
         paths.append(fig7_counts(analysis.study2.all_trials.counts, hit if len(hit) else None,
-                                 out / "paper_fig7.png", n_participants=len(analysis.study2.all_trials.participants)))
+                                 out / "paper_fig7.png", n_participants=len(analysis.study2.all_trials.participants),
+                                 model=model))
     return paths
