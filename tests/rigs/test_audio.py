@@ -571,10 +571,17 @@ def test_devices_check_tone_plays_one_percent_of_full_scale(jack_server, tmp_pat
 
     cfg = tmp_path / "lab.json"
     cfg.write_text(json.dumps(jack_config()))
-    with _LoopbackRecorder(channels=(1, 2)) as recorder:
-        r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(cfg), "--tone",
-                            "--tone-s", "1", "--json"], capture_output=True, text=True, timeout=60)
-        time.sleep(3 * JACK_PERIOD / JACK_RATE)
+    # A tone the stream reports samples lost for is discarded and the command says "retry"
+    # (refusing is tested in test_stream_xrun_discards_the_recording); the JACK dummy driver
+    # beside a loaded test run can lose a period, so a lost take is taken again, as a user
+    # would, with a fresh recorder. Every check below is on the one take that succeeded.
+    for _take in range(3):
+        with _LoopbackRecorder(channels=(1, 2)) as recorder:
+            r = subprocess.run([sys.executable, "-m", "vibrofocus", "devices", "--check", str(cfg), "--tone",
+                                "--tone-s", "1", "--json"], capture_output=True, text=True, timeout=60)
+            time.sleep(3 * JACK_PERIOD / JACK_RATE)
+        if r.returncode == 0 or "samples were lost" not in r.stderr:
+            break
     assert r.returncode == 0, r.stderr
     tone = json.loads(r.stdout)["tone"]
     assert tone["output_channel"] == 1 and tone["frequency_hz"] == 100.0
