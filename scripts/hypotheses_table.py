@@ -1,8 +1,8 @@
 #!/usr/bin/env python
 """Write the hypotheses' tables of docs/simulated-participants.md (Hypotheses).
 
-Every registered hypothesis, with its fitted parameters, simulates the same 20 studies of
-20 participants (held-out seeds 500-519, never used by the fit) on a feature bank (default
+Every registered hypothesis, with its fitted parameters, simulates the same 40 studies of
+20 participants (the fit's held-out seeds, ``fit_participants.HELD_OUT_SEEDS``) on a feature bank (default
 the shipped one). Two tables (a model, not data):
 
 - ``hypotheses-measured``: with the fast path and the vectorized statistics, per
@@ -29,10 +29,11 @@ import numpy as np
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS, available_hypotheses, hypothesis, hypothesis_fits
 from vibrofocus.simulation.power import study_statistics
+from fit_participants import FIT_SEEDS, HELD_OUT_SEEDS
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-participants.md"
-SEEDS = range(500, 520)
+SEEDS = HELD_OUT_SEEDS
 N = 20
 
 
@@ -81,8 +82,11 @@ def findings_markdown(bank: FeatureBank) -> str:
     lines.append("| Study 2 reduction of selected points, inverse vs funneling (paper: about 20 %), median [5th, 95th "
                  "percentile] | " + " | ".join(f"{np.median(v):.0%} [{np.percentile(v, 5):.0%}, "
                                              f"{np.percentile(v, 95):.0%}]" for v in red.values()) + " |")
-    for title, key in (("fit loss, the search's weights (fit seeds 1000-1015)", "loss_fit"),
-                       ("held-out loss, the standard objective (seeds 500-519; lowest: the default)", "loss_held_out")):
+    held = f"seeds {SEEDS.start}-{SEEDS.stop - 1}"
+    for title, key in ((f"fit loss, the search's weights (fit seeds {FIT_SEEDS.start}-{FIT_SEEDS.stop - 1})", "loss_fit"),
+                       (f"held-out loss, the standard objective, every finding weighted alike ({held}; lowest: "
+                        "the default)", "loss_held_out"),
+                       (f"held-out loss, the search's weights ({held})", "loss_held_out_search_weights")):
         lines.append(f"| {title} | " + " | ".join(f"{fits[n][key]:.3f}" if n in fits else "not fitted"
                                                   for n in names) + " |")
     return "\n".join(lines)

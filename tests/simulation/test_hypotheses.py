@@ -193,5 +193,6 @@ def test_the_recorded_held_out_losses_and_so_the_default_are_reproduced():
     fits = hypothesis_fits()["hypotheses"]
     for name, fit in fits.items():
         assert tuple(fit["held_out_seeds"]) == (HELD_OUT_SEEDS.start, HELD_OUT_SEEDS.stop)
-        again = loss(seed_statistics(None, HELD_OUT_SEEDS, hypothesis=name))  # the standard objective
-        np.testing.assert_allclose(again, fit["loss_held_out"], rtol=1e-3, atol=1e-4)
+        stats = seed_statistics(None, HELD_OUT_SEEDS, hypothesis=name)
+        np.testing.assert_allclose(loss(stats), fit["loss_held_out"], rtol=1e-3, atol=1e-4)  # the standard objective
+        np.testing.assert_allclose(loss(stats, fit["weights"]), fit["loss_held_out_search_weights"], rtol=1e-3, atol=1e-4)
