@@ -29,7 +29,7 @@ import numpy as np
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS, available_hypotheses, hypothesis, hypothesis_fits
 from vibrofocus.simulation.power import study_statistics
-from fit_participants import FIT_SEEDS, HELD_OUT_SEEDS
+from fit_participants import HELD_OUT_SEEDS
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-participants.md"
@@ -82,11 +82,14 @@ def findings_markdown(bank: FeatureBank) -> str:
     lines.append("| Study 2 reduction of selected points, inverse vs funneling (paper: about 20 %), median [5th, 95th "
                  "percentile] | " + " | ".join(f"{np.median(v):.0%} [{np.percentile(v, 5):.0%}, "
                                              f"{np.percentile(v, 95):.0%}]" for v in red.values()) + " |")
-    held = f"seeds {SEEDS.start}-{SEEDS.stop - 1}"
-    for title, key in ((f"fit loss, the search's weights (fit seeds {FIT_SEEDS.start}-{FIT_SEEDS.stop - 1})", "loss_fit"),
-                       (f"held-out loss, the standard objective, every finding weighted alike ({held}; lowest: "
+    # The losses are those adopt recorded, on the seeds it recorded with them (the same for
+    # every fit: tests/simulation/test_hypotheses.py).
+    some = next(iter(fits.values()))
+    fit_seeds, held = (f"{a}-{b - 1}" for a, b in (some["fit_seeds"], some["held_out_seeds"]))
+    for title, key in ((f"fit loss, the search's weights (fit seeds {fit_seeds})", "loss_fit"),
+                       (f"held-out loss, the standard objective, every finding weighted alike (seeds {held}; lowest: "
                         "the default)", "loss_held_out"),
-                       (f"held-out loss, the search's weights ({held})", "loss_held_out_search_weights")):
+                       (f"held-out loss, the search's weights (seeds {held})", "loss_held_out_search_weights")):
         lines.append(f"| {title} | " + " | ".join(f"{fits[n][key]:.3f}" if n in fits else "not fitted"
                                                   for n in names) + " |")
     return "\n".join(lines)
