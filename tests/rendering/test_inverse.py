@@ -9,6 +9,7 @@ from scipy.signal import fftconvolve
 from vibrofocus import InverseOperator, inverse_filter
 from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
 from vibrofocus.rendering import DriveScaledWarning, WraparoundCheck, band_taper
+from vibrofocus.rendering.inverse import scale_to_peak
 from vibrofocus.signals import ricker
 
 from ._media import FS, delay_gain_medium, fir_medium, random_fir_taps
@@ -282,6 +283,22 @@ def test_drive_limit_refuse_and_scale(rng):
     within = inverse_filter(H, targets, FS, max_drive=2 * limit, check_wraparound=False)
     assert_allclose(within, free, rtol=0, atol=0)
 
+
+
+def test_scaled_drives_never_read_over_the_limit():
+    # drives * (limit / peak) rounds one ulp over the limit for some arrays (about 1 in 60
+    # of these); a drive scaled to the limit must peak at the limit, not just over it.
+    rng = np.random.default_rng(2026)
+    naive_over = 0
+    for _ in range(500):
+        drives = rng.standard_normal((4, 64)) * rng.uniform(0.1, 100.0)
+        limit = float(rng.uniform(0.5, 20.0))
+        naive_over += np.abs(drives * (limit / np.abs(drives).max())).max() > limit
+        scaled = scale_to_peak(drives, limit)
+        assert np.abs(scaled).max() <= limit
+        assert_allclose(np.abs(scaled).max(), limit, rtol=1e-15)
+        assert_allclose(scaled, drives * (limit / np.abs(drives).max()), rtol=1e-15, atol=0)
+    assert naive_over > 0  # the case this guards against occurs in the sample
 
 # ---------------------------------------------------------------- bad input (SPEC §10)
 @pytest.fixture

@@ -22,7 +22,8 @@ from ._pinv import SpectralPinv, _single_threaded_blas, small_gram
 from .causality import DEFAULT_WRAPAROUND_TOL, WraparoundCheck
 from .taper import design_grid
 
-__all__ = ["InverseOperator", "inverse_filter", "DesignReport", "DriveScaledWarning", "apply_drive_limit"]
+__all__ = ["InverseOperator", "inverse_filter", "DesignReport", "DriveScaledWarning", "apply_drive_limit",
+           "scale_to_peak"]
 
 
 class DriveScaledWarning(UserWarning):
@@ -304,6 +305,29 @@ def _check_same_transfer(wraparound: Any, H: np.ndarray, n: int) -> None:
         )
 
 
+def scale_to_peak(drives: np.ndarray, peak: float) -> np.ndarray:
+    """Scale ``drives`` so that their largest magnitude is ``peak``, never above it.
+
+    ``drives * (peak / max|drives|)`` can round one ulp over ``peak`` (about 1 in 60 random
+    arrays); the result is clipped to ``[-peak, peak]``, which moves only such samples, by
+    that ulp, so a drive scaled to a limit reads as the limit, not just over it.
+
+    Parameters
+    ----------
+    drives : ndarray, shape (n_actuators, n_samples)
+        Drives, V; not all zero.
+    peak : float
+        The wanted peak, V.
+
+    Returns
+    -------
+    ndarray, shape (n_actuators, n_samples)
+        A scaled copy.
+    """
+    out = drives * (peak / float(np.max(np.abs(drives))))
+    return np.clip(out, -peak, peak, out=out)
+
+
 def apply_drive_limit(drives: np.ndarray, max_drive: float | None, on_limit: str, what: str = "the design") -> tuple[np.ndarray, float, float]:
     """Refuse or scale drives whose peak exceeds ``max_drive``.
 
@@ -324,8 +348,7 @@ def apply_drive_limit(drives: np.ndarray, max_drive: float | None, on_limit: str
             f"{what} needs {needed:.4g} peak drive, over the limit max_drive={max_drive:.4g}; "
             "refused (ask for on_limit='scale' to scale it down, or lower the target amplitude)"
         )
-    scale = max_drive / needed
-    return drives * scale, scale, needed
+    return scale_to_peak(drives, max_drive), max_drive / needed, needed
 
 
 @_single_threaded_blas()  # one BLAS thread for the whole design (set once)

@@ -25,7 +25,7 @@ from .bound import contrast_bound
 from .causality import DEFAULT_WRAPAROUND_TOL
 from .contrast import taper_drive_ends
 from .design import Design
-from .inverse import apply_drive_limit, predict_response
+from .inverse import apply_drive_limit, predict_response, scale_to_peak
 from .taper import design_grid
 from .transfer import TransferMatrix
 
@@ -267,7 +267,7 @@ class Method:
         if self.scale_to_limit and not self.self_normalized:
             if needed == 0:
                 raise ValidationError(f"{what} gives silent drives: nothing to scale to the limit")
-            drives = drives * (self.limit_v / float(np.max(np.abs(drives))))
+            drives = scale_to_peak(drives, self.limit_v)
             scale = self.limit_v / needed
         predicted = predict_response(tm.H, drives)
         bound, bound_all = self._bounds(p) if self.bounds else (None, None)

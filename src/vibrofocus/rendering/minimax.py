@@ -41,7 +41,7 @@ from ..defaults import BAND_HZ
 from ..errors import InfeasibleDesignError, ValidationError
 from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
-from .inverse import _prepare_design, predict_response
+from .inverse import _prepare_design, predict_response, scale_to_peak
 from .metrics import zero_lag_fidelity
 from .timing import response_timing
 
@@ -726,7 +726,7 @@ class _Program:
         if max_drive is not None:
             peak = float(np.max(np.abs(drives)))
             if peak > max_drive:  # within tol: trim to the limit exactly
-                drives = drives * (max_drive / peak)
+                drives = scale_to_peak(drives, max_drive)
                 predicted = predicted * (max_drive / peak)
         yt = predicted[self.ti]
         fid = zero_lag_fidelity(yt, self.desired)

@@ -10,6 +10,7 @@ from .._validation import as_array, check_band, check_positive
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
 from ._checks import as_transfer, check_grid
+from .inverse import scale_to_peak
 from .taper import design_grid
 
 __all__ = ["time_reversal_drives"]
@@ -64,5 +65,5 @@ def time_reversal_drives(
         peak = np.max(np.abs(drives))
         if peak == 0:
             raise ValidationError("time reversal gives silent drives (targets zero in band, or H zero there)")
-        drives = drives * (max_drive / peak)
+        drives = scale_to_peak(drives, max_drive)
     return drives
