@@ -17,7 +17,7 @@ significant), the ranking of the mean errors (4, 5, 7, 8 best; 1 among the worst
 a hinge that keeps the share of taps felt at 99 % or more (the paper's participants
 answered every tap).
 
-    PYTHONPATH=src python scripts/fit_participants.py search --hypothesis NAME --out fit.json   # ~8 min
+    PYTHONPATH=src python scripts/fit_participants.py search --hypothesis NAME --out fit.json   # ~13 min (64 fit studies, three side by side on two cores)
     PYTHONPATH=src python scripts/fit_participants.py adopt fit-a.json fit-b.json ...
     PYTHONPATH=src python scripts/fit_participants.py report [--fit fit.json] [--hypothesis NAME]
     PYTHONPATH=src python scripts/fit_participants.py table [--seeds 20] [--check]

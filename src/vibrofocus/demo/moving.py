@@ -76,6 +76,7 @@ def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float
     MovingFocus
     """
     from ..rendering import render
+    from ..rendering.inverse import scale_to_peak
 
     start = as_array(start_xy, "start_xy", ndim=1, shape=(2,))
     end = as_array(end_xy, "end_xy", ndim=1, shape=(2,))
@@ -101,8 +102,9 @@ def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float
         total[:, i * step:i * step + n_samples] += r.drives
         onsets[i] = i * step / fs + r.t0
     peak = float(np.abs(total).max())
-    scale = min(1.0, limit_v / peak) if peak > 0 else 1.0
-    return MovingFocus(targets_xy=targets, onsets_s=onsets, drives=total * scale, fs=float(fs), scale=scale)
+    # Overlapping taps add up: the sum is scaled down to the limit (to it, never one rounding over).
+    drives, scale = (scale_to_peak(total, limit_v), limit_v / peak) if peak > limit_v else (total, 1.0)
+    return MovingFocus(targets_xy=targets, onsets_s=onsets, drives=drives, fs=float(fs), scale=scale)
 
 
 def write_moving_gif(focus: MovingFocus, arm, path, *, half_width_m: float = 0.025, n_grid: int = 41,
