@@ -68,6 +68,28 @@ def _wilcoxon_p(a: np.ndarray, b: np.ndarray) -> float:
     return float(stats.wilcoxon(d[d != 0]).pvalue) if np.count_nonzero(d) >= 2 else 1.0
 
 
+def study2_findings(count: np.ndarray, count_hit: np.ndarray) -> dict[str, float | bool]:
+    """Study 2's findings for one study from its cell means, shape (n_participants, 9, 3) each."""
+    out: dict[str, float | bool] = {}
+    out["s2_location"] = _friedman(count.mean(axis=2)) < ALPHA
+    cm = count.mean(axis=1)  # (n, 3)
+    out["s2_method"] = (_friedman(cm) < ALPHA and min(1.0, 3 * _wilcoxon_p(cm[:, INV], cm[:, FUN])) < ALPHA
+                        and cm[:, INV].mean() < cm[:, FUN].mean())
+    out["s2_reduction"] = float(1.0 - cm[:, INV].mean() / cm[:, FUN].mean())
+    # The paper's headline (abstract): about 20 % fewer points; 10-30 % counts as reproduced.
+    out["s2_headline"] = bool(out["s2_method"] and 0.10 <= out["s2_reduction"] <= 0.30)
+    # Target-containing trials: per-participant marginal means (averaged over the other
+    # factor's cells that have such a trial), so no participant is dropped for one empty cell.
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        hit_loc, hit_meth = np.nanmean(count_hit, axis=2), np.nanmean(count_hit, axis=1)
+    out["s2_hit_location_ns"] = not (_friedman(hit_loc) < ALPHA)
+    out["s2_hit_method_ns"] = not (_friedman(hit_meth) < ALPHA)
+    out["s2_hit_n_location"] = int(np.all(np.isfinite(hit_loc), axis=1).sum())
+    out["s2_hit_n_method"] = int(np.all(np.isfinite(hit_meth), axis=1).sum())
+    return out
+
+
 def findings(error: np.ndarray, count: np.ndarray, count_hit: np.ndarray) -> dict[str, float | bool]:
     """The findings for one study from its cell means, shape (n_participants, 9, 3) each."""
     with warnings.catch_warnings():
@@ -95,22 +117,7 @@ def findings(error: np.ndarray, count: np.ndarray, count_hit: np.ndarray) -> dic
     out["s1_interaction"] = p["l * m"] < ALPHA
     out["s1_interaction_at_139"] = p["l * m"] < ALPHA and all(at)
     out["s1_interaction_at_139_share"] = float(np.mean(at))
-    out["s2_location"] = _friedman(count.mean(axis=2)) < ALPHA
-    cm = count.mean(axis=1)  # (n, 3)
-    out["s2_method"] = (_friedman(cm) < ALPHA and min(1.0, 3 * _wilcoxon_p(cm[:, INV], cm[:, FUN])) < ALPHA
-                        and cm[:, INV].mean() < cm[:, FUN].mean())
-    out["s2_reduction"] = float(1.0 - cm[:, INV].mean() / cm[:, FUN].mean())
-    # The paper's headline (abstract): about 20 % fewer points; 10-30 % counts as reproduced.
-    out["s2_headline"] = bool(out["s2_method"] and 0.10 <= out["s2_reduction"] <= 0.30)
-    # Target-containing trials: per-participant marginal means (averaged over the other
-    # factor's cells that have such a trial), so no participant is dropped for one empty cell.
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        hit_loc, hit_meth = np.nanmean(count_hit, axis=2), np.nanmean(count_hit, axis=1)
-    out["s2_hit_location_ns"] = not (_friedman(hit_loc) < ALPHA)
-    out["s2_hit_method_ns"] = not (_friedman(hit_meth) < ALPHA)
-    out["s2_hit_n_location"] = int(np.all(np.isfinite(hit_loc), axis=1).sum())
-    out["s2_hit_n_method"] = int(np.all(np.isfinite(hit_meth), axis=1).sum())
+    out.update(study2_findings(count, count_hit))
     return out
 
 

@@ -247,6 +247,7 @@ def simulate_cell_means(
     locations: tuple[int, ...] | None = None,
     forearms: np.ndarray | None = None,
     hypothesis: Any = None,
+    rule: Any = None,
 ) -> StudyArrays:
     """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
 
@@ -270,6 +271,10 @@ def simulate_cell_means(
         How the participants read the felt field
         (:func:`~vibrofocus.simulation.hypotheses.hypothesis`; default
         :data:`~vibrofocus.simulation.hypotheses.DEFAULT_HYPOTHESIS`).
+    rule : callable, optional
+        How answers and selections follow from the posterior, in both studies (default
+        the model's, :func:`~vibrofocus.simulation.perception.posterior_ratio_rule`;
+        ``scripts/selection_rules.py`` compares others).
     """
     from .hypotheses import hypothesis as find_hypothesis
 
@@ -304,8 +309,8 @@ def simulate_cell_means(
         own = b.actuator_energy[forearms[i]].reshape(-1, b.actuators_xy.shape[0])
         per = h.percepts(energy, b.points_xy, m, traits, own, b.actuators_xy, b.locations_xy)
         felt[i] = per.felt[stim].mean()
-        a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
-        a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx)
+        a1, _, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx, rule=rule)
+        a2, sel, _ = draw_answers(per, stim, b.locations_xy, b.centre_xy, m, traits, rng, allowed=loc_idx, rule=rule)
         e = np.linalg.norm(locs_mm[a1] - locs_mm[targets], axis=1)
         err[i] = (np.bincount(flat, e, n_cell) / np.bincount(flat, minlength=n_cell)).reshape(n_l, n_m)
         k = sel[:, loc_idx].sum(axis=1)

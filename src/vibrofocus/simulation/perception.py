@@ -60,7 +60,7 @@ import json
 from dataclasses import asdict, dataclass, field
 from functools import lru_cache
 from importlib import resources
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -79,6 +79,11 @@ __all__ = [
     "felt_energy",
     "reference_felt_energy",
     "Percepts",
+    "TrialPosteriors",
+    "trial_posteriors",
+    "location_distances",
+    "select_locations",
+    "posterior_ratio_rule",
     "central_percepts",
     "draw_answers",
     "study2_rt",
@@ -536,6 +541,133 @@ def central_percepts(
     return Percepts(pos, spread, felt, conflict)
 
 
+@dataclass(frozen=True)
+class TrialPosteriors:
+    """A participant's belief about where each trial's tap was (central prior applied).
+
+    Attributes
+    ----------
+    perceived_m : ndarray, shape (n_trials, 2)
+        Posterior mean of the tap's place, m.
+    sd_m : ndarray, shape (n_trials,)
+        Posterior SD per axis, m (the prior's SD where nothing was felt).
+    felt : ndarray of bool, shape (n_trials,)
+        Whether the tap was felt.
+    """
+
+    perceived_m: np.ndarray
+    sd_m: np.ndarray
+    felt: np.ndarray
+
+
+def trial_posteriors(
+    percepts: Percepts,
+    index: np.ndarray,
+    centre_xy: np.ndarray,
+    model: PerceptualModel,
+    traits: Traits,
+    noise: np.ndarray,
+) -> TrialPosteriors:
+    """Posteriors of trials from their noise-free percepts and standard-normal noise.
+
+    Parameters
+    ----------
+    percepts : Percepts
+        Of the distinct stimuli.
+    index : ndarray of int, shape (n_trials,)
+        Which stimulus each trial presents.
+    centre_xy : ndarray, shape (2,)
+        Array centre, m (the prior's centre before the participant's bias).
+    noise : ndarray, shape (n_trials, 2)
+        Standard-normal draws of the sensed position's noise.
+    """
+    idx = np.asarray(index, dtype=int)
+    n = idx.size
+    c = np.asarray(centre_xy, dtype=float) + traits.bias_m
+    pos = percepts.position_m[idx]
+    spread = percepts.spread_m[idx]
+    felt = percepts.felt[idx]
+    conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
+    sig_s2 = (traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
+              + (model.conflict_gain * np.nan_to_num(conflict)) ** 2)
+    if percepts.reliability is not None:
+        sig_s2 = sig_s2 / np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
+    sp2 = traits.prior_sd_m**2
+    g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
+    sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)
+    perceived = c + g[:, None] * (sensed - c)
+    post_sd = np.where(felt, np.sqrt(g * sig_s2), traits.prior_sd_m)
+    perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
+    return TrialPosteriors(perceived, post_sd, felt)
+
+
+def location_distances(perceived_m: np.ndarray, locations_xy: np.ndarray,
+                       allowed: np.ndarray | None = None) -> np.ndarray:
+    """Squared distances of perceived places to the locations, m^2, shape (n_trials, n_locations).
+
+    Locations outside ``allowed`` (0-based indices) are infinitely far: never answered,
+    never selected.
+    """
+    locs = np.asarray(locations_xy, dtype=float)
+    d2 = np.sum((locs[None, :, :] - np.asarray(perceived_m, dtype=float)[:, None, :]) ** 2, axis=2)
+    if allowed is not None:
+        mask = np.zeros(locs.shape[0], dtype=bool)
+        mask[np.asarray(allowed, dtype=int)] = True
+        d2 = np.where(mask[None, :], d2, np.inf)
+    return d2
+
+
+def select_locations(d2: np.ndarray, sd_m: np.ndarray, criterion: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Study 1 answer and Study 2 selection from a posterior over the locations.
+
+    The answer is the location nearest the posterior mean; the selection holds every
+    location whose posterior density is at least ``criterion`` times the answer's.
+
+    Parameters
+    ----------
+    d2 : ndarray, shape (n_trials, n_locations)
+        Squared distances of the posterior means to the locations, m^2
+        (:func:`location_distances`).
+    sd_m : ndarray, shape (n_trials,)
+        Posterior SD, m.
+    criterion : ndarray, shape (n_trials,)
+        Fraction of the answer's density, 0-1 (the participant's ``kappa`` times the
+        trial's jitter).
+
+    Returns
+    -------
+    answer : ndarray of int, shape (n_trials,)
+    selected : ndarray of bool, shape (n_trials, n_locations)
+        Always contains ``answer``.
+    """
+    n = d2.shape[0]
+    answer = np.argmin(d2, axis=1)
+    # Posterior density ratio to the best location: exp(-(d2 - d2_min) / (2 sd^2)).
+    ratio = np.exp(-(d2 - d2[np.arange(n), answer][:, None]) / (2.0 * np.asarray(sd_m)[:, None] ** 2))
+    selected = ratio >= np.clip(criterion, 0.0, 1.0)[:, None]
+    selected[np.arange(n), answer] = True
+    return answer, selected
+
+
+def posterior_ratio_rule(
+    posteriors: TrialPosteriors,
+    criterion: np.ndarray,
+    locations_xy: np.ndarray,
+    allowed: np.ndarray | None,
+    percepts: Percepts,
+    index: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The model's answer rule: the nearest location, and the locations within the posterior's criterion.
+
+    Every answer rule takes these arguments (``percepts`` and ``index``, the noise-free
+    percepts and which one each trial presents, serve rules that read more than the
+    posterior) and returns ``(answer, selected)`` as :func:`select_locations` does.
+    ``scripts/selection_rules.py`` compares other rules with this one.
+    """
+    return select_locations(location_distances(posteriors.perceived_m, locations_xy, allowed), posteriors.sd_m,
+                            criterion)
+
+
 def draw_answers(
     percepts: Percepts,
     index: np.ndarray,
@@ -546,6 +678,7 @@ def draw_answers(
     rng: np.random.Generator,
     *,
     allowed: np.ndarray | None = None,
+    rule: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Answers to trials (vectorized): Study 1 location and Study 2 selection.
 
@@ -564,6 +697,9 @@ def draw_answers(
         criterion jitter (n,), response time (n,)).
     allowed : ndarray of int, optional
         0-based indices of the locations that may be answered (default all).
+    rule : callable, optional
+        How the answer and the selection follow from the posterior (default
+        :func:`posterior_ratio_rule`, the model's own).
 
     Returns
     -------
@@ -575,37 +711,13 @@ def draw_answers(
         Response time for Study 1, s (Study 2 adds the per-location cost, see
         :func:`study2_rt`).
     """
-    idx = np.asarray(index, dtype=int)
-    n = idx.size
+    n = np.asarray(index).size
     noise = rng.standard_normal((n, 2))
     jitter = rng.lognormal(0.0, model.select_log_sd, size=n)
     rt = traits.rt_median_s * rng.lognormal(0.0, model.rt_log_sd, size=n)
-    c = np.asarray(centre_xy, dtype=float) + traits.bias_m
-    pos = percepts.position_m[idx]
-    spread = percepts.spread_m[idx]
-    felt = percepts.felt[idx]
-    conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
-    sig_s2 = (traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
-              + (model.conflict_gain * np.nan_to_num(conflict)) ** 2)
-    if percepts.reliability is not None:
-        sig_s2 = sig_s2 / np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
-    sp2 = traits.prior_sd_m**2
-    g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
-    sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)
-    perceived = c + g[:, None] * (sensed - c)
-    post_sd = np.where(felt, np.sqrt(g * sig_s2), traits.prior_sd_m)
-    perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
-    locs = np.asarray(locations_xy, dtype=float)
-    d2 = np.sum((locs[None, :, :] - perceived[:, None, :]) ** 2, axis=2)  # (n, L)
-    if allowed is not None:
-        mask = np.zeros(locs.shape[0], dtype=bool)
-        mask[np.asarray(allowed, dtype=int)] = True
-        d2 = np.where(mask[None, :], d2, np.inf)
-    answer = np.argmin(d2, axis=1)
-    # Posterior density ratio to the best location: exp(-(d2 - d2_min) / (2 sd^2)).
-    ratio = np.exp(-(d2 - d2[np.arange(n), answer][:, None]) / (2.0 * post_sd[:, None] ** 2))
-    selected = ratio >= np.clip(traits.kappa * jitter, 0.0, 1.0)[:, None]
-    selected[np.arange(n), answer] = True
+    post = trial_posteriors(percepts, index, centre_xy, model, traits, noise)
+    answer, selected = (rule or posterior_ratio_rule)(post, traits.kappa * jitter, locations_xy, allowed, percepts,
+                                                      np.asarray(index, dtype=int))
     return answer, selected, rt
 
 

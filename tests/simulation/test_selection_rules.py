@@ -1,0 +1,127 @@
+"""The answer rule's parts (perception.select_locations & co.) and scripts/selection_rules.py."""
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.perception import (TrialPosteriors, location_distances, posterior_ratio_rule,
+                                              select_locations)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def rules():
+    sys.path.insert(0, str(ROOT / "scripts"))
+    try:
+        import selection_rules
+    finally:
+        sys.path.pop(0)
+    return selection_rules
+
+
+def test_select_locations_reads_the_density_ratio_analytically():
+    locs = np.array([[0.0, 0.0], [0.01, 0.0], [0.02, 0.0]])
+    perceived = np.array([[0.003, 0.0]])
+    sd = np.array([0.005])
+    d2 = location_distances(perceived, locs)
+    # Density of location 2 re location 1: exp(-(7^2 - 3^2) / (2 * 5^2)) = exp(-0.8) = 0.449.
+    for criterion, expected in ((0.44, [True, True, False]), (0.46, [True, False, False])):
+        answer, selected = select_locations(d2, sd, np.array([criterion]))
+        assert answer[0] == 0
+        assert selected[0].tolist() == expected
+
+
+def test_select_locations_always_holds_the_answer_and_respects_allowed():
+    rng = np.random.default_rng(5)
+    locs = rng.uniform(-0.01, 0.01, (9, 2))
+    perceived = rng.uniform(-0.015, 0.015, (200, 2))
+    allowed = np.array([0, 2, 4, 6, 8])
+    d2 = location_distances(perceived, locs, allowed)
+    answer, selected = select_locations(d2, rng.uniform(1e-3, 1e-2, 200), rng.uniform(0.0, 1.5, 200))
+    assert selected[np.arange(200), answer].all()
+    assert np.isin(answer, allowed).all()
+    assert not selected[:, [1, 3, 5, 7]].any()
+    _, everything = select_locations(d2, np.full(200, 1e-2), np.zeros(200))
+    assert everything[:, allowed].all()
+
+
+def _posteriors(n=300, seed=3):
+    rng = np.random.default_rng(seed)
+    locs = default_bank().locations_xy
+    post = TrialPosteriors(rng.uniform(-0.012, 0.012, (n, 2)), rng.uniform(2e-3, 1.2e-2, n), np.ones(n, bool))
+    return post, rng.uniform(0.1, 1.0, n), locs
+
+
+def test_rules_that_reduce_to_the_shipped_one(rules):
+    post, crit, locs = _posteriors()
+    idx = np.zeros(crit.size, int)
+    ref = posterior_ratio_rule(post, crit, locs, None, None, idx)
+    for rule in (rules.fixed_width(1.0, 0.123), rules.hedge_to_centre(0.0), rules.capped(9)):
+        a, s = rule(post, crit, locs, None, None, idx)
+        np.testing.assert_array_equal(a, ref[0])
+        np.testing.assert_array_equal(s, ref[1])
+
+
+def test_capped_rule_keeps_at_most_k_and_the_answer(rules):
+    post, crit, locs = _posteriors()
+    idx = np.zeros(crit.size, int)
+    _, full = posterior_ratio_rule(post, crit * 0.05, locs, None, None, idx)
+    assert full.sum(axis=1).max() > 2  # the cap has something to cut
+    a, s = rules.capped(2)(post, crit * 0.05, locs, None, None, idx)
+    assert s.sum(axis=1).max() <= 2
+    assert s[np.arange(a.size), a].all()
+
+
+def test_hook_passes_every_selection_through(rules):
+    """Cell means rebuilt from the recorded selections equal the ones simulate_cell_means returns."""
+    bank = default_bank()
+    plain = simulate_cell_means(4, np.random.default_rng([11, 16]), bank=bank)
+    rec = rules.Recorder()
+    hooked = simulate_cell_means(4, np.random.default_rng([11, 16]), bank=bank, rule=rec)
+    np.testing.assert_array_equal(plain.count, hooked.count)
+    np.testing.assert_array_equal(plain.error_mm, hooked.error_mm)
+    assert len(rec.calls) == 8  # two studies for each of 4 participants
+    n_loc = len(bank.locations_xy)
+    for p, (selected, index) in enumerate(rec.calls[1::2]):
+        k = selected.sum(axis=1)
+        for m in range(len(bank.methods)):
+            for loc in range(n_loc):
+                cell = index == m * n_loc + loc
+                np.testing.assert_allclose(hooked.count[p, loc, m], k[cell].mean(), rtol=1e-12)
+
+
+def test_diffuse_rule_without_jumps_is_the_shipped_one_and_is_seeded(rules):
+    bank = default_bank()
+    base = simulate_cell_means(3, np.random.default_rng([4, 16]), bank=bank)
+    none = simulate_cell_means(3, np.random.default_rng([4, 16]), bank=bank, rule=rules.DiffuseTrials(0.0, 0.02, 1))
+    np.testing.assert_array_equal(base.count, none.count)
+    a = simulate_cell_means(3, np.random.default_rng([4, 16]), bank=bank, rule=rules.DiffuseTrials(3.0, 0.02, 1))
+    b = simulate_cell_means(3, np.random.default_rng([4, 16]), bank=bank, rule=rules.DiffuseTrials(3.0, 0.02, 1))
+    np.testing.assert_array_equal(a.count, b.count)
+    assert not np.array_equal(a.error_mm, base.error_mm)  # jumps move the answers
+
+
+def test_script_prints_its_table_and_plot(tmp_path):
+    png = tmp_path / "rules.png"
+    res = subprocess.run([sys.executable, str(ROOT / "scripts" / "selection_rules.py"), "--seeds", "800", "803",
+                          "--n", "8", "--only", "2", "--plot", str(png)],
+                         capture_output=True, text=True, timeout=300,
+                         env={"PYTHONPATH": f"{ROOT / 'src'}:{ROOT / 'scripts'}", "PATH": "/usr/bin:/bin",
+                              "MPLBACKEND": "Agg"})
+    assert res.returncode == 0, res.stderr
+    rows = [line for line in res.stdout.splitlines() if line.startswith("| posterior ratio")]
+    assert len(rows) == 2
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_script_refuses_an_empty_seed_range():
+    res = subprocess.run([sys.executable, str(ROOT / "scripts" / "selection_rules.py"), "--seeds", "5", "5"],
+                         capture_output=True, text=True, timeout=120,
+                         env={"PYTHONPATH": f"{ROOT / 'src'}:{ROOT / 'scripts'}", "PATH": "/usr/bin:/bin"})
+    assert res.returncode == 2
+    assert "STOP must be above FIRST" in res.stderr
