@@ -182,6 +182,8 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
             prior_sd_m=(lo_p, lo_p * rng.uniform(1.2, 2.0)),
             bias_mean_m=(rng.uniform(-8e-3, 8e-3), rng.uniform(-8e-3, 0.0)), bias_sd_m=rng.uniform(0, 4e-3),
             select_kappa=(lo_k, min(lo_k + rng.uniform(0.1, 0.4), 0.99)), select_log_sd=rng.uniform(0.1, 1.0),
+            unfused_per_m=rng.uniform(0.0, 400.0), unfused_jump_m=rng.uniform(10e-3, 35e-3),
+            unfused_width=rng.uniform(1.0, 3.5),
         )
 
     def jit(v: float) -> float:
@@ -201,6 +203,10 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
         bias_sd_m=float(abs(b.bias_sd_m + rng.normal(0, 5e-4 * scale))),
         select_kappa=tuple(sorted(float(np.clip(jit(v), 0.01, 0.99)) for v in b.select_kappa)),
         select_log_sd=jit(b.select_log_sd),
+        # Additive, so a search that starts without unfused percepts (0) can find them.
+        unfused_per_m=float(abs(b.unfused_per_m + rng.normal(0, 40.0 * scale))),
+        unfused_jump_m=float(np.clip(jit(b.unfused_jump_m), 5e-3, 50e-3)),
+        unfused_width=float(np.clip(b.unfused_width + rng.normal(0, 0.2 * scale), 1.0, 5.0)),
     )
 
 

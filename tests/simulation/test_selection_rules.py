@@ -125,3 +125,38 @@ def test_script_refuses_an_empty_seed_range():
                          env={"PYTHONPATH": f"{ROOT / 'src'}:{ROOT / 'scripts'}", "PATH": "/usr/bin:/bin"})
     assert res.returncode == 2
     assert "STOP must be above FIRST" in res.stderr
+
+
+def test_unfuse_moves_exactly_the_unfused_trials_by_the_jump():
+    from vibrofocus.simulation.perception import PerceptualModel, unfuse
+
+    rng = np.random.default_rng(21)
+    n = 2000
+    post = TrialPosteriors(rng.uniform(-0.01, 0.01, (n, 2)), rng.uniform(2e-3, 8e-3, n), rng.random(n) < 0.9)
+    conflict = rng.uniform(0.0, 0.01, n)
+    model = PerceptualModel().replace(unfused_per_m=50.0, unfused_jump_m=0.02, unfused_width=2.0)
+    u, angle = rng.random(n), rng.uniform(0, 2 * np.pi, n)
+    moved, unfused = unfuse(post, conflict, model, u, angle)
+    # A trial is unfused where u < 50/m * conflict (at most 0.5 here), and only if felt.
+    np.testing.assert_array_equal(unfused, (u < 50.0 * conflict) & post.felt)
+    step = np.linalg.norm(moved.perceived_m - post.perceived_m, axis=1)
+    np.testing.assert_allclose(step[unfused], 0.02, rtol=1e-12)
+    assert np.all(step[~unfused] == 0.0)
+    np.testing.assert_allclose(moved.sd_m[unfused], 2.0 * post.sd_m[unfused], rtol=1e-12)
+    np.testing.assert_array_equal(moved.sd_m[~unfused], post.sd_m[~unfused])
+    # The share follows the probability: E[min(1, 50 * c)] over c ~ U(0, 10 mm) is 0.25, times 0.9 felt.
+    assert abs(unfused.mean() - 0.25 * 0.9) < 0.03
+
+
+def test_without_unfused_percepts_the_draws_are_unchanged():
+    """unfused_per_m = 0 draws nothing more, so the answers of the other fits stay as they were."""
+    bank = default_bank()
+    from vibrofocus.simulation.hypotheses import hypothesis
+
+    m = hypothesis(None).model()
+    a = simulate_cell_means(3, np.random.default_rng([8, 16]), bank=bank, model=m.replace(unfused_per_m=0.0))
+    b = simulate_cell_means(3, np.random.default_rng([8, 16]), bank=bank, model=m.replace(unfused_per_m=0.0,
+                                                                                       unfused_width=3.0))
+    np.testing.assert_array_equal(a.count, b.count)
+    c = simulate_cell_means(3, np.random.default_rng([8, 16]), bank=bank, model=m.replace(unfused_per_m=400.0))
+    assert not np.array_equal(a.error_mm, c.error_mm)

@@ -81,6 +81,7 @@ __all__ = [
     "Percepts",
     "TrialPosteriors",
     "trial_posteriors",
+    "unfuse",
     "location_distances",
     "select_locations",
     "posterior_ratio_rule",
@@ -197,6 +198,19 @@ class PerceptualModel:
         posterior density). *Fitted.*
     select_log_sd : float
         Per-trial log-normal jitter of the criterion. *Fitted.*
+    unfused_per_m : float
+        Probability per metre of cue conflict that a trial's percept is *unfused*
+        (capped at 1): the skin cue and the drive cue are not felt as one tap, and the tap
+        is felt at another place. 0 (default): every percept is fused. *Assumption* of the
+        form (in causal inference, cues that disagree are attributed to separate causes
+        instead of being averaged, Körding et al. 2007); size *fitted*.
+    unfused_jump_m : float
+        How far from the fused percept an unfused one is felt, m, in a direction the
+        participant cannot sense (uniform). *Assumption* of the form; size *fitted*.
+    unfused_width : float
+        Factor on the posterior SD with which the participant selects points on an unfused
+        trial (it felt odd, so the participant is less sure); the answer does not change.
+        *Fitted.*
     rt_median_s, rt_log_sd, rt_per_extra_location_s
         Response times (an assumption).
     version : str
@@ -222,6 +236,9 @@ class PerceptualModel:
     bias_sd_m: float = 0.0013
     select_kappa: tuple[float, float] = (0.248, 0.922)
     select_log_sd: float = 0.454
+    unfused_per_m: float = 0.0
+    unfused_jump_m: float = 0.02
+    unfused_width: float = 1.0
     rt_median_s: tuple[float, float] = (0.9, 1.4)
     rt_log_sd: float = 0.3
     rt_per_extra_location_s: float = 0.35
@@ -262,6 +279,9 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "bias_sd_m": ("fitted", "spread of the participants' biases"),
     "select_kappa": ("fitted", "Study 2 criterion"),
     "select_log_sd": ("fitted", "Study 2 per-trial jitter of the criterion"),
+    "unfused_per_m": ("fitted", "form an assumption: conflicting cues are not fused but felt apart (Körding et al. 2007)"),
+    "unfused_jump_m": ("fitted", "form an assumption: how far away an unfused tap is felt"),
+    "unfused_width": ("fitted", "how much wider an unfused trial's selection is"),
     "rt_median_s": ("assumption", "response times (not analysed)"),
     "rt_log_sd": ("assumption", "response times (not analysed)"),
     "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),
@@ -601,6 +621,40 @@ def trial_posteriors(
     return TrialPosteriors(perceived, post_sd, felt)
 
 
+def unfuse(
+    posteriors: TrialPosteriors,
+    conflict_m: np.ndarray,
+    model: PerceptualModel,
+    uniform: np.ndarray,
+    angle: np.ndarray,
+) -> tuple[TrialPosteriors, np.ndarray]:
+    """Move the unfused trials' percepts and widen their selection (``model.unfused_*``).
+
+    Parameters
+    ----------
+    posteriors : TrialPosteriors
+        Of the trials, fused.
+    conflict_m : ndarray, shape (n_trials,)
+        Distance between the skin cue and the drive cue, m (NaN or 0: no conflict).
+    uniform, angle : ndarray, shape (n_trials,)
+        Uniform draws in [0, 1) (a trial is unfused where ``uniform`` is below its
+        probability) and directions of the jump, rad.
+
+    Returns
+    -------
+    posteriors : TrialPosteriors
+        With the unfused trials' means moved by ``unfused_jump_m`` and their SD multiplied
+        by ``unfused_width``.
+    unfused : ndarray of bool, shape (n_trials,)
+    """
+    p = np.clip(model.unfused_per_m * np.nan_to_num(np.asarray(conflict_m, dtype=float)), 0.0, 1.0)
+    unfused = (np.asarray(uniform) < p) & posteriors.felt
+    jump = model.unfused_jump_m * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+    perceived = posteriors.perceived_m + np.where(unfused[:, None], jump, 0.0)
+    sd = np.where(unfused, posteriors.sd_m * model.unfused_width, posteriors.sd_m)
+    return TrialPosteriors(perceived, sd, posteriors.felt), unfused
+
+
 def location_distances(perceived_m: np.ndarray, locations_xy: np.ndarray,
                        allowed: np.ndarray | None = None) -> np.ndarray:
     """Squared distances of perceived places to the locations, m^2, shape (n_trials, n_locations).
@@ -694,7 +748,9 @@ def draw_answers(
         Array centre, m.
     rng : numpy.random.Generator
         Source of all per-trial noise (drawn in a fixed order: position noise (n, 2),
-        criterion jitter (n,), response time (n,)).
+        criterion jitter (n,), response time (n,); then, only where the model has
+        unfused percepts (``unfused_per_m > 0``), whether each trial is unfused (n,) and
+        the direction of its jump (n,)).
     allowed : ndarray of int, optional
         0-based indices of the locations that may be answered (default all).
     rule : callable, optional
@@ -716,6 +772,9 @@ def draw_answers(
     jitter = rng.lognormal(0.0, model.select_log_sd, size=n)
     rt = traits.rt_median_s * rng.lognormal(0.0, model.rt_log_sd, size=n)
     post = trial_posteriors(percepts, index, centre_xy, model, traits, noise)
+    if model.unfused_per_m > 0 and percepts.conflict_m is not None:
+        uniform, angle = rng.random(n), rng.uniform(0.0, 2.0 * np.pi, n)
+        post, _ = unfuse(post, percepts.conflict_m[np.asarray(index, dtype=int)], model, uniform, angle)
     answer, selected = (rule or posterior_ratio_rule)(post, traits.kappa * jitter, locations_xy, allowed, percepts,
                                                       np.asarray(index, dtype=int))
     return answer, selected, rt
