@@ -171,26 +171,32 @@ def residuals(stats: list[dict]) -> str:
 
 
 def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale: float = 1.0,
-           central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE) -> PerceptualModel:
-    """A candidate: drawn from broad ranges (``base`` None) or jittered around ``base``."""
+           central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE, unfused: bool = False) -> PerceptualModel:
+    """A candidate: drawn from broad ranges (``base`` None) or jittered around ``base``.
+
+    ``unfused``: search the unfused percepts too (``PerceptualModel.unfused_*``). Without
+    it nothing more is drawn, so a search repeats the shipped fits, made before them.
+    """
     if base is None:
         lo_a, lo_p, lo_k = rng.uniform(3e-3, 12e-3), rng.uniform(5e-3, 25e-3), rng.uniform(0.05, 0.6)
-        return PerceptualModel().replace(
+        drawn = PerceptualModel().replace(
             sl_ref_db=rng.uniform(10, 45), funneling_exponent=rng.uniform(0.2, 2.0),
             central_weight=rng.uniform(*central_range), conflict_gain=rng.uniform(0.0, 2.0),
             acuity_sd_m=(lo_a, lo_a * rng.uniform(1.2, 2.0)), spread_gain=tuple(sorted(rng.uniform(0, 2, 2))),
             prior_sd_m=(lo_p, lo_p * rng.uniform(1.2, 2.0)),
             bias_mean_m=(rng.uniform(-8e-3, 8e-3), rng.uniform(-8e-3, 0.0)), bias_sd_m=rng.uniform(0, 4e-3),
             select_kappa=(lo_k, min(lo_k + rng.uniform(0.1, 0.4), 0.99)), select_log_sd=rng.uniform(0.1, 1.0),
-            unfused_per_m=rng.uniform(0.0, 400.0), unfused_jump_m=rng.uniform(10e-3, 35e-3),
-            unfused_width=rng.uniform(1.0, 3.5),
         )
+        if not unfused:
+            return drawn
+        return drawn.replace(unfused_per_m=rng.uniform(0.0, 400.0), unfused_jump_m=rng.uniform(10e-3, 35e-3),
+                             unfused_width=rng.uniform(1.0, 3.5))
 
     def jit(v: float) -> float:
         return float(v * np.exp(rng.normal(0, 0.15 * scale)))
 
     b = base
-    return b.replace(
+    jittered = b.replace(
         sl_ref_db=float(np.clip(b.sl_ref_db + rng.normal(0, 2 * scale), 5, 50)),
         central_weight=float(np.clip(b.central_weight + rng.normal(0, 0.1 * scale), *central_range)),
         conflict_gain=float(abs(b.conflict_gain + rng.normal(0, 0.15 * scale))),
@@ -203,6 +209,10 @@ def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale:
         bias_sd_m=float(abs(b.bias_sd_m + rng.normal(0, 5e-4 * scale))),
         select_kappa=tuple(sorted(float(np.clip(jit(v), 0.01, 0.99)) for v in b.select_kappa)),
         select_log_sd=jit(b.select_log_sd),
+    )
+    if not unfused:
+        return jittered
+    return jittered.replace(
         # Additive, so a search that starts without unfused percepts (0) can find them.
         unfused_per_m=float(abs(b.unfused_per_m + rng.normal(0, 40.0 * scale))),
         unfused_jump_m=float(np.clip(jit(b.unfused_jump_m), 5e-3, 50e-3)),
@@ -226,7 +236,7 @@ HELD_OUT_SEEDS = range(700, 740)
 def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: int,
            weights: dict[str, float], central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE,
            bank: FeatureBank | None = None, integration_s: float | None = None,
-           name: str | None = None) -> PerceptualModel:
+           name: str | None = None, unfused: bool = False) -> PerceptualModel:
     h = hypothesis(name)
     b = bank if bank is not None else default_bank()
     rng = np.random.default_rng(rng_seed)
@@ -237,8 +247,9 @@ def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: 
     print(f"start: loss {best_loss:.4f}", flush=True)
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
-        cand = (sample(rng, central_range=central_range) if i < n_eval else
-                sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range))
+        cand = (sample(rng, central_range=central_range, unfused=unfused) if i < n_eval else
+                sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range,
+                       unfused=unfused))
         cand = cand.replace(integration_s=integration_s)  # the bank's window, never searched
         val = loss(seed_statistics(cand, FIT_SEEDS, bank=b, hypothesis=h), weights)
         if val < best_loss:
@@ -246,6 +257,7 @@ def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: 
             print(f"{i}: loss {val:.4f} ({time.perf_counter() - t0:.0f} s) {json.dumps(cand.to_dict())}", flush=True)
     write_text(out, json.dumps({"hypothesis": h.name, "levels": b.levels, "bank_forearms": b.n_forearms,
                                 "budget": {"n_eval": n_eval, "n_refine": n_refine, "rng_seed": rng_seed,
+                                           **({"unfused": True} if unfused else {}),
                                            "start": (json.loads(start.read_text(encoding="utf-8")).get("budget")
                                                      if start is not None else None)},
                                 "loss": best_loss, "weights": weights, "fit_seeds": [FIT_SEEDS.start, FIT_SEEDS.stop],
@@ -409,6 +421,9 @@ def main() -> int:
     s.add_argument("--weight", action="append", default=[], metavar="KEY=W",
                    help="weight of one matched statistic's term (e.g. s1_interaction_F=3); repeatable")
     s.add_argument("--hypothesis", default=None, help="the hypothesis to fit (default: the default one)")
+    s.add_argument("--unfused", action="store_true",
+                   help="search the unfused percepts too (off in the shipped fits; docs/simulated-participants.md, "
+                        "\"Unfused percepts: two fits, not adopted\")")
     a = sub.add_parser("adopt", help="ship fits: held-out losses, the default hypothesis, hypotheses_fit.json")
     a.add_argument("fits", type=Path, nargs="+", help="fit files written by search, one per hypothesis")
     a.add_argument("--version", action="append", default=[], metavar="NAME=V",
@@ -433,7 +448,7 @@ def main() -> int:
         bank = FeatureBank.load(args.bank) if args.bank else None
         window = None if args.integration_ms is None else args.integration_ms * 1e-3
         best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range,
-                      bank, window, args.hypothesis)
+                      bank, window, args.hypothesis, args.unfused)
         for title, seeds in ((f"fit seeds {FIT_SEEDS.start}-{FIT_SEEDS.stop - 1}", FIT_SEEDS), ("table seeds 0-19", range(20)),
                              (f"held-out seeds {HELD_OUT_SEEDS.start}-{HELD_OUT_SEEDS.stop - 1}", HELD_OUT_SEEDS)):
             print(f"\n{title}:\n" + residuals(seed_statistics(best, seeds, bank=bank, hypothesis=args.hypothesis)))

@@ -19,7 +19,8 @@ hypothesis and its fitted parameters, the paper's levels) the Study 2 headline h
 reduction), the median reduction, and the shares of the two target-containing tests that
 are not significant, all analysed with scipy as ``scripts/check_findings.py`` does. The
 default seeds are not the fit's held-out ones (``fit_participants.HELD_OUT_SEEDS``).
-Only the selection's parameters vary here, the rest of the model stays as fitted; a rule
+Only the selection varies here (and for the unfused percepts, which move the answers too, the
+conflict's own noise), the rest of the model stays as fitted; a rule
 worth adopting would then be refitted with ``scripts/fit_participants.py`` like every
 hypothesis.
 """
@@ -112,12 +113,12 @@ class DiffuseTrials:
 
 @dataclass(frozen=True)
 class Setting:
-    """One rule with its parameters, and the criterion's range (``select_kappa``) it runs with."""
+    """One rule with its parameters, and the changes to the fitted model it runs with."""
 
     family: str
     label: str
     make: Callable[[int], Callable[..., tuple[np.ndarray, np.ndarray]]]
-    kappa: tuple[float, float] | None = None
+    changes: tuple[tuple[str, Any], ...] = ()
 
 
 def settings(model: PerceptualModel) -> list[Setting]:
@@ -125,23 +126,28 @@ def settings(model: PerceptualModel) -> list[Setting]:
     k = model.select_kappa
     wide, narrow = (max(0.05, k[0] - 0.15), max(0.2, k[1] - 0.1)), (min(0.9, k[0] + 0.15), 0.99)
     out = [Setting("posterior ratio (shipped)", f"kappa {k[0]:.2f}-{k[1]:.2f}", lambda s: posterior_ratio_rule)]
-    out += [Setting("posterior ratio (shipped)", f"kappa {a:.2f}-{b:.2f}", lambda s: posterior_ratio_rule, (a, b))
-            for a, b in (wide, narrow)]
+    out += [Setting("posterior ratio (shipped)", f"kappa {a:.2f}-{b:.2f}", lambda s: posterior_ratio_rule,
+                    (("select_kappa", (a, b)),)) for a, b in (wide, narrow)]
     out += [Setting("at most K points", f"K = {kk}", lambda s, kk=kk: capped(kk)) for kk in (2, 3)]
     out += [Setting("partly fixed width", f"a = {a}, ref = {r * 1e3:.0f} mm", lambda s, a=a, r=r: fixed_width(a, r))
             for a in (0.5, 0.75) for r in (6e-3, 10e-3)]
     out += [Setting("hedge toward the centre", f"tau = {t}", lambda s, t=t: hedge_to_centre(t)) for t in (0.25, 0.5)]
     out += [Setting("hedge toward the centre", f"tau = 0.25, kappa {narrow[0]:.2f}-{narrow[1]:.2f}",
-                    lambda s: hedge_to_centre(0.25), narrow)]
+                    lambda s: hedge_to_centre(0.25), (("select_kappa", narrow),))]
     out += [Setting("diffuse trials", f"gain {g}, jump {j * 1e3:.0f} mm", lambda s, g=g, j=j: DiffuseTrials(g, j, s))
             for g in (1.0, 2.0) for j in (15e-3, 25e-3)]
+    # The model's unfused percepts (PerceptualModel.unfused_*), the conflict's own noise off;
+    # the rule stays the shipped one.
+    out += [Setting("unfused percepts", f"{p:.0f}/m, jump {j * 1e3:.0f} mm, width x{w:g}", lambda s: posterior_ratio_rule,
+                    (("conflict_gain", 0.0), ("unfused_per_m", p), ("unfused_jump_m", j), ("unfused_width", w)))
+            for p, j, w in ((200.0, 20e-3, 2.5), (300.0, 20e-3, 2.5), (250.0, 36e-3, 3.8))]
     return out
 
 
 def run(setting: Setting, seeds: range, n: int, bank: FeatureBank, name: str | None = None) -> dict[str, float]:
     """Shares of ``seeds``' studies in which each Study 2 finding holds under one setting."""
     h = hypothesis(name)
-    model = h.model() if setting.kappa is None else h.model().replace(select_kappa=setting.kappa)
+    model = h.model().replace(**dict(setting.changes))
     res = []
     for s in seeds:
         arrays = simulate_cell_means(n, np.random.default_rng([s, 16]), bank=bank, model=model, hypothesis=h,
