@@ -423,7 +423,7 @@ def main() -> int:
     s.add_argument("--hypothesis", default=None, help="the hypothesis to fit (default: the default one)")
     s.add_argument("--unfused", action="store_true",
                    help="search the unfused percepts too (off in the shipped fits; docs/simulated-participants.md, "
-                        "\"Unfused percepts: two fits, not adopted\")")
+                        "\"Unfused percepts: three fits, not adopted\")")
     a = sub.add_parser("adopt", help="ship fits: held-out losses, the default hypothesis, hypotheses_fit.json")
     a.add_argument("fits", type=Path, nargs="+", help="fit files written by search, one per hypothesis")
     a.add_argument("--version", action="append", default=[], metavar="NAME=V",

@@ -280,7 +280,7 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "select_kappa": ("fitted", "Study 2 criterion"),
     "select_log_sd": ("fitted", "Study 2 per-trial jitter of the criterion"),
     "unfused_per_m": ("fitted", "form an assumption: conflicting cues are not fused but felt apart (Körding et al. "
-                      "2007); 0 (off) in the shipped fits, two fits with it are documented, not adopted"),
+                      "2007); 0 (off) in the shipped fits, three fits with it are documented, not adopted"),
     "unfused_jump_m": ("fitted", "form an assumption: how far away an unfused tap is felt (used only when on)"),
     "unfused_width": ("fitted", "how much wider an unfused trial's selection is (used only when on)"),
     "rt_median_s": ("assumption", "response times (not analysed)"),
