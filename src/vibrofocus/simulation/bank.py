@@ -22,7 +22,7 @@ import os
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -247,7 +247,7 @@ def simulate_cell_means(
     locations: tuple[int, ...] | None = None,
     forearms: np.ndarray | None = None,
     hypothesis: Any = None,
-    rule: Any = None,
+    rule: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
 ) -> StudyArrays:
     """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
 

@@ -209,8 +209,8 @@ class PerceptualModel:
         participant cannot sense (uniform). *Assumption* of the form; size *fitted*.
     unfused_width : float
         Factor on the posterior SD with which the participant selects points on an unfused
-        trial (it felt odd, so the participant is less sure); the answer does not change.
-        *Fitted.*
+        trial (it felt odd, so the participant is less sure); it widens the selection only
+        (the jump, not the width, moves the answer). *Fitted.*
     rt_median_s, rt_log_sd, rt_per_extra_location_s
         Response times (an assumption).
     version : str
@@ -768,16 +768,17 @@ def draw_answers(
         Response time for Study 1, s (Study 2 adds the per-location cost, see
         :func:`study2_rt`).
     """
-    n = np.asarray(index).size
+    idx = np.asarray(index, dtype=int)
+    n = idx.size
     noise = rng.standard_normal((n, 2))
     jitter = rng.lognormal(0.0, model.select_log_sd, size=n)
     rt = traits.rt_median_s * rng.lognormal(0.0, model.rt_log_sd, size=n)
-    post = trial_posteriors(percepts, index, centre_xy, model, traits, noise)
+    post = trial_posteriors(percepts, idx, centre_xy, model, traits, noise)
     if model.unfused_per_m > 0 and percepts.conflict_m is not None:
         uniform, angle = rng.random(n), rng.uniform(0.0, 2.0 * np.pi, n)
-        post, _ = unfuse(post, percepts.conflict_m[np.asarray(index, dtype=int)], model, uniform, angle)
+        post, _ = unfuse(post, percepts.conflict_m[idx], model, uniform, angle)
     answer, selected = (rule or posterior_ratio_rule)(post, traits.kappa * jitter, locations_xy, allowed, percepts,
-                                                      np.asarray(index, dtype=int))
+                                                      idx)
     return answer, selected, rt
 
 
