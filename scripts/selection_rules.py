@@ -17,7 +17,9 @@ prints, per rule and setting, in how many studies (20 participants each, default
 hypothesis and its fitted parameters, the paper's levels) the Study 2 headline holds
 (fewer points with the inverse filter, Friedman + Bonferroni Wilcoxon, a 10-30 %
 reduction), the median reduction, and the shares of the two target-containing tests that
-are not significant, all analysed with scipy as ``scripts/check_findings.py`` does. The
+are not significant; and, since some rules move the answers too, the Study 1 direction
+(the inverse filter's error below funneling's, Bonferroni) and the Study 1 interaction's
+significance. All are analysed with pingouin and scipy by ``scripts/check_findings.py``. The
 default seeds are not the fit's held-out ones (``fit_participants.HELD_OUT_SEEDS``).
 Only the selection varies here (and for the unfused percepts, which move the answers too, the
 conflict's own noise), the rest of the model stays as fitted; a rule
@@ -34,7 +36,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from check_findings import study2_findings
+from check_findings import findings
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import hypothesis
 from vibrofocus.simulation.perception import (Percepts, PerceptualModel, TrialPosteriors, location_distances,
@@ -44,8 +46,12 @@ from vibrofocus.simulation.perception import (Percepts, PerceptualModel, TrialPo
 #: baseline) kept the target-containing method test not significant, over the 240 studies
 #: of seeds 700-739 and 800-999 (121 of 240; docs/simulated-participants.md).
 BASELINE_HIT_METHOD_NS = 121 / 240
-#: The issue's bar for the headline: at least two thirds of the studies.
+#: The issue's bar for its two headline findings (the Study 2 headline and the Study 1
+#: direction): at least two thirds of the studies.
 HEADLINE_BAR = 2 / 3
+#: Share of the same 240 studies in which c313a27's model found the Study 1 interaction
+#: significant (128 of 240): the rules that move the answers must not lose it.
+BASELINE_INTERACTION = 128 / 240
 PITCH_M = 10e-3  # the 3 x 3 grid's pitch (the shipped bank)
 
 
@@ -144,17 +150,27 @@ def settings(model: PerceptualModel) -> list[Setting]:
     return out
 
 
+#: The findings whose shares the comparison reports (``check_findings.findings``' keys).
+SHARES = ("s1_inverse_lower", "s1_interaction", "s2_headline", "s2_hit_location_ns", "s2_hit_method_ns")
+
+
+def meets_bars(share: dict[str, float]) -> bool:
+    """Both headlines in two thirds of the studies, and the interaction and the target-containing
+    method test at least at c313a27's shares."""
+    return (share["s2_headline"] >= HEADLINE_BAR and share["s1_inverse_lower"] >= HEADLINE_BAR
+            and share["s2_hit_method_ns"] >= BASELINE_HIT_METHOD_NS and share["s1_interaction"] >= BASELINE_INTERACTION)
+
+
 def run(setting: Setting, seeds: range, n: int, bank: FeatureBank, name: str | None = None) -> dict[str, float]:
-    """Shares of ``seeds``' studies in which each Study 2 finding holds under one setting."""
+    """Shares of ``seeds``' studies in which each finding of :data:`SHARES` holds under one setting."""
     h = hypothesis(name)
     model = h.model().replace(**dict(setting.changes))
     res = []
     for s in seeds:
         arrays = simulate_cell_means(n, np.random.default_rng([s, 16]), bank=bank, model=model, hypothesis=h,
                                      rule=setting.make(s))
-        res.append(study2_findings(arrays.count, arrays.count_hit))
-    share = {key: float(np.mean([r[key] for r in res]))
-             for key in ("s2_headline", "s2_hit_location_ns", "s2_hit_method_ns")}
+        res.append(findings(arrays.error_mm, arrays.count, arrays.count_hit))
+    share = {key: float(np.mean([r[key] for r in res])) for key in SHARES}
     share["reduction"] = float(np.median([r["s2_reduction"] for r in res]))
     return share
 
@@ -194,21 +210,26 @@ def points_by_outcome(seeds: range, n: int, bank: FeatureBank, name: str | None 
 
 def markdown(rows: list[tuple[Setting, dict[str, float]]], seeds: range, n: int) -> str:
     lines = [f"Seeds {seeds.start}-{seeds.stop - 1} ({len(seeds)} studies of {n}; not the held-out seeds), "
-             f"{hypothesis(None).label()}. Target: the headline in at least {HEADLINE_BAR:.0%} of the studies and "
-             f"the target-containing method test n.s. in at least {BASELINE_HIT_METHOD_NS:.0%} (c313a27's share).",
+             f"{hypothesis(None).label()}. Bars: the Study 2 headline and the Study 1 direction in at least "
+             f"{HEADLINE_BAR:.0%} of the studies, the target-containing method test n.s. in at least "
+             f"{BASELINE_HIT_METHOD_NS:.0%} and the Study 1 interaction significant in at least "
+             f"{BASELINE_INTERACTION:.0%} (c313a27's shares).",
              "",
              "| rule | setting | fewer points *and* 10-30 % | median reduction | target-containing location n.s. "
-             "| target-containing method n.s. | both bars |",
-             "|---|---|---:|---:|---:|---:|:---:|"]
+             "| target-containing method n.s. | Study 1: inverse below funneling | Study 1 interaction | all bars |",
+             "|---|---|---:|---:|---:|---:|---:|---:|:---:|"]
     for s, r in rows:
-        ok = r["s2_headline"] >= HEADLINE_BAR and r["s2_hit_method_ns"] >= BASELINE_HIT_METHOD_NS
         lines.append(f"| {s.family} | {s.label} | {r['s2_headline']:.0%} | {r['reduction']:.1%} "
-                     f"| {r['s2_hit_location_ns']:.0%} | {r['s2_hit_method_ns']:.0%} | {'yes' if ok else 'no'} |")
+                     f"| {r['s2_hit_location_ns']:.0%} | {r['s2_hit_method_ns']:.0%} | {r['s1_inverse_lower']:.0%} "
+                     f"| {r['s1_interaction']:.0%} | {'yes' if meets_bars(r) else 'no'} |")
     return "\n".join(lines)
 
 
 def plot(rows: list[tuple[Setting, dict[str, float]]], path: Path, seeds: range) -> None:
-    """Headline share against the target-containing method test's n.s. share, per rule (PNG)."""
+    """Headline share against the target-containing method test's n.s. share, per rule (PNG).
+
+    A hollow marker: the setting loses the Study 1 direction or the interaction (below its bar).
+    """
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -221,17 +242,21 @@ def plot(rows: list[tuple[Setting, dict[str, float]]], path: Path, seeds: range)
     ax.axhline(BASELINE_HIT_METHOD_NS, color="0.4", ls="--", lw=1)
     ax.axvline(HEADLINE_BAR, color="0.4", ls="--", lw=1)
     ax.fill_between([HEADLINE_BAR, 1.02], BASELINE_HIT_METHOD_NS, 1.02, color="#d8f0d8", zorder=0,
-                    label="both bars met")
+                    label="Study 2 bars met")
     markers = dict(zip(dict.fromkeys(s.family for s, _ in rows), "osD^v<>"))
-    for fam, mk in markers.items():
-        pts = [(r["s2_headline"], r["s2_hit_method_ns"]) for s, r in rows if s.family == fam]
-        ax.scatter(*zip(*pts), marker=mk, s=46, label=fam, zorder=3)
+    for (fam, mk), colour in zip(markers.items(), plt.rcParams["axes.prop_cycle"].by_key()["color"]):
+        mine = [r for s, r in rows if s.family == fam]
+        study1 = [r["s1_inverse_lower"] >= HEADLINE_BAR and r["s1_interaction"] >= BASELINE_INTERACTION
+                  for r in mine]
+        ax.scatter([r["s2_headline"] for r in mine], [r["s2_hit_method_ns"] for r in mine], marker=mk, s=46,
+                   label=fam, zorder=3, edgecolors=colour, linewidths=1.3,
+                   facecolors=[colour if ok else "none" for ok in study1])
     ax.set_xlim(-0.02, 1.02)
     ax.set_ylim(-0.02, 1.02)
     ax.set_xlabel("studies with fewer points for the inverse filter and a 10-30 % reduction")
     ax.set_ylabel("studies whose target-containing method test is n.s.")
     ax.set_title(f"Study 2 selection rules (seeds {seeds.start}-{seeds.stop - 1})", fontsize=10)
-    ax.legend(fontsize=7.5, loc="upper right")
+    ax.legend(fontsize=7.5, loc="lower left", title="hollow: Study 1 below its bars", title_fontsize=7.5)
     model_footer(fig, hypothesis(None).label())
     fig.tight_layout(rect=(0, 0.03, 1, 1))
     save_figure(fig, path, dpi=110)

@@ -116,7 +116,19 @@ def test_script_prints_its_table_and_plot(tmp_path):
     assert res.returncode == 0, res.stderr
     rows = [line for line in res.stdout.splitlines() if line.startswith("| posterior ratio")]
     assert len(rows) == 2
+    header = next(line for line in res.stdout.splitlines() if line.startswith("| rule |"))
+    assert "Study 1: inverse below funneling" in header and "Study 1 interaction" in header
+    assert all(len(row.split("|")) == len(header.split("|")) for row in rows)
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_bars_need_every_finding_at_its_share(rules):
+    at_bars = {"s2_headline": rules.HEADLINE_BAR, "s1_inverse_lower": rules.HEADLINE_BAR,
+               "s2_hit_method_ns": rules.BASELINE_HIT_METHOD_NS, "s1_interaction": rules.BASELINE_INTERACTION,
+               "s2_hit_location_ns": 0.0}
+    assert rules.meets_bars(at_bars)
+    for key in ("s2_headline", "s1_inverse_lower", "s2_hit_method_ns", "s1_interaction"):
+        assert not rules.meets_bars({**at_bars, key: at_bars[key] - 0.01}), key
 
 
 def test_script_refuses_an_empty_seed_range():
