@@ -40,6 +40,17 @@ METHODS = ("funneling", "inverse", "combination")
 FUN, INV, COMB = 0, 1, 2
 BEST = {3, 4, 6, 7}  # locations 4, 5, 7, 8 (0-based)
 POST_HOC = (0, 2, 8)  # locations 1, 3, 9
+#: Issue 42's baseline: the findings under commit c313a27's participants (model v3, every
+#: method at equal peak drive) on the same seeds, measured by scripts/baseline_findings.py.
+BASELINE = Path(__file__).resolve().parent / "fits" / "baseline-c313a27.json"
+#: The issue's headline findings (the Study 1 direction, the Study 2 headline) must hold in
+#: at least two thirds of the studies; every other finding at least as often as under the baseline.
+HEADLINE_KEYS, HEADLINE_BAR = ("s1_inverse_lower", "s2_headline"), 2 / 3
+
+
+def baseline() -> dict[str, dict]:
+    """The baseline's counts by seed range (``"700-739"``: ``studies``, ``holds``, ``s2_reduction``)."""
+    return json.loads(BASELINE.read_text(encoding="utf-8"))["seeds"]
 
 
 def _long(cells: np.ndarray) -> pd.DataFrame:

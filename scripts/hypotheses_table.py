@@ -11,8 +11,12 @@ the shipped one). Two tables (a model, not data):
   the paper's directional claims are significant;
 - ``hypotheses-findings``: per finding of the paper, in how many of the held-out studies it
   holds under each hypothesis, analysed independently with pingouin and scipy
-  (``scripts/check_findings.py``), with each hypothesis' fit loss and held-out loss (the
-  default is the one of lowest held-out loss).
+  (``scripts/check_findings.py``), beside the issue's baseline (the participants of commit
+  c313a27 on the same seeds, ``scripts/fits/baseline-c313a27.json``, written by
+  ``scripts/baseline_findings.py``) and each finding's bar: two thirds of the studies for
+  the two headline findings, the baseline's share for the others; a count under its bar
+  is marked. Then each hypothesis' fit loss and held-out loss (the default is the one of
+  lowest held-out loss).
 
     .venv/bin/python scripts/hypotheses_table.py                 # rewrite both tables in the doc
     .venv/bin/python scripts/hypotheses_table.py --bank B.npz --print
@@ -21,6 +25,7 @@ the shipped one). Two tables (a model, not data):
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -29,12 +34,25 @@ import numpy as np
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS, available_hypotheses, hypothesis, hypothesis_fits
 from vibrofocus.simulation.power import study_statistics
+from check_findings import HEADLINE_BAR, HEADLINE_KEYS, baseline
 from fit_participants import HELD_OUT_SEEDS
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-participants.md"
 SEEDS = HELD_OUT_SEEDS
 N = 20
+
+
+def baseline_counts() -> dict | None:
+    """The baseline's counts on the table's seeds (``holds``, ``studies``, ``s2_reduction``), or None."""
+    return baseline().get(f"{SEEDS[0]}-{SEEDS[-1]}")
+
+
+def bar(key: str, base: dict | None) -> int | None:
+    """The least count of studies at which the finding ``key`` meets its bar (None: no bar known)."""
+    if key in HEADLINE_KEYS:
+        return math.ceil(HEADLINE_BAR * len(SEEDS))
+    return None if base is None else base["holds"].get(key)
 
 
 def row(name: str, bank: FeatureBank) -> str:
@@ -69,19 +87,34 @@ def findings_markdown(bank: FeatureBank) -> str:
     names = available_hypotheses()
     res = {name: held_out(SEEDS, N, bank, name) for name in names}
     fits = hypothesis_fits()["hypotheses"]
+    base = baseline_counts()
     head = " | ".join(f"`{n}`{' (default)' if n == DEFAULT_HYPOTHESIS else ''}" for n in names)
     lines = [f"Held-out check: {len(SEEDS)} studies of {N} participants (seeds {SEEDS[0]}-{SEEDS[-1]}, never used "
              f"by the fit), feature bank of {bank.n_forearms} forearms at {bank.levels} levels, each hypothesis with "
              "its fitted parameters, analysed with pingouin and scipy (`scripts/check_findings.py`, "
-             "`scripts/hypotheses_table.py`). A model, not data.", "",
-             f"| finding of the paper | {head} |", "|---|" + "---:|" * len(names)]
+             "`scripts/hypotheses_table.py`). Baseline: the participants of commit c313a27 (model v3, every method "
+             "at equal peak drive) on the same seeds, by that commit's own check "
+             "(`scripts/fits/baseline-c313a27.json`). Bar: the two headline findings in two thirds of the studies, "
+             "every other finding at least as often as under the baseline; **below** marks a count under its bar. "
+             "A model, not data.", "",
+             f"| finding of the paper | {head} | baseline (c313a27) | bar |", "|---|" + "---:|" * (len(names) + 2)]
     for label, key in ROWS:
-        lines.append(f"| {label} | " + " | ".join(f"{sum(bool(r[key]) for r in res[n])} of {len(SEEDS)}"
-                                                   for n in names) + " |")
+        least = bar(key, base)
+        cells = []
+        for n in names:
+            k = sum(bool(r[key]) for r in res[n])
+            cells.append(f"{k} of {len(SEEDS)}" + (" **below**" if least is not None and k < least else ""))
+        known = base is not None and key in base["holds"]
+        cells.append(f"{base['holds'][key]} of {base['studies']}" if known else "not measured")
+        cells.append("—" if least is None else f"{least} or more")
+        lines.append(f"| {label} | " + " | ".join(cells) + " |")
     red = {n: np.array([r["s2_reduction"] for r in res[n]]) for n in names}
+    base_red = (f"{base['s2_reduction']['median']:.0%} [{base['s2_reduction']['p5']:.0%}, "
+                f"{base['s2_reduction']['p95']:.0%}]" if base is not None else "not measured")
     lines.append("| Study 2 reduction of selected points, inverse vs funneling (paper: about 20 %), median [5th, 95th "
                  "percentile] | " + " | ".join(f"{np.median(v):.0%} [{np.percentile(v, 5):.0%}, "
-                                             f"{np.percentile(v, 95):.0%}]" for v in red.values()) + " |")
+                                             f"{np.percentile(v, 95):.0%}]" for v in red.values())
+                 + f" | {base_red} | — |")
     # The losses are those adopt recorded, on the seeds it recorded with them (the same for
     # every fit: tests/simulation/test_hypotheses.py).
     some = next(iter(fits.values()))
@@ -91,7 +124,7 @@ def findings_markdown(bank: FeatureBank) -> str:
                         "the default)", "loss_held_out"),
                        (f"held-out loss, the search's weights (seeds {held})", "loss_held_out_search_weights")):
         lines.append(f"| {title} | " + " | ".join(f"{fits[n][key]:.3f}" if n in fits else "not fitted"
-                                                  for n in names) + " |")
+                                                  for n in names) + " | — | — |")
     return "\n".join(lines)
 
 
