@@ -63,9 +63,12 @@ def main() -> int:
             r["s2_headline"] = bool(r["s2_method"] and 0.10 <= r["s2_reduction"] <= 0.30)
             res.append(r)
         red = np.array([r["s2_reduction"] for r in res])
+        keys = [k for _, k in ROWS] + ["s2_headline"]
         out["seeds"][f"{first}-{stop - 1}"] = {
             "studies": len(res),
-            "holds": {k: int(sum(bool(r[k]) for r in res)) for k in [k for _, k in ROWS] + ["s2_headline"]},
+            "holds": {k: int(sum(bool(r[k]) for r in res)) for k in keys},
+            # Each study's outcome, in seed order ("1": the finding held), for paired comparisons.
+            "per_seed": {k: "".join("1" if r[k] else "0" for r in res) for k in keys},
             "s2_reduction": {"median": float(np.median(red)), "p5": float(np.percentile(red, 5)),
                              "p95": float(np.percentile(red, 95))},
         }

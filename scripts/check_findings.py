@@ -11,7 +11,10 @@ Sec. III.B-C:
 
 prints, per finding, in how many seeds it holds, and the median reduction of selected
 points (inverse vs funneling), under one hypothesis of how the participants read the felt
-field (default the default one, with its fitted parameters). The default seeds are the
+field (default the default one, with its fitted parameters). ``--against-baseline`` adds, per
+finding, its count under the issue's baseline (the participants of commit c313a27, the same
+seeds: ``scripts/fits/baseline-c313a27.json``) and an exact McNemar test of the paired
+difference, so that a shortfall of a few studies can be told from chance. The default seeds are the
 fit's held-out seeds (``fit_participants.HELD_OUT_SEEDS``); the fit uses seeds from 1000
 (``fit_participants.FIT_SEEDS``). ``scripts/hypotheses_table.py`` writes the same check for every
 hypothesis into docs/simulated-participants.md.
@@ -51,6 +54,30 @@ HEADLINE_KEYS, HEADLINE_BAR = ("s1_inverse_lower", "s2_headline"), 2 / 3
 def baseline() -> dict[str, dict]:
     """The baseline's counts by seed range (``"700-739"``: ``studies``, ``holds``, ``s2_reduction``)."""
     return json.loads(BASELINE.read_text(encoding="utf-8"))["seeds"]
+
+
+def baseline_outcomes(seeds: range) -> dict[str, np.ndarray]:
+    """The baseline's outcome of each finding in each study of ``seeds``, shape (len(seeds),) per key.
+
+    Raises ValueError if a seed lies outside the ranges the baseline was measured on.
+    """
+    parts: dict[int, dict[str, bool]] = {}
+    for span, block in baseline().items():
+        first = int(span.split("-")[0])
+        for key, bits in block["per_seed"].items():
+            for i, bit in enumerate(bits):
+                parts.setdefault(first + i, {})[key] = bit == "1"
+    missing = [s for s in seeds if s not in parts]
+    if missing:
+        raise ValueError(f"the baseline was measured on seeds {', '.join(baseline())}, not on seed {missing[0]} "
+                         "(scripts/baseline_findings.py)")
+    return {key: np.array([parts[s][key] for s in seeds]) for key in parts[seeds[0]]}
+
+
+def paired_difference_p(model: np.ndarray, base: np.ndarray) -> float:
+    """Exact two-sided McNemar p of two paired 0/1 outcomes (the same seeds): 1.0 if none differ."""
+    gained, lost = int(np.sum(model & ~base)), int(np.sum(~model & base))
+    return 1.0 if gained + lost == 0 else float(stats.binomtest(gained, gained + lost, 0.5).pvalue)
 
 
 def _long(cells: np.ndarray) -> pd.DataFrame:
@@ -173,23 +200,39 @@ def main() -> None:
                     help="a feature bank built by scripts/build_feature_bank.py (default: the shipped one)")
     ap.add_argument("--hypothesis", default=None,
                     help="how the participants read the felt field (default: the default hypothesis)")
+    ap.add_argument("--against-baseline", action="store_true",
+                    help="add the issue's baseline (c313a27's participants, the same seeds) and an exact McNemar "
+                         "test of the paired difference per finding")
     args = ap.parse_args()
+    seeds = range(*args.seeds)
+    if args.against_baseline:
+        try:
+            base = baseline_outcomes(seeds)
+        except ValueError as exc:
+            ap.error(f"--against-baseline: {exc}")
     bank = FeatureBank.load(args.bank) if args.bank else default_bank()
     model = (PerceptualModel().replace(**json.loads(args.fit.read_text(encoding="utf-8"))["model"])
              if args.fit else None)
-    seeds = range(*args.seeds)
     res = held_out(seeds, args.n, bank, args.hypothesis, model)
     print(f"{hypothesis(args.hypothesis).label()}: {len(res)} studies of {args.n}, seeds {seeds.start}-{seeds.stop - 1}")
-    print("| finding | holds in |\n|---|---|")
+    if args.against_baseline:
+        print("| finding | holds in | baseline (c313a27) | paired McNemar p |\n|---|---|---|---|")
+    else:
+        print("| finding | holds in |\n|---|---|")
     for label, key in ROWS:
-        print(f"| {label} | {sum(bool(r[key]) for r in res)} of {len(res)} |")
+        mine = np.array([bool(r[key]) for r in res])
+        extra = (f" | {int(base[key].sum())} of {len(res)} | {paired_difference_p(mine, base[key]):.3g}"
+                 if args.against_baseline else "")
+        print(f"| {label} | {int(mine.sum())} of {len(res)}{extra} |")
+    tail = " | | |" if args.against_baseline else " |"  # the rows below fill only the first two columns
     red = np.array([r["s2_reduction"] for r in res])
     print(f"| Study 2 reduction of selected points, inverse vs funneling | median {np.median(red):.1%} "
-          f"[{np.percentile(red, 5):.1%}, {np.percentile(red, 95):.1%}] |")
+          f"[{np.percentile(red, 5):.1%}, {np.percentile(red, 95):.1%}]{tail}")
     print(f"| target-containing tests: participants kept (location, method), median | "
-          f"{np.median([r['s2_hit_n_location'] for r in res]):.0f}, {np.median([r['s2_hit_n_method'] for r in res]):.0f} of {args.n} |")
+          f"{np.median([r['s2_hit_n_location'] for r in res]):.0f}, {np.median([r['s2_hit_n_method'] for r in res]):.0f} "
+          f"of {args.n}{tail}")
     share = np.mean([r["s1_interaction_at_139_share"] for r in res])
-    print(f"| share of locations 1, 3, 9 with the inverse differing from both | {share:.0%} |")
+    print(f"| share of locations 1, 3, 9 with the inverse differing from both | {share:.0%}{tail}")
 
 
 if __name__ == "__main__":

@@ -15,13 +15,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def rules():
-    sys.path.insert(0, str(ROOT / "scripts"))
-    try:
-        import selection_rules
-    finally:
-        sys.path.pop(0)
-    return selection_rules
+def rules(import_script):
+    return import_script("selection_rules")
 
 
 def test_select_locations_reads_the_density_ratio_analytically():
