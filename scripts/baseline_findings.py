@@ -12,8 +12,9 @@ every hypothesis (a MODEL, not data):
     git worktree add /tmp/c313a27 c313a27
     .venv/bin/python scripts/baseline_findings.py --checkout /tmp/c313a27      # ~10 s
 
-The Study 2 headline row (fewer points with a 10-30 % reduction) did not exist then; it is
-counted here from that commit's own Study 2 method test and reduction.
+The Study 2 headline row (fewer points with a 10-30 % reduction) and the rows of each study
+as a whole did not exist then; they are counted here from that commit's own findings
+(``scripts/_joint_findings.py``).
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ def main() -> int:
     head = subprocess.run(["git", "-C", str(args.checkout), "rev-parse", "HEAD"], capture_output=True, text=True)
     if head.returncode != 0 or not head.stdout.startswith(COMMIT):
         ap.error(f"--checkout {args.checkout}: not a checkout of {COMMIT} ({head.stdout.strip() or head.stderr.strip()})")
+    from _joint_findings import JOINT, add_joint, headline  # before the paths change: not in that commit
+
     # That commit's code, not this checkout's: its package and its check_findings first.
     sys.path[:0] = [str(args.checkout / "src"), str(args.checkout / "scripts")]
     sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
@@ -60,10 +63,10 @@ def main() -> int:
         for s in range(first, stop):
             arrays = simulate_cell_means(20, np.random.default_rng([s, 16]), bank=bank, model=PerceptualModel())
             r = findings(arrays.error_mm, arrays.count, arrays.count_hit)
-            r["s2_headline"] = bool(r["s2_method"] and 0.10 <= r["s2_reduction"] <= 0.30)
-            res.append(r)
+            r["s2_headline"] = headline(r["s2_method"], r["s2_reduction"])
+            res.append(add_joint(r))
         red = np.array([r["s2_reduction"] for r in res])
-        keys = [k for _, k in ROWS] + ["s2_headline"]
+        keys = list(dict.fromkeys([k for _, k in ROWS] + ["s2_headline", *JOINT]))
         out["seeds"][f"{first}-{stop - 1}"] = {
             "studies": len(res),
             "holds": {k: int(sum(bool(r[k]) for r in res)) for k in keys},
