@@ -86,6 +86,7 @@ def test_funneling_is_coded_from_what_the_actuators_deliver():
             np.testing.assert_allclose(p.position_m[0], (1 - beta) * np.array([0.0, 0.015]) + beta * drive_cue,
                                        atol=1e-9)
             np.testing.assert_allclose(p.conflict_m[0], np.hypot(drive_cue[0], 0.015), rtol=1e-6)  # threshold: 1e-8
+            np.testing.assert_allclose(p.drive_position_m[0], drive_cue, atol=1e-9)
 
 
 def test_cue_conflict_makes_a_less_certain_percept():

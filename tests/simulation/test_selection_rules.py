@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
-from vibrofocus.simulation.perception import (TrialPosteriors, location_distances, posterior_ratio_rule,
-                                              select_locations)
+from vibrofocus.simulation.perception import (Percepts, TrialPosteriors, location_distances,
+                                              posterior_ratio_rule, select_locations)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -167,3 +167,25 @@ def test_without_unfused_percepts_the_draws_are_unchanged():
     np.testing.assert_array_equal(a.count, b.count)
     c = simulate_cell_means(3, np.random.default_rng([8, 16]), bank=bank, model=m.replace(unfused_per_m=400.0))
     assert not np.array_equal(a.error_mm, c.error_mm)
+
+
+def test_felt_at_drive_moves_the_unfused_trials_toward_the_drive_cue(rules):
+    rng = np.random.default_rng(33)
+    n = 500
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    felt_at = rng.uniform(-0.012, 0.012, (n, 2))
+    drive_at = rng.uniform(-0.02, 0.02, (n, 2))
+    percepts = Percepts(felt_at, np.zeros(n), np.ones(n, bool), np.linalg.norm(drive_at - felt_at, axis=1),
+                        drive_position_m=drive_at)
+    post = TrialPosteriors(felt_at, np.full(n, 4e-3), np.ones(n, bool))
+    index, criterion = np.arange(n), np.full(n, 0.5)
+    # Certain to unfuse (probability capped at 1): every answer is the location nearest to
+    # the point half-way to the drive cue.
+    answer, _ = rules.FeltAtDrive(1e6, 0.5, 1.0, seed=2)(post, criterion, locs, None, percepts, index)
+    expected = np.argmin(location_distances(felt_at + 0.5 * (drive_at - felt_at), locs, None), axis=1)
+    np.testing.assert_array_equal(answer, expected)
+    # Never unfused: the shipped rule's answers and selections.
+    a0, s0 = rules.FeltAtDrive(0.0, 0.5, 3.0, seed=2)(post, criterion, locs, None, percepts, index)
+    a1, s1 = posterior_ratio_rule(post, criterion, locs, None, percepts, index)
+    np.testing.assert_array_equal(a0, a1)
+    np.testing.assert_array_equal(s0, s1)

@@ -165,7 +165,7 @@ class Hypothesis:
             reliability = np.where(felt, activity / (activity + max(ref, 1e-12)), np.nan)
         # Every hypothesis detects on the whole skin, so v3's conflict (NaN where nothing is
         # felt) serves as it is.
-        return Percepts(position, spread, felt, base.conflict_m, reliability)
+        return Percepts(position, spread, felt, base.conflict_m, reliability, base.drive_position_m)
 
 
 def _grid_peak(e: np.ndarray, xy: np.ndarray, locations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -488,6 +488,9 @@ class Percepts:
         Reliability of the sensed position in (0, 1]: its noise variance is divided by it
         (a hypothesis in which weak taps are localized less reliably,
         :mod:`vibrofocus.simulation.hypotheses`); None: 1.
+    drive_position_m : ndarray, shape (n, 2), optional
+        The drive cue's place: the energy-law position over the actuators' contacts, m
+        (NaN where the actuators deliver nothing felt); None without a drive cue.
     """
 
     position_m: np.ndarray
@@ -495,6 +498,7 @@ class Percepts:
     felt: np.ndarray
     conflict_m: np.ndarray | None = None
     reliability: np.ndarray | None = None
+    drive_position_m: np.ndarray | None = None
 
 
 def felt_threshold(model: PerceptualModel, traits: Traits) -> float:
@@ -549,17 +553,19 @@ def central_percepts(
     pos, spread, total = _energy_law(e, e_thr, points_xy, model.funneling_exponent)
     felt = total > 0
     conflict = np.zeros(len(e))
+    drive_place = None
     if actuator_energy is not None:
         a = np.atleast_2d(np.asarray(actuator_energy, dtype=float))
         drive_pos, _, drive_total = _energy_law(a, e_thr, np.asarray(actuators_xy, dtype=float), model.funneling_exponent)
         has = drive_total > 0
         conflict = np.where(has, np.linalg.norm(drive_pos - pos, axis=1), 0.0)
+        drive_place = np.where(has[:, None], drive_pos, np.nan)
         beta = np.where(has, model.central_weight, 0.0)[:, None]
         pos = (1.0 - beta) * pos + beta * drive_pos
     pos[~felt] = np.nan
     spread[~felt] = np.nan
     conflict[~felt] = np.nan
-    return Percepts(pos, spread, felt, conflict)
+    return Percepts(pos, spread, felt, conflict, drive_position_m=drive_place)
 
 
 @dataclass(frozen=True)
