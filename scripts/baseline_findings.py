@@ -58,6 +58,7 @@ def main() -> int:
                     "equal peak drive; issue 42's baseline), by that commit's scripts/check_findings.py; written by "
                     "scripts/baseline_findings.py. A model, not data.",
            "commit": head.stdout.strip(), "participants": 20, "seeds": {}}
+    keys = list(dict.fromkeys([k for _, k in ROWS] + ["s2_headline", *JOINT]))
     for first, stop in SEED_RANGES:
         res = []
         for s in range(first, stop):
@@ -66,7 +67,6 @@ def main() -> int:
             r["s2_headline"] = headline(r["s2_method"], r["s2_reduction"])
             res.append(add_joint(r))
         red = np.array([r["s2_reduction"] for r in res])
-        keys = list(dict.fromkeys([k for _, k in ROWS] + ["s2_headline", *JOINT]))
         out["seeds"][f"{first}-{stop - 1}"] = {
             "studies": len(res),
             "holds": {k: int(sum(bool(r[k]) for r in res)) for k in keys},

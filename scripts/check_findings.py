@@ -23,6 +23,7 @@ hypothesis into docs/simulated-participants.md.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import warnings
 from itertools import combinations
@@ -52,8 +53,12 @@ BASELINE = Path(__file__).resolve().parent / "fits" / "baseline-c313a27.json"
 HEADLINE_KEYS, HEADLINE_BAR = ("s1_inverse_lower", "s2_headline"), 2 / 3
 
 
+@functools.cache
 def baseline() -> dict[str, dict]:
-    """The baseline's counts by seed range (``"700-739"``: ``studies``, ``holds``, ``s2_reduction``)."""
+    """The baseline's counts by seed range (``"700-739"``: ``studies``, ``holds``, ``s2_reduction``).
+
+    Read once per process; callers must not modify it.
+    """
     return json.loads(BASELINE.read_text(encoding="utf-8"))["seeds"]
 
 

@@ -21,8 +21,9 @@ are not significant; and, since some rules move the answers too, the Study 1 dir
 (the inverse filter's error below funneling's, Bonferroni) and the Study 1 interaction's
 significance. All are analysed with pingouin and scipy by ``scripts/check_findings.py``. The
 default seeds are not the fit's held-out ones (``fit_participants.HELD_OUT_SEEDS``).
-Only the selection varies here (and for the unfused percepts, which move the answers too, the
-conflict's own noise), the rest of the model stays as fitted; a rule
+Only the answer rule varies here (most rules change the selection only; the diffuse trials
+and both unfused families move the answers too, and may switch the conflict's own noise
+off), the rest of the model stays as fitted; a rule
 worth adopting would then be refitted with ``scripts/fit_participants.py`` like every
 hypothesis.
 """
@@ -30,7 +31,7 @@ hypothesis.
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, Callable
 
@@ -40,7 +41,7 @@ from check_findings import HEADLINE_BAR, baseline, findings
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import hypothesis
 from vibrofocus.simulation.perception import (Percepts, PerceptualModel, TrialPosteriors, location_distances,
-                                              posterior_ratio_rule, select_locations)
+                                              posterior_ratio_rule, select_locations, unfuse)
 
 PITCH_M = 10e-3  # the 3 x 3 grid's pitch (the shipped bank)
 
@@ -134,21 +135,24 @@ class FeltAtDrive:
     width: float
     seed: int = 0
     rng: np.random.Generator = field(init=False, repr=False)
+    unfusing: PerceptualModel = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         self.rng = np.random.default_rng([self.seed, 0xD21])
+        # The model's own unfusing decides which trials and how much wider, with no jump of
+        # its own: the displacement is toward the drive cue instead of at a random angle.
+        self.unfusing = PerceptualModel().replace(unfused_per_m=self.per_m, unfused_jump_m=0.0,
+                                                  unfused_width=self.width)
 
     def __call__(self, post: TrialPosteriors, criterion: np.ndarray, locations_xy: np.ndarray, allowed: Any,
                  percepts: Percepts, index: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n = index.size
         if percepts.drive_position_m is None:  # no drive cue: nothing to be felt at
             return posterior_ratio_rule(post, criterion, locations_xy, allowed, percepts, index)
+        wider, unfused = unfuse(post, percepts.conflict_m[index], self.unfusing, self.rng.random(index.size),
+                                np.zeros(index.size))
         shift = np.nan_to_num(percepts.drive_position_m[index] - percepts.position_m[index])
-        conflict = np.nan_to_num(percepts.conflict_m[index])
-        unfused = (self.rng.random(n) < np.clip(self.per_m * conflict, 0.0, 1.0)) & post.felt
-        perceived = post.perceived_m + np.where(unfused[:, None], self.fraction * shift, 0.0)
-        sd = np.where(unfused, post.sd_m * self.width, post.sd_m)
-        return select_locations(location_distances(perceived, locations_xy, allowed), sd, criterion)
+        moved = replace(wider, perceived_m=wider.perceived_m + np.where(unfused[:, None], self.fraction * shift, 0.0))
+        return posterior_ratio_rule(moved, criterion, locations_xy, allowed, percepts, index)
 
 
 @dataclass(frozen=True)
