@@ -226,6 +226,37 @@ def test_the_emergency_stop_answers_during_a_slow_body_attack(capped):
             sock.close()
 
 
+def test_a_new_connection_outlives_a_flood_of_stalled_bodies(tmp_path):
+    """The flood's newer connections close stalled bodies, not a connection whose head is on its way.
+
+    Deterministic form of the race above: the stop's connection opens first and sends its
+    request only after twice the cap of stalled bodies have arrived (well inside its grace).
+    """
+    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log",
+                 args=("--max-connections", str(CAP), "--head-grace", "10"))
+    srv.start()
+    stop_conn = socket.create_connection(("127.0.0.1", srv.port))
+    held = []
+    try:
+        held = _slow_bodies(srv.port, 2 * CAP)
+        time.sleep(1.0)  # the server has read every stalled head and made room for each
+        stop_conn.sendall(f"POST /api/emergency-stop HTTP/1.1\r\nHost: 127.0.0.1\r\n"
+                          f"X-Vibrofocus-Token: {srv.token}\r\nContent-Length: 0\r\n\r\n".encode())
+        stop_conn.settimeout(10)
+        answer = b""
+        try:
+            while b"\r\n\r\n" not in answer and (chunk := stop_conn.recv(4096)):
+                answer += chunk
+        except ConnectionResetError:
+            pytest.fail("the emergency stop's connection was closed as idle before its request was read")
+        assert answer.startswith(b"HTTP/1.1 200"), answer[:200]
+    finally:
+        stop_conn.close()
+        for sock in held:
+            sock.close()
+        srv.stop()
+
+
 def test_a_reserved_slot_keeps_the_emergency_stop_when_every_connection_is_busy(capped):
     srv = capped
     busy = _busy_long_polls(srv, "P03")
@@ -239,3 +270,13 @@ def test_a_reserved_slot_keeps_the_emergency_stop_when_every_connection_is_busy(
     finally:
         for sock in busy:
             sock.close()
+
+
+@pytest.mark.parametrize("field", ["header_timeout_s", "keep_alive_s", "body_timeout_s", "head_grace_s"])
+def test_server_limits_refuse_a_time_that_is_not_positive(field):
+    from vibrofocus.web.serving import ServerLimits
+
+    with pytest.raises(ValueError, match=field):
+        ServerLimits(**{field: 0.0})
+    with pytest.raises(ValueError, match="max_connections"):
+        ServerLimits(max_connections=3)

@@ -28,6 +28,7 @@ def serve(
     max_connections: int = typer.Option(1000, "--max-connections", min=4, max=1_000_000, help="Most connections open at once; beyond it the longest-idle one is closed, or the new one refused when all are busy."),
     header_timeout: float = typer.Option(10.0, "--header-timeout", min=0.1, max=600.0, help="Seconds a connection may take to send a request's headers before it is closed."),
     keep_alive: float = typer.Option(5.0, "--keep-alive", min=0.1, max=3600.0, help="Seconds an idle connection is kept open between requests."),
+    head_grace: float = typer.Option(0.5, "--head-grace", min=0.01, max=60.0, help="Seconds a new connection has to start its request before it may be closed as idle when the connections are full (raise it for clients on slow networks)."),
     body_timeout: float = typer.Option(10.0, "--body-timeout", min=0.1, max=600.0, help="Seconds a request may take to send its body once its headers are in; then it gets 408 and its connection is closed."),
     trusted_proxy: str | None = typer.Option(None, "--trusted-proxy", metavar="ADDR", help="Address of a reverse proxy in front of this server whose X-Forwarded-For header names the real client (comma-separated for several). Without it, forwarding headers are ignored."),
     lsl: bool = lsl_option(),
@@ -122,7 +123,7 @@ def serve(
             # A moment later, so that the page does not ask before uvicorn listens.
             threading.Timer(1.5, webbrowser.open, args=(login,)).start()
         limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive,
-                              body_timeout_s=body_timeout)
+                              body_timeout_s=body_timeout, head_grace_s=head_grace)
         with markers:
             run(web_app, host=host, port=port, limits=limits, sock=sock, trusted_proxy=trusted_proxy)
 

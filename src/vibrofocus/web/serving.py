@@ -13,12 +13,16 @@ accept writes a line to the log. Here each connection is held to:
   ``body_timeout_s`` gets ``408`` and its connection is closed (checked by
   :class:`~vibrofocus.web.security.SecurityMiddleware`, which reads every body);
 - a **cap** on open connections (below the file-descriptor limit): a connection beyond
-  it closes the longest-idle connection (one with no request in progress), or else the
-  one that has waited longest for a request body that does not come (a client that
-  declared a body and sends nothing holds a connection without doing anything), so
-  neither idle sockets nor stalled bodies can lock out a participant or the
-  experimenter; when every connection is busy with real work, the new one gets ``503``
-  with a sentence saying why, and is closed;
+  it closes the longest-idle connection (one with no request in progress for more than
+  ``head_grace_s``), or else the one that has waited longest for a request body that
+  does not come (a client that declared a body and sends nothing holds a connection
+  without doing anything), or else the newest connection still inside its grace. The
+  grace matters under a flood of stalled bodies: a connection that has just opened has
+  not had the time to send its head, and without the grace the flood's newer
+  connections would close it as "idle" before its request (an emergency stop, a
+  participant's answer) was read. So neither idle sockets nor stalled bodies can lock
+  out a participant or the experimenter; when every connection is busy with real work,
+  the new one gets ``503`` with a sentence saying why, and is closed;
 - **reserved slots for the emergency stop**: beyond the cap, :data:`RESERVED_SLOTS` more
   connections are accepted that answer only ``POST /api/emergency-stop`` (everything else
   on them gets the ``503``), so the stop button works whatever the load.
@@ -40,7 +44,7 @@ import time
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["ServerLimits", "FloodFilter", "guarded_protocol", "effective_cap", "run", "RESERVED_SLOTS"]
+__all__ = ["ServerLimits", "FloodFilter", "guarded_protocol", "effective_cap", "run", "RESERVED_SLOTS", "HEAD_GRACE_S"]
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +53,10 @@ FD_RESERVE = 128
 
 #: Connections beyond the cap kept for ``POST /api/emergency-stop`` only.
 RESERVED_SLOTS = 8
+#: Default time a connection has, after opening or after its last response, to start a
+#: request before it counts as idle, s (a client on a network with a round trip under a
+#: second sends its request head well within it).
+HEAD_GRACE_S = 0.5
 #: The one request a reserved connection may carry.
 EMERGENCY_STOP = ("POST", "/api/emergency-stop")
 
@@ -73,18 +81,22 @@ class ServerLimits:
         Longest idle time between two requests on one connection, s.
     body_timeout_s : float
         Longest wait for the whole body of a request once its head is in, s (then 408).
+    head_grace_s : float
+        Time a connection has, after opening or after its last response, to start a
+        request before the cap may close it as idle, s (:data:`HEAD_GRACE_S`).
     """
 
     max_connections: int = 1000
     header_timeout_s: float = 10.0
     keep_alive_s: float = 5.0
     body_timeout_s: float = 10.0
+    head_grace_s: float = HEAD_GRACE_S
 
     def __post_init__(self) -> None:
         if self.max_connections < 4:
             raise ValueError(f"max_connections must be at least 4, got {self.max_connections}")
-        if not self.header_timeout_s > 0 or not self.keep_alive_s > 0 or not self.body_timeout_s > 0:
-            raise ValueError("header_timeout_s, keep_alive_s and body_timeout_s must be positive")
+        if not all(t > 0 for t in (self.header_timeout_s, self.keep_alive_s, self.body_timeout_s, self.head_grace_s)):
+            raise ValueError("header_timeout_s, keep_alive_s, body_timeout_s and head_grace_s must be positive")
 
 
 def effective_cap(limits: ServerLimits) -> int:
@@ -182,17 +194,27 @@ def guarded_protocol(limits: ServerLimits, cap: int | None = None) -> type:
             return [c for c in self.connections if c is not self and isinstance(c, GuardedH11Protocol)]
 
         def _evict(self) -> bool:
-            """Make room: close the longest-idle other connection, else the longest-stalled body.
+            """Make room: close the longest-idle other connection, else the longest-stalled
+            body, else the newest connection still in its grace (``limits.head_grace_s``).
+
+            The newest, in the grace: in a burst the server accepts many connections before
+            it reads any of them, and the one that opened first (whose request may already
+            be on its way) must not be the first to go.
 
             False if every other connection is busy with a request it has whole.
             """
             others = self._others()
-            for pick in (lambda c: not c._busy(), GuardedH11Protocol._stalled):
-                chosen = [c for c in others if pick(c)]
-                if chosen:
-                    min(chosen, key=lambda c: c._idle_since)._close()
-                    return True
-            return False
+            idle_before = time.monotonic() - limits.head_grace_s
+            idle = [c for c in others if not c._busy() and c._idle_since < idle_before]
+            stalled = [c for c in others if c._stalled()]
+            in_grace = [c for c in others if not c._busy() and c._idle_since >= idle_before]
+            if idle or stalled:
+                min(idle or stalled, key=lambda c: c._idle_since)._close()
+            elif in_grace:
+                max(in_grace, key=lambda c: c._idle_since)._close()
+            else:
+                return False
+            return True
 
         def _reserve(self) -> bool:
             """Take one of the slots kept for the emergency stop; False if none is left.
