@@ -36,7 +36,7 @@ from scipy import stats
 
 from vibrofocus.simulation.bank import FeatureBank, default_bank, simulate_cell_means
 from vibrofocus.simulation.hypotheses import hypothesis
-from vibrofocus.simulation.perception import PerceptualModel
+from vibrofocus.simulation.perception import MODEL_VERSION, PerceptualModel
 from _joint_findings import add_joint, headline
 from fit_participants import HELD_OUT_SEEDS
 
@@ -222,7 +222,11 @@ def main() -> None:
     model = (PerceptualModel().replace(**json.loads(args.fit.read_text(encoding="utf-8"))["model"])
              if args.fit else None)
     res = held_out(seeds, args.n, bank, args.hypothesis, model)
-    print(f"{hypothesis(args.hypothesis).label()}: {len(res)} studies of {args.n}, seeds {seeds.start}-{seeds.stop - 1}")
+    label = hypothesis(args.hypothesis).label()
+    if args.fit:  # not the shipped fit: say whose parameters these are
+        label = (f"simulated participants: model v{MODEL_VERSION}, hypothesis {hypothesis(args.hypothesis).name} with "
+                 f"the parameters of {args.fit.name}, not data")
+    print(f"{label}: {len(res)} studies of {args.n}, seeds {seeds.start}-{seeds.stop - 1}")
     if args.against_baseline:
         print("| finding | holds in | baseline (c313a27) | paired McNemar p |\n|---|---|---|---|")
     else:

@@ -171,12 +171,28 @@ def residuals(stats: list[dict]) -> str:
 
 
 def sample(rng: np.random.Generator, base: PerceptualModel | None = None, scale: float = 1.0,
-           central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE, unfused: bool = False) -> PerceptualModel:
+           central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE, unfused: bool = False,
+           aware: bool = False) -> PerceptualModel:
     """A candidate: drawn from broad ranges (``base`` None) or jittered around ``base``.
 
-    ``unfused``: search the unfused percepts too (``PerceptualModel.unfused_*``). Without
-    it nothing more is drawn, so a search repeats the shipped fits, made before them.
+    ``unfused``: search the unfused percepts too (``PerceptualModel.unfused_*``).
+    ``aware``: search ``PerceptualModel.conflict_awareness`` too, with the conflict gain's
+    random range widened to 0-4 (a selection that reads the trial's discrepancy pairs
+    with more conflict noise). Without them nothing more is drawn, so a search repeats
+    the fits made before them.
     """
+    drawn = _sample(rng, base, scale, central_range, unfused)
+    if not aware:
+        return drawn
+    if base is None:
+        return drawn.replace(conflict_gain=rng.uniform(0.0, 4.0), conflict_awareness=rng.uniform(0.0, 2.0))
+    # Additive, so a search that starts without it (0) can find it.
+    return drawn.replace(conflict_awareness=float(np.clip(base.conflict_awareness + rng.normal(0, 0.1 * scale), 0.0, 3.0)))
+
+
+def _sample(rng: np.random.Generator, base: PerceptualModel | None, scale: float,
+            central_range: tuple[float, float], unfused: bool) -> PerceptualModel:
+    """:func:`sample` without the conflict awareness."""
     if base is None:
         lo_a, lo_p, lo_k = rng.uniform(3e-3, 12e-3), rng.uniform(5e-3, 25e-3), rng.uniform(0.05, 0.6)
         drawn = PerceptualModel().replace(
@@ -236,7 +252,7 @@ HELD_OUT_SEEDS = range(700, 740)
 def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: int,
            weights: dict[str, float], central_range: tuple[float, float] = CENTRAL_WEIGHT_RANGE,
            bank: FeatureBank | None = None, integration_s: float | None = None,
-           name: str | None = None, unfused: bool = False) -> PerceptualModel:
+           name: str | None = None, unfused: bool = False, aware: bool = False) -> PerceptualModel:
     h = hypothesis(name)
     b = bank if bank is not None else default_bank()
     rng = np.random.default_rng(rng_seed)
@@ -247,9 +263,9 @@ def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: 
     print(f"start: loss {best_loss:.4f}", flush=True)
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
-        cand = (sample(rng, central_range=central_range, unfused=unfused) if i < n_eval else
+        cand = (sample(rng, central_range=central_range, unfused=unfused, aware=aware) if i < n_eval else
                 sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range,
-                       unfused=unfused))
+                       unfused=unfused, aware=aware))
         cand = cand.replace(integration_s=integration_s)  # the bank's window, never searched
         val = loss(seed_statistics(cand, FIT_SEEDS, bank=b, hypothesis=h), weights)
         if val < best_loss:
@@ -258,6 +274,7 @@ def search(n_eval: int, n_refine: int, out: Path, start: Path | None, rng_seed: 
     write_text(out, json.dumps({"hypothesis": h.name, "levels": b.levels, "bank_forearms": b.n_forearms,
                                 "budget": {"n_eval": n_eval, "n_refine": n_refine, "rng_seed": rng_seed,
                                            **({"unfused": True} if unfused else {}),
+                                           **({"aware": True} if aware else {}),
                                            "start": (json.loads(start.read_text(encoding="utf-8")).get("budget")
                                                      if start is not None else None)},
                                 "loss": best_loss, "weights": weights, "fit_seeds": [FIT_SEEDS.start, FIT_SEEDS.stop],
@@ -424,6 +441,9 @@ def main() -> int:
     s.add_argument("--unfused", action="store_true",
                    help="search the unfused percepts too (off in the shipped fits; docs/simulated-participants.md, "
                         "\"Unfused percepts: three fits, not adopted\")")
+    s.add_argument("--aware", action="store_true",
+                   help="search PerceptualModel.conflict_awareness too (the selection's width reads the trial's own "
+                        "cue discrepancy), with the conflict gain drawn in 0-4")
     a = sub.add_parser("adopt", help="ship fits: held-out losses, the default hypothesis, hypotheses_fit.json")
     a.add_argument("fits", type=Path, nargs="+", help="fit files written by search, one per hypothesis")
     a.add_argument("--version", action="append", default=[], metavar="NAME=V",
@@ -448,7 +468,7 @@ def main() -> int:
         bank = FeatureBank.load(args.bank) if args.bank else None
         window = None if args.integration_ms is None else args.integration_ms * 1e-3
         best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range,
-                      bank, window, args.hypothesis, args.unfused)
+                      bank, window, args.hypothesis, args.unfused, args.aware)
         for title, seeds in ((f"fit seeds {FIT_SEEDS.start}-{FIT_SEEDS.stop - 1}", FIT_SEEDS), ("table seeds 0-19", range(20)),
                              (f"held-out seeds {HELD_OUT_SEEDS.start}-{HELD_OUT_SEEDS.stop - 1}", HELD_OUT_SEEDS)):
             print(f"\n{title}:\n" + residuals(seed_statistics(best, seeds, bank=bank, hypothesis=args.hypothesis)))

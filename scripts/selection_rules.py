@@ -23,7 +23,9 @@ significance. All are analysed with pingouin and scipy by ``scripts/check_findin
 default seeds are not the fit's held-out ones (``fit_participants.HELD_OUT_SEEDS``).
 Only the answer rule varies here (most rules change the selection only; the diffuse trials
 and both unfused families move the answers too, and may switch the conflict's own noise
-off), the rest of the model stays as fitted; a rule
+off; the width read from the trial's discrepancy draws the place's noise in two parts, so
+its answers are new draws of the same law, and two of its settings raise the conflict's
+noise), the rest of the model stays as fitted; a rule
 worth adopting would then be refitted with ``scripts/fit_participants.py`` like every
 hypothesis.
 """
@@ -192,6 +194,12 @@ def settings(model: PerceptualModel) -> list[Setting]:
                     lambda s, p=p, f=f, w=w: FeltAtDrive(p, f, w, s), (("conflict_gain", 0.0),) if quiet else ())
             for p, f, w, quiet in ((100.0, 1.0, 1.0, False), (200.0, 2.0, 1.0, False), (200.0, 1.0, 1.5, False),
                                 (400.0, 1.0, 2.5, True))]
+    # The selection's width reads the trial's own cue discrepancy (PerceptualModel.
+    # conflict_awareness), alone and with more conflict noise; the rule stays the shipped one.
+    out += [Setting("width from the trial's discrepancy", f"lambda {lam:g}" + (f", conflict gain {g:g}" if g else ""),
+                    lambda s: posterior_ratio_rule,
+                    (("conflict_awareness", lam),) + ((("conflict_gain", g),) if g else ()))
+            for lam, g in ((1.0, None), (1.2, None), (1.0, 2.6), (0.9, 3.0))]
     return out
 
 

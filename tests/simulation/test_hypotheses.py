@@ -196,3 +196,19 @@ def test_the_recorded_held_out_losses_and_so_the_default_are_reproduced():
         stats = seed_statistics(None, HELD_OUT_SEEDS, hypothesis=name)
         np.testing.assert_allclose(loss(stats), fit["loss_held_out"], rtol=1e-3, atol=1e-4)  # the standard objective
         np.testing.assert_allclose(loss(stats, fit["weights"]), fit["loss_held_out_search_weights"], rtol=1e-3, atol=1e-4)
+
+
+def test_the_search_draws_the_conflict_awareness_only_when_asked(import_script):
+    fit = import_script("fit_participants")
+    plain = [fit.sample(np.random.default_rng(s)) for s in range(50)]
+    assert all(m.conflict_awareness == 0.0 and m.conflict_gain <= 2.0 for m in plain)
+    drawn = [fit.sample(np.random.default_rng(s), aware=True) for s in range(200)]
+    lam = np.array([m.conflict_awareness for m in drawn])
+    gain = np.array([m.conflict_gain for m in drawn])
+    assert lam.min() >= 0.0 and lam.max() <= 2.0 and gain.max() <= 4.0 and gain.max() > 2.0
+    # The rest of a candidate is what the search without it would draw.
+    assert fit.sample(np.random.default_rng(3), aware=True).select_kappa == plain[3].select_kappa
+    # Refined from a model without it, the awareness can appear, and stays in [0, 3].
+    refined = [fit.sample(np.random.default_rng(s), PerceptualModel(), aware=True) for s in range(200)]
+    lam = np.array([m.conflict_awareness for m in refined])
+    assert (lam > 0).mean() > 0.3 and lam.max() <= 3.0

@@ -197,6 +197,58 @@ def test_study2_selects_by_posterior_density_ratio():
     assert 1.2 < sel.sum(1).mean() < 8  # several locations at times, not all
 
 
+def _conflicted(position, conflict_m):
+    return Percepts(np.array([position], dtype=float), np.array([0.0]), np.array([True]), np.array([conflict_m]))
+
+
+@pytest.mark.parametrize("awareness", [0.6, 1.0])
+def test_conflict_awareness_leaves_the_place_and_widens_with_the_trials_own_discrepancy(awareness):
+    from scipy.stats import spearmanr
+
+    from vibrofocus.simulation.perception import trial_posteriors
+
+    acuity, prior, gain, conflict = 5e-3, 12e-3, 2.0, 4e-3
+    traits = Traits(0.0, acuity, prior, np.zeros(2), 0.5, 1.0, spread_gain=0.0)
+    x = np.array([0.006, -0.004])
+    n = 40000
+    rng = np.random.default_rng(31)
+    noise, by_conflict = rng.standard_normal((n, 2)), rng.standard_normal((n, 2))
+    percepts, index = _conflicted(x, conflict), np.zeros(n, int)
+    fused = trial_posteriors(percepts, index, np.zeros(2), PerceptualModel(conflict_gain=gain), traits, noise)
+    aware = trial_posteriors(percepts, index, np.zeros(2),
+                             PerceptualModel(conflict_gain=gain, conflict_awareness=awareness), traits, noise,
+                             by_conflict)
+    # The place, in law: mean g x and SD g * sqrt(acuity^2 + (gain * conflict)^2) per axis
+    # (Gaussian prior and likelihood), as without awareness; 3 SE tolerances.
+    sig2 = acuity**2 + (gain * conflict) ** 2
+    g = prior**2 / (prior**2 + sig2)
+    np.testing.assert_allclose(aware.perceived_m.mean(0), g * x, atol=3 * g * np.sqrt(sig2 / n))
+    np.testing.assert_allclose(aware.perceived_m.std(0), g * np.sqrt(sig2), rtol=0.02)
+    np.testing.assert_allclose(fused.sd_m, np.sqrt(g * sig2), rtol=1e-12)  # v3: one width per stimulus
+    # The width: sd^2 = w p^2 / (p^2 + w) with w = acuity^2 + awareness^2 |v|^2 / 2, and
+    # E[|v|^2 / 2] = (gain * conflict)^2, so E[w] = acuity^2 + awareness^2 (gain * conflict)^2.
+    w = prior**2 * aware.sd_m**2 / (prior**2 - aware.sd_m**2)
+    expected = acuity**2 + awareness**2 * (gain * conflict) ** 2
+    np.testing.assert_allclose(w.mean(), expected, rtol=0.02)
+    assert w.min() >= acuity**2 * (1 - 1e-9)  # never narrower than the other noise alone
+    # Wider on the trials the conflict displaced more: the width follows this trial's error.
+    error = np.linalg.norm(aware.perceived_m - g * x, axis=1)
+    assert spearmanr(aware.sd_m, error).statistic > 0.5
+
+
+def test_without_conflict_awareness_the_draws_are_unchanged():
+    """conflict_awareness = 0 draws nothing more, so the answers of the shipped fits stay as they were."""
+    model = PerceptualModel(conflict_gain=2.0)
+    traits = Traits(0.0, 5e-3, 12e-3, np.zeros(2), 0.5, 1.0, spread_gain=0.0)
+    locs = np.array([[x, y] for y in (0.01, 0, -0.01) for x in (-0.01, 0, 0.01)])
+    percepts = _conflicted([0.004, 0.002], 4e-3)
+    runs = [draw_answers(percepts, np.zeros(500, int), locs, np.zeros(2), m, traits, np.random.default_rng(5))
+            for m in (model, model.replace(conflict_awareness=0.0), model.replace(conflict_awareness=1.0))]
+    for x, y in zip(runs[0], runs[1]):
+        np.testing.assert_array_equal(x, y)
+    assert not np.array_equal(runs[0][1], runs[2][1])  # the selection reads the discrepancy
+
+
 def test_population_bias_points_toward_the_elbow():
     # Cholewiak et al. 2020: the forearm's perceived midpoint lies toward the elbow (-y).
     model = PerceptualModel()

@@ -211,6 +211,18 @@ class PerceptualModel:
         Factor on the posterior SD with which the participant selects points on an unfused
         trial (it felt odd, so the participant is less sure); it widens the selection only
         (the jump, not the width, moves the answer). *Fitted.*
+    conflict_awareness : float
+        ``lambda``: how the Study 2 selection reads the trial's own cue discrepancy. 0
+        (default, as in v3): the selection's width carries the conflict noise's expected
+        variance ``(conflict_gain * c)**2``, the same on every trial of a stimulus. Above
+        0: it carries ``lambda**2 * |v|**2 / 2`` per axis, ``v`` this trial's displacement by
+        the conflict noise, so a trial on which the two cues happened to disagree more is
+        felt less certain and selected wider, while the place (the answer) is read as
+        before. *Assumption* of the form (confidence follows the trial's sensed
+        uncertainty, read heuristically rather than as the posterior: Adler & Ma 2018,
+        PLoS Comput. Biol. 14(11):e1006572, doi:10.1371/journal.pcbi.1006572); size
+        *fitted*. Draws one more standard-normal pair per trial (after the unfused ones),
+        so answers of a model without it are unchanged.
     rt_median_s, rt_log_sd, rt_per_extra_location_s
         Response times (an assumption).
     version : str
@@ -239,6 +251,7 @@ class PerceptualModel:
     unfused_per_m: float = 0.0
     unfused_jump_m: float = 0.02
     unfused_width: float = 1.0
+    conflict_awareness: float = 0.0
     rt_median_s: tuple[float, float] = (0.9, 1.4)
     rt_log_sd: float = 0.3
     rt_per_extra_location_s: float = 0.35
@@ -283,6 +296,9 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
                       "2007); 0 (off) in the shipped fits, three fits with it are documented, not adopted"),
     "unfused_jump_m": ("fitted", "form an assumption: how far away an unfused tap is felt (used only when on)"),
     "unfused_width": ("fitted", "how much wider an unfused trial's selection is (used only when on)"),
+    "conflict_awareness": ("fitted", "form an assumption: the selection's width reads the trial's own cue "
+                           "discrepancy (confidence from sensed uncertainty, Adler & Ma 2018); 0 (off): v3's expected "
+                           "width"),
     "rt_median_s": ("assumption", "response times (not analysed)"),
     "rt_log_sd": ("assumption", "response times (not analysed)"),
     "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),
@@ -594,6 +610,7 @@ def trial_posteriors(
     model: PerceptualModel,
     traits: Traits,
     noise: np.ndarray,
+    conflict_noise: np.ndarray | None = None,
 ) -> TrialPosteriors:
     """Posteriors of trials from their noise-free percepts and standard-normal noise.
 
@@ -606,7 +623,14 @@ def trial_posteriors(
     centre_xy : ndarray, shape (2,)
         Array centre, m (the prior's centre before the participant's bias).
     noise : ndarray, shape (n_trials, 2)
-        Standard-normal draws of the sensed position's noise.
+        Standard-normal draws of the sensed position's noise (without ``conflict_noise``:
+        all of it; with it: the part not due to the cue conflict).
+    conflict_noise : ndarray, shape (n_trials, 2), optional
+        Standard-normal draws of the part due to the cue conflict, given only where the
+        model's ``conflict_awareness`` is on: the place's noise is then the same in law,
+        and the posterior SD (the selection's width) carries this trial's conflict
+        displacement ``v`` as ``conflict_awareness**2 * |v|**2 / 2`` per axis instead of its
+        expected variance; the shrinkage toward the prior, and so the place, is unchanged.
     """
     idx = np.asarray(index, dtype=int)
     n = idx.size
@@ -615,15 +639,27 @@ def trial_posteriors(
     spread = percepts.spread_m[idx]
     felt = percepts.felt[idx]
     conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
-    sig_s2 = (traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
-              + (model.conflict_gain * np.nan_to_num(conflict)) ** 2)
+    other2 = traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
+    conflict2 = (model.conflict_gain * np.nan_to_num(conflict)) ** 2
+    reliability = 1.0
     if percepts.reliability is not None:
-        sig_s2 = sig_s2 / np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
+        reliability = np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
+    sig_s2 = (other2 + conflict2) / reliability
     sp2 = traits.prior_sd_m**2
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
-    sensed = np.where(felt[:, None], np.nan_to_num(pos) + noise * np.sqrt(sig_s2)[:, None], c)
+    if conflict_noise is None:
+        displacement = noise * np.sqrt(sig_s2)[:, None]
+        width2 = sig_s2
+    else:
+        # The same noise in law, drawn in two parts, so that the selection can read this
+        # trial's own cue discrepancy (PerceptualModel.conflict_awareness).
+        by_conflict = conflict_noise * np.sqrt(conflict2 / reliability)[:, None]
+        displacement = noise * np.sqrt(other2 / reliability)[:, None] + by_conflict
+        width2 = other2 / reliability + model.conflict_awareness**2 * np.sum(by_conflict**2, axis=1) / 2.0
+    sensed = np.where(felt[:, None], np.nan_to_num(pos) + displacement, c)
     perceived = c + g[:, None] * (sensed - c)
-    post_sd = np.where(felt, np.sqrt(g * sig_s2), traits.prior_sd_m)
+    g_width = np.where(felt, sp2 / (sp2 + width2), 0.0)
+    post_sd = np.where(felt, np.sqrt(g_width * width2), traits.prior_sd_m)
     perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
     return TrialPosteriors(perceived, post_sd, felt)
 
@@ -757,7 +793,8 @@ def draw_answers(
         Source of all per-trial noise (drawn in a fixed order: position noise (n, 2),
         criterion jitter (n,), response time (n,); then, only where the model has
         unfused percepts (``unfused_per_m > 0``), whether each trial is unfused (n,) and
-        the direction of its jump (n,)).
+        the direction of its jump (n,); then, only where it has ``conflict_awareness > 0``,
+        the conflict's part of the position noise (n, 2)).
     allowed : ndarray of int, optional
         0-based indices of the locations that may be answered (default all).
     rule : callable, optional
@@ -779,9 +816,11 @@ def draw_answers(
     noise = rng.standard_normal((n, 2))
     jitter = rng.lognormal(0.0, model.select_log_sd, size=n)
     rt = traits.rt_median_s * rng.lognormal(0.0, model.rt_log_sd, size=n)
-    post = trial_posteriors(percepts, idx, centre_xy, model, traits, noise)
     if model.unfused_per_m > 0 and percepts.conflict_m is not None:
         uniform, angle = rng.random(n), rng.uniform(0.0, 2.0 * np.pi, n)
+    conflict_noise = rng.standard_normal((n, 2)) if model.conflict_awareness > 0 else None
+    post = trial_posteriors(percepts, idx, centre_xy, model, traits, noise, conflict_noise)
+    if model.unfused_per_m > 0 and percepts.conflict_m is not None:
         post, _ = unfuse(post, percepts.conflict_m[idx], model, uniform, angle)
     answer, selected = (rule or posterior_ratio_rule)(post, traits.kappa * jitter, locations_xy, allowed, percepts,
                                                       idx)
