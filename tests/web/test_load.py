@@ -230,16 +230,19 @@ def test_a_new_connection_outlives_a_flood_of_stalled_bodies(tmp_path):
     """The flood's newer connections close stalled bodies, not a connection whose head is on its way.
 
     Deterministic form of the race above: the stop's connection opens first and sends its
-    request only after twice the cap of stalled bodies have arrived (well inside its grace).
+    request only after twice the cap of stalled bodies, each arriving after the server
+    has read the heads before it (so, under the old rule, the stop's connection was the
+    one idle connection and the first closed).
     """
     srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log",
-                 args=("--max-connections", str(CAP), "--head-grace", "10"))
+                 args=("--max-connections", str(CAP), "--head-grace", "30"))
     srv.start()
     stop_conn = socket.create_connection(("127.0.0.1", srv.port))
     held = []
     try:
-        held = _slow_bodies(srv.port, 2 * CAP)
-        time.sleep(1.0)  # the server has read every stalled head and made room for each
+        for _ in range(2 * CAP // 5):
+            held += _slow_bodies(srv.port, 5)
+            time.sleep(0.05)  # the server reads these heads: they are stalled bodies now
         stop_conn.sendall(f"POST /api/emergency-stop HTTP/1.1\r\nHost: 127.0.0.1\r\n"
                           f"X-Vibrofocus-Token: {srv.token}\r\nContent-Length: 0\r\n\r\n".encode())
         stop_conn.settimeout(10)

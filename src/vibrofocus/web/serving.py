@@ -16,10 +16,10 @@ accept writes a line to the log. Here each connection is held to:
   it closes the longest-idle connection (one with no request in progress for more than
   ``head_grace_s``), or else the one that has waited longest for a request body that
   does not come (a client that declared a body and sends nothing holds a connection
-  without doing anything), or else the newest connection still inside its grace. The
+  without doing anything), or else the longest-idle one still inside its grace. The
   grace matters under a flood of stalled bodies: a connection that has just opened has
   not had the time to send its head, and without the grace the flood's newer
-  connections would close it as "idle" before its request (an emergency stop, a
+  connections closed it as "idle" before its request (an emergency stop, a
   participant's answer) was read. So neither idle sockets nor stalled bodies can lock
   out a participant or the experimenter; when every connection is busy with real work,
   the new one gets ``503`` with a sentence saying why, and is closed;
@@ -194,27 +194,22 @@ def guarded_protocol(limits: ServerLimits, cap: int | None = None) -> type:
             return [c for c in self.connections if c is not self and isinstance(c, GuardedH11Protocol)]
 
         def _evict(self) -> bool:
-            """Make room: close the longest-idle other connection, else the longest-stalled
-            body, else the newest connection still in its grace (``limits.head_grace_s``).
-
-            The newest, in the grace: in a burst the server accepts many connections before
-            it reads any of them, and the one that opened first (whose request may already
-            be on its way) must not be the first to go.
+            """Make room: close the longest-idle other connection past its grace
+            (``limits.head_grace_s``), else the longest-stalled body, else the longest-idle
+            one still in its grace.
 
             False if every other connection is busy with a request it has whole.
             """
             others = self._others()
             idle_before = time.monotonic() - limits.head_grace_s
-            idle = [c for c in others if not c._busy() and c._idle_since < idle_before]
-            stalled = [c for c in others if c._stalled()]
-            in_grace = [c for c in others if not c._busy() and c._idle_since >= idle_before]
-            if idle or stalled:
-                min(idle or stalled, key=lambda c: c._idle_since)._close()
-            elif in_grace:
-                max(in_grace, key=lambda c: c._idle_since)._close()
-            else:
-                return False
-            return True
+            for pick in (lambda c: not c._busy() and c._idle_since < idle_before,
+                         GuardedH11Protocol._stalled,
+                         lambda c: not c._busy()):
+                chosen = [c for c in others if pick(c)]
+                if chosen:
+                    min(chosen, key=lambda c: c._idle_since)._close()
+                    return True
+            return False
 
         def _reserve(self) -> bool:
             """Take one of the slots kept for the emergency stop; False if none is left.
