@@ -649,16 +649,16 @@ def trial_posteriors(
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
     if conflict_noise is None:
         displacement = noise * np.sqrt(sig_s2)[:, None]
-        width2 = sig_s2
+        width2, g_width = sig_s2, g
     else:
         # The same noise in law, drawn in two parts, so that the selection can read this
         # trial's own cue discrepancy (PerceptualModel.conflict_awareness).
         by_conflict = conflict_noise * np.sqrt(conflict2 / reliability)[:, None]
         displacement = noise * np.sqrt(other2 / reliability)[:, None] + by_conflict
         width2 = other2 / reliability + model.conflict_awareness**2 * np.sum(by_conflict**2, axis=1) / 2.0
+        g_width = np.where(felt, sp2 / (sp2 + width2), 0.0)
     sensed = np.where(felt[:, None], np.nan_to_num(pos) + displacement, c)
     perceived = c + g[:, None] * (sensed - c)
-    g_width = np.where(felt, sp2 / (sp2 + width2), 0.0)
     post_sd = np.where(felt, np.sqrt(g_width * width2), traits.prior_sd_m)
     perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
     return TrialPosteriors(perceived, post_sd, felt)
@@ -816,11 +816,12 @@ def draw_answers(
     noise = rng.standard_normal((n, 2))
     jitter = rng.lognormal(0.0, model.select_log_sd, size=n)
     rt = traits.rt_median_s * rng.lognormal(0.0, model.rt_log_sd, size=n)
-    if model.unfused_per_m > 0 and percepts.conflict_m is not None:
+    unfusing = model.unfused_per_m > 0 and percepts.conflict_m is not None
+    if unfusing:
         uniform, angle = rng.random(n), rng.uniform(0.0, 2.0 * np.pi, n)
     conflict_noise = rng.standard_normal((n, 2)) if model.conflict_awareness > 0 else None
     post = trial_posteriors(percepts, idx, centre_xy, model, traits, noise, conflict_noise)
-    if model.unfused_per_m > 0 and percepts.conflict_m is not None:
+    if unfusing:
         post, _ = unfuse(post, percepts.conflict_m[idx], model, uniform, angle)
     answer, selected = (rule or posterior_ratio_rule)(post, traits.kappa * jitter, locations_xy, allowed, percepts,
                                                       idx)
