@@ -26,12 +26,13 @@ answered every tap).
 one) on the feature bank (default the shipped one, whose level rule it records) and prints
 each improvement, then the paper beside the best model and the residuals. Every
 hypothesis is fitted with the same budget (the defaults of ``--n-eval`` and
-``--n-refine``), the same weights and the same seeds. ``adopt`` rounds the fits to 3 digits,
-evaluates each on the held-out seeds (``HELD_OUT_SEEDS``) with the standard objective (``loss``
-without weights: every finding weighted alike, whatever weights the search used; the loss
-with the search's weights is recorded beside it), and writes them all to
-``simulation/data/hypotheses_fit.json`` (atomically), with the default hypothesis: the one of
-lowest held-out loss under the standard objective.
+``--n-refine``), the same weights and the same seeds, along the same random paths (the
+``--rng-seed`` of each stage). ``adopt`` rounds the fits to 3 digits, keeps each hypothesis'
+path of lowest loss on the fit seeds, evaluates it on the held-out seeds
+(``HELD_OUT_SEEDS``) with the objective of the search (its weights; the standard
+objective, ``loss`` without weights, every finding weighted alike, is recorded beside it),
+and writes them all to ``simulation/data/hypotheses_fit.json`` (atomically), with the
+default hypothesis: the one of lowest held-out loss under the search's objective.
 ``report`` prints the same for the defaults (or a fit file) on the table's seeds.
 ``table`` evaluates the default hypothesis on seeds 0..N-1 and writes the side-by-side table,
 the parameters, the residuals and the power table between their markers in
@@ -346,42 +347,69 @@ def _rounded(value):
     return float(f"{value:.3g}") if isinstance(value, float) else value
 
 
+def _budget_key(budget: dict) -> str:
+    return json.dumps(budget, sort_keys=True)
+
+
 def adopt(paths: list[Path], versions: list[str]) -> int:
-    """Round the fits, score each on the held-out seeds, write hypotheses_fit.json; 0 on success."""
+    """Keep each hypothesis' best path, score it on the held-out seeds, write hypotheses_fit.json; 0 on success.
+
+    ``paths``: fit files written by ``search``, one or more per hypothesis (random paths
+    of the same procedure); every hypothesis must have paths of the same budgets and all
+    the same weights. Per hypothesis the path of lowest loss on the fit seeds (after
+    rounding) is kept: the held-out seeds play no part in that. The default is the
+    hypothesis of lowest held-out loss under the objective every hypothesis was fitted
+    to (the search's weights); the standard objective (every finding weighted alike) is
+    recorded beside it.
+    """
     bank = default_bank()
     wanted = dict(v.partition("=")[::2] for v in versions)
     loaded = {path: json.loads(path.read_text(encoding="utf-8")) for path in paths}
-    default = PerceptualModel().to_dict()
-    fits, scores = {}, {}
+    defaults = PerceptualModel().to_dict()
+    by_name: dict[str, list[tuple[Path, dict]]] = {}
     for path, fit in loaded.items():
-        if (fit["weights"], fit["budget"]) != (loaded[paths[0]]["weights"], loaded[paths[0]]["budget"]):
-            raise SystemExit(f"{path}: fitted with another budget or weights than {paths[0]}; fit all alike")
-        name = hypothesis(fit["hypothesis"]).name
+        if fit["weights"] != loaded[paths[0]]["weights"]:
+            raise SystemExit(f"{path}: fitted with other weights than {paths[0]}; fit all alike")
         if fit["levels"] != bank.levels:
             raise SystemExit(f"{path}: fitted at {fit['levels']} levels, the shipped bank is at {bank.levels} levels")
-        fixed = {k: _rounded(v) for k, v in fit["model"].items()
-                 if k not in ("version", "integration_s") and _rounded(v) != _rounded(default[k])}
-        model = PerceptualModel().replace(**fixed)
-        # Held out, every hypothesis is judged by the standard objective (every finding
-        # weighted alike, as loss() without weights), whatever weights its search used: the
-        # choice of the default does not lean toward one finding.
+        by_name.setdefault(hypothesis(fit["hypothesis"]).name, []).append((path, fit))
+    budgets = {name: sorted(_budget_key(fit["budget"]) for _, fit in group) for name, group in by_name.items()}
+    first = next(iter(budgets))
+    for name, keys in budgets.items():
+        if keys != budgets[first]:
+            raise SystemExit(f"{name}: its paths have other budgets than those of {first} "
+                             f"({len(keys)} against {len(budgets[first])} paths, or other seeds); fit all alike")
+    fits, scores = {}, {}
+    for name, group in by_name.items():
+        paths_tried = []
+        for path, fit in group:
+            fixed = {k: _rounded(v) for k, v in fit["model"].items()
+                     if k not in ("version", "integration_s") and _rounded(v) != _rounded(defaults[k])}
+            model = PerceptualModel().replace(**fixed)
+            fitted = loss(seed_statistics(model, FIT_SEEDS, bank=bank, hypothesis=name), fit["weights"])
+            paths_tried.append((fitted, path, fit, fixed, model))
+            print(f"{name}: {path}: loss {fitted:.4f} on the fit seeds")
+        fitted, path, fit, fixed, model = min(paths_tried, key=lambda t: t[0])
         stats = seed_statistics(model, HELD_OUT_SEEDS, bank=bank, hypothesis=name)
         held, held_weighted = loss(stats), loss(stats, fit["weights"])
-        fitted = loss(seed_statistics(model, FIT_SEEDS, bank=bank, hypothesis=name), fit["weights"])
-        scores[name] = held
+        scores[name] = held_weighted
         fits[name] = {"version": wanted.get(name, hypothesis(name).version), "levels": fit["levels"],
                       "bank_forearms": bank.n_forearms, "budget": fit["budget"], "weights": fit["weights"],
                       "fit_seeds": fit["fit_seeds"],
+                      "paths": [{"budget": f["budget"], "loss_fit": round(v, 4)}
+                                for v, _, f, _, _ in sorted(paths_tried, key=lambda t: _budget_key(t[2]["budget"]))],
                       "loss_fit": round(fitted, 4), "held_out_seeds": [HELD_OUT_SEEDS.start, HELD_OUT_SEEDS.stop],
                       "loss_held_out": round(held, 4), "loss_held_out_search_weights": round(held_weighted, 4),
                       "model": fixed}
-        print(f"{name}: loss {fitted:.4f} on the fit seeds, {held:.4f} held out "
-              f"({held_weighted:.4f} with the search's weights)")
+        print(f"{name}: kept {path} (of {len(group)} paths): loss {fitted:.4f} on the fit seeds, held out "
+              f"{held_weighted:.4f} with the search's weights ({held:.4f} under the standard objective)")
     default = min(scores, key=scores.get)
     doc = {"about": "Fits of the simulated participants' hypotheses (a MODEL, not data), written by "
-                    "scripts/fit_participants.py adopt; model: changes to PerceptualModel's defaults. The default "
-                    "hypothesis is the one of lowest held-out loss (loss_held_out: the standard objective, unweighted; "
-                    "loss_held_out_search_weights: the same seeds with the search's weights).",
+                    "scripts/fit_participants.py adopt; model: changes to PerceptualModel's defaults. Each "
+                    "hypothesis keeps the path (paths: its random paths, each with its loss on the fit seeds) "
+                    "of lowest loss on the fit seeds. The default hypothesis is the one of lowest held-out loss "
+                    "under the objective every hypothesis was fitted to (loss_held_out_search_weights); "
+                    "loss_held_out: the same seeds under the standard objective, every finding weighted alike.",
            "default": default, "hypotheses": fits}
     write_text(FITS_FILE, json.dumps(doc, indent=1) + "\n", what="fits")
     print(f"default: {default}; wrote {FITS_FILE}")
@@ -445,7 +473,8 @@ def main() -> int:
                    help="search PerceptualModel.conflict_awareness too (the selection's width reads the trial's own "
                         "cue discrepancy), with the conflict gain drawn in 0-4")
     a = sub.add_parser("adopt", help="ship fits: held-out losses, the default hypothesis, hypotheses_fit.json")
-    a.add_argument("fits", type=Path, nargs="+", help="fit files written by search, one per hypothesis")
+    a.add_argument("fits", type=Path, nargs="+",
+                   help="fit files written by search, one or more random paths per hypothesis (the same for each)")
     a.add_argument("--version", action="append", default=[], metavar="NAME=V",
                    help="version of a hypothesis' fitted model (bump it when its answers change); repeatable")
     r = sub.add_parser("report", help="the paper beside the model, with residuals")

@@ -80,6 +80,15 @@ def markdown(bank: FeatureBank) -> str:
     return "\n".join(lines)
 
 
+def _seeds(budget: dict | None) -> str:
+    """The random path of a search's budget: the ``--rng-seed`` of each stage, first to last."""
+    seeds = []
+    while budget is not None:
+        seeds.insert(0, str(budget["rng_seed"]))
+        budget = budget.get("start")
+    return "-".join(seeds)
+
+
 def findings_markdown(bank: FeatureBank) -> str:
     """Per finding, in how many held-out studies it holds under each hypothesis."""
     from check_findings import ROWS, held_out
@@ -119,10 +128,15 @@ def findings_markdown(bank: FeatureBank) -> str:
     # every fit: tests/simulation/test_hypotheses.py).
     some = next(iter(fits.values()))
     fit_seeds, held = (f"{a}-{b - 1}" for a, b in (some["fit_seeds"], some["held_out_seeds"]))
-    for title, key in ((f"fit loss, the search's weights (fit seeds {fit_seeds})", "loss_fit"),
-                       (f"held-out loss, the standard objective, every finding weighted alike (seeds {held}; lowest: "
-                        "the default)", "loss_held_out"),
-                       (f"held-out loss, the search's weights (seeds {held})", "loss_held_out_search_weights")):
+    seeds_of = {n: " / ".join(_seeds(p["budget"]) for p in fits[n]["paths"]) for n in fits}
+    lines.append(f"| fit loss of each random path of the search (its seeds {next(iter(seeds_of.values()))}; the "
+                 "lowest is kept) | " + " | ".join(" / ".join(f"{p['loss_fit']:.3f}" for p in fits[n]["paths"])
+                                                   if n in fits else "not fitted" for n in names) + " | — | — |")
+    for title, key in ((f"fit loss, the search's weights (fit seeds {fit_seeds}), the path kept", "loss_fit"),
+                       (f"held-out loss, the search's weights (seeds {held}; lowest: the default)",
+                        "loss_held_out_search_weights"),
+                       (f"held-out loss, the standard objective, every finding weighted alike (seeds {held})",
+                        "loss_held_out")):
         lines.append(f"| {title} | " + " | ".join(f"{fits[n][key]:.3f}" if n in fits else "not fitted"
                                                   for n in names) + " | — | — |")
     return "\n".join(lines)

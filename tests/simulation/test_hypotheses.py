@@ -1,6 +1,7 @@
 """Simulated participants as registered hypotheses of how the felt field is read."""
 
 import dataclasses
+import json
 
 import numpy as np
 import pytest
@@ -132,12 +133,16 @@ def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_and_the_d
     shipped = fits["hypotheses"]
     assert set(shipped) == set(available_hypotheses())
     assert {f["levels"] for f in shipped.values()} == {default_bank().levels} == {"paper"}
-    import json
-
-    assert len({json.dumps(f["budget"], sort_keys=True) for f in shipped.values()}) == 1
+    # The same random paths for every hypothesis, each keeping its best on the fit seeds.
+    paths = {n: sorted(json.dumps(p["budget"], sort_keys=True) for p in f["paths"]) for n, f in shipped.items()}
+    assert len({tuple(v) for v in paths.values()}) == 1 and len(next(iter(paths.values()))) >= 1
+    for f in shipped.values():
+        assert f["loss_fit"] == min(p["loss_fit"] for p in f["paths"])
+        assert json.dumps(f["budget"], sort_keys=True) in paths[next(iter(paths))]
     assert len({json.dumps(f["weights"], sort_keys=True) for f in shipped.values()}) == 1
     assert len({tuple(f["fit_seeds"]) for f in shipped.values()}) == 1
-    held = {n: f["loss_held_out"] for n, f in shipped.items()}
+    # The default: the lowest held-out loss under the objective every hypothesis was fitted to.
+    held = {n: f["loss_held_out_search_weights"] for n, f in shipped.items()}
     assert DEFAULT_HYPOTHESIS == fits["default"] == min(held, key=held.get)
     for name, fit in shipped.items():
         h = hypothesis(name)
@@ -212,3 +217,26 @@ def test_the_search_draws_the_conflict_awareness_only_when_asked(import_script):
     refined = [fit.sample(np.random.default_rng(s), PerceptualModel(), aware=True) for s in range(200)]
     lam = np.array([m.conflict_awareness for m in refined])
     assert (lam > 0).mean() > 0.3 and lam.max() <= 3.0
+
+
+def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(import_script, tmp_path):
+    fit = import_script("fit_participants")
+    weights = {"s2_reduction": 8.0}
+
+    def write(name, hyp, seeds, w=weights):
+        budget = {"n_eval": 0, "n_refine": 300, "rng_seed": seeds[1],
+                  "start": {"n_eval": 200, "n_refine": 300, "rng_seed": seeds[0], "start": None}}
+        path = tmp_path / name
+        path.write_text(json.dumps({"hypothesis": hyp, "levels": "paper", "budget": budget, "weights": w,
+                                    "fit_seeds": [1000, 1064], "loss": 1.0, "model": {}}))
+        return path
+
+    a = [write("a1.json", "grid-peak", (2023, 2024)), write("a2.json", "grid-peak", (2025, 2026))]
+    b = [write("b1.json", "v3-centroid", (2023, 2024))]
+    with pytest.raises(SystemExit, match="v3-centroid: its paths have other budgets|grid-peak: its paths"):
+        fit.adopt(a + b, [])
+    b.append(write("b2.json", "v3-centroid", (2025, 2027)))  # another seed for the second stage
+    with pytest.raises(SystemExit, match="other budgets"):
+        fit.adopt(a + b, [])
+    with pytest.raises(SystemExit, match="other weights"):
+        fit.adopt(a + [write("c.json", "v3-centroid", (2023, 2024), {"s2_reduction": 4.0})], [])

@@ -52,7 +52,7 @@ STIMULUS_COLUMNS = ("levels", "drive_peak_v", "target_peak_um")
 SIMULATED_COLUMN = "simulated"
 #: Column after :data:`SIMULATED_COLUMN` when rows name the model that answered for the
 #: simulated participants (key ``model``: ``simulated participants: model v3.0, hypothesis
-#: grid-peak v3.2 fitted at paper levels, not data``; empty for a real participant).
+#: grid-peak v3.3 fitted at paper levels, not data``; empty for a real participant).
 MODEL_COLUMN = "model"
 
 
