@@ -240,3 +240,40 @@ def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(impor
         fit.adopt(a + b, [])
     with pytest.raises(SystemExit, match="other weights"):
         fit.adopt(a + [write("c.json", "v3-centroid", (2023, 2024), {"s2_reduction": 4.0})], [])
+
+
+@pytest.mark.slow
+def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_file(import_script, tmp_path, monkeypatch):
+    # Two paths per hypothesis: the shipped fit, and a participant who selects almost
+    # every location (kappa near 0) and feels little (a high threshold), which no fit of
+    # the paper keeps. adopt must keep the shipped path, record both, and write only where
+    # it is told.
+    fit = import_script("fit_participants")
+    shipped_file = fit.FITS_FILE
+    shipped_bytes = shipped_file.read_bytes()
+    out = tmp_path / "hypotheses_fit.json"
+    monkeypatch.setattr(fit, "FITS_FILE", out)
+    fits = hypothesis_fits()["hypotheses"]
+    paths = []
+    for name in ("grid-peak", "v3-centroid"):
+        good = PerceptualModel().replace(**fits[name]["model"]).to_dict()
+        bad = PerceptualModel().replace(**{**fits[name]["model"], "select_kappa": (0.01, 0.02), "sl_ref_db": 10.0}).to_dict()
+        for seeds, model in (((1, 2), bad), ((3, 4), good)):
+            budget = {"n_eval": 0, "n_refine": 1, "rng_seed": seeds[1],
+                      "start": {"n_eval": 1, "n_refine": 1, "rng_seed": seeds[0], "start": None}}
+            path = tmp_path / f"{name}-{seeds[0]}.json"
+            path.write_text(json.dumps({"hypothesis": name, "levels": "paper", "budget": budget,
+                                        "weights": fits[name]["weights"], "fit_seeds": [1000, 1064],
+                                        "loss": 0.0, "model": model}))
+            paths.append(path)
+    assert fit.adopt(paths, []) == 0
+    written = json.loads(out.read_text())
+    assert shipped_file.read_bytes() == shipped_bytes
+    for name in ("grid-peak", "v3-centroid"):
+        kept = written["hypotheses"][name]
+        assert kept["model"] == fits[name]["model"] and kept["budget"]["rng_seed"] == 4
+        losses = [p["loss_fit"] for p in kept["paths"]]
+        assert len(losses) == 2 and kept["loss_fit"] == min(losses) < max(losses)
+        np.testing.assert_allclose(kept["loss_fit"], fits[name]["loss_fit"], rtol=1e-3)
+    held = {n: f["loss_held_out_search_weights"] for n, f in written["hypotheses"].items()}
+    assert written["default"] == min(held, key=held.get)
