@@ -128,8 +128,9 @@ def findings_markdown(bank: FeatureBank) -> str:
     # every fit: tests/simulation/test_hypotheses.py).
     some = next(iter(fits.values()))
     fit_seeds, held = (f"{a}-{b - 1}" for a, b in (some["fit_seeds"], some["held_out_seeds"]))
-    seeds_of = {n: " / ".join(_seeds(p["budget"]) for p in fits[n]["paths"]) for n in fits}
-    lines.append(f"| fit loss of each random path of the search (its seeds {next(iter(seeds_of.values()))}; the "
+    # Every hypothesis has the same paths (tests/simulation/test_hypotheses.py): name them once.
+    path_seeds = " / ".join(_seeds(p["budget"]) for p in some["paths"])
+    lines.append(f"| fit loss of each random path of the search (its seeds {path_seeds}; the "
                  "lowest is kept) | " + " | ".join(" / ".join(f"{p['loss_fit']:.3f}" for p in fits[n]["paths"])
                                                    if n in fits else "not fitted" for n in names) + " | — | — |")
     for title, key in ((f"fit loss, the search's weights (fit seeds {fit_seeds}), the path kept", "loss_fit"),
