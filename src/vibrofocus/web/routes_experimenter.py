@@ -200,7 +200,7 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     _refuse_if_busy(rig)
     _plan(rig, body.points)  # a subset the layout cannot give is refused now, not in the job
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig,
-                         points=body.points)
+                         points=body.points, _rig=rig)
     with web.lock:
         busy = [j for j in web.jobs.values() if j.status in ("running", "waiting")]
         if busy:
@@ -303,6 +303,9 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         with rig.reserve(f"the calibration of {job.participant_id}"):
             cal = calibrate(rig, participant_id=job.participant_id, progress=progress,
                             prompt=prompt if single_spot else None, measure=job.points)
+        # The point of no return: a cancel until here (a stop during the estimation too)
+        # saves nothing; from here on the calibration is saved and a cancel is refused.
+        job.begin_saving()
         folder = web.data_dir / "calibrations"
         private_dir(folder)
         # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
@@ -319,10 +322,14 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         job.progress = 1.0
         job.message = "done" if not job.n_errors else f"done, with {job.n_errors} error verdict(s)"
         job.status = "done"
-    except CalibrationCancelled:
-        job.status = "cancelled"
-        job.message = "cancelled: nothing was saved"
     except Exception as exc:  # noqa: BLE001 - shown on the experimenter page
+        if isinstance(exc, CalibrationCancelled) or job.cancelled:
+            # Cancelled, whatever the cancel interrupted: the emergency stop stops the rig
+            # too, so a recording ends with the rig's "stopped" error; that is the cancel.
+            job.status = "cancelled"
+            job.message = "cancelled: nothing was saved"
+            log.info("calibration %s of %s cancelled: nothing was saved", job.job_id, job.participant_id)
+            return
         job.status = "failed"
         if isinstance(exc, VibrofocusError):
             job.error = public_text(str(exc))
@@ -356,7 +363,9 @@ def calibration_step(job_id: str, action: str, web: WebState = Depends(require_t
     elif action == "cancel":
         if job.status not in ("running", "waiting"):
             raise HTTPException(409, detail=f"This calibration has already ended ({job.status}).")
-        job.cancel()
+        if not job.cancel():
+            raise HTTPException(409, detail=(
+                "This calibration's recordings are finished and it is being saved: it can no longer be cancelled."))
     else:
         raise HTTPException(404, detail="Unknown calibration action; use continue or cancel.")
     return job.to_dict()

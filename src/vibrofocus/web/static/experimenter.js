@@ -94,7 +94,7 @@
   async function emergencyStop() {
     try {
       const out = await api("/api/emergency-stop", { method: "POST" });
-      flash("Stopped: " + out.stopped.join("; "), true);
+      flash("Stopped: " + (out.stopped.length ? out.stopped.join("; ") : "nothing was running") + ".", true);
     } catch (err) {
       flash("The emergency stop did not reach the server (" + err.message + "): switch the amplifier off.", true);
     }
