@@ -580,6 +580,7 @@ FIELD_NAMES = {
     "rig": "The rig", "rig_seed": "The rig seed", "response": "The answer", "rt_s": "The reaction time",
     "answer_id": "The answer id", "trial_index": "The trial", "session_id": "The session",
     "location": "The location", "method": "The method", "wait": "The wait", "after": "The state number",
+    "simulated": "'simulated'", "allow_calibration_errors": "'allow_calibration_errors'", "points": "The points",
 }
 
 
@@ -609,10 +610,26 @@ def plain_problem(err: dict[str, Any]) -> str:
         return f"{what} may hold only letters, digits, '.', '_' and '-', and starts with a letter or digit."
     if kind == "literal_error" and "expected" in ctx:
         return f"{what} must be {ctx['expected']}."
+    if kind in ("bool_type", "int_type", "float_type", "string_type"):
+        # Strict types (api_models): say what was sent and what is wanted.
+        wanted = {"bool_type": "true or false", "int_type": "a whole number", "float_type": "a number",
+                  "string_type": "text"}[kind]
+        return f"{what} is not a valid value here: it must be {wanted}, not {_shown(err.get('input'))}."
     if kind.startswith(("int_", "float_", "bool_", "string_")) or kind == "enum":
         return f"{what} is not a valid value here."
     msg = str(err.get("msg", "is not valid")).removeprefix("Value error, ")
     return f"{what}: {msg[:1].lower() + msg[1:]}" + ("" if msg.endswith(".") else ".")
+
+
+def _shown(value: Any) -> str:
+    """A refused value as JSON, cut short (it comes from the request)."""
+    import json
+
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError):
+        text = type(value).__name__
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def trial_position(trials: list[Any], index: int | None) -> dict[str, Any]:
