@@ -158,11 +158,11 @@ def test_a_stop_during_the_estimation_cancels_the_calibration_and_saves_nothing(
     assert entered.wait(300), "the calibration never reached its estimation"
     stopped = client.post("/api/emergency-stop").json()["stopped"]
     release.set()
-    assert stopped == ["simulated rig (seed 7): outputs at 0 V", "calibration of P02 cancelled: nothing is saved"]
     j = _wait_job(client, job)
     assert (j["status"], j["message"], j["calibration_id"], j["error"]) == ("cancelled", "cancelled: nothing was saved", None, None)
     assert _saved_calibrations(client, "P02") == []
     assert not list(tmp_path.glob("s-files/calibrations/*.nc"))
+    assert stopped == ["simulated rig (seed 7): outputs at 0 V", "calibration of P02 cancelled: nothing is saved"]
     # Cancelling it again says it has ended, in the same word.
     r = client.post(f"/api/calibrations/jobs/{job}/cancel")
     assert r.status_code == 409 and "already ended (cancelled)" in r.json()["detail"]
@@ -220,10 +220,10 @@ def test_a_stop_during_a_recording_is_a_cancel_not_a_failure(tmp_path):
         job = client.post("/api/calibrations", json={"participant_id": "P03", "seed": 8}).json()["job_id"]
         assert recording.wait(120)
         stopped = client.post("/api/emergency-stop").json()["stopped"]
-        assert stopped == ["simulated rig (seed 8): outputs at 0 V", "calibration of P03 cancelled: nothing is saved"]
         j = _wait_job(client, job)
         assert (j["status"], j["message"], j["error"]) == ("cancelled", "cancelled: nothing was saved", None), j
         assert _saved_calibrations(client, "P03") == []
+        assert stopped == ["simulated rig (seed 8): outputs at 0 V", "calibration of P03 cancelled: nothing is saved"]
 
 
 @pytest.mark.slow
