@@ -172,3 +172,45 @@ def test_a_session_keeps_its_level_rule_and_a_bad_one_is_refused(server):
     before = snapshot(server.db)
     r = server.api("POST", "/api/sessions", json={"participant_id": "P11", "study": 1, "levels": "loud"})
     assert r.status_code == 422 and snapshot(server.db) == before
+
+
+def test_values_of_the_wrong_type_are_refused_not_converted(tmp_path):
+    """Issue 53 (LOW): "true", 1 or "yes" for a boolean, true or 1.0 for a number would change
+    what a participant or session is; strict types refuse them with the field named, and
+    nothing is stored."""
+    from fastapi.testclient import TestClient
+
+    from vibrofocus.web.app import create_app
+
+    token = "t" * 32
+    app = create_app(tmp_path / "s.sqlite", token=token, allowed_hosts=("testserver",), resume=False, pace="fast")
+    with TestClient(app, headers={"X-Vibrofocus-Token": token, "Origin": "http://testserver"}) as c:
+        assert c.post("/api/participants", json={"participant_id": "P01"}).status_code == 201
+        before = snapshot(tmp_path / "s.sqlite")
+        plan = {"participant_id": "P01", "study": 1}
+        checks = [
+            ("/api/participants", {"participant_id": "S01", "simulated": "true"}, "'simulated' is not a valid value here: it must be true or false, not \"true\""),
+            ("/api/participants", {"participant_id": "S02", "simulated": 1}, "must be true or false, not 1"),
+            ("/api/calibrations", {"participant_id": "P01", "seed": True}, "The seed is not a valid value here: it must be a whole number, not true"),
+            ("/api/calibrations", {"participant_id": "P01", "seed": "5"}, "must be a whole number, not \"5\""),
+            ("/api/calibrations", {"participant_id": "P01", "points": 5.0}, "must be a whole number, not 5.0"),
+            ("/api/sessions", {**plan, "allow_calibration_errors": "yes"}, "'allow_calibration_errors' is not a valid value here"),
+            ("/api/sessions", {**plan, "rig_seed": True}, "The rig seed is not a valid value here"),
+            ("/api/sessions", {**plan, "seed": False}, "The seed is not a valid value here"),
+            ("/api/sessions", {**plan, "repetitions": "2"}, "Repetitions is not a valid value here"),
+            ("/api/sessions", {**plan, "study": True}, "The study must be 1 or 2"),
+            ("/api/sessions", {**plan, "study": 1.0}, "The study must be 1 or 2"),
+            ("/api/sessions", {**plan, "study": "1"}, "The study must be 1 or 2"),
+            ("/api/analysis", {"study": True}, "The study must be 1 or 2"),
+        ]
+        for path, body, words in checks:
+            r = c.post(path, json=body)
+            assert r.status_code == 422, (body, r.text)
+            assert words in r.json()["detail"], (body, r.json())
+        assert snapshot(tmp_path / "s.sqlite") == before
+        assert c.app.state.web.jobs == {}, "a refused calibration starts no job"
+        # The right types pass.
+        assert c.post("/api/participants", json={"participant_id": "S01", "simulated": True}).json()["simulated"] is True
+        r = c.post("/api/sessions", json={**plan, "seed": 3, "rig_seed": 4, "repetitions": 1, "n_training": 0,
+                                          "allow_calibration_errors": False})
+        assert r.status_code == 201, r.text

@@ -79,8 +79,8 @@ def test_calibrate_on_the_audio_rig_from_the_page(jack_server, tmp_path, chromiu
         assert r.status_code == 409 and "busy with the calibration of P40" in r.json()["detail"]
         # The emergency stop: outputs at zero, the calibration cancelled, said on the page.
         page.click("#emergency-stop")
-        page.wait_for_function("document.getElementById('flash').textContent.includes('audio rig outputs at 0 V')")
-        assert "calibration of P40 cancelled" in page.inner_text("#flash")
+        page.wait_for_function("document.getElementById('flash').textContent.includes('audio rig (lab.json): outputs at 0 V')")
+        assert "calibration of P40 cancelled: nothing is saved" in page.inner_text("#flash")
     finally:
         context.close()
         server.stop()

@@ -82,7 +82,7 @@ def test_a_second_hardware_job_is_refused_and_the_emergency_stop_zeroes_the_outp
     device.outputs["Dev1/ao1"] = 0.4  # as if a drive were holding its last value
     r = client.post("/api/emergency-stop")
     assert r.status_code == 200
-    assert r.json()["stopped"] == ["nidaq rig outputs at 0 V", "calibration of P01 cancelled"]
+    assert r.json()["stopped"] == ["nidaq rig (lab.json): outputs at 0 V", "calibration of P01 cancelled: nothing is saved"]
     np.testing.assert_array_equal(device.output_vector(), 0.0)
     _wait(client, job_id, "cancelled")
     # Free again once the job ended.

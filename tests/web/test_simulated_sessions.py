@@ -6,6 +6,8 @@ import csv
 import io
 import time
 
+import pytest
+
 from vibrofocus.defaults import participant_seed
 
 from .test_api import answer, wait_state
@@ -78,3 +80,57 @@ def test_simulated_forearm_seeds_derive_from_the_participant_id(server):
     assert participant_seed("P21") != participant_seed("P22")
     r = server.api("POST", "/api/sessions", json={"participant_id": "P21", "study": 1, "rig_seed": 5, "repetitions": 1})
     assert r.json()["config"]["rig_seed"] == 5, "a seed given is kept"
+
+
+@pytest.mark.slow
+def test_a_session_plays_on_the_forearm_of_its_calibration(tmp_path):
+    """Issue 53, item 12: S01 calibrated on arm 5 got a session on arm 745814248 (no seed given)
+    or on arm 6 (another seed given); the drives were designed for one arm and played, and
+    judged by the model, on another."""
+    from fastapi.testclient import TestClient
+
+    from vibrofocus.rigs import make_rig
+    from vibrofocus.web.app import create_app
+
+    token = "t" * 32
+    db = tmp_path / "s.sqlite"
+    headers = {"X-Vibrofocus-Token": token, "Origin": "http://testserver"}
+    app = create_app(db, token=token, allowed_hosts=("testserver",), resume=False, pace="fast")
+    with TestClient(app, headers=headers) as c:
+        assert c.post("/api/participants", json={"participant_id": "S01", "simulated": True}).status_code == 201
+        job = c.post("/api/calibrations", json={"participant_id": "S01", "seed": 5}).json()["job_id"]
+        deadline = time.monotonic() + 300
+        while (j := c.get(f"/api/calibrations/jobs/{job}").json())["status"] == "running":
+            assert time.monotonic() < deadline
+            time.sleep(0.2)
+        assert j["status"] == "done", j
+        cal = j["calibration_id"]
+        assert c.app.state.web.calibration(cal).rig["seed"] == 5
+        plan = {"participant_id": "S01", "study": 1, "calibration_id": cal, "n_training": 0, "repetitions": 1}
+
+        r = c.post("/api/sessions", json=plan)  # no seed: the calibration's arm, not the id's
+        assert r.status_code == 201, r.text
+        sid = r.json()["session_id"]
+        assert r.json()["config"]["rig_seed"] == 5 != participant_seed("S01")
+        runner = c.app.state.web.runner(sid, create=True)
+        assert runner.rig.seed == 5 and runner.model.seed == 5, "the model feels the calibration's arm"
+        assert c.post("/api/sessions", json={**plan, "rig_seed": 5}).json()["config"]["rig_seed"] == 5
+
+        n_sessions = len(c.get("/api/sessions").json())
+        r = c.post("/api/sessions", json={**plan, "rig_seed": 6})
+        assert r.status_code == 422, r.text
+        assert r.json()["detail"] == (
+            f"Calibration {cal} was made on the simulated forearm of seed 5, and a session on it plays on that "
+            "forearm; the rig seed 6 would be another arm. Leave the seed empty or give 5.")
+        assert len(c.get("/api/sessions").json()) == n_sessions, "nothing stored"
+
+    # The same database served with another skin (serve --skin high) cannot build that arm.
+    def high(kind, seed=None, **kwargs):
+        return make_rig(kind, seed=seed, skin="high" if kind == "simulated" else None, **kwargs)
+
+    app = create_app(db, token=token, allowed_hosts=("testserver",), resume=False, pace="fast", rig_factory=high)
+    with TestClient(app, headers=headers) as c:
+        r = c.post("/api/sessions", json=plan)
+        assert r.status_code == 409, r.text
+        assert "skin 'nominal' (this server's: 'high')" in r.json()["detail"]
+        assert "Restart 'vibrofocus serve' with that --skin, or calibrate again" in r.json()["detail"]

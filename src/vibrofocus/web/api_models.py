@@ -8,10 +8,11 @@ several locations?) are the store's (:meth:`StudyStore.record_answer`).
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import Path
-from pydantic import BaseModel, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+from pydantic_core import PydanticCustomError
 
 from ..studies.protocol import REFERENCE_LOCATIONS
 
@@ -45,9 +46,22 @@ Location = Annotated[int, Field(ge=1, le=N_LOCATIONS, strict=True)]
 ParticipantId = Annotated[str, Field(min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")]
 
 
+def _study_number(value: Any) -> Any:
+    # A Literal takes True and 1.0 for 1 even in strict mode (they compare equal): only an int is a study.
+    if type(value) is not int:
+        raise PydanticCustomError("literal_error", "Input should be {expected}", {"expected": "1 or 2"})
+    return value
+
+
+#: The study: 1 or 2, as a JSON integer (not ``true``, ``1.0`` or ``"1"``).
+Study = Annotated[Literal[1, 2], BeforeValidator(_study_number)]
+
+
 class _Strict(BaseModel):
-    # Unknown fields are refused: a typo in a client must not pass silently.
-    model_config = ConfigDict(extra="forbid")
+    # Unknown fields are refused: a typo in a client must not pass silently. Strict types:
+    # "true", 1 or "yes" for a boolean, true or "5" for a number are refused, not
+    # converted: such a mistake would change what a participant or session is.
+    model_config = ConfigDict(extra="forbid", strict=True)
 
 
 class AnswerIn(_Strict):
@@ -112,7 +126,7 @@ class SessionIn(_Strict):
     """Plan a study session (the full trial list is written to the database)."""
 
     participant_id: ParticipantId
-    study: Literal[1, 2]
+    study: Study
     seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
     calibration_id: int | None = Field(default=None, ge=1, le=MAX_ID)
     rig: str = Field(default="simulated", min_length=1, max_length=32)
@@ -129,4 +143,4 @@ class SessionIn(_Strict):
 class AnalysisIn(_Strict):
     """Run the analysis on the current export."""
 
-    study: Literal[1, 2] | None = None
+    study: Study | None = None

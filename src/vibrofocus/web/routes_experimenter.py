@@ -200,7 +200,7 @@ def start_calibration(body: CalibrationIn, web: WebState = Depends(require_token
     _refuse_if_busy(rig)
     _plan(rig, body.points)  # a subset the layout cannot give is refused now, not in the job
     job = CalibrationJob(job_id=secrets.token_hex(8), participant_id=body.participant_id, rig=body.rig,
-                         points=body.points)
+                         points=body.points, _rig=rig)
     with web.lock:
         busy = [j for j in web.jobs.values() if j.status in ("running", "waiting")]
         if busy:
@@ -262,6 +262,44 @@ def _rig_seed(rig: str, seed: int | None, participant_id: str) -> int | None:
     return participant_seed(participant_id)
 
 
+#: What makes one simulated forearm another, as a calibration file's ``rig`` records it.
+_ARM_KEYS = ("seed", "skin", "geometry")
+
+
+def _calibration_arm(web: WebState, calibration_id: int, given: int | None, participant_id: str) -> int | None:
+    """The seed of the simulated forearm a session on this calibration plays on: the calibration's own.
+
+    The drives are designed from the calibration's transfer, so they play on the arm it
+    was measured on (and a simulated participant feels that arm): no seed given takes
+    the calibration's; another seed is refused (422). A calibration measured on hardware
+    has no simulated arm: a simulated participant's session on it is refused (409); a
+    person's rehearsal on the simulated rig keeps the seed rule of a dry run. An arm this
+    server cannot build again (another ``serve --skin``) is refused (409).
+    """
+    made_on = getattr(web.calibration(calibration_id), "rig", None) or {}
+    if made_on.get("kind") != "simulated" or made_on.get("seed") is None:
+        if web.is_simulated(participant_id):
+            raise HTTPException(409, detail=(
+                f"Calibration {calibration_id} was not made on the simulated rig, so it has no simulated forearm for "
+                f"the simulated participant {participant_id} to feel. Calibrate {participant_id} on the simulated rig."))
+        return _rig_seed("simulated", given, participant_id)
+    seed = int(made_on["seed"])
+    if given is not None and int(given) != seed:
+        raise HTTPException(422, detail=(
+            f"Calibration {calibration_id} was made on the simulated forearm of seed {seed}, and a session on it "
+            f"plays on that forearm; the rig seed {given} would be another arm. Leave the seed empty or give {seed}."))
+    arm = web.make_rig("simulated", seed)
+    describe = getattr(arm, "describe", None)
+    built = describe() if callable(describe) else {}
+    differs = [k for k in _ARM_KEYS if k in made_on and k in built and made_on[k] != built[k]]
+    if differs:
+        what = ", ".join(f"{k} {made_on[k]!r} (this server's: {built[k]!r})" for k in differs)
+        raise HTTPException(409, detail=(
+            f"Calibration {calibration_id} was made on a simulated forearm this server does not build: {what}. "
+            "Restart 'vibrofocus serve' with that --skin, or calibrate again."))
+    return seed
+
+
 def _refuse_if_busy(rig: Any) -> None:
     """409 when a hardware job holds the rig (one job uses a device at a time)."""
     busy = getattr(rig, "busy_with", None) if getattr(rig, "one_job_at_a_time", False) else None
@@ -303,6 +341,9 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         with rig.reserve(f"the calibration of {job.participant_id}"):
             cal = calibrate(rig, participant_id=job.participant_id, progress=progress,
                             prompt=prompt if single_spot else None, measure=job.points)
+        # The point of no return: a cancel until here (a stop during the estimation too)
+        # saves nothing; from here on the calibration is saved and a cancel is refused.
+        job.begin_saving()
         folder = web.data_dir / "calibrations"
         private_dir(folder)
         # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
@@ -319,10 +360,14 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
         job.progress = 1.0
         job.message = "done" if not job.n_errors else f"done, with {job.n_errors} error verdict(s)"
         job.status = "done"
-    except CalibrationCancelled:
-        job.status = "cancelled"
-        job.message = "cancelled: nothing was saved"
     except Exception as exc:  # noqa: BLE001 - shown on the experimenter page
+        if isinstance(exc, CalibrationCancelled) or job.cancelled:
+            # Cancelled, whatever the cancel interrupted: the emergency stop stops the rig
+            # too, so a recording ends with the rig's "stopped" error; that is the cancel.
+            job.status = "cancelled"
+            job.message = "cancelled: nothing was saved"
+            log.info("calibration %s of %s cancelled: nothing was saved", job.job_id, job.participant_id)
+            return
         job.status = "failed"
         if isinstance(exc, VibrofocusError):
             job.error = public_text(str(exc))
@@ -356,7 +401,9 @@ def calibration_step(job_id: str, action: str, web: WebState = Depends(require_t
     elif action == "cancel":
         if job.status not in ("running", "waiting"):
             raise HTTPException(409, detail=f"This calibration has already ended ({job.status}).")
-        job.cancel()
+        if not job.cancel():
+            raise HTTPException(409, detail=(
+                "This calibration's recordings are finished and it is being saved: it can no longer be cancelled."))
     else:
         raise HTTPException(404, detail="Unknown calibration action; use continue or cancel.")
     return job.to_dict()
@@ -471,7 +518,11 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         raise HTTPException(409, detail=(
             f"{body.participant_id} is a simulated participant: the perceptual model answers their sessions from what the "
             "simulated forearm feels, so plan it with a calibration on the simulated rig."))
-    config: dict[str, Any] = {"rig": body.rig, "rig_seed": _rig_seed(body.rig, body.rig_seed, body.participant_id)}
+    if body.calibration_id is not None and body.rig == "simulated":
+        rig_seed = _calibration_arm(web, body.calibration_id, body.rig_seed, body.participant_id)
+    else:
+        rig_seed = _rig_seed(body.rig, body.rig_seed, body.participant_id)
+    config: dict[str, Any] = {"rig": body.rig, "rig_seed": rig_seed}
     if body.repetitions is not None:
         config["repetitions"] = body.repetitions
     if body.n_training is not None:

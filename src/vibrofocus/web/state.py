@@ -50,6 +50,11 @@ class CalibrationJob:
     On a rig that records one point at a time (a single-spot vibrometer), the job stops
     before each point with ``status = "waiting"`` and a ``prompt`` saying where to aim the
     vibrometer; :meth:`go_on` lets it record, :meth:`cancel` ends it.
+
+    A cancel is honoured until the job starts saving (:meth:`begin_saving`, once every
+    recording and the estimation are over): before that, nothing is saved, whatever the
+    cancel interrupted (a recording, the estimation); from then on the calibration is
+    saved and :meth:`cancel` says it came too late.
     """
 
     job_id: str
@@ -67,6 +72,10 @@ class CalibrationJob:
     points: int | None = None  # points measured (the rest predicted); None: every point
     _go: threading.Event = field(default_factory=threading.Event, repr=False)
     _cancelled: bool = False
+    _saving: bool = False
+    _state_lock: threading.Lock = field(default_factory=threading.Lock, repr=False)
+    #: The rig object it records on (the emergency stop names the rigs in use).
+    _rig: Any = field(default=None, repr=False)
 
     def to_dict(self) -> dict[str, Any]:
         """The job as the page reads it (JSON-ready)."""
@@ -87,10 +96,36 @@ class CalibrationJob:
         """The experimenter has aimed the vibrometer: record the point."""
         self._go.set()
 
-    def cancel(self) -> None:
-        """Stop at the next point or recording (nothing is saved)."""
-        self._cancelled = True
+    def cancel(self) -> bool:
+        """Cancel: the job ends at its next step and nothing is saved.
+
+        Returns
+        -------
+        bool
+            True if the job is cancelled; False if it came too late: the recordings are
+            over and the calibration is being saved (:meth:`begin_saving`).
+        """
+        with self._state_lock:
+            if self._saving:
+                return False
+            self._cancelled = True
         self._go.set()
+        return True
+
+    @property
+    def cancelled(self) -> bool:
+        """Whether the job was cancelled (it saves nothing)."""
+        return self._cancelled
+
+    def begin_saving(self) -> None:
+        """The point of no return: from now on the calibration is saved and a cancel is refused.
+
+        Raises :class:`CalibrationCancelled` if it was cancelled before (during the
+        recordings or the estimation): then nothing is saved.
+        """
+        with self._state_lock:
+            self.check_cancelled()
+            self._saving = True
 
     def check_cancelled(self) -> None:
         """Raise :class:`CalibrationCancelled` if the experimenter cancelled."""
@@ -427,35 +462,75 @@ class WebState:
                     log.exception("could not resume session %s", sid)
         return started
 
+    def rig_name(self, kind: str, rig: Any) -> str:
+        """A rig as the emergency stop names it: its kind, and its seed or config file."""
+        if kind == "simulated":
+            seed = getattr(rig, "seed", None)
+            return "simulated rig" + (f" (seed {seed})" if seed is not None else "")
+        if isinstance(self.rig_config, (str, os.PathLike)):
+            return f"{kind} rig ({Path(self.rig_config).name})"
+        return f"{kind} rig"
+
     def emergency_stop(self) -> list[str]:
         """Every rig's outputs to zero now, every calibration cancelled, every runner paused.
 
-        The caller stores the paused sessions' status (the routes own the session state
-        machine).
+        First every runner is told to pause and every calibration to cancel (flags, at
+        once), so that nothing starts a new play after its rig is stopped; then every
+        open rig is stopped. The caller stores the paused sessions' status (the routes
+        own the session state machine).
 
         Returns
         -------
         list of str
-            What was stopped, as people read it.
+            What was stopped, as people read it, each thing once: each hardware rig and
+            each simulated arm that was in use ("simulated rig (seed 5): outputs at 0 V"),
+            each calibration that was running ("calibration of P02 cancelled: nothing is
+            saved", or, past its recordings, "... not cancelled: its recordings had
+            finished; it is being saved") and each session that was running ("session 3
+            paused"). A finished session or calibration is not listed; empty when nothing
+            was running.
         """
         with self.lock:
             rigs = list(self.rigs.items())
             runners = list(self.runners.items())
             jobs = [j for j in self.jobs.values() if j.status in ("running", "waiting")]
-        done = []
-        for (kind, _), rig in rigs:  # first the outputs: nothing else is as urgent
+        # Flags first, at once: no runner starts a new play after its rig is stopped.
+        playing = {sid: runner.running and not runner.paused for sid, runner in runners}
+        for _, runner in runners:
+            runner.pause()  # every runner: one that was not running must not start playing now
+        cancelled = [(job, job.cancel()) for job in jobs]
+        failed = {}
+        for key, rig in rigs:  # the outputs, now: nothing before this waits for the database
             try:
                 rig.stop()
-                done.append(f"{kind} rig outputs at 0 V")
             except Exception as exc:  # noqa: BLE001 - the others must still be stopped
-                log.exception("emergency stop of the %s rig failed", kind)
-                done.append(f"{kind} rig: stop FAILED ({exc}); switch the amplifier off")
-        for job in jobs:
-            job.cancel()
-            done.append(f"calibration of {job.participant_id} cancelled")
+                log.exception("emergency stop of the %s failed", self.rig_name(key[0], rig))
+                failed[key] = exc
+        # Which sessions were running: the store says so (the caller stores them as
+        # paused), or the runner was playing and its engine has just stored the pause.
+        # A session whose last answer is in (completed) is not, even while its runner
+        # shows "taken" for the last time.
+        paused = []
         for sid, runner in runners:
-            runner.pause()
-            done.append(f"session {sid} paused")
+            with self.db:
+                try:
+                    status = self.store.session(sid).status
+                except StudyError:
+                    continue
+            if status == "running" or (playing[sid] and status == "paused"):
+                paused.append((sid, runner))
+        in_use = [runner.rig for _, runner in paused] + [job._rig for job in jobs]
+        done = []
+        for key, rig in rigs:
+            name = self.rig_name(key[0], rig)
+            if key in failed:
+                done.append(f"{name}: stop FAILED ({failed[key]}); switch the amplifier off")
+            elif key[0] != "simulated" or any(rig is used for used in in_use):
+                done.append(f"{name}: outputs at 0 V")
+        for job, ok in cancelled:
+            done.append(f"calibration of {job.participant_id} cancelled: nothing is saved" if ok else
+                        f"calibration of {job.participant_id} not cancelled: its recordings had finished; it is being saved")
+        done.extend(f"session {sid} paused" for sid, _ in paused)
         return done
 
     def start_job(self, target: Any, *args: Any, name: str) -> threading.Thread:
@@ -505,6 +580,7 @@ FIELD_NAMES = {
     "rig": "The rig", "rig_seed": "The rig seed", "response": "The answer", "rt_s": "The reaction time",
     "answer_id": "The answer id", "trial_index": "The trial", "session_id": "The session",
     "location": "The location", "method": "The method", "wait": "The wait", "after": "The state number",
+    "simulated": "'simulated'", "allow_calibration_errors": "'allow_calibration_errors'", "points": "The points",
 }
 
 
@@ -534,10 +610,26 @@ def plain_problem(err: dict[str, Any]) -> str:
         return f"{what} may hold only letters, digits, '.', '_' and '-', and starts with a letter or digit."
     if kind == "literal_error" and "expected" in ctx:
         return f"{what} must be {ctx['expected']}."
+    if kind in ("bool_type", "int_type", "float_type", "string_type"):
+        # Strict types (api_models): say what was sent and what is wanted.
+        wanted = {"bool_type": "true or false", "int_type": "a whole number", "float_type": "a number",
+                  "string_type": "text"}[kind]
+        return f"{what} is not a valid value here: it must be {wanted}, not {_shown(err.get('input'))}."
     if kind.startswith(("int_", "float_", "bool_", "string_")) or kind == "enum":
         return f"{what} is not a valid value here."
     msg = str(err.get("msg", "is not valid")).removeprefix("Value error, ")
     return f"{what}: {msg[:1].lower() + msg[1:]}" + ("" if msg.endswith(".") else ".")
+
+
+def _shown(value: Any) -> str:
+    """A refused value as JSON, cut short (it comes from the request)."""
+    import json
+
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError):
+        text = type(value).__name__
+    return text if len(text) <= 40 else text[:37] + "..."
 
 
 def trial_position(trials: list[Any], index: int | None) -> dict[str, Any]:

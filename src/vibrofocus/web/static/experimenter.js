@@ -94,7 +94,7 @@
   async function emergencyStop() {
     try {
       const out = await api("/api/emergency-stop", { method: "POST" });
-      flash("Stopped: " + out.stopped.join("; "), true);
+      flash("Stopped: " + (out.stopped.length ? out.stopped.join("; ") : "nothing was running") + ".", true);
     } catch (err) {
       flash("The emergency stop did not reach the server (" + err.message + "): switch the amplifier off.", true);
     }
@@ -442,11 +442,14 @@
     try {
       const s = await api("/api/sessions", { method: "POST", body: JSON.stringify({
         participant_id: pid, study: Number($("study").value), calibration_id: cal ? Number(cal) : null,
-        rig: $("rig").value, rig_seed: rigSeed(),
+        // With a calibration, the session plays on the forearm it was made on (the server takes
+        // its seed): the Seed field is for Calibrate and dry runs only.
+        rig: $("rig").value, rig_seed: cal ? null : rigSeed(),
         repetitions: Number($("repetitions").value), n_training: Number($("n-training").value),
         allow_calibration_errors: Boolean(cal) && $("cal-override").checked }) });
       selectSession(s.session_id);
-      flash(`Session ${s.session_id} planned (${s.n_trials} trials)${cal ? "" : " — no calibration: a dry run, nothing is played"}.`);
+      const arm = cal && s.config && s.config.rig === "simulated" ? ` on the calibration's simulated forearm (seed ${s.config.rig_seed})` : "";
+      flash(`Session ${s.session_id} planned (${s.n_trials} trials)${arm}${cal ? "" : " — no calibration: a dry run, nothing is played"}.`);
       loadSessions();
     } catch (e) { flash(e.message, true); }
   });
