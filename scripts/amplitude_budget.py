@@ -97,7 +97,7 @@ def main() -> int:
     table = markdown([budget(skin) for skin in PRESETS])
     print(table)
     if not args.print:
-        from _markers import write_between_markers
+        from vibrofocus_tools.markers import write_between_markers
 
         write_between_markers(PAGE, "amplitude-budget", table)
     return 0

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibrofocus._atomic import write_text
+from vibrofocus.io import write_text
 from vibrofocus.calibration import calibrate
 from vibrofocus.defaults import FS_HZ, SIGMA_S
 from vibrofocus.demo import calibrated_transfer, run_demo

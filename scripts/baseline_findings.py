@@ -14,24 +14,49 @@ every hypothesis (a MODEL, not data):
 
 The Study 2 headline row (fewer points with a 10-30 % reduction) and the rows of each study
 as a whole did not exist then; they are counted here from that commit's own findings
-(``scripts/_joint_findings.py``).
+(``vibrofocus_tools.joint``).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
-import warnings
 from pathlib import Path
 
 import numpy as np
+
+from vibrofocus.io import write_text
+from vibrofocus_tools.joint import JOINT, add_joint, headline
 
 ROOT = Path(__file__).resolve().parent.parent
 OUT = ROOT / "scripts" / "fits" / "baseline-c313a27.json"
 COMMIT = "c313a27"
 SEED_RANGES = ((700, 740), (800, 1000))  # the held-out seeds, then those the weights were chosen on
+
+#: Run in that commit's code (its src and scripts first on the path): the findings of each
+#: study of each seed range, and that commit's rows, as JSON on stdout.
+_MEASURE = """
+import json, sys, warnings
+import numpy as np
+from check_findings import ROWS, findings
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.perception import PerceptualModel
+warnings.simplefilter("ignore")
+bank = default_bank()
+studies = []
+for first, stop in json.loads(sys.argv[1]):
+    res = []
+    for s in range(first, stop):
+        arrays = simulate_cell_means(20, np.random.default_rng([s, 16]), bank=bank, model=PerceptualModel())
+        r = findings(arrays.error_mm, arrays.count, arrays.count_hit)
+        res.append({k: (bool(v) if isinstance(v, (bool, np.bool_)) else int(v) if isinstance(v, (int, np.integer))
+                        else float(v)) for k, v in r.items()})
+    studies.append(res)
+json.dump({"rows": [k for _, k in ROWS], "studies": studies}, sys.stdout)
+"""
 
 
 def main() -> int:
@@ -42,28 +67,23 @@ def main() -> int:
     head = subprocess.run(["git", "-C", str(args.checkout), "rev-parse", "HEAD"], capture_output=True, text=True)
     if head.returncode != 0 or not head.stdout.startswith(COMMIT):
         ap.error(f"--checkout {args.checkout}: not a checkout of {COMMIT} ({head.stdout.strip() or head.stderr.strip()})")
-    from _joint_findings import JOINT, add_joint, headline  # before the paths change: not in that commit
-
-    # That commit's code, not this checkout's: its package and its check_findings first.
-    sys.path[:0] = [str(args.checkout / "src"), str(args.checkout / "scripts")]
-    sys.path = [p for p in sys.path if Path(p or ".").resolve() != Path(__file__).resolve().parent]
-    from check_findings import ROWS, findings
-    from vibrofocus._atomic import write_text  # that commit's atomic writer (the same as this one's)
-    from vibrofocus.simulation.bank import default_bank, simulate_cell_means
-    from vibrofocus.simulation.perception import PerceptualModel
-
-    warnings.simplefilter("ignore")
-    bank = default_bank()
+    # That commit's code, not this checkout's: its package and its check_findings, in a child
+    # process of their own; this one adds the findings made of others and writes the file.
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(args.checkout / "src"), str(args.checkout / "scripts")]),
+           "PYTHONDONTWRITEBYTECODE": "1"}
+    child = subprocess.run([sys.executable, "-c", _MEASURE, json.dumps(SEED_RANGES)], capture_output=True,
+                           text=True, env=env, cwd=args.checkout)
+    if child.returncode != 0:
+        ap.error(f"--checkout {args.checkout}: its check_findings failed: {child.stderr.strip()[-2000:]}")
+    measured = json.loads(child.stdout)
     out = {"about": f"The paper's findings under commit {COMMIT}'s simulated participants (model v3, every method at "
                     "equal peak drive; issue 42's baseline), by that commit's scripts/check_findings.py; written by "
                     "scripts/baseline_findings.py. A model, not data.",
            "commit": head.stdout.strip(), "participants": 20, "seeds": {}}
-    keys = list(dict.fromkeys([k for _, k in ROWS] + ["s2_headline", *JOINT]))
-    for first, stop in SEED_RANGES:
+    keys = list(dict.fromkeys(measured["rows"] + ["s2_headline", *JOINT]))
+    for (first, stop), found in zip(SEED_RANGES, measured["studies"]):
         res = []
-        for s in range(first, stop):
-            arrays = simulate_cell_means(20, np.random.default_rng([s, 16]), bank=bank, model=PerceptualModel())
-            r = findings(arrays.error_mm, arrays.count, arrays.count_hit)
+        for r in found:
             r["s2_headline"] = headline(r["s2_method"], r["s2_reduction"])
             res.append(add_joint(r))
         red = np.array([r["s2_reduction"] for r in res])

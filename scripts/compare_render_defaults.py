@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus import SimulatedForearm, render
-from vibrofocus._atomic import write_text
+from vibrofocus.io import write_text
 from vibrofocus.demo import peak_bound
 from vibrofocus.rendering.inverse import predict_response
 from vibrofocus.rendering.transfer import as_transfer_matrix

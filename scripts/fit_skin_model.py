@@ -73,7 +73,7 @@ def _figure(fit, path: str) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from vibrofocus._atomic import save_figure
+    from vibrofocus.io import save_figure
 
     law = fit.law
     f = np.geomspace(20, 1000, 200)

@@ -4,7 +4,7 @@
 Recomputes :func:`vibrofocus.demo.sensitivity.attenuation_sensitivity` (about 90 s, most of it the
 peak bounds: a minimax design per location and skin) and
 replaces the table between the ``sensitivity-table`` markers of ``docs/skin-model.md``
-(atomically, through ``vibrofocus._atomic``). With ``--check`` it only
+(atomically, through ``vibrofocus.io.write_text``). With ``--check`` it only
 compares and exits 1 if the page is out of date.
 
     .venv/bin/python scripts/skin_sensitivity.py [--check]
@@ -16,7 +16,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from vibrofocus._atomic import write_text
+from vibrofocus.io import write_text
 from vibrofocus.demo.sensitivity import attenuation_sensitivity, sensitivity_markdown
 
 PAGE = Path(__file__).resolve().parent.parent / "docs" / "skin-model.md"

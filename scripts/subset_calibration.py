@@ -32,8 +32,7 @@ from vibrofocus.errors import CausalityError
 from vibrofocus.rendering import focus_metrics, render
 from vibrofocus.skin import SimulatedForearm
 
-sys.path.insert(0, str(Path(__file__).parent))
-from _markers import write_between_markers  # noqa: E402
+from vibrofocus_tools.markers import write_between_markers
 
 METHODS = ("inverse", "minimax")
 PAGE = Path(__file__).resolve().parent.parent / "docs" / "method.md"

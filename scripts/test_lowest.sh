@@ -12,7 +12,7 @@ python3 -m venv "$work/venv"
 "$work/venv/bin/python" -m pip install -q uv
 # Built from a copy: setuptools writes its build/ folder beside the sources.
 mkdir "$work/pkg"
-cp -r "$root/src" "$root/pyproject.toml" "$root/README.md" "$root/LICENSE" "$work/pkg/"
+cp -r "$root/src" "$root/tools" "$root/pyproject.toml" "$root/README.md" "$root/LICENSE" "$work/pkg/"
 # The test extra's file readers (pybids, pyfar) at their minimums too: pyproject states them.
 "$work/venv/bin/uv" pip install -q --python "$work/venv/bin/python" --resolution lowest-direct "$work/pkg[lsl,sofa,osc,minimax]" \
     "pybids==$(grep -oP '"pybids>=\K[0-9.]+' "$root/pyproject.toml")" "pyfar==$(grep -oP '"pyfar>=\K[0-9.]+' "$root/pyproject.toml")"
@@ -56,10 +56,12 @@ import sys, bids, pyfar
 from vibrofocus.calibration import export_sofa, load_calibration
 export_sofa(load_calibration(sys.argv[1]), sys.argv[2])
 pyfar.io.read_sofa(sys.argv[2])" "$work/demo/calibration.nc" "$work/cal.sofa"
-PYTHONPATH="$root" "$work/venv/bin/python" -c "
+# The synthetic trials of the analysis tests, imported as the package tests.analysis from the
+# checkout's root (the current folder of a -c command is first on its path; nothing is written).
+(cd "$root" && "$work/venv/bin/python" -c "
 import sys
 from tests.analysis.synthetic import make_trials
-make_trials(8, seed=3).to_csv(sys.argv[1], index=False)" "$work/trials.csv"
+make_trials(8, seed=3).to_csv(sys.argv[1], index=False)" "$work/trials.csv")
 "$vf" analyze "$work/trials.csv" --out "$work/report" > /dev/null
 test -s "$work/report/report.json"
 echo "lowest-versions smoke test passed with:"

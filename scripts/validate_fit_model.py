@@ -38,8 +38,7 @@ from vibrofocus.demo.trust import tap_band
 from vibrofocus.rendering import focus_metrics, render
 from vibrofocus.skin import SimulatedForearm
 
-sys.path.insert(0, str(Path(__file__).parent))
-from _markers import write_between_markers  # noqa: E402
+from vibrofocus_tools.markers import write_between_markers
 
 METHODS = ("inverse", "contrast")
 ROOT = Path(__file__).resolve().parent.parent

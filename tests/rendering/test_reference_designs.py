@@ -1,13 +1,13 @@
 """render gives the drives saved before the methods became objects (issue 28).
 
 ``tests/rendering/data/reference_designs.npz`` holds the drives of every built-in method,
-rendered by the former single ``render`` function (``scripts/save_reference_designs.py``,
+rendered by the former single ``render`` function (``scripts/save_reference_designs.py``, i.e.
+``vibrofocus_tools.reference_designs``,
 run on that code) on a seeded simulated calibration. Each case is rendered again here,
 through the string API, the method objects and a user-built ``TransferMatrix``.
 """
 
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -18,10 +18,9 @@ from vibrofocus import TransferMatrix, render
 from vibrofocus.defaults import METHODS
 from vibrofocus.rendering import make_method
 
-ROOT = Path(__file__).resolve().parents[2]
+import vibrofocus_tools.reference_designs as saved
+
 DATA = Path(__file__).with_name("data") / "reference_designs.npz"
-sys.path.insert(0, str(ROOT / "scripts"))
-import save_reference_designs as saved  # noqa: E402
 
 # Relative to each design's peak drive.
 RTOL = 1e-12

@@ -185,14 +185,7 @@ def test_the_documented_hypotheses_table_is_that_of_the_code():
 
 @pytest.mark.slow
 def test_the_recorded_held_out_losses_and_so_the_default_are_reproduced():
-    import sys
-    from pathlib import Path
-
-    sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "scripts"))
-    try:
-        from fit_participants import HELD_OUT_SEEDS, loss
-    finally:
-        sys.path.pop(0)
+    from vibrofocus.simulation.fitting import HELD_OUT_SEEDS, loss
     from vibrofocus.simulation.paper import seed_statistics
 
     fits = hypothesis_fits()["hypotheses"]
@@ -203,8 +196,9 @@ def test_the_recorded_held_out_losses_and_so_the_default_are_reproduced():
         np.testing.assert_allclose(loss(stats, fit["weights"]), fit["loss_held_out_search_weights"], rtol=1e-3, atol=1e-4)
 
 
-def test_the_search_draws_the_conflict_awareness_only_when_asked(import_script):
-    fit = import_script("fit_participants")
+def test_the_search_draws_the_conflict_awareness_only_when_asked():
+    from vibrofocus.simulation import fitting as fit
+
     plain = [fit.sample(np.random.default_rng(s)) for s in range(50)]
     assert all(m.conflict_awareness == 0.0 and m.conflict_gain <= 2.0 for m in plain)
     drawn = [fit.sample(np.random.default_rng(s), aware=True) for s in range(200)]
@@ -219,8 +213,15 @@ def test_the_search_draws_the_conflict_awareness_only_when_asked(import_script):
     assert (lam > 0).mean() > 0.3 and lam.max() <= 3.0
 
 
-def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(import_script, tmp_path):
-    fit = import_script("fit_participants")
+def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(tmp_path, monkeypatch):
+    from vibrofocus.simulation import fitting as fit
+    from vibrofocus.simulation.fitting import adoption
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("adopt simulated a study before refusing its input")
+
+    monkeypatch.setattr(adoption, "seed_statistics", no_work)
+    out = tmp_path / "hypotheses_fit.json"
     weights = {"s2_reduction": 8.0}
 
     def write(name, hyp, seeds, w=weights):
@@ -233,29 +234,30 @@ def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(impor
 
     a = [write("a1.json", "grid-peak", (2023, 2024)), write("a2.json", "grid-peak", (2025, 2026))]
     b = [write("b1.json", "v3-centroid", (2023, 2024))]
-    with pytest.raises(SystemExit, match="v3-centroid: its paths have other budgets|grid-peak: its paths"):
-        fit.adopt(a + b, [])
+    with pytest.raises(ValidationError, match="v3-centroid: its paths have other budgets|grid-peak: its paths"):
+        fit.adopt(a + b, [], out=out)
     b.append(write("b2.json", "v3-centroid", (2025, 2027)))  # another seed for the second stage
-    with pytest.raises(SystemExit, match="other budgets"):
-        fit.adopt(a + b, [])
-    with pytest.raises(SystemExit, match="other weights"):
-        fit.adopt(a + [write("c.json", "v3-centroid", (2023, 2024), {"s2_reduction": 4.0})], [])
+    with pytest.raises(ValidationError, match="other budgets"):
+        fit.adopt(a + b, [], out=out)
+    with pytest.raises(ValidationError, match="other weights"):
+        fit.adopt(a + [write("c.json", "v3-centroid", (2023, 2024), {"s2_reduction": 4.0})], [], out=out)
+    assert not out.exists()
 
 
 @pytest.mark.slow
-def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_file(import_script, tmp_path, monkeypatch):
+def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_file(tmp_path):
     # Two paths per hypothesis: the shipped fit, and a participant who selects almost
     # every location (kappa near 0) and feels little (a high threshold), which no fit of
     # the paper keeps. adopt must keep the shipped path, record both, and write only where
-    # it is told.
-    fit = import_script("fit_participants")
+    # it is told. Every hypothesis: adopt refuses a set that leaves one out.
+    from vibrofocus.simulation import fitting as fit
+
     shipped_file = fit.FITS_FILE
     shipped_bytes = shipped_file.read_bytes()
     out = tmp_path / "hypotheses_fit.json"
-    monkeypatch.setattr(fit, "FITS_FILE", out)
     fits = hypothesis_fits()["hypotheses"]
     paths = []
-    for name in ("grid-peak", "v3-centroid"):
+    for name in available_hypotheses():
         good = PerceptualModel().replace(**fits[name]["model"]).to_dict()
         bad = PerceptualModel().replace(**{**fits[name]["model"], "select_kappa": (0.01, 0.02), "sl_ref_db": 10.0}).to_dict()
         for seeds, model in (((1, 2), bad), ((3, 4), good)):
@@ -266,10 +268,10 @@ def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_fil
                                         "weights": fits[name]["weights"], "fit_seeds": [1000, 1064],
                                         "loss": 0.0, "model": model}))
             paths.append(path)
-    assert fit.adopt(paths, []) == 0
+    assert fit.adopt(paths, [], out=out) == json.loads(out.read_text())
     written = json.loads(out.read_text())
     assert shipped_file.read_bytes() == shipped_bytes
-    for name in ("grid-peak", "v3-centroid"):
+    for name in available_hypotheses():
         kept = written["hypotheses"][name]
         assert kept["model"] == fits[name]["model"] and kept["budget"]["rng_seed"] == 4
         losses = [p["loss_fit"] for p in kept["paths"]]

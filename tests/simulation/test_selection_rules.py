@@ -1,5 +1,6 @@
 """The answer rule's parts (perception.select_locations & co.) and scripts/selection_rules.py."""
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -15,8 +16,10 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.fixture(scope="module")
-def rules(import_script):
-    return import_script("selection_rules")
+def rules():
+    import vibrofocus_tools.selection_rules
+
+    return vibrofocus_tools.selection_rules
 
 
 def test_select_locations_reads_the_density_ratio_analytically():
@@ -106,8 +109,7 @@ def test_script_prints_its_table_and_plot(tmp_path):
     res = subprocess.run([sys.executable, str(ROOT / "scripts" / "selection_rules.py"), "--seeds", "800", "803",
                           "--n", "8", "--only", "2", "--plot", str(png)],
                          capture_output=True, text=True, timeout=300,
-                         env={"PYTHONPATH": f"{ROOT / 'src'}:{ROOT / 'scripts'}", "PATH": "/usr/bin:/bin",
-                              "MPLBACKEND": "Agg"})
+                         env={**os.environ, "MPLBACKEND": "Agg"})
     assert res.returncode == 0, res.stderr
     rows = [line for line in res.stdout.splitlines() if line.startswith("| posterior ratio")]
     assert len(rows) == 2
@@ -128,8 +130,7 @@ def test_bars_need_every_finding_at_its_share(rules):
 
 def test_script_refuses_an_empty_seed_range():
     res = subprocess.run([sys.executable, str(ROOT / "scripts" / "selection_rules.py"), "--seeds", "5", "5"],
-                         capture_output=True, text=True, timeout=120,
-                         env={"PYTHONPATH": f"{ROOT / 'src'}:{ROOT / 'scripts'}", "PATH": "/usr/bin:/bin"})
+                         capture_output=True, text=True, timeout=120)
     assert res.returncode == 2
     assert "STOP must be above FIRST" in res.stderr
 

@@ -25,6 +25,9 @@
 :mod:`.lsl`
     Lab Streaming Layer markers (``--lsl``, extra ``vibrofocus[lsl]``): :class:`MarkerOutlet`,
     :func:`marker_code` (the event codes), :func:`stable_source_id`.
+:mod:`.files`
+    Any other file, written atomically under the package's rules: :func:`write_text`,
+    :func:`save_figure`, :func:`atomic_path` (for scripts and other programs).
 :mod:`.sofa`
     Transfer matrices as SOFA ``GeneralTF-E`` files (extra ``vibrofocus[sofa]``):
     :func:`write_sofa_tf`, :func:`read_sofa_tf`.
@@ -39,6 +42,7 @@ from .bids import read_bids_trials_table, write_bids_dataset
 from .calibration_nc import read_calibration_file, write_calibration_file
 from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
+from .files import atomic_path, save_figure, write_text
 from .jsonsafe import json_safe
 from .lsl import MarkerOutlet, marker_code, stable_source_id
 from .report_json import check_report, read_report_json, write_report_json
@@ -71,4 +75,7 @@ __all__ = [
     "stable_source_id",
     "write_sofa_tf",
     "read_sofa_tf",
+    "write_text",
+    "save_figure",
+    "atomic_path",
 ]

@@ -18,6 +18,10 @@ Fast studies and power (:mod:`.bank`, :mod:`.power`, :mod:`.paper`)
     :func:`simulate_cell_means`; :class:`PowerDesign`, :func:`run_power`,
     :func:`power_table`, :func:`study_statistics`; :func:`seed_statistics`,
     :func:`compare` (the model beside the paper).
+Figures of simulated data
+    :func:`model_footer` (the footer that says what in a figure is a model).
+Fitting (:mod:`.fitting`)
+    the objective, the search and the adoption of the shipped fits.
 """
 
 from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
@@ -27,6 +31,7 @@ from .participants import MODEL_NOTICE, SimulatedParticipant
 from .perception import MODEL_LABEL, MODEL_VERSION, STUDY_SKIN, Percepts, PerceptualModel
 from .power import PowerDesign, power_table, robust_conclusions, run_power, study_statistics
 from .simulate import participant_seeds, simulate_studies, summarize_simulation
+from .._style import model_footer
 
 __all__ = [
     "SimulatedParticipant",
@@ -55,4 +60,5 @@ __all__ = [
     "study_statistics",
     "seed_statistics",
     "compare",
+    "model_footer",
 ]

@@ -1,12 +1,14 @@
 """The generated blocks of the docs: a table between ``<!-- name:start -->`` and ``<!-- name:end -->``.
 
-Shared by the scripts that regenerate a table in a page (run as ``python scripts/NAME.py``,
-so this folder is on ``sys.path``).
+Shared by the tools and scripts that regenerate a table in a page.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
+
+#: The checkout these tools belong to (they read and write its docs and fits).
+ROOT = Path(__file__).resolve().parents[2]
 
 
 def replace_between_markers(text: str, name: str, block: str, page: Path) -> str:
@@ -21,6 +23,6 @@ def replace_between_markers(text: str, name: str, block: str, page: Path) -> str
 
 def write_between_markers(page: Path, name: str, block: str) -> None:
     """Put ``block`` between the page's ``name`` markers, written atomically."""
-    from vibrofocus._atomic import write_text
+    from vibrofocus.io import write_text
 
     write_text(page, replace_between_markers(page.read_text(encoding="utf-8"), name, block, page))
