@@ -147,3 +147,42 @@ def test_a_folder_given_as_a_symbolic_link_is_written_through(tmp_path):
         with _atomic.atomic_directory(tmp_path / "gone", what="report folder") as build:
             (build / "report.json").write_text("x")
     assert not (tmp_path / "missing").exists()
+
+
+def test_a_deleted_protected_file_whose_inode_is_reused_is_not_the_input(tmp_path):
+    """A study database's -wal is protected while it exists and deleted when the database closes; a new file
+    that reuses its inode number was refused as "the study database this command reads" (issue 53, two
+    exports at once)."""
+    wal = tmp_path / "study.sqlite-wal"
+    wal.write_bytes(b"journal")
+    with _atomic.output_guard():
+        _atomic.protect(wal, "study database")
+        inode = os.stat(wal).st_ino
+        os.unlink(wal)
+        for i in range(200):  # file systems hand a freed inode number to the next new file, mostly
+            other = tmp_path / f"out-{i}.txt"
+            other.write_text("x")
+            if os.stat(other).st_ino == inode:
+                break
+            other.unlink()
+        else:
+            pytest.skip("this file system did not reuse the inode number")
+        _atomic.write_text(other, "the export's file\n")
+        assert other.read_text() == "the export's file\n"
+        wal.write_bytes(b"journal again")  # the same name again, another inode: still protected by name
+        with pytest.raises(OutputError, match="study database this command reads"):
+            _atomic.write_text(wal, "x")
+
+
+def test_an_exclusive_folder_is_only_created_never_swapped_over_one_made_meanwhile(tmp_path):
+    out = tmp_path / "ds"
+    with pytest.raises(OutputError, match="another process created it meanwhile") as info:
+        with _atomic.atomic_directory(out, exclusive=True) as build:
+            (build / "mine.txt").write_text("mine")
+            out.mkdir()  # another export's dataset, put in place while this one was built
+            (out / "theirs.txt").write_text("theirs")
+    assert info.value.errno == 17 and sorted(p.name for p in tmp_path.iterdir()) == ["ds"]
+    assert [p.name for p in out.iterdir()] == ["theirs.txt"]
+    with _atomic.atomic_directory(tmp_path / "new", exclusive=True) as build:
+        (build / "mine.txt").write_text("mine")
+    assert (tmp_path / "new" / "mine.txt").read_text() == "mine"

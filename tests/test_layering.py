@@ -26,7 +26,7 @@ FLOORS = (
     ("errors", "defaults", "_docs", "_style", "_templates", "_interrupts"),  # constants, messages, signals
     ("_oserrors", "_validation", "_safe_folders"),            # error wording, the shared checks, shared folders
     ("_output_rules",),                                       # what an output may replace
-    ("_disk_checks", "_atomic_folders"),                      # free space, whole folders
+    ("_disk_checks", "_atomic_folders", "_confined"),         # free space, whole folders, below a root
     ("_atomic",),                                             # atomic files (re-exports the four above)
     ("io", "layout", "signals"),                              # formats (plain arrays), the array, waveforms
     ("rendering", "analysis"),                                # the designs, the statistics of trials

@@ -27,10 +27,16 @@ Interrupts: the commit (rename) runs with SIGINT/SIGTERM deferred (see
 new one. An interrupt noted while a library swallowed it (:func:`interrupt_pending`)
 stops the save before the commit.
 
+Inside a folder others may write (an export into an existing dataset), ``within=root``
+confines a write to ``root``: a link at the target or on any folder between ``root`` and
+it is refused, and the file is renamed over its name in the folder's descriptor, so
+nothing is ever written through a link (:mod:`._confined`).
+
 This module writes the files; each other job of the family has a module of its own, whose
 public names are re-exported here: :mod:`._oserrors` (error wording),
 :mod:`._interrupts` (signals), :mod:`._output_rules` (what an output may replace, file
-modes), :mod:`._atomic_folders` (folders) and :mod:`._disk_checks` (room on the disk).
+modes), :mod:`._atomic_folders` (folders), :mod:`._confined` (files below a root, no
+link followed) and :mod:`._disk_checks` (room on the disk).
 """
 
 from __future__ import annotations
@@ -44,6 +50,7 @@ from typing import IO, Any
 
 # The family's other parts, each with one job; their public names are this module's too.
 from ._atomic_folders import atomic_directory, make_output_folder
+from ._confined import atomic_write_below, link_below, lock_folder, read_below
 from ._disk_checks import SPACE_MARGIN_BYTES, check_writable
 from ._interrupts import clear_interrupt, critical_section, install_signal_handlers, interrupt_pending
 from ._oserrors import OUTPUT_ERRNOS, describe_os_error, output_error
@@ -84,6 +91,9 @@ __all__ = [
     "allow_overwrite",
     "file_kind",
     "make_output_folder",
+    "read_below",
+    "link_below",
+    "lock_folder",
     "OUTPUT_ERRNOS",
     "SPACE_MARGIN_BYTES",
 ]
@@ -183,6 +193,8 @@ def atomic_write(
     encoding: str | None = "utf-8",
     newline: str | None = None,
     what: str = "file",
+    within: str | os.PathLike | None = None,
+    parents: bool = False,
 ) -> Iterator[IO[Any]]:
     """Open a temporary file beside ``path`` for writing; on success it replaces ``path``.
 
@@ -196,6 +208,14 @@ def atomic_write(
         For text mode (default UTF-8).
     what : str
         What is written, for error messages.
+    within : path-like, optional
+        A folder ``path`` must stay in, others may write (a shared dataset): a symbolic
+        link at ``path`` or on any folder between it and ``within`` is refused ("... is
+        a link: refused"), before writing and again at the rename, which replaces the
+        name itself (:func:`vibrofocus._confined.atomic_write_below`). Without it, a
+        link to a regular file is written through (:func:`output_target`).
+    parents : bool
+        With ``within``: make missing folders below it (never through a link).
 
     Yields
     ------
@@ -210,6 +230,13 @@ def atomic_write(
     if mode not in ("w", "wb"):
         raise ValueError(f"atomic_write mode must be 'w' or 'wb', got {mode!r}")
     path = Path(path)
+    if within is not None:
+        with atomic_write_below(within, path, mode, encoding=encoding, newline=newline, what=what,
+                                kind=_suffix_kind(path), parents=parents) as fh:
+            yield fh
+        return
+    if parents:
+        raise ValueError("atomic_write(parents=True) needs within=")
     _check_folder(path, what)
     real = output_target(path, what, kind=_suffix_kind(path))
     fd, tmp = _mkstemp(real, what)
@@ -225,16 +252,18 @@ def atomic_write(
             os.fsync(fh.fileno())
 
 
-def write_bytes(path: str | os.PathLike, data: bytes, *, what: str = "file") -> Path:
-    """Write ``data`` to ``path`` atomically (see :func:`atomic_write`); returns the path."""
-    with atomic_write(path, "wb", what=what) as fh:
+def write_bytes(path: str | os.PathLike, data: bytes, *, what: str = "file",
+                within: str | os.PathLike | None = None, parents: bool = False) -> Path:
+    """Write ``data`` to ``path`` atomically (see :func:`atomic_write`, also for ``within`` and ``parents``)."""
+    with atomic_write(path, "wb", what=what, within=within, parents=parents) as fh:
         fh.write(data)
     return Path(path)
 
 
-def write_text(path: str | os.PathLike, text: str, *, what: str = "file", encoding: str = "utf-8") -> Path:
-    """Write ``text`` to ``path`` atomically (see :func:`atomic_write`); returns the path."""
-    with atomic_write(path, "w", encoding=encoding, what=what) as fh:
+def write_text(path: str | os.PathLike, text: str, *, what: str = "file", encoding: str = "utf-8",
+               within: str | os.PathLike | None = None, parents: bool = False) -> Path:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_write`, also for ``within`` and ``parents``)."""
+    with atomic_write(path, "w", encoding=encoding, what=what, within=within, parents=parents) as fh:
         fh.write(text)
     return Path(path)
 

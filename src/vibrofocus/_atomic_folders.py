@@ -23,19 +23,24 @@ from .errors import OutputError
 
 __all__ = ["atomic_directory", "make_output_folder", "resolve_folder_link"]
 
+_RENAME_NOREPLACE = 1
 _RENAME_EXCHANGE = 2
 _AT_FDCWD = -100
 
 
-def _exchange(a: Path, b: Path) -> bool:
-    """Swap two paths atomically with ``renameat2(RENAME_EXCHANGE)``; False where unsupported."""
+def _exchange(a: Path, b: Path, flags: int = _RENAME_EXCHANGE) -> bool:
+    """Swap two paths atomically with ``renameat2(RENAME_EXCHANGE)``; False where unsupported.
+
+    With ``flags=RENAME_NOREPLACE``: rename ``a`` to ``b`` only if ``b`` does not exist
+    (``FileExistsError`` if it does).
+    """
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         fn = libc.renameat2
     except (OSError, AttributeError):
         return False
     fn.argtypes = [ctypes.c_int, ctypes.c_char_p, ctypes.c_int, ctypes.c_char_p, ctypes.c_uint]
-    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), _RENAME_EXCHANGE) == 0:
+    if fn(_AT_FDCWD, os.fsencode(a), _AT_FDCWD, os.fsencode(b), flags) == 0:
         return True
     err = ctypes.get_errno()
     if err in (_errno.ENOSYS, _errno.EINVAL, _errno.ENOTSUP, _errno.EOPNOTSUPP):
@@ -82,6 +87,7 @@ def atomic_directory(
     *,
     owned: Iterable[str] | Callable[[str], bool] | None = None,
     what: str = "folder",
+    exclusive: bool = False,
 ) -> Iterator[Path]:
     """Build a folder beside ``path`` and put it in place as a whole, or not at all.
 
@@ -110,6 +116,10 @@ def atomic_directory(
         new build holds.
     what : str
         For error messages (``"report folder"``).
+    exclusive : bool
+        Only create ``path``: if it exists when the build is done (another process made
+        it meanwhile), nothing is replaced and ``OutputError`` with ``errno`` ``EEXIST``
+        is raised (``renameat2(RENAME_NOREPLACE)`` where the system has it).
 
     Raises
     ------
@@ -147,7 +157,12 @@ def atomic_directory(
                 raise KeyboardInterrupt
             try:
                 existing = [p.name for p in path.iterdir()] if path.exists() else None
-                if existing is None:
+                if exclusive and (existing is not None or not _create_only(tmp, path)):
+                    raise OutputError(f"cannot write the {what} {path}: another process created it meanwhile; "
+                                      "nothing was written", errno=_errno.EEXIST, path=str(path))
+                if exclusive:
+                    _fsync_dir(path.parent)
+                elif existing is None:
                     os.rename(tmp, path)
                     _fsync_dir(path.parent)
                 elif all(is_owned(name) for name in existing):
@@ -160,6 +175,19 @@ def atomic_directory(
         with critical_section():
             if tmp.exists():
                 shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _create_only(new: Path, path: Path) -> bool:
+    """Rename folder ``new`` to ``path`` unless ``path`` exists; False if it does."""
+    try:
+        if _exchange(new, path, _RENAME_NOREPLACE):
+            return True
+    except FileExistsError:
+        return False
+    if path.exists() or path.is_symlink():  # no renameat2: the check and the rename are two steps
+        return False
+    os.rename(new, path)
+    return True
 
 
 def _swap_whole(new: Path, path: Path) -> None:

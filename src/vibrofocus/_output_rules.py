@@ -14,7 +14,7 @@ import contextvars
 import errno as _errno
 import os
 import stat
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -84,6 +84,11 @@ def file_kind(path: str | os.PathLike) -> str | None:
             head = fh.read(4096)
     except OSError:
         return None
+    return _kind_of_head(head)
+
+
+def _kind_of_head(head: bytes) -> str | None:
+    """:func:`file_kind` from a file's first 4096 bytes."""
     if not head:
         return None
     for magic, kind in _MAGIC:
@@ -105,7 +110,7 @@ def file_kind(path: str | os.PathLike) -> str | None:
 class _Guard:
     """What the running command reads (by device and inode, or by path before it exists) and ``--force``."""
 
-    inodes: dict[tuple[int, int], str] = field(default_factory=dict)
+    inodes: dict[tuple[int, int], tuple[str, str]] = field(default_factory=dict)
     paths: dict[str, str] = field(default_factory=dict)
     force: bool = False
 
@@ -166,7 +171,7 @@ def protect(paths: str | os.PathLike | Iterable[str | os.PathLike], what: str) -
         with contextlib.suppress(OSError, ValueError):
             guard.paths.setdefault(os.path.realpath(p), what)
             st = os.stat(p)
-            guard.inodes.setdefault((st.st_dev, st.st_ino), what)
+            guard.inodes.setdefault((st.st_dev, st.st_ino), (what, os.path.abspath(p)))
 
 
 _NOT_REGULAR = ((stat.S_ISDIR, "a folder"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
@@ -222,24 +227,84 @@ def output_target(path: str | os.PathLike, what: str = "file", *, kind: str | No
         st = None
     except OSError as exc:
         raise output_error(exc, path, what) from exc
+    check_existing(path, what, st, kind=kind, real=real, linked=path.is_symlink(),
+                   head=lambda: _read_head(real))
+    return real
+
+
+def _read_head(path: Path) -> bytes:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(4096)
+    except OSError:
+        return b""
+
+
+def _protected(guard: _Guard, st: os.stat_result | None, real: Path | None) -> str | None:
+    """What the running command reads at this inode (or resolved path), if anything.
+
+    An inode counts only while the file protected under it still has it: a journal
+    (``-wal``) deleted since, whose inode number a new file reuses, is not the database.
+    """
+    if st is not None:
+        entry = guard.inodes.get((st.st_dev, st.st_ino))
+        if entry is not None:
+            what, name = entry
+            try:
+                now = os.stat(name)
+            except OSError:
+                now = None
+            if now is not None and (now.st_dev, now.st_ino) == (st.st_dev, st.st_ino):
+                return what
+    return guard.paths.get(str(real)) if real is not None else None
+
+
+def check_existing(path: Path, what: str, st: os.stat_result | None, *, kind: str | None,
+                   head: Callable[[], bytes], real: Path | None = None, linked: bool = False) -> None:
+    """The rules of :func:`output_target` on the file found at an output name.
+
+    Parameters
+    ----------
+    path : Path
+        The output name, for messages.
+    what : str
+        What is written.
+    st : os.stat_result or None
+        The file there (None: none).
+    kind : str, optional
+        The new file's kind (None skips the kind rule).
+    head : callable
+        Returns the old file's first bytes (for its kind).
+    real : Path, optional
+        Its resolved path (for files protected before they existed).
+    linked : bool
+        Whether ``path`` is a link to it (for the wording).
+
+    Raises
+    ------
+    OutputError
+    """
+    def refuse(reason: str, err: int | None = None) -> OutputError:
+        return OutputError(f"cannot write the {what} {path}: {reason}; nothing was written", errno=err,
+                           path=str(path))
+
     if st is not None:
         for test, name in _NOT_REGULAR:
             if test(st.st_mode):
-                raise refuse(f"{'it points to' if path.is_symlink() else 'it is'} {name}, not a regular file; "
+                raise refuse(f"{'it points to' if linked else 'it is'} {name}, not a regular file; "
                              "choose a file name", _errno.EISDIR if name == "a folder" else _errno.EINVAL)
     guard = _guard.get()
     if guard is None:
-        return real
+        return
     # By inode; by path too, for a file protected before it existed (a new database).
-    same = (guard.inodes.get((st.st_dev, st.st_ino)) if st is not None else None) or guard.paths.get(str(real))
+    same = _protected(guard, st, real)
     if same is not None:
         raise refuse(f"it is the {same} this command reads (the same file); choose another name", _errno.EEXIST)
     if st is not None and kind is not None and not guard.force:
-        old = file_kind(real)
+        old = _kind_of_head(head())
         if old is not None and old != kind:
             raise refuse(f"it holds a {old}, not a {kind}; choose another name, or pass --force to replace it",
                          _errno.EEXIST)
-    return real
 
 
 def _suffix_kind(path: Path) -> str | None:

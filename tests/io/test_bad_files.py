@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import io
 import shutil
 import zipfile
@@ -185,3 +186,111 @@ def test_a_known_variable_declared_larger_than_the_file_is_refused_before_readin
              "compressed bytes of it")
     with pytest.raises(CalibrationFileError, match=words):
         load_calibration(edited)
+
+
+# --------------------------------------------------------------------------- data from outside the file
+def _recreate(f, name, make):
+    """Replace dataset ``name`` by ``make(shape, dtype, data)``, keeping its attributes and dimensions."""
+    old = f[name]
+    data, attrs = old[()], {k: v for k, v in old.attrs.items() if k not in ("DIMENSION_LIST", "REFERENCE_LIST")}
+    dims = [[scale.name for scale in dim.values()] for dim in old.dims]
+    del f[name]
+    new = make(data.shape, data.dtype, data)
+    if new is None:  # a link: nothing to attach
+        return
+    for key, value in attrs.items():
+        new.attrs[key] = value
+    for i, names in enumerate(dims):
+        for scale in names:
+            new.dims[i].attach_scale(f[scale])
+
+
+@pytest.mark.parametrize("kind, words", [
+    ("fifo", r"point_measured keeps its data outside the file \(HDF5 external storage in .*pipe\)"),
+    ("dev_zero", r"point_measured keeps its data outside the file \(HDF5 external storage in /dev/zero\)"),
+    ("other_file", r"point_measured keeps its data outside the file \(HDF5 external storage in .*secret.bin\)"),
+    ("virtual", r"point_measured is an HDF5 virtual dataset \(its data come from other files\)"),
+    ("external_link", r"point_measured is an HDF5 external link \(to '/x' in the file '.*other.h5'\)"),
+    ("soft_link", r"point_measured is an HDF5 soft link \(to '/point_kind'\)"),
+])
+def test_data_from_outside_the_file_is_refused_before_anything_is_read(tmp_path, calibration_file, kind, words):
+    """Issue 53 item 7: external storage on a FIFO blocked for ever in HDF5's open of it (a C call Ctrl-C
+    cannot stop), /dev/zero or any readable file became the flags, a virtual dataset or a link read another
+    file's data. Each is refused from the header, and the FIFO is never opened."""
+    import os
+    import threading
+
+    import h5py
+
+    from vibrofocus.calibration import load_calibration
+
+    edited = tmp_path / "edited.nc"
+    shutil.copy2(calibration_file, edited)
+    fifo, other, secret = tmp_path / "pipe", tmp_path / "other.h5", tmp_path / "secret.bin"
+    os.mkfifo(fifo)
+    opened, stop = [], threading.Event()
+
+    def feed() -> None:  # a writer that connects only if the reader opens the FIFO; then it gives zeros
+        while not stop.is_set():
+            try:
+                fd = os.open(fifo, os.O_WRONLY | os.O_NONBLOCK)
+            except OSError:  # ENXIO: no reader yet
+                stop.wait(0.01)
+                continue
+            opened.append(True)
+            with contextlib.suppress(OSError):
+                os.set_blocking(fd, True)
+                os.write(fd, bytes(1 << 16))
+            os.close(fd)
+            return
+
+    def make(shape, dtype, data):
+        n = data.nbytes
+        if kind == "fifo":
+            return f.create_dataset("point_measured", shape, dtype, external=[(str(fifo), 0, n)])
+        if kind == "dev_zero":
+            return f.create_dataset("point_measured", shape, dtype, external=[("/dev/zero", 0, n)])
+        if kind == "other_file":
+            secret.write_bytes(np.ones(shape, dtype).tobytes())
+            return f.create_dataset("point_measured", shape, dtype, external=[(str(secret), 0, n)])
+        with h5py.File(other, "w") as g:
+            g["x"] = data
+        if kind == "virtual":
+            layout = h5py.VirtualLayout(shape, dtype)
+            layout[...] = h5py.VirtualSource(str(other), "x", shape)
+            return f.create_virtual_dataset("point_measured", layout)
+        f["point_measured"] = h5py.ExternalLink(str(other), "/x") if kind == "external_link" else \
+            h5py.SoftLink("/point_kind")
+        return None
+
+    with h5py.File(edited, "r+") as f:
+        assert "point_measured" in f
+        _recreate(f, "point_measured", make)
+    feeder = threading.Thread(target=feed, daemon=True)
+    feeder.start()
+    try:
+        with pytest.raises(CalibrationFileError, match=rf"edited.nc: {words}; a calibration file must hold its "
+                                                       "own data, so it was refused before reading"):
+            load_calibration(edited)
+    finally:
+        stop.set()
+        feeder.join(5)
+    assert opened == []
+
+
+def test_a_link_or_outside_storage_deep_in_a_group_is_refused(tmp_path):
+    """The walk covers every group (SOFA and netCDF files may have them) and survives a loop of hard links."""
+    import h5py
+
+    from vibrofocus.io._headers import check_hdf5_sizes
+
+    path = tmp_path / "deep.h5"
+    with h5py.File(path, "w") as f:
+        inner = f.create_group("a/b")
+        inner["loop"] = f["a"]  # a hard link back up: visited once
+        f["ok"] = np.zeros(3)
+    assert check_hdf5_sizes(path, "a SOFA file")[0] == {"ok": (3,)}
+    with h5py.File(path, "r+") as f:
+        f["a/b"].create_dataset("v", (4,), "f8", external=[("/dev/zero", 0, 32)])
+    with pytest.raises(ValidationError, match=r"a/b/v keeps its data outside the file .*; a SOFA file must hold"):
+        check_hdf5_sizes(path, "a SOFA file")

@@ -167,3 +167,124 @@ def test_the_same_label_from_another_study_is_a_file_in_the_way(tmp_path):
     assert events.read_bytes() == before
     export_bids(other, ds, force=True)
     assert len(read_bids_trials_table(ds)) == 3
+
+
+# --------------------------------------------------------------------------- a dataset someone else can write
+EVENTS = "sub-sim001/beh/sub-sim001_task-localization1_events.tsv"
+
+
+def _plant(kind, ds, source, outside):
+    """Issue 53 item 3: a link inside the dataset, to a file or folder outside it. Returns the --force flag."""
+    victim = outside / "precious.txt"
+    if kind in ("events_known_hash", "events_other_hash"):
+        events = ds / EVENTS
+        events.parent.mkdir(parents=True)
+        events.symlink_to(victim)
+        digest = hashlib.sha256(victim.read_bytes()).hexdigest() if kind == "events_known_hash" else "0" * 64
+        (ds / MANIFEST_NAME).write_text(json.dumps({"format": "vibrofocus BIDS export manifest", "version": 1,
+                                                    "files": {EVENTS: digest},
+                                                    "sources": {EVENTS: str(source.resolve())}}))
+        return kind == "events_other_hash"
+    if kind == "manifest":
+        (ds / MANIFEST_NAME).symlink_to(victim)
+        return True
+    if kind == "participants":
+        victim.write_text(PARTICIPANTS)
+        (ds / "participants.tsv").unlink()
+        (ds / "participants.tsv").symlink_to(victim)
+        return False
+    if kind == "sidecar_folder":  # a whole beh/ folder of a subject without data of the lab
+        (ds / "sub-sim001/beh").symlink_to(outside, target_is_directory=True)
+        return True
+    (ds / "sub-sim002").symlink_to(outside, target_is_directory=True)
+    return False
+
+
+@pytest.mark.parametrize("kind, link", [
+    ("events_known_hash", EVENTS), ("events_other_hash", EVENTS), ("manifest", MANIFEST_NAME),
+    ("participants", "participants.tsv"), ("subject_folder", "sub-sim002"), ("sidecar_folder", "sub-sim001/beh"),
+])
+def test_a_link_inside_the_dataset_is_refused_even_with_force_and_nothing_outside_changes(tmp_path, kind, link):
+    """On 37770a8 each of these replaced or merged a file outside the dataset (a plain export, no --force, when
+    the manifest gave the outside file's hash), or made ses-*/ folders in a folder outside."""
+    ds = _lab_dataset(tmp_path)
+    source = _trials(tmp_path / "a.csv", "sim-001")
+    source.write_text(source.read_text() + "sim-002,1,main,1,inverse,4,4,0.5\n")
+    outside = tmp_path / "outside"
+    outside.mkdir()
+    (outside / "precious.txt").write_text("the user's own file\n")
+    force = _plant(kind, ds, source, outside)
+    before, inside = _hashes(outside), _hashes(ds)
+    links = sorted(str(p.relative_to(ds)) for p in ds.rglob("*") if p.is_symlink())
+    for flags in ([], ["--force"]) if force else ([],):
+        result = runner.invoke(app, ["export", str(source), "--bids", str(ds), *flags])
+        assert result.exit_code == 2 and result.output.count("error:") == 1, result.output
+        assert f"{link} is a link: refused" in result.output and "nothing was changed" in result.output
+    assert _hashes(outside) == before and sorted(p.name for p in outside.iterdir()) == ["precious.txt"]
+    assert _hashes(ds) == inside and links == sorted(str(p.relative_to(ds)) for p in ds.rglob("*") if p.is_symlink())
+
+
+def test_the_write_itself_never_follows_a_link_below_its_root(tmp_path):
+    """The atomic layer's own rule (for a link made between the export's check and its write): a link at the
+    file or on a folder below ``within`` is refused, and the rename replaces names, never a link's target."""
+    from vibrofocus._atomic import atomic_write, read_below, write_text
+
+    root, outside = tmp_path / "ds", tmp_path / "outside"
+    (root / "sub-1").mkdir(parents=True)
+    outside.mkdir()
+    victim = outside / "x.tsv"
+    victim.write_text("mine\n")
+    (root / "sub-1" / "x.tsv").symlink_to(victim)
+    (root / "sub-2").symlink_to(outside, target_is_directory=True)
+    for target in (root / "sub-1" / "x.tsv", root / "sub-2" / "x.tsv", root / "sub-2" / "new" / "y.tsv"):
+        with pytest.raises(OutputError, match=r"is a link: refused"):
+            write_text(target, "export\n", within=root, parents=True)
+        with pytest.raises(OutputError, match=r"is a link: refused"):
+            read_below(root, target)
+    assert victim.read_text() == "mine\n" and sorted(p.name for p in outside.iterdir()) == ["x.tsv"]
+    # A link made while the file is being written: the rename is refused, the target untouched.
+    with pytest.raises(OutputError, match=r"sub-3/x.tsv is a link: refused"):
+        with atomic_write(root / "sub-3" / "x.tsv", "w", within=root, parents=True) as fh:
+            fh.write("export\n")
+            (root / "sub-3" / "x.tsv").symlink_to(victim)
+    assert victim.read_text() == "mine\n" and [p.name for p in (root / "sub-3").iterdir()] == ["x.tsv"]
+    # A FIFO where a file is read is refused without being opened (it would block).
+    os.mkfifo(root / "fifo")
+    with pytest.raises(OutputError, match="not a regular file"):
+        read_below(root, root / "fifo")
+    write_text(root / "sub-4" / "beh" / "z.tsv", "ok\n", within=root, parents=True)
+    assert read_below(root, root / "sub-4" / "beh" / "z.tsv") == b"ok\n"
+
+
+def test_a_crlf_participants_file_keeps_its_line_endings(tmp_path):
+    """On 37770a8 the file was read with universal newlines, so the merge never saw \\r\\n and wrote \\n."""
+    ds = _lab_dataset(tmp_path)
+    (ds / "participants.tsv").write_bytes(PARTICIPANTS.replace("\n", "\r\n").encode())
+    (ds / "participants.json").write_bytes(b'{\r\n  "age": {"Units": "years"}\r\n}\r\n')
+    export_bids(_trials(tmp_path / "a.csv", "sim-001"), ds)
+    tsv = (ds / "participants.tsv").read_bytes()
+    assert tsv.startswith(b"participant_id\tage\tsex\t") and tsv.count(b"\r\n") == tsv.count(b"\n") == 3
+    assert b"sub-X\t25\tM\tn/a" in tsv
+    js = (ds / "participants.json").read_bytes()
+    assert js.count(b"\r\n") == js.count(b"\n") > 3 and json.loads(js)["age"] == {"Units": "years"}
+
+
+def test_a_second_export_into_a_dataset_being_written_says_so(tmp_path):
+    """On 37770a8 two exports at once failed with false reasons ("it is the study database this command reads",
+    files "vibrofocus did not write"); the dataset's folder is locked while one export writes it."""
+    import fcntl
+
+    ds = _lab_dataset(tmp_path)
+    before = _hashes(ds)
+    source = _trials(tmp_path / "a.csv", "sim-001")
+    fd = os.open(ds, os.O_RDONLY | os.O_DIRECTORY)  # what the other export holds while it writes
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        result = runner.invoke(app, ["export", str(source), "--bids", str(ds)])
+        assert result.exit_code == 2 and result.output.count("error:") == 1
+        assert f"another export is writing the BIDS dataset {ds} now; nothing was changed" in \
+            " ".join(result.output.split())
+        assert _hashes(ds) == before
+    finally:
+        os.close(fd)
+    assert runner.invoke(app, ["export", str(source), "--bids", str(ds)]).exit_code == 0

@@ -103,3 +103,33 @@ def test_a_closed_log_refuses_a_tap(tmp_path):
     log.close()
     with pytest.raises(OutputError, match="closed"):
         log.append(_record(1))
+
+
+@pytest.mark.parametrize("tap_id", ["²", "٣", "9" * 5000, "-1", " 7", "7.0", "9" * 19])
+def test_a_hand_edited_tap_id_is_not_a_tap_log(tmp_path, tap_id):
+    """Issue 53: a Unicode digit ('²' passes str.isdigit) or 5000 digits (past int()'s limit) gave "unexpected
+    ValueError ... this is a bug" from serve-osc --log; the file is refused as not a tap log, unchanged."""
+    path = tmp_path / "taps.csv"
+    with TapLog(path) as log:
+        log.append(_record(1))
+    lines = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    path.write_text(lines[0] + lines[1] + lines[1].replace("1", tap_id, 1), encoding="utf-8")
+    before = path.read_bytes()
+    with pytest.raises(OutputError, match=r"it is not a tap log \(line 3: the tap_id .* is not a whole number of 1 to "
+                                          r"18 digits 0-9\); it was not changed"):
+        TapLog(path)
+    assert path.read_bytes() == before
+    with pytest.raises(ValidationError, match=r"taps.csv'? is not a tap log \(line 3: the tap_id"):
+        read_tap_log(path)
+
+
+def test_a_cell_that_is_no_number_is_named_when_the_log_is_read(tmp_path):
+    path = tmp_path / "taps.csv"
+    with TapLog(path) as log:
+        log.append(_record(1))
+    header, row = path.read_text(encoding="utf-8").splitlines(keepends=True)
+    cells = row.split(",")
+    cells[TAP_LOG_COLUMNS.index("location")] = "²"
+    path.write_text(header + ",".join(cells), encoding="utf-8")
+    with pytest.raises(ValidationError, match=r"is not a tap log \(line 2: location '²' is not a number\)"):
+        read_tap_log(path)

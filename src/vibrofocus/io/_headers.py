@@ -5,10 +5,17 @@ on disk and reads back in full as its fill value; compressed zeros shrink a
 thousandfold. Every reader of an HDF5 format (calibration netCDF, SOFA) or an ``.npz``
 (drives, feature banks) checks the arrays it will read here first, through the one helper
 :func:`vibrofocus._validation.check_declared_size`.
+
+An HDF5 file can also point outside itself: a soft or external link, a dataset whose
+bytes live in other files (external storage, a FIFO or ``/dev/zero`` included) or a
+virtual dataset made of other files' datasets. :func:`check_hdf5_storage` refuses all of
+them before any dataset is opened through a link or any data is read, so a file can only
+give its own bytes.
 """
 
 from __future__ import annotations
 
+import os
 from collections.abc import Collection
 from pathlib import Path
 from typing import Any
@@ -25,6 +32,76 @@ DECLARED_PER_FILE_BYTE = 16
 _SIZE_KEEPING_FILTERS = frozenset({2, 3})
 #: How netCDF-4 marks an HDF5 dataset that is only a dimension (its NAME attribute).
 _DIMENSION_ONLY = "This is a netCDF dimension but not a netCDF variable"
+
+
+#: Most links an HDF5 file of these formats may hold (a calibration has a few dozen).
+MAX_HDF5_LINKS = 10_000
+
+
+def _name(value: Any) -> str:
+    """A name HDF5 gives (bytes or str) as text, at most 200 characters."""
+    return (os.fsdecode(value) if isinstance(value, bytes) else str(value))[:200]
+
+
+def check_hdf5_storage(f: Any, what: str) -> None:
+    """Refuse an HDF5 file that takes data from anywhere but its own bytes.
+
+    Every link of the file is walked without following it: soft and external links
+    (and user-defined ones) are refused, and every dataset must keep its data in the
+    file (contiguous, chunked or compact layout, no external storage, not virtual).
+    Only the object headers are read: no other file is opened and no data is read.
+
+    Parameters
+    ----------
+    f : h5py.File
+        The open file.
+    what : str
+        What the file is, for the message (``"a calibration file"``).
+
+    Raises
+    ------
+    ValidationError
+        Naming the link or dataset and where it points.
+    """
+    import h5py
+
+    seen: set[Any] = set()
+    count = 0
+
+    def refuse(name: str, reason: str) -> ValidationError:
+        return ValidationError(f"{name} {reason}; {what} must hold its own data, so it was refused before reading")
+
+    def walk(group: Any, prefix: str) -> None:
+        nonlocal count
+        for key in group:  # names only: nothing is resolved
+            name = f"{prefix}{key}"
+            count += 1
+            if count > MAX_HDF5_LINKS:
+                raise ValidationError(f"it holds more than {MAX_HDF5_LINKS:,} HDF5 links, more than {what} has; "
+                                      "refused before reading")
+            link = group.get(key, getlink=True)
+            if isinstance(link, h5py.SoftLink):
+                raise refuse(name, f"is an HDF5 soft link (to {_name(link.path)!r})")
+            if isinstance(link, h5py.ExternalLink):
+                raise refuse(name, f"is an HDF5 external link (to {_name(link.path)!r} in the file "
+                                   f"{_name(link.filename)!r})")
+            if not isinstance(link, h5py.HardLink):
+                raise refuse(name, "is an HDF5 link of a user-defined kind")
+            obj = group[key]
+            if obj.id in seen:  # a group reached twice (hard links may loop)
+                continue
+            seen.add(obj.id)
+            if isinstance(obj, h5py.Group):
+                walk(obj, f"{name}/")
+            elif isinstance(obj, h5py.Dataset):
+                plist = obj.id.get_create_plist()
+                if plist.get_layout() == h5py.h5d.VIRTUAL:
+                    raise refuse(name, "is an HDF5 virtual dataset (its data come from other files)")
+                if plist.get_external_count():
+                    files = sorted({_name(plist.get_external(k)[0]) for k in range(plist.get_external_count())})
+                    raise refuse(name, f"keeps its data outside the file (HDF5 external storage in {', '.join(files)})")
+
+    walk(f, "")
 
 
 def declared_cap(file_bytes: int) -> int:
@@ -60,7 +137,8 @@ def check_hdf5_sizes(path: Path, what: str, known: Collection[str] | None = None
     Raises
     ------
     ValidationError
-        A dataset declared larger than the file can hold, or the total above the cap.
+        A link or a dataset stored outside the file (:func:`check_hdf5_storage`), a
+        dataset declared larger than the file can hold, or the total above the cap.
     OSError
         The HDF5 library cannot read the header.
     """
@@ -74,6 +152,7 @@ def check_hdf5_sizes(path: Path, what: str, known: Collection[str] | None = None
     unknown: list[str] = []
     total = 0
     with h5py.File(path, "r") as f:
+        check_hdf5_storage(f, what)  # first: items() below would follow links
         for name, obj in f.items():
             if not isinstance(obj, h5py.Dataset):
                 continue

@@ -22,6 +22,7 @@ the trials table the analysis reads.
 from __future__ import annotations
 
 import csv
+import errno as _errno
 import io as _io
 import json
 import os
@@ -31,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from .._validation import shorten
-from ..errors import ValidationError
+from ..errors import OutputError, ValidationError
 from .jsonsafe import json_safe
 
 __all__ = ["BIDS_VERSION", "EVENT_COLUMNS", "EVENT_COLUMN_DESCRIPTIONS", "TASKS", "TASK_INFO", "METADATA_KEYS",
@@ -315,18 +316,17 @@ def read_bids_metadata(root: str | os.PathLike) -> dict[str, Any]:
     dict
         Key of :data:`METADATA_KEYS` -> its value.
     """
-    from .bids_merge import read_manifest
+    from .bids_merge import _read_json, read_manifest
 
     root = Path(root)
     found: dict[str, Any] = {}
-    sources = [root / "dataset_description.json"]
+    sources = ["dataset_description.json"]
     manifest, _ = read_manifest(root) if root.is_dir() else ({}, {})
-    sources += [root / rel for rel in sorted(manifest) if rel.endswith("_events.json")]
-    for path in sources:
-        try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError, UnicodeDecodeError):
-            continue
+    sources += [rel for rel in sorted(manifest) if rel.endswith("_events.json")]
+    for rel in sources:
+        # Read below root, no link followed (a manifest may name '../..' or a link outside).
+        path = root / rel
+        data = _read_json(root, rel) if root.is_dir() else None
         if not isinstance(data, dict):
             continue
         for key, (where, _kind) in METADATA_KEYS.items():
@@ -381,7 +381,9 @@ def write_bids_dataset(
     ``participants.tsv`` and ``participants.json`` are merged, keeping the lab's columns
     and rows; ``dataset_description.json`` and ``README`` are written only where
     missing or vibrofocus's own; nothing is deleted. A folder given as a symbolic link
-    is written through (the link stays).
+    is written through (the link stays), but a link inside it on the path of a file the
+    export writes or merges is refused, even with ``force``. One export at a time
+    writes into a dataset (a lock on its folder; another is refused at once, saying so).
 
     Parameters
     ----------
@@ -422,9 +424,10 @@ def write_bids_dataset(
     ValidationError
         A run names a study other than 1 or 2, or two runs the same file.
     OutputError
-        The folder cannot be written, or holds a file in the way (not ``force``).
+        The folder cannot be written, holds a link where the export writes, a file in
+        the way (not ``force``), or another export is writing it.
     """
-    from .._atomic import atomic_directory, write_text
+    from .._atomic import atomic_directory, lock_folder, write_text
     from .._atomic_folders import resolve_folder_link
     from .bids_merge import merge_into_dataset, text_sha256, write_manifest
 
@@ -445,20 +448,28 @@ def write_bids_dataset(
     rows = [{c: _NA if p.get(c) is None else _cell(p[c]) for c in columns} for p in participants]
     out = resolve_folder_link(out_dir, what="BIDS dataset")
     counts: dict[str, Any] = {"participants": len(participants), "events": n_events}
-    if out.exists():
+    if not out.exists():
+        try:
+            # Only created, never swapped over a dataset another export put there meanwhile.
+            with atomic_directory(out, what="BIDS dataset", exclusive=True) as build:
+                texts = {**shared, "participants.tsv": _tsv(columns, participants),
+                         "participants.json": _json(participant_columns), **files}
+                for rel, text in texts.items():
+                    write_text(build / rel, text, what="BIDS file", within=build, parents=True)
+                write_manifest(build, {rel: text_sha256(text) for rel, text in texts.items()},
+                               {rel: source for rel in files} if source is not None else None)
+            return {**counts, "merged": False, "kept": []}
+        except OutputError as exc:
+            if exc.errno != _errno.EEXIST or not out.is_dir():
+                raise
+            # Another export created the dataset while this one built it: add to it as to any.
+    # One export at a time: the manifest is read, checked and rewritten under the lock.
+    with lock_folder(out, f"another export is writing the BIDS dataset {out} now; nothing was changed. Wait "
+                          "for it to finish, then export again"):
         kept = merge_into_dataset(out, files=files, shared=shared, participant_columns=participant_columns,
                                   participant_rows=rows, participants_tsv=_tsv(columns, participants),
                                   participants_json=_json(participant_columns), source=source, force=force)
-        return {**counts, "merged": True, "kept": kept}
-    with atomic_directory(out, what="BIDS dataset") as build:
-        texts = {**shared, "participants.tsv": _tsv(columns, participants),
-                 "participants.json": _json(participant_columns), **files}
-        for rel, text in texts.items():
-            (build / rel).parent.mkdir(parents=True, exist_ok=True)
-            write_text(build / rel, text, what="BIDS file")
-        write_manifest(build, {rel: text_sha256(text) for rel, text in texts.items()},
-                       {rel: source for rel in files} if source is not None else None)
-    return {**counts, "merged": False, "kept": []}
+    return {**counts, "merged": True, "kept": kept}
 
 
 def _read_tsv(path: Path) -> list[dict[str, str]]:

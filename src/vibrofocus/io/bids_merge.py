@@ -17,7 +17,13 @@ vibrofocus wrote:
 - ``participants.json`` is merged key by key (the lab's column descriptions stay);
 - ``dataset_description.json`` and ``README`` are written only where missing or
   vibrofocus's own;
-- nothing is deleted: files of an earlier export that this one does not write stay.
+- nothing is deleted: files of an earlier export that this one does not write stay;
+- a symbolic link on the path of any file the export writes or merges (the file itself,
+  a folder such as ``sub-01`` below the dataset, the manifest) is refused, even with
+  ``force``: nothing is written or merged through a link, so a dataset someone else can
+  write cannot make the export replace a file outside it. Every file is read and written
+  without following links (``within=`` of :mod:`vibrofocus._atomic`); the participants
+  files keep their line endings (``\r\n`` stays).
 
 Each file is written atomically (:mod:`vibrofocus._atomic`); the manifest is updated
 with what was written even when a later file fails.
@@ -26,6 +32,7 @@ with what was written even when a later file fails.
 from __future__ import annotations
 
 import contextlib
+import errno as _errno
 import hashlib
 import json
 import os
@@ -65,10 +72,7 @@ def read_manifest(root: str | os.PathLike) -> tuple[dict[str, str], dict[str, st
         from (absent for the shared files). An unreadable or foreign manifest counts
         as none: every file is then treated as the lab's own.
     """
-    try:
-        data = json.loads((Path(root) / MANIFEST_NAME).read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return {}, {}
+    data = _read_json(Path(root), MANIFEST_NAME)
     ok = isinstance(data, dict) and data.get("format") == _MANIFEST_FORMAT
     files, sources = (data.get("files"), data.get("sources")) if ok else (None, None)
     if not isinstance(files, dict):
@@ -77,11 +81,43 @@ def read_manifest(root: str | os.PathLike) -> tuple[dict[str, str], dict[str, st
     return pick(files), pick(sources) if isinstance(sources, dict) else {}
 
 
-def _file_sha256(path: Path) -> str | None:
+#: Largest manifest or participants file read, bytes (a lab's participants.tsv is far smaller).
+_MAX_READ_BYTES = 64 * 2**20
+
+
+def _read(root: Path, rel: str) -> bytes | None:
+    """The bytes of ``root/rel`` read without following a link (None: missing, a link, not a regular file)."""
+    from .._atomic import read_below
+
     try:
-        return _sha256(path.read_bytes())
-    except OSError:
+        return read_below(root, root / rel, limit=_MAX_READ_BYTES)
+    except (OutputError, ValueError):
         return None
+
+
+def _read_json(root: Path, rel: str) -> Any:
+    data = _read(root, rel)
+    try:
+        return json.loads(data.decode("utf-8")) if data is not None else None
+    except (ValueError, RecursionError):
+        return None
+
+
+def _file_sha256(root: Path, rel: str) -> str | None:
+    data = _read(root, rel)
+    return None if data is None else _sha256(data)
+
+
+def _links_in_the_way(root: Path, names: Sequence[str]) -> list[str]:
+    """The links (relative to ``root``) on the paths of ``names`` below ``root``, each once, sorted."""
+    from .._atomic import link_below
+
+    found = set()
+    for rel in names:
+        link = link_below(root, root / rel)
+        if link is not None:
+            found.add(link.relative_to(root).as_posix())
+    return sorted(found)
 
 
 def merge_participants_tsv(existing: str, columns: Sequence[str], rows: Sequence[Mapping[str, str]]) -> str | None:
@@ -151,12 +187,13 @@ def merge_participants_json(existing: str, columns: Mapping[str, Any]) -> str | 
     """
     try:
         data = json.loads(existing)
-    except ValueError:
+    except (ValueError, RecursionError):
         return None
     if not isinstance(data, dict):
         return None
     data.update(columns)
-    return json.dumps(data, indent=2) + "\n"
+    text = json.dumps(data, indent=2) + "\n"
+    return text.replace("\n", "\r\n") if "\r\n" in existing else text  # the file's line endings stay
 
 
 def _conflict_message(root: Path, conflicts: list[str]) -> str:
@@ -207,18 +244,27 @@ def merge_into_dataset(
     Raises
     ------
     OutputError
-        A file in the way (nothing is changed), or a write failed (the files written
-        before stay, and are in the manifest).
+        A symbolic link on the path of a file it would write or merge, even with
+        ``force``, or a file in the way (nothing is changed); or a write failed (the
+        files written before stay, and are in the manifest).
     """
-    from .._atomic import output_error, output_target, write_text
+    from .._atomic import atomic_write, output_target
 
+    names = [*files, *shared, "participants.tsv", "participants.json", MANIFEST_NAME]
+    links = _links_in_the_way(root, names)
+    if links:
+        shown = "; ".join(f"{link} is a link: refused" for link in links[:3])
+        more = f" (and {len(links) - 3} more)" if len(links) > 3 else ""
+        raise OutputError(f"the BIDS dataset {root} holds links where the export would write: {shown}{more}; "
+                          "nothing was changed. An export never writes through a link, even with --force: put the "
+                          "folder or file itself there, or export into another folder", errno=_errno.ELOOP,
+                          path=str(root))
     manifest, sources = read_manifest(root)
 
     def ours(rel: str, *, same_source: bool = True) -> bool:
-        path = root / rel
         if same_source and sources.get(rel) != source:
             return False
-        return rel in manifest and _file_sha256(path) == manifest[rel]
+        return rel in manifest and _file_sha256(root, rel) == manifest[rel]
 
     plan: dict[str, str] = {}
     conflicts: list[str] = []
@@ -244,9 +290,11 @@ def merge_into_dataset(
         if not (path.exists() or path.is_symlink()):
             plan[name] = fresh
             continue
+        data = _read(root, name)
         try:
-            merged = merge(path.read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError):
+            # Bytes decoded as they are: universal newlines would turn the file's \r\n into \n.
+            merged = merge(data.decode("utf-8")) if data is not None else None
+        except UnicodeDecodeError:
             merged = None
         if merged is None:
             conflicts.append(f"{name} (cannot be merged: not UTF-8 with a participant_id column / a JSON object)")
@@ -262,12 +310,9 @@ def merge_into_dataset(
 
     try:
         for rel, text in plan.items():
-            path = root / rel
-            try:
-                path.parent.mkdir(parents=True, exist_ok=True)
-            except OSError as exc:
-                raise output_error(exc, path, "BIDS folder") from exc
-            write_text(path, text, what="BIDS file")
+            # Below root only, no link followed: folders made with mkdirat, the file renamed in its folder.
+            with atomic_write(root / rel, "w", newline="", what="BIDS file", within=root, parents=True) as fh:
+                fh.write(text)
             written[rel] = _sha256(text.encode("utf-8"))
     except BaseException:
         # What was written is vibrofocus's: listed, so a second try replaces it.
@@ -293,4 +338,4 @@ def write_manifest(root: Path, files: Mapping[str, str], sources: Mapping[str, s
                        "files": dict(sorted(files.items())),
                        "sources": dict(sorted((k, v) for k, v in (sources or {}).items() if k in files))},
                       indent=2) + "\n"
-    write_text(root / MANIFEST_NAME, text, what="BIDS export manifest")
+    write_text(root / MANIFEST_NAME, text, what="BIDS export manifest", within=root)

@@ -26,6 +26,7 @@ import csv
 import io
 import math
 import os
+import re
 import sqlite3
 import threading
 from datetime import datetime, timezone
@@ -48,6 +49,9 @@ _SQL_TYPES = {"tap_id": "INTEGER PRIMARY KEY", "location": "INTEGER", "x_mm": "R
               "level_db": "REAL NOT NULL", "drive_peak_v": "REAL", "onset_host_s": "REAL NOT NULL",
               "onset_device_s": "REAL"}
 _SQLITE_MAGIC = b"SQLite format 3\x00"
+#: Longest tap id a log may hold (SQLite's INTEGER is 64-bit), and its form: ASCII digits only.
+_TAP_ID_DIGITS = 18
+_TAP_ID = re.compile(rf"[0-9]{{1,{_TAP_ID_DIGITS}}}")
 
 
 def _now() -> str:
@@ -184,8 +188,17 @@ class TapLog:
                 fh.flush()
                 os.fsync(fh.fileno())
             text = text[: text.rfind("\n") + 1]
-        ids = [int(row["tap_id"]) for row in csv.DictReader(io.StringIO(text)) if row.get("tap_id", "").isdigit()]
-        return max(ids, default=0)
+        last = 0
+        reader = csv.DictReader(io.StringIO(text))
+        for row in reader:
+            line = reader.line_num
+            tap_id = row.get("tap_id")
+            if not isinstance(tap_id, str) or not _TAP_ID.fullmatch(tap_id):
+                # A hand-edited id (a Unicode digit such as '²', thousands of digits): not this log's own.
+                raise self._refuse(f"it is not a tap log (line {line}: the tap_id {shorten(tap_id)} is not "
+                                   f"a whole number of 1 to {_TAP_ID_DIGITS} digits 0-9)")
+            last = max(last, int(tap_id))
+        return last
 
     # -- appending ------------------------------------------------------------------------
     def row(self, record: Any) -> dict[str, Any]:
@@ -307,5 +320,23 @@ def read_tap_log(path: str | os.PathLike) -> list[dict[str, Any]]:
     numbers = {"tap_id": int, "location": int, "x_mm": float, "y_mm": float, "level_db": float,
                "drive_peak_v": float, "onset_host_s": float, "onset_device_s": float}
     with open(path, encoding="utf-8", newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    return [{c: (None if r[c] == "" else numbers.get(c, str)(r[c])) for c in TAP_LOG_COLUMNS} for r in rows]
+        reader = csv.DictReader(fh)
+        rows = [(reader.line_num, r) for r in reader]
+    out = []
+    for line, r in rows:
+        cells = {}
+        for c in TAP_LOG_COLUMNS:
+            value = r.get(c)
+            if not isinstance(value, str):
+                raise ValidationError(f"{shorten(str(path))} is not a tap log (line {line} has no {c})")
+            if c == "tap_id" and not _TAP_ID.fullmatch(value):
+                raise ValidationError(f"{shorten(str(path))} is not a tap log (line {line}: the tap_id "
+                                      f"{shorten(value)} is not a whole number of 1 to {_TAP_ID_DIGITS} "
+                                      "digits 0-9)")
+            try:
+                cells[c] = None if value == "" else numbers.get(c, str)(value)
+            except ValueError:
+                raise ValidationError(f"{shorten(str(path))} is not a tap log (line {line}: {c} "
+                                      f"{shorten(value)} is not a number)") from None
+        out.append(cells)
+    return out
