@@ -39,7 +39,7 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
     # stimulus columns, then the flag that these participants are simulated (a model, not
     # data) and the model's label.
     assert tuple(header) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                             + ("simulated", "model"))
+                             + ("protocol", "simulated", "model"))
     assert {r["levels"] for r in rows} == {"paper"}
     # Every row names the model and the hypothesis that answered.
     from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS, hypothesis

@@ -20,7 +20,9 @@ def simulate_study(
     seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX,
                              help="Seed of the whole simulation (participants, trial orders, answers)."),
     db: Path = typer.Option(..., "--db", help="Study database (SQLite); an unfinished one is resumed."),
-    pace: float = typer.Option(0.0, "--pace", min=0.0, max=60.0, help="Wait this long after each answer, s."),
+    pace: float | None = typer.Option(None, "--pace", min=0.0, max=60.0, show_default=False,
+                                      help="Wait this long after each answer, s (default the protocol's pacing: 0 "
+                                           "for the paper's studies)."),
     trials_csv: Path | None = typer.Option(
         None, "--trials-csv", help="Also write the trials file here (never over the database or a calibration)."
     ),
@@ -47,11 +49,17 @@ def simulate_study(
              "taps localized less reliably). Default: the hypothesis whose fit holds best on held-out seeds; see "
              "docs/simulated-participants.md, Hypotheses. Stored with each session.",
     ),
-    levels: str = typer.Option(
-        "paper", "--levels",
-        help="Level rule of the stimuli: paper (funneling by eq. 3 at A = 10 V, the inverse filter asking 2 um, the "
+    levels: str | None = typer.Option(
+        None, "--levels", show_default=False,
+        help="Level rule of the stimuli (default paper): paper (funneling by eq. 3 at A = 10 V, the inverse filter asking 2 um, the "
              "combination funneling's displacement, each scaled down only over 10 V) | equal-peak (every method at "
              "10 V). Stored with each session; a resumed database keeps its own.",
+    ),
+    protocol: Path | None = typer.Option(
+        None, "--protocol",
+        help="A study protocol file (TOML; docs/protocols.md): each participant runs its blocks in order, and its "
+             "name is stored with each session and exported. Default: the paper's Study 1 and Study 2 "
+             "(paper-study1, paper-study2). Not with --methods or --levels (the file names them).",
     ),
 ) -> None:
     """Calibrate N simulated participants and run Study 1 and Study 2 with each.
@@ -76,7 +84,22 @@ def simulate_study(
         allow_overwrite(force)
         from ..studies.protocol import level_options
 
-        level_options(levels, 10.0)  # a bad rule: one error line before anything is created
+        the_protocol = None
+        if protocol is not None:  # a bad file: one error line before anything is created
+            from ..errors import StudyError
+            from ..studies.protocol_files import load_protocol
+
+            if methods is not None or levels is not None:
+                raise StudyError("--protocol names the methods and levels of its blocks: leave out --methods and "
+                                 "--levels")
+            the_protocol = load_protocol(protocol)
+            the_protocol.check_runnable()
+            protect(protocol, "protocol file")
+            from ..simulation.simulate import check_protocol_levels
+
+            check_protocol_levels(the_protocol, seed, skin)  # a level over the drive limit: before anything
+        if levels is not None:
+            level_options(levels, 10.0)  # a bad rule: one error line before anything is created
         from ..simulation.hypotheses import hypothesis as find_hypothesis
 
         chosen_h = find_hypothesis(hypothesis)  # an unknown name: one error line, nothing created
@@ -133,6 +156,9 @@ def simulate_study(
             raise
         console = Console(stderr=True)
         console.print(f"[yellow]{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.[/]")
+        if the_protocol is not None:
+            console.print(f"protocol {the_protocol.name} ({len(the_protocol.blocks)} block(s)) from {protocol}",
+                          markup=False)
         if source_id is not None:
             console.print(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {source_id})", markup=False)
         with lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait), Progress(
@@ -147,7 +173,7 @@ def simulate_study(
             result = simulate_studies(
                 db, n_participants=participants, seed=seed, pace_s=pace,
                 calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen, levels=levels,
-                hypothesis=chosen_h.name,
+                hypothesis=chosen_h.name, protocol=the_protocol,
             )
         summary = summarize_simulation(db)
         table = Table(title=f"Simulated participants on the {skin} skin ({chosen_h.label()}): main trials")

@@ -49,7 +49,8 @@ def export(
 @study_app.command("run")
 def run(
     participant: str = typer.Option(..., "--participant", help="Participant id (letters, digits, _ . -)."),
-    study: int = typer.Option(..., "--study", min=1, max=2, help="1: one location per trial; 2: several."),
+    study: int | None = typer.Option(None, "--study", min=1, max=2, show_default=False,
+                                     help="1: one location per trial; 2: several (the paper's; not with --protocol)."),
     db: Path = typer.Option(..., "--db", help="Study database; an unfinished session of this participant and study is resumed."),
     calibration: Path = typer.Option(..., "--calibration", help="The participant's calibration file (netCDF)."),
     rig: str = typer.Option("simulated", "--rig", help="simulated | audio | nidaq"),
@@ -70,6 +71,12 @@ def run(
         help="Level rule of a new session's stimuli: paper (funneling by eq. 3 at A = the drive limit, the inverse "
         "filter asking 2 um, the combination funneling's displacement, each scaled down only over the limit) | "
         "equal-peak (every method at the drive limit). A resumed session keeps its own.",
+    ),
+    protocol: Path | None = typer.Option(
+        None, "--protocol",
+        help="A study protocol file (TOML; docs/protocols.md) in place of --study: runs the participant's first "
+             "unfinished block of it (one session per block; run again for the next). Its name is stored with the "
+             "session and exported. Not with --study or --levels.",
     ),
 ) -> None:
     """Run a real participant: each trial beeps, plays the stimulus, then waits for the
@@ -92,6 +99,20 @@ def run(
         from .._validation import shorten
 
         console = Console()
+        the_protocol = None
+        if protocol is not None:  # a bad file: one error line before anything is made or written
+            from .._atomic import protect
+            from ..studies.protocol_files import load_protocol
+
+            if study is not None or levels != "paper":
+                raise StudyError("--protocol names the study and levels of its blocks: leave out --study and --levels")
+            the_protocol = load_protocol(protocol)
+            the_protocol.check_runnable()
+            protect(protocol, "protocol file")
+            study = the_protocol.blocks[0].study
+        elif study is None:
+            raise StudyError("give --study 1 or 2 (the paper's studies), or --protocol FILE")
+        assert study is not None
         check_rig_options(rig, rig_config)
         source_id = lsl_source(lsl, lsl_source_id, db, study)  # a bad id: refused before the rig is made
         cal = load_calibration(calibration)
@@ -99,6 +120,34 @@ def run(
             raise StudyError(
                 f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {shorten(participant)}"
             )
+        block_index = 0
+        if the_protocol is not None:
+            # The participant's first unfinished block (read before anything is written).
+            from ..studies.storage import session_protocol
+
+            done: set[int] = set()
+            if db.is_file():
+                with StudyStore(db, create=False) as store:
+                    if any(p.participant_id == participant for p in store.participants()):
+                        for s in store.sessions(participant):
+                            name, b = session_protocol(s.study, s.config)
+                            if name == the_protocol.name and s.finished:
+                                done.add(b)
+                            elif name == the_protocol.name:
+                                done.discard(b)
+            todo = [b.index for b in the_protocol.blocks if b.index not in done]
+            if not todo:
+                raise StudyError(f"{participant} has finished every block of the protocol {the_protocol.name!r} in "
+                                 f"{db}")
+            block_index = todo[0]
+            study = the_protocol.blocks[block_index].study
+            assert study is not None
+            # Every stimulus of the block rendered and its level checked before anything is written.
+            from ..studies.engine import check_drive_levels
+
+            design0 = the_protocol.design(block_index)
+            check_drive_levels(calibration_renderer(cal, levels=design0.levels), design0,
+                               where=the_protocol.level_where(block_index))
         # The rig first: a rig that cannot be made (no config, no device) leaves the
         # database as it was, with no participant or session planned for nothing.
         the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
@@ -108,10 +157,16 @@ def run(
                               markup=False)
             store.add_participant(participant, simulated=False)
             cid = store.add_calibration(participant, calibration)
-            config = {"rig": rig, "levels": levels}
+            config: dict = {"rig": rig, "levels": levels}
+            if the_protocol is not None:
+                config = {"rig": rig, **the_protocol.session_config(block_index)}
             design = StudyDesign.from_config(study, config)
             renderer = None
-            if not any(not s.finished for s in store.sessions(participant, study=study)):
+            from ..studies.storage import session_protocol
+
+            mine = (the_protocol.name if the_protocol is not None else f"paper-study{study}", block_index)
+            if not any(not s.finished for s in store.sessions(participant, study=study)
+                       if session_protocol(s.study, s.config) == mine):
                 # A new session: every stimulus is rendered before it is planned, so one
                 # that cannot fit this calibration is refused now, never mid-study.
                 renderer = calibration_renderer(cal, levels=design.levels)
@@ -131,7 +186,9 @@ def run(
                     )
                 console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
             else:
-                console.print(f"new session {sid} for {participant}, study {study} ({design.levels} levels)")
+                console.print(f"new session {sid} for {participant}, study {study} ({design.levels} levels)"
+                              + ("" if the_protocol is None else
+                                 f", protocol {the_protocol.name} block {block_index + 1} of {len(the_protocol.blocks)}"))
             if not beep:
                 cue = None
             elif beep_device is not None:
@@ -141,7 +198,7 @@ def run(
             engine = StudyEngine(store, sid, the_rig, cal, cue=cue, renderer=renderer)
             responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
             try:
-                summary = engine.run(responder)
+                summary = engine.run(responder, pace_s=float(info.config.get("pace_s", 0.0) or 0.0))
             except KeyboardInterrupt:
                 store.set_status(sid, "paused")
                 console.print("\ninterrupted: every answer so far is saved; run the same command to resume")

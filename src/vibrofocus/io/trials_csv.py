@@ -24,7 +24,8 @@ from .._validation import shorten
 from ..errors import StudyError, ValidationError
 from .responses import format_response, parse_response_text
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS",
+           "SIMULATED_COLUMN", "MODEL_COLUMN",
            "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
 
@@ -47,6 +48,10 @@ ONSET_COLUMNS = ("onset_host_s", "onset_device_s", "onset_clock")
 #: at the target predicted from the calibration, µm). A peak cell is empty where none was
 #: stored (a dry run; an answer stored by an older vibrofocus).
 STIMULUS_COLUMNS = ("levels", "drive_peak_v", "target_peak_um")
+#: Column a study database's export adds after :data:`STIMULUS_COLUMNS`: ``protocol``, the
+#: name of the study protocol the session was planned from (``paper-study1``,
+#: ``paper-study2`` or a protocol file's ``name``; docs/protocols.md).
+PROTOCOL_COLUMNS = ("protocol",)
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
@@ -57,7 +62,7 @@ MODEL_COLUMN = "model"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
-                     onsets: bool = False, stimuli: bool = False) -> int:
+                     onsets: bool = False, stimuli: bool = False, protocols: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -83,6 +88,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     stimuli : bool
         Also write :data:`STIMULUS_COLUMNS` (after the onset columns; a missing key or None
         is an empty cell).
+    protocols : bool
+        Also write :data:`PROTOCOL_COLUMNS` (after the stimulus columns; a missing key or
+        None is an empty cell).
 
     Returns
     -------
@@ -101,7 +109,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     with atomic_write(path, "w", newline="", what="trials file") as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
-                        + (STIMULUS_COLUMNS if stimuli else ()) + ((SIMULATED_COLUMN,) if with_flag else ())
+                        + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())
+                        + ((SIMULATED_COLUMN,) if with_flag else ())
                         + ((MODEL_COLUMN,) if with_model else ()))
         for row in rows:
             response = row["response"]
@@ -120,6 +129,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
             if stimuli:
                 values += [row.get("levels") or "", _seconds_cell(row.get("drive_peak_v")),
                            _seconds_cell(row.get("target_peak_um"))]
+            if protocols:
+                values.append(row.get("protocol") or "")
             if with_flag:
                 values.append(int(bool(row.get(SIMULATED_COLUMN))))
             if with_model:
@@ -160,7 +171,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
             reader = csv.reader(fh)
             header = next(reader, None)
             headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS,
-                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS)
+                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS,
+                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
+                                                        + PROTOCOL_COLUMNS)
                        for f in ((), (SIMULATED_COLUMN,), (SIMULATED_COLUMN, MODEL_COLUMN))]
             if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")

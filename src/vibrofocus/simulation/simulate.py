@@ -21,7 +21,7 @@ from ..io.responses import parse_response_text
 from .perception import STUDY_SKIN
 from ..studies.storage import StudyStore
 
-__all__ = ["participant_seeds", "simulate_studies", "summarize_simulation", "SIMULATED_PREFIX"]
+__all__ = ["participant_seeds", "simulate_studies", "check_protocol_levels", "summarize_simulation", "SIMULATED_PREFIX"]
 
 #: Ids of simulated participants: ``sim-001``, ``sim-002``, ...
 SIMULATED_PREFIX = "sim-"
@@ -78,7 +78,7 @@ def simulate_studies(
     *,
     n_participants: int,
     seed: int = 0,
-    pace_s: float = 0.0,
+    pace_s: float | None = None,
     calibration_dir: str | os.PathLike | None = None,
     studies: tuple[int, ...] = (1, 2),
     config: dict[str, Any] | None = None,
@@ -87,6 +87,7 @@ def simulate_studies(
     methods: tuple[str, ...] | None = None,
     levels: str | None = None,
     hypothesis: str | None = None,
+    protocol: Any = None,
 ) -> dict[str, int]:
     """Calibrate ``n_participants`` simulated participants and run the studies into ``db``.
 
@@ -99,8 +100,8 @@ def simulate_studies(
         Participants ``sim-001`` ... ``sim-NNN``.
     seed : int
         Seed of the simulation (see :func:`participant_seeds`).
-    pace_s : float
-        Wait after each answer, s.
+    pace_s : float, optional
+        Wait after each answer, s; default the protocol block's pacing (0 for the paper's).
     calibration_dir : path-like, optional
         Where calibration files are written; default ``<db>.calibrations`` beside it.
     studies : tuple of int
@@ -127,6 +128,12 @@ def simulate_studies(
         (:mod:`vibrofocus.simulation.hypotheses`; default the default hypothesis, with its fitted parameters), stored with
         each session (name and version); a resumed database must have been started with
         the same.
+    protocol : StudyProtocol, optional
+        A study protocol (:func:`~vibrofocus.studies.protocol_files.load_protocol`): each
+        participant runs its blocks in order, one session each, with the protocol's name
+        stored in each session. Default: the paper's two protocols (``studies``, of
+        ``paper-study1`` and ``paper-study2``). Not with ``methods`` or ``levels`` (name
+        them in the file); a database holds one protocol's sessions (or the paper's).
 
     Returns
     -------
@@ -142,7 +149,7 @@ def simulate_studies(
     """
     from ..rigs import make_rig
     from ..skin import skin_preset
-    from ..studies.engine import StudyEngine, calibration_renderer
+    from ..studies.engine import StudyEngine, calibration_renderer, check_drive_levels
     from ..studies.protocol import StudyDesign
     from .participants import SimulatedParticipant
 
@@ -158,7 +165,7 @@ def simulate_studies(
         raise StudyError(f"n_participants must be an integer >= 1, got {n_participants!r}")
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise StudyError(f"seed must be a non-negative integer, got {seed!r}")
-    if not np.isfinite(pace_s) or pace_s < 0:
+    if pace_s is not None and (not np.isfinite(pace_s) or pace_s < 0):
         raise StudyError(f"pace must be >= 0 s, got {pace_s!r}")
     if methods is not None:  # checked (registered, each once) by the study design
         from ..studies.protocol import StudyDesign
@@ -170,6 +177,20 @@ def simulate_studies(
 
         level_options(levels, 1.0)  # checked: one of the rules
         config = {**(config or {}), "levels": levels}
+    from ..studies.storage import session_protocol
+
+    if protocol is not None:
+        if methods is not None or levels is not None:
+            raise StudyError("a protocol names its blocks' methods and levels: give them in the protocol file, not "
+                             "as methods or levels")
+        protocol.check_runnable()  # what the engine cannot run yet: refused before anything is written
+        runs = [(b.study, protocol.session_config(b.index), protocol.name, b.index, b.pacing_s) for b in protocol.blocks]
+    else:
+        from ..studies.protocol_files import paper_protocol_name, shipped_protocol
+
+        runs = [(study, {}, paper_protocol_name(study), 0, shipped_protocol(paper_protocol_name(study)).blocks[0].pacing_s)
+                for study in studies]
+    asked_protocols = {run[2] for run in runs}
     asked_methods = tuple((config or {}).get("methods") or STUDY_METHODS)
     asked_levels = str((config or {}).get("levels", DEFAULT_LEVELS))
     from .hypotheses import hypothesis as find_hypothesis
@@ -178,13 +199,15 @@ def simulate_studies(
     db = Path(db)
     cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
     with StudyStore(db) as store:
-        n_sessions = n_participants * len(studies)
-        design_trials: int | None = None
+        per_participant = sum(StudyDesign.from_config(run[0], {**(config or {}), **run[1]}).n_trials for run in runs)
         n_new = 0
         answered = 0
         for k in range(1, n_participants + 1):
             pid = f"{SIMULATED_PREFIX}{k:03d}"
-            pseed, *study_seeds = participant_seeds(seed, k)
+            pseed = participant_seeds(seed, k)[0]
+            # Session seeds: stream 1 + i of the participant's seed sequence for the i-th
+            # block (the paper's Study 1 and Study 2: streams 1 and 2, as before protocols).
+            streams = np.random.SeedSequence([int(seed), int(k)]).generate_state(1 + max(2, len(runs)), dtype=np.uint32)
             store.add_participant(pid, simulated=True)
             for info in store.sessions(pid):
                 if info.config.get("simulation_seed") != seed:
@@ -197,7 +220,15 @@ def simulate_studies(
                         f"{db} holds participant {pid} simulated on the {info.config.get('skin', STUDY_SKIN)!r} skin, "
                         f"not {skin!r}; use that skin or another database"
                     )
+                stored_protocol = session_protocol(info.study, info.config)[0]
+                if stored_protocol not in asked_protocols:
+                    raise StudyError(
+                        f"{db} holds participant {pid} simulated with the protocol {stored_protocol!r}, not "
+                        f"{', '.join(sorted(asked_protocols))}; use that protocol or another database"
+                    )
                 stored = tuple(info.config.get("methods") or STUDY_METHODS)
+                if protocol is not None:
+                    stored = asked_methods  # each block names its own; compared per block below
                 if stored != asked_methods and sorted(stored) == sorted(asked_methods):
                     # The same methods in another order: the same study. The stored order
                     # is kept, so every participant's plan is drawn from the same design.
@@ -208,7 +239,7 @@ def simulate_studies(
                         f"{db} holds participant {pid} simulated with the methods {', '.join(stored)}, not "
                         f"{', '.join(asked_methods)}; use those methods or another database"
                     )
-                if info.design.levels != asked_levels:
+                if protocol is None and info.design.levels != asked_levels:
                     raise StudyError(
                         f"{db} holds participant {pid} simulated at {info.design.levels!r} levels, not "
                         f"{asked_levels!r}; use those levels or another database"
@@ -243,8 +274,16 @@ def simulate_studies(
                     shared["participant"] = SimulatedParticipant(shared["rig"], _pseed, hypothesis=chosen)
                 return shared
 
-            for study in studies:
-                existing = store.sessions(pid, study=study)
+            for run_index, (study, block_config, pname, block_index, block_pace) in enumerate(runs):
+                existing = [s for s in store.sessions(pid, study=study)
+                            if session_protocol(s.study, s.config) == (pname, block_index)]
+                if protocol is not None and existing:
+                    planned = StudyDesign.from_config(study, {**(config or {}), **block_config})
+                    if existing[-1].design != planned:
+                        raise StudyError(
+                            f"{db} holds participant {pid}'s block {block_index} of the protocol {pname!r} planned with "
+                            f"another design ({existing[-1].design}); use the protocol file it was planned from or "
+                            "another database")
                 if existing and existing[-1].finished:
                     answered += existing[-1].n_answered
                     continue
@@ -257,6 +296,7 @@ def simulate_studies(
                 else:
                     parts = participant_parts(shared["cal"][0] if "cal" in shared else None)
                     session_config = dict(config or {})
+                    session_config.update(block_config)
                     session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin,
                                           hypothesis=chosen.name, hypothesis_version=chosen.version,
                                           model=chosen.label())
@@ -264,11 +304,14 @@ def simulate_studies(
                     # before the session is planned.
                     design = StudyDesign.from_config(study, session_config)
                     renderer_for(parts, design.levels).prepare(design.methods, design.locations)
+                    check_drive_levels(renderer_for(parts, design.levels), design,
+                                       where=None if protocol is None else protocol.level_where(block_index))
                     # Check and create in one transaction: another process simulating into
                     # the same database may have created this session since the check above.
+                    stream = int(streams[study if protocol is None else 1 + run_index])
                     sid, created = store.open_session(
-                        pid, study, seed=study_seeds[study - 1], calibration_id=parts["cal"][0], config=session_config,
-                        reuse="latest",
+                        pid, study, seed=_block_seed(protocol, block_index, stream), calibration_id=parts["cal"][0],
+                        config=session_config, reuse="latest",
                     )
                     if not created:
                         info = store.session(sid)
@@ -279,10 +322,8 @@ def simulate_studies(
                             parts = participant_parts(info.calibration_id)
                 info = store.session(sid)
                 answered += info.n_answered
-                # Later participants have no sessions yet: every session has the same design,
-                # so the total is the number of sessions times one session's trials.
-                design_trials = design_trials or info.n_trials
-                total_est = design_trials * n_sessions
+                # Later participants have no sessions yet: each runs the same blocks.
+                total_est = per_participant * n_participants
                 label = f"{pid} study {study}"
 
                 def on_answer(trial: Any, receipt: Any, _label: str = label, _total: int = total_est) -> None:
@@ -296,7 +337,8 @@ def simulate_studies(
                     progress(label, answered, total_est)
                 engine = StudyEngine(store, sid, parts["rig"], renderer=renderer_for(parts, info.design.levels))
                 try:
-                    engine.run(parts["participant"], pace_s=pace_s, progress=on_answer)
+                    engine.run(parts["participant"], pace_s=block_pace if pace_s is None else pace_s,
+                               progress=on_answer)
                 except AnswerRefused as exc:
                     if exc.reason not in ("answered", "not_current"):
                         raise
@@ -315,6 +357,51 @@ def simulate_studies(
                 total += info.n_trials
                 people.add(info.participant_id)
         return {"n_answered": answered, "n_total": total, "n_new": n_new, "n_participants": len(people)}
+
+
+def check_protocol_levels(protocol: Any, seed: int, skin: str = STUDY_SKIN) -> None:
+    """Refuse, before anything is written, a block level over the drive limit on the first
+    simulated participant's arm.
+
+    Only a level above 0 dB re its rule can exceed the limit; for a protocol with one, the
+    first participant's arm is calibrated in memory and every stimulus of those blocks
+    rendered (``simulate-study`` calls this before it creates anything). A later
+    participant's arm needing more is refused by :func:`simulate_studies` when its session
+    is planned, before its first trial.
+
+    Parameters
+    ----------
+    protocol : StudyProtocol
+        The protocol to check.
+    seed : int
+        Seed of the simulation (:func:`participant_seeds`).
+    skin : str
+        Skin preset of the simulated forearms.
+
+    Raises
+    ------
+    StudyError
+        A block's level needs more than the drive limit, naming the file's line and field.
+    """
+    if not any(b.levels[0] > 0 for b in protocol.blocks):
+        return
+    from ..calibration import calibrate
+    from ..rigs import make_rig
+    from ..studies.engine import calibration_renderer, check_drive_levels
+
+    with make_rig("simulated", seed=participant_seeds(seed, 1)[0], skin=skin) as rig:
+        cal = calibrate(rig, participant_id=f"{SIMULATED_PREFIX}001")
+    renderers: dict[str, Any] = {}
+    for b in protocol.blocks:
+        design = protocol.design(b.index)
+        if design.level_db > 0:
+            renderer = renderers.setdefault(design.levels, calibration_renderer(cal, levels=design.levels))
+            check_drive_levels(renderer, design, where=protocol.level_where(b.index))
+
+
+def _block_seed(protocol: Any, index: int, stream: int) -> int:
+    """The seed of a session of block ``index``: the block's own seed, else its stream's."""
+    return stream if protocol is None else protocol.blocks[index].session_seed(stream)
 
 
 def summarize_simulation(db: str | os.PathLike) -> list[dict[str, Any]]:

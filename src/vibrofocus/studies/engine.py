@@ -32,6 +32,7 @@ from .protocol import DEFAULT_LEVELS, PlannedTrial, StudyDesign, level_options
 from .storage import AnswerReceipt, StudyStore
 
 __all__ = [
+    "check_drive_levels",
     "PAUSE",
     "ABORT",
     "STOP",
@@ -253,6 +254,50 @@ def calibration_renderer(calibration: Any, **options: Any) -> CalibrationRendere
     CalibrationRenderer
     """
     return CalibrationRenderer(calibration, **options)
+
+
+def check_drive_levels(renderer: Any, design: StudyDesign, *, limit_v: float | None = None,
+                       where: str | None = None) -> None:
+    """Refuse a design whose level needs more than the drive limit, before any trial.
+
+    Every stimulus of ``design`` is rendered (``renderer.prepare``) at its level rule, and its
+    largest ``|drive|`` times :attr:`StudyDesign.gain` compared with the limit. A level at or
+    below 0 dB re the rule never exceeds it (the rules keep every drive within the limit).
+
+    Parameters
+    ----------
+    renderer : CalibrationRenderer
+        The participant's renderer of ``design.levels``.
+    design : StudyDesign
+        The design to check.
+    limit_v : float, optional
+        Drive limit, V peak; default the renderer's ``limit_v``.
+    where : str, optional
+        What to name in the error (a protocol file's field, ``protocol F, line 9,
+        blocks[0].levels``); default ``level_db``.
+
+    Raises
+    ------
+    StudyError
+        The stimulus needing the most drive exceeds the limit at this level, naming it.
+    """
+    if design.level_db <= 0.0:
+        return
+    limit = float(getattr(renderer, "limit_v", DRIVE_LIMIT_V) if limit_v is None else limit_v)
+    prepare = getattr(renderer, "prepare", None)
+    if prepare is not None:
+        prepare(design.methods, design.locations)
+    worst, peak = None, -1.0
+    for m in design.methods:
+        for loc in design.locations:
+            p = float(np.max(np.abs(np.asarray(renderer(m, loc), dtype=float)))) * design.gain
+            if p > peak:
+                worst, peak = (m, loc), p
+    if worst is not None and peak > limit * (1.0 + 1e-9):
+        raise StudyError(
+            f"{where or 'level_db'}: {design.level_db:+g} dB re the {design.levels} levels needs {peak:.3g} V for "
+            f"{worst[0]} at location {worst[1]}, over the {limit:g} V drive limit; lower the level"
+        )
 
 
 def terminal_beep() -> None:
@@ -526,6 +571,7 @@ class StudyEngine:
             prepare = getattr(renderer, "prepare", None)
             if prepare is not None:  # every stimulus now, never a refusal mid-study
                 prepare(self.design.methods, self.design.locations)
+            check_drive_levels(renderer, self.design)
         self._renderer = None if dry_run else renderer
         _check_rates(calibration if calibration is not None else getattr(renderer, "calibration", None), rig)
         self.cue = cue
@@ -540,9 +586,14 @@ class StudyEngine:
         key = (str(method), int(target))
         if key not in self._cache:
             drives = np.asarray(self._renderer(*key), dtype=float)
+            gain = self.design.gain
+            if gain != 1.0:  # the block's level re its rule (a protocol file's levels)
+                drives = drives * gain
             drives.setflags(write=False)
             rendering = getattr(self._renderer, "rendering", None)
             reached = getattr(rendering(*key), "reached_peak_m", None) if rendering is not None else None
+            if reached is not None:
+                reached = float(reached) * gain
             self._cache[key] = Stimulus(key[0], key[1], drives, drive_sha256(drives),
                                         target_peak_m=None if reached is None else float(reached))
         return self._cache[key]

@@ -104,6 +104,17 @@ class StudyDesign:
     levels : {"paper", "equal-peak"}
         The level rule of the stimuli (:func:`level_options`); default
         :data:`DEFAULT_LEVELS`, the paper's.
+    level_db : float
+        Level of every stimulus re the level rule, dB (0: the rule's own level; a
+        protocol file's block level). A level that would need more than the drive limit
+        is refused when the session is planned
+        (:func:`~vibrofocus.studies.engine.check_drive_levels`).
+
+    Notes
+    -----
+    The built-in designs of Study 1 and Study 2 (:meth:`from_config`) are read from the
+    shipped protocol files ``paper-study1`` and ``paper-study2``
+    (:mod:`vibrofocus.studies.protocol_files`); the defaults here are the same design.
     """
 
     study: int = 1
@@ -112,6 +123,7 @@ class StudyDesign:
     repetitions: int = 3
     n_training: int = 5
     levels: str = DEFAULT_LEVELS
+    level_db: float = 0.0
 
     def __post_init__(self) -> None:
         if isinstance(self.study, bool) or self.study not in STUDIES:
@@ -141,6 +153,10 @@ class StudyDesign:
             raise StudyError(f"repetitions must be >= 1, got {self.repetitions}")
         if self.levels not in LEVEL_RULES:
             raise StudyError(f"levels must be one of {', '.join(LEVEL_RULES)}, got {shorten(self.levels)}")
+        if (isinstance(self.level_db, bool) or not isinstance(self.level_db, (int, float, np.integer, np.floating))
+                or not np.isfinite(self.level_db) or abs(float(self.level_db)) > 120.0):
+            raise StudyError(f"level_db must be a finite number within +-120 dB, got {shorten(self.level_db)}")
+        object.__setattr__(self, "level_db", float(self.level_db))
         object.__setattr__(self, "methods", methods)
         object.__setattr__(self, "locations", tuple(int(x) for x in locations))
         object.__setattr__(self, "study", int(self.study))
@@ -160,27 +176,42 @@ class StudyDesign:
         """All trials of a session, training included."""
         return self.n_training + self.n_main
 
+    @property
+    def gain(self) -> float:
+        """Amplitude factor of :attr:`level_db` on the level rule's drives: 10^(level_db / 20)."""
+        return float(10.0 ** (self.level_db / 20.0))
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-serialisable form, stored in the session's config."""
+        """JSON-serialisable form, stored in the session's config (``level_db`` only when not 0)."""
         d = asdict(self)
         d["methods"] = list(self.methods)
         d["locations"] = list(self.locations)
+        if not self.level_db:
+            del d["level_db"]
         return d
 
     @classmethod
     def from_config(cls, study: int, config: Mapping[str, Any] | None, *, stored: bool = False) -> "StudyDesign":
         """The design of ``study`` with the design keys found in ``config`` applied.
 
-        Keys other than ``methods``, ``locations``, ``repetitions``, ``n_training`` and
-        ``levels`` are ignored here (they are stored with the session as they are).
+        The design of ``study`` is the shipped protocol ``paper-study<study>``'s block
+        (:func:`~vibrofocus.studies.protocol_files.shipped_protocol`). Keys other than
+        ``methods``, ``locations``, ``repetitions``, ``n_training``, ``levels`` and
+        ``level_db`` are ignored here (they are stored with the session as they are).
         ``stored=True``: ``config`` is a stored session's, and one without ``levels``
         was planned before sessions kept it, so its rule is :data:`LEGACY_LEVELS`.
         """
         config = dict(config or {})
-        kwargs: dict[str, Any] = {}
+        if isinstance(study, bool) or study not in STUDIES:
+            raise StudyError(f"study must be 1 or 2, got {study!r}")
+        from .protocol_files import paper_protocol_name, shipped_protocol
+
+        base = shipped_protocol(paper_protocol_name(study)).design(0)
+        kwargs: dict[str, Any] = {key: getattr(base, key) for key in
+                                  ("methods", "locations", "repetitions", "n_training", "levels", "level_db")}
         if stored and "levels" not in config:
             kwargs["levels"] = LEGACY_LEVELS
-        for key in ("methods", "locations", "repetitions", "n_training", "levels"):
+        for key in ("methods", "locations", "repetitions", "n_training", "levels", "level_db"):
             if key in config:
                 value = config[key]
                 kwargs[key] = tuple(value) if key in ("methods", "locations") else value

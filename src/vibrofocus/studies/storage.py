@@ -59,6 +59,7 @@ __all__ = [
     "Event",
     "file_sha256",
     "check_participant_id",
+    "session_protocol",
 ]
 
 # Used with fullmatch: "$" also matches before a trailing newline, so "P01\n" passed re.match.
@@ -343,6 +344,11 @@ class StudyStore(StudyDatabase):
         design = StudyDesign.from_config(int(study), config)
         stored_config = dict(config or {})
         stored_config.update(design.to_dict())
+        # The protocol the session was planned from, and its block: a session planned without
+        # one is the paper's study (its shipped protocol file, block 0), as every session
+        # stored before sessions named their protocol is read (session_protocol).
+        protocol, block = session_protocol(int(study), stored_config)
+        stored_config.update(protocol=protocol, block=block)
         try:
             config_json = json.dumps(stored_config, sort_keys=True, allow_nan=False)
         except (TypeError, ValueError) as exc:
@@ -357,9 +363,12 @@ class StudyStore(StudyDatabase):
                 unfinished = (" AND (SELECT COUNT(*) FROM answers a WHERE a.session_id = s.session_id) < "
                               "(SELECT COUNT(*) FROM planned_trials p WHERE p.session_id = s.session_id)"
                               if reuse == "open" else "")
+                # The same protocol and block only (a session stored without them: the paper's).
                 prior = conn.execute(
-                    "SELECT session_id FROM sessions s WHERE participant_id = ? AND study = ?" + unfinished
-                    + " ORDER BY session_id DESC LIMIT 1", (participant_id, int(study)),
+                    "SELECT session_id FROM sessions s WHERE participant_id = ? AND study = ?"
+                    " AND COALESCE(json_extract(config, '$.protocol'), 'paper-study' || study) = ?"
+                    " AND COALESCE(json_extract(config, '$.block'), 0) = ?" + unfinished
+                    + " ORDER BY session_id DESC LIMIT 1", (participant_id, int(study), protocol, block),
                 ).fetchone()
                 if prior is not None:
                     return int(prior[0]), False
@@ -689,7 +698,8 @@ class StudyStore(StudyDatabase):
         (its peak at the target predicted from the calibration, µm), from the trial's
         ``stimulus_onset`` event (None where none holds them), and for a simulated
         participant ``model`` (the label of the model and hypothesis that answered, from the
-        session). Ordered by participant (as added), study, session and trial index.
+        session), and ``protocol`` (the name of the protocol the session was planned from:
+        :func:`session_protocol`). Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -719,6 +729,7 @@ class StudyStore(StudyDatabase):
             row.update(onsets.get(row["answer_id"], _NO_ONSET))
             row.update(stimuli.get((row["session_id"], row["trial_index"]), _NO_STIMULUS))
             row["levels"], model = stimuli.get(row["session_id"], (LEGACY_LEVELS, None))
+            row["protocol"] = stimuli.get(("protocol", row["session_id"]))
             if row["simulated"]:
                 # A simulated session stored before sessions named their model: v3, its only one then.
                 row["model"] = model or legacy_model
@@ -733,10 +744,11 @@ class StudyStore(StudyDatabase):
         if participant_id is not None:
             where, args = "WHERE participant_id = ? ", (participant_id,)
         out: dict[Any, Any] = {}
-        for sid, text in conn.execute("SELECT session_id, config FROM sessions " + where, args):
+        for sid, study, text in conn.execute("SELECT session_id, study, config FROM sessions " + where, args):
             config = json.loads(text)  # the stored rule as it is (the design's rules: StudyDesign.from_config)
             config = config if isinstance(config, dict) else {}
             out[sid] = (str(config.get("levels", LEGACY_LEVELS)), config.get("model"))
+            out[("protocol", sid)] = session_protocol(study, config)[0]
         sql = ("SELECT session_id, payload FROM events WHERE kind = 'stimulus_onset' "
                + ("AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) " if args else ""))
         for sid, text in conn.execute(sql + "ORDER BY event_id", args):
@@ -774,7 +786,7 @@ class StudyStore(StudyDatabase):
         from ..io.trials_csv import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True,
-                                stimuli=True)
+                                stimuli=True, protocols=True)
 
 
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.
@@ -782,6 +794,22 @@ _ONSET_KEYS = {"onset_s": "onset_host_s", "onset_device_s": "onset_device_s", "o
 _NO_ONSET: dict[str, Any] = dict.fromkeys(_ONSET_KEYS.values())
 #: Stimulus columns of :meth:`StudyStore.trial_rows` from the ``stimulus_onset`` event (None: not stored).
 _NO_STIMULUS: dict[str, Any] = {"drive_peak_v": None, "target_peak_um": None}
+
+
+def session_protocol(study: int, config: Mapping[str, Any]) -> tuple[str, int]:
+    """The protocol name and block index a session was planned from, from its config.
+
+    A session stored without them (planned by vibrofocus before protocol files, or without
+    one) is the paper's study: ``("paper-study<study>", 0)``, the shipped protocol file its
+    design comes from (:meth:`~vibrofocus.studies.protocol.StudyDesign.from_config`).
+    """
+    name = config.get("protocol") if isinstance(config, Mapping) else None
+    block = config.get("block", 0) if isinstance(config, Mapping) else 0
+    if not isinstance(name, str) or not name:
+        name = f"paper-study{int(study)}"
+    if isinstance(block, bool) or not isinstance(block, int):
+        block = 0
+    return name, int(block)
 
 
 def _check_onsets(onset_s: Any, onset_device_s: Any, onset_clock: Any) -> dict[str, Any]:
