@@ -41,7 +41,7 @@ class SharedOutputError(DeviceError, SafetyError):
     JACK adds every signal connected to a port, so the actuators would get the drive plus
     the other program's signal, past the rig's limits. The play was refused before it
     started, or stopped with the rig's outputs at zero; the rig disconnected the other
-    program where it could (the message says so). Both a :class:`DeviceError` and a
+    program where it could (the message says so). Both a :class:`~vibrofocus.rigs.DeviceError` and a
     :class:`~vibrofocus.errors.SafetyError`.
     """
 
