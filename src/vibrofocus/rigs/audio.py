@@ -92,6 +92,8 @@ POLL_S = 0.02
 MAX_RESAMPLING_OVERSHOOT = 0.01
 #: A stream that has not ended this long after its block's length is given up, s.
 STREAM_MARGIN_S = 2.0
+#: After an error the rig did not control, a stream that does not close within this long is abandoned, s.
+CLOSE_WAIT_S = 5.0
 # Words that say how a device is reached, not which interface it is.
 _GENERIC_WORDS = {
     "usb", "audio", "device", "devices", "output", "outputs", "input", "inputs", "speakers", "speaker",
@@ -586,6 +588,9 @@ class AudioRig(HardwareRig):
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface could not open a stream for {what}: {exc}") from None
         hung = False
+        # A stream whose end the rig controlled is closed in place; after any other error
+        # (the server may be gone, and then closing blocks for good) only for so long.
+        controlled = False
         try:
             own = guard.own_ports(before, n_out) if guard is not None else None
             latency = stream.latency
@@ -607,9 +612,11 @@ class AudioRig(HardwareRig):
                 self._refuse_shared(own, "during", halted)
             while True:  # short waits: Ctrl-C, a stop and other programs' connections get in between them
                 finished = done.wait(POLL_S)
+                if stopped():
+                    break
                 if guard is not None:
                     self._refuse_shared(own, "during", halted)
-                if finished or stopped():
+                if finished:
                     break
                 if time.monotonic() > deadline:
                     hung = True
@@ -617,14 +624,21 @@ class AudioRig(HardwareRig):
                         f"the audio interface stopped answering while {what} (no end of the stream "
                         f"{total / self.device_fs + STREAM_MARGIN_S:.1f} s after it started): is the audio "
                         "server (JACK, the driver) still running? The stream was abandoned")
+            controlled = True
             if state["error"] is not None:
                 raise DeviceError(f"the audio callback failed while {what}: {state['error']!r}") from state["error"]
+        except (StoppedError, SharedOutputError):
+            controlled = True
+            raise
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface failed while {what}: {exc}") from None
         finally:
+            # Whatever ended the stream (its end, an error, Ctrl-C), the callback writes
+            # silence from its next buffer: the abort returns only after JACK's cycles.
+            halted.set()
             with self._stream_lock:
                 self._stream = None
-            self._end_stream(stream, wait_s=1.0 if hung else None)
+            self._end_stream(stream, wait_s=None if controlled else 1.0 if hung else CLOSE_WAIT_S)
         if stopped():
             raise StoppedError("recording" if record else "play")
         if state["pos"] < total:
