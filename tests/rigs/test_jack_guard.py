@@ -211,7 +211,7 @@ def test_devices_check_names_another_client_on_the_outputs(jack_server, tmp_path
     ("MME", "Speakers (Focusrite USB Audio)", True),
     ("Windows WASAPI", "Out 1-2 (MOTU Pro Audio)", True),
     ("ASIO", "Focusrite USB ASIO", False),
-    ("Core Audio", "MOTU UltraLite-mk5", False),
+    ("Core Audio", "MOTU UltraLite-mk5", True),
     ("ALSA", "Scarlett 2i2 USB: Audio (hw:1,0)", False),
     ("ALSA", "pipewire", True),
 ])

@@ -195,7 +195,9 @@ def other_programs_report(hostapi: str, device_name: str) -> str:
                 "is connected to the rig's playback ports, and stopped at zero when one connects while it plays; "
                 "the rig disconnects it and names it")
     words = audio_interface_words(device_name)
-    mixed = bool(words & _ROUTING_DEVICES) or not words or any(h in hostapi.lower() for h in UNSTEADY_LATENCY_HOSTAPIS)
+    # Core Audio, and WASAPI in the shared mode PortAudio opens, mix every program on a device.
+    mixers = (*UNSTEADY_LATENCY_HOSTAPIS, "core audio")
+    mixed = bool(words & _ROUTING_DEVICES) or not words or any(h in hostapi.lower() for h in mixers)
     how = ("this device mixes other programs' sound into the outputs"
            if mixed else "other programs may play to this interface beside the rig")
     return (f"other programs on the outputs: NOT checked: {hostapi} gives no way to see who else plays to "

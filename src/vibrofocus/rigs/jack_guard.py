@@ -164,10 +164,11 @@ class JackOutputGuard:
         found = next(iter(by_client.values())) if len(by_client) == 1 else []
         numbers = sorted(n for n, _ in found)
         if len(numbers) != n_out or numbers != list(range(numbers[0], numbers[0] + n_out)):
+            listing = ", ".join(sorted(new)) or "none"
             raise DeviceError(
-                f"the rig could not tell its own stream's JACK ports among the new ones ({', '.join(sorted(new)) or 'none'}; "
-                f"expected {n_out} ports out_n of one client), so it cannot check who else feeds its outputs; "
-                "nothing was played: try again")
+                f"the rig could not tell its own stream's JACK ports among the new ones ({listing}; expected "
+                f"{n_out} ports out_n of one client), so it cannot check who else feeds its outputs; nothing was "
+                "played: try again")
         ordered = [name for _, name in sorted(found)]
         return {c: ordered[c - 1] for c in self.channels}
 
