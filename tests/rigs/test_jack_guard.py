@@ -223,3 +223,45 @@ def test_devices_check_says_where_other_programs_cannot_be_seen(hostapi, device,
     assert ("mixes other programs' sound into the outputs" in line) is mixes
     assert "limiter or mute on the amplifier's input" in line
     assert "NOT" not in other_programs_report("JACK Audio Connection Kit", "system")
+
+
+def test_the_guard_refuses_when_it_cannot_tell_the_streams_own_ports(jack_server):
+    """Ports registered by two clients while the stream opened: which feed is the rig's own is unknown."""
+    import jack
+
+    from vibrofocus.rigs.jack_guard import JackOutputGuard
+
+    guard = JackOutputGuard("loopback", [1, 3])
+    clients = []
+    try:
+        before = guard.output_ports()
+        clients.append(jack.Client("stream-a", no_start_server=True))
+        for n in (4, 5, 6):
+            clients[0].outports.register(f"out_{n}")
+        assert guard.own_ports(before, 3) == {1: "stream-a:out_4", 3: "stream-a:out_6"}
+        clients.append(jack.Client("stream-b", no_start_server=True))
+        for n in (0, 1, 2):
+            clients[1].outports.register(f"out_{n}")
+        with pytest.raises(DeviceError, match="could not tell its own stream's JACK ports.*nothing was played"):
+            guard.own_ports(before, 3)
+    finally:
+        for client in clients:
+            client.close()
+        guard.close()
+    with pytest.raises(DeviceError, match="the rig is closed"):
+        guard.feeds()
+
+
+def test_a_connection_the_rig_could_not_remove_says_to_switch_the_amplifier_off():
+    from vibrofocus.rigs.jack_guard import ForeignFeed, shared_output_message
+
+    feeds = [ForeignFeed("firefox:output_FL", "system:playback_1", 1),
+             ForeignFeed("ardour:master/out_1", "system:playback_2", 2)]
+    message = shared_output_message(feeds, {1: "actuator 1", 2: "actuator 2"}, when="during",
+                                     failed=["firefox:output_FL -> system:playback_1: refused"])
+    assert message.startswith("another program feeds the rig's outputs: JACK clients 'ardour', 'firefox' "
+                              "(firefox:output_FL into system:playback_1, output 1, actuator 1; ardour:master/out_1 "
+                              "into system:playback_2, output 2, actuator 2) connected while the rig was playing")
+    assert message.endswith("but the rig could NOT disconnect it (firefox:output_FL -> system:playback_1: refused): "
+                            "switch the amplifier off, then close that program")
+    assert "\n" not in message
