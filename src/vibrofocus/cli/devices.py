@@ -18,7 +18,8 @@ def devices(
     check: Path | None = typer.Option(
         None, "--check", metavar="RIG_CONFIG",
         help="Open the rig of this config file and run its checks at setup (device, channels, rates, output "
-             "range, timing, limits) without playing anything; exit 2 at the first problem."),
+             "range, timing, limits, other programs on the outputs where the host API shows them) without playing "
+             "anything; exit 2 at the first problem."),
     tone: bool = typer.Option(
         False, "--tone",
         help="With --check on an audio rig: after the checks, play a 100 Hz sine at 1 % of digital full scale "
@@ -132,6 +133,8 @@ def _check_rig(path: Path, as_json: bool, tone_s: float | None = None) -> None:
                                   f"a {cfg.kind} rig's outputs are set in volts already")
         tone = None
         with make_rig(cfg.kind, config=cfg) as rig:
+            if hasattr(rig, "check_outputs_alone"):  # another program feeding the outputs is a problem
+                rig.check_outputs_alone()
             lines = [*rig.setup_report, *rig.limits_report()]
             if tone_s is not None:
                 tone = _play_tone(rig, cfg, tone_s)

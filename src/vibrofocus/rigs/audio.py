@@ -39,6 +39,18 @@ outputs are silent within one buffer plus the interface's buffered output latenc
 (:attr:`AudioRig.output_latency_s`). A recording buffer starts as zeros, never as
 uninitialised memory.
 
+Other programs on the interface
+-------------------------------
+A sound server mixes every program that plays to an output: a media player's signal
+adds to the drive, past every limit of the rig. On JACK (and PipeWire's JACK) the rig
+sees the connections of its playback ports (:mod:`vibrofocus.rigs.jack_guard`): a play
+is refused before its stream starts when anything is connected to the ports it uses,
+and while it plays the rig looks every :data:`POLL_S` and stops at zero when anything
+but its own stream feeds them; either way it disconnects the other program and names it
+(:class:`~vibrofocus.rigs.SharedOutputError`). Other host APIs give no way to see
+other programs: ``vibrofocus devices --check`` says so (:func:`other_programs_report`),
+and only a hardware limiter on the amplifier's input guards them.
+
 Audio interfaces are AC-coupled, so this rig cannot read strap force sensors.
 """
 
@@ -58,12 +70,12 @@ import scipy.signal
 from ..errors import SafetyError, ValidationError
 from ..layout import ArrayLayout
 from .config import AudioRigConfig
-from .devices import DeviceError, StoppedError
+from .devices import DeviceError, SharedOutputError, StoppedError
 from .hardware import HardwareRig
 from .onset import MAX_LATENCY_S, PORTAUDIO_CLOCK, DeviceOnset
 
 __all__ = ["AudioRig", "resolve_audio_device", "audio_interface_words", "same_audio_interface",
-           "default_output_risk", "audio_lock_keys"]
+           "default_output_risk", "audio_lock_keys", "other_programs_report"]
 
 log = logging.getLogger(__name__)
 
@@ -80,6 +92,8 @@ POLL_S = 0.02
 MAX_RESAMPLING_OVERSHOOT = 0.01
 #: A stream that has not ended this long after its block's length is given up, s.
 STREAM_MARGIN_S = 2.0
+#: After an error the rig did not control, a stream that does not close within this long is abandoned, s.
+CLOSE_WAIT_S = 5.0
 # Words that say how a device is reached, not which interface it is.
 _GENERIC_WORDS = {
     "usb", "audio", "device", "devices", "output", "outputs", "input", "inputs", "speakers", "speaker",
@@ -159,6 +173,37 @@ def audio_lock_keys(name: str) -> list:
     if not words or words & _ROUTING_DEVICES:
         return [LockKey("audio-any")]
     return [LockKey("audio-any", shared=True)] + [LockKey(f"audio-word:{w}") for w in sorted(words)]
+
+
+def other_programs_report(hostapi: str, device_name: str) -> str:
+    """Whether the rig can see other programs that play to its interface, as one line.
+
+    Parameters
+    ----------
+    hostapi : str
+        The PortAudio host API's name.
+    device_name : str
+        The device's name as the host API lists it.
+
+    Returns
+    -------
+    str
+        What ``vibrofocus devices --check`` prints about it.
+    """
+    if "jack" in hostapi.lower():
+        return ("other programs on the outputs: checked (JACK connections); a play is refused when another client "
+                "is connected to the rig's playback ports, and stopped at zero when one connects while it plays; "
+                "the rig disconnects it and names it")
+    words = audio_interface_words(device_name)
+    # Core Audio, and WASAPI in the shared mode PortAudio opens, mix every program on a device.
+    mixers = (*UNSTEADY_LATENCY_HOSTAPIS, "core audio")
+    mixed = bool(words & _ROUTING_DEVICES) or not words or any(h in hostapi.lower() for h in mixers)
+    how = ("this device mixes other programs' sound into the outputs"
+           if mixed else "other programs may play to this interface beside the rig")
+    return (f"other programs on the outputs: NOT checked: {hostapi} gives no way to see who else plays to "
+            f"{device_name}, and {how}, adding to the drives past the rig's limits; give the interface to the rig "
+            "alone (exclusive mode, no system sounds) and put a limiter or mute on the amplifier's input "
+            "(docs/hardware.md)")
 
 
 def _sounddevice():
@@ -293,8 +338,19 @@ class AudioRig(HardwareRig):
         dev = sd.query_devices(self.device_index)
         self.device_name = str(dev["name"])
         self.hostapi_name = str(sd.query_hostapis(dev["hostapi"])["name"])
+        # On JACK the rig watches who else feeds its playback ports (module docstring).
+        self._jack_guard = None
+        if "jack" in self.hostapi_name.lower():
+            from .jack_guard import JackOutputGuard
+
+            self._jack_guard = JackOutputGuard(self.device_name, self._out_channels)
         words = sorted(audio_interface_words(self.device_name)) or [self.device_name.lower()]
-        self._lock_device("audio:" + "-".join(words), keys=audio_lock_keys(self.device_name))
+        try:
+            self._lock_device("audio:" + "-".join(words), keys=audio_lock_keys(self.device_name))
+        except BaseException:
+            if self._jack_guard is not None:
+                self._jack_guard.close()
+            raise
         self.setup_report = [
             f"device {self.device_index}: {self.device_name} ({self.hostapi_name})",
             f"rate: device {self.device_fs:g} Hz, rig {self.fs:g} Hz (resampled {self._up}/{self._down})"
@@ -303,6 +359,7 @@ class AudioRig(HardwareRig):
             f"{ch.vibrometer}" + (f", loopback output {ch.loopback_output} -> input {ch.loopback_input}"
                                   if ch.loopback_output else f", no loopback (latency {config.latency_samples} samples)"),
             f"output latency reported by the device: {1e3 * float(dev['default_low_output_latency']):.0f} ms",
+            other_programs_report(self.hostapi_name, self.device_name),
         ]
         self.last_latency_samples: int | None = None
         self.last_clipped: np.ndarray | None = None
@@ -312,6 +369,67 @@ class AudioRig(HardwareRig):
         # from racing the owner closing it.
         self._stream = None
         self._stream_lock = threading.Lock()
+
+    def close(self) -> None:
+        """Release the device (outputs left at zero), its lock and the JACK connection watch."""
+        try:
+            super().close()
+        finally:
+            if self._jack_guard is not None:
+                self._jack_guard.close()
+
+    # ------------------------------------------------------------------ other programs
+    @property
+    def output_labels(self) -> dict[int, str]:
+        """What each output channel the rig uses drives, ``{channel: "actuator 1"}`` (1-based)."""
+        ch = self.config.channels
+        labels = {c: f"actuator {i + 1}" for i, c in enumerate(ch.actuators)}
+        if ch.loopback_output:
+            labels.setdefault(ch.loopback_output, "the loopback output")
+        return labels
+
+    def check_outputs_alone(self) -> None:
+        """Refuse when another program feeds the rig's outputs now; plays and disconnects nothing.
+
+        What ``vibrofocus devices --check`` runs. On host APIs where other programs cannot
+        be seen (every one but JACK) it does nothing: :func:`other_programs_report` says so.
+
+        Raises
+        ------
+        SharedOutputError
+            Another JACK client is connected to a playback port the rig uses.
+        """
+        if self._jack_guard is None:
+            return
+        from .jack_guard import shared_output_message
+
+        feeds = self._jack_guard.feeds()
+        if feeds:
+            raise SharedOutputError(shared_output_message(feeds, self.output_labels, when="check"))
+
+    def _refuse_shared(self, own: dict[int, str] | None, when: str, halted: threading.Event | None = None) -> None:
+        """Stop and disconnect when anything but the rig's own stream feeds its outputs (JACK only).
+
+        ``own``: the stream's own ports once it has started (None before: then every
+        connection is another program's). During a play, the stream's callback writes
+        silence from its next buffer on (``halted``, as it does after :meth:`stop`), the
+        other program is disconnected, and the stream is aborted (which returns only once
+        JACK has played out what it had, several periods later).
+        """
+        guard = self._jack_guard
+        feeds = guard.feeds(own)
+        if not feeds:
+            return
+        from .jack_guard import shared_output_message
+
+        if halted is not None:
+            halted.set()
+        failed = guard.disconnect(feeds)
+        if when == "during":
+            self._zero_outputs()
+        message = shared_output_message(feeds, self.output_labels, when=when, failed=failed)
+        (log.critical if failed else log.error)("%s", message)
+        raise SharedOutputError(message)
 
     # ------------------------------------------------------------------ scaling
     @property
@@ -415,6 +533,7 @@ class AudioRig(HardwareRig):
         state = {"pos": 0, "status": sd.CallbackFlags(), "onset": None, "error": None}
         done = threading.Event()
         stopped = self._stop_probe()  # the stop epoch of the play that called us (rigs.base)
+        halted = threading.Event()  # set when another program feeds the outputs (_refuse_shared)
 
         def fill(outdata, frames, time_info):
             pos = state["pos"]
@@ -422,7 +541,7 @@ class AudioRig(HardwareRig):
                 state["onset"] = (time.monotonic(), float(time_info.outputBufferDacTime),
                                   float(time_info.outputBufferDacTime) - float(time_info.currentTime))
             outdata.fill(0)
-            if stopped():
+            if stopped() or halted.is_set():
                 raise sd.CallbackAbort
             n = min(frames, total - pos)
             outdata[:n, out_cols] = block[pos:pos + n]
@@ -458,6 +577,9 @@ class AudioRig(HardwareRig):
 
         duplex, output_only = keep_error(duplex), keep_error(output_only)
 
+        guard = self._jack_guard
+        # The output ports before the stream registers its own: the new ones are the rig's.
+        before = guard.output_ports() if guard is not None else None
         try:
             kwargs = dict(samplerate=self.device_fs, device=self.device_index, dtype="float32",
                           latency=self.config.latency, finished_callback=done.set)
@@ -468,12 +590,18 @@ class AudioRig(HardwareRig):
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface could not open a stream for {what}: {exc}") from None
         hung = False
+        # A stream whose end the rig controlled is closed in place; after any other error
+        # (the server may be gone, and then closing blocks for good) only for so long.
+        controlled = False
         try:
+            own = guard.own_ports(before, n_out) if guard is not None else None
             latency = stream.latency
             self._output_latency_s = float(latency[1] if isinstance(latency, tuple) else latency)
             # A dead server or a vanished device never finishes the stream: give up after
             # the block's own length plus the latencies and a margin.
             deadline = time.monotonic() + total / self.device_fs + 2 * self._output_latency_s + STREAM_MARGIN_S
+            if guard is not None:  # nothing may be connected to the rig's ports before its stream
+                self._refuse_shared(None, "before")
             with self._stream_lock:
                 # Checked and started under the lock stop() aborts through: a stop before
                 # this line is seen here, one after it finds the stream to abort.
@@ -481,8 +609,16 @@ class AudioRig(HardwareRig):
                     raise StoppedError("recording" if record else "play")
                 self._stream = stream
                 stream.start()
-            while not done.wait(POLL_S):  # short waits: Ctrl-C and a stop get in between them
+            if guard is not None:  # from its start to its end, only the stream's own ports
+                guard.check_routing(own)
+                self._refuse_shared(own, "during", halted)
+            while True:  # short waits: Ctrl-C, a stop and other programs' connections get in between them
+                finished = done.wait(POLL_S)
                 if stopped():
+                    break
+                if guard is not None:
+                    self._refuse_shared(own, "during", halted)
+                if finished:
                     break
                 if time.monotonic() > deadline:
                     hung = True
@@ -490,14 +626,21 @@ class AudioRig(HardwareRig):
                         f"the audio interface stopped answering while {what} (no end of the stream "
                         f"{total / self.device_fs + STREAM_MARGIN_S:.1f} s after it started): is the audio "
                         "server (JACK, the driver) still running? The stream was abandoned")
+            controlled = True
             if state["error"] is not None:
                 raise DeviceError(f"the audio callback failed while {what}: {state['error']!r}") from state["error"]
+        except (StoppedError, SharedOutputError):
+            controlled = True
+            raise
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface failed while {what}: {exc}") from None
         finally:
+            # Whatever ended the stream (its end, an error, Ctrl-C), the callback writes
+            # silence from its next buffer: the abort returns only after JACK's cycles.
+            halted.set()
             with self._stream_lock:
                 self._stream = None
-            self._end_stream(stream, wait_s=1.0 if hung else None)
+            self._end_stream(stream, wait_s=None if controlled else 1.0 if hung else CLOSE_WAIT_S)
         if stopped():
             raise StoppedError("recording" if record else "play")
         if state["pos"] < total:

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from ..errors import VibrofocusError
+from ..errors import SafetyError, VibrofocusError
 
-__all__ = ["DeviceError", "DeviceBusyError", "StoppedError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
+__all__ = ["DeviceError", "DeviceBusyError", "StoppedError", "SharedOutputError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
 
 
 class DeviceError(VibrofocusError):
@@ -33,6 +33,17 @@ class StoppedError(DeviceError):
     def __init__(self, what: str = "play") -> None:
         super().__init__(f"the {what} was stopped before it ended (rig.stop()); the outputs are at zero"
                          + ("; it is discarded" if what == "recording" else ""))
+
+
+class SharedOutputError(DeviceError, SafetyError):
+    """Another program feeds the rig's outputs (a JACK client on its playback ports).
+
+    JACK adds every signal connected to a port, so the actuators would get the drive plus
+    the other program's signal, past the rig's limits. The play was refused before it
+    started, or stopped with the rig's outputs at zero; the rig disconnected the other
+    program where it could (the message says so). Both a :class:`~vibrofocus.rigs.DeviceError` and a
+    :class:`~vibrofocus.errors.SafetyError`.
+    """
 
 
 @dataclass
