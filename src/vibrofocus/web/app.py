@@ -117,10 +117,11 @@ def create_app(
     # Before SQLite opens them: the database, its journals, logins and files folder are
     # this user's alone, in a folder no other user can write in (docs/security.md).
     private_database(db_path)
+    secret = load_or_make_secret(db_path)
     store = StudyStore(db_path)
     private_journal(db_path)
     state = WebState(
-        store=store, db_path=db_path, token=token, secret=load_or_make_secret(db_path),
+        store=store, db_path=db_path, token=token, secret=secret,
         rig_kind=rig, pace=pace, rig_factory=rig_factory, rig_config=rig_config,
     )
 
