@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import secrets
 import select
 import shutil
 import socket
@@ -136,7 +137,7 @@ def other_user():
         pytest.skip("needs useradd and userdel, to make a second local user")
     import pwd
 
-    name = f"vftest{os.getpid()}"[:32]
+    name = f"vft{os.getpid()}{secrets.token_hex(3)}"[:32]
     made = subprocess.run([useradd, "--no-create-home", "--user-group", "--shell", "/usr/sbin/nologin", name],
                           capture_output=True, text=True)
     if made.returncode != 0:

@@ -19,9 +19,7 @@ from fastapi.testclient import TestClient
 
 from vibrofocus.errors import StudyError
 from vibrofocus.web import create_app
-from vibrofocus.web.private import writable_by_others
 
-from .other_user import other_user, shared_dir  # noqa: F401 - fixtures
 
 TOKEN = "test-token-" + "x" * 20
 
@@ -151,6 +149,8 @@ def test_a_database_in_a_folder_of_another_user_is_refused(tmp_path, other_user)
 
 
 def test_a_folder_their_group_can_write_in_is_refused_ours_alone_is_not(tmp_path, other_user):
+    from vibrofocus.web.private import writable_by_others
+
     lab, db = _lab(tmp_path)
     os.chown(lab, os.getuid(), other_user.gid)
     os.chmod(lab, 0o770)
