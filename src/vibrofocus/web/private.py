@@ -28,7 +28,6 @@ __all__ = [
     "private_dir",
     "private_file",
     "private_journal",
-    "owner_only",
     "check_database_folder",
     "private_database",
     "load_or_make_secret",
@@ -159,10 +158,10 @@ def _open_existing(path: Path, what: str, flags: int = os.O_RDONLY) -> int:
             raise _refuse(path, what, "is a symbolic link", "give the real path, or remove the link") from None
         raise
     try:
-        st = os.fstat(fd)
-        if os.name != "nt":
+        if os.name != "nt":  # no owners or modes to check there
+            st = os.fstat(fd)
             _check_ours(path, st, what, folder=False)
-        _tighten(path, fd, st, 0o600)
+            _tighten(path, fd, st, 0o600)
     except BaseException:
         os.close(fd)
         raise
@@ -196,29 +195,6 @@ def private_file(path: Path, what: str = "file") -> None:
         if exc.errno in (errno.EACCES, errno.EROFS, errno.EPERM) and not os.path.lexists(path):
             return  # a read-only folder: the store says so in its own words
         raise
-    os.close(_open_existing(Path(path), what))
-
-
-def owner_only(path: Path, mode: int, what: str = "file") -> None:
-    """Check that ``path`` is ours and closed to writers; close it to readers (``mode``, e.g. 0o600).
-
-    Parameters
-    ----------
-    path : Path
-        An existing file or folder.
-    mode : int
-        Its mode if other users could read it.
-    what : str
-        What it is, for the error message.
-
-    Raises
-    ------
-    StudyError
-        It is a link, another user's, or writable by other users.
-    """
-    if Path(path).is_dir() and not os.path.islink(path):
-        private_dir(Path(path), what)
-        return
     os.close(_open_existing(Path(path), what))
 
 
