@@ -20,6 +20,9 @@ import httpx
 import pytest
 
 from tests.conftest import CHROMIUM, CHROMIUM_ARGS  # noqa: F401 - the browser is shared with the docs test
+
+from .other_user import other_user, shared_dir  # noqa: F401 - fixtures: a real second local user
+
 TOKEN = "test-token-" + "x" * 20
 
 

@@ -1,4 +1,8 @@
-"""``vibrofocus stop``: the emergency stop through the server's owner-only socket (issue 38, item 9)."""
+"""``vibrofocus stop``: the emergency stop through the server's owner-only socket (issue 38, item 9).
+
+Issue 53: the client believes only a socket that can be the server's (items 1), a second
+server of one database is refused (item 5), silent peers delay no stop (item 13).
+"""
 
 from __future__ import annotations
 
@@ -14,6 +18,8 @@ import time
 import httpx
 import pytest
 
+from vibrofocus.errors import StudyError, ValidationError
+from vibrofocus.web import emergency
 from vibrofocus.web.emergency import stop_socket_path
 
 from .conftest import Server, free_port
@@ -57,22 +63,33 @@ def test_vibrofocus_stop_without_a_server_says_so(tmp_path):
     assert "Traceback" not in done.stderr
 
 
-def test_the_stop_socket_answers_only_its_own_user(tmp_path, monkeypatch):
-    from vibrofocus.web import emergency
+class _Web:
+    """Just what :func:`vibrofocus.web.emergency.stop_all` uses of the app's state."""
 
-    stopped = []
+    def __init__(self) -> None:
+        self.lock = self.db = threading.RLock()
+        self.runners = {}
+        self.stopped = []
 
-    class Web:
-        def emergency_stop(self):
-            stopped.append(1)
-            return ["simulated rig outputs at 0 V"]
+    def emergency_stop(self):
+        self.stopped.append(1)
+        return ["simulated rig outputs at 0 V"]
 
-    web = Web()
-    web.lock = web.db = __import__("threading").RLock()
-    web.runners = {}
+
+def _listener(tmp_path) -> tuple[_Web, emergency.StopListener]:
+    """A started stop listener of ``tmp_path/studies.sqlite`` on a stand-in state."""
+    web = _Web()
     folder = tmp_path / "studies-files"
+    folder.mkdir(mode=0o700)
     listener = emergency.StopListener(web, folder / "stop.sock")
     assert listener.start()
+    return web, listener
+
+
+def test_the_stop_socket_answers_only_its_own_user(tmp_path, monkeypatch):
+    web, listener = _listener(tmp_path)
+    stopped = web.stopped
+    folder = tmp_path / "studies-files"
     try:
         monkeypatch.setattr(emergency, "_peer_uid", lambda conn: os.getuid() + 1)  # as if another user connected
         with socket.socket(socket.AF_UNIX) as c:
@@ -250,3 +267,156 @@ def test_the_stop_names_what_was_running_each_rig_once(client):
     assert stopped == ["simulated rig (seed 5): outputs at 0 V", f"session {second} paused"]
     assert client.get(f"/api/sessions/{second}").json()["status"] == "paused"
     assert client.get(f"/api/sessions/{first}").json()["status"] == "completed"
+
+
+# ---------------------------------------------------------------------------- issue 53, item 1
+def _not_stopped(db) -> str:
+    with pytest.raises(ValidationError) as caught:
+        emergency.request_stop(db, timeout_s=2.0)
+    message = str(caught.value)
+    assert message.startswith("not stopped") and message.endswith("switch the amplifier off"), message
+    return message
+
+
+@pytest.mark.parametrize("case", ["their folder and socket", "their socket in our folder",
+                                  "our socket file, their program", "our folder open to others"])
+def test_stop_believes_no_socket_another_user_planted(shared_dir, other_user, case):
+    """Before issue 53 each of these printed "stopped: every rig output to 0 V; session 1 paused", exit 0."""
+    db = shared_dir / "study.sqlite"
+    sock = stop_socket_path(db)
+    with other_user.answer_stop_socket(sock) as planted:
+        if case != "their folder and socket":  # later made to look like ours, piece by piece
+            os.chown(sock.parent, os.getuid(), os.getgid())
+            os.chmod(sock.parent, 0o755 if case == "our folder open to others" else 0o700)
+        if case in ("our socket file, their program", "our folder open to others"):
+            os.chown(sock, os.getuid(), os.getgid())
+            os.chmod(sock, 0o600)
+        message = _not_stopped(db)
+        expected = {
+            "their folder and socket": f"its folder {sock.parent} belongs to user {other_user.name}",
+            "their socket in our folder": f"{sock} belongs to user {other_user.name}",
+            "our socket file, their program": f"the program at the stop socket runs as user {other_user.name}",
+            "our folder open to others": f"its folder {sock.parent} is open to other users (mode 0755)",
+        }[case]
+        assert expected in message, message
+        assert "r" not in planted.events(), "the client sent its stop to another user's program"
+
+
+def test_the_stop_command_says_not_stopped_with_exit_2(shared_dir, other_user):
+    db = shared_dir / "study.sqlite"
+    with other_user.answer_stop_socket(stop_socket_path(db)) as planted:
+        done = _stop(db)
+        assert planted.events() == ""
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "stopped" not in done.stdout
+    assert "error: not stopped" in done.stderr and "switch the amplifier off" in done.stderr, done.stderr
+    assert len(done.stderr.strip().splitlines()) == 1, done.stderr
+
+
+def _serve_refused(db, env=None) -> subprocess.CompletedProcess:
+    """``vibrofocus serve`` that is expected to refuse to start (killed after 60 s if it starts)."""
+    env = dict(os.environ, VIBROFOCUS_TOKEN="test-token-" + "x" * 20, **(env or {}))
+    try:
+        return subprocess.run([sys.executable, "-m", "vibrofocus", "serve", "--db", str(db), "--port", "0",
+                               "--no-browser"], capture_output=True, text=True, timeout=60, env=env)
+    except subprocess.TimeoutExpired as exc:
+        raise AssertionError(f"the server started: {exc.stdout}") from None
+
+
+def test_serve_refuses_to_start_without_its_stop_socket(tmp_path, monkeypatch):
+    """A database path too long for a Unix socket, without XDG_RUNTIME_DIR: before issue 53 the server
+    started, printed the stop hint, then warned that 'vibrofocus stop' was not available."""
+    deep = tmp_path / ("d" * 60)
+    deep.mkdir(mode=0o700)
+    db = deep / "study.sqlite"
+    monkeypatch.setenv("XDG_RUNTIME_DIR", "")
+    assert stop_socket_path(db) is None
+    done = _serve_refused(db)
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "vibrofocus stop" not in done.stdout and "experimenter page" not in done.stdout, done.stdout
+    assert "too long for the socket of 'vibrofocus stop'" in done.stderr, done.stderr
+
+
+# ---------------------------------------------------------------------------- issue 53, item 5
+def test_a_second_server_of_one_database_is_refused_naming_the_first(tmp_path):
+    first = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "first.log")
+    first.start()
+    try:
+        done = _serve_refused(first.db)
+        assert done.returncode == 2, (done.stdout, done.stderr)
+        assert f"(PID {first.proc.pid}, port {first.port})" in done.stderr, done.stderr
+        assert "another 'vibrofocus serve' already serves" in done.stderr
+        assert "vibrofocus stop" not in done.stdout, "the stop hint of a server that does not run"
+        assert emergency.request_stop(first.db) == []  # still the first server's socket
+    finally:
+        first.stop()
+
+
+def test_the_lock_names_its_holder_and_goes_with_a_killed_server(tmp_path):
+    """The lock itself: a second claim fails and names the holder; a SIGKILLed holder leaves it free."""
+
+    class Web(_Web):
+        db_path = tmp_path / "studies.sqlite"
+        data_dir = tmp_path / "studies-files"
+
+    Web.data_dir.mkdir(mode=0o700)
+    with emergency.ServerGuard(Web()) as one:
+        one.claim(8123)
+        with pytest.raises(StudyError, match=rf"already serves .* \(PID {os.getpid()}, port 8123\)"):
+            emergency.ServerGuard(Web()).claim(8124)
+    ready_r, ready_w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # a server that is killed while it holds the lock
+        try:
+            emergency.ServerGuard(Web()).claim(8126)
+            os.write(ready_w, b"ok")
+            time.sleep(60)
+        finally:
+            os._exit(0)
+    try:
+        assert os.read(ready_r, 2) == b"ok"
+        with pytest.raises(StudyError, match=rf"\(PID {pid}, port 8126\)"):
+            emergency.ServerGuard(Web()).claim(8125)
+    finally:
+        os.kill(pid, 9)
+        os.waitpid(pid, 0)
+        os.close(ready_r)
+        os.close(ready_w)
+    with emergency.ServerGuard(Web()) as again:
+        again.claim(8125)
+
+
+# ---------------------------------------------------------------------------- issue 53, item 13
+def test_silent_peers_delay_no_stop(tmp_path):
+    """Before issue 53: one connection at a time, 2 s for each silent one; 3 silent peers made the
+    stop wait past the client's 5 s and fail, and a silent peer was dropped after 2 s."""
+    web, listener = _listener(tmp_path)
+    path = tmp_path / "studies-files" / "stop.sock"
+    silent = []
+    try:
+        for _ in range(2 * getattr(emergency, "MAX_PENDING", 64)):  # more than are kept waiting
+            s = socket.socket(socket.AF_UNIX)
+            s.settimeout(1.0)
+            try:
+                s.connect(str(path))
+            except OSError:
+                s.close()
+                continue
+            silent.append(s)
+        assert len(silent) >= 6
+        t0 = time.monotonic()
+        assert emergency.request_stop(tmp_path / "studies.sqlite") == ["simulated rig outputs at 0 V"]
+        assert time.monotonic() - t0 < 1.0
+        # A silent peer is dropped well under a second after it connected.
+        with socket.socket(socket.AF_UNIX) as s:
+            s.settimeout(5.0)
+            s.connect(str(path))
+            t0 = time.monotonic()
+            assert s.recv(64) == b""
+            waited = time.monotonic() - t0
+        assert waited < 0.8, waited
+    finally:
+        for s in silent:
+            s.close()
+        listener.close()
+    assert web.stopped == [1]

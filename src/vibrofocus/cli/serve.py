@@ -46,6 +46,9 @@ def serve(
     which the login page also accepts. Set VIBROFOCUS_TOKEN to reuse a token across
     restarts. 'vibrofocus stop --db DB' (same user) stops every output of this server,
     also when its port or page does not answer.
+
+    The database must be yours, in a folder other users cannot write in; a second server
+    of one database is refused (docs/security.md).
     """
     with user_errors():
         import secrets
@@ -104,28 +107,39 @@ def serve(
         extra_hosts = tuple(allow_host) + (() if host in _LOCAL_HOSTS + ("0.0.0.0", "::") else (host,))
         web_app = create_app(db, token=token, rig=rig, pace=pace, allowed_hosts=extra_hosts,
                              rig_config=rig_config if rig != "simulated" else None, rig_factory=rig_factory,
-                             body_timeout_s=body_timeout, stop_socket=True)
-        sock = listen(host, port)  # a busy port is one error line, before any link is printed
-        port = sock.getsockname()[1]
-        shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-        base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
-        login = f"{base}/login/{web_app.state.web.new_login_code()}"
-        typer.echo(f"study database: {Path(db).resolve()}")
-        typer.echo(f"rig: {web_app.state.web.rig_label} (simulated forearm: skin {skin})")
-        typer.echo(f"experimenter page: {base}/")
-        typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
-        typer.echo(f"experimenter token (for the login page): {token}")
-        typer.echo("participant pages: linked from the experimenter page (one per session)")
-        typer.echo(f"emergency stop from a terminal: vibrofocus stop --db {Path(db).resolve()}")
-        if outlet is not None:
-            typer.echo(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})")
-        if not no_browser:
-            # A moment later, so that the page does not ask before uvicorn listens.
-            threading.Timer(1.5, webbrowser.open, args=(login,)).start()
-        limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive,
-                              body_timeout_s=body_timeout, head_grace_s=head_grace)
-        with markers:
-            run(web_app, host=host, port=port, limits=limits, sock=sock, trusted_proxy=trusted_proxy)
+                             body_timeout_s=body_timeout)
+        from ..web.emergency import ServerGuard
+
+        # The one server of this database: a second one is refused here, naming the first.
+        guard = ServerGuard(web_app.state.web)
+        guard.claim(port or None)
+        try:
+            sock = listen(host, port)  # a busy port is one error line, before any link is printed
+            port = sock.getsockname()[1]
+            guard.record_port(port)
+            # 'vibrofocus stop' must work before it is offered: no socket, no server.
+            guard.open_stop_socket()
+            shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+            base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
+            login = f"{base}/login/{web_app.state.web.new_login_code()}"
+            typer.echo(f"study database: {Path(db).resolve()}")
+            typer.echo(f"rig: {web_app.state.web.rig_label} (simulated forearm: skin {skin})")
+            typer.echo(f"experimenter page: {base}/")
+            typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
+            typer.echo(f"experimenter token (for the login page): {token}")
+            typer.echo("participant pages: linked from the experimenter page (one per session)")
+            typer.echo(f"emergency stop from a terminal: vibrofocus stop --db {Path(db).resolve()}")
+            if outlet is not None:
+                typer.echo(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})")
+            if not no_browser:
+                # A moment later, so that the page does not ask before uvicorn listens.
+                threading.Timer(1.5, webbrowser.open, args=(login,)).start()
+            limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout,
+                                  keep_alive_s=keep_alive, body_timeout_s=body_timeout, head_grace_s=head_grace)
+            with markers:
+                run(web_app, host=host, port=port, limits=limits, sock=sock, trusted_proxy=trusted_proxy)
+        finally:
+            guard.close()  # after the server's shutdown: 'vibrofocus stop' answers until its end
 
 
 def _check_database(db: Path) -> None:

@@ -18,7 +18,10 @@ def stop(
 
     Works when the server's port is flooded or its page does not answer: it talks to the
     server through a socket only the user running the server can open (see docs/security.md).
-    Resume the paused sessions from the experimenter page.
+    It believes only a socket that is yours (or root's), closed to others and answered by a
+    program of yours; otherwise, or when the server does not answer, it says 'not stopped'
+    (exit 2): then switch the amplifier off. Resume the paused sessions from the
+    experimenter page.
     """
     with user_errors():
         from ..web.emergency import request_stop

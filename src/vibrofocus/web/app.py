@@ -36,10 +36,10 @@ from .state import (
     WebState,
     load_or_make_secret,
     plain_problem,
-    private_file,
     private_journal,
     render_template,
 )
+from .private import private_database
 from .public_text import public_text
 
 __all__ = ["create_app", "render_template", "WebState", "TOKEN_HEADER", "TOKEN_COOKIE", "KEY_HEADER"]
@@ -87,13 +87,22 @@ def create_app(
     body_timeout_s : float
         Longest wait for a whole request body, s; a body that does not come in time gets 408.
     stop_socket : bool
-        Answer ``vibrofocus stop`` on an owner-only Unix socket beside the database while
-        the app runs (:mod:`.emergency`; ``vibrofocus serve`` turns it on).
+        While the app runs, be the one server of this database and answer ``vibrofocus
+        stop`` on an owner-only Unix socket beside it (:class:`.emergency.ServerGuard`);
+        the app does not start if either fails. ``vibrofocus serve`` does the same itself,
+        before it prints how to stop it.
 
     Returns
     -------
     FastAPI
         With ``app.state.web`` the :class:`WebState`.
+
+    Raises
+    ------
+    StudyError
+        The database, its journals, secret, list of logins or files folder is a link,
+        another user's or writable by other users, or the database is in a folder other
+        users can write in.
     """
     from ..studies import StudyStore
 
@@ -105,38 +114,38 @@ def create_app(
         pace = PACES[pace]
     db_path = Path(db_path).resolve()
     db_path.parent.mkdir(parents=True, exist_ok=True)
-    private_file(db_path)
-    private_journal(db_path)  # before SQLite opens them, and again once it has
+    # Before SQLite opens them: the database, its journals, logins and files folder are
+    # this user's alone, in a folder no other user can write in (docs/security.md).
+    private_database(db_path)
+    secret = load_or_make_secret(db_path)
     store = StudyStore(db_path)
     private_journal(db_path)
     state = WebState(
-        store=store, db_path=db_path, token=token, secret=load_or_make_secret(db_path),
+        store=store, db_path=db_path, token=token, secret=secret,
         rig_kind=rig, pace=pace, rig_factory=rig_factory, rig_config=rig_config,
     )
 
     @asynccontextmanager
     async def lifespan(app: FastAPI):
-        listener = None
+        guard = None
         if stop_socket:
-            from .emergency import StopListener, stop_socket_path
+            from .emergency import ServerGuard
 
-            where = stop_socket_path(db_path)
-            if where is None:
-                log.warning("'vibrofocus stop' is not available: the database's path is too long for a Unix socket "
-                            "and XDG_RUNTIME_DIR is not set; the page's emergency stop still is")
-            else:
-                state.data_dir  # noqa: B018 - creates the files folder 0700 before the socket goes in it
-                listener = StopListener(state, where)
-                if not listener.start():
-                    listener = None
+            guard = ServerGuard(state)
+            guard.claim()
+            try:
+                guard.open_stop_socket()
+            except BaseException:
+                guard.close()
+                raise
         if resume:
             started = state.resume_running_sessions()
             if started:
                 log.warning("resumed sessions %s at their first unanswered trial", started)
         yield
-        if listener is not None:
-            listener.close()
         state.shutdown()
+        if guard is not None:
+            guard.close()  # after the shutdown: 'vibrofocus stop' answers until the end
         close = getattr(store, "close", None)
         if close is not None:
             close()

@@ -8,13 +8,24 @@ every calibration cancelled, every running session paused (and stored as paused)
 hung or the page is closed:
 
 - the socket is ``stop.sock`` in the database's files folder (``<db stem>-files/``,
-  which the server keeps 0700); when that path is too long for a Unix socket, it is
-  ``vibrofocus-stop-<hash of the database path>.sock`` in ``$XDG_RUNTIME_DIR`` (a folder
-  only this user can enter);
+  which must be the server's user's alone: see :mod:`.private`); when that path is too
+  long for a Unix socket, it is ``vibrofocus-stop-<hash of the database path>.sock`` in
+  ``$XDG_RUNTIME_DIR`` (a folder only this user can enter);
 - the socket itself is 0600 and every connection's peer is checked (``SO_PEERCRED``):
   only the user running the server (or root) is answered. Another local user can neither
-  reach the folder nor pass the check, so cannot trigger a stop; the socket has its own
-  thread and nobody else can connect to it, so cannot block it either.
+  reach the folder nor pass the check, so cannot trigger a stop;
+- the listener reads every connection's request at once (one thread, non-blocking) and
+  drops a peer silent for :data:`READ_TIMEOUT_S`: no connection, even of the same user,
+  delays another's stop;
+- a server is the one server of its database (:class:`ServerGuard`): it holds a lock in
+  the files folder that names its PID and port, and refuses to start when it cannot
+  take that lock or make its stop socket. ``vibrofocus serve`` prints how to stop it
+  only once both are done.
+
+The client (:func:`request_stop`) believes only a socket that can be the server's: the
+socket and its folder must be the user's own (or root's) and closed to others, and the
+peer that answers must run as the user (or root). On any doubt it says "not stopped"
+and to switch the amplifier off.
 """
 
 from __future__ import annotations
@@ -23,22 +34,36 @@ import hashlib
 import json
 import logging
 import os
+import selectors
 import socket
+import stat
 import struct
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
 from ..errors import StudyError, ValidationError
+from .private import owner_name
 
-__all__ = ["stop_all", "stop_socket_path", "StopListener", "request_stop"]
+__all__ = ["stop_all", "stop_socket_path", "StopListener", "ServerGuard", "request_stop", "READ_TIMEOUT_S"]
 
 log = logging.getLogger(__name__)
 
 #: Longest path a Unix socket can be bound at (``sun_path`` less its final NUL), bytes.
 _MAX_SOCKET_PATH = 107
-#: What the client sends, and the largest request read.
+#: What the client sends.
 _REQUEST = b"stop\n"
+#: Largest request read, bytes.
+_MAX_REQUEST = 64
+#: Longest wait for a connection's request once it is accepted, s; a silent peer is then dropped.
+READ_TIMEOUT_S = 0.3
+#: Most connections waiting for their request at once; beyond it the oldest is dropped.
+MAX_PENDING = 64
+#: The lock file in the files folder held by the one server of a database.
+LOCK_NAME = "server.lock"
+#: How every failure of ``vibrofocus stop`` ends.
+_SWITCH_OFF = "switch the amplifier off"
 
 
 def stop_all(web: Any) -> list[str]:
@@ -104,15 +129,61 @@ def _peer_uid(conn: socket.socket) -> int | None:
     return struct.unpack("3i", creds)[1]
 
 
+def _trusted_uid(uid: int) -> bool:
+    """This user, or root."""
+    return uid in (os.geteuid(), 0)
+
+
+def _socket_problem(path: Path, *, socket_too: bool = True) -> str | None:
+    """What makes the stop socket at ``path`` (or its folder) one this user cannot trust; None if nothing.
+
+    The folder and the socket must be this user's (or root's), not links, and closed to
+    other users: else another user may have made them, and may answer in the server's place.
+    """
+    if os.name == "nt":  # no owners or modes to check there
+        return None
+    folder = path.parent
+    try:
+        st = os.lstat(folder)
+    except OSError as exc:
+        return f"its folder {folder} cannot be read ({exc.strerror or exc})"
+    if stat.S_ISLNK(st.st_mode):
+        return f"its folder {folder} is a symbolic link"
+    if not stat.S_ISDIR(st.st_mode):
+        return f"{folder} is not a folder"
+    if not _trusted_uid(st.st_uid):
+        return f"its folder {folder} belongs to {owner_name(st.st_uid)}, not to you"
+    if stat.S_IMODE(st.st_mode) & 0o077:
+        return f"its folder {folder} is open to other users (mode {stat.S_IMODE(st.st_mode):04o})"
+    if not socket_too:
+        return None
+    try:
+        st = os.lstat(path)
+    except OSError as exc:
+        return f"{path} cannot be read ({exc.strerror or exc})"
+    if not stat.S_ISSOCK(st.st_mode):
+        return f"{path} is not a socket"
+    if not _trusted_uid(st.st_uid):
+        return f"{path} belongs to {owner_name(st.st_uid)}, not to you"
+    if stat.S_IMODE(st.st_mode) & 0o077:
+        return f"{path} is open to other users (mode {stat.S_IMODE(st.st_mode):04o})"
+    return None
+
+
 class StopListener:
     """A thread answering ``vibrofocus stop`` on the server's stop socket.
+
+    One thread reads every connection's request at once, so that no connection delays
+    another's; a peer that sends nothing for :data:`READ_TIMEOUT_S` is dropped, and
+    beyond :data:`MAX_PENDING` waiting connections the oldest is.
 
     Parameters
     ----------
     web : WebState
         The app's state (:func:`stop_all` runs on it).
     path : Path
-        The socket's path (:func:`stop_socket_path`).
+        The socket's path (:func:`stop_socket_path`); its folder must exist and be this
+        user's alone.
     """
 
     def __init__(self, web: Any, path: Path) -> None:
@@ -120,27 +191,45 @@ class StopListener:
         self._sock: socket.socket | None = None
         self._thread: threading.Thread | None = None
         self._closing = False
+        self._wake: tuple[int, int] | None = None
+        self._inode: int | None = None
 
     def start(self) -> bool:
-        """Bind the socket and start answering; False (with a warning logged) if it cannot be made."""
+        """Bind the socket and start answering.
+
+        Returns
+        -------
+        bool
+            True.
+
+        Raises
+        ------
+        StudyError
+            The socket cannot be made: no Unix sockets, a folder that is not this user's
+            alone, another server answering there, or a system error.
+        """
         if not hasattr(socket, "AF_UNIX"):
-            return False
+            raise StudyError("'vibrofocus stop' needs Unix sockets, which this system does not have")
+        problem = _socket_problem(self.path, socket_too=False)
+        if problem:
+            raise StudyError(f"the stop socket {self.path} cannot be made: {problem}")
         try:
-            self.path.parent.mkdir(mode=0o700, parents=True, exist_ok=True)
-            st = self.path.parent.stat()
-            if st.st_uid != os.getuid() or st.st_mode & 0o077:
-                raise OSError(f"{self.path.parent} is not a folder only this user can enter")
             self._clear_stale()
             sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
             old = os.umask(0o177)  # 0600 from the start: no window where others could connect
             try:
                 sock.bind(str(self.path))
+            except OSError:
+                sock.close()
+                raise
             finally:
                 os.umask(old)
-            sock.listen(8)
+            sock.listen(socket.SOMAXCONN)
+            sock.setblocking(False)
+            self._inode = os.lstat(self.path).st_ino
+            self._wake = os.pipe()
         except OSError as exc:
-            log.warning("'vibrofocus stop' is not available for this server (%s); the page's emergency stop still is", exc)
-            return False
+            raise StudyError(f"the stop socket {self.path} cannot be made ({exc.strerror or exc})") from None
         self._sock = sock
         self._thread = threading.Thread(target=self._serve, name="vibrofocus-stop-socket", daemon=True)
         self._thread.start()
@@ -149,23 +238,29 @@ class StopListener:
     def close(self) -> None:
         """Stop answering and remove the socket."""
         self._closing = True
-        sock, self._sock = self._sock, None
-        if sock is not None:
+        if self._wake is not None:
             try:
-                sock.shutdown(socket.SHUT_RDWR)
-            except OSError:
-                pass
-            sock.close()
-            try:
-                self.path.unlink()
+                os.write(self._wake[1], b"x")
             except OSError:
                 pass
         if self._thread is not None:
-            self._thread.join(2.0)
+            self._thread.join(5.0)
+        sock, self._sock = self._sock, None
+        if sock is not None:
+            sock.close()
+            try:
+                if os.lstat(self.path).st_ino == self._inode:  # ours, not a later server's
+                    self.path.unlink()
+            except OSError:
+                pass
+        if self._wake is not None:
+            for fd in self._wake:
+                os.close(fd)
+            self._wake = None
 
     def _clear_stale(self) -> None:
         """Remove a socket left by a server that died; refuse if one still answers there."""
-        if not (self.path.exists() or self.path.is_symlink()):
+        if not os.path.lexists(self.path):
             return
         probe = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         probe.settimeout(1.0)
@@ -178,39 +273,211 @@ class StopListener:
             probe.close()
         raise OSError(f"another server already answers at {self.path}")
 
+    # ------------------------------------------------------------------ the thread
     def _serve(self) -> None:
-        while not self._closing:
+        sel = selectors.DefaultSelector()
+        sel.register(self._sock, selectors.EVENT_READ, "accept")
+        sel.register(self._wake[0], selectors.EVENT_READ, "wake")
+        pending: dict[socket.socket, tuple[float, bytearray]] = {}  # oldest first
+        try:
+            while not self._closing:
+                timeout = max(0.0, min(d for d, _ in pending.values()) - time.monotonic()) if pending else None
+                for key, _ in sel.select(timeout):
+                    if key.data == "wake":
+                        return
+                    if key.data == "accept":
+                        self._accept(sel, pending)
+                    else:
+                        self._read(sel, pending, key.fileobj)
+                now = time.monotonic()
+                for conn in [c for c, (deadline, _) in pending.items() if deadline <= now]:
+                    self._drop(sel, pending, conn)  # silent too long
+        except Exception:  # noqa: BLE001 - say so: the stop socket is gone
+            log.exception("the stop socket stopped answering; the page's emergency stop still works")
+        finally:
+            for conn in list(pending):
+                self._drop(sel, pending, conn)
+            sel.close()
+
+    def _accept(self, sel: selectors.BaseSelector, pending: dict) -> None:
+        while True:
             try:
                 conn, _ = self._sock.accept()
+            except (BlockingIOError, InterruptedError):
+                return
             except OSError:
                 return  # closed
-            with conn:
-                try:
-                    self._answer(conn)
-                except Exception:  # noqa: BLE001 - the listener must keep answering
-                    log.exception("the stop socket could not answer a request")
+            uid = _peer_uid(conn)
+            if uid is not None and not _trusted_uid(uid):
+                self._reply(conn, {"error": "not the user running this server"})
+                continue
+            if len(pending) >= MAX_PENDING:
+                self._drop(sel, pending, next(iter(pending)))
+            conn.setblocking(False)
+            pending[conn] = (time.monotonic() + READ_TIMEOUT_S, bytearray())
+            sel.register(conn, selectors.EVENT_READ, "read")
 
-    def _answer(self, conn: socket.socket) -> None:
-        uid = _peer_uid(conn)
-        if uid is not None and uid not in (os.getuid(), 0):
-            conn.sendall(json.dumps({"error": "not the user running this server"}).encode() + b"\n")
+    def _read(self, sel: selectors.BaseSelector, pending: dict, conn: socket.socket) -> None:
+        try:
+            chunk = conn.recv(_MAX_REQUEST)
+        except (BlockingIOError, InterruptedError):
             return
-        conn.settimeout(2.0)
-        data = b""
-        while not data.endswith(b"\n") and len(data) < 64:
-            chunk = conn.recv(64)
-            if not chunk:
-                break
-            data += chunk
-        if data != _REQUEST:
-            conn.sendall(json.dumps({"error": "unknown request"}).encode() + b"\n")
+        except OSError:
+            chunk = b""
+        if not chunk:
+            self._drop(sel, pending, conn)
             return
-        done = stop_all(self.web)
-        conn.sendall(json.dumps({"stopped": done}).encode() + b"\n")
+        data = pending[conn][1]
+        data += chunk
+        if not (data.endswith(b"\n") or len(data) >= _MAX_REQUEST):
+            return
+        sel.unregister(conn)
+        del pending[conn]
+        if bytes(data) != _REQUEST:
+            self._reply(conn, {"error": "unknown request"})
+            return
+        try:
+            done = stop_all(self.web)
+        except Exception:  # noqa: BLE001 - the listener must keep answering
+            log.exception("the stop socket could not answer a request")
+            self._reply(conn, {"error": "the stop failed on the server; its terminal says why"})
+            return
+        self._reply(conn, {"stopped": done})
+
+    @staticmethod
+    def _drop(sel: selectors.BaseSelector, pending: dict, conn: socket.socket) -> None:
+        pending.pop(conn, None)
+        try:
+            sel.unregister(conn)
+        except (KeyError, ValueError):
+            pass
+        conn.close()
+
+    @staticmethod
+    def _reply(conn: socket.socket, answer: dict) -> None:
+        try:
+            conn.settimeout(1.0)
+            conn.sendall(json.dumps(answer).encode() + b"\n")
+        except OSError:
+            pass
+        finally:
+            conn.close()
+
+
+class ServerGuard:
+    """What makes a server the one server of its database, reachable by ``vibrofocus stop``.
+
+    - :meth:`claim`: a lock (``flock``) on ``server.lock`` in the database's files folder,
+      held while the server runs, which records its PID and port. A second server of the
+      same database is refused, naming the first. The lock goes with the process, so a
+      server that died leaves nothing to clean up.
+    - :meth:`open_stop_socket`: the stop socket (:class:`StopListener`).
+
+    Parameters
+    ----------
+    web : WebState
+        The app's state (its ``db_path`` and ``data_dir``).
+    """
+
+    def __init__(self, web: Any) -> None:
+        self.web = web
+        self.listener: StopListener | None = None
+        self._fd: int | None = None
+
+    def claim(self, port: int | None = None) -> None:
+        """Take the database's lock, recording this process's PID and ``port``.
+
+        Raises
+        ------
+        StudyError
+            Another server holds it (its PID and port are named), or the lock file is
+            not this user's plain file.
+        """
+        try:
+            import fcntl
+        except ImportError:  # no flock (Windows): nothing to guard with
+            return
+        path = self.web.data_dir / LOCK_NAME  # the files folder is checked: ours alone, no link
+        flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0) | os.O_NONBLOCK
+        try:
+            fd = os.open(path, flags, 0o600)
+        except OSError as exc:
+            raise StudyError(f"the server lock {path} cannot be opened ({exc.strerror or exc})") from None
+        try:
+            st = os.fstat(fd)
+            if not stat.S_ISREG(st.st_mode) or st.st_uid != os.geteuid() or st.st_nlink != 1:
+                raise StudyError(f"the server lock {path} is not a plain file of yours; remove it")
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except BlockingIOError:
+                raise StudyError(
+                    f"another 'vibrofocus serve' already serves the study database {self.web.db_path} "
+                    f"({_holder(fd)}): stop it first, or give this one another --db") from None
+        except BaseException:
+            os.close(fd)
+            raise
+        self._fd = fd
+        self.record_port(port)
+
+    def record_port(self, port: int | None) -> None:
+        """Write this process's PID and its TCP ``port`` in the lock file (for a second server to name)."""
+        if self._fd is None:
+            return
+        data = json.dumps({"pid": os.getpid(), "port": port}).encode()
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, data, 0)
+
+    def open_stop_socket(self) -> None:
+        """Make the stop socket and answer on it.
+
+        Raises
+        ------
+        StudyError
+            No path fits a Unix socket, or the socket cannot be made (:meth:`StopListener.start`).
+        """
+        path = stop_socket_path(self.web.db_path)
+        if path is None:
+            raise StudyError(
+                f"the study database's path {self.web.db_path} is too long for the socket of 'vibrofocus stop' "
+                f"(at most {_MAX_SOCKET_PATH} bytes) and XDG_RUNTIME_DIR is not set: use a shorter path, or set "
+                "XDG_RUNTIME_DIR to a folder only you can enter")
+        listener = StopListener(self.web, path)
+        listener.start()
+        self.listener = listener
+
+    def close(self) -> None:
+        """Close the stop socket and give the lock back."""
+        if self.listener is not None:
+            self.listener.close()
+            self.listener = None
+        if self._fd is not None:
+            os.close(self._fd)  # the lock goes with it
+            self._fd = None
+
+    def __enter__(self) -> ServerGuard:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _holder(fd: int) -> str:
+    """The PID and port a lock file names, as people read them."""
+    try:
+        info = json.loads(os.pread(fd, 256, 0))
+        pid, port = int(info["pid"]), info.get("port")
+    except (OSError, ValueError, TypeError, KeyError):
+        return "its PID and port are not known yet"
+    if isinstance(port, int) and not isinstance(port, bool):
+        return f"PID {pid}, port {port}"
+    return f"PID {pid}"
 
 
 def request_stop(db_path: str | os.PathLike, timeout_s: float = 5.0) -> list[str]:
     """Ask the ``vibrofocus serve`` of ``db_path`` to stop everything now.
+
+    The socket is believed only if it and its folder are the user's own (or root's) and
+    closed to others, and the peer that answers runs as the user (or root).
 
     Parameters
     ----------
@@ -227,33 +494,60 @@ def request_stop(db_path: str | os.PathLike, timeout_s: float = 5.0) -> list[str
     Raises
     ------
     ValidationError
-        No server of this database answers (none running, or it has no stop socket).
+        Not stopped: no server of this database answers (none running, or it has no stop
+        socket), the socket cannot be trusted, or the server refused or gave no answer.
+        The message starts with "not stopped" and ends with "switch the amplifier off".
     """
     path = stop_socket_path(db_path)
     where = f"--db {db_path}"
-    if path is None or not (path.exists() or path.is_symlink()):
-        raise ValidationError(f"{where}: no 'vibrofocus serve' of this database is running (no stop socket); "
-                              "if a server is running, use its page's emergency stop or switch the amplifier off")
-    sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    sock.settimeout(timeout_s)
+    if path is None or not os.path.lexists(path):
+        raise ValidationError(f"not stopped: {where}: no 'vibrofocus serve' of this database is running (no stop socket); "
+                              f"if a server is running, use its page's emergency stop or {_SWITCH_OFF}")
+    problem = _socket_problem(path)
+    if problem:
+        raise ValidationError(f"not stopped: {where}: the stop socket cannot be the server's ({problem}); {_SWITCH_OFF}")
+    deadline = time.monotonic() + timeout_s
+    sock = None
     try:
-        sock.connect(str(path))
+        while True:
+            sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            sock.settimeout(max(0.01, deadline - time.monotonic()))
+            try:
+                sock.connect(str(path))
+                break
+            except BlockingIOError:  # its queue of connections is full for now (a busy or flooded server)
+                sock.close()
+                if time.monotonic() >= deadline:
+                    raise
+                time.sleep(0.02)
+        sock.settimeout(max(0.01, deadline - time.monotonic()))
+        uid = _peer_uid(sock)
+        if uid is not None and not _trusted_uid(uid):
+            raise ValidationError(f"not stopped: {where}: the program at the stop socket runs as {owner_name(uid)}, "
+                                  f"not as you: it is not the server; {_SWITCH_OFF}")
         sock.sendall(_REQUEST)
         answer = b""
-        while not answer.endswith(b"\n"):
+        while not answer.endswith(b"\n") and len(answer) < 1 << 20:
             chunk = sock.recv(65536)
             if not chunk:
                 break
             answer += chunk
     except OSError as exc:
-        raise ValidationError(f"{where}: the server's stop socket did not answer ({exc.strerror or exc}); "
-                              "switch the amplifier off") from None
+        raise ValidationError(f"not stopped: {where}: the server's stop socket did not answer "
+                              f"({exc.strerror or exc}); {_SWITCH_OFF}") from None
     finally:
-        sock.close()
+        if sock is not None:
+            sock.close()
     try:
         reply = json.loads(answer)
     except ValueError:
-        raise ValidationError(f"{where}: the server gave no answer to the stop; switch the amplifier off") from None
+        reply = None
+    if not isinstance(reply, dict):
+        raise ValidationError(f"not stopped: {where}: the server gave no answer to the stop; {_SWITCH_OFF}")
     if "error" in reply:
-        raise ValidationError(f"{where}: the server refused the stop ({reply['error']})")
-    return [str(x) for x in reply.get("stopped", [])]
+        raise ValidationError(f"not stopped: {where}: the server refused the stop ({str(reply['error'])[:200]}); "
+                              f"{_SWITCH_OFF}")
+    stopped = reply.get("stopped")
+    if not isinstance(stopped, list):
+        raise ValidationError(f"not stopped: {where}: the server's answer says nothing was stopped; {_SWITCH_OFF}")
+    return [str(x) for x in stopped]

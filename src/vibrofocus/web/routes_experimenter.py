@@ -655,8 +655,9 @@ def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require
             raise HTTPException(409, detail="An analysis is already running. Wait for it to finish, then run it again.")
         web.analyses[name] = job
     try:
+        private_dir(web.data_dir / "reports")  # ours alone, never a link
         out = web.data_dir / "reports" / name
-        out.mkdir(parents=True, mode=0o700)
+        out.mkdir(mode=0o700)
         trials = out / "trials.csv"
         with web.db:
             n = web.store.export_trials_csv(trials)
@@ -701,7 +702,9 @@ def analysis_job(name: str, web: WebState = Depends(require_token)) -> dict[str,
 @router.get("/reports/{name}/{file_path:path}", include_in_schema=False)
 def report_file(name: str, file_path: str, web: WebState = Depends(require_token)) -> FileResponse:
     """Files of an analysis report (HTML, PNG, JSON)."""
-    root = (web.data_dir / "reports").resolve()
+    reports = web.data_dir / "reports"
+    private_dir(reports)  # a link would serve another folder as the lab's reports
+    root = reports.resolve()
     missing = HTTPException(404, detail="There is no such report file.")
     if "\x00" in name or "\x00" in file_path:  # the file system cannot even look such a name up
         raise missing

@@ -24,7 +24,7 @@ from fastapi import HTTPException, Request
 from .._templates import template_environment
 from ..errors import StudyError, VibrofocusError
 from .logins import LoginSessions
-from .private import owner_only, private_dir, private_file, private_journal
+from .private import load_or_make_secret, private_dir, private_file, private_journal
 from .public_text import public_text
 from .security import same_secret
 from .session_runner import Pace, SessionRunner
@@ -226,7 +226,7 @@ class WebState:
     def data_dir(self) -> Path:
         """Folder for calibrations, exports and reports, beside the database."""
         d = self.db_path.parent / f"{self.db_path.stem}-files"
-        private_dir(d)
+        private_dir(d, "files folder")
         return d
 
     # ------------------------------------------------------------------ access
@@ -682,22 +682,3 @@ def login_cookie(cookie_header: str | None) -> str | None:
         if name == TOKEN_COOKIE:
             return value
     return None
-
-
-def load_or_make_secret(db_path: Path) -> bytes:
-    """The HMAC secret of participant keys, kept beside the database (mode 0600, enforced)."""
-    path = db_path.with_name(db_path.name + ".web-secret")
-    if path.exists():
-        owner_only(path, 0o600)
-        return bytes.fromhex(path.read_text().strip())
-    secret = secrets.token_bytes(32)
-    # O_EXCL: two servers starting at once must not each write their own secret.
-    try:
-        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
-    except FileExistsError:
-        return bytes.fromhex(path.read_text().strip())
-    with os.fdopen(fd, "w") as fh:
-        fh.write(secret.hex())
-    return secret
-
-
