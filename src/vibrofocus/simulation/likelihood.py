@@ -37,7 +37,9 @@ and with unfused and conflict-aware percepts, that the sampler's answer frequenc
 match these probabilities within Monte Carlo error in every stimulus x answer cell.
 
 A probability the quadrature puts at 0 (an answer far beyond the model's tails) gives
-``-inf``: the model, as it stands, has no lapse rate.
+``-inf``: the model, as it stands, has no lapse rate. The likelihood is that of the
+model's own answer rule (:func:`~vibrofocus.simulation.perception.posterior_ratio_rule`);
+other rules given to ``draw_answers(rule=...)`` are not covered.
 """
 
 from __future__ import annotations
@@ -219,6 +221,7 @@ def _lines(mean: np.ndarray, sd: np.ndarray, locs: np.ndarray, q: Quadrature):
     stretches of constant distance order along each line, on the probability scale of
     ``v``, sorted, (M, I, S + 1).
     """
+    sd = np.maximum(sd, 1e-12)  # a place known to a picometre: as good as exact
     j, k = np.triu_indices(locs.shape[0], 1)
     row = np.abs(locs[j, 1] - locs[k, 1]) <= 1e-9
     x_jump = np.unique(np.round((locs[j[row], 0] + locs[k[row], 0]) / 2.0, 12))
