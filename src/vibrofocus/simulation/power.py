@@ -463,10 +463,9 @@ def directional_shares(results: dict[int, list[dict[str, Any]]], alpha: float = 
             ok = np.isfinite(pa) & np.isfinite(pr)
             if not ok.any():
                 continue
-            paper = float(np.mean(pa[ok] < alpha))
-            reverse = float(np.mean(pr[ok] < alpha))
-            out.setdefault(name, {})[str(int(n))] = {"paper": paper, "reverse": reverse,
-                                                     "neither": float(1.0 - paper - reverse)}
+            a, r = pa[ok] < alpha, pr[ok] < alpha  # exclusive: one of the two p is 1
+            out.setdefault(name, {})[str(int(n))] = {"paper": float(np.mean(a)), "reverse": float(np.mean(r)),
+                                                     "neither": float(np.mean(~a & ~r))}
     return out
 
 
@@ -489,18 +488,20 @@ def direction_sentences(directions: dict[str, dict[str, dict[int, str]]], n: int
         c = CONTRASTS[name]
         at = n if n is not None else max(max(v) for v in by_h.values())
         d = {h: v.get(at, "unknown") for h, v in by_h.items()}
-        reads = {"paper": f"predicts {c['paper_reads']} (the paper's direction)",
-                 "reverse": f"predicts the reverse, {c['reverse_reads']}",
-                 "none": "shows neither direction", "unknown": "was not simulated at this N"}
+        reads = {"paper": (f"predicts {c['paper_reads']} (the paper's direction)",
+                           f"predict {c['paper_reads']} (the paper's direction)"),
+                 "reverse": (f"predicts the reverse, {c['reverse_reads']}", f"predict the reverse, {c['reverse_reads']}"),
+                 "none": ("shows neither direction", "show neither direction"),
+                 "unknown": ("was not simulated at this N", "were not simulated at this N")}
         kinds = list(dict.fromkeys(d.values()))
         if len(kinds) == 1:
             who = "every hypothesis" if len(d) > 1 else f"{next(iter(d))}"
-            out[name] = f"at N = {at}, {who} {reads[kinds[0]]} for {c['label']}"
+            out[name] = f"at N = {at}, {who} {reads[kinds[0]][0]} for {c['label']}"
         else:
             parts = []
             for k in kinds:
                 hs = [h for h, v in d.items() if v == k]
-                parts.append(f"{' and '.join(hs)} {reads[k]}")
+                parts.append(f"{' and '.join(hs)} {reads[k][len(hs) > 1]}")
             out[name] = f"at N = {at}, the direction of {c['label']} depends on the hypothesis: " + "; ".join(parts)
     return out
 
