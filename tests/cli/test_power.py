@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import pandas as pd
+import pytest
 from typer.testing import CliRunner
 
 from vibrofocus.cli.main import app
@@ -22,17 +23,37 @@ def test_power_writes_table_plot_and_json(tmp_path):
     assert "inverse error below funneling" in " ".join(res.output.split())
     table = pd.read_csv(out / "power.csv")
     assert set(table["hypothesis"]) == {"v3-centroid", "grid-peak", "level-reliability"}
-    assert set(table["n_participants"]) == {4, 6} and len(table) == 3 * 2 * (7 + 2)
-    assert {"s1_inverse_below", "s2_inverse_fewer"} <= set(table["test"])
-    # Robust only where every hypothesis agrees on powered (>= 0.8) or not.
+    assert set(table["n_participants"]) == {4, 6} and len(table) == 3 * 2 * (7 + 2 + 2)
+    assert {"s1_inverse_below", "s2_inverse_fewer", "s1_inverse_above", "s2_inverse_more"} <= set(table["test"])
+    report = json.loads((out / "power.json").read_text())
+    directions = report["directions"]
+    method_tests = {"s1_method": "s1_inverse_vs_funneling", "s1_inverse_below": "s1_inverse_vs_funneling",
+                    "s1_inverse_above": "s1_inverse_vs_funneling", "s2_method": "s2_inverse_vs_funneling",
+                    "s2_inverse_fewer": "s2_inverse_vs_funneling", "s2_inverse_more": "s2_inverse_vs_funneling"}
+    # Robust only where every hypothesis agrees on powered (>= 0.8) or not and, for a method
+    # test, on the direction of the effect.
     for (test, n), rows in table.groupby(["test", "n_participants"]):
         verdicts = set(rows["power"].dropna() >= 0.8)
-        assert rows["robust"].iloc[0] == (len(verdicts) == 1 and rows["power"].notna().all())
+        agree = len(verdicts) == 1 and rows["power"].notna().all()
+        if test in method_tests:
+            agree = agree and len({d[str(n)] for d in directions[method_tests[test]].values()}) == 1
+        assert rows["robust"].iloc[0] == agree
+    # The directional shares: contrast -> hypothesis -> N -> paper / reverse / neither.
+    for contrast in ("s1_inverse_vs_funneling", "s2_inverse_vs_funneling"):
+        assert set(report["directional"][contrast]) == set(table["hypothesis"])
+        for by_n in report["directional"][contrast].values():
+            assert set(by_n) == {"4", "6"}
+            for shares in by_n.values():
+                assert set(shares) == {"paper", "reverse", "neither"}
+                assert abs(sum(shares.values()) - 1) < 1e-12 and min(shares.values()) >= 0
+        assert contrast in report["direction_sentences"]
+    flat = " ".join(res.output.split())
+    assert "the reverse" in flat and "d_z = 0.79" in flat
+    assert report["paper_implied"]["d_z"] == pytest.approx(0.785, abs=0.001)
     ran = table["n_studies"] > 0  # a test that never ran (too few participants kept) has no power
     assert table.loc[ran, "power"].between(0, 1).all() and table.loc[~ran, "power"].isna().all()
     assert ran[table["test"].str.startswith("s1_")].all()
     assert (table["model"].str.contains("not data") & table["model"].str.contains("model v3")).all()
-    report = json.loads((out / "power.json").read_text())
     assert report["design"]["n_studies"] == 5 and "not data" in report["label"]
     assert set(report["hypotheses"]) == set(table["hypothesis"]) and report["levels"] == "paper"
     assert (out / "power.png").stat().st_size > 1000

@@ -9,7 +9,10 @@ from scipy import stats
 from vibrofocus.analysis.fast import rm_anova2_batch
 from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
-from vibrofocus.simulation.power import TESTS, PowerDesign, power_table, run_power, study_statistics
+from vibrofocus.simulation.bank import StudyArrays
+from vibrofocus.simulation.power import (TESTS, PowerDesign, direction_sentences, directional_shares,
+                                         effect_directions, paper_implied_power, power_table, robust_conclusions,
+                                         run_power, study_statistics)
 
 
 @pytest.mark.parametrize(("n", "effect"), [(10, 0.6), (20, 0.5)])
@@ -123,3 +126,75 @@ def test_power_for_the_minimax_design_from_a_bank_that_renders_it(tmp_path):
     assert result["design"]["methods"] == ["inverse", "minimax"]
     rows = {r["test"]: r for r in result["table"]}
     assert rows["s1_method"]["n_studies"] == 4 and 0.0 <= rows["s1_method"]["power"] <= 1.0
+
+
+def test_paper_implied_power_matches_monte_carlo_t_tests():
+    # The paper: Bonferroni p = 0.007 over 3 method pairs, 20 participants -> t(19) ~ 3.5,
+    # d_z ~ 0.79; a Bonferroni-corrected paired t replication of N has power 0.38 / 0.80 /
+    # 0.95 at N = 10 / 20 / 30, and 0.09 / 0.22 / 0.36 at half the effect.
+    imp = paper_implied_power((10, 20, 30))
+    assert imp["t"] == pytest.approx(3.51, abs=0.01) and imp["d_z"] == pytest.approx(0.785, abs=0.001)
+    for n, full, half in ((10, 0.38, 0.09), (20, 0.80, 0.22), (30, 0.95, 0.36)):
+        assert imp["power"][str(n)] == pytest.approx(full, abs=0.006)
+        assert imp["power_half"][str(n)] == pytest.approx(half, abs=0.006)
+    # Independently: simulated replications, each a paired t-test of N differences of mean
+    # d_z (SD 1), Bonferroni over 3 pairs.
+    rng = np.random.default_rng(2023)
+    n_studies = 20000
+    for n in (10, 20, 30):
+        for key, eff in (("power", imp["d_z"]), ("power_half", imp["d_z"] / 2)):
+            d = rng.normal(eff, 1.0, (n_studies, n))
+            p = stats.ttest_1samp(d, 0.0, axis=1).pvalue
+            share = np.mean(np.minimum(p * 3, 1.0) < 0.05)
+            se = np.sqrt(share * (1 - share) / n_studies)
+            assert abs(share - imp[key][str(n)]) < 4 * se + 1e-3, (n, key, share, imp[key][str(n)])
+
+
+def _rows(powers):
+    return [{"n_participants": 20, "test": t, "label": t, "power": p, "n_studies": 200, "se": 0.0}
+            for t, p in powers.items()]
+
+
+def test_robust_only_where_the_hypotheses_agree_on_the_direction():
+    # Both hypotheses power the Study 1 method test, in opposite directions: no conclusion.
+    a = _rows({"s1_location": 1.0, "s1_method": 1.0, "s1_inverse_below": 0.9, "s1_inverse_above": 0.0})
+    b = _rows({"s1_location": 1.0, "s1_method": 1.0, "s1_inverse_below": 0.0, "s1_inverse_above": 0.9})
+    rows = {r["test"]: r for r in robust_conclusions({"a": a, "b": b})}
+    assert rows["s1_location"]["robust"] and rows["s1_location"]["direction"] is None
+    for t in ("s1_method", "s1_inverse_below", "s1_inverse_above"):
+        assert not rows[t]["robust"] and rows[t]["conclusion"] == "depends on the hypothesis"
+        assert rows[t]["direction"] == {"a": "paper", "b": "reverse"}
+    # Both not powered in the paper's direction (0.0 and 0.0) but one powered in the reverse.
+    assert rows["s1_inverse_below"]["power"] == {"a": 0.9, "b": 0.0}
+    # The same direction under both: robust.
+    same = {r["test"]: r for r in robust_conclusions({"a": a, "b": a})}
+    assert same["s1_method"]["robust"] and same["s1_method"]["conclusion"] == "powered"
+    sentence = direction_sentences(effect_directions({"a": a, "b": b}))["s1_inverse_vs_funneling"]
+    assert "depends on the hypothesis" in sentence and "a predicts inverse < funneling" in sentence
+    assert "b predicts the reverse" in sentence
+    agree = direction_sentences(effect_directions({"a": a, "b": a}))["s1_inverse_vs_funneling"]
+    assert agree.startswith("at N = 20, every hypothesis predicts inverse < funneling")
+    # Neither direction shows when the two shares are within two standard errors.
+    tie = _rows({"s1_inverse_below": 0.02, "s1_inverse_above": 0.01})
+    assert effect_directions({"a": tie})["s1_inverse_vs_funneling"]["a"][20] == "none"
+
+
+def test_directional_shares_count_paper_reverse_and_neither():
+    results = {10: [{"s1_inverse_below_p": 0.01, "s1_inverse_above_p": 1.0},
+                    {"s1_inverse_below_p": 1.0, "s1_inverse_above_p": 0.001},
+                    {"s1_inverse_below_p": 1.0, "s1_inverse_above_p": 0.3},
+                    {"s1_inverse_below_p": 1.0, "s1_inverse_above_p": 0.02}]}
+    shares = directional_shares(results)
+    assert shares == {"s1_inverse_vs_funneling": {"10": {"paper": 0.25, "reverse": 0.5, "neither": 0.25}}}
+
+
+def test_study_statistics_reports_the_reverse():
+    # Funneling's error clearly below the inverse filter's: significant in the reverse only.
+    rng = np.random.default_rng(4)
+    err = 8.0 + rng.normal(0, 0.5, (12, 9, 3))
+    err[:, :, 1] += 2.0  # methods: funneling, inverse, combination
+    count = 2.0 + rng.normal(0, 0.1, (12, 9, 3))
+    count[:, :, 1] += 0.5
+    s = study_statistics(StudyArrays(err, count, count.copy()), methods=("funneling", "inverse", "combination"))
+    assert s["s1_inverse_above_p"] < 0.05 and s["s1_inverse_below_p"] == 1.0
+    assert s["s2_inverse_more_p"] < 0.05 and s["s2_inverse_fewer_p"] == 1.0

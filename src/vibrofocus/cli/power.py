@@ -71,7 +71,8 @@ def power_command(
     fitted to the source paper's statistics), not data, under each hypothesis of how they
     read the felt field (--hypotheses): the power is that of the model's effect sizes. The
     paper's directional claims (inverse below funneling; fewer points with the inverse
-    filter) are reported beside the omnibus tests.
+    filter) and their reverse are reported beside the omnibus tests, with the power that
+    the paper's own Study 1 statistic implies for a replication.
     """
     with user_errors():
         from rich.console import Console
@@ -81,7 +82,7 @@ def power_command(
         from .._atomic import allow_overwrite
         from .._validation import check_in_range
         from ..simulation.perception import MODEL_LABEL
-        from ..simulation.power import DIRECTIONAL_TESTS, TESTS, PowerDesign, run_power
+        from ..simulation.power import DIRECTIONAL_TESTS, REVERSE_TESTS, TESTS, PowerDesign, run_power
 
         allow_overwrite(force)
         from ..errors import ValidationError
@@ -122,7 +123,8 @@ def power_command(
         console.print(f"[yellow]{MODEL_LABEL}[/]")
         import dataclasses
 
-        from ..simulation.power import robust_conclusions
+        from ..simulation.power import (CONTRASTS, direction_sentences, effect_directions, paper_implied_power,
+                                        robust_conclusions)
 
         per: dict[str, dict] = {}
         with Progress(
@@ -140,17 +142,24 @@ def power_command(
         result = dict(per[names[0]])
         result["hypotheses"] = {name: {"label": r["label"], "hypothesis": r["hypothesis"], "table": r["table"]}
                                 for name, r in per.items()}
-        result["robust"] = robust_conclusions({name: r["table"] for name, r in per.items()})
+        tables = {name: r["table"] for name, r in per.items()}
+        result["robust"] = robust_conclusions(tables)
+        result["directional"] = {c: {name: r["directional"][c] for name, r in per.items() if c in r["directional"]}
+                                 for c in CONTRASTS if any(c in r["directional"] for r in per.values())}
+        directions = effect_directions(tables)
+        result["directions"] = directions
+        result["direction_sentences"] = direction_sentences(directions)
+        result["paper_implied"] = paper_implied_power(design.n_participants, alpha)
         result["elapsed_s"] = sum(r["elapsed_s"] for r in per.values())
         robust = {(r["test"], r["n_participants"]): r for r in result["robust"]}
         table = Table(title=f"Power by simulation ({MODEL_LABEL}; stimuli at {result['levels']} levels), "
                             f"{design.n_studies} studies per N, alpha {alpha}; *: robust, every hypothesis agrees "
-                            f"on powered (>= 0.8) or not")
+                            f"on powered (>= 0.8) or not and, for a method test, on the direction of the effect")
         table.add_column("test")
         table.add_column("hypothesis")
         for n in design.n_participants:
             table.add_column(f"N={n}", justify="right")
-        for key, label in TESTS + DIRECTIONAL_TESTS:
+        for key, label in TESTS + DIRECTIONAL_TESTS + REVERSE_TESTS:
             for name in names:
                 by = {(r["test"], r["n_participants"]): r for r in per[name]["table"]}
                 if (key, design.n_participants[0]) not in by:
@@ -160,7 +169,16 @@ def power_command(
                     cell = f"{by[(key, n)]['power']:.2f}" if by[(key, n)]["n_studies"] else "not run"
                     cells.append(cell + ("*" if robust.get((key, n), {}).get("robust") else ""))
                 table.add_row(label if name == names[0] else "", name, *cells)
+        if "s1_inverse_vs_funneling" in result["directional"]:
+            imp = result["paper_implied"]
+            label = (f"Study 1 inverse vs funneling, the paper's own effect (Bonferroni p = {imp['p_bonferroni']:g} "
+                     f"-> t({imp['n_paper'] - 1}) = {imp['t']:.2f}, d_z = {imp['d_z']:.2f}; noncentral t)")
+            for k, (key, what) in enumerate((("power", "as published"), ("power_half", "half of it"))):
+                table.add_row(label if k == 0 else "", what,
+                              *[f"{imp[key][str(n)]:.2f}" for n in design.n_participants])
         Console().print(table)
+        for sentence in result["direction_sentences"].values():
+            Console().print(sentence[0].upper() + sentence[1:] + ".")
         console.print(f"{len(names) * each} studies in {result['elapsed_s']:.1f} s")
         if out is not None:
             paths = write_power(result, out)
@@ -195,7 +213,8 @@ def write_power(result: dict, out: Path) -> list[Path]:
                       ignore_index=True)
     table["robust"] = [robust.get((t, n)) for t, n in zip(table["test"], table["n_participants"])]
     csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")
-    keys = ("label", "levels", "hypothesis", "design", "table", "hypotheses", "robust", "elapsed_s")
+    keys = ("label", "levels", "hypothesis", "design", "table", "hypotheses", "robust", "directional", "directions",
+            "direction_sentences", "paper_implied", "elapsed_s")
     js = write_text(out / "power.json", json.dumps({k: result[k] for k in keys if k in result}, indent=1),
                     what="power results")
     first = next(iter(hyps))

@@ -22,11 +22,15 @@ Figures of simulated data
     :func:`model_footer` (the footer that says what in a figure is a model).
 Fitting (:mod:`.fitting`)
     the objective, the search and the adoption of the shipped fits.
+Likelihood (:mod:`.likelihood`)
+    :func:`loglik` (each answer's log-probability given a participant's traits),
+    :func:`marginal_loglik` (integrated over a hypothesis' population), :class:`Stimuli`.
 """
 
 from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
 from .hypotheses import DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis
 from .paper import compare, seed_statistics
+from .likelihood import Stimuli, loglik, marginal_loglik
 from .participants import MODEL_NOTICE, SimulatedParticipant
 from .perception import MODEL_LABEL, MODEL_VERSION, STUDY_SKIN, Percepts, PerceptualModel
 from .power import PowerDesign, power_table, robust_conclusions, run_power, study_statistics
@@ -41,6 +45,9 @@ __all__ = [
     "register_hypothesis",
     "DEFAULT_HYPOTHESIS",
     "robust_conclusions",
+    "loglik",
+    "marginal_loglik",
+    "Stimuli",
     "PerceptualModel",
     "Percepts",
     "MODEL_VERSION",

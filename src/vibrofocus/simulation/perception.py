@@ -82,6 +82,7 @@ __all__ = [
     "TrialPosteriors",
     "trial_posteriors",
     "unfuse",
+    "unfused_probability",
     "location_distances",
     "select_locations",
     "posterior_ratio_rule",
@@ -664,6 +665,21 @@ def trial_posteriors(
     return TrialPosteriors(perceived, post_sd, felt)
 
 
+def unfused_probability(conflict_m: np.ndarray, model: PerceptualModel) -> np.ndarray:
+    """Probability that a felt trial's percept is unfused, shape of ``conflict_m``.
+
+    ``unfused_per_m`` times the cue conflict, capped at 1 (0 where there is no conflict).
+    :func:`unfuse` draws with it, :mod:`vibrofocus.simulation.likelihood` integrates it.
+
+    Parameters
+    ----------
+    conflict_m : ndarray
+        Distance between the skin cue and the drive cue, m (NaN or 0: no conflict).
+    model : PerceptualModel
+    """
+    return np.clip(model.unfused_per_m * np.nan_to_num(np.asarray(conflict_m, dtype=float)), 0.0, 1.0)
+
+
 def unfuse(
     posteriors: TrialPosteriors,
     conflict_m: np.ndarray,
@@ -690,8 +706,7 @@ def unfuse(
         by ``unfused_width``.
     unfused : ndarray of bool, shape (n_trials,)
     """
-    p = np.clip(model.unfused_per_m * np.nan_to_num(np.asarray(conflict_m, dtype=float)), 0.0, 1.0)
-    unfused = (np.asarray(uniform) < p) & posteriors.felt
+    unfused = (np.asarray(uniform) < unfused_probability(conflict_m, model)) & posteriors.felt
     jump = model.unfused_jump_m * np.stack([np.cos(angle), np.sin(angle)], axis=1)
     perceived = posteriors.perceived_m + np.where(unfused[:, None], jump, 0.0)
     sd = np.where(unfused, posteriors.sd_m * model.unfused_width, posteriors.sd_m)

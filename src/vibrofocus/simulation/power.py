@@ -26,7 +26,9 @@ from ..errors import ValidationError
 from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
 from .perception import PerceptualModel
 
-__all__ = ["TESTS", "DIRECTIONAL_TESTS", "ROBUST_POWER", "robust_conclusions", "PowerDesign", "study_statistics", "simulate_statistics", "power_table", "run_power"]
+__all__ = ["TESTS", "DIRECTIONAL_TESTS", "REVERSE_TESTS", "CONTRASTS", "ROBUST_POWER", "robust_conclusions",
+           "directional_shares", "effect_directions", "direction_sentences", "paper_implied_power", "PowerDesign",
+           "study_statistics", "simulate_statistics", "power_table", "run_power"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
@@ -45,6 +47,30 @@ DIRECTIONAL_TESTS: tuple[tuple[str, str], ...] = (
     ("s1_inverse_below", "Study 1 inverse error below funneling (Bonferroni paired t; the paper's direction)"),
     ("s2_inverse_fewer", "Study 2 fewer points with the inverse filter (Bonferroni Wilcoxon; the paper's direction)"),
 )
+#: The same tests significant in the reverse direction: a hypothesis can predict the
+#: opposite of the paper, and "not significant in the paper's direction" does not say so.
+REVERSE_TESTS: tuple[tuple[str, str], ...] = (
+    ("s1_inverse_above", "Study 1 funneling error below inverse (Bonferroni paired t; the reverse)"),
+    ("s2_inverse_more", "Study 2 fewer points with funneling (Bonferroni Wilcoxon; the reverse)"),
+)
+#: The paper's two method contrasts, inverse filter vs funneling: per contrast, its label,
+#: the tests significant in the paper's direction and in the reverse, the omnibus test whose
+#: post hoc direction it is, and how each direction reads.
+CONTRASTS: dict[str, dict[str, str]] = {
+    "s1_inverse_vs_funneling": {
+        "label": "the Study 1 method effect (error)", "paper": "s1_inverse_below", "reverse": "s1_inverse_above",
+        "omnibus": "s1_method", "paper_reads": "inverse < funneling",
+        "reverse_reads": "funneling < inverse"},
+    "s2_inverse_vs_funneling": {
+        "label": "the Study 2 method effect (points selected)", "paper": "s2_inverse_fewer", "reverse": "s2_inverse_more",
+        "omnibus": "s2_method", "paper_reads": "inverse < funneling",
+        "reverse_reads": "funneling < inverse"},
+}
+#: The paper's Bonferroni-corrected p of funneling vs inverse in Study 1 (Sec. III.B), of
+#: 3 method pairs, with 20 participants.
+PAPER_S1_PAIR_P = 0.007
+PAPER_S1_PAIRS = 3
+PAPER_N = 20
 
 
 #: Largest sample size N of a power analysis (memory grows with N x studies).
@@ -194,7 +220,8 @@ def study_statistics(
         ``s2_inverse_fewer`` (Bonferroni Wilcoxon significant, inverse lower), and the
         directional claims' p values of :data:`DIRECTIONAL_TESTS` (``s1_inverse_below_p``,
         ``s2_inverse_fewer_p``: the Bonferroni p where the inverse filter is on the paper's
-        side, else 1).
+        side, else 1) and of :data:`REVERSE_TESTS` (``s1_inverse_above_p``,
+        ``s2_inverse_more_p``: the same where funneling is on the paper's side).
     """
     from ..analysis.fast import friedman_batch, rm_anova2_batch
 
@@ -250,6 +277,9 @@ def study_statistics(
         # on the paper's side, 1 where it is not (significant only in the paper's direction).
         out["s1_inverse_below_p"] = p_pairs[fi] if per[:, inv].mean() < per[:, fun].mean() else 1.0
         out["s2_inverse_fewer_p"] = p_w if cm[:, inv].mean() < cm[:, fun].mean() else 1.0
+        # The reverse: the same tests, significant where funneling is on the paper's side.
+        out["s1_inverse_above_p"] = p_pairs[fi] if per[:, inv].mean() > per[:, fun].mean() else 1.0
+        out["s2_inverse_more_p"] = p_w if cm[:, inv].mean() > cm[:, fun].mean() else 1.0
     return out
 
 
@@ -275,7 +305,7 @@ def simulate_statistics(
 def power_table(
     results: dict[int, list[dict[str, Any]]],
     alpha: float = 0.05,
-    tests: Sequence[tuple[str, str]] = TESTS + DIRECTIONAL_TESTS,
+    tests: Sequence[tuple[str, str]] = TESTS + DIRECTIONAL_TESTS + REVERSE_TESTS,
 ) -> list[dict[str, Any]]:
     """Power per N and test: share of studies with p < alpha and its binomial standard error.
 
@@ -285,8 +315,9 @@ def power_table(
         ``{N: [statistics of each study]}``; each study's dict holds ``<test>_p``.
     alpha : float
     tests : sequence of (key, label)
-        Default :data:`TESTS` then :data:`DIRECTIONAL_TESTS`; a test no study computed
-        (the directional ones without funneling and the inverse filter) is left out.
+        Default :data:`TESTS`, :data:`DIRECTIONAL_TESTS` then :data:`REVERSE_TESTS`; a test
+        no study computed (the directional ones without funneling and the inverse filter)
+        is left out.
 
     Returns
     -------
@@ -315,8 +346,59 @@ def power_table(
 ROBUST_POWER = 0.8
 
 
+def _test_contrast() -> dict[str, str]:
+    """Which contrast's direction each test concludes on (the omnibus method tests: their post hoc)."""
+    out = {}
+    for name, c in CONTRASTS.items():
+        for key in ("paper", "reverse", "omnibus"):
+            out[c[key]] = name
+    return out
+
+
+def effect_directions(tables: dict[str, list[dict[str, Any]]]) -> dict[str, dict[str, dict[int, str]]]:
+    """The direction of each contrast under each hypothesis, per N, read from its power table.
+
+    ``"paper"`` where studies significant in the paper's direction outnumber those
+    significant in the reverse by more than two standard errors of the difference of the
+    two shares, ``"reverse"`` for the opposite, ``"none"`` otherwise (neither direction
+    shows in the simulated studies).
+
+    Parameters
+    ----------
+    tables : dict
+        ``{hypothesis: power_table(...) rows}`` with the rows of :data:`DIRECTIONAL_TESTS`
+        and :data:`REVERSE_TESTS`.
+
+    Returns
+    -------
+    dict
+        ``{contrast: {hypothesis: {N: direction}}}`` for the contrasts of :data:`CONTRASTS`
+        the tables have.
+    """
+    out: dict[str, dict[str, dict[int, str]]] = {}
+    for name, c in CONTRASTS.items():
+        for h, rows in tables.items():
+            by = {(r["test"], r["n_participants"]): r for r in rows}
+            for (test, n), r in by.items():
+                if test != c["paper"] or (c["reverse"], n) not in by:
+                    continue
+                a, b = r["power"], by[(c["reverse"], n)]["power"]
+                k = max(r["n_studies"], 1)
+                se = np.sqrt(max(a + b - (a - b) ** 2, 0.0) / k)
+                d = "paper" if a - b > 2 * se else "reverse" if b - a > 2 * se else "none"
+                out.setdefault(name, {}).setdefault(h, {})[int(n)] = d
+    return out
+
+
 def robust_conclusions(tables: dict[str, list[dict[str, Any]]], threshold: float = ROBUST_POWER) -> list[dict[str, Any]]:
-    """Where every hypothesis agrees: per test and N, whether the test is powered under all.
+    """Where every hypothesis agrees: per test and N, whether the test is powered under all, and in which direction.
+
+    A conclusion is robust only where every hypothesis gives the same verdict (powered at
+    ``threshold`` or not) and, for a test of the inverse filter against funneling
+    (:data:`CONTRASTS`: the directional tests, their reverse, and the omnibus method tests,
+    whose post hoc direction it is), the same direction of the effect
+    (:func:`effect_directions`): a method test powered under every hypothesis is no
+    conclusion where they predict opposite winners.
 
     Parameters
     ----------
@@ -329,13 +411,16 @@ def robust_conclusions(tables: dict[str, list[dict[str, Any]]], threshold: float
     -------
     list of dict
         ``test``, ``label``, ``n_participants``, ``power`` ({hypothesis: power}),
+        ``direction`` ({hypothesis: direction}, or None for a test without a contrast),
         ``conclusion`` (``"powered"``, ``"not powered"`` or ``"depends on the hypothesis"``)
-        and ``robust`` (True only where every hypothesis gives the same conclusion).
+        and ``robust`` (True only where every hypothesis agrees).
     """
     names = list(tables)
     if not names:
         return []
     keyed = {h: {(r["test"], r["n_participants"]): r for r in tables[h]} for h in names}
+    directions = effect_directions(tables)
+    contrast_of = _test_contrast()
     out = []
     for r in tables[names[0]]:
         key = (r["test"], r["n_participants"])
@@ -343,9 +428,132 @@ def robust_conclusions(tables: dict[str, list[dict[str, Any]]], threshold: float
         verdicts = {bool(p >= threshold) for p in powers.values() if np.isfinite(p)}
         complete = all(np.isfinite(p) for p in powers.values())
         robust = complete and len(verdicts) == 1
+        direction = None
+        contrast = contrast_of.get(r["test"])
+        if contrast is not None and contrast in directions:
+            direction = {h: directions[contrast].get(h, {}).get(int(r["n_participants"]), "unknown") for h in names}
+            robust = robust and len(set(direction.values())) == 1 and "unknown" not in direction.values()
         conclusion = ("powered" if verdicts == {True} else "not powered") if robust else "depends on the hypothesis"
         out.append({"test": r["test"], "label": r["label"], "n_participants": r["n_participants"], "power": powers,
-                    "conclusion": conclusion, "robust": robust})
+                    "direction": direction, "conclusion": conclusion, "robust": robust})
+    return out
+
+
+def directional_shares(results: dict[int, list[dict[str, Any]]], alpha: float = 0.05) -> dict[str, dict[str, dict[str, float]]]:
+    """Share of studies significant in the paper's direction, in the reverse, and in neither, per contrast and N.
+
+    Parameters
+    ----------
+    results : dict
+        ``{N: [statistics of each study]}`` (:func:`study_statistics`).
+    alpha : float
+
+    Returns
+    -------
+    dict
+        ``{contrast: {str(N): {"paper": share, "reverse": share, "neither": share}}}`` for
+        the contrasts of :data:`CONTRASTS` the studies computed (N as a string, as JSON keys).
+    """
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for name, c in CONTRASTS.items():
+        for n in sorted(results):
+            res = results[n]
+            pa = np.array([r.get(f"{c['paper']}_p", np.nan) for r in res], dtype=float)
+            pr = np.array([r.get(f"{c['reverse']}_p", np.nan) for r in res], dtype=float)
+            ok = np.isfinite(pa) & np.isfinite(pr)
+            if not ok.any():
+                continue
+            a, r = pa[ok] < alpha, pr[ok] < alpha  # exclusive: one of the two p is 1
+            out.setdefault(name, {})[str(int(n))] = {"paper": float(np.mean(a)), "reverse": float(np.mean(r)),
+                                                     "neither": float(np.mean(~a & ~r))}
+    return out
+
+
+def direction_sentences(directions: dict[str, dict[str, dict[int, str]]], n: int | None = None) -> dict[str, str]:
+    """One sentence per contrast: whether the hypotheses agree on its direction (at N ``n``, default the largest).
+
+    Parameters
+    ----------
+    directions : dict
+        :func:`effect_directions`.
+    n : int, optional
+
+    Returns
+    -------
+    dict
+        ``{contrast: sentence}``.
+    """
+    out = {}
+    for name, by_h in directions.items():
+        c = CONTRASTS[name]
+        at = n if n is not None else max(max(v) for v in by_h.values())
+        d = {h: v.get(at, "unknown") for h, v in by_h.items()}
+        reads = {"paper": (f"predicts {c['paper_reads']} (the paper's direction)",
+                           f"predict {c['paper_reads']} (the paper's direction)"),
+                 "reverse": (f"predicts the reverse, {c['reverse_reads']}", f"predict the reverse, {c['reverse_reads']}"),
+                 "none": ("shows neither direction", "show neither direction"),
+                 "unknown": ("was not simulated at this N", "were not simulated at this N")}
+        kinds = list(dict.fromkeys(d.values()))
+        if len(kinds) == 1:
+            who = "every hypothesis" if len(d) > 1 else f"{next(iter(d))}"
+            out[name] = f"at N = {at}, {who} {reads[kinds[0]][0]} for {c['label']}"
+        else:
+            parts = []
+            for k in kinds:
+                hs = [h for h, v in d.items() if v == k]
+                parts.append(f"{' and '.join(hs)} {reads[k][len(hs) > 1]}")
+            out[name] = f"at N = {at}, the direction of {c['label']} depends on the hypothesis: " + "; ".join(parts)
+    return out
+
+
+def paper_implied_power(
+    n_participants: Sequence[int],
+    alpha: float = 0.05,
+    p_bonferroni: float = PAPER_S1_PAIR_P,
+    n_pairs: int = PAPER_S1_PAIRS,
+    n_paper: int = PAPER_N,
+) -> dict[str, Any]:
+    """Power of a replication implied by the paper's own Study 1 statistic, funneling vs inverse.
+
+    The paper's Bonferroni-corrected p of the paired t-test (``p_bonferroni`` over
+    ``n_pairs`` pairs, ``n_paper`` participants) gives its t and its effect size
+    ``d_z = t / sqrt(n_paper)``; a replication of ``N`` participants testing the same pair
+    with the same correction has the power of a two-sided paired t-test at level
+    ``alpha / n_pairs`` with noncentrality ``d_z sqrt(N)`` (noncentral t), at the effect as
+    published and at half of it (published effects are often inflated).
+
+    Parameters
+    ----------
+    n_participants : sequence of int
+        Sample sizes N of the replication (each >= 2).
+    alpha : float
+        Family-wise significance level.
+    p_bonferroni : float
+        The paper's reported (corrected) p.
+    n_pairs : int
+        Comparisons the correction covered.
+    n_paper : int
+        The paper's participants.
+
+    Returns
+    -------
+    dict
+        ``t``, ``d_z``, ``p_bonferroni``, ``n_pairs``, ``n_paper``, and ``power`` and
+        ``power_half`` ({str(N): power}).
+    """
+    p_unc = p_bonferroni / n_pairs
+    t = float(stats.t.isf(p_unc / 2.0, n_paper - 1))
+    d = t / np.sqrt(n_paper)
+    out: dict[str, Any] = {"t": t, "d_z": float(d), "p_bonferroni": p_bonferroni, "n_pairs": n_pairs,
+                           "n_paper": n_paper, "alpha": alpha, "power": {}, "power_half": {}}
+    for n in n_participants:
+        n = int(n)
+        if n < 2:
+            raise ValidationError(f"a paired t-test needs at least 2 participants, got {n}")
+        crit = stats.t.isf(alpha / n_pairs / 2.0, n - 1)
+        for key, eff in (("power", d), ("power_half", d / 2.0)):
+            nc = eff * np.sqrt(n)
+            out[key][str(n)] = float(stats.nct.sf(crit, n - 1, nc) + stats.nct.cdf(-crit, n - 1, nc))
     return out
 
 
@@ -401,7 +609,8 @@ def run_power(
     -------
     dict
         ``label`` (the model notice), ``levels`` (the bank's level rule), ``design`` (JSON-ready), ``results`` ({N: list of
-        per-study statistics}), ``table`` (:func:`power_table`), ``elapsed_s``.
+        per-study statistics}), ``table`` (:func:`power_table`), ``directional``
+        (:func:`directional_shares`), ``elapsed_s``.
     """
     import time
 
@@ -476,5 +685,6 @@ def run_power(
         },
         "results": results,
         "table": power_table(results, design.alpha),
+        "directional": directional_shares(results, design.alpha),
         "elapsed_s": time.perf_counter() - t0,
     }
