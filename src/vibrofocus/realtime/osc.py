@@ -616,11 +616,11 @@ class OscTapServer:
         except _Refused as exc:
             self._reply(job.sender, "/error", str(exc))
         except VibrofocusError as exc:  # a refused design or drive: the safety layer's word
-            self._reply(job.sender, "/error", f"{job.address}: {exc}")
+            self._reply(job.sender, "/error", f"{job.address} {job.target}: {exc}")
         except Exception as exc:  # noqa: BLE001 - the server keeps serving whatever one tap does
             # A play that failed has set the outputs to zero itself (Rig.play); stopping the
             # rig here would end the server's hold on it and refuse every later tap.
-            self._reply(job.sender, "/error", f"{job.address}: unexpected {type(exc).__name__}: {exc}")
+            self._reply(job.sender, "/error", f"{job.address} {job.target}: unexpected {type(exc).__name__}: {exc}")
 
     def _record(self, job: _Job, onset: Any, played_s: float, peak_v: float) -> TapRecord:
         self._last_tap_id += 1
