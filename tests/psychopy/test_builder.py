@@ -196,7 +196,8 @@ PERCENT_VARIANTS = [
     ({"rigConfig": "/lab/rig%s.toml"}, "calibration=None, rig_config='/lab/rig%s.toml', seed=7"),
     ({"calibration": "/lab/%(name)s/cal.nc"}, "calibration='/lab/%(name)s/cal.nc', rig_config=None"),
     ({"calibration": "/lab/50%%/cal.nc"}, "calibration='/lab/50%%/cal.nc', rig_config=None"),
-    ({"backend": "serve-osc", "host": "lab%(name)s"}, "tap = TapStimulus.osc(host='lab%(name)s', port=9000, name='tap'"),
+    ({"backend": "serve-osc", "host": "lab%(name)s"},
+     "tap = TapStimulus.osc(host='lab%(name)s', port=9000, name='tap'"),
 ]
 
 
