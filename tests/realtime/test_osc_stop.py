@@ -334,3 +334,31 @@ def test_a_stop_during_a_local_flood_of_big_bundles_acts_and_no_tap_plays_after_
     # The old server took 0.3-5 s here, playing the flood's taps meanwhile (tens after the stop).
     assert stopped_after_s < 1.0, stopped_after_s
     assert [r for r in server.records if r.onset_host_s > sent] == []
+
+
+def test_a_tap_that_waited_in_the_socket_past_the_bound_is_stale_and_a_fresh_one_plays(designer):
+    """The wait counts from the datagram's arrival in the kernel (Linux), not from its read."""
+    import sys
+
+    if not sys.platform.startswith("linux"):
+        pytest.skip("the kernel's arrival stamp is read on Linux only")
+    rig = SimulatedForearm(seed=3)
+    designer.set_method("inverse")
+    server = OscTapServer(rig, designer, port=0, max_wait_s=0.2)
+    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    client.sendto(_message("/tap", 2).dgram, server.address)
+    time.sleep(0.4)  # in the socket's buffer, unread: the server does not serve yet
+    thread = threading.Thread(target=server.serve, daemon=True)
+    thread.start()
+    try:
+        (stale,) = _collect(client, lambda r: len(r) == 1)
+        client.sendto(_message("/tap", 3).dgram, server.address)
+        (fresh,) = _collect(client, lambda r: len(r) == 1)
+    finally:
+        server.stop()
+        thread.join(WAIT_S)
+        server.close()
+        client.close()
+    assert stale.address == "/error" and stale.params[0].startswith("stale: this datagram waited over the 200 ms")
+    assert fresh.address == "/played" and fresh.params[:1] == [3]
+    assert [r.target for r in server.records] == ["location 3"]
