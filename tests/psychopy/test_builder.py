@@ -185,3 +185,56 @@ def test_psychopys_plugin_loader_finds_the_component(tmp_path):
                           timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert "component: vibrofocus.psychopy.builder" in proc.stdout.splitlines(), proc.stdout[-2000:]
+
+
+#: Parameters of the example's component changed one at a time, and the code each must give
+#: (issue 53, item 8): a ``%`` in an expression or a path is written as is, never formatted.
+PERCENT_VARIANTS = [
+    ({"location": "$(trials.thisN % 9) + 1"}, "tap.set(location=(trials.thisN % 9) + 1, level_db=level"),
+    ({"x_mm": "$xs[i%3]", "y_mm": "1"}, "tap.set(x_mm=xs[i%3], y_mm=1, level_db=level"),
+    ({"calibration": "C:/lab/100%done/cal.nc"}, "calibration='C:/lab/100%done/cal.nc', rig_config=None"),
+    ({"rigConfig": "/lab/rig%s.toml"}, "calibration=None, rig_config='/lab/rig%s.toml', seed=7"),
+    ({"calibration": "/lab/%(name)s/cal.nc"}, "calibration='/lab/%(name)s/cal.nc', rig_config=None"),
+    ({"calibration": "/lab/50%%/cal.nc"}, "calibration='/lab/50%%/cal.nc', rig_config=None"),
+    ({"backend": "serve-osc", "host": "lab%(name)s"},
+     "tap = TapStimulus.osc(host='lab%(name)s', port=9000, name='tap'"),
+]
+
+
+def test_psychopys_compiler_writes_every_value_once_percent_signs_included(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    psychopy = _psychopy_path()
+    if psychopy is None:
+        pytest.skip("PsychoPy's wheel is not at hand (scripts/test.sh installs it, VIBROFOCUS_TEST_PSYCHOPY)")
+    pairs = []
+    for k, (changes, _) in enumerate(PERCENT_VARIANTS):
+        tree = ET.parse(EXAMPLES / "tap_staircase.psyexp")
+        (component,) = tree.iter("VibrofocusTapComponent")
+        for param in component.iter("Param"):
+            if param.get("name") in changes:
+                param.set("val", changes[param.get("name")])
+        tree.write(tmp_path / f"v{k}.psyexp", encoding="utf-8", xml_declaration=True)
+        pairs += [str(tmp_path / f"v{k}.psyexp"), str(tmp_path / f"v{k}.py")]
+    # One child compiles them all (PsychoPy takes seconds to import); each failure is kept.
+    compiler = tmp_path / "compile_all.py"
+    compiler.write_text(
+        "import sys, traceback\n"
+        "from psychopy.experiment import Experiment, components\n"
+        "from vibrofocus.psychopy.builder import VibrofocusTapComponent\n"
+        "components.addComponent(VibrofocusTapComponent)\n"
+        "args = sys.argv[1:]\n"
+        "for src, out in zip(args[::2], args[1::2]):\n"
+        "    try:\n"
+        "        exp = Experiment()\n"
+        "        exp.loadFromXML(src)\n"
+        "        script = exp.writeScript(target='PsychoPy')\n"
+        "    except Exception as exc:\n"
+        "        script = f'FAILED {type(exc).__name__}: {exc}'\n"
+        "    open(out, 'w', encoding='utf-8').write(script)\n", encoding="utf-8")
+    _run(compiler, tmp_path, *pairs, psychopy=psychopy)
+    for k, (changes, expected) in enumerate(PERCENT_VARIANTS):
+        script = (tmp_path / f"v{k}.py").read_text(encoding="utf-8")
+        assert not script.startswith("FAILED"), (changes, script)
+        assert expected in script, (changes, [line for line in script.splitlines() if "tap" in line][:8])
+        ast.parse(script)  # the whole script is Python

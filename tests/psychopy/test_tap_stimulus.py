@@ -3,6 +3,7 @@ UDP; levels scale the played drive by their decibels, onsets reach the data file
 
 from __future__ import annotations
 
+import socket
 import threading
 
 import numpy as np
@@ -64,6 +65,7 @@ def test_through_serve_osc_with_its_tap_ids_and_onsets():
     rig = make_rig("simulated", seed=3)
     designer = TapDesigner(TransferMatrix.from_model(rig, rig.layout, rig.fs), rig, limit_v=rig.limits.peak_v,
                            grid_pitch_m=5e-3)
+    designer.prepare_grid()  # as serve-osc does at start: the tap at a point is not answered 30 s late
     server = OscTapServer(rig, designer, port=0)
     thread = threading.Thread(target=server.serve, daemon=True)
     thread.start()
@@ -133,3 +135,148 @@ def test_bad_settings_are_one_clear_error(kwargs, needle):
         TapStimulus(backend=_Nothing(), name="my tap")
     with pytest.raises(ValidationError, match="call play"):
         tap.result()
+
+
+# -- pairing answers with taps (issue 53, item 11) -----------------------------------------
+class ScriptedServer:
+    """A UDP socket that answers as a test says: what serve-osc sends, at the moment chosen."""
+
+    def __init__(self):
+        from pythonosc.osc_message import OscMessage
+
+        self._parse = OscMessage
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(("127.0.0.1", 0))
+        self.sock.settimeout(30)
+        self.port = self.sock.getsockname()[1]
+        self.client = None
+        # TapStimulus asks its method when made: answered by a thread, the rest by the test.
+        self._method = threading.Thread(target=self._answer_method, daemon=True)
+        self._method.start()
+
+    def _answer_method(self):
+        message = self.next()
+        self.send("/method", *message.params)
+
+    def next(self):
+        data, self.client = self.sock.recvfrom(65536)
+        return self._parse(data)
+
+    def send(self, address, *args, to=None):
+        from pythonosc.osc_message_builder import OscMessageBuilder
+
+        builder = OscMessageBuilder(address=address)
+        for arg in args:
+            builder.add_arg(arg)
+        self.sock.sendto(builder.build().dgram, to or self.client)
+
+    def played(self, echo, tap_id, level_db=0.0):
+        self.send("/played", *echo, tap_id, 100.0 + tap_id, float("nan"), "", float(level_db))
+
+    def close(self):
+        self.sock.close()
+
+
+@pytest.fixture
+def scripted():
+    pytest.importorskip("pythonosc")
+    server = ScriptedServer()
+    yield server
+    server.close()
+
+
+def test_an_answer_after_the_timeout_is_discarded_not_given_to_the_next_tap(scripted):
+    with TapStimulus.osc(port=scripted.port, timeout_s=30.0) as tap:
+        tap.set(location=5, level_db=-6.0).play()
+        assert scripted.next().params == [5, -6.0]
+        given_up = tap.result(timeout_s=0.2)
+        assert not given_up.played and "no answer" in given_up.error
+        scripted.played([5], 1, -6.0)  # its answer, late
+        tap.set(location=5, level_db=-6.0).play()
+        scripted.next()
+        scripted.played([5], 2, -6.0)
+        after = tap.result()
+    assert after.played and after.tap_id == 2 and after.onset_host_s == 102.0
+
+
+def test_answers_are_matched_by_what_they_echo_and_by_increasing_tap_ids(scripted):
+    with TapStimulus.osc(port=scripted.port, timeout_s=30.0) as tap:
+        tap.set(location=1).play()
+        tap.set(x_mm=1.3, y_mm=-2.0, level_db=-3.0).play()
+        tap.set(location=9).play()
+        for _ in range(3):
+            scripted.next()
+        # Out of order, as serve-osc may answer (a refusal at once, a play later), with noise:
+        scripted.send("/error", "stopped: /tap location 9 was not played")
+        scripted.played([4], 7)  # a location nobody asked
+        scripted.played([1], 3, -12.0)  # location 1, but not the level asked
+        scripted.played([1], 3)
+        scripted.played([1.3, -2.0], 3, -3.0)  # a tap id already used
+        scripted.played([1.3, -2.0], 4, -3.0)
+        first, point, last = tap.result(), tap.result(), tap.result()
+    assert (first.location, first.tap_id, first.onset_host_s) == (1, 3, 103.0)
+    assert (point.x_mm, point.tap_id, point.onset_host_s) == (1.3, 4, 104.0)
+    assert not last.played and last.location == 9 and last.error == "stopped: /tap location 9 was not played"
+
+
+def test_the_socket_takes_answers_from_the_server_only(scripted):
+    with TapStimulus.osc(port=scripted.port, timeout_s=30.0) as tap:
+        tap.set(location=5).play()
+        scripted.next()
+        # Another local program that found the client's port sends it a /played first.
+        intruder = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        try:
+            intruder.sendto(_played_dgram(5, 1), tap._backend._sock.getsockname())
+        finally:
+            intruder.close()
+        scripted.played([5], 2)
+        result = tap.result()
+    # The server's answer only (its address and port): the kernel drops the intruder's.
+    assert (result.tap_id, result.onset_host_s, result.onset_clock) == (2, 102.0, None)
+
+
+def _played_dgram(location, tap_id):
+    from pythonosc.osc_message_builder import OscMessageBuilder
+
+    builder = OscMessageBuilder(address="/played")
+    for arg in (location, tap_id, 999.0, float("nan"), "intruder", 0.0):
+        builder.add_arg(arg)
+    return builder.build().dgram
+
+
+def test_a_late_answer_of_a_real_server_is_not_given_to_the_next_tap():
+    pytest.importorskip("pythonosc")
+    import time
+
+    from vibrofocus.realtime import OscTapServer, TapDesigner
+    from vibrofocus.rendering import TransferMatrix
+    from vibrofocus.rigs.simulated import SimulatedForearm
+
+    class Slow(SimulatedForearm):
+        first = True
+
+        def _play(self, drive):
+            if self.first:
+                self.first = False
+                time.sleep(1.0)
+            return super()._play(drive)
+
+    rig = Slow(seed=3)
+    designer = TapDesigner(TransferMatrix.from_model(rig, rig.layout, rig.fs), rig, limit_v=rig.limits.peak_v,
+                           grid_pitch_m=5e-3)
+    server = OscTapServer(rig, designer, port=0, max_wait_s=30.0)
+    thread = threading.Thread(target=server.serve, daemon=True)
+    thread.start()
+    try:
+        with TapStimulus.osc(port=server.address[1], timeout_s=30.0) as tap:
+            tap.set(location=5).play()
+            given_up = tap.result(timeout_s=0.3)  # the server answers about 0.7 s later
+            tap.set(location=5).play()
+            after = tap.result()
+    finally:
+        server.stop()
+        thread.join(10)
+        server.close()
+    assert not given_up.played and "no answer" in given_up.error
+    assert [r.tap_id for r in server.records] == [1, 2]
+    assert after.played and after.tap_id == 2 and after.onset_host_s == server.records[1].onset_host_s

@@ -183,3 +183,30 @@ def test_a_server_answers_the_negative_size_datagram_error_and_the_next_tap_play
         server.close()
         raw.close()
     assert logging.getLogger("pythonosc").propagate is False
+
+
+def test_a_bundle_of_more_than_a_few_messages_is_refused_whole_and_the_next_tap_plays():
+    """The flood's 2000-message bundle held the receiving thread 0.1-0.2 s (and a /stop behind it)."""
+    assert MAX_ELEMENTS <= 16
+    rig, designer = simulated_designer()
+    server = OscTapServer(rig, designer, port=0)
+    thread = threading.Thread(target=server.serve, daemon=True)
+    thread.start()
+    raw = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    raw.settimeout(60)
+    try:
+        raw.sendto(HEADER + element(TAP5) * 2000, server.address)
+        reply = OscMessage(raw.recv(65536))
+        assert reply.address == "/error", reply.params
+        assert reply.params[0].startswith(f"refused: more than {MAX_ELEMENTS} elements"), reply.params
+        assert "nothing in it played" in reply.params[0]
+        raw.sendto(HEADER + element(TAP5) * MAX_ELEMENTS, server.address)  # at the cap: every tap answered
+        replies = [OscMessage(raw.recv(65536)) for _ in range(MAX_ELEMENTS)]
+        assert all(r.address in ("/played", "/error") for r in replies)
+        assert replies[0].address == "/played" and replies[0].params[:1] == [5]
+        assert server.n_errors == 1 + sum(r.address == "/error" for r in replies)
+    finally:
+        server.stop()
+        thread.join(30)
+        server.close()
+        raw.close()

@@ -105,39 +105,46 @@ class VibrofocusTapComponent(BaseComponent):
             self.depends.append({"dependsOn": "backend", "condition": "=='serve-osc'", "param": device,
                                  "true": "show", "false": "hide"})
 
+    # Every value goes into the code once, as PsychoPy writes it (``str(param)``), and the
+    # code is never formatted again: a ``%`` in an expression (``$(trials.thisN % 9) + 1``)
+    # or a path (``C:/lab/100%done/cal.nc``) stays as written.
     def writeInitCode(self, buff):
         p = self.params
-        code = "# the vibrofocus tap %(name)s\nfrom vibrofocus.psychopy import TapStimulus\n"
+        name = _code(p, "name")
+        code = f"# the vibrofocus tap {name}\nfrom vibrofocus.psychopy import TapStimulus\n"
         if p["backend"].val == "in-process":
             # Blank settings are None (the simulated arm's own transfer, no hardware file, no seed).
-            given = {k: str(p[k]) if str(p[k].val).strip() else "None" for k in ("calibration", "rigConfig", "seed")}
+            given = {k: _code(p, k) if str(p[k].val).strip() else "None" for k in ("calibration", "rigConfig", "seed")}
             # Taps at points need the skin model evaluated at start (seconds); locations do not.
             anywhere = bool(str(p["x_mm"].val).strip() and str(p["y_mm"].val).strip())
-            code += ("%(name)s = TapStimulus.in_process(%(rig)s, calibration=" + given["calibration"]
-                     + ", rig_config=" + given["rigConfig"] + ", seed=" + given["seed"]
-                     + f", anywhere={anywhere}, name='%(name)s', method=%(method)s)\n")
+            code += (f"{name} = TapStimulus.in_process({_code(p, 'rig')}, calibration={given['calibration']}, "
+                     f"rig_config={given['rigConfig']}, seed={given['seed']}, anywhere={anywhere}, name={name!r}, "
+                     f"method={_code(p, 'method')})\n")
         else:
-            code += "%(name)s = TapStimulus.osc(host=%(host)s, port=%(port)s, name='%(name)s', method=%(method)s)\n"
-        buff.writeIndentedLines(code % p)
+            code += (f"{name} = TapStimulus.osc(host={_code(p, 'host')}, port={_code(p, 'port')}, name={name!r}, "
+                     f"method={_code(p, 'method')})\n")
+        buff.writeIndentedLines(code)
 
     def writeRoutineStartCode(self, buff):
         p = self.params
+        name = _code(p, "name")
         if str(p["x_mm"].val).strip() and str(p["y_mm"].val).strip():
-            where = "x_mm=%(x_mm)s, y_mm=%(y_mm)s" % p
+            where = f"x_mm={_code(p, 'x_mm')}, y_mm={_code(p, 'y_mm')}"
         else:
-            where = "location=%(location)s" % p
-        buff.writeIndentedLines(f"{p['name']}.set({where}, level_db=%(level)s, method=%(method)s)\n" % p)
-        buff.writeIndentedLines("%(name)s.status = NOT_STARTED\n" % p)
+            where = f"location={_code(p, 'location')}"
+        buff.writeIndentedLines(f"{name}.set({where}, level_db={_code(p, 'level')}, method={_code(p, 'method')})\n")
+        buff.writeIndentedLines(f"{name}.status = NOT_STARTED\n")
 
     def writeFrameCode(self, buff):
-        buff.writeIndented("# *%(name)s* updates\n" % self.params)
+        name = _code(self.params, "name")
+        buff.writeIndented(f"# *{name}* updates\n")
         indented = self.writeStartTestCode(buff)
         if indented:
             if self.params["syncScreenRefresh"].val:
                 # On the flip that shows this frame, as a sound component starts.
-                buff.writeIndented("win.callOnFlip(%(name)s.play)\n" % self.params)
+                buff.writeIndented(f"win.callOnFlip({name}.play)\n")
             else:
-                buff.writeIndented("%(name)s.play()\n" % self.params)
+                buff.writeIndented(f"{name}.play()\n")
             buff.setIndentLevel(-indented, relative=True)
         # The tap plays on by itself; its stop only lets the routine end (a drive lasts < 1 s).
         indented = self.writeStopTestCode(buff)
@@ -146,9 +153,15 @@ class VibrofocusTapComponent(BaseComponent):
 
     def writeRoutineEndCode(self, buff):
         # The onsets on the host's and the device's clocks, in the data file.
-        buff.writeIndentedLines("if %(name)s.status != NOT_STARTED:\n"
-                                "    %(name)s.store(thisExp)\n" % self.params)
+        name = _code(self.params, "name")
+        buff.writeIndentedLines(f"if {name}.status != NOT_STARTED:\n"
+                                f"    {name}.store(thisExp)\n")
         super().writeRoutineEndCode(buff)
 
     def writeExperimentEndCode(self, buff):
-        buff.writeIndented("%(name)s.close()\n" % self.params)
+        buff.writeIndented(f"{_code(self.params, 'name')}.close()\n")
+
+
+def _code(params, key: str) -> str:
+    """A parameter as PsychoPy writes it into a script (a literal, or a ``$`` expression as is)."""
+    return str(params[key])

@@ -19,7 +19,9 @@ from __future__ import annotations
 
 import math
 import os
+import re
 import socket
+import struct
 import threading
 import time
 from collections import deque
@@ -83,7 +85,7 @@ class TapResult:
         return self.error is None
 
 
-@dataclass
+@dataclass(eq=False)
 class _Asked:
     level_db: float
     method: str
@@ -92,6 +94,7 @@ class _Asked:
     asked_host_s: float
     result: TapResult | None = None
     done: threading.Event | None = None
+    given_up: bool = False  # its wait timed out: a late answer is discarded, never given to another tap
 
 
 class TapStimulus:
@@ -320,10 +323,25 @@ class _MethodAsked:
     def __init__(self, name: str) -> None:
         self.name = name
         self.reply: Any = None
+        self.given_up = False
+
+
+#: Most requests given up whose late answers are still recognised (and discarded).
+_GIVEN_UP_KEPT = 256
+
+
+def _f32(value: float) -> float:
+    """``value`` as OSC sends it (a 32-bit float): the server echoes that."""
+    return struct.unpack(">f", struct.pack(">f", value))[0]
 
 
 class _OscBackend:
-    """Asks a ``serve-osc`` over UDP; its answers come back in the order asked."""
+    """Asks a ``serve-osc`` over a UDP socket connected to it (the kernel drops datagrams
+    from anyone else), and pairs each answer with its request by what the answer echoes:
+    the location or point and the level of a ``/played`` (with tap ids that increase),
+    the target named in an ``/error``, the name of a ``/method``. The server answers one
+    client's taps in the order asked, so an answer goes to the oldest request it fits;
+    an answer to a request already given up (timed out) is discarded."""
 
     def __init__(self, host: str, port: int) -> None:
         try:
@@ -336,9 +354,17 @@ class _OscBackend:
             raise ValidationError(f"host must be an address, got {shorten(host)}")
         self._server = (host, port)
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
-        self._sock = socket.socket(family, socket.SOCK_DGRAM)  # bound to a free port by the first send
+        self._sock = socket.socket(family, socket.SOCK_DGRAM)
+        try:
+            # Connected: answers come only from the server's address and port.
+            self._sock.connect(self._server)
+        except OSError as exc:
+            self._sock.close()
+            raise ValidationError(f"cannot reach {self._where()}: {exc.strerror or exc}") from None
         self._method = ""
+        # Requests not answered yet, oldest first; those given up stay (marked) until their answer.
         self._waiting: deque[_Asked | _MethodAsked] = deque()
+        self._last_tap_id = 0
         self._lock = threading.Lock()
 
     def _where(self) -> str:
@@ -350,7 +376,7 @@ class _OscBackend:
         builder = OscMessageBuilder(address=address)
         for arg in args:
             builder.add_arg(arg)
-        self._sock.sendto(builder.build().dgram, self._server)
+        self._sock.send(builder.build().dgram)
 
     def set_method(self, name: str, timeout_s: float) -> None:
         """Switch the server's method now and wait for its answer (not on a flip: a server
@@ -361,12 +387,12 @@ class _OscBackend:
         with self._lock:
             self._send("/method", name)
             self._waiting.append(asked)
-        self._pump(asked, timeout_s)
+        error = self._pump(asked, timeout_s)
         if asked.reply is None:
             with self._lock:
-                self._drop(asked)
+                self._give_up(asked)
             raise ValidationError(f"no answer from {self._where()} in {timeout_s:g} s (is it running, on that "
-                                  "port?)")
+                                  f"port?{' ' + error if error else ''})")
         if asked.reply.address != "/method":
             # The server keeps its method: a tap recorded under this name would be false.
             reason = asked.reply.params[0] if asked.reply.params else asked.reply.address
@@ -386,11 +412,11 @@ class _OscBackend:
         if asked.result is None:
             asked.result = _result(asked, error=error or f"no answer from {self._where()} in {timeout_s:g} s")
             with self._lock:
-                self._drop(asked)
+                self._give_up(asked)
 
     def _pump(self, until: Any, timeout_s: float) -> str | None:
-        """Read answers, each to the oldest waiting message, until ``until`` has its own;
-        a socket error (no server: ICMP port unreachable) is returned."""
+        """Read answers, each to the request it echoes, until ``until`` has its own; a
+        socket error (no server: ICMP port unreachable) is returned."""
         from pythonosc.osc_message import OscMessage
 
         deadline = time.monotonic() + timeout_s
@@ -410,17 +436,49 @@ class _OscBackend:
             except Exception:  # noqa: BLE001 - not an answer of serve-osc
                 continue
             with self._lock:
-                if not self._waiting:
-                    continue
-                owner = self._waiting.popleft()
+                owner = self._owner(message)
+                if owner is None or owner.given_up:
+                    continue  # an answer to nothing asked, or to a request given up: discarded
             if isinstance(owner, _MethodAsked):
                 owner.reply = message
             else:
                 owner.result = self._answer(owner, message)
         return None
 
-    def _drop(self, asked: Any) -> None:
-        self._waiting = deque(w for w in self._waiting if w is not asked)
+    def _owner(self, message: Any) -> _Asked | _MethodAsked | None:
+        """The request ``message`` answers (taken off the waiting list), or None (under the lock)."""
+        params = list(message.params)
+        if message.address == "/method":
+            fits = lambda w: isinstance(w, _MethodAsked) and params == [w.name]  # noqa: E731
+        elif message.address == "/played":
+            if len(params) < 6 or isinstance(params[-5], bool) or not isinstance(params[-5], int):
+                return None
+            tap_id, level, echo = params[-5], params[-1], params[:-5]
+            if tap_id <= self._last_tap_id:
+                return None  # tap ids increase: an old or a repeated answer
+            fits = lambda w: isinstance(w, _Asked) and _echo(w) == echo and _f32(w.level_db) == level  # noqa: E731
+        elif message.address == "/error" and params and isinstance(params[0], str):
+            fits = _error_fits(params[0])
+        else:
+            return None
+        owner = next((w for w in self._waiting if fits(w)), None)
+        if owner is None:
+            return None
+        if message.address == "/played":
+            self._last_tap_id = params[-5]
+            # Answers come in the order asked: those asked before this tap and given up
+            # were answered already (or their answer was lost): forget them.
+            while self._waiting and self._waiting[0] is not owner and self._waiting[0].given_up:
+                self._waiting.popleft()
+        self._waiting.remove(owner)
+        return owner
+
+    def _give_up(self, asked: Any) -> None:
+        """``asked`` timed out: kept, marked, so that its late answer is recognised and discarded."""
+        asked.given_up = True
+        given_up = [w for w in self._waiting if w.given_up]
+        for old in given_up[:max(0, len(given_up) - _GIVEN_UP_KEPT)]:
+            self._waiting.remove(old)
 
     @staticmethod
     def _answer(asked: _Asked, message: Any) -> TapResult:
@@ -435,6 +493,35 @@ class _OscBackend:
 
     def close(self) -> None:
         self._sock.close()
+
+
+def _echo(asked: _Asked) -> list:
+    """What ``/played`` echoes of a tap: its location, or its point as 32-bit floats."""
+    if asked.location is not None:
+        return [asked.location]
+    return [_f32(asked.xy_mm[0]), _f32(asked.xy_mm[1])]
+
+
+_LOCATION = re.compile(r"(?:/tap location|unknown location) (-?\d+)\b")
+_POINT = re.compile(r"/tap_xy(?: x (\S+) mm, y (\S+) mm|: \((\S+), (\S+)\) mm)")
+_METHOD = re.compile(r"/method\b(?: (\S+) was not played)?")
+
+
+def _error_fits(reason: str):
+    """Which waiting request an ``/error`` answers: the tap or method its reason names
+    (the server's reasons name the target: ``stopped: /tap location 5 ...``), else the
+    oldest tap (a reason that names none, as a refused datagram's)."""
+    if (found := _LOCATION.search(reason)) is not None:
+        location = int(found.group(1))
+        return lambda w: isinstance(w, _Asked) and w.location == location
+    if (found := _POINT.search(reason)) is not None:
+        x, y = (found.group(1), found.group(2)) if found.group(1) is not None else (found.group(3), found.group(4))
+        return lambda w: (isinstance(w, _Asked) and w.xy_mm is not None
+                          and (f"{_f32(w.xy_mm[0]):g}", f"{_f32(w.xy_mm[1]):g}") == (x, y))
+    if (found := _METHOD.search(reason)) is not None:
+        name = found.group(1)
+        return lambda w: isinstance(w, _MethodAsked) and name in (None, w.name)
+    return lambda w: isinstance(w, _Asked)
 
 
 class _RigBackend:

@@ -5,7 +5,11 @@ walks its framing (:mod:`.osc_framing`), parses it with python-osc, refuses what
 malformed and queues each tap; the thread that called :meth:`OscTapServer.serve` (the
 one that holds the rig) designs and plays the queued taps in order. So ``/stop`` is
 never behind a tap: it empties the queue and stops the rig at once, in the middle of a
-play. The addresses:
+play. Nor is it behind other datagrams: before it handles each datagram, the receiving
+thread reads every datagram waiting in the socket (at most :data:`MAX_BACKLOG` ahead;
+past that, one is answered ``/error busy`` unread), and acts on a ``/stop`` among them
+first. A datagram holds at most :data:`~.osc_framing.MAX_ELEMENTS` messages and bundles,
+so that none holds the receiving thread for long. The addresses:
 
 ``/tap <location> [<level_db>]``
     A tap at a layout location (int, 1-based).
@@ -18,7 +22,8 @@ play. The addresses:
     (``serve-osc --method minimax``).
 ``/stop``
     All outputs to zero now (a play under way is cut), the taps still queued are
-    dropped, and the server ends.
+    dropped, and the server ends; the taps in datagrams already read, the stop's own
+    included, are answered ``/error stopped: ...``.
 
 The optional level is in dB re the design (0: the design as made, scaled to the drive
 limit; -6: half its amplitude); the safety layer still checks the scaled drive, so a
@@ -33,9 +38,10 @@ none) and the level played (dB re the design). Every problem is answered
 (framing included: a bundle element of a negative size, too deep a nesting, too many
 elements), an unknown address, a wrong type or number of arguments, NaN or Inf, a level
 out of range, a point off the calibrated area, an unknown location or method, a drive
-the safety layer refuses; a tap that waited longer than ``max_wait_s`` behind others
-(``/error stale: ...``), a tap when ``max_queued`` already wait (``/error busy: ...``),
-and the taps that a stop dropped (``/error stopped: ...``).
+the safety layer refuses; a tap that waited longer than ``max_wait_s`` since its datagram
+was read, behind other taps or other datagrams (``/error stale: ...``), a tap when
+``max_queued`` already wait or a datagram read when :data:`MAX_BACKLOG` already wait
+(``/error busy: ...``), and the taps that a stop dropped (``/error stopped: ...``).
 
 Each played tap goes to the server's tap log (:class:`~vibrofocus.realtime.taplog.TapLog`,
 committed before ``/played`` is sent) and marker sink (an LSL outlet) when it has them.
@@ -45,7 +51,10 @@ from __future__ import annotations
 
 import collections
 import logging
+import platform
 import socket
+import struct
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -56,9 +65,9 @@ import numpy as np
 
 from ..errors import ValidationError, VibrofocusError
 from .designer import TapDesigner
-from .osc_framing import FramingError, parse_datagram
+from .osc_framing import MAX_ELEMENTS, FramingError, TooManyElements, parse_datagram
 
-__all__ = ["OscTapServer", "TapRecord", "ADDRESSES", "MAX_WAIT_S", "MAX_QUEUED", "LEVEL_DB_RANGE",
+__all__ = ["OscTapServer", "TapRecord", "ADDRESSES", "MAX_WAIT_S", "MAX_QUEUED", "MAX_BACKLOG", "LEVEL_DB_RANGE",
            "PLAYED_FIELDS"]
 
 #: The addresses the server answers, with their arguments.
@@ -77,6 +86,13 @@ MAX_DATAGRAM = 65536
 MAX_WAIT_S = 0.5
 #: Most taps and method changes waiting at once; more are refused (``/error busy``).
 MAX_QUEUED = 256
+#: Most datagrams read from the socket and not yet handled; one read past them is answered
+#: ``/error busy`` without being parsed (unless it holds a ``/stop``, which acts at once).
+MAX_BACKLOG = 512
+#: Most datagrams read from the socket in one go between two handled datagrams.
+READ_AHEAD = 1024
+_BUSY_TEXT = (f"busy: {MAX_BACKLOG} datagrams read wait already to be handled (a flood of datagrams?); nothing in "
+              "this one played")
 #: Levels a tap may ask, dB re the design: outside them a level is a mistake (a linear
 #: gain, a level in dB SPL), refused before the safety layer sees it.
 LEVEL_DB_RANGE = (-100.0, 40.0)
@@ -84,6 +100,16 @@ LEVEL_DB_RANGE = (-100.0, 40.0)
 PLAYED_FIELDS = ("tap_id", "onset_host_s", "onset_device_s", "onset_clock", "level_db")
 #: How often the threads look whether the server was stopped (and let Ctrl-C in), s.
 POLL_S = 0.05
+#: The receive buffer asked for, bytes (the system caps it: net.core.rmem_max on Linux).
+RCVBUF_BYTES = 4 << 20
+
+# The kernel's arrival time of each datagram (SO_TIMESTAMP: a struct timeval of two C
+# longs on the wall clock), so that a tap's wait counts its time in the socket's buffer.
+# Python names no constant for it; Linux's is 29 (parisc's excepted). Elsewhere the wait
+# is counted from the read.
+_SO_TIMESTAMP: int | None = (getattr(socket, "SO_TIMESTAMP", 29) if sys.platform.startswith("linux")
+                             and not platform.machine().startswith("parisc") else None)
+_TIMEVAL = struct.Struct("@ll")
 
 
 class _Double(float):
@@ -101,7 +127,7 @@ class TapRecord:
     Attributes
     ----------
     receipt_s : float
-        When its datagram was read, s, on the server's clock.
+        When its datagram arrived (or was read: see the server's ``clock``), s, on the server's clock.
     played_s : float
         When the rig's ``play`` returned, s, on the same clock.
     target : str
@@ -201,10 +227,13 @@ class OscTapServer:
         UDP port; 0 picks a free one (see :attr:`address`).
     clock : callable
         Seconds now (``time.perf_counter`` by default): receipt and play times of
-        :attr:`records`, and how long a tap waited.
+        :attr:`records`, and how long a tap waited. With ``time.perf_counter`` or
+        ``time.monotonic``, on Linux, a datagram's receipt is when the kernel received
+        it (its time in the socket's buffer counts); otherwise when it was read.
     max_wait_s : float
-        A tap that waited longer than this between its receipt and its turn to play is
-        dropped and answered ``/error stale: ...``, s.
+        A tap that waited longer than this between its receipt and its turn to be queued
+        or played (behind other datagrams, or other taps) is dropped and answered
+        ``/error stale: ...``, s.
     max_queued : int
         Most taps and method changes waiting at once; one more is answered
         ``/error busy: ...``.
@@ -259,6 +288,7 @@ class OscTapServer:
         self._receiver: threading.Thread | None = None
         self._receiver_error: BaseException | None = None
         self._count_lock = threading.Lock()
+        self._fixed: dict[str, bytes] = {}  # prepared /error datagrams (_reply_fixed)
         _quiet_pythonosc()
         family = socket.AF_INET6 if ":" in host else socket.AF_INET
         self._sock = socket.socket(family, socket.SOCK_DGRAM)
@@ -269,6 +299,20 @@ class OscTapServer:
             raise ValidationError(f"cannot listen on UDP {host}:{port}: {exc.strerror or exc} (another program may "
                                   "use the port: give another --port)") from None
         self._sock.settimeout(POLL_S)
+        try:
+            self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, RCVBUF_BYTES)
+        except OSError:  # the system's own size then
+            pass
+        self._stamped = False
+        # A clock of the caller's own (a test's) may not run in seconds of real time: the
+        # kernel's stamp, which does, is used only with the real clocks.
+        if (_SO_TIMESTAMP is not None and hasattr(self._sock, "recvmsg")
+                and clock in (time.perf_counter, time.monotonic)):
+            try:
+                self._sock.setsockopt(socket.SOL_SOCKET, _SO_TIMESTAMP, 1)
+                self._stamped = True
+            except OSError:
+                pass
 
     @property
     def address(self) -> tuple[str, int]:
@@ -352,20 +396,97 @@ class OscTapServer:
 
     # -- the receiving thread ---------------------------------------------------------
     def _receive(self) -> None:
+        # Datagrams read and not yet handled, oldest first: (data, sender, receipt_s).
+        backlog: collections.deque[tuple[bytes, tuple, float]] = collections.deque()
         try:
             while not self._stop:
-                try:
-                    data, sender = self._sock.recvfrom(MAX_DATAGRAM)
-                except (TimeoutError, socket.timeout):
-                    continue
-                except OSError:
-                    if self._stop:
-                        break
-                    raise
-                self.handle(data, sender, self.clock())
+                if not backlog:
+                    try:
+                        data, sender, receipt_s = self._recv()
+                    except (TimeoutError, socket.timeout):
+                        continue
+                    except OSError:
+                        if self._stop:
+                            break
+                        raise
+                    self._take(data, sender, receipt_s, backlog)
+                # The kernel's buffer is first in, first out: read what waits there before
+                # handling anything, so that a /stop behind a flood acts now.
+                self._read_ahead(backlog)
+                if backlog and not self._stop:
+                    data, sender, receipt_s = backlog.popleft()
+                    if self.clock() - receipt_s > self.max_wait_s:
+                        self._reply_fixed(sender, self._stale_text)  # behind: answered unparsed
+                    else:
+                        self.handle(data, sender, receipt_s)
+            # Stopped: what was read, and what waits in the socket now, is answered
+            # (every tap in it: /error stopped), once.
+            self._read_ahead(backlog)
+            while backlog:
+                self.handle(*backlog.popleft())
         except BaseException as exc:  # noqa: BLE001 - handed to serve(), which raises it
             self._receiver_error = exc
             self.stop()
+
+    def _read_ahead(self, backlog: collections.deque) -> None:
+        """Read the datagrams waiting in the socket (at most :data:`READ_AHEAD`), without waiting."""
+        try:
+            self._sock.settimeout(0.0)
+        except OSError:  # closed meanwhile (close() after a stop)
+            return
+        try:
+            for _ in range(READ_AHEAD):
+                try:
+                    data, sender, receipt_s = self._recv()
+                except (BlockingIOError, InterruptedError):
+                    return
+                except OSError:
+                    if self._stop:
+                        return
+                    raise
+                self._take(data, sender, receipt_s, backlog)
+        finally:
+            try:
+                self._sock.settimeout(POLL_S)
+            except OSError:
+                pass
+
+    def _recv(self) -> tuple[bytes, tuple, float]:
+        """One datagram, its sender and when it arrived on :attr:`clock` (the kernel's
+        time stamp where there is one: the time it waited in the socket's buffer counts)."""
+        if not self._stamped:
+            data, sender = self._sock.recvfrom(MAX_DATAGRAM)
+            return data, sender, self.clock()
+        data, ancillary, _flags, sender = self._sock.recvmsg(MAX_DATAGRAM, 64)
+        now, wall = self.clock(), time.time()
+        for level, kind, payload in ancillary:
+            if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMP and len(payload) == _TIMEVAL.size:
+                sec, usec = _TIMEVAL.unpack(payload)
+                # Clamped (a wall clock stepped meanwhile): never after its read, at most a minute before.
+                return data, sender, now - min(max(wall - (sec + 1e-6 * usec), 0.0), 60.0)
+        return data, sender, now
+
+    def _take(self, data: bytes, sender: tuple, receipt_s: float, backlog: collections.deque) -> None:
+        """A datagram just read: a ``/stop`` in it acts now; the rest waits its turn in ``backlog``."""
+        if b"/stop" in data:
+            try:
+                messages = parse_datagram(data)
+            except Exception:  # noqa: BLE001 - refused in its turn, like any bad datagram
+                messages = []
+            if any(m.address == "/stop" and not m.params for m in messages):
+                self._handle_messages(messages, sender, receipt_s)
+                return
+        if self._stop:
+            self.handle(data, sender, receipt_s)  # after a stop: its taps answered /error stopped, now
+            return
+        # Behind a flood, each datagram costs one read and one prepared answer, no parse:
+        # the receiving thread catches up as fast as it can, and a /stop is not lost long.
+        if self.clock() - receipt_s > self.max_wait_s:
+            self._reply_fixed(sender, self._stale_text)
+        elif len(backlog) >= MAX_BACKLOG:
+            self._reply_fixed(sender, _BUSY_TEXT)
+        else:
+            backlog.append((data, sender, receipt_s))
 
     def handle(self, data: bytes, sender: tuple, receipt_s: float) -> None:
         """Answer one datagram: refuse what is wrong, queue the taps, act on ``/stop`` now.
@@ -377,16 +498,24 @@ class OscTapServer:
         sender : tuple
             Its source address; answers go there.
         receipt_s : float
-            When it was read, s (:attr:`clock`).
+            When it arrived, s (:attr:`clock`).
         """
         try:
             messages = parse_datagram(data)
+        except TooManyElements as exc:
+            self._reply(sender, "/error", f"refused: {exc} ({len(data)} bytes; send at most {MAX_ELEMENTS} "
+                                          "messages a datagram); nothing in it played")
+            return
         except FramingError as exc:
             self._reply(sender, "/error", f"not an OSC packet ({len(data)} bytes: {exc}); nothing played")
             return
         except Exception:  # noqa: BLE001 - an undecodable datagram is refused, never fatal
             self._reply(sender, "/error", f"not an OSC packet ({len(data)} bytes); nothing played")
             return
+        self._handle_messages(messages, sender, receipt_s)
+
+    def _handle_messages(self, messages: list, sender: tuple, receipt_s: float) -> None:
+        # Every message is answered, those after a /stop too (a tap: /error stopped).
         for message in messages:
             try:
                 self._dispatch(message.address, list(message.params), sender, receipt_s)
@@ -394,8 +523,6 @@ class OscTapServer:
                 self._reply(sender, "/error", str(exc))
             except Exception as exc:  # noqa: BLE001 - the server keeps serving whatever one message does
                 self._reply(sender, "/error", f"{message.address}: unexpected {type(exc).__name__}: {exc}")
-            if self._stop:
-                return
 
     def _dispatch(self, address: str, args: list, sender: tuple, receipt_s: float) -> None:
         if address == "/tap":
@@ -435,9 +562,14 @@ class OscTapServer:
             raise _Refused(f"unknown address {address[:80]!r}; known: {', '.join(ADDRESSES)}")
 
     def _enqueue(self, job: _Job) -> None:
+        waited = self.clock() - job.receipt_s
         with self._cond:
             if self._stop:
                 raise _Refused(f"stopped: {job.address} {job.target} was not played")
+            if waited > self.max_wait_s:
+                # Read long before its turn in the receiving thread: the server is behind.
+                raise _Refused(f"stale: {job.address} {job.target} waited {1e3 * waited:.0f} ms behind other "
+                               f"datagrams, over the {1e3 * self.max_wait_s:g} ms bound; not played")
             if len(self._queue) >= self.max_queued:
                 raise _Refused(f"busy: {len(self._queue)} messages wait already (at most {self.max_queued}); "
                                f"{job.address} {job.target} was not played")
@@ -484,11 +616,11 @@ class OscTapServer:
         except _Refused as exc:
             self._reply(job.sender, "/error", str(exc))
         except VibrofocusError as exc:  # a refused design or drive: the safety layer's word
-            self._reply(job.sender, "/error", f"{job.address}: {exc}")
+            self._reply(job.sender, "/error", f"{job.address} {job.target}: {exc}")
         except Exception as exc:  # noqa: BLE001 - the server keeps serving whatever one tap does
             # A play that failed has set the outputs to zero itself (Rig.play); stopping the
             # rig here would end the server's hold on it and refuse every later tap.
-            self._reply(job.sender, "/error", f"{job.address}: unexpected {type(exc).__name__}: {exc}")
+            self._reply(job.sender, "/error", f"{job.address} {job.target}: unexpected {type(exc).__name__}: {exc}")
 
     def _record(self, job: _Job, onset: Any, played_s: float, peak_v: float) -> TapRecord:
         self._last_tap_id += 1
@@ -522,6 +654,27 @@ class OscTapServer:
                     self._marker_failed = True
                     logging.getLogger(__name__).warning("a tap's marker could not be sent (%s: %s); taps go on",
                                                         type(exc).__name__, exc)
+
+    @property
+    def _stale_text(self) -> str:
+        return (f"stale: this datagram waited over the {1e3 * self.max_wait_s:g} ms bound before the server could "
+                "read it (a flood of datagrams?); nothing in it played")
+
+    def _reply_fixed(self, sender: tuple, text: str) -> None:
+        """``/error text``, built once per text."""
+        with self._count_lock:
+            self.n_errors += 1
+            dgram = self._fixed.get(text)
+            if dgram is None:
+                from pythonosc.osc_message_builder import OscMessageBuilder
+
+                builder = OscMessageBuilder(address="/error")
+                builder.add_arg(_clean(text))
+                dgram = self._fixed[text] = builder.build().dgram
+        try:
+            self._sock.sendto(dgram, sender)
+        except OSError:
+            pass
 
     def _reply(self, sender: tuple, address: str, *args: Any) -> None:
         from pythonosc.osc_message_builder import OscMessageBuilder

@@ -8,17 +8,22 @@ elements a datagram holds, and checks each message's address and type tags, so t
 python-osc only parses datagrams it can parse in one pass, without logging.
 
 The walk moves forward only: each step passes at least 4 bytes, so it ends after at most
-``len(data) / 4`` steps whatever the bytes are.
+``len(data) / 4`` steps whatever the bytes are, and it stops at the first element past
+:data:`MAX_ELEMENTS`. That cap is small on purpose: a datagram is handled as one piece
+(python-osc takes about 0.1 ms per message), so a bundle of thousands of taps would hold
+the server's receiving thread, and a ``/stop`` behind it, for a tenth of a second or more.
 """
 
 from __future__ import annotations
 
-__all__ = ["FramingError", "check_framing", "parse_datagram", "MAX_BUNDLE_DEPTH", "MAX_ELEMENTS"]
+__all__ = ["FramingError", "TooManyElements", "check_framing", "parse_datagram", "MAX_BUNDLE_DEPTH",
+           "MAX_ELEMENTS"]
 
 #: Deepest nesting of bundles accepted (a bundle in a bundle is depth 2).
 MAX_BUNDLE_DEPTH = 8
-#: Most messages and bundles one datagram may hold.
-MAX_ELEMENTS = 4096
+#: Most messages and bundles one datagram may hold (a bundle of a few taps, a method and
+#: a tap, is what a client needs; each tap may also go in a datagram of its own).
+MAX_ELEMENTS = 16
 
 _BUNDLE = b"#bundle\x00"
 #: The argument types python-osc parses (OSC 1.0 and 1.1): any other would be logged and skipped.
@@ -27,6 +32,10 @@ _TYPE_TAGS = frozenset(b"ihfdsbrmtTFN[]")
 
 class FramingError(ValueError):
     """A datagram whose framing is not OSC's; its message says where."""
+
+
+class TooManyElements(FramingError):
+    """A datagram of valid framing that holds more than :data:`MAX_ELEMENTS` messages and bundles."""
 
 
 def check_framing(data: bytes) -> int:
@@ -47,9 +56,11 @@ def check_framing(data: bytes) -> int:
     FramingError
         A bundle element whose size is negative, zero, not a multiple of 4 or past the end
         of its bundle; a bundle shorter than its header; bundles nested deeper than
-        :data:`MAX_BUNDLE_DEPTH` or more than :data:`MAX_ELEMENTS` elements; an element
+        :data:`MAX_BUNDLE_DEPTH`; an element
         that is neither a message nor a bundle; a message without a terminated address,
         or with a type tag python-osc does not parse.
+    TooManyElements
+        More than :data:`MAX_ELEMENTS` elements (a subclass of FramingError).
     """
     data = bytes(data)
     if data.startswith(b"/"):
@@ -74,7 +85,7 @@ def check_framing(data: bytes) -> int:
             raise FramingError(f"bundle element at byte {pos}: its size {size} {reason}")
         n_elements += 1
         if n_elements > MAX_ELEMENTS:
-            raise FramingError(f"more than {MAX_ELEMENTS} elements in one datagram")
+            raise TooManyElements(f"more than {MAX_ELEMENTS} elements (messages and bundles) in one datagram")
         stack.append((end, start + size, depth))  # the rest of this bundle, after this element
         if data.startswith(_BUNDLE, start):
             if depth >= MAX_BUNDLE_DEPTH:
