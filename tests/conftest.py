@@ -118,13 +118,24 @@ def pytest_sessionfinish(session, exitstatus):
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
-#: Fixtures that make a test need a real outside part, and the marker that says so.
-_MARK_BY_FIXTURE = {"jack_server": "jack", "chromium": "browser", "page": "browser"}
+#: Fixtures that make a test need a real outside part, and the marker that says so. A test
+#: needs one when the fixture is in its closure (tests/web's ``page`` requests ``chromium``),
+#: never because an argument has a fixture's name: a docs check parametrized over a ``page``
+#: of the docs needs no browser.
+_MARK_BY_FIXTURE = {"jack_server": "jack", "chromium": "browser"}
+
+
+def _uses_fixture(item, name: str) -> bool:
+    """Whether ``item`` requests the fixture ``name`` (itself or through another fixture)."""
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return False
+    return bool(info.name2fixturedefs.get(name)) and name in item.fixturenames
 
 
 def pytest_collection_modifyitems(config, items):
     # Marked by what they use, so `-m "not jack"` or `-m "not browser"` cannot miss one.
     for item in items:
         for fixture, marker in _MARK_BY_FIXTURE.items():
-            if fixture in getattr(item, "fixturenames", ()):
+            if _uses_fixture(item, fixture):
                 item.add_marker(getattr(pytest.mark, marker))

@@ -275,6 +275,17 @@ def test_relative_links_and_anchors_resolve(page):
     assert not broken, f"{_rel(page)}:\n" + "\n".join(broken)
 
 
+def test_the_docs_checks_need_no_browser(request):
+    """An argument named like a fixture (``page``, a page of the docs) marks no test as a
+    browser test (tests/conftest.py marks by the fixtures a test uses): these checks run in
+    the quick loop and in parallel."""
+    names = ("test_docs_state_what_the_code_has", "test_relative_links_and_anchors_resolve")
+    checks = [item for item in request.session.items if getattr(item, "originalname", None) in names]
+    if not checks:
+        pytest.skip("the docs checks are not collected in this run")
+    assert not [item.nodeid for item in checks if item.get_closest_marker("browser")]
+
+
 def test_the_link_check_can_fail(tmp_path):
     page = tmp_path / "page.md"
     page.write_text("# Title here\n\n## A `code` section\n", encoding="utf-8")
