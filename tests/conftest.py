@@ -51,6 +51,33 @@ def _private_device_locks(tmp_path_factory):
         os.environ["VIBROFOCUS_LOCK_DIR"] = before
 
 
+# ------------------------------------------------------------ one shared simulated calibration
+@pytest.fixture(scope="session")
+def simulated_calibration_of():
+    """``get(skin="nominal") -> (rig, cal)``: simulated participant 0's default (mimo)
+    calibration, noise and dropouts on, on the simulated forearm with that skin preset, and
+    the rig. Each is made once per test process (seconds each) for the tests that only read
+    it: never change the calibration or play on the rig (copy a saved file to edit it)."""
+    from vibrofocus.calibration import calibrate
+    from vibrofocus.skin import SimulatedForearm
+
+    made = {}
+
+    def get(skin: str = "nominal"):
+        if skin not in made:
+            rig = SimulatedForearm(seed=0, skin=skin)
+            made[skin] = rig, calibrate(rig, participant_id="S00")
+        return made[skin]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def simulated_calibration(simulated_calibration_of):
+    """``(rig, cal)`` on the default (nominal) skin: :func:`simulated_calibration_of`."""
+    return simulated_calibration_of("nominal")
+
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Debian's chromium, driven by Playwright (the web pages, the docs' navigation bar).
