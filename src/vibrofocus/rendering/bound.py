@@ -1,4 +1,4 @@
-"""The energy-contrast bound of an array (SPEC §2): :func:`contrast_bound` and
+"""The energy-contrast bound of an array (docs/method.md, "Rendering methods"): :func:`contrast_bound` and
 :func:`energy_contrast_db`. Notation: :mod:`.contrast`."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ __all__ = ["ContrastBound", "contrast_bound", "energy_contrast_db"]
 
 @dataclass(frozen=True)
 class ContrastBound:
-    """The most energy contrast an array can give at one target (SPEC §2).
+    """The most energy contrast an array can give at one target (docs/method.md, "Rendering methods").
 
     Attributes
     ----------

@@ -1,4 +1,4 @@
-"""The combination method of SPEC §2: an inverse filter whose target waveform is what
+"""The combination method (docs/method.md, "Rendering methods"): an inverse filter whose target waveform is what
 funneling would produce at the target, predicted through ``H``."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Contrast designs of SPEC §2: acoustic contrast control (ACC), a constrained
+"""Contrast designs (docs/method.md, "Rendering methods"): acoustic contrast control (ACC), a constrained
 fidelity-contrast design, and the contrast bound of an array.
 
 Notation, per frequency ``f`` of ``rfftfreq(n, 1/fs)``: ``h`` (row, ``n_actuators``) is the
@@ -17,8 +17,8 @@ which left free makes the drives a noise burst. The designs here choose it so th
 target receives the band-limited tap: ``s = w U / lambda`` gives ``h s = U`` exactly, ``U``
 the spectrum of the desired waveform (the Ricker tap through the band taper). Among all
 drives that put exactly ``U`` at the target, this ``s`` has the least regularized quiet
-energy ``s^H B s = |U|^2 / lambda``: with ``delta = 0`` that is the *exact-tap bound* of
-SPEC §2.
+energy ``s^H B s = |U|^2 / lambda``: with ``delta = 0`` that is the *exact-tap bound*
+(docs/method.md, "Rendering methods").
 
 The constrained design trades fidelity for contrast: ``s = w V / lambda`` puts
 ``V = g U`` at the target, ``g`` proportional to ``lambda / (lambda + mu)``. It solves

@@ -1,4 +1,4 @@
-"""High-level rendering: one call from a transfer matrix to drives (SPEC §2).
+"""High-level rendering: one call from a transfer matrix to drives (docs/method.md, "Rendering methods").
 
 :func:`render` is a thin front over the method registry (:mod:`.registry`): it makes a
 :class:`~.transfer.TransferMatrix` of what it is given, the method object of the name

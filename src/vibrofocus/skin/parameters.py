@@ -47,8 +47,8 @@ STIFFNESS_SPREAD = 0.237
 #: Relative half-width of the uniform draw of the spring-pot (viscosity) coefficient: the
 #: relative SD of Zhang et al. 2011's forearm Voigt viscosity (0.60 / 5.03 Pa s).
 VISCOSITY_SPREAD = 0.119
-#: Relative half-width of the uniform draw of a layered arm's loss tangent (±25 %, the
-#: spread of attenuation between participants that SPEC §3 asks for: an assumption).
+#: Relative half-width of the uniform draw of a layered arm's loss tangent (±25 %, an
+#: assumed spread of attenuation between participants: docs/skin-model.md).
 LOSS_SPREAD = 0.25
 #: Coupling of wrist-side actuators, drawn uniformly in this range (an assumption of the
 #: model, see :class:`ForearmParameters`).
