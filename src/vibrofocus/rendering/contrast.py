@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import BAND_HZ, SIGMA_S
 from ..errors import ValidationError
@@ -136,6 +137,7 @@ def taper_drive_ends(drives: Any, centre: int, taper: float = DRIVE_WINDOW_TAPER
     return drives * window
 
 
+@fill_doc
 def contrast_drives(
     H: Any,
     target_index: int,
@@ -159,18 +161,15 @@ def contrast_drives(
 
     Parameters
     ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    %(H)s
     target_index : int
         Row of ``H`` of the target.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     quiet_indices : sequence of int, optional
         Rows of ``H`` to keep quiet; default every other row (unless ``quiet_H``).
     quiet_H : ndarray, complex, shape (n // 2 + 1, n_grid, n_actuators), optional
         Transfer to further quiet points (a dense skin grid).
-    band : (float, float)
-        Design band, Hz.
+    %(band)s
     sigma, t0
         Ricker spread and centre, s (t0 default: mid-window).
     waveform : ndarray, shape (n,), optional

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_in_range, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
@@ -257,6 +258,7 @@ class ForearmParameters:
         )
 
     @classmethod
+    @fill_doc
     def draw(cls, seed: int, layout: ArrayLayout, skin: str = "voigt-fit") -> "ForearmParameters":
         """Draw one participant around the nominal forearm.
 
@@ -271,8 +273,7 @@ class ForearmParameters:
 
         Parameters
         ----------
-        seed : int
-            Participant seed (>= 0); the same seed always gives the same participant.
+        %(seed)s
         layout : ArrayLayout
             The array (decides which actuators are wrist-side).
         skin : str
