@@ -1,4 +1,4 @@
-"""Speed of the default inverse-filter design against a naive per-frequency loop (SPEC §9).
+"""Speed of the default inverse-filter design against a naive per-frequency loop (docs/performance.md).
 
 Prints, from one run, for the reference setup and a dense sleeve, every row of issue 18's
 table:

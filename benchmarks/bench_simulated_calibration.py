@@ -1,4 +1,4 @@
-"""How much faster than real time a calibration runs on the simulated forearm (SPEC §9).
+"""How much faster than real time a calibration runs on the simulated forearm (docs/performance.md).
 
 A real single-spot vibrometer calibration of the reference setup records, for each skin
 point the operator aims at, one sweep per actuator (one actuator plays at a time). The

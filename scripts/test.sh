@@ -2,41 +2,114 @@
 # The whole test suite on a fresh machine with Python 3.11 and apt: installs Debian's
 # chromium (browser tests), jackd2 and libportaudio2 (the audio rig against a real JACK
 # server on its dummy driver), a virtual environment with vibrofocus and its test extras,
-# then runs pytest: in parallel, then the browser tests in one process. Extra arguments go to
-# both runs of pytest (e.g. -q, -x); to choose tests by marker, call pytest yourself
-# (DEVELOPING.md).
+# then runs the suite in phases, each timed ("phase unit: 312 s"):
+#
+#   unit     the tests that are neither slow, browser nor docs, in parallel (pytest-xdist)
+#   slow     the slow (> ~10 s) and integration tests, in parallel
+#   browser  the browser tests, in one process (their pages keep real time)
+#   docs     the Sphinx site with its executed gallery, built outside pytest, then checked
+#            (scripts/build_docs.sh)
+#   lowest   the smoke test at the lowest versions pyproject.toml allows (scripts/test_lowest.sh)
+#
+#   bash scripts/test.sh                  unit, slow, browser and docs: every test
+#   bash scripts/test.sh unit browser -x  only those phases; other arguments go to pytest
+#   PYTHON=/path/to/python bash scripts/test.sh unit   in an environment of yours: installs nothing
+#
+# Every phase runs even when an earlier one failed; the exit status is the first failure's.
+# A phase that selects no test (pytest's exit code 5, e.g. with -k) passes and says so.
+# To choose tests by marker, call pytest yourself (DEVELOPING.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 
-apt_packages=(chromium jackd2 libportaudio2)
-missing=()
-for pkg in "${apt_packages[@]}"; do
-    dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
+phases=()
+pytest_args=()
+for arg in "$@"; do
+    case "$arg" in
+        unit|slow|browser|docs|lowest) phases+=("$arg") ;;
+        *) pytest_args+=("$arg") ;;
+    esac
 done
-if ((${#missing[@]})); then
-    SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
-    echo "installing Debian packages: ${missing[*]}"
-    $SUDO apt-get update -qq
-    DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+((${#phases[@]})) || phases=(unit slow browser docs)
+
+declare -A took=()
+order=()
+status=0
+# phase NAME COMMAND...: runs the command, prints "phase NAME: N s" and keeps the first failure.
+phase() {
+    local name=$1; shift
+    local start=$SECONDS rc=0
+    echo "=== phase $name"
+    "$@" || rc=$?
+    if [ "$rc" = 5 ] && [ "$1" = "$python" ]; then
+        echo "phase $name: no test selected"
+        rc=0
+    fi
+    took[$name]=$((SECONDS - start))
+    order+=("$name")
+    echo "phase $name: ${took[$name]} s$([ "$rc" = 0 ] || echo " (FAILED, exit $rc)")"
+    [ "$rc" = 0 ] || [ "$status" != 0 ] || status=$rc
+}
+
+setup() {
+    local apt_packages=(chromium jackd2 libportaudio2) missing=() pkg
+    for pkg in "${apt_packages[@]}"; do
+        dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
+    done
+    if ((${#missing[@]})); then
+        local SUDO=""; [ "$(id -u)" = 0 ] || SUDO="sudo"
+        echo "installing Debian packages: ${missing[*]}"
+        $SUDO apt-get update -qq
+        DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+    fi
+    [ -x .venv/bin/python ] || python3 -m venv .venv
+    .venv/bin/python -m pip install -q --upgrade pip
+    .venv/bin/python -m pip install -q -e '.[test]'
+    # PsychoPy's own wheel without its dependencies (PyQt6, psychtoolbox, opencv, MeshPy... too
+    # heavy for CI), in a folder of its own: enough for its Builder compiler and psychopy.data,
+    # which tests/psychopy run in child processes (docs/psychopy.md). Not importable from the venv.
+    [ -d "$psychopy_dir/psychopy" ] || .venv/bin/python -m pip install -q --no-deps --target "$psychopy_dir" \
+        'psychopy==2026.2.5' 'six>=1.16' 'json-tricks>=3.17' 'i18next>=0.0.3' 'astunparse>=1.6' 'esprima>=4.0'
+}
+
+python=.venv/bin/python
+psychopy_dir=.venv/psychopy-nodeps
+if [ -n "${PYTHON:-}" ]; then
+    # An environment of the caller's (PYTHON=/path/to/python): nothing is installed, and
+    # VIBROFOCUS_TEST_PSYCHOPY is the caller's too.
+    python=$PYTHON
+else
+    needs_setup=0
+    for p in "${phases[@]}"; do [ "$p" = lowest ] || needs_setup=1; done
+    if ((needs_setup)); then phase setup setup; fi
+    export VIBROFOCUS_TEST_PSYCHOPY="$PWD/$psychopy_dir"
 fi
 
-[ -x .venv/bin/python ] || python3 -m venv .venv
-.venv/bin/python -m pip install -q --upgrade pip
-.venv/bin/python -m pip install -q -e '.[test]'
-# PsychoPy's own wheel without its dependencies (PyQt6, psychtoolbox, opencv, MeshPy... too heavy
-# for CI), in a folder of its own: enough for its Builder compiler and psychopy.data, which
-# tests/psychopy run in child processes (docs/psychopy.md). Not importable from the venv itself.
-psychopy_dir=.venv/psychopy-nodeps
-[ -d "$psychopy_dir/psychopy" ] || .venv/bin/python -m pip install -q --no-deps --target "$psychopy_dir" \
-    'psychopy==2026.2.5' 'six>=1.16' 'json-tricks>=3.17' 'i18next>=0.0.3' 'astunparse>=1.6' 'esprima>=4.0'
-export VIBROFOCUS_TEST_PSYCHOPY="$PWD/$psychopy_dir"
-
-# Everything but the browser tests in parallel on every core (pytest-xdist), then the
-# browser tests in one process: their pages keep real time (timeouts, pauses), which two
-# chromiums beside a loaded machine would stretch. No bytecode or pytest cache in the
-# checkout: the suite writes only to temporary folders (tests/conftest.py checks it).
+# No bytecode or pytest cache in the checkout: the suite writes only to temporary folders
+# (tests/conftest.py checks it). The 25 slowest tests of each phase are listed at its end.
 export PYTHONDONTWRITEBYTECODE=1
-status=0
-.venv/bin/python -m pytest -n auto -p no:cacheprovider -m "not browser" "$@" || status=$?
-.venv/bin/python -m pytest -p no:cacheprovider -m browser "$@" || status=$?
+pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
+# The unit phase hands out whole modules (--dist loadscope), so a module's shared fixture (a
+# calibration, a served app) is made by one worker, not by each; the slow phase's tests take
+# seconds to minutes each, so an idle worker takes tests from a busy one (--dist worksteal).
+for p in "${phases[@]}"; do
+    case "$p" in
+        unit) phase unit "${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs" \
+            ${pytest_args[@]+"${pytest_args[@]}"} ;;
+        slow) phase slow "${pytest[@]}" -n auto --dist worksteal -m "slow and not browser and not docs" \
+            ${pytest_args[@]+"${pytest_args[@]}"} ;;
+        # One process: the pages keep real time (timeouts, pauses), which two chromiums beside
+        # a loaded machine would stretch.
+        browser) phase browser "${pytest[@]}" -m "browser and not docs" ${pytest_args[@]+"${pytest_args[@]}"} ;;
+        docs) phase docs env PYTHON="$python" bash scripts/build_docs.sh ${pytest_args[@]+"${pytest_args[@]}"} ;;
+        lowest) phase lowest bash scripts/test_lowest.sh ;;
+    esac
+done
+
+echo "=== phase times"
+total=0
+for name in "${order[@]}"; do
+    printf 'phase %-8s %5d s\n' "$name:" "${took[$name]}"
+    total=$((total + took[$name]))
+done
+printf 'total          %5d s\n' "$total"
 exit "$status"

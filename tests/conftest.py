@@ -51,6 +51,33 @@ def _private_device_locks(tmp_path_factory):
         os.environ["VIBROFOCUS_LOCK_DIR"] = before
 
 
+# ------------------------------------------------------------ one shared simulated calibration
+@pytest.fixture(scope="session")
+def simulated_calibration_of():
+    """``get(skin="nominal") -> (rig, cal)``: simulated participant 0's default (mimo)
+    calibration, noise and dropouts on, on the simulated forearm with that skin preset, and
+    the rig. Each is made once per test process (seconds each) for the tests that only read
+    it: never change the calibration or play on the rig (copy a saved file to edit it)."""
+    from vibrofocus.calibration import calibrate
+    from vibrofocus.skin import SimulatedForearm
+
+    made = {}
+
+    def get(skin: str = "nominal"):
+        if skin not in made:
+            rig = SimulatedForearm(seed=0, skin=skin)
+            made[skin] = rig, calibrate(rig, participant_id="S00")
+        return made[skin]
+
+    return get
+
+
+@pytest.fixture(scope="session")
+def simulated_calibration(simulated_calibration_of):
+    """``(rig, cal)`` on the default (nominal) skin: :func:`simulated_calibration_of`."""
+    return simulated_calibration_of("nominal")
+
+
 ROOT = Path(__file__).resolve().parents[1]
 
 #: Debian's chromium, driven by Playwright (the web pages, the docs' navigation bar).
@@ -118,13 +145,24 @@ def pytest_sessionfinish(session, exitstatus):
         session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
-#: Fixtures that make a test need a real outside part, and the marker that says so.
-_MARK_BY_FIXTURE = {"jack_server": "jack", "chromium": "browser", "page": "browser"}
+#: Fixtures that make a test need a real outside part, and the marker that says so. A test
+#: needs one when the fixture is in its closure (tests/web's ``page`` requests ``chromium``),
+#: never because an argument has a fixture's name: a docs check parametrized over a ``page``
+#: of the docs needs no browser.
+_MARK_BY_FIXTURE = {"jack_server": "jack", "chromium": "browser"}
+
+
+def _uses_fixture(item, name: str) -> bool:
+    """Whether ``item`` requests the fixture ``name`` (itself or through another fixture)."""
+    info = getattr(item, "_fixtureinfo", None)
+    if info is None:
+        return False
+    return bool(info.name2fixturedefs.get(name)) and name in item.fixturenames
 
 
 def pytest_collection_modifyitems(config, items):
     # Marked by what they use, so `-m "not jack"` or `-m "not browser"` cannot miss one.
     for item in items:
         for fixture, marker in _MARK_BY_FIXTURE.items():
-            if fixture in getattr(item, "fixturenames", ()):
+            if _uses_fixture(item, fixture):
                 item.add_marker(getattr(pytest.mark, marker))

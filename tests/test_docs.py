@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import importlib
 import inspect
+import os
 import pkgutil
 import shutil
 import subprocess
@@ -83,11 +84,11 @@ def test_shared_descriptions_are_filled_with_the_placeholder_indent():
         @fill_doc
         def g():
             """%(nope)s"""
-    assert set(docdict) >= {"fs", "band", "taper_octaves"}
+    assert set(docdict) >= {"fs", "band", "H", "layout", "rig", "seed", "taper_octaves"}  # DEVELOPING.md
 
 
-@pytest.mark.slow
-def test_the_documentation_site_builds_without_warnings(tmp_path, chromium):
+def _build_site(tmp_path: Path) -> Path:
+    """The site built as scripts/build_docs.sh builds it, into ``tmp_path / "html"``."""
     pytest.importorskip("sphinx")
     pytest.importorskip("sphinx_gallery")
     # Built from a copy: the build writes pages (api/, auto_examples/) next to its sources,
@@ -102,9 +103,21 @@ def test_the_documentation_site_builds_without_warnings(tmp_path, chromium):
         capture_output=True, text=True, timeout=900, cwd=tmp_path,
     )
     assert result.returncode == 0, result.stderr[-4000:]
-    html = tmp_path / "html"
+    return tmp_path / "html"
+
+
+@pytest.mark.slow
+@pytest.mark.docs
+def test_the_documentation_site_builds_without_warnings(tmp_path, chromium):
+    # CI builds the site outside pytest (scripts/build_docs.sh, its own phase) and hands it
+    # over in VIBROFOCUS_DOCS_HTML; run alone, the test builds it itself.
+    built = os.environ.get("VIBROFOCUS_DOCS_HTML")
+    html = Path(built) if built else _build_site(tmp_path)
+    assert (html / "index.html").is_file(), f"no built site in {html}"
     assert (html / "api" / "vibrofocus.rendering.html").exists()
     assert (html / "auto_examples" / "plot_rendering_methods.html").exists()
+    examples = sorted(p.stem for p in (ROOT / "examples").glob("plot_*.py"))
+    assert sorted(p.stem for p in (html / "auto_examples").glob("plot_*.html")) == examples
     page = (html / "api" / "generated" / "vibrofocus.rendering.render.html").read_text(encoding="utf-8")
     assert "guard_weight" in page and "Parameters" in page
     # The command-line reference comes from the CLI itself.

@@ -220,6 +220,37 @@ def test_no_internal_issue_numbers_in_docs_help_or_package():
     assert not hits, "internal issue numbers in user-facing text:\n" + "\n".join(hits)
 
 
+#: A citation of a file the repository does not have: the specification the project started
+#: from, or anything beside the checkout. Docs and code cite the docs pages instead.
+_OUTSIDE = re.compile(r"\bSPEC(?:\.md|\s*§)|\.\./shared\b|(?<![\w./-])shared/\w")
+
+
+def _repository_text() -> list[Path]:
+    """The repository's own text: package, docs, tests, benchmarks, examples and top-level files
+    (scripts/ is outside this check for now)."""
+    files = [ROOT / name for name in ("README.md", "DEVELOPING.md", "pyproject.toml", ".ci/run")]
+    for folder, patterns in (("src", ("*.py", "*.md", "*.html", "*.toml")), ("docs", ("*.md", "*.py")),
+                             ("tests", ("*.py", "*.md")), ("benchmarks", ("*.py",)), ("examples", ("*.py", "*.rst"))):
+        for pattern in patterns:
+            files += sorted((ROOT / folder).rglob(pattern))
+    return [f for f in files if f.is_file()]
+
+
+def test_the_repository_cites_no_file_outside_it():
+    hits = [f"{path.relative_to(ROOT)}:{lineno}: {line.strip()}"
+            for path in _repository_text()
+            for lineno, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if _OUTSIDE.search(line)]
+    assert not hits, "cite the docs pages, not a file outside the repository:\n" + "\n".join(hits)
+
+
+def test_the_outside_citation_check_can_fail():
+    spec, shared = "SPEC", "shared/"  # apart, so that this file passes the check above
+    for line in (f"designs ({spec} §2).", f"Read `../{shared}{spec}.md` first.", f"see {shared}PAPER.md"):
+        assert _OUTSIDE.search(line), line
+    for line in ('(docs/method.md, "Rendering methods")', "SPECTRUM", "a shared/ folder", "the shared one"):
+        assert not _OUTSIDE.search(line), line
+
+
 # --- links ----------------------------------------------------------------------------------
 
 _LINK = re.compile(r"!?\[[^\]]*\]\(\s*<?([^)\s>]+)>?(?:\s+\"[^\"]*\")?\s*\)|<img [^>]*src=\"([^\"]+)\"")
@@ -273,6 +304,17 @@ def broken_links(page: Path, text: str | None = None) -> list[str]:
 def test_relative_links_and_anchors_resolve(page):
     broken = broken_links(page)
     assert not broken, f"{_rel(page)}:\n" + "\n".join(broken)
+
+
+def test_the_docs_checks_need_no_browser(request):
+    """An argument named like a fixture (``page``, a page of the docs) marks no test as a
+    browser test (tests/conftest.py marks by the fixtures a test uses): these checks run in
+    the quick loop and in parallel."""
+    names = ("test_docs_state_what_the_code_has", "test_relative_links_and_anchors_resolve")
+    checks = [item for item in request.session.items if getattr(item, "originalname", None) in names]
+    if not checks:
+        pytest.skip("the docs checks are not collected in this run")
+    assert not [item.nodeid for item in checks if item.get_closest_marker("browser")]
 
 
 def test_the_link_check_can_fail(tmp_path):

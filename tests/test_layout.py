@@ -1,4 +1,4 @@
-"""ArrayLayout: the reference geometry of SPEC §1 and other layouts through the same code."""
+"""ArrayLayout: the reference geometry (docs/method.md, "Reference setup") and other layouts through the same code."""
 
 import numpy as np
 import pytest

@@ -32,5 +32,5 @@ def test_importing_the_package_loads_no_heavy_dependency():
 
 
 def test_spec_contract_names_are_top_level():
-    # SPEC §8: importable from the top-level package.
+    # The public API: importable from the top-level package.
     from vibrofocus import focus_metrics, funneling_gains, inverse_filter, ricker  # noqa: F401

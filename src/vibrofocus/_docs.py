@@ -21,6 +21,17 @@ docdict: dict[str, str] = {
     Sample rate, Hz.""",
     "band": """band : (float, float)
     Design band ``(low, high)``, Hz, inside ``(0, fs / 2]``.""",
+    "H": """H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
+    Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.""",
+    "layout": """layout : ArrayLayout
+    The array: its actuators, locations and guard points (positions in m).""",
+    "layout_default": """layout : ArrayLayout, optional
+    Location coordinates (m); default the reference layout.""",
+    "rig": """rig : Rig
+    Where the drives play, through the rig's safety layer (the simulated forearm, an
+    audio interface or NI-DAQmx: :func:`vibrofocus.rigs.make_rig`).""",
+    "seed": """seed : int
+    Participant seed (>= 0): the same seed always gives the same simulated participant.""",
     "taper_octaves": """taper_octaves : float
     Width of the raised-cosine roll-off beyond each band edge, octaves (0: a brick
     wall). The default 0.5 keeps the band's edges smooth in time.""",

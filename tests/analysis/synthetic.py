@@ -26,7 +26,7 @@ def make_trials(
     n_training: int = 5,
     studies: tuple[int, ...] = (1, 2),
 ) -> pd.DataFrame:
-    """Return a trials table with the SPEC §6 columns (all values as written to CSV)."""
+    """Return a trials table with the columns of docs/file-formats.md, "Trials file" (all values as written to CSV)."""
     rng = np.random.default_rng(seed)
     sd_mm = sd_mm or dict.fromkeys(METHODS, 7.0)
     extra_mean = extra_mean or dict.fromkeys(METHODS, 1.0)

@@ -19,19 +19,19 @@ def firs(layout) -> np.ndarray:
     return analytic_firs(layout, 10_000.0)
 
 
-@pytest.fixture(scope="module")
-def fir_calibration(layout, firs):
-    """A quick noise-free h1 calibration of the FIR rig (2 repeats of a 1 s sweep)."""
-    rig = FIRRig(firs, layout)
+@pytest.fixture(scope="session")
+def fir_calibration():
+    """A quick noise-free h1 calibration of the FIR rig (2 repeats of a 1 s sweep) on the
+    reference layout, made once per test process for the tests that only read it."""
+    layout = ArrayLayout.reference()
+    rig = FIRRig(analytic_firs(layout, 10_000.0), layout)
     return rig, calibrate(rig, participant_id="FIR", method="h1", sweep_s=1.0, repeats=2)
 
 
-@pytest.fixture(scope="module")
-def forearm_calibration():
+@pytest.fixture(scope="session")
+def forearm_calibration(simulated_calibration_of):
     """The default (mimo) calibration of simulated participant 0 (noise and dropouts on),
     on the voigt-fit skin, for the tests of fit_model's homogeneous law (an arm of that
-    family; test_fit_model_layered.py tests the layered law on the nominal skin)."""
-    from vibrofocus.skin import SimulatedForearm
-
-    rig = SimulatedForearm(seed=0, skin="voigt-fit")
-    return rig, calibrate(rig, participant_id="S00")
+    family; test_fit_model_layered.py tests the layered law on the nominal skin). Made once
+    per test process (tests/conftest.py)."""
+    return simulated_calibration_of("voigt-fit")

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from vibrofocus.calibration import FittedSkin, calibrate, fit_model, load_calibration, save_calibration
+from vibrofocus.calibration import FittedSkin, fit_model, load_calibration, save_calibration
 from vibrofocus.calibration.fitmodel import FIT_LAW_PARAMETERS, parameter_names, true_parameters
 from vibrofocus.demo.trust import tap_band
 from vibrofocus.errors import ValidationError
@@ -20,12 +20,13 @@ CENTRE = 4  # location 5
 
 
 @pytest.fixture(scope="module")
-def nominal_calibration():
+def nominal_calibration(simulated_calibration):
     """The default (mimo) calibration of participant 0 on the default nominal skin
-    (noise and dropouts on), and the noise-free arm."""
-    rig = SimulatedForearm(seed=0)
+    (noise and dropouts on; made once per test process, tests/conftest.py), and the
+    noise-free arm."""
+    rig, cal = simulated_calibration
     assert rig.skin == "nominal" and rig.participant.layered is not None
-    return calibrate(rig, participant_id="S00"), SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0)
+    return cal, SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0)
 
 
 @pytest.fixture(scope="module")

@@ -3,8 +3,6 @@
 import numpy as np
 import pytest
 
-from vibrofocus import SimulatedForearm
-from vibrofocus.calibration import calibrate
 from vibrofocus.demo import calibration_trust, tap_band
 
 
@@ -19,9 +17,8 @@ def test_tap_band_brackets_the_ricker_peak():
 
 
 @pytest.mark.parametrize(("skin", "covered"), [("nominal", True), ("voigt-fit", False)])
-def test_nominal_calibration_is_coherent_over_the_taps_band(skin, covered):
-    rig = SimulatedForearm(seed=0, skin=skin)
-    cal = calibrate(rig, participant_id="trust")
+def test_nominal_calibration_is_coherent_over_the_taps_band(simulated_calibration_of, skin, covered):
+    rig, cal = simulated_calibration_of(skin)
     trust = calibration_trust(cal, rig.transfer(rig.layout.points_xy, cal.freqs))
     assert trust["covers_tap_band"] is covered
     assert trust["error_inside"] < 0.02

@@ -300,7 +300,7 @@ def test_scaled_drives_never_read_over_the_limit():
         assert_allclose(scaled, drives * (limit / np.abs(drives).max()), rtol=1e-15, atol=0)
     assert naive_over > 0  # the case this guards against occurs in the sample
 
-# ---------------------------------------------------------------- bad input (SPEC §10)
+# ------------------------------- bad input (docs/method.md, "Bad input, full disks and interrupts")
 @pytest.fixture
 def small_case(rng):
     n = 256

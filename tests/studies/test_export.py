@@ -1,4 +1,4 @@
-"""The trials file contract (SPEC §6)."""
+"""The trials file contract (docs/file-formats.md, "Trials file")."""
 
 import pytest
 

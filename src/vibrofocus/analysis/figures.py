@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from .. import _style
+from .._docs import fill_doc
 from ..layout import ArrayLayout
 from .trials import method_order
 
@@ -53,6 +54,7 @@ def _grid_shape(xy_mm: np.ndarray) -> tuple[int, int, list[tuple[int, int]]]:
     return n_rows, n_cols, [divmod(i, n_cols) for i in range(len(xy_mm))]
 
 
+@fill_doc
 def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None, *, title: str | None = None):
     """Perceived positions per target: mean and 1-SD covariance ellipse per method.
 
@@ -60,8 +62,7 @@ def plot_localization(positions: pd.DataFrame, layout: ArrayLayout | None = None
     ----------
     positions : DataFrame
         Output of :func:`~vibrofocus.analysis.localization_summary`.
-    layout : ArrayLayout, optional
-        Location coordinates; default the reference layout.
+    %(layout_default)s
     title : str, optional
         Figure title.
 

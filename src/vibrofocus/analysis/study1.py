@@ -16,6 +16,7 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from .._docs import fill_doc
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .trials import method_order
@@ -51,6 +52,7 @@ def _only_study(trials: pd.DataFrame, study: int) -> pd.DataFrame:
     return trials
 
 
+@fill_doc
 def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
     """Add the target and perceived positions (mm) and the error (mm) to study-1 trials.
 
@@ -60,8 +62,7 @@ def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None)
         Trials with ``target`` and ``selection`` (one location per trial): the output
         of :func:`vibrofocus.analysis.load_trials` (only its study-1 main-phase rows are
         used) or of :func:`vibrofocus.analysis.check_design`.
-    layout : ArrayLayout, optional
-        Location coordinates (m); default the reference layout.
+    %(layout_default)s
 
     Returns
     -------
@@ -91,6 +92,7 @@ def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None)
     return out
 
 
+@fill_doc
 def localization_summary(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
     """Mean perceived position and its 1-SD covariance ellipse per target and method.
 
@@ -100,8 +102,7 @@ def localization_summary(trials: pd.DataFrame, layout: ArrayLayout | None = None
     ----------
     trials : DataFrame
         Study-1 trials (see :func:`perceived_positions`).
-    layout : ArrayLayout, optional
-        Location coordinates; default the reference layout.
+    %(layout_default)s
 
     Returns
     -------
@@ -161,6 +162,7 @@ def _sort(df: pd.DataFrame, by: Sequence[str] = ("location", "method")) -> pd.Da
     return df.loc[idx].reset_index(drop=True)
 
 
+@fill_doc
 def study1_errors(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
     """Euclidean localization error averaged per participant and condition.
 
@@ -168,8 +170,7 @@ def study1_errors(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd
     ----------
     trials : DataFrame
         Study-1 main-phase trials of complete participants.
-    layout : ArrayLayout, optional
-        Location coordinates; default the reference layout.
+    %(layout_default)s
 
     Returns
     -------

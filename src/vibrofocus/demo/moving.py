@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_positive
 from ..defaults import DRIVE_LIMIT_V
 from ..errors import ValidationError
@@ -45,6 +46,7 @@ class MovingFocus:
     scale: float
 
 
+@fill_doc
 def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float = 0.1,
                  tap_interval_s: float = 0.04, method: str = "inverse", limit_v: float = DRIVE_LIMIT_V,
                  n_samples: int | None = None) -> MovingFocus:
@@ -54,9 +56,8 @@ def moving_focus(model, layout, fs: float, *, start_xy, end_xy, speed_m_s: float
     ----------
     model : FittedSkin or SimulatedForearm
         Skin model giving ``transfer(points_xy, freqs)`` (see ``render``'s ``target_xy``).
-    layout : ArrayLayout
-    fs : float
-        Sample rate, Hz.
+    %(layout)s
+    %(fs)s
     start_xy, end_xy : (float, float)
         Ends of the path on the skin, m.
     speed_m_s : float

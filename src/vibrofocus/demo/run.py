@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import check_choice
 from ..defaults import N_SAMPLES
 from ..errors import ValidationError
@@ -67,6 +68,7 @@ def design_window(rig: Rig, minimum: int = N_SAMPLES) -> int:
     return int(minimum) if own is None else int(own(minimum))
 
 
+@fill_doc
 def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: float = 0.0,
                  max_tries: int = 3) -> tuple[np.ndarray, int]:
     """Play and record, repeating a recording spoiled by vibrometer dropouts (NaN).
@@ -76,7 +78,7 @@ def record_clean(rig: Rig, drive: np.ndarray, points_xy: np.ndarray, *, tail_s: 
 
     Parameters
     ----------
-    rig : Rig
+    %(rig)s
     drive : ndarray, shape (n_actuators, n_samples)
         Drives, V.
     points_xy : ndarray, shape (n_points, 2)

@@ -63,6 +63,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from ..errors import ValidationError, VibrofocusError
 from .designer import TapDesigner
 from .osc_framing import MAX_ELEMENTS, FramingError, TooManyElements, parse_datagram
@@ -212,13 +213,13 @@ def _quiet_pythonosc() -> None:
     logger.propagate = False
 
 
+@fill_doc
 class OscTapServer:
     """An OSC server that plays taps on a rig.
 
     Parameters
     ----------
-    rig : Rig
-        Where taps play (through its safety layer).
+    %(rig)s
     designer : TapDesigner
         Where their drives come from.
     host : str

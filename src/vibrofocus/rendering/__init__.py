@@ -1,4 +1,4 @@
-"""Rendering methods of SPEC §2: funneling, inverse filter, combination, time reversal,
+"""Rendering methods (docs/method.md, "Rendering methods"): funneling, inverse filter, combination, time reversal,
 the contrast designs (acoustic contrast control, constrained) and their bound, the
 wrap-around check, focus metrics, the methods as objects with their registry, the
 :class:`TransferMatrix` they design through, and the high-level :func:`render`."""

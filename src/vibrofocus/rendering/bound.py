@@ -1,4 +1,4 @@
-"""The energy-contrast bound of an array (SPEC §2): :func:`contrast_bound` and
+"""The energy-contrast bound of an array (docs/method.md, "Rendering methods"): :func:`contrast_bound` and
 :func:`energy_contrast_db`. Notation: :mod:`.contrast`."""
 
 from __future__ import annotations
@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_index, check_positive
 from ..defaults import BAND_HZ, SIGMA_S
 from ._acc import _parseval_weights, _quiet_gram, _tap
@@ -19,7 +20,7 @@ __all__ = ["ContrastBound", "contrast_bound", "energy_contrast_db"]
 
 @dataclass(frozen=True)
 class ContrastBound:
-    """The most energy contrast an array can give at one target (SPEC §2).
+    """The most energy contrast an array can give at one target (docs/method.md, "Rendering methods").
 
     Attributes
     ----------
@@ -92,6 +93,7 @@ def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
     return np.where(escapes, np.inf, lam)
 
 
+@fill_doc
 def contrast_bound(
     H: Any,
     target_index: int,
@@ -109,8 +111,7 @@ def contrast_bound(
 
     Parameters
     ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    %(H)s
     target_index : int
         Row of ``H`` of the target.
     quiet_indices : sequence of int, optional
@@ -118,8 +119,7 @@ def contrast_bound(
         (unless ``quiet_H`` is given, then only its points).
     band : (float, float)
         Band of the tap, Hz; the tap is band-limited with :func:`band_taper`.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     sigma, t0
         Ricker spread and centre of the tap, s (t0 default: mid-window; the bound does
         not depend on it).

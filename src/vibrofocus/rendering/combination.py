@@ -1,4 +1,4 @@
-"""The combination method of SPEC §2: an inverse filter whose target waveform is what
+"""The combination method (docs/method.md, "Rendering methods"): an inverse filter whose target waveform is what
 funneling would produce at the target, predicted through ``H``."""
 
 from __future__ import annotations
@@ -7,6 +7,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_index, check_positive
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
@@ -16,6 +17,7 @@ from .taper import design_grid
 __all__ = ["combination_target"]
 
 
+@fill_doc
 def combination_target(
     H: Any,
     target_index: int,
@@ -34,16 +36,14 @@ def combination_target(
 
     Parameters
     ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    %(H)s
     target_index : int
         Row of ``H`` of the target point.
     gains : ndarray, shape (n_actuators,)
         Funneling amplitudes ``A_q``, V (see :func:`funneling_gains`).
     stimulus : ndarray, shape (n,)
         Base stimulus, unit peak (see :func:`~vibrofocus.signals.ricker`).
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band, taper_octaves
         As in :func:`inverse_filter`; ``band=None`` skips the band limit (``T = 1``), for
         callers whose design applies the taper itself (:class:`InverseOperator` does).

@@ -1,4 +1,4 @@
-"""Contrast designs of SPEC §2: acoustic contrast control (ACC), a constrained
+"""Contrast designs (docs/method.md, "Rendering methods"): acoustic contrast control (ACC), a constrained
 fidelity-contrast design, and the contrast bound of an array.
 
 Notation, per frequency ``f`` of ``rfftfreq(n, 1/fs)``: ``h`` (row, ``n_actuators``) is the
@@ -17,8 +17,8 @@ which left free makes the drives a noise burst. The designs here choose it so th
 target receives the band-limited tap: ``s = w U / lambda`` gives ``h s = U`` exactly, ``U``
 the spectrum of the desired waveform (the Ricker tap through the band taper). Among all
 drives that put exactly ``U`` at the target, this ``s`` has the least regularized quiet
-energy ``s^H B s = |U|^2 / lambda``: with ``delta = 0`` that is the *exact-tap bound* of
-SPEC §2.
+energy ``s^H B s = |U|^2 / lambda``: with ``delta = 0`` that is the *exact-tap bound*
+(docs/method.md, "Rendering methods").
 
 The constrained design trades fidelity for contrast: ``s = w V / lambda`` puts
 ``V = g U`` at the target, ``g`` proportional to ``lambda / (lambda + mu)``. It solves
@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 import scipy.signal
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import BAND_HZ, SIGMA_S
 from ..errors import ValidationError
@@ -136,6 +137,7 @@ def taper_drive_ends(drives: Any, centre: int, taper: float = DRIVE_WINDOW_TAPER
     return drives * window
 
 
+@fill_doc
 def contrast_drives(
     H: Any,
     target_index: int,
@@ -159,18 +161,15 @@ def contrast_drives(
 
     Parameters
     ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``, m/V.
+    %(H)s
     target_index : int
         Row of ``H`` of the target.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     quiet_indices : sequence of int, optional
         Rows of ``H`` to keep quiet; default every other row (unless ``quiet_H``).
     quiet_H : ndarray, complex, shape (n // 2 + 1, n_grid, n_actuators), optional
         Transfer to further quiet points (a dense skin grid).
-    band : (float, float)
-        Design band, Hz.
+    %(band)s
     sigma, t0
         Ricker spread and centre, s (t0 default: mid-window).
     waveform : ndarray, shape (n,), optional

@@ -1,4 +1,4 @@
-"""Funneling (phantom sensation) gains of SPEC §2."""
+"""Funneling (phantom sensation) gains (docs/method.md, "Rendering methods")."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The inverse filter of SPEC §2: per-frequency (regularized) pseudo-inverse designs.
+"""The inverse filter (docs/method.md, "Rendering methods"): per-frequency (regularized) pseudo-inverse designs.
 
 ``S(f) = T(f) H_c(f)^+ U_c(f)`` at every frequency ``f`` of ``rfftfreq(n, 1/fs)``, with
 ``H_c`` the transfer matrix at the control points, ``U_c`` the spectra of their desired
@@ -119,7 +119,8 @@ class InverseOperator:
     weights : ndarray, shape (n_control,), optional
         Positive weights ``w_c`` of the control points: the design minimizes
         ``sum_c w_c^2 |H_c S - U_c|^2`` (then the smallest-norm ``S``), i.e. uses
-        ``(W H_c)^+ W``. Default: all 1, the plain ``H_c^+`` of SPEC §2.
+        ``(W H_c)^+ W``. Default: all 1, the plain ``H_c^+`` of the
+        published method (docs/method.md, "Rendering methods").
 
     Attributes
     ----------
@@ -368,7 +369,7 @@ def inverse_filter(
     wraparound: WraparoundCheck | None = None,
     full_output: bool = False,
 ) -> np.ndarray | tuple[np.ndarray, DesignReport]:
-    """Inverse-filter drives: ``irfft(T(f) H(f)^+ U(f))`` (SPEC §2, §8).
+    """Inverse-filter drives: ``irfft(T(f) H(f)^+ U(f))`` (docs/method.md, "Rendering methods").
 
     Every row of ``H`` is a control point; give zero targets for quiet points.
 

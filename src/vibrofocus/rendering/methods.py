@@ -1,4 +1,4 @@
-"""The built-in rendering methods of SPEC §2, as objects: :class:`Funneling`,
+"""The built-in rendering methods (docs/method.md, "Rendering methods"), as objects: :class:`Funneling`,
 :class:`Inverse`, :class:`Combination`, :class:`TimeReversal`, :class:`Contrast` and
 :class:`Constrained`, each a :class:`~.method.Method` with its own options.
 """
@@ -49,7 +49,7 @@ def _check_control(method: Method, default: str, field_allowed: bool) -> str:
 
 @dataclass(frozen=True, kw_only=True)
 class Funneling(Method):
-    """Funneling (SPEC §2): every actuator plays the tap, at a gain by its distance.
+    """Funneling (docs/method.md, "Rendering methods"): every actuator plays the tap, at a gain by its distance.
 
     Parameters
     ----------
@@ -82,12 +82,12 @@ class Funneling(Method):
 
 @dataclass(frozen=True, kw_only=True)
 class Inverse(Method):
-    """The inverse filter (SPEC §2): per-frequency pseudo-inverse at the control points.
+    """The inverse filter (docs/method.md, "Rendering methods"): per-frequency pseudo-inverse at the control points.
 
     Parameters
     ----------
     control : {"guards", "all", "locations"}, optional
-        Points held at zero besides the target. ``"guards"`` (default, SPEC §2): the
+        Points held at zero besides the target. ``"guards"`` (default, the paper's): the
         guard points, which keeps the system close to square so the target is met.
         ``"all"``: every other calibrated point (a least-squares compromise).
         ``"locations"``: the other locations.
@@ -159,7 +159,7 @@ class Inverse(Method):
 
 @dataclass(frozen=True, kw_only=True)
 class Combination(Inverse, Funneling):
-    """Funneling and inverse filter combined (SPEC §2): the inverse design asks the target
+    """Funneling and inverse filter combined (docs/method.md, "Rendering methods"): the inverse design asks the target
     for the displacement funneling gives there, and quiet at the control points.
 
     Parameters
@@ -177,7 +177,7 @@ class Combination(Inverse, Funneling):
 
 @dataclass(frozen=True, kw_only=True)
 class TimeReversal(Method):
-    """Time reversal (SPEC §2): the control points' impulse responses played backwards.
+    """Time reversal (docs/method.md, "Rendering methods"): the control points' impulse responses played backwards.
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""Focus metrics of SPEC §2, one function used everywhere."""
+"""Focus metrics (docs/method.md, "Rendering methods"), one function used everywhere."""
 
 from __future__ import annotations
 

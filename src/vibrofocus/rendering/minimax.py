@@ -1,4 +1,4 @@
-"""The peak-contrast (minimax) design of SPEC §2: :func:`minimax_filter`.
+"""The peak-contrast (minimax) design (docs/method.md, "Rendering methods"): :func:`minimax_filter`.
 
 The drives minimize the largest ``|displacement|`` at the quiet points over the whole window,
 subject to the target's fidelity (zero-lag correlation with the band-limited desired
@@ -367,7 +367,7 @@ def minimax_filter(
     h_radius: Any = None,
 ) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
     """Peak-contrast (minimax) drives: the least largest quiet-point ``|displacement|`` at
-    a given target fidelity (SPEC §2, §8).
+    a given target fidelity (docs/method.md, "Rendering methods").
 
     Parameters
     ----------

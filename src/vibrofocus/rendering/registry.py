@@ -1,6 +1,6 @@
 """The registry of rendering methods: names to :class:`~.method.Method` classes.
 
-The six methods of SPEC §2 are registered when the package loads. A lab adds its own
+The six methods of docs/method.md ("Rendering methods") are registered when the package loads. A lab adds its own
 with :func:`register_method`, or from an installed package through the entry-point group
 ``vibrofocus.methods`` (each entry point names a ``Method`` subclass; its name is the
 method's name), read the first time the registry is asked. :func:`render`, the CLI, the
@@ -94,7 +94,8 @@ def _read_entry_points() -> None:
 
 
 def available_methods() -> tuple[str, ...]:
-    """Names of the registered methods: the built-in ones first, in SPEC order."""
+    """Names of the registered methods: the built-in ones first, in the
+    order docs/method.md gives them."""
     _read_entry_points()
     return tuple(_REGISTRY)
 

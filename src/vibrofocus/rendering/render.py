@@ -1,4 +1,4 @@
-"""High-level rendering: one call from a transfer matrix to drives (SPEC §2).
+"""High-level rendering: one call from a transfer matrix to drives (docs/method.md, "Rendering methods").
 
 :func:`render` is a thin front over the method registry (:mod:`.registry`): it makes a
 :class:`~.transfer.TransferMatrix` of what it is given, the method object of the name
@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
+from .._docs import fill_doc
 from ..errors import CausalityError, ValidationError
 from ..layout import ArrayLayout
 from .design import Design, Rendering
@@ -19,6 +20,7 @@ from .transfer import as_transfer_matrix, target_on_model
 __all__ = ["Design", "Rendering", "render", "render_fitted", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
 
 
+@fill_doc
 def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | None = None, *,
            target_xy: Any = None, n_samples: int | None = None, calibrated_band: tuple[float, float] | None = None,
            **options: Any) -> Design:
@@ -40,9 +42,8 @@ def render(method: str, H: Any, fs: float, layout: ArrayLayout, location: int | 
         ``FittedSkin``, a ``SimulatedForearm``) gives ``TransferMatrix.from_model``; an
         array, shape (n // 2 + 1, n_points, n_actuators), on ``rfftfreq(n, 1 / fs)``, rows
         in the order of ``layout.points_xy``, is validated into one.
-    fs : float
-        Sample rate, Hz.
-    layout : ArrayLayout
+    %(fs)s
+    %(layout)s
     location : int, optional
         1-based location number of the target; give this or ``target_xy``.
     target_xy : (float, float), optional

@@ -1,4 +1,4 @@
-"""Time reversal of SPEC §2: ``S(f) = H_c(f)^H U_c(f)``, normalized to the drive limit."""
+"""Time reversal (docs/method.md, "Rendering methods"): ``S(f) = H_c(f)^H U_c(f)``, normalized to the drive limit."""
 
 from __future__ import annotations
 

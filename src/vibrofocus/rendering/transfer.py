@@ -1,4 +1,4 @@
-"""A transfer matrix that knows itself: :class:`TransferMatrix` (SPEC §2).
+"""A transfer matrix that knows itself: :class:`TransferMatrix` (docs/method.md, "Rendering methods").
 
 ``H`` travels with what a design needs to trust and reuse it: its frequency grid and
 sample rate, the layout its rows and columns belong to, the band it was calibrated in,

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_in_range, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
@@ -47,8 +48,8 @@ STIFFNESS_SPREAD = 0.237
 #: Relative half-width of the uniform draw of the spring-pot (viscosity) coefficient: the
 #: relative SD of Zhang et al. 2011's forearm Voigt viscosity (0.60 / 5.03 Pa s).
 VISCOSITY_SPREAD = 0.119
-#: Relative half-width of the uniform draw of a layered arm's loss tangent (±25 %, the
-#: spread of attenuation between participants that SPEC §3 asks for: an assumption).
+#: Relative half-width of the uniform draw of a layered arm's loss tangent (±25 %, an
+#: assumed spread of attenuation between participants: docs/skin-model.md).
 LOSS_SPREAD = 0.25
 #: Coupling of wrist-side actuators, drawn uniformly in this range (an assumption of the
 #: model, see :class:`ForearmParameters`).
@@ -257,6 +258,7 @@ class ForearmParameters:
         )
 
     @classmethod
+    @fill_doc
     def draw(cls, seed: int, layout: ArrayLayout, skin: str = "voigt-fit") -> "ForearmParameters":
         """Draw one participant around the nominal forearm.
 
@@ -271,8 +273,7 @@ class ForearmParameters:
 
         Parameters
         ----------
-        seed : int
-            Participant seed (>= 0); the same seed always gives the same participant.
+        %(seed)s
         layout : ArrayLayout
             The array (decides which actuators are wrist-side).
         skin : str
