@@ -226,11 +226,12 @@ _OUTSIDE = re.compile(r"\bSPEC(?:\.md|\s*§)|\.\./shared\b|(?<![\w./-])shared/\w
 
 
 def _repository_text() -> list[Path]:
-    """The repository's own text: package, docs, tests, benchmarks, examples and top-level files
-    (scripts/ is outside this check for now)."""
+    """The repository's own text: package, docs, tests, benchmarks, examples, scripts, tools
+    and top-level files."""
     files = [ROOT / name for name in ("README.md", "DEVELOPING.md", "pyproject.toml", ".ci/run")]
     for folder, patterns in (("src", ("*.py", "*.md", "*.html", "*.toml")), ("docs", ("*.md", "*.py")),
-                             ("tests", ("*.py", "*.md")), ("benchmarks", ("*.py",)), ("examples", ("*.py", "*.rst"))):
+                             ("tests", ("*.py", "*.md")), ("benchmarks", ("*.py",)), ("examples", ("*.py", "*.rst")),
+                             ("scripts", ("*.py", "*.sh")), ("tools", ("*.py",))):
         for pattern in patterns:
             files += sorted((ROOT / folder).rglob(pattern))
     return [f for f in files if f.is_file()]
