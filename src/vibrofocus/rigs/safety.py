@@ -29,6 +29,7 @@ __all__ = [
     "SafetyLimits",
     "EnergyBudget",
     "check_drive",
+    "check_sustained_alone",
     "windowed_rms",
     "PEAK_V_CEILING",
     "RMS_V_CEILING",
@@ -231,6 +232,36 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
         raise SafetyError(f"drive refused: {arr.shape[1]} sample(s) cannot hold its fades ({n_fade} sample(s) at "
                           f"each end at {fs:g} Hz); make it at least {2 * n_fade} samples long")
     return apply_fades(arr, fs, n_fade / fs)
+
+
+def check_sustained_alone(drive: np.ndarray, fs: float, limits: SafetyLimits) -> None:
+    """Refuse a drive that breaks the sustained limit played alone, from silence.
+
+    :func:`check_drive` holds every limit a drive has by itself but this one, which
+    :class:`EnergyBudget` applies across plays; a drive whose own energy over
+    ``limits.sustained_window_s`` exceeds ``limits.sustained_rms_v`` is refused by the
+    budget whatever the wait before it. A plan (a study's stimuli) checks each drive with
+    :func:`check_drive` and this, so such a drive is refused when it is planned.
+
+    Parameters
+    ----------
+    drive : ndarray, shape (n_actuators, n_samples)
+        Voltages at the actuators, V (e.g. :func:`check_drive`'s faded copy).
+    fs : float
+        Sample rate, Hz.
+    limits : SafetyLimits
+
+    Raises
+    ------
+    SafetyError
+        Over ``limits.sustained_rms_v``, naming the channel and the value.
+    """
+    arr = np.asarray(drive, dtype=float)
+    rms = windowed_rms(arr**2, max(1, int(round(limits.sustained_window_s * fs))))
+    if rms.max() > limits.sustained_rms_v * (1 + 1e-9):
+        raise SafetyError("drive refused: played alone, " + _channel_message(
+            rms, limits.sustained_rms_v, "V RMS", f" over {limits.sustained_window_s:g} s")
+            + " (sustained_rms_v); no wait before it would admit it")
 
 
 def _check_slow_content(arr: np.ndarray, fs: float, n_window: int, window_s: float) -> None:

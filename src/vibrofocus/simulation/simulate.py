@@ -260,10 +260,10 @@ def simulate_studies(
                     session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin,
                                           hypothesis=chosen.name, hypothesis_version=chosen.version,
                                           model=chosen.label())
-                    # Every stimulus is rendered (and a design that cannot fit this arm refused)
-                    # before the session is planned.
+                    # Every stimulus is rendered (and a design that cannot fit this arm, or the
+                    # rig's limits, made again or refused) before the session is planned.
                     design = StudyDesign.from_config(study, session_config)
-                    renderer_for(parts, design.levels).prepare(design.methods, design.locations)
+                    renderer_for(parts, design.levels).prepare(design.methods, design.locations, rig=parts["rig"])
                     # Check and create in one transaction: another process simulating into
                     # the same database may have created this session since the check above.
                     sid, created = store.open_session(
