@@ -47,7 +47,7 @@ def serve(
     restarts. 'vibrofocus stop --db DB' (same user) stops every output of this server,
     also when its port or page does not answer.
     """
-    with user_errors():
+    with user_errors(exit_by_signal=True):  # 143 on SIGTERM, as supervisors expect
         import secrets
         import threading
         import webbrowser
