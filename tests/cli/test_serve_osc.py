@@ -121,3 +121,29 @@ def test_an_ipv6_address_is_shown_in_brackets(tmp_path):
         proc.kill()
         proc.communicate(timeout=60)
     assert re.search(r"osc\.udp://\[::1\]:\d+ ", line), line
+
+
+def test_the_default_inverse_method_starts_on_a_calibration_that_needs_a_longer_window(tmp_path):
+    """The window follows the calibration as in the studies: this arm's inverse designs ring past 4096 samples."""
+    from vibrofocus.calibration import calibrate, save_calibration
+    from vibrofocus.rendering import TransferMatrix
+    from vibrofocus.rigs import make_rig
+    from vibrofocus.simulation.simulate import STUDY_SKIN, participant_seeds
+
+    # simulate-study --seed 977's second participant, whose inverse designs need 8192 samples.
+    calibration = calibrate(make_rig("simulated", seed=participant_seeds(977, 2)[0], skin=STUDY_SKIN),
+                            participant_id="P02")
+    assert TransferMatrix.from_calibration(calibration).n_samples == 4096
+    cal = tmp_path / "P02.nc"
+    save_calibration(calibration, cal)
+    proc, client = _start(tmp_path, "--calibration", str(cal))  # "too short ... location 2" before
+    try:
+        # Location 1: this arm's plain inverse at 2, 5 and 8 rings over the 1 s RMS limit
+        # (the studies make those again regularized; serve-osc refuses them at the tap).
+        reply = _ask(client, "/tap", 1)
+        assert reply.address == "/played", reply.params
+        assert _ask(client, "/stop", []).address == "/stopped"
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 0, err

@@ -600,7 +600,7 @@ def test_volts_full_scale_is_required_and_the_error_says_how_to_measure_it():
 
     cfg = jack_config()
     del cfg["volts_full_scale"]
-    with pytest.raises(ValidationError, match=r"volts_full_scale: required.*devices --check --tone"):
+    with pytest.raises(ValidationError, match=r"volts_full_scale: required.*devices --check FILE --tone"):
         parse_rig_config(cfg)
 
 

@@ -67,7 +67,7 @@ def test_json_and_toml_agree(tmp_path):
         (dict(amplifier_gain=1.0), r"needs 10 V into the amplifier .* amplifier_input_max_v = 1 V. Check amplifier_gain"),
         (dict(amplifier_input_max_v=20.0), r"amplifier_input_max_v: Input should be less than or equal to 10"),
         (dict(limits={"peak_v": 30.0}), r"limits.peak_v: Input should be less than or equal to 20"),
-        (dict(limits={"rms_v": 100.0}), r"limits.rms_v: Input should be less than or equal to 5.65"),
+        (dict(limits={"rms_v": 100.0}), r"limits.rms_v: Input should be less than or equal to 5.66"),
         (dict(limits={"max_duration_s": 1000.0}), r"limits.max_duration_s: Input should be less than or equal to 60"),
         (dict(limits={"fade_s": 0.0}), r"limits.fade_s: Input should be greater than or equal to 0.0001"),
         (dict(limits={"fade_s": 100.0}), r"limits.fade_s: Input should be less than or equal to 0.05"),
@@ -132,3 +132,55 @@ def test_configs_are_frozen():
     cfg = parse_rig_config(audio_dict())
     with pytest.raises(Exception):
         cfg.amplifier_gain = 100.0  # a running rig's gain chain cannot change under it
+
+
+def _named_commands(text: str) -> list[list[str]]:
+    """The `vibrofocus ...` commands a message or comment tells the user to run, as argument lists."""
+    import re
+    import shlex
+
+    found = re.findall(r"`vibrofocus ([^`]+)`", text)
+    found += re.findall(r"^#\s+vibrofocus (.+)$", text, flags=re.MULTILINE)
+    return [shlex.split(cmd) for cmd in found]
+
+
+def _parses(args: list[str], config: Path) -> None:
+    """Parse ``vibrofocus ARGS`` as the CLI would, without running it (a bad option raises)."""
+    import typer
+
+    from vibrofocus.cli.main import app
+
+    args = [str(config) if a in ("FILE", "this-file.toml") else a for a in args]
+    group = typer.main.get_command(app)
+    with group.make_context("vibrofocus", list(args), resilient_parsing=False) as ctx:
+        name, command, rest = group.resolve_command(ctx, list(args))
+        command.make_context(name, rest, parent=ctx)
+
+
+def test_the_volts_full_scale_measurement_the_error_and_the_example_name_parses(tmp_path):
+    config = tmp_path / "lab.toml"
+    config.write_text((EXAMPLES / "audio.toml").read_text())
+    cfg = audio_dict()
+    del cfg["volts_full_scale"]
+    with pytest.raises(ValidationError, match="volts_full_scale: required") as info:
+        parse_rig_config(cfg)
+    for text in (str(info.value), (EXAMPLES / "audio.toml").read_text()):
+        commands = [c for c in _named_commands(text) if "--tone" in c]
+        assert commands, text
+        for args in commands:
+            _parses(args, config)  # "No such option: --rig" before
+
+
+def test_the_rms_ceiling_as_the_docs_write_it_is_accepted_as_the_ceiling():
+    from vibrofocus.rigs.safety import RMS_V_CEILING, SafetyLimits
+
+    assert f"{RMS_V_CEILING:.3g}" == "5.66"
+    limits = parse_rig_config(audio_dict(limits={"peak_v": 10.0, "rms_v": 5.66})).limits.build()
+    assert limits.rms_v == RMS_V_CEILING  # taken as the ceiling itself, never above it
+    assert SafetyLimits(rms_v=5.66).rms_v == RMS_V_CEILING
+    with pytest.raises(ValidationError, match="less than or equal to 5.66"):
+        parse_rig_config(audio_dict(limits={"rms_v": 5.67}))
+    with pytest.raises(ValidationError, match="hard ceiling of 5.66"):
+        SafetyLimits(rms_v=5.661)
+    # The example's comment states the ceilings the code holds.
+    assert "hard ceilings: 20 V peak, 5.66 V RMS, 60 s" in (EXAMPLES / "audio.toml").read_text()

@@ -349,3 +349,56 @@ def test_the_onset_is_when_the_device_took_the_first_sample(store, renderer):
     onsets = [e.payload["onset_s"] for e in store.events(sid, kind="answer")]
     assert onsets == rig.starts  # not the time the play was called, 60 ms earlier
     assert [r["onset_host_s"] for r in store.trial_rows()] == rig.starts
+
+
+def _tight(rms_v=4.0, sustained_rms_v=4.0):
+    from vibrofocus.rigs.safety import SafetyLimits
+
+    rig = make_rig("simulated", seed=3)
+    rig.limits = SafetyLimits(rms_v=rms_v, sustained_rms_v=sustained_rms_v)
+    return rig
+
+
+@pytest.mark.parametrize("limits, words", [
+    # The plain inverse at location 4 holds 0.55 V RMS over 1 s, 0.45 V made again at
+    # Tikhonov 0.1; 0.071 V over 60 s, 0.058 V made again.
+    ({"rms_v": 0.3}, r"inverse stimulus at location 4 .*over 1 s, over the limit of 0\.3 V RMS"),
+    ({"sustained_rms_v": 0.05}, r"inverse stimulus at location 4 .*over 60 s, over the limit of 0\.05 V RMS.*no wait"),
+])
+def test_a_stimulus_over_the_rigs_limits_is_refused_when_planned(store, calibration_file, limits, words):
+    from vibrofocus.calibration import load_calibration
+
+    cal = load_calibration(calibration_file)
+    sid = _small(store)
+    rig = _tight(**limits)
+    with pytest.raises(StudyError, match=words) as info:
+        StudyEngine(store, sid, rig, cal)
+    assert "participant p-real" in str(info.value) and "tikhonov regularization 0.1" in str(info.value)
+    # Refused at planning, before any trial.
+    assert [e.kind for e in store.events(sid)] == ["created"] and rig.n_played == 0
+
+
+def test_a_stimulus_over_the_rigs_limits_is_made_again_regularized(store, calibration_file):
+    from vibrofocus.calibration import load_calibration
+    from vibrofocus.rigs.safety import windowed_rms
+
+    cal = load_calibration(calibration_file)
+    sid = _small(store)
+    rig = _tight(rms_v=0.5)
+    renderer = calibration_renderer(cal)
+    engine = StudyEngine(store, sid, rig, renderer=renderer)  # as the web runner and simulate-study build it
+    assert renderer.redesigned == {("inverse", 4): {"regularization": "tikhonov", "reg_param": 0.1},
+                                   ("inverse", 6): {"regularization": "tikhonov", "reg_param": 0.1}}
+    stim = engine.stimulus("inverse", 4)
+    assert windowed_rms(stim.drives**2, int(rig.fs)).max() <= 0.5
+    expected = render("inverse", cal.transfer_for(renderer.n_samples), cal.fs, cal.layout, 4, scale_to_limit=False,
+                      regularization="tikhonov", reg_param=0.1).drives
+    np.testing.assert_allclose(stim.drives, expected, rtol=1e-9, atol=1e-12)
+    summary = engine.run(Scripted([4, 6]), pace_s=1.5)  # back to back, the budget (the runtime's) refuses
+    assert (summary.status, summary.n_answered, rig.n_played) == ("completed", 2, 2)
+    onsets = store.events(sid, kind="stimulus_onset")
+    assert [e.payload["redesign"]["reg_param"] for e in onsets] == [0.1, 0.1]
+    # On the default limits the same session plays the design as asked, with no redesign.
+    plain = calibration_renderer(cal)
+    StudyEngine(store, _small(store), make_rig("simulated", seed=3), renderer=plain)
+    assert plain.redesigned == {}

@@ -134,17 +134,25 @@ def report_unexpected() -> int:
     return EXIT_UNEXPECTED
 
 
-def interrupted_exit(detail: str = "") -> typer.Exit:
-    """Print the one interrupt line; return the Exit(130) to raise."""
+def interrupted_exit(detail: str = "", *, code: int = EXIT_INTERRUPTED) -> typer.Exit:
+    """Print the one interrupt line; return the Exit(``code``, default 130) to raise."""
     err_console.print(
         "[bold yellow]interrupted[/]" + (f": {detail}" if detail else ": stopped; no file was left half-written"),
         highlight=False,
     )
-    return typer.Exit(code=EXIT_INTERRUPTED)
+    return typer.Exit(code=code)
+
+
+def _interrupt_code(by_signal: bool) -> int:
+    """130, or with ``by_signal`` 128 + the number of the signal that came (143 for SIGTERM)."""
+    from .. import _atomic
+
+    signum = _atomic.interrupt_pending()
+    return 128 + int(signum) if by_signal and signum is not None else EXIT_INTERRUPTED
 
 
 @contextlib.contextmanager
-def user_errors(*, interrupt_message: str = "") -> Iterator[None]:
+def user_errors(*, interrupt_message: str = "", exit_by_signal: bool = False) -> Iterator[None]:
     """Run a command body: one ``error:`` line and exit 2 on user errors, exit 130 on interrupts.
 
     SIGINT and SIGTERM raise KeyboardInterrupt while the body runs (at safe points: file
@@ -155,6 +163,9 @@ def user_errors(*, interrupt_message: str = "") -> Iterator[None]:
     ----------
     interrupt_message : str
         What to say after ``interrupted:`` (default: nothing half-written).
+    exit_by_signal : bool
+        Exit with 128 + the signal's number (130 for SIGINT, 143 for SIGTERM), as process
+        supervisors expect of a server; default 130 for both.
     """
     from .. import _atomic
 
@@ -168,13 +179,13 @@ def user_errors(*, interrupt_message: str = "") -> Iterator[None]:
             raise KeyboardInterrupt
     except VibrofocusError as exc:
         if _atomic.interrupt_pending() is not None:
-            raise interrupted_exit(interrupt_message) from None
+            raise interrupted_exit(interrupt_message, code=_interrupt_code(exit_by_signal)) from None
         _traceback()
         print_error(str(exc))
         raise typer.Exit(code=EXIT_USER_ERROR) from None
     except KeyboardInterrupt:
         _traceback()
-        raise interrupted_exit(interrupt_message) from None
+        raise interrupted_exit(interrupt_message, code=_interrupt_code(exit_by_signal)) from None
     except OSError as exc:
         if exc.errno not in _USER_ERRNOS:
             raise

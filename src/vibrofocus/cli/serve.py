@@ -50,7 +50,7 @@ def serve(
     The database must be yours, in a folder other users cannot write in; a second server
     of one database is refused (docs/security.md).
     """
-    with user_errors():
+    with user_errors(exit_by_signal=True):  # 143 on SIGTERM, as supervisors expect
         import secrets
         import threading
         import webbrowser

@@ -99,7 +99,13 @@ def serve_osc(
                 if cal.layout.n_actuators != the_rig.layout.n_actuators:
                     raise ValidationError(f"--calibration {calibration} has {cal.layout.n_actuators} actuators, the "
                                           f"{rig} rig {the_rig.layout.n_actuators}")
-                tm, model = TransferMatrix.from_calibration(cal), cal.fit
+                from ..studies.engine import CalibrationRenderer
+
+                # The window the method's designs fit on this calibration, found as the studies
+                # find it (the calibration's own resolution, doubled while a design needs more).
+                window = CalibrationRenderer(cal, limit_v=the_rig.limits.peak_v, levels="equal-peak",
+                                             bounds=False).prepare([method], cal.layout.location_numbers)
+                tm, model = TransferMatrix.from_calibration(cal, window), cal.fit
                 source = f"calibration {calibration}"
             else:
                 tm, model = TransferMatrix.from_model(the_rig, the_rig.layout, the_rig.fs), the_rig

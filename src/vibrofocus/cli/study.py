@@ -170,7 +170,7 @@ def run(
                 # A new session: every stimulus is rendered before it is planned, so one
                 # that cannot fit this calibration is refused now, never mid-study.
                 renderer = calibration_renderer(cal, levels=design.levels)
-                renderer.prepare(design.methods, design.locations)
+                renderer.prepare(design.methods, design.locations, rig=the_rig)
             # Check and create in one transaction: two `study run`s at once get one session.
             sid, created = store.open_session(
                 participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,

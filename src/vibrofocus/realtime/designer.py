@@ -26,7 +26,7 @@ from typing import Any
 import numpy as np
 
 from .._validation import as_array, check_positive
-from ..errors import ValidationError
+from ..errors import CausalityError, ValidationError
 from ..layout import ArrayLayout
 from ..rendering import TransferMatrix, available_methods, make_method, method_class
 from ..rendering.taper import design_grid
@@ -182,8 +182,17 @@ class TapDesigner:
         full = make_method(name, **options)
         fast = make_method(name, **options, check_wraparound=False)
         if not self.designed_ahead(name):  # made once: switching back to a method is free
-            self._drives.update({(name, loc): np.ascontiguousarray(full.design(self.tm, loc).drives)
-                                 for loc in self.layout.location_numbers})
+            tapered = None
+            drives = {}
+            for loc in self.layout.location_numbers:
+                try:
+                    drives[loc] = full.design(self.tm, loc).drives
+                except CausalityError:
+                    # As render_fitted (render, the studies): noise in a measured H spreads a
+                    # little drive over the whole window; made again with its ends tapered.
+                    tapered = tapered or make_method(name, **options, taper_ends=True)
+                    drives[loc] = tapered.design(self.tm, loc).drives
+            self._drives.update({(name, loc): np.ascontiguousarray(d) for loc, d in drives.items()})
         self._full, self._fast, self.method = full, fast, name
         self._active = design_grid(self.tm.n_samples, self.tm.fs, full.band, full.taper_octaves)[1] > 0
 

@@ -40,7 +40,7 @@ from pydantic import BaseModel, ConfigDict, Field, PositiveFloat, field_validato
 
 from ..errors import ValidationError
 from .safety import (DURATION_S_CEILING, MAX_FADE_S, MIN_FADE_S, PEAK_V_CEILING, RMS_V_CEILING,
-                     SUSTAINED_RMS_V_CEILING, SafetyLimits)
+                     SUSTAINED_RMS_V_CEILING, SafetyLimits, written_ceiling)
 
 __all__ = [
     "RigConfig",
@@ -154,13 +154,13 @@ class LimitsConfig(_Model):
     """Safety limits at the actuator terminals (see :class:`~vibrofocus.rigs.safety.SafetyLimits`).
 
     Each has a hard ceiling no file can raise: ``peak_v`` <= 20 V, ``rms_v`` <= 5.66 V
-    (twice the assumed 2 W rating in power), ``sustained_rms_v`` <= 4 V over
+    (sqrt(32) = 5.65685 V, twice the assumed 2 W rating in power; 5.66 is taken as it), ``sustained_rms_v`` <= 4 V over
     ``sustained_window_s`` in [10, 600] s, ``max_duration_s`` <= 60 s, and ``fade_s`` in
     [0.1 ms, 50 ms].
     """
 
     peak_v: float = Field(SafetyLimits.peak_v, gt=0, le=PEAK_V_CEILING)
-    rms_v: float = Field(SafetyLimits.rms_v, gt=0, le=RMS_V_CEILING)
+    rms_v: float = Field(SafetyLimits.rms_v, gt=0, le=written_ceiling(RMS_V_CEILING))  # 5.66 as the docs write it
     max_duration_s: float = Field(SafetyLimits.max_duration_s, gt=0, le=DURATION_S_CEILING)
     fade_s: float = Field(SafetyLimits.fade_s, ge=MIN_FADE_S, le=MAX_FADE_S)
     sustained_rms_v: float = Field(SafetyLimits.sustained_rms_v, gt=0, le=SUSTAINED_RMS_V_CEILING)
@@ -472,9 +472,10 @@ def _format_errors(exc: pydantic.ValidationError) -> str:
         if err["type"] == "extra_forbidden":
             msg = "unknown setting (check the spelling)"
         elif err["type"] == "missing" and loc == ["volts_full_scale"]:
-            msg = ("required: the interface's output in V peak at digital full scale. Measure it: "
-                   "`vibrofocus devices --check --tone --rig audio --rig-config FILE` plays a known low level; "
-                   "read it with a voltmeter (docs/hardware.md, first-day checklist)")
+            msg = ("required: the interface's output in V peak at digital full scale. Measure it: set "
+                   "volts_full_scale = 1.0 for now, then `vibrofocus devices --check FILE --tone` plays a known "
+                   "low digital level whatever the value; read it with a voltmeter, amplifier off "
+                   "(docs/hardware.md, first-day checklist)")
         elif err["type"] == "union_tag_invalid":
             where, msg = "kind", f"must be 'audio' or 'nidaq', got {err['ctx']['tag']!r}"
         parts.append(f"{where}: {msg}" if loc or err["type"] == "union_tag_invalid" else msg)

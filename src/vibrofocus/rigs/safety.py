@@ -29,6 +29,7 @@ __all__ = [
     "SafetyLimits",
     "EnergyBudget",
     "check_drive",
+    "check_sustained_alone",
     "windowed_rms",
     "PEAK_V_CEILING",
     "RMS_V_CEILING",
@@ -51,7 +52,8 @@ ASSUMED_COIL_OHMS = 8.0
 #: Largest peak limit any configuration may set, V at the actuator (twice the reference).
 PEAK_V_CEILING = 20.0
 #: Largest RMS limit over the short window any configuration may set, V at the actuator:
-#: twice the assumed rating in power, sqrt(2 * 2 W * 8 ohm) = 5.66 V.
+#: twice the assumed rating in power, sqrt(2 * 2 W * 8 ohm) = 5.65685 V, written 5.66 V (a limit
+#: set to 5.66 is accepted and taken as this value: :func:`written_ceiling`).
 RMS_V_CEILING = math.sqrt(2 * ASSUMED_RATED_POWER_W * ASSUMED_COIL_OHMS)
 #: Largest sustained RMS limit (the long window), V: the assumed rating itself, 4 V = 2 W.
 SUSTAINED_RMS_V_CEILING = math.sqrt(ASSUMED_RATED_POWER_W * ASSUMED_COIL_OHMS)
@@ -76,6 +78,14 @@ MAX_FADE_S = 50e-3
 RMS_WINDOW_S = 1.0
 
 
+def written_ceiling(ceiling: float) -> float:
+    """A hard ceiling as the docs and messages write it: 3 significant digits (5.66 for 5.65685...).
+
+    A limit set to the ceiling as written is accepted, and taken as the ceiling itself.
+    """
+    return float(f"{ceiling:.3g}")
+
+
 @dataclass(frozen=True)
 class SafetyLimits:
     """Limits at the actuator terminals.
@@ -86,7 +96,8 @@ class SafetyLimits:
         Largest instantaneous voltage magnitude, V, in (0, 20]. Default 10 V: a 1 V DAQ
         output through a 20 dB amplifier (docs/method.md, reference setup).
     rms_v : float
-        Largest RMS voltage per channel over any window of ``rms_window_s``, V, in (0, 8].
+        Largest RMS voltage per channel over any window of ``rms_window_s``, V, in (0, 5.66]
+        (the ceiling, sqrt(32) = 5.65685 V; 5.66 as written is taken as it).
         Default 4 V, i.e. 2 W into the 8 ohm coil of a 14 mm exciter. The window slides
         over the drive and over the plays before it (:class:`EnergyBudget`), and a drive
         shorter than the window counts as followed by silence: a 10 V peak sine (7.1 V
@@ -120,10 +131,12 @@ class SafetyLimits:
                               ("max_duration_s", DURATION_S_CEILING),
                               ("sustained_rms_v", SUSTAINED_RMS_V_CEILING)):
             value = check_positive(getattr(self, name), name)
-            if value > ceiling:
+            if value > written_ceiling(ceiling):
                 raise ValidationError(
                     f"{name} = {value:g} is above the hard ceiling of {ceiling:.3g} that no configuration may "
                     "exceed (docs/hardware.md, limits)")
+            # The ceiling as written (5.66 V RMS) is the ceiling itself (5.65685... V).
+            object.__setattr__(self, name, min(float(value), ceiling))
         check_in_range(self.fade_s, "fade_s", MIN_FADE_S, MAX_FADE_S)
         check_in_range(self.rms_window_s, "rms_window_s", 0.1, 10.0)
         check_in_range(self.sustained_window_s, "sustained_window_s", 10.0, 600.0)
@@ -231,6 +244,36 @@ def check_drive(drive: np.ndarray, fs: float, n_actuators: int, limits: SafetyLi
         raise SafetyError(f"drive refused: {arr.shape[1]} sample(s) cannot hold its fades ({n_fade} sample(s) at "
                           f"each end at {fs:g} Hz); make it at least {2 * n_fade} samples long")
     return apply_fades(arr, fs, n_fade / fs)
+
+
+def check_sustained_alone(drive: np.ndarray, fs: float, limits: SafetyLimits) -> None:
+    """Refuse a drive that breaks the sustained limit played alone, from silence.
+
+    :func:`check_drive` holds every limit a drive has by itself but this one, which
+    :class:`EnergyBudget` applies across plays; a drive whose own energy over
+    ``limits.sustained_window_s`` exceeds ``limits.sustained_rms_v`` is refused by the
+    budget whatever the wait before it. A plan (a study's stimuli) checks each drive with
+    :func:`check_drive` and this, so such a drive is refused when it is planned.
+
+    Parameters
+    ----------
+    drive : ndarray, shape (n_actuators, n_samples)
+        Voltages at the actuators, V (e.g. :func:`check_drive`'s faded copy).
+    fs : float
+        Sample rate, Hz.
+    limits : SafetyLimits
+
+    Raises
+    ------
+    SafetyError
+        Over ``limits.sustained_rms_v``, naming the channel and the value.
+    """
+    arr = np.asarray(drive, dtype=float)
+    rms = windowed_rms(arr**2, max(1, int(round(limits.sustained_window_s * fs))))
+    if rms.max() > limits.sustained_rms_v * (1 + 1e-9):
+        raise SafetyError("drive refused: played alone, " + _channel_message(
+            rms, limits.sustained_rms_v, "V RMS", f" over {limits.sustained_window_s:g} s")
+            + " (sustained_rms_v); no wait before it would admit it")
 
 
 def _check_slow_content(arr: np.ndarray, fs: float, n_window: int, window_s: float) -> None:

@@ -172,7 +172,8 @@ def build_feature_bank(
         # drives, are not computed).
         render = calibration_renderer(cal, bounds=False, levels=levels)
         n_loc = len(layout.locations_xy)
-        render.prepare(methods, range(1, n_loc + 1))  # one window every stimulus fits, as a study's
+        # One window every stimulus fits, each within the rig's limits, as a study's.
+        render.prepare(methods, range(1, n_loc + 1), rig=rig)
         drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
         peaks.append(np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc))
         reached.append(np.array([render.rendering(meth, loc).reached_peak_m for meth in methods

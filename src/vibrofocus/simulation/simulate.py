@@ -300,10 +300,10 @@ def simulate_studies(
                     session_config.update(simulated=True, simulation_seed=int(seed), participant_seed=pseed, skin=skin,
                                           hypothesis=chosen.name, hypothesis_version=chosen.version,
                                           model=chosen.label())
-                    # Every stimulus is rendered (and a design that cannot fit this arm refused)
-                    # before the session is planned.
+                    # Every stimulus is rendered (and a design that cannot fit this arm, or the
+                    # rig's limits, made again or refused) before the session is planned.
                     design = StudyDesign.from_config(study, session_config)
-                    renderer_for(parts, design.levels).prepare(design.methods, design.locations)
+                    renderer_for(parts, design.levels).prepare(design.methods, design.locations, rig=parts["rig"])
                     check_drive_levels(renderer_for(parts, design.levels), design,
                                        where=None if protocol is None else protocol.level_where(block_index))
                     # Check and create in one transaction: another process simulating into

@@ -15,6 +15,7 @@ the same form for every responder.
 from __future__ import annotations
 
 import hashlib
+import inspect
 import sys
 import threading
 import time
@@ -45,6 +46,7 @@ __all__ = [
     "RunSummary",
     "StudyEngine",
     "drive_sha256",
+    "check_stimulus",
     "calibration_renderer",
     "CalibrationRenderer",
     "terminal_beep",
@@ -151,6 +153,9 @@ class CalibrationRenderer:
         self._lock = threading.RLock()
         self._H: Any = None  # the TransferMatrix of the current window
         self._cache: dict[tuple[str, int], Any] = {}
+        #: The stimuli made again to fit a rig's limits: (method, location) -> the options
+        #: that made them (:meth:`prepare` with ``rig``).
+        self.redesigned: dict[tuple[str, int], dict[str, Any]] = {}
 
     def _render(self, key: tuple[str, int]) -> Any:
         from ..rendering import TransferMatrix
@@ -163,18 +168,32 @@ class CalibrationRenderer:
         # does not fit is made again with the window's ends tapered.
         return render_fitted(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v, **self._options)
 
-    def prepare(self, methods: Any, locations: Any) -> int:
+    #: Regularizations a stimulus over a rig's limits is made again with, in turn
+    #: (:meth:`prepare`): the inverse designs' default Tikhonov parameter, then ten times it.
+    REDESIGNS: tuple[dict[str, Any], ...] = (
+        {"regularization": "tikhonov", "reg_param": 1e-2},
+        {"regularization": "tikhonov", "reg_param": 1e-1},
+    )
+
+    def prepare(self, methods: Any, locations: Any, *, rig: Any = None) -> int:
         """Render every (method, location) stimulus now, on one window they all fit.
 
         A study calls this when its session is planned, so that a stimulus that cannot
         be played is refused then, never mid-study. With the default window, the window
         is doubled (every stimulus rendered again on it) until every stimulus fits.
+        Given the rig that will play them, every stimulus is also checked against every
+        limit of that rig that a drive has by itself (:func:`check_stimulus`); one over
+        them is made again with the regularizations of :attr:`REDESIGNS` in turn, where
+        its method has that option and the renderer's options do not fix it
+        (:attr:`redesigned` records those), or refused.
 
         Parameters
         ----------
         methods : iterable of str
         locations : iterable of int
             Location numbers.
+        rig : Rig, optional
+            The rig the stimuli will play on.
 
         Returns
         -------
@@ -185,11 +204,59 @@ class CalibrationRenderer:
         ------
         StudyError
             A stimulus does not fit the longest window (:attr:`MAX_SAMPLES`, or the
-            ``n_samples`` given), naming the method, the location and why.
+            ``n_samples`` given), or the rig's limits even made again, naming the
+            participant, the method, the location and why.
         """
+        keys = [(str(m), int(loc)) for m in methods for loc in locations]
+        with self._lock:
+            n = self._render_all(keys)
+            if rig is not None:
+                for key in keys:
+                    self._fit_limits(key, rig)
+            return n
+
+    def _fit_limits(self, key: tuple[str, int], rig: Any) -> None:
+        """Check a rendered stimulus against the rig's limits; make it again, or refuse it."""
+        from dataclasses import fields
+
+        from ..errors import CausalityError, SafetyError
+        from ..rendering.registry import method_class
+
+        try:
+            check_stimulus(self._cache[key].drives, rig)
+            return
+        except SafetyError as exc:
+            first = exc
+        names = {f.name for f in fields(method_class(key[0]))}
+        tries = self.REDESIGNS if {"regularization", "reg_param"} <= names and not (
+            {"regularization", "reg_param"} & set(self._options)) else ()
+        from ..rendering import TransferMatrix
+        from ..rendering.render import render_fitted
+
+        cal = self.calibration
+        if self._H is None:
+            self._H = TransferMatrix.from_calibration(cal, self.n_samples)
+        for options in tries:
+            try:
+                design = render_fitted(key[0], self._H, cal.fs, cal.layout, key[1], limit_v=self.limit_v,
+                                       **{**self._options, **options})
+                check_stimulus(design.drives, rig)
+            except (SafetyError, CausalityError):
+                continue
+            self._cache[key], self.redesigned[key] = design, dict(options)
+            return
+        who = getattr(self.calibration, "participant_id", None)
+        tried = (" (also made again with " + ", then ".join(
+            f"{o['regularization']} regularization {o['reg_param']:g}" for o in tries) + ")") if tries else ""
+        raise StudyError(
+            f"the {key[0]} stimulus at location {key[1]}{f' for participant {who}' if who else ''} breaks the limits "
+            f"of the {getattr(rig, 'kind', '')} rig{tried}: {first}. Check the calibration, lower the drive limit, "
+            "or leave this method out") from None
+
+    def _render_all(self, keys: list[tuple[str, int]]) -> int:
+        """Render ``keys`` on one window they all fit (doubling the default window); the window."""
         from ..errors import CausalityError
 
-        keys = [(str(m), int(loc)) for m in methods for loc in locations]
         with self._lock:
             while True:
                 try:
@@ -207,6 +274,7 @@ class CalibrationRenderer:
                         ) from None
                     # The window follows the arm: every stimulus again, on one longer window.
                     self.n_samples, self._H, self._cache = 2 * self.n_samples, None, {}
+                    self.redesigned = {}
 
     def rendering(self, method: str, target: int) -> Any:
         """The :class:`~vibrofocus.rendering.Rendering` of ``method`` at location number ``target``."""
@@ -219,6 +287,31 @@ class CalibrationRenderer:
     def __call__(self, method: str, target: int) -> np.ndarray:
         """Drives of a condition, shape (n_actuators, n_samples), V."""
         return np.asarray(self.rendering(method, target).drives, dtype=float)
+
+
+def check_stimulus(drives: np.ndarray, rig: Any) -> None:
+    """Check one stimulus against every limit of a rig that a drive has by itself.
+
+    The rig's own check (:meth:`~vibrofocus.rigs.Rig.check`: shape, peak, RMS over the
+    short window, DC and slow content, the level at its outputs) and the sustained limit
+    played alone (:func:`~vibrofocus.rigs.safety.check_sustained_alone`). What the
+    stimulus adds to the plays before it is the energy budget's, when it plays.
+
+    Parameters
+    ----------
+    drives : ndarray, shape (n_actuators, n_samples)
+        V.
+    rig : Rig
+
+    Raises
+    ------
+    SafetyError
+        The first limit it breaks.
+    """
+    from ..rigs.safety import check_sustained_alone
+
+    safe = rig.check(drives)
+    check_sustained_alone(safe, rig.fs, rig.limits)
 
 
 def _check_rates(calibration: Any, rig: Any) -> None:
@@ -356,6 +449,9 @@ class Stimulus:
     target_peak_m : float or None
         Peak displacement at the target predicted from the calibration, m; None when the
         renderer gives no prediction.
+    redesign : dict or None
+        The rendering options the stimulus was made again with to fit the rig's limits
+        (:attr:`CalibrationRenderer.redesigned`); None for the design as asked.
     """
 
     method: str
@@ -364,6 +460,7 @@ class Stimulus:
     sha256: str
     drive_peak_v: float | None = None
     target_peak_m: float | None = None
+    redesign: dict | None = None
 
     def __post_init__(self) -> None:
         if self.drive_peak_v is None:
@@ -514,8 +611,9 @@ class StudyEngine:
     StudyError
         A stimulus of the session's design does not fit the participant
         (:meth:`CalibrationRenderer.prepare`: every stimulus is rendered when the engine
-        is made, before any trial), or a given renderer plays another level rule than the
-        session's.
+        is made, before any trial), or breaks a limit of ``rig`` that a drive has by itself
+        even made again (:func:`check_stimulus`, naming the participant, method and
+        location), or a given renderer plays another level rule than the session's.
 
     Notes
     -----
@@ -563,6 +661,7 @@ class StudyEngine:
                 )
             renderer = calibration_renderer(calibration, n_samples=n_samples, limit_v=limit_v,
                                             levels=self.design.levels)
+        prepare = None
         if renderer is not None and not dry_run:
             own = getattr(renderer, "levels", None)
             if own is not None and own != self.design.levels:
@@ -570,13 +669,32 @@ class StudyEngine:
                                  f"but its renderer plays {own!r}")
             prepare = getattr(renderer, "prepare", None)
             if prepare is not None:  # every stimulus now, never a refusal mid-study
-                prepare(self.design.methods, self.design.locations)
+                if rig is not None and "rig" in inspect.signature(prepare).parameters:
+                    prepare(self.design.methods, self.design.locations, rig=rig)
+                else:
+                    prepare(self.design.methods, self.design.locations)
             check_drive_levels(renderer, self.design)
         self._renderer = None if dry_run else renderer
         _check_rates(calibration if calibration is not None else getattr(renderer, "calibration", None), rig)
         self.cue = cue
         self._beep = "played" if cue is not None else str(cue_by)
         self._cache: dict[tuple[str, int], Stimulus] = {}
+        if prepare is not None and rig is not None and not dry_run:
+            self._check_limits()
+
+    def _check_limits(self) -> None:
+        """Every prepared stimulus against the rig's limits, before any trial."""
+        from ..errors import SafetyError
+
+        for method in self.design.methods:
+            for target in self.design.locations:
+                stim = self.stimulus(method, target)
+                try:
+                    check_stimulus(stim.drives, self.rig)
+                except SafetyError as exc:
+                    raise StudyError(
+                        f"the {method} stimulus at location {target} for participant {self.participant_id} breaks "
+                        f"the limits of the {getattr(self.rig, 'kind', '')} rig: {exc}") from None
 
     # ------------------------------------------------------------------ pieces
     def stimulus(self, method: str, target: int) -> Stimulus | None:
@@ -594,8 +712,10 @@ class StudyEngine:
             reached = getattr(rendering(*key), "reached_peak_m", None) if rendering is not None else None
             if reached is not None:
                 reached = float(reached) * gain
+            redesign = getattr(self._renderer, "redesigned", {}).get(key)
             self._cache[key] = Stimulus(key[0], key[1], drives, drive_sha256(drives),
-                                        target_peak_m=None if reached is None else float(reached))
+                                        target_peak_m=None if reached is None else float(reached),
+                                        redesign=None if redesign is None else dict(redesign))
         return self._cache[key]
 
     def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
@@ -628,6 +748,7 @@ class StudyEngine:
             played=stim is not None, drive_sha256=None if stim is None else stim.sha256,
             levels=self.design.levels, drive_peak_v=None if stim is None else stim.drive_peak_v,
             target_peak_um=None if stim is None or stim.target_peak_m is None else stim.target_peak_m * 1e6,
+            **({} if stim is None or stim.redesign is None else {"redesign": stim.redesign}),
         )
         onset = time.monotonic()
         played = self.rig.play(stim.drives) if stim is not None else None
