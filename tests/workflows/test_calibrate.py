@@ -70,9 +70,12 @@ def test_a_calibration_is_planned_recorded_judged_saved_and_registered_in_that_o
 def test_a_cancel_during_the_recordings_saves_nothing_and_skips_the_saving_hook(tmp_path):
     out = tmp_path / "P01.nc"
     hooked = []
+    progress = Recorder(cancel_at=2)
     with pytest.raises(WorkflowCancelled):
-        calibrate_participant(SimulatedForearm(seed=3), "P01", out, progress=Recorder(cancel_at=2),
+        calibrate_participant(SimulatedForearm(seed=3), "P01", out, progress=progress,
                               before_saving=lambda: hooked.append(True), **QUICK)
+    assert [e[0] for e in progress.events].count("step") == 2, "the recordings stop at the step that saw the cancel"
+    assert "judged" not in [e[0] for e in progress.events]
     assert hooked == [] and not out.exists()
     assert list(tmp_path.iterdir()) == []
 
