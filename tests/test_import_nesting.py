@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 # Subpackage -> the vibrofocus subpackages it must NOT load when imported.
-UPPER = {"rendering", "skin", "calibration", "rigs", "studies", "analysis", "demo", "web", "cli"}
+UPPER = {"rendering", "skin", "calibration", "rigs", "studies", "analysis", "workflows", "demo", "web", "cli"}
 FORBIDDEN = {
     "layout": UPPER | {"signals", "io"},
     # The file formats sit just above layout: every layer may read and write files.
@@ -25,10 +25,12 @@ FORBIDDEN = {
     # The simulated rig is an adapter over the arm's physics (skin), which sits below rigs.
     "rigs": UPPER - {"rigs", "skin"},
     # The arm's physics knows nothing of rigs (the simulated rig is an adapter in rigs/).
-    "skin": {"rigs", "calibration", "studies", "analysis", "demo", "web", "cli"},
-    "calibration": {"studies", "analysis", "demo", "web", "cli"},
-    "analysis": {"rendering", "skin", "calibration", "rigs", "studies", "demo", "web", "cli"},
-    "studies": {"analysis", "demo", "web", "cli"},
+    "skin": {"rigs", "calibration", "studies", "analysis", "workflows", "demo", "web", "cli"},
+    "calibration": {"studies", "analysis", "workflows", "demo", "web", "cli"},
+    "analysis": {"rendering", "skin", "calibration", "rigs", "studies", "workflows", "demo", "web", "cli"},
+    "studies": {"analysis", "workflows", "demo", "web", "cli"},
+    # The workflows sit under every front-end: importing them loads none.
+    "workflows": {"demo", "web", "cli", "psychopy"},
     "web": {"cli", "demo"},
 }
 

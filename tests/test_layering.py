@@ -35,6 +35,7 @@ FLOORS = (
     ("calibration",),                                         # measures on a rig, fits the skin, designs
     ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine
+    ("workflows",),                                           # the lab's workflows, under every front-end
     ("demo", "web", "psychopy"),                              # the two applications; taps in PsychoPy
     ("cli",),                                                 # the command line
     ("__main__",),                                            # python -m vibrofocus

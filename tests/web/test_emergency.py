@@ -187,9 +187,10 @@ def test_a_stop_during_the_estimation_cancels_the_calibration_and_saves_nothing(
 
 @pytest.mark.slow
 def test_a_stop_once_the_calibration_is_being_saved_says_it_is_saved(client, monkeypatch):
-    import vibrofocus.calibration
+    import vibrofocus.calibration.files
 
-    entered, release = _held(monkeypatch, vibrofocus.calibration, "save_calibration")
+    # The save step of the calibration workflow (vibrofocus.workflows.calibrate_participant).
+    entered, release = _held(monkeypatch, vibrofocus.calibration.files, "save_calibration_keeping")
     assert client.post("/api/participants", json={"participant_id": "P02"}).status_code == 201
     job = client.post("/api/calibrations", json={"participant_id": "P02", "seed": 7}).json()["job_id"]
     assert entered.wait(300), "the calibration never reached its saving"

@@ -307,54 +307,55 @@ def _refuse_if_busy(rig: Any) -> None:
         raise HTTPException(409, detail=f"The {rig.kind} rig is busy with {busy}. Wait until it ends, or stop it first.")
 
 
-def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
-    from ..calibration import calibrate, save_calibration
-    from ..rigs.force import has_strap_sensors
+class _JobProgress:
+    """The calibration workflow's :class:`~vibrofocus.workflows.Progress` as the job's live card."""
 
-    def progress(*args: Any, **kwargs: Any) -> None:
-        # Accept the callback in the forms a long task usually reports: a fraction, a
-        # (done, total) pair, and an optional message.
-        nums = [a for a in args if isinstance(a, (int, float)) and not isinstance(a, bool)]
-        texts = [a for a in args if isinstance(a, str)] + [v for v in kwargs.values() if isinstance(v, str)]
-        if len(nums) >= 2 and nums[1]:
-            job.progress = float(nums[0]) / float(nums[1])
-        elif nums:
-            job.progress = float(nums[0])
-        if texts:
-            job.message = texts[0]
-        job.check_cancelled()
+    def __init__(self, job: CalibrationJob):
+        self.job = job
 
-    def prompt(label: str, xy: Any) -> None:
-        job.wait_for_experimenter(
+    def step(self, done: int, total: int, message: str) -> None:
+        if total:
+            self.job.progress = float(done) / float(total)
+        self.job.message = message
+
+    def note(self, message: str, **details: Any) -> None:
+        reading = details.get("straps")
+        if reading is not None:  # shown before the first sweep, so loose straps are seen now
+            self.job.straps = {**reading.to_dict(), "message": reading.message}
+
+    def judged(self, result: Any) -> None:
+        pass
+
+    def cancelled(self) -> bool:
+        return self.job.cancelled
+
+    def aim(self, label: str, xy: Any) -> None:
+        self.job.wait_for_experimenter(
             f"Aim the vibrometer at point {label} (x {xy[0] * 1e3:+.1f} mm, y {xy[1] * 1e3:+.1f} mm), then press Continue."
         )
 
-    try:
-        if has_strap_sensors(rig):
-            # Read before the first sweep, so the experimenter sees loose straps now;
-            # calibrate() stores its own reading with the calibration.
-            from ..rigs.force import check_straps
-
-            reading = check_straps(rig)
-            job.straps = {**reading.to_dict(), "message": reading.message}
-        single_spot = getattr(rig, "max_points_per_recording", None) is not None
-        with rig.reserve(f"the calibration of {job.participant_id}"):
-            cal = calibrate(rig, participant_id=job.participant_id, progress=progress,
-                            prompt=prompt if single_spot else None, measure=job.points)
+    def begin_saving(self) -> None:
         # The point of no return: a cancel until here (a stop during the estimation too)
         # saves nothing; from here on the calibration is saved and a cancel is refused.
-        job.begin_saving()
+        self.job.begin_saving()
+        self.job.message = "saving"
+
+
+def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
+    from ..workflows import calibrate_participant
+
+    card = _JobProgress(job)
+    try:
         folder = web.data_dir / "calibrations"
         private_dir(folder)
         # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
         path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.nc"
-        job.message = "saving"
-        save_calibration(cal, path)
-        with web.db:
-            cal_id = web.store.add_calibration(job.participant_id, path)
+        done = calibrate_participant(rig, job.participant_id, path, points=job.points, progress=card, aim=card.aim,
+                                     before_saving=card.begin_saving, store=web.store, store_lock=web.db)
+        cal = done.calibration
         with web.lock:
-            web.calibrations[cal_id] = cal
-        job.calibration_id = cal_id
+            web.calibrations[done.calibration_id] = cal
+        job.calibration_id = done.calibration_id
         job.verdicts = _verdicts(cal)
         job.n_errors = sum(v["severity"] == "error" for v in job.verdicts)
         job.progress = 1.0
