@@ -11,8 +11,11 @@ location, repeated, in random order, after a few training trials.
 from __future__ import annotations
 
 import re
+import tomllib
 from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass
+from functools import lru_cache
+from importlib import resources
 from typing import Any
 
 import numpy as np
@@ -204,9 +207,7 @@ class StudyDesign:
         config = dict(config or {})
         if isinstance(study, bool) or study not in STUDIES:
             raise StudyError(f"study must be 1 or 2, got {study!r}")
-        from .protocol_files import paper_protocol_name, shipped_protocol
-
-        base = shipped_protocol(paper_protocol_name(study)).design(0)
+        base = design_of_block(study, _paper_block(study))
         kwargs: dict[str, Any] = {key: getattr(base, key) for key in
                                   ("methods", "locations", "repetitions", "n_training", "levels", "level_db")}
         if stored and "levels" not in config:
@@ -360,6 +361,31 @@ def parse_response(response: Any, design: StudyDesign) -> tuple[int, ...]:
     if not design.multi_select and len(locations) != 1:
         raise StudyError(f"Study 1 takes exactly one location per trial, got {len(locations)}: {locations}")
     return tuple(sorted(locations))
+
+
+def design_of_block(study: int, block: Mapping[str, Any]) -> StudyDesign:
+    """The :class:`StudyDesign` of one protocol block, given as the protocol file's fields.
+
+    ``block`` holds ``methods``, ``locations``, ``repetitions``, ``training_trials``,
+    ``level_rule`` and ``levels`` (one level, in dB re the level rule), as in a protocol
+    file's ``[[blocks]]`` table (docs/protocols.md).
+    """
+    return StudyDesign(study=study, methods=tuple(block["methods"]), locations=tuple(block["locations"]),
+                       repetitions=int(block["repetitions"]), n_training=int(block["training_trials"]),
+                       levels=block["level_rule"], level_db=float(block["levels"][0]))
+
+
+@lru_cache(maxsize=None)
+def _paper_block(study: int) -> Mapping[str, Any]:
+    """Block 0 of the shipped protocol of the paper's study ``study``, read as plain TOML.
+
+    Read here, not through :mod:`.protocol_files` (which builds on this module): the file
+    ships with the package, and tests/studies/test_protocol_files.py checks that it passes
+    the protocol checks and gives the same trials as this design.
+    """
+    text = resources.files("vibrofocus.studies").joinpath("protocols", f"paper-study{study}.toml").read_text(
+        encoding="utf-8")
+    return tomllib.loads(text)["blocks"][0]
 
 
 def _check_seed(seed: Any) -> int:

@@ -30,7 +30,7 @@ from typing import Any, Literal
 
 from .._validation import shorten
 from ..errors import StudyError
-from .protocol import LEVEL_RULES, StudyDesign
+from .protocol import LEVEL_RULES, StudyDesign, design_of_block
 
 __all__ = [
     "MAX_PROTOCOL_BYTES",
@@ -189,8 +189,9 @@ class StudyProtocol:
         b = self.blocks[index]
         assert b.study is not None and b.locations is not None  # check_runnable
         try:
-            return StudyDesign(study=b.study, methods=b.methods, locations=b.locations, repetitions=b.repetitions,
-                               n_training=b.training_trials, levels=b.level_rule, level_db=b.levels[0])
+            return design_of_block(b.study, {"methods": b.methods, "locations": b.locations,
+                                             "repetitions": b.repetitions, "training_trials": b.training_trials,
+                                             "level_rule": b.level_rule, "levels": b.levels})
         except StudyError as exc:
             raise StudyError(f"{self.where(f'blocks[{index}]')}: {exc}") from None
 
