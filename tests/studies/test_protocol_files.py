@@ -107,8 +107,6 @@ BAD = {
     "wrong-type": (SMALL.replace("repetitions = 1", 'repetitions = "three"'), "line 9, blocks[0].repetitions: Input"),
     "unknown-field": (SMALL.replace("seed = 7", "sead = 7"), "line 11, blocks[0].sead: unknown field"),
     "not-toml": (SMALL.replace("levels = [-6.0]", "levels = [-6.0"), "not valid TOML"),
-    "point-targets": (SMALL.replace("locations = [1, 9]", "points_mm = [[0.0, 0.0]]"),
-                      "line 7, blocks[0].points_mm: targets given as points in mm are not run yet"),
     "db-sl": (SMALL.replace("levels = [-6.0]", 'levels = [20.0]\nlevel_unit = "dB SL"'),
               "line 9, blocks[0].level_unit: levels in dB SL need"),
 }
