@@ -77,7 +77,7 @@ class AnswerIn(_Strict):
     session_id: int = Field(ge=1, le=MAX_ID, strict=True)
     trial_index: int = Field(ge=0, le=MAX_ID, strict=True)
     response: list[Location] | None = Field(default=None, min_length=1, max_length=N_LOCATIONS)
-    point_mm: list[Annotated[float, Field(allow_inf_nan=False, ge=-10_000.0, le=10_000.0, strict=False)]] | None = (
+    point_mm: list[Annotated[float, Field(allow_inf_nan=False, ge=-10_000.0, le=10_000.0)]] | None = (
         Field(default=None, min_length=2, max_length=2))
     rt_s: float = Field(ge=0.0, le=3600.0, allow_inf_nan=False)
     answer_id: str = Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
