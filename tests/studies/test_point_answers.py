@@ -194,3 +194,11 @@ def test_a_point_protocol_runs_in_simulation(tmp_path):
     with StudyStore(db, create=False) as store:
         (info,) = store.sessions()
         assert info.design.point and info.config["protocol"] == "point-pilot"
+    # analyze reports the points' error in mm per method, as point_errors computes it.
+    result = CliRunner().invoke(app, ["analyze", str(out), "--out", str(tmp_path / "report")])
+    assert result.exit_code == 0, result.output
+    expected = point_errors(pd.read_csv(out, dtype=str, keep_default_na=False))
+    text = " ".join(result.output.split())
+    assert "Point answers, mean localization error (point to target):" in text, text
+    for r in expected.itertuples():
+        assert f"{r.method} {r.mean_error_mm:.2f} mm (n = {r.n})" in text, text
