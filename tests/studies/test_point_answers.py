@@ -202,3 +202,15 @@ def test_a_point_protocol_runs_in_simulation(tmp_path):
     assert "Point answers, mean localization error (point to target):" in text, text
     for r in expected.itertuples():
         assert f"{r.method} {r.mean_error_mm:.2f} mm (n = {r.n})" in text, text
+
+
+def test_study_run_in_the_terminal_refuses_a_point_block_before_anything(tmp_path, calibration_file):
+    from vibrofocus.cli.main import app
+
+    path = tmp_path / "point.toml"
+    path.write_text(POINT_PROTOCOL)
+    result = CliRunner().invoke(app, ["study", "run", "--participant", "p-real", "--db", str(tmp_path / "s.db"),
+                                      "--calibration", str(calibration_file), "--protocol", str(path)])
+    assert result.exit_code != 0
+    assert "line 5, blocks[0].response: point answers are given on the web participant page" in result.output
+    assert not (tmp_path / "s.db").exists()
