@@ -134,6 +134,16 @@ class MinimaxReport:
         First and last sample the drive pulses are centred on.
     decimation : int
         Spacing of the pulses, samples.
+    least_drive : float or None
+        With ``max_drive``: the least peak drive (unit of the drives) any drives on this
+        support need to reach ``min_fidelity`` at the target's amplitude (one small cone
+        program on the drive samples alone); ``None`` without ``max_drive``.
+    drive_limited : bool
+        ``on_max_drive="least"`` raised the drive limit to ``least_drive`` (plus 2 %):
+        ``max_drive`` could not reach the fidelity at this tap amplitude.
+    size_limit : str or None
+        A size limit that changed the program, in words (the default support shortened
+        to :data:`MAX_VARIABLES` design variables); ``None`` when none did.
     """
 
     predicted: np.ndarray
@@ -155,6 +165,9 @@ class MinimaxReport:
     ir_tail_energy: float
     support: tuple[int, int]
     decimation: int
+    least_drive: float | None = None
+    drive_limited: bool = False
+    size_limit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -365,6 +378,7 @@ def minimax_filter(
     fidelity_margin: float = 1e-3,
     max_iter: int = 30,
     h_radius: Any = None,
+    on_max_drive: str = "refuse",
 ) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
     """Peak-contrast (minimax) drives: the least largest quiet-point ``|displacement|`` at
     a given target fidelity (SPEC §2, §8).
@@ -436,6 +450,13 @@ def minimax_filter(
         bins) and ``||x||`` the drives' Euclidean norm: the largest quiet ``|displacement|``
         through any ``H`` within the radius (Cauchy-Schwarz over frequency and actuator).
         ``None``: the nominal program (no norm term).
+    on_max_drive : {"refuse", "least"}
+        What to do when no drive within ``max_drive`` reaches ``min_fidelity`` at the
+        target's amplitude (found by one small program before the design, and reported
+        as ``least_drive``): ``"refuse"`` raises
+        :class:`~vibrofocus.errors.InfeasibleDesignError` naming the drive needed;
+        ``"least"`` designs at that least drive (plus 2 %) instead and sets the report's
+        ``drive_limited``: the caller scales the drives to its limit, and the tap falls.
 
     Returns
     -------
@@ -459,7 +480,7 @@ def minimax_filter(
                            support_s=support_s, stride=stride, ir_energy_tol=ir_energy_tol, decimation=decimation,
                            h_radius=h_radius)
         return program.design(min_fidelity, max_drive=max_drive, full_output=full_output, tol=tol,
-                              fidelity_margin=fidelity_margin, max_iter=max_iter)
+                              fidelity_margin=fidelity_margin, max_iter=max_iter, on_max_drive=on_max_drive)
 
 
 class _Program:
@@ -501,8 +522,17 @@ class _Program:
         t_peak = int(np.argmax(np.abs(desired)))
         # The support H asks for: the waves' arrival at the target sets how early drives start.
         self.timing = response_timing(H, fs, band=band, taper_octaves=taper_octaves)
-        self.suggested = self._fit_support(self.timing.support_s(ti), n_act, r, fs)
+        wanted = tuple(float(x) for x in self.timing.support_s(ti))
+        self.suggested = self._fit_support(wanted, n_act, r, fs)
         self.given = support_s is not None
+        # No silent cap: a default support cut to the program's size is named in the
+        # report and in every refusal.
+        self.size_limit = None
+        if not self.given and self.suggested[0] < wanted[0] - 1e-12:
+            self.size_limit = (
+                f"the default support_s=({wanted[0]:.4g}, {wanted[1]:.4g}) s (from H's arrival times) was shortened "
+                f"to ({self.suggested[0]:g}, {self.suggested[1]:g}) s by MAX_VARIABLES={MAX_VARIABLES} design "
+                f"variables over {n_act} actuators")
         asked_support = support_s
         support_s = self.suggested if support_s is None else _check_support(support_s)
         pre, post = (int(round(s * fs)) for s in support_s)
@@ -605,13 +635,15 @@ class _Program:
                 why = (f"shorter than the waves' arrival at the target (~{arrival:.3g} s)" if pre < arrival
                        else f"too short for min_fidelity={min_fidelity:.10g}")
                 given = "support_s" if self.given else "the default support_s"
+                capped = f" [size limit: {self.size_limit}]" if self.size_limit else ""
                 return (f"{given}=({pre:g}, {post:g}) is {why}: it reaches fidelity {self.best_fidelity:.4g} at best; "
-                        f"use support_s=({cand[0]:g}, {cand[1]:g})")
+                        f"use support_s=({cand[0]:g}, {cand[1]:g}){capped}")
         longest = max(tries, key=sum)
         longer = (f"; longer ones, up to support_s=({longest[0]:g}, {longest[1]:g}), reach no more"
                   if sum(longest) > pre + post + 1e-9 else "")
+        capped = f" [size limit: {self.size_limit}]" if self.size_limit else ""
         return (f"min_fidelity={min_fidelity:.10g} is above the model's best fidelity {self.best_fidelity:.6g} "
-                f"over this support (support_s=({pre:g}, {post:g}){longer}): relax the fidelity")
+                f"over this support (support_s=({pre:g}, {post:g}){longer}): relax the fidelity{capped}")
 
     def _add_pairs(self, pairs: Any) -> int:
         """Add the peak constraints at (quiet j, sample t) not listed yet; how many."""
@@ -636,6 +668,29 @@ class _Program:
         train = np.zeros((self.n_act, self.n))
         train[:, self.delays] = u.reshape(self.n_act, self.m) @ self.basis.T
         return np.fft.irfft(np.fft.rfft(train, axis=-1) * self.taper, self.n, axis=-1) * self.u_scale
+
+    def least_drive(self, min_fidelity: float, *, tol: float, fidelity_margin: float, max_iter: int) -> float:
+        """The least peak drive (unit of the drives) that reaches ``min_fidelity`` at the
+        target's amplitude: ``min max|x|`` s.t. ``b.u = 1``, ``||Lt u|| <= cap``, by the same
+        constraint generation on the drive samples (no peak rows: a small program)."""
+        asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
+        cap = 1.0 / asked
+        if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
+            raise InfeasibleDesignError("the minimax program is infeasible: "
+                                        + self._support_advice(min_fidelity, asked))
+        x0 = self.drives_of(self.u_best) / self.u_scale
+        self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x0[a], 0.3 * np.max(np.abs(x0)), 10)])
+        value = np.nan
+        for _ in range(max_iter):
+            found, value, status, _ = _solve_cone(np.kron(np.eye(self.n_act), self.D), self.b, self.Lt, cap, None, None)
+            if found is None or not np.isfinite(value) or "infeasible" in status:
+                raise InfeasibleDesignError(f"the least-drive program failed ({status}): "
+                                            f"{self._asked(min_fidelity, None)}")
+            x = self.drives_of(found) / self.u_scale
+            floor = value * (1 + tol)
+            if self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x[a], floor, 20)]) == 0:
+                break
+        return float(value * self.u_scale)
 
     def solve(self, min_fidelity: float, *, max_drive: float | None, tol: float, fidelity_margin: float,
               max_iter: int) -> tuple[np.ndarray, float, str, int]:
@@ -710,16 +765,33 @@ class _Program:
             parts.append(f"max_drive={max_drive:g}")
         if self.rq is not None:
             parts.append(f"h_radius (up to {self.rho_max:.3g}, against |H| up to {self.h_max:.3g})")
-        return "relax " + ", or ".join(parts)
+        capped = f" [size limit: {self.size_limit}]" if self.size_limit else ""
+        return "relax " + ", or ".join(parts) + capped
 
     def design(self, min_fidelity: float, *, max_drive: float | None, full_output: bool, tol: float,
-               fidelity_margin: float, max_iter: int) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
+               fidelity_margin: float, max_iter: int,
+               on_max_drive: str = "refuse") -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
         min_fidelity = check_in_range(min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False)
         if max_drive is not None:
             max_drive = check_positive(max_drive, "max_drive")
         tol = check_positive(tol, "tol")
         fidelity_margin = check_positive(fidelity_margin, "fidelity_margin", allow_zero=True)
         max_iter = _check_max_iter(max_iter)
+        if on_max_drive not in ("refuse", "least"):
+            raise ValidationError(f"on_max_drive must be 'refuse' or 'least', got {on_max_drive!r}")
+        least, limited = None, False
+        if max_drive is not None:
+            # One small program says whether the limit can reach the fidelity at all: no
+            # re-solves of the whole program at doubled limits.
+            least = self.least_drive(min_fidelity, tol=tol, fidelity_margin=fidelity_margin, max_iter=max_iter)
+            if least > max_drive:
+                if on_max_drive == "refuse":
+                    raise InfeasibleDesignError(
+                        f"the minimax program is infeasible: min_fidelity={min_fidelity:g} needs a peak drive of at "
+                        f"least {least:.4g} at this tap amplitude, over max_drive={max_drive:g} ({least / max_drive:.3g}x)"
+                        f"; relax the fidelity or the drive limit, or lower the tap amplitude"
+                        + (f" [size limit: {self.size_limit}]" if self.size_limit else ""))
+                max_drive, limited = least * 1.02, True
         drives, value, status, it = self.solve(min_fidelity, max_drive=max_drive, tol=tol,
                                                fidelity_margin=fidelity_margin, max_iter=max_iter)
         predicted = predict_response(self.H, drives)
@@ -745,7 +817,7 @@ class _Program:
             status=str(status), solver="cvxopt.conelp", iterations=it, n_constraints=len(self.listed),
             n_variables=self.A.shape[1], ir_taps=self.ir_taps, ir_energy_left_out=self.left_out,
             ir_tail_energy=self.tail, support=(int(self.delays[0]), int(self.delays[-1])),
-            decimation=self.decimation)
+            decimation=self.decimation, least_drive=least, drive_limited=limited, size_limit=self.size_limit)
         return drives, report
 
 
