@@ -443,9 +443,10 @@ class Minimax(Method):
             return tap * self.limit_v / peak_drive * 1e6, 20 * np.log10(tap / float(np.max(np.abs(y[quiet]))))
 
         mm_um, mm_db = at_limit(rep.predicted, rep.peak_drive)
+        budget_x = 1.0 if self.drive_budget == "auto" else float(self.drive_budget)
         inv_um, inv_db = at_limit(y_inv, float(np.max(np.abs(inv))))
         return (f"minimax at location {p.location}: fidelity {rep.fidelity:.3f} needs a peak drive of "
                 f"{rep.least_drive:.3g} V for the {self.target_peak_m * 1e6:g} um tap, {rep.least_drive / budget:.3g}x "
-                f"the drive budget ({budget:.3g} V, {self.drive_budget} x the pseudo-inverse's); at limit_v="
+                f"the drive budget ({budget:.3g} V, {budget_x:g} x the pseudo-inverse's); the design takes twice that; at limit_v="
                 f"{self.limit_v:g} V its tap peaks at {mm_um:.3g} um with {mm_db:.1f} dB peak contrast, the inverse "
                 f"filter's at {inv_um:.3g} um with {inv_db:.1f} dB; lower min_fidelity to keep the budget")
