@@ -323,6 +323,11 @@ class Minimax(Method):
         small and a measured one is mostly noise; ``None``: unconstrained. ``"auto"``
         (default): 1 (no more drive than the pseudo-inverse) for the nominal program, none
         for the robust one (its norm term already keeps the drive off those directions).
+        One solve: where no drive within the budget reaches the fidelity at this tap, the
+        design takes twice the least drive that does and warns (``UserWarning``) with the
+        cost at ``limit_v``: the tap's peak at the target (um) and the peak contrast,
+        beside the inverse filter's. A default support cut by the program's size limit
+        also warns.
     robust : float, optional
         Designing from a measured ``H`` (one with a coherence): the quiet peak is bounded
         over every ``H`` within ``robust`` standard errors of the measurement (default 1;
