@@ -459,8 +459,9 @@ def minimax_filter(
         Spacing of the drive pulses, samples; default the largest that keeps the taper's
         upper edge below the pulses' Nyquist frequency.
     stride : int
-        Spacing of the first peak constraints, samples (later rounds add the samples found
-        over the peak).
+        Least spacing of the first peak constraints' coarse grid, samples (widened to at
+        most 16 samples per quiet point, so that the first program does not grow with the
+        window; later rounds add the samples found over the peak).
     ir_energy_tol : float
         The first peak constraints cover the samples where the pulses' responses hold all
         but this share of their energy (the truncation, reported as ``ir_taps`` and
