@@ -14,7 +14,7 @@ import numpy as np
 
 from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import FUNNELING_AMPLITUDE_V
-from ..errors import InfeasibleDesignError, ValidationError
+from ..errors import ValidationError
 from ._acc import DEFAULT_ACC_REG
 from ._checks import as_transfer, check_regularization
 from .combination import combination_target
@@ -452,6 +452,7 @@ class Minimax(Method):
         inv_um, inv_db = at_limit(y_inv, float(np.max(np.abs(inv))))
         return (f"minimax at location {p.location}: fidelity {rep.fidelity:.3f} needs a peak drive of "
                 f"{rep.least_drive:.3g} V for the {self.target_peak_m * 1e6:g} um tap, {rep.least_drive / budget:.3g}x "
-                f"the drive budget ({budget:.3g} V, {budget_x:g} x the pseudo-inverse's); the design takes twice that; at limit_v="
+                f"the drive budget ({budget:.3g} V, {budget_x:g} x the pseudo-inverse's); the design takes twice that; "
+                f"at limit_v="
                 f"{self.limit_v:g} V its tap peaks at {mm_um:.3g} um with {mm_db:.1f} dB peak contrast, the inverse "
                 f"filter's at {inv_um:.3g} um with {inv_db:.1f} dB; lower min_fidelity to keep the budget")

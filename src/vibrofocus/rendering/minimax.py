@@ -723,7 +723,8 @@ class _Program:
         self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x0[a], 0.3 * np.max(np.abs(x0)), 10)])
         value = np.nan
         for _ in range(max_iter):
-            found, value, status, _ = _solve_cone(np.kron(np.eye(self.n_act), self.D), self.b, self.Lt, cap, None, None)
+            found, value, status, _ = _solve_cone(np.kron(np.eye(self.n_act), self.D), self.b, self.Lt, cap, None, None,
+                                                  norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
             if found is None or not np.isfinite(value) or "infeasible" in status:
                 raise InfeasibleDesignError(f"the least-drive program failed ({status}): "
                                             f"{self._asked(min_fidelity, None)}")
@@ -834,7 +835,8 @@ class _Program:
                 if on_max_drive == "refuse":
                     raise InfeasibleDesignError(
                         f"the minimax program is infeasible: min_fidelity={min_fidelity:g} needs a peak drive of at "
-                        f"least {least:.4g} at this tap amplitude, over max_drive={max_drive:g} ({least / max_drive:.3g}x)"
+                        f"least {least:.4g} at this tap amplitude, over max_drive={max_drive:g} "
+                        f"({least / max_drive:.3g}x)"
                         f"; relax the fidelity or the drive limit, or lower the tap amplitude"
                         + (f" [size limit: {self.size_limit}]" if self.size_limit else ""))
                 max_drive, limited = least * _LEAST_DRIVE_ROOM, True
