@@ -79,7 +79,7 @@ _NORM_CAP = 1e6
 #: this share of it (the rows about to bind, not only those over): fewer rounds.
 _ADD_MARGIN = 0.7
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
-_GRID_ROWS = 16
+_GRID_ROWS = 64
 #: With ``on_max_drive="least"``, the design's drive limit over the least drive that reaches
 #: the fidelity: at the least drive itself the drives are pinned by the fidelity and the
 #: quiet peak cannot fall (1.3 dB against 5.3 dB at 1.02x on the reference medium).
@@ -460,7 +460,7 @@ def minimax_filter(
         upper edge below the pulses' Nyquist frequency.
     stride : int
         Least spacing of the first peak constraints' coarse grid, samples (widened to at
-        most 16 samples per quiet point, so that the first program does not grow with the
+        most 64 samples per quiet point, so that the first program does not grow with the
         window; later rounds add the samples found over the peak).
     ir_energy_tol : float
         The first peak constraints cover the samples where the pulses' responses hold all
@@ -719,6 +719,13 @@ class _Program:
         if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
             raise InfeasibleDesignError("the minimax program is infeasible: "
                                         + self._support_advice(min_fidelity, asked))
+        saved = self.D, self.drive_rows  # its rows stay out of the design's program
+        try:
+            return self._least_drive(cap, min_fidelity, tol=tol, max_iter=max_iter)
+        finally:
+            self.D, self.drive_rows = saved
+
+    def _least_drive(self, cap: float, min_fidelity: float, *, tol: float, max_iter: int) -> float:
         x0 = self.drives_of(self.u_best) / self.u_scale
         self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x0[a], 0.3 * np.max(np.abs(x0)), 10)])
         value = np.nan
