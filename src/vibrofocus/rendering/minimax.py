@@ -16,8 +16,13 @@ Structure used for speed:
   pair, so the fidelity constraint holds over the whole window without listing its samples.
 * **Constraint generation.** The peak constraints start at the samples where the
   pseudo-inverse's quiet response peaks (the warm start) and on a coarse grid; after each
-  solve, the full response (FFT) adds the samples that exceed the current peak, until
-  none does; rows far below the peak leave whenever the optimum sets a record.
+  solve, the full response (FFT) adds the samples that exceed the current peak (and, in a
+  round with any, those within 30 % of it), until none does; rows far below the peak leave
+  whenever the optimum sets a record. The first grid has at most 64 samples per point: the
+  first program does not grow with the window.
+* **Drive limit in one solve.** With ``max_drive``, a small program on the drive samples
+  alone first finds the least peak drive that reaches the fidelity; a limit below it is
+  refused naming that drive (or, ``on_max_drive="least"``, the design runs at twice it).
 * **A cone solver called directly.** A few hundred coefficients and rows: CVXOPT's
   primal-dual cone solver takes the dense rows as they are (BLAS on one thread), about 20
   iterations per round, with no modelling layer to compile each round.
