@@ -12,7 +12,13 @@ Then the long-response case beside it: a simulated arm with four exciters 9-15 c
 points at 1.3 kHz (band 10-500 Hz), where the waves take 20-30 ms to arrive. minimax_filter
 with its defaults (support from H) against the naive pseudo-inverse: fidelity, peak contrast,
 seconds per design, and the ratio of its time to the reference setup's.
+Then the synthetic array cases of issue 57 (45 mm pitch, 3 x 3 locations at 10 mm, n = 4096,
+min_fidelity 0.95, location 5): 4, 8, 16 and 32 actuators x 9 points, each timed in the same run
+as the reference setup's design at n = 4096 and printed as a ratio to it, with the variables, the
+peak constraints and any size limit the design named (``MinimaxReport.size_limit``).
+
 Usage: python benchmarks/bench_minimax.py [n_samples]   (needs the test extra: cvxpy, Clarabel)
+       python benchmarks/bench_minimax.py --arrays      (the synthetic array cases only)
 """
 
 from __future__ import annotations
@@ -69,7 +75,37 @@ def plain(H, targets, n, min_fidelity):
     return float(s.value)
 
 
+def arrays(n: int = 4096) -> None:
+    """The issue's synthetic cases: actuators x 9 points, times as ratios to the reference's."""
+    warnings.simplefilter("ignore", UserWarning)
+
+    def one(layout: ArrayLayout) -> tuple[float, object]:
+        H = medium(layout, n)
+        targets = np.zeros((layout.n_points, n))
+        targets[layout.location_index(5)] = 2e-6 * ricker(FS, 1e-3, n / FS, n / FS / 2)
+        t = time.perf_counter()
+        try:
+            _, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.95, full_output=True)
+        except Exception as exc:  # noqa: BLE001 - a refusal is a result here
+            return time.perf_counter() - t, exc
+        return time.perf_counter() - t, rep
+
+    ref_s, rep = one(ArrayLayout.reference())
+    print(f"reference setup 13 x 4, n={n}, defaults: {ref_s:.1f} s")
+    for shape in ((2, 2), (2, 4), (4, 4), (4, 8)):
+        layout = ArrayLayout.grid(shape, 0.045, (3, 3), 0.01)
+        s, rep = one(layout)
+        what = (f"refused: {rep}" if isinstance(rep, Exception) else
+                f"{rep.n_variables} variables, {rep.n_constraints} peak constraints, {rep.iterations} rounds, "
+                f"{rep.peak_contrast_db:.1f} dB at fidelity {rep.fidelity:.3f}, "
+                f"size limit: {getattr(rep, 'size_limit', None) or 'none'}")
+        print(f"{layout.n_actuators:>2} x {layout.n_points}: {s:7.1f} s  ratio {s / ref_s:5.2f}x  {what}")
+
+
 def main() -> None:
+    if sys.argv[1:] == ["--arrays"]:
+        arrays()
+        return
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1024
     layout = ArrayLayout.reference()
     H = medium(layout, n)

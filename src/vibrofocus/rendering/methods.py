@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from dataclasses import field as _field
 from typing import Any, ClassVar
@@ -13,7 +14,7 @@ import numpy as np
 
 from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import FUNNELING_AMPLITUDE_V
-from ..errors import InfeasibleDesignError, ValidationError
+from ..errors import ValidationError
 from ._acc import DEFAULT_ACC_REG
 from ._checks import as_transfer, check_regularization
 from .combination import combination_target
@@ -322,6 +323,11 @@ class Minimax(Method):
         small and a measured one is mostly noise; ``None``: unconstrained. ``"auto"``
         (default): 1 (no more drive than the pseudo-inverse) for the nominal program, none
         for the robust one (its norm term already keeps the drive off those directions).
+        One solve: where no drive within the budget reaches the fidelity at this tap, the
+        design takes twice the least drive that does and warns (``UserWarning``) with the
+        cost at ``limit_v``: the tap's peak at the target (um) and the peak contrast,
+        beside the inverse filter's. A default support cut by the program's size limit
+        also warns.
     robust : float, optional
         Designing from a measured ``H`` (one with a coherence): the quiet peak is bounded
         over every ``H`` within ``robust`` standard errors of the measurement (default 1;
@@ -415,15 +421,38 @@ class Minimax(Method):
         fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
         max_drive = None if budget is None else budget * peak
         targets = self._targets(p)
-        # A budget the short support cannot meet at this fidelity is doubled (twice), then dropped.
-        limits = [None] if max_drive is None else [max_drive, 2 * max_drive, 4 * max_drive, None]
-        for i, limit in enumerate(limits):
-            try:
-                drives = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity,
-                                        quiet=control[1:], max_drive=limit, taper_octaves=self.taper_octaves,
-                                        support_s=self.support_s, h_radius=h_radius)
-                break
-            except InfeasibleDesignError:
-                if i == len(limits) - 1:
-                    raise
+        # One solve: the budget is a constraint of the program; where no drive within it
+        # reaches the fidelity at this tap, the design takes the least drive that does, and
+        # says what that costs at the drive limit (no silent drop of the budget).
+        drives, rep = minimax_filter(p.tm.H, targets, p.fs, band=p.band, min_fidelity=fidelity, quiet=control[1:],
+                                     max_drive=max_drive, taper_octaves=self.taper_octaves, support_s=self.support_s,
+                                     h_radius=h_radius, on_max_drive="least", full_output=True)
+        if rep.size_limit:
+            warnings.warn(f"minimax at location {p.location}: {rep.size_limit}", UserWarning, stacklevel=3)
+        if rep.drive_limited:
+            warnings.warn(self._budget_cost(p, rep, max_drive, control), UserWarning, stacklevel=3)
         return Solution(drives, control_indices=control)
+
+    def _budget_cost(self, p: Problem, rep: Any, budget: float, control: np.ndarray) -> str:
+        """What a design over the drive budget costs at ``limit_v``: the tap's peak at the
+        target (um) and the peak contrast over the quiet points, minimax against the
+        pseudo-inverse (scaled to the same limit)."""
+        quiet = control[1:]
+        op = p.tm.inverse_operator(p.control("guards"), band=p.band, taper_octaves=self.taper_octaves)
+        inv = op.drives_for_point(p.target_index, self.target_peak_m * p.stimulus)
+        y_inv = predict_response(p.tm.H, inv)
+        ti = p.target_index
+
+        def at_limit(y: np.ndarray, peak_drive: float) -> tuple[float, float]:
+            tap = float(np.max(np.abs(y[ti])))
+            return tap * self.limit_v / peak_drive * 1e6, 20 * np.log10(tap / float(np.max(np.abs(y[quiet]))))
+
+        mm_um, mm_db = at_limit(rep.predicted, rep.peak_drive)
+        budget_x = 1.0 if self.drive_budget == "auto" else float(self.drive_budget)
+        inv_um, inv_db = at_limit(y_inv, float(np.max(np.abs(inv))))
+        return (f"minimax at location {p.location}: fidelity {rep.fidelity:.3f} needs a peak drive of "
+                f"{rep.least_drive:.3g} V for the {self.target_peak_m * 1e6:g} um tap, {rep.least_drive / budget:.3g}x "
+                f"the drive budget ({budget:.3g} V, {budget_x:g} x the pseudo-inverse's); the design takes twice that; "
+                f"at limit_v="
+                f"{self.limit_v:g} V its tap peaks at {mm_um:.3g} um with {mm_db:.1f} dB peak contrast, the inverse "
+                f"filter's at {inv_um:.3g} um with {inv_db:.1f} dB; lower min_fidelity to keep the budget")

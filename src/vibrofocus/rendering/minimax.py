@@ -16,8 +16,13 @@ Structure used for speed:
   pair, so the fidelity constraint holds over the whole window without listing its samples.
 * **Constraint generation.** The peak constraints start at the samples where the
   pseudo-inverse's quiet response peaks (the warm start) and on a coarse grid; after each
-  solve, the full response (FFT) adds the samples that exceed the current peak, until
-  none does; rows far below the peak leave whenever the optimum sets a record.
+  solve, the full response (FFT) adds the samples that exceed the current peak (and, in a
+  round with any, those within 30 % of it), until none does; rows far below the peak leave
+  whenever the optimum sets a record. The first grid has at most 64 samples per point: the
+  first program does not grow with the window.
+* **Drive limit in one solve.** With ``max_drive``, a small program on the drive samples
+  alone first finds the least peak drive that reaches the fidelity; a limit below it is
+  refused naming that drive (or, ``on_max_drive="least"``, the design runs at twice it).
 * **A cone solver called directly.** A few hundred coefficients and rows: CVXOPT's
   primal-dual cone solver takes the dense rows as they are (BLAS on one thread), about 20
   iterations per round, with no modelling layer to compile each round.
@@ -71,6 +76,19 @@ MIN_ITER = 5
 #: a support over the whole window (support_s=(100, 100)) asked for 5,000 and ran
 #: 151 s at 4.3 GB.
 MAX_VARIABLES = 1024
+#: A norm bound, this many times the best-fidelity drives' norm, that lets the Cholesky
+#: solver take a rank-deficient round (few rows); a round where it binds is solved again
+#: without it.
+_NORM_CAP = 1e6
+#: Each round with a sample over the peak adds, at every quiet point, the local peaks above
+#: this share of it (the rows about to bind, not only those over): fewer rounds.
+_ADD_MARGIN = 0.7
+#: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
+_GRID_ROWS = 64
+#: With ``on_max_drive="least"``, the design's drive limit over the least drive that reaches
+#: the fidelity: at the least drive itself the drives are pinned by the fidelity and the
+#: quiet peak cannot fall (1.3 dB against 5.3 dB at 1.02x on the reference medium).
+_LEAST_DRIVE_ROOM = 2.0
 
 
 #: minimax_filter's keywords that shape the program's set-up, and those of each solve
@@ -134,6 +152,16 @@ class MinimaxReport:
         First and last sample the drive pulses are centred on.
     decimation : int
         Spacing of the pulses, samples.
+    least_drive : float or None
+        With ``max_drive``: the least peak drive (unit of the drives) any drives on this
+        support need to reach ``min_fidelity`` at the target's amplitude (one small cone
+        program on the drive samples alone); ``None`` without ``max_drive``.
+    drive_limited : bool
+        ``on_max_drive="least"`` raised the drive limit to twice ``least_drive``:
+        ``max_drive`` could not reach the fidelity at this tap amplitude.
+    size_limit : str or None
+        A size limit that changed the program, in words (the default support shortened
+        to :data:`MAX_VARIABLES` design variables); ``None`` when none did.
     """
 
     predicted: np.ndarray
@@ -155,6 +183,9 @@ class MinimaxReport:
     ir_tail_energy: float
     support: tuple[int, int]
     decimation: int
+    least_drive: float | None = None
+    drive_limited: bool = False
+    size_limit: str | None = None
 
 
 @dataclass(frozen=True)
@@ -240,14 +271,19 @@ def _row_radius(h_radius: Any, shape: tuple[int, ...], taper: np.ndarray) -> np.
 
 
 def _solve_cone(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, cap: float, D: np.ndarray | None,
-                dcap: float | None, *, r: np.ndarray | None = None) -> tuple[np.ndarray | None, float, str, int]:
+                dcap: float | None, *, r: np.ndarray | None = None,
+                norm_cap: float | None = None) -> tuple[np.ndarray | None, float, str, int]:
     """min t s.t. ``|A u| + r s <= t``, ``||u|| <= s``, ``b.u = 1``, ``||Lt u|| <= cap``,
     ``|D u| <= dcap``, by CVXOPT's primal-dual cone solver on the dense rows (no modelling
     layer: this program is rebuilt every round).
 
     ``A`` (n_rows, n_var), ``b`` (n_var,), ``Lt`` (rank, n_var) with ``Lt' Lt`` the target's
     Gram, ``D`` (n_drive_rows, n_var) or ``None``; ``r`` (n_rows,) non-negative per-row radii,
-    or ``None``: no ``s`` and no norm term. Returns ``u`` (``None`` if the solver gave no
+    or ``None``: no ``s`` and no norm term. ``norm_cap``: with ``r`` ``None``, the
+    Cholesky solver, refused for a rank-deficient system (few rows, a target norm of less
+    than full rank), is tried again with ``||u|| <= norm_cap`` added (inactive when the cap
+    is far above the optimum's norm; it gives the system full rank) before the slower
+    regularized LDL. Returns ``u`` (``None`` if the solver gave no
     point), ``t``, the solver's status and its iterations.
     """
     from cvxopt import matrix, solvers
@@ -275,21 +311,37 @@ def _solve_cone(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, cap: float, D: np.
         norm[0, nv], norm[1:, :nv] = -1.0, -np.eye(nv)
         cones.append(norm)
         h_cone.append(np.zeros(1 + nv))
-    G = np.vstack(linear + cones)
-    h = np.concatenate(h_lin + h_cone)
     c = np.zeros(nx)
     c[-1] = 1.0
     eq = np.zeros((1, nx))
     eq[0, :nv] = b
-    dims = {"l": sum(len(x) for x in h_lin), "q": [len(x) for x in h_cone], "s": []}
-    args = (matrix(c), matrix(G), matrix(h), dims, matrix(eq), matrix([1.0]))
     options = {"show_progress": False, "maxiters": 100}
+
+    def program(cones: list, h_cone: list) -> tuple:
+        G = np.vstack(linear + cones)
+        h = np.concatenate(h_lin + h_cone)
+        dims = {"l": sum(len(x) for x in h_lin), "q": [len(x) for x in h_cone], "s": []}
+        return (matrix(c), matrix(G), matrix(h), dims, matrix(eq), matrix([1.0]))
+
+    args = program(cones, h_cone)
     try:  # Cholesky on the reduced system: fast, but it needs [G; A] of full column rank
-        if len(G) + 1 < nx:
+        if args[1].size[0] + 1 < nx:
             raise ArithmeticError("fewer rows than coefficients")
         sol = solvers.conelp(*args, kktsolver="chol", options=options)
-    except (ArithmeticError, ValueError):  # rank-deficient (few rows): a regularized LDL
-        sol = solvers.conelp(*args, kktsolver="ldl", options={**options, "kktreg": 1e-9})
+    except (ArithmeticError, ValueError):  # rank-deficient (few rows)
+        sol = None
+        if not robust and norm_cap is not None:  # an inactive norm bound gives it full rank
+            norm = np.zeros((1 + nv, nx))
+            norm[1:, :nv] = -np.eye(nv)
+            try:
+                sol = solvers.conelp(*program(cones + [norm], h_cone + [np.concatenate([[norm_cap], np.zeros(nv)])]),
+                                     kktsolver="chol", options=options)
+                if sol["x"] is not None and np.linalg.norm(np.asarray(sol["x"])[:nv]) > 0.5 * norm_cap:
+                    sol = None  # the bound binds: not the program asked; solve without it
+            except (ArithmeticError, ValueError):
+                sol = None
+        if sol is None:  # a regularized LDL
+            sol = solvers.conelp(*args, kktsolver="ldl", options={**options, "kktreg": 1e-9})
     x = None if sol["x"] is None else np.asarray(sol["x"]).ravel()
     return (None if x is None else x[:nv]), (np.nan if x is None else float(x[-1])), sol["status"], sol["iterations"]
 
@@ -365,6 +417,7 @@ def minimax_filter(
     fidelity_margin: float = 1e-3,
     max_iter: int = 30,
     h_radius: Any = None,
+    on_max_drive: str = "refuse",
 ) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
     """Peak-contrast (minimax) drives: the least largest quiet-point ``|displacement|`` at
     a given target fidelity (docs/method.md, "Rendering methods").
@@ -411,8 +464,9 @@ def minimax_filter(
         Spacing of the drive pulses, samples; default the largest that keeps the taper's
         upper edge below the pulses' Nyquist frequency.
     stride : int
-        Spacing of the first peak constraints, samples (later rounds add the samples found
-        over the peak).
+        Least spacing of the first peak constraints' coarse grid, samples (widened to at
+        most 64 samples per quiet point, so that the first program does not grow with the
+        window; later rounds add the samples found over the peak).
     ir_energy_tol : float
         The first peak constraints cover the samples where the pulses' responses hold all
         but this share of their energy (the truncation, reported as ``ir_taps`` and
@@ -436,6 +490,14 @@ def minimax_filter(
         bins) and ``||x||`` the drives' Euclidean norm: the largest quiet ``|displacement|``
         through any ``H`` within the radius (Cauchy-Schwarz over frequency and actuator).
         ``None``: the nominal program (no norm term).
+    on_max_drive : {"refuse", "least"}
+        What to do when no drive within ``max_drive`` reaches ``min_fidelity`` at the
+        target's amplitude (found by one small program before the design, and reported
+        as ``least_drive``): ``"refuse"`` raises
+        :class:`~vibrofocus.errors.InfeasibleDesignError` naming the drive needed;
+        ``"least"`` designs at twice that least drive instead (room for the quiet peak
+        to fall; :data:`_LEAST_DRIVE_ROOM`) and sets the report's
+        ``drive_limited``: the caller scales the drives to its limit, and the tap falls.
 
     Returns
     -------
@@ -459,7 +521,7 @@ def minimax_filter(
                            support_s=support_s, stride=stride, ir_energy_tol=ir_energy_tol, decimation=decimation,
                            h_radius=h_radius)
         return program.design(min_fidelity, max_drive=max_drive, full_output=full_output, tol=tol,
-                              fidelity_margin=fidelity_margin, max_iter=max_iter)
+                              fidelity_margin=fidelity_margin, max_iter=max_iter, on_max_drive=on_max_drive)
 
 
 class _Program:
@@ -501,8 +563,17 @@ class _Program:
         t_peak = int(np.argmax(np.abs(desired)))
         # The support H asks for: the waves' arrival at the target sets how early drives start.
         self.timing = response_timing(H, fs, band=band, taper_octaves=taper_octaves)
-        self.suggested = self._fit_support(self.timing.support_s(ti), n_act, r, fs)
+        wanted = tuple(float(x) for x in self.timing.support_s(ti))
+        self.suggested = self._fit_support(wanted, n_act, r, fs)
         self.given = support_s is not None
+        # No silent cap: a default support cut to the program's size is named in the
+        # report and in every refusal.
+        self.size_limit = None
+        if not self.given and self.suggested[0] < wanted[0] - 1e-12:
+            self.size_limit = (
+                f"the default support_s=({wanted[0]:.4g}, {wanted[1]:.4g}) s (from H's arrival times) was shortened "
+                f"to ({self.suggested[0]:g}, {self.suggested[1]:g}) s by MAX_VARIABLES={MAX_VARIABLES} design "
+                f"variables over {n_act} actuators")
         asked_support = support_s
         support_s = self.suggested if support_s is None else _check_support(support_s)
         pre, post = (int(round(s * fs)) for s in support_s)
@@ -562,8 +633,13 @@ class _Program:
 
         pinv = inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves, check_wraparound=False)
         y0 = predict_response(H[:, quiet_idx], pinv)
-        grid = np.arange(first, min(n, last + ir_taps), stride)
-        pairs = [(j, int(t)) for j in range(len(quiet_idx)) for t in _local_peaks(y0[j], 0.3 * np.max(np.abs(y0[j])), 10)]
+        # The coarse grid has at most _GRID_ROWS samples per point, whatever the window (the
+        # rounds add what it misses), and the best-fidelity drives' quiet peaks join it.
+        span = min(n, last + ir_taps) - first
+        grid = np.arange(first, first + span, max(stride, -(-span // _GRID_ROWS)))
+        y1 = predict_response(H[:, quiet_idx], self.drives_of(self.u_best))
+        pairs = [(j, int(t)) for y in (y0, y1) for j in range(len(quiet_idx))
+                 for t in _local_peaks(y[j], 0.3 * np.max(np.abs(y[j])), 10)]
         pairs += [(j, int(t)) for j in range(len(quiet_idx)) for t in grid]
         self.listed = np.zeros((0, 2), int)
         self.A = np.zeros((0, n_act * m))
@@ -605,13 +681,15 @@ class _Program:
                 why = (f"shorter than the waves' arrival at the target (~{arrival:.3g} s)" if pre < arrival
                        else f"too short for min_fidelity={min_fidelity:.10g}")
                 given = "support_s" if self.given else "the default support_s"
+                capped = f" [size limit: {self.size_limit}]" if self.size_limit else ""
                 return (f"{given}=({pre:g}, {post:g}) is {why}: it reaches fidelity {self.best_fidelity:.4g} at best; "
-                        f"use support_s=({cand[0]:g}, {cand[1]:g})")
+                        f"use support_s=({cand[0]:g}, {cand[1]:g}){capped}")
         longest = max(tries, key=sum)
         longer = (f"; longer ones, up to support_s=({longest[0]:g}, {longest[1]:g}), reach no more"
                   if sum(longest) > pre + post + 1e-9 else "")
+        capped = f" [size limit: {self.size_limit}]" if self.size_limit else ""
         return (f"min_fidelity={min_fidelity:.10g} is above the model's best fidelity {self.best_fidelity:.6g} "
-                f"over this support (support_s=({pre:g}, {post:g}){longer}): relax the fidelity")
+                f"over this support (support_s=({pre:g}, {post:g}){longer}): relax the fidelity{capped}")
 
     def _add_pairs(self, pairs: Any) -> int:
         """Add the peak constraints at (quiet j, sample t) not listed yet; how many."""
@@ -637,6 +715,37 @@ class _Program:
         train[:, self.delays] = u.reshape(self.n_act, self.m) @ self.basis.T
         return np.fft.irfft(np.fft.rfft(train, axis=-1) * self.taper, self.n, axis=-1) * self.u_scale
 
+    def least_drive(self, min_fidelity: float, *, tol: float, fidelity_margin: float, max_iter: int) -> float:
+        """The least peak drive (unit of the drives) that reaches ``min_fidelity`` at the
+        target's amplitude: ``min max|x|`` s.t. ``b.u = 1``, ``||Lt u|| <= cap``, by the same
+        constraint generation on the drive samples (no peak rows: a small program)."""
+        asked = min(min_fidelity + fidelity_margin, (1 + min_fidelity) / 2)
+        cap = 1.0 / asked
+        if self.best_fidelity**-2 >= cap**2 * (1 - 1e-9):
+            raise InfeasibleDesignError("the minimax program is infeasible: "
+                                        + self._support_advice(min_fidelity, asked))
+        saved = self.D, self.drive_rows  # its rows stay out of the design's program
+        try:
+            return self._least_drive(cap, min_fidelity, tol=tol, max_iter=max_iter)
+        finally:
+            self.D, self.drive_rows = saved
+
+    def _least_drive(self, cap: float, min_fidelity: float, *, tol: float, max_iter: int) -> float:
+        x0 = self.drives_of(self.u_best) / self.u_scale
+        self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x0[a], 0.3 * np.max(np.abs(x0)), 10)])
+        value = np.nan
+        for _ in range(max_iter):
+            found, value, status, _ = _solve_cone(np.kron(np.eye(self.n_act), self.D), self.b, self.Lt, cap, None, None,
+                                                  norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
+            if found is None or not np.isfinite(value) or "infeasible" in status:
+                raise InfeasibleDesignError(f"the least-drive program failed ({status}): "
+                                            f"{self._asked(min_fidelity, None)}")
+            x = self.drives_of(found) / self.u_scale
+            floor = value * (1 + tol)
+            if self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x[a], floor, 20)]) == 0:
+                break
+        return float(value * self.u_scale)
+
     def solve(self, min_fidelity: float, *, max_drive: float | None, tol: float, fidelity_margin: float,
               max_iter: int) -> tuple[np.ndarray, float, str, int]:
         """Drives (n_act, n), the program's quiet peak (unit of the targets), the status and
@@ -652,7 +761,8 @@ class _Program:
             D = None if dcap is None else np.kron(np.eye(self.n_act), self.D)
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
             try:
-                found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r)
+                found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r,
+                                                      norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
             except (ValueError, ArithmeticError) as exc:  # cvxopt: "domain error", "Rank(A) < p", singular KKT
                 raise InfeasibleDesignError(f"the minimax solver failed numerically at round {it} ({exc}): "
                                             f"{self._asked(min_fidelity, max_drive)}") from None
@@ -669,14 +779,18 @@ class _Program:
             # Per quiet point, the nominal level over which a sample breaks the (robust) bound.
             floors = floor - (0.0 if self.rq is None else self.rq * np.linalg.norm(u))
             floors = np.broadcast_to(floors, len(self.quiet))
-            over_q = np.flatnonzero(np.max(np.abs(yq), axis=1) > floors)
-            added = new_rows = self._add_pairs([(int(j), int(t)) for j in over_q
-                                                for t in _local_peaks(yq[j], floors[j], 20)])
+            peaks = np.max(np.abs(yq), axis=1)
+            violated = bool(np.any(peaks > floors))
+            # With any sample over, the rows about to bind join too (margin _ADD_MARGIN).
+            near = _ADD_MARGIN * floors if violated else floors
+            added = new_rows = self._add_pairs([(int(j), int(t)) for j in np.flatnonzero(peaks > near)
+                                                for t in _local_peaks(yq[j], near[j], 50)])
             if dcap is not None:
                 over = np.abs(x) > max_drive * (1 + tol)
+                violated = violated or bool(over.any())
                 added += self._add_drive_rows([t for a in np.flatnonzero(over.any(axis=1))
                                                for t in _local_peaks(x[a], max_drive * (1 + tol), 20)])
-            if added == 0:
+            if added == 0 or not violated:
                 break
             # Rows far below the peak leave the program only when its optimum sets a record
             # (by more than tol: finitely often, so no set of rows comes back for ever); the
@@ -710,16 +824,34 @@ class _Program:
             parts.append(f"max_drive={max_drive:g}")
         if self.rq is not None:
             parts.append(f"h_radius (up to {self.rho_max:.3g}, against |H| up to {self.h_max:.3g})")
-        return "relax " + ", or ".join(parts)
+        capped = f" [size limit: {self.size_limit}]" if self.size_limit else ""
+        return "relax " + ", or ".join(parts) + capped
 
     def design(self, min_fidelity: float, *, max_drive: float | None, full_output: bool, tol: float,
-               fidelity_margin: float, max_iter: int) -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
+               fidelity_margin: float, max_iter: int,
+               on_max_drive: str = "refuse") -> np.ndarray | tuple[np.ndarray, MinimaxReport]:
         min_fidelity = check_in_range(min_fidelity, "min_fidelity", 0.0, 1.0, inclusive=False)
         if max_drive is not None:
             max_drive = check_positive(max_drive, "max_drive")
         tol = check_positive(tol, "tol")
         fidelity_margin = check_positive(fidelity_margin, "fidelity_margin", allow_zero=True)
         max_iter = _check_max_iter(max_iter)
+        if on_max_drive not in ("refuse", "least"):
+            raise ValidationError(f"on_max_drive must be 'refuse' or 'least', got {on_max_drive!r}")
+        least, limited = None, False
+        if max_drive is not None:
+            # One small program says whether the limit can reach the fidelity at all: no
+            # re-solves of the whole program at doubled limits.
+            least = self.least_drive(min_fidelity, tol=tol, fidelity_margin=fidelity_margin, max_iter=max_iter)
+            if least > max_drive:
+                if on_max_drive == "refuse":
+                    raise InfeasibleDesignError(
+                        f"the minimax program is infeasible: min_fidelity={min_fidelity:g} needs a peak drive of at "
+                        f"least {least:.4g} at this tap amplitude, over max_drive={max_drive:g} "
+                        f"({least / max_drive:.3g}x)"
+                        f"; relax the fidelity or the drive limit, or lower the tap amplitude"
+                        + (f" [size limit: {self.size_limit}]" if self.size_limit else ""))
+                max_drive, limited = least * _LEAST_DRIVE_ROOM, True
         drives, value, status, it = self.solve(min_fidelity, max_drive=max_drive, tol=tol,
                                                fidelity_margin=fidelity_margin, max_iter=max_iter)
         predicted = predict_response(self.H, drives)
@@ -745,7 +877,7 @@ class _Program:
             status=str(status), solver="cvxopt.conelp", iterations=it, n_constraints=len(self.listed),
             n_variables=self.A.shape[1], ir_taps=self.ir_taps, ir_energy_left_out=self.left_out,
             ir_tail_energy=self.tail, support=(int(self.delays[0]), int(self.delays[-1])),
-            decimation=self.decimation)
+            decimation=self.decimation, least_drive=least, drive_limited=limited, size_limit=self.size_limit)
         return drives, report
 
 

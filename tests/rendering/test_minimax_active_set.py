@@ -1,0 +1,116 @@
+"""minimax_filter's active set against the full program (every quiet sample a constraint),
+named size limits, and the drive limit: kept, or refused naming the drive it needs."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("cvxopt")
+
+from vibrofocus.errors import InfeasibleDesignError  # noqa: E402
+from vibrofocus.rendering import minimax, minimax_filter  # noqa: E402
+from vibrofocus.rendering.minimax import _Program, _solve_cone  # noqa: E402
+
+FS, N, BAND = 2000.0, 256, (20.0, 300.0)
+SUPPORT = (0.02, 0.01)
+TOL = 1e-3  # minimax_filter's default constraint-generation tolerance
+
+
+def medium(n_points=4, n_act=2, taps=24, seed=0):
+    """A random causal medium: decaying FIR impulse responses, as H (n // 2 + 1, points, actuators)."""
+    rng = np.random.default_rng(seed)
+    h = rng.standard_normal((n_points, n_act, taps)) * np.exp(-np.arange(taps) / 6.0)
+    return np.fft.rfft(h, N, axis=-1).transpose(2, 0, 1)
+
+
+def tap(n_points=4):
+    t = np.arange(N) / FS
+    a = ((t - N / FS / 2) / 4e-3) ** 2
+    targets = np.zeros((n_points, N))
+    targets[0] = (1 - a) * np.exp(-a / 2)
+    return targets
+
+
+def full_program(H, targets, min_fidelity, max_drive=None, margin=1e-3):
+    """The same program with every (quiet point, sample) peak constraint and every drive sample
+    of the window listed: its optimum (unit of the targets)."""
+    p = _Program(H, targets, FS, band=BAND, quiet=None, taper_octaves=0.5, support_s=SUPPORT, stride=32,
+                 ir_energy_tol=1e-4, decimation=None)
+    p._add_pairs([(j, t) for j in range(len(p.quiet)) for t in range(N)])
+    cap = 1 / min(min_fidelity + margin, (1 + min_fidelity) / 2)
+    D = dcap = None
+    if max_drive is not None:
+        p._add_drive_rows(np.arange(N))
+        D, dcap = np.kron(np.eye(p.n_act), p.D), max_drive / p.u_scale
+    u, value, status, _ = _solve_cone(p.A, p.b, p.Lt, cap, D, dcap)
+    assert status == "optimal"
+    return value * p.d_norm
+
+
+@pytest.mark.parametrize("seed, stride, limit", [(0, 32, None), (1, 1000, None), (2, 1000, 0.9)])
+def test_active_set_reaches_the_full_programs_optimum(seed, stride, limit):
+    """Listing only the constraints that bind gives the full program's optimum, and the design
+    meets every constraint of the full program (to the tolerance)."""
+    H, targets = medium(seed=seed), tap()
+    if limit is not None:  # a drive limit that binds: 0.9 of the free design's peak
+        limit *= float(np.max(np.abs(minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT))))
+    drives, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, stride=stride,
+                                 max_drive=limit, full_output=True)
+    full = full_program(H, targets, 0.9, max_drive=limit)
+    assert rep.n_constraints < 0.5 * 3 * N  # the active set is a fraction of the full program's rows
+    assert rep.model_quiet_peak == pytest.approx(full, rel=2 * TOL)
+    # Every full constraint holds: the quiet peak over the whole window, the fidelity, the drive.
+    assert np.max(np.abs(rep.predicted[1:])) <= full * (1 + 2 * TOL)
+    assert rep.fidelity >= 0.9 - 1e-4
+    if limit is not None:
+        assert np.max(np.abs(drives)) <= limit * (1 + 1e-9)
+
+
+def test_a_size_limit_that_cuts_the_support_is_named(monkeypatch):
+    """The default support cut to MAX_VARIABLES is in the report and in a refusal, not silent."""
+    H, targets = medium(), tap()
+    _, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, full_output=True)
+    assert rep.size_limit is None
+    monkeypatch.setattr(minimax, "MAX_VARIABLES", 24)  # 12 pulses per actuator: under the default's 10 ms
+    _, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, full_output=True)
+    assert rep.n_variables <= 24
+    assert "shortened" in rep.size_limit and "MAX_VARIABLES=24" in rep.size_limit
+    with pytest.raises(InfeasibleDesignError, match=r"size limit: .*MAX_VARIABLES=24"):
+        minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9999)
+
+
+def test_a_drive_limit_is_kept_or_refused_naming_the_drive_it_needs():
+    H, targets = medium(seed=3), tap()
+    free = float(np.max(np.abs(minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT))))
+    low = 1e-3 * free
+    with pytest.raises(InfeasibleDesignError, match=r"needs a peak drive of at least [0-9.e+-]+ at this tap "
+                                                    r"amplitude, over max_drive="):
+        minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, max_drive=low)
+    drives, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, max_drive=low,
+                                 on_max_drive="least", full_output=True)
+    assert rep.drive_limited and rep.least_drive > 100 * low
+    assert rep.least_drive <= free * (1 + 1e-3)  # no drive reaches the fidelity with less
+    assert np.max(np.abs(drives)) <= rep.least_drive * 2 * (1 + 1e-9)
+    assert rep.fidelity >= 0.9 - 1e-4
+    _, kept = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=SUPPORT, max_drive=2 * free,
+                             on_max_drive="least", full_output=True)
+    assert not kept.drive_limited and kept.peak_drive <= 2 * free * (1 + 1e-9)
+
+
+@pytest.mark.slow
+def test_the_method_says_what_a_design_over_its_drive_budget_costs():
+    """The reference medium's location 5 needs 1.3x the pseudo-inverse's drive at its fidelity:
+    it used to be re-solved at 2x the budget without a word (and dropped past 4x)."""
+    from vibrofocus import ArrayLayout, TransferMatrix, render
+
+    from ._media import FS as MFS
+    from ._media import layout_medium
+
+    ref = ArrayLayout.reference()
+    tm = TransferMatrix(layout_medium(ref, 2048, MFS), MFS, ref)
+    with pytest.warns(UserWarning, match=r"needs a peak drive of [0-9.]+ V for the 2 um tap, [0-9.]+x the drive "
+                                         r"budget .* at limit_v=10 V its tap peaks at [0-9.]+ um with -?[0-9.]+ dB "
+                                         r"peak contrast, the inverse filter's at [0-9.]+ um with -?[0-9.]+ dB"):
+        design = render("minimax", tm, MFS, ref, 5)
+    assert np.max(np.abs(design.drives)) == pytest.approx(10.0)
