@@ -119,7 +119,7 @@ def test_a_hand_edited_tap_id_is_not_a_tap_log(tmp_path, tap_id):
                                           r"18 digits 0-9\); it was not changed"):
         TapLog(path)
     assert path.read_bytes() == before
-    with pytest.raises(ValidationError, match=r"taps.csv'? is not a tap log \(line 3: the tap_id"):
+    with pytest.raises(ValidationError, match=r"is not a tap log \(line 3: the tap_id"):
         read_tap_log(path)
 
 
