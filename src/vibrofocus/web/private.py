@@ -207,10 +207,23 @@ def private_journal(db_path: Path) -> None:
         One of them is a link, another user's, or writable by other users (SQLite would
         use it with the database's data).
     """
+    # Checked by path, never opened: closing a descriptor of a file that SQLite has open in
+    # this process drops SQLite's POSIX locks on it (fcntl semantics), and a -shm whose locks
+    # are gone is reset by the next connection under the server's mapping (the server died
+    # with SIGBUS in its next commit).
     for suffix in JOURNAL_SUFFIXES:
         path = db_path.with_name(db_path.name + suffix)
-        if os.path.lexists(path):
-            os.close(_open_existing(path, "database journal"))
+        try:
+            st = os.lstat(path)
+        except FileNotFoundError:
+            continue
+        _check_ours(path, st, "database journal", folder=False)
+        if os.name != "nt" and stat.S_IMODE(st.st_mode) & 0o077:
+            try:
+                os.chmod(path, 0o600)  # a plain file of ours (lstat above): no link to follow
+            except OSError:  # a file system without modes
+                continue
+            log.warning("%s could be read by other users; it is now %s", path.name, oct(0o600))
 
 
 def private_database(db_path: Path) -> None:
