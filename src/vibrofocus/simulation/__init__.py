@@ -25,12 +25,15 @@ Fitting (:mod:`.fitting`)
 Likelihood (:mod:`.likelihood`)
     :func:`loglik` (each answer's log-probability given a participant's traits),
     :func:`marginal_loglik` (integrated over a hypothesis' population), :class:`Stimuli`.
+Free parameters (:mod:`.parameters`)
+    :class:`ParameterRange` (a hypothesis' free parameter, its range and source).
 """
 
 from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
 from .hypotheses import DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis
 from .paper import compare, seed_statistics
 from .likelihood import Stimuli, loglik, marginal_loglik
+from .parameters import ParameterRange
 from .participants import MODEL_NOTICE, SimulatedParticipant
 from .perception import MODEL_LABEL, MODEL_VERSION, STUDY_SKIN, Percepts, PerceptualModel
 from .power import PowerDesign, power_table, robust_conclusions, run_power, study_statistics
@@ -48,6 +51,7 @@ __all__ = [
     "loglik",
     "marginal_loglik",
     "Stimuli",
+    "ParameterRange",
     "PerceptualModel",
     "Percepts",
     "MODEL_VERSION",

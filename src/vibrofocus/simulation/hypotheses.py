@@ -26,6 +26,7 @@ import numpy as np
 
 from .._validation import check_choice
 from ..errors import ValidationError
+from .parameters import ParameterRange
 from .perception import (MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts, felt_threshold,
                          funneling_weights, weighted_centre)
 
@@ -72,6 +73,9 @@ class Hypothesis:
         :class:`~vibrofocus.simulation.perception.PerceptualModel` (:meth:`model`).
     levels : str or None
         The level rule of the stimuli the parameters were fitted at (``"paper"``), or None.
+    free_parameters : tuple of ParameterRange
+        The parameters left free under this hypothesis, each with its range and source;
+        every other parameter is fixed (empty: none declared yet).
     """
 
     name: str
@@ -83,6 +87,7 @@ class Hypothesis:
     fitted: bool = False
     parameters: Mapping[str, Any] = field(default_factory=dict, hash=False)
     levels: str | None = None
+    free_parameters: tuple[ParameterRange, ...] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name or any(c.isspace() for c in self.name):
