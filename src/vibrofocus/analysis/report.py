@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -168,10 +169,12 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
 
 # --------------------------------------------------------------------------- writer
 #: Names a report writes into its folder; only these are replaced (other files are left alone).
-REPORT_FILES = (REPORT_JSON, "report.html", "study1_localization.png", "study1_errors.png", "study2_counts.png")
+REPORT_FILES = (REPORT_JSON, "report.html", "study1_localization.png", "study1_errors.png", "study2_counts.png",
+                "hypotheses.json", "hypotheses_check.png")
 
 
-def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str, Path]:
+def write_report(result: AnalysisResult, out_dir: str | os.PathLike, *,
+                 hypotheses: dict[str, Any] | None = None) -> dict[str, Path]:
     """Write report.json, PNG figures and a self-contained report.html into ``out_dir``.
 
     The report is built in a temporary folder beside ``out_dir`` and put in place as a
@@ -186,12 +189,16 @@ def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str
         Output of :func:`~vibrofocus.analysis.analyze`.
     out_dir : path
         Created if needed; a previous report there is replaced.
+    hypotheses : dict, optional
+        A hypotheses fit (:func:`vibrofocus.simulation.fitting.fit_trials`): written as
+        ``hypotheses.json`` with its figure ``hypotheses_check.png`` and a section of
+        report.html (model output).
 
     Returns
     -------
     dict of str to Path
         ``"json"``, ``"html"`` and one entry per figure (``"localization"``,
-        ``"errors"``, ``"counts"``).
+        ``"errors"``, ``"counts"``, ``"hypotheses"``), and ``"hypotheses_json"``.
 
     Raises
     ------
@@ -226,28 +233,41 @@ def write_report(result: AnalysisResult, out_dir: str | os.PathLike) -> dict[str
             hit = result.study2.contains_target.counts
             hit = hit if len(hit) else None
             figures["counts"] = save(plot_counts(result.study2.all_trials.counts, hit), build / names["counts"])
+        extra: dict[str, Path] = {}
+        if hypotheses is not None:
+            import json
+
+            from .hypotheses import HYPOTHESES_FIGURE, HYPOTHESES_JSON, plot_hypotheses_check
+
+            figures["hypotheses"] = save_figure(plot_hypotheses_check(hypotheses), build / HYPOTHESES_FIGURE)
+            write_text(build / HYPOTHESES_JSON, json.dumps(json_safe(hypotheses), indent=1) + "\n",
+                       what="hypotheses fit")
+            extra["hypotheses_json"] = out / HYPOTHESES_JSON
         report = report_dict(result, figures={k: p.name for k, p in figures.items()})
         write_report_json(report, build / REPORT_JSON)
-        write_text(build / "report.html", render_html(result, figures, simulated_notice=report["simulated"]["notice"]),
-                   what="report")
-    return {"json": out / REPORT_JSON, "html": out / "report.html", **{k: out / p.name for k, p in figures.items()}}
+        write_text(build / "report.html", render_html(result, figures, simulated_notice=report["simulated"]["notice"],
+                                                      hypotheses=hypotheses), what="report")
+    return {"json": out / REPORT_JSON, "html": out / "report.html", **{k: out / p.name for k, p in figures.items()},
+            **extra}
 
 
 def report_trials_file(
-    trials: str | os.PathLike,
+    trials: str | os.PathLike | pd.DataFrame,
     out_dir: str | os.PathLike,
     *,
     on_invalid: str = "raise",
     keep_aborted: bool = False,
     keep_dry_runs: bool = False,
     alpha: float = 0.05,
+    hypotheses: Callable[[pd.DataFrame], dict[str, Any]] | None = None,
 ) -> tuple[AnalysisResult, dict[str, Path]]:
     """Analyse a trials file and write its report folder: what ``vibrofocus analyze`` and the web app do.
 
     Parameters
     ----------
-    trials : path-like
-        A trials CSV (docs/file-formats.md, trials file).
+    trials : path-like or DataFrame
+        A trials CSV (docs/file-formats.md, trials file), a BIDS folder, or a table
+        (what :func:`~vibrofocus.analysis.load_trials` reads).
     out_dir : path-like
         Report folder, created if needed (see :func:`write_report`).
     on_invalid : {"raise", "exclude"}
@@ -257,6 +277,10 @@ def report_trials_file(
         Analyse aborted sessions and dry runs of a study database's export too.
     alpha : float
         Significance level of the results sentences, in (0, 1).
+    hypotheses : callable, optional
+        ``hypotheses(trials)``: a hypotheses fit of the loaded trials
+        (``vibrofocus analyze --hypotheses`` passes
+        :func:`vibrofocus.simulation.fitting.fit_trials`), written with the report.
 
     Returns
     -------
@@ -279,4 +303,5 @@ def report_trials_file(
     check_in_range(alpha, "alpha", 0.0, 1.0, inclusive=False)
     data = load_trials(trials, on_invalid=on_invalid, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
     result = analyze(data, alpha=alpha)
-    return result, write_report(result, out_dir)
+    fit = hypotheses(data) if hypotheses is not None else None
+    return result, write_report(result, out_dir, hypotheses=fit)

@@ -108,7 +108,17 @@ def _figure(path: Path) -> dict[str, str]:
     return {"alt": path.stem, "data": base64.b64encode(path.read_bytes()).decode("ascii")}
 
 
-def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_notice: str | None = None) -> str:
+def _hypotheses(fit: dict[str, Any]) -> dict[str, Any]:
+    from .hypotheses import MODEL_OUTPUT, hypotheses_table
+
+    diff, se = fit.get("difference"), fit.get("difference_se")
+    return {"notice": MODEL_OUTPUT, "chosen": fit["chosen"], "runner_up": fit.get("runner_up"),
+            "difference": None if diff is None else f"{diff:.1f}", "difference_se": None if se is None else f"{se:.1f}",
+            "table": _table(hypotheses_table(fit)), "n_participants": len(fit.get("participants", []))}
+
+
+def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_notice: str | None = None,
+                hypotheses: dict[str, Any] | None = None) -> str:
     """The report page for ``result``, with the PNG ``figures`` embedded.
 
     Parameters
@@ -121,6 +131,9 @@ def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_n
     simulated_notice : str, optional
         The notice on simulated participants (report.json ``simulated.notice``); shown
         in a banner when ``result`` has simulated participants.
+    hypotheses : dict, optional
+        A hypotheses fit (``hypotheses.json``, :mod:`vibrofocus.analysis.hypotheses`):
+        adds the section "Hypotheses fitted to these trials (model output)".
 
     Returns
     -------
@@ -154,5 +167,6 @@ def render_html(result: AnalysisResult, figures: dict[str, Path], *, simulated_n
         if s2 is not None else None,
         "figures": {name: _figure(path) for name, path in figures.items()},
         "stimulus_levels": _table(result.stimulus_levels) if result.stimulus_levels is not None else None,
+        "hypotheses": _hypotheses(hypotheses) if hypotheses is not None else None,
     }
     return template_environment(_TEMPLATES).get_template("report.html").render(context)

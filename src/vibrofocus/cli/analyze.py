@@ -31,7 +31,7 @@ def _p(p: float) -> str:
 def analyze_command(
     trials: Path = typer.Argument(
         ...,
-        help="Trials CSV (docs/file-formats.md, trials file): participant, study, phase, trial, method, target, response, rt_s; or a BIDS folder written by vibrofocus export --bids.",
+        help="Trials CSV (docs/file-formats.md, trials file): participant, study, phase, trial, method, target, response, rt_s; a BIDS folder written by vibrofocus export --bids; or a study database (SQLite).",
         show_default=False,
     ),
     out: Path = typer.Option(
@@ -48,6 +48,20 @@ def analyze_command(
     keep_dry_runs: bool = typer.Option(False, "--keep-dry-runs", help="Analyse dry-run sessions too (no calibration, nothing played; left out and listed by default)."),
     alpha: float = typer.Option(0.05, "--alpha", help="Significance level for the results sentences, in (0, 1)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the paths written."),
+    hypotheses: bool = typer.Option(
+        False, "--hypotheses",
+        help="Also fit every registered hypothesis of the simulated participants to the trials by maximum marginal "
+             "likelihood, score each by leave-one-participant-out predictive log-likelihood (ELPD) and write "
+             "hypotheses.json, its figure and a report section (model output; docs: fitting hypotheses)."),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler", help="With --hypotheses: Dask scheduler address (tcp://host:8786) for the folds; default "
+                                  "a LocalCluster on this machine."),
+    workers: int | None = typer.Option(None, "--workers", min=1, max=256,
+                                       help="With --hypotheses: LocalCluster worker processes (default: CPUs)."),
+    no_dask: bool = typer.Option(False, "--no-dask", help="With --hypotheses: fit in this process (same numbers)."),
+    draws: int = typer.Option(32, "--draws", min=1, max=100_000,
+                              help="With --hypotheses: participants drawn from each hypothesis' population to "
+                                   "integrate every participant's likelihood over."),
 ) -> None:
     """Analyse localization studies 1 and 2 from a trials file.
 
@@ -65,8 +79,17 @@ def analyze_command(
         from ..analysis import report_trials_file
 
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
-        result, paths = report_trials_file(trials, out, on_invalid="exclude" if exclude_invalid else "raise",
-                                           keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, alpha=alpha)
+        from ..simulation.fitting import FitSettings, fit_trials, trials_source
+
+        fit = None
+        if hypotheses:
+            from functools import partial
+
+            fit = partial(fit_trials, settings=FitSettings(n_draws=draws), scheduler=scheduler, n_workers=workers,
+                          local=no_dask)
+        result, paths = report_trials_file(trials_source(trials), out, on_invalid="exclude" if exclude_invalid else "raise",
+                                           keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, alpha=alpha,
+                                           hypotheses=fit)
 
     if quiet:
         for p in paths.values():
@@ -123,4 +146,20 @@ def analyze_command(
             for factor, r in part.friedman.iterrows():
                 table.add_row(factor, f"{r['chi2']:.2f}", str(int(r["dof"])), _p(r["p"]), f"{r['kendall_w']:.2f}")
             console.print(table)
-    console.print(f"wrote {paths['json']}, {paths['html']} and {len(paths) - 2} figure(s) in {out}")
+    if "hypotheses_json" in paths:
+        import json
+
+        fitted = json.loads(paths["hypotheses_json"].read_text(encoding="utf-8"))
+        table = Table(title=f"Hypotheses fitted to the trials (MODEL OUTPUT), leave-one-participant-out ELPD, "
+                            f"{fitted['elapsed_s']:.0f} s")
+        for col in ("hypothesis", "ELPD", "SE", "parameters"):
+            table.add_column(col, justify="left" if col in ("hypothesis", "parameters") else "right")
+        for name, h in sorted(fitted["hypotheses"].items(), key=lambda kv: -kv[1]["elpd"]):
+            params = ", ".join(f"{k} = {v:.4g}" for k, v in h["params"].items()) or "none free"
+            table.add_row(name, f"{h['elpd']:.1f}", f"{h['se']:.1f}", params)
+        console.print(table)
+        if fitted.get("runner_up"):
+            console.print(f"best: {fitted['chosen']}, {fitted['difference']:.1f} (SE {fitted['difference_se']:.1f}) "
+                          f"above {fitted['runner_up']}")
+    figures = len([k for k in paths if k not in ("json", "html", "hypotheses_json")])
+    console.print(f"wrote {paths['json']}, {paths['html']}{', ' + str(paths['hypotheses_json']) if 'hypotheses_json' in paths else ''} and {figures} figure(s) in {out}")

@@ -14,7 +14,8 @@ split into tasks, nor on the scheduler (one process, a LocalCluster or a cluster
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,7 +29,7 @@ from .perception import PerceptualModel
 
 __all__ = ["TESTS", "DIRECTIONAL_TESTS", "REVERSE_TESTS", "CONTRASTS", "ROBUST_POWER", "robust_conclusions",
            "directional_shares", "effect_directions", "direction_sentences", "paper_implied_power", "PowerDesign",
-           "study_statistics", "simulate_statistics", "power_table", "run_power"]
+           "study_statistics", "simulate_statistics", "power_table", "run_power", "dask_client"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
@@ -573,6 +574,47 @@ def _connect(client_cls: Any, scheduler: str) -> Any:
                               "--scheduler for a cluster on this machine") from None
 
 
+@contextmanager
+def dask_client(*, scheduler: str | None = None, n_workers: int | None = None, client: Any = None) -> Iterator[Any]:
+    """A Dask client for the duration of a ``with`` block: the cluster options of ``power``.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a Dask scheduler (``tcp://host:8786``); default a
+        ``distributed.LocalCluster`` on this machine (no dashboard) with ``n_workers``
+        single-threaded processes, closed when the block ends.
+    n_workers : int, optional
+        LocalCluster workers (default: the CPU count).
+    client : distributed.Client, optional
+        Use this client as it is (not closed at the end).
+
+    Yields
+    ------
+    distributed.Client
+    """
+    if client is not None:
+        yield client
+        return
+    from distributed import Client, LocalCluster
+
+    cluster = None
+    if scheduler:
+        client = _connect(Client, scheduler)
+    else:
+        import os
+
+        cluster = LocalCluster(n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    try:
+        yield client
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def run_power(
     design: PowerDesign,
     *,
@@ -637,24 +679,11 @@ def run_power(
             if progress is not None:
                 progress(done, total)
     else:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import as_completed
 
-        own_client = client is None
-        cluster = None
-        if own_client:
-            if scheduler:
-                client = _connect(Client, scheduler)
-            else:
-                import os
-
-                cluster = LocalCluster(
-                    n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                    dashboard_address=None,
-                )
-                client = Client(cluster)
-        try:
-            bank_f = client.scatter(b, broadcast=True)
-            futures = {client.submit(simulate_statistics, n, idx, design, bank_f, pure=False): (n, idx)
+        with dask_client(scheduler=scheduler, n_workers=n_workers, client=client) as dask:
+            bank_f = dask.scatter(b, broadcast=True)
+            futures = {dask.submit(simulate_statistics, n, idx, design, bank_f, pure=False): (n, idx)
                        for n, idx in tasks}
             for fut in as_completed(futures):
                 n, idx = futures[fut]
@@ -662,11 +691,6 @@ def run_power(
                 done += len(idx)
                 if progress is not None:
                     progress(done, total)
-        finally:
-            if own_client:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
     for (n, _start), res in sorted(parts.items()):
         results[n].extend(res)
     from .hypotheses import hypothesis as find_hypothesis

@@ -18,6 +18,21 @@ are fitted to the statistics of de Vlam et al. (IEEE ToH 16(4), 2023) kept in
     :func:`adopt`: the best path of each hypothesis, its held-out loss, the default.
 :mod:`.seeds`
     :data:`FIT_SEEDS` and :data:`HELD_OUT_SEEDS`.
+
+Fitting to a lab's trials (docs/fitting-hypotheses.md):
+
+:mod:`.lab_trials`
+    :class:`LabTrials`, :func:`lab_trials`, :func:`trials_source`: the trials on a bank's stimuli.
+:mod:`.likelihood_fit`
+    :class:`FitSettings`, :func:`participant_loglik`, :func:`fit_hypothesis`: maximum marginal likelihood.
+:mod:`.elpd`
+    :func:`compare_hypotheses`: leave-one-participant-out ELPD, on Dask.
+:mod:`.predictive`
+    :func:`predictive_check`: observed vs predicted answer frequencies.
+:mod:`.lab_fit`
+    :func:`fit_trials`: all of it, the content of ``hypotheses.json``.
+:mod:`.recovery`
+    :func:`simulate_trials`, :func:`model_recovery`, :func:`parameter_recovery`.
 """
 
 from .adoption import FITS_FILE, adopt, check_fit_set
@@ -26,6 +41,12 @@ from .fitfile import check_fit, fit_model, read_fit
 from .objective import PATTERNS, loss, residuals, targets, weight_keys
 from .searching import search
 from .seeds import FIT_SEEDS, HELD_OUT_SEEDS
+from .elpd import compare_hypotheses
+from .lab_fit import fit_trials
+from .lab_trials import LabTrials, lab_trials, trials_source
+from .likelihood_fit import Fit, FitSettings, fit_hypothesis, participant_loglik
+from .predictive import predictive_check
+from .recovery import model_recovery, parameter_recovery, simulate_trials
 
 __all__ = [
     "FIT_SEEDS",
@@ -44,4 +65,17 @@ __all__ = [
     "fit_model",
     "check_fit_set",
     "adopt",
+    "LabTrials",
+    "lab_trials",
+    "trials_source",
+    "FitSettings",
+    "Fit",
+    "participant_loglik",
+    "fit_hypothesis",
+    "compare_hypotheses",
+    "predictive_check",
+    "fit_trials",
+    "simulate_trials",
+    "model_recovery",
+    "parameter_recovery",
 ]

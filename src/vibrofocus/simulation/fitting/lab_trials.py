@@ -1,0 +1,217 @@
+"""A lab's trials as the arrays the likelihood reads: stimulus and answer of every main trial.
+
+:func:`trials_source` turns a study database into the table :func:`vibrofocus.analysis.load_trials`
+reads (a trials CSV and a BIDS folder are read by it directly), and :func:`lab_trials`
+maps the loaded trials onto a feature bank's stimuli (method x location), refusing
+trials the bank cannot present. How the fit uses them: docs/fitting-hypotheses.md.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ...errors import ValidationError
+from ..bank import FeatureBank
+
+__all__ = ["LabTrials", "trials_source", "lab_trials"]
+
+
+@dataclass(frozen=True)
+class LabTrials:
+    """The main-phase trials of a lab's Study 1 and Study 2, on a feature bank's stimuli.
+
+    Stimulus ``s`` is ``method * n_locations + location`` (0-based, the order of
+    :meth:`~vibrofocus.simulation.likelihood.Stimuli.from_bank`).
+
+    Attributes
+    ----------
+    participants : tuple of str
+        Participant ids, in the order of the ``participant`` indices below.
+    methods : tuple of str
+        The bank's methods (the stimulus numbering's methods).
+    n_locations : int
+    part1, stim1, answer1 : ndarray of int, shape (n1,)
+        Study 1: participant index, stimulus, answered location (0-based).
+    part2, stim2 : ndarray of int, shape (n2,)
+        Study 2: participant index, stimulus.
+    selected2 : ndarray of bool, shape (n2, n_locations)
+        Study 2 selections.
+    source : str
+        The trials' source (file name, or ``<DataFrame>``).
+    levels : str or None
+        The level rule the trials name (column ``levels``), or None where they name none.
+    """
+
+    participants: tuple[str, ...]
+    methods: tuple[str, ...]
+    n_locations: int
+    part1: np.ndarray
+    stim1: np.ndarray
+    answer1: np.ndarray
+    part2: np.ndarray
+    stim2: np.ndarray
+    selected2: np.ndarray
+    source: str = "<DataFrame>"
+    levels: str | None = None
+
+    @property
+    def n_participants(self) -> int:
+        return len(self.participants)
+
+    def table(self) -> Any:
+        """The trials as a trials-file table (docs/file-formats.md, trials file), every cell text.
+
+        Returns
+        -------
+        DataFrame
+            Columns ``participant, study, phase, trial, method, target, response, rt_s``
+            (main phase; ``rt_s`` empty), which :func:`vibrofocus.analysis.load_trials` reads.
+        """
+        import pandas as pd
+
+        frames = []
+        for study, part, stim, sel in ((1, self.part1, self.stim1, np.eye(self.n_locations, dtype=bool)[self.answer1]),
+                                       (2, self.part2, self.stim2, self.selected2)):
+            response = [" ".join(str(j + 1) for j in np.flatnonzero(row)) for row in sel]
+            trial = np.zeros(part.size, dtype=int)
+            for i in np.unique(part):
+                trial[part == i] = np.arange(1, np.count_nonzero(part == i) + 1)
+            frames.append(pd.DataFrame({
+                "participant": [self.participants[i] for i in part], "study": study, "phase": "main", "trial": trial,
+                "method": [self.methods[k] for k in stim // self.n_locations], "target": stim % self.n_locations + 1,
+                "response": response, "rt_s": ""}))
+        return pd.concat(frames, ignore_index=True).astype(str)
+
+    def subset(self, keep: np.ndarray) -> "LabTrials":
+        """Only the participants ``keep`` (indices into :attr:`participants`), renumbered in that order.
+
+        Parameters
+        ----------
+        keep : ndarray of int
+            Participant indices.
+
+        Returns
+        -------
+        LabTrials
+        """
+        keep = np.asarray(keep, dtype=int)
+        new = np.full(self.n_participants, -1)
+        new[keep] = np.arange(keep.size)
+        r1, r2 = new[self.part1] >= 0, new[self.part2] >= 0
+        return LabTrials(tuple(self.participants[i] for i in keep), self.methods, self.n_locations,
+                         new[self.part1][r1], self.stim1[r1], self.answer1[r1], new[self.part2][r2], self.stim2[r2],
+                         self.selected2[r2], self.source, self.levels)
+
+
+def _is_database(path: str) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            return fh.read(16) == b"SQLite format 3\x00"
+    except OSError:
+        return False
+
+
+def trials_source(source: str | os.PathLike) -> Any:
+    """What :func:`vibrofocus.analysis.load_trials` reads for ``source``.
+
+    Parameters
+    ----------
+    source : path-like
+        A trials CSV, a BIDS folder (``vibrofocus export --bids``) or a study database
+        (SQLite, e.g. of ``vibrofocus simulate-study``).
+
+    Returns
+    -------
+    path or DataFrame
+        The path as it is for a CSV or a folder; for a database, its answered trials as a
+        table of text cells (:meth:`~vibrofocus.studies.storage.StudyStore.trial_rows`),
+        with ``attrs["source"]`` the database's path.
+    """
+    name = os.fspath(source)
+    if os.path.isdir(name) or not _is_database(name):
+        return source
+    import pandas as pd
+
+    from ..._output_rules import protect
+    from ...studies.storage import StudyStore
+
+    protect(name, "study database")
+    with StudyStore(name, create=False) as store:
+        rows = store.trial_rows()
+    if not rows:
+        raise ValidationError(f"study database {name!r} holds no answered trials")
+    table = pd.DataFrame(rows).astype(object)
+    table = table.where(table.notna(), "").astype(str)
+    table.attrs["source"] = name
+    return table
+
+
+def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
+    """The main-phase trials of ``trials`` on the stimuli of ``bank``.
+
+    Parameters
+    ----------
+    trials : DataFrame
+        As :func:`vibrofocus.analysis.load_trials` returns (training rows are left out).
+    bank : FeatureBank
+        Whose methods and locations the trials must use.
+
+    Returns
+    -------
+    LabTrials
+
+    Raises
+    ------
+    ValidationError
+        No main-phase trial of either study; a method the bank has no stimuli of; a
+        target or answer beyond the bank's locations; a Study 1 answer of more than one
+        location; trials that name a level rule other than the bank's.
+    """
+    from ...analysis.trials import main_trials
+
+    n_loc = len(bank.locations_xy)
+    source = str(trials.attrs.get("source", "<DataFrame>"))
+    parts = [main_trials(trials, 1), main_trials(trials, 2)]
+    if not any(len(p) for p in parts):
+        raise ValidationError(f"trials {source!r} have no main-phase trials of study 1 or 2 to fit")
+    levels = None
+    if "levels" in trials.columns:
+        named = sorted({str(v) for v in trials["levels"] if str(v).strip() not in ("", "None", "nan")})
+        if len(named) > 1:
+            raise ValidationError(f"trials {source!r} mix level rules ({', '.join(named)}); fit one at a time")
+        if named and named[0] != bank.levels:
+            raise ValidationError(f"trials {source!r} were played at level rule {named[0]!r}, the feature bank's "
+                                  f"stimuli at {bank.levels!r}; build a bank with scripts/build_feature_bank.py "
+                                  f"--levels {named[0]}")
+        levels = named[0] if named else None
+    unknown = sorted({str(m) for p in parts for m in p["method"]} - set(bank.methods))
+    if unknown:
+        raise ValidationError(f"trials {source!r} use method(s) {', '.join(unknown)} that the feature bank has no "
+                              f"stimuli of (it has {', '.join(bank.methods)})")
+    participants = tuple(sorted({str(x) for p in parts for x in p["participant"]}))
+    number = {p: i for i, p in enumerate(participants)}
+    method = {m: i for i, m in enumerate(bank.methods)}
+    out: list[np.ndarray] = []
+    for study, p in zip((1, 2), parts):
+        target = p["target"].to_numpy(dtype=int) - 1
+        if np.any((target < 0) | (target >= n_loc)):
+            raise ValidationError(f"study {study} of {source!r} has targets beyond the bank's {n_loc} locations")
+        sel = np.zeros((len(p), n_loc), dtype=bool)
+        for row, chosen in enumerate(p["selection"]):
+            chosen = np.asarray(chosen, dtype=int) - 1
+            if chosen.size == 0 or np.any((chosen < 0) | (chosen >= n_loc)):
+                raise ValidationError(f"study {study} of {source!r} has an answer beyond the bank's {n_loc} locations")
+            sel[row, chosen] = True
+        stim = np.array([method[m] for m in p["method"]], dtype=int) * n_loc + target
+        who = np.array([number[str(x)] for x in p["participant"]], dtype=int)
+        if study == 1:
+            if np.any(sel.sum(axis=1) != 1):
+                raise ValidationError(f"study 1 of {source!r} has answers of more than one location")
+            out += [who, stim, np.argmax(sel, axis=1)]
+        else:
+            out += [who, stim, sel]
+    return LabTrials(participants, tuple(bank.methods), n_loc, *out, source=source, levels=levels)

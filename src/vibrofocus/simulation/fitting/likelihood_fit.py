@@ -1,0 +1,246 @@
+"""Maximum marginal likelihood of a hypothesis' free parameters, from a lab's trials.
+
+Each participant's answers (Study 1 locations and Study 2 selections) are scored by the
+likelihood of :mod:`vibrofocus.simulation.likelihood`, integrated over the hypothesis'
+population of participants as :func:`~vibrofocus.simulation.likelihood.marginal_loglik`
+does (the same trait draws, common to every parameter set), and over the simulated
+forearms of a feature bank (draw ``k`` feels with forearm ``k mod n_forearms``). The
+draws are shared by all participants: one pass over them scores everyone.
+:func:`fit_hypothesis` maximizes the sum over participants within the free parameters'
+ranges (:attr:`~vibrofocus.simulation.hypotheses.Hypothesis.free_parameters`). The
+method and its settings: docs/fitting-hypotheses.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import optimize, special
+
+from ...errors import ValidationError
+from ..bank import FeatureBank, default_bank
+from ..likelihood import Quadrature, Stimuli, answer_law, answer_probabilities, selection_probability
+from ..parameters import apply_parameters, read_parameters
+from ..perception import PerceptualModel, Percepts, Traits
+from .lab_trials import LabTrials
+
+__all__ = ["FitSettings", "Fit", "model_at", "population_draws", "participant_loglik", "fit_hypothesis"]
+
+
+@dataclass(frozen=True)
+class FitSettings:
+    """How a hypothesis is fitted and scored.
+
+    Attributes
+    ----------
+    n_draws : int
+        Participants (traits and forearm) drawn from the hypothesis' population to
+        integrate each participant's likelihood over (Monte Carlo, common to every
+        parameter set and every participant).
+    seed : int
+        Seed of those draws and of the optimizer's extra starts.
+    n_starts : int
+        Starts of the bounded optimizer: the hypothesis' own values, then points drawn
+        uniformly within the ranges.
+    lapse : float
+        Share of answers given at random (uniform over the locations in Study 1, over the
+        non-empty selections in Study 2), mixed into every answer's probability so that
+        an answer the model cannot give costs a finite amount (Wichmann & Hill 2001,
+        Percept. Psychophys. 63(8)). An assumption of the fit, the same for every hypothesis.
+    quadrature : Quadrature
+        Nodes of the likelihood's integrals (coarser than the likelihood's defaults:
+        about 1e-3 in log-likelihood per Study 2 trial).
+    maxiter : int
+        Iterations of L-BFGS-B per start.
+    """
+
+    n_draws: int = 32
+    seed: int = 0
+    n_starts: int = 3
+    lapse: float = 0.01
+    quadrature: Quadrature = field(default_factory=lambda: Quadrature(n_place=6, n_segment=3))
+    maxiter: int = 30
+
+    def __post_init__(self) -> None:
+        for name, lo, hi in (("n_draws", 1, 100_000), ("n_starts", 1, 1000), ("maxiter", 1, 10_000),
+                             ("seed", 0, 2**63 - 1)):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
+                raise ValidationError(f"{name} must be an integer from {lo} to {hi}, got {v!r}")
+        if not (isinstance(self.lapse, (int, float)) and 0.0 <= self.lapse < 1.0):
+            raise ValidationError(f"lapse must be in [0, 1), got {self.lapse!r}")
+
+
+@dataclass(frozen=True)
+class Fit:
+    """A hypothesis fitted to trials.
+
+    Attributes
+    ----------
+    hypothesis : str
+    params : dict of str to float
+        The free parameters at the maximum (by :attr:`ParameterRange.key`, SI units).
+    loglik : float
+        Summed marginal log-likelihood at the maximum, natural log.
+    participant_loglik : ndarray, shape (n_participants,)
+        Each participant's marginal log-likelihood there.
+    n_evaluations : int
+        Likelihood evaluations (each scores every participant).
+    """
+
+    hypothesis: str
+    params: dict[str, float]
+    loglik: float
+    participant_loglik: np.ndarray
+    n_evaluations: int
+
+
+def model_at(h: Any, values: Sequence[float] | Mapping[str, float] | None) -> PerceptualModel:
+    """The hypothesis' model with its free parameters at ``values`` (None: as the hypothesis has them)."""
+    m = h.model()
+    if values is None or not h.free_parameters:
+        return m
+    return apply_parameters(m, h.free_parameters, values)
+
+
+def population_draws(h: Any, model: PerceptualModel, bank: FeatureBank,
+                     settings: FitSettings) -> Iterator[tuple[Traits, Stimuli, Percepts]]:
+    """The population's draws: traits (:meth:`Traits.draw`, the stream of ``marginal_loglik``) and forearm.
+
+    Parameters
+    ----------
+    h : Hypothesis
+    model : PerceptualModel
+    bank : FeatureBank
+    settings : FitSettings
+
+    Yields
+    ------
+    traits : Traits
+    stimuli : Stimuli
+        Draw ``k``'s forearm, ``k mod n_forearms``.
+    percepts : Percepts
+        Its noise-free percepts of every stimulus of the bank.
+    """
+    rng = np.random.default_rng([int(settings.seed), 0x11C])
+    for k in range(settings.n_draws):
+        traits = Traits.draw(model, rng)
+        st = Stimuli.from_bank(bank, k % bank.n_forearms)
+        yield traits, st, st.percepts(h, model, traits)
+
+
+def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float] | Mapping[str, float] | None = None,
+                       *, bank: FeatureBank | None = None, settings: FitSettings | None = None) -> np.ndarray:
+    """Each participant's marginal log-likelihood under a hypothesis with its free parameters at ``values``.
+
+    ``log mean_k prod_trials p(answer | traits_k, forearm_k)``, the product over the
+    participant's Study 1 and Study 2 trials together (one person, one set of traits).
+
+    Parameters
+    ----------
+    hypothesis : str or Hypothesis
+    data : LabTrials
+    values : sequence or mapping of float, optional
+        The free parameters (in the order of ``free_parameters``, or by key); None: the
+        hypothesis' own.
+    bank : FeatureBank, optional
+        Default :func:`~vibrofocus.simulation.bank.default_bank`.
+    settings : FitSettings, optional
+
+    Returns
+    -------
+    ndarray, shape (n_participants,)
+        Natural log.
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
+    b = bank if bank is not None else default_bank()
+    s = settings or FitSettings()
+    m = model_at(h, values)
+    if tuple(b.methods) != data.methods or len(b.locations_xy) != data.n_locations:
+        raise ValidationError("the trials were mapped onto another feature bank's stimuli")
+    n_stim, n_loc, q = len(b.methods) * data.n_locations, data.n_locations, s.quadrature
+    # Study 2: distinct (stimulus, selection) pairs, scored once per draw for everyone.
+    uniq = np.unique(np.column_stack([data.stim2, data.selected2]).astype(np.int64), axis=0)
+    _, inverse = np.unique(np.column_stack([data.stim2, data.selected2]).astype(np.int64), axis=0, return_inverse=True)
+    inverse = inverse.reshape(-1)
+    floor1, floor2 = s.lapse / n_loc, s.lapse / (2.0**n_loc - 1.0)
+    total = np.zeros((s.n_draws, data.n_participants))
+    for k, (traits, st, per) in enumerate(population_draws(h, m, b, s)):
+        with np.errstate(divide="ignore"):
+            if data.stim1.size:
+                law = answer_law(per, np.arange(n_stim), st.centre_xy, m, traits, q, study=1)
+                p1 = answer_probabilities(law, st.locations_xy, None, q)[data.stim1, data.answer1]
+                total[k] += np.bincount(data.part1, np.log((1.0 - s.lapse) * p1 + floor1), data.n_participants)
+            if data.stim2.size:
+                law = answer_law(per, uniq[:, 0], st.centre_xy, m, traits, q, study=2)
+                p2 = selection_probability(law, st.locations_xy, uniq[:, 1:].astype(bool), None, q)[inverse]
+                total[k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2 + floor2), data.n_participants)
+    with np.errstate(divide="ignore"):
+        return special.logsumexp(total, axis=0) - np.log(s.n_draws)
+
+
+def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None = None,
+                   settings: FitSettings | None = None, start: Mapping[str, float] | None = None) -> Fit:
+    """Fit a hypothesis' free parameters to trials by maximum marginal likelihood.
+
+    L-BFGS-B within the parameters' ranges (scaled to [0, 1]), from ``settings.n_starts``
+    starts: ``start`` (or the hypothesis' own values, clipped into the ranges), then
+    points drawn uniformly with ``settings.seed``. Deterministic for a seed. A hypothesis
+    without free parameters is scored as it is.
+
+    Parameters
+    ----------
+    hypothesis : str or Hypothesis
+    data : LabTrials
+    bank : FeatureBank, optional
+    settings : FitSettings, optional
+    start : mapping of str to float, optional
+        First start (by parameter key), e.g. a fit to all participants when refitting
+        without one.
+
+    Returns
+    -------
+    Fit
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
+    b = bank if bank is not None else default_bank()
+    s = settings or FitSettings()
+    ranges = h.free_parameters
+    if not ranges:
+        ll = participant_loglik(h, data, None, bank=b, settings=s)
+        return Fit(h.name, {}, float(ll.sum()), ll, 1)
+    lo = np.array([r.lo for r in ranges])
+    span = np.array([r.hi for r in ranges]) - lo
+    cache: dict[tuple[float, ...], np.ndarray] = {}
+
+    def per_participant(u: np.ndarray) -> np.ndarray:
+        key = tuple(np.round(np.clip(u, 0.0, 1.0), 12))
+        if key not in cache:
+            cache[key] = participant_loglik(h, data, list(lo + span * np.array(key)), bank=b, settings=s)
+        return cache[key]
+
+    def objective(u: np.ndarray) -> float:
+        value = float(per_participant(u).sum())
+        return -value if np.isfinite(value) else 1e300
+
+    first = [start[r.key] for r in ranges] if start is not None else read_parameters(h.model(), ranges)
+    starts = [np.clip((np.asarray(first, dtype=float) - lo) / span, 0.0, 1.0)]
+    rng = np.random.default_rng([int(s.seed), 0xF17])
+    starts += list(rng.random((s.n_starts - 1, len(ranges))))
+    best = None
+    for u0 in starts:
+        res = optimize.minimize(objective, u0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(ranges),
+                                options={"maxiter": s.maxiter, "eps": 1e-4})
+        if best is None or res.fun < best.fun:
+            best = res
+    u = np.clip(best.x, 0.0, 1.0)
+    ll = per_participant(u)
+    params = {r.key: float(v) for r, v in zip(ranges, lo + span * u)}
+    return Fit(h.name, params, float(ll.sum()), ll, len(cache))
