@@ -86,13 +86,15 @@ class LabTrials:
                 "response": response, "rt_s": ""}))
         return pd.concat(frames, ignore_index=True).astype(str)
 
-    def subset(self, keep: np.ndarray) -> "LabTrials":
+    def subset(self, keep: np.ndarray, studies: tuple[int, ...] = (1, 2)) -> "LabTrials":
         """Only the participants ``keep`` (indices into :attr:`participants`), renumbered in that order.
 
         Parameters
         ----------
         keep : ndarray of int
             Participant indices.
+        studies : tuple of int
+            The studies whose trials are kept.
 
         Returns
         -------
@@ -101,7 +103,8 @@ class LabTrials:
         keep = np.asarray(keep, dtype=int)
         new = np.full(self.n_participants, -1)
         new[keep] = np.arange(keep.size)
-        r1, r2 = new[self.part1] >= 0, new[self.part2] >= 0
+        r1 = (new[self.part1] >= 0) & (1 in studies)
+        r2 = (new[self.part2] >= 0) & (2 in studies)
         return LabTrials(tuple(self.participants[i] for i in keep), self.methods, self.n_locations,
                          new[self.part1][r1], self.stim1[r1], self.answer1[r1], new[self.part2][r2], self.stim2[r2],
                          self.selected2[r2], self.source, self.levels)

@@ -76,7 +76,7 @@ def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generat
 
 
 def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants: int = 12, seed: int = 0,
-                   bank: FeatureBank | None = None, settings: FitSettings | None = None,
+                   bank: FeatureBank | None = None, settings: FitSettings | None = None, study1_only: bool = False,
                    **cluster: Any) -> dict[str, Any]:
     """Simulate studies under each hypothesis, score every hypothesis on each, count the choices.
 
@@ -94,6 +94,8 @@ def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants:
     seed : int
     bank : FeatureBank, optional
     settings : FitSettings, optional
+    study1_only : bool
+        Fit Study 1's answers only (fast; the selections are simulated and dropped).
     **cluster
         ``scheduler``, ``n_workers``, ``local``: as :func:`compare_hypotheses`.
 
@@ -115,6 +117,8 @@ def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants:
     for t, truth in enumerate(hs):
         for j in range(n_studies):
             data = simulate_trials(truth, n_participants, np.random.default_rng([seed, t, j]), bank=b)
+            if study1_only:
+                data = data.subset(np.arange(n_participants), studies=(1,))
             res = compare_hypotheses(data, hs, bank=b, settings=settings, **cluster)
             confusion[t, names.index(res["chosen"])] += 1
             studies.append({"true": truth.name, "study": j, "chosen": res["chosen"],

@@ -1,0 +1,133 @@
+"""Fitting hypotheses to a lab's trials: the marginal likelihood, the fit, ELPD, recovery, the report."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from vibrofocus.analysis import load_trials
+from vibrofocus.errors import ValidationError
+from vibrofocus.simulation import Hypothesis, ParameterRange, default_bank, hypothesis, marginal_loglik
+from vibrofocus.simulation.fitting import (FitSettings, compare_hypotheses, fit_hypothesis, lab_trials,
+                                           model_recovery, participant_loglik, simulate_trials)
+from vibrofocus.simulation.likelihood import Quadrature, Stimuli
+
+#: A hypothesis with one free parameter: v3's readout, the prior's centre free along x.
+SHIFT = Hypothesis(name="test-shift", version="1", title="v3 with the prior's x shift free", sources="test",
+                   parameters=dict(hypothesis("v3-centroid").parameters),
+                   free_parameters=(ParameterRange("bias_mean_m", -0.01, 0.01, "assumption: a test range", 0),))
+FAST = FitSettings(n_draws=8, n_starts=1, maxiter=15)
+
+
+def _study1_only(data):
+    return data.subset(np.arange(data.n_participants), studies=(1,))
+
+
+def test_participant_loglik_is_marginal_loglik_per_participant():
+    # One forearm, no lapse, the likelihood's own quadrature: the shared-draw pass over all
+    # participants gives each one exactly what marginal_loglik gives it alone.
+    b = default_bank()
+    one = dataclasses.replace(b, energy=b.energy[:1], actuator_energy=b.actuator_energy[:1],
+                              forearm_seeds=b.forearm_seeds[:1])
+    data = simulate_trials("v3-centroid", 2, np.random.default_rng(3), bank=one, repetitions=1)
+    got = participant_loglik("v3-centroid", data, bank=one,
+                             settings=FitSettings(n_draws=3, lapse=0.0, quadrature=Quadrature()))
+    st = Stimuli.from_bank(one, 0)
+    for i in range(2):
+        m1, m2 = data.part1 == i, data.part2 == i
+        want = marginal_loglik("v3-centroid", st, study1=(data.stim1[m1], data.answer1[m1]),
+                               study2=(data.stim2[m2], data.selected2[m2]), n_draws=3, seed=0)
+        np.testing.assert_allclose(got[i], want, rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_fit_recovers_a_free_parameter():
+    truth = 0.006
+    data = _study1_only(simulate_trials(SHIFT, 10, np.random.default_rng(11), values={"bias_mean_m[0]": truth}))
+    fit = fit_hypothesis(SHIFT, data, settings=FAST)
+    assert abs(fit.params["bias_mean_m[0]"] - truth) < 0.002, fit.params
+    # the fit is a maximum: the hypothesis' own value (-3.6 mm) scores lower
+    assert fit.loglik > participant_loglik(SHIFT, data, None, settings=FAST).sum()
+    again = fit_hypothesis(SHIFT, data, settings=FAST)
+    assert again.params == fit.params  # deterministic
+
+
+def test_model_recovery_chooses_the_true_hypothesis():
+    # Two hypotheses that differ clearly, Study 1 only, few small studies: the true one wins.
+    rec = model_recovery(["v3-centroid", "grid-peak"], n_studies=2, n_participants=5, seed=51,
+                         settings=FitSettings(n_draws=6), local=True, study1_only=True)
+    assert np.array_equal(np.diag(rec["confusion"]), [2, 2]), rec["confusion"]
+
+
+def test_elpd_names_the_best_with_its_difference():
+    data = _study1_only(simulate_trials("grid-peak", 5, np.random.default_rng(5), repetitions=2))
+    res = compare_hypotheses(data, ["v3-centroid", "grid-peak"], settings=FitSettings(n_draws=6), local=True)
+    assert res["chosen"] == "grid-peak" and res["runner_up"] == "v3-centroid"
+    h = res["hypotheses"]
+    np.testing.assert_allclose(res["difference"], h["grid-peak"]["elpd"] - h["v3-centroid"]["elpd"], rtol=1e-12)
+    d = np.subtract(h["grid-peak"]["pointwise"], h["v3-centroid"]["pointwise"])
+    np.testing.assert_allclose(res["difference_se"], np.sqrt(d.size * d.var(ddof=1)), rtol=1e-12)
+    np.testing.assert_allclose(h["grid-peak"]["elpd"], np.sum(h["grid-peak"]["pointwise"]), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_folds_on_dask_give_the_numbers_of_one_process():
+    data = _study1_only(simulate_trials(SHIFT, 3, np.random.default_rng(2), repetitions=1))
+    s = FitSettings(n_draws=3, n_starts=1, maxiter=5)
+    here = compare_hypotheses(data, [SHIFT], settings=s, local=True)
+    there = compare_hypotheses(data, [SHIFT], settings=s, n_workers=1)
+    assert len(here["hypotheses"]["test-shift"]["fold_params"]) == 3
+    np.testing.assert_allclose(there["hypotheses"]["test-shift"]["pointwise"],
+                               here["hypotheses"]["test-shift"]["pointwise"], rtol=1e-12)
+
+
+def _table(rows):
+    return load_trials(pd.DataFrame(rows, columns=["participant", "study", "phase", "trial", "method", "target",
+                                                   "response", "rt_s"]))
+
+
+@pytest.mark.parametrize("rows, match", [
+    ([("p1", 1, "training", 1, "funneling", 5, "5", "")], "no main-phase trials"),
+    ([("p1", 1, "main", 1, "minimax", 5, "5", "")], "minimax"),
+])
+def test_trials_the_bank_cannot_present_are_refused(rows, match):
+    with pytest.raises(ValidationError, match=match):
+        lab_trials(_table(rows), default_bank())
+
+
+def test_trials_at_another_level_rule_are_refused():
+    trials = _table([("p1", 1, "main", 1, "funneling", 5, "5", "")])
+    trials["levels"] = "equal-peak"
+    with pytest.raises(ValidationError, match="level rule 'equal-peak'"):
+        lab_trials(trials, default_bank())
+
+
+@pytest.mark.slow
+def test_analyze_hypotheses_writes_the_fit_and_its_section(tmp_path):
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    data = _study1_only(simulate_trials("grid-peak", 3, np.random.default_rng(9), repetitions=1))
+    csv = tmp_path / "trials.csv"
+    data.table().to_csv(csv, index=False)
+    out = tmp_path / "report"
+    res = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out), "--hypotheses", "--no-dask",
+                                   "--draws", "3", "-q"])
+    assert res.exit_code == 0, res.output
+    fit = json.loads((out / "hypotheses.json").read_text())
+    assert fit["chosen"] in fit["hypotheses"] and fit["about"].startswith("MODEL OUTPUT")
+    for name, h in fit["hypotheses"].items():
+        assert {"elpd", "se", "params", "check"} <= set(h)
+        check = h["check"]["study1"]
+        assert set(check) == {"funneling", "inverse", "combination"}
+        observed = np.bincount(data.answer1[data.stim1 < 9], minlength=9) / np.count_nonzero(data.stim1 < 9)
+        np.testing.assert_allclose(check["funneling"]["observed"], observed, rtol=1e-12)
+        np.testing.assert_allclose(np.sum(check["funneling"]["predicted"]), 1.0, rtol=1e-9)
+    html = (out / "report.html").read_text()
+    assert "Hypotheses fitted to these trials (model output)" in html and "MODEL OUTPUT" in html
+    assert (out / "hypotheses_check.png").stat().st_size > 0
