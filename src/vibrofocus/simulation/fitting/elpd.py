@@ -55,7 +55,20 @@ def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str
 
 
 def elpd_summary(pointwise: np.ndarray) -> tuple[float, float]:
-    """ELPD and its standard error from the per-participant scores, shape (N,)."""
+    """ELPD and its standard error from the per-participant scores.
+
+    Parameters
+    ----------
+    pointwise : ndarray, shape (N,)
+        Each participant's left-out log-likelihood, natural log.
+
+    Returns
+    -------
+    elpd : float
+        The sum.
+    se : float
+        ``sqrt(N var)`` (NaN for one participant).
+    """
     p = np.asarray(pointwise, dtype=float)
     se = float(np.sqrt(p.size * np.var(p, ddof=1))) if p.size > 1 else float("nan")
     return float(p.sum()), se

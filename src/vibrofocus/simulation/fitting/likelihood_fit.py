@@ -99,7 +99,18 @@ class Fit:
 
 
 def model_at(h: Any, values: Sequence[float] | Mapping[str, float] | None) -> PerceptualModel:
-    """The hypothesis' model with its free parameters at ``values`` (None: as the hypothesis has them)."""
+    """The hypothesis' model with its free parameters at ``values``.
+
+    Parameters
+    ----------
+    h : Hypothesis
+    values : sequence or mapping of float, or None
+        In the order of ``h.free_parameters`` or by key; None: as the hypothesis has them.
+
+    Returns
+    -------
+    PerceptualModel
+    """
     m = h.model()
     if values is None or not h.free_parameters:
         return m
