@@ -55,6 +55,9 @@ from ._disk_checks import SPACE_MARGIN_BYTES, check_writable
 from ._interrupts import clear_interrupt, critical_section, install_signal_handlers, interrupt_pending
 from ._oserrors import OUTPUT_ERRNOS, describe_os_error, output_error
 from ._output_rules import (
+    DRIVES_CSV,
+    REPORT_JSON,
+    TRIALS_CSV,
     _check_folder,
     _fsync_dir,
     _suffix_kind,
@@ -90,6 +93,9 @@ __all__ = [
     "guarding",
     "allow_overwrite",
     "file_kind",
+    "TRIALS_CSV",
+    "DRIVES_CSV",
+    "REPORT_JSON",
     "make_output_folder",
     "read_below",
     "link_below",
@@ -195,6 +201,7 @@ def atomic_write(
     what: str = "file",
     within: str | os.PathLike | None = None,
     parents: bool = False,
+    kind: str | None = None,
 ) -> Iterator[IO[Any]]:
     """Open a temporary file beside ``path`` for writing; on success it replaces ``path``.
 
@@ -216,6 +223,10 @@ def atomic_write(
         link to a regular file is written through (:func:`output_target`).
     parents : bool
         With ``within``: make missing folders below it (never through a link).
+    kind : str, optional
+        What the new file is, for the rule on replacing a file of another kind
+        (:func:`~vibrofocus._output_rules.output_target`): a kind told by the content,
+        such as ``"trials CSV"``; default: from the suffix (``"text file"`` for ``.csv``).
 
     Yields
     ------
@@ -232,13 +243,13 @@ def atomic_write(
     path = Path(path)
     if within is not None:
         with atomic_write_below(within, path, mode, encoding=encoding, newline=newline, what=what,
-                                kind=_suffix_kind(path), parents=parents) as fh:
+                                kind=kind or _suffix_kind(path), parents=parents) as fh:
             yield fh
         return
     if parents:
         raise ValueError("atomic_write(parents=True) needs within=")
     _check_folder(path, what)
-    real = output_target(path, what, kind=_suffix_kind(path))
+    real = output_target(path, what, kind=kind or _suffix_kind(path))
     fd, tmp = _mkstemp(real, what)
     with _replacing(tmp, path, what):
         if mode == "wb":
@@ -261,9 +272,9 @@ def write_bytes(path: str | os.PathLike, data: bytes, *, what: str = "file",
 
 
 def write_text(path: str | os.PathLike, text: str, *, what: str = "file", encoding: str = "utf-8",
-               within: str | os.PathLike | None = None, parents: bool = False) -> Path:
-    """Write ``text`` to ``path`` atomically (see :func:`atomic_write`, also for ``within`` and ``parents``)."""
-    with atomic_write(path, "w", encoding=encoding, what=what, within=within, parents=parents) as fh:
+               within: str | os.PathLike | None = None, parents: bool = False, kind: str | None = None) -> Path:
+    """Write ``text`` to ``path`` atomically (see :func:`atomic_write`, also for ``within``, ``parents`` and ``kind``)."""
+    with atomic_write(path, "w", encoding=encoding, what=what, within=within, parents=parents, kind=kind) as fh:
         fh.write(text)
     return Path(path)
 

@@ -23,7 +23,7 @@ SPACE_MARGIN_BYTES = 1 << 20
 
 
 def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: str = "file",
-                   written_as: str | None = None) -> Path:
+                   written_as: str | None = None, kind: str | None = None) -> Path:
     """Check, before a long job, that ``path`` can be written and its folder has room.
 
     Checks the rules of :func:`output_target`, that the folder exists, that a file can
@@ -42,6 +42,9 @@ def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: st
     written_as : str, optional
         The suffix whose kind of file will be written (``".csv"``), when the name's own
         suffix does not say it.
+    kind : str, optional
+        What will be written, when its content tells it apart from other text files
+        (``"trials CSV"``, ``"drives CSV"``, ``"report JSON"``; see :func:`file_kind`).
 
     Returns
     -------
@@ -54,7 +57,7 @@ def check_writable(path: str | os.PathLike, *, expected_bytes: int = 0, what: st
     """
     path = Path(path)
     _check_folder(path, what)
-    kind = _suffix_kind(Path(f"x{written_as}") if written_as else path)
+    kind = kind or _suffix_kind(Path(f"x{written_as}") if written_as else path)
     folder = output_target(path, what, kind=kind).parent
     try:
         fd, probe = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".probe", dir=folder)

@@ -13,6 +13,7 @@ import contextlib
 import contextvars
 import errno as _errno
 import os
+import re
 import stat
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
@@ -21,7 +22,7 @@ from pathlib import Path
 from ._oserrors import output_error
 from .errors import OutputError
 
-__all__ = ["new_file_mode", "file_kind", "output_guard", "allow_overwrite", "guarding", "protect", "output_target"]
+__all__ = ["TRIALS_CSV", "DRIVES_CSV", "REPORT_JSON", "new_file_mode", "file_kind", "output_guard", "allow_overwrite", "guarding", "protect", "output_target"]
 
 
 # ---------------------------------------------------------------------- file modes
@@ -65,6 +66,17 @@ _SUFFIX_KIND = {
 }
 _TEXT = "text file"
 
+#: Text files told apart by their first lines, so that one command's CSV or JSON never
+#: silently replaces another's (both are "text" by their bytes).
+TRIALS_CSV = "trials CSV"
+DRIVES_CSV = "drives CSV"
+REPORT_JSON = "report JSON"
+_TEXT_KINDS = (
+    (re.compile(rb"\A(\xef\xbb\xbf)?participant,study,phase,trial,"), TRIALS_CSV),
+    (re.compile(rb'\A# software: "vibrofocus"\n|^# time_s,', re.M), DRIVES_CSV),
+    (re.compile(rb'\A\s*\{\s*"generator":\s*"vibrofocus [^"]*",\s*"source":[^\n]*\n\s*"n_trials":'), REPORT_JSON),
+)
+
 
 def file_kind(path: str | os.PathLike) -> str | None:
     """What a file holds, from its first bytes: ``"SQLite database"``, ``"text file"``, ...
@@ -103,6 +115,9 @@ def _kind_of_head(head: bytes) -> str | None:
     except UnicodeDecodeError as exc:
         if exc.start < len(head) - 3:  # not just a character cut at the 4096th byte
             return "binary file"
+    for pattern, kind in _TEXT_KINDS:
+        if pattern.search(head):
+            return kind
     return _TEXT
 
 

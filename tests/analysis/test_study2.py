@@ -225,3 +225,20 @@ def test_friedman_recognises_ties_of_means_despite_float_noise():
     by_location = totals.sum(axis=2)  # integers: ties are exact
     ref = stats.friedmanchisquare(*by_location.T)
     assert_allclose(res.loc["location", ["chi2", "p"]].astype(float), [ref.statistic, ref.pvalue], rtol=1e-10)
+
+
+def test_missing_target_containing_wilcoxon_says_which_cells_lack_participants():
+    # Issue 54, item 7: four participants, one repetition; only P01 selects the target at
+    # location 9, so no two participants have a target-containing trial at every location.
+    from vibrofocus.analysis import analyze, load_trials
+
+    from .synthetic import make_trials
+
+    df = make_trials(4, seed=5, repetitions=1, n_training=0, studies=(2,))
+    at9 = df["target"] == 9
+    df.loc[at9, "response"] = np.where(df.loc[at9, "participant"] == "P01", "9", "1")
+    part = analyze(load_trials(df)).study2.contains_target
+    assert part.wilcoxon == {}
+    why = part.wilcoxon_unavailable
+    assert "of the 4 participants with a target-containing trial, 1 have one at every location" in why
+    assert "4 with every method" in why and "more participants" in why

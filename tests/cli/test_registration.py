@@ -13,7 +13,7 @@ import pytest
 from vibrofocus.cli.commands import COMMAND_MODULES
 
 ORDER = ["demo", "calibrate", "render", "serve", "stop", "serve-osc", "analyze", "simulate-study", "export", "power", "play",
-         "latency", "devices", "straps", "study"]
+         "latency", "devices", "straps", "study", "psychopy"]
 
 PROBE = """
 import json, sys

@@ -280,3 +280,20 @@ def test_a_late_answer_of_a_real_server_is_not_given_to_the_next_tap():
     assert not given_up.played and "no answer" in given_up.error
     assert [r.tap_id for r in server.records] == [1, 2]
     assert after.played and after.tap_id == 2 and after.onset_host_s == server.records[1].onset_host_s
+
+
+@pytest.mark.parametrize("location, level", [(np.int64(5), np.int64(-6)), (np.int32(5), np.float32(-6.0)),
+                                             (np.uint8(5), np.int16(-6)), (5, -6)])
+def test_numpy_scalars_from_a_conditions_file_are_numbers(location, level):
+    # PsychoPy's importConditions gives numpy integers (issue 54, item 4b).
+    tap = TapStimulus(backend=_Nothing()).set(location=location, level_db=level)
+    assert (tap.location, tap.level_db) == (5, -6.0)
+    assert type(tap.location) is int and type(tap.level_db) is float
+
+
+@pytest.mark.parametrize("kwargs", [{"location": np.bool_(True)}, {"location": np.float64(2.5)},
+                                    {"level_db": np.float64("nan")}, {"level_db": np.bool_(False)},
+                                    {"location": np.float64("inf")}])
+def test_numpy_scalars_that_are_not_a_location_or_level_are_refused(kwargs):
+    with pytest.raises(ValidationError):
+        TapStimulus(backend=_Nothing()).set(**kwargs)

@@ -224,7 +224,10 @@ def plot_counts(counts: pd.DataFrame, counts_hit: pd.DataFrame | None = None):
     axes = fig.subplots(len(rows), 2, width_ratios=[3, 1], squeeze=False)
     for (label, data), (ax1, ax2) in zip(rows, axes):
         _grouped_boxes(ax1, data, "n_selected", locations, methods, colors)
-        ax1.set_ylabel(f"selected locations\n({label}, N = {data['participant'].nunique()})")
+        n = data["participant"].nunique()
+        # Participants without such a trial in a cell leave its box smaller, or empty.
+        each = f"N = {n}" if label == "all trials" else f"N \u2264 {n} per box"
+        ax1.set_ylabel(f"selected locations\n({label}, {each})")
         _method_boxes(ax2, data, "n_selected", methods, colors)
         ax2.set_title("per method", fontsize=10)
         ax2.sharey(ax1)

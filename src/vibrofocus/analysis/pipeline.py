@@ -216,6 +216,17 @@ def _too_few(stat: str, n: int) -> str | None:
     return f"{name} at least {need} participants{per}, got {n}{why}"
 
 
+def _why_no_complete_cells(counts: pd.DataFrame, n: int) -> str:
+    """Why the target-containing Wilcoxon tests are missing: too few participants have such a
+    trial in every cell of a factor (a selection often misses the target)."""
+    complete = {factor: int((counts.groupby("participant")[factor].nunique() == counts[factor].nunique()).sum())
+                for factor in ("location", "method")}
+    return (f"of the {_participants(n)} with a target-containing trial, {complete['location']} have one at every "
+            f"location and {complete['method']} with every method; the pairwise Wilcoxon tests need at least 2 "
+            "with every level. More repetitions per condition, or more participants, would give them (the paper "
+            "had 20 participants)")
+
+
 def _guarded(stat: str, n: int, compute: Callable[[], Any]) -> tuple[Any, str | None]:
     """Run ``compute()`` unless ``n`` is too few for ``stat``; return ``(value, reason)``.
 
@@ -306,6 +317,8 @@ def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
                 else "no participant has a target-containing trial"
             )
             why_f = why_w = f"{left}; Friedman and Wilcoxon tests need at least 2"
+    elif contains_target and why_w and "with every level" in why_w:
+        why_w = _why_no_complete_cells(counts, n)
     return Study2Counts(participants, counts, cell_means, friedman, wilcoxon or {}, excluded, why_f, why_w)
 
 

@@ -57,7 +57,7 @@ def render_command(
         import numpy as np
 
         from .. import __version__
-        from .._atomic import allow_overwrite, check_writable, protect
+        from .._atomic import DRIVES_CSV, allow_overwrite, check_writable, protect
         from .._validation import check_memory
         from ..calibration import load_calibration
         from ..defaults import DRIVE_LIMIT_V
@@ -78,7 +78,7 @@ def render_command(
             raise ValidationError(f"--out and --wav name the same file {out}")
         for path, what in ((out, "drives file"), (wav, "WAV file")):
             if path is not None:
-                check_writable(path, what=what)
+                check_writable(path, what=what, kind=DRIVES_CSV if path.suffix.lower() == ".csv" else None)
         cal = load_calibration(calibration)
         if n_samples is None:
             n_samples = calibration_window(cal)

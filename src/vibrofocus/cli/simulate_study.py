@@ -77,7 +77,7 @@ def simulate_study(
         from ..simulation.participants import MODEL_NOTICE
         from ..simulation.simulate import simulate_studies, summarize_simulation
 
-        from .._atomic import allow_overwrite, check_writable, output_error, protect
+        from .._atomic import TRIALS_CSV, allow_overwrite, check_writable, output_error, protect
         from ..io.calibration_nc import estimate_calibration_bytes
         from ..layout import ArrayLayout
 
@@ -138,7 +138,7 @@ def simulate_study(
             typer.echo(f"adding simulated participant(s) sim-{held + 1:03d} to sim-{participants:03d}: the database held "
                        f"{held}", err=True)
         if trials_csv is not None:
-            check_writable(trials_csv, what="trials file", written_as=".csv")
+            check_writable(trials_csv, what="trials file", kind=TRIALS_CSV)
         cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
         created = not cal_dir.exists()
         try:

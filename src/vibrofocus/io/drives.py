@@ -75,13 +75,13 @@ def write_drives(
     OutputError
         The file cannot be written; a previous file at ``path`` is unchanged.
     """
-    from .._atomic import atomic_write
+    from .._atomic import DRIVES_CSV, atomic_write
 
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in DRIVES_SUFFIXES:
         raise ValidationError(f"drives file {path}: use a .npz or .csv file name")
-    with atomic_write(path, "wb", what="drives file") as fh:
+    with atomic_write(path, "wb", what="drives file", kind=DRIVES_CSV if suffix == ".csv" else None) as fh:
         if suffix == ".npz":
             extra = {k: v for k, v in (("predicted", predicted), ("desired", desired)) if v is not None}
             np.savez(fh, drives=drives, fs=np.float64(fs), **extra, metadata=json.dumps(dict(metadata)))

@@ -89,11 +89,11 @@ def write_report_json(report: Mapping[str, Any], path: str | os.PathLike) -> Pat
     OutputError
         The file cannot be written; a previous file at ``path`` is unchanged.
     """
-    from .._atomic import write_text
+    from .._atomic import REPORT_JSON as REPORT_KIND, write_text
 
     check_report(report)
     text = json.dumps(json_safe(report), indent=2, ensure_ascii=False, allow_nan=False)
-    return write_text(path, text, what="report")
+    return write_text(path, text, what="report", kind=REPORT_KIND)
 
 
 def read_report_json(path: str | os.PathLike) -> dict[str, Any]:

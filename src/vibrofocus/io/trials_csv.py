@@ -97,7 +97,7 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     int
         Number of rows written.
     """
-    from .._atomic import atomic_write
+    from .._atomic import TRIALS_CSV, atomic_write
 
     path = Path(path)
     if not path.parent.is_dir():
@@ -106,7 +106,7 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     rows = list(rows)
     with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
     with_model = with_flag and any(row.get(MODEL_COLUMN) for row in rows)
-    with atomic_write(path, "w", newline="", what="trials file") as fh:
+    with atomic_write(path, "w", newline="", what="trials file", kind=TRIALS_CSV) as fh:
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
                         + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())

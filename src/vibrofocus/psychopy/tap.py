@@ -18,6 +18,7 @@ component (:mod:`vibrofocus.psychopy.builder`) writes code that does.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import re
 import socket
@@ -27,6 +28,8 @@ import time
 from collections import deque
 from dataclasses import asdict, dataclass
 from typing import Any
+
+import numpy as np
 
 from .._validation import check_positive, shorten
 from ..errors import ValidationError
@@ -221,7 +224,9 @@ class TapStimulus:
         if (x_mm is None) != (y_mm is None):
             raise ValidationError("a point needs both x_mm and y_mm")
         if location is not None:
-            if isinstance(location, bool) or not isinstance(location, (int, float)) or int(location) != location:
+            # numbers.Integral/Real take numpy's scalars too: PsychoPy's conditions files give np.int64.
+            if (isinstance(location, (bool, np.bool_)) or not isinstance(location, numbers.Real)
+                    or not math.isfinite(location) or int(location) != location):
                 raise ValidationError(f"location must be an integer, got {shorten(location)}")
             self.location, self.xy_mm = int(location), None
         if x_mm is not None:
@@ -306,7 +311,7 @@ def _method(name: Any) -> str:
 
 
 def _finite(value: Any, what: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Real) or not math.isfinite(value):
         raise ValidationError(f"{what} must be a finite number, got {shorten(value)}")
     return float(value)
 
