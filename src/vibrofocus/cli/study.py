@@ -108,6 +108,11 @@ def run(
                 raise StudyError("--protocol names the study and levels of its blocks: leave out --study and --levels")
             the_protocol = load_protocol(protocol)
             the_protocol.check_runnable()
+            for b in the_protocol.blocks:  # the terminal's keypad names locations; a point needs a picture
+                if b.response == "point":
+                    raise StudyError(f"{the_protocol.where(f'blocks[{b.index}].response')}: point answers are given on "
+                                     "the web participant page (vibrofocus serve); the terminal's keypad answers "
+                                     "locations only")
             protect(protocol, "protocol file")
             study = the_protocol.blocks[0].study
         elif study is None:

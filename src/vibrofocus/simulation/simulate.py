@@ -303,6 +303,8 @@ def simulate_studies(
                     # Every stimulus is rendered (and a design that cannot fit this arm, or the
                     # rig's limits, made again or refused) before the session is planned.
                     design = StudyDesign.from_config(study, session_config)
+                    if design.point:  # the picture a point is answered on: this arm's layout
+                        session_config["layout"] = parts["cal"][1].layout.to_dict()
                     renderer_for(parts, design.levels).prepare(design.methods, design.locations, rig=parts["rig"])
                     check_drive_levels(renderer_for(parts, design.levels), design,
                                        where=None if protocol is None else protocol.level_where(block_index))

@@ -9,7 +9,8 @@ Design (why each part is there):
   DELETE); participants, calibrations and sessions cannot be deleted.
 - The schema version lives in ``PRAGMA user_version`` and the file is marked with a
   vibrofocus ``application_id``; a database from a newer vibrofocus is refused rather
-  than misread.
+  than misread. An older one is upgraded when opened (:data:`_MIGRATIONS`: additive
+  changes only, so that every row it held reads as before).
 - A database in a read-only place can still be read (an export): a private copy is.
 
 The study rules on top of it are :class:`~vibrofocus.studies.storage.StudyStore`'s.
@@ -30,7 +31,7 @@ from ..errors import StudyError
 __all__ = ["SCHEMA_VERSION", "APPLICATION_ID", "StudyDatabase", "now_utc", "software_version"]
 
 #: Version of the database layout written by this vibrofocus (``PRAGMA user_version``).
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 #: ``PRAGMA application_id`` marking a vibrofocus study database ("VBFC").
 APPLICATION_ID = 0x56424643
 
@@ -79,6 +80,8 @@ CREATE TABLE answers (
     drive_sha256   TEXT,
     calibration_id INTEGER REFERENCES calibrations(calibration_id),
     recorded_at    TEXT NOT NULL,
+    response_x_mm  REAL,
+    response_y_mm  REAL,
     UNIQUE (session_id, trial_index),
     FOREIGN KEY (session_id, trial_index) REFERENCES planned_trials(session_id, trial_index)
 );
@@ -106,6 +109,13 @@ _TRIGGERS = "".join(
     for op in ops
 )
 
+
+#: Upgrades of an older database, by the version they lead to: additive statements only.
+#: 2: a point answer's place, mm in the layout frame (NULL for a location answer).
+_MIGRATIONS: dict[int, tuple[str, ...]] = {
+    2: ("ALTER TABLE answers ADD COLUMN response_x_mm REAL",
+        "ALTER TABLE answers ADD COLUMN response_y_mm REAL"),
+}
 
 
 def now_utc() -> str:
@@ -256,6 +266,8 @@ class StudyDatabase:
             raise StudyError(f"cannot open the study database {self.path}: {exc}") from exc
         if str(mode).lower() != "wal":
             raise StudyError(f"the study database {self.path} cannot use WAL journaling (got {mode!r})")
+        if 0 < version < SCHEMA_VERSION:
+            self._migrate()
         if version == 0:
             with self._write("create the study database"):
                 if conn.execute("PRAGMA user_version").fetchone()[0] != 0:
@@ -268,6 +280,16 @@ class StudyDatabase:
                         conn.execute(statement)
                 conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
                 conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+
+    def _migrate(self) -> None:
+        """Upgrade an older database to :data:`SCHEMA_VERSION` in one transaction (additive changes)."""
+        conn = self._conn
+        with self._write("upgrade the study database"):
+            version = conn.execute("PRAGMA user_version").fetchone()[0]  # another process may have done it
+            for target in range(version + 1, SCHEMA_VERSION + 1):
+                for statement in _MIGRATIONS[target]:
+                    conn.execute(statement)
+            conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def close(self) -> None:
         """Close the connection (committed data is already on disk)."""

@@ -520,11 +520,15 @@ class Response:
         The answer's id; a new one is made when it is committed if ``None``. A responder
         whose answers arrive already committed (the web page's, by its answer route)
         gives that answer's id, so that committing it again stores nothing new.
+    point_mm : (float, float), optional
+        A point answer's place in the layout frame, mm (a point session's answers:
+        ``locations`` is then None or the point's nearest location).
     """
 
     locations: Any
     rt_s: float
     answer_id: str | None = None
+    point_mm: Any = None
 
 
 class Responder(Protocol):
@@ -782,7 +786,7 @@ class StudyEngine:
         receipt = self.store.record_answer(
             self.session_id, presentation.trial.trial_index, response.locations, response.rt_s,
             answer_id=answer_id or response.answer_id or uuid.uuid4().hex,
-            drive_sha256=None if stim is None else stim.sha256, **onsets,
+            drive_sha256=None if stim is None else stim.sha256, point_mm=response.point_mm, **onsets,
         )
         if receipt.duplicate:
             # Committed before the engine had the onset (the web page's answer route): its onset apart.

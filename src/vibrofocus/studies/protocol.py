@@ -112,6 +112,10 @@ class StudyDesign:
         protocol file's block level). A level that would need more than the drive limit
         is refused when the session is planned
         (:func:`~vibrofocus.studies.engine.check_drive_levels`).
+    point : bool
+        The participant answers a point on a picture of the arm area, mm
+        (:mod:`vibrofocus.studies.points`); its nearest location is the answer's
+        response. Study 1 only (one location per answer). Default False.
 
     Notes
     -----
@@ -127,6 +131,7 @@ class StudyDesign:
     n_training: int = 5
     levels: str = DEFAULT_LEVELS
     level_db: float = 0.0
+    point: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.study, bool) or self.study not in STUDIES:
@@ -159,6 +164,10 @@ class StudyDesign:
         if (isinstance(self.level_db, bool) or not isinstance(self.level_db, (int, float, np.integer, np.floating))
                 or not np.isfinite(self.level_db) or abs(float(self.level_db)) > 120.0):
             raise StudyError(f"level_db must be a finite number within +-120 dB, got {shorten(self.level_db)}")
+        if not isinstance(self.point, bool):
+            raise StudyError(f"point must be true or false, got {shorten(self.point)}")
+        if self.point and self.study != 1:
+            raise StudyError("a point answer stands for one location: it needs study 1, got study 2")
         object.__setattr__(self, "level_db", float(self.level_db))
         object.__setattr__(self, "methods", methods)
         object.__setattr__(self, "locations", tuple(int(x) for x in locations))
@@ -185,12 +194,15 @@ class StudyDesign:
         return float(10.0 ** (self.level_db / 20.0))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-serialisable form, stored in the session's config (``level_db`` only when not 0)."""
+        """JSON-serialisable form, stored in the session's config (``level_db`` only when not 0,
+        ``point`` only when true)."""
         d = asdict(self)
         d["methods"] = list(self.methods)
         d["locations"] = list(self.locations)
         if not self.level_db:
             del d["level_db"]
+        if not self.point:
+            del d["point"]
         return d
 
     @classmethod
@@ -200,7 +212,7 @@ class StudyDesign:
         The design of ``study`` is the shipped protocol ``paper-study<study>``'s block
         (:func:`~vibrofocus.studies.protocol_files.shipped_protocol`). Keys other than
         ``methods``, ``locations``, ``repetitions``, ``n_training``, ``levels`` and
-        ``level_db`` are ignored here (they are stored with the session as they are).
+        ``level_db``, ``point`` are ignored here (they are stored with the session as they are).
         ``stored=True``: ``config`` is a stored session's, and one without ``levels``
         was planned before sessions kept it, so its rule is :data:`LEGACY_LEVELS`.
         """
@@ -212,7 +224,7 @@ class StudyDesign:
                                   ("methods", "locations", "repetitions", "n_training", "levels", "level_db")}
         if stored and "levels" not in config:
             kwargs["levels"] = LEGACY_LEVELS
-        for key in ("methods", "locations", "repetitions", "n_training", "levels", "level_db"):
+        for key in ("methods", "locations", "repetitions", "n_training", "levels", "level_db", "point"):
             if key in config:
                 value = config[key]
                 kwargs[key] = tuple(value) if key in ("methods", "locations") else value
@@ -367,12 +379,13 @@ def design_of_block(study: int, block: Mapping[str, Any]) -> StudyDesign:
     """The :class:`StudyDesign` of one protocol block, given as the protocol file's fields.
 
     ``block`` holds ``methods``, ``locations``, ``repetitions``, ``training_trials``,
-    ``level_rule`` and ``levels`` (one level, in dB re the level rule), as in a protocol
-    file's ``[[blocks]]`` table (docs/protocols.md).
+    ``level_rule``, ``levels`` (one level, in dB re the level rule) and ``response``, as in
+    a protocol file's ``[[blocks]]`` table (docs/protocols.md).
     """
     return StudyDesign(study=study, methods=tuple(block["methods"]), locations=tuple(block["locations"]),
                        repetitions=int(block["repetitions"]), n_training=int(block["training_trials"]),
-                       levels=block["level_rule"], level_db=float(block["levels"][0]))
+                       levels=block["level_rule"], level_db=float(block["levels"][0]),
+                       point=block["response"] == "point")
 
 
 @lru_cache(maxsize=None)

@@ -10,8 +10,8 @@ A file is read in three steps, each refusing bad input with one line that names 
 the line and the field (``blocks[0].methods[1]``): its size (at most
 :data:`MAX_PROTOCOL_BYTES`, checked before it is read), its TOML syntax (:mod:`tomllib`), and
 its fields (pydantic models that forbid unknown keys and convert no types). What the study
-engine cannot run yet (a point answer, targets given as points in mm, several levels in one
-block, levels in dB SL, which need a measured threshold) is accepted by the format and
+engine cannot run yet (targets given as points in mm, several levels in one block, levels
+in dB SL, which need a measured threshold) is accepted by the format and
 refused when a session is planned (:meth:`StudyProtocol.check_runnable`), before anything
 is written.
 """
@@ -51,7 +51,8 @@ MAX_PROTOCOL_BYTES = 1_000_000
 #: The version of the file format (the file's ``format`` key).
 PROTOCOL_FORMAT = 1
 #: Answers a block takes: one location (Study 1), one or more locations (Study 2), or a
-#: point in mm (accepted by the format, not run yet).
+#: point in mm on a picture of the arm area (stored beside its nearest location, which is
+#: the answer's response: :mod:`vibrofocus.studies.points`).
 RESPONSES = ("location", "locations", "point")
 #: Units of a block's levels: ``dB`` re the block's level rule (0 dB: the rule's own level),
 #: or ``dB SL`` re the participant's measured detection threshold (accepted by the format,
@@ -64,7 +65,8 @@ MAX_BLOCKS = 64
 MAX_BLOCK_TRIALS = 20_000
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
-_STUDY_OF_RESPONSE = {"location": 1, "locations": 2}
+#: A point answer stands for one location (its nearest): a study 1 session whose design has ``point``.
+_STUDY_OF_RESPONSE = {"location": 1, "locations": 2, "point": 1}
 
 
 def paper_protocol_name(study: int) -> str:
@@ -123,7 +125,7 @@ class ProtocolBlock:
 
     @property
     def study(self) -> int | None:
-        """The study number of the block's sessions: 1 (one location), 2 (several); None for a point."""
+        """The study number of the block's sessions: 1 (one location, or a point), 2 (several)."""
         return _STUDY_OF_RESPONSE.get(self.response)
 
     def session_seed(self, seed: int) -> int:
@@ -164,15 +166,12 @@ class StudyProtocol:
         Raises
         ------
         StudyError
-            A point answer, targets given as points in mm, several levels in one block,
+            Targets given as points in mm, several levels in one block,
             or levels in dB SL (they need the participant's measured threshold, which no
             block measures yet).
         """
         for b in self.blocks:
             at = f"blocks[{b.index}]"
-            if b.response == "point":
-                raise StudyError(f"{self.where(at + '.response')}: point answers are not run yet; use \"location\" "
-                                 "or \"locations\"")
             if b.points_mm is not None:
                 raise StudyError(f"{self.where(at + '.points_mm')}: targets given as points in mm are not run yet; "
                                  "name location numbers (locations = [...])")
@@ -191,7 +190,8 @@ class StudyProtocol:
         try:
             return design_of_block(b.study, {"methods": b.methods, "locations": b.locations,
                                              "repetitions": b.repetitions, "training_trials": b.training_trials,
-                                             "level_rule": b.level_rule, "levels": b.levels})
+                                             "level_rule": b.level_rule, "levels": b.levels,
+                                             "response": b.response})
         except StudyError as exc:
             raise StudyError(f"{self.where(f'blocks[{index}]')}: {exc}") from None
 

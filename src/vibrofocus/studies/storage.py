@@ -344,6 +344,19 @@ class StudyStore(StudyDatabase):
         design = StudyDesign.from_config(int(study), config)
         stored_config = dict(config or {})
         stored_config.update(design.to_dict())
+        if design.point:
+            # The picture the participant points on, stored with the session: every answer
+            # is checked against it (the config's ``layout``, an ArrayLayout.to_dict(), or
+            # the reference layout).
+            from ..layout import ArrayLayout
+            from .points import point_area
+
+            layout = stored_config.get("layout")
+            try:
+                the_layout = ArrayLayout.from_dict(layout) if isinstance(layout, Mapping) else ArrayLayout.reference()
+            except (ValidationError, KeyError, TypeError, ValueError) as exc:  # one line
+                raise StudyError(f"session config layout is not a layout: {exc}") from None
+            stored_config["point_area"] = point_area(the_layout, design.locations)
         # The protocol the session was planned from, and its block: a session planned without
         # one is the paper's study (its shipped protocol file, block 0), as every session
         # stored before sessions named their protocol is read (session_protocol).
@@ -487,6 +500,7 @@ class StudyStore(StudyDatabase):
         onset_s: float | None = None,
         onset_device_s: float | None = None,
         onset_clock: str | None = None,
+        point_mm: Any = None,
     ) -> AnswerReceipt:
         """Validate an answer and commit it in its own transaction before returning.
 
@@ -500,9 +514,10 @@ class StudyStore(StudyDatabase):
         trial_index : int
             0-based index of the trial answered; it must be the session's first
             unanswered trial (answers come in order: nothing is skipped).
-        response : int, str or iterable of int
+        response : int, str, iterable of int or None
             Locations (see :func:`parse_response`): Study 1 exactly one, Study 2 one or
-            more distinct, each within the design's locations.
+            more distinct, each within the design's locations. In a point session
+            (the design's ``point``): None, or the point's nearest location.
         rt_s : float
             Response time, s (finite, >= 0).
         answer_id : str
@@ -525,6 +540,11 @@ class StudyStore(StudyDatabase):
         onset_clock : str, optional
             That clock's name (``simulated_samples``, ``portaudio_dac``,
             ``nidaq_start_trigger``, ``nidaq_samples``); given with ``onset_device_s``.
+        point_mm : (float, float), optional
+            A point answer's place ``(x, y)`` in the layout frame, mm: required in a point
+            session, refused in another. It must lie in the session's picture
+            (:func:`~vibrofocus.studies.points.check_point`); its nearest location is
+            stored as the response.
 
         Returns
         -------
@@ -559,13 +579,14 @@ class StudyStore(StudyDatabase):
             info = self._session(conn, session_id)
             sid = info.session_id
             try:
-                locations = parse_response(response, info.design)
+                point, locations = self._answer_place(info, response, point_mm)
             except StudyError as exc:
                 raise AnswerRefused(str(exc), "invalid") from None
             prior = conn.execute("SELECT * FROM answers WHERE answer_id = ?", (answer_id,)).fetchone()
             if prior is not None:
                 receipt = receipt_from_row(prior)
-                if (receipt.session_id, receipt.trial_index, receipt.response) != (sid, tidx, locations):
+                if (receipt.session_id, receipt.trial_index, receipt.response, receipt.point_mm) != (
+                        sid, tidx, locations, point):
                     same_trial = (receipt.session_id, receipt.trial_index) == (sid, tidx)
                     raise AnswerRefused(
                         f"answer_id {answer_id!r} was already used for session {receipt.session_id} trial "
@@ -602,11 +623,13 @@ class StudyStore(StudyDatabase):
             now = now_utc()
             conn.execute(
                 "INSERT INTO answers (answer_id, session_id, trial_index, response, rt_s, drive_sha256, "
-                "calibration_id, recorded_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (answer_id, sid, tidx, format_response(locations), rt, drive_sha256, info.calibration_id, now),
+                "calibration_id, recorded_at, response_x_mm, response_y_mm) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (answer_id, sid, tidx, format_response(locations), rt, drive_sha256, info.calibration_id, now,
+                 None if point is None else point[0], None if point is None else point[1]),
             )
             self._insert_event(conn, sid, "answer", {
                 "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt, **onsets,
+                **({} if point is None else {"point_mm": list(point)}),
             })
             new_status = status_after_answer(info.status, finished=info.n_answered + 1 >= info.n_trials)
             if new_status != info.status:
@@ -615,6 +638,25 @@ class StudyStore(StudyDatabase):
                 conn.execute("UPDATE sessions SET updated_at = ? WHERE session_id = ?", (now, sid))
             row = conn.execute("SELECT * FROM answers WHERE answer_id = ?", (answer_id,)).fetchone()
         return receipt_from_row(row)
+
+    @staticmethod
+    def _answer_place(info: SessionInfo, response: Any,
+                      point_mm: Any) -> tuple[tuple[float, float] | None, tuple[int, ...]]:
+        """The answer's point (None for a location answer) and its locations, checked against the session."""
+        design = info.design
+        if not design.point:
+            if point_mm is not None:
+                raise StudyError(f"session {info.session_id} takes locations, not a point; answer a location")
+            return None, parse_response(response, design)
+        if point_mm is None:
+            raise StudyError(f"session {info.session_id} takes a point answer [x, y] in mm; none was given")
+        from .points import check_point, point_area
+
+        area = info.config.get("point_area") or point_area(None, design.locations)
+        point, nearest = check_point(point_mm, area)
+        if response is not None and parse_response(response, design) != (nearest,):
+            raise StudyError(f"response {shorten(response)} is not the point's nearest location {nearest}")
+        return point, (nearest,)
 
     @staticmethod
     def _last_onset(conn: sqlite3.Connection, sid: int, tidx: int) -> dict[str, Any] | None:
@@ -699,7 +741,8 @@ class StudyStore(StudyDatabase):
         ``stimulus_onset`` event (None where none holds them), and for a simulated
         participant ``model`` (the label of the model and hypothesis that answered, from the
         session), and ``protocol`` (the name of the protocol the session was planned from:
-        :func:`session_protocol`). Ordered by participant (as added), study, session and trial index.
+        :func:`session_protocol`), and ``response_x_mm``, ``response_y_mm`` (a point answer's
+        place in the layout frame, mm; None for a location answer). Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -707,6 +750,7 @@ class StudyStore(StudyDatabase):
                 "p.method AS method, p.target AS target, a.response AS response, a.rt_s AS rt_s, "
                 "s.session_id AS session_id, p.trial_index AS trial_index, a.answer_id AS answer_id, "
                 "a.drive_sha256 AS drive_sha256, a.calibration_id AS calibration_id, a.recorded_at AS recorded_at, "
+                "a.response_x_mm AS response_x_mm, a.response_y_mm AS response_y_mm, "
                 "s.session_id AS session, s.status AS session_status, (s.calibration_id IS NULL) AS dry_run, "
                 "pt.simulated AS simulated "
                 "FROM answers a JOIN planned_trials p ON p.session_id = a.session_id AND p.trial_index = a.trial_index "
@@ -781,12 +825,13 @@ class StudyStore(StudyDatabase):
         :data:`~vibrofocus.io.trials_csv.SESSION_COLUMNS`), so that an analysis can leave
         out aborted sessions and dry runs, then the onset columns
         (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`) and the stimulus columns
-        (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`).
+        (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`), the protocol column and the point
+        columns (:data:`~vibrofocus.io.trials_csv.POINT_COLUMNS`).
         """
         from ..io.trials_csv import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True,
-                                stimuli=True, protocols=True)
+                                stimuli=True, protocols=True, points=True)
 
 
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.
