@@ -151,11 +151,17 @@ class SimulatedParticipant:
             posterior mean the model's Study 1 answer is the nearest location to), in mm
             in the layout frame, kept within the picture's area
             (:func:`~vibrofocus.studies.points.point_area`); its location is left for the
-            store to take (the point's nearest).
+            store to take (the point's nearest). A threshold design (``design.detection``)
+            gets whether the tap was felt: 1 where some skin point's felt energy exceeds the
+            participant's own threshold (:func:`~vibrofocus.simulation.perception.felt_threshold`,
+            the hypothesis' reference sensation level and the participant's offset), else 0.
         """
         if study not in (1, 2):
             raise StudyError(f"study must be 1 or 2, got {study!r}")
         p = self.percept(drives)
+        if design is not None and design.detection:
+            rt = float(np.random.default_rng([self.seed, int(study), int(trial_index)]).lognormal(np.log(0.6), 0.3))
+            return Response((int(bool(p.felt[0])),), rt)
         rng = np.random.default_rng([self.seed, int(study), int(trial_index)])
         allowed = np.asarray(design.locations if design is not None else range(1, len(self.locations_xy) + 1)) - 1
         seen: dict[str, np.ndarray] = {}

@@ -31,7 +31,7 @@ from ..errors import StudyError
 __all__ = ["SCHEMA_VERSION", "APPLICATION_ID", "StudyDatabase", "now_utc", "software_version"]
 
 #: Version of the database layout written by this vibrofocus (``PRAGMA user_version``).
-SCHEMA_VERSION = 2
+SCHEMA_VERSION = 3
 #: ``PRAGMA application_id`` marking a vibrofocus study database ("VBFC").
 APPLICATION_ID = 0x56424643
 
@@ -94,6 +94,15 @@ CREATE TABLE events (
 );
 CREATE INDEX events_by_session ON events(session_id, event_id);
 """
+#: 3: a participant's detection threshold, one per finished threshold session (docs/protocols.md).
+_THRESHOLDS = """CREATE TABLE thresholds (
+    session_id     INTEGER PRIMARY KEY REFERENCES sessions(session_id),
+    participant_id TEXT NOT NULL REFERENCES participants(participant_id),
+    threshold_db   REAL,
+    reversals_db   TEXT NOT NULL,
+    recorded_at    TEXT NOT NULL
+);
+"""
 
 _TRIGGERS = "".join(
     f"CREATE TRIGGER {table}_no_{op.lower()} BEFORE {op} ON {table} "
@@ -105,6 +114,7 @@ _TRIGGERS = "".join(
         ("participants", ("DELETE",)),
         ("calibrations", ("DELETE",)),
         ("sessions", ("DELETE",)),
+        ("thresholds", ("UPDATE", "DELETE")),
     )
     for op in ops
 )
@@ -115,6 +125,8 @@ _TRIGGERS = "".join(
 _MIGRATIONS: dict[int, tuple[str, ...]] = {
     2: ("ALTER TABLE answers ADD COLUMN response_x_mm REAL",
         "ALTER TABLE answers ADD COLUMN response_y_mm REAL"),
+    3: (_THRESHOLDS.strip().rstrip(";"),
+        *(t.strip().rstrip(";") for t in _TRIGGERS.splitlines() if " ON thresholds " in t)),
 }
 
 
@@ -275,7 +287,7 @@ class StudyDatabase:
                     # transaction (two commands started on a new database at once).
                     return
                 # Statement by statement: executescript() would COMMIT our transaction early.
-                for statement in (_SCHEMA + _TRIGGERS).split(";\n"):
+                for statement in (_SCHEMA + _THRESHOLDS + _TRIGGERS).split(";\n"):
                     if statement.strip():
                         conn.execute(statement)
                 conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")

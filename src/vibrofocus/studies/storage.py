@@ -29,6 +29,7 @@ from typing import Any
 
 from .._validation import shorten
 from ..errors import AnswerRefused, StudyError, ValidationError
+from ..io.responses import parse_response_text
 from .database import APPLICATION_ID, SCHEMA_VERSION, StudyDatabase, now_utc, software_version
 from .protocol import LEGACY_LEVELS, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .records import (
@@ -631,7 +632,10 @@ class StudyStore(StudyDatabase):
                 "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt, **onsets,
                 **({} if point is None else {"point_mm": list(point)}),
             })
-            new_status = status_after_answer(info.status, finished=info.n_answered + 1 >= info.n_trials)
+            finished = info.n_answered + 1 >= info.n_trials
+            if finished and info.design.detection:
+                self._store_threshold(conn, info)
+            new_status = status_after_answer(info.status, finished=finished)
             if new_status != info.status:
                 self._change_status(conn, info, new_status, now)
             else:
@@ -644,6 +648,10 @@ class StudyStore(StudyDatabase):
                       point_mm: Any) -> tuple[tuple[float, float] | None, tuple[int, ...]]:
         """The answer's point (None for a location answer) and its locations, checked against the session."""
         design = info.design
+        if design.detection:
+            if point_mm is not None:
+                raise StudyError(f"session {info.session_id} asks whether the tap was felt, not where; answer 1 or 0")
+            return None, (_detection_answer(response),)
         if not design.point:
             if point_mm is not None:
                 raise StudyError(f"session {info.session_id} takes locations, not a point; answer a location")
@@ -657,6 +665,83 @@ class StudyStore(StudyDatabase):
         if response is not None and parse_response(response, design) != (nearest,):
             raise StudyError(f"response {shorten(response)} is not the point's nearest location {nearest}")
         return point, (nearest,)
+
+    @staticmethod
+    def _store_threshold(conn: sqlite3.Connection, info: SessionInfo) -> None:
+        """Store a finished threshold session's threshold (inside its last answer's transaction)."""
+        design = info.design
+        assert design.staircase is not None
+        felt = [parse_response_text(r[0])[0] for r in conn.execute(
+            "SELECT response FROM answers WHERE session_id = ? AND trial_index >= ? ORDER BY trial_index",
+            (info.session_id, design.n_training))]
+        run = design.staircase.run(felt)
+        conn.execute("INSERT INTO thresholds (session_id, participant_id, threshold_db, reversals_db, recorded_at) "
+                     "VALUES (?, ?, ?, ?, ?)", (info.session_id, info.participant_id, run.threshold_db,
+                                                json.dumps(list(run.reversals_db)), now_utc()))
+
+    def threshold(self, participant_id: str, *, protocol: str | None = None, block: int | None = None,
+                  ) -> tuple[int, float | None] | None:
+        """The participant's latest measured detection threshold: ``(session id, dB re the level
+        rule)`` (the dB value None where the staircase had too few reversals), or None when no
+        threshold session of theirs has finished (only of ``protocol``'s block ``block`` when
+        given). Aborted sessions are left out."""
+        with self._read("read the thresholds") as conn:
+            self._require_participant(conn, participant_id)
+            rows = conn.execute(
+                "SELECT t.session_id, t.threshold_db, s.study, s.config FROM thresholds t "
+                "JOIN sessions s ON s.session_id = t.session_id WHERE t.participant_id = ? AND s.status != 'aborted' "
+                "ORDER BY t.session_id DESC", (participant_id,)).fetchall()
+        for sid, value, study, config in rows:
+            if protocol is None or session_protocol(study, json.loads(config)) == (protocol, block):
+                return int(sid), None if value is None else float(value)
+        return None
+
+    def threshold_rows(self, *, participant_id: str | None = None) -> list[dict[str, Any]]:
+        """The answered trials of threshold sessions, one dict per trial, with the staircase replayed.
+
+        Keys: ``participant``, ``session``, ``protocol``, ``block``, ``phase``, ``trial``,
+        ``method``, ``target``, ``level_db`` (dB re the level rule), ``levels`` (the rule),
+        ``felt`` (1 / 0), ``rt_s``, ``drive_peak_v`` (None where nothing was played),
+        ``reversal`` (1 where the staircase reversed after this answer) and ``threshold_db``
+        (the session's stored threshold; None before it finished or with too few reversals).
+        Ordered by participant (as added), session and trial.
+        """
+        out: list[dict[str, Any]] = []
+        with self._read("read the threshold trials") as conn:
+            sql = ("SELECT s.session_id FROM sessions s JOIN participants pt ON pt.participant_id = s.participant_id "
+                   "WHERE json_extract(s.config, '$.staircase') IS NOT NULL ")
+            args: list[Any] = []
+            if participant_id is not None:
+                self._require_participant(conn, participant_id)
+                sql, args = sql + "AND s.participant_id = ? ", [participant_id]
+            ids = [r[0] for r in conn.execute(sql + "ORDER BY pt.rowid, s.session_id", args)]
+            stored = dict(conn.execute("SELECT session_id, threshold_db FROM thresholds").fetchall())
+        for sid in ids:
+            info = self.session(sid)
+            staircase, n_training = info.design.staircase, info.design.n_training
+            assert staircase is not None
+            plan = {t.trial_index: t for t in self.planned_trials(sid)}
+            answers = self.answers(sid)
+            run = staircase.run([a.response for a in answers if a.trial_index >= n_training])
+            peaks = {e.payload.get("trial_index"): e.payload.get("drive_peak_v")
+                     for e in self.events(sid, kind="stimulus_onset") if isinstance(e.payload, dict)}
+            protocol, block = session_protocol(info.study, info.config)
+            for a in answers:
+                t, k = plan[a.trial_index], a.trial_index - n_training
+                out.append({"participant": info.participant_id, "session": sid, "protocol": protocol, "block": block,
+                            "phase": t.phase, "trial": t.trial, "method": t.method, "target": t.target,
+                            "level_db": staircase.start_db if k < 0 else run.levels_db[k],
+                            "levels": info.design.levels, "felt": a.response[0], "rt_s": a.rt_s,
+                            "drive_peak_v": peaks.get(a.trial_index), "reversal": int(k in run.reversal_trials),
+                            "threshold_db": stored.get(sid)})
+        return out
+
+    def export_thresholds_csv(self, path: str | os.PathLike, *, participant_id: str | None = None) -> int:
+        """Write the threshold trials (:meth:`threshold_rows`) as a CSV file
+        (docs/file-formats.md, threshold file); returns the row count."""
+        from ..io.thresholds_csv import write_thresholds_csv
+
+        return write_thresholds_csv(self.threshold_rows(participant_id=participant_id), path)
 
     @staticmethod
     def _last_onset(conn: sqlite3.Connection, sid: int, tidx: int) -> dict[str, Any] | None:
@@ -757,10 +842,12 @@ class StudyStore(StudyDatabase):
                 "JOIN sessions s ON s.session_id = a.session_id "
                 "JOIN participants pt ON pt.participant_id = s.participant_id "
             )
+            # Threshold sessions' answers (felt or not) are no localization trials: their own file.
+            sql += "WHERE json_extract(s.config, '$.staircase') IS NULL "
             args: list[Any] = []
             if participant_id is not None:
                 self._require_participant(conn, participant_id)
-                sql += "WHERE s.participant_id = ? "
+                sql += "AND s.participant_id = ? "
                 args.append(participant_id)
             sql += "ORDER BY pt.rowid, s.study, s.session_id, p.trial_index"
             rows = [dict(r) for r in conn.execute(sql, args).fetchall()]
@@ -855,6 +942,17 @@ def session_protocol(study: int, config: Mapping[str, Any]) -> tuple[str, int]:
     if isinstance(block, bool) or not isinstance(block, int):
         block = 0
     return name, int(block)
+
+
+def _detection_answer(response: Any) -> int:
+    """A detection answer as stored: 1 (felt) or 0 (not felt); ``True``, ``"yes"``, ``"1"`` and
+    ``[1]`` are read too."""
+    from .staircase import _detection
+
+    if isinstance(response, str):
+        text = response.strip().lower()
+        response = {"1": 1, "yes": 1, "felt": 1, "0": 0, "no": 0, "not felt": 0}.get(text, response)
+    return _detection(response)
 
 
 def _check_onsets(onset_s: Any, onset_device_s: Any, onset_clock: Any) -> dict[str, Any]:
