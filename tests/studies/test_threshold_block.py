@@ -144,3 +144,22 @@ def test_detection_answers_are_checked_and_a_schema_2_database_is_upgraded(tmp_p
         with pytest.raises(StudyError, match="append-only"):
             with store._write("change a threshold") as conn:
                 conn.execute("UPDATE thresholds SET threshold_db = 0")
+
+
+def test_the_keypad_answers_felt_or_not(tmp_path):
+    import io
+
+    from rich.console import Console
+
+    from vibrofocus.studies.terminal import TerminalResponder
+
+    protocol = _protocol(THRESHOLD_BLOCK.replace("repetitions = 24", "repetitions = 3"))
+    keys = iter(["5", "1", "no", "y"])
+    out = io.StringIO()
+    with StudyStore(tmp_path / "s.db") as store:
+        store.add_participant("P1")
+        sid = store.create_session("P1", 1, seed=1, config=protocol.session_config(0))
+        responder = TerminalResponder(console=Console(file=out), input_fn=lambda _: next(keys))
+        assert StudyEngine(store, sid, Rig(), renderer=renderer).run(responder).status == "completed"
+        assert [a.response for a in store.answers(sid)] == [(1,), (0,), (1,)]
+    assert "did you feel it? 1 yes, 0 no" in out.getvalue() and "1 (felt) or 0" in out.getvalue()

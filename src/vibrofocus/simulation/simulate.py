@@ -278,8 +278,8 @@ def simulate_studies(
 
             for run_index, (study, block_config, pname, block_index, block_pace) in enumerate(runs):
                 if protocol is not None and protocol.blocks[block_index].level_unit == "dB SL":
-                    block_config = protocol.session_config(block_index, _threshold_of(store, pid, protocol,
-                                                                                      block_index))
+                    block_config = protocol.session_config(
+                        block_index, protocol.participant_threshold(store, pid, block_index))
                 existing = [s for s in store.sessions(pid, study=study)
                             if session_protocol(s.study, s.config) == (pname, block_index)]
                 if protocol is not None and existing:
@@ -406,18 +406,6 @@ def check_protocol_levels(protocol: Any, seed: int, skin: str = STUDY_SKIN) -> N
         design = protocol.design(b.index)
         renderer = renderers.setdefault(design.levels, calibration_renderer(cal, levels=design.levels))
         check_drive_levels(renderer, design, where=protocol.level_where(b.index))
-
-
-def _threshold_of(store: StudyStore, pid: str, protocol: Any, index: int) -> float:
-    """The participant's threshold from the threshold block that block ``index`` (in dB SL) refers to."""
-    source = protocol.threshold_block(index)
-    found = store.threshold(pid, protocol=protocol.name, block=source)
-    if found is None or found[1] is None:
-        raise StudyError(f"{protocol.where(f'blocks[{index}].level_unit')}: {pid} has no threshold from the threshold "
-                         f"block {protocol.blocks[source].name!r}" + ("" if found is None else
-                                                                      " (its staircase reversed too few times: "
-                                                                      "give that block more repetitions)"))
-    return found[1]
 
 
 def _block_seed(protocol: Any, index: int, stream: int) -> int:

@@ -224,6 +224,28 @@ class StudyProtocol:
         except StudyError as exc:
             raise StudyError(f"{self.where(f'blocks[{index}]')}: {exc}") from None
 
+    def participant_threshold(self, store: Any, participant_id: str, index: int) -> float | None:
+        """The participant's threshold that block ``index`` uses (dB re the level rule), from
+        ``store`` (:meth:`~vibrofocus.studies.StudyStore.threshold`); None for a block in dB.
+
+        Raises
+        ------
+        StudyError
+            A block in dB SL whose threshold block the participant has not finished, or whose
+            staircase reversed too few times for a threshold.
+        """
+        if self.blocks[index].level_unit != "dB SL":
+            return None
+        source = self.threshold_block(index)
+        assert source is not None  # check_runnable
+        found = store.threshold(participant_id, protocol=self.name, block=source)
+        if found is None or found[1] is None:
+            raise StudyError(f"{self.where(f'blocks[{index}].level_unit')}: {participant_id} has no threshold from the "
+                             f"threshold block {self.blocks[source].name!r}" + (
+                                 "" if found is None else " (its staircase reversed too few times: give that block "
+                                                          "more repetitions)"))
+        return found[1]
+
     def session_config(self, index: int, threshold_db: float | None = None) -> dict[str, Any]:
         """The session config of block ``index``: its design, the protocol's name, the block's
         index, name and pacing (stored with the session; see

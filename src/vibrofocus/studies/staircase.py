@@ -19,7 +19,8 @@ from typing import Any
 from .._validation import shorten
 from ..errors import StudyError
 
-__all__ = ["Staircase", "StaircaseRun", "MIN_REVERSALS", "DISCARDED_REVERSALS", "DETECTION_ANSWERS"]
+__all__ = ["Staircase", "StaircaseRun", "MIN_REVERSALS", "DISCARDED_REVERSALS", "DETECTION_ANSWERS",
+           "parse_detection"]
 
 #: Reversals a staircase needs for a threshold; fewer: no threshold (the block was too short).
 MIN_REVERSALS = 6
@@ -178,6 +179,24 @@ class Staircase:
     def level_of(self, felt: Sequence[Any]) -> float:
         """The level of the trial after the answers ``felt``, dB re the level rule."""
         return self.run(felt).next_db
+
+
+def parse_detection(answer: Any) -> int:
+    """A detection answer as stored: 1 (felt) or 0 (not felt).
+
+    Parameters
+    ----------
+    answer : bool, int, str or one-item sequence
+        ``1``/``0``, ``True``/``False``, ``"yes"``/``"no"``, ``"felt"``/``"not felt"``, ``[1]``.
+
+    Returns
+    -------
+    int
+    """
+    if isinstance(answer, str):
+        text = answer.strip().lower()
+        answer = {"1": 1, "yes": 1, "y": 1, "felt": 1, "0": 0, "no": 0, "n": 0, "not felt": 0}.get(text, answer)
+    return _detection(answer)
 
 
 def _detection(answer: Any) -> int:

@@ -44,6 +44,7 @@ from .records import (
     receipt_from_row,
     trial_from_row,
 )
+from .staircase import parse_detection
 from .session_status import SESSION_STATUSES, check_transition, status_after_answer, transition_event
 
 # SCHEMA_VERSION, APPLICATION_ID and the records are re-exported: their public home has
@@ -651,7 +652,7 @@ class StudyStore(StudyDatabase):
         if design.detection:
             if point_mm is not None:
                 raise StudyError(f"session {info.session_id} asks whether the tap was felt, not where; answer 1 or 0")
-            return None, (_detection_answer(response),)
+            return None, (parse_detection(response),)
         if not design.point:
             if point_mm is not None:
                 raise StudyError(f"session {info.session_id} takes locations, not a point; answer a location")
@@ -942,17 +943,6 @@ def session_protocol(study: int, config: Mapping[str, Any]) -> tuple[str, int]:
     if isinstance(block, bool) or not isinstance(block, int):
         block = 0
     return name, int(block)
-
-
-def _detection_answer(response: Any) -> int:
-    """A detection answer as stored: 1 (felt) or 0 (not felt); ``True``, ``"yes"``, ``"1"`` and
-    ``[1]`` are read too."""
-    from .staircase import _detection
-
-    if isinstance(response, str):
-        text = response.strip().lower()
-        response = {"1": 1, "yes": 1, "felt": 1, "0": 0, "no": 0, "not felt": 0}.get(text, response)
-    return _detection(response)
 
 
 def _check_onsets(onset_s: Any, onset_device_s: Any, onset_clock: Any) -> dict[str, Any]:
