@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 from vibrofocus.cli.main import app
 from vibrofocus.layout import ArrayLayout
 from vibrofocus.studies import TRIALS_COLUMNS, StudyStore
-from vibrofocus.io.trials_csv import STIMULUS_COLUMNS
+from vibrofocus.io.trials_csv import POINT_COLUMNS, PROTOCOL_COLUMNS, STIMULUS_COLUMNS
 from vibrofocus.studies.export import ONSET_COLUMNS, SESSION_COLUMNS
 from vibrofocus.simulation.simulate import participant_seeds, simulate_studies
 
@@ -36,10 +36,11 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
     # A database export: the contract's columns, the session columns, the onset columns, the
-    # stimulus columns, then the flag that these participants are simulated (a model, not
-    # data) and the model's label.
+    # stimulus columns, the protocol and the point columns (docs/file-formats.md), then the
+    # flag that these participants are simulated (a model, not data) and the model's label.
     assert tuple(header) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                             + ("protocol", "simulated", "model"))
+                             + PROTOCOL_COLUMNS + POINT_COLUMNS + ("simulated", "model"))
+    assert {r["response_x_mm"] for r in rows} == {""}  # the paper's studies answer with location keys
     assert {r["levels"] for r in rows} == {"paper"}
     # Every row names the model and the hypothesis that answered.
     from vibrofocus.simulation.hypotheses import DEFAULT_HYPOTHESIS, hypothesis

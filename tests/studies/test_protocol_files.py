@@ -107,7 +107,6 @@ BAD = {
     "wrong-type": (SMALL.replace("repetitions = 1", 'repetitions = "three"'), "line 9, blocks[0].repetitions: Input"),
     "unknown-field": (SMALL.replace("seed = 7", "sead = 7"), "line 11, blocks[0].sead: unknown field"),
     "not-toml": (SMALL.replace("levels = [-6.0]", "levels = [-6.0"), "not valid TOML"),
-    "point-answer": (SMALL.replace('"location"', '"point"'), "line 5, blocks[0].response: point answers are not run"),
     "db-sl": (SMALL.replace("levels = [-6.0]", 'levels = [20.0]\nlevel_unit = "dB SL"'),
               "line 9, blocks[0].level_unit: levels in dB SL need"),
 }

@@ -21,6 +21,7 @@ from .report import format_p, report_dict, report_trials_file, results_sentences
 from .study1 import (
     localization_summary,
     perceived_positions,
+    point_errors,
     shapiro_tests,
     study1_anova,
     study1_errors,
@@ -38,6 +39,7 @@ __all__ = [
     "main_trials",
     "method_order",
     "perceived_positions",
+    "point_errors",
     "localization_summary",
     "study1_errors",
     "shapiro_tests",

@@ -23,6 +23,7 @@ from .trials import method_order
 
 __all__ = [
     "perceived_positions",
+    "point_errors",
     "localization_summary",
     "study1_errors",
     "shapiro_tests",
@@ -89,6 +90,45 @@ def perceived_positions(trials: pd.DataFrame, layout: ArrayLayout | None = None)
     out["target_x_mm"], out["target_y_mm"] = xy_mm[target - 1].T
     out["perceived_x_mm"], out["perceived_y_mm"] = xy_mm[response - 1].T
     out["error_mm"] = np.hypot(out["perceived_x_mm"] - out["target_x_mm"], out["perceived_y_mm"] - out["target_y_mm"])
+    return out
+
+
+def point_errors(trials: pd.DataFrame, layout: ArrayLayout | None = None) -> pd.DataFrame:
+    """Mean localization error of point answers per method, mm (docs/protocols.md, point responses).
+
+    Parameters
+    ----------
+    trials : DataFrame
+        Trials with ``phase``, ``method``, ``target`` and the point columns
+        ``response_x_mm``, ``response_y_mm`` (a study database's export, read with
+        :func:`pandas.read_csv`); rows without a point (empty cells) are left out, and
+        only main-phase rows are used.
+    layout : ArrayLayout, optional
+        Location coordinates of the targets (m); default the reference layout.
+
+    Returns
+    -------
+    DataFrame
+        One row per method with point answers: ``method``, ``n`` (trials) and
+        ``mean_error_mm`` (mean Euclidean distance between the point and the target, mm);
+        empty when no trial has a point.
+    """
+    _require(trials, ("phase", "method", "target", "response_x_mm", "response_y_mm"), "point trials")
+    xy_mm = np.asarray(_layout(layout).locations_xy) * _M_TO_MM
+    x = pd.to_numeric(trials["response_x_mm"], errors="coerce")
+    y = pd.to_numeric(trials["response_y_mm"], errors="coerce")
+    keep = (trials["phase"].astype(str) == "main") & x.notna() & y.notna()
+    if not keep.any():
+        return pd.DataFrame({"method": pd.Series(dtype=str), "n": pd.Series(dtype=int),
+                             "mean_error_mm": pd.Series(dtype=float)})
+    target = pd.to_numeric(trials.loc[keep, "target"], errors="coerce").to_numpy()
+    if np.isnan(target).any() or target.min() < 1 or target.max() > len(xy_mm):
+        raise ValidationError(f"targets of point trials must be location numbers 1..{len(xy_mm)}")
+    t = xy_mm[target.astype(int) - 1]
+    err = np.hypot(x[keep].to_numpy() - t[:, 0], y[keep].to_numpy() - t[:, 1])
+    frame = pd.DataFrame({"method": trials.loc[keep, "method"].astype(str).to_numpy(), "error_mm": err})
+    out = frame.groupby("method", sort=True)["error_mm"].agg(n="size", mean_error_mm="mean").reset_index()
+    out["n"] = out["n"].astype(int)
     return out
 
 

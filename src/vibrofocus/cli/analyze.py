@@ -21,6 +21,30 @@ def _p(p: float) -> str:
     return format_p(p).removeprefix("p = ").removeprefix("p ")
 
 
+def _point_errors(trials: Path, *, keep_aborted: bool, keep_dry_runs: bool):
+    """Mean error of point answers per method, mm, of a trials CSV with the point columns (None without them).
+
+    The sessions the analysis leaves out (aborted ones, dry runs) are left out here too.
+    """
+    import pandas as pd
+
+    from ..analysis import point_errors
+
+    if not trials.is_file():
+        return None
+    try:
+        raw = pd.read_csv(trials, dtype=str, keep_default_na=False, skipinitialspace=True, encoding="utf-8-sig")
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError):
+        return None
+    if not {"response_x_mm", "response_y_mm"} <= set(raw.columns):
+        return None
+    if not keep_aborted and "session_status" in raw.columns:
+        raw = raw[raw["session_status"] != "aborted"]
+    if not keep_dry_runs and "dry_run" in raw.columns:
+        raw = raw[raw["dry_run"] != "1"]
+    return point_errors(raw)
+
+
 @command(
     "analyze",
     epilog=(
@@ -132,6 +156,10 @@ def analyze_command(
                 console.print(f"[yellow]Study 1 {name}: not computed: {s1.unavailable[key]}[/]")
         means = s1.errors.groupby("method")["error_mm"].mean()
         console.print("Study 1 mean error: " + ", ".join(f"{m} {means[m]:.2f} mm" for m in s1.methods))
+    points = _point_errors(trials, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    if points is not None and len(points):
+        console.print("Point answers, mean localization error (point to target): " + ", ".join(
+            f"{r.method} {r.mean_error_mm:.2f} mm (n = {r.n})" for r in points.itertuples()))
     s2 = result.study2
     if s2 is not None:
         for label, part in (("all trials", s2.all_trials), ("contains target", s2.contains_target)):

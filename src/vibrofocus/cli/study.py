@@ -108,6 +108,11 @@ def run(
                 raise StudyError("--protocol names the study and levels of its blocks: leave out --study and --levels")
             the_protocol = load_protocol(protocol)
             the_protocol.check_runnable()
+            for b in the_protocol.blocks:  # the terminal's keypad names locations; a point needs a picture
+                if b.response == "point":
+                    raise StudyError(f"{the_protocol.where(f'blocks[{b.index}].response')}: point answers are given on "
+                                     "the web participant page (vibrofocus serve); the terminal's keypad answers "
+                                     "locations only")
             protect(protocol, "protocol file")
             study = the_protocol.blocks[0].study
         elif study is None:
@@ -145,7 +150,11 @@ def run(
             # Every stimulus of the block rendered and its level checked before anything is written.
             from ..studies.engine import check_drive_levels
 
-            design0 = the_protocol.design(block_index)
+            threshold_db = None
+            if the_protocol.blocks[block_index].level_unit == "dB SL":  # on the threshold block's result
+                with StudyStore(db, create=False) as store:
+                    threshold_db = the_protocol.participant_threshold(store, participant, block_index)
+            design0 = the_protocol.design(block_index, threshold_db)
             check_drive_levels(calibration_renderer(cal, levels=design0.levels), design0,
                                where=the_protocol.level_where(block_index))
         # The rig first: a rig that cannot be made (no config, no device) leaves the
@@ -159,7 +168,7 @@ def run(
             cid = store.add_calibration(participant, calibration)
             config: dict = {"rig": rig, "levels": levels}
             if the_protocol is not None:
-                config = {"rig": rig, **the_protocol.session_config(block_index)}
+                config = {"rig": rig, **the_protocol.session_config(block_index, threshold_db)}
             design = StudyDesign.from_config(study, config)
             renderer = None
             from ..studies.storage import session_protocol

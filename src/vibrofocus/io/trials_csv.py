@@ -25,6 +25,7 @@ from ..errors import StudyError, ValidationError
 from .responses import format_response, parse_response_text
 
 __all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS",
+           "POINT_COLUMNS",
            "SIMULATED_COLUMN", "MODEL_COLUMN",
            "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
@@ -52,6 +53,10 @@ STIMULUS_COLUMNS = ("levels", "drive_peak_v", "target_peak_um")
 #: name of the study protocol the session was planned from (``paper-study1``,
 #: ``paper-study2`` or a protocol file's ``name``; docs/protocols.md).
 PROTOCOL_COLUMNS = ("protocol",)
+#: Columns a study database's export adds after :data:`PROTOCOL_COLUMNS`: a point answer's
+#: place in the layout frame, mm (``response`` is then its nearest location); empty cells
+#: for a location answer (docs/protocols.md, point responses).
+POINT_COLUMNS = ("response_x_mm", "response_y_mm")
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
@@ -62,7 +67,8 @@ MODEL_COLUMN = "model"
 
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
-                     onsets: bool = False, stimuli: bool = False, protocols: bool = False) -> int:
+                     onsets: bool = False, stimuli: bool = False, protocols: bool = False,
+                     points: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -91,6 +97,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     protocols : bool
         Also write :data:`PROTOCOL_COLUMNS` (after the stimulus columns; a missing key or
         None is an empty cell).
+    points : bool
+        Also write :data:`POINT_COLUMNS` (after the protocol column; a missing key or None
+        is an empty cell).
 
     Returns
     -------
@@ -110,6 +119,7 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
         writer = csv.writer(fh, lineterminator="\n")
         writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
                         + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())
+                        + (POINT_COLUMNS if points else ())
                         + ((SIMULATED_COLUMN,) if with_flag else ())
                         + ((MODEL_COLUMN,) if with_model else ()))
         for row in rows:
@@ -131,6 +141,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
                            _seconds_cell(row.get("target_peak_um"))]
             if protocols:
                 values.append(row.get("protocol") or "")
+            if points:
+                values += [_seconds_cell(row.get("response_x_mm")), _seconds_cell(row.get("response_y_mm"))]
             if with_flag:
                 values.append(int(bool(row.get(SIMULATED_COLUMN))))
             if with_model:
@@ -160,7 +172,7 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         tuple of int; the rest as str. A file with :data:`SESSION_COLUMNS` also gives
         ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
         :data:`SIMULATED_COLUMN` gives ``simulated`` (bool); the onset and stimulus
-        columns' numbers are floats (None for an empty cell).
+        columns' numbers, and the point columns', are floats (None for an empty cell).
     """
     from .._atomic import protect
 
@@ -173,7 +185,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
             headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS,
                                                         SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS,
                                                         SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                                                        + PROTOCOL_COLUMNS)
+                                                        + PROTOCOL_COLUMNS,
+                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
+                                                        + PROTOCOL_COLUMNS + POINT_COLUMNS)
                        for f in ((), (SIMULATED_COLUMN,), (SIMULATED_COLUMN, MODEL_COLUMN))]
             if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
@@ -199,6 +213,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                         row["onset_clock"] = row["onset_clock"] or None
                     if "levels" in row:
                         for key in ("drive_peak_v", "target_peak_um"):
+                            row[key] = float(row[key]) if row[key] else None
+                    if "response_x_mm" in row:
+                        for key in POINT_COLUMNS:
                             row[key] = float(row[key]) if row[key] else None
                     row["study"] = int(row["study"])
                     row["trial"] = int(row["trial"])

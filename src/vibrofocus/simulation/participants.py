@@ -30,6 +30,7 @@ from .perception import (
     band_transfer,
     draw_answers,
     felt_energy,
+    posterior_ratio_rule,
     own_transfer,
     skin_grid,
     study2_rt,
@@ -145,16 +146,41 @@ class SimulatedParticipant:
         trial_index : int
             Seeds the trial's noise together with the participant seed and the study.
         design : StudyDesign, optional
-            Which locations may be answered (default all of the layout's).
+            Which locations may be answered (default all of the layout's). A point design
+            (``design.point``) gets a point answer: the trial's perceived place (the
+            posterior mean the model's Study 1 answer is the nearest location to), in mm
+            in the layout frame, kept within the picture's area
+            (:func:`~vibrofocus.studies.points.point_area`); its location is left for the
+            store to take (the point's nearest). A threshold design (``design.detection``)
+            gets whether the tap was felt: 1 where some skin point's felt energy exceeds the
+            participant's own threshold (:func:`~vibrofocus.simulation.perception.felt_threshold`,
+            the hypothesis' reference sensation level and the participant's offset), else 0.
         """
         if study not in (1, 2):
             raise StudyError(f"study must be 1 or 2, got {study!r}")
         p = self.percept(drives)
+        if design is not None and design.detection:
+            rt = float(np.random.default_rng([self.seed, int(study), int(trial_index)]).lognormal(np.log(0.6), 0.3))
+            return Response((int(bool(p.felt[0])),), rt)
         rng = np.random.default_rng([self.seed, int(study), int(trial_index)])
         allowed = np.asarray(design.locations if design is not None else range(1, len(self.locations_xy) + 1)) - 1
+        seen: dict[str, np.ndarray] = {}
+
+        def rule(posteriors: Any, *args: Any) -> tuple[np.ndarray, np.ndarray]:
+            seen["perceived_m"] = posteriors.perceived_m  # the trial's percept: what a point answer shows
+            return posterior_ratio_rule(posteriors, *args)
+
         a, sel, rt = draw_answers(
-            p, np.zeros(1, dtype=int), self.locations_xy, self.centre_xy, self.model, self.traits, rng, allowed=allowed
+            p, np.zeros(1, dtype=int), self.locations_xy, self.centre_xy, self.model, self.traits, rng,
+            allowed=allowed, rule=rule,
         )
+        if design is not None and design.point:
+            from ..studies.points import point_area
+
+            area = point_area(self.forearm.layout, design.locations)
+            x_mm, y_mm = (float(v) * 1e3 for v in seen["perceived_m"][0])
+            point = (min(max(x_mm, area["x_mm"][0]), area["x_mm"][1]), min(max(y_mm, area["y_mm"][0]), area["y_mm"][1]))
+            return Response(None, float(rt[0]), point_mm=point)
         if study == 1:
             return Response((int(a[0]) + 1,), float(rt[0]))
         chosen = tuple(int(i) + 1 for i in allowed if sel[0, i])

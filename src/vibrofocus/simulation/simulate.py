@@ -184,7 +184,9 @@ def simulate_studies(
             raise StudyError("a protocol names its blocks' methods and levels: give them in the protocol file, not "
                              "as methods or levels")
         protocol.check_runnable()  # what the engine cannot run yet: refused before anything is written
-        runs = [(b.study, protocol.session_config(b.index), protocol.name, b.index, b.pacing_s) for b in protocol.blocks]
+        # A block in dB SL: its config (level) per participant, from their threshold (below).
+        runs = [(b.study, protocol.session_config(b.index, 0.0 if b.level_unit == "dB SL" else None), protocol.name,
+                 b.index, b.pacing_s) for b in protocol.blocks]
     else:
         from ..studies.protocol_files import paper_protocol_name, shipped_protocol
 
@@ -275,6 +277,9 @@ def simulate_studies(
                 return shared
 
             for run_index, (study, block_config, pname, block_index, block_pace) in enumerate(runs):
+                if protocol is not None and protocol.blocks[block_index].level_unit == "dB SL":
+                    block_config = protocol.session_config(
+                        block_index, protocol.participant_threshold(store, pid, block_index))
                 existing = [s for s in store.sessions(pid, study=study)
                             if session_protocol(s.study, s.config) == (pname, block_index)]
                 if protocol is not None and existing:
@@ -303,6 +308,8 @@ def simulate_studies(
                     # Every stimulus is rendered (and a design that cannot fit this arm, or the
                     # rig's limits, made again or refused) before the session is planned.
                     design = StudyDesign.from_config(study, session_config)
+                    if design.point:  # the picture a point is answered on: this arm's layout
+                        session_config["layout"] = parts["cal"][1].layout.to_dict()
                     renderer_for(parts, design.levels).prepare(design.methods, design.locations, rig=parts["rig"])
                     check_drive_levels(renderer_for(parts, design.levels), design,
                                        where=None if protocol is None else protocol.level_where(block_index))
@@ -383,7 +390,10 @@ def check_protocol_levels(protocol: Any, seed: int, skin: str = STUDY_SKIN) -> N
     StudyError
         A block's level needs more than the drive limit, naming the file's line and field.
     """
-    if not any(b.levels[0] > 0 for b in protocol.blocks):
+    # A block in dB SL is checked when it is planned, on the participant's own threshold.
+    loud = [b for b in protocol.blocks if b.level_unit == "dB"
+            and (b.levels[0] > 0 if b.response != "detection" else (b.max_db or 0.0) > 0)]
+    if not loud:
         return
     from ..calibration import calibrate
     from ..rigs import make_rig
@@ -392,11 +402,10 @@ def check_protocol_levels(protocol: Any, seed: int, skin: str = STUDY_SKIN) -> N
     with make_rig("simulated", seed=participant_seeds(seed, 1)[0], skin=skin) as rig:
         cal = calibrate(rig, participant_id=f"{SIMULATED_PREFIX}001")
     renderers: dict[str, Any] = {}
-    for b in protocol.blocks:
+    for b in loud:
         design = protocol.design(b.index)
-        if design.level_db > 0:
-            renderer = renderers.setdefault(design.levels, calibration_renderer(cal, levels=design.levels))
-            check_drive_levels(renderer, design, where=protocol.level_where(b.index))
+        renderer = renderers.setdefault(design.levels, calibration_renderer(cal, levels=design.levels))
+        check_drive_levels(renderer, design, where=protocol.level_where(b.index))
 
 
 def _block_seed(protocol: Any, index: int, stream: int) -> int:

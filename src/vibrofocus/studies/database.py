@@ -9,7 +9,8 @@ Design (why each part is there):
   DELETE); participants, calibrations and sessions cannot be deleted.
 - The schema version lives in ``PRAGMA user_version`` and the file is marked with a
   vibrofocus ``application_id``; a database from a newer vibrofocus is refused rather
-  than misread.
+  than misread. An older one is upgraded when opened (:data:`_MIGRATIONS`: additive
+  changes only, so that every row it held reads as before).
 - A database in a read-only place can still be read (an export): a private copy is.
 
 The study rules on top of it are :class:`~vibrofocus.studies.storage.StudyStore`'s.
@@ -30,7 +31,7 @@ from ..errors import StudyError
 __all__ = ["SCHEMA_VERSION", "APPLICATION_ID", "StudyDatabase", "now_utc", "software_version"]
 
 #: Version of the database layout written by this vibrofocus (``PRAGMA user_version``).
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 3
 #: ``PRAGMA application_id`` marking a vibrofocus study database ("VBFC").
 APPLICATION_ID = 0x56424643
 
@@ -79,6 +80,8 @@ CREATE TABLE answers (
     drive_sha256   TEXT,
     calibration_id INTEGER REFERENCES calibrations(calibration_id),
     recorded_at    TEXT NOT NULL,
+    response_x_mm  REAL,
+    response_y_mm  REAL,
     UNIQUE (session_id, trial_index),
     FOREIGN KEY (session_id, trial_index) REFERENCES planned_trials(session_id, trial_index)
 );
@@ -91,6 +94,15 @@ CREATE TABLE events (
 );
 CREATE INDEX events_by_session ON events(session_id, event_id);
 """
+#: 3: a participant's detection threshold, one per finished threshold session (docs/protocols.md).
+_THRESHOLDS = """CREATE TABLE thresholds (
+    session_id     INTEGER PRIMARY KEY REFERENCES sessions(session_id),
+    participant_id TEXT NOT NULL REFERENCES participants(participant_id),
+    threshold_db   REAL,
+    reversals_db   TEXT NOT NULL,
+    recorded_at    TEXT NOT NULL
+);
+"""
 
 _TRIGGERS = "".join(
     f"CREATE TRIGGER {table}_no_{op.lower()} BEFORE {op} ON {table} "
@@ -102,10 +114,20 @@ _TRIGGERS = "".join(
         ("participants", ("DELETE",)),
         ("calibrations", ("DELETE",)),
         ("sessions", ("DELETE",)),
+        ("thresholds", ("UPDATE", "DELETE")),
     )
     for op in ops
 )
 
+
+#: Upgrades of an older database, by the version they lead to: additive statements only.
+#: 2: a point answer's place, mm in the layout frame (NULL for a location answer).
+_MIGRATIONS: dict[int, tuple[str, ...]] = {
+    2: ("ALTER TABLE answers ADD COLUMN response_x_mm REAL",
+        "ALTER TABLE answers ADD COLUMN response_y_mm REAL"),
+    3: (_THRESHOLDS.strip().rstrip(";"),
+        *(t.strip().rstrip(";") for t in _TRIGGERS.splitlines() if " ON thresholds " in t)),
+}
 
 
 def now_utc() -> str:
@@ -256,6 +278,8 @@ class StudyDatabase:
             raise StudyError(f"cannot open the study database {self.path}: {exc}") from exc
         if str(mode).lower() != "wal":
             raise StudyError(f"the study database {self.path} cannot use WAL journaling (got {mode!r})")
+        if 0 < version < SCHEMA_VERSION:
+            self._migrate()
         if version == 0:
             with self._write("create the study database"):
                 if conn.execute("PRAGMA user_version").fetchone()[0] != 0:
@@ -263,11 +287,21 @@ class StudyDatabase:
                     # transaction (two commands started on a new database at once).
                     return
                 # Statement by statement: executescript() would COMMIT our transaction early.
-                for statement in (_SCHEMA + _TRIGGERS).split(";\n"):
+                for statement in (_SCHEMA + _THRESHOLDS + _TRIGGERS).split(";\n"):
                     if statement.strip():
                         conn.execute(statement)
                 conn.execute(f"PRAGMA application_id = {APPLICATION_ID}")
                 conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+
+    def _migrate(self) -> None:
+        """Upgrade an older database to :data:`SCHEMA_VERSION` in one transaction (additive changes)."""
+        conn = self._conn
+        with self._write("upgrade the study database"):
+            version = conn.execute("PRAGMA user_version").fetchone()[0]  # another process may have done it
+            for target in range(version + 1, SCHEMA_VERSION + 1):
+                for statement in _MIGRATIONS[target]:
+                    conn.execute(statement)
+            conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def close(self) -> None:
         """Close the connection (committed data is already on disk)."""

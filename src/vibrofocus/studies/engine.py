@@ -354,8 +354,9 @@ def check_drive_levels(renderer: Any, design: StudyDesign, *, limit_v: float | N
     """Refuse a design whose level needs more than the drive limit, before any trial.
 
     Every stimulus of ``design`` is rendered (``renderer.prepare``) at its level rule, and its
-    largest ``|drive|`` times :attr:`StudyDesign.gain` compared with the limit. A level at or
-    below 0 dB re the rule never exceeds it (the rules keep every drive within the limit).
+    largest ``|drive|`` times :attr:`StudyDesign.gain` compared with the limit (a threshold
+    block's: at its staircase's ``max_db``, the loudest it may play). A level at or below 0 dB
+    re the rule never exceeds it (the rules keep every drive within the limit).
 
     Parameters
     ----------
@@ -374,8 +375,10 @@ def check_drive_levels(renderer: Any, design: StudyDesign, *, limit_v: float | N
     StudyError
         The stimulus needing the most drive exceeds the limit at this level, naming it.
     """
-    if design.level_db <= 0.0:
+    level_db = design.staircase.max_db if design.staircase is not None else design.level_db
+    if level_db <= 0.0:
         return
+    gain = 10.0 ** (level_db / 20.0)
     limit = float(getattr(renderer, "limit_v", DRIVE_LIMIT_V) if limit_v is None else limit_v)
     prepare = getattr(renderer, "prepare", None)
     if prepare is not None:
@@ -383,14 +386,30 @@ def check_drive_levels(renderer: Any, design: StudyDesign, *, limit_v: float | N
     worst, peak = None, -1.0
     for m in design.methods:
         for loc in design.locations:
-            p = float(np.max(np.abs(np.asarray(renderer(m, loc), dtype=float)))) * design.gain
+            p = float(np.max(np.abs(np.asarray(renderer(m, loc), dtype=float)))) * gain
             if p > peak:
                 worst, peak = (m, loc), p
     if worst is not None and peak > limit * (1.0 + 1e-9):
         raise StudyError(
-            f"{where or 'level_db'}: {design.level_db:+g} dB re the {design.levels} levels needs {peak:.3g} V for "
+            f"{where or 'level_db'}: {level_db:+g} dB re the {design.levels} levels needs {peak:.3g} V for "
             f"{worst[0]} at location {worst[1]}, over the {limit:g} V drive limit; lower the level"
         )
+
+
+def staircase_levels(store: Any, session_id: int) -> tuple[float, ...]:
+    """The levels of a threshold session's main trials so far, and the next one's, dB re the level rule.
+
+    The staircase replayed over the session's stored main-phase answers
+    (:meth:`~vibrofocus.studies.staircase.Staircase.run`): a resumed session plays what an
+    uninterrupted one would have.
+    """
+    info = store.session(session_id)
+    staircase = info.design.staircase
+    if staircase is None:
+        raise StudyError(f"session {session_id} is not a threshold block (no staircase)")
+    n_training = info.design.n_training
+    felt = [a.response for a in store.answers(session_id) if a.trial_index >= n_training]
+    return staircase.run(felt).levels_db
 
 
 def terminal_beep() -> None:
@@ -520,11 +539,15 @@ class Response:
         The answer's id; a new one is made when it is committed if ``None``. A responder
         whose answers arrive already committed (the web page's, by its answer route)
         gives that answer's id, so that committing it again stores nothing new.
+    point_mm : (float, float), optional
+        A point answer's place in the layout frame, mm (a point session's answers:
+        ``locations`` is then None or the point's nearest location).
     """
 
     locations: Any
     rt_s: float
     answer_id: str | None = None
+    point_mm: Any = None
 
 
 class Responder(Protocol):
@@ -686,9 +709,11 @@ class StudyEngine:
         """Every prepared stimulus against the rig's limits, before any trial."""
         from ..errors import SafetyError
 
+        staircase = self.design.staircase
+        loudest = None if staircase is None else staircase.max_db  # a threshold block's loudest level
         for method in self.design.methods:
             for target in self.design.locations:
-                stim = self.stimulus(method, target)
+                stim = self.stimulus(method, target, loudest)
                 try:
                     check_stimulus(stim.drives, self.rig)
                 except SafetyError as exc:
@@ -697,14 +722,19 @@ class StudyEngine:
                         f"the limits of the {getattr(self.rig, 'kind', '')} rig: {exc}") from None
 
     # ------------------------------------------------------------------ pieces
-    def stimulus(self, method: str, target: int) -> Stimulus | None:
-        """The (cached) stimulus of a condition; ``None`` in a dry run."""
+    def stimulus(self, method: str, target: int, level_db: float | None = None) -> Stimulus | None:
+        """The (cached) stimulus of a condition; ``None`` in a dry run.
+
+        ``level_db``: the level re the level rule, dB (a threshold block's trial level,
+        :meth:`trial_level`); default the design's.
+        """
         if self._renderer is None:
             return None
+        level = self.design.level_db if level_db is None else float(level_db)
         key = (str(method), int(target))
-        if key not in self._cache:
+        if key + (level,) not in self._cache:
             drives = np.asarray(self._renderer(*key), dtype=float)
-            gain = self.design.gain
+            gain = float(10.0 ** (level / 20.0))
             if gain != 1.0:  # the block's level re its rule (a protocol file's levels)
                 drives = drives * gain
             drives.setflags(write=False)
@@ -713,10 +743,20 @@ class StudyEngine:
             if reached is not None:
                 reached = float(reached) * gain
             redesign = getattr(self._renderer, "redesigned", {}).get(key)
-            self._cache[key] = Stimulus(key[0], key[1], drives, drive_sha256(drives),
-                                        target_peak_m=None if reached is None else float(reached),
-                                        redesign=None if redesign is None else dict(redesign))
-        return self._cache[key]
+            self._cache[key + (level,)] = Stimulus(key[0], key[1], drives, drive_sha256(drives),
+                                                   target_peak_m=None if reached is None else float(reached),
+                                                   redesign=None if redesign is None else dict(redesign))
+        return self._cache[key + (level,)]
+
+    def trial_level(self, trial: PlannedTrial) -> float:
+        """The level of a trial, dB re the level rule: the design's, or in a threshold block
+        the staircase's after the main trials answered so far (training: its start)."""
+        staircase = self.design.staircase
+        if staircase is None:
+            return self.design.level_db
+        if trial.phase != "main":
+            return staircase.start_db
+        return staircase_levels(self.store, self.session_id)[trial.trial_index - self.design.n_training]
 
     def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
         self.store.log_event(self.session_id, kind, {"trial_index": trial.trial_index, **fields})
@@ -735,7 +775,8 @@ class StudyEngine:
         stimulus onset's marker follows the play, stamped with the onset's host time and
         carrying its device time (``onset_device_s``, ``onset_clock``).
         """
-        stim = self.stimulus(trial.method, trial.target)
+        level_db = self.trial_level(trial)
+        stim = self.stimulus(trial.method, trial.target, level_db)
         self._log("cue", trial, beep=self._beep)
         self._marker("cue", time.monotonic(), trial)
         if self.cue is not None:
@@ -746,7 +787,7 @@ class StudyEngine:
         self._log(
             "stimulus_onset", trial, method=trial.method, target=trial.target,
             played=stim is not None, drive_sha256=None if stim is None else stim.sha256,
-            levels=self.design.levels, drive_peak_v=None if stim is None else stim.drive_peak_v,
+            levels=self.design.levels, level_db=level_db, drive_peak_v=None if stim is None else stim.drive_peak_v,
             target_peak_um=None if stim is None or stim.target_peak_m is None else stim.target_peak_m * 1e6,
             **({} if stim is None or stim.redesign is None else {"redesign": stim.redesign}),
         )
@@ -782,7 +823,7 @@ class StudyEngine:
         receipt = self.store.record_answer(
             self.session_id, presentation.trial.trial_index, response.locations, response.rt_s,
             answer_id=answer_id or response.answer_id or uuid.uuid4().hex,
-            drive_sha256=None if stim is None else stim.sha256, **onsets,
+            drive_sha256=None if stim is None else stim.sha256, point_mm=response.point_mm, **onsets,
         )
         if receipt.duplicate:
             # Committed before the engine had the onset (the web page's answer route): its onset apart.

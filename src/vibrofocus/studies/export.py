@@ -3,6 +3,7 @@
 from ..io.trials_csv import (
     MODEL_COLUMN,
     ONSET_COLUMNS,
+    POINT_COLUMNS,
     PROTOCOL_COLUMNS,
     SESSION_COLUMNS,
     SIMULATED_COLUMN,
@@ -12,5 +13,5 @@ from ..io.trials_csv import (
     write_trials_csv,
 )
 
-__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS", "SIMULATED_COLUMN",
-           "MODEL_COLUMN", "write_trials_csv", "read_trials_csv"]
+__all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS", "POINT_COLUMNS",
+           "SIMULATED_COLUMN", "MODEL_COLUMN", "write_trials_csv", "read_trials_csv"]

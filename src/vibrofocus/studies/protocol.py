@@ -25,6 +25,7 @@ from ..defaults import METHODS, STUDY_METHODS
 from ..errors import StudyError
 from ..io.responses import format_response  # the stored form of a response: one home, re-exported
 from ..layout import ArrayLayout
+from .staircase import Staircase
 
 __all__ = [
     "STUDIES",
@@ -112,6 +113,15 @@ class StudyDesign:
         protocol file's block level). A level that would need more than the drive limit
         is refused when the session is planned
         (:func:`~vibrofocus.studies.engine.check_drive_levels`).
+    point : bool
+        The participant answers a point on a picture of the arm area, mm
+        (:mod:`vibrofocus.studies.points`); its nearest location is the answer's
+        response. Study 1 only (one location per answer). Default False.
+    staircase : Staircase, optional
+        A threshold block (docs/protocols.md, "Threshold blocks"): each trial asks whether the
+        tap was felt (answers 1 or 0), at the level the staircase sets from the answers so
+        far (:class:`~vibrofocus.studies.staircase.Staircase`, dB re the level rule;
+        ``level_db`` is then 0). Study 1 sessions; the training trials play at its start level.
 
     Notes
     -----
@@ -127,6 +137,8 @@ class StudyDesign:
     n_training: int = 5
     levels: str = DEFAULT_LEVELS
     level_db: float = 0.0
+    point: bool = False
+    staircase: Staircase | None = None
 
     def __post_init__(self) -> None:
         if isinstance(self.study, bool) or self.study not in STUDIES:
@@ -159,6 +171,18 @@ class StudyDesign:
         if (isinstance(self.level_db, bool) or not isinstance(self.level_db, (int, float, np.integer, np.floating))
                 or not np.isfinite(self.level_db) or abs(float(self.level_db)) > 120.0):
             raise StudyError(f"level_db must be a finite number within +-120 dB, got {shorten(self.level_db)}")
+        if not isinstance(self.point, bool):
+            raise StudyError(f"point must be true or false, got {shorten(self.point)}")
+        if self.point and self.study != 1:
+            raise StudyError("a point answer stands for one location: it needs study 1, got study 2")
+        if self.staircase is not None:
+            if isinstance(self.staircase, Mapping):
+                object.__setattr__(self, "staircase", Staircase.from_dict(self.staircase))
+            if not isinstance(self.staircase, Staircase):
+                raise StudyError(f"staircase must be a Staircase, got {shorten(self.staircase)}")
+            if self.study != 1 or self.point or self.level_db:
+                raise StudyError("a threshold block (staircase) is a study 1 session of detection answers at the "
+                                 "staircase's levels: no point answers, level_db 0")
         object.__setattr__(self, "level_db", float(self.level_db))
         object.__setattr__(self, "methods", methods)
         object.__setattr__(self, "locations", tuple(int(x) for x in locations))
@@ -180,17 +204,29 @@ class StudyDesign:
         return self.n_training + self.n_main
 
     @property
+    def detection(self) -> bool:
+        """Whether trials ask "felt or not" (a threshold block: :attr:`staircase` is set)."""
+        return self.staircase is not None
+
+    @property
     def gain(self) -> float:
         """Amplitude factor of :attr:`level_db` on the level rule's drives: 10^(level_db / 20)."""
         return float(10.0 ** (self.level_db / 20.0))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-serialisable form, stored in the session's config (``level_db`` only when not 0)."""
+        """JSON-serialisable form, stored in the session's config (``level_db`` only when not 0,
+        ``point`` only when true, ``staircase`` only when set)."""
         d = asdict(self)
+        if self.staircase is None:
+            del d["staircase"]
+        else:
+            d["staircase"] = self.staircase.to_dict()
         d["methods"] = list(self.methods)
         d["locations"] = list(self.locations)
         if not self.level_db:
             del d["level_db"]
+        if not self.point:
+            del d["point"]
         return d
 
     @classmethod
@@ -200,7 +236,7 @@ class StudyDesign:
         The design of ``study`` is the shipped protocol ``paper-study<study>``'s block
         (:func:`~vibrofocus.studies.protocol_files.shipped_protocol`). Keys other than
         ``methods``, ``locations``, ``repetitions``, ``n_training``, ``levels`` and
-        ``level_db`` are ignored here (they are stored with the session as they are).
+        ``level_db``, ``point``, ``staircase`` are ignored here (they are stored with the session as they are).
         ``stored=True``: ``config`` is a stored session's, and one without ``levels``
         was planned before sessions kept it, so its rule is :data:`LEGACY_LEVELS`.
         """
@@ -212,7 +248,7 @@ class StudyDesign:
                                   ("methods", "locations", "repetitions", "n_training", "levels", "level_db")}
         if stored and "levels" not in config:
             kwargs["levels"] = LEGACY_LEVELS
-        for key in ("methods", "locations", "repetitions", "n_training", "levels", "level_db"):
+        for key in ("methods", "locations", "repetitions", "n_training", "levels", "level_db", "point", "staircase"):
             if key in config:
                 value = config[key]
                 kwargs[key] = tuple(value) if key in ("methods", "locations") else value
@@ -367,12 +403,20 @@ def design_of_block(study: int, block: Mapping[str, Any]) -> StudyDesign:
     """The :class:`StudyDesign` of one protocol block, given as the protocol file's fields.
 
     ``block`` holds ``methods``, ``locations``, ``repetitions``, ``training_trials``,
-    ``level_rule`` and ``levels`` (one level, in dB re the level rule), as in a protocol
-    file's ``[[blocks]]`` table (docs/protocols.md).
+    ``level_rule``, ``levels`` (one level, in dB re the level rule) and ``response``, as in
+    a protocol file's ``[[blocks]]`` table (docs/protocols.md). A ``detection`` block's level
+    is its staircase's start (with ``steps_db`` and ``max_db`` where given).
     """
+    staircase = None
+    level_db = float(block["levels"][0])
+    if block["response"] == "detection":
+        staircase = Staircase(start_db=level_db, **{k: (tuple(block[k]) if k == "steps_db" else block[k])
+                                                    for k in ("steps_db", "max_db") if block.get(k) is not None})
+        level_db = 0.0
     return StudyDesign(study=study, methods=tuple(block["methods"]), locations=tuple(block["locations"]),
                        repetitions=int(block["repetitions"]), n_training=int(block["training_trials"]),
-                       levels=block["level_rule"], level_db=float(block["levels"][0]))
+                       levels=block["level_rule"], level_db=level_db,
+                       point=block["response"] == "point", staircase=staircase)
 
 
 @lru_cache(maxsize=None)

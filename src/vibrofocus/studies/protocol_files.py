@@ -10,9 +10,8 @@ A file is read in three steps, each refusing bad input with one line that names 
 the line and the field (``blocks[0].methods[1]``): its size (at most
 :data:`MAX_PROTOCOL_BYTES`, checked before it is read), its TOML syntax (:mod:`tomllib`), and
 its fields (pydantic models that forbid unknown keys and convert no types). What the study
-engine cannot run yet (a point answer, targets given as points in mm, several levels in one
-block, levels in dB SL, which need a measured threshold) is accepted by the format and
-refused when a session is planned (:meth:`StudyProtocol.check_runnable`), before anything
+engine cannot run yet (targets given as points in mm, several levels in one block) is
+accepted by the format and refused when a session is planned (:meth:`StudyProtocol.check_runnable`), before anything
 is written.
 """
 
@@ -51,11 +50,14 @@ MAX_PROTOCOL_BYTES = 1_000_000
 #: The version of the file format (the file's ``format`` key).
 PROTOCOL_FORMAT = 1
 #: Answers a block takes: one location (Study 1), one or more locations (Study 2), or a
-#: point in mm (accepted by the format, not run yet).
-RESPONSES = ("location", "locations", "point")
+#: point in mm on a picture of the arm area (stored beside its nearest location, which is
+#: the answer's response: :mod:`vibrofocus.studies.points`), or whether the tap was felt
+#: (``detection``: a threshold block, its levels set by a staircase,
+#: :mod:`vibrofocus.studies.staircase`).
+RESPONSES = ("location", "locations", "point", "detection")
 #: Units of a block's levels: ``dB`` re the block's level rule (0 dB: the rule's own level),
-#: or ``dB SL`` re the participant's measured detection threshold (accepted by the format,
-#: not run yet: it needs the threshold block).
+#: or ``dB SL`` re the participant's detection threshold measured by an earlier threshold
+#: block of the protocol.
 LEVEL_UNITS = ("dB", "dB SL")
 #: Protocols shipped with the package (``vibrofocus/studies/protocols/<name>.toml``).
 SHIPPED_PROTOCOLS = ("paper-study1", "paper-study2")
@@ -64,7 +66,8 @@ MAX_BLOCKS = 64
 MAX_BLOCK_TRIALS = 20_000
 
 _NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
-_STUDY_OF_RESPONSE = {"location": 1, "locations": 2}
+#: A point answer stands for one location (its nearest): a study 1 session whose design has ``point``.
+_STUDY_OF_RESPONSE = {"location": 1, "locations": 2, "point": 1, "detection": 1}
 
 
 def paper_protocol_name(study: int) -> str:
@@ -82,8 +85,8 @@ class ProtocolBlock:
         0-based position in the protocol.
     name : str
         The block's name.
-    response : {"location", "locations", "point"}
-        The answer a trial takes.
+    response : {"location", "locations", "point", "detection"}
+        The answer a trial takes (``detection``: felt or not, a threshold block).
     methods : tuple of str
         Rendering methods (registered ones).
     locations : tuple of int or None
@@ -105,6 +108,10 @@ class ProtocolBlock:
     seed : int or None
         Seed of the trial order, the same for every participant; None: each session's own
         seed (``seed = "session"`` in the file).
+    steps_db : tuple of float or None
+        A threshold block's staircase steps, dB (None: the staircase's default).
+    max_db : float or None
+        A threshold block's highest level, dB re the level rule (None: 0 dB).
     """
 
     index: int
@@ -120,10 +127,12 @@ class ProtocolBlock:
     training_trials: int
     pacing_s: float
     seed: int | None
+    steps_db: tuple[float, ...] | None = None
+    max_db: float | None = None
 
     @property
     def study(self) -> int | None:
-        """The study number of the block's sessions: 1 (one location), 2 (several); None for a point."""
+        """The study number of the block's sessions: 1 (one location, or a point), 2 (several)."""
         return _STUDY_OF_RESPONSE.get(self.response)
 
     def session_seed(self, seed: int) -> int:
@@ -164,44 +173,91 @@ class StudyProtocol:
         Raises
         ------
         StudyError
-            A point answer, targets given as points in mm, several levels in one block,
-            or levels in dB SL (they need the participant's measured threshold, which no
-            block measures yet).
+            Targets given as points in mm, several levels in one block, or levels in dB SL
+            without a threshold block (``response = "detection"``) before them.
         """
         for b in self.blocks:
             at = f"blocks[{b.index}]"
-            if b.response == "point":
-                raise StudyError(f"{self.where(at + '.response')}: point answers are not run yet; use \"location\" "
-                                 "or \"locations\"")
             if b.points_mm is not None:
                 raise StudyError(f"{self.where(at + '.points_mm')}: targets given as points in mm are not run yet; "
                                  "name location numbers (locations = [...])")
-            if b.level_unit == "dB SL":
+            if b.level_unit == "dB SL" and self.threshold_block(b.index) is None:
                 raise StudyError(f"{self.where(at + '.level_unit')}: levels in dB SL need the participant's measured "
-                                 "threshold, which no block measures yet; use \"dB\" (re the level rule)")
+                                 "threshold: put a threshold block (response = \"detection\") before this one, or "
+                                 "use \"dB\" (re the level rule)")
             if len(b.levels) != 1:
                 raise StudyError(f"{self.where(at + '.levels')}: a block plays one level for now, got "
                                  f"{len(b.levels)}; make one block per level")
 
-    def design(self, index: int) -> StudyDesign:
-        """The :class:`~vibrofocus.studies.protocol.StudyDesign` of block ``index`` (runnable ones only)."""
+    def threshold_block(self, index: int) -> int | None:
+        """The threshold block (``response = "detection"``) whose threshold block ``index``'s
+        levels in dB SL refer to: the last one before it; None if there is none."""
+        found = [b.index for b in self.blocks[:index] if b.response == "detection"]
+        return found[-1] if found else None
+
+    def design(self, index: int, threshold_db: float | None = None) -> StudyDesign:
+        """The :class:`~vibrofocus.studies.protocol.StudyDesign` of block ``index`` (runnable ones only).
+
+        Parameters
+        ----------
+        index : int
+            The block.
+        threshold_db : float, optional
+            The participant's threshold from :meth:`threshold_block`, dB re the level rule:
+            required by a block in dB SL, whose level is then ``threshold_db + level``.
+        """
         self.check_runnable()
         b = self.blocks[index]
         assert b.study is not None and b.locations is not None  # check_runnable
+        levels = b.levels
+        if b.level_unit == "dB SL":
+            if threshold_db is None:
+                raise StudyError(f"{self.where(f'blocks[{index}].level_unit')}: levels in dB SL need the "
+                                 "participant's threshold from the threshold block "
+                                 f"{self.blocks[self.threshold_block(index) or 0].name!r}, which has none yet")
+            levels = tuple(float(threshold_db) + x for x in b.levels)
         try:
             return design_of_block(b.study, {"methods": b.methods, "locations": b.locations,
                                              "repetitions": b.repetitions, "training_trials": b.training_trials,
-                                             "level_rule": b.level_rule, "levels": b.levels})
+                                             "level_rule": b.level_rule, "levels": levels,
+                                             "response": b.response, "steps_db": b.steps_db, "max_db": b.max_db})
         except StudyError as exc:
             raise StudyError(f"{self.where(f'blocks[{index}]')}: {exc}") from None
 
-    def session_config(self, index: int) -> dict[str, Any]:
+    def participant_threshold(self, store: Any, participant_id: str, index: int) -> float | None:
+        """The participant's threshold that block ``index`` uses (dB re the level rule), from
+        ``store`` (:meth:`~vibrofocus.studies.StudyStore.threshold`); None for a block in dB.
+
+        Raises
+        ------
+        StudyError
+            A block in dB SL whose threshold block the participant has not finished, or whose
+            staircase reversed too few times for a threshold.
+        """
+        if self.blocks[index].level_unit != "dB SL":
+            return None
+        source = self.threshold_block(index)
+        assert source is not None  # check_runnable
+        found = store.threshold(participant_id, protocol=self.name, block=source)
+        if found is None or found[1] is None:
+            raise StudyError(f"{self.where(f'blocks[{index}].level_unit')}: {participant_id} has no threshold from the "
+                             f"threshold block {self.blocks[source].name!r}" + (
+                                 "" if found is None else " (its staircase reversed too few times: give that block "
+                                                          "more repetitions)"))
+        return found[1]
+
+    def session_config(self, index: int, threshold_db: float | None = None) -> dict[str, Any]:
         """The session config of block ``index``: its design, the protocol's name, the block's
         index, name and pacing (stored with the session; see
-        :meth:`~vibrofocus.studies.StudyStore.create_session`)."""
+        :meth:`~vibrofocus.studies.StudyStore.create_session`); for a block in dB SL also
+        ``level_sl_db`` (the block's level, dB SL) and ``threshold_db`` (the threshold it
+        was planned on, dB re the level rule; see :meth:`design`)."""
         b = self.blocks[index]
-        return {**self.design(index).to_dict(), "protocol": self.name, "block": b.index, "block_name": b.name,
-                "level_unit": b.level_unit, "pace_s": b.pacing_s}
+        config = {**self.design(index, threshold_db).to_dict(), "protocol": self.name, "block": b.index,
+                  "block_name": b.name, "level_unit": b.level_unit, "pace_s": b.pacing_s}
+        if b.level_unit == "dB SL":
+            config.update(level_sl_db=b.levels[0], threshold_db=float(threshold_db))  # type: ignore[arg-type]
+        return config
 
     def level_where(self, index: int) -> str:
         """:meth:`where` of block ``index``'s levels."""
@@ -216,7 +272,7 @@ def _models() -> tuple[type, type]:
     class Block(BaseModel):
         model_config = ConfigDict(extra="forbid", strict=True)
         name: str = Field(default="", max_length=64)
-        response: Literal["location", "locations", "point"]
+        response: Literal["location", "locations", "point", "detection"]
         methods: list[str] = Field(min_length=1, max_length=64)
         locations: list[int] | None = Field(default=None, min_length=1, max_length=1000)
         points_mm: list[tuple[float, float]] | None = Field(default=None, min_length=1, max_length=1000)
@@ -227,6 +283,8 @@ def _models() -> tuple[type, type]:
         training_trials: int = Field(default=0, ge=0, le=1000)
         pacing_s: float = Field(default=0.0, ge=0.0, le=60.0)
         seed: Any = "session"
+        steps_db: list[float] | None = Field(default=None, min_length=1, max_length=16)
+        max_db: float | None = Field(default=None, ge=-120.0, le=120.0)
 
         @field_validator("methods")
         @classmethod
@@ -281,6 +339,20 @@ def _models() -> tuple[type, type]:
             if (self.locations is None) == (self.points_mm is None):
                 raise ValueError("give the targets as locations = [...] or as points_mm = [[x, y], ...], "
                                  "exactly one of them")
+            if self.response != "detection" and (self.steps_db is not None or self.max_db is not None):
+                raise ValueError("steps_db and max_db belong to a threshold block (response = \"detection\")")
+            if self.response == "detection":
+                from .staircase import Staircase
+
+                if self.level_unit != "dB" or len(self.levels) != 1:
+                    raise ValueError("a threshold block starts its staircase at one level in dB re the level rule: "
+                                     "levels = [start], level_unit = \"dB\"")
+                try:
+                    Staircase(start_db=self.levels[0], **({} if self.steps_db is None else
+                                                          {"steps_db": tuple(self.steps_db)}),
+                              **({} if self.max_db is None else {"max_db": self.max_db}))
+                except StudyError as exc:
+                    raise ValueError(str(exc)) from None
             n = len(self.methods) * len(self.locations or self.points_mm or ()) * len(self.levels)
             if n * self.repetitions + self.training_trials > MAX_BLOCK_TRIALS:
                 raise ValueError(f"the block has {n * self.repetitions + self.training_trials} trials, more than "
@@ -416,6 +488,8 @@ def parse_protocol(text: str, source: str = "<text>") -> StudyProtocol:
             levels=tuple(float(x) for x in b.levels), level_unit=b.level_unit, level_rule=b.level_rule,
             repetitions=int(b.repetitions), training_trials=int(b.training_trials), pacing_s=float(b.pacing_s),
             seed=None if b.seed == "session" else int(b.seed),
+            steps_db=None if b.steps_db is None else tuple(float(x) for x in b.steps_db),
+            max_db=None if b.max_db is None else float(b.max_db),
         )
         for i, b in enumerate(parsed.blocks)
     )

@@ -37,6 +37,9 @@ class AnswerReceipt:
         Calibration the session used.
     recorded_at : str
         UTC time of the commit, ISO 8601.
+    point_mm : (float, float) or None
+        A point answer's place in the layout frame, mm (``response`` is its nearest
+        location); None for a location answer.
     duplicate : bool
         True when this receipt answers a re-send (the same ``answer_id`` again): nothing
         new was stored. Not part of equality: a re-send's receipt equals the original's.
@@ -50,6 +53,7 @@ class AnswerReceipt:
     drive_sha256: str | None
     calibration_id: int | None
     recorded_at: str
+    point_mm: tuple[float, float] | None = None
     duplicate: bool = field(default=False, compare=False)
 
 
@@ -184,6 +188,7 @@ def receipt_from_row(r: sqlite3.Row, *, duplicate: bool = False) -> AnswerReceip
         drive_sha256=r["drive_sha256"],
         calibration_id=r["calibration_id"],
         recorded_at=r["recorded_at"],
+        point_mm=None if r["response_x_mm"] is None else (float(r["response_x_mm"]), float(r["response_y_mm"])),
         duplicate=duplicate,
     )
 

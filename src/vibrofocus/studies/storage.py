@@ -29,6 +29,7 @@ from typing import Any
 
 from .._validation import shorten
 from ..errors import AnswerRefused, StudyError, ValidationError
+from ..io.responses import parse_response_text
 from .database import APPLICATION_ID, SCHEMA_VERSION, StudyDatabase, now_utc, software_version
 from .protocol import LEGACY_LEVELS, PlannedTrial, StudyDesign, format_response, parse_response, plan_trials
 from .records import (
@@ -43,6 +44,7 @@ from .records import (
     receipt_from_row,
     trial_from_row,
 )
+from .staircase import parse_detection
 from .session_status import SESSION_STATUSES, check_transition, status_after_answer, transition_event
 
 # SCHEMA_VERSION, APPLICATION_ID and the records are re-exported: their public home has
@@ -344,6 +346,19 @@ class StudyStore(StudyDatabase):
         design = StudyDesign.from_config(int(study), config)
         stored_config = dict(config or {})
         stored_config.update(design.to_dict())
+        if design.point:
+            # The picture the participant points on, stored with the session: every answer
+            # is checked against it (the config's ``layout``, an ArrayLayout.to_dict(), or
+            # the reference layout).
+            from ..layout import ArrayLayout
+            from .points import point_area
+
+            layout = stored_config.get("layout")
+            try:
+                the_layout = ArrayLayout.from_dict(layout) if isinstance(layout, Mapping) else ArrayLayout.reference()
+            except (ValidationError, KeyError, TypeError, ValueError) as exc:  # one line
+                raise StudyError(f"session config layout is not a layout: {exc}") from None
+            stored_config["point_area"] = point_area(the_layout, design.locations)
         # The protocol the session was planned from, and its block: a session planned without
         # one is the paper's study (its shipped protocol file, block 0), as every session
         # stored before sessions named their protocol is read (session_protocol).
@@ -487,6 +502,7 @@ class StudyStore(StudyDatabase):
         onset_s: float | None = None,
         onset_device_s: float | None = None,
         onset_clock: str | None = None,
+        point_mm: Any = None,
     ) -> AnswerReceipt:
         """Validate an answer and commit it in its own transaction before returning.
 
@@ -500,9 +516,10 @@ class StudyStore(StudyDatabase):
         trial_index : int
             0-based index of the trial answered; it must be the session's first
             unanswered trial (answers come in order: nothing is skipped).
-        response : int, str or iterable of int
+        response : int, str, iterable of int or None
             Locations (see :func:`parse_response`): Study 1 exactly one, Study 2 one or
-            more distinct, each within the design's locations.
+            more distinct, each within the design's locations. In a point session
+            (the design's ``point``): None, or the point's nearest location.
         rt_s : float
             Response time, s (finite, >= 0).
         answer_id : str
@@ -525,6 +542,11 @@ class StudyStore(StudyDatabase):
         onset_clock : str, optional
             That clock's name (``simulated_samples``, ``portaudio_dac``,
             ``nidaq_start_trigger``, ``nidaq_samples``); given with ``onset_device_s``.
+        point_mm : (float, float), optional
+            A point answer's place ``(x, y)`` in the layout frame, mm: required in a point
+            session, refused in another. It must lie in the session's picture
+            (:func:`~vibrofocus.studies.points.check_point`); its nearest location is
+            stored as the response.
 
         Returns
         -------
@@ -559,13 +581,14 @@ class StudyStore(StudyDatabase):
             info = self._session(conn, session_id)
             sid = info.session_id
             try:
-                locations = parse_response(response, info.design)
+                point, locations = self._answer_place(info, response, point_mm)
             except StudyError as exc:
                 raise AnswerRefused(str(exc), "invalid") from None
             prior = conn.execute("SELECT * FROM answers WHERE answer_id = ?", (answer_id,)).fetchone()
             if prior is not None:
                 receipt = receipt_from_row(prior)
-                if (receipt.session_id, receipt.trial_index, receipt.response) != (sid, tidx, locations):
+                if (receipt.session_id, receipt.trial_index, receipt.response, receipt.point_mm) != (
+                        sid, tidx, locations, point):
                     same_trial = (receipt.session_id, receipt.trial_index) == (sid, tidx)
                     raise AnswerRefused(
                         f"answer_id {answer_id!r} was already used for session {receipt.session_id} trial "
@@ -602,19 +625,124 @@ class StudyStore(StudyDatabase):
             now = now_utc()
             conn.execute(
                 "INSERT INTO answers (answer_id, session_id, trial_index, response, rt_s, drive_sha256, "
-                "calibration_id, recorded_at) VALUES (?, ?, ?, ?, ?, ?, ?, ?)",
-                (answer_id, sid, tidx, format_response(locations), rt, drive_sha256, info.calibration_id, now),
+                "calibration_id, recorded_at, response_x_mm, response_y_mm) VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (answer_id, sid, tidx, format_response(locations), rt, drive_sha256, info.calibration_id, now,
+                 None if point is None else point[0], None if point is None else point[1]),
             )
             self._insert_event(conn, sid, "answer", {
                 "trial_index": tidx, "answer_id": answer_id, "response": list(locations), "rt_s": rt, **onsets,
+                **({} if point is None else {"point_mm": list(point)}),
             })
-            new_status = status_after_answer(info.status, finished=info.n_answered + 1 >= info.n_trials)
+            finished = info.n_answered + 1 >= info.n_trials
+            if finished and info.design.detection:
+                self._store_threshold(conn, info)
+            new_status = status_after_answer(info.status, finished=finished)
             if new_status != info.status:
                 self._change_status(conn, info, new_status, now)
             else:
                 conn.execute("UPDATE sessions SET updated_at = ? WHERE session_id = ?", (now, sid))
             row = conn.execute("SELECT * FROM answers WHERE answer_id = ?", (answer_id,)).fetchone()
         return receipt_from_row(row)
+
+    @staticmethod
+    def _answer_place(info: SessionInfo, response: Any,
+                      point_mm: Any) -> tuple[tuple[float, float] | None, tuple[int, ...]]:
+        """The answer's point (None for a location answer) and its locations, checked against the session."""
+        design = info.design
+        if design.detection:
+            if point_mm is not None:
+                raise StudyError(f"session {info.session_id} asks whether the tap was felt, not where; answer 1 or 0")
+            return None, (parse_detection(response),)
+        if not design.point:
+            if point_mm is not None:
+                raise StudyError(f"session {info.session_id} takes locations, not a point; answer a location")
+            return None, parse_response(response, design)
+        if point_mm is None:
+            raise StudyError(f"session {info.session_id} takes a point answer [x, y] in mm; none was given")
+        from .points import check_point, point_area
+
+        area = info.config.get("point_area") or point_area(None, design.locations)
+        point, nearest = check_point(point_mm, area)
+        if response is not None and parse_response(response, design) != (nearest,):
+            raise StudyError(f"response {shorten(response)} is not the point's nearest location {nearest}")
+        return point, (nearest,)
+
+    @staticmethod
+    def _store_threshold(conn: sqlite3.Connection, info: SessionInfo) -> None:
+        """Store a finished threshold session's threshold (inside its last answer's transaction)."""
+        design = info.design
+        assert design.staircase is not None
+        felt = [parse_response_text(r[0])[0] for r in conn.execute(
+            "SELECT response FROM answers WHERE session_id = ? AND trial_index >= ? ORDER BY trial_index",
+            (info.session_id, design.n_training))]
+        run = design.staircase.run(felt)
+        conn.execute("INSERT INTO thresholds (session_id, participant_id, threshold_db, reversals_db, recorded_at) "
+                     "VALUES (?, ?, ?, ?, ?)", (info.session_id, info.participant_id, run.threshold_db,
+                                                json.dumps(list(run.reversals_db)), now_utc()))
+
+    def threshold(self, participant_id: str, *, protocol: str | None = None, block: int | None = None,
+                  ) -> tuple[int, float | None] | None:
+        """The participant's latest measured detection threshold: ``(session id, dB re the level
+        rule)`` (the dB value None where the staircase had too few reversals), or None when no
+        threshold session of theirs has finished (only of ``protocol``'s block ``block`` when
+        given). Aborted sessions are left out."""
+        with self._read("read the thresholds") as conn:
+            self._require_participant(conn, participant_id)
+            rows = conn.execute(
+                "SELECT t.session_id, t.threshold_db, s.study, s.config FROM thresholds t "
+                "JOIN sessions s ON s.session_id = t.session_id WHERE t.participant_id = ? AND s.status != 'aborted' "
+                "ORDER BY t.session_id DESC", (participant_id,)).fetchall()
+        for sid, value, study, config in rows:
+            if protocol is None or session_protocol(study, json.loads(config)) == (protocol, block):
+                return int(sid), None if value is None else float(value)
+        return None
+
+    def threshold_rows(self, *, participant_id: str | None = None) -> list[dict[str, Any]]:
+        """The answered trials of threshold sessions, one dict per trial, with the staircase replayed.
+
+        Keys: ``participant``, ``session``, ``protocol``, ``block``, ``phase``, ``trial``,
+        ``method``, ``target``, ``level_db`` (dB re the level rule), ``levels`` (the rule),
+        ``felt`` (1 / 0), ``rt_s``, ``drive_peak_v`` (None where nothing was played),
+        ``reversal`` (1 where the staircase reversed after this answer) and ``threshold_db``
+        (the session's stored threshold; None before it finished or with too few reversals).
+        Ordered by participant (as added), session and trial.
+        """
+        out: list[dict[str, Any]] = []
+        with self._read("read the threshold trials") as conn:
+            sql = ("SELECT s.session_id FROM sessions s JOIN participants pt ON pt.participant_id = s.participant_id "
+                   "WHERE json_extract(s.config, '$.staircase') IS NOT NULL ")
+            args: list[Any] = []
+            if participant_id is not None:
+                self._require_participant(conn, participant_id)
+                sql, args = sql + "AND s.participant_id = ? ", [participant_id]
+            ids = [r[0] for r in conn.execute(sql + "ORDER BY pt.rowid, s.session_id", args)]
+            stored = dict(conn.execute("SELECT session_id, threshold_db FROM thresholds").fetchall())
+        for sid in ids:
+            info = self.session(sid)
+            staircase, n_training = info.design.staircase, info.design.n_training
+            assert staircase is not None
+            plan = {t.trial_index: t for t in self.planned_trials(sid)}
+            answers = self.answers(sid)
+            run = staircase.run([a.response for a in answers if a.trial_index >= n_training])
+            peaks = {e.payload.get("trial_index"): e.payload.get("drive_peak_v")
+                     for e in self.events(sid, kind="stimulus_onset") if isinstance(e.payload, dict)}
+            protocol, block = session_protocol(info.study, info.config)
+            for a in answers:
+                t, k = plan[a.trial_index], a.trial_index - n_training
+                out.append({"participant": info.participant_id, "session": sid, "protocol": protocol, "block": block,
+                            "phase": t.phase, "trial": t.trial, "method": t.method, "target": t.target,
+                            "level_db": staircase.start_db if k < 0 else run.levels_db[k],
+                            "levels": info.design.levels, "felt": a.response[0], "rt_s": a.rt_s,
+                            "drive_peak_v": peaks.get(a.trial_index), "reversal": int(k in run.reversal_trials),
+                            "threshold_db": stored.get(sid)})
+        return out
+
+    def export_thresholds_csv(self, path: str | os.PathLike, *, participant_id: str | None = None) -> int:
+        """Write the threshold trials (:meth:`threshold_rows`) as a CSV file
+        (docs/file-formats.md, threshold file); returns the row count."""
+        from ..io.thresholds_csv import write_thresholds_csv
+
+        return write_thresholds_csv(self.threshold_rows(participant_id=participant_id), path)
 
     @staticmethod
     def _last_onset(conn: sqlite3.Connection, sid: int, tidx: int) -> dict[str, Any] | None:
@@ -699,7 +827,8 @@ class StudyStore(StudyDatabase):
         ``stimulus_onset`` event (None where none holds them), and for a simulated
         participant ``model`` (the label of the model and hypothesis that answered, from the
         session), and ``protocol`` (the name of the protocol the session was planned from:
-        :func:`session_protocol`). Ordered by participant (as added), study, session and trial index.
+        :func:`session_protocol`), and ``response_x_mm``, ``response_y_mm`` (a point answer's
+        place in the layout frame, mm; None for a location answer). Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -707,16 +836,19 @@ class StudyStore(StudyDatabase):
                 "p.method AS method, p.target AS target, a.response AS response, a.rt_s AS rt_s, "
                 "s.session_id AS session_id, p.trial_index AS trial_index, a.answer_id AS answer_id, "
                 "a.drive_sha256 AS drive_sha256, a.calibration_id AS calibration_id, a.recorded_at AS recorded_at, "
+                "a.response_x_mm AS response_x_mm, a.response_y_mm AS response_y_mm, "
                 "s.session_id AS session, s.status AS session_status, (s.calibration_id IS NULL) AS dry_run, "
                 "pt.simulated AS simulated "
                 "FROM answers a JOIN planned_trials p ON p.session_id = a.session_id AND p.trial_index = a.trial_index "
                 "JOIN sessions s ON s.session_id = a.session_id "
                 "JOIN participants pt ON pt.participant_id = s.participant_id "
             )
+            # Threshold sessions' answers (felt or not) are no localization trials: their own file.
+            sql += "WHERE json_extract(s.config, '$.staircase') IS NULL "
             args: list[Any] = []
             if participant_id is not None:
                 self._require_participant(conn, participant_id)
-                sql += "WHERE s.participant_id = ? "
+                sql += "AND s.participant_id = ? "
                 args.append(participant_id)
             sql += "ORDER BY pt.rowid, s.study, s.session_id, p.trial_index"
             rows = [dict(r) for r in conn.execute(sql, args).fetchall()]
@@ -781,12 +913,13 @@ class StudyStore(StudyDatabase):
         :data:`~vibrofocus.io.trials_csv.SESSION_COLUMNS`), so that an analysis can leave
         out aborted sessions and dry runs, then the onset columns
         (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`) and the stimulus columns
-        (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`).
+        (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`), the protocol column and the point
+        columns (:data:`~vibrofocus.io.trials_csv.POINT_COLUMNS`).
         """
         from ..io.trials_csv import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True,
-                                stimuli=True, protocols=True)
+                                stimuli=True, protocols=True, points=True)
 
 
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.

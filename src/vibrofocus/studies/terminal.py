@@ -9,6 +9,7 @@ from typing import Any
 from ..errors import StudyError
 from .engine import ABORT, PAUSE, Presentation, Response
 from .protocol import parse_response
+from .staircase import parse_detection
 
 __all__ = ["TerminalResponder", "InputEnded"]
 
@@ -57,7 +58,10 @@ class TerminalResponder:
         t = presentation.trial
         of = f"/{self.n_trials}" if self.n_trials else ""
         several = "one or more locations, e.g. 45" if presentation.design.multi_select else "one location"
-        prompt = f"[bold]trial {t.trial_index + 1}{of}[/] ({t.phase}) — where did you feel it? {several}, Enter (p pause, q abort): "
+        question = f"where did you feel it? {several}"
+        if presentation.design.detection:  # a threshold block
+            question = "did you feel it? 1 yes, 0 no"
+        prompt = f"[bold]trial {t.trial_index + 1}{of}[/] ({t.phase}) — {question}, Enter (p pause, q abort): "
         while True:
             line = self._read(prompt)
             rt = time.monotonic() - presentation.onset_s
@@ -67,7 +71,8 @@ class TerminalResponder:
             if text == "q":
                 return ABORT
             try:
-                locations = parse_response(text, presentation.design)
+                locations = ((parse_detection(text),) if presentation.design.detection
+                             else parse_response(text, presentation.design))
             except StudyError as exc:
                 self.console.print(f"[red]{exc}[/] — try again")
                 continue

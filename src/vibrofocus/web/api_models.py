@@ -11,7 +11,7 @@ from __future__ import annotations
 from typing import Annotated, Any, Literal
 
 from fastapi import Path
-from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator
+from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
 from ..studies.protocol import REFERENCE_LOCATIONS
@@ -69,20 +69,34 @@ class AnswerIn(_Strict):
 
     ``answer_id`` is made by the page when the participant answers and sent again
     unchanged on every retry, so that the server can tell a re-send from a new answer.
+    An answer names locations (``response``) or, in a point session, a point on the
+    picture of the arm area (``point_mm``: ``[x, y]`` in the layout frame, mm); whether
+    the point lies in the picture is the store's rule (422 when it does not).
     """
 
     session_id: int = Field(ge=1, le=MAX_ID, strict=True)
     trial_index: int = Field(ge=0, le=MAX_ID, strict=True)
-    response: list[Location] = Field(min_length=1, max_length=N_LOCATIONS)
+    response: list[Location] | None = Field(default=None, min_length=1, max_length=N_LOCATIONS)
+    point_mm: list[Annotated[float, Field(allow_inf_nan=False, ge=-10_000.0, le=10_000.0)]] | None = (
+        Field(default=None, min_length=2, max_length=2))
     rt_s: float = Field(ge=0.0, le=3600.0, allow_inf_nan=False)
     answer_id: str = Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
 
     @field_validator("response")
     @classmethod
-    def _distinct(cls, value: list[int]) -> list[int]:
+    def _distinct(cls, value: list[int] | None) -> list[int] | None:
+        if value is None:
+            return None
         if len(set(value)) != len(value):
             raise ValueError(f"response names a location twice: {value}")
         return sorted(value)
+
+    @model_validator(mode="after")
+    def _one_answer(self) -> "AnswerIn":
+        if (self.response is None) == (self.point_mm is None):
+            raise ValueError("an answer gives either response (locations) or point_mm ([x, y] in mm), not "
+                             + ("both" if self.response is not None else "neither"))
+        return self
 
 
 class RestartIn(_Strict):
@@ -99,6 +113,7 @@ class AnswerReceipt(BaseModel):
     trial_index: int
     answer_id: str
     response: list[int]
+    point_mm: list[float] | None = None
     committed: bool = True
     duplicate: bool = False
     next_trial_index: int | None
@@ -138,6 +153,9 @@ class SessionIn(_Strict):
     allow_calibration_errors: bool = False
     # The level rule of the stimuli (vibrofocus.studies.protocol.level_options); None: the paper's.
     levels: Literal["paper", "equal-peak"] | None = None
+    # The participant answers a point on a picture of the arm area (study 1 only): the
+    # calibration's layout is the picture (docs/web.md, point answers).
+    point: bool = False
 
 
 class AnalysisIn(_Strict):

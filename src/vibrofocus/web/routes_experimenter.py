@@ -532,6 +532,12 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         config["calibration_errors_accepted"] = accepted  # the record of the override
     if body.levels is not None:
         config["levels"] = body.levels
+    if body.point:
+        if body.study != 1:
+            raise HTTPException(422, detail="A point answer stands for one location: plan it as study 1.")
+        config["point"] = True
+        if body.calibration_id is not None:  # the picture the participant points on: this arm's layout
+            config["layout"] = web.calibration(body.calibration_id).layout.to_dict()
     seed = body.seed if body.seed is not None else secrets.randbelow(2**31)
     try:
         if body.calibration_id is not None:

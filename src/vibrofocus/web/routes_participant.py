@@ -75,6 +75,7 @@ def _state(web: WebState, session_id: int) -> dict[str, Any]:
         "n_answered": int(info["n_answered"]),
         "error": snap.get("error"),
         "simulated": web.is_simulated(info["participant_id"]),
+        "point": bool((info.get("config") or {}).get("point")),
     }
 
 
@@ -84,7 +85,24 @@ def participant_page(request: Request, session_id: SessionId, key: str = Query("
     web = _web(request)
     web.check_key(session_id, key)
     info = web.session(session_id)
-    return HTMLResponse(render_template("participant.html", session_id=session_id, study=int(info["study"])))
+    config = info.get("config") or {}
+    area = config.get("point_area") if config.get("point") else None
+    return HTMLResponse(render_template("participant.html", session_id=session_id, study=int(info["study"]),
+                                        area=None if area is None else arm_picture(area)))
+
+
+def arm_picture(area: dict[str, Any]) -> dict[str, Any]:
+    """What the page's picture of the arm area draws (an SVG in mm; its y axis points down,
+    so the layout's y, toward the wrist, is drawn as -y), from a session's point area."""
+    (x0, x1), (y0, y1) = area["x_mm"], area["y_mm"]
+    return {
+        "view_box": f"{x0:g} {-y1:g} {x1 - x0:g} {y1 - y0:g}",
+        "x0": x0, "x1": x1, "y0": y0, "y1": y1, "width": x1 - x0, "height": y1 - y0,
+        "locations": [(int(n), float(x), -float(y)) for n, (x, y) in sorted(area["locations_mm"].items(),
+                                                                            key=lambda kv: int(kv[0]))],
+        "actuators": [(float(x), -float(y)) for x, y in area["actuators_mm"]],
+        "unit": max(x1 - x0, y1 - y0) / 100.0,  # 1 % of the picture, mm: strokes and radii scale with it
+    }
 
 
 @router.get("/api/participant/{session_id}/state")
@@ -193,8 +211,9 @@ def participant_answer(
         raise HTTPException(409, detail=SIMULATED_MESSAGE)
     try:
         receipt = web.store.record_answer(
-            session_id, body.trial_index, list(body.response), float(body.rt_s),
+            session_id, body.trial_index, None if body.response is None else list(body.response), float(body.rt_s),
             answer_id=body.answer_id, require_presented=True,
+            point_mm=None if body.point_mm is None else [float(v) for v in body.point_mm],
         )
     except AnswerRefused as exc:
         status, words = _REFUSALS.get(exc.reason, (409, None))
@@ -206,5 +225,6 @@ def participant_answer(
     return AnswerReceipt(
         session_id=session_id, trial_index=receipt.trial_index, answer_id=receipt.answer_id,
         response=list(receipt.response), duplicate=receipt.duplicate,
+        point_mm=None if receipt.point_mm is None else list(receipt.point_mm),
         next_trial_index=None if nxt is None else nxt.trial_index,
     )

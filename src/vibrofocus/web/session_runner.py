@@ -289,7 +289,8 @@ class SessionRunner:
             if receipt is None:  # told by trial index only: the store has the answer
                 receipt = next(a for a in self.store.answers(self.session_id) if a.trial_index == index)
             # Already committed: the engine's commit finds the same answer_id and stores nothing new.
-            return Response(receipt.response, receipt.rt_s, answer_id=receipt.answer_id)
+            return Response(receipt.response, receipt.rt_s, answer_id=receipt.answer_id,
+                            point_mm=getattr(receipt, "point_mm", None))
         if self._stopping:
             return STOP
         return Again("trial_restarted", "the participant page did not see the stimulus onset (reloaded)")

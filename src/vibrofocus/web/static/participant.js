@@ -15,6 +15,10 @@
   const pendingKey = `vibrofocus.pending.${sessionId}`;
   const $ = (id) => document.getElementById(id);
   const cells = Array.from(document.querySelectorAll(".cell"));
+  // A point session: the picture of the arm area (an SVG in mm, y drawn downward).
+  const arm = $("arm");
+  const area = arm ? ["x0", "x1", "y0", "y1"].reduce((o, k) => ({ ...o, [k]: Number(arm.dataset[k]) }), {}) : null;
+  let cursor = null;          // [x, y] mm of the keyboard cursor (layout frame), null until shown
 
   let seq = -1;               // last state seq seen (long-poll cursor)
   let state = null;           // last state object from the server
@@ -220,7 +224,7 @@
     body.dataset.state = next.state;
     body.dataset.trial = next.trial_index ?? "";
     const newTrial = !previous || previous.trial_index !== next.trial_index;
-    if (newTrial) { selected = new Set(); }
+    if (newTrial) { selected = new Set(); if (arm) { cursor = null; showCursor(); arm.classList.remove("chosen"); } }
     if (next.state === "cue" && audioReady) {
       cueSeenFor = next.trial_index;
       const tag = `${next.trial_index}:${next.seq}`;
@@ -260,7 +264,7 @@
     const waitingForServer = sentFor === next.trial_index && confirmedFor !== next.trial_index;
     $("confirm").hidden = !(multi && answerable);
     for (const c of cells) c.classList.toggle("selected", selected.has(Number(c.dataset.loc)));
-    $("hint").textContent = "";
+    if (!arm) $("hint").textContent = "";
 
     if (refusedHere && ["respond", "taken"].includes(next.state)) { setMessage(refused.text); return; }
     if (ownPending().length && (!online || stalled)) {
@@ -286,6 +290,7 @@
         if (restart) setMessage("Get ready");
         else if (waitingForServer) setMessage("Sending…");
         else if (confirmedFor === next.trial_index) showTaken();
+        else if (arm) setMessage("Where did you feel it? Point at the place.");
         else {
           setMessage(multi ? "Where did you feel it? Choose every location you felt (one or several), then Confirm."
                            : "Where did you feel it most?");
@@ -316,6 +321,7 @@
   let pointerAnchor = null;   // where the pointer was when the grid became answerable
   function startAnswering() {
     respondSince = performance.now();
+    if (arm) { cursor = null; showCursor(); arm.classList.remove("chosen"); }
     if (document.activeElement && document.activeElement.classList.contains("cell")) document.activeElement.blur();
     body.classList.remove("pointer-moved");
     pointerAnchor = pointerAt;
@@ -364,6 +370,54 @@
     flushPending();
   }
 
+  // ---------------------------------------------------------------- point answers
+  const clamp = (v, lo, hi) => Math.min(Math.max(v, lo), hi);
+  function showCursor() {
+    const g = $("cursor");
+    if (!g) return;
+    g.hidden = cursor === null;
+    if (cursor !== null) g.setAttribute("transform", `translate(${cursor[0]} ${-cursor[1]})`);
+    $("hint").textContent = cursor === null ? "" : `x ${cursor[0].toFixed(0)} mm, y ${cursor[1].toFixed(0)} mm`;
+  }
+  function submitPoint(point) {
+    if (!canAnswer()) return;
+    const rt = (performance.now() - respondSince) / 1000;
+    const answer = {
+      session_id: sessionId,
+      trial_index: state.trial_index,
+      point_mm: [Math.round(point[0] * 100) / 100, Math.round(point[1] * 100) / 100],
+      rt_s: Math.round(rt * 1e4) / 1e4,
+      answer_id: newAnswerId(),
+    };
+    ownIds.add(answer.answer_id);
+    savePending([...loadPending(), answer]);
+    sentFor = state.trial_index;
+    cursor = answer.point_mm;
+    showCursor();
+    arm.classList.add("chosen");
+    body.classList.remove("answerable");
+    setMessage("Sending…");
+    flushPending();
+  }
+  if (arm) {
+    arm.addEventListener("pointerdown", (ev) => {
+      if (!audioReady || !canAnswer()) return;
+      ev.preventDefault();
+      // The screen point in the picture's own units (mm), whatever its scale on this screen.
+      const pt = arm.createSVGPoint();
+      pt.x = ev.clientX; pt.y = ev.clientY;
+      const p = pt.matrixTransform(arm.getScreenCTM().inverse());
+      submitPoint([clamp(p.x, area.x0, area.x1), clamp(-p.y, area.y0, area.y1)]);
+    });
+  }
+  function moveCursor(key, big) {
+    if (cursor === null) cursor = [(area.x0 + area.x1) / 2, (area.y0 + area.y1) / 2];
+    const step = big ? 5 : 1;
+    const d = { ArrowLeft: [-step, 0], ArrowRight: [step, 0], ArrowUp: [0, step], ArrowDown: [0, -step] }[key];
+    if (d) cursor = [clamp(cursor[0] + d[0], area.x0, area.x1), clamp(cursor[1] + d[1], area.y0, area.y1)];
+    showCursor();
+  }
+
   function choose(loc) {
     if (!canAnswer()) return;
     if (!multi) { submit([loc]); return; }
@@ -381,6 +435,18 @@
     if ((ev.key === "Enter" || ev.key === " ") && onButton) return;
     if (ev.key === "Enter" || ev.key === " ") ev.preventDefault();
     if (!audioReady) return;
+    if (arm) {
+      // A point session: arrow keys move the cursor (Shift: 5 mm steps), Enter answers at it.
+      if (ev.key.startsWith("Arrow")) {
+        ev.preventDefault();
+        if (canAnswer()) moveCursor(ev.key, ev.shiftKey);
+      } else if (ev.key === "Enter" && cursor !== null) {
+        submitPoint(cursor);
+      } else if (ev.key === "Enter" && canAnswer()) {
+        moveCursor("", false);  // the first Enter shows the cursor at the centre; the next answers
+      }
+      return;
+    }
     // Top-row digits and the keypad with NumLock give ev.key "1".."9"; the keypad
     // without NumLock gives navigation keys, so its ev.code is read as well.
     let loc = null;
