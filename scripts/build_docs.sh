@@ -19,6 +19,10 @@ cd "$(dirname "$0")/.."
 root=$(pwd)
 python=${PYTHON:-.venv/bin/python}
 case "$python" in /*) ;; */*) python="$root/$python" ;; esac
+if ! "$python" -c "import sphinx, sphinx_gallery, numpydoc, myst_parser, pydata_sphinx_theme" 2>/dev/null; then
+    echo "error: building the docs needs the docs extra: $python -m pip install -e '.[docs]'" >&2
+    exit 2
+fi
 if [ -n "${DOCS_OUT:-}" ]; then
     work=$DOCS_OUT
 else

@@ -290,6 +290,8 @@ def broken_links(page: Path, text: str | None = None) -> list[str]:
             continue  # http(s), mailto: no network here
         path, _, anchor = target.partition("#")
         if path and path in generated:
+            # A page only the build makes is a broken link on GitHub and in a checkout.
+            broken.append(f"{target}: made only by the docs build; name the command instead")
             continue
         dest = (page.parent / path).resolve() if path else page
         if not dest.exists():
