@@ -203,3 +203,47 @@ def test_simulate_study_refuses_a_trials_csv_folder_that_does_not_exist_before_s
     message = " ".join(result.output.split())
     assert "--trials-csv" in message and "does not exist" in message
     assert not db.exists()  # refused before anything was simulated or stored
+
+
+def test_keys_typed_ahead_at_a_terminal_are_not_the_next_trials_answers(tmp_path, calibration_file):
+    # Issue 54, item 2b: at a real terminal (a pty), "5⏎5⏎5⏎" typed once is one answer.
+    import pty
+    import select
+
+    db = tmp_path / "typed.db"
+    main, child_tty = pty.openpty()
+    env = dict(os.environ, PYTHONDONTWRITEBYTECODE="1", COLUMNS="200", TERM="dumb")
+    proc = subprocess.Popen([sys.executable, "-m", "vibrofocus", "study", "run", "--participant", "p-real",
+                             "--study", "1", "--db", str(db), "--calibration", str(calibration_file), "--seed", "3",
+                             "--no-beep"], stdin=child_tty, stdout=child_tty, stderr=child_tty, env=env)
+    os.close(child_tty)
+    seen = b""
+
+    def wait_for(text: bytes, timeout_s: float = 600.0) -> None:
+        nonlocal seen
+        deadline = time.monotonic() + timeout_s
+        while text not in seen:
+            assert time.monotonic() < deadline and proc.poll() is None, seen[-2000:]
+            ready, _, _ = select.select([main], [], [], 1.0)
+            if ready:
+                try:
+                    seen += os.read(main, 4096)
+                except OSError:
+                    break
+
+    try:
+        wait_for(b"trial 1/")
+        os.write(main, b"5\n5\n5\n")  # typed at once: the first prompt takes the first line
+        wait_for(b"trial 2/")
+        time.sleep(1.0)  # whatever was typed ahead has reached the terminal's buffer
+        os.write(main, b"q\n")
+        assert proc.wait(timeout=120) == 0, seen[-2000:]
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+        os.close(main)
+    assert b"trial 3/" not in seen, seen[-2000:]
+    with StudyStore(db) as store:
+        (session,) = store.sessions("p-real")
+        assert [a.trial_index for a in store.answers(session.session_id)] == [0]
+        assert session.status == "aborted"

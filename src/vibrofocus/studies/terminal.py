@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import sys
 import time
 from collections.abc import Callable
 from typing import Any
@@ -35,7 +36,9 @@ class TerminalResponder:
     Notes
     -----
     The response time runs from the stimulus onset to the Enter key of a valid answer,
-    s. An invalid answer is explained and asked again; it is never stored.
+    s. An invalid answer is explained and asked again; it is never stored. Keys typed
+    before a prompt appears (ahead, during the stimulus) are discarded when the keypad is
+    a terminal, so one line typed three times is one answer, not three trials' answers.
     """
 
     def __init__(self, console: Any = None, input_fn: Callable[[str], str] | None = None, n_trials: int | None = None):
@@ -48,6 +51,8 @@ class TerminalResponder:
         self.n_trials = n_trials
 
     def _read(self, prompt: str) -> str:
+        if self.input_fn is input:
+            _discard_typed_ahead()
         self.console.print(prompt, end="")
         try:
             return self.input_fn("")
@@ -81,3 +86,16 @@ class TerminalResponder:
     def wait_resume(self) -> bool:
         line = self._read("[yellow]paused[/] — Enter to resume (the trial is played again), q to abort: ")
         return line.strip().lower() != "q"
+
+
+def _discard_typed_ahead() -> None:
+    """Drop what was typed at the terminal and not read yet (POSIX terminals; nothing elsewhere)."""
+    try:
+        import termios
+    except ImportError:  # Windows: its console has no line buffer to flush here
+        return
+    try:
+        if sys.stdin is not None and sys.stdin.isatty():
+            termios.tcflush(sys.stdin.fileno(), termios.TCIFLUSH)
+    except (OSError, ValueError, termios.error):
+        pass  # not a terminal after all (a closed or redirected stdin): nothing typed ahead to drop
