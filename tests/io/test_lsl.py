@@ -132,3 +132,18 @@ def test_the_stream_info_says_who_made_it_and_lists_the_codes(lsl_config):
         codes.append(entry.child_value("name"))
         entry = entry.next_sibling()
     assert codes == list(CODES)
+
+
+@pytest.mark.parametrize("how", ["database", "given", "random"])
+def test_the_stream_says_where_its_source_id_came_from(lsl_config, tmp_path, how):
+    # Issue 54, item 6: an id derived from the database's path said "given".
+    if how == "database":
+        source_id = stable_source_id(tmp_path / f"study-{uuid.uuid4().hex}.db")
+    else:
+        source_id = f"vibrofocus-test-{uuid.uuid4().hex}" if how == "given" else None
+    with MarkerOutlet(source_id=source_id) as outlet:
+        inlet, _ = _inlet(outlet.source_id)
+        said = inlet.info(timeout=30.0).desc().child("vibrofocus").child_value("source_id_from")
+    expected = {"database": f"a hash of this machine's name and the file {tmp_path.resolve()}",
+                "given": "given (--lsl-source-id)", "random": "random (this process)"}[how]
+    assert said.startswith(expected), said

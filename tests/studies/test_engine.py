@@ -403,3 +403,24 @@ def test_a_stimulus_over_the_rigs_limits_is_made_again_regularized(store, calibr
     plain = calibration_renderer(cal)
     StudyEngine(store, _small(store), make_rig("simulated", seed=3), renderer=plain)
     assert plain.redesigned == {}
+
+
+def test_a_trial_presented_again_says_replay_in_its_onset_marker(store, rig, renderer):
+    # Issue 54, item 6: a pause (and, below, a run killed mid-trial) presents a trial again;
+    # its second onset marker says so, so a recording keeps one onset per answer.
+    from vibrofocus.studies.markers import sending_markers
+
+    sid = store.create_session("p1", 1, seed=6, config={"repetitions": 1, "n_training": 0})
+    onsets = []
+
+    def sink(marker, host_time_s):
+        if marker["event"] == "stimulus_onset":
+            onsets.append((marker["trial_index"], marker["replay"]))
+
+    with sending_markers(sink):
+        StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([3, PAUSE, 4, ABORT]))
+        # Aborted at trial 2's answer; then a run killed after trial 2's stimulus, before
+        # its answer (presented here without one); the resumed run plays it a third time.
+        StudyEngine(store, sid, rig, renderer=renderer).present(store.planned_trials(sid)[2])
+        StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([5, ABORT]))
+    assert onsets == [(0, False), (1, False), (1, True), (2, False), (2, True), (2, True), (3, False)]

@@ -55,7 +55,9 @@ DETAIL_STREAM_TYPE = "MarkerDetails"
 #: ``main`` or ``training``, ``<N>``: the study, 1 or 2).
 CODES: dict[str, str] = {
     "cue": "the cue (beep) of a trial",
-    "tap/<method>/<phase>/study<N>": "the stimulus onset: the drive's first sample at the actuators",
+    "tap/<method>/<phase>/study<N>": "the stimulus onset: the drive's first sample at the actuators (the detail "
+                                     "record's replay is true for a trial presented again: resumed, or after a pause)",
+    "tap/<method>": "a live tap's onset (serve-osc --lsl; no phase or study)",
     "dry/<method>/<phase>/study<N>": "a dry run's stimulus onset (nothing is played)",
     "answer": "the participant's answer (the locations are in the detail stream)",
 }
@@ -65,6 +67,9 @@ CODES: dict[str, str] = {
 DETAIL_GRACE_S = 5.0
 
 _TOKEN = re.compile(r"[^A-Za-z0-9_.+-]+")
+#: Where the source ids this process derived from a file came from (:func:`stable_source_id`),
+#: for the streams' ``source_id_from``.
+_DERIVED: dict[str, str] = {}
 _SOURCE_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.:+-]{0,99}")
 
 
@@ -145,9 +150,12 @@ def stable_source_id(database: str | os.PathLike[str], study: int | None = None)
     -------
     str
     """
-    where = f"{socket.gethostname()}\0{Path(os.fspath(database)).expanduser().resolve()}"
+    path = Path(os.fspath(database)).expanduser().resolve()
+    where = f"{socket.gethostname()}\0{path}"
     digest = hashlib.sha256(where.encode("utf-8", "surrogateescape")).hexdigest()[:16]
-    return f"vibrofocus-{digest}" + (f"-study{int(study)}" if study is not None else "")
+    source_id = f"vibrofocus-{digest}" + (f"-study{int(study)}" if study is not None else "")
+    _DERIVED[source_id] = f"a hash of this machine's name and the file {path}"
+    return source_id
 
 
 def import_pylsl() -> Any:
@@ -242,7 +250,8 @@ class MarkerOutlet:
         self.source_id = (check_source_id(source_id, "source_id") if given
                           else f"vibrofocus-{os.getpid()}-{uuid.uuid4().hex[:8]}")
         detail_name = (DETAIL_STREAM_NAME if name == STREAM_NAME else f"{name}-detail") if detail else None
-        origin = "given" if given else "random (this process)"
+        origin = (_DERIVED.get(self.source_id, "given (--lsl-source-id)") if given
+                  else "random (this process)")
         info = pylsl.StreamInfo(name, STREAM_TYPE, 1, pylsl.IRREGULAR_RATE, pylsl.cf_string, self.source_id)
         _describe(info, channel=("code", "Marker"), source=origin, detail=detail_name)
         self._outlet = pylsl.StreamOutlet(info)

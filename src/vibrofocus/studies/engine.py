@@ -20,6 +20,7 @@ import sys
 import threading
 import time
 import uuid
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol, Union
@@ -668,6 +669,7 @@ class StudyEngine:
         limit_v: float = DRIVE_LIMIT_V,
     ) -> None:
         self.store = store
+        self._onset_counts: Counter | None = None  # stimulus onsets logged per trial index
         info = store.session(session_id)  # unknown session -> StudyError now, not mid-run
         self.session_id = info.session_id
         self.participant_id = info.participant_id
@@ -758,6 +760,19 @@ class StudyEngine:
             return staircase.start_db
         return staircase_levels(self.store, self.session_id)[trial.trial_index - self.design.n_training]
 
+    def _presented_before(self, trial: PlannedTrial) -> bool:
+        """Whether this session logged more than one stimulus onset of ``trial`` (the one just logged included).
+
+        The log is read once per engine (a resumed run's earlier onsets), then counted here.
+        """
+        if self._onset_counts is None:
+            self._onset_counts = Counter(
+                e.payload.get("trial_index") for e in self.store.events(self.session_id, kind="stimulus_onset")
+                if isinstance(e.payload, dict))
+        else:
+            self._onset_counts[trial.trial_index] += 1
+        return self._onset_counts[trial.trial_index] > 1
+
     def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
         self.store.log_event(self.session_id, kind, {"trial_index": trial.trial_index, **fields})
 
@@ -803,9 +818,11 @@ class StudyEngine:
         latency = getattr(played, "latency_s", None)
         latency = float(latency) if isinstance(latency, (int, float)) and np.isfinite(latency) else None
         # The marker at the drive's first sample leaving the device: the hand-over plus the
-        # output latency where the rig knows it.
+        # output latency where the rig knows it. A trial presented before (a resumed run,
+        # a pause) says so, so that a recording keeps one onset per answer.
         self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=stim is not None,
-                     onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency)
+                     onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency,
+                     replay=self._presented_before(trial))
         return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency)
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
