@@ -42,6 +42,10 @@ def export_command(
                                        "InstitutionalDepartmentName (a lab's dataset_description.json reads too). "
                                        "--author, --license and --institution override it; what the dataset "
                                        "holds already is kept unless given."),
+    session_label: list[str] = typer.Option(None, "--session-label", show_default=False, metavar="ID=LABEL",
+                                            help="With --bids: file study session ID (the database's id) as "
+                                                 "ses-LABEL, beside the lab's own sessions (e.g. 3=01); repeat "
+                                                 "for each. Others keep their id."),
 ) -> None:
     """Export the localization studies as a BIDS behavioural dataset, or a calibration as a SOFA file.
 
@@ -96,8 +100,29 @@ def export_command(
         meta = read_bids_metadata_file(metadata) if metadata is not None else {}
         meta.update({k: v for k, v in (("Authors", list(author) if author else None), ("License", license_),
                                        ("InstitutionName", institution)) if v is not None})
-        counts = export_bids(source, bids, force=force, metadata=meta)
+        counts = export_bids(source, bids, force=force, metadata=meta,
+                             session_labels=_session_labels(session_label or []))
         into = "added to the existing BIDS dataset" if counts["merged"] else "to the BIDS dataset"
         typer.echo(f"wrote {counts['events']} trials of {counts['participants']} participant(s) {into} {bids}")
         if counts["kept"]:
             typer.echo(f"kept the dataset's own {' and '.join(counts['kept'])}")
+            given = [option for option, value in (("--author", author), ("--license", license_)) if value]
+            if "dataset_description.json" in counts["kept"] and given:
+                # vibrofocus never edits a file it did not write: the lab's description stays as it is.
+                typer.echo(f"note: {' and '.join(given)} not applied: the dataset's dataset_description.json is "
+                           "its own (vibrofocus did not write it); add them there")
+
+
+def _session_labels(pairs: list[str]) -> dict[int, str]:
+    """``--session-label ID=LABEL`` options as {id: label} (checked by export_bids)."""
+    from ..errors import ValidationError
+
+    out: dict[int, str] = {}
+    for pair in pairs:
+        key, sep, label = pair.partition("=")
+        if not sep or not key.strip().isdigit():
+            raise ValidationError(f"--session-label {pair!r}: give the session's database id and its label, e.g. 3=01")
+        if int(key) in out:
+            raise ValidationError(f"--session-label names session {int(key)} twice")
+        out[int(key)] = label.strip()
+    return out

@@ -42,7 +42,11 @@ from typing import Any
 
 from ..errors import OutputError
 
-__all__ = ["MANIFEST_NAME", "merge_into_dataset", "merge_participants_tsv", "merge_participants_json",
+#: Columns of participants.tsv that BIDS defines and a lab describes in its own words: a
+#: merge keeps the lab's description of these.
+LAB_DESCRIBED = frozenset({"participant_id"})
+
+__all__ = ["LAB_DESCRIBED", "MANIFEST_NAME", "merge_into_dataset", "merge_participants_tsv", "merge_participants_json",
            "read_manifest", "text_sha256", "write_manifest"]
 
 #: The manifest of the files vibrofocus wrote into a dataset (relative path -> SHA-256).
@@ -182,8 +186,9 @@ def merge_participants_json(existing: str, columns: Mapping[str, Any]) -> str | 
     Returns
     -------
     str or None
-        The lab's keys kept (in their order), vibrofocus's set; None when ``existing``
-        is not a JSON object.
+        The lab's keys kept (in their order), vibrofocus's set, except those of
+        :data:`LAB_DESCRIBED` that the lab describes (its words stay); None when
+        ``existing`` is not a JSON object.
     """
     try:
         data = json.loads(existing)
@@ -191,7 +196,9 @@ def merge_participants_json(existing: str, columns: Mapping[str, Any]) -> str | 
         return None
     if not isinstance(data, dict):
         return None
-    data.update(columns)
+    # participant_id is BIDS's column, which the lab describes its own way; vibrofocus's
+    # own columns (source_id, simulated) get vibrofocus's current description.
+    data.update({k: v for k, v in columns.items() if k not in LAB_DESCRIBED or k not in data})
     text = json.dumps(data, indent=2) + "\n"
     return text.replace("\n", "\r\n") if "\r\n" in existing else text  # the file's line endings stay
 

@@ -9,12 +9,14 @@ session, and writes them.
 from __future__ import annotations
 
 import os
+import re
 from collections import defaultdict
+from collections.abc import Mapping
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from ..errors import StudyError
+from ..errors import StudyError, ValidationError
 from ..io.bids import (BIDS_VERSION, EVENT_COLUMN_DESCRIPTIONS, METADATA_KEYS, TASK_INFO, TASKS, bids_label,
                        check_bids_metadata, levels_from_data, read_bids_metadata, write_bids_dataset)
 from ..io.responses import format_response
@@ -127,7 +129,8 @@ def _session_key(row: dict[str, Any]) -> int | None:
 
 
 def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force: bool = False,
-                metadata: dict[str, Any] | None = None) -> dict[str, Any]:
+                metadata: dict[str, Any] | None = None,
+                session_labels: Mapping[int, str] | None = None) -> dict[str, Any]:
     """Write a study database or a trials CSV as a BIDS behavioural dataset, or add it to one.
 
     One ``sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-localization<study>_events.tsv``
@@ -153,6 +156,11 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         ``InstitutionName``, ``InstitutionAddress``, ``InstitutionalDepartmentName`` for
         every events sidecar. What the dataset at ``out_dir`` already holds of these is
         kept unless given here, so a re-export never drops it.
+    session_labels : mapping of int to str, optional
+        The ``ses-`` label of a study session (database id -> label), to file the
+        behaviour beside the lab's own sessions (``{3: "01"}``: session 3 is
+        ``ses-01``); a session not named keeps its id. Labels are BIDS labels (ASCII
+        letters and digits); two sessions of one participant and study may not share one.
 
     Returns
     -------
@@ -201,9 +209,17 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         if clash:
             raise StudyError(f"participants {clash[0]!r} and {pid!r} would both be sub-{label} in BIDS")
         labels[pid] = label
+    relabel = _check_session_labels(session_labels)
     grouped: dict[tuple[str, int, int | None], list[dict[str, Any]]] = defaultdict(list)
     for row in rows:
         grouped[(row["participant"], int(row["study"]), _session_key(row))].append(row)
+    named: dict[tuple[str, int, str], int] = {}
+    for pid, study, session in grouped:
+        if session is not None and session in relabel:
+            other = named.setdefault((pid, study, relabel[session]), session)
+            if other != session:
+                raise ValidationError(f"sessions {other} and {session} of participant {pid!r}, study {study}, would "
+                                      f"both be ses-{relabel[session]}: give each its own label")
     institution = {k: v for k, v in meta.items() if METADATA_KEYS[k][0] == "events"}
     runs = []
     for (pid, study, session), trials in grouped.items():
@@ -232,7 +248,8 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
         if _ONSET_NOTE[clock]:
             columns["onset"] = {**EVENT_COLUMN_DESCRIPTIONS["onset"], "Description": _ONSET_NOTE[clock]}
         versions = sorted({str(i["SoftwareVersion"]) for i in infos if i.get("SoftwareVersion")})
-        runs.append({"label": labels[pid], "study": study, "session": session, "events": events, "sidecar": {
+        runs.append({"label": labels[pid], "study": study, "session": relabel.get(session, session) if session
+                     is not None else None, "events": events, "sidecar": {
             **columns, **TASK_INFO[study],
             # The software that presented the stimuli: the recording's vibrofocus.
             "StimulusPresentation": {"SoftwareName": "vibrofocus",
@@ -279,3 +296,17 @@ def _dataset_has_simulated(root: Path) -> bool:
             return any(row.get("simulated") == "true" for row in csv.DictReader(fh, delimiter="\t"))
     except (OSError, UnicodeDecodeError, csv.Error):
         return False
+
+
+def _check_session_labels(session_labels: Mapping[int, str] | None) -> dict[int, str]:
+    """``session_labels`` checked: database ids to BIDS labels (ASCII letters and digits)."""
+    out: dict[int, str] = {}
+    for key, label in (session_labels or {}).items():
+        if isinstance(key, bool) or not isinstance(key, int) or key < 1:
+            raise ValidationError(f"a session label names a study session by its database id (1, 2, ...), got "
+                                  f"{key!r}")
+        if not isinstance(label, str) or not re.fullmatch(r"[0-9A-Za-z]+", label):
+            raise ValidationError(f"ses- label {label!r} of session {key}: BIDS labels are ASCII letters and digits "
+                                  "only (e.g. 01)")
+        out[key] = label
+    return out
