@@ -49,7 +49,7 @@ ALLOWED = {
         "use (importing vibrofocus.skin loads no rig: test_import_nesting)",
     ("vibrofocus.studies.bids", "vibrofocus.simulation.perception"):
         "the BIDS sidecars name the perceptual model that answered for simulated participants",
-    ("vibrofocus.studies.storage", "vibrofocus.simulation.perception"):
+    ("vibrofocus.studies.store_events", "vibrofocus.simulation.perception"):
         "a simulated session stored before sessions named their model is labelled with model v3, its only one then",
     ("vibrofocus.analysis.report", "vibrofocus.simulation.perception"):
         "report.json names the perceptual model (label, version) that answered for simulated participants; "
