@@ -35,8 +35,9 @@ FLOORS = (
     ("calibration",),                                         # measures on a rig, fits the skin, designs
     ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine
+    ("demo",),                                                # the demo's parts: taps played, figures, frontier
     ("workflows",),                                           # the lab's workflows, under every front-end
-    ("demo", "web", "psychopy"),                              # the two applications; taps in PsychoPy
+    ("web", "psychopy"),                                      # the web app; taps in PsychoPy
     ("cli",),                                                 # the command line
     ("__main__",),                                            # python -m vibrofocus
 )
