@@ -110,6 +110,19 @@ def run_session(engine: Any, responder: Any, *, pace_s: float = 0.0, progress: P
 def first_unfinished_block(db: Path, participant_id: str, protocol: Any) -> int:
     """The index of the participant's first unfinished block of a protocol (read only).
 
+    Parameters
+    ----------
+    db : Path
+        The study database (a missing file: no block is finished).
+    participant_id : str
+        The participant.
+    protocol : StudyProtocol
+        The protocol whose blocks run in order.
+
+    Returns
+    -------
+    int
+
     Raises
     ------
     StudyError
