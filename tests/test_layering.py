@@ -35,8 +35,9 @@ FLOORS = (
     ("calibration",),                                         # measures on a rig, fits the skin, designs
     ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine
+    ("demo",),                                                # the demo's parts: taps played, figures, frontier
     ("workflows",),                                           # the lab's workflows, under every front-end
-    ("demo", "web", "psychopy"),                              # the two applications; taps in PsychoPy
+    ("web", "psychopy"),                                      # the web app; taps in PsychoPy
     ("cli",),                                                 # the command line
     ("__main__",),                                            # python -m vibrofocus
 )
@@ -49,7 +50,7 @@ ALLOWED = {
         "use (importing vibrofocus.skin loads no rig: test_import_nesting)",
     ("vibrofocus.studies.bids", "vibrofocus.simulation.perception"):
         "the BIDS sidecars name the perceptual model that answered for simulated participants",
-    ("vibrofocus.studies.storage", "vibrofocus.simulation.perception"):
+    ("vibrofocus.studies.store_events", "vibrofocus.simulation.perception"):
         "a simulated session stored before sessions named their model is labelled with model v3, its only one then",
     ("vibrofocus.analysis.report", "vibrofocus.simulation.perception"):
         "report.json names the perceptual model (label, version) that answered for simulated participants; "

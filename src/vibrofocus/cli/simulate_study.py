@@ -70,113 +70,65 @@ def simulate_study(
     """
     with user_errors():
         from rich.console import Console
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
-        from rich.table import Table
 
-        from ..studies.markers import lsl_markers
-        from ..simulation.participants import MODEL_NOTICE
-        from ..simulation.simulate import simulate_studies, summarize_simulation
-
-        from .._atomic import TRIALS_CSV, allow_overwrite, check_writable, output_error, protect
-        from ..io.calibration_nc import estimate_calibration_bytes
-        from ..layout import ArrayLayout
+        from .._atomic import allow_overwrite
+        from .. import workflows
 
         allow_overwrite(force)
-        from ..studies.protocol import level_options
-
-        the_protocol = None
-        if protocol is not None:  # a bad file: one error line before anything is created
-            from ..errors import StudyError
-            from ..studies.protocol_files import load_protocol
-
-            if methods is not None or levels is not None:
-                raise StudyError("--protocol names the methods and levels of its blocks: leave out --methods and "
-                                 "--levels")
-            the_protocol = load_protocol(protocol)
-            the_protocol.check_runnable()
-            protect(protocol, "protocol file")
-            from ..simulation.simulate import check_protocol_levels
-
-            check_protocol_levels(the_protocol, seed, skin)  # a level over the drive limit: before anything
-        if levels is not None:
-            level_options(levels, 10.0)  # a bad rule: one error line before anything is created
-        from ..simulation.hypotheses import hypothesis as find_hypothesis
-
-        chosen_h = find_hypothesis(hypothesis)  # an unknown name: one error line, nothing created
-        chosen = None
-        if methods is not None:  # checked now, before anything is created
-            from ..studies.protocol import StudyDesign
-
-            chosen = StudyDesign(methods=tuple(m.strip() for m in methods.split(",") if m.strip())).methods
         source_id = lsl_source(lsl, lsl_source_id, db)  # a bad id: one error line before anything is created
-        if lsl:  # no pylsl: one error line before anything is created
-            from ..io.lsl import import_pylsl
+        with SimulationProgress(Console(stderr=True), quiet=quiet, skin=skin) as shown:
+            workflows.simulate_study(db, participants=participants, seed=seed, pace_s=pace, trials_csv=trials_csv,
+                calibration_dir=calibration_dir, skin=skin, methods=methods, hypothesis=hypothesis, levels=levels,
+                protocol=protocol, lsl_source_id=source_id, lsl_wait_s=lsl_wait, progress=shown)
 
-            import_pylsl()
-        if trials_csv is not None and not trials_csv.parent.is_dir():
-            # Checked first: the simulation takes minutes and the file is written last.
-            from ..errors import ValidationError
 
-            raise ValidationError(f"--trials-csv {trials_csv}: the folder {trials_csv.parent} does not exist")
-        # Every output place is checked before the first calibration: a read-only folder,
-        # a full disk or a trials file named like the database is reported now, not after
-        # minutes of simulation (and nothing is created for a refused run).
-        check_writable(db, what="study database")
-        protect(db, "study database")
-        held = 0
-        if db.exists():
-            from ..simulation.simulate import SIMULATED_PREFIX
-            from ..studies import StudyStore
+class SimulationProgress:
+    """The simulation workflow's :class:`~vibrofocus.workflows.Progress` at the terminal: its
+    lines on stderr, a bar of the trials, and the summary tables on stdout."""
 
-            # A foreign file is refused now; an open store protects the calibrations it lists.
-            with StudyStore(db, create=False) as store:
-                held = len({s.participant_id for s in store.sessions()
-                            if s.participant_id.startswith(SIMULATED_PREFIX) and s.config.get("simulation_seed") is not None})
-        if participants is None:
-            participants = held or 3
-        elif participants > held > 0:
-            typer.echo(f"adding simulated participant(s) sim-{held + 1:03d} to sim-{participants:03d}: the database held "
-                       f"{held}", err=True)
-        if trials_csv is not None:
-            check_writable(trials_csv, what="trials file", kind=TRIALS_CSV)
-        cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
-        created = not cal_dir.exists()
-        try:
-            cal_dir.mkdir(parents=True, exist_ok=True)
-        except OSError as exc:
-            raise output_error(exc, cal_dir, "calibration folder") from exc
-        lay = ArrayLayout.reference()
-        try:
-            check_writable(cal_dir / "calibration.nc", what="calibration",
-                           expected_bytes=participants * estimate_calibration_bytes(lay.n_points, lay.n_actuators,
-                                                                                    8, 30_000, 4096))
-        except BaseException:
-            if created:
-                cal_dir.rmdir()
-            raise
-        console = Console(stderr=True)
-        console.print(f"[yellow]{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.[/]")
-        if the_protocol is not None:
-            console.print(f"protocol {the_protocol.name} ({len(the_protocol.blocks)} block(s)) from {protocol}",
-                          markup=False)
-        if source_id is not None:
-            console.print(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {source_id})", markup=False)
-        with lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait), Progress(
-            TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-            console=console, disable=quiet, transient=False,
-        ) as bar:
-            task = bar.add_task("trials", total=None)
+    def __init__(self, console, *, quiet: bool, skin: str):
+        self.console, self.quiet, self.skin = console, quiet, skin
+        self.bar = self.task = None
 
-            def progress(what: str, done: int, total: int) -> None:
-                bar.update(task, description=what, completed=done, total=total)
+    def __enter__(self) -> "SimulationProgress":
+        return self
 
-            result = simulate_studies(
-                db, n_participants=participants, seed=seed, pace_s=pace,
-                calibration_dir=calibration_dir, progress=progress, skin=skin, methods=chosen, levels=levels,
-                hypothesis=chosen_h.name, protocol=the_protocol,
-            )
-        summary = summarize_simulation(db)
-        table = Table(title=f"Simulated participants on the {skin} skin ({chosen_h.label()}): main trials")
+    def __exit__(self, *exc) -> None:
+        self._close()
+
+    def _close(self) -> None:
+        if self.bar is not None:
+            self.bar.stop()
+            self.bar = None
+
+    def step(self, done: int, total: int, message: str) -> None:
+        if self.bar is None:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+
+            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+                                TimeElapsedColumn(), console=self.console, disable=self.quiet, transient=False)
+            self.bar.start()
+            self.task = self.bar.add_task("trials", total=None)
+        self.bar.update(self.task, description=message, completed=done, total=total)
+
+    def note(self, message: str, **details) -> None:
+        if details.get("plain"):
+            typer.echo(message, err=True)
+        elif details.get("notice"):
+            self.console.print(f"[yellow]{message}[/]")
+        elif "summary" in details:
+            self._close()
+            self._tables(details["summary"], details["levels"], details["hypothesis"])
+        else:
+            self.console.print(message, markup=False)
+
+    def _tables(self, summary, levels, chosen_h) -> None:
+        from rich.console import Console
+        from rich.table import Table
+
+        from ._levels import levels_table
+
+        table = Table(title=f"Simulated participants on the {self.skin} skin ({chosen_h.label()}): main trials")
         for col in ("study", "method", "trials", "mean error (mm)", "correct (%)", "locations selected"):
             table.add_column(col, justify="right" if col != "method" else "left")
         for row in summary:
@@ -185,26 +137,11 @@ def simulate_study(
                 f"{100 * row['correct']:.0f}", f"{row['mean_n_selected']:.2f}",
             )
         Console().print(table)
-        import pandas as pd
-
-        from ..analysis.levels import stimulus_levels
-        from ..studies import StudyStore
-        from ._levels import levels_table
-
-        with StudyStore(db) as store:
-            levels = stimulus_levels(pd.DataFrame(store.trial_rows()))
         if levels is not None:
             Console().print(levels_table(levels, title="Stimuli played (main trials, median over participants)"))
-        held_now = result["n_participants"]
-        console.print(
-            f"{result['n_answered']} answers stored in {db} ({result['n_new']} new this run) for {held_now} "
-            f"simulated participant(s)"
-            + (f" ({participants} in this run)." if held_now != participants else ".")
-        )
-        if trials_csv is not None:
-            from ..studies import StudyStore
 
-            with StudyStore(db) as store:
-                n = store.export_trials_csv(trials_csv)
-            console.print(f"wrote {n} trials to {trials_csv}")
-        console.print(f"[yellow]{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.[/]")
+    def judged(self, result) -> None:
+        pass
+
+    def cancelled(self) -> bool:
+        return False

@@ -84,141 +84,51 @@ def run(
     ``p`` then Enter pauses, ``q`` then Enter aborts. Each answer is committed to the
     database before the next trial; running the command again resumes."""
     with user_errors():
-        import secrets
-
         from rich.console import Console
 
-        from ..calibration import load_calibration
-        from ..errors import StudyError
-        from ..rigs import make_rig
-        from ..studies import StudyStore
-        from ..studies.engine import StudyEngine, calibration_renderer, headphone_beep, terminal_beep
-        from ..studies.protocol import StudyDesign
-        from ..studies.markers import lsl_markers
-        from ..studies.terminal import InputEnded, TerminalResponder
-        from .._validation import shorten
+        from ..studies.engine import headphone_beep, terminal_beep
+        from ..studies.terminal import TerminalResponder
+        from ..workflows import run_study_at_terminal
 
         console = Console()
-        the_protocol = None
-        if protocol is not None:  # a bad file: one error line before anything is made or written
-            from .._atomic import protect
-            from ..studies.protocol_files import load_protocol
-
-            if study is not None or levels != "paper":
-                raise StudyError("--protocol names the study and levels of its blocks: leave out --study and --levels")
-            the_protocol = load_protocol(protocol)
-            the_protocol.check_runnable()
-            for b in the_protocol.blocks:  # the terminal's keypad names locations; a point needs a picture
-                if b.response == "point":
-                    raise StudyError(f"{the_protocol.where(f'blocks[{b.index}].response')}: point answers are given on "
-                                     "the web participant page (vibrofocus serve); the terminal's keypad answers "
-                                     "locations only")
-            protect(protocol, "protocol file")
-            study = the_protocol.blocks[0].study
-        elif study is None:
-            raise StudyError("give --study 1 or 2 (the paper's studies), or --protocol FILE")
-        assert study is not None
         check_rig_options(rig, rig_config)
-        source_id = lsl_source(lsl, lsl_source_id, db, study)  # a bad id: refused before the rig is made
-        cal = load_calibration(calibration)
-        if getattr(cal, "participant_id", participant) != participant:
-            raise StudyError(
-                f"calibration {calibration} belongs to participant {cal.participant_id!r}, not {shorten(participant)}"
-            )
-        block_index = 0
-        if the_protocol is not None:
-            # The participant's first unfinished block (read before anything is written).
-            from ..studies.storage import session_protocol
 
-            done: set[int] = set()
-            if db.is_file():
-                with StudyStore(db, create=False) as store:
-                    if any(p.participant_id == participant for p in store.participants()):
-                        for s in store.sessions(participant):
-                            name, b = session_protocol(s.study, s.config)
-                            if name == the_protocol.name and s.finished:
-                                done.add(b)
-                            elif name == the_protocol.name:
-                                done.discard(b)
-            todo = [b.index for b in the_protocol.blocks if b.index not in done]
-            if not todo:
-                raise StudyError(f"{participant} has finished every block of the protocol {the_protocol.name!r} in "
-                                 f"{db}")
-            block_index = todo[0]
-            study = the_protocol.blocks[block_index].study
-            assert study is not None
-            # Every stimulus of the block rendered and its level checked before anything is written.
-            from ..studies.engine import check_drive_levels
-
-            threshold_db = None
-            if the_protocol.blocks[block_index].level_unit == "dB SL":  # on the threshold block's result
-                with StudyStore(db, create=False) as store:
-                    threshold_db = the_protocol.participant_threshold(store, participant, block_index)
-            design0 = the_protocol.design(block_index, threshold_db)
-            check_drive_levels(calibration_renderer(cal, levels=design0.levels), design0,
-                               where=the_protocol.level_where(block_index))
-        # The rig first: a rig that cannot be made (no config, no device) leaves the
-        # database as it was, with no participant or session planned for nothing.
-        the_rig = make_rig(rig, config=rig_config, layout=cal.layout)
-        with lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait) as outlet, the_rig, StudyStore(db) as store:
-            if outlet is not None:
-                console.print(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})",
-                              markup=False)
-            store.add_participant(participant, simulated=False)
-            cid = store.add_calibration(participant, calibration)
-            config: dict = {"rig": rig, "levels": levels}
-            if the_protocol is not None:
-                config = {"rig": rig, **the_protocol.session_config(block_index, threshold_db)}
-            design = StudyDesign.from_config(study, config)
-            renderer = None
-            from ..studies.storage import session_protocol
-
-            mine = (the_protocol.name if the_protocol is not None else f"paper-study{study}", block_index)
-            if not any(not s.finished for s in store.sessions(participant, study=study)
-                       if session_protocol(s.study, s.config) == mine):
-                # A new session: every stimulus is rendered before it is planned, so one
-                # that cannot fit this calibration is refused now, never mid-study.
-                renderer = calibration_renderer(cal, levels=design.levels)
-                renderer.prepare(design.methods, design.locations, rig=the_rig)
-            # Check and create in one transaction: two `study run`s at once get one session.
-            sid, created = store.open_session(
-                participant, study, seed=secrets.randbelow(2**31) if seed is None else seed,
-                calibration_id=cid, config=config, reuse="open",
-            )
-            info = store.session(sid)
-            if not created:
-                renderer = None  # the session's own level rule, from its stored design
-                if info.calibration_id != cid:
-                    raise StudyError(
-                        f"session {info.session_id} of {participant} (study {study}) was started with calibration "
-                        f"{info.calibration_id} ({store.calibration(info.calibration_id).path}); resume it with that file"
-                    )
-                console.print(f"resuming session {sid}: {info.n_answered} of {info.n_trials} trials answered")
-            else:
-                console.print(f"new session {sid} for {participant}, study {study} ({design.levels} levels)"
-                              + ("" if the_protocol is None else
-                                 f", protocol {the_protocol.name} block {block_index + 1} of {len(the_protocol.blocks)}"))
+        def cue(the_rig):
             if not beep:
-                cue = None
-            elif beep_device is not None:
-                cue = headphone_beep(beep_device, rig=the_rig)
-            else:
-                cue = terminal_beep
-            engine = StudyEngine(store, sid, the_rig, cal, cue=cue, renderer=renderer)
-            responder = TerminalResponder(console=console, n_trials=store.session(sid).n_trials)
-            try:
-                summary = engine.run(responder, pace_s=float(info.config.get("pace_s", 0.0) or 0.0))
-            except KeyboardInterrupt:
-                store.set_status(sid, "paused")
-                console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
-                raise typer.Exit(code=130) from None
-            except InputEnded as exc:
-                # Nobody is answering (stdin closed or redirected): pause, never abort.
-                console.print()  # end the prompt's line
-                store.set_status(sid, "paused")
-                info = store.session(sid)
-                raise StudyError(f"{exc}: session {sid} is paused with {info.n_answered} of {info.n_trials} trials "
-                                 "answered; run the same command at a terminal to resume") from None
-            console.print(
-                f"session {sid}: {summary.status}, {summary.n_answered} of {summary.n_trials} trials answered"
-            )
+                return None
+            return headphone_beep(beep_device, rig=the_rig) if beep_device is not None else terminal_beep
+
+        try:
+            run_study_at_terminal(
+                participant, db=db, calibration=calibration, rig=rig, rig_config=rig_config, study=study, seed=seed,
+                levels=levels, protocol=protocol, cue=cue,
+                responder=lambda n_trials: TerminalResponder(console=console, n_trials=n_trials),
+                lsl=lsl, lsl_source=lambda s: lsl_source(lsl, lsl_source_id, db, s), lsl_wait_s=lsl_wait,
+                progress=_Lines(console))
+        except KeyboardInterrupt:
+            console.print("\ninterrupted: every answer so far is saved; run the same command to resume")
+            raise typer.Exit(code=130) from None
+
+
+class _Lines:
+    """The session workflow's :class:`~vibrofocus.workflows.Progress` at the terminal: its lines."""
+
+    def __init__(self, console):
+        self.console = console
+
+    def step(self, done: int, total: int, message: str) -> None:
+        pass
+
+    def note(self, message: str, **details) -> None:
+        if details.get("input_ended"):
+            self.console.print()  # end the prompt's line
+        elif message.startswith("LSL markers"):
+            self.console.print(message, markup=False)
+        else:
+            self.console.print(message)
+
+    def judged(self, result) -> None:
+        pass
+
+    def cancelled(self) -> bool:
+        return False

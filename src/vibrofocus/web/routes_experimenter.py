@@ -540,15 +540,17 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
             config["layout"] = web.calibration(body.calibration_id).layout.to_dict()
     seed = body.seed if body.seed is not None else secrets.randbelow(2**31)
     try:
+        renderer = None
         if body.calibration_id is not None:
             # Every stimulus now: a design that cannot fit this participant is refused when the
             # session is planned, never mid-study.
             from ..studies.protocol import StudyDesign
 
-            design = StudyDesign.from_config(body.study, config)
-            web.bank(body.calibration_id, levels=design.levels).prepare(design.methods, design.locations)
-        with web.db:
-            sid = web.store.create_session(body.participant_id, body.study, seed=seed, calibration_id=body.calibration_id, config=config)
+            renderer = web.bank(body.calibration_id, levels=StudyDesign.from_config(body.study, config).levels)
+        from ..workflows import plan_session
+
+        sid, _ = plan_session(web.store, body.participant_id, body.study, seed=seed,
+                              calibration_id=body.calibration_id, config=config, renderer=renderer, store_lock=web.db)
     except StudyError as exc:
         raise _study_error(exc) from None
     return _session_out(web, sid)

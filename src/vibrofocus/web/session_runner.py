@@ -366,12 +366,14 @@ class SessionRunner:
 
     # ------------------------------------------------------------------ thread
     def _run(self) -> None:
+        from ..workflows import run_session
+
         try:
             # A runner rebuilt for a paused session (a server restart) waits before the
             # engine starts, which would set the session running.
             if self._held() != PAUSE or self.wait_resume() is True:
                 with self._reserved():  # one job on the hardware at a time
-                    summary = self.engine.run(self)
+                    summary = run_session(self.engine, self)
                 if summary.status == "completed":
                     self._set("done", trial_index=None)
                     return

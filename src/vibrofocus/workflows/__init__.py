@@ -12,13 +12,29 @@ demo and psychopy (tests/test_layering.py).
 from __future__ import annotations
 
 from .calibrate import CalibrationOutcome, calibrate_participant, check_calibration_out
+from .demo import DemoOutcome, demo_methods, demo_moving_focus, demo_paper_figures
+from .power import PowerOutcome, study_power
 from .progress import Progress, QuietProgress, WorkflowCancelled
+from .session import first_unfinished_block, plan_session, run_session, run_study_at_terminal
+from .simulate import SimulationOutcome, simulate_study
 
 __all__ = [
     "CalibrationOutcome",
+    "DemoOutcome",
+    "PowerOutcome",
     "Progress",
     "QuietProgress",
+    "SimulationOutcome",
     "WorkflowCancelled",
     "calibrate_participant",
     "check_calibration_out",
+    "demo_methods",
+    "demo_moving_focus",
+    "demo_paper_figures",
+    "first_unfinished_block",
+    "plan_session",
+    "run_session",
+    "run_study_at_terminal",
+    "simulate_study",
+    "study_power",
 ]
