@@ -87,7 +87,7 @@ SRC = CLI.parent
 #: Commands still over the limit, with their code lines now: each may only shrink (one that
 #: reaches the limit leaves the list). Every other command has at most the limit.
 STILL_LONG = {
-    "analyze_command": 82, "export_command": 61, "render_command": 103, "serve": 98,
+    "render_command": 103, "serve": 98,
     "serve_osc": 110,
 }
 

@@ -97,20 +97,15 @@ def analyze_command(
     aborted sessions and dry runs of a study database's export (--keep-aborted, --keep-dry-runs).
     """  # noqa: E501
     with user_errors():
-        import pandas as pd
+        from functools import partial
 
         from .._validation import check_in_range
         from ..analysis import report_trials_file
-
-        check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
         from ..simulation.fitting import FitSettings, fit_trials, trials_source
 
-        fit = None
-        if hypotheses:
-            from functools import partial
-
-            fit = partial(fit_trials, settings=FitSettings(n_draws=draws), scheduler=scheduler, n_workers=workers,
-                          local=no_dask)
+        check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
+        fit = partial(fit_trials, settings=FitSettings(n_draws=draws), scheduler=scheduler, n_workers=workers,
+                      local=no_dask) if hypotheses else None
         result, paths = report_trials_file(trials_source(trials), out, on_invalid="exclude" if exclude_invalid else "raise",
                                            keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, alpha=alpha,
                                            hypotheses=fit)
@@ -119,6 +114,13 @@ def analyze_command(
         for p in paths.values():
             console.print(str(p))
         return
+    _print_summary(result, paths, trials, out, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+
+
+def _print_summary(result, paths: dict, trials: Path, out: Path, *, keep_aborted: bool, keep_dry_runs: bool) -> None:
+    """The analysis at the terminal: exclusions, notes, the studies' tables and the files written."""
+    import pandas as pd
+
     console.print(f"[bold]vibrofocus analyze[/] {trials} ({result.n_trials} rows)")
     if result.simulated_participants:
         from ..analysis.report import _simulated
@@ -175,19 +177,25 @@ def analyze_command(
                 table.add_row(factor, f"{r['chi2']:.2f}", str(int(r["dof"])), _p(r["p"]), f"{r['kendall_w']:.2f}")
             console.print(table)
     if "hypotheses_json" in paths:
-        import json
-
-        fitted = json.loads(paths["hypotheses_json"].read_text(encoding="utf-8"))
-        table = Table(title=f"Hypotheses fitted to the trials (MODEL OUTPUT), leave-one-participant-out ELPD, "
-                            f"{fitted['elapsed_s']:.0f} s")
-        for col in ("hypothesis", "ELPD", "SE", "parameters"):
-            table.add_column(col, justify="left" if col in ("hypothesis", "parameters") else "right")
-        for name, h in sorted(fitted["hypotheses"].items(), key=lambda kv: -kv[1]["elpd"]):
-            params = ", ".join(f"{k} = {v:.4g}" for k, v in h["params"].items()) or "none free"
-            table.add_row(name, f"{h['elpd']:.1f}", f"{h['se']:.1f}", params)
-        console.print(table)
-        if fitted.get("runner_up"):
-            console.print(f"best: {fitted['chosen']}, {fitted['difference']:.1f} (SE {fitted['difference_se']:.1f}) "
-                          f"above {fitted['runner_up']}")
+        _print_hypotheses(paths["hypotheses_json"])
     figures = len([k for k in paths if k not in ("json", "html", "hypotheses_json")])
-    console.print(f"wrote {paths['json']}, {paths['html']}{', ' + str(paths['hypotheses_json']) if 'hypotheses_json' in paths else ''} and {figures} figure(s) in {out}")
+    written = f", {paths['hypotheses_json']}" if "hypotheses_json" in paths else ""
+    console.print(f"wrote {paths['json']}, {paths['html']}{written} and {figures} figure(s) in {out}")
+
+
+def _print_hypotheses(path: Path) -> None:
+    """The hypotheses' fit (model output) from hypotheses.json."""
+    import json
+
+    fitted = json.loads(path.read_text(encoding="utf-8"))
+    table = Table(title=f"Hypotheses fitted to the trials (MODEL OUTPUT), leave-one-participant-out ELPD, "
+                        f"{fitted['elapsed_s']:.0f} s")
+    for col in ("hypothesis", "ELPD", "SE", "parameters"):
+        table.add_column(col, justify="left" if col in ("hypothesis", "parameters") else "right")
+    for name, h in sorted(fitted["hypotheses"].items(), key=lambda kv: -kv[1]["elpd"]):
+        params = ", ".join(f"{k} = {v:.4g}" for k, v in h["params"].items()) or "none free"
+        table.add_row(name, f"{h['elpd']:.1f}", f"{h['se']:.1f}", params)
+    console.print(table)
+    if fitted.get("runner_up"):
+        console.print(f"best: {fitted['chosen']}, {fitted['difference']:.1f} (SE {fitted['difference_se']:.1f}) "
+                      f"above {fitted['runner_up']}")

@@ -92,25 +92,31 @@ def export_command(
             return
         if band_only:
             raise ValidationError("--band-only is a SOFA option (--sofa)")
-        from ..io.bids import read_bids_metadata_file
-        from ..studies.bids import export_bids
-
         protect(source, "study database or trials file")
         allow_overwrite(force)
-        meta = read_bids_metadata_file(metadata) if metadata is not None else {}
-        meta.update({k: v for k, v in (("Authors", list(author) if author else None), ("License", license_),
-                                       ("InstitutionName", institution)) if v is not None})
-        counts = export_bids(source, bids, force=force, metadata=meta,
-                             session_labels=_session_labels(session_label or []))
-        into = "added to the existing BIDS dataset" if counts["merged"] else "to the BIDS dataset"
-        typer.echo(f"wrote {counts['events']} trials of {counts['participants']} participant(s) {into} {bids}")
-        if counts["kept"]:
-            typer.echo(f"kept the dataset's own {' and '.join(counts['kept'])}")
-            given = [option for option, value in (("--author", author), ("--license", license_)) if value]
-            if "dataset_description.json" in counts["kept"] and given:
-                # vibrofocus never edits a file it did not write: the lab's description stays as it is.
-                typer.echo(f"note: {' and '.join(given)} not applied: the dataset's dataset_description.json is "
-                           "its own (vibrofocus did not write it); add them there")
+        _export_bids(source, bids, force=force, metadata=metadata, author=author, license_=license_,
+                     institution=institution, session_label=session_label)
+
+
+def _export_bids(source: Path, bids: Path, *, force: bool, metadata: Path | None, author: list[str] | None,
+                 license_: str | None, institution: str | None, session_label: list[str] | None) -> None:
+    """``export --bids``: the options as metadata and session labels, the export, what it did."""
+    from ..io.bids import read_bids_metadata_file
+    from ..studies.bids import export_bids
+
+    meta = read_bids_metadata_file(metadata) if metadata is not None else {}
+    meta.update({k: v for k, v in (("Authors", list(author) if author else None), ("License", license_),
+                                   ("InstitutionName", institution)) if v is not None})
+    counts = export_bids(source, bids, force=force, metadata=meta, session_labels=_session_labels(session_label or []))
+    into = "added to the existing BIDS dataset" if counts["merged"] else "to the BIDS dataset"
+    typer.echo(f"wrote {counts['events']} trials of {counts['participants']} participant(s) {into} {bids}")
+    if counts["kept"]:
+        typer.echo(f"kept the dataset's own {' and '.join(counts['kept'])}")
+        given = [option for option, value in (("--author", author), ("--license", license_)) if value]
+        if "dataset_description.json" in counts["kept"] and given:
+            # vibrofocus never edits a file it did not write: the lab's description stays as it is.
+            typer.echo(f"note: {' and '.join(given)} not applied: the dataset's dataset_description.json is "
+                       "its own (vibrofocus did not write it); add them there")
 
 
 def _session_labels(pairs: list[str]) -> dict[int, str]:
