@@ -151,13 +151,13 @@ class _BarProgress:
             self._open(plan.settings.take_s)
 
     def _open(self, take_s: float) -> None:
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from ._progress import ProgressLines, progress_bar
 
-        self.bar = Progress(TextColumn("[progress.description]{task.description}"), BarColumn(),
-                            MofNCompleteColumn(), TimeElapsedColumn(), console=self.console, transient=True)
+        self.bar = progress_bar(self.console, transient=True)
         self.bar.start()
         self.task = self.bar.add_task("calibrating", total=None)
-        self.take = _TakeClock(self.bar, take_s)
+        # The take's own bar only at a terminal: as lines it would repeat every take.
+        self.take = _TakeClock(self.bar, take_s) if not isinstance(self.bar, ProgressLines) else _NoTakeClock()
 
     def step(self, done: int, total: int, message: str) -> None:
         if self.bar is None:
@@ -182,6 +182,16 @@ class _BarProgress:
 
     def cancelled(self) -> bool:
         return False
+
+
+class _NoTakeClock:
+    """No second bar (progress printed as lines)."""
+
+    def started(self) -> None:
+        pass
+
+    def ended(self) -> None:
+        pass
 
 
 class _TakeClock:

@@ -8,10 +8,10 @@ from pathlib import Path
 import typer
 from rich import box
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from ._errors import user_errors
+from ._progress import progress_bar
 from ._options import SEED_MAX, force_option
 from ._command import command
 
@@ -253,9 +253,7 @@ class _Bar:
     """A demo workflow's :class:`~vibrofocus.workflows.Progress` at the terminal: one transient bar."""
 
     def __init__(self, *, transient: bool, disable: bool = False, columns: str = "bar"):
-        extra = (BarColumn(), MofNCompleteColumn()) if columns == "bar" else ()
-        self.bar = Progress(TextColumn("[progress.description]{task.description}"), *extra, TimeElapsedColumn(),
-                            console=err_console, disable=disable, transient=transient)
+        self.bar = progress_bar(err_console, counts=columns == "bar", disable=disable, transient=transient)
         self.task = None
 
     def __enter__(self) -> "_Bar":

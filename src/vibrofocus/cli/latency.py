@@ -55,6 +55,9 @@ def latency(
             if figure.suffix.lower() != ".png":
                 raise ValidationError(f"--figure {figure}: use a .png file name")
             check_writable(figure, what="latency figure")
+        if not as_json:
+            typer.echo(f"playing {count} clicks {spacing:g} s apart on the {rig} rig (about "
+                       f"{count * spacing:.0f} s)...")
         with make_rig(rig, config=rig_config, seed=seed) as the_rig:
             report = measure_latency(the_rig, count=count, spacing_s=spacing, loopback=loopback, channel=channel,
                                      amplitude_v=amplitude_v)
@@ -71,5 +74,8 @@ def latency(
                    f"{report.input_fs:g} Hz")
         typer.echo(f"onset latency: mean {stats['mean']:.3f} ms, SD {stats['sd']:.3f} ms, 99th percentile "
                    f"{stats['p99']:.3f} ms, max {stats['max']:.3f} ms (min {stats['min']:.3f} ms)")
+        if rig == "simulated":
+            typer.echo("the simulated rig plays each sample the moment it is handed over: its latency is 0 by "
+                       "construction; measure a hardware rig's with --rig audio or nidaq")
         if figure is not None:
             typer.echo(f"wrote {figure}")

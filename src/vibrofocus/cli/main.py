@@ -46,6 +46,7 @@ class _OneLineErrors(TyperGroup):
         **extra: Any,
     ) -> Any:
         _plain_help(self)
+        _line_buffered()
         if not standalone_mode:
             return super().main(args, prog_name, complete_var, standalone_mode, windows_expand_args, **extra)
         try:
@@ -113,6 +114,18 @@ def _quiet_after_closed_pipe() -> None:
     except (OSError, ValueError):  # stdout is not a real file (a test runner's capture)
         pass
     sys.exit(EXIT_CLOSED_PIPE)
+
+
+def _line_buffered() -> None:
+    """Flush each line of output when it is not a terminal (a log, CI, ``| tee``): Python
+    buffers such output in blocks, so a long command showed nothing for minutes."""
+    for stream in (sys.stdout, sys.stderr):
+        reconfigure = getattr(stream, "reconfigure", None)
+        try:
+            if reconfigure is not None and not stream.isatty():
+                reconfigure(line_buffering=True)
+        except (OSError, ValueError):  # a closed or detached stream: nothing to buffer
+            pass
 
 
 def _plain_help(group: Any) -> None:

@@ -97,8 +97,10 @@ def power_command(
                       f"{result['elapsed_s']:.1f} s")
         if done.paths:
             console.print("wrote " + ", ".join(str(p) for p in done.paths))
-        for name in names:
-            console.print(f"[yellow]{done.per[name]['label']}[/]")
+        # The model notice was said at the start and heads the table: here only which hypotheses, in which version.
+        versions = ", ".join(f"{done.per[n]['hypothesis']['name']} v{done.per[n]['hypothesis']['version']}"
+                             for n in names)
+        console.print(f"[yellow]hypotheses: {versions}[/]")
 
 
 def power_table(done):
@@ -141,11 +143,10 @@ class _PowerProgress:
     """The power workflow's :class:`~vibrofocus.workflows.Progress` at the terminal: a bar of the studies."""
 
     def __init__(self, console, *, quiet: bool):
-        from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+        from ._progress import progress_bar
 
         self.console = console
-        self.bar = Progress(TextColumn("studies"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                            console=console, disable=quiet)
+        self.bar = progress_bar(console, label="studies", disable=quiet)
         self.task = None
 
     def __enter__(self) -> "_PowerProgress":

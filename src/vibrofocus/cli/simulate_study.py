@@ -103,10 +103,9 @@ class SimulationProgress:
 
     def step(self, done: int, total: int, message: str) -> None:
         if self.bar is None:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+            from ._progress import progress_bar
 
-            self.bar = Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
-                                TimeElapsedColumn(), console=self.console, disable=self.quiet, transient=False)
+            self.bar = progress_bar(self.console, disable=self.quiet)
             self.bar.start()
             self.task = self.bar.add_task("trials", total=None)
         self.bar.update(self.task, description=message, completed=done, total=total)

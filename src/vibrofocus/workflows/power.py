@@ -3,6 +3,7 @@ and the files of the result (docs/simulated-participants.md, "Power")."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
@@ -97,7 +98,7 @@ def study_power(
     from ..errors import ValidationError
     from ..simulation.hypotheses import available_hypotheses, hypothesis as find_hypothesis
     from ..simulation.perception import MODEL_LABEL, STUDY_SKIN
-    from ..simulation.power import (CONTRASTS, PowerDesign, direction_sentences, effect_directions,
+    from ..simulation.power import (CONTRASTS, PowerDesign, dask_client, direction_sentences, effect_directions,
                                     paper_implied_power, robust_conclusions, run_power)
     from ..skin import skin_preset
 
@@ -132,12 +133,14 @@ def study_power(
     per: dict[str, dict] = {}
     each = len(design.n_participants) * design.n_studies
     progress.step(0, each * len(names), "studies")
-    for k, name in enumerate(names):
-        per[name] = run_power(
-            dataclasses.replace(design, hypothesis=name), scheduler=scheduler, n_workers=workers, local=local,
-            bank=feature_bank,
-            progress=lambda done, total, _k=k: progress.step(_k * each + done, each * len(names), "studies"),
-        )
+    # One cluster for every hypothesis: workers start once, and stop once at the end.
+    with contextlib.ExitStack() as stack:
+        client = None if local else stack.enter_context(dask_client(scheduler=scheduler, n_workers=workers))
+        for k, name in enumerate(names):
+            per[name] = run_power(
+                dataclasses.replace(design, hypothesis=name), client=client, local=local, bank=feature_bank,
+                progress=lambda done, total, _k=k: progress.step(_k * each + done, each * len(names), "studies"),
+            )
     result = dict(per[names[0]])
     result["hypotheses"] = {name: {"label": r["label"], "hypothesis": r["hypothesis"], "table": r["table"]}
                             for name, r in per.items()}
