@@ -49,10 +49,9 @@ def test_the_metrics_table_fits_80_columns_uncut():
     # fidelity shown as "-0.…".
     from rich.console import Console
 
+    from vibrofocus.cli.demo import METRIC_COLUMNS as columns
     from vibrofocus.cli.demo import _fmt, metrics_table
 
-    columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB", "peak\nbound\ndB",
-               "target\nµm", "drive\nV")
     worst = [_fmt(-0.999), _fmt(-0.999), _fmt(-38.25, 1), _fmt(-38.25, 1), _fmt(-38.25, 1), _fmt(-38.25, 1),
              _fmt(-38.25, 1), _fmt(12.3456, 3), _fmt(10.0, 1)]
     for location, first in ((False, ["time_reversal"]), (True, ["9", "time_reversal"])):

@@ -26,6 +26,12 @@ def _fmt(value: float, digits: int = 2) -> str:
     return text[1:] if text.startswith("-") and float(text) == 0 else text  # never "-0.00"
 
 
+#: The metric columns' headers, read top-down per column (each line of a header is one
+#: row of the table's head, so a word never seems to belong to the column beside it).
+METRIC_COLUMNS = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ncontr.\ndB", "energy\nbound\ndB",
+                  "peak\nbound\ndB", "target\nµm", "drive\nV")
+
+
 def metrics_table(title: str, columns: tuple[str, ...], rows: list[list[str]], *, location: bool = False) -> Table:
     """A table of the demo's metrics that fits 80 columns (a pipe, a default terminal).
 
@@ -181,7 +187,8 @@ def _print_tables(done, *, seed: int, design_from: str, per_location: bool, fron
     p = rig.participant
     console.print(
         f"[bold]Simulated forearm[/], skin {rig.skin}, seed {seed}: c(250 Hz) = {p.c250_m_s:.2f} m/s, "
-        f"alpha(250 Hz) = {p.alpha250_np_m:.0f} Np/m, contact {np.round(p.contact, 2).tolist()}"
+        f"alpha(250 Hz) = {p.alpha250_np_m:.0f} Np/m; each actuator's contact with the skin (0-1, 1 = full): "
+        + ", ".join(f"{name} {c:.2f}" for name, c in zip(rig.layout.actuator_names, p.contact))
     )
     if calibration_info:
         console.print(
@@ -210,8 +217,7 @@ def _print_tables(done, *, seed: int, design_from: str, per_location: bool, fron
               "reaches there" + ("; peak bound: the most peak contrast against every calibrated point any "
                                  "drive reaches at the pseudo-inverse's fidelity (minimax, predicted)."
                                  if bounds else "."))
-    columns = ("fid", "shape", "contrast\ndB", "all pts\ndB", "energy\ndB", "bound\ndB",
-               *(("peak\nbound\ndB",) if bounds else ()), "target\nµm", "drive\nV")
+    columns = METRIC_COLUMNS if bounds else tuple(c for c in METRIC_COLUMNS if not c.startswith("peak"))
 
     def metric_cells(values: dict) -> list[str]:
         return [_fmt(values["fidelity"]), _fmt(values["shape_fidelity"]), _fmt(values["contrast_db"], 1),

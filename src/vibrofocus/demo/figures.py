@@ -124,7 +124,8 @@ def propagation_figure(rig, path: Path, *, actuator: int | None = None,
         axes[1].text(time_ms[view][0], i + 0.3, f"up to {band[1]:.0f} Hz", fontsize=7, color="tab:red")
     axes[0].set_yticks(range(len(distances_m)), [f"{d * 1e3:.0f} mm" for d in distances_m])
     axes[0].set_ylabel("distance from the actuator")
-    axes[0].set_title(f"{layout.actuator_names[actuator]} plays a {limit:g} V Ricker\n", fontsize=10)
+    axes[0].set_title(f"{layout.actuator_names[actuator]} alone plays a {limit:g} V Ricker pulse (a tap's drive)\n",
+                      fontsize=10)
     axes[1].set_title(f"inverse filtered at each point\n(red dashed: the Ricker asked, up to {dynamic_range_db:g} dB "
                       "of extra path loss)", fontsize=10)
     for ax in axes:

@@ -100,7 +100,7 @@ def fig4_focusing_along_a_line(rig, path: Path, *, actuator: int | None = None,
 
     fig, axes = plt.subplots(1, 3, figsize=(13, 5.2), gridspec_kw={"width_ratios": [1, 1.1, 1]})
     view = (time_ms > -15) & (time_ms < 30)
-    for ax, rec, title in ((axes[0], rec_plain, f"{layout.actuator_names[actuator]} plays a {limit:g} V Ricker"),
+    for ax, rec, title in ((axes[0], rec_plain, f"{layout.actuator_names[actuator]} alone plays a {limit:g} V Ricker pulse"),
                            (axes[2], rec_focused, "the drive in the middle, recorded")):
         for i, dist in enumerate(distances_m):
             trace = rec[i, :n]
