@@ -64,7 +64,7 @@ def test_bad_protocols_and_felt_answers_are_refused_and_nothing_is_stored(server
 def test_a_threshold_block_over_http_then_its_db_sl_block(server):
     r = upload(server, TINY_PROTOCOL)
     assert r.status_code == 201, r.text
-    assert [b["n_trials"] for b in r.json()["blocks"]] == [10, 2]
+    assert [b["n_trials"] for b in r.json()["blocks"]] == [10, 2, 1]
     assert upload(server, TINY_PROTOCOL).status_code == 201  # the same text again: no change
     other = upload(server, TINY_PROTOCOL.replace("repetitions = 1\n", "repetitions = 2\n"))
     assert other.status_code == 409 and "another protocol named 'tiny-threshold'" in other.json()["detail"]

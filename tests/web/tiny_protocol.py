@@ -2,7 +2,9 @@
 
 The answers ``FELT`` walk its staircase (start -6 dB, 4 dB then 2 dB steps) through six
 reversals, for a threshold of -9 dB re the paper's levels; the point block then plays at
--9 + 6 = -3 dB.
+-9 + 6 = -3 dB. Its third block, at 24 dB SL (+15 dB re the paper's levels: funneling at
+location 5 needs 2.5 V x 10^(15/20) = 14 V, over the 10 V limit), is refused when it is
+planned on a calibration.
 """
 
 TINY_PROTOCOL = """\
@@ -24,6 +26,15 @@ response = "point"
 methods = ["funneling"]
 locations = [1, 9]
 levels = [6.0]
+level_unit = "dB SL"
+repetitions = 1
+
+[[blocks]]
+name = "too-loud"
+response = "point"
+methods = ["funneling"]
+locations = [5]
+levels = [24.0]
 level_unit = "dB SL"
 repetitions = 1
 """
