@@ -13,6 +13,8 @@ import sys
 
 import pytest
 
+from tests.studies.test_bids_validator import validate
+
 from .conftest import calibrate, login
 from .test_participant_browser import wait_answers, wait_respond
 from .tiny_protocol import FELT, THRESHOLD_DB, TINY_PROTOCOL
@@ -95,3 +97,17 @@ def test_a_protocol_session_end_to_end(server, chromium, tmp_path):
     done = subprocess.run([sys.executable, "-m", "vibrofocus", "export", str(server.db), "--bids", str(out)],
                           capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
+    beh = out / "sub-P01" / f"ses-{sid}" / "beh"
+    with open(beh / f"sub-P01_ses-{sid}_task-threshold_events.tsv", encoding="utf-8") as fh:
+        detection = list(csv.DictReader(fh, delimiter="\t"))
+    assert [int(r["response"]) for r in detection] == list(FELT)
+    assert {(r["protocol"], r["block"], r["threshold_db"]) for r in detection} == {("tiny-threshold", "0", "-9.0")}
+    with open(out / "sub-P01" / f"ses-{sid2}" / "beh" / f"sub-P01_ses-{sid2}_task-localization1_events.tsv",
+              encoding="utf-8") as fh:
+        points = list(csv.DictReader(fh, delimiter="\t"))
+    assert [(r["protocol"], r["block"], float(r["level_db"])) for r in points] == [("tiny-threshold", "1", -3.0)] * 2
+    sidecar = json.loads((out / "sub-P01" / f"ses-{sid2}" / "beh" /
+                          f"sub-P01_ses-{sid2}_task-localization1_events.json").read_text(encoding="utf-8"))
+    assert sidecar["Sessions"][0]["ThresholdDb"] == THRESHOLD_DB and sidecar["Sessions"][0]["LevelSlDb"] == 6.0
+    status, issues = validate(out)
+    assert status == 0 and not [i for i in issues if i[0] == "error"], issues
