@@ -57,7 +57,7 @@ def test_bad_protocols_and_felt_answers_are_refused_and_nothing_is_stored(server
     r = answer(server, sid, key, 0, felt=True)
     assert r.status_code == 422 and "not whether" in r.json()["detail"]
     r = answer(server, sid, key, 0, felt=True, response=[1])
-    assert r.status_code == 422 and "not several" in str(r.json()["detail"])
+    assert r.status_code == 422 and "not both" in str(r.json()["detail"])
     assert snapshot(server.db) == before
 
 

@@ -100,7 +100,7 @@ class AnswerIn(_Strict):
         given = [self.response is not None, self.point_mm is not None, self.felt is not None]
         if sum(given) != 1:
             raise ValueError("an answer gives one of response (locations), point_mm ([x, y] in mm) or felt "
-                             "(true or false), not " + ("several" if any(given) else "neither"))
+                             "(true or false), not " + {0: "neither", 2: "both"}.get(sum(given), "all three"))
         return self
 
 
