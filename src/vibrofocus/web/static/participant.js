@@ -374,12 +374,12 @@
     flushPending();
   }
 
-  // ---------------------------------------------------------------- detection answers
-  function submitFelt(felt) {
-    if (!canAnswer()) return;
+  // An answer (a point or felt / not felt), timed now: stored here before the first send (a
+  // crash or reload from here on cannot lose it), then sent.
+  function send(fields) {
     const rt = (performance.now() - respondSince) / 1000;
     const answer = {
-      session_id: sessionId, trial_index: state.trial_index, felt,
+      session_id: sessionId, trial_index: state.trial_index, ...fields,
       rt_s: Math.round(rt * 1e4) / 1e4, answer_id: newAnswerId(),
     };
     ownIds.add(answer.answer_id);
@@ -388,6 +388,13 @@
     body.classList.remove("answerable");
     setMessage("Sending…");
     flushPending();
+    return answer;
+  }
+
+  // ---------------------------------------------------------------- detection answers
+  function submitFelt(felt) {
+    if (!canAnswer()) return;
+    send({ felt });
   }
   for (const b of feltButtons) {
     b.addEventListener("click", (ev) => {
@@ -407,23 +414,10 @@
   }
   function submitPoint(point) {
     if (!canAnswer()) return;
-    const rt = (performance.now() - respondSince) / 1000;
-    const answer = {
-      session_id: sessionId,
-      trial_index: state.trial_index,
-      point_mm: [Math.round(point[0] * 100) / 100, Math.round(point[1] * 100) / 100],
-      rt_s: Math.round(rt * 1e4) / 1e4,
-      answer_id: newAnswerId(),
-    };
-    ownIds.add(answer.answer_id);
-    savePending([...loadPending(), answer]);
-    sentFor = state.trial_index;
+    const answer = send({ point_mm: [Math.round(point[0] * 100) / 100, Math.round(point[1] * 100) / 100] });
     cursor = answer.point_mm;
     showCursor();
     arm.classList.add("chosen");
-    body.classList.remove("answerable");
-    setMessage("Sending…");
-    flushPending();
   }
   if (arm) {
     arm.addEventListener("pointerdown", (ev) => {
