@@ -140,7 +140,7 @@ def test_a_dataset_written_before_the_device_columns_and_sessions_is_still_read(
     for path in list(out.glob("sub-*/ses-*/beh/*_events.tsv")):  # as an older vibrofocus wrote it
         # No ses- (a session_id column instead), no device or stimulus columns.
         session = path.parent.parent.name.removeprefix("ses-")
-        lines = [line.split("\t")[:-5] for line in path.read_text().splitlines()]
+        lines = [line.split("\t")[:11] for line in path.read_text().splitlines()]
         assert lines[0][-1] == "dry_run"
         lines = [cells[:9] + [session if k else "session_id"] + cells[9:] for k, cells in enumerate(lines)]
         old_path = path.parent.parent.parent / "beh" / path.name.replace(f"_ses-{session}", "")

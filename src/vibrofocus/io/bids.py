@@ -7,11 +7,13 @@ Layout written by :func:`write_bids_dataset` (BIDS 1.10, the ``beh`` datatype)::
     DIR/participants.tsv, .json        participant_id (sub-<label>), source_id, simulated
     DIR/sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-localization<1|2>_events.tsv
     DIR/sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-localization<1|2>_events.json
+    DIR/sub-<label>/ses-<session>/beh/sub-<label>_ses-<session>_task-threshold_events.tsv, .json
 
 (``ses-<session>`` is the study session's id; a source without sessions, such as a
 trials CSV without a ``session`` column, writes ``sub-<label>/beh/...`` without it.)
 
-The events file has one row per answered trial with the columns :data:`EVENT_COLUMNS`;
+The events file has one row per answered trial with the columns :data:`EVENT_COLUMNS`
+(a threshold block's, ``task-threshold``: :data:`THRESHOLD_EVENT_COLUMNS`);
 its JSON sidecar describes every column (units, levels) and records where the trials
 came from (rig, calibration hash, skin preset, simulated or not). This module writes and
 reads plain records (dicts and lists); the study side builds them
@@ -37,7 +39,8 @@ from .jsonsafe import json_safe
 
 __all__ = ["BIDS_VERSION", "EVENT_COLUMNS", "EVENT_COLUMN_DESCRIPTIONS", "TASKS", "TASK_INFO", "METADATA_KEYS",
            "bids_label", "events_name", "check_bids_metadata", "read_bids_metadata", "read_bids_metadata_file", "levels_from_data",
-           "write_bids_dataset", "read_bids_trials_table"]
+           "write_bids_dataset", "read_bids_trials_table", "THRESHOLD_TASK", "THRESHOLD_EVENT_COLUMNS",
+           "THRESHOLD_TASK_INFO", "THRESHOLD_COLUMN_DESCRIPTIONS"]
 
 #: The BIDS version the dataset follows.
 BIDS_VERSION = "1.10.0"
@@ -52,7 +55,8 @@ TASKS = {1: "localization1", 2: "localization2"}
 #: before those existed (with a ``session_id`` column and no ``ses-``) is read too.
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
                  "trial", "session_status", "dry_run", "device_onset", "device_clock",
-                 "levels", "drive_peak_v", "target_peak_um")
+                 "levels", "drive_peak_v", "target_peak_um", "protocol", "block", "level_db",
+                 "response_x_mm", "response_y_mm")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
 _REQUIRED_COLUMNS = EVENT_COLUMNS[:11]
 #: What each task asks (the events sidecar's ``TaskDescription`` and ``Instructions``, as
@@ -146,6 +150,54 @@ EVENT_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
                                       "n/a where none was stored.",
                        "Units": "um"},
 }
+EVENT_COLUMN_DESCRIPTIONS.update({
+    "protocol": {"LongName": "study protocol",
+                 "Description": "The name of the study protocol the session was planned from (docs/protocols.md); "
+                                "paper-study1 or paper-study2 for the source paper's studies."},
+    "block": {"LongName": "protocol block", "Description": "0-based index of the protocol's block the session ran."},
+    "level_db": {"LongName": "stimulus level",
+                 "Description": "The stimulus level re the level rule (levels): 0 is the rule's own level; a block "
+                                "in dB SL is at the participant's threshold (the sidecar's Sessions: ThresholdDb) "
+                                "plus its level (LevelSlDb).", "Units": "dB"},
+    "response_x_mm": {"LongName": "answered point, x",
+                      "Description": "A point answer's x in the layout frame (n/a for a location answer); its "
+                                     "nearest location is the response.", "Units": "mm"},
+    "response_y_mm": {"LongName": "answered point, y",
+                      "Description": "A point answer's y in the layout frame, toward the wrist (n/a for a location "
+                                     "answer).", "Units": "mm"},
+})
+
+#: Task label of threshold blocks (docs/protocols.md, "Threshold blocks"): their trials are
+#: in events files of their own, ``..._task-threshold_events.tsv``, with the columns
+#: :data:`THRESHOLD_EVENT_COLUMNS` (read by no localization analysis).
+THRESHOLD_TASK = "threshold"
+THRESHOLD_EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time",
+                           "phase", "trial", "session_status", "dry_run", "levels", "level_db", "drive_peak_v",
+                           "reversal", "threshold_db", "protocol", "block")
+THRESHOLD_TASK_INFO = {
+    "TaskDescription": "Detection threshold of a focused vibrotactile tap by a 1-up-2-down staircase (Levitt 1971; "
+                       "docs/protocols.md, Threshold blocks): each trial plays the tap at the level the staircase "
+                       "sets from the answers so far, and the participant says whether it was felt.",
+    "Instructions": "After each beep, say whether you felt a tap: press Felt it (or the key Y or 1) or Did not feel "
+                    "it (N or 0). Some taps are too weak to feel; that is expected.",
+}
+THRESHOLD_COLUMN_DESCRIPTIONS: dict[str, dict[str, Any]] = {
+    **{c: EVENT_COLUMN_DESCRIPTIONS[c] for c in THRESHOLD_EVENT_COLUMNS if c in EVENT_COLUMN_DESCRIPTIONS},
+    "trial_type": {"LongName": "condition",
+                   "Description": "The condition: 'detection_<method>_loc<target>'."},
+    "response": {"LongName": "felt", "Description": "Whether the participant felt the tap.",
+                 "Levels": {"1": "felt", "0": "not felt"}},
+    "level_db": {"LongName": "stimulus level",
+                 "Description": "The trial's level set by the staircase, re the level rule (levels); training trials "
+                                "play at its start.", "Units": "dB"},
+    "reversal": {"LongName": "reversal",
+                 "Description": "Whether the staircase reversed its direction after this answer.",
+                 "Levels": {"1": "a reversal", "0": "no reversal"}},
+    "threshold_db": {"LongName": "threshold",
+                     "Description": "The session's threshold: the mean of its reversal levels after the first two, "
+                                    "re the level rule; n/a before the block ended or with fewer than 6 reversals.",
+                     "Units": "dB"},
+}
 _LABEL = re.compile(r"[^A-Za-z0-9]")
 _NA = "n/a"
 
@@ -174,10 +226,11 @@ def bids_label(participant_id: str) -> str:
     return label
 
 
-def events_name(label: str, study: int, session: int | str | None = None) -> str:
-    """``sub-<label>[_ses-<session>]_task-localization<study>_events`` (without suffix)."""
+def events_name(label: str, study: int, session: int | str | None = None, *, task: str | None = None) -> str:
+    """``sub-<label>[_ses-<session>]_task-localization<study>_events`` (without suffix); ``task``:
+    another task label (:data:`THRESHOLD_TASK`)."""
     ses = "" if session is None else f"_ses-{session}"
-    return f"sub-{label}{ses}_task-{TASKS[study]}_events"
+    return f"sub-{label}{ses}_task-{task or TASKS[study]}_events"
 
 
 def _events_folder(label: str, session: int | str | None) -> str:
@@ -402,7 +455,9 @@ def write_bids_dataset(
         One per participant, study and session: ``label`` (str), ``study`` (1 or 2),
         ``session`` (the ``ses-`` label, or None for none), ``events`` (rows keyed by
         :data:`EVENT_COLUMNS`; None or NaN is written ``n/a``) and ``sidecar`` (extra keys
-        of the events JSON besides the column descriptions, which it may replace).
+        of the events JSON besides the column descriptions, which it may replace); and
+        ``task`` :data:`THRESHOLD_TASK` for a threshold block's trials (rows keyed by
+        :data:`THRESHOLD_EVENT_COLUMNS`).
     source : str, optional
         Where the data comes from (the source file's resolved path), recorded in the
         manifest: an events file is replaced only by an export of the same source (the
@@ -435,12 +490,14 @@ def write_bids_dataset(
     for run in runs:
         if run["study"] not in TASKS:
             raise ValidationError(f"a BIDS run must be of study 1 or 2, got {run['study']!r}")
-        name = events_name(run["label"], run["study"], run.get("session"))
+        threshold = run.get("task") == THRESHOLD_TASK
+        name = events_name(run["label"], run["study"], run.get("session"), task=run.get("task"))
         folder = _events_folder(run["label"], run.get("session"))
         if f"{folder}/{name}.tsv" in files:
             raise ValidationError(f"two runs would both write {name}.tsv")
-        sidecar = {"TaskName": TASKS[run["study"]], **EVENT_COLUMN_DESCRIPTIONS, **run["sidecar"]}
-        files[f"{folder}/{name}.tsv"] = _tsv(EVENT_COLUMNS, run["events"])
+        described = THRESHOLD_COLUMN_DESCRIPTIONS if threshold else EVENT_COLUMN_DESCRIPTIONS
+        sidecar = {"TaskName": run.get("task") or TASKS[run["study"]], **described, **run["sidecar"]}
+        files[f"{folder}/{name}.tsv"] = _tsv(THRESHOLD_EVENT_COLUMNS if threshold else EVENT_COLUMNS, run["events"])
         files[f"{folder}/{name}.json"] = _json(sidecar)
     n_events = sum(len(run["events"]) for run in runs)
     shared = {"dataset_description.json": _json(description), "README": readme}

@@ -59,6 +59,7 @@ CODES: dict[str, str] = {
                                      "record's replay is true for a trial presented again: resumed, or after a pause)",
     "tap/<method>": "a live tap's onset (serve-osc --lsl; no phase or study)",
     "dry/<method>/<phase>/study<N>": "a dry run's stimulus onset (nothing is played)",
+    "tap/<method>/<phase>/threshold": "a threshold block's stimulus onset (dry/... in a dry run)",
     "answer": "the participant's answer (the locations are in the detail stream)",
 }
 
@@ -83,7 +84,8 @@ def marker_code(marker: Mapping[str, Any]) -> str:
 
     ``cue`` and ``answer`` as they are; a stimulus onset (``event`` ``stimulus_onset`` or
     ``tap``) as ``tap/<method>``, then ``/<phase>`` and ``/study<N>`` where the marker has
-    them (``dry/...`` when ``played`` is false); any other event by its name; a marker with
+    them, ``/threshold`` in place of ``/study<N>`` for a threshold block's (``task``
+    ``threshold``) (``dry/...`` when ``played`` is false); any other event by its name; a marker with
     its own ``code`` keeps it.
 
     Parameters
@@ -103,7 +105,9 @@ def marker_code(marker: Mapping[str, Any]) -> str:
     parts = ["dry" if marker.get("played") is False else "tap", _token(marker.get("method", "unknown"))]
     if marker.get("phase") is not None:
         parts.append(_token(marker["phase"]))
-    if marker.get("study") is not None:
+    if marker.get("task") == "threshold":  # a threshold block's tap: not a localization trial
+        parts.append("threshold")
+    elif marker.get("study") is not None:
         parts.append(f"study{_token(marker['study'])}")
     return "/".join(parts)
 

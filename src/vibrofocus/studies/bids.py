@@ -17,7 +17,8 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import StudyError, ValidationError
-from ..io.bids import (BIDS_VERSION, EVENT_COLUMN_DESCRIPTIONS, METADATA_KEYS, TASK_INFO, TASKS, bids_label,
+from ..io.bids import (BIDS_VERSION, EVENT_COLUMN_DESCRIPTIONS, METADATA_KEYS, TASK_INFO, TASKS,
+                       THRESHOLD_COLUMN_DESCRIPTIONS, THRESHOLD_TASK, THRESHOLD_TASK_INFO, bids_label,
                        check_bids_metadata, levels_from_data, read_bids_metadata, write_bids_dataset)
 from ..io.responses import format_response
 from ..io.trials_csv import read_trials_csv
@@ -42,7 +43,7 @@ def _onsets(store: Any, session_id: int) -> dict[int, datetime]:
 
 
 def _from_database(db: Path) -> tuple[list[dict[str, Any]], dict[str, bool], dict[tuple[str, int], list[dict]]]:
-    from .storage import StudyStore
+    from .storage import StudyStore, session_protocol
 
     with StudyStore(db, create=False) as store:
         rows = store.trial_rows()
@@ -60,10 +61,64 @@ def _from_database(db: Path) -> tuple[list[dict[str, Any]], dict[str, bool], dic
                 "CalibrationSHA256": None if cal is None else cal.sha256,
                 "CalibrationFile": None if cal is None else Path(cal.path).name,
                 "SoftwareVersion": info.software_version,
+                **_protocol_keys(info),
             })
+        level_block = {info.session_id: (info.design.level_db, session_protocol(info.study, info.config)[1])
+                       for info in store.sessions()}
     for row in rows:
         row["onset_time"] = onsets.get(row["session_id"], {}).get(row["trial_index"])
+        row["level_db"], row["block"] = level_block.get(row["session_id"], (None, None))
     return rows, simulated, sessions
+
+
+def _protocol_keys(info: Any) -> dict[str, Any]:
+    """A session's protocol, block and levels, as the events sidecar's ``Sessions`` names them."""
+    from .storage import session_protocol
+
+    protocol, block = session_protocol(info.study, info.config)
+    keys = {"Protocol": protocol, "Block": block, "BlockName": info.config.get("block_name"),
+            "LevelUnit": info.config.get("level_unit", "dB"), "LevelDb": info.design.level_db}
+    if info.config.get("level_unit") == "dB SL":
+        keys.update(LevelSlDb=info.config.get("level_sl_db"), ThresholdDb=info.config.get("threshold_db"))
+    if info.design.staircase is not None:
+        keys["Staircase"] = info.design.staircase.to_dict()
+    return keys
+
+
+def _threshold_runs(db: Path, labels: dict[str, str], sessions: dict[tuple[str, int], list[dict]],
+                    institution: dict[str, Any]) -> list[dict[str, Any]]:
+    """The threshold blocks' trials (:meth:`StudyStore.threshold_rows`): one ``task-threshold`` run per session."""
+    from .storage import StudyStore
+
+    with StudyStore(db, create=False) as store:
+        rows = store.threshold_rows()
+        walls = {sid: _onsets(store, sid) for sid in {r["session"] for r in rows}}
+        infos = {sid: store.session(sid) for sid in walls}
+    grouped: dict[int, list[dict[str, Any]]] = defaultdict(list)
+    for r in rows:
+        grouped[int(r["session"])].append(r)
+    runs = []
+    for sid, trials in grouped.items():
+        info = infos[sid]
+        index = [t["trial"] - 1 + (info.design.n_training if t["phase"] == "main" else 0) for t in trials]
+        stamps = [walls[sid].get(i) for i in index]
+        first = min((w for w in stamps if w is not None), default=None)
+        events = [{
+            "onset": None if w is None or first is None else (w - first).total_seconds(), "duration": None,
+            "trial_type": f"detection_{t['method']}_loc{int(t['target'])}", "method": t["method"],
+            "target": int(t["target"]), "response": int(t["felt"]), "response_time": float(t["rt_s"]),
+            "phase": t["phase"], "trial": int(t["trial"]), "session_status": info.status,
+            "dry_run": int(info.calibration_id is None), "levels": t["levels"], "level_db": t["level_db"],
+            "drive_peak_v": t["drive_peak_v"], "reversal": t["reversal"], "threshold_db": t["threshold_db"],
+            "protocol": t["protocol"], "block": t["block"],
+        } for t, w in zip(trials, stamps, strict=True)]
+        pid = info.participant_id
+        runs.append({"label": labels[pid], "study": info.study, "session": sid, "task": THRESHOLD_TASK,
+                     "events": events, "sidecar": {
+                         **THRESHOLD_TASK_INFO, **institution, "SourceId": pid,
+                         "onset": {**THRESHOLD_COLUMN_DESCRIPTIONS["onset"], "Description": _ONSET_NOTE["wall"]},
+                         "Sessions": [s for s in sessions.get((pid, info.study), []) if s["Session"] == sid]}})
+    return runs
 
 
 def _from_trials_csv(path: Path) -> tuple[list[dict[str, Any]], dict[str, bool], dict[tuple[str, int], list[dict]]]:
@@ -233,7 +288,9 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
             "dry_run": None if t.get("dry_run") is None else int(bool(t["dry_run"])),
             "device_onset": t.get("onset_device_s"), "device_clock": t.get("onset_clock"),
             "levels": t.get("levels") or None, "drive_peak_v": t.get("drive_peak_v"),
-            "target_peak_um": t.get("target_peak_um"),
+            "target_peak_um": t.get("target_peak_um"), "protocol": t.get("protocol"), "block": t.get("block"),
+            "level_db": t.get("level_db"), "response_x_mm": t.get("response_x_mm"),
+            "response_y_mm": t.get("response_y_mm"),
         } for t, onset in zip(trials, onsets, strict=True)]
         sim = simulated.get(pid, False)
         infos = [s for s in sessions.get((pid, study), []) if session is None or s["Session"] == session]
@@ -261,6 +318,9 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
             "Source": "study database" if from_db else "trials CSV", "SourceFile": source.name,
             "Sessions": infos,
         }})
+    if from_db:
+        runs += [{**run, "session": relabel.get(run["session"], run["session"])}
+                 for run in _threshold_runs(source, labels, sessions, institution)]
     # The README speaks for the whole dataset: simulated participants of an earlier
     # export into it count too.
     any_sim = any(simulated.values()) or _dataset_has_simulated(Path(out_dir))

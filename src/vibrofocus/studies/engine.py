@@ -31,7 +31,7 @@ from ..defaults import DRIVE_LIMIT_V, N_SAMPLES
 from ..errors import StudyError, ValidationError
 from .markers import send_marker
 from .protocol import DEFAULT_LEVELS, PlannedTrial, StudyDesign, level_options
-from .storage import AnswerReceipt, StudyStore
+from .storage import AnswerReceipt, StudyStore, session_protocol
 
 __all__ = [
     "check_drive_levels",
@@ -676,6 +676,7 @@ class StudyEngine:
         self.study = info.study
         self.design = info.design
         self.rig = rig
+        self._marked = _protocol_fields(info)
         if renderer is None and not dry_run:
             if calibration is None:
                 raise StudyError("a study engine needs the participant's calibration (or a renderer)")
@@ -780,7 +781,7 @@ class StudyEngine:
         """Send the marker of a cue, stimulus onset or answer (:mod:`.markers`; ``--lsl``)."""
         send_marker(event, host_time_s, participant=self.participant_id, study=self.study, session=self.session_id,
                     trial=trial.trial, trial_index=trial.trial_index, phase=trial.phase, method=trial.method,
-                    target=trial.target, **{"response": None, **fields})
+                    target=trial.target, **{"response": None, **self._marked, **fields})
 
     def present(self, trial: PlannedTrial, responder: Any = None) -> Presentation | str | Again:
         """Cue, then play the trial's stimulus; both are logged before they happen.
@@ -820,7 +821,7 @@ class StudyEngine:
         # The marker at the drive's first sample leaving the device: the hand-over plus the
         # output latency where the rig knows it. A trial presented before (a resumed run,
         # a pause) says so, so that a recording keeps one onset per answer.
-        self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=stim is not None,
+        self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=stim is not None, level_db=level_db,
                      onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency,
                      replay=self._presented_before(trial))
         return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency)
@@ -940,6 +941,13 @@ class StudyEngine:
             if pace_s > 0:
                 time.sleep(pace_s)
         return n_run
+
+
+def _protocol_fields(info: Any) -> dict[str, Any]:
+    """What every marker of a session says of its protocol (docs/lab-streaming-layer.md): its
+    name and block, and ``task`` ``threshold`` for a threshold block (its taps' own code)."""
+    protocol, block = session_protocol(info.study, info.config)
+    return {"protocol": protocol, "block": block, **({"task": "threshold"} if info.design.detection else {})}
 
 
 def _hook(responder: Any, name: str, trial: PlannedTrial) -> Control:

@@ -23,6 +23,7 @@ __all__ = [
     "ParticipantIn",
     "CalibrationIn",
     "SessionIn",
+    "ProtocolIn",
     "AnalysisIn",
     "MAX_ID",
     "SessionId",
@@ -71,7 +72,8 @@ class AnswerIn(_Strict):
     unchanged on every retry, so that the server can tell a re-send from a new answer.
     An answer names locations (``response``) or, in a point session, a point on the
     picture of the arm area (``point_mm``: ``[x, y]`` in the layout frame, mm); whether
-    the point lies in the picture is the store's rule (422 when it does not).
+    the point lies in the picture is the store's rule (422 when it does not). In a
+    threshold session it says whether the tap was felt (``felt``, stored as 1 or 0).
     """
 
     session_id: int = Field(ge=1, le=MAX_ID, strict=True)
@@ -79,6 +81,8 @@ class AnswerIn(_Strict):
     response: list[Location] | None = Field(default=None, min_length=1, max_length=N_LOCATIONS)
     point_mm: list[Annotated[float, Field(allow_inf_nan=False, ge=-10_000.0, le=10_000.0)]] | None = (
         Field(default=None, min_length=2, max_length=2))
+    #: A threshold block's answer (docs/protocols.md, "Threshold blocks"): whether the tap was felt.
+    felt: bool | None = None
     rt_s: float = Field(ge=0.0, le=3600.0, allow_inf_nan=False)
     answer_id: str = Field(min_length=8, max_length=64, pattern=r"^[A-Za-z0-9_-]+$")
 
@@ -93,9 +97,10 @@ class AnswerIn(_Strict):
 
     @model_validator(mode="after")
     def _one_answer(self) -> "AnswerIn":
-        if (self.response is None) == (self.point_mm is None):
-            raise ValueError("an answer gives either response (locations) or point_mm ([x, y] in mm), not "
-                             + ("both" if self.response is not None else "neither"))
+        given = [self.response is not None, self.point_mm is not None, self.felt is not None]
+        if sum(given) != 1:
+            raise ValueError("an answer gives one of response (locations), point_mm ([x, y] in mm) or felt "
+                             "(true or false), not " + {0: "neither", 2: "both"}.get(sum(given), "all three"))
         return self
 
 
@@ -141,7 +146,8 @@ class SessionIn(_Strict):
     """Plan a study session (the full trial list is written to the database)."""
 
     participant_id: ParticipantId
-    study: Study
+    # Required unless a protocol gives it (its block's study).
+    study: Study | None = None
     seed: int | None = Field(default=None, ge=0, le=2**32 - 1)
     calibration_id: int | None = Field(default=None, ge=1, le=MAX_ID)
     rig: str = Field(default="simulated", min_length=1, max_length=32)
@@ -156,6 +162,20 @@ class SessionIn(_Strict):
     # The participant answers a point on a picture of the arm area (study 1 only): the
     # calibration's layout is the picture (docs/web.md, point answers).
     point: bool = False
+    # A study protocol (docs/protocols.md): a shipped one or one uploaded (/api/protocols) by
+    # its name, and its block (None: the participant's first unfinished one). The protocol
+    # then sets the study and the design: study, repetitions, n_training, levels and point
+    # are not given with it.
+    protocol: str | None = Field(default=None, min_length=1, max_length=64, pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")
+    block: int | None = Field(default=None, ge=0, le=63)
+
+
+class ProtocolIn(_Strict):
+    """Upload a study protocol: the text of its TOML file (docs/protocols.md)."""
+
+    text: str = Field(min_length=1, max_length=60_000)
+    #: The file's name, for the error messages.
+    filename: str = Field(default="upload.toml", min_length=1, max_length=128, pattern=r"^[^/\\\x00-\x1f]+$")
 
 
 class AnalysisIn(_Strict):

@@ -488,7 +488,16 @@ def _session_out(web: WebState, session_id: int) -> dict[str, Any]:
         info["live"].update(trial_position(planned(web, session_id), info["live"].get("trial_index")))
     info["dry_run"] = info.get("calibration_id") is None
     info["participant_url"] = f"/participant/{session_id}?key={web.participant_key(session_id)}"
+    info["staircase"] = _staircase_out(web, session_id)
     return info
+
+
+def _staircase_out(web: WebState, session_id: int) -> dict[str, Any] | None:
+    """A threshold session's staircase and threshold (web/protocols.py); None for other sessions."""
+    from .protocols import staircase_state
+
+    with web.db:
+        return staircase_state(web.store, web.store.session(session_id))
 
 
 @router.get("/api/sessions")
@@ -523,6 +532,10 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
         rig_seed = _calibration_arm(web, body.calibration_id, body.rig_seed, body.participant_id)
     else:
         rig_seed = _rig_seed(body.rig, body.rig_seed, body.participant_id)
+    if body.protocol is not None:
+        return _create_protocol_session(web, body, rig_seed, accepted)
+    if body.study is None:
+        raise HTTPException(422, detail="Give the study (1 or 2), or a protocol and its block.")
     config: dict[str, Any] = {"rig": body.rig, "rig_seed": rig_seed}
     if body.repetitions is not None:
         config["repetitions"] = body.repetitions
@@ -551,6 +564,30 @@ def create_session(body: SessionIn, web: WebState = Depends(require_token)) -> d
 
         sid, _ = plan_session(web.store, body.participant_id, body.study, seed=seed,
                               calibration_id=body.calibration_id, config=config, renderer=renderer, store_lock=web.db)
+    except StudyError as exc:
+        raise _study_error(exc) from None
+    return _session_out(web, sid)
+
+
+def _create_protocol_session(web: WebState, body: SessionIn, rig_seed: int | None, accepted: list[str]) -> dict[str, Any]:
+    """Plan a session of a protocol's block (web/protocols.py), as ``study run --protocol`` does."""
+    from .protocols import find_protocol, plan_block
+
+    given = [k for k in ("study", "repetitions", "n_training", "levels") if getattr(body, k) is not None]
+    if given or body.point:
+        raise HTTPException(422, detail=(f"The protocol {body.protocol!r} sets the study and the design: leave out "
+                                         f"{', '.join(given + (['point'] if body.point else []))}."))
+    assert body.protocol is not None
+    protocol = find_protocol(web, body.protocol)
+    try:
+        study, block, config = plan_block(web, protocol, body.participant_id, body.block, body.calibration_id)
+        config.update(rig=body.rig, rig_seed=rig_seed)
+        if accepted:
+            config["calibration_errors_accepted"] = accepted
+        seed = protocol.blocks[block].session_seed(body.seed if body.seed is not None else secrets.randbelow(2**31))
+        with web.db:
+            sid = web.store.create_session(body.participant_id, study, seed=seed, calibration_id=body.calibration_id,
+                                           config=config)
     except StudyError as exc:
         raise _study_error(exc) from None
     return _session_out(web, sid)

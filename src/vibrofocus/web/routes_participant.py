@@ -76,7 +76,13 @@ def _state(web: WebState, session_id: int) -> dict[str, Any]:
         "error": snap.get("error"),
         "simulated": web.is_simulated(info["participant_id"]),
         "point": bool((info.get("config") or {}).get("point")),
+        "detection": is_detection(info),
     }
+
+
+def is_detection(info: dict[str, Any]) -> bool:
+    """Whether a session is a threshold block: its trials ask whether the tap was felt."""
+    return (info.get("config") or {}).get("staircase") is not None
 
 
 @router.get("/participant/{session_id}", response_class=HTMLResponse, include_in_schema=False)
@@ -88,7 +94,8 @@ def participant_page(request: Request, session_id: SessionId, key: str = Query("
     config = info.get("config") or {}
     area = config.get("point_area") if config.get("point") else None
     return HTMLResponse(render_template("participant.html", session_id=session_id, study=int(info["study"]),
-                                        area=None if area is None else arm_picture(area)))
+                                        area=None if area is None else arm_picture(area),
+                                        detection=is_detection(info)))
 
 
 def arm_picture(area: dict[str, Any]) -> dict[str, Any]:
@@ -209,9 +216,15 @@ def participant_answer(
     if web.is_simulated(info["participant_id"]):
         # Its answers are the perceptual model's: one from a person would be stored as model output.
         raise HTTPException(409, detail=SIMULATED_MESSAGE)
+    response = None if body.response is None else list(body.response)
+    if body.felt is not None:
+        if not is_detection(info):
+            raise HTTPException(422, detail=f"session {session_id} asks where the tap was felt, not whether; "
+                                            "answer locations")
+        response = [int(body.felt)]  # stored as a threshold block's answer: 1 felt, 0 not felt
     try:
         receipt = web.store.record_answer(
-            session_id, body.trial_index, None if body.response is None else list(body.response), float(body.rt_s),
+            session_id, body.trial_index, response, float(body.rt_s),
             answer_id=body.answer_id, require_presented=True,
             point_mm=None if body.point_mm is None else [float(v) for v in body.point_mm],
         )

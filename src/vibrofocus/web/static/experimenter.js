@@ -434,18 +434,61 @@
     no.focus();  // Enter on the focused button keeps the session
   }
 
+  // ---------------------------------------------------------------- protocols
+  // A protocol (shipped, or uploaded here) sets the study and design of each of its blocks:
+  // with one chosen, Plan session plans its block (default: the participant's next unfinished).
+  const MAX_PROTOCOL_UPLOAD = 60000;  // characters: the server's ProtocolIn limit
+  let protocols = [];
+  async function loadProtocols(select = null) {
+    protocols = await api("/api/protocols");
+    const keep = select ?? $("protocol").value;
+    $("protocol").replaceChildren(el("option", { value: "" }, "none: the study and options below"),
+      ...protocols.map((p) => el("option", { value: p.name }, `${p.name}${p.shipped ? "" : " (uploaded)"}`)));
+    $("protocol").value = protocols.some((p) => p.name === keep) ? keep : "";
+    showBlocks();
+  }
+  function showBlocks() {
+    const p = protocols.find((x) => x.name === $("protocol").value);
+    $("block").replaceChildren(el("option", { value: "" }, "next unfinished"),
+      ...(p ? p.blocks : []).map((b) => el("option", { value: String(b.index) },
+        `${b.index + 1}. ${b.name} · ${b.response} · ${b.n_trials} trials · ${b.levels.join(", ")} ${b.level_unit}`)));
+    $("block").disabled = !p;
+    for (const id of ["study", "repetitions", "n-training"]) $(id).disabled = Boolean(p);
+    $("protocol-message").textContent = p ? (p.description || "") : "";
+  }
+  $("protocol").addEventListener("change", showBlocks);
+  $("protocol-file").addEventListener("change", async () => {
+    const file = $("protocol-file").files[0];
+    if (!file) return;
+    try {
+      if (file.size > MAX_PROTOCOL_UPLOAD) throw new Error(`protocol ${file.name}: ${file.size} bytes, more than the ${MAX_PROTOCOL_UPLOAD} this server takes`);
+      const p = await api("/api/protocols", { method: "POST", body: JSON.stringify({ text: await file.text(), filename: file.name }) });
+      await loadProtocols(p.name);
+      flash(`Protocol ${p.name} uploaded: ${p.blocks.length} block(s).`);
+    } catch (e) { flash(e.message, true); }
+    $("protocol-file").value = "";
+  });
+  function staircaseText(st) {
+    if (st.threshold_db !== null) return `Threshold ${st.threshold_db.toFixed(1)} dB re the level rule (${st.reversals} reversals).`;
+    if (st.finished) return `No threshold: the staircase reversed ${st.reversals} times, fewer than it needs; give the block more trials.`;
+    return `Staircase: next level ${st.level_db.toFixed(1)} dB, ${st.reversals} reversal(s) so far.`;
+  }
+
   $("new-session").addEventListener("submit", async (ev) => {
     ev.preventDefault();
     const pid = $("participant").value;
     if (!pid) { flash("Add or pick a participant first.", true); return; }
     const cal = $("calibration").value;
+    const protocol = $("protocol").value;
+    const design = protocol
+      ? { protocol, block: $("block").value === "" ? null : Number($("block").value) }
+      : { study: Number($("study").value), repetitions: Number($("repetitions").value), n_training: Number($("n-training").value) };
     try {
       const s = await api("/api/sessions", { method: "POST", body: JSON.stringify({
-        participant_id: pid, study: Number($("study").value), calibration_id: cal ? Number(cal) : null,
+        participant_id: pid, calibration_id: cal ? Number(cal) : null, ...design,
         // With a calibration, the session plays on the forearm it was made on (the server takes
         // its seed): the Seed field is for Calibrate and dry runs only.
         rig: $("rig").value, rig_seed: cal ? null : rigSeed(),
-        repetitions: Number($("repetitions").value), n_training: Number($("n-training").value),
         allow_calibration_errors: Boolean(cal) && $("cal-override").checked }) });
       selectSession(s.session_id);
       const arm = cal && s.config && s.config.rig === "simulated" ? ` on the calibration's simulated forearm (seed ${s.config.rig_seed})` : "";
@@ -465,9 +508,12 @@
     $("live-title").textContent = `session ${s.session_id} · study ${s.study} · ${s.status}` +
       (s.live ? ` · ${[s.live.state, trialText(s.live)].filter(Boolean).join(" · ")}` : "") + (s.live && s.live.error ? ` · ${s.live.error}` : "");
     $("live-progress").value = s.n_trials ? s.n_answered / s.n_trials : 0;
-    const rows = s.answers.slice().reverse().map((a) => el("tr", { class: a.response.includes(a.target) ? "hit" : "" },
+    $("live-staircase").hidden = !s.staircase;
+    $("live-staircase").textContent = s.staircase ? staircaseText(s.staircase) : "";
+    const said = (a) => (s.staircase ? (a.response[0] ? "felt" : "not felt") : a.response.join(" "));
+    const rows = s.answers.slice().reverse().map((a) => el("tr", { class: !s.staircase && a.response.includes(a.target) ? "hit" : "" },
       el("td", {}, a.phase), el("td", {}, String(a.trial)), el("td", {}, a.method), el("td", {}, String(a.target)),
-      el("td", {}, a.response.join(" ")), el("td", {}, a.rt_s.toFixed(3)), el("td", {}, a.recorded_at.slice(11, 19))));
+      el("td", {}, said(a)), el("td", {}, a.rt_s.toFixed(3)), el("td", {}, a.recorded_at.slice(11, 19))));
     $("answers").querySelector("tbody").replaceChildren(...rows);
   }
 
@@ -488,7 +534,7 @@
 
   // ---------------------------------------------------------------- start
   (async () => {
-    try { await loadRigs(); await loadParticipants(); }
+    try { await loadRigs(); await loadParticipants(); await loadProtocols(); }
     catch (e) { flash(e.message, true); }
     setInterval(loadSessions, 1500);
   })();

@@ -15,6 +15,9 @@
   const pendingKey = `vibrofocus.pending.${sessionId}`;
   const $ = (id) => document.getElementById(id);
   const cells = Array.from(document.querySelectorAll(".cell"));
+  // A threshold block: each trial asks whether the tap was felt (two buttons, keys Y/1 and N/0).
+  const detection = body.dataset.detection === "1";
+  const feltButtons = Array.from(document.querySelectorAll(".felt"));
   // A point session: the picture of the arm area (an SVG in mm, y drawn downward).
   const arm = $("arm");
   const area = arm ? ["x0", "x1", "y0", "y1"].reduce((o, k) => ({ ...o, [k]: Number(arm.dataset[k]) }), {}) : null;
@@ -290,6 +293,7 @@
         if (restart) setMessage("Get ready");
         else if (waitingForServer) setMessage("Sending…");
         else if (confirmedFor === next.trial_index) showTaken();
+        else if (detection) setMessage("Did you feel a tap?");
         else if (arm) setMessage("Where did you feel it? Point at the place.");
         else {
           setMessage(multi ? "Where did you feel it? Choose every location you felt (one or several), then Confirm."
@@ -370,6 +374,35 @@
     flushPending();
   }
 
+  // An answer (a point or felt / not felt), timed now: stored here before the first send (a
+  // crash or reload from here on cannot lose it), then sent.
+  function send(fields) {
+    const rt = (performance.now() - respondSince) / 1000;
+    const answer = {
+      session_id: sessionId, trial_index: state.trial_index, ...fields,
+      rt_s: Math.round(rt * 1e4) / 1e4, answer_id: newAnswerId(),
+    };
+    ownIds.add(answer.answer_id);
+    savePending([...loadPending(), answer]);
+    sentFor = state.trial_index;
+    body.classList.remove("answerable");
+    setMessage("Sending…");
+    flushPending();
+    return answer;
+  }
+
+  // ---------------------------------------------------------------- detection answers
+  function submitFelt(felt) {
+    if (!canAnswer()) return;
+    send({ felt });
+  }
+  for (const b of feltButtons) {
+    b.addEventListener("click", (ev) => {
+      b.blur();  // no focus mark left to bias the next answer
+      if (audioReady && ev.detail !== 0) submitFelt(b.dataset.felt === "1");  // detail 0: a key, not the pointer
+    });
+  }
+
   // ---------------------------------------------------------------- point answers
   const clamp = (v, lo, hi) => Math.min(Math.max(v, lo), hi);
   function showCursor() {
@@ -381,23 +414,10 @@
   }
   function submitPoint(point) {
     if (!canAnswer()) return;
-    const rt = (performance.now() - respondSince) / 1000;
-    const answer = {
-      session_id: sessionId,
-      trial_index: state.trial_index,
-      point_mm: [Math.round(point[0] * 100) / 100, Math.round(point[1] * 100) / 100],
-      rt_s: Math.round(rt * 1e4) / 1e4,
-      answer_id: newAnswerId(),
-    };
-    ownIds.add(answer.answer_id);
-    savePending([...loadPending(), answer]);
-    sentFor = state.trial_index;
+    const answer = send({ point_mm: [Math.round(point[0] * 100) / 100, Math.round(point[1] * 100) / 100] });
     cursor = answer.point_mm;
     showCursor();
     arm.classList.add("chosen");
-    body.classList.remove("answerable");
-    setMessage("Sending…");
-    flushPending();
   }
   if (arm) {
     arm.addEventListener("pointerdown", (ev) => {
@@ -431,10 +451,17 @@
     // cell they would "click" it again (the last one clicked): they never act on a cell.
     // Nothing answers until the participant has begun (after a reload the "Click here
     // to begin" overlay covers the grid).
-    const onButton = ev.target instanceof HTMLButtonElement && !ev.target.classList.contains("cell");
+    const onButton = ev.target instanceof HTMLButtonElement && !ev.target.classList.contains("cell")
+      && !ev.target.classList.contains("felt");
     if ((ev.key === "Enter" || ev.key === " ") && onButton) return;
     if (ev.key === "Enter" || ev.key === " ") ev.preventDefault();
     if (!audioReady) return;
+    if (detection) {
+      const k = ev.key.toLowerCase();
+      if (k === "y" || k === "1" || ev.code === "Numpad1") { ev.preventDefault(); submitFelt(true); }
+      else if (k === "n" || k === "0" || ev.code === "Numpad0") { ev.preventDefault(); submitFelt(false); }
+      return;
+    }
     if (arm) {
       // A point session: arrow keys move the cursor (Shift: 5 mm steps), Enter answers at it.
       if (ev.key.startsWith("Arrow")) {

@@ -1,0 +1,176 @@
+"""Study protocols in the web app: the shipped ones, uploads, and sessions planned from a block.
+
+The experimenter page plans a session from a protocol (docs/web.md, "Sessions from a
+protocol"; the file format: docs/protocols.md): one of the shipped protocols
+(``vibrofocus/studies/protocols/*.toml``) or one uploaded through ``POST /api/protocols``.
+An upload is read by the same parser as ``study run --protocol``
+(:func:`~vibrofocus.studies.protocol_files.parse_protocol`): a bad one gets its one line
+naming the field and the line, and nothing is stored. A good one is kept in the server's
+files folder (``protocols/<name>.toml``), so that its later blocks can be planned from it;
+a second upload of another text under the same name is refused, since every session
+names its protocol only by name.
+
+A session of a block is planned as ``study run --protocol`` plans it: the block's design,
+the protocol's name and block stored in the session's config, a block in dB SL on the
+participant's threshold from the threshold block before it
+(:meth:`~vibrofocus.studies.protocol_files.StudyProtocol.participant_threshold`), and a
+level over the drive limit refused before anything is written
+(:func:`~vibrofocus.studies.engine.check_drive_levels`).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from fastapi import APIRouter, Depends, HTTPException
+
+from ..errors import StudyError
+from ..studies.protocol_files import (MAX_PROTOCOL_BYTES, SHIPPED_PROTOCOLS, StudyProtocol, parse_protocol,
+                                      shipped_protocol)
+from .api_models import ProtocolIn
+from .private import private_dir
+from .public_text import public_text
+from .routes_experimenter import require_token
+
+__all__ = ["router", "find_protocol", "protocol_summary", "first_unfinished_block", "staircase_state"]
+
+router = APIRouter()
+
+
+def _folder(web: Any) -> Path:
+    """The folder of the uploaded protocols (private to the server's user)."""
+    folder = web.data_dir / "protocols"
+    private_dir(folder, "protocols folder")
+    return folder
+
+
+def _read_uploaded(path: Path, name: str) -> StudyProtocol:
+    with open(path, "rb") as fh:
+        raw = fh.read(MAX_PROTOCOL_BYTES + 1)
+    return parse_protocol(raw.decode("utf-8"), f"{name}.toml")
+
+
+def find_protocol(web: Any, name: str) -> StudyProtocol:
+    """The protocol ``name``: a shipped one, else one uploaded to this server (404 if none)."""
+    if name in SHIPPED_PROTOCOLS:
+        return shipped_protocol(name)
+    path = _folder(web) / f"{name}.toml"
+    if not path.is_file():
+        raise HTTPException(404, detail=(f"No protocol {name!r} on this server: the shipped ones are "
+                                         f"{', '.join(SHIPPED_PROTOCOLS)}; upload a protocol file first."))
+    return _read_uploaded(path, name)
+
+
+def protocol_summary(protocol: StudyProtocol, *, shipped: bool) -> dict[str, Any]:
+    """What the experimenter page lists of a protocol: its name, text and blocks."""
+    return {
+        "name": protocol.name, "description": protocol.description, "shipped": shipped,
+        "blocks": [{"index": b.index, "name": b.name, "response": b.response, "study": b.study,
+                    "methods": list(b.methods), "locations": None if b.locations is None else list(b.locations),
+                    "levels": list(b.levels), "level_unit": b.level_unit,
+                    "n_trials": b.training_trials + len(b.methods) * len(b.locations or b.points_mm or ()) * b.repetitions}
+                   for b in protocol.blocks],
+    }
+
+
+@router.get("/api/protocols")
+def list_protocols(web: Any = Depends(require_token)) -> list[dict[str, Any]]:
+    """The shipped protocols, then those uploaded to this server (by name)."""
+    out = [protocol_summary(shipped_protocol(n), shipped=True) for n in SHIPPED_PROTOCOLS]
+    for path in sorted(_folder(web).glob("*.toml")):
+        try:
+            out.append(protocol_summary(_read_uploaded(path, path.stem), shipped=False))
+        except (StudyError, OSError, UnicodeDecodeError):  # a file put there by hand: not listed
+            continue
+    return out
+
+
+@router.post("/api/protocols", status_code=201)
+def upload_protocol(body: ProtocolIn, web: Any = Depends(require_token)) -> dict[str, Any]:
+    """Check a protocol file's text and keep it under its name; 422 with one line, and nothing stored, if bad."""
+    from .._atomic import write_text
+
+    try:
+        protocol = parse_protocol(body.text, body.filename)
+        protocol.check_runnable()
+    except StudyError as exc:
+        raise HTTPException(422, detail=public_text(str(exc))) from None
+    name = protocol.name
+    if name in SHIPPED_PROTOCOLS:
+        raise HTTPException(409, detail=(f"protocol {body.filename}: the name {name!r} is a shipped protocol's; "
+                                         "give yours another name"))
+    path = _folder(web) / f"{name}.toml"
+    if path.is_file():
+        if path.read_bytes() != body.text.encode("utf-8"):
+            raise HTTPException(409, detail=(
+                f"protocol {body.filename}: another protocol named {name!r} is already on this server, and sessions "
+                "name their protocol by its name only; give this one another name"))
+    else:
+        write_text(path, body.text, what="protocol file")
+    return protocol_summary(protocol, shipped=False)
+
+
+def first_unfinished_block(store: Any, participant_id: str, protocol: StudyProtocol) -> int:
+    """The participant's first block of ``protocol`` without a finished session (as ``study run`` picks it).
+
+    Raises
+    ------
+    StudyError
+        Every block has a finished session.
+    """
+    from ..studies.storage import session_protocol
+
+    done = {b for s in store.sessions(participant_id) if s.finished
+            for name, b in [session_protocol(s.study, s.config)] if name == protocol.name}
+    todo = [b.index for b in protocol.blocks if b.index not in done]
+    if not todo:
+        raise StudyError(f"{participant_id} has finished every block of the protocol {protocol.name!r}")
+    return todo[0]
+
+
+def plan_block(web: Any, protocol: StudyProtocol, participant_id: str, block: int | None,
+               calibration_id: int | None) -> tuple[int, int, dict[str, Any]]:
+    """``(study, block, config)`` of a session of ``protocol``'s block (default: the first unfinished).
+
+    Checked before anything is written: the block runnable, a threshold for a block in
+    dB SL, and with a calibration every stimulus rendered and its level within the drive
+    limit (:func:`~vibrofocus.studies.engine.check_drive_levels`).
+    """
+    from ..studies.engine import check_drive_levels
+    from ..studies.protocol import StudyDesign
+
+    protocol.check_runnable()
+    with web.db:
+        if block is None:
+            block = first_unfinished_block(web.store, participant_id, protocol)
+        if block >= len(protocol.blocks):
+            raise StudyError(f"protocol {protocol.name!r} has {len(protocol.blocks)} block(s): no block {block}")
+        threshold_db = protocol.participant_threshold(web.store, participant_id, block)
+    b = protocol.blocks[block]
+    assert b.study is not None  # check_runnable
+    config = protocol.session_config(block, threshold_db)
+    if calibration_id is not None:
+        design = StudyDesign.from_config(b.study, config)
+        bank = web.bank(calibration_id, levels=design.levels)
+        bank.prepare(design.methods, design.locations)
+        check_drive_levels(bank, design, where=protocol.level_where(block))
+        if design.point:  # the picture the participant points on: this arm's layout
+            config["layout"] = web.calibration(calibration_id).layout.to_dict()
+    return b.study, block, config
+
+
+def staircase_state(store: Any, info: Any) -> dict[str, Any] | None:
+    """A threshold session's staircase as the experimenter page shows it; None for other sessions.
+
+    ``level_db`` the next trial's level, ``reversals`` the reversals so far, and
+    ``threshold_db`` the threshold the store keeps for it (None before the block's last
+    answer, or where the staircase reversed too few times), all dB re the level rule.
+    """
+    staircase = info.design.staircase
+    if staircase is None:
+        return None
+    felt = [a.response for a in store.answers(info.session_id) if a.trial_index >= info.design.n_training]
+    run = staircase.run(felt)  # what the store's threshold is computed from, with the block's last answer
+    return {"level_db": run.next_db, "reversals": len(run.reversals_db), "levels_db": list(run.levels_db),
+            "threshold_db": run.threshold_db if info.finished else None, "finished": info.finished}
