@@ -11,7 +11,7 @@ from vibrofocus.calibration import calibrate, load_calibration, plan_calibration
 from vibrofocus.calibration.plan import subset_points
 from vibrofocus.demo.trust import tap_band
 from vibrofocus.errors import CalibrationFileError, ValidationError
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 from ._netcdf import rewrite_netcdf
 

@@ -117,7 +117,7 @@ def demo_command(
         from .._validation import check_choice
         from ..calibration import calibrate, save_calibration
         from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
-        from ..skin import SimulatedForearm
+        from ..rigs.simulated import SimulatedForearm
 
         allow_overwrite(force)
         check_choice(design_from, "--design-from", ("calibration", "model"))
@@ -313,7 +313,7 @@ def _write_moving_focus(out: Path, *, seed: int, speed_m_s: float, quiet: bool, 
     """``demo --moving``: a moving focus rendered from the skin model fitted to a calibration."""
     from ..calibration import calibrate, fit_model
     from ..demo.moving import moving_focus, write_moving_gif
-    from ..skin import SimulatedForearm
+    from ..rigs.simulated import SimulatedForearm
 
     _make_output_folder(out)
     rig = SimulatedForearm(seed=seed, skin=skin)
