@@ -9,6 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from vibrofocus import ArrayLayout, TransferMatrix, render
+from vibrofocus.rendering import render_fitted
 from vibrofocus.defaults import METHODS
 from vibrofocus.errors import ValidationError
 from vibrofocus.rendering import (
@@ -130,6 +131,9 @@ def test_render_takes_a_method_object_and_refuses_options_beside_it(tm):
     with pytest.raises(ValidationError, match="method must be a Method object or a registered method's name, got "
                                               "type"):
         render(Inverse, tm, FS, REF, 3)
+    # render_fitted takes the object too (its retry with tapered ends is a copy of it).
+    fitted = render_fitted(Inverse(regularization="tikhonov", limit_v=5.0), tm, FS, REF, 3)
+    assert_allclose(fitted.drives, by_object.drives, rtol=0, atol=0)
 
 
 def test_a_registered_method_runs_in_render(tm, clean_registry):
