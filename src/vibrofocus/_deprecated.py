@@ -15,6 +15,7 @@ import types
 import warnings
 from collections.abc import Callable
 from importlib import import_module
+from pathlib import Path
 from typing import Any
 
 __all__ = ["REMOVED_IN", "module_getattr", "warn_deprecated", "warn_if_imported_from_outside", "alias_submodules"]
@@ -59,18 +60,31 @@ def module_getattr(module: str, former: dict[str, tuple[str, str, str]],
 def warn_if_imported_from_outside(module: str, new: str) -> None:
     """Warn that the module ``module`` is deprecated for ``new``, when a module outside vibrofocus imports it.
 
-    Called from a module's body. vibrofocus's own modules may still import the former path
-    (code that other work is editing moves later); a user's ``import`` of it warns. Like any
-    module-level deprecation, it warns at the module's first import in a process.
+    Called from a module's body. The project's own code (the package, ``vibrofocus_tools``
+    and the checkout's ``scripts/``) may still import the former path: code that other work
+    is editing moves later. A user's ``import`` of it warns. Like any module-level
+    deprecation, it warns at the module's first import in a process.
     """
     frame = sys._getframe(2)
     while frame is not None and frame.f_code.co_filename.startswith("<frozen importlib"):
         frame = frame.f_back
-    importer = "" if frame is None else str(frame.f_globals.get("__name__", ""))
-    if importer != "vibrofocus" and not importer.startswith("vibrofocus."):
+    if frame is None or not _is_the_projects(frame.f_globals):
         # warn_deprecated, this function, the module's body, then the importer (the
         # warnings module skips importlib's own frames).
         warn_deprecated(module, new, stacklevel=4)
+
+
+#: The checkout's scripts (src/vibrofocus/_deprecated.py -> the repository root); absent from a wheel.
+_SCRIPTS = Path(__file__).resolve().parents[2] / "scripts"
+
+
+def _is_the_projects(module_globals: dict[str, Any]) -> bool:
+    """Whether an importing module is the project's own: vibrofocus, its tools or one of its scripts."""
+    name = str(module_globals.get("__name__", ""))
+    if name.split(".")[0] in ("vibrofocus", "vibrofocus_tools"):
+        return True
+    path = module_globals.get("__file__")
+    return isinstance(path, str) and Path(path).resolve().parent == _SCRIPTS
 
 
 class _AliasFinder(importlib.abc.MetaPathFinder, importlib.abc.Loader):
