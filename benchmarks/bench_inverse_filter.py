@@ -37,7 +37,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from bench_contrast import loop_acc
-from vibrofocus import InverseOperator, inverse_filter, ricker
+from vibrofocus import ricker
+from vibrofocus.rendering import InverseOperator, inverse_filter
 from vibrofocus.rendering import WraparoundCheck, band_taper, constrained_drives, contrast_drives
 from vibrofocus.rendering.causality import _playback_wraparound_fraction
 

@@ -28,7 +28,7 @@ import sys
 import numpy as np
 
 from vibrofocus.calibration import calibrate, transfer_error
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 METHODS = (("h1", {}), ("mimo", {}), ("mimo 2 s", {"sweep_s": 2.0}))
 

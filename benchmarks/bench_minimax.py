@@ -143,7 +143,7 @@ def long_response(ref_s: float) -> None:
     """minimax_filter with its defaults on a simulated arm whose exciters sit 9-15 cm away."""
     from vibrofocus.rendering import inverse_filter, predict_response
     from vibrofocus.rendering.metrics import zero_lag_fidelity
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     fs, n, band = 1300.0, 1024, (10.0, 500.0)
     layout = ArrayLayout.grid((2, 2), (0.14, 0.20), (3, 3), 0.02, name="far exciters")

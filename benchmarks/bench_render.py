@@ -26,7 +26,7 @@ import vibrofocus
 from vibrofocus import render
 from vibrofocus.calibration import calibrate
 from vibrofocus.defaults import METHODS
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 N = 4096
 LOCATION = 5

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import bids
 
-from vibrofocus.simulation import simulate_studies
+from vibrofocus.participant_models import simulate_studies
 from vibrofocus.studies import export_bids
 
 with tempfile.TemporaryDirectory() as tmp:

@@ -34,7 +34,7 @@ import pyxdf
 from vibrofocus.io.lsl import stable_source_id
 from vibrofocus.rendering import render
 from vibrofocus.rigs import make_rig
-from vibrofocus.simulation import SimulatedParticipant
+from vibrofocus.participant_models import SimulatedParticipant
 from vibrofocus.studies import StudyEngine, StudyStore, lsl_markers, sending_markers
 
 FS_EEG = 250.0

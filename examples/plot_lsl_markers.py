@@ -21,7 +21,7 @@ from pathlib import Path
 import pylsl
 
 from vibrofocus.io.lsl import stable_source_id
-from vibrofocus.simulation import simulate_studies
+from vibrofocus.participant_models import simulate_studies
 from vibrofocus.studies import lsl_markers
 
 

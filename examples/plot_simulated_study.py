@@ -12,7 +12,7 @@ import tempfile
 from pathlib import Path
 
 import vibrofocus.analysis as va
-from vibrofocus.simulation import simulate_studies
+from vibrofocus.participant_models import simulate_studies
 from vibrofocus.studies import StudyStore
 
 with tempfile.TemporaryDirectory() as tmp:

@@ -24,7 +24,8 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus.defaults import FS_HZ, SIGMA_S
-from vibrofocus.skin import ForearmParameters, SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
+from vibrofocus.skin import ForearmParameters
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-arm-truth.md"

@@ -26,7 +26,8 @@ from vibrofocus.defaults import FS_HZ, SIGMA_S
 from vibrofocus.demo import calibrated_transfer, run_demo
 from vibrofocus.demo.paper_figures import PAPER_METHODS, fig4_focusing_along_a_line, fig5_focus_at_a_location
 from vibrofocus.rendering import render
-from vibrofocus.skin import SKIN_PRESETS, ForearmParameters, SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
+from vibrofocus.skin import SKIN_PRESETS, ForearmParameters
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "simulated-arm-truth.md"

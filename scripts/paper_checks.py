@@ -22,7 +22,8 @@ import numpy as np
 
 from vibrofocus.defaults import FS_HZ, SIGMA_S
 from vibrofocus.rendering import render
-from vibrofocus.skin import ForearmParameters, SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
+from vibrofocus.skin import ForearmParameters
 
 N = 4096
 

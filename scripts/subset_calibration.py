@@ -30,7 +30,7 @@ from vibrofocus import ArrayLayout
 from vibrofocus.calibration import calibrate, plan_calibration
 from vibrofocus.errors import CausalityError
 from vibrofocus.rendering import focus_metrics, render
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 from vibrofocus_tools.markers import write_between_markers
 

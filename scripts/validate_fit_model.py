@@ -36,7 +36,7 @@ from vibrofocus import ArrayLayout
 from vibrofocus.calibration import calibrate, fit_model
 from vibrofocus.demo.trust import tap_band
 from vibrofocus.rendering import focus_metrics, render
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 from vibrofocus_tools.markers import write_between_markers
 

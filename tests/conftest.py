@@ -59,7 +59,7 @@ def simulated_calibration_of():
     the rig. Each is made once per test process (seconds each) for the tests that only read
     it: never change the calibration or play on the rig (copy a saved file to edit it)."""
     from vibrofocus.calibration import calibrate
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     made = {}
 

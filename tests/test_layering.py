@@ -23,7 +23,8 @@ PACKAGE = Path(vibrofocus.__file__).parent
 #: package ``vibrofocus`` (``__version__``, the lazy public API) is no floor: at run time it
 #: loads only :mod:`vibrofocus.errors`.
 FLOORS = (
-    ("errors", "defaults", "_docs", "_style", "_templates", "_interrupts"),  # constants, messages, signals
+    ("errors", "defaults", "_docs", "_style", "_templates", "_interrupts",  # constants, messages, signals,
+     "_deprecated"),                                          # former names that warn
     ("_oserrors", "_validation", "_safe_folders"),            # error wording, the shared checks, shared folders
     ("_output_rules",),                                       # what an output may replace
     ("_disk_checks", "_atomic_folders", "_confined"),         # free space, whole folders, below a root
@@ -35,7 +36,7 @@ FLOORS = (
     ("calibration",),                                         # measures on a rig, fits the skin, designs
     ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine
-    ("demo",),                                                # the demo's parts: taps played, figures, frontier
+    ("demo", "participant_models"),                           # the demo's parts; the participants' new name
     ("workflows",),                                           # the lab's workflows, under every front-end
     ("web", "psychopy"),                                      # the web app; taps in PsychoPy
     ("cli",),                                                 # the command line
@@ -46,8 +47,8 @@ FLOORS = (
 #: still exist (test_every_allowed_exception_is_still_needed), so a fixed one leaves the list.
 ALLOWED = {
     ("vibrofocus.skin", "vibrofocus.rigs.simulated"):
-        "the long-standing name vibrofocus.skin.SimulatedForearm of the rig over the physics, loaded on first "
-        "use (importing vibrofocus.skin loads no rig: test_import_nesting)",
+        "the former name vibrofocus.skin.SimulatedForearm of the rig over the physics, deprecated, loaded on "
+        "first use (importing vibrofocus.skin loads no rig: test_import_nesting)",
     ("vibrofocus.studies.bids", "vibrofocus.simulation.perception"):
         "the BIDS sidecars name the perceptual model that answered for simulated participants",
     ("vibrofocus.studies.store_events", "vibrofocus.simulation.perception"):

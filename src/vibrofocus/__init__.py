@@ -32,19 +32,22 @@ _LAZY_ATTRIBUTES = {
     "ArrayLayout": ".layout",
     "Rig": ".rigs",
     "SafetyLimits": ".rigs",
-    "SimulatedForearm": ".skin",
+    "SimulatedForearm": ".rigs",
     "ricker": ".signals",
     "linear_sweep": ".signals",
     "exponential_sweep": ".signals",
-    "funneling_gains": ".rendering",
-    "inverse_filter": ".rendering",
-    "minimax_filter": ".rendering",
     "minimax_frontier": ".rendering",
-    "InverseOperator": ".rendering",
     "focus_metrics": ".rendering",
     "render": ".rendering",
+    "Method": ".rendering",
+    "Funneling": ".rendering",
+    "Inverse": ".rendering",
+    "Combination": ".rendering",
+    "TimeReversal": ".rendering",
+    "Contrast": ".rendering",
+    "Constrained": ".rendering",
+    "Minimax": ".rendering",
     "contrast_bound": ".rendering",
-    "Rendering": ".rendering",
     "Design": ".rendering",
     "TransferMatrix": ".rendering",
     "register_method": ".rendering",
@@ -59,31 +62,52 @@ if TYPE_CHECKING:  # static analysers and IDEs see the real imports
     from .calibration import Calibration, calibrate, load_calibration, save_calibration
     from .layout import ArrayLayout
     from .rendering import (
+        Combination,
+        Constrained,
+        Contrast,
         Design,
-        InverseOperator,
-        Rendering,
+        Funneling,
+        Inverse,
+        Method,
+        Minimax,
+        TimeReversal,
         TransferMatrix,
         available_methods,
         contrast_bound,
         focus_metrics,
-        funneling_gains,
-        inverse_filter,
-        minimax_filter,
         minimax_frontier,
         register_method,
         render,
     )
     from .rigs import Rig, SafetyLimits
     from .signals import exponential_sweep, linear_sweep, ricker
-    from .skin import SimulatedForearm
+    from .rigs import SimulatedForearm
 
 
 #: Subpackages reachable as attributes without importing them first (``vf.rigs.make_rig``).
-_SUBPACKAGES = frozenset({"analysis", "calibration", "defaults", "demo", "errors", "layout", "rendering", "rigs",
-                          "signals", "simulation", "skin", "studies"})
+_SUBPACKAGES = frozenset({"analysis", "calibration", "defaults", "demo", "errors", "layout", "participant_models",
+                          "rendering", "rigs", "signals", "skin", "studies"})
 
 
-def __getattr__(name: str):
+#: Former top-level names (DEVELOPING.md, "Names"): one way to design a tap is
+#: ``render(method, ...)`` with a method object; the functions and the operator the methods
+#: are built from stay in :mod:`vibrofocus.rendering` as building blocks.
+_FORMER = {
+    "simulation": ("vibrofocus", "participant_models", "vibrofocus.participant_models"),
+    "Rendering": ("vibrofocus.rendering.design", "Design", "vibrofocus.Design"),
+    "inverse_filter": ("vibrofocus.rendering", "inverse_filter",
+                       "vibrofocus.render(vibrofocus.Inverse(...), H, fs, layout, location)"),
+    "InverseOperator": ("vibrofocus.rendering", "InverseOperator",
+                        "vibrofocus.render(vibrofocus.Inverse(...), H, fs, layout, location) or "
+                        "vibrofocus.rendering.InverseOperator"),
+    "funneling_gains": ("vibrofocus.rendering", "funneling_gains",
+                        "vibrofocus.render(vibrofocus.Funneling(...), H, fs, layout, location)"),
+    "minimax_filter": ("vibrofocus.rendering", "minimax_filter",
+                       "vibrofocus.render(vibrofocus.Minimax(...), H, fs, layout, location)"),
+}
+
+
+def _lazy(name: str):
     if name in _SUBPACKAGES:
         value = import_module(f".{name}", __name__)
         globals()[name] = value
@@ -94,6 +118,16 @@ def __getattr__(name: str):
     value = getattr(import_module(module, __name__), name)
     globals()[name] = value  # later look-ups skip this function
     return value
+
+
+def __getattr__(name: str):
+    if name in _FORMER:  # not cached: each use warns
+        from ._deprecated import warn_deprecated
+
+        new_module, new_name, advice = _FORMER[name]
+        warn_deprecated(f"vibrofocus.{name}", advice)
+        return getattr(import_module(new_module), new_name)
+    return _lazy(name)
 
 
 def __dir__() -> list[str]:
@@ -107,15 +141,18 @@ __all__ = [
     "SafetyLimits",
     "SimulatedForearm",
     "ricker",
-    "funneling_gains",
-    "inverse_filter",
-    "minimax_filter",
-    "minimax_frontier",
-    "InverseOperator",
-    "focus_metrics",
     "render",
-    "Rendering",
+    "Method",
+    "Funneling",
+    "Inverse",
+    "Combination",
+    "TimeReversal",
+    "Contrast",
+    "Constrained",
+    "Minimax",
     "Design",
+    "minimax_frontier",
+    "focus_metrics",
     "TransferMatrix",
     "register_method",
     "available_methods",

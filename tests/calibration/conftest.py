@@ -29,6 +29,15 @@ def fir_calibration():
 
 
 @pytest.fixture(scope="session")
+def fir_calibration_file(fir_calibration, tmp_path_factory):
+    """:func:`fir_calibration` saved once per test process, for the tests that only read the
+    file (never write to it: copy it, or rewrite it to another path, to edit it)."""
+    from vibrofocus.calibration import save_calibration
+
+    return save_calibration(fir_calibration[1], tmp_path_factory.mktemp("fir-cal") / "P01.nc")
+
+
+@pytest.fixture(scope="session")
 def forearm_calibration(simulated_calibration_of):
     """The default (mimo) calibration of simulated participant 0 (noise and dropouts on),
     on the voigt-fit skin, for the tests of fit_model's homogeneous law (an arm of that

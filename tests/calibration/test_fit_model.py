@@ -11,7 +11,7 @@ from vibrofocus.calibration import FittedSkin, fit_model, load_calibration, save
 from vibrofocus.calibration.fitmodel import parameter_names, true_parameters
 from vibrofocus.errors import ValidationError
 from vibrofocus.rendering import render
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 
 @pytest.fixture(scope="module")

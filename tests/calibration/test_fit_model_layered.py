@@ -12,7 +12,7 @@ from vibrofocus.calibration import FittedSkin, fit_model, load_calibration, save
 from vibrofocus.calibration.fitmodel import FIT_LAW_PARAMETERS, parameter_names, true_parameters
 from vibrofocus.demo.trust import tap_band
 from vibrofocus.errors import ValidationError
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 pytestmark = pytest.mark.slow  # each fit of the layered law takes 20-40 s
 

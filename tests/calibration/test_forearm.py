@@ -34,7 +34,7 @@ def test_default_method_is_within_5_percent_of_the_true_transfer(forearm_calibra
 
 
 def test_paper_method_is_less_accurate_than_the_default(forearm_calibration):
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     rig, cal = forearm_calibration
     paper_rig = SimulatedForearm(seed=0)
@@ -100,7 +100,9 @@ def test_target_only_inverse_from_the_estimate_focuses_like_one_from_the_truth(f
 def test_dead_and_reversed_actuators_on_the_simulated_arm_are_flagged():
     from dataclasses import replace
 
-    from vibrofocus.skin import ForearmParameters, SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
+
+    from vibrofocus.skin import ForearmParameters
 
     class MiswiredForearm(SimulatedForearm):
         """The forearm with actuator A3's two wires swapped: its drive arrives negated."""

@@ -12,10 +12,8 @@ from ._netcdf import rewrite_netcdf
 
 
 @pytest.fixture(scope="module")
-def saved(fir_calibration, tmp_path_factory):
-    path = tmp_path_factory.mktemp("cal") / "P01.nc"
-    save_calibration(fir_calibration[1], path)
-    return path
+def saved(fir_calibration_file):
+    return fir_calibration_file
 
 
 def test_round_trip_is_identical(fir_calibration, saved):

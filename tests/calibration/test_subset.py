@@ -11,7 +11,7 @@ from vibrofocus.calibration import calibrate, load_calibration, plan_calibration
 from vibrofocus.calibration.plan import subset_points
 from vibrofocus.demo.trust import tap_band
 from vibrofocus.errors import CalibrationFileError, ValidationError
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 from ._netcdf import rewrite_netcdf
 
@@ -141,10 +141,10 @@ def test_the_file_says_which_rows_are_measured(subset, tmp_path):
     assert back.quality.by_check("predicted") == subset.quality.by_check("predicted")
 
 
-def test_a_full_calibration_file_marks_every_row_measured(fir_calibration, tmp_path):
+def test_a_full_calibration_file_marks_every_row_measured(fir_calibration, fir_calibration_file, tmp_path):
     _, cal = fir_calibration
     assert cal.measured is None and cal.measured_points.all() and cal.predicted_points.size == 0
-    path = save_calibration(cal, tmp_path / "full.nc")
+    path = fir_calibration_file  # save_calibration(cal, ...), made once
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         assert (ds["point_measured"].values == 1).all()
     assert load_calibration(path).measured is None
@@ -158,10 +158,8 @@ def test_a_full_calibration_file_marks_every_row_measured(fir_calibration, tmp_p
     ([0] * 13, "no point as measured"),
     ([1] * 12 + [0], "no fitted skin model"),
 ])
-def test_a_hostile_point_measured_is_refused(fir_calibration, tmp_path, values, match):
-    _, cal = fir_calibration
-    path = save_calibration(cal, tmp_path / "full.nc")
-    bad = rewrite_netcdf(path, tmp_path / "bad.nc",
+def test_a_hostile_point_measured_is_refused(fir_calibration_file, tmp_path, values, match):
+    bad = rewrite_netcdf(fir_calibration_file, tmp_path / "bad.nc",
                    lambda ds: ds.assign(point_measured=("point", np.asarray(values, np.int8))))
     with pytest.raises(CalibrationFileError, match=match):
         load_calibration(bad)

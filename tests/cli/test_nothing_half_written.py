@@ -299,7 +299,7 @@ def test_1_a_real_full_disk_gives_one_line_not_a_crash(tmp_path):
         code = textwrap.dedent(f"""
             import sys
             from vibrofocus.calibration import calibrate, save_calibration
-            from vibrofocus.skin import SimulatedForearm
+            from vibrofocus.rigs import SimulatedForearm
             from vibrofocus.errors import OutputError
             cal = calibrate(SimulatedForearm(seed=1), participant_id="P01", repeats=4, sweep_s=1.0)
             try:

@@ -7,7 +7,7 @@ from numpy.testing import assert_allclose
 from vibrofocus import ArrayLayout
 from vibrofocus.demo.moving import moving_focus, write_moving_gif
 from vibrofocus.errors import ValidationError
-from vibrofocus.skin import SimulatedForearm
+from vibrofocus.rigs import SimulatedForearm
 
 
 @pytest.fixture(scope="module")

@@ -83,7 +83,7 @@ def test_folders_objects_and_booleans_are_named(tmp_path, make, words):
 @pytest.fixture(scope="module")
 def calibration_file(tmp_path_factory):
     from vibrofocus.calibration import calibrate, save_calibration
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     cal = calibrate(SimulatedForearm(seed=3), participant_id="P03", repeats=4, sweep_s=1.0)
     return save_calibration(cal, tmp_path_factory.mktemp("cal") / "P03.nc")

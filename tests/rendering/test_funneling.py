@@ -5,7 +5,8 @@ import pytest
 from hypothesis import given, settings, strategies as st
 from numpy.testing import assert_allclose
 
-from vibrofocus import ArrayLayout, funneling_gains
+from vibrofocus import ArrayLayout
+from vibrofocus.rendering import funneling_gains
 from vibrofocus.errors import ValidationError
 from vibrofocus.rendering import funneling_weights
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st
 from numpy.testing import assert_allclose
 from scipy.signal import fftconvolve
 
-from vibrofocus import InverseOperator, inverse_filter
+from vibrofocus.rendering import InverseOperator, inverse_filter
 from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
 from vibrofocus.rendering import DriveScaledWarning, WraparoundCheck, band_taper
 from vibrofocus.rendering.inverse import scale_to_peak

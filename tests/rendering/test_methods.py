@@ -9,6 +9,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from vibrofocus import ArrayLayout, TransferMatrix, render
+from vibrofocus.rendering import render_fitted
 from vibrofocus.defaults import METHODS
 from vibrofocus.errors import ValidationError
 from vibrofocus.rendering import (
@@ -118,6 +119,23 @@ def test_render_keeps_the_string_api_and_refuses_an_unknown_option(tm):
         render("contrast", tm, FS, REF, 3, min_contrast_db=3.0)
 
 
+def test_render_takes_a_method_object_and_refuses_options_beside_it(tm):
+    by_object = render(Inverse(regularization="tikhonov", limit_v=5.0), tm, FS, REF, 3)
+    by_name = render("inverse", tm, FS, REF, 3, regularization="tikhonov", limit_v=5.0)
+    assert by_object.method == "inverse"
+    assert_allclose(by_object.drives, by_name.drives, rtol=0, atol=0)
+    with pytest.raises(ValidationError, match=r"render takes no option limit_v beside a method object: give it to "
+                                              r"the method \(Inverse\(limit_v=...\)\); its options are .*guard_weight"
+                                              r".*; render's own keywords are target_xy, n_samples, calibrated_band"):
+        render(Inverse(), tm, FS, REF, 3, limit_v=5.0)
+    with pytest.raises(ValidationError, match="method must be a Method object or a registered method's name, got "
+                                              "type"):
+        render(Inverse, tm, FS, REF, 3)
+    # render_fitted takes the object too (its retry with tapered ends is a copy of it).
+    fitted = render_fitted(Inverse(regularization="tikhonov", limit_v=5.0), tm, FS, REF, 3)
+    assert_allclose(fitted.drives, by_object.drives, rtol=0, atol=0)
+
+
 def test_a_registered_method_runs_in_render(tm, clean_registry):
     register_method("delayed", Delayed)
     assert "delayed" in available_methods()
@@ -129,7 +147,7 @@ def test_a_registered_method_runs_in_render(tm, clean_registry):
 
 def test_a_registered_method_runs_in_the_demo(clean_registry):
     from vibrofocus.demo import run_demo
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     register_method("delayed", Delayed)
     rig = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0)

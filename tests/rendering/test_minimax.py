@@ -318,7 +318,7 @@ def test_hostile_arguments_get_a_clear_error(options, error, words):
 @pytest.mark.slow
 def test_a_fidelity_the_solver_cannot_reach_numerically_is_an_infeasible_design():
     """The reference arm, min_fidelity=0.9999: cvxopt's 'domain error' at round 2 was raised raw."""
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     rig = SimulatedForearm(seed=0, noise_m=0, dropout_rate=0)
     n = 4096
@@ -399,7 +399,7 @@ def test_defaults_on_a_simulated_arm_with_far_exciters_beat_the_pseudo_inverse()
     from vibrofocus import ArrayLayout
     from vibrofocus.rendering import inverse_filter, predict_response
     from vibrofocus.rendering.metrics import zero_lag_fidelity
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     fs, n, band = 1300.0, 1024, (10.0, 500.0)
     layout = ArrayLayout.grid((2, 2), (0.14, 0.20), (3, 3), 0.02, name="far exciters")

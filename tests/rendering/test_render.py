@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 from numpy.testing import assert_allclose
 
-from vibrofocus import ArrayLayout, Rendering, funneling_gains, render, ricker
+from vibrofocus import ArrayLayout, Design, render, ricker
 from vibrofocus.errors import CausalityError, DriveLimitError, ValidationError
-from vibrofocus.rendering import band_taper
+from vibrofocus.rendering import band_taper, funneling_gains
 
 from ._media import FS, layout_medium
 
@@ -38,7 +38,7 @@ def H_ref():
 @pytest.mark.parametrize("location", [1, 5, 9])
 def test_inverse_meets_target_and_silences_guards(H_square, location):
     r = render("inverse", H_square, FS, SQUARE, location, limit_v=1e3, scale_to_limit=False)
-    assert isinstance(r, Rendering)
+    assert isinstance(r, Design)
     ideal = band_limited(2e-6 * ricker(FS, 1e-3, N / FS))
     assert_allclose(r.desired, ideal, atol=1e-15)
     assert_allclose(r.predicted, respond(H_square, r.drives), atol=1e-15)
@@ -189,7 +189,7 @@ def test_bad_input(H_ref):
 ])
 def test_a_window_beyond_the_design_memory_is_refused_before_allocating(n_samples, words):
     """On main 2**40 raised MemoryError, and 10**6 was designed after 32 s at 3.4 GB (128 s here)."""
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     arm = SimulatedForearm(seed=0)
     assert arm.fs == 10_000.0 and (REF.n_points, REF.n_actuators) == (13, 4)

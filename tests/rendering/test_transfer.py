@@ -86,7 +86,7 @@ def test_rows_keep_the_grid_without_a_second_check(H):
 
 def test_a_calibration_and_the_simulated_arm_make_one():
     from vibrofocus.calibration import Calibration  # noqa: F401 - the method lives on the class
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     arm = SimulatedForearm(seed=1, noise_m=0.0, dropout_rate=0.0)
     tm = arm.transfer_matrix(N)

@@ -109,7 +109,7 @@ def test_a_partly_coupled_actuator_delivers_less():
     # actuator delivers less of the same drive at its contact; the fully coupled ones the same.
     from dataclasses import replace
 
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     loose = make_rig("simulated", seed=3, skin="nominal")
     contact = np.asarray(loose.participant.contact)

@@ -16,7 +16,8 @@ TOKEN = "t" * 32
 
 def _dead_a2(kind, seed=None, **kwargs):
     """The simulated forearm with actuator A2 weak enough to read as dead."""
-    from vibrofocus.skin import ForearmParameters, SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
+    from vibrofocus.skin import ForearmParameters
 
     lay = SimulatedForearm(seed=4).layout
     params = ForearmParameters.draw(4, lay)

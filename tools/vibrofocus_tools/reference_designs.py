@@ -38,7 +38,7 @@ OUT = ROOT / "tests" / "rendering" / "data" / "reference_designs.npz"
 def simulated_calibration():
     """The fixed calibration every reference design is rendered on."""
     from vibrofocus.calibration import calibrate
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     rig = SimulatedForearm(seed=3)
     return calibrate(rig, participant_id="REF", method="h1", sweep_s=1.0, repeats=2)

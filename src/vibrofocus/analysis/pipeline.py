@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from .._docs import fill_doc
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .study1 import localization_summary, shapiro_tests, study1_anova, study1_errors, study1_posthoc
@@ -322,6 +323,7 @@ def _study2_part(data: pd.DataFrame, contains_target: bool) -> Study2Counts:
     return Study2Counts(participants, counts, cell_means, friedman, wilcoxon or {}, excluded, why_f, why_w)
 
 
+@fill_doc
 def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: float = 0.05) -> AnalysisResult:
     """Analyse both studies of a trials table (docs/file-formats.md, report.json).
 
@@ -337,8 +339,7 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
     trials : DataFrame
         Output of :func:`~vibrofocus.analysis.load_trials` (its ``attrs["exclusions"]``
         are carried into the result).
-    layout : ArrayLayout, optional
-        Location coordinates (m); default the reference layout.
+    %(layout_default)s
     alpha : float
         Significance level for flags and sentences.
 

@@ -45,6 +45,7 @@ import numpy as np
 import scipy.fft
 import scipy.signal
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
 from ..signals.taper import band_taper
@@ -114,6 +115,7 @@ def resize_impulse_response(h: np.ndarray, n_out: int) -> np.ndarray:
     return out
 
 
+@fill_doc
 def estimate_repeats(
     recordings: np.ndarray,
     drive: np.ndarray,
@@ -131,8 +133,7 @@ def estimate_repeats(
     drive : ndarray, shape (n_drive,)
         The voltage actually played on the actuator (after the rig's fades), V;
         ``n_drive <= n_rec``.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band : (float, float)
         Calibrated band, Hz; the inverse is tapered to zero over half an octave beyond
         each edge.
@@ -316,6 +317,7 @@ def mimo_h1(inputs: np.ndarray, outputs: np.ndarray, valid: np.ndarray | None = 
     )
 
 
+@fill_doc
 def noise_and_snr(
     recordings: np.ndarray, valid: np.ndarray, n_pre: int, fs: float, band: tuple[float, float]
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -332,8 +334,7 @@ def noise_and_snr(
     valid : ndarray of bool, shape (n_repeats, n_points)
     n_pre : int
         Samples of silence at the start of each drive.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band : (float, float)
         Calibrated band, Hz.
 
@@ -369,6 +370,7 @@ def noise_and_snr(
     return np.sqrt(p_noise), snr_db
 
 
+@fill_doc
 def split_snr(
     snr_db: np.ndarray, H: np.ndarray, freqs: np.ndarray, band: tuple[float, float], drive: np.ndarray, fs: float
 ) -> np.ndarray:
@@ -393,8 +395,7 @@ def split_snr(
         Calibrated band, Hz.
     drive : ndarray, shape (n_drive,)
         The sweep each actuator played (up to its sign), V.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
 
     Returns
     -------

@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import check_band, check_choice, check_positive
 from ..errors import ValidationError
 from ..signals import exponential_sweep, linear_sweep
@@ -51,6 +52,7 @@ _MARGIN_OCTAVES = 0.5
 
 
 @dataclass(frozen=True)
+@fill_doc
 class SweepSettings:
     """Everything that defines the excitation of one calibration.
 
@@ -75,8 +77,7 @@ class SweepSettings:
         Recording after the drive ends, s (decay of the response).
     fade_s : float
         Raised-cosine fade at both sweep ends, s.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     """
 
     method: str
@@ -121,6 +122,7 @@ class SweepSettings:
         return cls(**data)
 
 
+@fill_doc
 def default_settings(
     method: str,
     fs: float,
@@ -137,8 +139,7 @@ def default_settings(
     Parameters
     ----------
     method : {"h1", "paper", "mimo"}
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band : (float, float)
         Calibrated band, Hz.
     sweep_s : float, optional

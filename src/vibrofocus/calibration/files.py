@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import CalibrationFileError, ValidationError
 from ..io.calibration_nc import read_calibration_file, write_calibration_file
+from ..io.calibration_record import CalibrationFileRecord, FitRecord, QualityRecord
 from ..io.sofa import read_sofa_tf, write_sofa_tf
 from ..layout import ArrayLayout
 from .calibrate import Calibration
@@ -34,8 +35,8 @@ _QUALITY_ARRAYS = ("snr_db", "noise_rms_m", "band_gain", "low_coherence_share", 
                    "repeats_used", "dropouts", "polarity", "input_condition", "input_correlation")
 
 
-def calibration_record(cal: Calibration) -> dict[str, Any]:
-    """The plain record of a calibration (:data:`vibrofocus.io.calibration_nc.RECORD_KEYS`).
+def calibration_record(cal: Calibration) -> CalibrationFileRecord:
+    """The file record of a calibration (:class:`~vibrofocus.io.calibration_record.CalibrationFileRecord`).
 
     Parameters
     ----------
@@ -43,34 +44,36 @@ def calibration_record(cal: Calibration) -> dict[str, Any]:
 
     Returns
     -------
-    dict
+    CalibrationFileRecord
         Arrays, numbers, strings and JSON-like dicts; no vibrofocus object.
     """
     if not isinstance(cal, Calibration):
         raise ValidationError(f"cal must be a Calibration, got {type(cal).__name__}")
     lay, q, fit = cal.layout, cal.quality, cal.fit
-    quality = {name: getattr(q, name) for name in _QUALITY_ARRAYS}
-    quality |= {"issues": [i.to_dict() for i in q.issues], "thresholds": q.thresholds.to_dict()}
-    return {
-        "H": cal.H, "freqs": cal.freqs, "coherence": cal.coherence, "drives": cal.drives, "recordings": cal.recordings,
-        "fs": cal.fs, "band": tuple(cal.band), "n_fft": cal.n_fft, "method": cal.method,
-        "participant_id": cal.participant_id, "created": cal.created, "software_version": cal.software_version,
-        "schema_version": cal.schema_version, "layout": lay.to_dict(), "point_labels": list(lay.point_labels),
-        "point_kinds": ["location"] * lay.n_locations + ["guard"] * lay.n_guards,
-        "actuator_names": list(lay.actuator_names), "points_xy": lay.points_xy, "actuators_xy": lay.actuators_xy,
-        "rig": cal.rig, "sweep": cal.sweep.to_dict(), "quality": quality, "codes": cal.codes,
-        "multiple_coherence": cal.multiple_coherence, "straps": cal.straps, "recorded_s": cal.recorded_s,
-        "measured": cal.measured, "fit": None if fit is None else {
-            "names": list(fit.names), "values": fit.values, "std": fit.std, "log_covariance": fit.log_covariance,
-            "residual": fit.residual, "band": tuple(fit.band), "fs": fit.fs, "fixed": fit.fixed, "info": fit.info},
-    }
+    quality = QualityRecord(issues=[i.to_dict() for i in q.issues], thresholds=q.thresholds.to_dict(),
+                            **{name: getattr(q, name) for name in _QUALITY_ARRAYS})
+    return CalibrationFileRecord(
+        H=cal.H, freqs=cal.freqs, coherence=cal.coherence, drives=cal.drives, recordings=cal.recordings,
+        fs=cal.fs, band=tuple(cal.band), n_fft=cal.n_fft, method=cal.method, participant_id=cal.participant_id,
+        created=cal.created, software_version=cal.software_version, schema_version=cal.schema_version,
+        layout=lay.to_dict(), point_labels=list(lay.point_labels),
+        point_kinds=["location"] * lay.n_locations + ["guard"] * lay.n_guards,
+        actuator_names=list(lay.actuator_names), points_xy=lay.points_xy, actuators_xy=lay.actuators_xy,
+        rig=cal.rig, sweep=cal.sweep.to_dict(), quality=quality, codes=cal.codes,
+        multiple_coherence=cal.multiple_coherence, straps=cal.straps, recorded_s=cal.recorded_s,
+        measured=cal.measured, fit=None if fit is None else FitRecord(
+            names=fit.names, values=fit.values, std=fit.std, log_covariance=fit.log_covariance,
+            residual=fit.residual, band=fit.band, fs=fit.fs, fixed=fit.fixed, info=fit.info))
 
 
 def _fail(path: Path | None, what: str) -> CalibrationFileError:
     return CalibrationFileError(f"{path}: {what}" if path is not None else what)
 
 
-def _check_against_layout(rec: dict[str, Any], layout: ArrayLayout, path: Path | None) -> None:
+def _check_against_layout(rec: CalibrationFileRecord | dict[str, Any], layout: ArrayLayout,
+                          path: Path | None) -> None:
+    if isinstance(rec, CalibrationFileRecord):
+        rec = {name: getattr(rec, name) for name in ("point_labels", "points_xy", "actuator_names", "actuators_xy")}
     labels = list(rec["point_labels"])
     if labels != list(layout.point_labels):
         absent = [lab for lab in layout.point_labels if lab not in labels]
@@ -91,13 +94,15 @@ def _check_against_layout(rec: dict[str, Any], layout: ArrayLayout, path: Path |
         raise _fail(path, "actuator positions (actuator_x, actuator_y) differ from the layout's")
 
 
-def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None = None) -> Calibration:
+def calibration_from_record(rec: CalibrationFileRecord | dict[str, Any],
+                            path: str | os.PathLike | None = None) -> Calibration:
     """Build a :class:`Calibration` from a record read by :func:`~vibrofocus.io.calibration_nc.read_calibration_file`.
 
     Parameters
     ----------
-    rec : dict
-        The record (:data:`vibrofocus.io.calibration_nc.RECORD_KEYS`).
+    rec : CalibrationFileRecord or dict
+        The record (a dict keyed as :data:`~vibrofocus.io.calibration_nc.RECORD_KEYS` is
+        made into one first).
     path : path-like, optional
         The file it came from, named in errors.
 
@@ -109,39 +114,47 @@ def calibration_from_record(rec: dict[str, Any], path: str | os.PathLike | None 
     """
     path = None if path is None else Path(path)
     try:
-        layout = ArrayLayout.from_dict(rec["layout"])
-        sweep = SweepSettings.from_dict(rec["sweep"])
-        q = rec["quality"]
-        issues = [QualityIssue.from_dict(d) for d in q["issues"]]
-        thresholds = QualityThresholds(**q["thresholds"])
+        rec = CalibrationFileRecord.from_mapping(rec)
+    except ValidationError as exc:
+        raise _fail(path, str(exc)) from None
+    q = rec.quality
+    try:
+        layout = ArrayLayout.from_dict(rec.layout)
+        sweep = SweepSettings.from_dict(rec.sweep)
+        issues = [QualityIssue.from_dict(d) for d in q.issues]
+        thresholds = QualityThresholds(**q.thresholds)
     except (ValueError, TypeError, KeyError, AttributeError) as exc:
         raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
     _check_against_layout(rec, layout, path)
     quality = QualityReport(issues=issues, thresholds=thresholds,
-                            **{name: q[name] for name in _QUALITY_ARRAYS})
-    fit = None
-    if rec["fit"] is not None:
-        stored = rec["fit"]
-        law = dict(stored["fixed"]).get("law", "homogeneous") if isinstance(stored["fixed"], dict) else None
-        if law not in FIT_LAWS:
-            raise _fail(path, f"has a skin-model fit of an unknown law {law!r} (known: {', '.join(FIT_LAWS)})")
-        expected = list(parameter_names(layout.actuator_names, law))
-        if list(stored["names"]) != expected:
-            raise _fail(path, f"fit parameters {list(stored['names'])} differ from the model's {expected}")
-        try:
-            fit = FittedSkin(layout=layout, fs=float(stored["fs"]), band=tuple(stored["band"]),
-                             values=stored["values"], log_covariance=stored["log_covariance"],
-                             residual=stored["residual"], fixed=stored["fixed"], info=stored["info"])
-        except (ValueError, TypeError, KeyError, ValidationError) as exc:
-            raise _fail(path, f"has an unreadable skin-model fit ({exc})") from exc
+                            **{name: getattr(q, name) for name in _QUALITY_ARRAYS})
     return Calibration(
-        H=rec["H"], freqs=rec["freqs"], fs=rec["fs"], coherence=rec["coherence"], layout=layout,
-        band=tuple(rec["band"]), participant_id=rec["participant_id"], method=rec["method"], quality=quality,
-        drives=rec["drives"], recordings=rec["recordings"], rig=rec["rig"], sweep=sweep, created=rec["created"],
-        software_version=rec["software_version"], schema_version=rec["schema_version"], straps=rec["straps"],
-        codes=rec["codes"], multiple_coherence=rec["multiple_coherence"], recorded_s=rec["recorded_s"], fit=fit,
-        measured=None if rec.get("measured") is None or rec["measured"].all() else rec["measured"],
+        H=rec.H, freqs=rec.freqs, fs=rec.fs, coherence=rec.coherence, layout=layout, band=rec.band,
+        participant_id=rec.participant_id, method=rec.method, quality=quality, drives=rec.drives,
+        recordings=rec.recordings, rig=rec.rig, sweep=sweep, created=rec.created,
+        software_version=rec.software_version, schema_version=rec.schema_version, straps=rec.straps,
+        codes=rec.codes, multiple_coherence=rec.multiple_coherence, recorded_s=rec.recorded_s,
+        fit=_fitted_skin(rec.fit, layout, path),
+        measured=None if rec.measured is None or rec.measured.all() else rec.measured,
     )
+
+
+def _fitted_skin(stored: FitRecord | None, layout: ArrayLayout, path: Path | None) -> FittedSkin | None:
+    """The skin model of a stored fit, checked against the model's parameters (None for None)."""
+    if stored is None:
+        return None
+    law = dict(stored.fixed).get("law", "homogeneous") if isinstance(stored.fixed, dict) else None
+    if law not in FIT_LAWS:
+        raise _fail(path, f"has a skin-model fit of an unknown law {law!r} (known: {', '.join(FIT_LAWS)})")
+    expected = list(parameter_names(layout.actuator_names, law))
+    if list(stored.names) != expected:
+        raise _fail(path, f"fit parameters {list(stored.names)} differ from the model's {expected}")
+    try:
+        return FittedSkin(layout=layout, fs=float(stored.fs), band=tuple(stored.band), values=stored.values,
+                          log_covariance=stored.log_covariance, residual=stored.residual, fixed=stored.fixed,
+                          info=stored.info)
+    except (ValueError, TypeError, KeyError, ValidationError) as exc:
+        raise _fail(path, f"has an unreadable skin-model fit ({exc})") from exc
 
 
 def save_calibration(cal: Calibration, path: str | os.PathLike, *, force: bool = False,
@@ -258,7 +271,7 @@ def export_sofa(cal: Calibration, path: str | os.PathLike, *, force: bool = Fals
 
     check_calibration_target(path, None, force=force, what="SOFA file")
     rec = calibration_record(cal)
-    out = {key: rec[key] for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels", "point_kinds",
+    out = {key: getattr(rec, key) for key in ("H", "freqs", "points_xy", "actuators_xy", "point_labels", "point_kinds",
                                      "actuator_names", "fs", "band", "participant_id", "layout", "created")}
     if band_only:
         low, high = cal.band

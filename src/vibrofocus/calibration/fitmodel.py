@@ -222,7 +222,7 @@ class FittedSkin:
         return _participant(np.log(self.values), self.layout.n_actuators, self.fixed)
 
     def forearm(self):
-        """A noise-free :class:`~vibrofocus.skin.SimulatedForearm` with the fitted
+        """A noise-free :class:`~vibrofocus.rigs.SimulatedForearm` with the fitted
         parameters (to play drives through the fitted model)."""
         return _forearm(self.participant, self.layout, self.fs, self.fixed)
 
@@ -384,7 +384,7 @@ def _participant(log_values: np.ndarray, n_act: int, fixed: dict):
 
 
 def _forearm(participant, layout: ArrayLayout, fs: float, fixed: dict):
-    from ..skin import SimulatedForearm
+    from ..rigs.simulated import SimulatedForearm
 
     return SimulatedForearm(layout=layout, fs=fs, noise_m=0.0, dropout_rate=0.0, participant=participant,
                             geometry=fixed["geometry"], n_images=int(fixed["n_images"]))

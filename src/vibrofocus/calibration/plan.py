@@ -10,6 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import check_band, check_choice
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
@@ -30,6 +31,7 @@ DEFAULT_METHOD = "mimo"
 MIN_MEASURED_POINTS = 2
 
 
+@fill_doc
 def subset_points(layout: ArrayLayout, k: int) -> np.ndarray:
     """Which ``k`` points of a layout to measure when the rest are predicted.
 
@@ -42,7 +44,7 @@ def subset_points(layout: ArrayLayout, k: int) -> np.ndarray:
 
     Parameters
     ----------
-    layout : ArrayLayout
+    %(layout)s
     k : int
         Points to measure, ``MIN_MEASURED_POINTS`` .. ``layout.n_points``.
 

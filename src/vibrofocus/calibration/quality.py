@@ -71,6 +71,7 @@ from dataclasses import asdict, dataclass, field
 
 import numpy as np
 
+from .._docs import fill_doc
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 
@@ -384,6 +385,7 @@ def _polarity(
     return polarity, corr, nearest
 
 
+@fill_doc
 def assess_quality(
     H: np.ndarray,
     coherence: np.ndarray,
@@ -417,7 +419,7 @@ def assess_quality(
         Hz.
     band : (float, float)
         Calibrated band, Hz.
-    layout : ArrayLayout
+    %(layout)s
     snr_db, noise_rms_m : ndarray, shape (n_points, n_actuators)
         From :func:`vibrofocus.calibration.estimate.noise_and_snr`.
     clipped : ndarray of bool, shape (n_points, n_actuators)

@@ -288,7 +288,7 @@ def write_paper_figures(out_dir: Path, *, seed: int = 0, participants: int = 12,
     """
     from ..analysis import analyze, load_trials
     from ..calibration import calibrate
-    from ..skin import SimulatedForearm
+    from ..rigs.simulated import SimulatedForearm
     from ..simulation import simulate_studies
     from ..studies import StudyStore
     from .run import calibrated_transfer, run_demo

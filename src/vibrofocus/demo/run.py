@@ -55,7 +55,7 @@ def model_transfer(rig: Rig, n: int) -> np.ndarray:
 def design_window(rig: Rig, minimum: int = N_SAMPLES) -> int:
     """The design window of the demo: the rig's own when it knows its responses.
 
-    A simulated forearm's :meth:`~vibrofocus.skin.SimulatedForearm.design_window`
+    A simulated forearm's :meth:`~vibrofocus.rigs.SimulatedForearm.design_window`
     follows its impulse-response length; any other rig gets ``minimum``.
 
     Parameters

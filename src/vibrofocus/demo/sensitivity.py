@@ -49,7 +49,8 @@ def attenuation_sensitivity(laws: Mapping[str, object] | None = None, *,
         with ``peak_bounds``) and ``target_peak_m`` (every method at the same 10 V peak
         drive).
     """
-    from ..skin import SKIN_PRESETS, ForearmParameters, SimulatedForearm
+    from ..rigs.simulated import SimulatedForearm
+    from ..skin import SKIN_PRESETS, ForearmParameters
     from .frontier import peak_frontiers
     from .run import model_transfer, run_demo
 

@@ -1,7 +1,8 @@
 """File formats: one module per on-disk format, each the only writer and reader of it.
 
 :mod:`.calibration_nc`
-    Calibration files (netCDF4/HDF5), as plain records: :func:`write_calibration_file`,
+    Calibration files (netCDF4/HDF5), as records (:class:`CalibrationFileRecord`, a frozen
+    dataclass of :mod:`.calibration_record` that checks itself): :func:`write_calibration_file`,
     :func:`read_calibration_file` (the :class:`~vibrofocus.calibration.Calibration` is built
     above, by :func:`vibrofocus.calibration.load_calibration`).
 :mod:`.drives`
@@ -40,6 +41,7 @@ every layer can use it and domain objects are built above it.
 
 from .bids import read_bids_trials_table, write_bids_dataset
 from .calibration_nc import read_calibration_file, write_calibration_file
+from .calibration_record import CalibrationFileRecord
 from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
 from .files import atomic_path, save_figure, write_text
@@ -51,6 +53,7 @@ from .sofa import read_sofa_tf, write_sofa_tf
 from .trials_csv import TRIALS_COLUMNS, read_trials_csv, read_trials_table, write_trials_csv
 
 __all__ = [
+    "CalibrationFileRecord",
     "write_calibration_file",
     "read_calibration_file",
     "write_drives",

@@ -45,11 +45,12 @@ version 1 files (``h1``/``paper`` only) load unchanged, their missing thresholds
 the defaults. :func:`read_calibration_file` checks all of it and raises
 :class:`~vibrofocus.errors.CalibrationFileError` naming the file and what is wrong.
 
-This module reads and writes a *calibration record*: a plain mapping of arrays, numbers,
-strings and JSON-like dicts (:data:`RECORD_KEYS`), never a domain object. The
-:class:`~vibrofocus.calibration.Calibration` is built from the record one floor up, by
-:func:`vibrofocus.calibration.load_calibration`, which also checks the points and
-actuators against the layout.
+This module reads and writes a *calibration record*
+(:class:`~vibrofocus.io.calibration_record.CalibrationFileRecord`, a frozen dataclass of
+arrays, numbers, strings and JSON-like dicts that checks its own consistency), never a
+domain object. The :class:`~vibrofocus.calibration.Calibration` is built from the record
+one floor up, by :func:`vibrofocus.calibration.load_calibration`, which also checks the
+points and actuators against the layout.
 """
 
 from __future__ import annotations
@@ -69,10 +70,11 @@ import numpy as np
 from .._validation import shorten
 from ..errors import CalibrationFileError, ValidationError
 from ._headers import check_hdf5_sizes
+from .calibration_record import RECORD_KEYS, CalibrationFileRecord, FitRecord, QualityRecord
 from .jsonsafe import json_safe
 
-__all__ = ["SCHEMA_VERSION", "FILE_KIND", "RECORD_KEYS", "write_calibration_file", "read_calibration_file",
-           "calibration_bytes", "estimate_calibration_bytes"]
+__all__ = ["SCHEMA_VERSION", "FILE_KIND", "RECORD_KEYS", "CalibrationFileRecord", "write_calibration_file",
+           "read_calibration_file", "calibration_bytes", "estimate_calibration_bytes"]
 
 #: Version of the calibration file layout this vibrofocus writes (and the newest it reads).
 SCHEMA_VERSION = 2
@@ -98,114 +100,96 @@ _MIMO_VARS = {
     "input_condition": (("frequency", "point"), "1", "condition number of the input spectral matrix"),
     "input_correlation": (("frequency", "point"), "1", "largest normalised input cross-spectrum"),
 }
-#: Keys of a calibration record (what :func:`read_calibration_file` returns and
-#: :func:`write_calibration_file` takes): ``H`` complex (n_freqs, n_points, n_actuators),
-#: m/V; ``freqs`` (n_freqs,), Hz; ``coherence`` like ``H``, 1; ``drives`` (n_actuators,
-#: n_drive), V; ``recordings``, m; ``fs`` Hz; ``band`` (low, high) Hz; ``n_fft``;
-#: ``method``, ``participant_id``, ``created``, ``software_version`` str; ``schema_version``
-#: int; ``layout`` (dict, :meth:`ArrayLayout.to_dict`), ``point_labels``, ``point_kinds``,
-#: ``actuator_names`` (lists of str), ``points_xy`` (n_points, 2) and ``actuators_xy``
-#: (n_actuators, 2), m; ``rig`` and ``sweep`` (dicts); ``quality`` (dict of the quality
-#: arrays, named as :class:`~vibrofocus.calibration.QualityReport`'s fields, with
-#: ``issues`` a list of dicts and ``thresholds`` a dict); ``codes``, ``multiple_coherence``
-#: (``mimo``, else None); ``straps`` (dict or None); ``recorded_s`` (s, NaN: unknown);
-#: ``fit`` (None, or a dict with ``names``, ``values``, ``std``, ``log_covariance``,
-#: ``residual``, ``band``, ``fs``, ``fixed``, ``info``); ``measured`` (None: every row
-#: measured, or bool (n_points,): False where H was predicted by the fit).
-RECORD_KEYS = ("H", "freqs", "coherence", "drives", "recordings", "fs", "band", "n_fft", "method", "participant_id",
-               "created", "software_version", "schema_version", "layout", "point_labels", "point_kinds",
-               "actuator_names", "points_xy", "actuators_xy", "rig", "sweep", "quality", "codes",
-               "multiple_coherence", "straps", "recorded_s", "fit", "measured")
 _REQUIRED_ATTRS = ("schema_version", "participant_id", "method", "fs", "band_low", "band_high", "n_fft",
                    "created", "software_version", "layout", "rig", "sweep", "quality_issues",
                    "quality_thresholds")
 
 
-def _to_dataset(rec: Mapping[str, Any]):
+def _to_dataset(rec: CalibrationFileRecord):
     import xarray as xr
 
-    pts, act = np.asarray(rec["points_xy"], float), np.asarray(rec["actuators_xy"], float)
-    q = rec["quality"]
-    method = rec["method"]
+    pts, act = np.asarray(rec.points_xy, float), np.asarray(rec.actuators_xy, float)
+    q = rec.quality
+    method = rec.method
     pa = ("point", "actuator")
     data_vars = {
-        "H_real": (("frequency", *pa), rec["H"].real, {"units": "m/V", "long_name": "transfer matrix, real part"}),
-        "H_imag": (("frequency", *pa), rec["H"].imag, {"units": "m/V", "long_name": "transfer matrix, imaginary part"}),
-        "coherence": (("frequency", *pa), rec["coherence"],
+        "H_real": (("frequency", *pa), rec.H.real, {"units": "m/V", "long_name": "transfer matrix, real part"}),
+        "H_imag": (("frequency", *pa), rec.H.imag, {"units": "m/V", "long_name": "transfer matrix, imaginary part"}),
+        "coherence": (("frequency", *pa), rec.coherence,
                       {"units": "1", "long_name": "coherence over repeats (NaN: not assessable)"}),
-        "drive": (("actuator", "drive_sample"), rec["drives"],
+        "drive": (("actuator", "drive_sample"), rec.drives,
                   {"units": "V", "long_name": "voltage on the measured actuator's channel (others zero)"}),
-        "recording": (_recording_dims(method), rec["recordings"],
+        "recording": (_recording_dims(method), rec.recordings,
                       {"units": "m", "long_name": "raw displacement (NaN: dropout)"}),
-        "polarity": (("actuator",), np.asarray(q["polarity"]).astype(np.int8),
+        "polarity": (("actuator",), np.asarray(q.polarity).astype(np.int8),
                      {"units": "1", "long_name": "relative polarity (+1/-1, 0 not judged)"}),
     }
-    figures = {"snr_db": q["snr_db"], "noise_rms": q["noise_rms_m"], "band_gain": q["band_gain"],
-               "low_coherence_share": q["low_coherence_share"], "coherent_to_hz": q["coherent_to_hz"],
-               "clipped": np.asarray(q["clipped"]).astype(np.int8),
-               "repeats_used": np.asarray(q["repeats_used"]).astype(np.int32),
-               "dropouts": np.asarray(q["dropouts"]).astype(np.int32)}
+    figures = {"snr_db": q.snr_db, "noise_rms": q.noise_rms_m, "band_gain": q.band_gain,
+               "low_coherence_share": q.low_coherence_share, "coherent_to_hz": q.coherent_to_hz,
+               "clipped": np.asarray(q.clipped).astype(np.int8),
+               "repeats_used": np.asarray(q.repeats_used).astype(np.int32),
+               "dropouts": np.asarray(q.dropouts).astype(np.int32)}
     for name, values in figures.items():
         units, long_name = _QUALITY_VARS[name]
         data_vars[name] = (pa, values, {"units": units, "long_name": long_name})
     if method == "mimo":
-        mimo = {"code": np.asarray(rec["codes"]).astype(np.int8), "multiple_coherence": rec["multiple_coherence"],
-                "input_condition": q["input_condition"], "input_correlation": q["input_correlation"]}
+        mimo = {"code": np.asarray(rec.codes).astype(np.int8), "multiple_coherence": rec.multiple_coherence,
+                "input_condition": q.input_condition, "input_correlation": q.input_correlation}
         for name, values in mimo.items():
             dims, units, long_name = _MIMO_VARS[name]
             data_vars[name] = (dims, values, {"units": units, "long_name": long_name})
     coords = {}
-    fit = rec["fit"]
+    fit = rec.fit
     if fit is not None:
-        coords["fit_parameter"] = ("fit_parameter", list(fit["names"]))
-        data_vars["fit_value"] = (("fit_parameter",), fit["values"],
+        coords["fit_parameter"] = ("fit_parameter", list(fit.names))
+        data_vars["fit_value"] = (("fit_parameter",), fit.values,
                                   {"units": "SI", "long_name": "fitted skin-model parameter"})
-        data_vars["fit_std"] = (("fit_parameter",), fit["std"], {"units": "SI", "long_name": "standard error"})
-        data_vars["fit_log_covariance"] = (("fit_parameter", "fit_parameter_b"), fit["log_covariance"],
+        data_vars["fit_std"] = (("fit_parameter",), fit.std, {"units": "SI", "long_name": "standard error"})
+        data_vars["fit_log_covariance"] = (("fit_parameter", "fit_parameter_b"), fit.log_covariance,
                                            {"units": "1", "long_name": "covariance of log parameters"})
-        data_vars["fit_residual"] = (("point",), fit["residual"],
+        data_vars["fit_residual"] = (("point",), fit.residual,
                                      {"units": "1", "long_name": "relative fit residual per point"})
-    measured = rec.get("measured")
-    measured = np.ones(len(rec["point_labels"]), bool) if measured is None else np.asarray(measured, bool)
+    measured = rec.measured
+    measured = np.ones(len(rec.point_labels), bool) if measured is None else np.asarray(measured, bool)
     data_vars["point_measured"] = (("point",), measured.astype(np.int8), {
         "units": "1", "long_name": "1 if H at the point was measured, 0 if predicted by the fitted skin model",
         "flag_values": np.array([0, 1], np.int8), "flag_meanings": "predicted measured"})
     coords |= {
-        "frequency": ("frequency", rec["freqs"], {"units": "Hz"}),
-        "point": ("point", list(rec["point_labels"])),
+        "frequency": ("frequency", rec.freqs, {"units": "Hz"}),
+        "point": ("point", list(rec.point_labels)),
         "point_x": ("point", pts[:, 0], {"units": "m", "long_name": "x, across the arm toward the thumb"}),
         "point_y": ("point", pts[:, 1], {"units": "m", "long_name": "y, along the arm toward the wrist"}),
-        "point_kind": ("point", list(rec["point_kinds"])),
-        "actuator": ("actuator", list(rec["actuator_names"])),
+        "point_kind": ("point", list(rec.point_kinds)),
+        "actuator": ("actuator", list(rec.actuator_names)),
         "actuator_x": ("actuator", act[:, 0], {"units": "m"}),
         "actuator_y": ("actuator", act[:, 1], {"units": "m"}),
     }
     attrs = {
-        "title": f"vibrofocus calibration of {rec['participant_id']}",
+        "title": f"vibrofocus calibration of {rec.participant_id}",
         "file_kind": FILE_KIND,
         "schema_version": np.int32(SCHEMA_VERSION),
         "software": "vibrofocus",
-        "software_version": rec["software_version"],
-        "participant_id": rec["participant_id"],
+        "software_version": rec.software_version,
+        "participant_id": rec.participant_id,
         "method": method,
-        "fs": float(rec["fs"]),
-        "band_low": float(rec["band"][0]),
-        "band_high": float(rec["band"][1]),
-        "n_fft": np.int32(rec["n_fft"]),
-        "created": rec["created"],
-        "layout": json.dumps(rec["layout"]),
-        "rig": _json_text(rec["rig"]),
-        "sweep": json.dumps(rec["sweep"]),
-        "quality_issues": json.dumps(list(q["issues"])),
-        "quality_thresholds": json.dumps(q["thresholds"]),
+        "fs": float(rec.fs),
+        "band_low": float(rec.band[0]),
+        "band_high": float(rec.band[1]),
+        "n_fft": np.int32(rec.n_fft),
+        "created": rec.created,
+        "layout": json.dumps(rec.layout),
+        "rig": _json_text(rec.rig),
+        "sweep": json.dumps(rec.sweep),
+        "quality_issues": json.dumps(list(q.issues)),
+        "quality_thresholds": json.dumps(q.thresholds),
     }
-    if rec["straps"] is not None:
-        attrs["strap_forces"] = json.dumps(rec["straps"])
-    if np.isfinite(rec["recorded_s"]):
-        attrs["recorded_s"] = float(rec["recorded_s"])
+    if rec.straps is not None:
+        attrs["strap_forces"] = json.dumps(rec.straps)
+    if np.isfinite(rec.recorded_s):
+        attrs["recorded_s"] = float(rec.recorded_s)
     if fit is not None:
-        attrs["fit"] = _json_text({"band": list(fit["band"]), "fs": fit["fs"], "fixed": fit["fixed"],
-                                   "info": fit["info"]})
+        attrs["fit"] = _json_text({"band": list(fit.band), "fs": fit.fs, "fixed": fit.fixed,
+                                   "info": fit.info})
     return xr.Dataset(data_vars, coords=coords, attrs=attrs)
 
 
@@ -221,18 +205,21 @@ def _json_text(value) -> str:
     return json.dumps(json_safe(value, finite=False), default=str)
 
 
-def calibration_bytes(record: Mapping[str, Any]) -> bytes:
-    """The calibration file's bytes (netCDF4/HDF5), built in memory from a record (:data:`RECORD_KEYS`).
+def calibration_bytes(record: CalibrationFileRecord | Mapping[str, Any]) -> bytes:
+    """The calibration file's bytes (netCDF4/HDF5), built in memory from a record.
 
     Serializing in memory first means the HDF5 library never writes to the disk itself:
     a full disk then surfaces as a plain, catchable ``OSError`` at the write, never as a
     crash inside the library.
+
+    Parameters
+    ----------
+    record : CalibrationFileRecord or mapping
+        The record, or a mapping keyed as :data:`RECORD_KEYS` (made into one, and so checked).
     """
-    if not isinstance(record, Mapping) or set(RECORD_KEYS) - set(record):
-        missing = sorted(set(RECORD_KEYS) - set(record)) if isinstance(record, Mapping) else None
-        raise ValidationError(f"a calibration record must be a mapping with the keys RECORD_KEYS; "
-                              f"{'missing: ' + ', '.join(missing) if missing else 'got ' + type(record).__name__}")
-    ds = _to_dataset(record)
+    if not isinstance(record, (CalibrationFileRecord, Mapping)):
+        raise ValidationError(f"a calibration record must be a CalibrationFileRecord, got {type(record).__name__}")
+    ds = _to_dataset(CalibrationFileRecord.from_mapping(record))
     # Raw recordings are mostly sensor noise, which hardly compresses: light, fast zlib.
     # Every array carries an HDF5 Fletcher-32 checksum: a flipped bit in H (a plausible,
     # finite, wrong value) then fails loading instead of silently changing the design.
@@ -268,8 +255,8 @@ def estimate_calibration_bytes(n_points: int, n_actuators: int, repeats: int, n_
     return int(1.1 * (recordings + matrices + drives + mimo)) + 64 * 1024
 
 
-def write_calibration_file(record: Mapping[str, Any], path: str | os.PathLike) -> Path:
-    """Write a calibration record (:data:`RECORD_KEYS`) to one netCDF4/HDF5 file (see the module docstring).
+def write_calibration_file(record: CalibrationFileRecord | Mapping[str, Any], path: str | os.PathLike) -> Path:
+    """Write a calibration record to one netCDF4/HDF5 file (see the module docstring).
 
     The file is built in memory, written next to its destination, fsynced and renamed
     over it (:func:`vibrofocus._atomic.atomic_write`): a full disk, a read-only folder
@@ -278,8 +265,9 @@ def write_calibration_file(record: Mapping[str, Any], path: str | os.PathLike) -
 
     Parameters
     ----------
-    record : mapping
-        The calibration's arrays and descriptions, keyed as :data:`RECORD_KEYS`.
+    record : CalibrationFileRecord or mapping
+        The calibration's arrays and descriptions (a mapping keyed as :data:`RECORD_KEYS`
+        is made into a record, and so checked).
     path : str or PathLike
         Destination, conventionally ``*.nc``; its folder must exist.
 
@@ -304,8 +292,8 @@ def _fail(path: Path, what: str) -> CalibrationFileError:
     return CalibrationFileError(f"{path}: {what}")
 
 
-def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
-    """Read and validate a calibration file into a record (:data:`RECORD_KEYS`).
+def read_calibration_file(path: str | os.PathLike) -> CalibrationFileRecord:
+    """Read and validate a calibration file into a record.
 
     Parameters
     ----------
@@ -313,7 +301,7 @@ def read_calibration_file(path: str | os.PathLike) -> dict[str, Any]:
 
     Returns
     -------
-    dict
+    CalibrationFileRecord
         The record: plain arrays, numbers, strings and JSON-like dicts.
 
     Raises
@@ -421,7 +409,49 @@ def _number_attr(attrs, name: str, path: Path) -> float:
         raise _fail(path, f"attribute {name} must be one number, got {raw!r}") from None
 
 
-def _from_dataset(ds, path: Path) -> dict[str, Any]:
+def _from_dataset(ds, path: Path) -> CalibrationFileRecord:
+    """The record a loaded dataset holds; what the record checks itself is reported with the path."""
+    attrs = ds.attrs
+    version, method = _header(ds, path)
+    described = _descriptions(attrs, path)
+    _check_dims(ds, method, path)
+    labels = [str(v) for v in ds["point"].values]
+    names = [str(v) for v in ds["actuator"].values]
+    H_real, H_imag = ds["H_real"].values, ds["H_imag"].values
+    mimo = method == "mimo"
+    fit = _fit_from_dataset(ds, attrs, path) if "fit_value" in ds.variables else None
+    try:
+        record = CalibrationFileRecord(
+            H=H_real.astype(float) + 1j * H_imag.astype(float), freqs=np.asarray(ds["frequency"].values, float),
+            coherence=ds["coherence"].values.astype(float), drives=ds["drive"].values,
+            recordings=ds["recording"].values, fs=_number_attr(attrs, "fs", path),
+            band=(_number_attr(attrs, "band_low", path), _number_attr(attrs, "band_high", path)),
+            n_fft=_integer_attr(attrs, "n_fft", path), method=method, participant_id=str(attrs["participant_id"]),
+            created=str(attrs["created"]), software_version=str(attrs["software_version"]), schema_version=version,
+            layout=described["layout"], point_labels=labels,
+            point_kinds=[str(v) for v in ds["point_kind"].values] if "point_kind" in ds.variables else None,
+            actuator_names=names, points_xy=_xy(ds, "point"), actuators_xy=_xy(ds, "actuator"),
+            rig=described["rig"], sweep=described["sweep"], quality=_quality_from_dataset(ds, described, mimo),
+            codes=ds["code"].values if mimo else None,
+            multiple_coherence=ds["multiple_coherence"].values.astype(float) if mimo else None,
+            straps=described["strap_forces"],
+            recorded_s=_number_attr(attrs, "recorded_s", path) if "recorded_s" in attrs else float("nan"),
+            fit=fit, measured=ds["point_measured"].values if "point_measured" in ds.variables else None)
+    except ValidationError as exc:
+        raise _fail(path, str(exc)) from None
+    freqs = record.freqs
+    for name, arr in (("H_real", H_real), ("H_imag", H_imag)):
+        bad = ~np.isfinite(arr)
+        if bad.any():
+            f, p, a = np.argwhere(bad)[0]
+            raise _fail(path, f"variable {name} holds {int(bad.sum())} NaN/Inf value(s); first at "
+                              f"{freqs[f]:g} Hz, point {labels[p]}, actuator {names[a]}")
+    _check_plausible(H_real, H_imag, freqs, record.band, labels, names, path)
+    return record
+
+
+def _header(ds, path: Path) -> tuple[int, str]:
+    """The file's schema version and method, after checking its kind and that nothing required is missing."""
     attrs = ds.attrs
     if attrs.get("file_kind") != FILE_KIND:
         raise _fail(path, f"is an HDF5/netCDF file but not a vibrofocus calibration (file_kind is "
@@ -451,41 +481,32 @@ def _from_dataset(ds, path: Path) -> dict[str, Any]:
     missing = [v for v in (*_REQUIRED_VARS, *(_MIMO_VARS if mimo else ())) if v not in ds.variables]
     if missing:
         raise _fail(path, f"lacks the variable(s) {', '.join(missing)}")
+    return version, method
 
+
+def _descriptions(attrs, path: Path) -> dict[str, Any]:
+    """The JSON attributes, parsed and of the right kind (``strap_forces`` None when absent)."""
+    kinds = {"layout": dict, "rig": dict, "sweep": dict, "quality_issues": list, "quality_thresholds": dict}
     try:
-        layout = json.loads(attrs["layout"])
-        rig = json.loads(attrs["rig"])
-        sweep = json.loads(attrs["sweep"])
-        issues = json.loads(attrs["quality_issues"])
-        thresholds = json.loads(attrs["quality_thresholds"])
-        straps = json.loads(attrs["strap_forces"]) if "strap_forces" in attrs else None
+        out = {name: json.loads(attrs[name]) for name in kinds}
+        out["strap_forces"] = json.loads(attrs["strap_forces"]) if "strap_forces" in attrs else None
     except (ValueError, TypeError) as exc:  # JSONDecodeError is a ValueError
         raise _fail(path, f"has an unreadable description attribute ({exc})") from exc
-    for name, value, kind in (("rig", rig, dict), ("layout", layout, dict), ("sweep", sweep, dict),
-                              ("quality_issues", issues, list), ("quality_thresholds", thresholds, dict)):
-        if not isinstance(value, kind):
+    for name in ("rig", "layout", "sweep", "quality_issues", "quality_thresholds"):
+        if not isinstance(out[name], kinds[name]):
             raise _fail(path, f"has an unreadable description attribute (attribute {name} must be a JSON "
-                              f"{'object' if kind is dict else 'list'}, got {type(value).__name__})")
+                              f"{'object' if kinds[name] is dict else 'list'}, got {type(out[name]).__name__})")
+    return out
 
-    fs = _number_attr(attrs, "fs", path)
-    n_fft = _number_attr(attrs, "n_fft", path)
-    if not float(n_fft).is_integer() or n_fft < 2:
-        raise _fail(path, f"attribute n_fft must be an integer >= 2, got {n_fft!r}")
-    n_fft = int(n_fft)
-    if not np.isfinite(fs) or fs <= 0:
-        raise _fail(path, f"has an invalid sample rate fs={fs!r}")
-    band = (_number_attr(attrs, "band_low", path), _number_attr(attrs, "band_high", path))
-    if not (0 < band[0] < band[1] <= fs / 2):
-        raise _fail(path, f"has an invalid band {band[0]:g}-{band[1]:g} Hz (needs 0 < low < high <= fs/2 = "
-                          f"{fs / 2:g} Hz)")
 
-    # Dimensions, shapes and dtypes.
+def _check_dims(ds, method: str, path: Path) -> None:
+    """Every known variable on its dimensions, numeric, and floating point where the data is."""
     expected_dims = {
         "H_real": ("frequency", "point", "actuator"), "H_imag": ("frequency", "point", "actuator"),
         "coherence": ("frequency", "point", "actuator"), "drive": ("actuator", "drive_sample"),
         "recording": _recording_dims(method), "polarity": ("actuator",),
         **{name: ("point", "actuator") for name in _QUALITY_VARS},
-        **({name: spec[0] for name, spec in _MIMO_VARS.items()} if mimo else {}),
+        **({name: spec[0] for name, spec in _MIMO_VARS.items()} if method == "mimo" else {}),
     }
     for name, dims in expected_dims.items():
         if ds[name].dims != dims:
@@ -495,81 +516,28 @@ def _from_dataset(ds, path: Path) -> dict[str, Any]:
     for name in ("H_real", "H_imag", "coherence", "drive", "recording"):
         if not np.issubdtype(ds[name].dtype, np.floating):
             raise _fail(path, f"variable {name} has dtype {ds[name].dtype}, expected floating point")
-    n_f = ds.sizes["frequency"]
-    if n_f != n_fft // 2 + 1:
-        raise _fail(path, f"has {n_f} frequencies but n_fft={n_fft} needs {n_fft // 2 + 1}")
-    freqs = np.asarray(ds["frequency"].values, float)
-    if not np.allclose(freqs, np.fft.rfftfreq(n_fft, 1 / fs), rtol=1e-9, atol=1e-9):
-        raise _fail(path, f"its frequency axis is not rfftfreq({n_fft}, 1/{fs:g})")
 
-    # Points and actuators as stored (the layout's check is one floor up).
-    labels = [str(v) for v in ds["point"].values]
-    pts = np.stack([ds["point_x"].values, ds["point_y"].values], axis=1).astype(float)
-    names = [str(v) for v in ds["actuator"].values]
-    act = np.stack([ds["actuator_x"].values, ds["actuator_y"].values], axis=1).astype(float)
-    if ds.sizes["record_sample"] < ds.sizes["drive_sample"]:
-        raise _fail(path, "recordings are shorter than the drives")
 
-    # Values.
-    H_real, H_imag = ds["H_real"].values, ds["H_imag"].values
-    for name, arr in (("H_real", H_real), ("H_imag", H_imag)):
-        bad = ~np.isfinite(arr)
-        if bad.any():
-            f, p, a = np.argwhere(bad)[0]
-            raise _fail(path, f"variable {name} holds {int(bad.sum())} NaN/Inf value(s); first at "
-                              f"{freqs[f]:g} Hz, point {labels[p]}, actuator {names[a]}")
-    _check_plausible(H_real, H_imag, freqs, band, labels, names, path)
-    coherence = ds["coherence"].values.astype(float)
-    finite = np.isfinite(coherence)
-    if (coherence[finite] < -1e-9).any() or (coherence[finite] > 1 + 1e-9).any():
-        raise _fail(path, "variable coherence holds values outside [0, 1]")
-    drive = ds["drive"].values
-    if not np.isfinite(drive).all():
-        raise _fail(path, "variable drive holds NaN/Inf")
-    codes = multiple = condition = correlation = None
-    if mimo:
-        codes = ds["code"].values
-        if ds.sizes["take"] != codes.shape[0] or not np.isin(codes, (-1, 1)).all():
-            raise _fail(path, "variable code must hold +1 or -1 for every take and actuator")
-        codes = codes.astype(np.int8)
-        multiple = ds["multiple_coherence"].values.astype(float)
-        finite = np.isfinite(multiple)
-        if (multiple[finite] < -1e-9).any() or (multiple[finite] > 1 + 1e-9).any():
-            raise _fail(path, "variable multiple_coherence holds values outside [0, 1]")
-        condition = ds["input_condition"].values.astype(float)
-        correlation = ds["input_correlation"].values.astype(float)
-    recorded_s = _number_attr(attrs, "recorded_s", path) if "recorded_s" in attrs else float("nan")
+def _xy(ds, dim: str) -> np.ndarray:
+    """The stored positions on ``point`` or ``actuator``, m, shape (n, 2)."""
+    return np.stack([ds[f"{dim}_x"].values, ds[f"{dim}_y"].values], axis=1).astype(float)
 
-    quality = {
-        "issues": issues, "snr_db": ds["snr_db"].values, "noise_rms_m": ds["noise_rms"].values,
-        "band_gain": ds["band_gain"].values, "low_coherence_share": ds["low_coherence_share"].values,
-        "coherent_to_hz": ds["coherent_to_hz"].values,
-        "clipped": ds["clipped"].values.astype(bool), "repeats_used": ds["repeats_used"].values.astype(int),
-        "dropouts": ds["dropouts"].values.astype(int), "polarity": ds["polarity"].values.astype(int),
-        "thresholds": thresholds, "input_condition": condition, "input_correlation": correlation,
-    }
-    fit = _fit_from_dataset(ds, attrs, path) if "fit_value" in ds.variables else None
-    measured = None
-    if "point_measured" in ds.variables:
-        flags = ds["point_measured"].values
-        if flags.shape != (len(labels),) or not np.isin(flags, (0, 1)).all():
-            raise _fail(path, "variable point_measured must hold 0 (predicted) or 1 (measured) for every point")
-        if not flags.any():
-            raise _fail(path, "variable point_measured marks no point as measured")
-        measured = flags.astype(bool)
-        if not measured.all() and fit is None:
-            raise _fail(path, "variable point_measured marks predicted points, but the file holds no fitted skin "
-                              "model (fit_value) that predicted them")
-    return {
-        "H": H_real.astype(float) + 1j * H_imag.astype(float), "freqs": freqs, "fs": fs, "coherence": coherence,
-        "band": band, "n_fft": n_fft, "participant_id": str(attrs["participant_id"]), "method": method,
-        "quality": quality, "drives": drive, "recordings": ds["recording"].values, "rig": rig, "sweep": sweep,
-        "created": str(attrs["created"]), "software_version": str(attrs["software_version"]),
-        "schema_version": version, "straps": straps, "codes": codes, "multiple_coherence": multiple,
-        "recorded_s": recorded_s, "fit": fit, "measured": measured, "layout": layout, "point_labels": labels,
-        "point_kinds": [str(v) for v in ds["point_kind"].values] if "point_kind" in ds.variables else None,
-        "actuator_names": names, "points_xy": pts, "actuators_xy": act,
-    }
+
+def _integer_attr(attrs, name: str, path: Path) -> float | int:
+    """A number attribute, as an int when it is a whole number (the record refuses the rest)."""
+    value = _number_attr(attrs, name, path)
+    return int(value) if float(value).is_integer() else value
+
+
+def _quality_from_dataset(ds, described: Mapping[str, Any], mimo: bool) -> QualityRecord:
+    return QualityRecord(
+        issues=described["quality_issues"], thresholds=described["quality_thresholds"],
+        snr_db=ds["snr_db"].values, noise_rms_m=ds["noise_rms"].values, band_gain=ds["band_gain"].values,
+        low_coherence_share=ds["low_coherence_share"].values, coherent_to_hz=ds["coherent_to_hz"].values,
+        clipped=ds["clipped"].values.astype(bool), repeats_used=ds["repeats_used"].values.astype(int),
+        dropouts=ds["dropouts"].values.astype(int), polarity=ds["polarity"].values.astype(int),
+        input_condition=ds["input_condition"].values.astype(float) if mimo else None,
+        input_correlation=ds["input_correlation"].values.astype(float) if mimo else None)
 
 
 def _check_plausible(H_real: np.ndarray, H_imag: np.ndarray, freqs: np.ndarray, band: tuple[float, float],
@@ -594,8 +562,8 @@ def _check_plausible(H_real: np.ndarray, H_imag: np.ndarray, freqs: np.ndarray, 
                           "actuator moved the skin measurably; check the rig and calibrate again")
 
 
-def _fit_from_dataset(ds, attrs, path: Path) -> dict[str, Any]:
-    """The stored skin-model fit as a dict of arrays and settings, or CalibrationFileError naming what is wrong."""
+def _fit_from_dataset(ds, attrs, path: Path) -> FitRecord:
+    """The stored skin-model fit, or CalibrationFileError naming what is wrong."""
     missing = [v for v in ("fit_log_covariance", "fit_residual") if v not in ds.variables]
     if "fit" not in attrs:
         missing.append("attribute fit")
@@ -603,11 +571,11 @@ def _fit_from_dataset(ds, attrs, path: Path) -> dict[str, Any]:
         raise _fail(path, f"has fit_value but lacks {', '.join(missing)}")
     try:
         meta = json.loads(attrs["fit"])
-        return {"names": [str(v) for v in ds["fit_parameter"].values], "fs": float(meta["fs"]),
-                "band": tuple(meta["band"]), "values": ds["fit_value"].values.astype(float),
-                "std": ds["fit_std"].values.astype(float) if "fit_std" in ds.variables else None,
-                "log_covariance": ds["fit_log_covariance"].values.astype(float),
-                "residual": ds["fit_residual"].values.astype(float), "fixed": meta["fixed"],
-                "info": meta.get("info", {})}
+        return FitRecord(names=[str(v) for v in ds["fit_parameter"].values], fs=float(meta["fs"]),
+                         band=tuple(meta["band"]), values=ds["fit_value"].values.astype(float),
+                         std=ds["fit_std"].values.astype(float) if "fit_std" in ds.variables else None,
+                         log_covariance=ds["fit_log_covariance"].values.astype(float),
+                         residual=ds["fit_residual"].values.astype(float), fixed=meta["fixed"],
+                         info=meta.get("info", {}))
     except (ValueError, TypeError, KeyError) as exc:
         raise _fail(path, f"has an unreadable skin-model fit ({exc})") from exc

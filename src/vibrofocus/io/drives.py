@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from ..errors import ValidationError
 
 __all__ = ["DRIVES_SUFFIXES", "write_drives", "write_drives_wav", "read_drives"]
@@ -34,6 +35,7 @@ __all__ = ["DRIVES_SUFFIXES", "write_drives", "write_drives_wav", "read_drives"]
 DRIVES_SUFFIXES = (".npz", ".csv")
 
 
+@fill_doc
 def write_drives(
     path: str | os.PathLike,
     drives: np.ndarray,
@@ -52,8 +54,7 @@ def write_drives(
         Destination ending in ``.npz`` or ``.csv``; its folder must exist.
     drives : ndarray, shape (n_actuators, n_samples)
         Voltages, V.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     actuator_names : sequence of str
         One name per row of ``drives`` (the CSV's column names).
     metadata : mapping

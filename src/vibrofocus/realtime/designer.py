@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_positive
 from ..errors import CausalityError, ValidationError
 from ..layout import ArrayLayout
@@ -54,12 +55,13 @@ class CalibratedArea:
     y_m: tuple[float, float]
 
     @classmethod
+    @fill_doc
     def of_layout(cls, layout: ArrayLayout) -> "CalibratedArea":
         """The area of a layout's locations.
 
         Parameters
         ----------
-        layout : ArrayLayout
+        %(layout)s
 
         Returns
         -------

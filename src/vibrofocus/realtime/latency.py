@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import check_in_range, check_positive
 from ..errors import ValidationError
 from ..rigs.devices import DeviceError
@@ -73,13 +74,13 @@ class LatencyReport:
                 "latencies_ms": [round(float(v) * 1e3, 6) for v in self.latencies_s], **self.details}
 
 
+@fill_doc
 def click_drive(fs: float, n_actuators: int, channel: int, amplitude_v: float) -> np.ndarray:
     """The drive of one click on one actuator.
 
     Parameters
     ----------
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     n_actuators : int
     channel : int
         1-based actuator output the click plays on.

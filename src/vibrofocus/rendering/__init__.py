@@ -16,7 +16,7 @@ from .contrast import (
 from .funneling import funneling_gains, funneling_weights
 from .inverse import DesignReport, DriveScaledWarning, InverseOperator, inverse_filter, predict_response
 from .metrics import focus_metrics
-from .design import Design, Rendering  # noqa: F401 - Rendering: Design's former name, kept importable
+from .design import Design
 from .method import Method, Problem, Solution
 from .methods import Combination, Constrained, Contrast, Funneling, Inverse, Minimax, TimeReversal
 from .minimax import MinimaxFrontier, MinimaxReport, coherence_radius, minimax_filter, minimax_frontier
@@ -77,3 +77,8 @@ __all__ = [
     "available_methods",
     "ENTRY_POINT_GROUP",
 ]
+
+from .._deprecated import module_getattr  # noqa: E402
+
+__getattr__ = module_getattr(__name__, {"Rendering": ("vibrofocus.rendering.design", "Design",
+                                                      "vibrofocus.rendering.Design")})

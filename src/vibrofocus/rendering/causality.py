@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 import scipy.fft
 
+from .._docs import fill_doc
 from .._validation import as_array, check_choice, check_finite, check_in_range
 from ..errors import CausalityError, ValidationError
 from ._pinv import _single_threaded_blas
@@ -163,6 +164,7 @@ def _placed(response: np.ndarray, bins: slice, n: int) -> np.ndarray:
     return rows
 
 
+@fill_doc
 class WraparoundCheck:
     """The single-playback (linear convolution) check of drives through one ``H``.
 
@@ -178,8 +180,7 @@ class WraparoundCheck:
 
     Parameters
     ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``.
+    %(H)s
     n_samples : int, optional
         Window length ``n``; default ``2 (n_freqs - 1)``. Give it for odd ``n``.
     keep : bool

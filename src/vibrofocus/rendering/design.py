@@ -1,9 +1,11 @@
 """What a rendering method designs: :class:`Design` (drives, prediction, bounds, metrics).
 
-``Rendering``, its former name, is kept as an alias.
+``Rendering``, its former name, is a deprecated alias (a ``DeprecationWarning`` when used).
 """
 
 from __future__ import annotations
+
+from .._deprecated import module_getattr
 
 from dataclasses import dataclass, field
 from typing import Any
@@ -15,7 +17,7 @@ from ..layout import ArrayLayout
 from .bound import ContrastBound
 from .metrics import focus_metrics
 
-__all__ = ["Design", "Rendering"]
+__all__ = ["Design"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -164,5 +166,5 @@ class Design:
         return out
 
 
-#: The former name of :class:`Design` (``render`` returned a ``Rendering``).
-Rendering = Design
+# ``Rendering``, the former name of :class:`Design`, warns when used (vibrofocus._deprecated).
+__getattr__ = module_getattr(__name__, {"Rendering": (__name__, "Design", "vibrofocus.rendering.Design")})

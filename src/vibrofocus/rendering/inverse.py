@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_choice, check_positive
 from ..defaults import BAND_HZ
 from ..errors import DriveLimitError, ValidationError
@@ -90,6 +91,7 @@ def _check_in_band(vanishes: np.ndarray, freqs_active: np.ndarray, band: tuple[f
         )
 
 
+@fill_doc
 class InverseOperator:
     """Precomputed band-limited (regularized) pseudo-inverse of a transfer matrix.
 
@@ -100,8 +102,7 @@ class InverseOperator:
     ----------
     H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
         Transfer matrix on ``rfftfreq(n, 1 / fs)``, response unit per drive unit (m/V).
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     n_samples : int, optional
         Window length ``n``; default ``2 (n_freqs - 1)``. Give it for odd ``n``.
     control : sequence of int, optional
@@ -353,6 +354,7 @@ def apply_drive_limit(drives: np.ndarray, max_drive: float | None, on_limit: str
 
 
 @_single_threaded_blas()  # one BLAS thread for the whole design (set once)
+@fill_doc
 def inverse_filter(
     H: Any,
     targets: Any,
@@ -379,8 +381,7 @@ def inverse_filter(
         Transfer matrix on ``numpy.fft.rfftfreq(n, 1 / fs)`` (m/V, or any unit pair).
     targets : ndarray, real, shape (n_points, n)
         Desired displacement at every point (unit of ``H``'s output, m).
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band : (float, float)
         Design band, Hz, inside (0, fs/2]; a raised-cosine taper of ``taper_octaves``
         rolls off outside it.

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_in_range, check_index, check_positive
 from ..defaults import SIGMA_S
 from ..errors import ValidationError
@@ -15,6 +16,7 @@ from .taper import design_grid
 __all__ = ["focus_metrics", "zero_lag_fidelity"]
 
 
+@fill_doc
 def focus_metrics(
     response: Any,
     target_index: int,
@@ -42,8 +44,7 @@ def focus_metrics(
         Desired target waveform, m, ``n_desired <= n``. A shorter waveform (the design
         window, when ``response`` is a recording with a decay tail) is zero-padded at
         the end.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     t0 : float, optional
         Centre of the tap, s; default the time of the largest ``|desired|``.
     sigma : float

@@ -8,6 +8,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from .._docs import fill_doc
 from ..signals.taper import band_taper
 
 __all__ = ["band_taper", "design_grid"]
@@ -22,6 +23,7 @@ def _grid(n: int, fs: float, low: float, high: float, taper_octaves: float) -> t
     return freqs, taper
 
 
+@fill_doc
 def design_grid(n: int, fs: float, band: tuple[float, float], taper_octaves: float) -> tuple[np.ndarray, np.ndarray]:
     """Frequencies and band taper of an ``n``-sample design at ``fs``.
 
@@ -32,8 +34,7 @@ def design_grid(n: int, fs: float, band: tuple[float, float], taper_octaves: flo
     ----------
     n : int
         Window length, samples.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band : (float, float)
         Pass band, Hz (validated by the caller).
     taper_octaves : float

@@ -6,6 +6,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_positive
 from ..defaults import BAND_HZ
 from ..errors import ValidationError
@@ -16,6 +17,7 @@ from .taper import design_grid
 __all__ = ["time_reversal_drives"]
 
 
+@fill_doc
 def time_reversal_drives(
     H: Any,
     targets: Any,
@@ -33,12 +35,10 @@ def time_reversal_drives(
 
     Parameters
     ----------
-    H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
-        Transfer matrix on ``rfftfreq(n, 1 / fs)``.
+    %(H)s
     targets : ndarray, real, shape (n_points, n)
         Desired displacements at the points of ``H`` (zeros for quiet points).
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     max_drive : float, optional
         If given, the drives are scaled so that their peak equals it (V); else they are
         returned in the unit of ``H^H U``.

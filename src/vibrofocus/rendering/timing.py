@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import check_in_range, check_positive
 from ..defaults import BAND_HZ
 from ._checks import as_transfer
@@ -101,6 +102,7 @@ class ResponseTiming:
         return int(max(int(minimum), 2 ** int(np.ceil(np.log2(max(need, 2.0))))))
 
 
+@fill_doc
 def response_timing(H: Any, fs: float, *, band: tuple[float, float] = BAND_HZ, taper_octaves: float = 0.5,
                     onset: float = 0.01, tol: float = 1e-4) -> ResponseTiming:
     """Arrival, energy group delay and ring-down of each impulse response of ``H``.
@@ -110,8 +112,7 @@ def response_timing(H: Any, fs: float, *, band: tuple[float, float] = BAND_HZ, t
     H : ndarray, complex, shape (n // 2 + 1, n_points, n_actuators)
         Transfer matrix on ``rfftfreq(n, 1 / fs)`` (m/V), or a
         :class:`~vibrofocus.rendering.TransferMatrix`.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     band : (float, float)
         Design band, Hz: the impulse responses are band-limited with the designs' taper.
     taper_octaves : float

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_band, check_positive
 from ..errors import ValidationError
 from ..layout import ArrayLayout
@@ -66,6 +67,7 @@ def _averages(calibration: Any) -> int:
     return max(1, repeats - others)
 
 
+@fill_doc
 class TransferMatrix(ValidatedTransfer):
     """A calibrated (or modelled) transfer matrix with its grid, layout and provenance.
 
@@ -74,8 +76,7 @@ class TransferMatrix(ValidatedTransfer):
     H : array_like, complex, shape (n // 2 + 1, n_points, n_actuators)
         Transfer matrix, m/V, on ``rfftfreq(n, 1 / fs)``; row ``i`` is
         ``layout.points_xy[i]``, column ``q`` actuator ``q``.
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     layout : ArrayLayout
         The actuators and points ``H`` belongs to.
     n_samples : int, optional
@@ -164,6 +165,7 @@ class TransferMatrix(ValidatedTransfer):
         return tm
 
     @classmethod
+    @fill_doc
     def from_model(cls, model: Any, layout: ArrayLayout, fs: float, n_samples: int | None = None, *,
                    taper_octaves: float = 0.5) -> "TransferMatrix":
         """H of a model of the skin at the layout's points.
@@ -174,9 +176,8 @@ class TransferMatrix(ValidatedTransfer):
             A fitted :class:`~vibrofocus.calibration.FittedSkin` or a simulated arm (its
             true H). A model with ``band`` is tapered outside it like
             ``Calibration.transfer_for`` and gives the calibrated band.
-        layout : ArrayLayout
-        fs : float
-            Sample rate, Hz.
+        %(layout)s
+        %(fs)s
         n_samples : int, optional
             Window, samples; default the model's ``design_window()`` if it has one, else 4096.
         taper_octaves : float
@@ -259,6 +260,7 @@ class TransferMatrix(ValidatedTransfer):
                 f"fs={self.fs:g}, n_samples={self.n_samples}, band={band}, layout={self.layout.name!r})")
 
 
+@fill_doc
 def as_transfer_matrix(H: Any, fs: float, layout: ArrayLayout, *, n_samples: int | None = None,
                        calibrated_band: tuple[float, float] | None = None,
                        taper_octaves: float = 0.5) -> TransferMatrix:
@@ -270,9 +272,8 @@ def as_transfer_matrix(H: Any, fs: float, layout: ArrayLayout, *, n_samples: int
         A ``TransferMatrix`` is returned as it is; a ``Calibration`` gives
         :meth:`TransferMatrix.from_calibration`; an object with ``transfer(points_xy,
         freqs)`` gives :meth:`TransferMatrix.from_model`; an array is validated.
-    fs : float
-        Sample rate, Hz.
-    layout : ArrayLayout
+    %(fs)s
+    %(layout)s
     n_samples : int, optional
         Window, samples.
     calibrated_band : (float, float), optional
@@ -302,6 +303,7 @@ def as_transfer_matrix(H: Any, fs: float, layout: ArrayLayout, *, n_samples: int
     return tm
 
 
+@fill_doc
 def target_on_model(H: Any, layout: ArrayLayout, target_xy: Any) -> tuple[Any, ArrayLayout, int]:
     """The skin model a tap anywhere is designed with, and the layout with the target in it.
 
@@ -309,7 +311,7 @@ def target_on_model(H: Any, layout: ArrayLayout, target_xy: Any) -> tuple[Any, A
     ----------
     H : Calibration with a fitted model, or skin model
         A calibration gives its ``fit``; a model has ``transfer(points_xy, freqs)``.
-    layout : ArrayLayout
+    %(layout)s
     target_xy : (float, float)
         Target position on the skin, m, in the layout frame.
 

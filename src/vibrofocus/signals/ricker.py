@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .._docs import fill_doc
 from .._validation import as_array, check_choice, check_in_range, check_positive
 from ..defaults import N_SAMPLES, SIGMA_S, TARGET_FRACTION
 from ..errors import ValidationError
@@ -11,14 +12,14 @@ from ..errors import ValidationError
 __all__ = ["ricker", "time_axis"]
 
 
+@fill_doc
 def time_axis(n_samples: int, fs: float) -> np.ndarray:
     """Sample times ``k / fs``.
 
     Parameters
     ----------
     n_samples : int
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
 
     Returns
     -------
@@ -28,6 +29,7 @@ def time_axis(n_samples: int, fs: float) -> np.ndarray:
     return np.arange(int(n_samples)) / float(fs)
 
 
+@fill_doc
 def ricker(
     fs: float,
     sigma: float = SIGMA_S,
@@ -41,8 +43,7 @@ def ricker(
 
     Parameters
     ----------
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     sigma : float
         Spread, s. The spectral peak is at ``1 / (sqrt(2) pi sigma)`` (225 Hz for 1 ms).
     duration : float, optional

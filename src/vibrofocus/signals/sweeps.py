@@ -18,14 +18,14 @@ __all__ = [
 ]
 
 
+@fill_doc
 def apply_fades(signal: np.ndarray, fs: float, fade_in_s: float, fade_out_s: float | None = None) -> np.ndarray:
     """Raised-cosine fade-in and fade-out along the last axis (returns a copy).
 
     Parameters
     ----------
     signal : ndarray, shape (..., n_samples)
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     fade_in_s, fade_out_s : float
         Fade lengths, s; ``fade_out_s`` defaults to ``fade_in_s``.
     """
@@ -143,6 +143,7 @@ def exponential_sweep_inverse(
     return inverse / gain[centre]
 
 
+@fill_doc
 def spectral_inverse(
     excitation: np.ndarray,
     fs: float,
@@ -160,8 +161,7 @@ def spectral_inverse(
     Parameters
     ----------
     excitation : ndarray, shape (n_samples,)
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     n_fft : int
         FFT length, >= n_samples (use >= recording length for linear deconvolution).
     band : (float, float)

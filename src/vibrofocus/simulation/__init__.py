@@ -73,3 +73,8 @@ __all__ = [
     "compare",
     "model_footer",
 ]
+
+# The former name of vibrofocus.participant_models (DEVELOPING.md, "Names"): an import from outside warns.
+from .._deprecated import warn_if_imported_from_outside  # noqa: E402
+
+warn_if_imported_from_outside(__name__, "vibrofocus.participant_models")

@@ -1,57 +1,11 @@
 """The simulated participants' perceptual model, version 3 (a MODEL, not data).
 
-A stimulus is felt in two stages, each from published psychophysics (sources in
-``simulation/data/SOURCES.md``; parameters that are assumptions or fitted are said so in
-:class:`PerceptualModel` and in ``docs/simulated-participants.md``).
-
-Peripheral stage (computed ONCE per stimulus, :func:`felt_energy`)
-    The true skin displacement ``u_p(t)`` at a modest grid of skin points ``p`` (11 x 11,
-    5 mm pitch, ±25 mm: the array's area) is weighted in frequency by the inverse of the
-    Pacinian detection threshold curve (U-shaped: flat to 40 Hz, -12 dB/octave to 250 Hz,
-    Verrillo 1963 as summarised by Gescheider & Verrillo 1979; rising 12 dB/octave above,
-    an assumption), giving a *felt energy* ``E_p`` per point, expressed relative to the
-    felt energy of the reference tap (the band-limited Ricker of 2 µm peak).
-
-Central stage (cheap, per trial, :func:`draw_answers`)
-    1. **Detection.** A point is felt where its sensation level
-       ``L_p = 10 log10(E_p) + SL_ref - d_i`` exceeds 0 dB (``SL_ref``: sensation level of
-       the reference tap, ``d_i`` a participant's threshold offset).
-    2. **Funneling, coded centrally.** Two position cues are integrated into one percept.
-       The skin cue is the energy-weighted mean of the supra-threshold skin points,
-       ``x_skin = sum w_p x_p / sum w_p``, ``w_p = (E_p / E_threshold - 1)^gamma``; the
-       drive cue is the same law over the actuators' contacts, weighted by the felt energy
-       each actuator delivers at its own contact through its coupling
-       (:func:`actuator_energy`): the funneling illusion's phantom between the sources.
-       ``gamma = 1`` is the energy law (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018
-       in 2D), ``gamma`` fitted. The percept is ``x_f = (1 - beta) x_skin + beta x_drive``;
-       ``beta`` (fitted) says how centrally the place is coded: the source paper (Sec. IV)
-       reads its result as funneling being coded centrally (Gardner & Spencer 1972; Chen et
-       al. 2003). A wrist-side actuator in partial contact delivers less than its drive
-       (:data:`vibrofocus.skin.parameters.WRIST_CONTACT_RANGE`, the paper's explanation of
-       locations 1 and 3): funneling's phantom moves away from it, while the inverse filter,
-       calibrated through the same contact, drives it harder. ``s`` is the skin cue's
-       spread (weighted RMS distance, m): how diffuse the stimulus feels.
-    3. **Localization noise.** The sensed position is ``x_f + e``,
-       ``e ~ N(0, sigma_s^2 I)`` with ``sigma_s^2 = sigma_i^2 + (k_i s)^2 + (k_c c)^2``: a
-       participant's point-localization acuity on the mid-forearm (poor: fewer than half of
-       the arm sites uniquely identified, Cholewiak & Collins 2003), a diffuse percept's
-       extra uncertainty (phantoms are perceived over distributed positions, Park & Choi
-       2018), and the conflict ``c`` between the skin and drive cues (an assumption, see
-       ``conflict_gain``).
-    4. **Central bias.** A Gaussian prior around the array centre shifted by the
-       participant's bias ``b_i`` (population mean toward the elbow: the forearm's
-       perceived midpoint lies toward the elbow, Cholewiak et al. 2020) of SD
-       ``sigma_prior``; the percept is the posterior mean
-       ``c_i + g (x_f + e - c_i)``, ``g = sigma_prior^2 / (sigma_prior^2 + sigma_s^2)``:
-       the less reliable the sensation, the stronger the pull to the centre.
-    5. **Study 1 answer:** the location nearest to the percept.
-       **Study 2 selection:** from the model's own uncertainty, the posterior
-       ``N(percept, sigma_post^2)`` with ``sigma_post^2 = g sigma_s^2``: every location
-       whose posterior density reaches a participant's criterion ``kappa_i`` (times a
-       per-trial log-normal jitter) of the largest one; the Study 1 answer is always in.
-       Nothing felt: the participant guesses from the prior.
-
-Every random draw is seeded; see :class:`Traits` and :func:`draw_answers`.
+A stimulus is felt in two stages: a peripheral one computed once per stimulus
+(:func:`felt_energy`, :func:`actuator_energy`) and a central one drawn per trial
+(:func:`central_percepts`, :func:`draw_answers`), with the parameters and their sources in
+:class:`PerceptualModel` and ``simulation/data/SOURCES.md``. The method, its stages and
+what is published, assumed or fitted: docs/simulated-participants.md, "The model". Every
+random draw is seeded (:class:`Traits`, :func:`draw_answers`).
 """
 
 from __future__ import annotations

@@ -1,8 +1,8 @@
 """The simulated forearm's physics: a physically based arm that runs without hardware.
 
 :class:`SimulatedArm` is the physics and imports nothing from :mod:`vibrofocus.rigs`; the
-rig over it, :class:`~vibrofocus.rigs.simulated.SimulatedForearm`, is reachable here too
-(loaded on first use, so that importing the physics does not load the rigs).
+rig over it is :class:`vibrofocus.rigs.SimulatedForearm` (``vibrofocus.skin.SimulatedForearm``,
+its former place, is deprecated: DEVELOPING.md, "Names").
 
 The skin's waves follow a named preset (``nominal``, ``low``, ``high``: a layered arm
 whose dispersion and loss come from separate published measurements; ``voigt-fit``: a
@@ -19,7 +19,6 @@ from .propagation import exciter_response, surface_green, wavenumber
 from .viscoelastic import ViscoelasticLaw
 
 __all__ = [
-    "SimulatedForearm",
     "SimulatedArm",
     "ForearmParameters",
     "ForearmGeometry",
@@ -43,10 +42,12 @@ __all__ = [
 
 
 def __getattr__(name: str):
-    # The simulated rig lives in vibrofocus.rigs (an adapter over this physics); it is
-    # offered here under its long-standing name without the physics importing the rigs.
+    # The simulated rig lives in vibrofocus.rigs (an adapter over this physics); its former
+    # place here warns, and loads the rigs only when used.
     if name == "SimulatedForearm":
+        from .._deprecated import warn_deprecated
         from ..rigs.simulated import SimulatedForearm
 
+        warn_deprecated(f"{__name__}.SimulatedForearm", "vibrofocus.rigs.SimulatedForearm")
         return SimulatedForearm
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

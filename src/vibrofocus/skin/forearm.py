@@ -26,6 +26,7 @@ import numpy as np
 from scipy import fft as sp_fft
 from scipy import signal as sp_signal
 
+from .._docs import fill_doc
 from .._validation import as_array, check_positive
 from ..defaults import FS_HZ, N_SAMPLES, SIGMA_S
 from ..errors import ValidationError
@@ -121,6 +122,7 @@ def drive_sensitivity(fs: float = FS_HZ, sigma: float = SIGMA_S, skin: str = "vo
     return _REFERENCE_PEAK_M / float(np.abs(response).max())
 
 
+@fill_doc
 class SimulatedArm:
     """A simulated participant's forearm with the actuator array: the physics alone.
 
@@ -136,8 +138,7 @@ class SimulatedArm:
         seed, same arm.
     layout : ArrayLayout, optional
         The array; default the reference setup (docs/method.md).
-    fs : float
-        Sample rate, Hz.
+    %(fs)s
     participant : ForearmParameters, optional
         Explicit parameters instead of drawing them from ``seed`` (for controlled
         experiments, e.g. ``ForearmParameters.nominal(4, skin="nominal")``).

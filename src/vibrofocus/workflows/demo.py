@@ -102,7 +102,7 @@ def demo_methods(
     """
     from ..calibration import calibrate, save_calibration
     from ..demo import calibrated_transfer, model_transfer, run_demo, summarize
-    from ..skin import SimulatedForearm
+    from ..rigs.simulated import SimulatedForearm
 
     progress = progress if progress is not None else QuietProgress()
     rig = SimulatedForearm(seed=seed, skin=skin)
@@ -234,7 +234,7 @@ def demo_moving_focus(out: Path, *, seed: int, speed_m_s: float, skin: str) -> t
     """
     from ..calibration import calibrate, fit_model
     from ..demo.moving import moving_focus, write_moving_gif
-    from ..skin import SimulatedForearm
+    from ..rigs.simulated import SimulatedForearm
 
     _make_output_folder(out)
     rig = SimulatedForearm(seed=seed, skin=skin)
