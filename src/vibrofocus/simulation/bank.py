@@ -30,10 +30,22 @@ from ..errors import StudyError, ValidationError
 from ..io.feature_bank import load_feature_bank, save_feature_bank
 from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, draw_answers
 
-__all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
+__all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means",
+           "check_level_db", "MAX_LEVEL_DB"]
 
 #: The bank shipped with the package (built by ``scripts/build_feature_bank.py``).
 DEFAULT_BANK = "data/feature_bank.npz"
+#: Largest magnitude of a level re the level rule, dB (a protocol file's bound).
+MAX_LEVEL_DB = 120.0
+
+
+def check_level_db(level_db: float, name: str = "level_db") -> float:
+    """A level in dB re the level rule, as a float, or ValidationError naming ``name``."""
+    from .._validation import check_in_range
+
+    if isinstance(level_db, bool):
+        raise ValidationError(f"{name} must be a number of dB, got {level_db!r}")
+    return check_in_range(level_db, name, -MAX_LEVEL_DB, MAX_LEVEL_DB)
 
 
 @dataclass(frozen=True)
@@ -87,6 +99,50 @@ class FeatureBank:
     @property
     def n_forearms(self) -> int:
         return int(self.energy.shape[0])
+
+    def at_level(self, level_db: float, *, limit_v: float | None = None) -> "FeatureBank":
+        """The same stimuli played ``level_db`` dB re the bank's level rule.
+
+        A level multiplies every drive by ``10**(level_db / 20)`` (as a protocol block's
+        level does, docs/protocols.md); felt energies are quadratic in the drives, so they
+        are multiplied by ``10**(level_db / 10)`` exactly (also with a finite
+        ``integration_s``), and the drive and target peaks by ``10**(level_db / 20)``.
+
+        Parameters
+        ----------
+        level_db : float
+            dB re the bank's level rule (0: the bank itself), within +-120 dB.
+        limit_v : float, optional
+            Refuse a level at which some stimulus needs a drive above this, V (default
+            :data:`vibrofocus.defaults.DRIVE_LIMIT_V`); needs ``drive_peak_v``.
+
+        Returns
+        -------
+        FeatureBank
+
+        Raises
+        ------
+        ValidationError
+            A level out of range, or one that needs more than ``limit_v``.
+        """
+        from ..defaults import DRIVE_LIMIT_V
+
+        level = check_level_db(level_db)
+        if level == 0.0:
+            return self
+        amp = 10.0 ** (level / 20.0)
+        limit = DRIVE_LIMIT_V if limit_v is None else float(limit_v)
+        if self.drive_peak_v is not None and level > 0:
+            need = float(np.max(self.drive_peak_v)) * amp
+            if need > limit * (1.0 + 1e-9):
+                f, m, loc = np.unravel_index(int(np.argmax(self.drive_peak_v)), self.drive_peak_v.shape)
+                raise ValidationError(f"{level:+g} dB re the {self.levels} levels needs {need:.3g} V for "
+                                      f"{self.methods[m]} at location {loc + 1} (forearm {f}), over the "
+                                      f"{limit:g} V drive limit; lower the level")
+        scale = lambda a: None if a is None else a * amp  # noqa: E731
+        return dataclasses.replace(
+            self, energy=self.energy * amp**2, actuator_energy=self.actuator_energy * amp**2,
+            drive_peak_v=scale(self.drive_peak_v), target_peak_m=scale(self.target_peak_m))
 
     def save(self, path: str | os.PathLike) -> None:
         """Write the bank (``.npz``, atomically; :func:`vibrofocus.io.feature_bank.save_feature_bank`).
@@ -249,6 +305,7 @@ def simulate_cell_means(
     forearms: np.ndarray | None = None,
     hypothesis: Any = None,
     rule: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
+    level_db: float = 0.0,
 ) -> StudyArrays:
     """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
 
@@ -276,11 +333,14 @@ def simulate_cell_means(
         How answers and selections follow from the posterior, in both studies (default
         the model's, :func:`~vibrofocus.simulation.perception.posterior_ratio_rule`;
         ``scripts/selection_rules.py`` compares others).
+    level_db : float
+        Level of every stimulus, dB re the bank's level rule (:meth:`FeatureBank.at_level`;
+        default 0, the bank's own).
     """
     from .hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(hypothesis)
-    b = bank if bank is not None else default_bank()
+    b = (bank if bank is not None else default_bank()).at_level(level_db)
     m = model or h.model()
     if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
         raise ValidationError(f"n_participants must be an integer >= 1, got {n_participants!r}")

@@ -14,7 +14,8 @@ split into tasks, nor on the scheduler (one process, a LocalCluster or a cluster
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
 
@@ -28,7 +29,7 @@ from .perception import PerceptualModel
 
 __all__ = ["TESTS", "DIRECTIONAL_TESTS", "REVERSE_TESTS", "CONTRASTS", "ROBUST_POWER", "robust_conclusions",
            "directional_shares", "effect_directions", "direction_sentences", "paper_implied_power", "PowerDesign",
-           "study_statistics", "simulate_statistics", "power_table", "run_power"]
+           "study_statistics", "simulate_statistics", "power_table", "run_power", "dask_client"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
 TESTS: tuple[tuple[str, str], ...] = (
@@ -110,6 +111,9 @@ class PowerDesign:
     hypothesis : str or None
         How the simulated participants read the felt field
         (:mod:`vibrofocus.simulation.hypotheses`; None: the default hypothesis).
+    level_db : float
+        Level of every stimulus, dB re the feature bank's level rule (0: the bank's own;
+        :meth:`~vibrofocus.simulation.bank.FeatureBank.at_level`).
     """
 
     n_participants: tuple[int, ...] = (10, 15, 20, 25, 30)
@@ -121,13 +125,16 @@ class PowerDesign:
     seed: int = 0
     model: PerceptualModel | None = None
     hypothesis: str | None = None
+    level_db: float = 0.0
 
     def __post_init__(self) -> None:
         from .._validation import shorten
         from ..layout import ArrayLayout
+        from .bank import check_level_db
         from .hypotheses import hypothesis as find_hypothesis
 
         object.__setattr__(self, "hypothesis", find_hypothesis(self.hypothesis).name)
+        object.__setattr__(self, "level_db", check_level_db(self.level_db, "level_db"))
 
         ns = tuple(int(n) for n in self.n_participants)
         if not ns or min(ns) < 3 or max(ns) > MAX_PARTICIPANTS:
@@ -297,6 +304,7 @@ def simulate_statistics(
         arrays = simulate_cell_means(
             int(n), rng, bank=b, model=design.model, repetitions=design.repetitions,
             methods=design.methods, locations=design.locations, hypothesis=design.hypothesis,
+            level_db=design.level_db,
         )
         out.append(study_statistics(arrays, design.alpha, design.methods or b.methods))
     return out
@@ -573,6 +581,48 @@ def _connect(client_cls: Any, scheduler: str) -> Any:
                               "--scheduler for a cluster on this machine") from None
 
 
+@contextmanager
+def dask_client(*, scheduler: str | None = None, n_workers: int | None = None,
+                client: Any = None) -> Iterator[Any]:
+    """The Dask client of ``vibrofocus power`` and ``design-experiment``, closed on exit.
+
+    Parameters
+    ----------
+    scheduler : str, optional
+        Address of a Dask scheduler (``tcp://host:8786``); default a
+        ``distributed.LocalCluster`` on this machine (processes, one thread each, no
+        dashboard).
+    n_workers : int, optional
+        LocalCluster workers (default: the CPU count).
+    client : distributed.Client, optional
+        Use this client as it is (not closed on exit).
+
+    Yields
+    ------
+    distributed.Client
+    """
+    if client is not None:
+        yield client
+        return
+    import os
+
+    from distributed import Client, LocalCluster
+
+    cluster = None
+    if scheduler:
+        own = _connect(Client, scheduler)
+    else:
+        cluster = LocalCluster(n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        own = Client(cluster)
+    try:
+        yield own
+    finally:
+        own.close()
+        if cluster is not None:
+            cluster.close()
+
+
 def run_power(
     design: PowerDesign,
     *,
@@ -637,24 +687,11 @@ def run_power(
             if progress is not None:
                 progress(done, total)
     else:
-        from distributed import Client, LocalCluster, as_completed
+        from distributed import as_completed
 
-        own_client = client is None
-        cluster = None
-        if own_client:
-            if scheduler:
-                client = _connect(Client, scheduler)
-            else:
-                import os
-
-                cluster = LocalCluster(
-                    n_workers=n_workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-                    dashboard_address=None,
-                )
-                client = Client(cluster)
-        try:
-            bank_f = client.scatter(b, broadcast=True)
-            futures = {client.submit(simulate_statistics, n, idx, design, bank_f, pure=False): (n, idx)
+        with dask_client(scheduler=scheduler, n_workers=n_workers, client=client) as dc:
+            bank_f = dc.scatter(b, broadcast=True)
+            futures = {dc.submit(simulate_statistics, n, idx, design, bank_f, pure=False): (n, idx)
                        for n, idx in tasks}
             for fut in as_completed(futures):
                 n, idx = futures[fut]
@@ -662,11 +699,6 @@ def run_power(
                 done += len(idx)
                 if progress is not None:
                     progress(done, total)
-        finally:
-            if own_client:
-                client.close()
-                if cluster is not None:
-                    cluster.close()
     for (n, _start), res in sorted(parts.items()):
         results[n].extend(res)
     from .hypotheses import hypothesis as find_hypothesis
@@ -681,7 +713,7 @@ def run_power(
             "locations": list(design.locations or range(1, len(b.locations_xy) + 1)),
             "alpha": design.alpha, "seed": design.seed,
             "model": (design.model or find_hypothesis(design.hypothesis).model()).to_dict(),
-            "hypothesis": design.hypothesis,
+            "hypothesis": design.hypothesis, "level_db": design.level_db,
         },
         "results": results,
         "table": power_table(results, design.alpha),
