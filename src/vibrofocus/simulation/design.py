@@ -33,8 +33,8 @@ from .likelihood import AnswerLaw, Quadrature, answer_law, answer_probabilities
 from .perception import PerceptualModel, Traits, draw_answers
 
 __all__ = ["DesignSettings", "CandidateBlock", "PlanBlock", "ExperimentDesign", "location_sets",
-           "study1_probabilities", "parameter_draws", "condition_gains", "design_experiment", "paper_plan",
-           "design_protocol_text", "score_table", "identification", "DEFAULT_LEVELS_DB", "SCORE_SEED"]
+           "study1_probabilities", "shipped_model", "parameter_draws", "condition_gains", "design_experiment", "paper_plan",
+           "design_protocol_text", "score_tables", "design_report", "write_design", "identification", "DEFAULT_LEVELS_DB", "SCORE_SEED"]
 
 #: Candidate levels, dB re the level rule (the paper's): 0 down to -30 dB.
 DEFAULT_LEVELS_DB = (0.0, -10.0, -20.0, -30.0)
@@ -77,6 +77,10 @@ class DesignSettings:
         Simulated answer sets per sample (the Monte Carlo of the expected gain).
     seed : int
         Seed of every draw of the design.
+    population : str or None
+        None: each hypothesis with its own shipped parameters (as ``simulate-study
+        --hypothesis`` simulates it). A hypothesis' name: every hypothesis with that one's
+        parameters, so that they differ in their readout only (one population).
     """
 
     hypotheses: tuple[str, ...] | None = None
@@ -90,6 +94,7 @@ class DesignSettings:
     n_traits: int = 8
     n_replicates: int = 2
     seed: int = 0
+    population: str | None = None
 
     def __post_init__(self) -> None:
         from .._validation import check_in_range
@@ -100,6 +105,8 @@ class DesignSettings:
         if len(names) < 2:
             raise ValidationError(f"a design tells hypotheses apart: name at least 2, got {', '.join(names) or 'none'}")
         object.__setattr__(self, "hypotheses", names)
+        if self.population is not None:
+            object.__setattr__(self, "population", find_hypothesis(self.population).name)
         levels = tuple(check_level_db(x, "levels_db") for x in self.levels_db)
         if not levels or len(set(levels)) != len(levels):
             raise ValidationError(f"levels_db: at least one level, each once, got {list(self.levels_db)}")
@@ -283,7 +290,15 @@ def study1_probabilities(law: AnswerLaw, locations_xy: np.ndarray, allowed: np.n
     return out
 
 
-def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1) -> tuple[list[PerceptualModel], dict[str, Any]]:
+def shipped_model(name: str, population: str | None = None) -> PerceptualModel:
+    """The perceptual model of hypothesis ``name``: its own shipped parameters, or those of ``population``."""
+    from .hypotheses import hypothesis as find_hypothesis
+
+    return find_hypothesis(population or name).model()
+
+
+def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
+                    base: PerceptualModel | None = None) -> tuple[list[PerceptualModel], dict[str, Any]]:
     """The shipped parameters of a hypothesis and ``n - 1`` sets drawn around them.
 
     Each of the hypothesis' free parameters (:attr:`Hypothesis.free_parameters`) is drawn
@@ -300,6 +315,8 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1) -> tuple
     seed : int
     spread : float
         Fraction of each range, 0-1.
+    base : PerceptualModel, optional
+        The parameters drawn around (default the hypothesis' shipped ones).
 
     Returns
     -------
@@ -309,7 +326,7 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1) -> tuple
     """
     from .parameters import ParameterRange, apply_parameters, read_parameters
 
-    base = h.model()
+    base = base or h.model()
     ranges = tuple(getattr(h, "free_parameters", ()) or ())
     if ranges:
         lows = np.array([r.lo for r in ranges])
@@ -489,7 +506,7 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
     models = {}
     for hi, name in enumerate(names):
         models[name], draws_about[name] = parameter_draws(find_hypothesis(name), s.n_parameter_draws, s.seed,
-                                                          s.parameter_spread)
+                                                          s.parameter_spread, shipped_model(name, s.population))
     total = s.n_forearms * len(names) * s.n_parameter_draws * s.n_traits
     done = 0
     for fi, f in enumerate(forearms):
@@ -634,49 +651,83 @@ def design_protocol_text(design: ExperimentDesign, name: str = "designed-study1"
 
 
 # --------------------------------------------------------------------- P(correct) against N
-def score_table(plan: Sequence[PlanBlock], hypotheses: Sequence[str], bank: FeatureBank,
-                forearms: Sequence[int], *, n_draws: int = 32, seed: int = SCORE_SEED) -> np.ndarray:
-    """Log-probabilities of every answer of a plan's trials, per hypothesis, forearm and trait draw.
+def score_tables(plans: dict[str, Sequence[PlanBlock]], hypotheses: Sequence[str], bank: FeatureBank,
+                 forearms: Sequence[int], *, n_draws: int = 32, seed: int = SCORE_SEED,
+                 submit: Callable[..., Any] | None = None, population: str | None = None) -> dict[str, np.ndarray]:
+    """Log-probabilities of every answer of each plan's trials, per hypothesis, forearm and trait draw.
 
     The trait draws are those of :func:`~vibrofocus.simulation.likelihood.marginal_loglik`
     (``n_draws`` from ``default_rng([seed, 0x11C])``, per hypothesis at its shipped
     parameters), so that ``logsumexp`` over them, minus ``log n_draws``, of a participant's
     summed log-probabilities is its marginal log-likelihood.
 
+    Parameters
+    ----------
+    plans : dict
+        ``{name: plan blocks}``.
+    hypotheses : sequence of str
+    bank : FeatureBank
+    forearms : sequence of int
+        Bank rows.
+    n_draws : int
+    seed : int
+    submit : callable, optional
+        ``submit(fn, *args)`` returning a future (a Dask client's ``submit``): one task per
+        hypothesis and forearm; default in this process.
+    population : str, optional
+        As :attr:`DesignSettings.population` (default each hypothesis' own parameters).
+
     Returns
     -------
-    ndarray, shape (n_hypotheses, n_forearms, n_draws, n_plan_stimuli, n_locations)
-        Stimuli in plan order (each block's methods x locations); ``-inf`` for an answer
-        the model cannot give.
+    dict
+        Per plan, an array of shape (n_hypotheses, n_forearms, n_draws, n_plan_stimuli,
+        n_locations); the plan's stimuli in order (each block's methods x locations);
+        ``-inf`` for an answer the model cannot give.
     """
+    levels = _plan_levels(*plans.values())
+    args = [(plans, name, int(f), bank, levels, n_draws, seed, population) for name in hypotheses for f in forearms]
+    if submit is None:
+        parts = [_score_part(*a) for a in args]
+    else:
+        parts = [fut.result() for fut in [submit(_score_part, *a, pure=False) for a in args]]
+    shape = (len(hypotheses), len(forearms))
+    with np.errstate(divide="ignore"):
+        return {p: np.log(np.stack([x[p] for x in parts]).reshape(shape + parts[0][p].shape)) for p in plans}
+
+
+def _score_part(plans: dict[str, Sequence[PlanBlock]], name: str, forearm: int, bank: FeatureBank,
+                levels: Sequence[float], n_draws: int, seed: int, population: str | None) -> dict[str, np.ndarray]:
+    """One hypothesis and forearm of :func:`score_tables`: probabilities (n_draws, n_plan_stimuli, n_locations)."""
     from .hypotheses import hypothesis as find_hypothesis
 
-    levels = sorted({blk.level_db for blk in plan}, reverse=True)
-    stim = [(blk, m) for blk in plan for m in blk.methods]
-    out = []
-    for name in hypotheses:
-        h = find_hypothesis(name)
-        m = h.model()
-        rng = np.random.default_rng([int(seed), 0x11C])
-        traits = [Traits.draw(m, rng) for _ in range(n_draws)]
-        per_f = []
-        for f in forearms:
-            laws = [_laws(h, m, t, bank, int(f), levels) for t in traits]
-            law = _stack_laws(laws)
-            n_stim = laws[0].weight.shape[0]
-            rows = []
-            for blk, meth in stim:
-                p = study1_probabilities(law, bank.locations_xy, np.asarray(blk.locations) - 1).reshape(
-                    n_draws, n_stim, -1)
-                rows.append(p[:, _stimulus_index(bank, levels, meth, blk.level_db, blk.locations)])
-            per_f.append(np.concatenate(rows, axis=1))
-        out.append(np.stack(per_f))
-    with np.errstate(divide="ignore"):
-        return np.log(np.stack(out))
+    h = find_hypothesis(name)
+    m = shipped_model(name, population)
+    rng = np.random.default_rng([int(seed), 0x11C])
+    laws = [_laws(h, m, Traits.draw(m, rng), bank, forearm, levels) for _ in range(n_draws)]
+    law = _stack_laws(laws)
+    n_stim = laws[0].weight.shape[0]
+    by_set: dict[tuple[int, ...], np.ndarray] = {}
+    out = {}
+    for p, plan in plans.items():
+        rows = []
+        for blk in plan:
+            if blk.locations not in by_set:
+                by_set[blk.locations] = study1_probabilities(law, bank.locations_xy,
+                                                             np.asarray(blk.locations) - 1).reshape(n_draws, n_stim, -1)
+            for meth in blk.methods:
+                rows.append(by_set[blk.locations][:, _stimulus_index(bank, levels, meth, blk.level_db, blk.locations)])
+        out[p] = np.concatenate(rows, axis=1)
+    return out
+
+
+def _plan_levels(*plans: Sequence[PlanBlock]) -> list[float]:
+    """The levels of plans, loudest first: the order of :func:`_energies`' stacked stimuli."""
+    return sorted({blk.level_db for plan in plans for blk in plan}, reverse=True)
 
 
 def _simulate_scores(plan: Sequence[PlanBlock], true: str, hypotheses: Sequence[str], indices: Sequence[int],
-                     bank: FeatureBank, forearms: np.ndarray, table: np.ndarray, seed: int) -> np.ndarray:
+                     bank: FeatureBank, forearms: np.ndarray, table: np.ndarray, seed: int,
+                     levels: Sequence[float], population: str | None = None) -> np.ndarray:
     """Simulated participants of hypothesis ``true`` answer the plan; their marginal log-likelihoods (n, H).
 
     Each participant (stream ``[seed, 0xE7A1, hypothesis, index]``) has a forearm drawn
@@ -687,9 +738,8 @@ def _simulate_scores(plan: Sequence[PlanBlock], true: str, hypotheses: Sequence[
     from .hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(true)
-    m = h.model()
+    m = shipped_model(true, population)
     hi = list(hypotheses).index(true)
-    levels = sorted({blk.level_db for blk in plan}, reverse=True)
     out = np.empty((len(indices), len(hypotheses)))
     for row, i in enumerate(indices):
         rng = np.random.default_rng([int(seed), 0xE7A1, hi, int(i)])
@@ -720,7 +770,7 @@ def identification(
     n_studies: int = 200,
     pool: int = 60,
     n_draws: int = 32,
-    n_forearms: int | None = None,
+    n_forearms: int | None = 12,
     seed: int = 1,
     bank: FeatureBank | None = None,
     scheduler: str | None = None,
@@ -728,6 +778,7 @@ def identification(
     client: Any = None,
     local: bool = False,
     chunk: int = 20,
+    population: str | None = None,
 ) -> dict[str, Any]:
     """P(the true hypothesis is chosen) against N, for each plan, by simulation (on Dask).
 
@@ -752,7 +803,8 @@ def identification(
     n_draws : int
         Trait draws of the marginal likelihood.
     n_forearms : int, optional
-        Bank forearms the participants are drawn from (default all).
+        Bank forearms the participants are drawn from, the first ones (default 12; None:
+        all).
     seed : int
         Seed of the simulated participants and of the studies (not the design's streams).
     bank : FeatureBank, optional
@@ -762,6 +814,9 @@ def identification(
         In this process, without Dask (same numbers).
     chunk : int
         Participants per task.
+    population : str, optional
+        As :attr:`DesignSettings.population`: the simulated participants and the scores
+        use that hypothesis' parameters for every hypothesis (default each its own).
 
     Returns
     -------
@@ -776,16 +831,20 @@ def identification(
     if not ns or min(ns) < 1 or max(ns) > pool:
         raise ValidationError(f"n_participants must be from 1 to the pool of {pool}, got {ns}")
     forearms = np.arange(b.n_forearms if n_forearms is None else int(n_forearms))
+    if len(forearms) < 1 or len(forearms) > b.n_forearms:
+        raise ValidationError(f"n_forearms must be from 1 to the bank's {b.n_forearms}, got {len(forearms)}")
     t0 = time.perf_counter()
-    tables = {p: score_table(plan, names, b, forearms, n_draws=n_draws) for p, plan in plans.items()}
-    t_tables = time.perf_counter() - t0
+    levels = _plan_levels(*plans.values())
     tasks = [(p, h, list(range(s, min(s + chunk, pool)))) for p in plans for h in names
              for s in range(0, pool, chunk)]
     scores: dict[tuple[str, str], list[tuple[int, np.ndarray]]] = {}
     if local:
+        tables = score_tables(plans, names, b, forearms, n_draws=n_draws, population=population)
+        t_tables = time.perf_counter() - t0
         for p, h, idx in tasks:
             scores.setdefault((p, h), []).append(
-                (idx[0], _simulate_scores(plans[p], h, names, idx, b, forearms, tables[p], seed)))
+                (idx[0], _simulate_scores(plans[p], h, names, idx, b, forearms, tables[p], seed, levels,
+                                          population)))
     else:
         from distributed import as_completed
 
@@ -793,9 +852,12 @@ def identification(
 
         with dask_client(scheduler=scheduler, n_workers=n_workers, client=client) as dc:
             bank_f = dc.scatter(b, broadcast=True)
+            tables = score_tables(plans, names, bank_f, forearms, n_draws=n_draws, submit=dc.submit,
+                                  population=population)
+            t_tables = time.perf_counter() - t0
             table_f = {p: dc.scatter(t, broadcast=True) for p, t in tables.items()}
             futures = {dc.submit(_simulate_scores, plans[p], h, names, idx, bank_f, forearms, table_f[p], seed,
-                                 pure=False): (p, h, idx[0]) for p, h, idx in tasks}
+                                 levels, population, pure=False): (p, h, idx[0]) for p, h, idx in tasks}
             for fut in as_completed(futures):
                 p, h, start = futures[fut]
                 scores.setdefault((p, h), []).append((start, fut.result()))
@@ -815,4 +877,167 @@ def identification(
     return {"rates": rates, "mean": mean, "confusion": confusion, "elapsed_s": time.perf_counter() - t0,
             "tables_s": t_tables,
             "settings": {"n_participants": ns, "n_studies": n_studies, "pool": pool, "n_draws": n_draws,
+                         "population": population,
                          "n_forearms": len(forearms), "seed": seed, "hypotheses": names}}
+
+
+# --------------------------------------------------------------------- the report
+def design_report(design: ExperimentDesign, ident: dict[str, Any] | None = None) -> dict[str, Any]:
+    """The design and its evaluation as one JSON-ready dict (``design.json``)."""
+    from .hypotheses import hypothesis as find_hypothesis
+    from .perception import MODEL_LABEL
+
+    s = design.settings
+    out: dict[str, Any] = {
+        "label": MODEL_LABEL,
+        "hypotheses": {n: find_hypothesis(n).label() for n in s.hypotheses or ()},
+        "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(s).items()},
+        "levels": design.levels,
+        "blocks": [{"methods": list(b.methods), "level_db": b.level_db, "locations": list(b.locations),
+                    "repetitions": b.repetitions, "grid": b.grid, "trials": b.n_trials} for b in design.blocks],
+        "trials": design.trials,
+        "information_nats": design.information_nats,
+        "steps": design.steps,
+        "conditions": design.conditions,
+        "parameter_draws": design.parameter_draws,
+        "elapsed_s": design.elapsed_s,
+        "timings": design.timings,
+    }
+    if ident is not None:
+        out["identification"] = {
+            "rates": {p: {h: {str(n): v for n, v in r.items()} for h, r in by.items()} for p, by in ident["rates"].items()},
+            "mean": {p: {str(n): v for n, v in r.items()} for p, r in ident["mean"].items()},
+            "confusion": {p: {str(n): c for n, c in by.items()} for p, by in ident["confusion"].items()},
+            "settings": ident["settings"], "elapsed_s": ident["elapsed_s"],
+        }
+    return out
+
+
+def _markdown(report: dict[str, Any]) -> str:
+    lines = [f"# Designed study ({report['label']})", "",
+             f"Hypotheses: {', '.join(report['hypotheses'])}. {report['trials']} Study 1 trials per participant; "
+             f"expected information about the hypothesis {report['information_nats']:.3f} nats per participant "
+             f"(at most {np.log(len(report['hypotheses'])):.3f}). Levels in dB re the {report['levels']} levels.", "",
+             "## Designed blocks", "", "| methods | level (dB) | locations | repetitions | trials |",
+             "|---|---|---|---|---|"]
+    for b in report["blocks"]:
+        lines.append(f"| {', '.join(b['methods'])} | {b['level_db']:+g} | {' '.join(map(str, b['locations']))} "
+                     f"({b['grid']}) | {b['repetitions']} | {b['trials']} |")
+    ident = report.get("identification")
+    if ident:
+        ns = ident["settings"]["n_participants"]
+        lines += ["", "## P(the true hypothesis is chosen) against N", "",
+                  "Model choice by marginal likelihood at the hypotheses' shipped parameters; "
+                  f"{ident['settings']['n_studies']} simulated studies per N and hypothesis.", "",
+                  "| protocol | true hypothesis | " + " | ".join(f"N={n}" for n in ns) + " |",
+                  "|---|---|" + "---|" * len(ns)]
+        for p, by in ident["rates"].items():
+            for h, r in by.items():
+                lines.append(f"| {p} | {h} | " + " | ".join(f"{r[str(n)]:.2f}" for n in ns) + " |")
+            lines.append(f"| {p} | mean | " + " | ".join(f"{ident['mean'][p][str(n)]:.2f}" for n in ns) + " |")
+    lines += ["", "## Expected information of one trial, per condition (best 20)", "",
+              "| method | location | level (dB) | gain (nats) |", "|---|---|---|---|"]
+    for c in report["conditions"][:20]:
+        lines.append(f"| {c['method']} | {c['location']} | {c['level_db']:+g} | {c['gain_nats']:.4f} |")
+    return "\n".join(lines) + "\n"
+
+
+def _figures(report: dict[str, Any], bank: FeatureBank) -> tuple[Any, Any]:
+    import matplotlib.pyplot as plt
+
+    from .._style import METHOD_MARKERS, method_colors, model_footer
+
+    fig1, ax = plt.subplots(figsize=(6.0, 4.0))
+    ident = report.get("identification")
+    if ident:
+        ns = ident["settings"]["n_participants"]
+        for p, style in zip(ident["rates"], ("-", "--", ":", "-.")):
+            ax.plot(ns, [ident["mean"][p][str(n)] for n in ns], style, color="k", lw=2, label=f"{p}: mean")
+            for h, r in ident["rates"][p].items():
+                ax.plot(ns, [r[str(n)] for n in ns], style, lw=1, alpha=0.7, label=f"{p}: {h}")
+        ax.axhline(0.9, color="0.6", lw=0.8)
+        ax.set_xlabel("participants N")
+        ax.set_ylabel("P(true hypothesis chosen)")
+        ax.set_ylim(0, 1.02)
+        ax.legend(fontsize=7)
+    ax.set_title("Identifying the hypothesis, designed vs paper's protocol", fontsize=9)
+    model_footer(fig1, report["label"])
+    levels = sorted({b["level_db"] for b in report["blocks"]}, reverse=True)
+    fig2, axes = plt.subplots(1, max(len(levels), 1), figsize=(3.2 * max(len(levels), 1), 3.6), squeeze=False)
+    methods = sorted({m for b in report["blocks"] for m in b["methods"]})
+    colors = method_colors(methods)
+    offsets = {m: (np.array([np.cos(a), np.sin(a)]) * 2.5) for m, a in
+               zip(methods, np.linspace(0, 2 * np.pi, len(methods), endpoint=False) + np.pi / 2)}
+    locs, acts = bank.locations_xy * 1e3, bank.actuators_xy * 1e3
+    for ax, lvl in zip(axes[0], levels):
+        ax.scatter(locs[:, 0], locs[:, 1], s=10, color="0.7")
+        for k, (x, y) in enumerate(locs):
+            ax.annotate(str(k + 1), (x, y), xytext=(-9, -9), textcoords="offset points", fontsize=7, color="0.5")
+        ax.scatter(acts[:, 0], acts[:, 1], marker="s", s=120, facecolor="none", edgecolor="0.3")
+        reps: dict[tuple[str, int], int] = {}
+        for b in report["blocks"]:
+            if b["level_db"] == lvl:
+                for m in b["methods"]:
+                    for loc in b["locations"]:
+                        reps[(m, loc)] = reps.get((m, loc), 0) + b["repetitions"]
+        for (m, loc), n in reps.items():
+            x, y = locs[loc - 1] + offsets[m]
+            ax.scatter([x], [y], s=18 * n, color=colors[m], marker=METHOD_MARKERS.get(m, "o"), alpha=0.8)
+        ax.set_title(f"{lvl:+g} dB", fontsize=9)
+        ax.set_aspect("equal")
+        ax.set_xlim(-30, 30)
+        ax.set_ylim(-30, 30)
+        ax.set_xlabel("x (mm)")
+    axes[0][0].set_ylabel("y (mm)")
+    for m in methods:
+        axes[0][-1].scatter([], [], color=colors[m], marker=METHOD_MARKERS.get(m, "o"), label=m)
+    axes[0][-1].legend(fontsize=7, loc="lower right")
+    fig2.suptitle("Designed trials on the arm (marker area: repetitions; squares: actuators)", fontsize=9)
+    model_footer(fig2, report["label"])
+    return fig1, fig2
+
+
+def write_design(design: ExperimentDesign, out: Any, *, ident: dict[str, Any] | None = None,
+                 bank: FeatureBank | None = None, name: str = "designed-study1") -> list[Any]:
+    """Write ``protocol.toml``, ``design.json``, ``design.md`` and two figures into folder ``out``.
+
+    Parameters
+    ----------
+    design : ExperimentDesign
+    out : path-like
+        An existing folder.
+    ident : dict, optional
+        :func:`identification` of the design and the paper's protocol.
+    bank : FeatureBank, optional
+        For the map (default the shipped bank).
+    name : str
+        The protocol's name.
+
+    Returns
+    -------
+    list of Path
+        The files written (each whole or not at all).
+    """
+    import json
+    from pathlib import Path
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io import json_safe, save_figure, write_text
+
+    folder = Path(out)
+    report = design_report(design, ident)
+    paths = [write_text(folder / "protocol.toml", design_protocol_text(design, name), what="protocol"),
+             write_text(folder / "design.json", json.dumps(json_safe(report), indent=1) + "\n", what="design"),
+             write_text(folder / "design.md", _markdown(report), what="design report")]
+    fig1, fig2 = _figures(report, bank if bank is not None else default_bank())
+    try:
+        paths.append(save_figure(fig1, folder / "identification.png", what="figure", dpi=120))
+        paths.append(save_figure(fig2, folder / "design-map.png", what="figure", dpi=120))
+    finally:
+        plt.close(fig1)
+        plt.close(fig2)
+    return [Path(p) for p in paths]
