@@ -34,7 +34,8 @@ from .perception import PerceptualModel, Traits, draw_answers
 
 __all__ = ["DesignSettings", "CandidateBlock", "PlanBlock", "ExperimentDesign", "location_sets",
            "study1_probabilities", "shipped_model", "parameter_draws", "condition_gains", "design_experiment", "paper_plan",
-           "design_protocol_text", "score_tables", "design_report", "write_design", "identification", "DEFAULT_LEVELS_DB", "SCORE_SEED"]
+           "design_protocol_text", "score_tables", "design_report", "write_design",
+           "participant_loglik", "choose_hypothesis", "identification", "DEFAULT_LEVELS_DB", "SCORE_SEED"]
 
 #: Candidate levels, dB re the level rule (the paper's): 0 down to -30 dB.
 DEFAULT_LEVELS_DB = (0.0, -10.0, -20.0, -30.0)
@@ -879,6 +880,125 @@ def identification(
             "settings": {"n_participants": ns, "n_studies": n_studies, "pool": pool, "n_draws": n_draws,
                          "population": population,
                          "n_forearms": len(forearms), "seed": seed, "hypotheses": names}}
+
+
+# --------------------------------------------------------------------- the loop
+def participant_loglik(hypothesis: Any, bank: FeatureBank, forearm: int,
+                       trials: Sequence[tuple[str, int, int, float, Sequence[int]]], *, n_draws: int = 32,
+                       seed: int = SCORE_SEED, model: PerceptualModel | None = None) -> float:
+    """Marginal log-likelihood of one participant's Study 1 answers under a hypothesis.
+
+    The same number as :func:`~vibrofocus.simulation.likelihood.marginal_loglik` (the same
+    trait draws: ``n_draws`` from ``default_rng([seed, 0x11C])``), for trials that may come
+    from several blocks, each at its own level and with its own allowed answers: per trait
+    draw, the log-probabilities of all trials are summed (:class:`~vibrofocus.simulation.
+    likelihood.Stimuli` of the bank row at each level, the hypothesis' percepts,
+    :func:`~vibrofocus.simulation.likelihood.answer_law` and :func:`study1_probabilities`),
+    then averaged over the draws.
+
+    Parameters
+    ----------
+    hypothesis : str or Hypothesis
+    bank : FeatureBank
+        Holds the participant's forearm (its felt fields at the bank's level rule).
+    forearm : int
+        Bank row of the participant's forearm.
+    trials : sequence of (method, target, answer, level_db, allowed)
+        Method, target and answered location numbers (1-based), the level (dB re the
+        bank's rule) and the location numbers that could be answered.
+    n_draws, seed
+        As :func:`~vibrofocus.simulation.likelihood.marginal_loglik`.
+    model : PerceptualModel, optional
+        Default the hypothesis' shipped parameters.
+
+    Returns
+    -------
+    float
+        Natural log; ``-inf`` if an answer is impossible under every draw.
+    """
+    from .hypotheses import hypothesis as find_hypothesis
+    from .likelihood import Stimuli
+
+    h = find_hypothesis(hypothesis)
+    m = model or h.model()
+    n_loc = len(bank.locations_xy)
+    groups: dict[tuple[float, tuple[int, ...]], list[tuple[int, int]]] = {}
+    for meth, target, answer, level, allowed in trials:
+        if meth not in bank.methods:
+            raise ValidationError(f"the feature bank has no stimuli of {meth!r} (it has {', '.join(bank.methods)})")
+        groups.setdefault((float(level), tuple(sorted(int(a) for a in allowed))), []).append(
+            (bank.methods.index(meth) * n_loc + int(target) - 1, int(answer) - 1))
+    stimuli = {lvl: Stimuli.from_bank(bank, forearm, lvl) for lvl, _ in groups}
+    rng = np.random.default_rng([int(seed), 0x11C])
+    total = np.zeros(n_draws)
+    for k in range(n_draws):
+        traits = Traits.draw(m, rng)
+        per = {lvl: st.percepts(h, m, traits) for lvl, st in stimuli.items()}
+        for (lvl, allowed), rows in groups.items():
+            idx, ans = np.array(rows).T
+            st = stimuli[lvl]
+            law = answer_law(per[lvl], idx, st.centre_xy, m, traits, study=1)
+            p = study1_probabilities(law, st.locations_xy, np.asarray(allowed) - 1)[np.arange(idx.size), ans]
+            with np.errstate(divide="ignore"):
+                total[k] += np.log(p).sum()
+    return float(special.logsumexp(total) - np.log(n_draws))
+
+
+def choose_hypothesis(db: Any, bank: FeatureBank, hypotheses: Sequence[str] | None = None, *, n_draws: int = 32,
+                      seed: int = SCORE_SEED) -> dict[str, Any]:
+    """Model choice on a study database: the hypothesis of the largest marginal likelihood of its Study 1 answers.
+
+    Every participant's main-phase Study 1 answers (all blocks, each at its level and with
+    its own locations as the allowed answers) are scored by :func:`participant_loglik`
+    under each hypothesis at its shipped parameters; the hypotheses' log-likelihoods are
+    summed over participants (a uniform prior). Participant ``sim-00k`` of
+    ``simulate-study --seed S`` is row ``k - 1`` of a bank built with the same seed
+    (``scripts/build_feature_bank.py --seed S``), as :func:`~vibrofocus.simulation.bank.
+    build_feature_bank` promises.
+
+    Parameters
+    ----------
+    db : path-like
+        A study database (``simulate-study --db``).
+    bank : FeatureBank
+        The participants' felt fields.
+    hypotheses : sequence of str, optional
+        Default every registered one.
+    n_draws, seed
+        As :func:`participant_loglik`.
+
+    Returns
+    -------
+    dict
+        ``participants`` ({id: {hypothesis: log-likelihood}}), ``total`` ({hypothesis:
+        summed log-likelihood}), ``chosen`` (the hypothesis of the largest total).
+    """
+    from ..studies.storage import StudyStore
+    from .hypotheses import available_hypotheses
+    from .simulate import SIMULATED_PREFIX
+
+    names = list(hypotheses or available_hypotheses())
+    store = StudyStore(db)
+    per: dict[str, dict[str, float]] = {}
+    for info in store.participants():
+        pid = info.participant_id
+        if not pid.startswith(SIMULATED_PREFIX) or not pid[len(SIMULATED_PREFIX):].isdigit():
+            raise ValidationError(f"participant {pid!r} is not a simulated participant: its forearm is not in a bank")
+        row = int(pid[len(SIMULATED_PREFIX):]) - 1
+        if row >= bank.n_forearms:
+            raise ValidationError(f"participant {pid} needs bank row {row}, the bank has {bank.n_forearms}")
+        trials = []
+        for sess in store.sessions(pid, study=1):
+            d = sess.design
+            plan = {t.trial_index: t for t in store.planned_trials(sess.session_id)}
+            for a in store.answers(sess.session_id):
+                t = plan[a.trial_index]
+                if t.phase == "main":
+                    trials.append((t.method, t.target, int(a.response[0]), float(d.level_db), d.locations))
+        if trials:
+            per[pid] = {h: participant_loglik(h, bank, row, trials, n_draws=n_draws, seed=seed) for h in names}
+    total = {h: float(sum(v[h] for v in per.values())) for h in names}
+    return {"participants": per, "total": total, "chosen": max(total, key=total.get) if per else None}
 
 
 # --------------------------------------------------------------------- the report
