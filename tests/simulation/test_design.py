@@ -143,3 +143,40 @@ def test_designed_protocol_identifies_one_population_better_than_the_papers():
                        pool=12, n_draws=8, n_forearms=6, local=True, population="v3-centroid", seed=5)
     assert r["mean"]["designed"][3] >= 0.9
     assert r["mean"]["designed"][3] > r["mean"]["paper"][3] + 0.1
+
+
+LOOP_PROTOCOL = """
+format = 1
+name = "loop-check"
+
+[[blocks]]
+response = "location"
+methods = ["funneling"]
+locations = [1, 3, 7, 9]
+levels = [-20.0]
+repetitions = 2
+
+[[blocks]]
+response = "location"
+methods = ["inverse", "combination"]
+locations = [1, 2, 3, 7, 8, 9]
+levels = [-10.0]
+repetitions = 1
+"""
+
+
+@pytest.mark.slow
+def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp_path):
+    """The loop through the study engine: simulate-study's code, then marginal likelihood.
+
+    Participant sim-001 of seed 0 has the shipped bank's forearm 0, so its felt fields
+    need no new bank.
+    """
+    from vibrofocus.simulation import simulate_studies
+    from vibrofocus.simulation.design import choose_hypothesis
+
+    proto = parse_protocol(LOOP_PROTOCOL, "loop")
+    simulate_studies(tmp_path / "s.db", n_participants=1, seed=0, protocol=proto, hypothesis="level-reliability")
+    r = choose_hypothesis(tmp_path / "s.db", default_bank(), n_draws=8)
+    assert set(r["participants"]) == {"sim-001"}
+    assert r["chosen"] == "level-reliability", r["total"]

@@ -40,7 +40,19 @@ MAX_LEVEL_DB = 120.0
 
 
 def check_level_db(level_db: float, name: str = "level_db") -> float:
-    """A level in dB re the level rule, as a float, or ValidationError naming ``name``."""
+    """A level in dB re the level rule, as a float, or ValidationError naming ``name``.
+
+    Parameters
+    ----------
+    level_db : float
+        Within +-:data:`MAX_LEVEL_DB` dB.
+    name : str
+        What to call it in the error.
+
+    Returns
+    -------
+    float
+    """
     from .._validation import check_in_range
 
     if isinstance(level_db, bool):
@@ -188,6 +200,7 @@ def build_feature_bank(
     model: PerceptualModel | None = None,
     progress: Any = None,
     levels: str = "paper",
+    calibrations: Any = None,
 ) -> FeatureBank:
     """Calibrate ``n_forearms`` simulated forearms, render every stimulus, compute felt energies.
 
@@ -206,6 +219,9 @@ def build_feature_bank(
     levels : {"paper", "equal-peak"}
         The level rule of the stimuli (a study protocol's; default the paper's), stored
         in the bank.
+    calibrations : sequence of Calibration, optional
+        The forearms' calibrations made already (those ``simulate-study --seed seed``
+        stored for ``sim-001``, ...), used instead of calibrating again; one per forearm.
     """
     from ..calibration import calibrate
     from ..rigs import make_rig
@@ -216,13 +232,15 @@ def build_feature_bank(
     if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
         raise StudyError(f"n_forearms must be an integer >= 1, got {n_forearms!r}")
     m = model or PerceptualModel()
+    if calibrations is not None and len(calibrations) != n_forearms:
+        raise StudyError(f"calibrations: one per forearm, got {len(calibrations)} for {n_forearms}")
     energies, own, seeds, peaks, reached = [], [], [], [], []
     layout = points = None
     for k in range(1, n_forearms + 1):
         pseed = participant_seeds(seed, k)[0]
         rig = make_rig("simulated", seed=pseed, skin=STUDY_SKIN)
         layout = rig.layout
-        cal = calibrate(rig, participant_id=f"bank-{k:03d}")
+        cal = calibrate(rig, participant_id=f"bank-{k:03d}") if calibrations is None else calibrations[k - 1]
         # Same drives as simulate-study: the study renderer's window, its tapered ends where a
         # design needs them, the same level rule (the contrast bounds, not part of the
         # drives, are not computed).

@@ -147,7 +147,19 @@ class CandidateBlock:
 
 @dataclass(frozen=True)
 class PlanBlock:
-    """A block of a study plan: methods x locations at one level, ``repetitions`` times."""
+    """A block of a study plan: methods x locations at one level, ``repetitions`` times.
+
+    Attributes
+    ----------
+    methods : tuple of str
+    level_db : float
+        dB re the level rule.
+    locations : tuple of int
+        Location numbers (1-based): the targets, and the answers allowed.
+    repetitions : int
+    grid : str
+        Which grid of :func:`location_sets` the locations are ("" if none).
+    """
 
     methods: tuple[str, ...]
     level_db: float
@@ -186,6 +198,8 @@ class ExperimentDesign:
     elapsed_s : float
     levels : str
         The level rule 0 dB refers to (the bank's).
+    timings : dict
+        Seconds spent on the answer laws, the tables and the greedy choice.
     """
 
     settings: DesignSettings
@@ -292,7 +306,19 @@ def study1_probabilities(law: AnswerLaw, locations_xy: np.ndarray, allowed: np.n
 
 
 def shipped_model(name: str, population: str | None = None) -> PerceptualModel:
-    """The perceptual model of hypothesis ``name``: its own shipped parameters, or those of ``population``."""
+    """The perceptual model of hypothesis ``name``: its own shipped parameters, or those of ``population``.
+
+    Parameters
+    ----------
+    name : str
+        A registered hypothesis.
+    population : str, optional
+        A registered hypothesis whose parameters to use instead.
+
+    Returns
+    -------
+    PerceptualModel
+    """
     from .hypotheses import hypothesis as find_hypothesis
 
     return find_hypothesis(population or name).model()
@@ -603,7 +629,17 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
 
 
 def paper_plan(bank: FeatureBank | None = None) -> tuple[PlanBlock, ...]:
-    """The paper's Study 1 as a plan: every method of the shipped protocol at every location, 3 times, 0 dB."""
+    """The paper's Study 1 as a plan: every method of the shipped protocol at every location, 3 times, 0 dB.
+
+    Parameters
+    ----------
+    bank : FeatureBank, optional
+        Unused (the plan is the shipped protocol's); kept for symmetry with the designs.
+
+    Returns
+    -------
+    tuple of PlanBlock
+    """
     from ..studies.protocol_files import shipped_protocol
 
     blk = shipped_protocol("paper-study1").blocks[0]
@@ -617,6 +653,17 @@ def design_protocol_text(design: ExperimentDesign, name: str = "designed-study1"
     One block per designed block: its methods, locations, level and repetitions; the
     participant answers one location per trial (``response = "location"``), among the
     block's locations. Every block uses each session's own seed for its trial order.
+
+    Parameters
+    ----------
+    design : ExperimentDesign
+    name : str
+        The protocol's name.
+
+    Returns
+    -------
+    str
+        The file's text (a valid protocol: :func:`~vibrofocus.studies.protocol_files.parse_protocol`).
     """
     from ..studies.protocol_files import parse_protocol
 
@@ -1003,7 +1050,18 @@ def choose_hypothesis(db: Any, bank: FeatureBank, hypotheses: Sequence[str] | No
 
 # --------------------------------------------------------------------- the report
 def design_report(design: ExperimentDesign, ident: dict[str, Any] | None = None) -> dict[str, Any]:
-    """The design and its evaluation as one JSON-ready dict (``design.json``)."""
+    """The design and its evaluation as one JSON-ready dict (``design.json``).
+
+    Parameters
+    ----------
+    design : ExperimentDesign
+    ident : dict, optional
+        :func:`identification` of the design and the paper's protocol.
+
+    Returns
+    -------
+    dict
+    """
     from .hypotheses import hypothesis as find_hypothesis
     from .perception import MODEL_LABEL
 
