@@ -8,20 +8,7 @@ import typer
 
 from ._command import command
 from ._errors import user_errors
-from ._options import SEED_MAX, force_option
-
-
-def _numbers(text: str, name: str, kind: type = int) -> tuple:
-    from .._validation import shorten
-    from ..errors import ValidationError
-
-    try:
-        values = tuple(kind(x) for x in text.replace(",", " ").split())
-    except ValueError:
-        raise ValidationError(f"{name} must be numbers separated by commas, got {shorten(text)}") from None
-    if not values:
-        raise ValidationError(f"{name} is empty")
-    return values
+from ._options import SEED_MAX, comma_list, force_option
 
 
 @command("design-experiment", epilog="Example: vibrofocus design-experiment --out design/")
@@ -44,6 +31,12 @@ def design_experiment_command(
     participants: str = typer.Option("1,2,3,4,6,8", "--participants", "-n", help="Sample sizes N of the check."),
     studies: int = typer.Option(200, "--studies", min=0, max=100_000,
                                 help="Simulated studies per N and hypothesis (0: no check)."),
+    pool: int = typer.Option(60, "--pool", min=2, max=100_000,
+                             help="Simulated participants per protocol and hypothesis of the check."),
+    score_forearms: int = typer.Option(12, "--score-forearms", min=1, max=1000,
+                                       help="Bank forearms of the check's participants."),
+    score_draws: int = typer.Option(32, "--score-draws", min=1, max=100_000,
+                                    help="Trait draws of the check's marginal likelihood."),
     seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Seed of the design (the check uses seed + 1)."),
     scheduler: str | None = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786)."),
     workers: int | None = typer.Option(None, "--workers", min=1, max=256, help="LocalCluster workers (default CPUs)."),
@@ -68,12 +61,12 @@ def design_experiment_command(
 
         allow_overwrite(force)
         settings = DesignSettings(
-            hypotheses=None if hypotheses.strip() == "all" else _numbers(hypotheses, "--hypotheses", str),
-            methods=_numbers(methods, "--methods", str) if methods else None,
-            locations=_numbers(locations, "--locations") if locations else None,
-            levels_db=_numbers(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
+            hypotheses=None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str),
+            methods=comma_list(methods, "--methods", str) if methods else None,
+            locations=comma_list(locations, "--locations") if locations else None,
+            levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population)
-        ns = _numbers(participants, "--participants")
+        ns = comma_list(participants, "--participants")
         fb = FeatureBank.load(bank) if bank is not None else default_bank()
         if out is not None:
             from .._atomic import check_writable, make_output_folder
@@ -87,7 +80,8 @@ def design_experiment_command(
         ident = None
         if studies:
             ident = identification({"designed": design.blocks, "paper": paper_plan()}, list(settings.hypotheses or ()),
-                                   n_participants=ns, n_studies=studies, pool=max(60, 2 * max(ns)), seed=seed + 1,
+                                   n_participants=ns, n_studies=studies, pool=pool, seed=seed + 1,
+                                   n_forearms=score_forearms, n_draws=score_draws,
                                    bank=fb, scheduler=scheduler, n_workers=workers, local=local,
                                    population=settings.population)
             console.print(f"checked in {ident['elapsed_s']:.1f} s")
