@@ -332,7 +332,10 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
     uniformly within ``spread`` of its range on either side of the shipped value (clipped
     to the range). A hypothesis that declares none has one uncertain parameter by
     assumption: the sensation level of the reference tap (``sl_ref_db``), within 3 dB of
-    the shipped value (the spread of thresholds across people, ``threshold_sd_db``).
+    the shipped value (the spread of thresholds across people, ``threshold_sd_db``). The
+    fit paths of ``hypotheses_fit.json`` hold each search's budget and loss, not its
+    parameters, so they cannot serve as draws. The draws use the same random numbers for
+    every hypothesis (the same offsets on the scale of each range).
 
     Parameters
     ----------
