@@ -116,20 +116,20 @@ def test_participant_loglik_is_marginal_loglik_on_one_block():
 def test_scores_of_simulated_participants_are_their_marginal_loglik():
     b = default_bank()
     names = ["v3-centroid", "grid-peak"]
-    plan = (PlanBlock(("inverse",), -10.0, (1, 3, 7, 9), 2),)
+    plan = (PlanBlock(("inverse",), -30.0, (1, 3, 7, 9), 2),)
     forearms = np.array([3, 7])
     tables = score_tables({"p": plan}, names, b, forearms, n_draws=6)
-    fast = _simulate_scores(plan, "grid-peak", names, [0], b, forearms, tables["p"], 9, [-10.0])
+    fast = _simulate_scores(plan, "grid-peak", names, [0], b, forearms, tables["p"], 9, [-30.0])
     # The same participant by hand: its forearm, traits and answers from the same stream.
     rng = np.random.default_rng([9, 0xE7A1, 1, 0])
     fi = int(rng.integers(2))
     h = hypothesis("grid-peak")
     traits = Traits.draw(h.model(), rng)
-    st = Stimuli.from_bank(b, int(forearms[fi]), -10.0)
+    st = Stimuli.from_bank(b, int(forearms[fi]), -30.0)
     idx = np.tile(9 + np.array([0, 2, 6, 8]), 2)
     ans, _, _ = draw_answers(st.percepts(h, h.model(), traits), idx, st.locations_xy, st.centre_xy, h.model(),
                              traits, rng, allowed=np.array([0, 2, 6, 8]))
-    trials = [("inverse", i - 9 + 1, int(a) + 1, -10.0, (1, 3, 7, 9)) for i, a in zip(idx, ans)]
+    trials = [("inverse", i - 9 + 1, int(a) + 1, -30.0, (1, 3, 7, 9)) for i, a in zip(idx, ans)]
     ref = [participant_loglik(n, b, int(forearms[fi]), trials, n_draws=6) for n in names]
     np.testing.assert_allclose(fast[0], ref, atol=5e-3)
 
