@@ -33,7 +33,8 @@ from .likelihood import AnswerLaw, Quadrature, answer_law, answer_probabilities
 from .perception import PerceptualModel, Traits, draw_answers
 
 __all__ = ["DesignSettings", "CandidateBlock", "PlanBlock", "ExperimentDesign", "location_sets",
-           "study1_probabilities", "shipped_model", "parameter_draws", "condition_gains", "design_experiment", "paper_plan",
+           "study1_probabilities", "shipped_model", "parameter_draws", "condition_gains", "design_experiment",
+           "paper_plan",
            "design_protocol_text", "score_tables", "design_report", "write_design",
            "participant_loglik", "choose_hypothesis", "identification", "DEFAULT_LEVELS_DB", "SCORE_SEED"]
 
@@ -1086,7 +1087,8 @@ def design_report(design: ExperimentDesign, ident: dict[str, Any] | None = None)
     }
     if ident is not None:
         out["identification"] = {
-            "rates": {p: {h: {str(n): v for n, v in r.items()} for h, r in by.items()} for p, by in ident["rates"].items()},
+            "rates": {p: {h: {str(n): v for n, v in r.items()} for h, r in by.items()}
+                      for p, by in ident["rates"].items()},
             "mean": {p: {str(n): v for n, v in r.items()} for p, r in ident["mean"].items()},
             "confusion": {p: {str(n): c for n, c in by.items()} for p, by in ident["confusion"].items()},
             "settings": ident["settings"], "elapsed_s": ident["elapsed_s"],
