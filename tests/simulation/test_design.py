@@ -180,3 +180,19 @@ def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp
     r = choose_hypothesis(tmp_path / "s.db", default_bank(), n_draws=8)
     assert set(r["participants"]) == {"sim-001"}
     assert r["chosen"] == "level-reliability", r["total"]
+
+
+@pytest.mark.slow
+def test_felt_fields_from_a_calibration_match_the_arm_it_measured(simulated_calibration):
+    """The skin model fitted to a simulated calibration gives that arm's felt fields (to 0.05 dB)."""
+    from vibrofocus.simulation.bank import _forearm_features, bank_from_calibration
+    from vibrofocus.simulation.perception import PerceptualModel
+
+    rig, cal = simulated_calibration
+    b = bank_from_calibration(cal, methods=("inverse",))
+    true, own, peaks, _ = _forearm_features(cal, rig, ("inverse",), PerceptualModel(), "paper", rig=rig)
+    big = true > 0.1 * true.max(axis=-1, keepdims=True)
+    np.testing.assert_allclose(10 * np.log10(b.energy[0][big] / true[big]), 0.0, atol=0.05)
+    np.testing.assert_allclose(b.actuator_energy[0], own, rtol=0.02)
+    np.testing.assert_allclose(b.drive_peak_v[0], peaks, rtol=1e-12)
+    assert b.n_forearms == 1 and b.levels == "paper"

@@ -17,6 +17,9 @@ def design_experiment_command(
                                                               "identification.png and design-map.png."),
     hypotheses: str = typer.Option("all", "--hypotheses", help="Hypotheses to tell apart, comma separated, or all."),
     bank: Path | None = typer.Option(None, "--bank", help="Feature bank (.npz; default the shipped simulated one)."),
+    calibration: Path | None = typer.Option(
+        None, "--calibration", help="A participant's calibration (.nc): the design for that arm, its felt fields "
+                                    "from the skin model fitted to it (instead of --bank; one forearm)."),
     methods: str | None = typer.Option(None, "--methods", help="Candidate methods (default the bank's)."),
     locations: str | None = typer.Option(None, "--locations", help="Candidate location numbers (default all)."),
     levels: str = typer.Option("0,-10,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
@@ -60,6 +63,20 @@ def design_experiment_command(
         from ..simulation.design import DesignSettings, design_experiment, design_report, identification, paper_plan
 
         allow_overwrite(force)
+        from ..errors import ValidationError
+
+        if calibration is not None and bank is not None:
+            raise ValidationError("give --calibration or --bank, not both")
+        if calibration is not None:
+            from .._atomic import protect
+            from ..calibration import load_calibration
+            from ..simulation.bank import bank_from_calibration
+
+            protect(calibration, "calibration")
+            fb = bank_from_calibration(load_calibration(calibration))
+            forearms = score_forearms = 1
+        else:
+            fb = FeatureBank.load(bank) if bank is not None else default_bank()
         settings = DesignSettings(
             hypotheses=None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str),
             methods=comma_list(methods, "--methods", str) if methods else None,
@@ -67,7 +84,6 @@ def design_experiment_command(
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population)
         ns = comma_list(participants, "--participants")
-        fb = FeatureBank.load(bank) if bank is not None else default_bank()
         if out is not None:
             from .._atomic import check_writable, make_output_folder
 

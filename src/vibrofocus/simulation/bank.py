@@ -30,7 +30,7 @@ from ..errors import StudyError, ValidationError
 from ..io.feature_bank import load_feature_bank, save_feature_bank
 from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, draw_answers
 
-__all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means",
+__all__ = ["FeatureBank", "build_feature_bank", "bank_from_calibration", "default_bank", "StudyArrays", "simulate_cell_means",
            "check_level_db", "MAX_LEVEL_DB"]
 
 #: The bank shipped with the package (built by ``scripts/build_feature_bank.py``).
@@ -225,8 +225,7 @@ def build_feature_bank(
     """
     from ..calibration import calibrate
     from ..rigs import make_rig
-    from ..studies.engine import calibration_renderer
-    from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
+    from .perception import skin_grid
     from .simulate import participant_seeds
 
     if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
@@ -241,27 +240,19 @@ def build_feature_bank(
         rig = make_rig("simulated", seed=pseed, skin=STUDY_SKIN)
         layout = rig.layout
         cal = calibrate(rig, participant_id=f"bank-{k:03d}") if calibrations is None else calibrations[k - 1]
-        # Same drives as simulate-study: the study renderer's window, its tapered ends where a
-        # design needs them, the same level rule (the contrast bounds, not part of the
-        # drives, are not computed).
-        render = calibration_renderer(cal, bounds=False, levels=levels)
-        n_loc = len(layout.locations_xy)
-        # One window every stimulus fits, each within the rig's limits, as a study's.
-        render.prepare(methods, range(1, n_loc + 1), rig=rig)
-        drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
-        peaks.append(np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc))
-        reached.append(np.array([render.rendering(meth, loc).reached_peak_m for meth in methods
-                                 for loc in range(1, n_loc + 1)]).reshape(len(methods), n_loc))
-        centre = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
-        points = skin_grid(centre, m)
-        H = band_transfer(rig, points, drives.shape[-1], m)  # the window the stimuli fit
-        energies.append(felt_energy(H, drives, rig.fs, m).reshape(len(methods), n_loc, len(points)))
-        actuators = np.asarray(layout.actuators_xy, dtype=float)
-        own.append(actuator_energy(rig, actuators, drives, m).reshape(len(methods), n_loc, len(actuators)))
+        feats = _forearm_features(cal, rig, methods, m, levels, rig=rig)
+        for out, x in zip((energies, own, peaks, reached), feats):
+            out.append(x)
+        points = skin_grid(np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), m)
         seeds.append(pseed)
         if progress is not None:
             progress(k, n_forearms)
     assert layout is not None and points is not None
+    return _bank(layout, points, methods, energies, own, peaks, reached, seeds, seed, levels)
+
+
+def _bank(layout: Any, points: np.ndarray, methods: tuple[str, ...], energies: list, own: list, peaks: list,
+          reached: list, seeds: list, seed: int, levels: str) -> FeatureBank:
     return FeatureBank(
         energy=np.stack(energies), points_xy=points, locations_xy=np.asarray(layout.locations_xy, dtype=float),
         centre_xy=np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), methods=tuple(methods),
@@ -269,6 +260,79 @@ def build_feature_bank(
         actuator_energy=np.stack(own), actuators_xy=np.asarray(layout.actuators_xy, dtype=float),
         levels=str(levels), drive_peak_v=np.stack(peaks), target_peak_m=np.stack(reached),
     )
+
+
+def _forearm_features(cal: Any, skin: Any, methods: tuple[str, ...], m: PerceptualModel, levels: str,
+                      rig: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Felt energies, actuator energies, drive peaks and target peaks of every stimulus of one forearm.
+
+    ``cal`` renders the stimuli as a study does; ``skin`` (a simulated forearm, or a skin
+    model fitted to a measured calibration) gives the true transfer to the skin grid.
+    """
+    from ..studies.engine import calibration_renderer
+    from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
+
+    layout = cal.layout
+    # Same drives as simulate-study: the study renderer's window, its tapered ends where a
+    # design needs them, the same level rule (the contrast bounds, not part of the
+    # drives, are not computed).
+    render = calibration_renderer(cal, bounds=False, levels=levels)
+    n_loc = len(layout.locations_xy)
+    # One window every stimulus fits, each within the rig's limits, as a study's.
+    render.prepare(methods, range(1, n_loc + 1), rig=rig)
+    drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
+    peaks = np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc)
+    reached = np.array([render.rendering(meth, loc).reached_peak_m for meth in methods
+                        for loc in range(1, n_loc + 1)]).reshape(len(methods), n_loc)
+    actuators = np.asarray(layout.actuators_xy, dtype=float)
+    points = skin_grid(actuators.mean(axis=0), m)
+    H = band_transfer(skin, points, drives.shape[-1], m)  # the window the stimuli fit
+    energy = felt_energy(H, drives, skin.fs, m).reshape(len(methods), n_loc, len(points))
+    own = actuator_energy(skin, actuators, drives, m).reshape(len(methods), n_loc, len(actuators))
+    return energy, own, peaks, reached
+
+
+def bank_from_calibration(
+    calibration: Any,
+    *,
+    methods: tuple[str, ...] = ("funneling", "inverse", "combination"),
+    model: PerceptualModel | None = None,
+    levels: str = "paper",
+    law: str = "layered",
+) -> FeatureBank:
+    """A one-forearm feature bank from a measured calibration: its stimuli's felt fields.
+
+    The stimuli are rendered from the calibration as a study renders them; the skin
+    displacement they make between the measured points comes from the skin model fitted
+    to the calibration (its ``fit``, else :func:`~vibrofocus.calibration.fit_model` with
+    ``law``), since a calibration measures the locations and guards only. A MODEL of the
+    participant's skin, not a measurement of the felt field.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        A participant's calibration (:func:`~vibrofocus.calibration.load_calibration`).
+    methods : tuple of str
+    model : PerceptualModel, optional
+        Only its grid, band and integration window matter here.
+    levels : {"paper", "equal-peak"}
+        The level rule of the stimuli.
+    law : {"layered", "homogeneous"}
+        Wave law of the fitted skin model, where the calibration carries none.
+
+    Returns
+    -------
+    FeatureBank
+        One forearm (row 0; its seed -1: not a simulated participant's).
+    """
+    from ..calibration import fit_model
+    from .perception import skin_grid
+
+    m = model or PerceptualModel()
+    skin = calibration.fit if calibration.fit is not None else fit_model(calibration, law=law)
+    feats = _forearm_features(calibration, skin, methods, m, levels)
+    points = skin_grid(np.asarray(calibration.layout.actuators_xy, dtype=float).mean(axis=0), m)
+    return _bank(calibration.layout, points, methods, *([x] for x in feats), [-1], 0, levels)
 
 
 _DEFAULT: FeatureBank | None = None
