@@ -112,3 +112,31 @@ def check_rig_options(rig: str, rig_config: Path | None) -> None:
             f"--rig-config {rig_config}: the simulated rig takes no settings file; give --rig audio or --rig nidaq "
             "with it, or leave it out"
         )
+
+
+def comma_list(text: str, name: str, kind: type = int) -> tuple:
+    """Values of an option written as a comma (or space) separated list, one line naming it if bad.
+
+    Parameters
+    ----------
+    text : str
+    name : str
+        The option, for the error (``--participants``).
+    kind : type
+        ``int``, ``float`` or ``str``.
+
+    Returns
+    -------
+    tuple
+    """
+    from .._validation import shorten
+    from ..errors import ValidationError
+
+    try:
+        values = tuple(kind(x) for x in text.replace(",", " ").split())
+    except ValueError:
+        what = "integers" if kind is int else "numbers"
+        raise ValidationError(f"{name} must be {what} separated by commas, got {shorten(text)}") from None
+    if not values:
+        raise ValidationError(f"{name} is empty")
+    return values

@@ -7,22 +7,12 @@ from pathlib import Path
 import typer
 
 from ._errors import user_errors
-from ._options import SEED_MAX, force_option
+from ._options import SEED_MAX, comma_list, force_option
 from ._command import command
 
 
 def _ints(text: str, name: str) -> tuple[int, ...]:
-    from ..errors import ValidationError
-
-    try:
-        values = tuple(int(x) for x in text.replace(",", " ").split())
-    except ValueError:
-        from .._validation import shorten
-
-        raise ValidationError(f"{name} must be integers separated by commas, got {shorten(text)}") from None
-    if not values:
-        raise ValidationError(f"{name} is empty")
-    return values
+    return comma_list(text, name, int)
 
 
 @command(

@@ -25,11 +25,16 @@ Fitting (:mod:`.fitting`)
 Likelihood (:mod:`.likelihood`)
     :func:`loglik` (each answer's log-probability given a participant's traits),
     :func:`marginal_loglik` (integrated over a hypothesis' population), :class:`Stimuli`.
+Designing a study (:mod:`.design`)
+    :func:`design_experiment`, :class:`DesignSettings` (the Study 1 blocks that tell the
+    hypotheses apart), :func:`identification` (P(correct) against N, on Dask),
+    :func:`choose_hypothesis` (model choice on a study database).
 Free parameters (:mod:`.parameters`)
     :class:`ParameterRange` (a hypothesis' free parameter, its range and source).
 """
 
 from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
+from .design import DesignSettings, ExperimentDesign, choose_hypothesis, design_experiment, identification
 from .hypotheses import DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis
 from .paper import compare, seed_statistics
 from .likelihood import Stimuli, loglik, marginal_loglik
@@ -52,6 +57,11 @@ __all__ = [
     "marginal_loglik",
     "Stimuli",
     "ParameterRange",
+    "DesignSettings",
+    "ExperimentDesign",
+    "design_experiment",
+    "identification",
+    "choose_hypothesis",
     "PerceptualModel",
     "Percepts",
     "MODEL_VERSION",

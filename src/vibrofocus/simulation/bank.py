@@ -30,10 +30,34 @@ from ..errors import StudyError, ValidationError
 from ..io.feature_bank import load_feature_bank, save_feature_bank
 from .perception import MODEL_VERSION, STUDY_SKIN, PerceptualModel, Traits, draw_answers
 
-__all__ = ["FeatureBank", "build_feature_bank", "default_bank", "StudyArrays", "simulate_cell_means"]
+__all__ = ["FeatureBank", "build_feature_bank", "bank_from_calibration", "default_bank", "StudyArrays", "simulate_cell_means",
+           "check_level_db", "MAX_LEVEL_DB"]
 
 #: The bank shipped with the package (built by ``scripts/build_feature_bank.py``).
 DEFAULT_BANK = "data/feature_bank.npz"
+#: Largest magnitude of a level re the level rule, dB (a protocol file's bound).
+MAX_LEVEL_DB = 120.0
+
+
+def check_level_db(level_db: float, name: str = "level_db") -> float:
+    """A level in dB re the level rule, as a float, or ValidationError naming ``name``.
+
+    Parameters
+    ----------
+    level_db : float
+        Within +-:data:`MAX_LEVEL_DB` dB.
+    name : str
+        What to call it in the error.
+
+    Returns
+    -------
+    float
+    """
+    from .._validation import check_in_range
+
+    if isinstance(level_db, bool):
+        raise ValidationError(f"{name} must be a number of dB, got {level_db!r}")
+    return check_in_range(level_db, name, -MAX_LEVEL_DB, MAX_LEVEL_DB)
 
 
 @dataclass(frozen=True)
@@ -88,6 +112,50 @@ class FeatureBank:
     def n_forearms(self) -> int:
         return int(self.energy.shape[0])
 
+    def at_level(self, level_db: float, *, limit_v: float | None = None) -> "FeatureBank":
+        """The same stimuli played ``level_db`` dB re the bank's level rule.
+
+        A level multiplies every drive by ``10**(level_db / 20)`` (as a protocol block's
+        level does, docs/protocols.md); felt energies are quadratic in the drives, so they
+        are multiplied by ``10**(level_db / 10)`` exactly (also with a finite
+        ``integration_s``), and the drive and target peaks by ``10**(level_db / 20)``.
+
+        Parameters
+        ----------
+        level_db : float
+            dB re the bank's level rule (0: the bank itself), within +-120 dB.
+        limit_v : float, optional
+            Refuse a level at which some stimulus needs a drive above this, V (default
+            :data:`vibrofocus.defaults.DRIVE_LIMIT_V`); needs ``drive_peak_v``.
+
+        Returns
+        -------
+        FeatureBank
+
+        Raises
+        ------
+        ValidationError
+            A level out of range, or one that needs more than ``limit_v``.
+        """
+        from ..defaults import DRIVE_LIMIT_V
+
+        level = check_level_db(level_db)
+        if level == 0.0:
+            return self
+        amp = 10.0 ** (level / 20.0)
+        limit = DRIVE_LIMIT_V if limit_v is None else float(limit_v)
+        if self.drive_peak_v is not None and level > 0:
+            need = float(np.max(self.drive_peak_v)) * amp
+            if need > limit * (1.0 + 1e-9):
+                f, m, loc = np.unravel_index(int(np.argmax(self.drive_peak_v)), self.drive_peak_v.shape)
+                raise ValidationError(f"{level:+g} dB re the {self.levels} levels needs {need:.3g} V for "
+                                      f"{self.methods[m]} at location {loc + 1} (forearm {f}), over the "
+                                      f"{limit:g} V drive limit; lower the level")
+        scale = lambda a: None if a is None else a * amp  # noqa: E731
+        return dataclasses.replace(
+            self, energy=self.energy * amp**2, actuator_energy=self.actuator_energy * amp**2,
+            drive_peak_v=scale(self.drive_peak_v), target_peak_m=scale(self.target_peak_m))
+
     def save(self, path: str | os.PathLike) -> None:
         """Write the bank (``.npz``, atomically; :func:`vibrofocus.io.feature_bank.save_feature_bank`).
 
@@ -132,6 +200,7 @@ def build_feature_bank(
     model: PerceptualModel | None = None,
     progress: Any = None,
     levels: str = "paper",
+    calibrations: Any = None,
 ) -> FeatureBank:
     """Calibrate ``n_forearms`` simulated forearms, render every stimulus, compute felt energies.
 
@@ -150,44 +219,40 @@ def build_feature_bank(
     levels : {"paper", "equal-peak"}
         The level rule of the stimuli (a study protocol's; default the paper's), stored
         in the bank.
+    calibrations : sequence of Calibration, optional
+        The forearms' calibrations made already (those ``simulate-study --seed seed``
+        stored for ``sim-001``, ...), used instead of calibrating again; one per forearm.
     """
     from ..calibration import calibrate
     from ..rigs import make_rig
-    from ..studies.engine import calibration_renderer
-    from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
+    from .perception import skin_grid
     from .simulate import participant_seeds
 
     if isinstance(n_forearms, bool) or not isinstance(n_forearms, (int, np.integer)) or n_forearms < 1:
         raise StudyError(f"n_forearms must be an integer >= 1, got {n_forearms!r}")
     m = model or PerceptualModel()
+    if calibrations is not None and len(calibrations) != n_forearms:
+        raise StudyError(f"calibrations: one per forearm, got {len(calibrations)} for {n_forearms}")
     energies, own, seeds, peaks, reached = [], [], [], [], []
     layout = points = None
     for k in range(1, n_forearms + 1):
         pseed = participant_seeds(seed, k)[0]
         rig = make_rig("simulated", seed=pseed, skin=STUDY_SKIN)
         layout = rig.layout
-        cal = calibrate(rig, participant_id=f"bank-{k:03d}")
-        # Same drives as simulate-study: the study renderer's window, its tapered ends where a
-        # design needs them, the same level rule (the contrast bounds, not part of the
-        # drives, are not computed).
-        render = calibration_renderer(cal, bounds=False, levels=levels)
-        n_loc = len(layout.locations_xy)
-        # One window every stimulus fits, each within the rig's limits, as a study's.
-        render.prepare(methods, range(1, n_loc + 1), rig=rig)
-        drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
-        peaks.append(np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc))
-        reached.append(np.array([render.rendering(meth, loc).reached_peak_m for meth in methods
-                                 for loc in range(1, n_loc + 1)]).reshape(len(methods), n_loc))
-        centre = np.asarray(layout.actuators_xy, dtype=float).mean(axis=0)
-        points = skin_grid(centre, m)
-        H = band_transfer(rig, points, drives.shape[-1], m)  # the window the stimuli fit
-        energies.append(felt_energy(H, drives, rig.fs, m).reshape(len(methods), n_loc, len(points)))
-        actuators = np.asarray(layout.actuators_xy, dtype=float)
-        own.append(actuator_energy(rig, actuators, drives, m).reshape(len(methods), n_loc, len(actuators)))
+        cal = calibrate(rig, participant_id=f"bank-{k:03d}") if calibrations is None else calibrations[k - 1]
+        feats = _forearm_features(cal, rig, methods, m, levels, rig=rig)
+        for out, x in zip((energies, own, peaks, reached), feats):
+            out.append(x)
+        points = skin_grid(np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), m)
         seeds.append(pseed)
         if progress is not None:
             progress(k, n_forearms)
     assert layout is not None and points is not None
+    return _bank(layout, points, methods, energies, own, peaks, reached, seeds, seed, levels)
+
+
+def _bank(layout: Any, points: np.ndarray, methods: tuple[str, ...], energies: list, own: list, peaks: list,
+          reached: list, seeds: list, seed: int, levels: str) -> FeatureBank:
     return FeatureBank(
         energy=np.stack(energies), points_xy=points, locations_xy=np.asarray(layout.locations_xy, dtype=float),
         centre_xy=np.asarray(layout.actuators_xy, dtype=float).mean(axis=0), methods=tuple(methods),
@@ -195,6 +260,79 @@ def build_feature_bank(
         actuator_energy=np.stack(own), actuators_xy=np.asarray(layout.actuators_xy, dtype=float),
         levels=str(levels), drive_peak_v=np.stack(peaks), target_peak_m=np.stack(reached),
     )
+
+
+def _forearm_features(cal: Any, skin: Any, methods: tuple[str, ...], m: PerceptualModel, levels: str,
+                      rig: Any = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Felt energies, actuator energies, drive peaks and target peaks of every stimulus of one forearm.
+
+    ``cal`` renders the stimuli as a study does; ``skin`` (a simulated forearm, or a skin
+    model fitted to a measured calibration) gives the true transfer to the skin grid.
+    """
+    from ..studies.engine import calibration_renderer
+    from .perception import actuator_energy, band_transfer, felt_energy, skin_grid
+
+    layout = cal.layout
+    # Same drives as simulate-study: the study renderer's window, its tapered ends where a
+    # design needs them, the same level rule (the contrast bounds, not part of the
+    # drives, are not computed).
+    render = calibration_renderer(cal, bounds=False, levels=levels)
+    n_loc = len(layout.locations_xy)
+    # One window every stimulus fits, each within the rig's limits, as a study's.
+    render.prepare(methods, range(1, n_loc + 1), rig=rig)
+    drives = np.stack([render(meth, loc) for meth in methods for loc in range(1, n_loc + 1)])
+    peaks = np.max(np.abs(drives), axis=(1, 2)).reshape(len(methods), n_loc)
+    reached = np.array([render.rendering(meth, loc).reached_peak_m for meth in methods
+                        for loc in range(1, n_loc + 1)]).reshape(len(methods), n_loc)
+    actuators = np.asarray(layout.actuators_xy, dtype=float)
+    points = skin_grid(actuators.mean(axis=0), m)
+    H = band_transfer(skin, points, drives.shape[-1], m)  # the window the stimuli fit
+    energy = felt_energy(H, drives, skin.fs, m).reshape(len(methods), n_loc, len(points))
+    own = actuator_energy(skin, actuators, drives, m).reshape(len(methods), n_loc, len(actuators))
+    return energy, own, peaks, reached
+
+
+def bank_from_calibration(
+    calibration: Any,
+    *,
+    methods: tuple[str, ...] = ("funneling", "inverse", "combination"),
+    model: PerceptualModel | None = None,
+    levels: str = "paper",
+    law: str = "layered",
+) -> FeatureBank:
+    """A one-forearm feature bank from a measured calibration: its stimuli's felt fields.
+
+    The stimuli are rendered from the calibration as a study renders them; the skin
+    displacement they make between the measured points comes from the skin model fitted
+    to the calibration (its ``fit``, else :func:`~vibrofocus.calibration.fit_model` with
+    ``law``), since a calibration measures the locations and guards only. A MODEL of the
+    participant's skin, not a measurement of the felt field.
+
+    Parameters
+    ----------
+    calibration : Calibration
+        A participant's calibration (:func:`~vibrofocus.calibration.load_calibration`).
+    methods : tuple of str
+    model : PerceptualModel, optional
+        Only its grid, band and integration window matter here.
+    levels : {"paper", "equal-peak"}
+        The level rule of the stimuli.
+    law : {"layered", "homogeneous"}
+        Wave law of the fitted skin model, where the calibration carries none.
+
+    Returns
+    -------
+    FeatureBank
+        One forearm (row 0; its seed -1: not a simulated participant's).
+    """
+    from ..calibration import fit_model
+    from .perception import skin_grid
+
+    m = model or PerceptualModel()
+    skin = calibration.fit if calibration.fit is not None else fit_model(calibration, law=law)
+    feats = _forearm_features(calibration, skin, methods, m, levels)
+    points = skin_grid(np.asarray(calibration.layout.actuators_xy, dtype=float).mean(axis=0), m)
+    return _bank(calibration.layout, points, methods, *([x] for x in feats), [-1], 0, levels)
 
 
 _DEFAULT: FeatureBank | None = None
@@ -249,6 +387,7 @@ def simulate_cell_means(
     forearms: np.ndarray | None = None,
     hypothesis: Any = None,
     rule: Callable[..., tuple[np.ndarray, np.ndarray]] | None = None,
+    level_db: float = 0.0,
 ) -> StudyArrays:
     """Simulate Study 1 and Study 2 for ``n_participants`` and return their cell means.
 
@@ -276,11 +415,14 @@ def simulate_cell_means(
         How answers and selections follow from the posterior, in both studies (default
         the model's, :func:`~vibrofocus.simulation.perception.posterior_ratio_rule`;
         ``scripts/selection_rules.py`` compares others).
+    level_db : float
+        Level of every stimulus, dB re the bank's level rule (:meth:`FeatureBank.at_level`;
+        default 0, the bank's own).
     """
     from .hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(hypothesis)
-    b = bank if bank is not None else default_bank()
+    b = (bank if bank is not None else default_bank()).at_level(level_db)
     m = model or h.model()
     if isinstance(n_participants, bool) or not isinstance(n_participants, (int, np.integer)) or n_participants < 1:
         raise ValidationError(f"n_participants must be an integer >= 1, got {n_participants!r}")

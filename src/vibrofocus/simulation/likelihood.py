@@ -506,8 +506,14 @@ class Stimuli:
     actuators_xy: np.ndarray | None = None
 
     @classmethod
-    def from_bank(cls, bank: Any, forearm: int) -> "Stimuli":
-        """Forearm ``forearm`` of a feature bank; stimulus ``method * n_locations + location`` (0-based)."""
+    def from_bank(cls, bank: Any, forearm: int, level_db: float = 0.0) -> "Stimuli":
+        """Forearm ``forearm`` of a feature bank; stimulus ``method * n_locations + location`` (0-based).
+
+        ``level_db``: the stimuli played that many dB re the bank's level rule
+        (:meth:`~vibrofocus.simulation.bank.FeatureBank.at_level`).
+        """
+        if level_db != 0.0:
+            bank = bank.at_level(level_db)
         if not 0 <= int(forearm) < bank.n_forearms:
             raise ValidationError(f"forearm must be a bank row from 0 to {bank.n_forearms - 1}, got {forearm!r}")
         return cls(bank.energy[forearm].reshape(-1, bank.points_xy.shape[0]), bank.points_xy, bank.locations_xy,

@@ -111,6 +111,9 @@ class PowerDesign:
     hypothesis : str or None
         How the simulated participants read the felt field
         (:mod:`vibrofocus.simulation.hypotheses`; None: the default hypothesis).
+    level_db : float
+        Level of every stimulus, dB re the feature bank's level rule (0: the bank's own;
+        :meth:`~vibrofocus.simulation.bank.FeatureBank.at_level`).
     """
 
     n_participants: tuple[int, ...] = (10, 15, 20, 25, 30)
@@ -122,13 +125,16 @@ class PowerDesign:
     seed: int = 0
     model: PerceptualModel | None = None
     hypothesis: str | None = None
+    level_db: float = 0.0
 
     def __post_init__(self) -> None:
         from .._validation import shorten
         from ..layout import ArrayLayout
+        from .bank import check_level_db
         from .hypotheses import hypothesis as find_hypothesis
 
         object.__setattr__(self, "hypothesis", find_hypothesis(self.hypothesis).name)
+        object.__setattr__(self, "level_db", check_level_db(self.level_db, "level_db"))
 
         ns = tuple(int(n) for n in self.n_participants)
         if not ns or min(ns) < 3 or max(ns) > MAX_PARTICIPANTS:
@@ -298,6 +304,7 @@ def simulate_statistics(
         arrays = simulate_cell_means(
             int(n), rng, bank=b, model=design.model, repetitions=design.repetitions,
             methods=design.methods, locations=design.locations, hypothesis=design.hypothesis,
+            level_db=design.level_db,
         )
         out.append(study_statistics(arrays, design.alpha, design.methods or b.methods))
     return out
@@ -705,7 +712,7 @@ def run_power(
             "locations": list(design.locations or range(1, len(b.locations_xy) + 1)),
             "alpha": design.alpha, "seed": design.seed,
             "model": (design.model or find_hypothesis(design.hypothesis).model()).to_dict(),
-            "hypothesis": design.hypothesis,
+            "hypothesis": design.hypothesis, "level_db": design.level_db,
         },
         "results": results,
         "table": power_table(results, design.alpha),

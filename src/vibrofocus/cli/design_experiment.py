@@ -1,0 +1,126 @@
+"""``vibrofocus design-experiment``: the Study 1 trials that best tell the hypotheses apart."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ._command import command
+from ._errors import user_errors
+from ._options import SEED_MAX, comma_list, force_option
+
+
+@command("design-experiment", epilog="Example: vibrofocus design-experiment --out design/")
+def design_experiment_command(
+    out: Path | None = typer.Option(None, "--out", "-o", help="Folder for protocol.toml, design.json, design.md, "
+                                                              "identification.png and design-map.png."),
+    hypotheses: str = typer.Option("all", "--hypotheses", help="Hypotheses to tell apart, comma separated, or all."),
+    bank: Path | None = typer.Option(None, "--bank", help="Feature bank (.npz; default the shipped simulated one)."),
+    calibration: Path | None = typer.Option(
+        None, "--calibration", help="A participant's calibration (.nc): the design for that arm, its felt fields "
+                                    "from the skin model fitted to it (instead of --bank; one forearm)."),
+    methods: str | None = typer.Option(None, "--methods", help="Candidate methods (default the bank's)."),
+    locations: str | None = typer.Option(None, "--locations", help="Candidate location numbers (default all)."),
+    levels: str = typer.Option("0,-10,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
+    budget: int = typer.Option(81, "--budget", min=4, max=20_000, help="Study 1 trials per participant."),
+    draws: int = typer.Option(3, "--parameter-draws", min=1, max=64,
+                              help="Parameter sets per hypothesis: the shipped one and draws around it."),
+    forearms: int = typer.Option(6, "--forearms", min=1, max=1000, help="Bank forearms the design integrates over."),
+    traits: int = typer.Option(8, "--traits", min=1, max=1000, help="Participants' trait draws per sample."),
+    population: str | None = typer.Option(
+        None, "--population", help="A hypothesis whose fitted parameters every hypothesis takes, so that they "
+                                   "differ in their readout only (default: each its own shipped parameters)."),
+    participants: str = typer.Option("1,2,3,4,6,8", "--participants", "-n", help="Sample sizes N of the check."),
+    studies: int = typer.Option(200, "--studies", min=0, max=100_000,
+                                help="Simulated studies per N and hypothesis (0: no check)."),
+    pool: int = typer.Option(60, "--pool", min=2, max=100_000,
+                             help="Simulated participants per protocol and hypothesis of the check."),
+    score_forearms: int = typer.Option(12, "--score-forearms", min=1, max=1000,
+                                       help="Bank forearms of the check's participants."),
+    score_draws: int = typer.Option(32, "--score-draws", min=1, max=100_000,
+                                    help="Trait draws of the check's marginal likelihood."),
+    seed: int = typer.Option(0, "--seed", min=0, max=SEED_MAX, help="Seed of the design (the check uses seed + 1)."),
+    scheduler: str | None = typer.Option(None, "--scheduler", help="Dask scheduler address (tcp://host:8786)."),
+    workers: int | None = typer.Option(None, "--workers", min=1, max=256, help="LocalCluster workers (default CPUs)."),
+    local: bool = typer.Option(False, "--no-dask", help="Run the check in this process (same numbers)."),
+    force: bool = force_option(),
+) -> None:
+    """Design the Study 1 blocks that tell the registered hypotheses apart, and check them by simulation.
+
+    Greedily chooses blocks (a method at a level over a grid of locations) that maximize
+    the expected information gain about which hypothesis is right, within --budget trials
+    per participant; then, on Dask, estimates the probability that model choice by
+    marginal likelihood picks the true hypothesis against N, for the design and the
+    paper's Study 1. Simulated participants: a MODEL, not data (docs: designing a study).
+    """
+    with user_errors():
+        from rich.console import Console
+        from rich.table import Table
+
+        from .._atomic import allow_overwrite
+        from ..simulation.bank import FeatureBank, default_bank
+        from ..simulation.design import DesignSettings, design_experiment, design_report, identification, paper_plan
+
+        allow_overwrite(force)
+        from ..errors import ValidationError
+
+        if calibration is not None and bank is not None:
+            raise ValidationError("give --calibration or --bank, not both")
+        if calibration is not None:
+            from .._atomic import protect
+            from ..calibration import load_calibration
+            from ..simulation.bank import bank_from_calibration
+
+            protect(calibration, "calibration")
+            fb = bank_from_calibration(load_calibration(calibration))
+            forearms = score_forearms = 1
+        else:
+            fb = FeatureBank.load(bank) if bank is not None else default_bank()
+        settings = DesignSettings(
+            hypotheses=None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str),
+            methods=comma_list(methods, "--methods", str) if methods else None,
+            locations=comma_list(locations, "--locations") if locations else None,
+            levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
+            n_forearms=forearms, n_traits=traits, seed=seed, population=population)
+        ns = comma_list(participants, "--participants")
+        if out is not None:
+            from .._atomic import check_writable, make_output_folder
+
+            make_output_folder(out)
+            check_writable(out / "protocol.toml", what="protocol")
+        console = Console(stderr=True)
+        design = design_experiment(settings, bank=fb)
+        console.print(f"designed in {design.elapsed_s:.1f} s: {design.trials} trials, "
+                      f"{design.information_nats:.3f} nats per participant")
+        ident = None
+        if studies:
+            ident = identification({"designed": design.blocks, "paper": paper_plan()}, list(settings.hypotheses or ()),
+                                   n_participants=ns, n_studies=studies, pool=pool, seed=seed + 1,
+                                   n_forearms=score_forearms, n_draws=score_draws,
+                                   bank=fb, scheduler=scheduler, n_workers=workers, local=local,
+                                   population=settings.population)
+            console.print(f"checked in {ident['elapsed_s']:.1f} s")
+        report = design_report(design, ident)
+        table = Table(title=f"Designed Study 1 blocks ({report['label']})")
+        for col in ("methods", "level (dB)", "locations", "repetitions", "trials"):
+            table.add_column(col)
+        for b in report["blocks"]:
+            table.add_row(", ".join(b["methods"]), f"{b['level_db']:+g}", " ".join(map(str, b["locations"])),
+                          str(b["repetitions"]), str(b["trials"]))
+        Console().print(table)
+        if ident is not None:
+            t2 = Table(title="P(true hypothesis chosen), marginal likelihood at the shipped parameters")
+            t2.add_column("protocol")
+            t2.add_column("true hypothesis")
+            for n in ns:
+                t2.add_column(f"N={n}", justify="right")
+            for p, by in ident["rates"].items():
+                for h, r in by.items():
+                    t2.add_row(p, h, *[f"{r[n]:.2f}" for n in ns])
+            Console().print(t2)
+        if out is not None:
+            from ..simulation.design import write_design
+
+            console.print("wrote " + ", ".join(str(p) for p in write_design(design, out, ident=ident, bank=fb)))
+        console.print(f"[yellow]{report['label']}[/]")

@@ -1,0 +1,198 @@
+"""Designing a study that decides: levels, exact answer laws on grids, the greedy design, model choice."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from vibrofocus.errors import ValidationError
+from vibrofocus.simulation.bank import default_bank, simulate_cell_means
+from vibrofocus.simulation.design import (DesignSettings, PlanBlock, _simulate_scores, design_experiment,
+                                          design_protocol_text, identification, location_sets, paper_plan,
+                                          participant_loglik, score_tables, study1_probabilities)
+from vibrofocus.simulation.hypotheses import available_hypotheses, hypothesis
+from vibrofocus.simulation.likelihood import Stimuli, answer_law, answer_probabilities, marginal_loglik
+from vibrofocus.simulation.perception import Traits, draw_answers
+from vibrofocus.studies.protocol_files import parse_protocol
+
+SMALL = dict(n_forearms=1, n_traits=3, n_parameter_draws=2, n_replicates=1, budget=24,
+             levels_db=(0.0, -20.0), methods=("funneling", "inverse"))
+
+
+# ------------------------------------------------------------------------- levels
+def test_bank_at_level_scales_energies_and_peaks_exactly():
+    b = default_bank()
+    low = b.at_level(-10.0)
+    np.testing.assert_allclose(low.energy, b.energy * 0.1, rtol=1e-6)
+    np.testing.assert_allclose(low.actuator_energy, b.actuator_energy * 0.1, rtol=1e-6)
+    np.testing.assert_allclose(low.drive_peak_v, b.drive_peak_v * 10 ** -0.5, rtol=1e-12)
+    assert b.at_level(0.0) is b
+
+
+def test_bank_at_level_refuses_a_level_over_the_drive_limit():
+    with pytest.raises(ValidationError, match="over the 10 V drive limit"):
+        default_bank().at_level(3.0)  # the shipped inverse filter needs the whole 10 V at 0 dB
+    with pytest.raises(ValidationError, match="level_db"):
+        default_bank().at_level(float("nan"))
+
+
+def test_simulate_cell_means_level_is_the_scaled_bank():
+    b = default_bank()
+    a = simulate_cell_means(4, np.random.default_rng(3), bank=b, level_db=-25.0)
+    c = simulate_cell_means(4, np.random.default_rng(3), bank=b.at_level(-25.0))
+    d = simulate_cell_means(4, np.random.default_rng(3), bank=b)
+    np.testing.assert_array_equal(a.error_mm, c.error_mm)
+    assert not np.array_equal(a.error_mm, d.error_mm)  # the level matters
+
+
+def test_stimuli_from_bank_at_level():
+    b = default_bank()
+    np.testing.assert_allclose(Stimuli.from_bank(b, 2, -20.0).energy, Stimuli.from_bank(b, 2).energy * 0.01,
+                               rtol=1e-6)
+
+
+# ------------------------------------------------------------------------- answer laws
+def test_location_sets_of_the_reference_grid():
+    b = default_bank()
+    sets = location_sets(b.locations_xy, range(1, 10))
+    assert sets == {"all": tuple(range(1, 10)), "outer columns": (1, 3, 4, 6, 7, 9),
+                    "outer rows": (1, 2, 3, 7, 8, 9), "corners": (1, 3, 7, 9)}
+    assert list(location_sets(b.locations_xy, (1, 2, 5))) == ["all"]  # not a grid
+
+
+@pytest.mark.parametrize("allowed", [None, [0, 2, 6, 8], [0, 1, 2, 6, 7, 8], [0, 1, 4]])
+def test_study1_probabilities_match_the_likelihood_module(allowed):
+    b = default_bank()
+    h = hypothesis("v3-centroid")
+    m = h.model()
+    st = Stimuli.from_bank(b, 5, -10.0)
+    traits = Traits.draw(m, 11)
+    law = answer_law(st.percepts(h, m, traits), np.arange(27), st.centre_xy, m, traits, study=1)
+    a = None if allowed is None else np.asarray(allowed)
+    fast = study1_probabilities(law, st.locations_xy, a)
+    slow = answer_probabilities(law, st.locations_xy, a)
+    np.testing.assert_allclose(fast, slow, atol=2e-3)
+    np.testing.assert_allclose(fast.sum(axis=1), 1.0, atol=1e-9)
+
+
+# ------------------------------------------------------------------------- design
+def test_design_fits_the_budget_and_writes_a_valid_protocol():
+    d = design_experiment(DesignSettings(**SMALL))
+    assert 20 < d.trials <= 24 and d.trials == sum(b.n_trials for b in d.blocks)
+    assert 0.0 < d.information_nats <= np.log(len(available_hypotheses())) + 1e-9
+    assert all(b.level_db in (0.0, -20.0) and set(b.methods) <= {"funneling", "inverse"} for b in d.blocks)
+    assert len(d.conditions) == 2 * 9 * 2 and d.conditions[0]["gain_nats"] >= d.conditions[-1]["gain_nats"]
+    proto = parse_protocol(design_protocol_text(d, "t"), "t")
+    assert [(b.methods, b.locations, b.levels[0], b.repetitions) for b in proto.blocks] == [
+        (b.methods, b.locations, b.level_db, b.repetitions) for b in d.blocks]
+    proto.check_runnable()
+
+
+def test_design_refuses_bad_settings():
+    with pytest.raises(ValidationError, match="at least 2"):
+        DesignSettings(hypotheses=("v3-centroid",))
+    with pytest.raises(ValidationError, match="budget"):
+        DesignSettings(budget=0)
+    with pytest.raises(ValidationError, match="drive limit"):
+        design_experiment(DesignSettings(**{**SMALL, "levels_db": (6.0,)}))
+
+
+# ------------------------------------------------------------------------- the loop
+def test_participant_loglik_is_marginal_loglik_on_one_block():
+    b = default_bank()
+    h = hypothesis("grid-peak")
+    m = h.model()
+    st = Stimuli.from_bank(b, 4, -20.0)
+    traits = Traits.draw(m, 5)
+    idx = np.repeat(np.array([0, 2, 6, 8, 9 + 2]), 2)
+    allowed = np.array([0, 2, 6, 8])
+    ans, _, _ = draw_answers(st.percepts(h, m, traits), idx, st.locations_xy, st.centre_xy, m, traits,
+                             np.random.default_rng(2), allowed=allowed)
+    ref = marginal_loglik(h, st, study1=(idx, ans), n_draws=8, allowed=allowed)
+    trials = [(b.methods[i // 9], i % 9 + 1, int(a) + 1, -20.0, (1, 3, 7, 9)) for i, a in zip(idx, ans)]
+    np.testing.assert_allclose(participant_loglik(h, b, 4, trials, n_draws=8), ref, atol=5e-3)
+
+
+def test_scores_of_simulated_participants_are_their_marginal_loglik():
+    b = default_bank()
+    names = ["v3-centroid", "grid-peak"]
+    plan = (PlanBlock(("inverse",), -30.0, (1, 3, 7, 9), 2),)
+    forearms = np.array([3, 7])
+    tables = score_tables({"p": plan}, names, b, forearms, n_draws=6)
+    fast = _simulate_scores(plan, "grid-peak", names, [0], b, forearms, tables["p"], 9, [-30.0])
+    # The same participant by hand: its forearm, traits and answers from the same stream.
+    rng = np.random.default_rng([9, 0xE7A1, 1, 0])
+    fi = int(rng.integers(2))
+    h = hypothesis("grid-peak")
+    traits = Traits.draw(h.model(), rng)
+    st = Stimuli.from_bank(b, int(forearms[fi]), -30.0)
+    idx = np.tile(9 + np.array([0, 2, 6, 8]), 2)
+    ans, _, _ = draw_answers(st.percepts(h, h.model(), traits), idx, st.locations_xy, st.centre_xy, h.model(),
+                             traits, rng, allowed=np.array([0, 2, 6, 8]))
+    trials = [("inverse", i - 9 + 1, int(a) + 1, -30.0, (1, 3, 7, 9)) for i, a in zip(idx, ans)]
+    ref = [participant_loglik(n, b, int(forearms[fi]), trials, n_draws=6) for n in names]
+    np.testing.assert_allclose(fast[0], ref, atol=5e-3)
+
+
+def test_designed_protocol_identifies_one_population_better_than_the_papers():
+    """The readouts under one population: the paper's design confuses two, the designed one does not."""
+    names = ["v3-centroid", "level-reliability"]
+    d = design_experiment(DesignSettings(hypotheses=tuple(names), population="v3-centroid", n_forearms=2,
+                                         n_traits=4, n_parameter_draws=1, n_replicates=1, seed=0))
+    r = identification({"designed": d.blocks, "paper": paper_plan()}, names, n_participants=(3,), n_studies=60,
+                       pool=12, n_draws=8, n_forearms=6, local=True, population="v3-centroid", seed=5)
+    assert r["mean"]["designed"][3] >= 0.9
+    assert r["mean"]["designed"][3] > r["mean"]["paper"][3] + 0.1
+
+
+LOOP_PROTOCOL = """
+format = 1
+name = "loop-check"
+
+[[blocks]]
+response = "location"
+methods = ["funneling"]
+locations = [1, 3, 7, 9]
+levels = [-20.0]
+repetitions = 2
+
+[[blocks]]
+response = "location"
+methods = ["inverse", "combination"]
+locations = [1, 2, 3, 7, 8, 9]
+levels = [-10.0]
+repetitions = 1
+"""
+
+
+@pytest.mark.slow
+def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp_path):
+    """The loop through the study engine: simulate-study's code, then marginal likelihood.
+
+    Participant sim-001 of seed 0 has the shipped bank's forearm 0, so its felt fields
+    need no new bank.
+    """
+    from vibrofocus.simulation import simulate_studies
+    from vibrofocus.simulation.design import choose_hypothesis
+
+    proto = parse_protocol(LOOP_PROTOCOL, "loop")
+    simulate_studies(tmp_path / "s.db", n_participants=1, seed=0, protocol=proto, hypothesis="level-reliability")
+    r = choose_hypothesis(tmp_path / "s.db", default_bank(), n_draws=8)
+    assert set(r["participants"]) == {"sim-001"}
+    assert r["chosen"] == "level-reliability", r["total"]
+
+
+@pytest.mark.slow
+def test_felt_fields_from_a_calibration_match_the_arm_it_measured(simulated_calibration):
+    """The skin model fitted to a simulated calibration gives that arm's felt fields (to 0.05 dB)."""
+    from vibrofocus.simulation.bank import _forearm_features, bank_from_calibration
+    from vibrofocus.simulation.perception import PerceptualModel
+
+    rig, cal = simulated_calibration
+    b = bank_from_calibration(cal, methods=("inverse",))
+    true, own, peaks, _ = _forearm_features(cal, rig, ("inverse",), PerceptualModel(), "paper", rig=rig)
+    big = true > 0.1 * true.max(axis=-1, keepdims=True)
+    np.testing.assert_allclose(10 * np.log10(b.energy[0][big] / true[big]), 0.0, atol=0.05)
+    np.testing.assert_allclose(b.actuator_energy[0], own, rtol=0.02)
+    np.testing.assert_allclose(b.drive_peak_v[0], peaks, rtol=1e-12)
+    assert b.n_forearms == 1 and b.levels == "paper"
