@@ -56,71 +56,68 @@ def design_experiment_command(
     """
     with user_errors():
         from rich.console import Console
-        from rich.table import Table
 
         from .._atomic import allow_overwrite
-        from ..simulation.bank import FeatureBank, default_bank
-        from ..simulation.design import DesignSettings, design_experiment, design_report, identification, paper_plan
+        from ..simulation.design import DesignSettings
+        from ..workflows import design_study
 
         allow_overwrite(force)
-        from ..errors import ValidationError
-
-        if calibration is not None and bank is not None:
-            raise ValidationError("give --calibration or --bank, not both")
-        if calibration is not None:
-            from .._atomic import protect
-            from ..calibration import load_calibration
-            from ..simulation.bank import bank_from_calibration
-
-            protect(calibration, "calibration")
-            fb = bank_from_calibration(load_calibration(calibration))
-            forearms = score_forearms = 1
-        else:
-            fb = FeatureBank.load(bank) if bank is not None else default_bank()
         settings = DesignSettings(
             hypotheses=None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str),
             methods=comma_list(methods, "--methods", str) if methods else None,
             locations=comma_list(locations, "--locations") if locations else None,
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population)
-        ns = comma_list(participants, "--participants")
-        if out is not None:
-            from .._atomic import check_writable, make_output_folder
-
-            make_output_folder(out)
-            check_writable(out / "protocol.toml", what="protocol")
         console = Console(stderr=True)
-        design = design_experiment(settings, bank=fb)
-        console.print(f"designed in {design.elapsed_s:.1f} s: {design.trials} trials, "
-                      f"{design.information_nats:.3f} nats per participant")
-        ident = None
-        if studies:
-            ident = identification({"designed": design.blocks, "paper": paper_plan()}, list(settings.hypotheses or ()),
-                                   n_participants=ns, n_studies=studies, pool=pool, seed=seed + 1,
-                                   n_forearms=score_forearms, n_draws=score_draws,
-                                   bank=fb, scheduler=scheduler, n_workers=workers, local=local,
-                                   population=settings.population)
-            console.print(f"checked in {ident['elapsed_s']:.1f} s")
-        report = design_report(design, ident)
-        table = Table(title=f"Designed Study 1 blocks ({report['label']})")
-        for col in ("methods", "level (dB)", "locations", "repetitions", "trials"):
-            table.add_column(col)
-        for b in report["blocks"]:
-            table.add_row(", ".join(b["methods"]), f"{b['level_db']:+g}", " ".join(map(str, b["locations"])),
-                          str(b["repetitions"]), str(b["trials"]))
-        Console().print(table)
-        if ident is not None:
-            t2 = Table(title="P(true hypothesis chosen), marginal likelihood at the shipped parameters")
-            t2.add_column("protocol")
-            t2.add_column("true hypothesis")
-            for n in ns:
-                t2.add_column(f"N={n}", justify="right")
-            for p, by in ident["rates"].items():
-                for h, r in by.items():
-                    t2.add_row(p, h, *[f"{r[n]:.2f}" for n in ns])
-            Console().print(t2)
-        if out is not None:
-            from ..simulation.design import write_design
+        done = design_study(settings, participants=comma_list(participants, "--participants"), studies=studies,
+                            bank=bank, calibration=calibration, pool=pool, score_forearms=score_forearms,
+                            score_draws=score_draws, scheduler=scheduler, workers=workers, local=local, out=out,
+                            progress=_Notes(console))
+        _print_design(done, comma_list(participants, "--participants"), console)
 
-            console.print("wrote " + ", ".join(str(p) for p in write_design(design, out, ident=ident, bank=fb)))
-        console.print(f"[yellow]{report['label']}[/]")
+
+class _Notes:
+    """The design workflow's notes on stderr."""
+
+    def __init__(self, console) -> None:
+        self.console = console
+
+    def step(self, done: int, total: int, message: str) -> None:
+        pass
+
+    def note(self, message: str, **details) -> None:
+        self.console.print(message)
+
+    def judged(self, result) -> None:
+        pass
+
+    def cancelled(self) -> bool:
+        return False
+
+
+def _print_design(done, ns: list[int], console) -> None:
+    """The designed blocks and the check's table at the terminal, then the files and the model label."""
+    from rich.console import Console
+    from rich.table import Table
+
+    report = done.report
+    table = Table(title=f"Designed Study 1 blocks ({report['label']})")
+    for col in ("methods", "level (dB)", "locations", "repetitions", "trials"):
+        table.add_column(col)
+    for b in report["blocks"]:
+        table.add_row(", ".join(b["methods"]), f"{b['level_db']:+g}", " ".join(map(str, b["locations"])),
+                      str(b["repetitions"]), str(b["trials"]))
+    Console().print(table)
+    if done.identification is not None:
+        t2 = Table(title="P(true hypothesis chosen), marginal likelihood at the shipped parameters")
+        t2.add_column("protocol")
+        t2.add_column("true hypothesis")
+        for n in ns:
+            t2.add_column(f"N={n}", justify="right")
+        for p, by in done.identification["rates"].items():
+            for h, r in by.items():
+                t2.add_row(p, h, *[f"{r[n]:.2f}" for n in ns])
+        Console().print(t2)
+    if done.paths:
+        console.print("wrote " + ", ".join(str(p) for p in done.paths))
+    console.print(f"[yellow]{report['label']}[/]")

@@ -26,7 +26,7 @@ from fastapi.staticfiles import StaticFiles
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
 from ..errors import StudyError
-from . import protocols, routes_experimenter, routes_participant
+from . import routes_experimenter, routes_participant, routes_protocols
 from .security import BODY_TIMEOUT_S, LOCAL_HOSTS, SecurityMiddleware
 from .session_runner import PACES, Pace
 from .state import (
@@ -183,5 +183,5 @@ def create_app(
 
     app.include_router(routes_participant.router)
     app.include_router(routes_experimenter.router)
-    app.include_router(protocols.router)
+    app.include_router(routes_protocols.router)
     return app

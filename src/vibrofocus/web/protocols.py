@@ -23,29 +23,25 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from fastapi import APIRouter, Depends, HTTPException
+from fastapi import HTTPException
 
 from ..errors import StudyError
 from ..studies.protocol_files import (MAX_PROTOCOL_BYTES, SHIPPED_PROTOCOLS, StudyProtocol, parse_protocol,
                                       shipped_protocol)
-from .api_models import ProtocolIn
 from .private import private_dir
-from .public_text import public_text
-from .routes_experimenter import require_token
 
-__all__ = ["router", "find_protocol", "protocol_summary", "first_unfinished_block", "staircase_state"]
-
-router = APIRouter()
+__all__ = ["find_protocol", "protocol_summary", "first_unfinished_block", "staircase_state", "protocols_folder",
+           "read_uploaded"]
 
 
-def _folder(web: Any) -> Path:
+def protocols_folder(web: Any) -> Path:
     """The folder of the uploaded protocols (private to the server's user)."""
     folder = web.data_dir / "protocols"
     private_dir(folder, "protocols folder")
     return folder
 
 
-def _read_uploaded(path: Path, name: str) -> StudyProtocol:
+def read_uploaded(path: Path, name: str) -> StudyProtocol:
     with open(path, "rb") as fh:
         raw = fh.read(MAX_PROTOCOL_BYTES + 1)
     return parse_protocol(raw.decode("utf-8"), f"{name}.toml")
@@ -55,11 +51,11 @@ def find_protocol(web: Any, name: str) -> StudyProtocol:
     """The protocol ``name``: a shipped one, else one uploaded to this server (404 if none)."""
     if name in SHIPPED_PROTOCOLS:
         return shipped_protocol(name)
-    path = _folder(web) / f"{name}.toml"
+    path = protocols_folder(web) / f"{name}.toml"
     if not path.is_file():
         raise HTTPException(404, detail=(f"No protocol {name!r} on this server: the shipped ones are "
                                          f"{', '.join(SHIPPED_PROTOCOLS)}; upload a protocol file first."))
-    return _read_uploaded(path, name)
+    return read_uploaded(path, name)
 
 
 def protocol_summary(protocol: StudyProtocol, *, shipped: bool) -> dict[str, Any]:
@@ -72,43 +68,6 @@ def protocol_summary(protocol: StudyProtocol, *, shipped: bool) -> dict[str, Any
                     "n_trials": b.training_trials + len(b.methods) * len(b.locations or b.points_mm or ()) * b.repetitions}
                    for b in protocol.blocks],
     }
-
-
-@router.get("/api/protocols")
-def list_protocols(web: Any = Depends(require_token)) -> list[dict[str, Any]]:
-    """The shipped protocols, then those uploaded to this server (by name)."""
-    out = [protocol_summary(shipped_protocol(n), shipped=True) for n in SHIPPED_PROTOCOLS]
-    for path in sorted(_folder(web).glob("*.toml")):
-        try:
-            out.append(protocol_summary(_read_uploaded(path, path.stem), shipped=False))
-        except (StudyError, OSError, UnicodeDecodeError):  # a file put there by hand: not listed
-            continue
-    return out
-
-
-@router.post("/api/protocols", status_code=201)
-def upload_protocol(body: ProtocolIn, web: Any = Depends(require_token)) -> dict[str, Any]:
-    """Check a protocol file's text and keep it under its name; 422 with one line, and nothing stored, if bad."""
-    from .._atomic import write_text
-
-    try:
-        protocol = parse_protocol(body.text, body.filename)
-        protocol.check_runnable()
-    except StudyError as exc:
-        raise HTTPException(422, detail=public_text(str(exc))) from None
-    name = protocol.name
-    if name in SHIPPED_PROTOCOLS:
-        raise HTTPException(409, detail=(f"protocol {body.filename}: the name {name!r} is a shipped protocol's; "
-                                         "give yours another name"))
-    path = _folder(web) / f"{name}.toml"
-    if path.is_file():
-        if path.read_bytes() != body.text.encode("utf-8"):
-            raise HTTPException(409, detail=(
-                f"protocol {body.filename}: another protocol named {name!r} is already on this server, and sessions "
-                "name their protocol by its name only; give this one another name"))
-    else:
-        write_text(path, body.text, what="protocol file")
-    return protocol_summary(protocol, shipped=False)
 
 
 def first_unfinished_block(store: Any, participant_id: str, protocol: StudyProtocol) -> int:

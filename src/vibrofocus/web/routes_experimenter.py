@@ -585,9 +585,11 @@ def _create_protocol_session(web: WebState, body: SessionIn, rig_seed: int | Non
         if accepted:
             config["calibration_errors_accepted"] = accepted
         seed = protocol.blocks[block].session_seed(body.seed if body.seed is not None else secrets.randbelow(2**31))
-        with web.db:
-            sid = web.store.create_session(body.participant_id, study, seed=seed, calibration_id=body.calibration_id,
-                                           config=config)
+        from ..workflows import plan_session
+
+        # The block's levels were checked against the drive limit by plan_block: nothing to render here.
+        sid, _ = plan_session(web.store, body.participant_id, study, seed=seed, calibration_id=body.calibration_id,
+                              config=config, store_lock=web.db)
     except StudyError as exc:
         raise _study_error(exc) from None
     return _session_out(web, sid)

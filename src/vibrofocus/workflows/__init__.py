@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from .calibrate import CalibrationOutcome, calibrate_participant, check_calibration_out
 from .demo import DemoOutcome, demo_methods, demo_moving_focus, demo_paper_figures
+from .design import DesignOutcome, design_study
 from .power import PowerOutcome, study_power
 from .progress import Progress, QuietProgress, WorkflowCancelled
 from .session import first_unfinished_block, plan_session, run_session, run_study_at_terminal
@@ -21,6 +22,7 @@ from .simulate import SimulationOutcome, simulate_study
 __all__ = [
     "CalibrationOutcome",
     "DemoOutcome",
+    "DesignOutcome",
     "PowerOutcome",
     "Progress",
     "QuietProgress",
@@ -31,6 +33,7 @@ __all__ = [
     "demo_methods",
     "demo_moving_focus",
     "demo_paper_figures",
+    "design_study",
     "first_unfinished_block",
     "plan_session",
     "run_session",

@@ -1,0 +1,90 @@
+"""Designing the study that tells the hypotheses apart: the workflow under ``design-experiment``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from .progress import Progress, QuietProgress
+
+__all__ = ["DesignOutcome", "design_study"]
+
+
+@dataclass
+class DesignOutcome:
+    """What :func:`design_study` made: the design, its check (or None), the report and the files."""
+
+    design: Any
+    identification: dict[str, Any] | None
+    report: dict[str, Any]
+    paths: list[Path]
+
+
+def design_study(settings: Any, *, participants: list[int], studies: int, bank: Path | None = None,
+                 calibration: Path | None = None, pool: int = 8, score_forearms: int = 8, score_draws: int = 32,
+                 scheduler: str | None = None, workers: int | None = None, local: bool = False,
+                 out: Path | None = None, progress: Progress | None = None) -> DesignOutcome:
+    """Design the Study 1 blocks of ``settings``, check them by simulation, and write them.
+
+    Parameters
+    ----------
+    settings : DesignSettings
+        The candidates, budget and hypotheses (:class:`~vibrofocus.simulation.design.DesignSettings`).
+    participants : list of int
+        The N the check estimates P(true hypothesis chosen) at.
+    studies : int
+        Simulated studies per N in the check (0: no check).
+    bank, calibration : Path, optional
+        A feature bank file, or a calibration whose fitted skin gives the felt fields (not
+        both); default the shipped simulated bank.
+    pool, score_forearms, score_draws : int
+        The check's participant pool, bank forearms and trait draws.
+    scheduler, workers, local
+        The check's Dask options, as ``power``'s.
+    out : Path, optional
+        Folder for protocol.toml and the report (checked before the design runs).
+    progress : Progress, optional
+        Notes of the design's and the check's times.
+
+    Returns
+    -------
+    DesignOutcome
+    """
+    import dataclasses
+
+    from ..errors import ValidationError
+    from ..simulation.bank import FeatureBank, default_bank
+    from ..simulation.design import design_experiment, design_report, identification, paper_plan, write_design
+
+    progress = progress if progress is not None else QuietProgress()
+    if calibration is not None and bank is not None:
+        raise ValidationError("give --calibration or --bank, not both")
+    if calibration is not None:
+        from .._atomic import protect
+        from ..calibration import load_calibration
+        from ..simulation.bank import bank_from_calibration
+
+        protect(calibration, "calibration")
+        fb = bank_from_calibration(load_calibration(calibration))
+        settings = dataclasses.replace(settings, n_forearms=1)
+        score_forearms = 1
+    else:
+        fb = FeatureBank.load(bank) if bank is not None else default_bank()
+    if out is not None:
+        from .._atomic import check_writable, make_output_folder
+
+        make_output_folder(out)
+        check_writable(out / "protocol.toml", what="protocol")
+    design = design_experiment(settings, bank=fb)
+    progress.note(f"designed in {design.elapsed_s:.1f} s: {design.trials} trials, "
+                  f"{design.information_nats:.3f} nats per participant")
+    ident = None
+    if studies:
+        ident = identification({"designed": design.blocks, "paper": paper_plan()}, list(settings.hypotheses or ()),
+                               n_participants=participants, n_studies=studies, pool=pool, seed=settings.seed + 1,
+                               n_forearms=score_forearms, n_draws=score_draws, bank=fb, scheduler=scheduler,
+                               n_workers=workers, local=local, population=settings.population)
+        progress.note(f"checked in {ident['elapsed_s']:.1f} s")
+    paths = write_design(design, out, ident=ident, bank=fb) if out is not None else []
+    return DesignOutcome(design, ident, design_report(design, ident), paths)
