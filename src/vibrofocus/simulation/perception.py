@@ -212,6 +212,13 @@ class PerceptualModel:
         Factor on the posterior SD with which the participant selects points on an unfused
         trial (it felt odd, so the participant is less sure); it widens the selection only
         (the jump, not the width, moves the answer). *Fitted.*
+    intensity_half_db : float
+        Under the ``intensity`` hypothesis only: the sensation level (dB SL, of the most
+        intense felt point) at which the sensed position's noise variance is doubled;
+        reliability ``1 / (1 + 10**((intensity_half_db - L) / 10))``. Weaker taps are
+        localized less consistently and pulled more to the centre (Steenbergen et al.
+        2014, Exp. Brain Res. 232(2):597-607, doi:10.1007/s00221-013-3768-x). *Assumption*
+        of the form; size *fitted*. Inert under every other hypothesis.
     conflict_awareness : float
         ``lambda``: how the Study 2 selection reads the trial's own cue discrepancy. 0
         (default, as in v3): the selection's width carries the conflict noise's expected
@@ -253,6 +260,7 @@ class PerceptualModel:
     unfused_jump_m: float = 0.02
     unfused_width: float = 1.0
     conflict_awareness: float = 0.0
+    intensity_half_db: float = 10.0
     rt_median_s: tuple[float, float] = (0.9, 1.4)
     rt_log_sd: float = 0.3
     rt_per_extra_location_s: float = 0.35
@@ -300,6 +308,8 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "conflict_awareness": ("fitted", "form an assumption: the selection's width reads the trial's own cue "
                            "discrepancy (confidence from sensed uncertainty, Adler & Ma 2018); 0 (off): v3's expected "
                            "width"),
+    "intensity_half_db": ("fitted", "intensity hypothesis only: level at which localization variance doubles "
+                          "(weak taps localized less consistently, Steenbergen et al. 2014)"),
     "rt_median_s": ("assumption", "response times (not analysed)"),
     "rt_log_sd": ("assumption", "response times (not analysed)"),
     "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),
