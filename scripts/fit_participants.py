@@ -36,8 +36,8 @@ with the default hypothesis: the one of lowest held-out loss under the search's 
 fit file is checked (keys, types, finite numbers, known parameters), and a set that does not
 cover every hypothesis is refused, before anything is computed or written.
 ``report`` prints the same for the defaults (or a fit file) on the table's seeds.
-``table`` evaluates the default hypothesis on seeds 0..N-1 and writes the side-by-side table,
-the parameters, the residuals and the power table between their markers in
+``table`` writes the parameters of every hypothesis, the fits' budget, the statement of the
+posterior-predictive check and the power table between their markers in
 ``docs/simulated-participants.md`` (atomically); ``--check`` only compares.
 
 The work is done by :mod:`vibrofocus.simulation.fitting` (objective, search, adopt) and

@@ -25,8 +25,8 @@ def bump(xy, peak, width=3e-3):
     return peak * np.exp(-np.sum((GRID - np.asarray(xy)) ** 2, axis=1) / (2 * width**2)) + 1e-6
 
 
-def test_the_registry_names_three_cited_hypotheses_and_refuses_unknown_ones():
-    assert set(available_hypotheses()[:3]) == {"v3-centroid", "grid-peak", "level-reliability"}
+def test_the_registry_names_four_cited_hypotheses_and_refuses_unknown_ones():
+    assert set(available_hypotheses()[:4]) == {"v3-centroid", "grid-peak", "level-reliability", "intensity"}
     assert hypothesis().name == DEFAULT_HYPOTHESIS == available_hypotheses()[0]
     for name in available_hypotheses():
         h = hypothesis(name)
@@ -86,6 +86,65 @@ def test_the_fast_path_records_the_share_of_taps_felt():
     # A reference tap at threshold: the bank's taps (all weaker than it at most points) go unfelt.
     faint = simulate_cell_means(3, np.random.default_rng(5), bank=bank, model=PerceptualModel().replace(sl_ref_db=-20.0))
     assert faint.felt.shape == (3,) and faint.felt.max() < 0.5
+
+
+def test_intensity_reliability_grows_with_the_felt_level_and_leaves_the_place():
+    h = hypothesis("intensity")
+    quiet, loud = bump((0.0, 0.0), 0.1), bump((0.0, 0.0), 1.0)  # -10 dB and 0 dB re the reference tap
+    model = MODEL.replace(sl_ref_db=10.0, intensity_half_db=10.0)
+    per = h.percepts(np.stack([quiet, loud]), GRID, model, TRAITS, locations_xy=LOCATIONS)
+    # 0 dB SL and 10 dB SL against a half point of 10 dB SL.
+    np.testing.assert_allclose(per.reliability, [1 / 11, 1 / 2], rtol=1e-4)  # the bump sits on 1e-6
+    base = hypothesis("v3-centroid").percepts(np.stack([quiet, loud]), GRID, model, TRAITS, locations_xy=LOCATIONS)
+    np.testing.assert_array_equal(per.position_m, base.position_m)
+    assert base.reliability is None
+
+
+def _two_values(h, name, index, lo, hi):
+    """Two in-range values of a free parameter, a population range (lo, hi) kept in order."""
+    if index is None or name == "bias_mean_m":  # a pair that is a point (x, y), not a range
+        return lo, hi
+    other = getattr(h.start_model(), name)[1 - index]
+    return (lo, min(hi, other)) if index == 0 else (max(lo, other), hi)
+
+
+def _answers(h, model):
+    a = simulate_cell_means(3, np.random.default_rng([8, 1]), bank=default_bank(), model=model, hypothesis=h)
+    return a.error_mm, a.count
+
+
+def test_every_free_parameter_moves_the_answers_and_every_inert_one_does_not():
+    from vibrofocus.simulation.parameters import apply_parameters
+
+    for name in available_hypotheses():
+        h = hypothesis(name)
+        base = h.start_model()
+        assert h.free_parameters, name
+        for r in h.free_parameters:
+            a, b = (_answers(h, apply_parameters(base, [r], [v])) for v in _two_values(h, r.name, r.index, r.lo, r.hi))
+            assert not all(np.array_equal(x, y) for x, y in zip(a, b)), (name, r.key)
+        for inert in h.inert_parameters():
+            assert inert not in {r.name for r in h.free_parameters}
+            a, b = (_answers(h, base.replace(**{inert: v})) for v in (0.0, 1.0))
+            assert all(np.array_equal(x, y) for x, y in zip(a, b)), (name, inert)  # bit-identical
+    assert "central_weight" in hypothesis("grid-peak").inert_parameters()
+    with pytest.raises(ValidationError, match="does nothing"):
+        dataclasses.replace(hypothesis("grid-peak"), free_parameters=hypothesis("v3-centroid").free_parameters)
+
+
+def test_the_shipped_fits_lie_inside_their_sourced_ranges():
+    from vibrofocus.simulation.parameters import read_parameters
+
+    for name in available_hypotheses():
+        h = hypothesis(name)
+        m = h.model()
+        for r, v in zip(h.free_parameters, read_parameters(m, h.free_parameters)):
+            assert r.lo <= v <= r.hi, (name, r.key, v)
+            assert r.source.strip()
+        # No sideways mean bias (no source gives one); along the arm at most the cited 3 mm.
+        assert m.bias_mean_m[0] == 0.0 and -3e-3 <= m.bias_mean_m[1] <= 0.0
+        # A reference tap (2 um) at most 20 dB above threshold: a threshold of 0.2 um or more.
+        assert m.sl_ref_db <= 20.0
 
 
 def test_level_reliability_grows_with_the_recruited_activity():

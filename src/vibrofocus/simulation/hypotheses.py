@@ -102,6 +102,19 @@ class Hypothesis:
             raise ValidationError(f"a hypothesis' name must be a word, got {self.name!r}")
         check_choice(self.readout, "readout", ("centroid", "grid-peak"))
         self.model()  # unknown parameter names fail here, at registration
+        inert = sorted({r.name for r in self.free_parameters} & set(self.inert_parameters()))
+        if inert:
+            raise ValidationError(f"hypothesis {self.name!r}: {', '.join(inert)} does nothing under it, so it cannot "
+                                  "be a free parameter")
+
+    def inert_parameters(self) -> tuple[str, ...]:
+        """Parameters of the model this hypothesis never reads (switching them changes no answer; tested).
+
+        ``central_weight`` moves the centroid's place only, so the ``grid-peak`` readout
+        never reads it; ``intensity_half_db`` is read by the intensity reliability only.
+        """
+        inert = ["central_weight"] if self.readout == "grid-peak" else []
+        return tuple(inert + ([] if self.intensity_reliability else ["intensity_half_db"]))
 
     def model(self) -> PerceptualModel:
         """The perceptual model with this hypothesis' fitted parameters.

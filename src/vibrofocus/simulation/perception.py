@@ -289,25 +289,25 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "grid_step_m": ("assumption", "half the 10 mm location pitch"),
     "band_hz": ("assumption", "the vibrotactile range; the U-curve weights within it"),
     "integration_s": ("assumption", "None: the whole stimulus (felt energy); short windows explored, not adopted"),
-    "sl_ref_db": ("fitted", "sensation level of the reference tap"),
+    "sl_ref_db": ("fitted", "sensation level of the reference tap; range from published thresholds for brief taps "
+                  "and the forearm"),
     "central_weight": ("fitted", "place coded from the actuators' delivered energies (the paper, Sec. IV: central coding)"),
     "conflict_gain": ("fitted", "form an assumption: cues that disagree add uncertainty (Körding et al. 2007)"),
-    "funneling_exponent": ("fitted", "1 is the energy law (Alles 1970; Israr & Poupyrev 2011)"),
+    "funneling_exponent": ("fitted", "0.5 the linear, 1 the energy law (Alles 1970; Israr & Poupyrev 2011)"),
     "threshold_sd_db": ("assumption", "spread of detection thresholds across people"),
     "acuity_sd_m": ("fitted", "poor localization on the mid-forearm (Cholewiak & Collins 2003)"),
     "spread_gain": ("fitted", "diffuse phantoms are localized worse (Park & Choi 2018)"),
     "prior_sd_m": ("fitted", "strength of the pull to the centre"),
-    "bias_mean_m": ("source + fitted", "y toward the elbow (Cholewiak et al. 2020); sizes fitted"),
+    "bias_mean_m": ("source + fitted", "y toward the elbow, at most 3 mm (Cholewiak et al. 2020); x 0 (no source)"),
     "bias_sd_m": ("fitted", "spread of the participants' biases"),
     "select_kappa": ("fitted", "Study 2 criterion"),
     "select_log_sd": ("fitted", "Study 2 per-trial jitter of the criterion"),
-    "unfused_per_m": ("fitted", "form an assumption: conflicting cues are not fused but felt apart (Körding et al. "
-                      "2007); 0 (off) in the shipped fits, three fits with it are documented, not adopted"),
-    "unfused_jump_m": ("fitted", "form an assumption: how far away an unfused tap is felt (used only when on)"),
-    "unfused_width": ("fitted", "how much wider an unfused trial's selection is (used only when on)"),
-    "conflict_awareness": ("fitted", "form an assumption: the selection's width reads the trial's own cue "
-                           "discrepancy (confidence from sensed uncertainty, Adler & Ma 2018); 0 (off): v3's expected "
-                           "width"),
+    "unfused_per_m": ("assumption", "off (0) under every shipped hypothesis; form: conflicting cues felt apart "
+                      "(Körding et al. 2007); explored, not adopted (docs/history-simulated-participants.md)"),
+    "unfused_jump_m": ("assumption", "how far away an unfused tap is felt (used only when unfused_per_m > 0)"),
+    "unfused_width": ("assumption", "how much wider an unfused trial's selection is (used only when unfused_per_m > 0)"),
+    "conflict_awareness": ("assumption", "off (0) under every shipped hypothesis; form: the selection's width reads "
+                           "the trial's own cue discrepancy (Adler & Ma 2018); explored, not adopted"),
     "intensity_half_db": ("fitted", "intensity hypothesis only: level at which localization variance doubles "
                           "(weak taps localized less consistently, Steenbergen et al. 2014)"),
     "rt_median_s": ("assumption", "response times (not analysed)"),

@@ -313,8 +313,8 @@ def ppc_markdown(result: Mapping[str, Any]) -> str:
         paper = "inside" if t in FIG6_INSIDE else "outside"
         head.append(f"| Study 1 answers, target {t} (Fig. 6: mean {paper} the cell) | {paper} | "
                     + " | ".join(cells) + " |")
-    head += ["", f"Default by the rule written before the check (`vibrofocus.simulation.ppc`): **{result['default']}**. "
-             + (result["statement"][0].upper() + result["statement"][1:]) + "."]
+    head += ["", f"Default by the rule written before the check (`vibrofocus.simulation.ppc`): **{result['default']}**; "
+             f"{result['statement']}."]
     return "\n".join(head)
 
 
