@@ -386,7 +386,9 @@ INTENSITY_RANGE = _P(
     "intensity_half_db", -10.0, 30.0,
     "assumption of size: the level at which localization variance doubles lies within the paper's stimuli's "
     "levels; the form (variance falls, answers contract less toward the centre, as the intensity grows) is "
-    "Steenbergen et al., Exp. Brain Res. 232(2):597-607, 2014, abstract")
+    "'Tactile localization depends on stimulus intensity', Exp. Brain Res. 232(2):597-607, 2014, abstract; Brooks, "
+    "Seizova-Cajic & Taylor, J. Neurophysiol. 2019, doi:10.1152/jn.00189.2018, summary: weak touches on the "
+    "forearm are localized more variably and compressed")
 #: Free under every hypothesis: the participants' population and the Study 2 criterion.
 _COMMON = (SL_REF_RANGE, FUNNELING_RANGE, CONFLICT_RANGE, *ACUITY_RANGES, *SPREAD_RANGES, *PRIOR_RANGES,
            *BIAS_RANGES, *SELECT_RANGES)
@@ -418,7 +420,9 @@ _builtin(
     free_parameters=(CENTRAL_RANGE, *_COMMON, INTENSITY_RANGE),
     title="v3's centroid, localized more precisely (and selected narrower) the more intense the tap is felt",
     sources="tactile localization on the lower arm becomes more consistent and less contracted toward the "
-            "centre as intensity grows (Steenbergen et al., Exp. Brain Res. 232(2):597-607, 2014); at the "
+            "centre as intensity grows ('Tactile localization depends on stimulus intensity', Exp. Brain Res. "
+            "232(2):597-607, 2014; mechanical touches on the forearm: Brooks, Seizova-Cajic & Taylor, J. Neurophysiol. "
+            "2019); at the "
             "paper's levels the inverse filter delivers more at the target than funneling (the simulated arm); "
             "the form, reliability 1 / (1 + 10^((h - L) / 10)) of the level L, is an assumption",
 )

@@ -216,8 +216,8 @@ class PerceptualModel:
         Under the ``intensity`` hypothesis only: the sensation level (dB SL, of the most
         intense felt point) at which the sensed position's noise variance is doubled;
         reliability ``1 / (1 + 10**((intensity_half_db - L) / 10))``. Weaker taps are
-        localized less consistently and pulled more to the centre (Steenbergen et al.
-        2014, Exp. Brain Res. 232(2):597-607, doi:10.1007/s00221-013-3768-x). *Assumption*
+        localized less consistently and pulled more to the centre ("Tactile localization depends on
+        stimulus intensity", Exp. Brain Res. 232(2):597-607, 2014; Brooks et al., J. Neurophysiol. 2019). *Assumption*
         of the form; size *fitted*. Inert under every other hypothesis.
     conflict_awareness : float
         ``lambda``: how the Study 2 selection reads the trial's own cue discrepancy. 0
@@ -309,7 +309,7 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "conflict_awareness": ("assumption", "off (0) under every shipped hypothesis; form: the selection's width reads "
                            "the trial's own cue discrepancy (Adler & Ma 2018); explored, not adopted"),
     "intensity_half_db": ("fitted", "intensity hypothesis only: level at which localization variance doubles "
-                          "(weak taps localized less consistently, Steenbergen et al. 2014)"),
+                          "(weak taps localized less consistently, Exp. Brain Res. 2014; Brooks et al. 2019)"),
     "rt_median_s": ("assumption", "response times (not analysed)"),
     "rt_log_sd": ("assumption", "response times (not analysed)"),
     "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),
