@@ -228,21 +228,6 @@ def test_a_hypothesis_must_be_a_word_with_a_known_readout():
 
 
 @pytest.mark.slow
-def test_the_documented_hypotheses_table_is_that_of_the_code():
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[2]
-    res = subprocess.run([sys.executable, str(root / "scripts" / "hypotheses_table.py"), "--print"],
-                         capture_output=True, text=True, timeout=900, check=True)
-    page = (root / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
-    blocks = [page.split(f"<!-- {name}:start -->\n", 1)[1].split(f"\n<!-- {name}:end -->", 1)[0]
-              for name in ("hypotheses-measured", "hypotheses-findings")]
-    assert "\n\n".join(blocks) == res.stdout.rstrip("\n")
-
-
-@pytest.mark.slow
 def test_the_recorded_held_out_losses_and_so_the_default_are_reproduced():
     from vibrofocus.simulation.fitting import HELD_OUT_SEEDS, loss
     from vibrofocus.simulation.paper import seed_statistics

@@ -81,3 +81,18 @@ def test_the_shipped_default_is_the_checks_and_every_label_says_what_the_check_f
     for name in available_hypotheses():
         label = hypothesis(name).label()
         assert (NONE_REPRODUCES in label) == (not check["default_reproduces"]) and label.endswith("not data")
+
+
+def test_the_documented_check_is_the_recorded_one():
+    from pathlib import Path
+
+    page = (Path(__file__).resolve().parents[2] / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
+    block = page.split("<!-- ppc-table:start -->\n", 1)[1].split("\n<!-- ppc-table:end -->", 1)[0]
+    rows = [line.split(" | ") for line in block.splitlines() if line.startswith("| ")]
+    names = [c.strip("` |") for c in rows[0][2:]]
+    inside = next(r for r in rows if r[0] == "| **inside, of 7**")
+    check = hypothesis_fits()["ppc"]
+    assert set(names) == set(check["hypotheses"])
+    assert {n: int(c.strip("* |")) for n, c in zip(names, inside[2:])} == {
+        n: c["inside"] for n, c in check["hypotheses"].items()}
+    assert f"**{DEFAULT_HYPOTHESIS}**; {check['statement']}." in block

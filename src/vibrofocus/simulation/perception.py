@@ -163,7 +163,7 @@ class PerceptualModel:
         ``None`` (default) integrates the whole stimulus: the felt *energy* the model was
         fitted with. Short windows (a few ms) make the intensity follow the displacement's
         peak, which favours a focus that is sharp in time. *Assumption*, explored in
-        docs/simulated-participants.md ("What the model does not reproduce").
+        docs/history-simulated-participants.md ("What the model does not reproduce").
     sl_ref_db : float
         Sensation level of the reference tap (2 µm peak Ricker), dB. *Fitted.*
     central_weight : float
