@@ -408,7 +408,7 @@ _builtin(
             f"({PEAK_SOFTNESS_DB:g} dB) and the area (the locations plus {GRID_MARGIN_M * 1e3:g} mm) are assumptions",
 )
 _builtin(
-    "level-reliability", version="2.0", readout="centroid", level_reliability=True,
+    "level-reliability", version="4.0", readout="centroid", level_reliability=True,
     free_parameters=(CENTRAL_RANGE, *_COMMON),
     title="v3's centroid, with a reliability that grows with the recruited activity, so weak taps are pulled "
           "to the centre",
