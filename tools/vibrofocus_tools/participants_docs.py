@@ -51,14 +51,15 @@ def parameters_markdown() -> str:
              "mean bias (x across the arm, y along it).", "",
              "| parameter | " + " | ".join(f"`{n}`" for n in names) + " | kind | note |",
              "|---|" + "---|" * (len(names) + 2)]
+    free_somewhere = {r.name for h in hs.values() for r in h.free_parameters}
+    same = [k for k in PARAMETER_SOURCES if k not in free_somewhere
+            and len({repr(getattr(models[n], k)) for n in names}) == 1]
     for name, (kind, note) in PARAMETER_SOURCES.items():
-        if name.startswith("rt_") or name in ("grid_half_width_m", "grid_step_m", "band_hz", "integration_s"):
-            continue  # the same under every hypothesis; listed after the table
-        lines.append(f"| `{name}` | " + " | ".join(_cell(hs[n], models[n], name) for n in names) + f" | {kind} | {note} |")
-    fixed = ", ".join(f"`{k}` = {_value(getattr(PerceptualModel(), k))}"
-                      for k in PARAMETER_SOURCES if k.startswith("rt_") or k in ("grid_half_width_m", "grid_step_m",
-                                                                                  "band_hz", "integration_s"))
-    lines += ["", f"The same under every hypothesis (assumptions): {fixed}.", "",
+        if name not in same:
+            lines.append(f"| `{name}` | " + " | ".join(_cell(hs[n], models[n], name) for n in names)
+                         + f" | {kind} | {note} |")
+    fixed = "; ".join(f"`{k}` = {_value(getattr(models[names[0]], k))} ({PARAMETER_SOURCES[k][1]})" for k in same)
+    lines += ["", f"Fixed, the same under every hypothesis: {fixed}.", "",
               "The free parameters' ranges and their sources:", "",
               "| parameter | range | source |", "|---|---|---|"]
     seen = {}
