@@ -36,7 +36,8 @@ import numpy as np
 
 from ..errors import ValidationError
 from .bank import FeatureBank, default_bank, simulate_cell_means
-from .perception import posterior_ratio_rule, psychophysics_data
+from .fitting.objective import targets
+from .perception import posterior_ratio_rule
 from .power import directional_shares, study_statistics
 
 __all__ = ["LEVEL", "MIN_INSIDE", "NONE_REPRODUCES", "PPC_SEEDS", "STATISTICS", "FIG6_INSIDE", "reproduces",
@@ -83,21 +84,8 @@ def choose_default(checks: Mapping[str, Mapping[str, Any]]) -> str:
 PPC_SEEDS = range(3000, 3200)
 
 
-def _statistics() -> tuple[tuple[str, str, float], ...]:
-    p = psychophysics_data()["paper_statistics"]
-    return (
-        ("s1_location_F", "Study 1 location F", p["study1_location"]["F"]),
-        ("s1_location_eps", "Study 1 location GG epsilon", p["study1_location"]["ddof1"] / 8.0),
-        ("s1_method_F", "Study 1 method F", p["study1_method"]["F"]),
-        ("s1_interaction_F", "Study 1 interaction F", p["study1_interaction"]["F"]),
-        ("s2_location_chi2", "Study 2 location chi2(8)", p["study2_location"]["chi2"]),
-        ("s2_method_chi2", "Study 2 method chi2(2)", p["study2_method"]["chi2"]),
-        ("s2_reduction", "Study 2 reduction of points, inverse vs funneling", p["study2_method"]["reduction"]),
-    )
-
-
 #: The paper's 7 statistics: (key of :func:`~vibrofocus.simulation.power.study_statistics`, label, value).
-STATISTICS: tuple[tuple[str, str, float], ...] = _statistics()
+STATISTICS: tuple[tuple[str, str, float], ...] = tuple(targets())
 #: Locations (1-9) whose mean perceived position lies inside the target's grid cell in the
 #: paper's Fig. 6 (Sec. III.B); not so for the other five.
 FIG6_INSIDE = (4, 5, 7, 8)
