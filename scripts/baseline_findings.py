@@ -6,7 +6,7 @@ held under the simulated participants of c313a27 (perceptual model v3, every met
 equal peak drive), on the same seeds. That model is no longer in the code, so this script
 runs that commit's own ``scripts/check_findings.py`` (its ``findings``, model and feature
 bank) from a checkout of it and writes the counts, with their provenance, to
-``scripts/fits/baseline-c313a27.json``, which ``scripts/hypotheses_table.py`` shows beside
+``scripts/fits/baseline-c313a27.json``, which ``scripts/hypotheses_table.py`` prints beside
 every hypothesis (a MODEL, not data):
 
     git worktree add /tmp/c313a27 c313a27

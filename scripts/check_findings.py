@@ -15,8 +15,8 @@ finding, its count under the issue's baseline (the participants of commit c313a2
 seeds: ``scripts/fits/baseline-c313a27.json``) and an exact McNemar test of the paired
 difference, so that a shortfall of a few studies can be told from chance. The default seeds are the
 fit's held-out seeds (``vibrofocus.simulation.fitting.HELD_OUT_SEEDS``); the fit uses seeds from 1000
-(``FIT_SEEDS``). ``scripts/hypotheses_table.py`` writes the same check for every
-hypothesis into docs/simulated-participants.md.
+(``FIT_SEEDS``). ``scripts/hypotheses_table.py`` prints the same check for every
+hypothesis.
 """
 
 from __future__ import annotations

@@ -36,8 +36,8 @@ with the default hypothesis: the one of lowest held-out loss under the search's 
 fit file is checked (keys, types, finite numbers, known parameters), and a set that does not
 cover every hypothesis is refused, before anything is computed or written.
 ``report`` prints the same for the defaults (or a fit file) on the table's seeds.
-``table`` evaluates the default hypothesis on seeds 0..N-1 and writes the side-by-side table,
-the parameters, the residuals and the power table between their markers in
+``table`` writes the parameters of every hypothesis, the fits' budget, the statement of the
+posterior-predictive check and the power table between their markers in
 ``docs/simulated-participants.md`` (atomically); ``--check`` only compares.
 
 The work is done by :mod:`vibrofocus.simulation.fitting` (objective, search, adopt) and
@@ -81,6 +81,8 @@ def main() -> int:
     s.add_argument("--weight", action="append", default=[], metavar="KEY=W",
                    help="weight of one matched statistic's term (e.g. s1_interaction_F=3); repeatable")
     s.add_argument("--hypothesis", default=None, help="the hypothesis to fit (default: the default one)")
+    s.add_argument("--fit-studies", type=int, default=len(FIT_SEEDS),
+                   help=f"judge candidates on the first N fit seeds (default all {len(FIT_SEEDS)})")
     s.add_argument("--unfused", action="store_true",
                    help="search the unfused percepts too (off in the shipped fits; docs/simulated-participants.md, "
                         "\"Unfused percepts: three fits, not adopted\")")
@@ -92,6 +94,8 @@ def main() -> int:
                    help="fit files written by search, one or more random paths per hypothesis (the same for each)")
     a.add_argument("--version", action="append", default=[], metavar="NAME=V",
                    help="version of a hypothesis' fitted model (bump it when its answers change); repeatable")
+    a.add_argument("--fit-studies", type=int, default=len(FIT_SEEDS),
+                   help="the fit seeds the paths were judged on: the first N (as given to search)")
     a.add_argument("--out", type=Path, default=FITS_FILE,
                    help="where to write the fits (default: the shipped simulation/data/hypotheses_fit.json)")
     r = sub.add_parser("report", help="the paper beside the model, with residuals")
@@ -123,13 +127,14 @@ def run(ap: argparse.ArgumentParser, args: argparse.Namespace) -> int:
         bank = FeatureBank.load(args.bank) if args.bank else None
         window = None if args.integration_ms is None else args.integration_ms * 1e-3
         best = search(args.n_eval, args.n_refine, args.out, args.start, args.rng_seed, weights, central_range,
-                      bank, window, args.hypothesis, args.unfused, args.aware, report=report)
+                      bank, window, args.hypothesis, args.unfused, args.aware, report=report,
+                      fit_seeds=FIT_SEEDS[:args.fit_studies])
         for title, seeds in ((f"fit seeds {FIT_SEEDS.start}-{FIT_SEEDS.stop - 1}", FIT_SEEDS), ("table seeds 0-19", range(20)),
                              (f"held-out seeds {HELD_OUT_SEEDS.start}-{HELD_OUT_SEEDS.stop - 1}", HELD_OUT_SEEDS)):
             print(f"\n{title}:\n" + residuals(seed_statistics(best, seeds, bank=bank, hypothesis=args.hypothesis)))
         return 0
     if args.cmd == "adopt":
-        adopt(args.fits, args.version, out=args.out, report=report)
+        adopt(args.fits, args.version, out=args.out, report=report, fit_seeds=FIT_SEEDS[:args.fit_studies])
         return 0
     if args.cmd == "report":
         model = fit_model(read_fit(args.fit)) if args.fit is not None else hypothesis(args.hypothesis).model()

@@ -22,8 +22,8 @@ def test_power_writes_table_plot_and_json(tmp_path):
     # The paper's directional claims beside the omnibus tests, for every hypothesis.
     assert "inverse error below funneling" in " ".join(res.output.split())
     table = pd.read_csv(out / "power.csv")
-    assert set(table["hypothesis"]) == {"v3-centroid", "grid-peak", "level-reliability"}
-    assert set(table["n_participants"]) == {4, 6} and len(table) == 3 * 2 * (7 + 2 + 2)
+    assert set(table["hypothesis"]) == {"v3-centroid", "grid-peak", "level-reliability", "intensity"}
+    assert set(table["n_participants"]) == {4, 6} and len(table) == 4 * 2 * (7 + 2 + 2)
     assert {"s1_inverse_below", "s2_inverse_fewer", "s1_inverse_above", "s2_inverse_more"} <= set(table["test"])
     report = json.loads((out / "power.json").read_text())
     directions = report["directions"]

@@ -73,7 +73,7 @@ def test_search_writes_a_fit_that_read_fit_accepts_and_repeats_it(tmp_path, tiny
                        name="grid-peak", fit_seeds=FIT, n_participants=N, report=lines.append)
     assert a.read_bytes() == (tmp_path / "again.json").read_bytes()  # seeded: the same path
     fit = fitting.read_fit(a)
-    assert fit["budget"] == {"n_eval": 2, "n_refine": 2, "rng_seed": 7, "start": None}
+    assert fit["budget"] == {"n_eval": 2, "n_refine": 2, "rng_seed": 7, "within_ranges": True, "start": None}
     assert fit["fit_seeds"] == [0, 2] and fit["hypothesis"] == "grid-peak" and fit["bank_forearms"] == 3
     assert fitting.fit_model(fit) == b
     np.testing.assert_allclose(fit["loss"], fitting.loss(seed_statistics(b, FIT, n_participants=N, bank=tiny_bank,
@@ -168,7 +168,7 @@ def nothing_computed(monkeypatch):
 @pytest.mark.parametrize("case", list(BAD_FITS))
 def test_adopt_refuses_a_bad_fit_file_before_anything_is_computed_or_written(case, tmp_path, nothing_computed):
     fit, message = BAD_FITS[case]
-    good = [ROOT / "scripts" / "fits" / "paths" / f"{name}-2027-2028.json" for name in available_hypotheses()]
+    good = [ROOT / "scripts" / "fits" / "paths" / f"{name}-2031.json" for name in available_hypotheses()]
     bad = _write(tmp_path, "bad.json", fit)
     out = tmp_path / "fits.json"
     with pytest.raises(ValidationError, match="bad.json") as err:
@@ -178,7 +178,7 @@ def test_adopt_refuses_a_bad_fit_file_before_anything_is_computed_or_written(cas
 
 
 def test_adopt_refuses_a_set_that_leaves_out_a_hypothesis(tmp_path, nothing_computed):
-    paths = [ROOT / "scripts" / "fits" / "paths" / f"{name}-2027-2028.json" for name in available_hypotheses()]
+    paths = [ROOT / "scripts" / "fits" / "paths" / f"{name}-2031.json" for name in available_hypotheses()]
     out = tmp_path / "fits.json"
     for left_out in range(len(paths)):
         with pytest.raises(ValidationError, match=f"no fit of the hypothesis\\(es\\) {available_hypotheses()[left_out]}"):

@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -25,8 +26,8 @@ def bump(xy, peak, width=3e-3):
     return peak * np.exp(-np.sum((GRID - np.asarray(xy)) ** 2, axis=1) / (2 * width**2)) + 1e-6
 
 
-def test_the_registry_names_three_cited_hypotheses_and_refuses_unknown_ones():
-    assert set(available_hypotheses()[:3]) == {"v3-centroid", "grid-peak", "level-reliability"}
+def test_the_registry_names_four_cited_hypotheses_and_refuses_unknown_ones():
+    assert set(available_hypotheses()[:4]) == {"v3-centroid", "grid-peak", "level-reliability", "intensity"}
     assert hypothesis().name == DEFAULT_HYPOTHESIS == available_hypotheses()[0]
     for name in available_hypotheses():
         h = hypothesis(name)
@@ -88,6 +89,65 @@ def test_the_fast_path_records_the_share_of_taps_felt():
     assert faint.felt.shape == (3,) and faint.felt.max() < 0.5
 
 
+def test_intensity_reliability_grows_with_the_felt_level_and_leaves_the_place():
+    h = hypothesis("intensity")
+    quiet, loud = bump((0.0, 0.0), 0.1), bump((0.0, 0.0), 1.0)  # -10 dB and 0 dB re the reference tap
+    model = MODEL.replace(sl_ref_db=10.0, intensity_half_db=10.0)
+    per = h.percepts(np.stack([quiet, loud]), GRID, model, TRAITS, locations_xy=LOCATIONS)
+    # 0 dB SL and 10 dB SL against a half point of 10 dB SL.
+    np.testing.assert_allclose(per.reliability, [1 / 11, 1 / 2], rtol=1e-4)  # the bump sits on 1e-6
+    base = hypothesis("v3-centroid").percepts(np.stack([quiet, loud]), GRID, model, TRAITS, locations_xy=LOCATIONS)
+    np.testing.assert_array_equal(per.position_m, base.position_m)
+    assert base.reliability is None
+
+
+def _two_values(h, name, index, lo, hi):
+    """Two in-range values of a free parameter, a population range (lo, hi) kept in order."""
+    if index is None or name == "bias_mean_m":  # a pair that is a point (x, y), not a range
+        return lo, hi
+    other = getattr(h.start_model(), name)[1 - index]
+    return (lo, min(hi, other)) if index == 0 else (max(lo, other), hi)
+
+
+def _answers(h, model):
+    a = simulate_cell_means(3, np.random.default_rng([8, 1]), bank=default_bank(), model=model, hypothesis=h)
+    return a.error_mm, a.count
+
+
+def test_every_free_parameter_moves_the_answers_and_every_inert_one_does_not():
+    from vibrofocus.simulation.parameters import apply_parameters
+
+    for name in available_hypotheses():
+        h = hypothesis(name)
+        base = h.start_model()
+        assert h.free_parameters, name
+        for r in h.free_parameters:
+            a, b = (_answers(h, apply_parameters(base, [r], [v])) for v in _two_values(h, r.name, r.index, r.lo, r.hi))
+            assert not all(np.array_equal(x, y) for x, y in zip(a, b)), (name, r.key)
+        for inert in h.inert_parameters():
+            assert inert not in {r.name for r in h.free_parameters}
+            a, b = (_answers(h, base.replace(**{inert: v})) for v in (0.0, 1.0))
+            assert all(np.array_equal(x, y) for x, y in zip(a, b)), (name, inert)  # bit-identical
+    assert "central_weight" in hypothesis("grid-peak").inert_parameters()
+    with pytest.raises(ValidationError, match="does nothing"):
+        dataclasses.replace(hypothesis("grid-peak"), free_parameters=hypothesis("v3-centroid").free_parameters)
+
+
+def test_the_shipped_fits_lie_inside_their_sourced_ranges():
+    from vibrofocus.simulation.parameters import read_parameters
+
+    for name in available_hypotheses():
+        h = hypothesis(name)
+        m = h.model()
+        for r, v in zip(h.free_parameters, read_parameters(m, h.free_parameters)):
+            assert r.lo <= v <= r.hi, (name, r.key, v)
+            assert r.source.strip()
+        # No sideways mean bias (no source gives one); along the arm at most the cited 3 mm.
+        assert m.bias_mean_m[0] == 0.0 and -3e-3 <= m.bias_mean_m[1] <= 0.0
+        # A reference tap (2 um) at most 20 dB above threshold: a threshold of 0.2 um or more.
+        assert m.sl_ref_db <= 20.0
+
+
 def test_level_reliability_grows_with_the_recruited_activity():
     h = hypothesis("level-reliability")
     quiet, loud = bump((0.0, 0.0), 3.0), bump((0.0, 0.0), 300.0)
@@ -128,7 +188,7 @@ def test_a_hypothesis_model_is_the_defaults_changed_by_its_parameters():
     assert unfitted.model() == PerceptualModel() and "not refitted" in unfitted.label()
 
 
-def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_and_the_default_holds_best():
+def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_inside_the_ranges():
     fits = hypothesis_fits()
     shipped = fits["hypotheses"]
     assert set(shipped) == set(available_hypotheses())
@@ -141,9 +201,10 @@ def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_and_the_d
         assert json.dumps(f["budget"], sort_keys=True) in paths[next(iter(paths))]
     assert len({json.dumps(f["weights"], sort_keys=True) for f in shipped.values()}) == 1
     assert len({tuple(f["fit_seeds"]) for f in shipped.values()}) == 1
-    # The default: the lowest held-out loss under the objective every hypothesis was fitted to.
-    held = {n: f["loss_held_out_search_weights"] for n, f in shipped.items()}
-    assert DEFAULT_HYPOTHESIS == fits["default"] == min(held, key=held.get)
+    # The default: the posterior-predictive check's choice (tests/simulation/test_ppc.py).
+    assert DEFAULT_HYPOTHESIS == fits["default"]
+    # Searched inside the free parameters' ranges, every finding weighted alike.
+    assert all(f["budget"].get("within_ranges") and f["weights"] == {} for f in shipped.values())
     for name, fit in shipped.items():
         h = hypothesis(name)
         assert h.fitted and h.version == fit["version"] and "fitted at paper levels" in h.label()
@@ -152,13 +213,17 @@ def test_the_shipped_fits_are_at_the_banks_levels_with_the_same_budget_and_the_d
         assert set(range(*fit["held_out_seeds"])).isdisjoint(range(*fit["fit_seeds"]))
 
 
-def test_under_every_shipped_hypothesis_the_participants_feel_the_papers_taps():
+def test_under_every_shipped_hypothesis_the_participants_feel_most_of_the_papers_taps():
     # The paper's participants answered every tap (no "not felt" answer, no missed taps
-    # reported): a fit whose participants guess on unfelt taps is refused by its objective.
+    # reported). At the sensation levels the sourced range allows (at most 20 dB SL) some of
+    # the paper's weakest taps go unfelt; the fits' objective keeps most felt, and the docs
+    # say so (Limits).
     bank = default_bank()
     for name in available_hypotheses():
         felt = simulate_cell_means(20, np.random.default_rng(11), bank=bank, hypothesis=name).felt
-        assert felt.mean() >= 0.99, (name, felt.mean())
+        assert felt.mean() >= 0.85, (name, felt.mean())
+    page = (Path(__file__).resolve().parents[2] / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
+    assert "some of the paper's weakest taps go unfelt" in " ".join(page.split())
 
 
 def test_a_hypothesis_must_be_a_word_with_a_known_readout():
@@ -166,21 +231,6 @@ def test_a_hypothesis_must_be_a_word_with_a_known_readout():
         Hypothesis(name="two words", version="1", title="t", sources="s")
     with pytest.raises(ValidationError, match="readout"):
         Hypothesis(name="x", version="1", title="t", sources="s", readout="guess")
-
-
-@pytest.mark.slow
-def test_the_documented_hypotheses_table_is_that_of_the_code():
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    root = Path(__file__).resolve().parents[2]
-    res = subprocess.run([sys.executable, str(root / "scripts" / "hypotheses_table.py"), "--print"],
-                         capture_output=True, text=True, timeout=900, check=True)
-    page = (root / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
-    blocks = [page.split(f"<!-- {name}:start -->\n", 1)[1].split(f"\n<!-- {name}:end -->", 1)[0]
-              for name in ("hypotheses-measured", "hypotheses-findings")]
-    assert "\n\n".join(blocks) == res.stdout.rstrip("\n")
 
 
 @pytest.mark.slow
@@ -279,3 +329,27 @@ def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_fil
         np.testing.assert_allclose(kept["loss_fit"], fits[name]["loss_fit"], rtol=1e-3)
     held = {n: f["loss_held_out_search_weights"] for n, f in written["hypotheses"].items()}
     assert written["default"] == min(held, key=held.get)
+
+
+def test_the_readout_sets_most_of_the_study1_direction_as_the_docs_say():
+    # docs/simulated-participants.md ("Where the Study 1 direction comes from"): read as the
+    # whole felt field's centroid, v3-centroid's fitted participants find funneling
+    # significantly better (the reverse of the paper) in nearly every study; the same
+    # participants reading the grid peak instead do so in far fewer. Switching the readout
+    # changes the direction's share.
+    from vibrofocus.simulation.paper import seed_statistics
+
+    centroid = hypothesis("v3-centroid")
+    peak = dataclasses.replace(centroid, name="v3-read-as-grid-peak", readout="grid-peak", free_parameters=())
+
+    def shares(h):
+        st = seed_statistics(centroid.model(), range(9400, 9412), hypothesis=h)
+        return (float(np.mean([s["s1_inverse_below_p"] < 0.05 for s in st])),
+                float(np.mean([s["s1_inverse_above_p"] < 0.05 for s in st])))
+
+    paper, reverse = shares(centroid)
+    assert reverse >= 0.8 and paper == 0.0, (paper, reverse)
+    paper_peak, reverse_peak = shares(peak)
+    assert reverse_peak <= reverse - 0.3 and paper_peak == 0.0, (paper_peak, reverse_peak)
+    page = (Path(__file__).resolve().parents[2] / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
+    assert "the readout sets most of the direction" in " ".join(page.split())

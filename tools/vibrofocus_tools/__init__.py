@@ -15,8 +15,10 @@ lines over them) and the tests, and read and write files of a checkout (docs pag
     Issue 42's baseline (the participants of commit c313a27) and the paired test against it.
 :mod:`.markers`
     The generated blocks of the docs pages.
-:mod:`.hypotheses_tables`, :mod:`.participants_docs`
-    The tables of docs/simulated-participants.md.
+:mod:`.participants_docs`
+    The generated tables of docs/simulated-participants.md.
+:mod:`.hypotheses_tables`
+    The paper's findings under every hypothesis (``scripts/hypotheses_table.py``).
 :mod:`.selection_rules`
     Other Study 2 selection rules on the same percepts (``scripts/selection_rules.py``).
 :mod:`.reference_designs`

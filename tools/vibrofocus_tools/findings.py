@@ -6,7 +6,7 @@ the fit draw them), and analysed HERE with pingouin and scipy only, independentl
 (tests/tools/test_findings.py checks that this module imports neither). The findings are
 those of de Vlam et al. (IEEE ToH 16(4), 2023, doi:10.1109/TOH.2023.3270362), Sec. III.B-C.
 ``scripts/check_findings.py`` prints them for a range of seeds; ``scripts/hypotheses_table.py``
-writes them for every hypothesis into docs/simulated-participants.md.
+prints them for every hypothesis.
 """
 
 from __future__ import annotations

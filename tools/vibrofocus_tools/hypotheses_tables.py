@@ -1,4 +1,4 @@
-"""The hypotheses' tables of docs/simulated-participants.md (Hypotheses; a MODEL, not data).
+"""The hypotheses' measured tables, printed by ``scripts/hypotheses_table.py`` (a MODEL, not data).
 
 Every registered hypothesis, with its fitted parameters, simulates the same 40 studies of
 20 participants (the fit's held-out seeds, ``vibrofocus.simulation.fitting.HELD_OUT_SEEDS``)
@@ -29,9 +29,7 @@ from vibrofocus.simulation.power import study_statistics
 
 from .baseline import HEADLINE_BAR, HEADLINE_KEYS, baseline
 from .findings import ROWS, held_out
-from .markers import ROOT
 
-PAGE = ROOT / "docs" / "simulated-participants.md"
 SEEDS = HELD_OUT_SEEDS
 N = 20
 

@@ -1,17 +1,16 @@
-"""The tables of docs/simulated-participants.md made from the fit (a MODEL, not data).
+"""The tables of docs/simulated-participants.md made from the fits (a MODEL, not data).
 
-:func:`table` evaluates the default hypothesis on seeds 0..N-1 and writes the side-by-side
-table with the paper, the parameters of every hypothesis, the residuals and the power
-table between their markers in ``docs/simulated-participants.md`` (atomically); with
-``check`` it only compares (``scripts/fit_participants.py table``).
+:func:`table` writes the parameters of every hypothesis, the fits' budget, the
+posterior-predictive check's statement and the power table between their markers in
+``docs/simulated-participants.md`` (atomically); with ``check`` it only compares
+(``scripts/fit_participants.py table``). The check's own table is written by
+``scripts/ppc_table.py --docs``.
 """
 
 from __future__ import annotations
 
 from vibrofocus.io import write_text
-from vibrofocus.simulation.fitting import residuals
 from vibrofocus.simulation.hypotheses import hypothesis
-from vibrofocus.simulation.paper import compare, comparison_markdown, seed_statistics
 from vibrofocus.simulation.perception import MODEL_LABEL, PARAMETER_SOURCES, PerceptualModel
 
 from .markers import ROOT, replace_between_markers
@@ -25,20 +24,50 @@ def _value(v) -> str:
     return f"{v:.4g}" if isinstance(v, float) else str(v)
 
 
+def _cell(h, model, name: str) -> str:
+    """One hypothesis' value of a parameter, marked free (with its range), inert or fixed."""
+    free = {r.index: r for r in h.free_parameters if r.name == name}
+    value = getattr(model, name)
+    if name in h.inert_parameters():
+        return f"{_value(value)} (inert)"
+    if not free:
+        return _value(value)
+    if isinstance(value, tuple):
+        return "(" + ", ".join(f"**{_value(v)}**" if i in free else _value(v) for i, v in enumerate(value)) + ")"
+    return f"**{_value(value)}**"
+
+
 def parameters_markdown() -> str:
-    """The parameters of every hypothesis' fitted model with their kind and note, as markdown."""
+    """Every hypothesis' parameters, which are free (fitted within a sourced range), and the ranges, as markdown."""
     from vibrofocus.simulation.hypotheses import available_hypotheses
 
     names = available_hypotheses()
-    models = {h: hypothesis(h).model() for h in names}
-    lines = [f"*{MODEL_LABEL}.* Values of each hypothesis' model (`hypothesis(name).model()`: the defaults of "
-             "`PerceptualModel()` changed by the hypothesis' fit; SI units: m, s, dB, Hz); ranges (lo, hi) are "
-             "uniform across simulated participants.", "",
-             "| parameter | " + " | ".join(f"`{h}`" for h in names) + " | `PerceptualModel()` | kind | note |",
-             "|---|" + "---|" * (len(names) + 3)]
+    hs = {n: hypothesis(n) for n in names}
+    models = {n: hs[n].model() for n in names}
+    lines = [f"*{MODEL_LABEL}.* Each hypothesis' model (`hypothesis(name).model()`; SI units: m, s, dB, Hz). "
+             "**Bold**: free under that hypothesis, fitted within its range (below); *inert*: the hypothesis never "
+             "reads it (switching it changes no answer, tested), so it is not fitted; others fixed. A pair (lo, hi) "
+             "is the uniform range of a trait across simulated participants, except `bias_mean_m`, the population's "
+             "mean bias (x across the arm, y along it).", "",
+             "| parameter | " + " | ".join(f"`{n}`" for n in names) + " | kind | note |",
+             "|---|" + "---|" * (len(names) + 2)]
+    free_somewhere = {r.name for h in hs.values() for r in h.free_parameters}
+    same = [k for k in PARAMETER_SOURCES if k not in free_somewhere
+            and len({repr(getattr(models[n], k)) for n in names}) == 1]
     for name, (kind, note) in PARAMETER_SOURCES.items():
-        values = [_value(getattr(models[h], name)) for h in names] + [_value(getattr(PerceptualModel(), name))]
-        lines.append(f"| `{name}` | " + " | ".join(values) + f" | {kind} | {note} |")
+        if name not in same:
+            lines.append(f"| `{name}` | " + " | ".join(_cell(hs[n], models[n], name) for n in names)
+                         + f" | {kind} | {note} |")
+    fixed = "; ".join(f"`{k}` = {_value(getattr(models[names[0]], k))} ({PARAMETER_SOURCES[k][1]})" for k in same)
+    lines += ["", f"Fixed, the same under every hypothesis: {fixed}.", "",
+              "The free parameters' ranges and their sources:", "",
+              "| parameter | range | source |", "|---|---|---|"]
+    seen = {}
+    for n in names:
+        for r in hs[n].free_parameters:
+            seen.setdefault(r.key, r)
+    for key, r in seen.items():
+        lines.append(f"| `{key}` | {r.lo:.4g} to {r.hi:.4g} | {r.source} |")
     return "\n".join(lines)
 
 
@@ -72,18 +101,44 @@ def power_markdown() -> str:
     return "\n".join(lines)
 
 
+def budget_markdown() -> str:
+    """The shipped fits' budget, seeds and losses (``hypotheses_fit.json``), as markdown."""
+    from vibrofocus.simulation.hypotheses import hypothesis_fits
+
+    fits = hypothesis_fits()["hypotheses"]
+    lines = ["| hypothesis | version | free parameters | random / refinement candidates (path seed) | fit seeds | "
+             "loss on the fit seeds | held-out seeds | loss on them |", "|---|---|---:|---|---|---:|---|---:|"]
+    for name, f in fits.items():
+        b = f["budget"]
+        lines.append(f"| `{name}` | {f['version']} | {len(hypothesis(name).free_parameters)} | {b['n_eval']} / "
+                     f"{b['n_refine']} ({b['rng_seed']}) | {f['fit_seeds'][0]}–{f['fit_seeds'][1] - 1} | "
+                     f"{f['loss_fit']:.2f} | {f['held_out_seeds'][0]}–{f['held_out_seeds'][1] - 1} | "
+                     f"{f['loss_held_out']:.2f} |")
+    return "\n".join(lines)
+
+
+def statement_markdown() -> str:
+    """What the posterior-predictive check found, in one paragraph (``hypotheses_fit.json``'s ``ppc``)."""
+    from vibrofocus.simulation.hypotheses import hypothesis_fits
+
+    fits = hypothesis_fits()
+    check = fits.get("ppc")
+    if not check:
+        return "*No posterior-predictive check is recorded with the shipped fits.*"
+    inside = ", ".join(f"{n} {c['inside']}" for n, c in check["hypotheses"].items())
+    return (f"**{check['statement'][0].upper() + check['statement'][1:]}.** The default, `{fits['default']}`, is "
+            f"the choice of the rule written before the check (\"The posterior-predictive check\"); the paper's 7 "
+            f"statistics inside each hypothesis' 90 % interval: {inside}.")
+
+
 def table(n_seeds: int, check: bool) -> int:
-    seeds = range(n_seeds)
-    stats = seed_statistics(None, seeds)
-    rows = compare(stats)
-    label = hypothesis().label()
-    resid = (f"`scripts/fit_participants.py report` ({label}; the default hypothesis, the table's {n_seeds} seeds; "
-             "model: median over seeds):\n\n```\n" + residuals(stats) + "\n```")
-    power = power_markdown()
+    """Write (or, with ``check``, compare) the generated blocks of docs/simulated-participants.md.
+
+    ``n_seeds`` is kept for the command line; the blocks no longer depend on it.
+    """
     blocks = {
-        PAGES["docs"]: {"participants-table": comparison_markdown(rows, seeds, label=label),
-                        "participants-parameters": parameters_markdown(), "fit-residuals": resid,
-                        "power-table": power},
+        PAGES["docs"]: {"participants-parameters": parameters_markdown(), "fit-budget": budget_markdown(),
+                        "ppc-statement": statement_markdown(), "power-table": power_markdown()},
     }
     stale = []
     for page, parts in blocks.items():
@@ -95,7 +150,7 @@ def table(n_seeds: int, check: bool) -> int:
             stale.append(page)
             if not check:
                 write_text(page, new, what="page")
-    print(blocks[PAGES["docs"]]["participants-table"])
+    print(blocks[PAGES["docs"]]["ppc-statement"])
     if check:
         print("up to date" if not stale else "out of date: " + ", ".join(map(str, stale)))
         return 1 if stale else 0

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from functools import lru_cache
 from importlib import resources
 from typing import Any, Mapping
 
@@ -26,12 +27,12 @@ import numpy as np
 
 from .._validation import check_choice
 from ..errors import ValidationError
-from .parameters import ParameterRange
+from .parameters import ParameterRange, apply_parameters, read_parameters
 from .perception import (MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts, felt_threshold,
                          funneling_weights, weighted_centre)
 
 __all__ = ["Hypothesis", "register_hypothesis", "hypothesis", "available_hypotheses", "DEFAULT_HYPOTHESIS",
-           "GRID_MARGIN_M", "PEAK_SOFTNESS_DB", "hypothesis_fits"]
+           "GRID_MARGIN_M", "PEAK_SOFTNESS_DB", "hypothesis_fits", "intensity_reliability"]
 
 #: Margin of the grid area beyond the outer locations, m (half the 10 mm pitch): the
 #: area the participant sees numbered on the foil (the paper's Sec. II.D).
@@ -64,6 +65,11 @@ class Hypothesis:
         Whether the sensed position's reliability grows with the recruited activity (the
         summed supra-threshold weights): a weak tap is localized less reliably, so the
         central prior pulls it harder toward the array centre.
+    intensity_reliability : bool
+        Whether the sensed position's reliability grows with the felt level: the sensation
+        level ``L`` of the most intense felt point sets it, ``1 / (1 + 10**((h - L) / 10))``
+        with ``h`` the model's ``intensity_half_db`` (a weaker tap is localized less
+        consistently and pulled harder toward the centre).
     fitted : bool
         Whether the model's parameters were fitted under this hypothesis (False: the
         defaults of :class:`~vibrofocus.simulation.perception.PerceptualModel` are used as
@@ -75,7 +81,8 @@ class Hypothesis:
         The level rule of the stimuli the parameters were fitted at (``"paper"``), or None.
     free_parameters : tuple of ParameterRange
         The parameters left free under this hypothesis, each with its range and source;
-        every other parameter is fixed (empty: none declared yet).
+        every other parameter is fixed at its value in :meth:`model` (a parameter that
+        does nothing under this hypothesis is never free).
     """
 
     name: str
@@ -84,6 +91,7 @@ class Hypothesis:
     sources: str
     readout: str = "centroid"
     level_reliability: bool = False
+    intensity_reliability: bool = False
     fitted: bool = False
     parameters: Mapping[str, Any] = field(default_factory=dict, hash=False)
     levels: str | None = None
@@ -94,6 +102,19 @@ class Hypothesis:
             raise ValidationError(f"a hypothesis' name must be a word, got {self.name!r}")
         check_choice(self.readout, "readout", ("centroid", "grid-peak"))
         self.model()  # unknown parameter names fail here, at registration
+        inert = sorted({r.name for r in self.free_parameters} & set(self.inert_parameters()))
+        if inert:
+            raise ValidationError(f"hypothesis {self.name!r}: {', '.join(inert)} does nothing under it, so it cannot "
+                                  "be a free parameter")
+
+    def inert_parameters(self) -> tuple[str, ...]:
+        """Parameters of the model this hypothesis never reads (switching them changes no answer; tested).
+
+        ``central_weight`` moves the centroid's place only, so the ``grid-peak`` readout
+        never reads it; ``intensity_half_db`` is read by the intensity reliability only.
+        """
+        inert = ["central_weight"] if self.readout == "grid-peak" else []
+        return tuple(inert + ([] if self.intensity_reliability else ["intensity_half_db"]))
 
     def model(self) -> PerceptualModel:
         """The perceptual model with this hypothesis' fitted parameters.
@@ -105,19 +126,38 @@ class Hypothesis:
         """
         return PerceptualModel().replace(**dict(self.parameters)) if self.parameters else PerceptualModel()
 
+    def start_model(self) -> PerceptualModel:
+        """Where a fit of :attr:`free_parameters` starts: ``PerceptualModel()`` brought into the ranges.
+
+        The sideways mean bias is 0 (no source gives one); each free parameter is clipped
+        into its range.
+        """
+        base = PerceptualModel()
+        base = base.replace(bias_mean_m=(0.0, base.bias_mean_m[1]))
+        values = [min(max(v, r.lo), r.hi) for v, r in zip(read_parameters(base, self.free_parameters),
+                                                           self.free_parameters)]
+        return apply_parameters(base, self.free_parameters, values)
+
     def label(self) -> str:
         """What every output made under this hypothesis says of itself."""
         if not self.fitted:
             fit = " with the model's default parameters, not refitted"
         else:
             fit = f" fitted at {self.levels} levels" if self.levels else ""
-        return f"simulated participants: model v{MODEL_VERSION}, hypothesis {self.name} v{self.version}{fit}, not data"
+        check = hypothesis_fits().get("ppc", {})
+        caveat = f" ({check['statement']})" if check and not check.get("default_reproduces", True) else ""
+        return (f"simulated participants: model v{MODEL_VERSION}, hypothesis {self.name} v{self.version}{fit}{caveat}, "
+                "not data")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready description."""
         return {"name": self.name, "version": self.version, "title": self.title, "sources": self.sources,
-                "readout": self.readout, "level_reliability": self.level_reliability, "fitted": self.fitted,
-                "levels": self.levels, "parameters": dict(self.parameters), "label": self.label()}
+                "readout": self.readout, "level_reliability": self.level_reliability,
+                "intensity_reliability": self.intensity_reliability, "fitted": self.fitted,
+                "levels": self.levels, "parameters": dict(self.parameters),
+                "free_parameters": [{"name": r.key, "lo": r.lo, "hi": r.hi, "source": r.source}
+                                    for r in self.free_parameters],
+                "label": self.label()}
 
     def percepts(
         self,
@@ -149,7 +189,7 @@ class Hypothesis:
         Returns
         -------
         Percepts
-            With ``reliability`` (n,) when ``level_reliability``.
+            With ``reliability`` (n,) when ``level_reliability`` or ``intensity_reliability``.
         """
         base = central_percepts(energy, points_xy, model, traits, actuator_energy, actuators_xy)
         e = np.atleast_2d(np.asarray(energy, dtype=float))
@@ -168,9 +208,34 @@ class Hypothesis:
             activity = funneling_weights(e, e_thr, model.funneling_exponent).sum(axis=1)
             ref = float(funneling_weights(np.ones((1, 1)), e_thr, model.funneling_exponent)[0, 0])
             reliability = np.where(felt, activity / (activity + max(ref, 1e-12)), np.nan)
+        if self.intensity_reliability:
+            reliability = np.where(felt, intensity_reliability(e, model, traits), np.nan)
         # Every hypothesis detects on the whole skin, so v3's conflict (NaN where nothing is
         # felt) serves as it is.
         return Percepts(position, spread, felt, base.conflict_m, reliability, base.drive_position_m)
+
+
+def intensity_reliability(energy: np.ndarray, model: PerceptualModel, traits: Traits) -> np.ndarray:
+    """Reliability of the sensed position from the felt level (the ``intensity`` hypothesis), shape (n,).
+
+    Parameters
+    ----------
+    energy : ndarray, shape (n, n_points)
+        Felt energy at the skin points, re the reference tap.
+    model : PerceptualModel
+        Its ``sl_ref_db`` and ``intensity_half_db`` are read.
+    traits : Traits
+        The participant's threshold offset is read.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        ``1 / (1 + 10**((intensity_half_db - L) / 10))`` in (0, 1), ``L`` the sensation
+        level of the most intense point, dB SL.
+    """
+    e = np.atleast_2d(np.asarray(energy, dtype=float))
+    level = 10.0 * np.log10(np.maximum(e.max(axis=1), 1e-30)) + model.sl_ref_db - traits.threshold_offset_db
+    return 1.0 / (1.0 + 10.0 ** ((model.intensity_half_db - level) / 10.0))
 
 
 def _grid_peak(e: np.ndarray, xy: np.ndarray, locations: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -237,6 +302,7 @@ def hypothesis(name: str | Hypothesis | None = None) -> Hypothesis:
     return _REGISTRY[DEFAULT_HYPOTHESIS if name is None else name]
 
 
+@lru_cache(maxsize=1)
 def hypothesis_fits() -> dict[str, dict[str, Any]]:
     """The fits of the hypotheses shipped with vibrofocus (``simulation/data/hypotheses_fit.json``).
 
@@ -247,7 +313,10 @@ def hypothesis_fits() -> dict[str, dict[str, Any]]:
     Returns
     -------
     dict
-        ``{"default": name, "hypotheses": {name: fit}}``; empty ``hypotheses`` if none.
+        ``{"default": name, "hypotheses": {name: fit}, "ppc": summary}``; empty
+        ``hypotheses`` if none. ``ppc``: the posterior-predictive check that chose the
+        default (:func:`vibrofocus.simulation.ppc.record_default`). Read once (cached):
+        do not change the returned dict.
     """
     try:
         text = resources.files("vibrofocus.simulation").joinpath("data/hypotheses_fit.json").read_text(encoding="utf-8")
@@ -263,28 +332,102 @@ def _builtin(name: str, **kw: Any) -> Hypothesis:
     return register_hypothesis(Hypothesis(name=name, **kw))
 
 
+# The free parameters' ranges (SI units), each with its source or stated assumption;
+# docs/simulated-participants.md ("Parameters") lists them per hypothesis.
+_P = ParameterRange
+#: Sensation level of the reference tap (2 um peak Ricker, sigma 1 ms: a ~3 ms tap peaking
+#: near 225 Hz), dB SL.
+SL_REF_RANGE = _P(
+    "sl_ref_db", -16.0, 20.0,
+    "low end: single mechanical pulses on hairy skin are detected at 44-140 um (Haemaelaeinen & Jaervilehto, "
+    "Brain Res. 219(1):1-12, 1981, abstract; 20-150 Hz pulses, probes 0.07-12.5 mm^2), lowered by 7 dB for "
+    "the tap's 225 Hz (the U-curve, Verrillo 1963 via Gescheider & Verrillo 1979) and 14 dB for a contact of "
+    "~3 cm^2 (-3 dB per doubling of area on the volar forearm, Verrillo, J. Exp. Psychol. 72(1):47-50, 1966, "
+    "abstract): 4-12 um, so -16 to -6 dB SL; high end, assumption: a threshold of 0.2 um, that of long 250 Hz "
+    "bursts with large contactors, without the brief tap's loss of temporal summation (Gescheider, Sensory "
+    "Processes 1:68-76, 1976, abstract: summation for high-frequency stimuli)")
+FUNNELING_RANGE = _P(
+    "funneling_exponent", 0.5, 1.0,
+    "0.5: the linear (amplitude) law, 1: the energy law of funneling (Alles, IEEE Trans. Man-Mach. Syst. "
+    "11(1):85-91, 1970; Israr & Poupyrev, CHI 2011, pp. 2019-2028); the laws are compared by Seo & Choi, "
+    "IEEE Haptics Symposium 2010 (cited by de Vlam et al. 2023)")
+CENTRAL_RANGE = _P(
+    "central_weight", 0.0, 1.0,
+    "0: the place from the skin alone; 1: from the actuators' delivered energies alone, the paper's reading "
+    "that funneling is coded centrally (de Vlam et al., IEEE ToH 16(4):511-517, 2023, Sec. IV)")
+CONFLICT_RANGE = _P(
+    "conflict_gain", 0.0, 1.0,
+    "assumption: skin and drive cues that disagree add uncertainty (form: Koerding et al., PLoS ONE "
+    "2(9):e943, 2007); at most 1 mm of noise SD per mm of conflict, so the term never exceeds the conflict")
+ACUITY_RANGES = tuple(_P(
+    "acuity_sd_m", 2e-3, 12e-3,
+    "order of the 10 mm location pitch: fewer than half of the arm sites are identified uniquely (Cholewiak & "
+    "Collins, Percept. Psychophys. 65(7):1058-1077, 2003; abstract of Cholewiak, Collins & Brill, Eurohaptics "
+    "2001); the bounds are an assumption", index=i) for i in (0, 1))
+SPREAD_RANGES = tuple(_P("spread_gain", 0.0, 0.5, "assumption: a diffuse percept (spread s) adds at most "
+                         "0.5 s of noise SD (phantoms are felt over distributed positions, Park & Choi, CHI 2018)",
+                         index=i) for i in (0, 1))
+PRIOR_RANGES = tuple(_P("prior_sd_m", 5e-3, 30e-3, "assumption: from half the location pitch to beyond the "
+                        "array's half width (the pull to the centre of a small, coarse grid, de Vlam et al. "
+                        "2023, Sec. IV)", index=i) for i in (0, 1))
+BIAS_RANGES = (
+    _P("bias_mean_m", -3e-3, 0.0,
+       "toward the elbow (-y), at most the forearm's perceived midpoint shift of about 3 mm (Cholewiak et al., "
+       "HCI International 2020, LNCS, doi:10.1007/978-3-030-49282-3_11, abstract); the sideways mean is fixed "
+       "at 0 (no source)", index=1),
+    _P("bias_sd_m", 0.0, 3e-3, "assumption: participants' biases differ by up to the cited mean shift"),
+)
+SELECT_RANGES = (
+    _P("select_kappa", 0.05, 0.99, "assumption: the Study 2 criterion's population, lower end", index=0),
+    _P("select_kappa", 0.05, 0.99, "assumption: the Study 2 criterion's population, upper end", index=1),
+    _P("select_log_sd", 0.1, 1.0, "assumption: per-trial jitter of the criterion, log units"),
+)
+INTENSITY_RANGE = _P(
+    "intensity_half_db", -10.0, 30.0,
+    "assumption of size: the level at which localization variance doubles lies within the paper's stimuli's "
+    "levels; the form (variance falls, answers contract less toward the centre, as the intensity grows) is "
+    "'Tactile localization depends on stimulus intensity', Exp. Brain Res. 232(2):597-607, 2014, abstract; Brooks, "
+    "Seizova-Cajic & Taylor, J. Neurophysiol. 2019, doi:10.1152/jn.00189.2018, summary: weak touches on the "
+    "forearm are localized more variably and compressed")
+#: Free under every hypothesis: the participants' population and the Study 2 criterion.
+_COMMON = (SL_REF_RANGE, FUNNELING_RANGE, CONFLICT_RANGE, *ACUITY_RANGES, *SPREAD_RANGES, *PRIOR_RANGES,
+           *BIAS_RANGES, *SELECT_RANGES)
+
 _builtin(
-    "v3-centroid", version=MODEL_VERSION, fitted=True, readout="centroid",
+    "v3-centroid", version="4.0", readout="centroid", free_parameters=(CENTRAL_RANGE, *_COMMON),
     title="the place is the energy-law centroid of the whole felt field (perceptual model v3)",
     sources="energy-law funneling (Alles 1970; Israr & Poupyrev 2011; Park & Choi 2018), central prior "
             "(Cholewiak et al. 2020), cue conflict (Koerding et al. 2007); fitted to de Vlam et al. 2023, Sec. III",
 )
 _builtin(
-    "grid-peak", version="1.0", readout="grid-peak",
+    # central_weight moves the centroid's place only: the grid peak never reads it (a test checks).
+    "grid-peak", version="4.0", readout="grid-peak", free_parameters=_COMMON,
     title="the place is where it felt most intense inside the grid area (a soft peak of the felt level)",
     sources="the paper's instruction: the participant types the grid number where the stimulus felt most "
             "intense, on a foil over the grid (de Vlam et al. 2023, Sec. II.D); the softness "
             f"({PEAK_SOFTNESS_DB:g} dB) and the area (the locations plus {GRID_MARGIN_M * 1e3:g} mm) are assumptions",
 )
 _builtin(
-    "level-reliability", version="1.0", readout="centroid", level_reliability=True,
+    "level-reliability", version="4.0", readout="centroid", level_reliability=True,
+    free_parameters=(CENTRAL_RANGE, *_COMMON),
     title="v3's centroid, with a reliability that grows with the recruited activity, so weak taps are pulled "
           "to the centre",
     sources="reliability-weighted cue combination with a prior (Koerding et al. 2007); localization improves "
             "with intensity (an assumption of form here: reliability activity / (activity + one reference tap))",
 )
+_builtin(
+    "intensity", version="1.0", readout="centroid", intensity_reliability=True,
+    free_parameters=(CENTRAL_RANGE, *_COMMON, INTENSITY_RANGE),
+    title="v3's centroid, localized more precisely (and selected narrower) the more intense the tap is felt",
+    sources="tactile localization on the lower arm becomes more consistent and less contracted toward the "
+            "centre as intensity grows ('Tactile localization depends on stimulus intensity', Exp. Brain Res. "
+            "232(2):597-607, 2014; mechanical touches on the forearm: Brooks, Seizova-Cajic & Taylor, J. Neurophysiol. "
+            "2019); at the "
+            "paper's levels the inverse filter delivers more at the target than funneling (the simulated arm); "
+            "the form, reliability 1 / (1 + 10^((h - L) / 10)) of the level L, is an assumption",
+)
 
-#: The hypothesis simulated participants use unless told: the one whose fit, at the paper's
-#: levels, holds best on held-out seeds (``hypothesis_fits()["default"]``; how it is chosen:
-#: docs/simulated-participants.md, "Hypotheses").
+#: The hypothesis simulated participants use unless told: chosen by the posterior-predictive
+#: check's rule, written before the check was run (:mod:`vibrofocus.simulation.ppc`;
+#: ``hypothesis_fits()["default"]``).
 DEFAULT_HYPOTHESIS: str = hypothesis_fits()["default"]

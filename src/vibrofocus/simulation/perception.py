@@ -117,7 +117,7 @@ class PerceptualModel:
         ``None`` (default) integrates the whole stimulus: the felt *energy* the model was
         fitted with. Short windows (a few ms) make the intensity follow the displacement's
         peak, which favours a focus that is sharp in time. *Assumption*, explored in
-        docs/simulated-participants.md ("What the model does not reproduce").
+        docs/history-simulated-participants.md ("What the model does not reproduce").
     sl_ref_db : float
         Sensation level of the reference tap (2 µm peak Ricker), dB. *Fitted.*
     central_weight : float
@@ -166,6 +166,13 @@ class PerceptualModel:
         Factor on the posterior SD with which the participant selects points on an unfused
         trial (it felt odd, so the participant is less sure); it widens the selection only
         (the jump, not the width, moves the answer). *Fitted.*
+    intensity_half_db : float
+        Under the ``intensity`` hypothesis only: the sensation level (dB SL, of the most
+        intense felt point) at which the sensed position's noise variance is doubled;
+        reliability ``1 / (1 + 10**((intensity_half_db - L) / 10))``. Weaker taps are
+        localized less consistently and pulled more to the centre ("Tactile localization depends on
+        stimulus intensity", Exp. Brain Res. 232(2):597-607, 2014; Brooks et al., J. Neurophysiol. 2019). *Assumption*
+        of the form; size *fitted*. Inert under every other hypothesis.
     conflict_awareness : float
         ``lambda``: how the Study 2 selection reads the trial's own cue discrepancy. 0
         (default, as in v3): the selection's width carries the conflict noise's expected
@@ -207,6 +214,7 @@ class PerceptualModel:
     unfused_jump_m: float = 0.02
     unfused_width: float = 1.0
     conflict_awareness: float = 0.0
+    intensity_half_db: float = 10.0
     rt_median_s: tuple[float, float] = (0.9, 1.4)
     rt_log_sd: float = 0.3
     rt_per_extra_location_s: float = 0.35
@@ -235,25 +243,27 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
     "grid_step_m": ("assumption", "half the 10 mm location pitch"),
     "band_hz": ("assumption", "the vibrotactile range; the U-curve weights within it"),
     "integration_s": ("assumption", "None: the whole stimulus (felt energy); short windows explored, not adopted"),
-    "sl_ref_db": ("fitted", "sensation level of the reference tap"),
+    "sl_ref_db": ("fitted", "sensation level of the reference tap; range from published thresholds for brief taps "
+                  "and the forearm"),
     "central_weight": ("fitted", "place coded from the actuators' delivered energies (the paper, Sec. IV: central coding)"),
     "conflict_gain": ("fitted", "form an assumption: cues that disagree add uncertainty (Körding et al. 2007)"),
-    "funneling_exponent": ("fitted", "1 is the energy law (Alles 1970; Israr & Poupyrev 2011)"),
+    "funneling_exponent": ("fitted", "0.5 the linear, 1 the energy law (Alles 1970; Israr & Poupyrev 2011)"),
     "threshold_sd_db": ("assumption", "spread of detection thresholds across people"),
     "acuity_sd_m": ("fitted", "poor localization on the mid-forearm (Cholewiak & Collins 2003)"),
     "spread_gain": ("fitted", "diffuse phantoms are localized worse (Park & Choi 2018)"),
     "prior_sd_m": ("fitted", "strength of the pull to the centre"),
-    "bias_mean_m": ("source + fitted", "y toward the elbow (Cholewiak et al. 2020); sizes fitted"),
+    "bias_mean_m": ("source + fitted", "y toward the elbow, at most 3 mm (Cholewiak et al. 2020); x 0 (no source)"),
     "bias_sd_m": ("fitted", "spread of the participants' biases"),
     "select_kappa": ("fitted", "Study 2 criterion"),
     "select_log_sd": ("fitted", "Study 2 per-trial jitter of the criterion"),
-    "unfused_per_m": ("fitted", "form an assumption: conflicting cues are not fused but felt apart (Körding et al. "
-                      "2007); 0 (off) in the shipped fits, three fits with it are documented, not adopted"),
-    "unfused_jump_m": ("fitted", "form an assumption: how far away an unfused tap is felt (used only when on)"),
-    "unfused_width": ("fitted", "how much wider an unfused trial's selection is (used only when on)"),
-    "conflict_awareness": ("fitted", "form an assumption: the selection's width reads the trial's own cue "
-                           "discrepancy (confidence from sensed uncertainty, Adler & Ma 2018); 0 (off): v3's expected "
-                           "width"),
+    "unfused_per_m": ("assumption", "off (0) under every shipped hypothesis; form: conflicting cues felt apart "
+                      "(Körding et al. 2007); explored, not adopted (docs/history-simulated-participants.md)"),
+    "unfused_jump_m": ("assumption", "how far away an unfused tap is felt (used only when unfused_per_m > 0)"),
+    "unfused_width": ("assumption", "how much wider an unfused trial's selection is (used only when unfused_per_m > 0)"),
+    "conflict_awareness": ("assumption", "off (0) under every shipped hypothesis; form: the selection's width reads "
+                           "the trial's own cue discrepancy (Adler & Ma 2018); explored, not adopted"),
+    "intensity_half_db": ("fitted", "intensity hypothesis only: level at which localization variance doubles "
+                          "(weak taps localized less consistently, Exp. Brain Res. 2014; Brooks et al. 2019)"),
     "rt_median_s": ("assumption", "response times (not analysed)"),
     "rt_log_sd": ("assumption", "response times (not analysed)"),
     "rt_per_extra_location_s": ("assumption", "response times (not analysed)"),

@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..parameters import ParameterRange, apply_parameters, read_parameters
 from ..perception import PerceptualModel
 
-__all__ = ["CENTRAL_WEIGHT_RANGE", "sample"]
+__all__ = ["CENTRAL_WEIGHT_RANGE", "sample", "sample_within"]
 
 #: Range searched for the drive cue's weight (``--central-weight LO HI`` narrows it, e.g.
 #: to hold the paper's reading that funneling is coded centrally).
@@ -94,3 +95,40 @@ def _sample(rng: np.random.Generator, base: PerceptualModel | None, scale: float
         unfused_jump_m=float(np.clip(jit(b.unfused_jump_m), 5e-3, 50e-3)),
         unfused_width=float(np.clip(b.unfused_width + rng.normal(0, 0.2 * scale), 1.0, 5.0)),
     )
+
+
+def sample_within(rng: np.random.Generator, base: PerceptualModel, ranges: tuple[ParameterRange, ...],
+                  scale: float | None = None) -> PerceptualModel:
+    """A candidate that moves only ``ranges``' parameters, always inside their ranges.
+
+    Parameters
+    ----------
+    rng : numpy.random.Generator
+        The search's random generator (its path).
+    base : PerceptualModel
+        The fixed parameters, and the point to jitter around.
+    ranges : tuple of ParameterRange
+        The free parameters (:attr:`~vibrofocus.simulation.hypotheses.Hypothesis.free_parameters`).
+    scale : float, optional
+        None: every free parameter drawn uniformly from its range; else a Gaussian step of
+        ``0.1 * scale`` of the range's width around ``base``'s value, clipped into the range.
+        The two ends of a population range, both free, are kept in order.
+
+    Returns
+    -------
+    PerceptualModel
+    """
+    lo = np.array([r.lo for r in ranges])
+    hi = np.array([r.hi for r in ranges])
+    if scale is None:
+        values = rng.uniform(lo, hi)
+    else:
+        values = np.clip(np.array(read_parameters(base, ranges)) + rng.normal(0.0, 0.1 * scale, lo.size) * (hi - lo),
+                         lo, hi)
+    # A population range (lo, hi) whose ends are both free stays ordered (numpy draws
+    # uniform(lo, hi) only for lo <= hi); both ends share one range, so sorting keeps them in it.
+    for name in {r.name for r in ranges if r.index is not None}:
+        pair = [k for k, r in enumerate(ranges) if r.name == name]
+        if len(pair) == 2:
+            values[pair] = np.sort(values[pair])
+    return apply_parameters(base, ranges, [float(v) for v in values])

@@ -28,7 +28,7 @@ __all__ = ["read_fit", "check_fit", "fit_model"]
 _REQUIRED = ("hypothesis", "levels", "budget", "weights", "fit_seeds", "model")
 _OPTIONAL = ("bank_forearms", "loss")
 _BUDGET_INTS = ("n_eval", "n_refine", "rng_seed")
-_BUDGET_FLAGS = ("unfused", "aware")
+_BUDGET_FLAGS = ("unfused", "aware", "within_ranges")
 #: How many searches a fit may have started from, one after another (a guard, not a rule).
 _MAX_STARTS = 50
 

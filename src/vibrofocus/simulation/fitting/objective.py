@@ -139,7 +139,7 @@ def residuals(stats: Sequence[Mapping]) -> str:
     lines = [f"{'statistic':34s} {'paper':>8s} {'model':>8s} {'model-paper':>12s} {'log ratio':>10s}"]
     for k, label, v in targets():
         m = _median(stats, k)
-        lines.append(f"{label:34s} {v:8.2f} {m:8.2f} {m - v:12.2f} {np.log(m / v):10.3f}")
+        lines.append(f"{label:34s} {v:8.2f} {m:8.2f} {m - v:12.2f} {np.log(max(m, 1e-3) / v):10.3f}")  # as loss
     for k, null in NULL_MEANS:
         m = _median(stats, k)
         ns = np.mean([s[k.replace('_chi2', '_p')] >= 0.05 for s in stats])

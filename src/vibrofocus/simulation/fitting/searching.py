@@ -21,7 +21,7 @@ from ..bank import FeatureBank, default_bank
 from ..hypotheses import hypothesis
 from ..paper import N_PARTICIPANTS, seed_statistics
 from ..perception import PerceptualModel
-from .candidates import CENTRAL_WEIGHT_RANGE, sample
+from .candidates import CENTRAL_WEIGHT_RANGE, sample, sample_within
 from .fitfile import fit_model, read_fit
 from .objective import loss
 from .seeds import FIT_SEEDS
@@ -82,14 +82,23 @@ def search(n_eval: int, n_refine: int, out: str | os.PathLike, start: str | os.P
     start_fit = read_fit(start) if start is not None else None
     # Every hypothesis starts from the same place (model v3's own fit, PerceptualModel()'s
     # defaults), not from its shipped fit: a refit repeats the shipped one.
-    best = (fit_model(start_fit) if start_fit is not None else PerceptualModel()).replace(integration_s=integration_s)
+    ranges = h.free_parameters
+    # A hypothesis that declares its free parameters is searched inside their ranges only
+    # (every other parameter stays at its start); the others along the broad ranges of
+    # candidates.sample.
+    fresh = h.start_model() if ranges else PerceptualModel()
+    best = (fit_model(start_fit) if start_fit is not None else fresh).replace(integration_s=integration_s)
+    fixed = best
     best_loss = loss(seed_statistics(best, fit_seeds, n_participants=n_participants, bank=b, hypothesis=h), weights)
     say(f"start: loss {best_loss:.4f}")
     t0 = time.perf_counter()
     for i in range(n_eval + n_refine):
-        cand = (sample(rng, central_range=central_range, unfused=unfused, aware=aware) if i < n_eval else
-                sample(rng, best, scale=1.0 - 0.8 * (i - n_eval) / max(n_refine, 1), central_range=central_range,
-                       unfused=unfused, aware=aware))
+        scale = 1.0 - 0.8 * (i - n_eval) / max(n_refine, 1)
+        if ranges:
+            cand = sample_within(rng, fixed if i < n_eval else best, ranges, None if i < n_eval else scale)
+        else:
+            cand = (sample(rng, central_range=central_range, unfused=unfused, aware=aware) if i < n_eval else
+                    sample(rng, best, scale=scale, central_range=central_range, unfused=unfused, aware=aware))
         cand = cand.replace(integration_s=integration_s)  # the bank's window, never searched
         val = loss(seed_statistics(cand, fit_seeds, n_participants=n_participants, bank=b, hypothesis=h), weights)
         if val < best_loss:
@@ -99,6 +108,7 @@ def search(n_eval: int, n_refine: int, out: str | os.PathLike, start: str | os.P
                                 "budget": {"n_eval": n_eval, "n_refine": n_refine, "rng_seed": rng_seed,
                                            **({"unfused": True} if unfused else {}),
                                            **({"aware": True} if aware else {}),
+                                           **({"within_ranges": True} if ranges else {}),
                                            "start": start_fit["budget"] if start_fit is not None else None},
                                 "loss": best_loss, "weights": dict(weights),
                                 "fit_seeds": [fit_seeds.start, fit_seeds.stop],
