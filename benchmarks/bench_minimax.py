@@ -24,7 +24,7 @@ may be shared) printed as a ratio to the reference setup's minimax design in the
 
 Usage: python benchmarks/bench_minimax.py [n_samples]   (needs the test extra: cvxpy, Clarabel)
        python benchmarks/bench_minimax.py --arrays      (the synthetic array cases only)
-       python benchmarks/bench_minimax.py --layouts     (the simulated arm's layouts only)
+       python benchmarks/bench_minimax.py --layouts [NAME ...]   (the simulated arm's layouts only)
 """
 
 from __future__ import annotations
@@ -121,7 +121,7 @@ LAYOUTS = {
 }
 
 
-def layouts() -> None:
+def layouts(only: list[str] | None = None) -> None:
     """Issue 57's layouts: minimax and inverse CPU seconds per design, minimax as a ratio to
     the reference setup's in the same run."""
     from vibrofocus.rendering import render
@@ -132,14 +132,16 @@ def layouts() -> None:
     print("| layout, location | minimax s | ratio to reference | inverse s | minimax peak contrast dB |")
     print("|---|---|---|---|---|")
     for name, (layout, seed, fs, n, locations) in LAYOUTS.items():
-        extra = {} if fs >= 2 * BAND[1] else {"noise_band": (10.0, 500.0)}
+        if only and name not in only and name != next(iter(LAYOUTS)):
+            continue
+        extra, band = ({}, {}) if fs >= 2 * BAND[1] else ({"noise_band": (10.0, 500.0)}, {"band": (10.0, 500.0)})
         tm = SimulatedForearm(seed=seed, skin="nominal", layout=layout, fs=fs, **extra).transfer_matrix(n)
         for loc in locations:
             t = time.process_time()
-            render("inverse", tm, fs, layout, loc)
+            render("inverse", tm, fs, layout, loc, **band)
             inv_s = time.process_time() - t
             t = time.process_time()
-            d = render("minimax", tm, fs, layout, loc)
+            d = render("minimax", tm, fs, layout, loc, **band)
             mm_s = time.process_time() - t
             ref_s = mm_s if ref_s is None else ref_s
             y = d.predicted
@@ -152,8 +154,8 @@ def main() -> None:
     if sys.argv[1:] == ["--arrays"]:
         arrays()
         return
-    if sys.argv[1:] == ["--layouts"]:
-        layouts()
+    if sys.argv[1:2] == ["--layouts"]:
+        layouts(sys.argv[2:])
         return
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1024
     layout = ArrayLayout.reference()
