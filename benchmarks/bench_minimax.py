@@ -17,8 +17,14 @@ min_fidelity 0.95, location 5): 4, 8, 16 and 32 actuators x 9 points, each timed
 as the reference setup's design at n = 4096 and printed as a ratio to it, with the variables, the
 peak constraints and any size limit the design named (``MinimaxReport.size_limit``).
 
+``--layouts``: issue 57's layouts on the simulated ``nominal`` arm (seed 41; the far layout
+seeds 5 and 17 at 1.3 kHz, n = 1024), ``render("minimax", ...)`` and ``render("inverse", ...)``
+with their defaults at n = 16384, each minimax time (CPU seconds of this process: the machine
+may be shared) printed as a ratio to the reference setup's minimax design in the same run.
+
 Usage: python benchmarks/bench_minimax.py [n_samples]   (needs the test extra: cvxpy, Clarabel)
        python benchmarks/bench_minimax.py --arrays      (the synthetic array cases only)
+       python benchmarks/bench_minimax.py --layouts [NAME ...]   (the simulated arm's layouts only)
 """
 
 from __future__ import annotations
@@ -102,9 +108,54 @@ def arrays(n: int = 4096) -> None:
         print(f"{layout.n_actuators:>2} x {layout.n_points}: {s:7.1f} s  ratio {s / ref_s:5.2f}x  {what}")
 
 
+#: Issue 57's layouts: (layout, seed, fs, n, locations).
+LAYOUTS = {
+    "reference 2x2 at 45 mm": (ArrayLayout.reference(), 41, FS, 16384, (5,)),
+    "2x2 at 60 mm": (ArrayLayout.grid((2, 2), 0.06, (3, 3), 0.01, guard_offset_m=9e-3), 41, FS, 16384, (5, 3)),
+    "line of 4 at 30 mm": (ArrayLayout.grid((4, 1), 0.03, (3, 3), 0.01), 41, FS, 16384, (4, 1)),
+    "2x3 sleeve": (ArrayLayout.grid((2, 3), 0.045, (3, 3), 0.01, guard_offset_m=9e-3), 41, FS, 16384, (5, 1)),
+    "2x2 at 45 mm, targets outside the hull": (ArrayLayout.grid((2, 2), 0.045, (3, 3), 0.03, guard_offset_m=9e-3),
+                                               41, FS, 16384, (5, 1)),
+    "far layout, seed 5": (ArrayLayout.grid((2, 2), (0.14, 0.20), (3, 3), 0.02), 5, 1300.0, 1024, (5,)),
+    "far layout, seed 17": (ArrayLayout.grid((2, 2), (0.14, 0.20), (3, 3), 0.02), 17, 1300.0, 1024, (5,)),
+}
+
+
+def layouts(only: list[str] | None = None) -> None:
+    """Issue 57's layouts: minimax and inverse CPU seconds per design, minimax as a ratio to
+    the reference setup's in the same run."""
+    from vibrofocus.rendering import render
+    from vibrofocus.skin import SimulatedForearm
+
+    warnings.simplefilter("ignore", UserWarning)
+    ref_s = None
+    print("| layout, location | minimax s | ratio to reference | inverse s | minimax peak contrast dB |")
+    print("|---|---|---|---|---|")
+    for name, (layout, seed, fs, n, locations) in LAYOUTS.items():
+        if only and name not in only and name != next(iter(LAYOUTS)):
+            continue
+        extra, band = ({}, {}) if fs >= 2 * BAND[1] else ({"noise_band": (10.0, 500.0)}, {"band": (10.0, 500.0)})
+        tm = SimulatedForearm(seed=seed, skin="nominal", layout=layout, fs=fs, **extra).transfer_matrix(n)
+        for loc in locations:
+            t = time.process_time()
+            render("inverse", tm, fs, layout, loc, **band)
+            inv_s = time.process_time() - t
+            t = time.process_time()
+            d = render("minimax", tm, fs, layout, loc, **band)
+            mm_s = time.process_time() - t
+            ref_s = mm_s if ref_s is None else ref_s
+            y = d.predicted
+            quiet = np.delete(np.arange(y.shape[0]), d.target_index)
+            db = 20 * np.log10(np.abs(y[d.target_index]).max() / np.abs(y[quiet]).max())
+            print(f"| {name}, {loc} | {mm_s:.1f} | {mm_s / ref_s:.2f}x | {inv_s:.2f} | {db:.1f} |", flush=True)
+
+
 def main() -> None:
     if sys.argv[1:] == ["--arrays"]:
         arrays()
+        return
+    if sys.argv[1:2] == ["--layouts"]:
+        layouts(sys.argv[2:])
         return
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1024
     layout = ArrayLayout.reference()

@@ -114,3 +114,52 @@ def test_the_method_says_what_a_design_over_its_drive_budget_costs():
                                          r"peak contrast, the inverse filter's at [0-9.]+ um with -?[0-9.]+ dB"):
         design = render("minimax", tm, MFS, ref, 5)
     assert np.max(np.abs(design.drives)) == pytest.approx(10.0)
+
+
+def cvxpy_program(A, b, Lt, cap, D, dcap):
+    """The same rows as an independent cvxpy + Clarabel program: its optimum."""
+    cp = pytest.importorskip("cvxpy")
+    u, t = cp.Variable(A.shape[1]), cp.Variable()
+    cons = [cp.abs(A @ u) <= t, b @ u == 1, cp.norm(Lt @ u) <= cap]
+    if D is not None:
+        cons.append(cp.abs(D @ u) <= dcap)
+    cp.Problem(cp.Minimize(t), cons).solve(solver="CLARABEL")
+    return float(t.value)
+
+
+@pytest.mark.parametrize("limit", [None, 0.9])
+def test_the_program_on_the_rows_span_has_the_full_programs_optimum(limit):
+    """Few rows (fewer than the coefficients): the program in the span of the listed rows
+    has the optimum of the program over every coefficient, as an independent cvxpy
+    program finds it (rel. 1e-5), and its point meets that program's constraints; the
+    structured KKT solver (drive rows outnumbering the peak rows) finds it too."""
+    from vibrofocus.rendering.minimax import _solve_in_span
+
+    H, targets = medium(n_points=9, n_act=1, seed=4), tap(n_points=9)
+    p = _Program(H, targets, FS, band=BAND, quiet=None, taper_octaves=0.5, support_s=SUPPORT, stride=1000,
+                 ir_energy_tol=1e-4, decimation=None)
+    p._add_pairs([(j, t) for j in range(len(p.quiet)) for t in range(0, N, 2)])
+    rows = p.A[np.random.default_rng(0).choice(len(p.A), 10, replace=False)]
+    cap = 1 / 0.9
+    D = dcap = None
+    if limit is not None:  # a drive limit that binds: 0.9 of the free design's peak drive
+        u, _, _, _ = _solve_cone(rows, p.b, p.Lt, cap, None, None)
+        p._add_drive_rows(np.arange(0, N, 16))
+        D = np.kron(np.eye(p.n_act), p.D)
+        dcap = limit * float(np.max(np.abs(D @ u)))
+    n_rows = len(rows) + (0 if D is None else len(D))
+    assert n_rows + 1 < p.Lt.shape[0] and p.N0.shape[1] == 0  # the span is smaller
+    reference = cvxpy_program(rows, p.b, p.Lt, cap, D, dcap)
+    assert reference > 0.1  # a program whose rows bind
+    blocks = None if D is None else p._per_actuator(p.D)
+    u, value, status, _ = _solve_in_span(rows, p.b, p.Lt, p.Linv, p.N0, cap, blocks, dcap)
+    assert status == "optimal"
+    assert value == pytest.approx(reference, rel=1e-5)
+    # The point found meets the full program's constraints, in the original coefficients.
+    assert np.max(np.abs(rows @ u)) <= value * (1 + 1e-6)
+    assert p.b @ u == pytest.approx(1.0, rel=1e-7)
+    assert np.linalg.norm(p.Lt @ u) <= cap * (1 + 1e-6)
+    if D is not None:
+        assert np.max(np.abs(D @ u)) <= dcap * (1 + 1e-6)
+        _, whole, status, _ = _solve_cone(rows, p.b, p.Lt, cap, blocks, dcap)  # the structured KKT
+        assert status == "optimal" and whole == pytest.approx(reference, rel=1e-5)

@@ -134,13 +134,18 @@ def test_window_too_short_raises_causality_error():
 
 def test_sleeve_of_32_actuators_through_the_same_code():
     n = 2048
-    # Without guards the only control point is the target: 1 x 32, met exactly.
+    # Without guards, control="guards" leaves the target alone: 1 x 32, met exactly, and
+    # labelled "no focus control".
     sleeve = ArrayLayout.sleeve()
     assert sleeve.n_actuators == 32 and sleeve.n_points == 108
     H = layout_medium(sleeve, n, FS, speed_m_s=20.0)
-    r = render("inverse", H, FS, sleeve, 50, n_samples=n, limit_v=1e3, scale_to_limit=False)
+    r = render("inverse", H, FS, sleeve, 50, n_samples=n, limit_v=1e3, scale_to_limit=False, control="guards")
     assert r.drives.shape == (32, n) and r.predicted.shape == (108, n)
     assert_allclose(r.predicted[49], r.desired, atol=1e-6 * 2e-6)
+    assert r.control_note.startswith("no focus control") and r.control_indices.tolist() == [49]
+    # The default holds down the calibrated area instead (the other locations) and says so.
+    r = render("inverse", H, FS, sleeve, 50, n_samples=n, limit_v=1e3, scale_to_limit=False, check_wraparound=False)
+    assert len(r.control_indices) == 108 and "no guard points" in r.control_note
     # With a guard by every actuator: 33 control points, the least-squares design.
     guarded = ArrayLayout.grid((8, 4), (0.21 / 8, 0.045), (9, 12), 0.01, guard_offset_m=0.006, name="sleeve")
     H = layout_medium(guarded, n, FS, speed_m_s=20.0)

@@ -91,6 +91,11 @@ class Design:
         Displacement predicted over the quiet grid of ``control="field"``, m.
     target_xy : ndarray, shape (2,) or None
         Position of the target on the skin, m (``layout.points_xy[target_index]``).
+    control_note : str or None
+        Set when the control points are not what the method's default names: on a layout
+        with no guard points, a default ``control="guards"`` holds down the other
+        locations and says so here; a design that controls the target alone is labelled
+        ``"no focus control: ..."`` (:data:`~vibrofocus.rendering.methods.NO_FOCUS_CONTROL`).
     """
 
     method: str
@@ -116,6 +121,7 @@ class Design:
     bound_all: ContrastBound | None = field(default=None, repr=False)
     field_predicted: np.ndarray | None = field(default=None, repr=False)
     target_xy: np.ndarray | None = None
+    control_note: str | None = None
 
     @property
     def n_samples(self) -> int:

@@ -103,6 +103,9 @@ class Solution:
         Funneling amplitudes, V.
     quiet_H : ndarray, optional
         Transfer to a quiet grid (``control="field"``), m/V; its prediction is kept.
+    note : str, optional
+        What the design's control points are when a default could not be used as it
+        stands (``Design.control_note``).
     """
 
     drives: np.ndarray
@@ -110,6 +113,7 @@ class Solution:
     control_indices: np.ndarray | None = None
     gains: np.ndarray | None = None
     quiet_H: np.ndarray | None = None
+    note: str | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -281,6 +285,7 @@ class Method:
             scaled_to_limit=bool(self.scale_to_limit), bound=bound, bound_all=bound_all,
             field_predicted=None if found.quiet_H is None else predict_response(found.quiet_H, drives),
             target_xy=np.array(tm.layout.points_xy[p.target_index], dtype=float),
+            control_note=found.note,
         )
 
     def _bounds(self, p: Problem):

@@ -29,7 +29,7 @@ from .taper import design_grid
 from .time_reversal import time_reversal_drives
 from .transfer import TransferMatrix
 
-__all__ = ["Method", "Problem", "Solution", "Funneling", "Inverse", "Combination", "TimeReversal", "Contrast",
+__all__ = ["NO_FOCUS_CONTROL", "Method", "Problem", "Solution", "Funneling", "Inverse", "Combination", "TimeReversal", "Contrast",
            "Constrained", "Minimax", "CONTROL_SETS", "DEFAULT_GUARD_WEIGHT"]
 
 #: Default weight of the quiet control points against the target (see :class:`Inverse`).
@@ -38,14 +38,38 @@ DEFAULT_GUARD_WEIGHT = 1.0
 CONTROL_SETS = ("guards", "all", "locations", "field")
 
 
+#: What a design that holds nothing down besides the target is labelled (``Design.control_note``).
+NO_FOCUS_CONTROL = "no focus control"
+
+
 def _check_control(method: Method, default: str, field_allowed: bool) -> str:
     """Validate a method's ``control`` (None: ``default``) and return it."""
+    if method.control is None:
+        object.__setattr__(method, "_control_defaulted", True)
     control = default if method.control is None else method.control
     check_choice(control, "control", CONTROL_SETS)
     if control == "field" and not field_allowed:
         raise ValidationError(f"control='field' is for the contrast designs (contrast, constrained), "
                               f"not {method.name or type(method).__name__!r}")
     return control
+
+
+def _control_of(method: Method, p: Problem) -> tuple[np.ndarray, str | None]:
+    """The points a design controls (target first) and what to say about them: a default
+    ``"guards"`` on a layout with no guards holds down the calibrated area (the other
+    locations) instead, and says so; a set with the target alone is "no focus control"."""
+    control = method.control
+    note = None
+    if (getattr(method, "_control_defaulted", False) and control == "guards" and p.tm.layout.n_guards == 0
+            and p.tm.layout.n_locations > 1):
+        control = "locations"
+        note = ("the layout has no guard points: the default holds down the calibrated area instead "
+                "(control='locations', the other locations)")
+    rows = p.control(control)
+    if rows.size == 1:
+        note = (f"{NO_FOCUS_CONTROL}: control={control!r} leaves no point besides the target on this layout "
+                "(the tap is met there; nothing is held down)")
+    return rows, note
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -89,7 +113,10 @@ class Inverse(Method):
     ----------
     control : {"guards", "all", "locations"}, optional
         Points held at zero besides the target. ``"guards"`` (default, the paper's): the
-        guard points, which keeps the system close to square so the target is met.
+        guard points, which keeps the system close to square so the target is met; on a
+        layout with no guards the default holds down the other locations instead
+        (``Design.control_note`` says so), and a design left with the target alone is
+        labelled "no focus control".
         ``"all"``: every other calibrated point (a least-squares compromise).
         ``"locations"``: the other locations.
     regularization : {None, "tikhonov", "tsvd"}
@@ -135,7 +162,7 @@ class Inverse(Method):
         return self.target_peak_m * p.stimulus
 
     def solve(self, p: Problem) -> Solution:
-        control = p.control(self.control)
+        control, note = _control_of(self, p)
         others = control[1:]
         gains = self.gains(p) if isinstance(self, Funneling) else None
         raw = self.raw_target(p, gains)
@@ -148,14 +175,14 @@ class Inverse(Method):
             spectra = np.zeros((len(taper), p.tm.n_actuators), complex)
             spectra[active] = exact_target_spectra(p.tm.H[active], p.target_index, np.asarray(others, int),
                                                    np.fft.rfft(desired)[active], self.regularization, self.reg_param)
-            return Solution(np.fft.irfft(spectra, n, axis=0).T, desired, control, gains)
+            return Solution(np.fft.irfft(spectra, n, axis=0).T, desired, control, gains, note=note)
         weights = np.full(len(control), self.guard_weight)
         weights[0] = 1.0
         operator = p.tm.inverse_operator(control, band=p.band, regularization=self.regularization,
                                          reg_param=self.reg_param, taper_octaves=self.taper_octaves, weights=weights)
         # The operator applies the band taper itself: hand it the raw target waveform.
         desired = operator.band_limit(raw) if gains is not None else p.reference
-        return Solution(operator.drives_for_point(p.target_index, raw), desired, control, gains)
+        return Solution(operator.drives_for_point(p.target_index, raw), desired, control, gains, note=note)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -197,12 +224,12 @@ class TimeReversal(Method):
         self._set("control", _check_control(self, "guards", field_allowed=False))
 
     def solve(self, p: Problem) -> Solution:
-        control = p.control(self.control)
+        control, note = _control_of(self, p)
         targets = np.zeros((len(control), p.n))
         targets[0] = self.target_peak_m * p.stimulus
         drives = time_reversal_drives(p.tm.rows(control), targets, p.fs, max_drive=self.limit_v, band=p.band,
                                       taper_octaves=self.taper_octaves)
-        return Solution(drives, control_indices=control)
+        return Solution(drives, control_indices=control, note=note)
 
 
 @dataclass(frozen=True, kw_only=True)
