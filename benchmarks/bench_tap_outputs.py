@@ -96,8 +96,8 @@ def start_jack(name: str, period: int) -> subprocess.Popen:
     raise SystemExit("jackd did not start (needs jackd2)")
 
 
-def send_taps(server, n: int, rate: float | None) -> tuple[int, int, int]:
-    """Send n /tap; return (played, stale, other errors)."""
+def send_taps(server, n: int, rate: float | None, sent: list | None = None) -> tuple[int, int, int]:
+    """Send n /tap (their send times, monotonic s, to ``sent``); return (played, stale, other errors)."""
     from pythonosc.osc_message import OscMessage
     from pythonosc.udp_client import SimpleUDPClient
 
@@ -106,6 +106,8 @@ def send_taps(server, n: int, rate: float | None) -> tuple[int, int, int]:
     for i in range(n):
         if rate:
             time.sleep(max(0.0, t0 + i / rate - time.monotonic()))
+        if sent is not None:
+            sent.append(time.monotonic())
         client.send_message("/tap", 1 + i % 9)
     counts = {"played": 0, "stale": 0, "other": 0}
     others = []
@@ -172,7 +174,8 @@ def main() -> None:
         assert probe.stdout.readline().strip() == "ready"
         n_before = len(server.records)
         t = time.monotonic()
-        played, stale, other = send_taps(server, args.taps, args.rate)
+        sent: list[float] = []
+        played, stale, other = send_taps(server, args.taps, args.rate, sent)
         print(f"{args.taps} taps at {args.rate:g}/s: {played} played, {stale} stale, {other} other errors "
               f"({time.monotonic() - t:.1f} s)")
         time.sleep(0.3)
@@ -185,7 +188,16 @@ def main() -> None:
             if later.size:
                 lat.append(later[0] - r.receipt_s)
         lat = 1e3 * np.array(lat)
-        print(f"  onsets at the outputs: {len(onsets)} for {len(records)} taps played")
+        # Every tap that reached the outputs, played or not (one the stream lost samples in
+        # is answered /error): from its send, just before the kernel's receipt.
+        every = 1e3 * np.array([onsets[onsets > t][0] - t for t in sent if (onsets > t).any()
+                                and onsets[onsets > t][0] - t < 1.0 / args.rate])
+        if every.size:
+            print(f"  send -> first non-zero sample at the outputs, every tap that reached them ({every.size}): "
+                  f"p50 {np.percentile(every, 50):.2f} ms, p99 {np.percentile(every, 99):.2f} ms, "
+                  f"max {every.max():.2f} ms")
+        print(f"  onsets at the outputs: {len(onsets)} for {len(records)} taps played; stream xruns: "
+              f"{rig._stream.xruns} buffers since it opened")
         if lat.size:
             print(f"  receipt -> first non-zero sample at the outputs: p50 {np.percentile(lat, 50):.2f} ms, "
                   f"p99 {np.percentile(lat, 99):.2f} ms, max {lat.max():.2f} ms, min {lat.min():.2f} ms "

@@ -405,14 +405,16 @@ class AudioRig(HardwareRig):
                     self._close_guard()
 
     def _close_guard(self) -> None:
-        from .audio_stream import CLOSE_DEADLINE_S, call_with_deadline, server_lost
+        # On a server that hangs, libjack's close waits for good: in a thread of its own,
+        # abandoned after a deadline (it holds the client, which is then never collected,
+        # so no collection at the process's exit waits on it either).
+        from .audio_stream import CLOSE_DEADLINE_S, server_lost
 
-        if server_lost() is not None:
-            return  # libjack would wait on the server for good
-        try:
-            call_with_deadline(self._jack_guard.close, CLOSE_DEADLINE_S, "close its JACK watch")
-        except DeviceError as exc:
-            log.error("%s", exc)
+        closer = threading.Thread(target=self._jack_guard.close, name="vibrofocus-jack-close", daemon=True)
+        closer.start()
+        closer.join(CLOSE_DEADLINE_S if server_lost() is None else 0.5)
+        if closer.is_alive():
+            log.error("the JACK connection watch did not close (the JACK server does not answer); abandoned")
 
     # ------------------------------------------------------------------ other programs
     @property
@@ -571,22 +573,20 @@ class AudioRig(HardwareRig):
 
     def _running_stream(self, what: str):
         """The running stream, opened again if it died (a callback that stopped coming, a failed start)."""
-        from .audio_stream import server_lost
+        from .audio_stream import STALL_S, mark_lost, raise_if_lost
 
-        if server_lost() is not None:
-            from .audio_stream import call_with_deadline
-
-            call_with_deadline(lambda: None, 0, what)  # raises the lost server's message
+        raise_if_lost()
         stream = self._stream
-        if stream is not None and stream.alive():
-            return stream
-        if stream is not None:
-            log.warning("the audio stream stopped running; opening it again for %s", what)
-            with self._stream_lock:
-                self._stream = None
-            stream.close()
-        self._open_stream()
-        return self._stream
+        if stream is None:  # closed by an earlier failure to open
+            self._open_stream()
+            return self._stream
+        if not stream.alive():
+            # Its callback stopped coming: the server hung, stopped or restarted, and
+            # PortAudio cannot reconnect within this process.
+            mark_lost(f"the audio server stopped answering: the rig's stream got no callback for over {STALL_S:g} s "
+                      f"before {what}")
+            raise_if_lost()
+        return stream
 
     def _clock(self) -> float:
         # The energy budget places a play at the time its first frame reaches the outputs:
@@ -608,7 +608,7 @@ class AudioRig(HardwareRig):
         (:data:`~vibrofocus.rigs.onset.PORTAUDIO_CLOCK`) and how far ahead of the callback
         that is (the latency).
         """
-        from .audio_stream import Job, mark_lost
+        from .audio_stream import Job, mark_lost, raise_if_lost
 
         sd = _sounddevice()
         stopped = self._stop_probe()  # the stop epoch of the play that called us (rigs.base)
@@ -640,15 +640,13 @@ class AudioRig(HardwareRig):
                     mark_lost(f"the audio interface stopped answering while {what} (no audio callback for "
                               f"{time.monotonic() - stream.last[0] if stream.last else 0:.1f} s): is the audio "
                               "server (JACK, the driver) still running?")
-                    from .audio_stream import call_with_deadline
-
-                    call_with_deadline(lambda: None, 0, what)  # raises the lost server's message
+                    raise_if_lost()
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface failed while {what}: {exc}") from None
         finally:
             # Whatever ended the play (its end, an error, Ctrl-C), the callback writes
             # silence from its next buffer.
-            stream.retire(job, wait=not job.done.is_set())
+            stream.retire(job, wait=True)
         if job.actual_start is not None and job.actual_start > frame:
             # It reached the callback after its planned frame: the budget places it where it played.
             self.budget.delay_last((job.actual_start - frame) / self.device_fs)

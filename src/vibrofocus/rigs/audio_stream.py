@@ -28,13 +28,14 @@ import logging
 import math
 import threading
 import time
+import weakref
 from typing import Callable
 
 import numpy as np
 
 from .devices import DeviceError
 
-__all__ = ["RunningStream", "Job", "server_lost", "call_with_deadline", "OPEN_DEADLINE_S", "CLOSE_DEADLINE_S",
+__all__ = ["RunningStream", "Job", "server_lost", "raise_if_lost", "mark_lost", "call_with_deadline", "OPEN_DEADLINE_S", "CLOSE_DEADLINE_S",
            "STALL_S"]
 
 log = logging.getLogger(__name__)
@@ -50,6 +51,26 @@ STALL_S = 2.0
 # as PortAudio's state is.
 _lost: str | None = None
 _lost_lock = threading.Lock()
+# Every stream not yet closed, for the check at the process's exit.
+_OPEN: "weakref.WeakSet[RunningStream]" = weakref.WeakSet()
+_exit_check_registered = False
+
+
+def _check_at_exit() -> None:
+    # Runs before sounddevice's own exit handler (registered after it): a stream whose
+    # callback stopped coming means a server that hung or went away, where terminating
+    # PortAudio would block or abort.
+    for stream in list(_OPEN):
+        if stream.stalled():
+            mark_lost("the audio server stopped answering before the process exited")
+            return
+
+
+def _register_exit_check() -> None:
+    global _exit_check_registered
+    if not _exit_check_registered:
+        atexit.register(_check_at_exit)
+        _exit_check_registered = True
 
 
 def server_lost() -> str | None:
@@ -85,6 +106,12 @@ def mark_lost(reason: str) -> None:
         atexit.unregister(handler)
 
 
+def raise_if_lost() -> None:
+    """Raise :class:`DeviceError` saying what to do when the audio server is lost for this process."""
+    if _lost is not None:
+        raise DeviceError(_lost_message())
+
+
 def call_with_deadline(func: Callable[[], object], seconds: float, what: str) -> object:
     """Run ``func()`` in a daemon thread; give up on it after ``seconds``.
 
@@ -101,8 +128,7 @@ def call_with_deadline(func: Callable[[], object], seconds: float, what: str) ->
     what : str
         What it does, as people read it ("open the stream").
     """
-    if _lost is not None:
-        raise DeviceError(_lost_message())
+    raise_if_lost()
     result: dict = {}
 
     def run() -> None:
@@ -187,7 +213,11 @@ class RunningStream:
         self.out_cols = list(out_cols)
         self.frame = 0
         self.callbacks = 0
+        #: Callbacks that reported lost samples since the stream opened.
+        self.xruns = 0
         self.job: Job | None = None
+        # The job whose last buffer the next callback's flags tell of.
+        self.trailing: Job | None = None
         self.opened_s = time.monotonic()
         # (host time, first frame, frames, currentTime, outputBufferDacTime) of the last callback.
         self.last: tuple[float, int, int, float, float] | None = None
@@ -202,6 +232,8 @@ class RunningStream:
             self.stream = call_with_deadline(make, OPEN_DEADLINE_S, "open its stream")
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface could not open a stream: {exc}") from None
+        _OPEN.add(self)
+        _register_exit_check()  # after sounddevice's import: it runs before sounddevice's handler
         latency_s = self.stream.latency
         self.output_latency_s = float(latency_s[1] if isinstance(latency_s, tuple) else latency_s)
 
@@ -224,6 +256,12 @@ class RunningStream:
             ahead = dac - current if math.isfinite(dac - current) and 0 <= dac - current < 2.0 else 0.0
             self.anchor_s = now + ahead - first / self.fs
         self.callbacks += 1
+        if status:
+            self.xruns += 1
+        trailing = self.trailing
+        if trailing is not None:  # what was lost in the last job's last buffer is told now
+            trailing.status |= status
+            self.trailing = None
         outdata.fill(0)
         job = self.job
         if job is None:
@@ -240,7 +278,8 @@ class RunningStream:
                     return  # its frame is in a later buffer
                 job.actual_start = first + offset
                 job.onset = (now, dac + offset / self.fs, dac - current + offset / self.fs)
-                job.status = status
+                # This callback's flags tell of the buffer before it, not of the job.
+                job.status = type(status)()
             else:
                 job.status |= status
             n = min(frames - offset, job.total - job.pos)
@@ -250,6 +289,7 @@ class RunningStream:
             job.pos += n
             if job.pos >= job.total:
                 self.job = None
+                self.trailing = job
                 job.done.set()
         except BaseException as exc:  # noqa: BLE001 - the stream runs on; the job reports it
             outdata.fill(0)
@@ -294,12 +334,16 @@ class RunningStream:
         self.job = job
 
     def retire(self, job: Job, wait: bool = True) -> None:
-        """Take a job off the callback (silence from its next buffer); wait for that buffer."""
+        """Take a job off the callback (silence from its next buffer); wait for that buffer.
+
+        The callback after a job's last buffer also tells whether that buffer was lost
+        (its status flags): after the wait, :attr:`Job.status` holds it.
+        """
         job.halted.set()
         if self.job is job:
             self.job = None
-            if wait:
-                self.wait_callback()
+        if wait:
+            self.wait_callback()
 
     def wait_callback(self) -> bool:
         """Wait for the next callback (within two buffers and 50 ms); whether it came."""
@@ -327,6 +371,10 @@ class RunningStream:
     def close(self) -> None:
         """Abort and close the stream within :data:`CLOSE_DEADLINE_S` (nothing once the server is lost)."""
         self.job = None
+        _OPEN.discard(self)
+        if self.stalled():
+            mark_lost("the audio server stopped answering (the rig's stream got no callback for "
+                      f"{STALL_S:g} s) before the rig closed")
         if _lost is not None:
             return  # a call into PortAudio would block or fail; the stream goes with the process
 
