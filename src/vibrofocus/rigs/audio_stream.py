@@ -226,7 +226,7 @@ class RunningStream:
 
         def make():
             return sd.Stream(samplerate=self.fs, device=device, channels=(n_in, n_out), dtype="float32",
-                             latency=latency, callback=self._callback)
+                             latency=latency, callback=lambda *args: self._callback(*args))
 
         try:
             self.stream = call_with_deadline(make, OPEN_DEADLINE_S, "open its stream")
