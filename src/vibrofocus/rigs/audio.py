@@ -2,8 +2,8 @@
 
 Many tactile labs drive their actuators from the line outputs of a multichannel audio
 interface through a power amplifier and record the vibrometer decoder on one of its
-inputs. This rig plays and records full-duplex in one PortAudio stream
-(:func:`sounddevice.playrec`), so input and output share the interface's sample clock.
+inputs. This rig plays and records full-duplex in one PortAudio stream, so input and
+output share the interface's sample clock.
 
 Signal chain
 ------------
@@ -30,23 +30,36 @@ loopback is required.
 
 Streams
 -------
-Each play or recording runs in a stream of its own (not sounddevice's module-level
-stream, which a cue tone could share), fed by a callback. The drive is followed by
-silence at least as long as the interface's output latency, so its fade-out is played
-and not cut by the end of the stream; a stream that delivered fewer frames than it was
-given is refused. :meth:`AudioRig.stop`, from any thread, aborts the running stream: the
-outputs are silent within one buffer plus the interface's buffered output latency
+The rig opens one full-duplex stream when it opens (not sounddevice's module-level
+stream, which a cue tone could share) and keeps it running, writing silence, until it
+closes (:mod:`vibrofocus.rigs.audio_stream`). A play or recording is scheduled into the
+stream's callback at a frame index, the first buffer boundary after the drive is
+converted; its onset is that frame on the device's clock, and the energy budget places
+it at that frame's time at the outputs. Nothing is opened per play, and the stream runs
+on after a drive, so its fade-out plays in full without padding. A play that took fewer
+frames than it was given is refused. :meth:`AudioRig.stop`, from any thread, takes the
+play off the callback, which writes silence from its next buffer: the outputs are
+silent within one buffer plus the interface's buffered output latency
 (:attr:`AudioRig.output_latency_s`). A recording buffer starts as zeros, never as
-uninitialised memory.
+uninitialised memory. The stream's lost samples (xruns) during a play are flagged on its
+onset (:attr:`~vibrofocus.rigs.DeviceOnset.xrun`) and refused with
+:class:`~vibrofocus.rigs.XrunError`, which carries that onset.
+
+Opening and closing the stream have deadlines; a server that stops answering (no
+callback for :data:`~vibrofocus.rigs.audio_stream.STALL_S`) ends the play with
+:class:`~vibrofocus.rigs.DeviceError`, and later plays are refused at once with what to
+do: PortAudio cannot reconnect within the process (docs/hardware.md, "A hung or
+restarted audio server").
 
 Other programs on the interface
 -------------------------------
 A sound server mixes every program that plays to an output: a media player's signal
 adds to the drive, past every limit of the rig. On JACK (and PipeWire's JACK) the rig
-sees the connections of its playback ports (:mod:`vibrofocus.rigs.jack_guard`): a play
-is refused before its stream starts when anything is connected to the ports it uses,
-and while it plays the rig looks every :data:`POLL_S` and stops at zero when anything
-but its own stream feeds them; either way it disconnects the other program and names it
+sees the connections of its playback ports (:mod:`vibrofocus.rigs.jack_guard`): its
+running stream's own ports are connected there from its opening to its closing; a play
+is refused before it starts when anything else is, and while it plays the rig looks
+every :data:`POLL_S` and stops at zero when anything but its own stream feeds them;
+either way it disconnects the other program and names it
 (:class:`~vibrofocus.rigs.SharedOutputError`). Other host APIs give no way to see
 other programs: ``vibrofocus devices --check`` says so (:func:`other_programs_report`),
 and only a hardware limiter on the amplifier's input guards them.

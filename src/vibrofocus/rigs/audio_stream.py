@@ -89,6 +89,11 @@ def mark_lost(reason: str) -> None:
 
     From then on PortAudio is not terminated at the process's exit: on a server that hangs
     it would block for good, on one that went away it aborts on an assertion.
+
+    Parameters
+    ----------
+    reason : str
+        What happened, as people read it (the first words of every later refusal).
     """
     global _lost
     with _lost_lock:
