@@ -32,6 +32,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 
@@ -148,6 +149,9 @@ def main() -> None:
     logging.basicConfig(level=logging.ERROR)
     name = f"vibrofocus-bench-{os.getpid()}"
     os.environ["JACK_DEFAULT_SERVER"], os.environ["JACK_NO_START_SERVER"] = name, "1"
+    # The server is this run's own, so is the device ("loopback" on it): device locks of
+    # its own too, beside other programs' rigs on other JACK servers of this machine.
+    os.environ["VIBROFOCUS_LOCK_DIR"] = tempfile.mkdtemp(prefix="vibrofocus-bench-locks-")
     jackd = start_jack(name, args.period)
 
     def stop_jack() -> None:
@@ -157,6 +161,7 @@ def main() -> None:
     # Registered before sounddevice is imported, so it runs after sounddevice's own exit
     # handler: PortAudio leaves the server before the server goes.
     atexit.register(stop_jack)
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(143))  # `timeout` ends the server too
     from vibrofocus.realtime import OscTapServer, TapDesigner
     from vibrofocus.rendering import TransferMatrix
     from vibrofocus.rigs import make_rig

@@ -11,15 +11,14 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import subprocess
 import sys
 import time
 
 import pytest
 
-from .conftest import JACK_LOOPBACK_PORTS
-from .test_audio import JACK_PERIOD, JACK_RATE, jack_config
+from .conftest import end_private_jackd, start_private_jackd
+from .test_audio import jack_config
 
 pytestmark = [pytest.mark.jack, pytest.mark.slow]
 
@@ -61,40 +60,6 @@ print(json.dumps(out), flush=True)
 """
 
 
-def start_private_jackd(name: str) -> subprocess.Popen:
-    """A JACK server named ``name`` (dummy driver, loopback ports, the test rate and period), running."""
-    proc = subprocess.Popen(["jackd", "-n", name, "--no-realtime", "-L", str(JACK_LOOPBACK_PORTS), "-d", "dummy",
-                             "-r", str(JACK_RATE), "-p", str(JACK_PERIOD), "-C", "2", "-P", "2"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True)
-    deadline = time.monotonic() + 15
-    while True:
-        answer = subprocess.run(["jack_wait", "-s", name, "-c"], capture_output=True, text=True).stdout
-        if "running" in answer and "not" not in answer:
-            return proc
-        if time.monotonic() > deadline:
-            proc.kill()
-            pytest.fail(f"the private jackd {name} did not start: {proc.communicate()[0][-1500:]}")
-        time.sleep(0.1)
-
-
-def _end(proc: subprocess.Popen, name: str) -> None:
-    """Stop a private server; one that dies (of SIGPIPE, writing to a client gone while it was
-    stopped) leaves its entry in JACK's registry of servers, which holds 8: a server of the same
-    name, started and stopped, takes the entry back."""
-    if proc.poll() is None:
-        os.kill(proc.pid, signal.SIGCONT)
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-    if proc.returncode != 0:
-        again = start_private_jackd(name)
-        again.terminate()
-        again.wait(10)
-
-
 def _child(name: str, server_pid: int, how: str) -> subprocess.Popen:
     env = {**os.environ, "JACK_DEFAULT_SERVER": name, "JACK_NO_START_SERVER": "1"}
     return subprocess.Popen([sys.executable, "-c", _SCRIPT, json.dumps(jack_config()), str(server_pid), how],
@@ -118,7 +83,7 @@ def test_a_stopped_jack_server_ends_the_play_refuses_the_next_and_the_process_ex
     try:
         result = _result(_child(name, server.pid, "sigstop"), timeout=40)
     finally:
-        _end(server, name)
+        end_private_jackd(server, name)
     print(result)
     assert result["first"].startswith("the audio") and "restart vibrofocus" in result["first"]
     assert result["first_s"] < 0.5 + 2.0 + 1.5  # SIGSTOP, no callback for STALL_S, slack
@@ -141,7 +106,7 @@ def test_a_restarted_jack_server_refuses_plays_with_what_to_do_and_the_process_e
         child.stdin.flush()
         result = _result(child, timeout=40)
     finally:
-        _end(server, name)
+        end_private_jackd(server, name)
     print(result)
     assert "restart vibrofocus" in result["second"] and result["second_s"] < 0.5
     assert result["close_s"] < 1.0
