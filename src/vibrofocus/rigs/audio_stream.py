@@ -395,4 +395,7 @@ class RunningStream:
         except DeviceError as exc:
             log.error("%s", exc)
         except Exception as exc:  # noqa: BLE001 - closing goes on
-            log.warning("closing the audio stream: %s", exc)
+            # At the process's exit sounddevice may have terminated PortAudio first, which
+            # closed the stream already.
+            (log.debug if "not initialized" in str(exc).lower() else log.warning)(
+                "closing the audio stream: %s", exc)
