@@ -5,6 +5,7 @@ datagram with a negative bundle element size is answered ``/error`` while the ne
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import struct
 import threading
@@ -47,6 +48,13 @@ def served(jack_server):  # noqa: F811
     arm = SimulatedForearm(seed=3, fs=FS)
     designer = TapDesigner(TransferMatrix.from_model(arm, rig.layout, rig.fs), None, method="inverse",
                            limit_v=rig.limits.peak_v)
+    with _serving(rig, designer) as (server, thread, result, client):
+        yield rig, server, thread, result, client
+
+
+@contextlib.contextmanager
+def _serving(rig, designer):
+    """A server on ``rig`` in a thread, and a client socket; everything closed at the end, the rig too."""
     server = OscTapServer(rig, designer, port=0)
     result = {}
     thread = threading.Thread(target=lambda: result.setdefault("who", server.serve()), daemon=True)
@@ -54,7 +62,7 @@ def served(jack_server):  # noqa: F811
     client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     client.settimeout(WAIT_S)
     try:
-        yield rig, server, thread, result, client
+        yield server, thread, result, client
     finally:
         server.stop()
         thread.join(WAIT_S)
@@ -121,12 +129,7 @@ def test_taps_sent_faster_than_a_stream_opens_all_play(jack_server):  # noqa: F8
     arm = SimulatedForearm(seed=3, fs=FS)
     designer = TapDesigner(TransferMatrix.from_model(arm, rig.layout, rig.fs, n_samples=800), None, method="inverse",
                            limit_v=rig.limits.peak_v)
-    server = OscTapServer(rig, designer, port=0)
-    thread = threading.Thread(target=server.serve, daemon=True)
-    thread.start()
-    client = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-    client.settimeout(WAIT_S)
-    try:
+    with _serving(rig, designer) as (server, _, _, client):
         for location in range(1, 10):
             designer.drives_at(location)  # designed ahead, as serve-osc does
         t0 = time.monotonic()
@@ -134,12 +137,6 @@ def test_taps_sent_faster_than_a_stream_opens_all_play(jack_server):  # noqa: F8
             time.sleep(max(0.0, t0 + i / 3.0 - time.monotonic()))
             client.sendto(_message("/tap", 1 + i % 9).dgram, server.address)
         replies = [Reply(client.recv(65536)) for _ in range(20)]
-    finally:
-        server.stop()
-        thread.join(WAIT_S)
-        server.close()
-        client.close()
-        rig.close()
     errors = [r.params[0] for r in replies if r.address != "/played"]
     waits = [1e3 * (r.played_s - r.receipt_s) for r in server.records]
     print(f"{len(server.records)} of 20 played; receipt to play() returned: median {np.median(waits):.0f} ms")
