@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import subprocess
+import tempfile
 import time
 
 from types import SimpleNamespace
@@ -96,3 +98,40 @@ def jack_server():
             sd._initialize()
         except Exception:  # noqa: BLE001
             pass
+
+
+def start_private_jackd(name: str) -> subprocess.Popen:
+    """A JACK server named ``name`` (dummy driver, loopback ports, the test rate and period), running."""
+    log = tempfile.TemporaryFile("w+")  # not a pipe: a server whose output nobody reads would block on it
+    proc = subprocess.Popen(["jackd", "-n", name, "--no-realtime", "-L", str(JACK_LOOPBACK_PORTS), "-d", "dummy",
+                             "-r", str(JACK_RATE), "-p", str(JACK_PERIOD), "-C", "2", "-P", "2"],
+                            stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    deadline = time.monotonic() + 15
+    while True:
+        answer = subprocess.run(["jack_wait", "-s", name, "-c"], capture_output=True, text=True).stdout
+        if "running" in answer and "not" not in answer:
+            return proc
+        if time.monotonic() > deadline:
+            proc.kill()
+            proc.wait()
+            log.seek(0)
+            pytest.fail(f"the private jackd {name} did not start: {log.read()[-1500:]}")
+        time.sleep(0.1)
+
+
+def end_private_jackd(proc: subprocess.Popen, name: str) -> None:
+    """Stop a private server; one that dies (of SIGPIPE, writing to a client gone while it was
+    stopped) leaves its entry in JACK's registry of servers, which holds 8: a server of the same
+    name, started and stopped, takes the entry back."""
+    if proc.poll() is None:
+        os.kill(proc.pid, signal.SIGCONT)
+        proc.terminate()
+        try:
+            proc.wait(10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    if proc.returncode != 0:
+        again = start_private_jackd(name)
+        again.terminate()
+        again.wait(10)

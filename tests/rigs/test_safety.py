@@ -199,3 +199,22 @@ def test_the_calibration_sweeps_pass_the_slow_content_check():
         for band in ((10.0, 1000.0), (5.0, 1000.0)):
             sweep = np.atleast_2d(make_excitation(default_settings(method, FS, band)))
             check_drive(np.tile(sweep[:1], (4, 1)), FS, 4, SafetyLimits())
+
+
+def test_a_play_that_began_late_moves_the_budgets_end_later():
+    """delay_last: the plays after it are placed against where it played, not where it was admitted."""
+    from vibrofocus.rigs.safety import EnergyBudget
+
+    fs = 1000.0
+    half_second = np.tile(5.0 * np.sqrt(2) * np.sin(2 * np.pi * 50 * np.arange(500) / fs), (1, 1))  # 5 V RMS
+    # Two of them 0.4 s apart hold 25 * 0.6 V^2 over the worst 1 s: 3.87 V RMS, under 4 V.
+    on_time = EnergyBudget(SafetyLimits(), 1, fs)
+    on_time.admit(half_second, 0.0)
+    on_time.admit(half_second, 0.9)
+    # The first began 0.1 s later than admitted: the second, at the same time, is 0.3 s after it
+    # (25 * 0.7 V^2: 4.18 V RMS), refused.
+    late = EnergyBudget(SafetyLimits(), 1, fs)
+    late.admit(half_second, 0.0)
+    late.delay_last(0.1)
+    with pytest.raises(SafetyError, match="together with the plays before it"):
+        late.admit(half_second, 0.9)

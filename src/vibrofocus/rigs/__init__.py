@@ -3,7 +3,8 @@
 from .base import Rig
 from .config import AudioRigConfig, NidaqRigConfig, RigConfig, load_rig_config, parse_rig_config
 from .device_lock import DeviceLock, LockKey
-from .devices import DeviceBusyError, DeviceError, SharedOutputError, StoppedError, list_audio_devices, list_nidaq_devices
+from .devices import (DeviceBusyError, DeviceError, SharedOutputError, StoppedError, XrunError, list_audio_devices,
+                      list_nidaq_devices)
 from .factory import RIG_KINDS, make_rig
 from .hardware import HardwareRig
 from .onset import CLOCKS, DeviceOnset, register_clock
@@ -15,7 +16,7 @@ from .vibrometer import Vibrometer
 # so importing vibrofocus does not load PortAudio or the NI driver.
 __all__ = [
     "Rig", "HardwareRig", "DeviceOnset", "CLOCKS", "register_clock", "SafetyLimits", "EnergyBudget", "check_drive", "make_rig", "RIG_KINDS",
-    "DeviceLock", "LockKey", "DeviceBusyError", "StoppedError", "SharedOutputError",
+    "DeviceLock", "LockKey", "DeviceBusyError", "StoppedError", "SharedOutputError", "XrunError",
     "RigConfig", "AudioRigConfig", "NidaqRigConfig", "load_rig_config", "parse_rig_config",
     "Vibrometer", "ForceCurve", "StrapSensors", "StrapReading", "check_straps", "evaluate_straps", "has_strap_sensors",
     "DeviceError", "list_audio_devices", "list_nidaq_devices",

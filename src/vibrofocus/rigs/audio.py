@@ -2,8 +2,8 @@
 
 Many tactile labs drive their actuators from the line outputs of a multichannel audio
 interface through a power amplifier and record the vibrometer decoder on one of its
-inputs. This rig plays and records full-duplex in one PortAudio stream
-(:func:`sounddevice.playrec`), so input and output share the interface's sample clock.
+inputs. This rig plays and records full-duplex in one PortAudio stream, so input and
+output share the interface's sample clock.
 
 Signal chain
 ------------
@@ -30,23 +30,36 @@ loopback is required.
 
 Streams
 -------
-Each play or recording runs in a stream of its own (not sounddevice's module-level
-stream, which a cue tone could share), fed by a callback. The drive is followed by
-silence at least as long as the interface's output latency, so its fade-out is played
-and not cut by the end of the stream; a stream that delivered fewer frames than it was
-given is refused. :meth:`AudioRig.stop`, from any thread, aborts the running stream: the
-outputs are silent within one buffer plus the interface's buffered output latency
+The rig opens one full-duplex stream when it opens (not sounddevice's module-level
+stream, which a cue tone could share) and keeps it running, writing silence, until it
+closes (:mod:`vibrofocus.rigs.audio_stream`). A play or recording is scheduled into the
+stream's callback at a frame index, the first buffer boundary after the drive is
+converted; its onset is that frame on the device's clock, and the energy budget places
+it at that frame's time at the outputs. Nothing is opened per play, and the stream runs
+on after a drive, so its fade-out plays in full without padding. A play that took fewer
+frames than it was given is refused. :meth:`AudioRig.stop`, from any thread, takes the
+play off the callback, which writes silence from its next buffer: the outputs are
+silent within one buffer plus the interface's buffered output latency
 (:attr:`AudioRig.output_latency_s`). A recording buffer starts as zeros, never as
-uninitialised memory.
+uninitialised memory. The stream's lost samples (xruns) during a play are flagged on its
+onset (:attr:`~vibrofocus.rigs.DeviceOnset.xrun`) and refused with
+:class:`~vibrofocus.rigs.XrunError`, which carries that onset.
+
+Opening and closing the stream have deadlines; a server that stops answering (no
+callback for :data:`~vibrofocus.rigs.audio_stream.STALL_S`) ends the play with
+:class:`~vibrofocus.rigs.DeviceError`, and later plays are refused at once with what to
+do: PortAudio cannot reconnect within the process (docs/hardware.md, "A hung or
+restarted audio server").
 
 Other programs on the interface
 -------------------------------
 A sound server mixes every program that plays to an output: a media player's signal
 adds to the drive, past every limit of the rig. On JACK (and PipeWire's JACK) the rig
-sees the connections of its playback ports (:mod:`vibrofocus.rigs.jack_guard`): a play
-is refused before its stream starts when anything is connected to the ports it uses,
-and while it plays the rig looks every :data:`POLL_S` and stops at zero when anything
-but its own stream feeds them; either way it disconnects the other program and names it
+sees the connections of its playback ports (:mod:`vibrofocus.rigs.jack_guard`): its
+running stream's own ports are connected there from its opening to its closing; a play
+is refused before it starts when anything else is, and while it plays the rig looks
+every :data:`POLL_S` and stops at zero when anything but its own stream feeds them;
+either way it disconnects the other program and names it
 (:class:`~vibrofocus.rigs.SharedOutputError`). Other host APIs give no way to see
 other programs: ``vibrofocus devices --check`` says so (:func:`other_programs_report`),
 and only a hardware limiter on the amplifier's input guards them.
@@ -70,7 +83,7 @@ import scipy.signal
 from ..errors import SafetyError, ValidationError
 from ..layout import ArrayLayout
 from .config import AudioRigConfig
-from .devices import DeviceError, SharedOutputError, StoppedError
+from .devices import DeviceError, SharedOutputError, StoppedError, XrunError
 from .hardware import HardwareRig
 from .onset import MAX_LATENCY_S, PORTAUDIO_CLOCK, DeviceOnset
 
@@ -86,14 +99,17 @@ MIN_LOOPBACK_CORRELATION = 0.5
 UNSTEADY_LATENCY_HOSTAPIS = ("mme", "directsound", "wasapi")
 #: A recorded sample at or above this fraction of full scale counts as clipped.
 CLIP_FRACTION = 0.999
+#: The most inputs the rig's stream opens (every input of the interface, up to this many).
+MAX_STREAM_INPUTS = 32
 #: How often a waiting play looks whether it was stopped (and lets Ctrl-C in), s.
 POLL_S = 0.02
 #: The most a resampled drive may peak over the limit and be scaled back, not refused (fraction).
 MAX_RESAMPLING_OVERSHOOT = 0.01
-#: A stream that has not ended this long after its block's length is given up, s.
+#: A play that has not ended this long after its block's length is given up, s.
 STREAM_MARGIN_S = 2.0
-#: After an error the rig did not control, a stream that does not close within this long is abandoned, s.
-CLOSE_WAIT_S = 5.0
+#: A play is planned at the first buffer boundary at least this far ahead, s: the time to
+#: convert a tap's drive for the device (a later start is placed where it played).
+PLAN_MARGIN_S = 0.002
 # Words that say how a device is reached, not which interface it is.
 _GENERIC_WORDS = {
     "usb", "audio", "device", "devices", "output", "outputs", "input", "inputs", "speakers", "speaker",
@@ -204,6 +220,14 @@ def other_programs_report(hostapi: str, device_name: str) -> str:
             f"{device_name}, and {how}, adding to the drives past the rig's limits; give the interface to the rig "
             "alone (exclusive mode, no system sounds) and put a limiter or mute on the amplifier's input "
             "(docs/hardware.md)")
+
+
+def _problems(status) -> list[str]:
+    """The samples-lost flags a stream reported, as people read them (empty: none)."""
+    if not status:
+        return []
+    return [flag.replace("_", " ") for flag in ("input_overflow", "input_underflow", "output_overflow",
+                                                 "output_underflow") if getattr(status, flag, False)]
 
 
 def _sounddevice():
@@ -365,18 +389,45 @@ class AudioRig(HardwareRig):
         self.last_clipped: np.ndarray | None = None
         self.last_dropout_mask: np.ndarray | None = None
         self._output_latency_s = 0.0
-        # The running stream, so stop() from any thread can abort it; the lock keeps that
-        # from racing the owner closing it.
+        # The running stream (module docstring, "Streams"), so stop() from any thread can
+        # retire its play; the lock keeps that from racing a play being scheduled.
         self._stream = None
         self._stream_lock = threading.Lock()
+        self._own_ports: dict[int, str] | None = None
+        self._planned_frame: int | None = None
+        # Every input opens with the stream, so a loopback capture may use any of them.
+        self._n_in = max(max(self._in_channels), min(int(dev["max_input_channels"]), MAX_STREAM_INPUTS))
+        try:
+            self._open_stream()
+        except BaseException:
+            self.close()
+            raise
 
     def close(self) -> None:
-        """Release the device (outputs left at zero), its lock and the JACK connection watch."""
+        """Stop, close the running stream (within its deadline), release the device, its lock and the JACK watch."""
         try:
-            super().close()
+            self.stop()
+            stream, self._stream = self._stream, None
+            if stream is not None:
+                stream.close()
         finally:
-            if self._jack_guard is not None:
-                self._jack_guard.close()
+            try:
+                super().close()
+            finally:
+                if self._jack_guard is not None:
+                    self._close_guard()
+
+    def _close_guard(self) -> None:
+        # On a server that hangs, libjack's close waits for good: in a thread of its own,
+        # abandoned after a deadline (it holds the client, which is then never collected,
+        # so no collection at the process's exit waits on it either).
+        from .audio_stream import CLOSE_DEADLINE_S, server_lost
+
+        closer = threading.Thread(target=self._jack_guard.close, name="vibrofocus-jack-close", daemon=True)
+        closer.start()
+        closer.join(CLOSE_DEADLINE_S if server_lost() is None else 0.5)
+        if closer.is_alive():
+            log.error("the JACK connection watch did not close (the JACK server does not answer); abandoned")
 
     # ------------------------------------------------------------------ other programs
     @property
@@ -403,7 +454,7 @@ class AudioRig(HardwareRig):
             return
         from .jack_guard import shared_output_message
 
-        feeds = self._jack_guard.feeds()
+        feeds = self._jack_guard.feeds(self._own_ports)  # the rig's running stream is its own
         if feeds:
             raise SharedOutputError(shared_output_message(feeds, self.output_labels, when="check"))
 
@@ -496,203 +547,143 @@ class AudioRig(HardwareRig):
         return lag
 
     # ------------------------------------------------------------------ backend
-    def _check_status(self, status, what: str) -> None:
-        if not status:
-            return
-        problems = [flag.replace("_", " ") for flag in
-                    ("input_overflow", "input_underflow", "output_overflow", "output_underflow")
-                    if getattr(status, flag, False)]
+    def _check_status(self, status, what: str, onset: DeviceOnset | None = None) -> None:
+        problems = _problems(status)
         if problems:
             log.error("audio stream reported %s while %s", ", ".join(problems), what)
-            raise DeviceError(
-                f"the audio stream reported {', '.join(problems)} while {what}: samples were lost, so the "
+            raise XrunError(
+                onset, f"the audio stream reported {', '.join(problems)} while {what}: samples were lost, so the "
                 "result is discarded (outputs are at zero); retry, close other programs, or raise the "
                 "device's buffer size"
             )
 
     @property
     def output_latency_s(self) -> float:
-        """Buffered output latency of the last stream, s (what a stop cannot recall)."""
+        """Buffered output latency of the running stream, s (what a stop cannot recall)."""
         return self._output_latency_s
 
-    def _run_stream(self, block: np.ndarray, record: bool, what: str) -> tuple[np.ndarray | None, object, DeviceOnset]:
-        """Play ``block`` (n_frames, n_out) through a stream of its own; record if asked.
+    # ------------------------------------------------------------------ the running stream
+    def _open_stream(self) -> None:
+        """Open the rig's one stream and start it (silence until a play); within deadlines."""
+        from .audio_stream import RunningStream
 
-        Returns the recorded input (n_frames, n_in), zeros where nothing came, the
-        stream's status flags over the whole run, and the onset of the block's first
-        frame: ``time.monotonic()`` in the first callback, that callback's
-        ``outputBufferDacTime`` (:data:`~vibrofocus.rigs.onset.PORTAUDIO_CLOCK`) and how far
-        ahead of the callback that is (``outputBufferDacTime - currentTime``, the latency).
-        """
         sd = _sounddevice()
-        n_out, n_in = max(self._out_channels), max(self._in_channels)
-        out_cols = [c - 1 for c in self._out_channels]
-        in_cols = [c - 1 for c in self._in_channels]
-        total = len(block)
-        recorded = np.zeros((total, len(in_cols)), np.float32) if record else None
-        state = {"pos": 0, "status": sd.CallbackFlags(), "onset": None, "error": None}
-        done = threading.Event()
-        stopped = self._stop_probe()  # the stop epoch of the play that called us (rigs.base)
-        halted = threading.Event()  # set when another program feeds the outputs (_refuse_shared)
-
-        def fill(outdata, frames, time_info):
-            pos = state["pos"]
-            if state["onset"] is None:  # the first callback: the block's first frame goes out now
-                state["onset"] = (time.monotonic(), float(time_info.outputBufferDacTime),
-                                  float(time_info.outputBufferDacTime) - float(time_info.currentTime))
-            outdata.fill(0)
-            if stopped() or halted.is_set():
-                raise sd.CallbackAbort
-            n = min(frames, total - pos)
-            outdata[:n, out_cols] = block[pos:pos + n]
-            return pos, n
-
-        def duplex(indata, outdata, frames, time_info, status):
-            state["status"] |= status
-            pos, n = fill(outdata, frames, time_info)
-            recorded[pos:pos + n] = indata[:n, in_cols]
-            state["pos"] = pos + n
-            if state["pos"] >= total:
-                raise sd.CallbackStop
-
-        def output_only(outdata, frames, time_info, status):
-            state["status"] |= status
-            pos, n = fill(outdata, frames, time_info)
-            state["pos"] = pos + n
-            if state["pos"] >= total:
-                raise sd.CallbackStop
-
-        def keep_error(callback):
-            # sounddevice ends the stream on a callback's exception and drops it: keep it,
-            # so the error says why the stream ended short.
-            def wrapped(*args):
-                try:
-                    callback(*args)
-                except (sd.CallbackStop, sd.CallbackAbort):
-                    raise
-                except BaseException as exc:
-                    state["error"] = exc
-                    raise sd.CallbackAbort from exc
-            return wrapped
-
-        duplex, output_only = keep_error(duplex), keep_error(output_only)
-
         guard = self._jack_guard
         # The output ports before the stream registers its own: the new ones are the rig's.
         before = guard.output_ports() if guard is not None else None
+        stream = RunningStream(sd, self.device_index, self.device_fs, self._n_in, max(self._out_channels),
+                               [c - 1 for c in self._out_channels], self.config.latency)
         try:
-            kwargs = dict(samplerate=self.device_fs, device=self.device_index, dtype="float32",
-                          latency=self.config.latency, finished_callback=done.set)
-            if record:
-                stream = sd.Stream(channels=(n_in, n_out), callback=duplex, **kwargs)
-            else:
-                stream = sd.OutputStream(channels=n_out, callback=output_only, **kwargs)
-        except sd.PortAudioError as exc:
-            raise DeviceError(f"the audio interface could not open a stream for {what}: {exc}") from None
-        hung = False
-        # A stream whose end the rig controlled is closed in place; after any other error
-        # (the server may be gone, and then closing blocks for good) only for so long.
-        controlled = False
+            self._own_ports = guard.own_ports(before, max(self._out_channels)) if guard is not None else None
+            stream.start()
+            if guard is not None:  # PortAudio connected each channel where the guard watches
+                guard.check_routing(self._own_ports)
+        except BaseException:
+            stream.close()
+            raise
+        self._output_latency_s = stream.output_latency_s
+        self._stream = stream
+
+    def _running_stream(self, what: str):
+        """The running stream, opened again if it died (a callback that stopped coming, a failed start)."""
+        from .audio_stream import STALL_S, mark_lost, raise_if_lost
+
+        raise_if_lost()
+        stream = self._stream
+        if stream is None:  # closed by an earlier failure to open
+            self._open_stream()
+            return self._stream
+        if not stream.alive():
+            # Its callback stopped coming: the server hung, stopped or restarted, and
+            # PortAudio cannot reconnect within this process.
+            mark_lost(f"the audio server stopped answering: the rig's stream got no callback for over {STALL_S:g} s "
+                      f"before {what}")
+            raise_if_lost()
+        return stream
+
+    def _clock(self) -> float:
+        # The energy budget places a play at the time its first frame reaches the outputs:
+        # the next buffer boundary after the drive's conversion, on the stream's frame axis.
+        stream = self._stream
+        if stream is None or not stream.alive():
+            self._planned_frame = None
+            return time.monotonic()
+        frame, at_s = stream.plan(PLAN_MARGIN_S)
+        self._planned_frame = frame
+        return at_s
+
+    def _run_stream(self, block: np.ndarray, record: bool, what: str) -> tuple[np.ndarray | None, object, DeviceOnset]:
+        """Play ``block`` (n_frames, n_out) in the running stream from the planned frame; record if asked.
+
+        Returns the recorded input (n_frames, n_in), zeros where nothing came, the
+        stream's status flags over the block, and the onset of the block's first frame:
+        ``time.monotonic()`` in the callback that wrote it, its ``outputBufferDacTime``
+        (:data:`~vibrofocus.rigs.onset.PORTAUDIO_CLOCK`) and how far ahead of the callback
+        that is (the latency).
+        """
+        from .audio_stream import Job, mark_lost, raise_if_lost
+
+        sd = _sounddevice()
+        stopped = self._stop_probe()  # the stop epoch of the play that called us (rigs.base)
+        planned, self._planned_frame = self._planned_frame, None
+        stream = self._running_stream(what)
+        frame = planned if planned is not None else stream.plan(PLAN_MARGIN_S)[0]
+        job = Job(block, frame, stopped, [c - 1 for c in self._in_channels] if record else None)
+        own = self._own_ports
+        guard = self._jack_guard
         try:
-            own = guard.own_ports(before, n_out) if guard is not None else None
-            latency = stream.latency
-            self._output_latency_s = float(latency[1] if isinstance(latency, tuple) else latency)
-            # A dead server or a vanished device never finishes the stream: give up after
-            # the block's own length plus the latencies and a margin.
-            deadline = time.monotonic() + total / self.device_fs + 2 * self._output_latency_s + STREAM_MARGIN_S
-            if guard is not None:  # nothing may be connected to the rig's ports before its stream
-                self._refuse_shared(None, "before")
+            if guard is not None:  # nothing but the rig's stream on its ports before the play
+                self._refuse_shared(own, "before")
             with self._stream_lock:
-                # Checked and started under the lock stop() aborts through: a stop before
-                # this line is seen here, one after it finds the stream to abort.
+                # Checked and scheduled under the lock stop() retires through: a stop before
+                # this line is seen here, one after it finds the job to retire.
                 if stopped():
                     raise StoppedError("recording" if record else "play")
-                self._stream = stream
-                stream.start()
-            if guard is not None:  # from its start to its end, only the stream's own ports
-                guard.check_routing(own)
-                self._refuse_shared(own, "during", halted)
+                stream.schedule(job)
+            deadline = time.monotonic() + (frame - stream.frame + job.total) / self.device_fs + STREAM_MARGIN_S
             while True:  # short waits: Ctrl-C, a stop and other programs' connections get in between them
-                finished = done.wait(POLL_S)
+                finished = job.done.wait(POLL_S)
                 if stopped():
                     break
                 if guard is not None:
-                    self._refuse_shared(own, "during", halted)
+                    self._refuse_shared(own, "during", job.halted)
                 if finished:
                     break
-                if time.monotonic() > deadline:
-                    hung = True
-                    raise DeviceError(
-                        f"the audio interface stopped answering while {what} (no end of the stream "
-                        f"{total / self.device_fs + STREAM_MARGIN_S:.1f} s after it started): is the audio "
-                        "server (JACK, the driver) still running? The stream was abandoned")
-            controlled = True
-            if state["error"] is not None:
-                raise DeviceError(f"the audio callback failed while {what}: {state['error']!r}") from state["error"]
-        except (StoppedError, SharedOutputError):
-            controlled = True
-            raise
+                if stream.stalled() or time.monotonic() > deadline:
+                    mark_lost(f"the audio interface stopped answering while {what} (no audio callback for "
+                              f"{time.monotonic() - stream.last[0] if stream.last else 0:.1f} s): is the audio "
+                              "server (JACK, the driver) still running?")
+                    raise_if_lost()
         except sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface failed while {what}: {exc}") from None
         finally:
-            # Whatever ended the stream (its end, an error, Ctrl-C), the callback writes
-            # silence from its next buffer: the abort returns only after JACK's cycles.
-            halted.set()
-            with self._stream_lock:
-                self._stream = None
-            self._end_stream(stream, wait_s=None if controlled else 1.0 if hung else CLOSE_WAIT_S)
+            # Whatever ended the play (its end, an error, Ctrl-C), the callback writes
+            # silence from its next buffer.
+            stream.retire(job, wait=True)
+        if job.actual_start is not None and job.actual_start > frame:
+            # It reached the callback after its planned frame: the budget places it where it played.
+            self.budget.delay_last((job.actual_start - frame) / self.device_fs)
         if stopped():
             raise StoppedError("recording" if record else "play")
-        if state["pos"] < total:
-            raise DeviceError(f"the audio interface took {state['pos']} of the {total} frames while {what}; "
+        if job.error is not None:
+            raise DeviceError(f"the audio callback failed while {what}: {job.error!r}") from job.error
+        if job.pos < job.total:
+            raise DeviceError(f"the audio interface took {job.pos} of the {job.total} frames while {what}; "
                               "the rest never played")
-        host, dac, ahead = state["onset"]
+        host, dac, ahead = job.onset
         # How far ahead of the callback the first sample reaches the converter, by the
         # stream's own clock; where the host API gives no such times, the stream's latency.
         latency = ahead if math.isfinite(ahead) and 0.0 <= ahead <= MAX_LATENCY_S else self._output_latency_s
         latency = latency if math.isfinite(latency) and 0.0 <= latency <= MAX_LATENCY_S else None
-        onset = (DeviceOnset(host, dac, PORTAUDIO_CLOCK, latency_s=latency) if math.isfinite(dac)
-                 else DeviceOnset(host, latency_s=latency))
-        return recorded, state["status"], onset
-
-    @staticmethod
-    def _end_stream(stream, wait_s: float | None) -> None:
-        """Abort (if running) and close a stream; with ``wait_s``, give up on it after that long.
-
-        A stream whose server died can block in ``close`` for good: then it is closed in
-        a daemon thread, so Ctrl-C and the process's exit still work.
-        """
-        def end():
-            try:
-                if stream.active:
-                    stream.abort()
-            except Exception as exc:  # noqa: BLE001 - closing follows anyway
-                log.warning("aborting the audio stream: %s", exc)
-            finally:
-                try:
-                    stream.close()
-                except Exception as exc:  # noqa: BLE001
-                    log.warning("closing the audio stream: %s", exc)
-
-        if wait_s is None:
-            end()
-            return
-        closer = threading.Thread(target=end, name="vibrofocus-audio-close", daemon=True)
-        closer.start()
-        closer.join(wait_s)
-        if closer.is_alive():
-            log.error("the audio stream did not close within %.1f s; abandoned", wait_s)
-
-    def _padded(self, block: np.ndarray) -> np.ndarray:
-        # Silence after the drive, longer than what the interface buffers: the fade-out
-        # plays in full before the stream ends.
-        n_pad = int(np.ceil(max(self._output_latency_s, 0.05) * self.device_fs)) + 4096
-        return np.concatenate([block, np.zeros((n_pad, block.shape[1]), np.float32)])
+        xrun = bool(_problems(job.status))
+        onset = (DeviceOnset(host, dac, PORTAUDIO_CLOCK, latency_s=latency, xrun=xrun) if math.isfinite(dac)
+                 else DeviceOnset(host, latency_s=latency, xrun=xrun))
+        return job.recorded, job.status, onset
 
     def _play(self, drive: np.ndarray) -> DeviceOnset:
-        block = self._padded(self._to_device(drive, n_tail=0))
-        _, status, onset = self._run_stream(block, record=False, what="playing")
-        self._check_status(status, "playing")
+        # The stream runs on after the block: its fade-out plays in full, with no padding.
+        _, status, onset = self._run_stream(self._to_device(drive, n_tail=0), record=False, what="playing")
+        self._check_status(status, "playing", onset)
         return onset
 
     @property
@@ -757,7 +748,13 @@ class AudioRig(HardwareRig):
     def _play_and_capture(self, drive: np.ndarray, input_channel: int) -> tuple[np.ndarray, float]:
         # One duplex stream that records only the loopback input, unaligned: where the
         # drive appears in it is the round trip of this stream.
-        block = self._padded(self._to_device(drive, n_tail=0))
+        if input_channel > self._n_in:
+            raise DeviceError(f"input {input_channel} is not among the {self._n_in} inputs of "
+                              f"{self.device_name}")
+        # The recording runs on past the drive, as long as the round trip may be.
+        n_after = int(np.ceil(max(self._output_latency_s, 0.05) * self.device_fs)) + 4096
+        block = self._to_device(drive, n_tail=0)
+        block = np.concatenate([block, np.zeros((n_after, block.shape[1]), np.float32)])
         kept = self._in_channels
         self._in_channels = [input_channel]
         try:
@@ -768,16 +765,15 @@ class AudioRig(HardwareRig):
         return np.asarray(recorded[:, 0], dtype=float), self.device_fs
 
     def _zero_outputs(self) -> None:
-        # Emergency stop from any thread: abort the running stream (pending buffers are
-        # dropped); the callback also writes silence from the moment it sees the stop
-        # (Rig.stop has moved the stop epoch before this runs).
+        # Emergency stop from any thread: the play leaves the callback, which writes
+        # silence from its next buffer (it also sees the stop epoch itself, which Rig.stop
+        # has moved before this runs); returns once that buffer has been written, or
+        # after two buffers and 50 ms if the server does not answer.
         with self._stream_lock:
             stream = self._stream
-            if stream is not None and stream.active:
-                try:
-                    stream.abort()
-                except Exception as exc:  # noqa: BLE001 - the owner closes it anyway
-                    log.warning("aborting the audio stream: %s", exc)
+            job = stream.job if stream is not None else None
+            if job is not None:
+                stream.retire(job)
 
     def describe(self) -> dict:
         """Settings to store beside a calibration (JSON-serialisable)."""

@@ -10,7 +10,7 @@ from dataclasses import dataclass, field
 
 from ..errors import SafetyError, VibrofocusError
 
-__all__ = ["DeviceError", "DeviceBusyError", "StoppedError", "SharedOutputError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
+__all__ = ["DeviceError", "DeviceBusyError", "StoppedError", "SharedOutputError", "XrunError", "DeviceListing", "list_audio_devices", "list_nidaq_devices"]
 
 
 class DeviceError(VibrofocusError):
@@ -33,6 +33,28 @@ class StoppedError(DeviceError):
     def __init__(self, what: str = "play") -> None:
         super().__init__(f"the {what} was stopped before it ended (rig.stop()); the outputs are at zero"
                          + ("; it is discarded" if what == "recording" else ""))
+
+
+class XrunError(DeviceError):
+    """The stream lost samples (an over- or underflow) while a drive played: the result is discarded.
+
+    Parameters
+    ----------
+    onset : DeviceOnset or None
+        The onset of the play it happened in (its ``xrun`` is True), where it began.
+    message : str
+        What was lost, while doing what.
+
+    Attributes
+    ----------
+    onset : DeviceOnset or None
+        When the stimulus that had the xrun began: a caller that presents it again
+        (a study's trial) knows which one it was.
+    """
+
+    def __init__(self, onset, message: str) -> None:
+        super().__init__(message)
+        self.onset = onset
 
 
 class SharedOutputError(DeviceError, SafetyError):

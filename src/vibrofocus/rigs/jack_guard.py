@@ -15,10 +15,10 @@ of a device as the ``k``-th audio input port of that client (``system:playback_k
 ports of its own on the process's PortAudio client (``PortAudio:out_n``) when it is
 opened, and connects its ``k``-th port to the device's ``k``-th when it starts.
 
-So before the rig's stream starts, nothing may be connected to the playback ports the
-rig uses; from its start to its end, only the stream's own port for that channel. Any
-other port connected there is another program's signal (or another stream of this
-process), summed with the drive by JACK.
+The audio rig runs one stream from its opening to its closing, so on the playback ports
+it uses only that stream's own port for each channel may be connected, before a play and
+while it plays. Any other port connected there is another program's signal (or another
+stream of this process), summed with the drive by JACK.
 """
 
 from __future__ import annotations

@@ -15,6 +15,13 @@ zeros, so the outputs end at zero; NI analog outputs hold their last value, whic
 any error, and why the output channels ask for ``ao_idle_output_behavior = ZERO_VOLTS``
 where the device supports it.
 
+One task per play
+-----------------
+Unlike the audio rig, which keeps one stream running, this rig starts a finite task per
+play: a streaming task whose program falls behind stops with its outputs holding their
+last value (a regenerating one replays its buffer), which is unsafe without a hardware
+watchdog (docs/hardware.md, "One running stream, and taps per second").
+
 Stopping
 --------
 A play waits for its task by polling ``is_task_done`` every few milliseconds, so Ctrl-C

@@ -9,10 +9,10 @@ time is the clock the samples themselves run on, named by :data:`CLOCKS`:
   still between plays.
 - ``portaudio_dac``: PortAudio's ``outputBufferDacTime`` of the stream's first callback,
   the time the drive's first sample reaches the converter, on the stream's clock
-  (``Pa_GetStreamTime``). On ALSA, Core Audio, ASIO and WASAPI that clock runs on
-  between streams. Through JACK (PortAudio's JACK host API) it is JACK's frame time
-  since the stream was opened, divided by the rate, plus the playback latency: every
-  play opens its own stream, so on JACK it starts again near zero at each play.
+  (``Pa_GetStreamTime``). The audio rig runs one stream from its opening to its closing,
+  so the clock runs on between plays. Through JACK (PortAudio's JACK host API) it is
+  JACK's frame time since the stream was opened, divided by the rate, plus the playback
+  latency.
 - ``nidaq_start_trigger``: the start trigger's timestamp of the NI-DAQmx output task
   (``StartTrigger.timestamp_val``, on the I/O device's timescale), as seconds since
   the Unix epoch. Only devices with timestamps give it (TSN-synchronised devices, such
@@ -44,8 +44,8 @@ NIDAQ_SAMPLES_CLOCK = "nidaq_samples"
 CLOCKS: dict[str, str] = {
     SIMULATED_CLOCK: "the simulated rig's sample clock: samples played before this play / rate (stands still "
                      "between plays)",
-    PORTAUDIO_CLOCK: "PortAudio's outputBufferDacTime of the first callback, on the stream's clock (through JACK: "
-                     "frame time since the stream opened / rate, plus the playback latency)",
+    PORTAUDIO_CLOCK: "PortAudio's outputBufferDacTime of the play's first sample, on the stream's clock (through "
+                     "JACK: frame time since the stream opened / rate, plus the playback latency)",
     NIDAQ_CLOCK: "the NI-DAQmx output task's start trigger timestamp, on the I/O device's timescale, seconds since "
                  "the Unix epoch",
     NIDAQ_SAMPLES_CLOCK: "the NI-DAQmx sample clock's count: samples the rig's completed output tasks generated "
@@ -147,12 +147,17 @@ class DeviceOnset:
         rig knows it (the audio rig: PortAudio's ``outputBufferDacTime - currentTime`` of
         the first callback; the simulated rig: 0); None where it does not. The LSL onset
         marker is stamped at ``host_s + latency_s``.
+    xrun : bool
+        Whether the device lost samples (an over- or underflow) while this play ran: the
+        stimulus was not presented as designed. The audio rig raises
+        :class:`~vibrofocus.rigs.devices.XrunError` for it, which carries this onset.
     """
 
     host_s: float
     device_s: float | None = None
     clock: str | None = None
     latency_s: float | None = None
+    xrun: bool = False
 
     def __post_init__(self) -> None:
         check_onset(self.host_s, self.device_s, self.clock,

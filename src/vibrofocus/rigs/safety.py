@@ -393,3 +393,18 @@ class EnergyBudget:
                 window.commit(history)
             begin = start_s if self._end_s is None else max(start_s, self._end_s)
             self._end_s = begin + drive.shape[1] / self.fs
+
+    def delay_last(self, delay_s: float) -> None:
+        """The last admitted play began ``delay_s`` later than it was admitted at: end it as much later.
+
+        What the plays after it are placed against moves later; the history keeps it where
+        it was admitted, nearer the plays before it, which can only make the check stricter.
+
+        Parameters
+        ----------
+        delay_s : float
+            How much later it began, s (>= 0; a negative delay is ignored).
+        """
+        with self._lock:
+            if self._end_s is not None and delay_s > 0:
+                self._end_s += float(delay_s)
