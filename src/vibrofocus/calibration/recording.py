@@ -6,6 +6,7 @@ before them.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
@@ -35,6 +36,7 @@ class _Takes:
         self.n_takes = 0
         self.progress, self.total, self.done = progress, total, 0
         self.checkpoint = None
+        self.pause_s = 0.0  # silence after each sweep before the next (the plan's pause_s), s
 
     def tell(self, message: str, *, took: int = 0) -> None:
         self.done += took
@@ -65,6 +67,8 @@ class _Takes:
             Displacement, m; NaN where the rig flagged a dropout.
         """
         rig = self.rig
+        if self.pause_s:
+            self._pause()
         y = rig.play_and_record(drive, self.points_xy[group] if self.aimed else self.points_xy, tail_s=self.tail_s)
         self.n_takes += 1
         if y.shape != (len(group), self.n_rec):
@@ -85,6 +89,20 @@ class _Takes:
             else:
                 self.adc_clipped[group, actuator] |= hit
         return y
+
+
+    def _pause(self) -> None:
+        """Wait until the last sweep has been silent for ``pause_s`` on the rig's budget clock.
+
+        Progress is told every 0.1 s, so a cancel (the web's emergency stop) ends the pause.
+        """
+        end = self.rig.budget.end_s
+        if end is None:
+            return
+        until = end + self.pause_s
+        while (left := until - self.rig._clock()) > 0:
+            self.tell(f"pausing {left:.1f} s for the actuators to cool")
+            time.sleep(min(0.1, left))
 
 
 def _where(labels, group: np.ndarray, aimed: bool) -> str:
