@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 import threading
+import time
 from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 
@@ -32,6 +33,7 @@ __all__ = [
     "PlanLevels",
     "plan_levels",
     "plan_pause_s",
+    "play_paced",
     "check_drive",
     "check_sustained_alone",
     "windowed_rms",
@@ -560,3 +562,48 @@ def plan_pause_s(drives: Sequence[np.ndarray], fs: float, limits: SafetyLimits, 
         else:
             lo = mid
     return hi * resolution_s
+
+
+#: Most waits :func:`play_paced` makes for one drive (the first wait named suffices).
+MAX_COOLING_WAITS = 3
+
+
+def play_paced(rig, drive: np.ndarray, on_wait=None, *, sleep=None):
+    """``rig.play(drive)``; when a limit over time refuses it, wait the time it names and play it then.
+
+    A drive that breaks a limit played alone is refused at once (no wait would admit it),
+    and a ``rig.stop()`` during the wait ends it (:class:`~vibrofocus.rigs.devices.StoppedError`):
+    the drive is never played after a stop.
+
+    Parameters
+    ----------
+    rig : Rig
+        The rig that plays.
+    drive : ndarray, shape (n_actuators, n_samples)
+        Voltages at the actuators, V.
+    on_wait : callable ``(wait_s: float, message: str) -> None``, optional
+        Told before each wait (the refusal's message and the wait, s).
+    sleep : callable, optional
+        Waits a number of seconds (default :func:`time.sleep`; a test's clock).
+
+    Returns
+    -------
+    What ``rig.play`` returns (a :class:`~vibrofocus.rigs.base.DeviceOnset`).
+    """
+    from .devices import StoppedError
+
+    sleep = time.sleep if sleep is None else sleep
+    for attempt in range(MAX_COOLING_WAITS + 1):
+        try:
+            return rig.play(drive)
+        except CoolingError as exc:
+            if attempt == MAX_COOLING_WAITS:
+                raise
+            if on_wait is not None:
+                on_wait(exc.wait_s, str(exc))
+            epoch, left = rig._stop_epoch, exc.wait_s
+            while left > 0:
+                sleep(min(0.05, left))
+                left -= 0.05
+                if rig._stop_epoch != epoch:
+                    raise StoppedError("play") from None
