@@ -17,8 +17,9 @@ from __future__ import annotations
 import math
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
@@ -568,7 +569,8 @@ def plan_pause_s(drives: Sequence[np.ndarray], fs: float, limits: SafetyLimits, 
 MAX_COOLING_WAITS = 3
 
 
-def play_paced(rig, drive: np.ndarray, on_wait=None, *, sleep=None):
+def play_paced(rig: Any, drive: np.ndarray, on_wait: Callable[[float, str], None] | None = None, *,
+               sleep: Callable[[float], None] | None = None) -> Any:
     """``rig.play(drive)``; when a limit over time refuses it, wait the time it names and play it then.
 
     A drive that breaks a limit played alone is refused at once (no wait would admit it),
