@@ -81,30 +81,26 @@ def _socket_problem(path: Path, *, socket_too: bool = True) -> str | None:
     if os.name == "nt":  # no owners or modes to check there
         return None
     folder = path.parent
-    try:
-        st = os.lstat(folder)
-    except OSError as exc:
-        return f"its folder {folder} cannot be read ({exc.strerror or exc})"
-    if stat.S_ISLNK(st.st_mode):
-        return f"its folder {folder} is a symbolic link"
-    if not stat.S_ISDIR(st.st_mode):
-        return f"{folder} is not a folder"
-    if not _trusted_uid(st.st_uid):
-        return f"its folder {folder} belongs to {owner_name(st.st_uid)}, not to you"
-    if stat.S_IMODE(st.st_mode) & 0o077:
-        return f"its folder {folder} is open to other users (mode {stat.S_IMODE(st.st_mode):04o})"
-    if not socket_too:
-        return None
+    problem = _not_owned(folder, f"its folder {folder}", stat.S_ISDIR, "folder")
+    if problem or not socket_too:
+        return problem
+    return _not_owned(path, str(path), stat.S_ISSOCK, "socket")
+
+
+def _not_owned(path: Path, name: str, is_kind, kind: str) -> str | None:
+    """What makes ``path`` (called ``name``) not this user's own ``kind``, closed to others; None if nothing."""
     try:
         st = os.lstat(path)
     except OSError as exc:
-        return f"{path} cannot be read ({exc.strerror or exc})"
-    if not stat.S_ISSOCK(st.st_mode):
-        return f"{path} is not a socket"
+        return f"{name} cannot be read ({exc.strerror or exc})"
+    if stat.S_ISLNK(st.st_mode):
+        return f"{name} is a symbolic link"
+    if not is_kind(st.st_mode):
+        return f"{path} is not a {kind}"
     if not _trusted_uid(st.st_uid):
-        return f"{path} belongs to {owner_name(st.st_uid)}, not to you"
+        return f"{name} belongs to {owner_name(st.st_uid)}, not to you"
     if stat.S_IMODE(st.st_mode) & 0o077:
-        return f"{path} is open to other users (mode {stat.S_IMODE(st.st_mode):04o})"
+        return f"{name} is open to other users (mode {stat.S_IMODE(st.st_mode):04o})"
     return None
 
 

@@ -124,7 +124,9 @@ def serve_osc(
                 err_console.print(f"designing {method} at the {tm.layout.n_locations} locations ahead "
                                   "(seconds each) ...")
             designer = TapDesigner(tm, model, method=method, limit_v=the_rig.limits.peak_v)
-            check_designs(designer, the_rig)  # a tap the limits refuse is said now, not at the tap
+            refused = check_designs(designer, the_rig)  # a tap the limits refuse is said now, not at the tap
+            if refused:
+                err_console.print(f"[bold yellow]warning:[/] {refused}", highlight=False)
             if model is not None:
                 designer.prepare_grid()
             if host not in _LOCAL_HOSTS:
