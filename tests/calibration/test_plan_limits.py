@@ -62,3 +62,25 @@ def test_the_calibration_pauses_between_sweeps_instead_of_failing_midway(monkeyp
     cal = calibrate(rig, participant_id="P01", repeats=4, sweep_s=1.0)
     assert cal.H.shape[1:] == (rig.layout.n_points, rig.layout.n_actuators)
     assert sum(slept) > 0
+
+
+class _RetakingArm(_VirtualClockArm):
+    """Takes its third recording again at once, as the audio rig does after lost samples."""
+
+    calls = 0
+
+    def _play_and_record(self, drive, points_xy, n_tail):
+        self.calls += 1
+        if self.calls == 3:
+            self._admit(drive, "recording")  # the take again: admitted again, with no pause
+        return super()._play_and_record(drive, points_xy, n_tail)
+
+
+def test_a_take_refused_after_a_retake_waits_for_the_actuators_to_cool(monkeypatch):
+    rig = _RetakingArm(seed=3)
+    rig.limits = SafetyLimits(sustained_rms_v=2.0, sustained_window_s=10.0)
+    told = []
+    monkeypatch.setattr(recording, "time", types.SimpleNamespace(sleep=lambda s: setattr(rig, "now", rig.now + s)))
+    calibrate(rig, participant_id="P01", repeats=4, sweep_s=1.0, progress=lambda d, t, m: told.append(m))
+    # Four takes, and the third tried once more after its wait.
+    assert rig.calls == 5 and any(m.startswith("pausing") for m in told)

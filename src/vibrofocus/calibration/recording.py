@@ -11,9 +11,10 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import VibrofocusError
+from ..errors import CoolingError, VibrofocusError
 from ..layout import ArrayLayout
 from ..rigs.base import Rig
+from ..rigs.safety import MAX_COOLING_WAITS
 
 #: Extra recordings tried for a point whose every repeat had a dropout.
 MAX_RETRIES = 3
@@ -69,7 +70,15 @@ class _Takes:
         rig = self.rig
         if self.pause_s:
             self._pause()
-        y = rig.play_and_record(drive, self.points_xy[group] if self.aimed else self.points_xy, tail_s=self.tail_s)
+        where = self.points_xy[group] if self.aimed else self.points_xy
+        for attempt in range(MAX_COOLING_WAITS + 1):
+            try:
+                y = rig.play_and_record(drive, where, tail_s=self.tail_s)
+                break
+            except CoolingError as exc:  # a take again after lost samples, past the plan's pauses
+                if attempt == MAX_COOLING_WAITS:
+                    raise
+                self._wait(exc.wait_s)
         self.n_takes += 1
         if y.shape != (len(group), self.n_rec):
             raise VibrofocusError(
@@ -97,9 +106,12 @@ class _Takes:
         Progress is told every 0.1 s, so a cancel (the web's emergency stop) ends the pause.
         """
         end = self.rig.budget.end_s
-        if end is None:
-            return
-        until = end + self.pause_s
+        if end is not None:
+            self._wait(end + self.pause_s - self.rig._clock())
+
+    def _wait(self, seconds: float) -> None:
+        """Wait ``seconds`` for the actuators to cool, telling progress every 0.1 s (a cancel ends it)."""
+        until = self.rig._clock() + seconds
         while (left := until - self.rig._clock()) > 0:
             self.tell(f"pausing {left:.1f} s for the actuators to cool")
             time.sleep(min(0.1, left))
