@@ -3,7 +3,7 @@
 A design the safety layer would refuse at the tap is found at start, with the locations
 named and the level (dB re the design, the ``/tap`` level argument) at which each one
 fits, as a study finds its stimuli at planning
-(:func:`vibrofocus.studies.engine.check_stimulus`).
+(:func:`vibrofocus.rigs.safety.check_on_rig`).
 """
 
 from __future__ import annotations
@@ -34,20 +34,19 @@ def check_designs(designer: Any, rig: Any) -> str | None:
         content, the sustained limit played alone), the first one's reason, and the
         largest ``/tap`` level, dB re the design, at which each fits.
     """
-    from ..rigs.safety import plan_levels
-    from ..studies.engine import check_stimulus
+    from ..rigs.safety import check_on_rig, plan_levels
 
     refused: dict[int, tuple[str, float | None]] = {}
     for location in designer.layout.location_numbers:
         drives = designer.drives_at(location)
         try:
-            check_stimulus(drives, rig)
+            check_on_rig(drives, rig)
             continue
         except SafetyError as exc:
             reason = str(exc)
         scale = plan_levels([drives], rig.fs, rig.limits).scale_to_fit
         try:
-            check_stimulus(drives * scale, rig)
+            check_on_rig(drives * scale, rig)
             level = math.floor(200 * math.log10(scale)) / 10  # dB, rounded down to 0.1
         except SafetyError:
             level = None

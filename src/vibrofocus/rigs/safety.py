@@ -37,6 +37,7 @@ __all__ = [
     "play_paced",
     "check_drive",
     "check_sustained_alone",
+    "check_on_rig",
     "windowed_rms",
     "PEAK_V_CEILING",
     "RMS_V_CEILING",
@@ -281,6 +282,34 @@ def check_sustained_alone(drive: np.ndarray, fs: float, limits: SafetyLimits) ->
         raise SafetyError("drive refused: played alone, " + _channel_message(
             rms, limits.sustained_rms_v, "V RMS", f" over {limits.sustained_window_s:g} s")
             + " (sustained_rms_v); no wait before it would admit it")
+
+
+def check_on_rig(drives: np.ndarray, rig: Any) -> np.ndarray:
+    """Every limit of ``rig`` that a drive has by itself; the faded copy to play.
+
+    The rig's own check (:meth:`~vibrofocus.rigs.Rig.check`: shape, peak, RMS over the
+    short window, DC and slow content, the level at its outputs) and the sustained limit
+    played alone (:func:`check_sustained_alone`). What the drive adds to the plays before
+    it is the energy budget's, when it plays.
+
+    Parameters
+    ----------
+    drives : ndarray, shape (n_actuators, n_samples)
+        V.
+    rig : Rig
+
+    Returns
+    -------
+    ndarray, shape (n_actuators, n_samples)
+
+    Raises
+    ------
+    SafetyError
+        The first limit it breaks.
+    """
+    safe = rig.check(drives)
+    check_sustained_alone(safe, rig.fs, rig.limits)
+    return safe
 
 
 def _check_slow_content(arr: np.ndarray, fs: float, n_window: int, window_s: float) -> None:

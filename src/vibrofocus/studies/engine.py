@@ -309,10 +309,9 @@ def check_stimulus(drives: np.ndarray, rig: Any) -> None:
     SafetyError
         The first limit it breaks.
     """
-    from ..rigs.safety import check_sustained_alone
+    from ..rigs.safety import check_on_rig
 
-    safe = rig.check(drives)
-    check_sustained_alone(safe, rig.fs, rig.limits)
+    check_on_rig(drives, rig)
 
 
 def _check_rates(calibration: Any, rig: Any) -> None:
