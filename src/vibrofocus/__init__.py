@@ -7,13 +7,7 @@ physically based simulated forearm.
 """
 
 from importlib import import_module
-from importlib.metadata import PackageNotFoundError, version as _version
 from typing import TYPE_CHECKING
-
-try:
-    __version__ = _version("vibrofocus")
-except PackageNotFoundError:  # running from a source tree without installation
-    __version__ = "0.0.0+unknown"
 
 from .errors import (
     CalibrationFileError,
@@ -107,7 +101,21 @@ _FORMER = {
 }
 
 
+def _installed_version() -> str:
+    # Read on first use: importlib.metadata costs a third of a second, which the
+    # terminal stop (vibrofocus._stop_client) must not pay.
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("vibrofocus")
+    except PackageNotFoundError:  # running from a source tree without installation
+        return "0.0.0+unknown"
+
+
 def _lazy(name: str):
+    if name == "__version__":
+        value = globals()["__version__"] = _installed_version()
+        return value
     if name in _SUBPACKAGES:
         value = import_module(f".{name}", __name__)
         globals()[name] = value

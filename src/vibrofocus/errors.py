@@ -11,6 +11,7 @@ __all__ = [
     "ValidationError",
     "InfeasibleDesignError",
     "SafetyError",
+    "CoolingError",
     "DriveLimitError",
     "CausalityError",
     "CalibrationFileError",
@@ -35,6 +36,20 @@ class InfeasibleDesignError(ValidationError):
 
 class SafetyError(VibrofocusError):
     """A drive was refused before reaching any actuator (limits, NaN/Inf, duration)."""
+
+
+class CoolingError(SafetyError):
+    """A drive refused by a limit over time (the energy budget) that a wait would lift.
+
+    Attributes
+    ----------
+    wait_s : float
+        A wait after which the same drive is admitted, s.
+    """
+
+    def __init__(self, message: str, wait_s: float) -> None:
+        super().__init__(message)
+        self.wait_s = float(wait_s)
 
 
 class DriveLimitError(SafetyError):

@@ -424,3 +424,29 @@ def test_a_trial_presented_again_says_replay_in_its_onset_marker(store, rig, ren
         StudyEngine(store, sid, rig, renderer=renderer).present(store.planned_trials(sid)[2])
         StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([5, ABORT]))
     assert onsets == [(0, False), (1, False), (1, True), (2, False), (2, True), (2, True), (3, False)]
+
+
+def test_a_limit_over_time_pauses_the_trial_for_its_wait_instead_of_ending_the_run(store, renderer, monkeypatch):
+    import types
+
+    from vibrofocus.rigs import safety
+    from vibrofocus.rigs.safety import SafetyLimits, windowed_rms
+    from vibrofocus.rigs.simulated import SimulatedForearm
+
+    class Clocked(SimulatedForearm):
+        now = 0.0
+
+        def _clock(self):
+            return self.now
+
+    rig = Clocked(seed=3)
+    alone = max(windowed_rms(renderer("inverse", k) ** 2, int(10 * rig.fs)).max() for k in (4, 6))
+    # Each stimulus fits alone; two back to back break the sustained limit.
+    rig.limits = SafetyLimits(sustained_rms_v=1.2 * alone, sustained_window_s=10.0)
+    monkeypatch.setattr(safety, "time", types.SimpleNamespace(sleep=lambda s: setattr(rig, "now", rig.now + s)))
+    sid = _small(store)
+    summary = StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([4, 6]))
+    assert (summary.status, summary.n_answered, rig.n_played) == ("completed", 2, 2)
+    (cooling,) = store.events(sid, kind="cooling")
+    assert cooling.payload["trial_index"] == 1 and cooling.payload["wait_s"] > 0
+    assert rig.now >= cooling.payload["wait_s"] - 0.06

@@ -209,6 +209,7 @@ def calibrate(
     if progress is not None:
         progress(0, plan.takes, plan.describe())
     session = _Takes(rig, points_xy, limit is not None, n_rec, settings.tail_s, (n_p, n_a), progress, plan.takes)
+    session.pause_s = plan.pause_s  # what the rig's limits over time need between sweeps
     if checkpoint is not None:
         from .checkpoint import CalibrationCheckpoint
 

@@ -5,6 +5,7 @@ Also the choice of points and actuators a calibration measures (a subset of the 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -131,6 +132,11 @@ class CalibrationPlan:
         fitted to the measured ones (``measure=``); empty when every point is measured.
     positions_saved : int
         Vibrometer positions the predicted points save against measuring every point.
+    pause_s : float
+        Silence after each take's sweep before the next, s: 0, or what the rig's RMS
+        limits over time need for these sweeps (:func:`vibrofocus.rigs.safety.plan_pause_s`).
+    pause_note : str
+        Why there is a pause, and the ``amplitude_v`` that would need none ("" without a pause).
     """
 
     method: str
@@ -140,6 +146,8 @@ class CalibrationPlan:
     positions: int
     predicted_indices: tuple[int, ...] = ()
     positions_saved: int = 0
+    pause_s: float = 0.0
+    pause_note: str = ""
 
     @property
     def seconds_saved(self) -> float:
@@ -160,9 +168,10 @@ class CalibrationPlan:
 
     @property
     def duration_s(self) -> float:
-        """Real duration of the takes (silence, sweep and tail each), s; aiming the
-        vibrometer and re-recordings after dropouts come on top."""
-        return self.takes * self.settings.take_s
+        """Real duration of the takes (silence, sweep and tail each) and of the pauses
+        between them (at most), s; aiming the vibrometer and re-recordings after dropouts
+        come on top."""
+        return self.takes * self.settings.take_s + max(0, self.takes - 1) * self.pause_s
 
     def describe(self) -> str:
         """The plan in one line, e.g. ``"mimo: 8 takes of 2.4 s (...) = 19.2 s of sweeps"``."""
@@ -173,6 +182,8 @@ class CalibrationPlan:
                  else f"at each of {self.positions} vibrometer positions")
         text = (f"{self.method}: {self.takes} takes of {self.settings.take_s:.3g} s ({who}, {where}) = "
                 f"{_format_duration(self.duration_s)} of sweeps")
+        if self.pause_s:
+            text += f", with {self.pause_note}"
         if self.positions > 1:
             text += f", plus aiming the vibrometer {self.positions} times"
         if self.predicted_indices:
@@ -241,7 +252,58 @@ def plan_calibration(
     def positions(n_points: int) -> int:
         return 1 if limit is None else -(-n_points // limit)
 
-    return CalibrationPlan(method=method, settings=settings, point_indices=tuple(int(i) for i in p_idx),
+    plan = CalibrationPlan(method=method, settings=settings, point_indices=tuple(int(i) for i in p_idx),
                            actuator_indices=tuple(int(i) for i in a_idx), positions=positions(len(p_idx)),
                            predicted_indices=tuple(int(i) for i in predicted),
                            positions_saved=positions(len(p_idx) + len(predicted)) - positions(len(p_idx)))
+    return _paced(plan, rig)
+
+
+def _take_drives(plan: CalibrationPlan, n_actuators: int) -> list[np.ndarray]:
+    """The drive of every take of ``plan`` in order (one array per distinct take, repeated)."""
+    from .excitation import make_excitation
+
+    excitation = make_excitation(plan.settings)
+    a_idx = np.asarray(plan.actuator_indices)
+    n_r = plan.settings.repeats
+    if plan.method == "mimo":
+        codes = hadamard_codes(len(a_idx), n_r).astype(float)
+        distinct = [np.zeros((n_actuators, excitation.size)) for _ in range(n_r)]
+        for r, drive in enumerate(distinct):
+            drive[a_idx] = codes[r][:, None] * excitation[None, :]
+        per_position = distinct
+    else:
+        per_position = []
+        for channel in a_idx:
+            drive = np.zeros((n_actuators, excitation.size))
+            drive[channel] = excitation
+            per_position += [drive] * n_r
+    return per_position * plan.positions
+
+
+def _paced(plan: CalibrationPlan, rig: Rig) -> CalibrationPlan:
+    """``plan`` with the pause after each take that the rig's RMS limits need; refused when none does.
+
+    The takes are placed back to back, as fast as a rig could play them, and measured
+    with the rig's own energy budget (:func:`vibrofocus.rigs.safety.plan_levels`).
+    """
+    from dataclasses import replace
+
+    from ..errors import SafetyError
+    from ..rigs.safety import plan_levels, plan_pause_s
+
+    drives = _take_drives(plan, rig.layout.n_actuators)
+    levels = plan_levels(drives, rig.fs, rig.limits)
+    if levels.fits:
+        return plan
+    amplitude = plan.settings.amplitude_v * levels.scale_to_fit
+    fitting = f"--amplitude-v {math.floor(amplitude * 100) / 100:g}"
+    pause = plan_pause_s(drives, rig.fs, rig.limits) if levels.peak_v <= rig.limits.peak_v else None
+    if pause is None:
+        raise SafetyError(
+            f"the calibration plan ({plan.takes} takes of {plan.settings.amplitude_v:g} V peak sweeps) breaks the "
+            f"{rig.kind} rig's limits, nothing was played: {levels.broken()}, and no pause between takes helps; "
+            f"the largest amplitude that fits is {fitting}")
+    note = (f"a pause of {pause:.1f} s after each sweep for the actuators to cool (back to back, the sweeps reach "
+            f"{levels.broken()}; {fitting} needs no pause)")
+    return replace(plan, pause_s=pause, pause_note=note)

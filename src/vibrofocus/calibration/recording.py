@@ -6,13 +6,15 @@ before them.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable
 
 import numpy as np
 
-from ..errors import VibrofocusError
+from ..errors import CoolingError, VibrofocusError
 from ..layout import ArrayLayout
 from ..rigs.base import Rig
+from ..rigs.safety import MAX_COOLING_WAITS
 
 #: Extra recordings tried for a point whose every repeat had a dropout.
 MAX_RETRIES = 3
@@ -35,6 +37,7 @@ class _Takes:
         self.n_takes = 0
         self.progress, self.total, self.done = progress, total, 0
         self.checkpoint = None
+        self.pause_s = 0.0  # silence after each sweep before the next (the plan's pause_s), s
 
     def tell(self, message: str, *, took: int = 0) -> None:
         self.done += took
@@ -65,7 +68,17 @@ class _Takes:
             Displacement, m; NaN where the rig flagged a dropout.
         """
         rig = self.rig
-        y = rig.play_and_record(drive, self.points_xy[group] if self.aimed else self.points_xy, tail_s=self.tail_s)
+        if self.pause_s:
+            self._pause()
+        where = self.points_xy[group] if self.aimed else self.points_xy
+        for attempt in range(MAX_COOLING_WAITS + 1):
+            try:
+                y = rig.play_and_record(drive, where, tail_s=self.tail_s)
+                break
+            except CoolingError as exc:  # a take again after lost samples, past the plan's pauses
+                if attempt == MAX_COOLING_WAITS:
+                    raise
+                self._wait(exc.wait_s)
         self.n_takes += 1
         if y.shape != (len(group), self.n_rec):
             raise VibrofocusError(
@@ -85,6 +98,23 @@ class _Takes:
             else:
                 self.adc_clipped[group, actuator] |= hit
         return y
+
+
+    def _pause(self) -> None:
+        """Wait until the last sweep has been silent for ``pause_s`` on the rig's budget clock.
+
+        Progress is told every 0.1 s, so a cancel (the web's emergency stop) ends the pause.
+        """
+        end = self.rig.budget.end_s
+        if end is not None:
+            self._wait(end + self.pause_s - self.rig._clock())
+
+    def _wait(self, seconds: float) -> None:
+        """Wait ``seconds`` for the actuators to cool, telling progress every 0.1 s (a cancel ends it)."""
+        until = self.rig._clock() + seconds
+        while (left := until - self.rig._clock()) > 0:
+            self.tell(f"pausing {left:.1f} s for the actuators to cool")
+            time.sleep(min(0.1, left))
 
 
 def _where(labels, group: np.ndarray, aimed: bool) -> str:

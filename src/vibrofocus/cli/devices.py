@@ -151,8 +151,12 @@ def _check_rig(path: Path, as_json: bool, tone_s: float | None = None) -> None:
             console.print(f"  {line}", highlight=False)
         if tone is not None:
             console.print(
-                f"Played {tone['frequency_hz']:g} Hz for {tone['duration_s']:g} s at {100 * TONE_FRACTION:g} % of "
-                f"digital full scale on output {tone['output_channel']}. Set volts_full_scale = (the meter's AC "
+                f"Played {tone['frequency_hz']:g} Hz for {tone['duration_s']:g} s at {100 * tone['digital_peak']:.3g} % "
+                f"of digital full scale on output {tone['output_channel']}"
+                + ("" if tone["digital_peak"] >= TONE_FRACTION else
+                   f" (not {100 * TONE_FRACTION:g} %: with the amplifier's gain of {cfg.amplifier_gain:g} that would "
+                   "break the rig's limits at the actuators, were the amplifier on)")
+                + f". Set volts_full_scale = (the meter's AC "
                 f"RMS reading, V) x {tone['volts_full_scale_per_rms_v']:.1f}. With the configured "
                 f"{cfg.volts_full_scale:g} V, the meter should read {tone['expected_rms_v']:.4g} V RMS; if it reads "
                 "more, every voltage into the amplifier is higher than the software computes. The stream's output "
@@ -160,19 +164,42 @@ def _check_rig(path: Path, as_json: bool, tone_s: float | None = None) -> None:
                 highlight=False)
 
 
+def tone_drive(cfg, limits, fs: float, n_actuators: int, seconds: float):
+    """The volts_full_scale measuring tone on the first actuator output, and its digital peak.
+
+    At :data:`TONE_FRACTION` of digital full scale, or lower where the chain's gain would
+    put more than the rig's limits allow at the actuators (gain 100 and 12 V at full scale
+    make 1 % into 12 V peak): the tone then plays at the largest level within the limits,
+    measured by the energy budget's own windows (:func:`vibrofocus.rigs.safety.plan_levels`).
+
+    Returns
+    -------
+    drive : ndarray, shape (n_actuators, n_samples)
+        Volts at the actuators.
+    digital_peak : float
+        The tone's peak as a fraction of digital full scale.
+    """
+    import numpy as np
+
+    from ..rigs.safety import plan_levels
+
+    n = int(round(seconds * fs))
+    # Actuator volts that the rig turns into this digital level: V / (gain * volts_full_scale).
+    volts_per_digital = cfg.amplifier_gain * cfg.volts_full_scale
+    drive = np.zeros((n_actuators, n))
+    drive[0] = TONE_FRACTION * volts_per_digital * np.sin(2 * np.pi * TONE_HZ * np.arange(n) / fs)
+    scale = plan_levels([drive], fs, limits).scale_to_fit
+    return drive * scale, TONE_FRACTION * scale
+
+
 def _play_tone(rig, cfg, seconds: float) -> dict:
     """Play the volts_full_scale measuring tone on the first actuator output; describe it."""
     import numpy as np
 
-    n = int(round(seconds * rig.fs))
-    digital_peak = TONE_FRACTION
-    # Actuator volts that the rig turns into this digital level: V / (gain * volts_full_scale).
-    actuator_peak_v = digital_peak * cfg.amplifier_gain * cfg.volts_full_scale
-    drive = np.zeros((rig.layout.n_actuators, n))
-    drive[0] = actuator_peak_v * np.sin(2 * np.pi * TONE_HZ * np.arange(n) / rig.fs)
+    drive, digital_peak = tone_drive(cfg, rig.limits, rig.fs, rig.layout.n_actuators, seconds)
     rig.play(drive)
     return {
-        "frequency_hz": TONE_HZ, "duration_s": n / rig.fs, "digital_peak": digital_peak,
+        "frequency_hz": TONE_HZ, "duration_s": drive.shape[1] / rig.fs, "digital_peak": digital_peak,
         "output_channel": cfg.channels.actuators[0],
         "expected_rms_v": digital_peak * cfg.volts_full_scale / np.sqrt(2),
         "volts_full_scale_per_rms_v": np.sqrt(2) / digital_peak,

@@ -168,6 +168,14 @@ def _check_page_beep_output(cfg, audio_elsewhere: bool) -> None:
     sd = _sounddevice()
     rig_index = resolve_audio_device(cfg.device.name, cfg.device.hostapi, outputs=max(cfg.channels.actuators))
     rig_name = str(sd.query_devices(rig_index)["name"])
+    if "jack" in str(sd.query_hostapis(int(sd.query_devices(rig_index)["hostapi"]))["name"]).lower():
+        # The browser never plays through PortAudio: PortAudio's default says nothing there.
+        from ..rigs.page_beep import check_page_beep_on_jack
+
+        warning = None if audio_elsewhere else check_page_beep_on_jack(rig_name, cfg.channels.actuators)
+        if warning:
+            err_console.print(f"[bold yellow]warning:[/] {warning}", highlight=False)
+        return
     try:
         default = sd.query_devices(kind="output")
     except sd.PortAudioError:  # no default output: the page has nowhere to beep here

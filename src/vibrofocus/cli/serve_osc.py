@@ -67,6 +67,7 @@ def serve_osc(
         except ImportError:
             raise ValidationError("serve-osc needs python-osc: pip install 'vibrofocus[osc]'") from None
         from ..realtime import OscTapServer, TapDesigner, TapLog
+        from ..realtime.limits import check_designs
         from ..rendering import TransferMatrix
         from ..rigs import make_rig
         from ..skin import skin_preset
@@ -123,6 +124,9 @@ def serve_osc(
                 err_console.print(f"designing {method} at the {tm.layout.n_locations} locations ahead "
                                   "(seconds each) ...")
             designer = TapDesigner(tm, model, method=method, limit_v=the_rig.limits.peak_v)
+            refused = check_designs(designer, the_rig)  # a tap the limits refuse is said now, not at the tap
+            if refused:
+                err_console.print(f"[bold yellow]warning:[/] {refused}", highlight=False)
             if model is not None:
                 designer.prepare_grid()
             if host not in _LOCAL_HOSTS:

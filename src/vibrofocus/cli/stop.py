@@ -24,7 +24,7 @@ def stop(
     experimenter page.
     """
     with user_errors():
-        from ..web.emergency import request_stop
+        from .._stop_client import request_stop
 
         done = request_stop(db)
         typer.echo("stopped: " + ("; ".join(done) if done else "nothing was running"))

@@ -16,20 +16,28 @@ from __future__ import annotations
 
 import math
 import threading
+import time
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass
+from typing import Any
 
 import numpy as np
 
 from .._validation import check_in_range, check_positive
 from ..defaults import DRIVE_LIMIT_V
-from ..errors import SafetyError, ValidationError
+from ..errors import CoolingError, SafetyError, ValidationError
 from ..signals.sweeps import apply_fades
 
 __all__ = [
     "SafetyLimits",
     "EnergyBudget",
+    "PlanLevels",
+    "plan_levels",
+    "plan_pause_s",
+    "play_paced",
     "check_drive",
     "check_sustained_alone",
+    "check_on_rig",
     "windowed_rms",
     "PEAK_V_CEILING",
     "RMS_V_CEILING",
@@ -276,6 +284,34 @@ def check_sustained_alone(drive: np.ndarray, fs: float, limits: SafetyLimits) ->
             + " (sustained_rms_v); no wait before it would admit it")
 
 
+def check_on_rig(drives: np.ndarray, rig: Any) -> np.ndarray:
+    """Every limit of ``rig`` that a drive has by itself; the faded copy to play.
+
+    The rig's own check (:meth:`~vibrofocus.rigs.Rig.check`: shape, peak, RMS over the
+    short window, DC and slow content, the level at its outputs) and the sustained limit
+    played alone (:func:`check_sustained_alone`). What the drive adds to the plays before
+    it is the energy budget's, when it plays.
+
+    Parameters
+    ----------
+    drives : ndarray, shape (n_actuators, n_samples)
+        V.
+    rig : Rig
+
+    Returns
+    -------
+    ndarray, shape (n_actuators, n_samples)
+
+    Raises
+    ------
+    SafetyError
+        The first limit it breaks.
+    """
+    safe = rig.check(drives)
+    check_sustained_alone(safe, rig.fs, rig.limits)
+    return safe
+
+
 def _check_slow_content(arr: np.ndarray, fs: float, n_window: int, window_s: float) -> None:
     """Refuse DC and slow drives: a mean over any window above DC_V_LIMIT, or RMS below SLOW_HZ above SLOW_RMS_V_LIMIT."""
     n = arr.shape[1]
@@ -369,30 +405,73 @@ class EnergyBudget:
 
         Raises
         ------
-        SafetyError
+        CoolingError
             If it would exceed an RMS limit together with the plays before it; the
-            budget is then left as it was.
+            budget is then left as it was, and ``wait_s`` says how long to wait.
+        SafetyError
+            If it exceeds an RMS limit played alone, from silence: no wait would admit it.
         """
         squares = drive**2
         with self._lock:
-            gap = None if self._end_s is None else int(np.floor(max(0.0, start_s - self._end_s) * self.fs))
-            histories = []
-            for window in self._windows:
-                history = window.history(squares, gap)
-                rms = window.worst_rms(history)
+            measured = self._measure(squares, start_s)
+            for window, history, rms in measured:
                 if rms.max() > window.rms_v * (1 + 1e-9):
+                    over = _channel_message(rms, window.rms_v, "V RMS", f" over {window.window_s:g} s")
+                    alone = window.worst_rms(window.history(squares, None))
+                    if alone.max() > window.rms_v * (1 + 1e-9):
+                        raise SafetyError(
+                            "drive refused: played alone, " + _channel_message(
+                                alone, window.rms_v, "V RMS", f" over {window.window_s:g} s")
+                            + f" ({window.label}); no wait will ever admit it: lower its level or shorten it")
                     wait = window.window_s if self._end_s is None else max(
                         0.0, self._end_s + window.window_s - start_s)
-                    raise SafetyError(
-                        "drive refused: together with the plays before it, "
-                        + _channel_message(rms, window.rms_v, "V RMS", f" over {window.window_s:g} s")
-                        + f" ({window.label}); wait {wait:.1f} s for the actuators to cool, or play less"
-                    )
-                histories.append(history)
-            for window, history in zip(self._windows, histories):
-                window.commit(history)
-            begin = start_s if self._end_s is None else max(start_s, self._end_s)
-            self._end_s = begin + drive.shape[1] / self.fs
+                    raise CoolingError(
+                        f"drive refused: together with the plays before it, {over} ({window.label}); wait "
+                        f"{wait:.1f} s for the actuators to cool, or play less", wait_s=wait)
+            self._commit(measured, drive.shape[1], start_s)
+
+    def record(self, drive: np.ndarray, start_s: float) -> np.ndarray:
+        """Record a drive whatever its level; return the worst RMS it makes in each window.
+
+        What a plan uses (:func:`plan_levels`): it never refuses.
+
+        Parameters
+        ----------
+        drive : ndarray, shape (n_channels, n_samples)
+            Voltages, V.
+        start_s : float
+            When it starts, s, on the budget's clock.
+
+        Returns
+        -------
+        ndarray, shape (2,)
+            The largest RMS over any channel in the short window (``rms_window_s``) and in
+            the long one (``sustained_window_s``), V.
+        """
+        with self._lock:
+            measured = self._measure(np.asarray(drive, dtype=float) ** 2, start_s)
+            self._commit(measured, drive.shape[1], start_s)
+        return np.array([float(rms.max()) for _, _, rms in measured])
+
+    @property
+    def end_s(self) -> float | None:
+        """When the last play admitted ends, s, on the budget's clock; None before the first."""
+        return self._end_s
+
+    def _measure(self, squares: np.ndarray, start_s: float) -> list:
+        """Each window's history with ``squares`` placed at ``start_s``, and its worst RMS per channel."""
+        gap = None if self._end_s is None else int(np.floor(max(0.0, start_s - self._end_s) * self.fs))
+        out = []
+        for window in self._windows:
+            history = window.history(squares, gap)
+            out.append((window, history, window.worst_rms(history)))
+        return out
+
+    def _commit(self, measured: list, n_samples: int, start_s: float) -> None:
+        for window, history, _ in measured:
+            window.commit(history)
+        begin = start_s if self._end_s is None else max(start_s, self._end_s)
+        self._end_s = begin + n_samples / self.fs
 
     def delay_last(self, delay_s: float) -> None:
         """The last admitted play began ``delay_s`` later than it was admitted at: end it as much later.
@@ -408,3 +487,169 @@ class EnergyBudget:
         with self._lock:
             if self._end_s is not None and delay_s > 0:
                 self._end_s += float(delay_s)
+
+
+@dataclass(frozen=True)
+class PlanLevels:
+    """The levels a sequence of plays reaches, against a rig's limits (:func:`plan_levels`).
+
+    Attributes
+    ----------
+    peak_v, rms_v, sustained_rms_v : float
+        Largest instantaneous voltage, RMS over ``limits.rms_window_s`` and RMS over
+        ``limits.sustained_window_s`` on any channel, V.
+    limits : SafetyLimits
+    pause_s : float
+        The silence between plays assumed, s.
+    """
+
+    peak_v: float
+    rms_v: float
+    sustained_rms_v: float
+    limits: SafetyLimits
+    pause_s: float = 0.0
+
+    def ratios(self) -> dict[str, float]:
+        """Each level over its limit (1 is at the limit), keyed by the limit's name."""
+        lim = self.limits
+        return {"peak_v": self.peak_v / lim.peak_v, "rms_v": self.rms_v / lim.rms_v,
+                "sustained_rms_v": self.sustained_rms_v / lim.sustained_rms_v}
+
+    @property
+    def fits(self) -> bool:
+        """Every level within its limit."""
+        return max(self.ratios().values()) <= 1 + 1e-9
+
+    @property
+    def scale_to_fit(self) -> float:
+        """The largest factor on every drive's level (<= 1) that fits, rounded down to 3 digits."""
+        worst = max(self.ratios().values())
+        if worst <= 1 + 1e-9:
+            return 1.0
+        return math.floor(1e3 / worst) / 1e3
+
+    def broken(self) -> str:
+        """The limits broken, as people read them ("" when it fits)."""
+        lim, parts = self.limits, []
+        for name, value, window in (("peak_v", self.peak_v, ""), ("rms_v", self.rms_v, f" RMS over {lim.rms_window_s:g} s"),
+                                    ("sustained_rms_v", self.sustained_rms_v,
+                                     f" RMS over {lim.sustained_window_s:g} s")):
+            if self.ratios()[name] > 1 + 1e-9:
+                limit = getattr(lim, name)
+                parts.append(f"{value:.3g} V{window or ' peak'}, over {name} = {limit:g} V")
+        return "; ".join(parts)
+
+
+def plan_levels(drives: Sequence[np.ndarray], fs: float, limits: SafetyLimits, *, pause_s: float = 0.0) -> PlanLevels:
+    """The peak, 1 s RMS and sustained RMS of drives played one after the other.
+
+    The drives are placed back to back with ``pause_s`` of silence between them (a rig
+    cannot play them closer), through an :class:`EnergyBudget` of ``limits``: the same
+    windows and the same sums the rig's budget applies when they play.
+
+    Parameters
+    ----------
+    drives : sequence of ndarray, shape (n_channels, n_samples)
+        The plays in order, V (the same array may appear many times).
+    fs : float
+        Sample rate, Hz.
+    limits : SafetyLimits
+    pause_s : float
+        Silence after each play, s.
+
+    Returns
+    -------
+    PlanLevels
+    """
+    check_positive(pause_s, "pause_s", allow_zero=True)
+    if not drives:
+        raise ValidationError("plan_levels needs at least one drive")
+    budget = EnergyBudget(limits, np.shape(drives[0])[0], fs)
+    peak, worst = 0.0, np.zeros(2)
+    start = 0.0
+    for drive in drives:
+        drive = np.asarray(drive, dtype=float)
+        peak = max(peak, float(np.abs(drive).max()))
+        worst = np.maximum(worst, budget.record(drive, start))
+        start = budget.end_s + pause_s
+    return PlanLevels(peak, float(worst[0]), float(worst[1]), limits, float(pause_s))
+
+
+def plan_pause_s(drives: Sequence[np.ndarray], fs: float, limits: SafetyLimits, *,
+                 resolution_s: float = 0.1) -> float | None:
+    """The shortest pause between plays (to ``resolution_s``, rounded up) for which they fit the RMS limits.
+
+    Parameters
+    ----------
+    drives : sequence of ndarray, shape (n_channels, n_samples)
+        The plays in order, V.
+    fs : float
+        Sample rate, Hz.
+    limits : SafetyLimits
+    resolution_s : float
+        Step of the pause searched, s.
+
+    Returns
+    -------
+    float or None
+        0 when they fit back to back; None when no pause makes them fit (a play alone
+        breaks a limit).
+    """
+    if plan_levels(drives, fs, limits).fits:
+        return 0.0
+    lo, hi = 0, int(math.ceil((limits.sustained_window_s + limits.rms_window_s) / resolution_s))
+    if not plan_levels(drives, fs, limits, pause_s=hi * resolution_s).fits:
+        return None
+    while hi - lo > 1:  # lo does not fit, hi fits: the levels only fall as the pause grows
+        mid = (lo + hi) // 2
+        if plan_levels(drives, fs, limits, pause_s=mid * resolution_s).fits:
+            hi = mid
+        else:
+            lo = mid
+    return hi * resolution_s
+
+
+#: Most waits :func:`play_paced` makes for one drive (the first wait named suffices).
+MAX_COOLING_WAITS = 3
+
+
+def play_paced(rig: Any, drive: np.ndarray, on_wait: Callable[[float, str], None] | None = None, *,
+               sleep: Callable[[float], None] | None = None) -> Any:
+    """``rig.play(drive)``; when a limit over time refuses it, wait the time it names and play it then.
+
+    A drive that breaks a limit played alone is refused at once (no wait would admit it),
+    and a ``rig.stop()`` during the wait ends it (:class:`~vibrofocus.rigs.devices.StoppedError`):
+    the drive is never played after a stop.
+
+    Parameters
+    ----------
+    rig : Rig
+        The rig that plays.
+    drive : ndarray, shape (n_actuators, n_samples)
+        Voltages at the actuators, V.
+    on_wait : callable ``(wait_s: float, message: str) -> None``, optional
+        Told before each wait (the refusal's message and the wait, s).
+    sleep : callable, optional
+        Waits a number of seconds (default :func:`time.sleep`; a test's clock).
+
+    Returns
+    -------
+    What ``rig.play`` returns (a :class:`~vibrofocus.rigs.base.DeviceOnset`).
+    """
+    from .devices import StoppedError
+
+    sleep = time.sleep if sleep is None else sleep
+    for attempt in range(MAX_COOLING_WAITS + 1):
+        try:
+            return rig.play(drive)
+        except CoolingError as exc:
+            if attempt == MAX_COOLING_WAITS:
+                raise
+            if on_wait is not None:
+                on_wait(exc.wait_s, str(exc))
+            epoch, left = rig._stop_epoch, exc.wait_s
+            while left > 0:
+                sleep(min(0.05, left))
+                left -= 0.05
+                if rig._stop_epoch != epoch:
+                    raise StoppedError("play") from None

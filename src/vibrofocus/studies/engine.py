@@ -29,6 +29,7 @@ import numpy as np
 
 from ..defaults import DRIVE_LIMIT_V, N_SAMPLES
 from ..errors import StudyError, ValidationError
+from ..rigs.safety import play_paced
 from .markers import send_marker
 from .protocol import DEFAULT_LEVELS, PlannedTrial, StudyDesign, level_options
 from .storage import AnswerReceipt, StudyStore, session_protocol
@@ -309,10 +310,9 @@ def check_stimulus(drives: np.ndarray, rig: Any) -> None:
     SafetyError
         The first limit it breaks.
     """
-    from ..rigs.safety import check_sustained_alone
+    from ..rigs.safety import check_on_rig
 
-    safe = rig.check(drives)
-    check_sustained_alone(safe, rig.fs, rig.limits)
+    check_on_rig(drives, rig)
 
 
 def _check_rates(calibration: Any, rig: Any) -> None:
@@ -774,6 +774,13 @@ class StudyEngine:
             self._onset_counts[trial.trial_index] += 1
         return self._onset_counts[trial.trial_index] > 1
 
+    def _cooling(self, trial: PlannedTrial, responder: Any, wait_s: float, why: str) -> None:
+        """A wait for the actuators to cool before the trial's stimulus: logged, and told to the responder."""
+        self._log("cooling", trial, wait_s=wait_s, reason=why)
+        hook = getattr(responder, "cooling", None)
+        if hook is not None:
+            hook(trial, wait_s)
+
     def _log(self, kind: str, trial: PlannedTrial, **fields: Any) -> None:
         self.store.log_event(self.session_id, kind, {"trial_index": trial.trial_index, **fields})
 
@@ -808,7 +815,9 @@ class StudyEngine:
             **({} if stim is None or stim.redesign is None else {"redesign": stim.redesign}),
         )
         onset = time.monotonic()
-        played = self.rig.play(stim.drives) if stim is not None else None
+        # A limit over time pauses the trial for the wait it names (not the run's end).
+        played = play_paced(self.rig, stim.drives, lambda wait_s, why: self._cooling(trial, responder, wait_s, why)
+                            ) if stim is not None else None
         # Rig.play's DeviceOnset; a rig of the caller's own may return nothing. Its host
         # time is when the device took the first sample (the audio rig's first callback,
         # tens of ms after the call): reaction times count from there.

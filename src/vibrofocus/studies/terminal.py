@@ -83,6 +83,11 @@ class TerminalResponder:
                 continue
             return Response(locations, rt)
 
+    def cooling(self, trial: Any, wait_s: float) -> None:
+        """Say that the trial waits for the actuators to cool (the rig's limits over time)."""
+        self.console.print(f"trial {trial.trial}: waiting {wait_s:.1f} s for the actuators to cool "
+                           "(the rig's RMS limit over time)")
+
     def wait_resume(self) -> bool:
         line = self._read("[yellow]paused[/] — Enter to resume (the trial is played again), q to abort: ")
         return line.strip().lower() != "q"

@@ -22,6 +22,7 @@ import secrets
 import stat
 from pathlib import Path
 
+from .._owners import owner_name
 from ..errors import StudyError
 
 __all__ = [
@@ -39,16 +40,6 @@ log = logging.getLogger(__name__)
 
 #: Suffixes of SQLite's journal files beside a database.
 JOURNAL_SUFFIXES = ("-wal", "-shm", "-journal")
-
-
-def owner_name(uid: int) -> str:
-    """A user id as people read it: ``user alice (uid 1000)``."""
-    try:
-        import pwd
-
-        return f"user {pwd.getpwuid(uid).pw_name} (uid {uid})"
-    except (ImportError, KeyError):
-        return f"uid {uid}"
 
 
 def _private_group(gid: int) -> bool:
