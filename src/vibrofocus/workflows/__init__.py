@@ -15,6 +15,7 @@ from .calibrate import CalibrationOutcome, calibrate_participant, check_calibrat
 from .demo import DemoOutcome, demo_methods, demo_moving_focus, demo_paper_figures
 from .power import PowerOutcome, study_power
 from .progress import Progress, QuietProgress, WorkflowCancelled
+from .render import TapOutcome, render_tap
 from .session import first_unfinished_block, plan_session, run_session, run_study_at_terminal
 from .simulate import SimulationOutcome, simulate_study
 
@@ -25,6 +26,7 @@ __all__ = [
     "Progress",
     "QuietProgress",
     "SimulationOutcome",
+    "TapOutcome",
     "WorkflowCancelled",
     "calibrate_participant",
     "check_calibration_out",
@@ -33,6 +35,7 @@ __all__ = [
     "demo_paper_figures",
     "first_unfinished_block",
     "plan_session",
+    "render_tap",
     "run_session",
     "run_study_at_terminal",
     "simulate_study",
