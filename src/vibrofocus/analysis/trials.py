@@ -378,7 +378,9 @@ def load_trials(
     if len(raw) == 0:
         raise ValidationError(f"trials file {name!r} has a header but no trials")
     _require_columns(raw)  # before the session columns are used
-    raw, left_out = select_kind(raw, kind, name=name)
+    # A study database's rows (simulation.fitting.trials_source) name the database.
+    named = str(source.attrs.get("source", name)) if isinstance(source, pd.DataFrame) else name
+    raw, left_out = select_kind(raw, kind, name=named)
     raw, exclusions = _drop_sessions(raw, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
     exclusions = left_out + exclusions
     trials, problems = trial_problems(raw, layout=layout)
