@@ -57,6 +57,40 @@ def test_render_npz_csv_and_wav_agree(cal_file, tmp_path):
     np.testing.assert_allclose(samples.T * scale, drives, rtol=1e-6, atol=1e-6)
 
 
+def test_render_plot_writes_the_web_previews_figure(cal_file, tmp_path, monkeypatch):
+    # --plot draws the one preview figure the web app serves (rendering.figures.plot_preview), saved as PNG.
+    import vibrofocus._atomic as atomic
+
+    drawn = []
+    real_save = atomic.save_figure
+    monkeypatch.setattr(atomic, "save_figure", lambda fig, path, **kw: drawn.append(fig) or real_save(fig, path, **kw))
+    png = tmp_path / "tap.png"
+    result = runner.invoke(app, ["render", "--calibration", str(cal_file), "--location", "5",
+                                 "--out", str(tmp_path / "tap.npz"), "--plot", str(png)])
+    assert result.exit_code == 0, result.output
+    data = png.read_bytes()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n"
+    assert (int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")) == (1100, 420)  # 11 x 4.2 in
+    (fig,) = drawn
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles[:3] == ["drive signals", "target (red), other points (grey)", "peak |u|: ■ actuators, ▲ guards"]
+    assert len(fig.axes) == 4 and fig.get_suptitle() == "inverse at location 5"  # three panels and a colour bar
+    assert f"wrote {png}" in text(result)
+    # The scaling to the limit says which way, from what, and why.
+    meta = json.loads(str(np.load(tmp_path / "tap.npz")["metadata"]))
+    way = "up" if meta["scale"] > 1 else "down"
+    assert (f"scaled {way} ×{meta['scale']:.3g}, from {meta['needed_peak_v']:.3g} V to the 10 V limit "
+            f"({'equal peak' if way == 'up' else 'over it'})") in text(result)
+    assert "scaled by" not in text(result)
+
+
+def test_render_refuses_a_plot_that_is_not_a_png(cal_file, tmp_path):
+    result = runner.invoke(app, ["render", "--calibration", str(cal_file), "--location", "5",
+                                 "--out", str(tmp_path / "tap.npz"), "--plot", str(tmp_path / "tap.npz")])
+    assert result.exit_code == 2 and "--plot" in text(result) and ".png" in text(result)
+    assert not (tmp_path / "tap.npz").exists()
+
+
 def test_render_refuses_a_foreign_calibration_file(tmp_path):
     bad = tmp_path / "notes.nc"
     bad.write_text("not a calibration")

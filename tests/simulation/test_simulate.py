@@ -147,7 +147,8 @@ def test_another_seed_on_the_same_database_is_refused(simulated):
 def test_analysis_reads_the_export(simulated, tmp_path):
     _, out, _ = simulated
     # The analysis ships with the package: an import failure is a failure, not a skip.
-    result = CliRunner().invoke(app, ["analyze", str(out), "--out", str(tmp_path / "report"), "--quiet"])
+    result = CliRunner().invoke(app, ["analyze", str(out), "--out", str(tmp_path / "report"), "--quiet",
+                                      "--simulated"])
     assert result.exit_code == 0, result.output
     report = json.loads((tmp_path / "report" / "report.json").read_text())
     effects = {row["effect"] for row in report["study1"]["anova"]}

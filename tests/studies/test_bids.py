@@ -103,7 +103,8 @@ def test_a_trials_csv_exports_the_same_rows_and_onsets_and_analyze_reads_the_fol
         assert list(f.get_df()["onset"]) == pytest.approx(list(from_db[f.filename]), abs=1e-9)
     reports = {}
     for name, source in (("csv", trials), ("bids", out)):
-        result = runner.invoke(app, ["analyze", str(source), "--out", str(root / f"report-{name}"), "-q"])
+        result = runner.invoke(app, ["analyze", str(source), "--out", str(root / f"report-{name}"), "-q",
+                                     "--simulated"])
         assert result.exit_code == 0, result.output
         reports[name] = json.loads((root / f"report-{name}" / "report.json").read_text())
         reports[name].pop("source")

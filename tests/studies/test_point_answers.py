@@ -197,7 +197,7 @@ def test_a_point_protocol_runs_in_simulation(tmp_path):
         (info,) = store.sessions()
         assert info.design.point and info.config["protocol"] == "point-pilot"
     # analyze reports the points' error in mm per method, as point_errors computes it.
-    result = CliRunner().invoke(app, ["analyze", str(out), "--out", str(tmp_path / "report")])
+    result = CliRunner().invoke(app, ["analyze", str(out), "--out", str(tmp_path / "report"), "--simulated"])
     assert result.exit_code == 0, result.output
     expected = point_errors(pd.read_csv(out, dtype=str, keep_default_na=False))
     text = " ".join(result.output.split())

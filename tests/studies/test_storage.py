@@ -228,10 +228,10 @@ def test_export_writes_only_answered_trials_in_order(store, session, tmp_path):
     out = tmp_path / "trials.csv"
     assert store.export_trials_csv(out) == 7
     lines = out.read_text().splitlines()
-    # The contract's columns first, in order, then the session's (id, status, dry run), then the onset's,
+    # The contract's columns first, in order, then the session's (id, status, dry run, rig), then the onset's,
     # then the stimulus's (level rule, peak drive, predicted peak at the target), then the protocol's name,
     # then a point answer's place (mm; empty for a location answer).
-    assert lines[0] == ("participant,study,phase,trial,method,target,response,rt_s,session,session_status,dry_run,"
+    assert lines[0] == ("participant,study,phase,trial,method,target,response,rt_s,session,session_status,dry_run,rig,"
                         "onset_host_s,onset_device_s,onset_clock,levels,drive_peak_v,target_peak_um,protocol,"
                         "response_x_mm,response_y_mm")
     plan = store.planned_trials(session)

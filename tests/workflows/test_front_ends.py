@@ -87,7 +87,7 @@ SRC = CLI.parent
 #: Commands still over the limit, with their code lines now: each may only shrink (one that
 #: reaches the limit leaves the list). Every other command has at most the limit.
 STILL_LONG = {
-    "render_command": 103, "serve": 98,
+    "serve": 98,
     "serve_osc": 110,
 }
 
@@ -121,6 +121,7 @@ FRONT_ENDS = {
             "web/session_runner.py": "run_session"},
     "simulate": {"cli/simulate_study.py": "simulate_study"},
     "power": {"cli/power.py": "study_power"},
+    "render": {"cli/render.py": "render_tap"},
 }
 #: What the steps do below the workflows: no front-end calls these itself.
 STEP_CALLS = {"calibrate", "create_session", "open_session", "simulate_studies", "run_power"}

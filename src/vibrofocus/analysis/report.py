@@ -260,6 +260,7 @@ def report_trials_file(
     keep_dry_runs: bool = False,
     alpha: float = 0.05,
     hypotheses: Callable[[pd.DataFrame], dict[str, Any]] | None = None,
+    kind: str = "people",
 ) -> tuple[AnalysisResult, dict[str, Path]]:
     """Analyse a trials file and write its report folder: what ``vibrofocus analyze`` and the web app do.
 
@@ -281,6 +282,11 @@ def report_trials_file(
         ``hypotheses(trials)``: a hypotheses fit of the loaded trials
         (``vibrofocus analyze --hypotheses`` passes
         :func:`vibrofocus.simulation.fitting.fit_trials`), written with the report.
+    kind : {"people", "simulated", "rehearsals", "all"}
+        Which participants to analyse (:data:`vibrofocus.analysis.trials.KINDS`): people on
+        hardware (default), simulated participants, or people's rehearsals on the simulated
+        rig; the others are listed in the report as left out, and why. A source without
+        any of the kind is refused, naming the kinds it holds.
 
     Returns
     -------
@@ -301,7 +307,8 @@ def report_trials_file(
     from .trials import load_trials
 
     check_in_range(alpha, "alpha", 0.0, 1.0, inclusive=False)
-    data = load_trials(trials, on_invalid=on_invalid, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    data = load_trials(trials, on_invalid=on_invalid, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs,
+                       kind=kind)
     result = analyze(data, alpha=alpha)
     fit = hypotheses(data) if hypotheses is not None else None
     return result, write_report(result, out_dir, hypotheses=fit)

@@ -29,6 +29,8 @@ __all__ = [
     "KNOWN_METHODS",
     "PHASES",
     "STUDIES",
+    "KINDS",
+    "select_kind",
     "load_trials",
     "trial_problems",
     "check_design",
@@ -44,6 +46,15 @@ KNOWN_METHODS: tuple[str, ...] = ("funneling", "inverse", "combination", "time_r
 PHASES: tuple[str, ...] = ("training", "main")
 #: Valid study numbers.
 STUDIES: tuple[int, ...] = (1, 2)
+
+#: The kinds of participant one analysis takes (docs/file-formats.md, trials file):
+#: ``people`` (people on hardware: not simulated, on a rig other than the simulated one),
+#: ``simulated`` (simulated participants: answers from the perceptual model),
+#: ``rehearsals`` (people's sessions on the simulated rig: nothing was felt), or ``all``
+#: (every row, as the file holds them).
+KINDS: tuple[str, ...] = ("people", "simulated", "rehearsals", "all")
+#: How each kind is asked for at the command line (``vibrofocus analyze``).
+_KIND_FLAGS = {"people": "the default", "simulated": "--simulated", "rehearsals": "--rehearsals"}
 
 _MAX_LISTED = 5  # problems quoted in one error message
 
@@ -308,6 +319,7 @@ def load_trials(
     on_invalid: Literal["raise", "exclude"] = "raise",
     keep_aborted: bool = False,
     keep_dry_runs: bool = False,
+    kind: str = "all",
 ) -> pd.DataFrame:
     """Read a trials CSV file (docs/file-formats.md, trials file) and validate every row.
 
@@ -333,6 +345,9 @@ def load_trials(
         ``session_status``, ``dry_run``): rows of aborted sessions and of dry runs (no
         calibration, nothing played) are left out unless these are True, and each such
         session is listed in ``attrs["exclusions"]``.
+    kind : {"all", "people", "simulated", "rehearsals"}
+        Which participants to analyse (:data:`KINDS`, :func:`select_kind`): every row
+        (default), or one kind alone, the others listed in ``attrs["exclusions"]``.
 
     Returns
     -------
@@ -363,7 +378,11 @@ def load_trials(
     if len(raw) == 0:
         raise ValidationError(f"trials file {name!r} has a header but no trials")
     _require_columns(raw)  # before the session columns are used
+    # A study database's rows (simulation.fitting.trials_source) name the database.
+    named = str(source.attrs.get("source", name)) if isinstance(source, pd.DataFrame) else name
+    raw, left_out = select_kind(raw, kind, name=named)
     raw, exclusions = _drop_sessions(raw, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    exclusions = left_out + exclusions
     trials, problems = trial_problems(raw, layout=layout)
     if len(problems):
         if on_invalid == "raise":
@@ -412,6 +431,80 @@ def simulated_participants(raw: pd.DataFrame) -> list[str]:
         return []
     flag = raw["simulated"].astype(str).str.strip().str.lower().isin(("1", "true", "yes", "1.0"))
     return sorted({str(p).strip() for p in raw.loc[flag, "participant"]})
+
+
+def _row_kinds(raw: pd.DataFrame) -> pd.Series:
+    """Each row's kind: ``simulated`` (column ``simulated`` true), ``rehearsals`` (a person on
+    the ``simulated`` rig, column ``rig``) or ``people`` (anyone else: a file without these
+    columns holds people)."""
+    def flag(column: str, words: tuple[str, ...]) -> pd.Series:
+        if column not in raw.columns:
+            return pd.Series(False, index=raw.index)
+        return raw[column].astype(str).str.strip().str.lower().isin(words)
+
+    simulated = flag("simulated", ("1", "true", "yes", "1.0"))
+    on_model = flag("rig", ("simulated",))
+    return pd.Series(np.where(simulated, "simulated", np.where(on_model, "rehearsals", "people")), index=raw.index)
+
+
+def select_kind(raw: pd.DataFrame, kind: str, *, name: str = "the trials") -> tuple[pd.DataFrame, list[dict]]:
+    """Keep the rows of one kind of participant; say what was left out, and why.
+
+    Parameters
+    ----------
+    raw : DataFrame
+        A trials table as read (text cells), with the optional columns ``simulated`` and
+        ``rig`` of a study database's export.
+    kind : {"people", "simulated", "rehearsals", "all"}
+        :data:`KINDS`: people on hardware, simulated participants, people's rehearsals on
+        the simulated rig, or every row.
+    name : str
+        The source, for the message.
+
+    Returns
+    -------
+    raw : DataFrame
+        The rows of that kind.
+    left_out : list of dict
+        ``participant``, ``study`` (None) and ``reason`` for each participant of another
+        kind, or each rehearsal session of a person (when the table names sessions).
+
+    Raises
+    ------
+    ValidationError
+        An unknown kind, or no row of that kind (the message says which kinds there are
+        and how to ask for them).
+    """
+    check_choice(kind, "kind", KINDS)
+    if kind == "all":
+        return raw, []
+    kinds = _row_kinds(raw)
+    keep = kinds.eq(kind)
+    if not keep.any():
+        found = [f"{raw.loc[kinds.eq(k), 'participant'].nunique()} {words} ({_KIND_FLAGS[k]})"
+                 for k, words in (("simulated", "simulated participant(s)"),
+                                  ("rehearsals", "person(s) rehearsing on the simulated rig"),
+                                  ("people", "person(s) on hardware")) if kinds.eq(k).any()]
+        wanted = {"people": "people on hardware", "simulated": "simulated participants",
+                  "rehearsals": "rehearsals on the simulated rig"}[kind]
+        raise ValidationError(f"{name} holds no {wanted} to analyse; it holds {' and '.join(found)}: "
+                              "analyse one kind at a time, with the option named")
+    why = {
+        "simulated": "simulated participant: answers from a perceptual model, not from a person; "
+                     "analysed alone with --simulated",
+        "rehearsals": "rehearsal on the simulated rig: the person felt nothing; analysed alone with --rehearsals",
+        "people": "a person on hardware, not of this analysis's kind; analysed alone by default",
+    }
+    left_out = []
+    for k in ("simulated", "rehearsals", "people"):
+        # A rehearsal is a session (a person may rehearse, then sit on hardware); the others a participant.
+        by = ["participant", "session"] if k == "rehearsals" and "session" in raw.columns else ["participant"]
+        for key, rows in raw[~keep & kinds.eq(k)].groupby(by, sort=True):
+            key = key if isinstance(key, tuple) else (key,)
+            where = f"session {key[1]} left out" if len(key) > 1 else "left out"
+            left_out.append({"participant": str(key[0]), "study": None,
+                             "reason": f"{where}: {why[k]} ({len(rows)} answered trials)"})
+    return raw[keep].reset_index(drop=True), left_out
 
 
 def _drop_sessions(raw: pd.DataFrame, *, keep_aborted: bool, keep_dry_runs: bool) -> tuple[pd.DataFrame, list[dict]]:

@@ -21,14 +21,16 @@ def _p(p: float) -> str:
     return format_p(p).removeprefix("p = ").removeprefix("p ")
 
 
-def _point_errors(trials: Path, *, keep_aborted: bool, keep_dry_runs: bool):
+def _point_errors(trials: Path, *, keep_aborted: bool, keep_dry_runs: bool, kind: str):
     """Mean error of point answers per method, mm, of a trials CSV with the point columns (None without them).
 
-    The sessions the analysis leaves out (aborted ones, dry runs) are left out here too.
+    The rows the analysis leaves out (other kinds of participant, aborted sessions, dry runs)
+    are left out here too.
     """
     import pandas as pd
 
     from ..analysis import point_errors
+    from ..analysis.trials import select_kind
 
     if not trials.is_file():
         return None
@@ -38,6 +40,7 @@ def _point_errors(trials: Path, *, keep_aborted: bool, keep_dry_runs: bool):
         return None
     if not {"response_x_mm", "response_y_mm"} <= set(raw.columns):
         return None
+    raw = select_kind(raw, kind)[0]
     if not keep_aborted and "session_status" in raw.columns:
         raw = raw[raw["session_status"] != "aborted"]
     if not keep_dry_runs and "dry_run" in raw.columns:
@@ -70,6 +73,8 @@ def analyze_command(
     ),
     keep_aborted: bool = typer.Option(False, "--keep-aborted", help="Analyse the answers of aborted sessions too (left out and listed by default)."),
     keep_dry_runs: bool = typer.Option(False, "--keep-dry-runs", help="Analyse dry-run sessions too (no calibration, nothing played; left out and listed by default)."),
+    simulated: bool = typer.Option(False, "--simulated", help="Analyse the simulated participants alone (answers from the perceptual model, not data) instead of the people on hardware."),
+    rehearsals: bool = typer.Option(False, "--rehearsals", help="Analyse people's rehearsals on the simulated rig alone (they felt nothing) instead of the people on hardware."),
     alpha: float = typer.Option(0.05, "--alpha", help="Significance level for the results sentences, in (0, 1)."),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="Print only the paths written."),
     hypotheses: bool = typer.Option(
@@ -95,29 +100,36 @@ def analyze_command(
 
     Participants missing a condition are excluded and listed, never dropped silently; so are
     aborted sessions and dry runs of a study database's export (--keep-aborted, --keep-dry-runs).
+
+    One kind of participant per analysis: people on hardware by default; simulated participants with --simulated; people's rehearsals on the simulated rig with --rehearsals. The others are listed as left out.
     """  # noqa: E501
     with user_errors():
         from functools import partial
 
         from .._validation import check_in_range
         from ..analysis import report_trials_file
+        from ..errors import ValidationError
         from ..simulation.fitting import FitSettings, fit_trials, trials_source
 
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
+        if simulated and rehearsals:
+            raise ValidationError("--simulated and --rehearsals are two analyses: run one at a time")
+        kind = "simulated" if simulated else "rehearsals" if rehearsals else "people"
         fit = partial(fit_trials, settings=FitSettings(n_draws=draws), scheduler=scheduler, n_workers=workers,
                       local=no_dask) if hypotheses else None
         result, paths = report_trials_file(trials_source(trials), out, on_invalid="exclude" if exclude_invalid else "raise",
                                            keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, alpha=alpha,
-                                           hypotheses=fit)
+                                           hypotheses=fit, kind=kind)
 
     if quiet:
         for p in paths.values():
             console.print(str(p))
         return
-    _print_summary(result, paths, trials, out, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    _print_summary(result, paths, trials, out, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, kind=kind)
 
 
-def _print_summary(result, paths: dict, trials: Path, out: Path, *, keep_aborted: bool, keep_dry_runs: bool) -> None:
+def _print_summary(result, paths: dict, trials: Path, out: Path, *, keep_aborted: bool, keep_dry_runs: bool,
+                   kind: str) -> None:
     """The analysis at the terminal: exclusions, notes, the studies' tables and the files written."""
     import pandas as pd
 
@@ -158,7 +170,7 @@ def _print_summary(result, paths: dict, trials: Path, out: Path, *, keep_aborted
                 console.print(f"[yellow]Study 1 {name}: not computed: {s1.unavailable[key]}[/]")
         means = s1.errors.groupby("method")["error_mm"].mean()
         console.print("Study 1 mean error: " + ", ".join(f"{m} {means[m]:.2f} mm" for m in s1.methods))
-    points = _point_errors(trials, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    points = _point_errors(trials, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, kind=kind)
     if points is not None and len(points):
         console.print("Point answers, mean localization error (point to target): " + ", ".join(
             f"{r.method} {r.mean_error_mm:.2f} mm (n = {r.n})" for r in points.itertuples()))

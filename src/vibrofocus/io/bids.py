@@ -548,7 +548,8 @@ def read_bids_trials_table(root: str | os.PathLike):
         Every value a str, with the trials-file columns (``participant``: the
         ``source_id``, ``study``, ``phase``, ``trial``, ``method``, ``target``,
         ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
-        ``dry_run``), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
+        ``dry_run``, ``rig``: the sidecar's ``Sessions`` ``Rig``, empty where it names none or
+        several), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
         ``drive_peak_v``, ``target_peak_um``) and, for a simulated participant, ``model``
         (the sidecar's ``SimulatedModel``) where the events files have them, and ``line``
         (row number over all events files, from 2), as
@@ -590,12 +591,15 @@ def read_bids_trials_table(root: str | os.PathLike):
         if events and set(_REQUIRED_COLUMNS) - set(events[0]):
             missing = sorted(set(_REQUIRED_COLUMNS) - set(events[0]))
             raise ValidationError(f"the events file {path} lacks the column(s) {', '.join(missing)}")
-        model = None
-        if person.get("simulated") == "true":  # the sidecar names the model that answered
-            try:
-                model = json.loads(path.with_suffix(".json").read_text(encoding="utf-8")).get("SimulatedModel")
-            except (OSError, ValueError, AttributeError):
-                model = None
+        try:  # the sidecar names the model that answered, and the sessions' rig
+            sidecar = json.loads(path.with_suffix(".json").read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            sidecar = {}
+        sidecar = sidecar if isinstance(sidecar, dict) else {}
+        model = sidecar.get("SimulatedModel") if person.get("simulated") == "true" else None
+        sessions = sidecar.get("Sessions") if isinstance(sidecar.get("Sessions"), list) else []
+        rigs = {str(i["Rig"]) for i in sessions if isinstance(i, dict) and i.get("Rig")}
+        rig = rigs.pop() if len(rigs) == 1 else ""  # one file, one session: one rig
         for ev in events:
             stimulus = {c: ("" if ev[c] == _NA else ev[c]) for c in ("levels", "drive_peak_v", "target_peak_um")
                         if c in ev}
@@ -609,7 +613,7 @@ def read_bids_trials_table(root: str | os.PathLike):
                     "0" if ev.get("session_id", _NA) in (_NA, None) else ev["session_id"]),
                 "session_status": "completed" if ev["session_status"] == _NA else ev["session_status"],
                 "dry_run": "0" if ev["dry_run"] == _NA else ev["dry_run"],
-                "simulated": "1" if person.get("simulated") == "true" else "0",
+                "simulated": "1" if person.get("simulated") == "true" else "0", "rig": rig,
                 **stimulus,
             })
     table = pd.DataFrame(rows, dtype=str).fillna("")  # a column some events files lack: empty cells

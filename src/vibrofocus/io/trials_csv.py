@@ -26,16 +26,21 @@ from .responses import format_response, parse_response_text
 
 __all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS",
            "POINT_COLUMNS",
-           "SIMULATED_COLUMN", "MODEL_COLUMN",
+           "LEGACY_SESSION_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
            "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
 
 #: Columns of the trials file, in order.
 TRIALS_COLUMNS = ("participant", "study", "phase", "trial", "method", "target", "response", "rt_s")
 #: Columns a study database's export adds after :data:`TRIALS_COLUMNS`: the session id,
-#: its status (``planned``, ``running``, ``paused``, ``aborted``, ``completed``) and
-#: ``dry_run`` (1 when the session had no calibration, so nothing was played; else 0).
-SESSION_COLUMNS = ("session", "session_status", "dry_run")
+#: its status (``planned``, ``running``, ``paused``, ``aborted``, ``completed``),
+#: ``dry_run`` (1 when the session had no calibration, so nothing was played; else 0) and
+#: ``rig`` (the rig the session ran on: ``simulated``, ``audio``, ``nidaq``; empty where the
+#: session did not store it). A person's rows on the ``simulated`` rig are a rehearsal:
+#: nothing was felt.
+SESSION_COLUMNS = ("session", "session_status", "dry_run", "rig")
+#: The session columns of an export written before sessions named their rig (still read).
+LEGACY_SESSION_COLUMNS = SESSION_COLUMNS[:3]
 #: Columns of the stimulus onset a study database's export adds after :data:`SESSION_COLUMNS`:
 #: ``onset_host_s`` (host ``time.monotonic()``, s, what reaction times count from),
 #: ``onset_device_s`` (the first sample on the rig's device clock, s) and ``onset_clock``
@@ -87,7 +92,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     path : path-like
         Destination CSV file; its folder must exist.
     sessions : bool
-        Also write :data:`SESSION_COLUMNS` (then each row needs those keys too).
+        Also write :data:`SESSION_COLUMNS` (then each row needs those keys too; a missing
+        ``rig`` or None is an empty cell).
     onsets : bool
         Also write :data:`ONSET_COLUMNS` (keys of the rows; a missing key or None is an
         empty cell).
@@ -132,7 +138,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
                 row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
             ]
             if sessions:
-                values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"]))]
+                values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"])),
+                           row.get("rig") or ""]
             if onsets:
                 values += [_seconds_cell(row.get("onset_host_s")), _seconds_cell(row.get("onset_device_s")),
                            row.get("onset_clock") or ""]
@@ -170,7 +177,8 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
     list of dict
         ``study``, ``trial``, ``target`` as int, ``rt_s`` as float, ``response`` as a
         tuple of int; the rest as str. A file with :data:`SESSION_COLUMNS` also gives
-        ``session`` (int), ``session_status`` (str) and ``dry_run`` (bool); one with
+        ``session`` (int), ``session_status`` (str), ``dry_run`` (bool) and ``rig`` (str;
+        ``""`` where not stored, and for an export written before sessions named their rig); one with
         :data:`SIMULATED_COLUMN` gives ``simulated`` (bool); the onset and stimulus
         columns' numbers, and the point columns', are floats (None for an empty cell).
     """
@@ -182,12 +190,10 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            headers = [TRIALS_COLUMNS + s + f for s in ((), SESSION_COLUMNS, SESSION_COLUMNS + ONSET_COLUMNS,
-                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS,
-                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                                                        + PROTOCOL_COLUMNS,
-                                                        SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                                                        + PROTOCOL_COLUMNS + POINT_COLUMNS)
+            later = (ONSET_COLUMNS, STIMULUS_COLUMNS, PROTOCOL_COLUMNS, POINT_COLUMNS)
+            middles = [()] + [s + sum(later[:k], ()) for s in (SESSION_COLUMNS, LEGACY_SESSION_COLUMNS)
+                              for k in range(len(later) + 1)]
+            headers = [TRIALS_COLUMNS + m + f for m in middles
                        for f in ((), (SIMULATED_COLUMN,), (SIMULATED_COLUMN, MODEL_COLUMN))]
             if header is None or tuple(header) not in headers:
                 raise StudyError(f"{path} is not a trials file: header {header!r}, expected {list(TRIALS_COLUMNS)}")
@@ -207,6 +213,7 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                     if "session" in row:
                         row["session"] = int(row["session"])
                         row["dry_run"] = bool(int(row["dry_run"]))
+                        row.setdefault("rig", "")
                     if "onset_clock" in row:
                         for key in ("onset_host_s", "onset_device_s"):
                             row[key] = float(row[key]) if row[key] else None

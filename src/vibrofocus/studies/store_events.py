@@ -82,7 +82,8 @@ class EventRows(StudyDatabase):
         target, response, rt_s``) plus ``session_id``, ``trial_index``, ``answer_id``,
         ``drive_sha256``, ``calibration_id``, ``recorded_at``, the session columns of
         the trials file: ``session`` (id), ``session_status``, ``dry_run`` (1 for a session
-        planned without a calibration: nothing was played), and ``simulated`` (1: the
+        planned without a calibration: nothing was played), ``rig`` (the session's rig:
+        ``simulated``, ``audio``, ``nidaq``; None where the session did not store it), and ``simulated`` (1: the
         participant is simulated, answers from the perceptual model), and the onset columns
         ``onset_host_s``, ``onset_device_s``, ``onset_clock`` (the stimulus onset on the
         host's ``time.monotonic()`` and on the rig's device clock, from the ``answer`` or
@@ -129,6 +130,8 @@ class EventRows(StudyDatabase):
             row.update(stimuli.get((row["session_id"], row["trial_index"]), _NO_STIMULUS))
             row["levels"], model = stimuli.get(row["session_id"], (LEGACY_LEVELS, None))
             row["protocol"] = stimuli.get(("protocol", row["session_id"]))
+            # A simulated participant's session stored before sessions named their rig ran on the simulated one.
+            row["rig"] = stimuli.get(("rig", row["session_id"])) or ("simulated" if row["simulated"] else None)
             if row["simulated"]:
                 # A simulated session stored before sessions named their model: v3, its only one then.
                 row["model"] = model or legacy_model
@@ -148,6 +151,7 @@ class EventRows(StudyDatabase):
             config = config if isinstance(config, dict) else {}
             out[sid] = (str(config.get("levels", LEGACY_LEVELS)), config.get("model"))
             out[("protocol", sid)] = session_protocol(study, config)[0]
+            out[("rig", sid)] = config.get("rig")
         sql = ("SELECT session_id, payload FROM events WHERE kind = 'stimulus_onset' "
                + ("AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) " if args else ""))
         for sid, text in conn.execute(sql + "ORDER BY event_id", args):

@@ -15,8 +15,11 @@ from pathlib import Path
 
 __all__ = ["analyse_in_child", "report_lines"]
 
+_KIND_WORDS = {"people": "people on hardware", "simulated": "simulated participants",
+               "rehearsals": "rehearsals on the simulated rig"}
 
-def report_lines(trials: str, out_dir: str) -> list[str]:
+
+def report_lines(trials: str, out_dir: str, kind: str = "people") -> list[str]:
     """Analyse ``trials`` into ``out_dir`` and return the job log's lines (runs in the child).
 
     Parameters
@@ -25,6 +28,8 @@ def report_lines(trials: str, out_dir: str) -> list[str]:
         A trials CSV (docs/file-formats.md, trials file).
     out_dir : str
         The report folder.
+    kind : {"people", "simulated", "rehearsals"}
+        Which participants to analyse (:func:`vibrofocus.analysis.report_trials_file`).
 
     Returns
     -------
@@ -39,15 +44,15 @@ def report_lines(trials: str, out_dir: str) -> list[str]:
     # "trials.csv", never the account's folders (it is served to the browser). The child
     # is a process of its own, so changing its folder touches nothing else.
     os.chdir(out_dir)
-    result, paths = report_trials_file(Path(os.path.relpath(trials, out_dir)), Path("."))
-    lines = [f"analysed {result.n_trials} rows"]
+    result, paths = report_trials_file(Path(os.path.relpath(trials, out_dir)), Path("."), kind=kind)
+    lines = [f"analysed {result.n_trials} rows ({_KIND_WORDS[kind]})"]
     lines += [f"excluded {e.participant}: {e.reason}" for e in result.exclusions.itertuples(index=False)]
     lines += [f"note: {w}" for w in result.warnings]
     lines.append(f"wrote {', '.join(p.name for p in paths.values())}")
     return lines
 
 
-def analyse_in_child(trials: Path, out_dir: Path) -> list[str]:
+def analyse_in_child(trials: Path, out_dir: Path, *, kind: str = "people") -> list[str]:
     """:func:`report_lines` in a fresh spawned process; blocks until it is done.
 
     Parameters
@@ -56,6 +61,8 @@ def analyse_in_child(trials: Path, out_dir: Path) -> list[str]:
         A trials CSV.
     out_dir : Path
         The report folder.
+    kind : {"people", "simulated", "rehearsals"}
+        Which participants to analyse.
 
     Returns
     -------
@@ -71,4 +78,4 @@ def analyse_in_child(trials: Path, out_dir: Path) -> list[str]:
     """
     # spawn, not fork: the server has threads (a forked child would inherit held locks).
     with ProcessPoolExecutor(max_workers=1, mp_context=multiprocessing.get_context("spawn")) as pool:
-        return pool.submit(report_lines, str(trials), str(out_dir)).result()
+        return pool.submit(report_lines, str(trials), str(out_dir), kind).result()

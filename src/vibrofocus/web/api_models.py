@@ -182,3 +182,6 @@ class AnalysisIn(_Strict):
     """Run the analysis on the current export."""
 
     study: Study | None = None
+    # One kind of participant per analysis (vibrofocus.analysis.trials.KINDS; the CLI's default, --simulated,
+    # --rehearsals): people on hardware, simulated participants, or people's rehearsals on the simulated rig.
+    kind: Literal["people", "simulated", "rehearsals"] = "people"

@@ -721,7 +721,7 @@ def run_analysis(body: AnalysisIn | None = None, web: WebState = Depends(require
         from .analysis_job import analyse_in_child
 
         try:
-            lines = analyse_in_child(trials, out)
+            lines = analyse_in_child(trials, out, kind=body.kind if body is not None else "people")
         except VibrofocusError as exc:
             job["log"] = public_text(f"error: {exc}")[-4000:]
             job["status"] = "failed"

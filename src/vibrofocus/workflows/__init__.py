@@ -16,6 +16,7 @@ from .demo import DemoOutcome, demo_methods, demo_moving_focus, demo_paper_figur
 from .design import DesignOutcome, design_study
 from .power import PowerOutcome, study_power
 from .progress import Progress, QuietProgress, WorkflowCancelled
+from .render import TapOutcome, render_tap
 from .session import first_unfinished_block, plan_session, run_session, run_study_at_terminal
 from .simulate import SimulationOutcome, simulate_study
 
@@ -27,6 +28,7 @@ __all__ = [
     "Progress",
     "QuietProgress",
     "SimulationOutcome",
+    "TapOutcome",
     "WorkflowCancelled",
     "calibrate_participant",
     "check_calibration_out",
@@ -36,6 +38,7 @@ __all__ = [
     "design_study",
     "first_unfinished_block",
     "plan_session",
+    "render_tap",
     "run_session",
     "run_study_at_terminal",
     "simulate_study",

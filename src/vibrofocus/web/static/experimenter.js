@@ -520,7 +520,7 @@
   // ---------------------------------------------------------------- export and analysis
   $("analyze").addEventListener("click", async () => {
     try {
-      let job = await api("/api/analysis", { method: "POST", body: "{}" });
+      let job = await api("/api/analysis", { method: "POST", body: JSON.stringify({ kind: $("analysis-kind").value }) });
       $("analysis-message").textContent = `Analysing ${job.rows} trials…`;
       while (job.status === "running") {
         await new Promise((r) => setTimeout(r, 1000));
