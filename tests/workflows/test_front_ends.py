@@ -86,10 +86,7 @@ CLI = Path(vibrofocus.cli.calibrate.__file__).parent
 SRC = CLI.parent
 #: Commands still over the limit, with their code lines now: each may only shrink (one that
 #: reaches the limit leaves the list). Every other command has at most the limit.
-STILL_LONG = {
-    "serve": 98,
-    "serve_osc": 110,
-}
+STILL_LONG: dict[str, int] = {}
 
 
 def _every_command() -> list[tuple[str, int]]:

@@ -51,65 +51,29 @@ def serve(
     of one database is refused (docs/security.md).
     """
     with user_errors(exit_by_signal=True):  # 143 on SIGTERM, as supervisors expect
-        import secrets
+        import contextlib
         import threading
         import webbrowser
 
-        from .._validation import check_choice
-        from ..rigs import RIG_KINDS
-        from ..web import PACES, create_app
+        from ..skin import skin_preset
+        from ..studies.markers import lsl_markers
+        from ..web import create_app
+        from ..web.emergency import ServerGuard
         from ..web.serving import ServerLimits, listen, run
 
-        check_choice(rig, "rig", RIG_KINDS)
-        if rig != "simulated":
-            from ..errors import ValidationError
-            from ..rigs.config import load_rig_config
-
-            if rig_config is None:
-                raise ValidationError(f"the {rig} rig needs its settings: add --rig-config FILE (see examples/rigs/{rig}.toml)")
-            cfg = load_rig_config(rig_config)  # a bad file is reported now, not at the first calibration
-            if cfg.kind != rig:
-                raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
-            if rig == "audio":
-                _check_page_beep_output(cfg, participant_audio_elsewhere)
-        check_choice(pace, "pace", tuple(PACES))
-        _check_database(db)
-        import contextlib
-
-        from ..studies.markers import lsl_markers
-
+        _check_options(rig, rig_config, pace, db, participant_audio_elsewhere)
         markers = contextlib.ExitStack()
         # A bad id or no pylsl: one error line before anything starts.
-        source_id = lsl_source(lsl, lsl_source_id, db)
-        outlet = markers.enter_context(lsl_markers(lsl, source_id=source_id, wait_s=lsl_wait))
-        from ..rigs import make_rig
-        from ..skin import skin_preset
-
+        outlet = markers.enter_context(lsl_markers(lsl, source_id=lsl_source(lsl, lsl_source_id, db), wait_s=lsl_wait))
         skin = skin_preset(skin).name
-
-        def rig_factory(kind: str, *, seed: int | None = None, **kwargs):
-            # The simulated forearm gets the chosen skin; hardware rigs measure a real arm.
-            return make_rig(kind, seed=seed, skin=skin if kind == "simulated" else None, **kwargs)
-
-        token = os.environ.get("VIBROFOCUS_TOKEN") or secrets.token_urlsafe(24)
-        if len(token) < 16:
-            err_console.print("[bold red]error:[/] VIBROFOCUS_TOKEN must be at least 16 characters")
-            raise typer.Exit(code=2)
-        if host not in _LOCAL_HOSTS:
-            # Participant data and rig control would be reachable from the network.
-            err_console.print(
-                f"[bold red]WARNING:[/] binding to {host}: anyone who can reach this address can try "
-                "to use the study server. The studies are meant to run on localhost (127.0.0.1)."
-            )
+        token = _token(host)
         # Participant data: everything this server writes (database, calibrations,
         # exports, reports) is readable by this user only.
         os.umask(0o077)
         extra_hosts = tuple(allow_host) + (() if host in _LOCAL_HOSTS + ("0.0.0.0", "::") else (host,))
         web_app = create_app(db, token=token, rig=rig, pace=pace, allowed_hosts=extra_hosts,
-                             rig_config=rig_config if rig != "simulated" else None, rig_factory=rig_factory,
+                             rig_config=rig_config if rig != "simulated" else None, rig_factory=_rig_factory(skin),
                              body_timeout_s=body_timeout)
-        from ..web.emergency import ServerGuard
-
         # The one server of this database: a second one is refused here, naming the first.
         guard = ServerGuard(web_app.state.web)
         guard.claim(port or None)
@@ -119,27 +83,88 @@ def serve(
             guard.record_port(port)
             # 'vibrofocus stop' must work before it is offered: no socket, no server.
             guard.open_stop_socket()
-            shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
-            base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
-            login = f"{base}/login/{web_app.state.web.new_login_code()}"
-            typer.echo(f"study database: {Path(db).resolve()}")
-            typer.echo(f"rig: {web_app.state.web.rig_label} (simulated forearm: skin {skin})")
-            typer.echo(f"experimenter page: {base}/")
-            typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
-            typer.echo(f"experimenter token (for the login page): {token}")
-            typer.echo("participant pages: linked from the experimenter page (one per session)")
-            typer.echo(f"emergency stop from a terminal: vibrofocus stop --db {Path(db).resolve()}")
-            if outlet is not None:
-                typer.echo(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})")
+            login = _print_links(web_app, db, host, port, token, skin, outlet)
             if not no_browser:
                 # A moment later, so that the page does not ask before uvicorn listens.
                 threading.Timer(1.5, webbrowser.open, args=(login,)).start()
-            limits = ServerLimits(max_connections=max_connections, header_timeout_s=header_timeout,
-                                  keep_alive_s=keep_alive, body_timeout_s=body_timeout, head_grace_s=head_grace)
             with markers:
-                run(web_app, host=host, port=port, limits=limits, sock=sock, trusted_proxy=trusted_proxy)
+                run(web_app, host=host, port=port, sock=sock, trusted_proxy=trusted_proxy, limits=ServerLimits(
+                    max_connections=max_connections, header_timeout_s=header_timeout, keep_alive_s=keep_alive,
+                    body_timeout_s=body_timeout, head_grace_s=head_grace))
         finally:
             guard.close()  # after the server's shutdown: 'vibrofocus stop' answers until its end
+
+
+def _token(host: str) -> str:
+    """The experimenter token (VIBROFOCUS_TOKEN, or a new one), with a warning when the server is public."""
+    import secrets
+
+    token = os.environ.get("VIBROFOCUS_TOKEN") or secrets.token_urlsafe(24)
+    if len(token) < 16:
+        err_console.print("[bold red]error:[/] VIBROFOCUS_TOKEN must be at least 16 characters")
+        raise typer.Exit(code=2)
+    if host not in _LOCAL_HOSTS:
+        # Participant data and rig control would be reachable from the network.
+        err_console.print(
+            f"[bold red]WARNING:[/] binding to {host}: anyone who can reach this address can try "
+            "to use the study server. The studies are meant to run on localhost (127.0.0.1)."
+        )
+    return token
+
+
+def _check_options(rig: str, rig_config: Path | None, pace: str, db: Path, participant_audio_elsewhere: bool) -> None:
+    """The rig, its settings, the pace and the database, checked before anything starts."""
+    from .._validation import check_choice
+    from ..rigs import RIG_KINDS
+    from ..web import PACES
+
+    check_choice(rig, "rig", RIG_KINDS)
+    _check_rig_config(rig, rig_config, participant_audio_elsewhere)
+    check_choice(pace, "pace", tuple(PACES))
+    _check_database(db)
+
+
+def _check_rig_config(rig: str, rig_config: Path | None, participant_audio_elsewhere: bool) -> None:
+    """A hardware rig's settings file, read and checked now (not at the first calibration)."""
+    if rig == "simulated":
+        return
+    from ..errors import ValidationError
+    from ..rigs.config import load_rig_config
+
+    if rig_config is None:
+        raise ValidationError(f"the {rig} rig needs its settings: add --rig-config FILE (see examples/rigs/{rig}.toml)")
+    cfg = load_rig_config(rig_config)
+    if cfg.kind != rig:
+        raise ValidationError(f"--rig-config {rig_config} is for a {cfg.kind} rig, but --rig is {rig}")
+    if rig == "audio":
+        _check_page_beep_output(cfg, participant_audio_elsewhere)
+
+
+def _rig_factory(skin: str):
+    """Rigs for the web app: the simulated forearm gets the chosen skin; hardware rigs measure a real arm."""
+    from ..rigs import make_rig
+
+    def rig_factory(kind: str, *, seed: int | None = None, **kwargs):
+        return make_rig(kind, seed=seed, skin=skin if kind == "simulated" else None, **kwargs)
+
+    return rig_factory
+
+
+def _print_links(web_app, db: Path, host: str, port: int, token: str, skin: str, outlet) -> str:
+    """The server's lines for its user (pages, login link, token, stop); returns the login link."""
+    shown = "127.0.0.1" if host in ("0.0.0.0", "::") else host
+    base = f"http://{'[' + shown + ']' if ':' in shown else shown}:{port}"
+    login = f"{base}/login/{web_app.state.web.new_login_code()}"
+    typer.echo(f"study database: {Path(db).resolve()}")
+    typer.echo(f"rig: {web_app.state.web.rig_label} (simulated forearm: skin {skin})")
+    typer.echo(f"experimenter page: {base}/")
+    typer.echo(f"one-time login link (valid 15 minutes, works once): {login}")
+    typer.echo(f"experimenter token (for the login page): {token}")
+    typer.echo("participant pages: linked from the experimenter page (one per session)")
+    typer.echo(f"emergency stop from a terminal: vibrofocus stop --db {Path(db).resolve()}")
+    if outlet is not None:
+        typer.echo(f"LSL markers: outlet vibrofocus-markers (type Markers, source id {outlet.source_id})")
+    return login
 
 
 def _check_database(db: Path) -> None:

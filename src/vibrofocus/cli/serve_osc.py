@@ -10,7 +10,6 @@ from ._command import command
 from ._errors import err_console, user_errors
 from ._options import RIG_CONFIG_HELP, SEED_MAX, check_rig_options, lsl_source_id_option
 
-_LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
 _LSL_HELP = ("Send one stimulus-onset marker per played tap to the Lab Streaming Layer outlet "
              "'vibrofocus-markers' (type Markers; the short code tap/<method>, its JSON detail on "
              "'vibrofocus-markers-detail'), stamped with the tap's onset on LSL's clock; needs "
@@ -58,104 +57,32 @@ def serve_osc(
     Needs pip install 'vibrofocus[osc]'.
     """
     with user_errors(interrupt_message="serve-osc stopped; all outputs at zero"):
-        import contextlib
-
-        from ..errors import ValidationError
-
-        try:
-            import pythonosc  # noqa: F401 - the optional extra, checked before anything starts
-        except ImportError:
-            raise ValidationError("serve-osc needs python-osc: pip install 'vibrofocus[osc]'") from None
-        from ..realtime import OscTapServer, TapDesigner, TapLog
-        from ..realtime.limits import check_designs
-        from ..rendering import TransferMatrix
-        from ..rigs import make_rig
-        from ..skin import skin_preset
+        from ..workflows import serve_live_taps
 
         check_rig_options(rig, rig_config)
-        if calibration is None and rig != "simulated":
-            raise ValidationError(f"the {rig} rig needs --calibration (a calibration measured on it)")
-        skin_name = skin_preset(skin).name
-        if lsl_source_id is not None and not lsl:
-            raise ValidationError("--lsl-source-id needs --lsl")
-        if lsl:
-            from ..io.lsl import check_source_id, import_pylsl, stable_source_id
+        serve_live_taps(port=port, host=host, rig=rig, rig_config=rig_config, calibration=calibration, skin=skin,
+                        method=method, seed=seed, max_wait_ms=max_wait_ms, log=log, lsl=lsl,
+                        lsl_source_id=lsl_source_id, progress=_Lines())
 
-            # Checked before the rig opens; a log names the stream, so a restarted server keeps it.
-            stream_id = (check_source_id(lsl_source_id) if lsl_source_id is not None
-                         else stable_source_id(log) if log is not None else None)
-            import_pylsl()  # before the rig opens: a missing pylsl is one line, nothing started
-        with contextlib.ExitStack() as stack:
-            the_rig = stack.enter_context(make_rig(rig, config=rig_config, seed=seed,
-                                                   skin=skin_name if rig == "simulated" else None))
-            if calibration is not None:
-                from .._atomic import protect
-                from ..calibration import load_calibration
 
-                protect(calibration, "calibration")
-                cal = load_calibration(calibration)
-                if abs(cal.fs - the_rig.fs) > 1e-9 * the_rig.fs:
-                    raise ValidationError(f"--calibration {calibration} is at {cal.fs:g} Hz but the {rig} rig runs "
-                                          f"at {the_rig.fs:g} Hz")
-                if cal.layout.n_actuators != the_rig.layout.n_actuators:
-                    raise ValidationError(f"--calibration {calibration} has {cal.layout.n_actuators} actuators, the "
-                                          f"{rig} rig {the_rig.layout.n_actuators}")
-                from ..studies.engine import CalibrationRenderer
+class _Lines:
+    """The live-taps workflow's lines: stdout, or stderr (warnings in colour)."""
 
-                # The window the method's designs fit on this calibration, found as the studies
-                # find it (the calibration's own resolution, doubled while a design needs more).
-                window = CalibrationRenderer(cal, limit_v=the_rig.limits.peak_v, levels="equal-peak",
-                                             bounds=False).prepare([method], cal.layout.location_numbers)
-                tm, model = TransferMatrix.from_calibration(cal, window), cal.fit
-                source = f"calibration {calibration}"
-            else:
-                tm, model = TransferMatrix.from_model(the_rig, the_rig.layout, the_rig.fs), the_rig
-                source = f"the simulated arm's own transfer (skin {skin_name})"
-            # Opened before the designs (seconds): a log that cannot be written is said at once.
-            tap_log = stack.enter_context(TapLog(log)) if log is not None else None
-            outlet = None
-            if lsl:
-                from ..io.lsl import MarkerOutlet
+    def step(self, done: int, total: int, message: str) -> None:
+        pass
 
-                outlet = stack.enter_context(MarkerOutlet(source_id=stream_id))
-            from ..rendering import available_methods, method_class
+    def note(self, message: str, **details) -> None:
+        if details.get("danger"):
+            err_console.print(f"[bold red]{message}[/]", highlight=False)
+        elif details.get("warning"):
+            err_console.print(f"[bold yellow]{message}[/]", highlight=False)
+        elif details.get("err"):
+            err_console.print(message, highlight=False)
+        else:
+            typer.echo(message)
 
-            if method in available_methods() and not method_class(method).live:
-                err_console.print(f"designing {method} at the {tm.layout.n_locations} locations ahead "
-                                  "(seconds each) ...")
-            designer = TapDesigner(tm, model, method=method, limit_v=the_rig.limits.peak_v)
-            refused = check_designs(designer, the_rig)  # a tap the limits refuse is said now, not at the tap
-            if refused:
-                err_console.print(f"[bold yellow]warning:[/] {refused}", highlight=False)
-            if model is not None:
-                designer.prepare_grid()
-            if host not in _LOCAL_HOSTS:
-                err_console.print(f"[bold red]WARNING:[/] binding to {host}: anyone who can reach it can play taps.")
-            server = OscTapServer(the_rig, designer, host=host, port=port, max_wait_s=max_wait_ms / 1e3,
-                                  tap_log=tap_log, marker_sink=None if outlet is None else outlet.push)
-            shown_host, shown_port = server.address
-            if ":" in str(shown_host):  # an IPv6 address goes in brackets in a URL: osc.udp://[::1]:9124
-                shown_host = f"[{shown_host}]"
-            typer.echo(f"serve-osc: listening on osc.udp://{shown_host}:{shown_port} ({rig} rig, designs from "
-                       f"{source}, method {designer.method}, drive limit {designer.limit_v:g} V)")
-            typer.echo(f"taps: /tap 1..{designer.layout.n_locations}"
-                       + (f" (no /tap_xy with {designer.method}: a design takes seconds)"
-                          if not designer.live else
-                          f", /tap_xy in {designer.area.describe()}" if model is not None else
-                          " (no /tap_xy: the calibration has no fitted skin model)")
-                       + " (each with an optional level, dB re the design); /method <name>; /stop", )
-            kept = ([f"taps logged to {log}" + (f" after tap {tap_log.last_tap_id}" if tap_log.last_tap_id else "")]
-                    if tap_log is not None else [])
-            kept += [f"LSL markers on 'vibrofocus-markers' (source_id {outlet.source_id})"] if outlet is not None else []
-            if kept:
-                typer.echo("recording: " + "; ".join(kept))
-            try:
-                who = server.serve()
-            finally:
-                server.close()
-            if server.log_error is not None:
-                from ..errors import OutputError
+    def judged(self, result) -> None:
+        pass
 
-                raise OutputError(f"serve-osc stopped: tap {server.records[-1].tap_id} played but could not be "
-                                  f"written to {log} ({server.log_error}); all outputs at zero")
-        typer.echo(f"serve-osc stopped by {who}; all outputs at zero")
+    def cancelled(self) -> bool:
+        return False

@@ -14,6 +14,7 @@ from __future__ import annotations
 from .calibrate import CalibrationOutcome, calibrate_participant, check_calibration_out
 from .demo import DemoOutcome, demo_methods, demo_moving_focus, demo_paper_figures
 from .design import DesignOutcome, design_study
+from .live_taps import serve_live_taps
 from .power import PowerOutcome, study_power
 from .progress import Progress, QuietProgress, WorkflowCancelled
 from .render import TapOutcome, render_tap
@@ -41,6 +42,7 @@ __all__ = [
     "render_tap",
     "run_session",
     "run_study_at_terminal",
+    "serve_live_taps",
     "simulate_study",
     "study_power",
 ]
