@@ -456,7 +456,7 @@ def test_13_error_verdicts_mean_exit_2_and_no_file_unless_force(ws):
     (["demo", "--seed", "-1", "--out", "{f}/demo"], "--seed"),
     (["simulate-study", "-n", "100000", "--db", "{f}/x.db"], "--participants"),
     (["simulate-study", "--pace", "1e9", "--db", "{f}/x.db"], "--pace"),
-    (["analyze", "{f}/t.csv", "-o", "{f}/a/b/c"], "does not exist"),
+    (["analyze", "{f}/t.csv", "--simulated", "-o", "{f}/a/b/c"], "does not exist"),
     (["render", "-c", "{cal}", "-l", "5", "-o", "{f}/d.npz", "--method", "x" * 100_000], "characters"),
 ])
 def test_low_items(ws, args, needle):

@@ -135,14 +135,18 @@ def test_scores_of_simulated_participants_are_their_marginal_loglik():
 
 
 def test_designed_protocol_identifies_one_population_better_than_the_papers():
-    """The readouts under one population: the paper's design confuses two, the designed one does not."""
+    """The readouts under one population: the designed protocol tells them apart more often than the paper's."""
     names = ["v3-centroid", "level-reliability"]
     d = design_experiment(DesignSettings(hypotheses=tuple(names), population="v3-centroid", n_forearms=2,
                                          n_traits=4, n_parameter_draws=1, n_replicates=1, seed=0))
     r = identification({"designed": d.blocks, "paper": paper_plan()}, names, n_participants=(3,), n_studies=60,
                        pool=12, n_draws=8, n_forearms=6, local=True, population="v3-centroid", seed=5)
-    assert r["mean"]["designed"][3] >= 0.9
-    assert r["mean"]["designed"][3] > r["mean"]["paper"][3] + 0.1
+    designed, paper = r["mean"]["designed"][3], r["mean"]["paper"][3]
+    assert designed >= 0.9  # the issue's aim
+    # Better than the paper's by more than two binomial standard errors of the paper's rate
+    # (60 studies per hypothesis, two hypotheses), not by a margin picked by eye.
+    n = 60 * len(names)
+    assert designed - paper > 2 * np.sqrt(max(paper * (1 - paper), 1 / n) / n), (designed, paper)
 
 
 LOOP_PROTOCOL = """

@@ -35,3 +35,14 @@ def test_value_outside_range_is_refused():
     ranges = (ParameterRange("sl_ref_db", 5.0, 30.0, "assumption: test"),)
     with pytest.raises(ValidationError, match="sl_ref_db"):
         apply_parameters(PerceptualModel(), ranges, [31.0])
+
+
+def test_the_ends_of_a_population_range_are_kept_in_order():
+    ranges = (ParameterRange("acuity_sd_m", 1e-3, 20e-3, "assumption: test", index=0),
+              ParameterRange("sl_ref_db", 5.0, 30.0, "assumption: test"),
+              ParameterRange("acuity_sd_m", 1e-3, 20e-3, "assumption: test", index=1))
+    from vibrofocus.simulation.parameters import ordered_pairs
+
+    assert ordered_pairs(ranges, [9e-3, 10.0, 4e-3]) == [4e-3, 10.0, 9e-3]
+    assert ordered_pairs(ranges, [4e-3, 10.0, 9e-3]) == [4e-3, 10.0, 9e-3]
+    assert ordered_pairs(ranges[::-1], [9e-3, 10.0, 4e-3]) == [9e-3, 10.0, 4e-3]  # index 1 first: already in order

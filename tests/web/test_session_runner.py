@@ -202,7 +202,7 @@ def test_the_web_writes_the_engines_payloads_and_a_paused_session_stays_paused(s
     # The keys the study engine writes for every responder (tests/studies/test_engine.py).
     assert cue.payload == {"trial_index": 0, "beep": "page"}
     assert onset.payload == {"trial_index": 0, "method": "inverse", "target": 2, "played": True,
-                             "drive_sha256": drive_sha256(np.ones((4, 8))), "levels": "paper",
+                             "drive_sha256": drive_sha256(np.ones((4, 8))), "levels": "paper", "level_db": 0.0,
                              "drive_peak_v": 1.0, "target_peak_um": None}  # a bare renderer predicts nothing
     runner.stop()
     assert store.session(sid).status == "running", "a stop (server shutdown) leaves the session to resume"

@@ -380,18 +380,15 @@ def load_trials(
     _require_columns(raw)  # before the session columns are used
     # A study database's rows (simulation.fitting.trials_source) name the database.
     named = str(source.attrs.get("source", name)) if isinstance(source, pd.DataFrame) else name
-    raw, left_out = select_kind(raw, kind, name=named)
     raw, exclusions = _drop_sessions(raw, keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs)
+    if on_invalid == "raise":  # a broken file is said to be broken, whatever kinds of participant it holds
+        _raise_problems(name, trial_problems(raw, layout=layout)[1])
+    raw, left_out = select_kind(raw, kind, name=named)
     exclusions = left_out + exclusions
     trials, problems = trial_problems(raw, layout=layout)
     if len(problems):
         if on_invalid == "raise":
-            listed = "; ".join(f"line {p.line}: {p.reason}" for p in problems.head(_MAX_LISTED).itertuples())
-            more = f" (and {len(problems) - _MAX_LISTED} more)" if len(problems) > _MAX_LISTED else ""
-            raise ValidationError(
-                f"trials file {name!r} has {len(problems)} invalid value(s): {listed}{more}. "
-                "Fix the file, or exclude the participants concerned (on_invalid='exclude', CLI --exclude-invalid)"
-            )
+            _raise_problems(name, problems)
         for participant, group in problems.groupby("participant", sort=True):
             first = group.iloc[0]
             extra = f" (and {len(group) - 1} more problem(s))" if len(group) > 1 else ""
@@ -431,6 +428,18 @@ def simulated_participants(raw: pd.DataFrame) -> list[str]:
         return []
     flag = raw["simulated"].astype(str).str.strip().str.lower().isin(("1", "true", "yes", "1.0"))
     return sorted({str(p).strip() for p in raw.loc[flag, "participant"]})
+
+
+def _raise_problems(name: str, problems: pd.DataFrame) -> None:
+    """Refuse a trials file with invalid values, listing the first of them by line."""
+    if not len(problems):
+        return
+    listed = "; ".join(f"line {p.line}: {p.reason}" for p in problems.head(_MAX_LISTED).itertuples())
+    more = f" (and {len(problems) - _MAX_LISTED} more)" if len(problems) > _MAX_LISTED else ""
+    raise ValidationError(
+        f"trials file {name!r} has {len(problems)} invalid value(s): {listed}{more}. "
+        "Fix the file, or exclude the participants concerned (on_invalid='exclude', CLI --exclude-invalid)"
+    )
 
 
 def _row_kinds(raw: pd.DataFrame) -> pd.Series:

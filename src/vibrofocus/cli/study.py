@@ -29,7 +29,7 @@ def export(
     """Write every answered trial as a trials CSV, one row per answer.
 
     Columns: participant, study, phase, trial, method, target, response, rt_s (the
-    trial); session, session_status, dry_run (its session); onset_host_s,
+    trial); session, session_status, dry_run, rig (its session); onset_host_s,
     onset_device_s, onset_clock (the stimulus onset); and simulated, last, when some
     participant is simulated. For a BIDS dataset use: vibrofocus export DB --bids DIR.
     """

@@ -17,7 +17,7 @@ from .._validation import check_in_range
 from ..errors import ValidationError
 from .perception import PerceptualModel
 
-__all__ = ["ParameterRange", "apply_parameters", "read_parameters"]
+__all__ = ["ParameterRange", "apply_parameters", "read_parameters", "ordered_pairs"]
 
 
 @dataclass(frozen=True)
@@ -97,3 +97,19 @@ def apply_parameters(model: PerceptualModel, ranges: Sequence[ParameterRange],
             pair[r.index] = v
             d[r.name] = tuple(pair)
     return model.replace(**d)
+
+
+def ordered_pairs(ranges: Sequence[ParameterRange], values: Sequence[float]) -> list[float]:
+    """``values`` with the two ends of each population range (both free) in order, low first.
+
+    A population range (lo, hi) is drawn from uniformly, which needs lo <= hi; a search or
+    an optimizer that moves both ends may cross them. Both ends of a pair share one range
+    (the same ``lo`` and ``hi``), so sorting keeps each inside it.
+    """
+    out = [float(v) for v in values]
+    for name in {r.name for r in ranges if r.index is not None}:
+        pair = [k for k, r in enumerate(ranges) if r.name == name]
+        if len(pair) == 2:
+            a, b = sorted(out[k] for k in pair)
+            out[pair[0]], out[pair[1]] = (a, b) if ranges[pair[0]].index == 0 else (b, a)
+    return out

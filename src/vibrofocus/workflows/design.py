@@ -13,7 +13,19 @@ __all__ = ["DesignOutcome", "design_study"]
 
 @dataclass
 class DesignOutcome:
-    """What :func:`design_study` made: the design, its check (or None), the report and the files."""
+    """What :func:`design_study` made.
+
+    Attributes
+    ----------
+    design : Design
+        The chosen blocks (:func:`~vibrofocus.simulation.design.design_experiment`).
+    identification : dict or None
+        The check: P(true hypothesis chosen) against N per protocol; None without one.
+    report : dict
+        The design's report (:func:`~vibrofocus.simulation.design.design_report`).
+    paths : list of Path
+        The files written (protocol.toml and the report), empty without ``out``.
+    """
 
     design: Any
     identification: dict[str, Any] | None

@@ -18,9 +18,32 @@ def serve_live_taps(*, port: int, host: str, rig: str, rig_config: Path | None, 
                     lsl_source_id: str | None, progress: Progress | None = None) -> None:
     """Open the rig, design the taps, and serve ``/tap`` requests until ``/stop``, SIGINT or SIGTERM.
 
-    The options are ``serve-osc``'s (``vibrofocus serve-osc --help``; docs/real-time.md).
     Every line the server has for its user goes to ``progress.note`` (``err=True`` for the
     standard error's, ``warning=True`` or ``danger=True`` for a warning).
+
+    Parameters
+    ----------
+    port, host : int, str
+        The UDP port (0: any free one) and the address to bind.
+    rig, rig_config : str, Path or None
+        The rig (simulated, audio, nidaq) and a hardware rig's settings file.
+    calibration : Path or None
+        The calibration the taps are designed from (required on hardware; default on the
+        simulated rig: the arm's own transfer).
+    skin : str
+        Skin preset of the simulated forearm.
+    method : str
+        Rendering method at start (``/method`` changes it).
+    seed : int or None
+        Participant seed of the simulated forearm.
+    max_wait_ms : float
+        A tap that waited longer than this behind others is answered ``/error stale``, ms.
+    log : Path or None
+        The tap log (.csv or SQLite) every played tap is kept in.
+    lsl, lsl_source_id : bool, str or None
+        Send onset markers over the Lab Streaming Layer, and their source id.
+    progress : Progress, optional
+        Where the server's lines go (docs/real-time.md gives what each says).
 
     Raises
     ------

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..parameters import ParameterRange, apply_parameters, read_parameters
+from ..parameters import ParameterRange, apply_parameters, ordered_pairs, read_parameters
 from ..perception import PerceptualModel
 
 __all__ = ["CENTRAL_WEIGHT_RANGE", "sample", "sample_within"]
@@ -125,10 +125,4 @@ def sample_within(rng: np.random.Generator, base: PerceptualModel, ranges: tuple
     else:
         values = np.clip(np.array(read_parameters(base, ranges)) + rng.normal(0.0, 0.1 * scale, lo.size) * (hi - lo),
                          lo, hi)
-    # A population range (lo, hi) whose ends are both free stays ordered (numpy draws
-    # uniform(lo, hi) only for lo <= hi); both ends share one range, so sorting keeps them in it.
-    for name in {r.name for r in ranges if r.index is not None}:
-        pair = [k for k, r in enumerate(ranges) if r.name == name]
-        if len(pair) == 2:
-            values[pair] = np.sort(values[pair])
-    return apply_parameters(base, ranges, [float(v) for v in values])
+    return apply_parameters(base, ranges, ordered_pairs(ranges, values))

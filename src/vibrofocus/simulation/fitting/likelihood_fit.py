@@ -23,7 +23,7 @@ from scipy import optimize, special
 from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
 from ..likelihood import Quadrature, Stimuli, answer_law, answer_probabilities, selection_probability
-from ..parameters import apply_parameters, read_parameters
+from ..parameters import apply_parameters, ordered_pairs, read_parameters
 from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
@@ -114,7 +114,12 @@ def model_at(h: Any, values: Sequence[float] | Mapping[str, float] | None) -> Pe
     m = h.model()
     if values is None or not h.free_parameters:
         return m
-    return apply_parameters(m, h.free_parameters, values)
+    if isinstance(values, Mapping):
+        if any(r.key not in values for r in h.free_parameters):
+            return apply_parameters(m, h.free_parameters, values)  # names what is missing
+        values = [values[r.key] for r in h.free_parameters]
+    # The optimizer moves the two ends of a population range apart: kept in order.
+    return apply_parameters(m, h.free_parameters, ordered_pairs(h.free_parameters, values))
 
 
 def population_draws(h: Any, model: PerceptualModel, bank: FeatureBank,
