@@ -170,6 +170,8 @@ repetitions = 1
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="open finding (issue 55): one simulated participant on this protocol no longer "
+                   "tells level-reliability from intensity under the refit hypotheses (intensity scores higher)")
 def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp_path):
     """The loop through the study engine: simulate-study's code, then marginal likelihood.
 

