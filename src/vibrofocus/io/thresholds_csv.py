@@ -6,13 +6,11 @@ Columns: :data:`THRESHOLD_COLUMNS` (docs/file-formats.md, "Threshold file"). Wri
 
 from __future__ import annotations
 
-import csv
 import os
 from collections.abc import Iterable, Mapping
-from pathlib import Path
 from typing import Any
 
-from ..errors import StudyError
+from ._csv_rows import number_cell, write_rows_csv
 
 __all__ = ["THRESHOLD_COLUMNS", "write_thresholds_csv"]
 
@@ -37,17 +35,5 @@ def write_thresholds_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathL
     int
         Number of rows written.
     """
-    from .._atomic import atomic_write
-
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise StudyError(f"cannot write the threshold file {path}: the folder {path.parent} does not exist")
-    n = 0
-    with atomic_write(path, "w", newline="", what="threshold file") as fh:
-        writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(THRESHOLD_COLUMNS)
-        for row in rows:
-            writer.writerow(["" if row.get(key) is None else (repr(float(row[key])) if isinstance(row[key], float)
-                                                               else row[key]) for key in THRESHOLD_COLUMNS])
-            n += 1
-    return n
+    cells = ([number_cell(row.get(key)) for key in THRESHOLD_COLUMNS] for row in rows)
+    return write_rows_csv(path, THRESHOLD_COLUMNS, cells, what="threshold file")

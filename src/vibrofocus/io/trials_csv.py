@@ -22,6 +22,7 @@ from typing import Any
 
 from .._validation import shorten
 from ..errors import StudyError, ValidationError
+from ._csv_rows import number_cell, write_rows_csv
 from .responses import format_response, parse_response_text
 
 __all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS",
@@ -112,56 +113,50 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     int
         Number of rows written.
     """
-    from .._atomic import TRIALS_CSV, atomic_write
+    from .._atomic import TRIALS_CSV
 
-    path = Path(path)
-    if not path.parent.is_dir():
-        raise StudyError(f"cannot write the trials file {path}: the folder {path.parent} does not exist")
-    n = 0
     rows = list(rows)
     with_flag = any(row.get(SIMULATED_COLUMN) for row in rows)
     with_model = with_flag and any(row.get(MODEL_COLUMN) for row in rows)
-    with atomic_write(path, "w", newline="", what="trials file", kind=TRIALS_CSV) as fh:
-        writer = csv.writer(fh, lineterminator="\n")
-        writer.writerow(TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
-                        + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())
-                        + (POINT_COLUMNS if points else ())
-                        + ((SIMULATED_COLUMN,) if with_flag else ())
-                        + ((MODEL_COLUMN,) if with_model else ()))
-        for row in rows:
-            response = row["response"]
-            if not isinstance(response, str):
-                response = format_response(response)
-            # repr keeps every digit of the stored float: the file round-trips exactly.
-            values = [
-                row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
-                row["method"], int(row["target"]), response, repr(float(row["rt_s"])),
-            ]
-            if sessions:
-                values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"])),
-                           row.get("rig") or ""]
-            if onsets:
-                values += [_seconds_cell(row.get("onset_host_s")), _seconds_cell(row.get("onset_device_s")),
-                           row.get("onset_clock") or ""]
-            if stimuli:
-                values += [row.get("levels") or "", _seconds_cell(row.get("drive_peak_v")),
-                           _seconds_cell(row.get("target_peak_um"))]
-            if protocols:
-                values.append(row.get("protocol") or "")
-            if points:
-                values += [_seconds_cell(row.get("response_x_mm")), _seconds_cell(row.get("response_y_mm"))]
-            if with_flag:
-                values.append(int(bool(row.get(SIMULATED_COLUMN))))
-            if with_model:
-                values.append(row.get(MODEL_COLUMN) or "")
-            writer.writerow(values)
-            n += 1
-    return n
+    header = (TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
+              + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())
+              + (POINT_COLUMNS if points else ())
+              + ((SIMULATED_COLUMN,) if with_flag else ())
+              + ((MODEL_COLUMN,) if with_model else ()))
+
+    def cells(row: Mapping[str, Any]) -> list[Any]:
+        response = row["response"]
+        if not isinstance(response, str):
+            response = format_response(response)
+        values = [
+            row["participant"], int(row["study"]), row["phase"], int(row["trial"]),
+            row["method"], int(row["target"]), response, _seconds_cell(row["rt_s"]),
+        ]
+        if sessions:
+            values += [int(row["session"]), row["session_status"], int(bool(row["dry_run"])),
+                       row.get("rig") or ""]
+        if onsets:
+            values += [_seconds_cell(row.get("onset_host_s")), _seconds_cell(row.get("onset_device_s")),
+                       row.get("onset_clock") or ""]
+        if stimuli:
+            values += [row.get("levels") or "", _seconds_cell(row.get("drive_peak_v")),
+                       _seconds_cell(row.get("target_peak_um"))]
+        if protocols:
+            values.append(row.get("protocol") or "")
+        if points:
+            values += [_seconds_cell(row.get("response_x_mm")), _seconds_cell(row.get("response_y_mm"))]
+        if with_flag:
+            values.append(int(bool(row.get(SIMULATED_COLUMN))))
+        if with_model:
+            values.append(row.get(MODEL_COLUMN) or "")
+        return values
+
+    return write_rows_csv(path, header, (cells(row) for row in rows), what="trials file", kind=TRIALS_CSV)
 
 
-def _seconds_cell(value: Any) -> str:
-    # repr keeps every digit: a stored time round-trips exactly; None is an empty cell.
-    return "" if value is None else repr(float(value))
+def _seconds_cell(value: Any) -> Any:
+    # Stored numbers may come back from SQLite as int; the file always spells them as floats.
+    return number_cell(None if value is None else float(value))
 
 
 def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
