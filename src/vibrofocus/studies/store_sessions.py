@@ -242,12 +242,7 @@ class SessionRows(StudyDatabase):
     # ------------------------------------------------------------------ trials
     def planned_trials(self, session_id: int) -> list[PlannedTrial]:
         """The full planned trial list of a session, in order."""
-        with self._read("read the planned trials") as conn:
-            self._session(conn, session_id)
-            rows = conn.execute(
-                "SELECT * FROM planned_trials WHERE session_id = ? ORDER BY trial_index", (int(session_id),)
-            ).fetchall()
-        return [trial_from_row(r) for r in rows]
+        return [trial_from_row(r) for r in self._session_rows("planned_trials", session_id, "read the planned trials")]
 
     def next_trial(self, session_id: int) -> PlannedTrial | None:
         """The first unanswered trial of a session, or ``None`` when all are answered."""
@@ -533,12 +528,15 @@ class SessionRows(StudyDatabase):
 
     def answers(self, session_id: int) -> list[AnswerReceipt]:
         """Committed answers of a session, by trial index."""
-        with self._read("read the answers") as conn:
+        return [receipt_from_row(r) for r in self._session_rows("answers", session_id, "read the answers")]
+
+    def _session_rows(self, table: str, session_id: int, doing: str) -> list[sqlite3.Row]:
+        # table is one of this module's own table names, never user input.
+        with self._read(doing) as conn:
             self._session(conn, session_id)
-            rows = conn.execute(
-                "SELECT * FROM answers WHERE session_id = ? ORDER BY trial_index", (int(session_id),)
+            return conn.execute(
+                f"SELECT * FROM {table} WHERE session_id = ? ORDER BY trial_index", (int(session_id),)
             ).fetchall()
-        return [receipt_from_row(r) for r in rows]
 
 
 def session_protocol(study: int, config: Mapping[str, Any]) -> tuple[str, int]:

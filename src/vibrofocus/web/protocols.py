@@ -28,9 +28,10 @@ from fastapi import HTTPException
 from ..errors import StudyError
 from ..studies.protocol_files import (MAX_PROTOCOL_BYTES, SHIPPED_PROTOCOLS, StudyProtocol, parse_protocol,
                                       shipped_protocol)
+from ..workflows.session import first_unfinished_block
 from .private import private_dir
 
-__all__ = ["find_protocol", "protocol_summary", "first_unfinished_block", "staircase_state", "protocols_folder",
+__all__ = ["find_protocol", "protocol_summary", "staircase_state", "protocols_folder",
            "read_uploaded"]
 
 
@@ -68,24 +69,6 @@ def protocol_summary(protocol: StudyProtocol, *, shipped: bool) -> dict[str, Any
                     "n_trials": b.training_trials + len(b.methods) * len(b.locations or b.points_mm or ()) * b.repetitions}
                    for b in protocol.blocks],
     }
-
-
-def first_unfinished_block(store: Any, participant_id: str, protocol: StudyProtocol) -> int:
-    """The participant's first block of ``protocol`` without a finished session (as ``study run`` picks it).
-
-    Raises
-    ------
-    StudyError
-        Every block has a finished session.
-    """
-    from ..studies.storage import session_protocol
-
-    done = {b for s in store.sessions(participant_id) if s.finished
-            for name, b in [session_protocol(s.study, s.config)] if name == protocol.name}
-    todo = [b.index for b in protocol.blocks if b.index not in done]
-    if not todo:
-        raise StudyError(f"{participant_id} has finished every block of the protocol {protocol.name!r}")
-    return todo[0]
 
 
 def plan_block(web: Any, protocol: StudyProtocol, participant_id: str, block: int | None,

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import secrets
+import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, ContextManager
@@ -107,13 +108,16 @@ def run_session(engine: Any, responder: Any, *, pace_s: float = 0.0, progress: P
     return engine.run(responder, pace_s=pace_s, progress=answered)
 
 
-def first_unfinished_block(db: Path, participant_id: str, protocol: Any) -> int:
+def first_unfinished_block(db: Path | Any, participant_id: str, protocol: Any) -> int:
     """The index of the participant's first unfinished block of a protocol (read only).
+
+    A block is finished when its latest session of ``protocol`` is; the terminal's
+    ``study run`` and the web app's planning both pick blocks by this rule.
 
     Parameters
     ----------
-    db : Path
-        The study database (a missing file: no block is finished).
+    db : Path or StudyStore
+        The study database (a missing file: no block is finished), or an open store.
     participant_id : str
         The participant.
     protocol : StudyProtocol
@@ -130,23 +134,34 @@ def first_unfinished_block(db: Path, participant_id: str, protocol: Any) -> int:
     """
     from ..errors import StudyError
     from ..studies import StudyStore
+
+    if not isinstance(db, (str, os.PathLike)):
+        done = _finished_blocks(db, participant_id, protocol.name)
+    elif Path(db).is_file():
+        with StudyStore(db, create=False) as store:
+            done = _finished_blocks(store, participant_id, protocol.name)
+    else:
+        done = set()
+    todo = [b.index for b in protocol.blocks if b.index not in done]
+    if not todo:
+        where = f" in {db}" if isinstance(db, (str, os.PathLike)) else ""
+        raise StudyError(f"{participant_id} has finished every block of the protocol {protocol.name!r}{where}")
+    return todo[0]
+
+
+def _finished_blocks(store: Any, participant_id: str, protocol_name: str) -> set[int]:
     from ..studies.storage import session_protocol
 
     done: set[int] = set()
-    if db.is_file():
-        with StudyStore(db, create=False) as store:
-            if any(p.participant_id == participant_id for p in store.participants()):
-                for s in store.sessions(participant_id):
-                    name, b = session_protocol(s.study, s.config)
-                    if name == protocol.name and s.finished:
-                        done.add(b)
-                    elif name == protocol.name:
-                        done.discard(b)
-    todo = [b.index for b in protocol.blocks if b.index not in done]
-    if not todo:
-        raise StudyError(f"{participant_id} has finished every block of the protocol {protocol.name!r} in "
-                         f"{db}")
-    return todo[0]
+    if not any(p.participant_id == participant_id for p in store.participants()):
+        return done
+    for s in store.sessions(participant_id):
+        name, b = session_protocol(s.study, s.config)
+        if name == protocol_name and s.finished:
+            done.add(b)
+        elif name == protocol_name:
+            done.discard(b)
+    return done
 
 
 def run_study_at_terminal(
