@@ -18,19 +18,9 @@ from vibrofocus.studies.points import point_area
 from vibrofocus.studies.protocol import StudyDesign
 from vibrofocus.studies.protocol_files import parse_protocol
 
-POINT_PROTOCOL = """\
-format = 1
-name = "point-pilot"
+from .corner_protocol import corner_protocol
 
-[[blocks]]
-response = "point"
-methods = ["funneling", "inverse"]
-locations = [1, 9]
-levels = [-6.0]
-repetitions = 1
-training_trials = 1
-seed = 7
-"""
+POINT_PROTOCOL = corner_protocol("point-pilot", "point")
 
 
 @pytest.fixture

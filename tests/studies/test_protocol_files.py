@@ -18,6 +18,8 @@ from vibrofocus.studies.protocol import StudyDesign, plan_trials
 from vibrofocus.studies.protocol_files import (MAX_PROTOCOL_BYTES, load_protocol, parse_protocol,
                                                shipped_protocol)
 
+from .corner_protocol import corner_protocol
+
 SEEDS = (0, 1, 2**40 + 3)
 PAPER_METHODS = ("funneling", "inverse", "combination")
 
@@ -26,19 +28,7 @@ PAPER_METHODS = ("funneling", "inverse", "combination")
 #: studies, whose designs differ only in the answer they take.
 BEFORE = {0: "aff964b3675bec70", 1: "03942c5f6c06f56f", 2**40 + 3: "d5dad084db3800c3"}
 
-SMALL = """\
-format = 1
-name = "corner-pilot"
-
-[[blocks]]
-response = "location"
-methods = ["funneling", "inverse"]
-locations = [1, 9]
-levels = [-6.0]
-repetitions = 1
-training_trials = 1
-seed = 7
-"""
+SMALL = corner_protocol("corner-pilot", "location")
 
 
 def _digest(trials):
