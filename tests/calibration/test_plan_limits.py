@@ -9,7 +9,7 @@ import pytest
 from vibrofocus.calibration import calibrate, plan_calibration
 from vibrofocus.calibration import plan as plan_module
 from vibrofocus.calibration import recording
-from vibrofocus.errors import SafetyError
+from vibrofocus.errors import SafetyError, ValidationError
 from vibrofocus.rigs.safety import SafetyLimits, plan_levels
 from vibrofocus.rigs.simulated import SimulatedForearm
 
@@ -84,3 +84,18 @@ def test_a_take_refused_after_a_retake_waits_for_the_actuators_to_cool(monkeypat
     calibrate(rig, participant_id="P01", repeats=4, sweep_s=1.0, progress=lambda d, t, m: told.append(m))
     # Four takes, and the third tried once more after its wait.
     assert rig.calls == 5 and any(m.startswith("pausing") for m in told)
+
+
+def test_a_shown_plan_is_used_as_it_is_and_one_for_other_arguments_is_refused(monkeypatch):
+    rig = _arm(sustained_rms_v=2.0, sustained_window_s=10.0)
+    shown = plan_calibration(rig, repeats=4, sweep_s=1.0)
+    assert shown.pause_s > 0
+    searched = []
+    from vibrofocus.rigs import safety
+
+    monkeypatch.setattr(safety, "plan_levels", lambda *a, **k: searched.append(a) or plan_levels(*a, **k))
+    monkeypatch.setattr(recording, "time", types.SimpleNamespace(sleep=lambda s: setattr(rig, "now", rig.now + s)))
+    calibrate(rig, participant_id="P01", repeats=4, sweep_s=1.0, plan=shown)
+    assert searched == []  # the pause search ran once, for the plan shown
+    with pytest.raises(ValidationError, match="plan must be the CalibrationPlan that plan_calibration gives"):
+        calibrate(rig, participant_id="P01", repeats=8, sweep_s=1.0, plan=shown)

@@ -22,7 +22,7 @@ from ..rigs.base import Rig
 from .estimate import estimate_repeats, h1_average, mimo_h1, noise_and_snr, split_snr
 from .excitation import METHODS, hadamard_codes, make_excitation
 from .quality import QualityThresholds, assess_quality, detect_clipping
-from .plan import DEFAULT_METHOD, CalibrationPlan, _sub_layout, measured_indices, plan_calibration
+from .plan import DEFAULT_METHOD, CalibrationPlan, _sub_layout, measured_indices, plan_calibration, plan_for_arguments
 from .recording import ProgressFn, _read_straps, _record_mimo, _record_one_at_a_time, _Takes
 from .result import Calibration
 
@@ -56,6 +56,7 @@ def calibrate(
     thresholds: QualityThresholds | None = None,
     measure: int | Sequence[int] | None = None,
     fit_law: str = "layered",
+    plan: CalibrationPlan | None = None,
 ) -> Calibration:
     """Measure the transfer matrix from every actuator to every skin point.
 
@@ -136,6 +137,9 @@ def calibrate(
         Default: measure every point. Not with ``points``.
     fit_law : {"layered", "homogeneous"}
         With ``measure``: the wave law of the fitted model (:func:`~.fitmodel.fit_model`).
+    plan : CalibrationPlan, optional
+        What :func:`plan_calibration` gave for the same rig and arguments (a caller that
+        showed the plan first): used as it is instead of checking the limits again.
 
     Returns
     -------
@@ -144,7 +148,7 @@ def calibrate(
     Raises
     ------
     ValidationError
-        Bad arguments, or a single-spot rig without ``prompt``.
+        Bad arguments, a ``plan`` made for other arguments, or a single-spot rig without ``prompt``.
     SafetyError
         The sweep breaks the rig's limits (nothing is played).
     VibrofocusError
@@ -164,8 +168,8 @@ def calibrate(
             f"n_fft={n_fft} gives a frequency step of {fs / n_fft:.3g} Hz, coarser than the band's low "
             f"edge {band[0]:g} Hz; use n_fft >= {int(np.ceil(fs / band[0]))}"
         )
-    plan = plan_calibration(rig, method=method, points=points, actuators=actuators, band=band, sweep_s=sweep_s,
-                            repeats=repeats, amplitude_v=amplitude_v, measure=measure)
+    plan = plan_for_arguments(rig, plan, method=method, points=points, actuators=actuators, band=band,
+                              sweep_s=sweep_s, repeats=repeats, amplitude_v=amplitude_v, measure=measure)
     settings = plan.settings
     thresholds = thresholds or QualityThresholds()
     layout, p_idx, a_idx = _sub_layout(rig.layout, points, actuators)

@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -231,7 +232,17 @@ def plan_calibration(
     ------
     ValidationError
         Bad arguments (nothing is played).
+    SafetyError
+        No pause between takes brings the sweeps within the rig's limits.
     """
+    return _paced(_takes_plan(rig, method=method, points=points, actuators=actuators, band=band, sweep_s=sweep_s,
+                              repeats=repeats, amplitude_v=amplitude_v, measure=measure), rig)
+
+
+def _takes_plan(rig: Rig, *, method: str, points: Sequence[int] | None, actuators: Sequence[int] | None,
+                band: tuple[float, float], sweep_s: float | None, repeats: int | None, amplitude_v: float,
+                measure: int | Sequence[int] | None) -> CalibrationPlan:
+    """:func:`plan_calibration` before its pauses: the takes only (cheap; no limit is checked)."""
     if not isinstance(rig, Rig):
         raise ValidationError(f"rig must be a vibrofocus Rig, got {type(rig).__name__}")
     check_choice(method, "method", METHODS)
@@ -256,7 +267,29 @@ def plan_calibration(
                            actuator_indices=tuple(int(i) for i in a_idx), positions=positions(len(p_idx)),
                            predicted_indices=tuple(int(i) for i in predicted),
                            positions_saved=positions(len(p_idx) + len(predicted)) - positions(len(p_idx)))
-    return _paced(plan, rig)
+    return plan
+
+
+def plan_for_arguments(rig: Rig, plan: CalibrationPlan | None, **arguments: Any) -> CalibrationPlan:
+    """``plan`` when :func:`plan_calibration` made it for these ``arguments`` on this rig, else a new one.
+
+    The limits check (the pause search) is the costly part of a plan; a caller that has
+    shown the plan passes it on rather than having it searched again.
+
+    Raises
+    ------
+    ValidationError
+        ``plan`` was made for other arguments.
+    """
+    from dataclasses import replace
+
+    takes = _takes_plan(rig, **arguments)
+    if plan is None:
+        return _paced(takes, rig)
+    if not isinstance(plan, CalibrationPlan) or replace(plan, pause_s=0.0, pause_note="") != takes:
+        raise ValidationError("plan must be the CalibrationPlan that plan_calibration gives for the same rig and "
+                              "arguments")
+    return plan
 
 
 def _take_drives(plan: CalibrationPlan, n_actuators: int) -> list[np.ndarray]:

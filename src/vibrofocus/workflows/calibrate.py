@@ -212,7 +212,7 @@ def calibrate_participant(
         with rig.reserve(f"the calibration of {participant_id}"):  # one job on the hardware
             cal = calibrate(rig, participant_id=participant_id, method=method, repeats=repeats, sweep_s=sweep_s,
                             amplitude_v=amplitude_v, prompt=on_aim if single_spot else None, progress=on_step,
-                            checkpoint=partial, resume=resume, measure=points)
+                            checkpoint=partial, resume=resume, measure=points, plan=plan)
     except BaseException:
         if partial is not None and partial.exists():
             progress.note(f"the completed points are kept in {partial}; continue with --resume")
