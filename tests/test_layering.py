@@ -32,7 +32,7 @@ FLOORS = (
     ("io", "layout", "signals"),                              # formats (plain arrays), the array, waveforms
     ("rendering", "analysis"),                                # the designs, the statistics of trials
     ("skin",),                                                # the simulated arm's physics
-    ("rigs",),                                                # hardware, and the simulated rig over the physics
+    ("rigs", "placement"),                                    # hardware, the simulated rig; where to put actuators
     ("calibration",),                                         # measures on a rig, fits the skin, designs
     ("studies", "realtime"),                                  # sessions, storage, export; live taps, latency
     ("simulation",),                                          # simulated participants (a model) on the engine

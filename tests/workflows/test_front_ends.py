@@ -119,9 +119,10 @@ FRONT_ENDS = {
     "simulate": {"cli/simulate_study.py": "simulate_study"},
     "power": {"cli/power.py": "study_power"},
     "render": {"cli/render.py": "render_tap"},
+    "design layout": {"cli/design_layout.py": "design_layout"},
 }
 #: What the steps do below the workflows: no front-end calls these itself.
-STEP_CALLS = {"calibrate", "create_session", "open_session", "simulate_studies", "run_power"}
+STEP_CALLS = {"calibrate", "create_session", "open_session", "simulate_studies", "run_power", "search_layout"}
 
 
 def _called(path: Path) -> set[str]:

@@ -37,6 +37,9 @@ _HELP = {
               "guards, 7 adds locations 2 and 4, 9 adds 6 and 8), fit the skin model to them and predict H at the "
               "others. The file marks each point measured or predicted (point_measured); the quality table shows "
               "the predicted ones. Saves one vibrometer aim per point on a single-spot rig.",
+    "layout": "Array layout file (layout.json of vibrofocus design-layout): where the actuators, locations and "
+              "guards are; the calibration keeps it, so render, the studies and the web app use it (default the "
+              "reference setup's 2x2).",
     "yes": "Do not ask before each point (only for rigs that record every point at once).",
     "figure": "Save |H| and coherence next to the file (.png).",
     "resume": "Continue an interrupted calibration from OUT.partial.npz (same command, same rig): its completed "
@@ -59,6 +62,7 @@ def calibrate_command(
     sweep_s: float | None = typer.Option(None, "--sweep-s", min=SWEEP_S_MIN, help=_HELP["sweep_s"]),
     amplitude_v: float = typer.Option(5.0, "--amplitude-v", min=AMPLITUDE_V_MIN, help=_HELP["amplitude_v"]),
     points: int | None = typer.Option(None, "--points", min=2, show_default="every point", help=_HELP["points"]),
+    layout: Path | None = typer.Option(None, "--layout", help=_HELP["layout"]),
     yes: bool = typer.Option(False, "--yes", "-y", help=_HELP["yes"]),
     figure: bool = typer.Option(True, "--figure/--no-figure", help=_HELP["figure"]),
     resume: bool = typer.Option(False, "--resume", help=_HELP["resume"]),
@@ -100,7 +104,7 @@ def calibrate_command(
         check_calibration_out(out, participant, force=force)
         if seed is None and rig == "simulated":
             seed = participant_seed(participant)
-        with make_rig(rig, config=rig_config, seed=seed, skin=skin) as r:
+        with make_rig(rig, config=rig_config, seed=seed, skin=skin, layout=layout) as r:
             if getattr(r, "skin", None):
                 console.print(f"simulated forearm: skin {r.skin}, seed {seed}", highlight=False)
             if r.max_points_per_recording is not None and yes:

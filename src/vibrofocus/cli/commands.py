@@ -19,7 +19,7 @@ __all__ = ["COMMAND_MODULES", "register", "reflowed"]
 
 #: Command modules of this package, in ``--help`` order.
 COMMAND_MODULES = ("demo", "calibrate", "render", "serve", "stop", "serve_osc", "analyze", "study", "simulate_study", "export",
-                   "power", "design_experiment", "play", "latency", "devices", "psychopy")
+                   "power", "design_experiment", "design_layout", "play", "latency", "devices", "psychopy")
 
 
 def register(app: typer.Typer) -> None:

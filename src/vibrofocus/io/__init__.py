@@ -18,6 +18,8 @@
 :mod:`.feature_bank`
     Feature banks of simulated forearms (``.npz``): :func:`save_feature_bank`,
     :func:`load_feature_bank`.
+:mod:`.layout_json`
+    Array layout files (JSON): :func:`write_layout_json`, :func:`read_layout_json`.
 :mod:`.jsonsafe`
     The one JSON sanitizer, :func:`json_safe`.
 :mod:`.bids`
@@ -46,6 +48,7 @@ from .drives import read_drives, write_drives, write_drives_wav
 from .feature_bank import load_feature_bank, save_feature_bank
 from .files import atomic_path, save_figure, write_text
 from .jsonsafe import json_safe
+from .layout_json import read_layout_json, write_layout_json
 from .lsl import MarkerOutlet, marker_code, stable_source_id
 from .report_json import check_report, read_report_json, write_report_json
 from .responses import format_response, parse_response_text
@@ -71,6 +74,8 @@ __all__ = [
     "save_feature_bank",
     "load_feature_bank",
     "json_safe",
+    "write_layout_json",
+    "read_layout_json",
     "write_bids_dataset",
     "read_bids_trials_table",
     "MarkerOutlet",

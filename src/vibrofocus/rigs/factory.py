@@ -9,14 +9,14 @@ from ..errors import ValidationError
 from ..layout import ArrayLayout
 from .base import Rig
 
-__all__ = ["RIG_KINDS", "make_rig"]
+__all__ = ["RIG_KINDS", "load_layout", "make_rig"]
 
 RIG_KINDS = ("simulated", "audio", "nidaq")
 
 
 def make_rig(
     kind: str = "simulated", *, config: object | None = None, seed: int | None = None,
-    layout: ArrayLayout | None = None, skin: str | None = None,
+    layout: ArrayLayout | str | Path | None = None, skin: str | None = None,
 ) -> Rig:
     """Build a rig by name.
 
@@ -31,13 +31,16 @@ def make_rig(
         ``nidaq``, whose ``kind`` it must match; ignored by the simulated rig.
     seed : int, optional
         Participant seed of the simulated forearm (default 0).
-    layout : ArrayLayout, optional
-        The array; default the reference setup.
+    layout : ArrayLayout or path-like, optional
+        The array, or a layout file (``vibrofocus design-layout``'s layout.json,
+        docs/file-formats.md, "Layout files"); default the reference setup.
     skin : str, optional
         Skin preset of the simulated forearm (``nominal``, ``low``, ``high``,
         ``voigt-fit``; default ``nominal``). Hardware rigs refuse it.
     """
     check_choice(kind, "rig", RIG_KINDS)
+    if isinstance(layout, (str, Path)):
+        layout = load_layout(layout)
     if kind == "simulated":
         from .simulated import SimulatedForearm  # imported here: the arm's model is not needed for hardware
 
@@ -66,3 +69,26 @@ def make_rig(
     from .nidaq import NidaqRig
 
     return NidaqRig(cfg, layout=layout)
+
+
+def load_layout(path: str | Path) -> ArrayLayout:
+    """An array layout from a layout file (docs/file-formats.md, "Layout files").
+
+    Parameters
+    ----------
+    path : path-like
+        A ``layout.json`` (``vibrofocus design-layout``), or a JSON object of
+        :meth:`ArrayLayout.to_dict`.
+
+    Returns
+    -------
+    ArrayLayout
+    """
+    from .._atomic import protect
+    from ..io import read_layout_json
+
+    protect(path, "layout")
+    try:
+        return ArrayLayout.from_dict(read_layout_json(path))
+    except (TypeError, ValueError) as exc:  # not numbers, ragged lists
+        raise ValidationError(f"{path} does not describe an array layout: {exc}") from None

@@ -14,6 +14,7 @@ from __future__ import annotations
 from .calibrate import CalibrationOutcome, calibrate_participant, check_calibration_out
 from .demo import DemoOutcome, demo_methods, demo_moving_focus, demo_paper_figures
 from .design import DesignOutcome, design_study
+from .layout import LayoutOutcome, design_layout
 from .live_taps import serve_live_taps
 from .power import PowerOutcome, study_power
 from .progress import Progress, QuietProgress, WorkflowCancelled
@@ -25,6 +26,7 @@ __all__ = [
     "CalibrationOutcome",
     "DemoOutcome",
     "DesignOutcome",
+    "LayoutOutcome",
     "PowerOutcome",
     "Progress",
     "QuietProgress",
@@ -36,6 +38,7 @@ __all__ = [
     "demo_methods",
     "demo_moving_focus",
     "demo_paper_figures",
+    "design_layout",
     "design_study",
     "first_unfinished_block",
     "plan_session",
