@@ -9,10 +9,10 @@ from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 from vibrofocus.simulation.design import (DesignSettings, PlanBlock, _simulate_scores, design_experiment,
                                           design_protocol_text, identification, location_sets, paper_plan,
-                                          participant_loglik, score_tables, study1_probabilities)
+                                          participant_loglik, point_area_m, score_tables, study1_probabilities)
 from vibrofocus.simulation.hypotheses import available_hypotheses, hypothesis
 from vibrofocus.simulation.likelihood import Stimuli, answer_law, answer_probabilities, marginal_loglik
-from vibrofocus.simulation.perception import Traits, draw_answers
+from vibrofocus.simulation.perception import Traits, draw_answers, posterior_ratio_rule
 from vibrofocus.studies.protocol_files import parse_protocol
 
 SMALL = dict(n_forearms=1, n_traits=3, n_parameter_draws=2, n_replicates=1, budget=24,
@@ -83,9 +83,12 @@ def test_design_fits_the_budget_and_writes_a_valid_protocol():
     assert all(b.level_db in (0.0, -20.0) and set(b.methods) <= {"funneling", "inverse"} for b in d.blocks)
     assert len(d.conditions) == 2 * 9 * 2 and d.conditions[0]["gain_nats"] >= d.conditions[-1]["gain_nats"]
     proto = parse_protocol(design_protocol_text(d, "t"), "t")
-    assert [(b.methods, b.locations, b.levels[0], b.repetitions) for b in proto.blocks] == [
-        (b.methods, b.locations, b.level_db, b.repetitions) for b in d.blocks]
+    assert [(b.methods, b.locations, b.levels[0], b.repetitions, b.response) for b in proto.blocks] == [
+        (b.methods, b.locations, b.level_db, b.repetitions, b.response) for b in d.blocks]
+    assert {b.response for b in d.blocks} == {"location", "point"}  # both answers inform here
     proto.check_runnable()
+    only = design_experiment(DesignSettings(**SMALL, responses=("location",)))
+    assert {b.response for b in only.blocks} == {"location"} and only.information_nats < d.information_nats
 
 
 def test_design_refuses_bad_settings():
@@ -93,6 +96,8 @@ def test_design_refuses_bad_settings():
         DesignSettings(hypotheses=("v3-centroid",))
     with pytest.raises(ValidationError, match="budget"):
         DesignSettings(budget=0)
+    with pytest.raises(ValidationError, match="responses"):
+        DesignSettings(responses=("telepathy",))
     with pytest.raises(ValidationError, match="drive limit"):
         design_experiment(DesignSettings(**{**SMALL, "levels_db": (6.0,)}))
 
@@ -132,6 +137,45 @@ def test_scores_of_simulated_participants_are_their_marginal_loglik():
     trials = [("inverse", i - 9 + 1, int(a) + 1, -30.0, (1, 3, 7, 9)) for i, a in zip(idx, ans)]
     ref = [participant_loglik(n, b, int(forearms[fi]), trials, n_draws=6) for n in names]
     np.testing.assert_allclose(fast[0], ref, atol=5e-3)
+
+
+def test_point_scores_of_simulated_participants_are_their_marginal_loglik():
+    """A point block: the check's score is the participant's marginal likelihood of its points
+    (the sampler's perceived places, kept within the picture, and the law's density)."""
+    b = default_bank()
+    names = ["v3-centroid", "intensity"]
+    plan = (PlanBlock(("combination",), -20.0, (1, 3, 7, 9), 2, "corners", "point"),)
+    forearms = np.array([2])
+    tables = score_tables({"p": plan}, names, b, forearms, n_draws=6)
+    fast = _simulate_scores(plan, "intensity", names, [3], b, forearms, tables["p"], 4, [-20.0])
+    rng = np.random.default_rng([4, 0xE7A1, 1, 3])
+    assert int(rng.integers(1)) == 0
+    h = hypothesis("intensity")
+    traits = Traits.draw(h.model(), rng)
+    st = Stimuli.from_bank(b, 2, -20.0)
+    idx = np.tile(18 + np.array([0, 2, 6, 8]), 2)
+    seen = {}
+
+    def rule(post, *args):
+        seen["place"] = post.perceived_m
+        return posterior_ratio_rule(post, *args)
+
+    draw_answers(st.percepts(h, h.model(), traits), idx, st.locations_xy, st.centre_xy, h.model(), traits, rng,
+                 allowed=np.array([0, 2, 6, 8]), rule=rule)
+    lo, hi = point_area_m(b)
+    pts = np.clip(seen["place"], lo, hi)
+    trials = [("combination", i - 18 + 1, tuple(p), -20.0, (1, 3, 7, 9)) for i, p in zip(idx, pts)]
+    ref = [participant_loglik(n, b, 2, trials, n_draws=6) for n in names]
+    np.testing.assert_allclose(fast[0], ref, rtol=1e-9)
+    assert ref[1] > ref[0]  # points of an intensity participant: likelier under intensity
+
+
+def test_the_point_area_is_the_pictures():
+    from vibrofocus.studies.points import point_area
+
+    area = point_area()
+    lo, hi = point_area_m(default_bank())
+    np.testing.assert_allclose(np.c_[lo, hi] * 1e3, [area["x_mm"], area["y_mm"]], atol=1e-9)
 
 
 def test_designed_protocol_identifies_one_population_better_than_the_papers():
