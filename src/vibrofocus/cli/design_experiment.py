@@ -25,6 +25,8 @@ def design_experiment_command(
     levels: str = typer.Option("0,-10,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
     responses: str = typer.Option("location,point", "--responses",
                                   help="Answers a block may take: location (a key), point (on the arm's picture)."),
+    threshold: int = typer.Option(0, "--threshold-trials", min=0, max=200,
+                                  help="Put a threshold block of this many trials first in protocol.toml (0: none)."),
     budget: int = typer.Option(81, "--budget", min=4, max=20_000, help="Study 1 trials per participant."),
     draws: int = typer.Option(3, "--parameter-draws", min=1, max=64,
                               help="Parameter sets per hypothesis: the shipped one and draws around it."),
@@ -76,7 +78,7 @@ def design_experiment_command(
         done = design_study(settings, participants=comma_list(participants, "--participants"), studies=studies,
                             bank=bank, calibration=calibration, pool=pool, score_forearms=score_forearms,
                             score_draws=score_draws, scheduler=scheduler, workers=workers, local=local, out=out,
-                            progress=_Notes(console))
+                            threshold_trials=threshold, progress=_Notes(console))
         _print_design(done, comma_list(participants, "--participants"), console)
 
 
