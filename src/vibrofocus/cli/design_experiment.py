@@ -23,8 +23,10 @@ def design_experiment_command(
     methods: str | None = typer.Option(None, "--methods", help="Candidate methods (default the bank's)."),
     locations: str | None = typer.Option(None, "--locations", help="Candidate location numbers (default all)."),
     levels: str = typer.Option("0,-10,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
-    responses: str = typer.Option("location,point", "--responses",
+    responses: str = typer.Option("location", "--responses",
                                   help="Answers a block may take: location (a key), point (on the arm's picture)."),
+    information: str = typer.Option("population", "--information",
+                                    help="What the greedy choice maximizes: population (given the forearm) or person."),
     threshold: int = typer.Option(0, "--threshold-trials", min=0, max=200,
                                   help="Put a threshold block of this many trials first in protocol.toml (0: none)."),
     budget: int = typer.Option(81, "--budget", min=4, max=20_000, help="Study 1 trials per participant."),
@@ -73,7 +75,7 @@ def design_experiment_command(
             locations=comma_list(locations, "--locations") if locations else None,
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population,
-            responses=comma_list(responses, "--responses", str))
+            responses=comma_list(responses, "--responses", str), information=information)
         console = Console(stderr=True)
         done = design_study(settings, participants=comma_list(participants, "--participants"), studies=studies,
                             bank=bank, calibration=calibration, pool=pool, score_forearms=score_forearms,

@@ -89,13 +89,17 @@ class DesignSettings:
         parameters, so that they differ in their readout only (one population).
     responses : tuple of str
         The answers candidate blocks may take (:data:`RESPONSES`): ``location`` (one of the
-        block's locations) and ``point`` (a point on the picture of the arm area).
+        block's locations; the default) and ``point`` (a point on the picture of the arm
+        area). Points carry much more information given the person, but model choice by
+        the Monte Carlo marginal likelihood over trait draws uses them poorly
+        (docs/designing-a-study.md).
     information : str
-        What the greedy choice maximizes: ``person`` (default), the information about the
-        hypothesis given the person (the same traits and parameter draw under every
-        hypothesis); ``population``, given the forearm only (traits and parameters
-        integrated over, by a nested Monte Carlo that is biased low and noisy when the
-        hypotheses are close).
+        What the greedy choice maximizes: ``population`` (default), the information about
+        the hypothesis given the forearm only (traits and parameters integrated over, by a
+        nested Monte Carlo that is biased low, and noisy when the hypotheses are close);
+        ``person``, given the person too (the same traits and parameter draw under every
+        hypothesis), which saturates at log(number of hypotheses) once a participant's
+        answers decide.
     """
 
     hypotheses: tuple[str, ...] | None = None
@@ -110,8 +114,8 @@ class DesignSettings:
     n_replicates: int = 2
     seed: int = 0
     population: str | None = None
-    responses: tuple[str, ...] = RESPONSES
-    information: str = "person"
+    responses: tuple[str, ...] = ("location",)
+    information: str = "population"
 
     def __post_init__(self) -> None:
         from .._validation import check_in_range
@@ -632,10 +636,11 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
         for hi, name in enumerate(names):
             h = find_hypothesis(name)
             for ki, m in enumerate(models[name]):
-                # The same random numbers for every hypothesis: sample (h, k, t) of one
-                # hypothesis and (h', k, t) of another are the same person (traits drawn at
-                # the same quantiles of each population), for the information given the person.
-                trng = np.random.default_rng([s.seed, 0x7EA7, int(f), ki])
+                # For the information given the person, the same random numbers for every
+                # hypothesis: sample (h, k, t) of one hypothesis and (h', k, t) of another are
+                # the same person (traits drawn at the same quantiles of each population).
+                trng = np.random.default_rng([s.seed, 0x7EA7, int(f), ki] if s.information == "person" else
+                                             [s.seed, 0x7EA7, int(f), hi, ki])
                 for _ in range(s.n_traits):
                     laws.append(_laws(h, m, Traits.draw(m, trng), b, int(f), s.levels_db))
                     if fi == 0:
