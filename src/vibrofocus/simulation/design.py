@@ -5,7 +5,8 @@ participants (:mod:`vibrofocus.simulation.hypotheses`), as they are implemented.
 method, its assumptions and its tables are in docs/designing-a-study.md.
 
 :func:`design_experiment` chooses Study 1 blocks (one method at one level re the level
-rule, over a grid of locations, the participant answering one of them) that maximize the
+rule, over a grid of locations, the participant answering one of them or a point on the
+picture of the arm area) that maximize the
 expected information gain about which hypothesis is right, greedily per trial of the
 budget; the answer laws are those of :mod:`vibrofocus.simulation.likelihood`
 (:func:`~vibrofocus.simulation.likelihood.answer_law`), integrated over a population of
