@@ -8,7 +8,8 @@ Prints, from one run:
 - the time of a whole design with the defaults (3 methods x 9 locations x 4 levels = 108
   candidate conditions, every registered hypothesis), split into its answer laws, its
   tables and its greedy choice, and with the candidates cut to one level (27) for the
-  ratio of the greedy part to the candidates' number;
+  ratio of the greedy part to the candidates' number, and with point answers too
+  (``responses=("location", "point")``: twice the candidate blocks);
 - the time of the identification check (P(correct) against N) in one process.
 
 Run: ``python benchmarks/bench_design.py [--studies 100]``. One BLAS thread.
@@ -60,6 +61,9 @@ def main() -> None:
         print(f"design, {n_cand // 4} candidate conditions (one level): {one.elapsed_s:.1f} s (greedy "
               f"{one.timings['greedy_s']:.1f} s); 4x the candidates cost {full.elapsed_s / one.elapsed_s:.1f}x the "
               f"time, greedy {full.timings['greedy_s'] / max(one.timings['greedy_s'], 1e-9):.1f}x")
+        pts = design_experiment(DesignSettings(responses=("location", "point")))
+        print(f"design with point answers too (twice the candidate blocks): {pts.elapsed_s:.1f} s "
+              f"(answer laws {pts.timings['answer_laws_s']:.1f} s, greedy {pts.timings['greedy_s']:.1f} s)")
         t = time.perf_counter()
         r = identification({"designed": full.blocks, "paper": paper_plan()}, list(names), n_participants=(6,),
                            n_studies=args.studies, local=True)

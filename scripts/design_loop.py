@@ -12,6 +12,10 @@ calibrations. Use seeds the design did not use (the design used the shipped bank
 A MODEL, not data.
 
     python scripts/design_loop.py --protocol design/protocol.toml -n 6 --seeds 7,8 --out loop/
+
+``--protocols designed`` runs the designed protocol alone. ``loop.md`` ends with the
+confusion matrix per protocol (rows: the true hypothesis; columns: the share of studies
+choosing each).
 """
 
 from __future__ import annotations
@@ -44,10 +48,14 @@ def main() -> None:
     ap.add_argument("-n", type=int, default=6, help="Participants per study.")
     ap.add_argument("--seeds", default="7", help="Simulation seeds, one study per seed, hypothesis and protocol.")
     ap.add_argument("--n-draws", type=int, default=32, help="Trait draws of the marginal likelihood.")
+    ap.add_argument("--protocols", default="designed,paper", help="Which protocols to run: designed, paper or both.")
     ap.add_argument("--out", type=Path, required=True)
     a = ap.parse_args()
     a.out.mkdir(parents=True, exist_ok=True)
-    protocols = {"designed": load_protocol(a.protocol), "paper": shipped_protocol("paper-study1")}
+    protocols = {k: v for k, v in (("designed", lambda: load_protocol(a.protocol)),
+                                   ("paper", lambda: shipped_protocol("paper-study1")))
+                 if k in a.protocols.split(",")}
+    protocols = {k: make() for k, make in protocols.items()}
     names = list(available_hypotheses())
     rows = []
     t0 = time.perf_counter()
@@ -77,6 +85,11 @@ def main() -> None:
         other = max(v for k, v in r["total"].items() if k != r["true"])
         lines.append(f"| {r['protocol']} | {r['seed']} | {r['true']} | {r['chosen']} | "
                      f"{(r['total'][r['true']] - other) / 2.302585:.1f} |")
+    lines += ["", "| protocol | true \\ chosen | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
+    for pname in protocols:
+        for h in names:
+            mine = [r["chosen"] for r in rows if r["protocol"] == pname and r["true"] == h]
+            lines.append(f"| {pname} | {h} | " + " | ".join(f"{mine.count(c) / len(mine):.2f}" for c in names) + " |")
     write_text(a.out / "loop.md", "\n".join(lines) + "\n")
     write_text(a.out / "loop.json", json.dumps({"n": a.n, "rows": rows, "elapsed_s": time.perf_counter() - t0},
                                                indent=1) + "\n")

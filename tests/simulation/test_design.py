@@ -9,10 +9,10 @@ from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 from vibrofocus.simulation.design import (DesignSettings, PlanBlock, _simulate_scores, design_experiment,
                                           design_protocol_text, identification, location_sets, paper_plan,
-                                          participant_loglik, score_tables, study1_probabilities)
+                                          participant_loglik, point_area_m, score_tables, study1_probabilities)
 from vibrofocus.simulation.hypotheses import available_hypotheses, hypothesis
 from vibrofocus.simulation.likelihood import Stimuli, answer_law, answer_probabilities, marginal_loglik
-from vibrofocus.simulation.perception import Traits, draw_answers
+from vibrofocus.simulation.perception import Traits, draw_answers, posterior_ratio_rule
 from vibrofocus.studies.protocol_files import parse_protocol
 
 SMALL = dict(n_forearms=1, n_traits=3, n_parameter_draws=2, n_replicates=1, budget=24,
@@ -77,15 +77,18 @@ def test_study1_probabilities_match_the_likelihood_module(allowed):
 
 # ------------------------------------------------------------------------- design
 def test_design_fits_the_budget_and_writes_a_valid_protocol():
-    d = design_experiment(DesignSettings(**SMALL))
+    d = design_experiment(DesignSettings(**SMALL, responses=("location", "point")))
     assert 20 < d.trials <= 24 and d.trials == sum(b.n_trials for b in d.blocks)
     assert 0.0 < d.information_nats <= np.log(len(available_hypotheses())) + 1e-9
     assert all(b.level_db in (0.0, -20.0) and set(b.methods) <= {"funneling", "inverse"} for b in d.blocks)
     assert len(d.conditions) == 2 * 9 * 2 and d.conditions[0]["gain_nats"] >= d.conditions[-1]["gain_nats"]
     proto = parse_protocol(design_protocol_text(d, "t"), "t")
-    assert [(b.methods, b.locations, b.levels[0], b.repetitions) for b in proto.blocks] == [
-        (b.methods, b.locations, b.level_db, b.repetitions) for b in d.blocks]
+    assert [(b.methods, b.locations, b.levels[0], b.repetitions, b.response) for b in proto.blocks] == [
+        (b.methods, b.locations, b.level_db, b.repetitions, b.response) for b in d.blocks]
+    assert {b.response for b in d.blocks} == {"location", "point"}  # both answers inform here
     proto.check_runnable()
+    only = design_experiment(DesignSettings(**SMALL))  # location answers only: the default
+    assert {b.response for b in only.blocks} == {"location"} and only.information_nats < d.information_nats
 
 
 def test_design_refuses_bad_settings():
@@ -93,6 +96,8 @@ def test_design_refuses_bad_settings():
         DesignSettings(hypotheses=("v3-centroid",))
     with pytest.raises(ValidationError, match="budget"):
         DesignSettings(budget=0)
+    with pytest.raises(ValidationError, match="responses"):
+        DesignSettings(responses=("telepathy",))
     with pytest.raises(ValidationError, match="drive limit"):
         design_experiment(DesignSettings(**{**SMALL, "levels_db": (6.0,)}))
 
@@ -134,6 +139,45 @@ def test_scores_of_simulated_participants_are_their_marginal_loglik():
     np.testing.assert_allclose(fast[0], ref, atol=5e-3)
 
 
+def test_point_scores_of_simulated_participants_are_their_marginal_loglik():
+    """A point block: the check's score is the participant's marginal likelihood of its points
+    (the sampler's perceived places, kept within the picture, and the law's density)."""
+    b = default_bank()
+    names = ["v3-centroid", "intensity"]
+    plan = (PlanBlock(("combination",), -20.0, (1, 3, 7, 9), 2, "corners", "point"),)
+    forearms = np.array([2])
+    tables = score_tables({"p": plan}, names, b, forearms, n_draws=6)
+    fast = _simulate_scores(plan, "intensity", names, [3], b, forearms, tables["p"], 4, [-20.0])
+    rng = np.random.default_rng([4, 0xE7A1, 1, 3])
+    assert int(rng.integers(1)) == 0
+    h = hypothesis("intensity")
+    traits = Traits.draw(h.model(), rng)
+    st = Stimuli.from_bank(b, 2, -20.0)
+    idx = np.tile(18 + np.array([0, 2, 6, 8]), 2)
+    seen = {}
+
+    def rule(post, *args):
+        seen["place"] = post.perceived_m
+        return posterior_ratio_rule(post, *args)
+
+    draw_answers(st.percepts(h, h.model(), traits), idx, st.locations_xy, st.centre_xy, h.model(), traits, rng,
+                 allowed=np.array([0, 2, 6, 8]), rule=rule)
+    lo, hi = point_area_m(b)
+    pts = np.clip(seen["place"], lo, hi)
+    trials = [("combination", i - 18 + 1, tuple(p), -20.0, (1, 3, 7, 9)) for i, p in zip(idx, pts)]
+    ref = [participant_loglik(n, b, 2, trials, n_draws=6) for n in names]
+    np.testing.assert_allclose(fast[0], ref, rtol=1e-9)
+    assert ref[1] > ref[0]  # points of an intensity participant: likelier under intensity
+
+
+def test_the_point_area_is_the_pictures():
+    from vibrofocus.studies.points import point_area
+
+    area = point_area()
+    lo, hi = point_area_m(default_bank())
+    np.testing.assert_allclose(np.c_[lo, hi] * 1e3, [area["x_mm"], area["y_mm"]], atol=1e-9)
+
+
 def test_designed_protocol_identifies_one_population_better_than_the_papers():
     """The readouts under one population: the designed protocol tells them apart more often than the paper's."""
     names = ["v3-centroid", "level-reliability"]
@@ -154,38 +198,58 @@ format = 1
 name = "loop-check"
 
 [[blocks]]
-response = "location"
-methods = ["funneling"]
-locations = [1, 3, 7, 9]
-levels = [-20.0]
-repetitions = 2
+name = "threshold"
+response = "detection"
+methods = ["inverse"]
+locations = [5]
+levels = [-6.0]
+repetitions = 12
 
 [[blocks]]
 response = "location"
-methods = ["inverse", "combination"]
+methods = ["inverse"]
 locations = [1, 2, 3, 7, 8, 9]
-levels = [-10.0]
-repetitions = 1
+levels = [0.0]
+repetitions = 2
+
+[[blocks]]
+response = "point"
+methods = ["funneling", "combination"]
+locations = [1, 3, 7, 9]
+levels = [0.0]
+repetitions = 2
 """
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open finding (issue 55): one simulated participant on this protocol no longer "
-                   "tells level-reliability from intensity under the refit hypotheses (intensity scores higher)")
 def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp_path):
-    """The loop through the study engine: simulate-study's code, then marginal likelihood.
+    """The loop through the study engine: simulate-study's code on a protocol with a
+    threshold block (not scored), location and point answers, then marginal likelihood.
 
     Participant sim-001 of seed 0 has the shipped bank's forearm 0, so its felt fields
-    need no new bank.
+    need no new bank. Its score is that of its stored answers read by hand (points in mm
+    in the layout frame, the bank's frame).
     """
     from vibrofocus.simulation import simulate_studies
     from vibrofocus.simulation.design import choose_hypothesis
+    from vibrofocus.studies import StudyStore
 
     proto = parse_protocol(LOOP_PROTOCOL, "loop")
-    simulate_studies(tmp_path / "s.db", n_participants=1, seed=0, protocol=proto, hypothesis="level-reliability")
+    simulate_studies(tmp_path / "s.db", n_participants=1, seed=0, protocol=proto, hypothesis="intensity")
     r = choose_hypothesis(tmp_path / "s.db", default_bank(), n_draws=8)
     assert set(r["participants"]) == {"sim-001"}
-    assert r["chosen"] == "level-reliability", r["total"]
+    assert r["chosen"] == "intensity", r["total"]
+    trials = []
+    with StudyStore(tmp_path / "s.db") as store:
+        for sess in store.sessions("sim-001"):
+            if not sess.design.detection:
+                plan = {t.trial_index: t for t in store.planned_trials(sess.session_id)}
+                trials += [(plan[a.trial_index].method, plan[a.trial_index].target,
+                            tuple(v / 1e3 for v in a.point_mm) if sess.design.point else int(a.response[0]), 0.0,
+                            sess.design.locations) for a in store.answers(sess.session_id)]
+    assert len(trials) == 12 + 16 and sum(isinstance(t[2], tuple) for t in trials) == 16
+    np.testing.assert_allclose(participant_loglik("intensity", default_bank(), 0, trials, n_draws=8),
+                               r["total"]["intensity"], rtol=1e-12)
 
 
 @pytest.mark.slow

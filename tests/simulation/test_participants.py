@@ -371,3 +371,25 @@ def test_short_integration_window_takes_the_largest_windowed_energy(rig, drives)
 def test_integration_window_must_be_positive():
     with pytest.raises(ValidationError, match="integration_s"):
         reference_felt_energy(10_000.0, 1024, PerceptualModel(integration_s=0.0))
+
+
+
+def test_every_trial_of_a_multi_block_protocol_has_its_own_noise(participant, drives):
+    """Trial k of block 0 and of block 1 (same stimulus) draw their own noise; block 0 keeps
+    the streams of before, (seed, study, trial index), so the paper's studies keep their answers."""
+    from vibrofocus.studies.engine import Presentation
+    from vibrofocus.studies.protocol import PlannedTrial, StudyDesign
+
+    d = drives[("inverse", 4)]
+    design = StudyDesign(study=1)
+
+    def shown(k, block):
+        trial = PlannedTrial(1, k, "main", k, "inverse", 4)
+        return Presentation(1, 1, trial, type("S", (), {"drives": d})(), 0.0, design, block=block)
+
+    first = [participant.respond(shown(k, 0)) for k in range(12)]
+    second = [participant.respond(shown(k, 1)) for k in range(12)]
+    assert all(a.rt_s != b.rt_s for a, b in zip(first, second))  # a continuous draw: equal only from one stream
+    assert first == [participant.answer(d, 1, k, design) for k in range(12)]
+    with pytest.raises(StudyError, match="block"):
+        participant.answer(d, 1, 0, design, block=-1)

@@ -41,3 +41,23 @@ def test_a_threshold_blocks_markers_name_the_protocol_and_their_level(tmp_path):
 def test_a_localization_tap_keeps_its_study_code():
     assert marker_code({"event": "stimulus_onset", "method": "inverse", "phase": "main", "study": 1,
                         "protocol": "paper-study1", "block": 0}) == "tap/inverse/main/study1"
+
+
+def test_a_presentation_names_its_sessions_block(tmp_path):
+    """The engine tells a responder which block of its protocol a trial is from (simulated
+    participants draw a later block's noise from streams of its own)."""
+    protocol = parse_protocol(TINY_PROTOCOL, "tiny.toml")
+    seen = []
+
+    class _Blocks(_Felt):
+        def respond(self, presentation):
+            seen.append(presentation.block)
+            return super().respond(presentation)
+
+    with StudyStore(tmp_path / "s.sqlite") as store:
+        store.add_participant("P01")
+        for block in (0, 1):
+            config = {**protocol.session_config(0), "block": block}
+            sid = store.create_session("P01", 1, seed=1, config=config)
+            StudyEngine(store, sid, None, dry_run=True).run(_Blocks(), max_trials=1)
+    assert seen == [0, 1]

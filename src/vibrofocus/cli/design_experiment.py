@@ -23,6 +23,12 @@ def design_experiment_command(
     methods: str | None = typer.Option(None, "--methods", help="Candidate methods (default the bank's)."),
     locations: str | None = typer.Option(None, "--locations", help="Candidate location numbers (default all)."),
     levels: str = typer.Option("0,-10,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
+    responses: str = typer.Option("location", "--responses",
+                                  help="Answers a block may take: location (a key), point (on the arm's picture)."),
+    information: str = typer.Option("population", "--information",
+                                    help="What the greedy choice maximizes: population (given the forearm) or person."),
+    threshold: int = typer.Option(0, "--threshold-trials", min=0, max=200,
+                                  help="Put a threshold block of this many trials first in protocol.toml (0: none)."),
     budget: int = typer.Option(81, "--budget", min=4, max=20_000, help="Study 1 trials per participant."),
     draws: int = typer.Option(3, "--parameter-draws", min=1, max=64,
                               help="Parameter sets per hypothesis: the shipped one and draws around it."),
@@ -48,7 +54,8 @@ def design_experiment_command(
 ) -> None:
     """Design the Study 1 blocks that tell the registered hypotheses apart, and check them by simulation.
 
-    Greedily chooses blocks (a method at a level over a grid of locations) that maximize
+    Greedily chooses blocks (a method at a level over a grid of locations, answered by a
+    location or a point) that maximize
     the expected information gain about which hypothesis is right, within --budget trials
     per participant; then, on Dask, estimates the probability that model choice by
     marginal likelihood picks the true hypothesis against N, for the design and the
@@ -67,12 +74,13 @@ def design_experiment_command(
             methods=comma_list(methods, "--methods", str) if methods else None,
             locations=comma_list(locations, "--locations") if locations else None,
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
-            n_forearms=forearms, n_traits=traits, seed=seed, population=population)
+            n_forearms=forearms, n_traits=traits, seed=seed, population=population,
+            responses=comma_list(responses, "--responses", str), information=information)
         console = Console(stderr=True)
         done = design_study(settings, participants=comma_list(participants, "--participants"), studies=studies,
                             bank=bank, calibration=calibration, pool=pool, score_forearms=score_forearms,
                             score_draws=score_draws, scheduler=scheduler, workers=workers, local=local, out=out,
-                            progress=_Notes(console))
+                            threshold_trials=threshold, progress=_Notes(console))
         _print_design(done, comma_list(participants, "--participants"), console)
 
 
@@ -102,11 +110,11 @@ def _print_design(done, ns: list[int], console) -> None:
 
     report = done.report
     table = Table(title=f"Designed Study 1 blocks ({report['label']})")
-    for col in ("methods", "level (dB)", "locations", "repetitions", "trials"):
+    for col in ("methods", "level (dB)", "locations", "answer", "repetitions", "trials"):
         table.add_column(col)
     for b in report["blocks"]:
         table.add_row(", ".join(b["methods"]), f"{b['level_db']:+g}", " ".join(map(str, b["locations"])),
-                      str(b["repetitions"]), str(b["trials"]))
+                      b["response"], str(b["repetitions"]), str(b["trials"]))
     Console().print(table)
     if done.identification is not None:
         t2 = Table(title="P(true hypothesis chosen), marginal likelihood at the shipped parameters")

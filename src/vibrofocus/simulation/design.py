@@ -5,7 +5,8 @@ participants (:mod:`vibrofocus.simulation.hypotheses`), as they are implemented.
 method, its assumptions and its tables are in docs/designing-a-study.md.
 
 :func:`design_experiment` chooses Study 1 blocks (one method at one level re the level
-rule, over a grid of locations, the participant answering one of them) that maximize the
+rule, over a grid of locations, the participant answering one of them or a point on the
+picture of the arm area) that maximize the
 expected information gain about which hypothesis is right, greedily per trial of the
 budget; the answer laws are those of :mod:`vibrofocus.simulation.likelihood`
 (:func:`~vibrofocus.simulation.likelihood.answer_law`), integrated over a population of
@@ -35,11 +36,15 @@ from .perception import PerceptualModel, Traits, draw_answers
 __all__ = ["DesignSettings", "CandidateBlock", "PlanBlock", "ExperimentDesign", "location_sets",
            "study1_probabilities", "shipped_model", "parameter_draws", "condition_gains", "design_experiment",
            "paper_plan",
-           "design_protocol_text", "score_tables", "design_report", "write_design",
-           "participant_loglik", "choose_hypothesis", "identification", "DEFAULT_LEVELS_DB", "SCORE_SEED"]
+           "design_protocol_text", "score_tables", "ScoreTable", "design_report", "write_design",
+           "participant_loglik", "choose_hypothesis", "identification", "point_area_m", "DEFAULT_LEVELS_DB",
+           "RESPONSES", "SCORE_SEED", "THRESHOLD_BLOCK"]
 
 #: Candidate levels, dB re the level rule (the paper's): 0 down to -30 dB.
 DEFAULT_LEVELS_DB = (0.0, -10.0, -20.0, -30.0)
+#: Answers a designed block may take: one location of the block's (a key), or a point on
+#: the picture of the arm area (docs/protocols.md, "Point responses").
+RESPONSES = ("location", "point")
 #: The trait draws' seed of :func:`~vibrofocus.simulation.likelihood.marginal_loglik` used
 #: to score simulated studies (its default).
 SCORE_SEED = 0
@@ -83,6 +88,19 @@ class DesignSettings:
         None: each hypothesis with its own shipped parameters (as ``simulate-study
         --hypothesis`` simulates it). A hypothesis' name: every hypothesis with that one's
         parameters, so that they differ in their readout only (one population).
+    responses : tuple of str
+        The answers candidate blocks may take (:data:`RESPONSES`): ``location`` (one of the
+        block's locations; the default) and ``point`` (a point on the picture of the arm
+        area). Points carry much more information given the person, but model choice by
+        the Monte Carlo marginal likelihood over trait draws uses them poorly
+        (docs/designing-a-study.md).
+    information : str
+        What the greedy choice maximizes: ``population`` (default), the information about
+        the hypothesis given the forearm only (traits and parameters integrated over, by a
+        nested Monte Carlo that is biased low, and noisy when the hypotheses are close);
+        ``person``, given the person too (the same traits and parameter draw under every
+        hypothesis), which saturates at log(number of hypotheses) once a participant's
+        answers decide.
     """
 
     hypotheses: tuple[str, ...] | None = None
@@ -97,6 +115,8 @@ class DesignSettings:
     n_replicates: int = 2
     seed: int = 0
     population: str | None = None
+    responses: tuple[str, ...] = ("location",)
+    information: str = "population"
 
     def __post_init__(self) -> None:
         from .._validation import check_in_range
@@ -113,6 +133,12 @@ class DesignSettings:
         if not levels or len(set(levels)) != len(levels):
             raise ValidationError(f"levels_db: at least one level, each once, got {list(self.levels_db)}")
         object.__setattr__(self, "levels_db", levels)
+        responses = tuple(dict.fromkeys(str(r) for r in self.responses))
+        if not responses or any(r not in RESPONSES for r in responses):
+            raise ValidationError(f"responses: one or more of {', '.join(RESPONSES)}, got {list(self.responses)}")
+        object.__setattr__(self, "responses", responses)
+        if self.information not in ("person", "population"):
+            raise ValidationError(f"information must be person or population, got {self.information!r}")
         for name, lo, hi in (("budget", 1, 20_000), ("n_parameter_draws", 1, 64), ("n_forearms", 1, 1000),
                              ("n_traits", 1, 1000), ("n_replicates", 1, 100), ("seed", 0, 2**63 - 1)):
             v = getattr(self, name)
@@ -134,16 +160,19 @@ class CandidateBlock:
         Location numbers (1-based): the targets, and the answers allowed.
     grid : str
         Which grid of the candidate locations (:func:`location_sets`).
+    response : str
+        ``location`` (answered among the locations) or ``point`` (anywhere on the picture).
     """
 
     method: str
     level_db: float
     locations: tuple[int, ...]
     grid: str
+    response: str = "location"
 
     @property
     def label(self) -> str:
-        return f"{self.method} {self.level_db:+g} dB, {self.grid}"
+        return f"{self.method} {self.level_db:+g} dB, {self.grid}" + (", points" if self.response == "point" else "")
 
 
 @dataclass(frozen=True)
@@ -160,6 +189,9 @@ class PlanBlock:
     repetitions : int
     grid : str
         Which grid of :func:`location_sets` the locations are ("" if none).
+    response : str
+        ``location`` (answered among the locations) or ``point`` (a point on the picture
+        of the arm area; its nearest location is the answer's location).
     """
 
     methods: tuple[str, ...]
@@ -167,6 +199,7 @@ class PlanBlock:
     locations: tuple[int, ...]
     repetitions: int
     grid: str = ""
+    response: str = "location"
 
     @property
     def n_trials(self) -> int:
@@ -306,6 +339,57 @@ def study1_probabilities(law: AnswerLaw, locations_xy: np.ndarray, allowed: np.n
     return out
 
 
+def point_area_m(bank: FeatureBank) -> tuple[np.ndarray, np.ndarray]:
+    """The picture a point answer is given on, as its lower and upper corners, m.
+
+    The bounding box of the bank's actuators and locations widened by
+    :data:`~vibrofocus.studies.points.MARGIN_PITCHES` location pitches: the area of
+    :func:`~vibrofocus.studies.points.point_area`, within which a simulated participant's
+    point answer is kept.
+
+    Parameters
+    ----------
+    bank : FeatureBank
+
+    Returns
+    -------
+    lo, hi : ndarray, shape (2,)
+    """
+    from ..studies.points import MARGIN_PITCHES, _pitch_m
+
+    loc = np.asarray(bank.locations_xy, dtype=float)
+    both = np.vstack([loc, np.asarray(bank.actuators_xy, dtype=float)])
+    margin = MARGIN_PITCHES * _pitch_m(loc)
+    return both.min(axis=0) - margin, both.max(axis=0) + margin
+
+
+def _point_logpdf(weight: np.ndarray, mean: np.ndarray, sd: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """:func:`~vibrofocus.simulation.likelihood.point_loglik` over leading axes, log(1/m^2).
+
+    ``weight`` (..., K), ``mean`` (..., K, 2), ``sd`` (..., K) and ``points`` (..., 2),
+    broadcast against each other.
+    """
+    from .likelihood import point_loglik
+
+    k = weight.shape[-1]
+    shape = np.broadcast_shapes(weight.shape[:-1], mean.shape[:-2], sd.shape[:-1], points.shape[:-1])
+    w = np.broadcast_to(weight, shape + (k,)).reshape(-1, k)
+    sd_ = np.broadcast_to(sd, shape + (k,)).reshape(-1, k)
+    law = AnswerLaw(w, np.broadcast_to(mean, shape + (k, 2)).reshape(-1, k, 2), sd_, sd_, 0.0, 0.0)
+    return point_loglik(law, np.broadcast_to(points, shape + (2,)).reshape(-1, 2)).reshape(shape)
+
+
+def _draw_points(weight: np.ndarray, mean: np.ndarray, sd: np.ndarray, u: np.ndarray, z: np.ndarray,
+                 area: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """Perceived places drawn from answer laws (..., K): a component by ``u`` (...), then its
+    Gaussian by ``z`` (..., 2), kept within the picture ``area`` as a point answer is; m."""
+    c = np.cumsum(weight, axis=-1)
+    k = np.minimum((c < u[..., None] * c[..., -1:]).sum(axis=-1), weight.shape[-1] - 1)
+    m = np.take_along_axis(mean, k[..., None, None], axis=-2)[..., 0, :]
+    s = np.take_along_axis(sd, k[..., None], axis=-1)
+    return np.clip(m + s * z, area[0], area[1])
+
+
 def shipped_model(name: str, population: str | None = None) -> PerceptualModel:
     """The perceptual model of hypothesis ``name``: its own shipped parameters, or those of ``population``.
 
@@ -331,7 +415,7 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
 
     Each of the hypothesis' free parameters (:attr:`Hypothesis.free_parameters`) is drawn
     uniformly within ``spread`` of its range on either side of the shipped value (clipped
-    to the range). A hypothesis that declares none has one uncertain parameter by
+    to the range; the two ends of a population range kept in order). A hypothesis that declares none has one uncertain parameter by
     assumption: the sensation level of the reference tap (``sl_ref_db``), within 3 dB of
     the shipped value (the spread of thresholds across people, ``threshold_sd_db``). The
     fit paths of ``hypotheses_fit.json`` hold each search's budget and loss, not its
@@ -355,7 +439,7 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
     about : dict
         ``parameters`` (keys), ``ranges`` ({key: [lo, hi]} drawn in), ``values`` (per set).
     """
-    from .parameters import ParameterRange, apply_parameters, read_parameters
+    from .parameters import ParameterRange, apply_parameters, ordered_pairs, read_parameters
 
     base = base or h.model()
     ranges = tuple(getattr(h, "free_parameters", ()) or ())
@@ -371,7 +455,8 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
         ranges = (ParameterRange("sl_ref_db", float(lo[0]), float(hi[0]),
                                  "assumption: within the spread of thresholds across people"),)
     rng = np.random.default_rng([int(seed), 0xD5A1])
-    values = [v0] + [rng.uniform(lo, hi) for _ in range(n - 1)]
+    # A population range's two ends drawn apart may cross: ordered, low first (Traits.draw needs lo <= hi).
+    values = [v0] + [np.array(ordered_pairs(ranges, rng.uniform(lo, hi))) for _ in range(n - 1)]
     models = [base] + [apply_parameters(base, ranges, [float(x) for x in v]) for v in values[1:]]
     about = {"parameters": [r.key for r in ranges], "ranges": {r.key: [float(a), float(b)]
                                                                for r, a, b in zip(ranges, lo, hi)},
@@ -462,15 +547,23 @@ def condition_gains(P: np.ndarray, hyp: np.ndarray, n_forearms: int) -> np.ndarr
     return kl.mean(axis=(0, 1))
 
 
-def _information(L: np.ndarray, hyp: np.ndarray, n_rep: int) -> float:
+def _information(L: np.ndarray, hyp: np.ndarray, n_rep: int, person: bool = False) -> float:
     """Expected information gain (nats) from log-likelihoods L (F, R, S) of simulated answer sets.
 
     Replicate r was generated by sample ``r // n_rep``, which is left out of its own
-    hypothesis' average (a sample always explains its own answers best).
+    hypothesis' average (a sample always explains its own answers best). With ``person``,
+    the information given the person instead: each hypothesis scores the replicate by its
+    own sample of the same person (samples hypothesis-major, the same count per hypothesis).
     """
     F, R, S = L.shape
     n_h = int(hyp.max()) + 1
     own = np.arange(R) // n_rep
+    if person:
+        per = S // n_h
+        cols = (own % per)[:, None] + per * np.arange(n_h)[None, :]  # (R, H)
+        per_h = L[:, np.arange(R)[:, None], cols]  # (F, R, H)
+        true = per_h[:, np.arange(R), hyp[own]]
+        return float(np.mean(true - special.logsumexp(per_h, axis=2) + np.log(n_h)))
     Lx = L.copy()
     Lx[:, np.arange(R), own] = -np.inf
     counts = np.bincount(hyp, minlength=n_h).astype(float)
@@ -544,7 +637,11 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
         for hi, name in enumerate(names):
             h = find_hypothesis(name)
             for ki, m in enumerate(models[name]):
-                trng = np.random.default_rng([s.seed, 0x7EA7, int(f), hi, ki])
+                # For the information given the person, the same random numbers for every
+                # hypothesis: sample (h, k, t) of one hypothesis and (h', k, t) of another are
+                # the same person (traits drawn at the same quantiles of each population).
+                trng = np.random.default_rng([s.seed, 0x7EA7, int(f), ki] if s.information == "person" else
+                                             [s.seed, 0x7EA7, int(f), hi, ki])
                 for _ in range(s.n_traits):
                     laws.append(_laws(h, m, Traits.draw(m, trng), b, int(f), s.levels_db))
                     if fi == 0:
@@ -557,8 +654,12 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
     law = _stack_laws(laws)
     timings["answer_laws_s"] = time.perf_counter() - t0
     grids = location_sets(b.locations_xy, locations)
-    cands = [CandidateBlock(m, lvl, locs, g) for lvl in s.levels_db for m in methods for g, locs in grids.items()]
-    P, mask = _block_probabilities(law, n_samples, b, s.levels_db, cands)
+    cands = [CandidateBlock(m, lvl, locs, g, r) for r in s.responses for lvl in s.levels_db for m in methods
+             for g, locs in grids.items()]
+    by_location = [c for c in cands if c.response == "location"]
+    P, mask = (_block_probabilities(law, n_samples, b, s.levels_db, by_location) if by_location else
+               (np.zeros((n_samples, 0, 1, len(b.locations_xy))), np.zeros((0, 1), dtype=bool)))
+    row = {id(c): i for i, c in enumerate(by_location)}
     # Per-condition gains: one trial of (method, location, level), answered among all the candidates.
     singles = [CandidateBlock(m, lvl, locations, "all") for lvl in s.levels_db for m in methods]
     Ps, _ = _block_probabilities(law, n_samples, b, s.levels_db, singles)
@@ -573,8 +674,14 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
     F = s.n_forearms
     S_f = n_samples // F
     R_f = S_f * s.n_replicates
-    logP = np.log(np.maximum(P, _FLOOR)).reshape(F, S_f, len(cands), P.shape[2], P.shape[3])
-    cum = np.cumsum(P, axis=-1).reshape(F, S_f, len(cands), P.shape[2], P.shape[3])
+    logP = np.log(np.maximum(P, _FLOOR)).reshape(F, S_f, len(by_location), P.shape[2], P.shape[3])
+    cum = np.cumsum(P, axis=-1).reshape(F, S_f, len(by_location), P.shape[2], P.shape[3])
+    # The perceived place's law per sample and stimulus, for the point answers.
+    n_stim, K = law.weight.shape[0] // n_samples, law.weight.shape[1]
+    W = law.weight.reshape(F, S_f, n_stim, K)
+    M = law.mean_m.reshape(F, S_f, n_stim, K, 2)
+    SD = law.sd_m.reshape(F, S_f, n_stim, K)
+    area = point_area_m(b)
     gen = np.repeat(np.arange(S_f), s.n_replicates)
     L = np.zeros((F, R_f, S_f))
     counts = np.zeros(len(cands), dtype=int)
@@ -584,12 +691,22 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
     jj = np.arange(P.shape[2])
 
     def increment(ci: int, rep: int) -> np.ndarray:
-        u = np.random.default_rng([s.seed, 0x6A1E, ci, rep]).random((F, R_f, P.shape[2]))
-        c = cum[:, gen, ci]  # (F, R_f, J, A)
-        a = np.minimum((c < u[..., None] * c[..., -1:]).sum(axis=-1), P.shape[3] - 1)  # (F, R_f, J)
-        lp = logP[:, :, ci]  # (F, S_f, J, A)
+        rng = np.random.default_rng([s.seed, 0x6A1E, ci, rep])
         out = np.zeros((F, R_f, S_f))
-        for j in jj[mask[ci]]:
+        if cands[ci].response == "point":
+            c = cands[ci]
+            idx = _stimulus_index(b, s.levels_db, c.method, c.level_db, c.locations)
+            u, z = rng.random((F, R_f, idx.size)), rng.standard_normal((F, R_f, idx.size, 2))
+            pts = _draw_points(W[:, gen][:, :, idx], M[:, gen][:, :, idx], SD[:, gen][:, :, idx], u, z, area)
+            for j, st in enumerate(idx):  # log-density of every replicate's point under every sample
+                out += _point_logpdf(W[:, None, :, st], M[:, None, :, st], SD[:, None, :, st], pts[:, :, None, j])
+            return out
+        li = row[id(cands[ci])]
+        u = rng.random((F, R_f, P.shape[2]))
+        c = cum[:, gen, li]  # (F, R_f, J, A)
+        a = np.minimum((c < u[..., None] * c[..., -1:]).sum(axis=-1), P.shape[3] - 1)  # (F, R_f, J)
+        lp = logP[:, :, li]  # (F, S_f, J, A)
+        for j in jj[mask[li]]:
             out += np.take_along_axis(lp[:, None, :, j, :], a[:, :, None, j, None], axis=3)[..., 0]
         return out
 
@@ -607,7 +724,7 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
             if key not in cache:  # the same draws whenever this repetition is weighed
                 cache[key] = increment(*key)
             inc = cache[key]
-            new = _information(L + inc, hyp, s.n_replicates)
+            new = _information(L + inc, hyp, s.n_replicates, s.information == "person")
             rate = (new - info) / sizes[ci]
             if rate > best_rate:
                 best, best_rate, best_inc, best_info = int(ci), rate, inc, new
@@ -622,12 +739,12 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
         if progress is not None:
             progress("greedy", used, budget)
     timings["greedy_s"] = time.perf_counter() - t1
-    chosen: dict[tuple[float, tuple[int, ...], int, str], list[str]] = {}
+    chosen: dict[tuple[float, tuple[int, ...], int, str, str], list[str]] = {}
     for ci in np.flatnonzero(counts):
         c = cands[ci]
-        chosen.setdefault((c.level_db, c.locations, int(counts[ci]), c.grid), []).append(c.method)
-    blocks = tuple(PlanBlock(tuple(ms), lvl, locs, reps, grid)
-                   for (lvl, locs, reps, grid), ms in sorted(chosen.items(), key=lambda kv: (-kv[0][0], kv[0][3])))
+        chosen.setdefault((c.level_db, c.locations, int(counts[ci]), c.grid, c.response), []).append(c.method)
+    blocks = tuple(PlanBlock(tuple(ms), lvl, locs, reps, grid, resp) for (lvl, locs, reps, grid, resp), ms in
+                   sorted(chosen.items(), key=lambda kv: (kv[0][4], -kv[0][0], kv[0][3])))
     return ExperimentDesign(s, blocks, steps, conditions, info, used, draws_about, time.perf_counter() - t0,
                             b.levels, timings)
 
@@ -651,18 +768,31 @@ def paper_plan(bank: FeatureBank | None = None) -> tuple[PlanBlock, ...]:
     return (PlanBlock(blk.methods, blk.levels[0], tuple(blk.locations), blk.repetitions, "all"),)
 
 
-def design_protocol_text(design: ExperimentDesign, name: str = "designed-study1") -> str:
+#: The threshold block :func:`design_protocol_text` may put first: the tap with the most
+#: felt energy of the shipped bank (the inverse filter at the centre), from -6 dB re the
+#: level rule, a 1-up-2-down staircase of 30 trials (docs/protocols.md, "Threshold blocks").
+THRESHOLD_BLOCK = {"methods": ("inverse",), "locations": (5,), "start_db": -6.0, "repetitions": 30}
+
+
+def design_protocol_text(design: ExperimentDesign, name: str = "designed-study1", *,
+                         threshold_trials: int = 0) -> str:
     """The design as a protocol file (TOML, docs/protocols.md), checked by the protocol reader.
 
     One block per designed block: its methods, locations, level and repetitions; the
-    participant answers one location per trial (``response = "location"``), among the
-    block's locations. Every block uses each session's own seed for its trial order.
+    participant answers one location per trial among the block's locations
+    (``response = "location"``), or a point on the picture of the arm area
+    (``response = "point"``). Every block uses each session's own seed for its trial order.
+    With ``threshold_trials``, a threshold block (:data:`THRESHOLD_BLOCK`) comes first: each
+    participant's detection threshold is measured, stored and exported; the designed
+    blocks' levels stay in dB re the level rule (the design does not use it).
 
     Parameters
     ----------
     design : ExperimentDesign
     name : str
         The protocol's name.
+    threshold_trials : int
+        Trials of the threshold block first (0: none).
 
     Returns
     -------
@@ -681,12 +811,19 @@ def design_protocol_text(design: ExperimentDesign, name: str = "designed-study1"
         f'name = "{name}"',
         f'description = "designed to tell apart {", ".join(s.hypotheses or ())}; {design.trials} trials"',
     ]
+    if threshold_trials:
+        t = THRESHOLD_BLOCK
+        lines += ["", "[[blocks]]", 'name = "threshold"', 'response = "detection"',
+                  "methods = [" + ", ".join(f'"{m}"' for m in t["methods"]) + "]",
+                  "locations = [" + ", ".join(str(x) for x in t["locations"]) + "]",
+                  f"levels = [{t['start_db']!r}]", f'level_rule = "{design.levels}"', f"repetitions = {int(threshold_trials)}"]
     for k, blk in enumerate(design.blocks):
         lines += [
             "",
             "[[blocks]]",
-            f'name = "b{k + 1}-{blk.level_db:+g}dB-{blk.grid.replace(" ", "-")}"',
-            'response = "location"',
+            f'name = "b{k + 1}-{blk.level_db:+g}dB-{blk.grid.replace(" ", "-")}'
+            + ('-points"' if blk.response == "point" else '"'),
+            f'response = "{blk.response}"',
             "methods = [" + ", ".join(f'"{m}"' for m in blk.methods) + "]",
             "locations = [" + ", ".join(str(x) for x in blk.locations) + "]",
             f"levels = [{float(blk.level_db)!r}]",
@@ -705,8 +842,11 @@ def design_protocol_text(design: ExperimentDesign, name: str = "designed-study1"
 # --------------------------------------------------------------------- P(correct) against N
 def score_tables(plans: dict[str, Sequence[PlanBlock]], hypotheses: Sequence[str], bank: FeatureBank,
                  forearms: Sequence[int], *, n_draws: int = 32, seed: int = SCORE_SEED,
-                 submit: Callable[..., Any] | None = None, population: str | None = None) -> dict[str, np.ndarray]:
+                 submit: Callable[..., Any] | None = None, population: str | None = None) -> dict[str, ScoreTable]:
     """Log-probabilities of every answer of each plan's trials, per hypothesis, forearm and trait draw.
+
+    Location answers are tabulated; for point answers, the perceived place's law is kept
+    (its density is taken at each simulated point).
 
     The trait draws are those of :func:`~vibrofocus.simulation.likelihood.marginal_loglik`
     (``n_draws`` from ``default_rng([seed, 0x11C])``, per hypothesis at its shipped
@@ -732,9 +872,7 @@ def score_tables(plans: dict[str, Sequence[PlanBlock]], hypotheses: Sequence[str
     Returns
     -------
     dict
-        Per plan, an array of shape (n_hypotheses, n_forearms, n_draws, n_plan_stimuli,
-        n_locations); the plan's stimuli in order (each block's methods x locations);
-        ``-inf`` for an answer the model cannot give.
+        Per plan, a :class:`ScoreTable`.
     """
     levels = _plan_levels(*plans.values())
     args = [(plans, name, int(f), bank, levels, n_draws, seed, population) for name in hypotheses for f in forearms]
@@ -743,13 +881,49 @@ def score_tables(plans: dict[str, Sequence[PlanBlock]], hypotheses: Sequence[str
     else:
         parts = [fut.result() for fut in [submit(_score_part, *a, pure=False) for a in args]]
     shape = (len(hypotheses), len(forearms))
+    k = max(x[p][1].shape[-1] for x in parts for p in plans)
+
+    def stacked(p: str, i: int, fill: float) -> np.ndarray:
+        arrays = [x[p][i] for x in parts]
+        pad = [np.pad(a, [(0, 0), (0, 0), (0, k - a.shape[2])] + [(0, 0)] * (a.ndim - 3), constant_values=fill)
+               for a in arrays]
+        return np.stack(pad).reshape(shape + pad[0].shape)
+
     with np.errstate(divide="ignore"):
-        return {p: np.log(np.stack([x[p] for x in parts]).reshape(shape + parts[0][p].shape)) for p in plans}
+        return {p: ScoreTable(np.log(np.stack([x[p][0] for x in parts]).reshape(shape + parts[0][p][0].shape)),
+                              stacked(p, 1, 0.0), stacked(p, 2, 0.0), stacked(p, 3, 1.0)) for p in plans}
+
+
+@dataclass(frozen=True)
+class ScoreTable:
+    """What :func:`score_tables` keeps of a plan, per hypothesis, forearm and trait draw.
+
+    Attributes
+    ----------
+    location : ndarray, shape (n_hypotheses, n_forearms, n_draws, n_location_stimuli, n_locations)
+        Log-probability of each answer to the plan's location-answer stimuli, in order
+        (each such block's methods x locations); ``-inf`` for an answer the model cannot give.
+    point_weight : ndarray, shape (n_hypotheses, n_forearms, n_draws, n_point_stimuli, K)
+        The perceived place's law for the plan's point-answer stimuli, in order: mixture
+        weights,
+    point_mean : ndarray, shape (..., K, 2)
+        means, m,
+    point_sd : ndarray, shape (..., K)
+        and SDs per axis, m (:class:`~vibrofocus.simulation.likelihood.AnswerLaw`).
+    """
+
+    location: np.ndarray
+    point_weight: np.ndarray
+    point_mean: np.ndarray
+    point_sd: np.ndarray
 
 
 def _score_part(plans: dict[str, Sequence[PlanBlock]], name: str, forearm: int, bank: FeatureBank,
-                levels: Sequence[float], n_draws: int, seed: int, population: str | None) -> dict[str, np.ndarray]:
-    """One hypothesis and forearm of :func:`score_tables`: probabilities (n_draws, n_plan_stimuli, n_locations)."""
+                levels: Sequence[float], n_draws: int, seed: int,
+                population: str | None) -> dict[str, tuple[np.ndarray, ...]]:
+    """One hypothesis and forearm of :func:`score_tables`: per plan, the probabilities
+    (n_draws, n_location_stimuli, n_locations) and the point laws' weights, means and SDs
+    (n_draws, n_point_stimuli, K[, 2])."""
     from .hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(name)
@@ -758,17 +932,24 @@ def _score_part(plans: dict[str, Sequence[PlanBlock]], name: str, forearm: int, 
     laws = [_laws(h, m, Traits.draw(m, rng), bank, forearm, levels) for _ in range(n_draws)]
     law = _stack_laws(laws)
     n_stim = laws[0].weight.shape[0]
+    k = law.weight.shape[1]
     by_set: dict[tuple[int, ...], np.ndarray] = {}
     out = {}
     for p, plan in plans.items():
-        rows = []
+        rows, points = [], []
         for blk in plan:
+            if blk.response == "point":
+                points += [_stimulus_index(bank, levels, meth, blk.level_db, blk.locations) for meth in blk.methods]
+                continue
             if blk.locations not in by_set:
                 by_set[blk.locations] = study1_probabilities(law, bank.locations_xy,
                                                              np.asarray(blk.locations) - 1).reshape(n_draws, n_stim, -1)
             for meth in blk.methods:
                 rows.append(by_set[blk.locations][:, _stimulus_index(bank, levels, meth, blk.level_db, blk.locations)])
-        out[p] = np.concatenate(rows, axis=1)
+        pi = np.concatenate(points) if points else np.zeros(0, dtype=int)
+        out[p] = (np.concatenate(rows, axis=1) if rows else np.zeros((n_draws, 0, len(bank.locations_xy))),
+                  law.weight.reshape(n_draws, n_stim, k)[:, pi], law.mean_m.reshape(n_draws, n_stim, k, 2)[:, pi],
+                  law.sd_m.reshape(n_draws, n_stim, k)[:, pi])
     return out
 
 
@@ -778,37 +959,54 @@ def _plan_levels(*plans: Sequence[PlanBlock]) -> list[float]:
 
 
 def _simulate_scores(plan: Sequence[PlanBlock], true: str, hypotheses: Sequence[str], indices: Sequence[int],
-                     bank: FeatureBank, forearms: np.ndarray, table: np.ndarray, seed: int,
+                     bank: FeatureBank, forearms: np.ndarray, table: ScoreTable, seed: int,
                      levels: Sequence[float], population: str | None = None) -> np.ndarray:
     """Simulated participants of hypothesis ``true`` answer the plan; their marginal log-likelihoods (n, H).
 
     Each participant (stream ``[seed, 0xE7A1, hypothesis, index]``) has a forearm drawn
     from ``forearms``, traits from the true hypothesis' shipped population and answers
     from :func:`~vibrofocus.simulation.perception.draw_answers` (the sampler of
-    ``simulate-study``), among each block's locations.
+    ``simulate-study``), among each block's locations; a point answer is the trial's
+    perceived place kept within the picture (as :class:`~vibrofocus.simulation.participants.
+    SimulatedParticipant` answers it).
     """
     from .hypotheses import hypothesis as find_hypothesis
+    from .perception import posterior_ratio_rule
 
     h = find_hypothesis(true)
     m = shipped_model(true, population)
     hi = list(hypotheses).index(true)
     out = np.empty((len(indices), len(hypotheses)))
+    area = point_area_m(bank)
+    seen: dict[str, np.ndarray] = {}
+
+    def rule(posteriors: Any, *args: Any) -> tuple[np.ndarray, np.ndarray]:
+        seen["perceived_m"] = posteriors.perceived_m
+        return posterior_ratio_rule(posteriors, *args)
+
     for row, i in enumerate(indices):
         rng = np.random.default_rng([int(seed), 0xE7A1, hi, int(i)])
         fi = int(rng.integers(len(forearms)))
         traits = Traits.draw(m, rng)
         e, a = _energies(bank, int(forearms[fi]), levels)
         per = h.percepts(e, bank.points_xy, m, traits, a, bank.actuators_xy, bank.locations_xy)
-        total = np.zeros((len(hypotheses), table.shape[2]))
-        col = 0
+        total = np.zeros((len(hypotheses), table.location.shape[2]))
+        col = pcol = 0
         for blk in plan:
             allowed = np.asarray(blk.locations) - 1
             for meth in blk.methods:
                 idx = _stimulus_index(bank, levels, meth, blk.level_db, blk.locations)
                 trials = np.tile(np.arange(len(idx)), blk.repetitions)
                 ans, _, _ = draw_answers(per, idx[trials], bank.locations_xy, bank.centre_xy, m, traits, rng,
-                                         allowed=allowed)
-                total += table[:, fi, :, col + trials, ans].sum(axis=0)  # (trials, H, draws) summed
+                                         allowed=allowed, rule=rule)
+                if blk.response == "point":
+                    pts = np.clip(seen["perceived_m"], area[0], area[1])  # (trials, 2)
+                    c = pcol + trials
+                    total += _point_logpdf(table.point_weight[:, fi][:, :, c], table.point_mean[:, fi][:, :, c],
+                                           table.point_sd[:, fi][:, :, c], pts).sum(axis=2)  # (H, draws)
+                    pcol += len(idx)
+                    continue
+                total += table.location[:, fi, :, col + trials, ans].sum(axis=0)  # (trials, H, draws) summed
                 col += len(idx)
         out[row] = special.logsumexp(total, axis=1) - np.log(total.shape[1])
     return out
@@ -935,7 +1133,7 @@ def identification(
 
 # --------------------------------------------------------------------- the loop
 def participant_loglik(hypothesis: Any, bank: FeatureBank, forearm: int,
-                       trials: Sequence[tuple[str, int, int, float, Sequence[int]]], *, n_draws: int = 32,
+                       trials: Sequence[tuple[str, int, Any, float, Sequence[int]]], *, n_draws: int = 32,
                        seed: int = SCORE_SEED, model: PerceptualModel | None = None) -> float:
     """Marginal log-likelihood of one participant's Study 1 answers under a hypothesis.
 
@@ -944,8 +1142,9 @@ def participant_loglik(hypothesis: Any, bank: FeatureBank, forearm: int,
     from several blocks, each at its own level and with its own allowed answers: per trait
     draw, the log-probabilities of all trials are summed (:class:`~vibrofocus.simulation.
     likelihood.Stimuli` of the bank row at each level, the hypothesis' percepts,
-    :func:`~vibrofocus.simulation.likelihood.answer_law` and :func:`study1_probabilities`),
-    then averaged over the draws.
+    :func:`~vibrofocus.simulation.likelihood.answer_law` and :func:`study1_probabilities`;
+    for a point answer, the density of the perceived place,
+    :func:`~vibrofocus.simulation.likelihood.point_loglik`), then averaged over the draws.
 
     Parameters
     ----------
@@ -956,7 +1155,8 @@ def participant_loglik(hypothesis: Any, bank: FeatureBank, forearm: int,
         Bank row of the participant's forearm.
     trials : sequence of (method, target, answer, level_db, allowed)
         Method, target and answered location numbers (1-based), the level (dB re the
-        bank's rule) and the location numbers that could be answered.
+        bank's rule) and the location numbers that could be answered. A point answer is
+        ``(x, y)`` in m in the layout frame instead of a location number.
     n_draws, seed
         As :func:`~vibrofocus.simulation.likelihood.marginal_loglik`.
     model : PerceptualModel, optional
@@ -968,18 +1168,22 @@ def participant_loglik(hypothesis: Any, bank: FeatureBank, forearm: int,
         Natural log; ``-inf`` if an answer is impossible under every draw.
     """
     from .hypotheses import hypothesis as find_hypothesis
-    from .likelihood import Stimuli
+    from .likelihood import Stimuli, point_loglik
 
     h = find_hypothesis(hypothesis)
     m = model or h.model()
     n_loc = len(bank.locations_xy)
     groups: dict[tuple[float, tuple[int, ...]], list[tuple[int, int]]] = {}
+    points: dict[float, list[tuple[int, float, float]]] = {}
     for meth, target, answer, level, allowed in trials:
         if meth not in bank.methods:
             raise ValidationError(f"the feature bank has no stimuli of {meth!r} (it has {', '.join(bank.methods)})")
-        groups.setdefault((float(level), tuple(sorted(int(a) for a in allowed))), []).append(
-            (bank.methods.index(meth) * n_loc + int(target) - 1, int(answer) - 1))
-    stimuli = {lvl: Stimuli.from_bank(bank, forearm, lvl) for lvl, _ in groups}
+        stim = bank.methods.index(meth) * n_loc + int(target) - 1
+        if isinstance(answer, (tuple, list, np.ndarray)):
+            points.setdefault(float(level), []).append((stim, float(answer[0]), float(answer[1])))
+        else:
+            groups.setdefault((float(level), tuple(sorted(int(a) for a in allowed))), []).append((stim, int(answer) - 1))
+    stimuli = {lvl: Stimuli.from_bank(bank, forearm, lvl) for lvl in {g[0] for g in groups} | set(points)}
     rng = np.random.default_rng([int(seed), 0x11C])
     total = np.zeros(n_draws)
     for k in range(n_draws):
@@ -992,6 +1196,11 @@ def participant_loglik(hypothesis: Any, bank: FeatureBank, forearm: int,
             p = study1_probabilities(law, st.locations_xy, np.asarray(allowed) - 1)[np.arange(idx.size), ans]
             with np.errstate(divide="ignore"):
                 total[k] += np.log(p).sum()
+        for lvl, rows in points.items():
+            st = stimuli[lvl]
+            idx = np.array([r[0] for r in rows])
+            law = answer_law(per[lvl], idx, st.centre_xy, m, traits, study=1)
+            total[k] += point_loglik(law, np.array([r[1:] for r in rows])).sum()
     return float(special.logsumexp(total) - np.log(n_draws))
 
 
@@ -1000,7 +1209,7 @@ def choose_hypothesis(db: Any, bank: FeatureBank, hypotheses: Sequence[str] | No
     """Model choice on a study database: the hypothesis of the largest marginal likelihood of its Study 1 answers.
 
     Every participant's main-phase Study 1 answers (all blocks, each at its level and with
-    its own locations as the allowed answers) are scored by :func:`participant_loglik`
+    its own locations as the allowed answers; a point block's points as points) are scored by :func:`participant_loglik`
     under each hypothesis at its shipped parameters; the hypotheses' log-likelihoods are
     summed over participants (a uniform prior). Participant ``sim-00k`` of
     ``simulate-study --seed S`` is row ``k - 1`` of a bank built with the same seed
@@ -1042,10 +1251,14 @@ def choose_hypothesis(db: Any, bank: FeatureBank, hypotheses: Sequence[str] | No
         for sess in store.sessions(pid, study=1):
             d = sess.design
             plan = {t.trial_index: t for t in store.planned_trials(sess.session_id)}
+            if d.detection:
+                continue  # a threshold block: its answers set levels, they are not scored here
             for a in store.answers(sess.session_id):
                 t = plan[a.trial_index]
                 if t.phase == "main":
-                    trials.append((t.method, t.target, int(a.response[0]), float(d.level_db), d.locations))
+                    answer = (tuple(v * 1e-3 for v in a.point_mm) if d.point and a.point_mm is not None
+                              else int(a.response[0]))
+                    trials.append((t.method, t.target, answer, float(d.level_db), d.locations))
         if trials:
             per[pid] = {h: participant_loglik(h, bank, row, trials, n_draws=n_draws, seed=seed) for h in names}
     total = {h: float(sum(v[h] for v in per.values())) for h in names}
@@ -1076,7 +1289,8 @@ def design_report(design: ExperimentDesign, ident: dict[str, Any] | None = None)
         "settings": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(s).items()},
         "levels": design.levels,
         "blocks": [{"methods": list(b.methods), "level_db": b.level_db, "locations": list(b.locations),
-                    "repetitions": b.repetitions, "grid": b.grid, "trials": b.n_trials} for b in design.blocks],
+                    "repetitions": b.repetitions, "grid": b.grid, "response": b.response, "trials": b.n_trials}
+                   for b in design.blocks],
         "trials": design.trials,
         "information_nats": design.information_nats,
         "steps": design.steps,
@@ -1101,11 +1315,11 @@ def _markdown(report: dict[str, Any]) -> str:
              f"Hypotheses: {', '.join(report['hypotheses'])}. {report['trials']} Study 1 trials per participant; "
              f"expected information about the hypothesis {report['information_nats']:.3f} nats per participant "
              f"(at most {np.log(len(report['hypotheses'])):.3f}). Levels in dB re the {report['levels']} levels.", "",
-             "## Designed blocks", "", "| methods | level (dB) | locations | repetitions | trials |",
-             "|---|---|---|---|---|"]
+             "## Designed blocks", "", "| methods | level (dB) | locations | answer | repetitions | trials |",
+             "|---|---|---|---|---|---|"]
     for b in report["blocks"]:
         lines.append(f"| {', '.join(b['methods'])} | {b['level_db']:+g} | {' '.join(map(str, b['locations']))} "
-                     f"({b['grid']}) | {b['repetitions']} | {b['trials']} |")
+                     f"({b['grid']}) | {b['response']} | {b['repetitions']} | {b['trials']} |")
     ident = report.get("identification")
     if ident:
         ns = ident["settings"]["n_participants"]
@@ -1181,7 +1395,7 @@ def _figures(report: dict[str, Any], bank: FeatureBank) -> tuple[Any, Any]:
 
 
 def write_design(design: ExperimentDesign, out: Any, *, ident: dict[str, Any] | None = None,
-                 bank: FeatureBank | None = None, name: str = "designed-study1") -> list[Any]:
+                 bank: FeatureBank | None = None, name: str = "designed-study1", threshold_trials: int = 0) -> list[Any]:
     """Write ``protocol.toml``, ``design.json``, ``design.md`` and two figures into folder ``out``.
 
     Parameters
@@ -1195,6 +1409,8 @@ def write_design(design: ExperimentDesign, out: Any, *, ident: dict[str, Any] | 
         For the map (default the shipped bank).
     name : str
         The protocol's name.
+    threshold_trials : int
+        As :func:`design_protocol_text`.
 
     Returns
     -------
@@ -1213,7 +1429,8 @@ def write_design(design: ExperimentDesign, out: Any, *, ident: dict[str, Any] | 
 
     folder = Path(out)
     report = design_report(design, ident)
-    paths = [write_text(folder / "protocol.toml", design_protocol_text(design, name), what="protocol"),
+    paths = [write_text(folder / "protocol.toml", design_protocol_text(design, name, threshold_trials=threshold_trials),
+                        what="protocol"),
              write_text(folder / "design.json", json.dumps(json_safe(report), indent=1) + "\n", what="design"),
              write_text(folder / "design.md", _markdown(report), what="design report")]
     fig1, fig2 = _figures(report, bank if bank is not None else default_bank())

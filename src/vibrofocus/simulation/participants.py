@@ -9,8 +9,10 @@ into the study engine as a responder.
 Per stimulus (drive signals on the participant's simulated forearm) the peripheral
 stage (felt energy on an 11 x 11 skin grid) is computed once and cached by the drives'
 hash; each trial then costs a few numpy operations. Every random draw is seeded from the
-participant seed (traits) and, per trial, from ``(seed, study, trial_index)``: a resumed
-session gets the answers an uninterrupted one would have given.
+participant seed (traits) and, per trial, from ``(seed, study, trial_index)`` in a
+protocol's first block (the paper's studies) and ``(seed, study, trial_index, block)`` in
+a later one, so that every trial of a participant has its own stream: a resumed session
+gets the answers an uninterrupted one would have given.
 """
 
 from __future__ import annotations
@@ -135,7 +137,8 @@ class SimulatedParticipant:
                                                             self.actuators_xy, self.locations_xy))
         return self._cache[key][1]
 
-    def answer(self, drives: np.ndarray, study: int, trial_index: int, design: StudyDesign | None = None) -> Response:
+    def answer(self, drives: np.ndarray, study: int, trial_index: int, design: StudyDesign | None = None,
+               block: int = 0) -> Response:
         """The model's answer to one trial.
 
         Parameters
@@ -144,7 +147,7 @@ class SimulatedParticipant:
             The stimulus, V.
         study : {1, 2}
         trial_index : int
-            Seeds the trial's noise together with the participant seed and the study.
+            Seeds the trial's noise together with the participant seed, the study and the block.
         design : StudyDesign, optional
             Which locations may be answered (default all of the layout's). A point design
             (``design.point``) gets a point answer: the trial's perceived place (the
@@ -155,14 +158,22 @@ class SimulatedParticipant:
             gets whether the tap was felt: 1 where some skin point's felt energy exceeds the
             participant's own threshold (:func:`~vibrofocus.simulation.perception.felt_threshold`,
             the hypothesis' reference sensation level and the participant's offset), else 0.
+        block : int
+            The session's block of its protocol (:attr:`Presentation.block`). A trial index
+            restarts in every block, so a later block's trials draw from streams of their
+            own, ``(seed, study, trial_index, block)``; block 0's are ``(seed, study,
+            trial_index)``, so that the paper's studies keep their answers.
         """
         if study not in (1, 2):
             raise StudyError(f"study must be 1 or 2, got {study!r}")
+        if isinstance(block, bool) or not isinstance(block, (int, np.integer)) or block < 0:
+            raise StudyError(f"block must be a non-negative integer, got {block!r}")
         p = self.percept(drives)
+        key = [self.seed, int(study), int(trial_index)] + ([int(block)] if block else [])
         if design is not None and design.detection:
-            rt = float(np.random.default_rng([self.seed, int(study), int(trial_index)]).lognormal(np.log(0.6), 0.3))
+            rt = float(np.random.default_rng(key).lognormal(np.log(0.6), 0.3))
             return Response((int(bool(p.felt[0])),), rt)
-        rng = np.random.default_rng([self.seed, int(study), int(trial_index)])
+        rng = np.random.default_rng(key)
         allowed = np.asarray(design.locations if design is not None else range(1, len(self.locations_xy) + 1)) - 1
         seen: dict[str, np.ndarray] = {}
 
@@ -190,7 +201,8 @@ class SimulatedParticipant:
     def respond(self, presentation: Presentation) -> Response:
         """Answer a presented trial (the :class:`Responder` protocol)."""
         return self.answer(
-            presentation.stimulus.drives, presentation.study, presentation.trial.trial_index, presentation.design
+            presentation.stimulus.drives, presentation.study, presentation.trial.trial_index, presentation.design,
+            presentation.block,
         )
 
     def wait_resume(self) -> bool:

@@ -513,6 +513,9 @@ class Presentation:
     onset_latency_s : float or None
         How long after ``onset_s`` the drive left the device's output, s, where the rig
         knows it (:attr:`vibrofocus.rigs.DeviceOnset.latency_s`).
+    block : int
+        The session's block of its protocol (0 for the paper's studies and a session
+        planned without a protocol; docs/protocols.md).
     """
 
     session_id: int
@@ -524,6 +527,7 @@ class Presentation:
     onset_device_s: float | None = None
     onset_clock: str | None = None
     onset_latency_s: float | None = None
+    block: int = 0
 
 
 @dataclass(frozen=True)
@@ -833,7 +837,8 @@ class StudyEngine:
         self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=stim is not None, level_db=level_db,
                      onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency,
                      replay=self._presented_before(trial))
-        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency)
+        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency,
+                            block=int(self._marked["block"]))
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
         """Commit the answer to a presented trial (with the drive hash and the onset) before returning.

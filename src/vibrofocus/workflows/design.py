@@ -36,7 +36,8 @@ class DesignOutcome:
 def design_study(settings: Any, *, participants: list[int], studies: int, bank: Path | None = None,
                  calibration: Path | None = None, pool: int = 8, score_forearms: int = 8, score_draws: int = 32,
                  scheduler: str | None = None, workers: int | None = None, local: bool = False,
-                 out: Path | None = None, progress: Progress | None = None) -> DesignOutcome:
+                 out: Path | None = None, threshold_trials: int = 0,
+                 progress: Progress | None = None) -> DesignOutcome:
     """Design the Study 1 blocks of ``settings``, check them by simulation, and write them.
 
     Parameters
@@ -56,6 +57,9 @@ def design_study(settings: Any, *, participants: list[int], studies: int, bank: 
         The check's Dask options, as ``power``'s.
     out : Path, optional
         Folder for protocol.toml and the report (checked before the design runs).
+    threshold_trials : int
+        Trials of a threshold block put first in protocol.toml (0: none;
+        :func:`~vibrofocus.simulation.design.design_protocol_text`).
     progress : Progress, optional
         Notes of the design's and the check's times.
 
@@ -98,5 +102,5 @@ def design_study(settings: Any, *, participants: list[int], studies: int, bank: 
                                n_forearms=score_forearms, n_draws=score_draws, bank=fb, scheduler=scheduler,
                                n_workers=workers, local=local, population=settings.population)
         progress.note(f"checked in {ident['elapsed_s']:.1f} s")
-    paths = write_design(design, out, ident=ident, bank=fb) if out is not None else []
+    paths = write_design(design, out, ident=ident, bank=fb, threshold_trials=threshold_trials) if out is not None else []
     return DesignOutcome(design, ident, design_report(design, ident), paths)
