@@ -27,7 +27,7 @@ def test_a_layout_reads_back_equal_and_a_rig_takes_the_file(tmp_path):
 
 
 @pytest.mark.parametrize(("content", "says"), [
-    ("{", "is not a JSON layout file"),
+    ("{", "is not UTF-8 JSON"),
     ('{"format": "vibrofocus layout", "version": 2, "layout": {}}', "version 2"),
     ('{"format": "vibrofocus layout", "version": 1, "layout": {"actuators_xy": [[0, 0]]}}', "'locations_xy'"),
     ("[1, 2]", "must be a JSON object"),

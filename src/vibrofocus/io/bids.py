@@ -35,6 +35,7 @@ from typing import Any
 
 from .._validation import shorten
 from ..errors import OutputError, ValidationError
+from ._capped import read_capped_json
 from .jsonsafe import json_safe
 
 __all__ = ["BIDS_VERSION", "EVENT_COLUMNS", "EVENT_COLUMN_DESCRIPTIONS", "TASKS", "TASK_INFO", "METADATA_KEYS",
@@ -335,17 +336,7 @@ def read_bids_metadata_file(path: str | os.PathLike) -> dict[str, Any]:
 
     path = Path(path)
     protect(path, "BIDS metadata template")
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read(_MAX_TEMPLATE_BYTES + 1)
-    except OSError as exc:
-        raise ValidationError(f"cannot read the BIDS metadata file {path}: {exc.strerror or exc}") from None
-    if len(raw) > _MAX_TEMPLATE_BYTES:
-        raise ValidationError(f"the BIDS metadata file {path} is larger than {_MAX_TEMPLATE_BYTES:,} bytes")
-    try:
-        data = json.loads(raw.decode("utf-8"))
-    except (ValueError, UnicodeDecodeError, RecursionError) as exc:
-        raise ValidationError(f"the BIDS metadata file {path} is not UTF-8 JSON ({shorten(str(exc))})") from None
+    data = read_capped_json(path, max_bytes=_MAX_TEMPLATE_BYTES, what="BIDS metadata file")
     if not isinstance(data, dict):
         raise ValidationError(f"the BIDS metadata file {path} must hold a JSON object, got {type(data).__name__}")
     return check_bids_metadata({k: v for k, v in data.items() if k not in _OWN_DESCRIPTION_KEYS},

@@ -17,6 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from ..errors import ValidationError
+from ._capped import read_capped_json
 from .jsonsafe import json_safe
 
 __all__ = ["LAYOUT_FORMAT", "read_layout_json", "write_layout_json"]
@@ -74,17 +75,7 @@ def read_layout_json(path: str | os.PathLike) -> dict[str, Any]:
         The file cannot be read, is too large, is not JSON or lacks the layout's keys.
     """
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            raw = fh.read(_MAX_BYTES + 1)
-    except OSError as exc:
-        raise ValidationError(f"cannot read the layout {path}: {exc.strerror or exc}") from None
-    if len(raw) > _MAX_BYTES:
-        raise ValidationError(f"{path} is over {_MAX_BYTES // 1024 // 1024} MiB: not a layout file")
-    try:
-        content = json.loads(raw.decode("utf-8"))
-    except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError
-        raise ValidationError(f"{path} is not a JSON layout file: {exc}") from None
+    content = read_capped_json(path, max_bytes=_MAX_BYTES, what="layout file")
     if isinstance(content, dict) and "format" in content:
         if content["format"] != LAYOUT_FORMAT or content.get("version") != 1:
             raise ValidationError(f"{path} is a {content['format']!r} file version {content.get('version')!r}, "
