@@ -627,7 +627,7 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
     info = web.session(session_id)
     if info["status"] == "aborted" and action != "stop":
         raise HTTPException(409, detail=(
-            f"Session {session_id} was stopped, and a stop is final. To go on with this participant, plan a new session."))
+            f"Session {session_id} was aborted, and an abort is final. To go on with this participant, plan a new session."))
     try:
         status = action_status(action, session_id, info["status"])
         if status == "running" and info.get("calibration_id") is not None:
