@@ -12,7 +12,7 @@ import math
 
 import pytest
 
-from .conftest import Server, free_port, login
+from .conftest import login, serving
 from .test_participant_browser import open_page, start, wait_respond
 
 pytestmark = pytest.mark.browser
@@ -47,13 +47,8 @@ PLACEHOLDER_JS = """
 
 @pytest.fixture(scope="module")
 def served(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("layout")
-    srv = Server(tmp / "studies.sqlite", free_port(), tmp / "server.log")
-    srv.start()
-    try:
+    with serving(tmp_path_factory.mktemp("layout")) as srv:
         yield srv
-    finally:
-        srv.stop()
 
 
 @pytest.fixture
