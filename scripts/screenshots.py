@@ -2,7 +2,9 @@
 
 Starts ``vibrofocus serve`` on a free localhost port with a temporary database, calibrates
 a simulated participant, plans and starts a Study 2 session, answers a few trials in the
-participant page, and writes docs/screenshots/experimenter.png and participant.png.
+participant page, and writes docs/screenshots/experimenter.png and participant.png; then
+pauses the session and opens its "Abort for good?" question for experimenter-abort.png
+(1280x720) and experimenter-phone.png (the sessions card, 390 px wide).
 
 Needs Debian's chromium (/usr/bin/chromium) and the playwright Python package::
 
@@ -28,6 +30,7 @@ CHROMIUM_ARGS = [
     "--disable-background-networking", "--disable-component-update", "--disable-sync",
 ]
 TOKEN = "screenshots-" + "t" * 20
+NAMES = ("experimenter.png", "participant.png", "experimenter-abort.png", "experimenter-phone.png")
 
 
 def main() -> None:
@@ -96,11 +99,36 @@ def main() -> None:
                                       timeout=60_000)
                 exp.wait_for_timeout(300)
                 exp.screenshot(path=str(args.out / "experimenter.png"), full_page=True)
+                _abort_question(ctx, base, args.out)
                 browser.close()
         finally:
             proc.terminate()
-            proc.wait(10)
-    print(f"wrote {args.out / 'experimenter.png'} and {args.out / 'participant.png'}")
+            try:
+                proc.wait(60)  # a loaded machine takes a while to shut the server down
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait(10)
+    print(f"wrote {', '.join(NAMES)} in {args.out}")
+
+
+def _abort_question(ctx, base: str, out: Path) -> None:
+    """The sessions card with the question "Abort session N for good?" open, at 1280x720,
+    and the same card on a 390 px phone."""
+    exp = ctx.new_page()
+    exp.set_viewport_size({"width": 1280, "height": 720})
+    exp.goto(f"{base}/")
+    exp.wait_for_selector("#participant-card")
+    exp.click("#sessions button[data-action=pause]")
+    exp.locator("#sessions td.status.paused").wait_for()
+    exp.click("#sessions button[data-action=stop]")
+    exp.locator("#sessions .confirm-stop").wait_for()
+    exp.mouse.move(5, 5)
+    exp.wait_for_timeout(300)
+    exp.locator("#sessions-card").screenshot(path=str(out / "experimenter-abort.png"))
+    exp.set_viewport_size({"width": 390, "height": 844})
+    exp.wait_for_timeout(300)
+    exp.locator("#sessions-card").screenshot(path=str(out / "experimenter-phone.png"))
+    exp.keyboard.press("Escape")  # Keep it
 
 
 def _wait_up(base: str, headers: dict[str, str]) -> None:

@@ -26,6 +26,7 @@ FLOORS = (
     ("errors", "defaults", "_docs", "_style", "_templates", "_interrupts",  # constants, messages, signals,
      "_deprecated"),                                          # former names that warn
     ("_oserrors", "_validation", "_safe_folders", "_owners"),  # error wording, the shared checks, shared folders
+    ("_db_files",),                                           # where a study database's files go
     ("_output_rules", "_stop_client"),                        # what an output may replace; the terminal stop
     ("_disk_checks", "_atomic_folders", "_confined"),         # free space, whole folders, below a root
     ("_atomic",),                                             # atomic files (re-exports the four above)

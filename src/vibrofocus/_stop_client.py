@@ -18,6 +18,7 @@ import sys
 import time
 from pathlib import Path
 
+from ._db_files import files_dir
 from ._owners import owner_name
 from .errors import ValidationError
 
@@ -46,7 +47,7 @@ def stop_socket_path(db_path: str | os.PathLike) -> Path | None:
         too long for a Unix socket.
     """
     db = Path(db_path).resolve()
-    primary = db.parent / f"{db.stem}-files" / "stop.sock"
+    primary = files_dir(db) / "stop.sock"
     if len(os.fsencode(primary)) <= _MAX_SOCKET_PATH:
         return primary
     runtime = os.environ.get("XDG_RUNTIME_DIR")

@@ -206,3 +206,41 @@ def test_saved_arrays_carry_checksums(saved):
     with h5py.File(saved, "r") as h5:
         unchecked = [name for name in names if not h5[name].fletcher32]
     assert "H_real" in names and unchecked == []
+
+
+def test_a_simulated_calibration_is_stored_in_steps_of_its_noise_and_half_the_size(simulated_calibration, tmp_path):
+    # Issue 54, item 11: each simulated calibration took 16 MB, more than its float32
+    # recordings alone (12 MB of noise that zlib hardly shrinks).
+    from vibrofocus.io.calibration_nc import RECORDING_STEP_OF_NOISE
+
+    cal = simulated_calibration[1]
+    path = save_calibration(cal, tmp_path / "sim.nc")
+    assert path.stat().st_size < 0.75 * cal.recordings.astype(np.float32).nbytes, path.stat().st_size
+    back = load_calibration(path)
+    for name in ("H", "coherence", "drives"):  # without loss: designs from the file are those from memory
+        np.testing.assert_array_equal(getattr(back, name), getattr(cal, name), err_msg=name)
+    step = np.nanmin(cal.quality.noise_rms_m) * RECORDING_STEP_OF_NOISE
+    assert back.recordings.dtype == np.float32
+    assert np.array_equal(np.isnan(back.recordings), np.isnan(cal.recordings)) and np.isnan(cal.recordings).any()
+    error = np.nanmax(np.abs(back.recordings.astype(float) - cal.recordings))
+    assert error <= 0.5 * step + 1e-6 * np.nanmax(np.abs(cal.recordings)), (error, step)
+    # A plain netCDF reader unpacks it alike (CF scale_factor and _FillValue).
+    with xr.open_dataset(path, engine="h5netcdf") as ds:
+        np.testing.assert_allclose(ds["recording"].values, back.recordings, rtol=1e-6, atol=1e-6 * step)
+
+
+def test_a_calibration_file_with_float32_recordings_still_loads(simulated_calibration, tmp_path):
+    # Files written before the packing hold float32 recordings (and uncompressed H).
+    cal = simulated_calibration[1]
+    packed = save_calibration(cal, tmp_path / "packed.nc")
+
+    def as_before(ds):
+        ds["recording"] = ds["recording"].astype(np.float32)
+        for var in ds.variables.values():
+            var.encoding = {}
+        return ds
+
+    old = rewrite_netcdf(packed, tmp_path / "old.nc", as_before)
+    with h5py.File(old, "r") as h5:
+        assert h5["recording"].dtype == np.float32 and h5["H_real"].compression is None
+    np.testing.assert_array_equal(load_calibration(old).recordings, load_calibration(packed).recordings)

@@ -154,7 +154,7 @@ def test_2_study_export_onto_its_own_database_even_by_a_hard_link_or_with_force(
 
 
 def test_2_study_export_onto_a_calibration_the_database_lists(ws):
-    listed = next((ws["seed"] / "study.db.calibrations").glob("*.nc"))
+    listed = next((ws["seed"] / "study-files" / "calibrations").glob("*.nc"))
     link = ws["folder"] / "trials.csv"
     link.symlink_to(listed)
     run_checked(ws, ["study", "export", "--db", ws["db"], "--out", link, "--force"], "calibration", "same file")
@@ -468,7 +468,7 @@ def test_low_items(ws, args, needle):
     out = run_checked(ws, [a.format(**fill) if len(a) < 200 else a for a in args], needle)
     assert max(len(line) for line in out.splitlines()) < 400  # no message echoes unbounded input
     assert not (ws["folder"] / "a").exists() and not (ws["folder"] / "demo").exists()
-    assert not (ws["folder"] / "x.db.calibrations").exists()
+    assert not (ws["folder"] / "x-files").exists()
 
 
 def test_a_refused_simulate_study_leaves_no_calibration_folder(ws):

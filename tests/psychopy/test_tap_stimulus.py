@@ -30,7 +30,8 @@ class Recorder:
 def test_in_process_levels_onsets_and_the_data_file():
     rig = make_rig("simulated", seed=4)
     exp = Recorder()
-    with TapStimulus.in_process(rig, name="vib", grid_pitch_m=5e-3) as tap:
+    said = []
+    with TapStimulus.in_process(rig, name="vib", grid_pitch_m=5e-3, report=said.append) as tap:
         design = rig.check(tap._backend.designer.drives_at(5))
         for level in (0.0, -6.0, -12.0):
             tap.set(location=5, level_db=level).play()
@@ -55,6 +56,12 @@ def test_in_process_levels_onsets_and_the_data_file():
     # Over the limit: the safety layer refuses, nothing plays, the reason is kept.
     assert not over.played and over.tap_id is None and "drive refused" in over.error
     assert rig.n_played == 4
+    # Issue 54, item 9: the start (42 s with the default grid) said nothing. It says each
+    # stage, the grid's rows with the time left, and when it is ready.
+    assert said[0].startswith("vibrofocus: evaluating the skin model on the grid"), said
+    grid = [line.split()[2].split("/") for line in said if line.startswith("vibrofocus: grid ")]
+    assert grid[0][0] == "0" and grid[-1][0] == grid[-1][1], said
+    assert said[-1].startswith("vibrofocus: ready in "), said
 
 
 def test_through_serve_osc_with_its_tap_ids_and_onsets():

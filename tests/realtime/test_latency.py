@@ -83,3 +83,17 @@ def test_cli_errors_are_one_line(tmp_path, args, needle):
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], lines
+
+
+def test_cli_says_at_once_that_the_simulated_rig_has_no_latency():
+    # Issue 54, item 9: the first line came after the imports and the rig (14 s here),
+    # and only the last one said why the simulated rig reads 0 ms.
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    result = CliRunner().invoke(app, ["latency", "--count", "2", "--spacing", "0"])
+    assert result.exit_code == 0, result.output
+    first = result.output.splitlines()[0]
+    assert first.startswith("playing 2 clicks") and "no latency by construction" in first, first
+    assert "onset latency: mean 0.000 ms" in result.output

@@ -7,6 +7,7 @@ Python API (never a downloaded browser) and are skipped when it is missing.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import socket
@@ -14,6 +15,7 @@ import sqlite3
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
@@ -122,14 +124,21 @@ def login(page, server: Server) -> None:
     page.wait_for_selector("#participant-card")
 
 
-@pytest.fixture
-def server(tmp_path):
-    srv = Server(tmp_path / "studies.sqlite", free_port(), tmp_path / "server.log")
+@contextlib.contextmanager
+def serving(folder: Path) -> Iterator[Server]:
+    """A started :class:`Server` with its database and log in ``folder``, always stopped."""
+    srv = Server(folder / "studies.sqlite", free_port(), folder / "server.log")
     srv.start()
     try:
         yield srv
     finally:
         srv.stop()
+
+
+@pytest.fixture
+def server(tmp_path):
+    with serving(tmp_path) as srv:
+        yield srv
 
 
 @pytest.fixture

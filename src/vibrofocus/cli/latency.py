@@ -46,8 +46,6 @@ def latency(
     with user_errors():
         from .._atomic import allow_overwrite, check_writable, save_figure
         from ..errors import ValidationError
-        from ..realtime import latency_figure, measure_latency
-        from ..rigs import make_rig
 
         allow_overwrite(force)
         check_rig_options(rig, rig_config)
@@ -55,9 +53,14 @@ def latency(
             if figure.suffix.lower() != ".png":
                 raise ValidationError(f"--figure {figure}: use a .png file name")
             check_writable(figure, what="latency figure")
-        if not as_json:
-            typer.echo(f"playing {count} clicks {spacing:g} s apart on the {rig} rig (about "
-                       f"{count * spacing:.0f} s)...")
+        if not as_json:  # said before the imports and the rig (seconds): never a silent start
+            typer.echo(f"playing {count} clicks {spacing:g} s apart on the {rig} rig ({count * spacing:.0f} s of "
+                       "clicks once it is open)..." + (" It has no latency by construction: this checks the "
+                                                      "measurement, which should read 0 ms."
+                                                      if rig == "simulated" else ""))
+        from ..realtime import latency_figure, measure_latency
+        from ..rigs import make_rig
+
         with make_rig(rig, config=rig_config, seed=seed) as the_rig:
             report = measure_latency(the_rig, count=count, spacing_s=spacing, loopback=loopback, channel=channel,
                                      amplitude_v=amplitude_v)

@@ -57,6 +57,8 @@ def serve_osc(
     Needs pip install 'vibrofocus[osc]'.
     """
     with user_errors(interrupt_message="serve-osc stopped; all outputs at zero"):
+        # At once, before the imports (seconds): the start takes about a minute on the simulated rig.
+        err_console.print(f"serve-osc: starting on the {rig} rig; each step is said as it begins ...", highlight=False)
         from ..workflows import serve_live_taps
 
         check_rig_options(rig, rig_config)
@@ -66,10 +68,23 @@ def serve_osc(
 
 
 class _Lines:
-    """The live-taps workflow's lines: stdout, or stderr (warnings in colour)."""
+    """The live-taps workflow's lines: stdout, or stderr (warnings in colour); its steps as
+    a bar on stderr at a terminal, else as lines with the time left (cli/_progress.py)."""
+
+    def __init__(self) -> None:
+        self._bar, self._task = None, None
 
     def step(self, done: int, total: int, message: str) -> None:
-        pass
+        if self._bar is None:
+            from ._progress import progress_bar
+
+            self._bar = progress_bar(err_console, transient=True)
+            self._bar.start()
+            self._task = self._bar.add_task(message, total=total)
+        self._bar.update(self._task, completed=done, total=total, description=message)
+        if done >= total:
+            self._bar.stop()
+            self._bar = None
 
     def note(self, message: str, **details) -> None:
         if details.get("danger"):

@@ -27,7 +27,7 @@ def simulate_study(
         None, "--trials-csv", help="Also write the trials file here (never over the database or a calibration)."
     ),
     calibration_dir: Path | None = typer.Option(
-        None, "--calibration-dir", help="Where calibration files go (default: <db>.calibrations/ beside the database)."
+        None, "--calibration-dir", help="Where calibration files go (default: <db stem>-files/calibrations/ beside the database)."
     ),
     quiet: bool = typer.Option(False, "--quiet", "-q", help="No progress bar."),
     force: bool = force_option(),

@@ -23,9 +23,11 @@ import os
 import re
 import socket
 import struct
+import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from typing import Any
 
@@ -39,6 +41,11 @@ __all__ = ["TapStimulus", "TapResult", "DATA_FIELDS"]
 #: The fields :meth:`TapStimulus.store` adds to the data file, as ``<name>.<field>``.
 DATA_FIELDS = ("tap_id", "level_db", "method", "location", "x_mm", "y_mm", "asked_host_s", "onset_host_s",
                "onset_device_s", "onset_clock", "error")
+
+
+def _say(line: str) -> None:
+    """A line on stderr, flushed (the default ``report`` of :meth:`TapStimulus.in_process`)."""
+    print(line, file=sys.stderr, flush=True)
 
 
 @dataclass(frozen=True)
@@ -160,7 +167,8 @@ class TapStimulus:
     @classmethod
     def in_process(cls, rig: Any = "simulated", *, calibration: str | os.PathLike | None = None,
                    rig_config: Any = None, seed: int | None = None, anywhere: bool = True,
-                   grid_pitch_m: float | None = None, **kwargs: Any) -> "TapStimulus":
+                   grid_pitch_m: float | None = None, report: Callable[[str], Any] | None = _say,
+                   **kwargs: Any) -> "TapStimulus":
         """Taps played on a rig this process opens (and closes with :meth:`close`).
 
         Parameters
@@ -181,6 +189,10 @@ class TapStimulus:
         grid_pitch_m : float, optional
             Pitch of that evaluation grid, m (default
             :data:`vibrofocus.realtime.GRID_PITCH_M`).
+        report : callable or None
+            Called with a line of text as the start goes (what it prepares, then the grid's
+            progress at most every 10 s with the time left, then the time it took); default:
+            the line on stderr (PsychoPy's Runner shows it). None: nothing is said.
         **kwargs
             ``name``, ``method``, ``timeout_s`` of :class:`TapStimulus`.
 
@@ -189,7 +201,7 @@ class TapStimulus:
         TapStimulus
         """
         backend = _RigBackend(rig, calibration, rig_config, seed, kwargs.get("method", "inverse"), anywhere,
-                              grid_pitch_m)
+                              grid_pitch_m, report=report)
         return cls(backend, **kwargs)
 
     # -- the next tap --------------------------------------------------------------------
@@ -529,16 +541,45 @@ def _error_fits(reason: str):
     return lambda w: isinstance(w, _Asked)
 
 
+class _Stages:
+    """The lines of a start that takes tens of seconds: each stage, the grid's rows at most
+    every 10 s with the time left, and the time it took."""
+
+    EVERY_S = 10.0
+
+    def __init__(self, report: Callable[[str], Any] | None) -> None:
+        self.report, self.start, self.last = report, time.monotonic(), None
+
+    def __call__(self, line: str) -> None:
+        if self.report is not None:
+            self.report(f"vibrofocus: {line}")
+
+    def rows(self, done: int, total: int) -> None:
+        now = time.monotonic()
+        if done < total and self.last is not None and now - self.last < self.EVERY_S:
+            return
+        self.last = now
+        spent = now - self.start
+        left = f", about {spent * (total - done) / done:.0f} s left" if 0 < done < total else ""
+        self(f"grid {done}/{total} rows ({spent:.0f} s{left})")
+
+    def done(self) -> None:
+        self(f"ready in {time.monotonic() - self.start:.0f} s")
+
+
 class _RigBackend:
     """Plays on a rig of this process, each play on a worker thread (in the order asked)."""
 
     def __init__(self, rig: Any, calibration: Any, rig_config: Any, seed: int | None, method: str,
-                 anywhere: bool = True, grid_pitch_m: float | None = None) -> None:
+                 anywhere: bool = True, grid_pitch_m: float | None = None,
+                 report: Callable[[str], Any] | None = None) -> None:
         from ..realtime import GRID_PITCH_M, TapDesigner
         from ..rendering import TransferMatrix
         from ..rigs import make_rig
 
+        say = _Stages(report)
         if isinstance(rig, str):
+            say(f"opening the {rig} rig and designing its taps ...")
             self._rig, self._owned = make_rig(rig, config=rig_config, seed=seed), True
         else:
             self._rig, self._owned = rig, False
@@ -558,7 +599,10 @@ class _RigBackend:
             self.designer = TapDesigner(tm, model, method=method, limit_v=self._rig.limits.peak_v,
                                         grid_pitch_m=grid_pitch_m or GRID_PITCH_M)
             if anywhere and model is not None:
-                self.designer.prepare_grid()
+                say("evaluating the skin model on the grid for taps at points (tens of seconds; "
+                    "anywhere=False skips it) ...")
+                self.designer.prepare_grid(say.rows)
+            say.done()
         except BaseException:
             if self._owned:
                 self._rig.close()

@@ -20,6 +20,7 @@ safety layer still checks every drive when it plays.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -290,8 +291,14 @@ class TapDesigner:
         row[active] = np.where(np.isfinite(polar), polar, mixed)
         return row
 
-    def prepare_grid(self) -> np.ndarray:
+    def prepare_grid(self, progress: Callable[[int, int], Any] | None = None) -> np.ndarray:
         """Evaluate the model on the grid over the area (once; a second call returns it).
+
+        Parameters
+        ----------
+        progress : callable, optional
+            Called with ``(rows done, rows)`` as the grid's rows are evaluated (the
+            simulated arm takes tens of seconds over the whole grid).
 
         Returns
         -------
@@ -308,7 +315,17 @@ class TapDesigner:
             self._dx, self._dy = self._grid_x[1] - self._grid_x[0], self._grid_y[1] - self._grid_y[0]
             X, Y = np.meshgrid(self._grid_x, self._grid_y)
             points = np.column_stack([X.ravel(), Y.ravel()])
-            H = np.asarray(self._model.transfer(points, self.tm.freqs))  # (n_freqs, n_points, n_actuators)
+            # A few rows at a time, so that a front-end can say how far it got; each
+            # point's transfer is its own, so the rows give the same values as one call.
+            step = max(1, ny // 16)
+            parts = []
+            if progress is not None:
+                progress(0, ny)
+            for j in range(0, ny, step):
+                parts.append(np.asarray(self._model.transfer(points[j * nx:(j + step) * nx], self.tm.freqs)))
+                if progress is not None:
+                    progress(min(j + step, ny), ny)
+            H = np.concatenate(parts, axis=1)  # (n_freqs, n_points, n_actuators)
             if not np.isfinite(H).all():
                 raise ValidationError("the skin model's transfer on the grid is not finite")
             self._grid_H = np.ascontiguousarray(np.moveaxis(H, 1, 0).reshape(ny, nx, *H[:, 0].shape))

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from .._db_files import calibrations_dir, make_private_dir
 from ..defaults import STUDY_METHODS
 from ..errors import AnswerRefused, CalibrationFileError, StudyError
 from ..studies.protocol import DEFAULT_LEVELS
@@ -103,7 +104,8 @@ def simulate_studies(
     pace_s : float, optional
         Wait after each answer, s; default the protocol block's pacing (0 for the paper's).
     calibration_dir : path-like, optional
-        Where calibration files are written; default ``<db>.calibrations`` beside it.
+        Where calibration files are written; default ``<db stem>-files/calibrations`` beside it
+        (:func:`vibrofocus._db_files.calibrations_dir`).
     studies : tuple of int
         Which studies to run, in order.
     config : dict, optional
@@ -199,7 +201,9 @@ def simulate_studies(
 
     chosen = find_hypothesis(hypothesis)
     db = Path(db)
-    cal_dir = Path(calibration_dir) if calibration_dir is not None else db.with_name(db.name + ".calibrations")
+    cal_dir = Path(calibration_dir) if calibration_dir is not None else calibrations_dir(db)
+    if calibration_dir is None:
+        make_private_dir(cal_dir, db)  # 0700, never through a link (docs/security.md)
     with StudyStore(db) as store:
         per_participant = sum(StudyDesign.from_config(run[0], {**(config or {}), **run[1]}).n_trials for run in runs)
         n_new = 0

@@ -241,7 +241,9 @@ def private_database(db_path: Path) -> None:
     logins = db_path.with_name(db_path.name + ".web-logins")
     if os.path.lexists(logins):
         private_file(logins, "list of logins")
-    files = db_path.parent / f"{db_path.stem}-files"
+    from .._db_files import files_dir
+
+    files = files_dir(db_path)
     if os.path.lexists(files):
         private_dir(files, "files folder")
 

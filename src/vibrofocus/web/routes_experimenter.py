@@ -20,6 +20,7 @@ from fastapi import APIRouter, Depends, HTTPException, Query, Request
 from fastapi import Path as FPath
 from fastapi.responses import FileResponse, HTMLResponse, RedirectResponse, Response
 
+from .._db_files import calibrations_dir
 from ..errors import StudyError, VibrofocusError
 from ..studies.session_status import SESSION_ACTIONS, action_status
 from .api_models import MAX_ID, AnalysisIn, CalibrationId, CalibrationIn, ParticipantIn, SessionId, SessionIn
@@ -346,7 +347,8 @@ def _calibrate(web: WebState, job: CalibrationJob, rig: Any) -> None:
 
     card = _JobProgress(job)
     try:
-        folder = web.data_dir / "calibrations"
+        private_dir(web.data_dir)  # the files folder, then its calibrations/ (_db_files)
+        folder = calibrations_dir(web.db_path)
         private_dir(folder)
         # .nc, as the CLI's: the file is netCDF4 (docs/file-formats.md).
         path = folder / f"{job.participant_id}-{time.strftime('%Y%m%d-%H%M%S')}-{job.job_id[:6]}.nc"
@@ -627,7 +629,7 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
     info = web.session(session_id)
     if info["status"] == "aborted" and action != "stop":
         raise HTTPException(409, detail=(
-            f"Session {session_id} was stopped, and a stop is final. To go on with this participant, plan a new session."))
+            f"Session {session_id} was aborted, and an abort is final. To go on with this participant, plan a new session."))
     try:
         status = action_status(action, session_id, info["status"])
         if status == "running" and info.get("calibration_id") is not None:

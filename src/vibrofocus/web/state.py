@@ -124,7 +124,9 @@ class WebState(AccessState, RigState, SessionState, JobState):
     @property
     def data_dir(self) -> Path:
         """Folder for calibrations, exports and reports, beside the database."""
-        d = self.db_path.parent / f"{self.db_path.stem}-files"
+        from .._db_files import files_dir
+
+        d = files_dir(self.db_path)
         private_dir(d, "files folder")
         return d
 

@@ -77,6 +77,9 @@ def serve_live_taps(*, port: int, host: str, rig: str, rig_config: Path | None, 
         stream_id = (check_source_id(lsl_source_id) if lsl_source_id is not None
                      else stable_source_id(log) if log is not None else None)
         import_pylsl()  # before the rig opens: a missing pylsl is one line, nothing started
+    # The start takes about a minute on the simulated rig (its transfer, the designs, the
+    # /tap_xy grid): each stage is said as it begins, never a silent wait.
+    progress.note(f"serve-osc: opening the {rig} rig ...", err=True)
     with contextlib.ExitStack() as stack:
         the_rig = stack.enter_context(make_rig(rig, config=rig_config, seed=seed,
                                                skin=skin_name if rig == "simulated" else None))
@@ -101,6 +104,7 @@ def serve_live_taps(*, port: int, host: str, rig: str, rig_config: Path | None, 
             tm, model = TransferMatrix.from_calibration(cal, window), cal.fit
             source = f"calibration {calibration}"
         else:
+            progress.note("serve-osc: computing the simulated arm's transfer at the locations ...", err=True)
             tm, model = TransferMatrix.from_model(the_rig, the_rig.layout, the_rig.fs), the_rig
             source = f"the simulated arm's own transfer (skin {skin_name})"
         # Opened before the designs (seconds): a log that cannot be written is said at once.
@@ -120,7 +124,8 @@ def serve_live_taps(*, port: int, host: str, rig: str, rig_config: Path | None, 
         if refused:
             progress.note(f"warning: {refused}", err=True, warning=True)
         if model is not None:
-            designer.prepare_grid()
+            progress.note("serve-osc: evaluating the skin model on the /tap_xy grid (up to a minute) ...", err=True)
+            designer.prepare_grid(lambda done, total: progress.step(done, total, "rows of the /tap_xy grid"))
         if host not in LOCAL_HOSTS:
             progress.note(f"WARNING: binding to {host}: anyone who can reach it can play taps.", err=True, danger=True)
         server = OscTapServer(the_rig, designer, host=host, port=port, max_wait_s=max_wait_ms / 1e3,

@@ -79,7 +79,8 @@ def simulate_study(
     trials_csv : Path, optional
         Also write the trials file here.
     calibration_dir : Path, optional
-        Where calibration files go (default ``<db>.calibrations/``).
+        Where calibration files go (default ``<db stem>-files/calibrations/``, made 0700;
+        those of a database made before, in ``<db>.calibrations/``, stay there).
     skin : str
         Skin preset of the simulated forearms.
     methods : str, optional
@@ -163,20 +164,29 @@ def simulate_study(
                       f"{held}", plain=True)
     if trials_csv is not None:
         check_writable(trials_csv, what="trials file", kind=TRIALS_CSV)
-    cal_dir = calibration_dir if calibration_dir is not None else db.with_name(db.name + ".calibrations")
-    created = not cal_dir.exists()
-    try:
-        cal_dir.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise output_error(exc, cal_dir, "calibration folder") from exc
+    from .._db_files import calibrations_dir, files_dir, former_calibrations_dir, make_private_dir
+
+    cal_dir = calibration_dir if calibration_dir is not None else calibrations_dir(db)
+    made = [d for d in (files_dir(db), cal_dir) if (calibration_dir is None or d == cal_dir) and not d.exists()]
+    if calibration_dir is None:
+        make_private_dir(cal_dir, db)  # never through a link (docs/security.md)
+        former = former_calibrations_dir(db)
+        if former is not None:
+            progress.note(f"calibrations made before stay in {former}/ (read from there); new ones go to "
+                          f"{cal_dir}/", plain=True)
+    else:
+        try:
+            cal_dir.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise output_error(exc, cal_dir, "calibration folder") from exc
     lay = ArrayLayout.reference()
     try:
         check_writable(cal_dir / "calibration.nc", what="calibration",
                        expected_bytes=participants * estimate_calibration_bytes(lay.n_points, lay.n_actuators,
                                                                                 8, 30_000, 4096))
     except BaseException:
-        if created:
-            cal_dir.rmdir()
+        for folder in reversed(made):
+            folder.rmdir()
         raise
     progress.note(f"{MODEL_NOTICE} Hypothesis: {chosen_h.label()}.", notice=True)
     if the_protocol is not None:

@@ -113,13 +113,19 @@
 
   // ---------------------------------------------------------------- participants
   let participants = [];
+  let participantsShown = false;
   async function loadParticipants(select = null) {
     participants = await api("/api/participants");
     const sel = $("participant");
-    const keep = select ?? sel.value;
-    sel.replaceChildren(...participants.map((p) =>
-      el("option", { value: p.participant_id }, p.participant_id + (p.simulated ? " (simulated)" : ""))));
-    if (keep && participants.some((p) => p.participant_id === keep)) sel.value = keep;
+    // The page opens on the newest participant who is a person; with none (a new database,
+    // or one of simulate-study's models only) on "add a participant", never on a model's session.
+    const people = participants.filter((p) => !p.simulated);
+    const keep = select ?? (participantsShown ? sel.value : people.length ? people[people.length - 1].participant_id : "");
+    sel.replaceChildren(el("option", { value: "" }, participants.length ? "— choose, or add one —" : "— none yet: add one —"),
+      ...participants.map((p) => el("option", { value: p.participant_id }, p.participant_id + (p.simulated ? " (simulated)" : ""))));
+    sel.value = keep && participants.some((p) => p.participant_id === keep) ? keep : "";
+    if (!participantsShown && !sel.value) $("new-participant-id").focus();
+    participantsShown = true;
     onParticipant();
   }
 
@@ -329,28 +335,29 @@
   // ---------------------------------------------------------------- sessions
   async function loadSessions() {
     const pid = $("participant").value;
-    let sessions = [];
-    try { sessions = await api(`/api/sessions${pid ? `?participant_id=${encodeURIComponent(pid)}` : ""}`); }
+    let sessions = [];  // no participant chosen: no sessions shown
+    try { if (pid) sessions = await api(`/api/sessions?participant_id=${encodeURIComponent(pid)}`); }
     catch (e) { if (!offline) flash(e.message, true); return; }
     if (pid !== $("participant").value) return;  // an answer for a participant no longer shown
     // Rows are updated in place and rebuilt only when a status changes, so that the
     // control buttons do not move or vanish under the experimenter's pointer.
     const tbody = $("sessions").querySelector("tbody");
     const existing = new Map(Array.from(tbody.children, (tr) => [tr.dataset.session, tr]));
-    const rows = sessions.slice().reverse().map((s) => {
-      const live = s.live && s.live.waiting_for_page ? "waiting for the participant page"
-        : s.live ? [s.live.state, trialText(s.live)].filter(Boolean).join(" · ") : "—";
+    if (pendingStop && !sessions.some((s) => s.session_id === pendingStop.session && STOPPABLE.includes(s.status))) {
+      pendingStop = null;  // the session ended meanwhile: nothing left to abort
+    }
+    const rows = sessions.slice().reverse().flatMap((s) => {
       let tr = existing.get(String(s.session_id));
       if (!tr || tr.dataset.status !== s.status) tr = sessionRow(s);
       tr.querySelector(".progress").textContent = `${s.n_answered} / ${s.n_trials}`;
-      tr.querySelector(".live").textContent = live;
+      tr.querySelector(".live").textContent = liveText(s);
       tr.classList.toggle("selected", s.session_id === selectedSession);
-      return tr;
+      return pendingStop && pendingStop.session === s.session_id ? [tr, pendingStop.row] : [tr];
     });
     if (rows.length !== tbody.children.length || rows.some((tr, i) => tbody.children[i] !== tr)) tbody.replaceChildren(...rows);
     if (!sessions.some((s) => s.session_id === selectedSession)) {
       selectSession(sessions.length ? sessions[sessions.length - 1].session_id : null);
-      for (const tr of rows) tr.classList.toggle("selected", tr.dataset.session === String(selectedSession));
+      for (const tr of rows) if (tr.dataset.session) tr.classList.toggle("selected", tr.dataset.session === String(selectedSession));
     }
     loadLive();
   }
@@ -370,6 +377,19 @@
     return live && live.trial ? `${live.phase} trial ${live.trial} of ${live.n_in_phase}` : "";
   }
 
+  // What a session is doing now. A paused session says where it paused, never the state
+  // its participant page was in before the pause.
+  function liveText(s) {
+    if (!s.live) return "—";
+    if (s.status === "paused" || s.live.paused) return ["paused", trialText(s.live)].filter(Boolean).join(" at ");
+    if (s.live.waiting_for_page) return "waiting for the participant page";
+    return [s.live.state, trialText(s.live)].filter(Boolean).join(" · ");
+  }
+
+  // What the flash says after a control: what happened, in the words of the status column.
+  const DONE = { start: "started", pause: "paused (the participant page shows a break; Resume goes on)", resume: "resumed" };
+  const STOPPABLE = ["running", "paused"];
+
   function sessionRow(s) {
     const link = el("a", { href: s.participant_url, target: "_blank", rel: "noopener" }, "open");
     const copy = el("button", { class: "small", onclick: (ev) => {
@@ -383,54 +403,60 @@
     const act = (label, action) => controls.append(el("button", { class: "small", "data-action": action,
       onclick: async (ev) => {
         ev.stopPropagation();
-        try { await api(`/api/sessions/${s.session_id}/${action}`, { method: "POST" }); flash(`Session ${s.session_id}: ${action}.`); }
+        try { await api(`/api/sessions/${s.session_id}/${action}`, { method: "POST" }); flash(`Session ${s.session_id} ${DONE[action]}.`); }
         catch (e) { flash(e.message, true); }
         selectSession(s.session_id);
         loadSessions();
       } }, label));
     if (s.status === "planned") act("Start", "start");
     if (s.status === "running") act("Pause", "pause");
-    if (s.status === "paused") act("Resume", "resume");  // a stop is final: a new session goes on
-    if (s.status === "running" || s.status === "paused") {
-      // Stop is final (a stopped session never resumes), one button away from Pause: it
-      // asks first, in the row itself. Not window.confirm(): a modal dialog would swallow
-      // the keys, and Esc twice must always reach the emergency stop.
+    if (s.status === "paused") act("Resume", "resume");  // an abort is final: a new session goes on
+    if (STOPPABLE.includes(s.status)) {
+      // Abort is final (an aborted session never resumes), one button away from Pause: it
+      // asks first, in a row of its own under the session's. Not window.confirm(): a modal
+      // dialog would swallow the keys, and Esc twice must always reach the emergency stop.
       controls.append(el("button", { class: "small", "data-action": "stop", onclick: (ev) => {
         ev.stopPropagation();
-        askStop(s, controls, ev.currentTarget);
-      } }, "Stop…"));
+        askStop(s);
+      } }, "Abort…"));
     }
     const tr = el("tr", { "data-session": s.session_id, "data-status": s.status },
       el("td", {}, String(s.session_id)), el("td", {}, s.participant_id), el("td", {}, String(s.study)),
       el("td", { class: `status ${s.status}` }, s.status + (s.dry_run ? " · dry run" : "")), el("td", { class: "progress" }), el("td", { class: "live" }),
       el("td", {}, link, " ", copy), el("td", {}, controls));
+    // Each cell names its column, for a phone, where the table's rows are blocks.
+    const heads = [...$("sessions").tHead.rows[0].cells];
+    for (const [i, td] of [...tr.cells].entries()) td.dataset.label = heads[i].textContent;
     tr.addEventListener("click", () => { selectSession(s.session_id); loadSessions(); });
     return tr;
   }
 
-  let pendingStop = null;  // {cancel}: the open confirmation of a stop, if any
-  function askStop(s, controls, opener) {
+  // {session, row, cancel}: the open question "abort for good?", if any. It has a row of
+  // its own, the table's full width, under the session's row: in the narrow control cell
+  // it wrapped one word per line and pushed "Keep it" out of the card.
+  let pendingStop = null;
+  function askStop(s) {
     if (pendingStop) pendingStop.cancel();
-    const kept = [...controls.childNodes];
-    const cancel = () => {
-      pendingStop = null;
-      controls.replaceChildren(...kept);
-      opener.focus();
+    const opener = () => $("sessions").querySelector(`tr[data-session="${s.session_id}"] button[data-action=stop]`);
+    const close = () => {
+      if (pendingStop && pendingStop.session === s.session_id) pendingStop = null;
+      row.remove();
     };
-    const question = el("span", { class: "confirm-stop", role: "alert" },
-      `Stop session ${s.session_id} for good? It cannot be resumed; use Pause for a break. `);
-    const yes = el("button", { class: "small danger", "data-action": "stop-confirm", onclick: async (ev) => {
-      ev.stopPropagation();
-      pendingStop = null;
-      try { await api(`/api/sessions/${s.session_id}/stop`, { method: "POST" }); flash(`Session ${s.session_id}: stopped.`); }
-      catch (e) { flash(e.message, true); controls.replaceChildren(...kept); }
+    const cancel = () => { close(); opener()?.focus(); };
+    const yes = el("button", { class: "small danger", "data-action": "stop-confirm", onclick: async () => {
+      close();
+      try { await api(`/api/sessions/${s.session_id}/stop`, { method: "POST" }); flash(`Session ${s.session_id} aborted: it cannot be resumed.`); }
+      catch (e) { flash(e.message, true); }
       selectSession(s.session_id);
       loadSessions();
-    } }, "Stop for good");
-    const no = el("button", { class: "small", "data-action": "stop-cancel", onclick: (ev) => { ev.stopPropagation(); cancel(); } },
-      "Keep it");
-    controls.replaceChildren(question, yes, " ", no);
-    pendingStop = { cancel };
+    } }, "Abort for good");
+    const no = el("button", { class: "small", "data-action": "stop-cancel", onclick: cancel }, "Keep it");
+    const row = el("tr", { class: "confirm-row" }, el("td", { colspan: "8" }, el("div", { class: "confirm-box" },
+      el("span", { class: "confirm-stop", role: "alert" },
+        `Abort session ${s.session_id} for good? It cannot be resumed; use Pause for a break.`),
+      el("span", { class: "controls" }, no, yes))));
+    pendingStop = { session: s.session_id, row, cancel };
+    $("sessions").querySelector(`tr[data-session="${s.session_id}"]`).after(row);
     no.focus();  // Enter on the focused button keeps the session
   }
 
@@ -505,8 +531,9 @@
     try { s = await api(`/api/sessions/${selectedSession}`); }
     catch (e) { if (!offline && asked === liveAsked) $("live-title").textContent = `· ${e.message}`; return; }
     if (asked !== liveAsked || s.session_id !== selectedSession) return;  // a slow reply for another session
-    $("live-title").textContent = `session ${s.session_id} · study ${s.study} · ${s.status}` +
-      (s.live ? ` · ${[s.live.state, trialText(s.live)].filter(Boolean).join(" · ")}` : "") + (s.live && s.live.error ? ` · ${s.live.error}` : "");
+    const now = s.live ? liveText(s) : "";
+    $("live-title").textContent = `session ${s.session_id} · study ${s.study} · ` +
+      (now.startsWith(s.status) ? now : [s.status, now].filter(Boolean).join(" · ")) + (s.live && s.live.error ? ` · ${s.live.error}` : "");
     $("live-progress").value = s.n_trials ? s.n_answered / s.n_trials : 0;
     $("live-staircase").hidden = !s.staircase;
     $("live-staircase").textContent = s.staircase ? staircaseText(s.staircase) : "";
