@@ -56,7 +56,7 @@ TASKS = {1: "localization1", 2: "localization2"}
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
                  "trial", "session_status", "dry_run", "device_onset", "device_clock",
                  "levels", "drive_peak_v", "target_peak_um", "protocol", "block", "level_db",
-                 "response_x_mm", "response_y_mm")
+                 "response_x_mm", "response_y_mm", "xrun_represented")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
 _REQUIRED_COLUMNS = EVENT_COLUMNS[:11]
 #: What each task asks (the events sidecar's ``TaskDescription`` and ``Instructions``, as
@@ -165,6 +165,10 @@ EVENT_COLUMN_DESCRIPTIONS.update({
     "response_y_mm": {"LongName": "answered point, y",
                       "Description": "A point answer's y in the layout frame, toward the wrist (n/a for a location "
                                      "answer).", "Units": "mm"},
+    "xrun_represented": {"LongName": "presentations again after lost samples",
+                         "Description": "How many times the trial was presented again because the audio stream "
+                                        "lost samples (an xrun) during its stimulus; the answer is to the last "
+                                        "presentation (docs/protocols.md). n/a where the source does not say."},
 })
 
 #: Task label of threshold blocks (docs/protocols.md, "Threshold blocks"): their trials are
