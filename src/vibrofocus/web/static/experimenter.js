@@ -339,7 +339,7 @@
     const existing = new Map(Array.from(tbody.children, (tr) => [tr.dataset.session, tr]));
     const rows = sessions.slice().reverse().map((s) => {
       const live = s.live && s.live.waiting_for_page ? "waiting for the participant page"
-        : s.live ? [s.live.state, trialText(s.live)].filter(Boolean).join(" · ") : "—";
+        : s.live ? [s.live.state, trialText(s.live), coolingText(s.live)].filter(Boolean).join(" · ") : "—";
       let tr = existing.get(String(s.session_id));
       if (!tr || tr.dataset.status !== s.status) tr = sessionRow(s);
       tr.querySelector(".progress").textContent = `${s.n_answered} / ${s.n_trials}`;
@@ -362,6 +362,11 @@
     $("live-title").textContent = id === null ? "" : `session ${id}`;
     $("live-progress").value = 0;
     $("answers").querySelector("tbody").replaceChildren();
+  }
+
+  function coolingText(live) {
+    // A limit over time holds the stimulus until the actuators have cooled (the rig's RMS limit).
+    return live && live.cooling_s > 0 ? `cooling: ${Math.ceil(live.cooling_s)} s` : "";
   }
 
   function trialText(live) {
