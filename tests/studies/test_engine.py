@@ -490,6 +490,12 @@ def test_an_xrun_presents_the_trial_again_and_every_answer_is_stored_once(store,
         (0, False, False), (1, True, False), (1, False, True)]
     store.export_trials_csv(tmp_path / "t.csv")
     assert [r["xrun_represented"] for r in read_trials_csv(tmp_path / "t.csv")] == [0, 1]
+    from vibrofocus.studies.bids import export_bids
+
+    export_bids(store.path, tmp_path / "bids")
+    (events,) = (tmp_path / "bids").rglob("*_events.tsv")
+    lines = [line.split("\t") for line in events.read_text().splitlines()]
+    assert [row[lines[0].index("xrun_represented")] for row in lines[1:]] == ["0", "1"]
 
 
 def test_xruns_past_the_sessions_count_end_the_run_which_resumes(store, rig, renderer, monkeypatch):

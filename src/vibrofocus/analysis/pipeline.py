@@ -195,14 +195,6 @@ class AnalysisResult:
     xrun_represented: int | None = None
 
 
-def _xrun_represented(trials: pd.DataFrame) -> int | None:
-    """Rows of trials presented again after an xrun (column ``xrun_represented`` > 0); None without the column."""
-    if "xrun_represented" not in trials.columns:
-        return None
-    counts = pd.to_numeric(trials["xrun_represented"], errors="coerce").fillna(0)
-    return int((counts > 0).sum())
-
-
 def _cell_means(df: pd.DataFrame, dv: str) -> pd.DataFrame:
     from .study1 import _sort
 
@@ -408,7 +400,7 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
             )
     if not results:
         raise ValidationError("no usable data in either study: " + "; ".join(unavailable.values()))
-    represented = _xrun_represented(trials)
+    represented = trials.attrs.get("xrun_represented")
     if represented:
         warnings.append(f"{represented} answered trial(s) were presented again because the audio stream lost "
                         "samples (an xrun) during their stimulus; each answer is to the trial's last presentation")
