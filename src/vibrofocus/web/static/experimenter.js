@@ -339,7 +339,7 @@
     const existing = new Map(Array.from(tbody.children, (tr) => [tr.dataset.session, tr]));
     const rows = sessions.slice().reverse().map((s) => {
       const live = s.live && s.live.waiting_for_page ? "waiting for the participant page"
-        : s.live ? [s.live.state, trialText(s.live), coolingText(s.live)].filter(Boolean).join(" · ") : "—";
+        : s.live ? [s.live.state, trialText(s.live)].filter(Boolean).join(" · ") : "—";
       let tr = existing.get(String(s.session_id));
       if (!tr || tr.dataset.status !== s.status) tr = sessionRow(s);
       tr.querySelector(".progress").textContent = `${s.n_answered} / ${s.n_trials}`;
@@ -364,15 +364,12 @@
     $("answers").querySelector("tbody").replaceChildren();
   }
 
-  function coolingText(live) {
-    // A limit over time holds the stimulus until the actuators have cooled (the rig's RMS limit).
-    return live && live.cooling_s > 0 ? `cooling: ${Math.ceil(live.cooling_s)} s` : "";
-  }
-
   function trialText(live) {
     // The one numbering of trials: the phase and the trial's number within it, as in
     // the trials file and on the participant page.
-    return live && live.trial ? `${live.phase} trial ${live.trial} of ${live.n_in_phase}` : "";
+    const trial = live && live.trial ? `${live.phase} trial ${live.trial} of ${live.n_in_phase}` : "";
+    // A limit over time holds the trial's stimulus until the actuators have cooled.
+    return live && live.cooling_s > 0 ? [trial, `cooling: ${Math.ceil(live.cooling_s)} s`].filter(Boolean).join(" · ") : trial;
   }
 
   function sessionRow(s) {
