@@ -865,28 +865,14 @@ class StudyEngine:
                                 ) if stim is not None else None
         except XrunError as exc:  # samples lost: the trial again, not the run's end
             return self._xrun(trial, responder, exc, onset, level_db)
-        # Rig.play's DeviceOnset; a rig of the caller's own may return nothing. Its host
-        # time is when the device took the first sample (the audio rig's first callback,
-        # tens of ms after the call): reaction times count from there.
-        onset, device_s, clock, latency = self._onset_marker(trial, played, onset, level_db, played=stim is not None)
-        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency)
-
-    def _onset_marker(self, trial: PlannedTrial, device_onset: Any, onset: float, level_db: float,
-                      **fields: Any) -> tuple[float, Any, Any, float | None]:
-        """Send the stimulus onset's marker; (host onset, device onset, its clock, latency) of ``device_onset``."""
-        host_s = getattr(device_onset, "host_s", None)
-        if isinstance(host_s, (int, float)) and np.isfinite(host_s):
-            onset = float(host_s)
-        device_s, clock = getattr(device_onset, "device_s", None), getattr(device_onset, "clock", None)
-        latency = getattr(device_onset, "latency_s", None)
-        latency = float(latency) if isinstance(latency, (int, float)) and np.isfinite(latency) else None
+        onset, device_s, clock, latency = _device_onset(played, onset)
         # The marker at the drive's first sample leaving the device: the hand-over plus the
         # output latency where the rig knows it. A trial presented before (a resumed run,
-        # a pause, an xrun) says so, so that a recording keeps one onset per answer.
-        self._marker("stimulus_onset", onset + (latency or 0.0), trial, level_db=level_db,
+        # a pause) says so, so that a recording keeps one onset per answer.
+        self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=stim is not None, level_db=level_db,
                      onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency,
-                     replay=self._presented_before(trial), **fields)
-        return onset, device_s, clock, latency
+                     replay=self._presented_before(trial))
+        return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency)
 
     def _xrun(self, trial: PlannedTrial, responder: Any, exc: Exception, onset: float, level_db: float) -> Again:
         """A stimulus whose stream lost samples: logged (event ``xrun``), and the trial presented again.
@@ -899,8 +885,11 @@ class StudyEngine:
                       if isinstance(e.payload, dict) and e.payload.get("trial_index") == trial.trial_index
                       and e.payload.get("represented"))
         again = earlier < self.represent_after_xrun
-        played = getattr(exc, "onset", None)  # what the participant felt is marked, as lost
-        _, device_s, _, _ = self._onset_marker(trial, played, onset, level_db, played=True, xrun=True)
+        # What the participant felt is marked too, as lost (a recording keeps one onset per answer).
+        onset, device_s, clock, latency = _device_onset(getattr(exc, "onset", None), onset)
+        self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=True, level_db=level_db,
+                     onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency,
+                     replay=self._presented_before(trial), xrun=True)
         self._log("xrun", trial, message=str(exc), represented=again, onset_device_s=device_s)
         if not again:
             raise exc
@@ -1024,6 +1013,23 @@ class StudyEngine:
             if pace_s > 0:
                 time.sleep(pace_s)
         return n_run
+
+
+def _device_onset(played: Any, onset: float) -> tuple[float, Any, Any, float | None]:
+    """(host onset, device onset, its clock, output latency) of a play's DeviceOnset, s.
+
+    Rig.play's DeviceOnset; a rig of the caller's own may return nothing (then ``onset``,
+    the host time before the play, and None). Its host time is when the device took the
+    first sample (the audio rig's first callback, tens of ms after the call): reaction
+    times count from there.
+    """
+    host_s = getattr(played, "host_s", None)
+    if isinstance(host_s, (int, float)) and np.isfinite(host_s):
+        onset = float(host_s)
+    device_s, clock = getattr(played, "device_s", None), getattr(played, "clock", None)
+    latency = getattr(played, "latency_s", None)
+    latency = float(latency) if isinstance(latency, (int, float)) and np.isfinite(latency) else None
+    return onset, device_s, clock, latency
 
 
 def _protocol_fields(info: Any) -> dict[str, Any]:
