@@ -554,7 +554,7 @@ def read_bids_trials_table(root: str | os.PathLike):
         ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
         ``dry_run``, ``rig``: the sidecar's ``Sessions`` ``Rig``, empty where it names none or
         several), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
-        ``drive_peak_v``, ``target_peak_um``) and, for a simulated participant, ``model``
+        ``drive_peak_v``, ``target_peak_um``), ``xrun_represented`` and, for a simulated participant, ``model``
         (the sidecar's ``SimulatedModel``) where the events files have them, and ``line``
         (row number over all events files, from 2), as
         :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
@@ -605,8 +605,8 @@ def read_bids_trials_table(root: str | os.PathLike):
         rigs = {str(i["Rig"]) for i in sessions if isinstance(i, dict) and i.get("Rig")}
         rig = rigs.pop() if len(rigs) == 1 else ""  # one file, one session: one rig
         for ev in events:
-            stimulus = {c: ("" if ev[c] == _NA else ev[c]) for c in ("levels", "drive_peak_v", "target_peak_um")
-                        if c in ev}
+            stimulus = {c: ("" if ev[c] == _NA else ev[c])
+                        for c in ("levels", "drive_peak_v", "target_peak_um", "xrun_represented") if c in ev}
             if model:
                 stimulus["model"] = str(model)
             rows.append({
