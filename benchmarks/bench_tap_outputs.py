@@ -20,7 +20,14 @@ The taps are designed from the simulated arm at the rig's 10 kHz with a window o
 ``--window`` samples (800: 80 ms drives, whose 20 ms of silence between taps at 10/s
 lets the scope tell one tap's onset from the next).
 
+Tuning (docs/performance.md): ``--realtime`` runs jackd with real-time scheduling (``-R``:
+its threads and its clients' process threads, the rig's callback among them, SCHED_FIFO;
+needs the right to it: root, or the ``audio`` group's rtprio), ``--switch-interval-ms`` sets
+Python's GIL switch interval (default 5 ms, about a 256-frame period: a callback waiting for
+the GIL can miss its period), ``--latency`` the rig's ``latency`` (``low``, ``high`` or s).
+
 Usage: python benchmarks/bench_tap_outputs.py [--period 256] [--taps 200] [--rate 10] [--window 800]
+       [--realtime] [--switch-interval-ms 0.5] [--latency high]
 """
 
 from __future__ import annotations
@@ -85,8 +92,9 @@ def scope(server: str, period: int) -> None:
     print(json.dumps(onsets), flush=True)
 
 
-def start_jack(name: str, period: int) -> subprocess.Popen:
-    proc = subprocess.Popen(["jackd", "-n", name, "--no-realtime", "-L", str(PORTS), "-d", "dummy", "-r", str(RATE),
+def start_jack(name: str, period: int, realtime: bool = False) -> subprocess.Popen:
+    rt = ["-R", "-P", "70"] if realtime else ["--no-realtime"]
+    proc = subprocess.Popen(["jackd", "-n", name, *rt, "-L", str(PORTS), "-d", "dummy", "-r", str(RATE),
                              "-p", str(period), "-C", "2", "-P", "2"], stdout=subprocess.DEVNULL,
                             stderr=subprocess.DEVNULL, start_new_session=True)
     for _ in range(150):
@@ -138,8 +146,13 @@ def main() -> None:
     parser.add_argument("--taps", type=int, default=200, help="Taps in the timed run (default 200)")
     parser.add_argument("--rate", type=float, default=10.0, help="Taps per second in the timed run (default 10)")
     parser.add_argument("--window", type=int, default=800, help="Design window, samples at 10 kHz (default 800)")
+    parser.add_argument("--realtime", action="store_true", help="jackd -R: real-time scheduling (needs the right)")
+    parser.add_argument("--switch-interval-ms", type=float, help="Python's GIL switch interval, ms (default 5)")
+    parser.add_argument("--latency", default="low", help="The rig's latency: low, high or seconds (default low)")
     parser.add_argument("--scope", help=argparse.SUPPRESS)
     args = parser.parse_args()
+    if args.switch_interval_ms:
+        sys.setswitchinterval(args.switch_interval_ms / 1e3)
     if args.scope:
         scope(args.scope, args.period)
         return
@@ -152,7 +165,7 @@ def main() -> None:
     # The server is this run's own, so is the device ("loopback" on it): device locks of
     # its own too, beside other programs' rigs on other JACK servers of this machine.
     os.environ["VIBROFOCUS_LOCK_DIR"] = tempfile.mkdtemp(prefix="vibrofocus-bench-locks-")
-    jackd = start_jack(name, args.period)
+    jackd = start_jack(name, args.period, args.realtime)
 
     def stop_jack() -> None:
         jackd.terminate()
@@ -170,13 +183,16 @@ def main() -> None:
     config = {
         "kind": "audio", "fs": 10_000.0, "amplifier_gain": 10.0, "volts_full_scale": 2.0,
         "input_volts_full_scale": 0.5, "max_latency_s": 0.2,
+        "latency": args.latency if args.latency in ("low", "high") else float(args.latency),
         "device": {"name": "loopback", "hostapi": "JACK", "samplerate": float(RATE)},
         "channels": {"actuators": [1, 2, 3, 4], "vibrometer": 1, "loopback_output": 5, "loopback_input": 5},
         "vibrometer": {"decoder": "displacement", "sensitivity": 1e-6, "highpass_hz": None}}
     t = time.monotonic()
     rig = make_rig("audio", config=config)
     print(f"rig opened in {1e3 * (time.monotonic() - t):.0f} ms; JACK dummy, {args.period} frames at {RATE} Hz "
-          f"({1e3 * args.period / RATE:.2f} ms), {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}")
+          f"({1e3 * args.period / RATE:.2f} ms), {os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}; "
+          f"{'real-time' if args.realtime else 'no real-time'} jackd, GIL switch interval "
+          f"{1e3 * sys.getswitchinterval():g} ms, rig latency {args.latency} ({1e3 * rig.output_latency_s:.1f} ms)")
     arm = SimulatedForearm(seed=3, fs=rig.fs)
     designer = TapDesigner(TransferMatrix.from_model(arm, rig.layout, rig.fs, n_samples=args.window), None,
                            method="inverse", limit_v=rig.limits.peak_v)

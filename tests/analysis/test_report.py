@@ -268,6 +268,18 @@ def test_one_participant_analysis_api_keeps_descriptives():
     assert any(s.startswith("The two-way repeated-measures ANOVA needs at least 3") for s in sentences)
 
 
+def test_the_report_counts_the_trials_presented_again_after_an_xrun():
+    from .synthetic import make_trials
+
+    trials = make_trials(1, seed=4, studies=(1,))
+    assert analyze(load_trials(trials)).xrun_represented is None  # a file without the column does not say
+    trials["xrun_represented"] = 0
+    trials.loc[[6, 9], "xrun_represented"] = [1, 2]  # two main trials, one presented twice more
+    result = analyze(load_trials(trials))
+    assert result.xrun_represented == 2 and report_dict(result)["xrun_represented"] == 2
+    assert any(w.startswith("2 answered trial(s) were presented again") for w in result.warnings)
+
+
 @pytest.mark.slow
 def test_simulated_participants_are_flagged_in_json_and_html(tmp_path, synthetic):
     # A trials file whose optional 'simulated' column marks some participants.

@@ -238,6 +238,35 @@ def test_one_xrun_is_retried_and_the_recording_kept(rig):
     assert int(np.argmax(np.abs(drive[0]))) == int(np.argmax(np.abs(rec[0])))
 
 
+def test_a_study_on_jack_presents_a_trial_whose_stimulus_lost_samples_again(rig, tmp_path):
+    # Issue 56, part C, on a real JACK server: the second stimulus reports an output underflow
+    # (injected: the dummy driver loses none on demand); its trial is played again and the run ends
+    # with each answer stored once.
+    from vibrofocus.studies import StudyEngine, StudyStore
+    from vibrofocus.studies.engine import Response
+
+    class Keypad:
+        def respond(self, presentation):
+            return Response(presentation.trial.target, 0.3)
+
+        def wait_resume(self):
+            return True
+
+    patch, calls = _with_status(rig, lambda n: 4 if n == 2 else 0)  # paOutputUnderflow on the second play
+    with StudyStore(tmp_path / "s.db") as store, patch:
+        store.add_participant("p1")
+        sid = store.create_session("p1", 1, seed=5, config={"repetitions": 1, "n_training": 0,
+                                                            "methods": ["inverse"], "locations": [4, 6]})
+        summary = StudyEngine(store, sid, rig, renderer=lambda method, target: pulse_drive(n=500)).run(Keypad())
+        assert (summary.status, summary.n_answered, len(calls)) == ("completed", 2, 3)
+        (xrun,) = store.events(sid, kind="xrun")
+        assert xrun.payload["trial_index"] == 1 and xrun.payload["represented"] is True
+        assert "output underflow while playing" in xrun.payload["message"]
+        assert xrun.payload["onset_device_s"] is not None  # where the lost stimulus began, on the DAC clock
+        assert [(a.trial_index, a.response) for a in store.answers(sid)] == [
+            (t.trial_index, (t.target,)) for t in store.planned_trials(sid)]
+
+
 class _LoopbackRecorder:
     """A second JACK client recording the loopback capture ports (what the actuators get)."""
 

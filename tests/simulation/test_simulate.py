@@ -39,7 +39,7 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
     # stimulus columns, the protocol and the point columns (docs/file-formats.md), then the
     # flag that these participants are simulated (a model, not data) and the model's label.
     assert tuple(header) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                             + PROTOCOL_COLUMNS + POINT_COLUMNS + ("simulated", "model"))
+                             + PROTOCOL_COLUMNS + POINT_COLUMNS + ("xrun_represented", "simulated", "model"))
     assert {r["response_x_mm"] for r in rows} == {""}  # the paper's studies answer with location keys
     assert {r["levels"] for r in rows} == {"paper"}
     # Every row names the model and the hypothesis that answered.

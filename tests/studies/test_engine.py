@@ -251,8 +251,8 @@ def test_a_dry_run_and_an_older_answer_have_no_onsets(store, tmp_path):
     store.export_trials_csv(tmp_path / "t.csv")
     line = (tmp_path / "t.csv").read_text().splitlines()[-1]
     # The old answer: three empty onset cells; its session's level rule, and no peaks (nothing was played);
-    # the paper's protocol, and no point (a location answer).
-    assert line.endswith(",,,,paper,,,paper-study1,,")
+    # the paper's protocol, no point (a location answer), and never presented again after an xrun.
+    assert line.endswith(",,,,paper,,,paper-study1,,,0")
     assert read_trials_csv(tmp_path / "t.csv")[-1]["onset_clock"] is None
 
 
@@ -450,3 +450,71 @@ def test_a_limit_over_time_pauses_the_trial_for_its_wait_instead_of_ending_the_r
     (cooling,) = store.events(sid, kind="cooling")
     assert cooling.payload["trial_index"] == 1 and cooling.payload["wait_s"] > 0
     assert rig.now >= cooling.payload["wait_s"] - 0.06
+
+
+def _xrun_on(rig, monkeypatch, plays):
+    """Make the rig's plays number ``plays`` (1-based) report lost samples, as an audio
+    stream's underflow does: the drive played, then the play raises XrunError with its onset."""
+    from vibrofocus.rigs import XrunError
+
+    real, calls = rig._play, []
+
+    def play(drive):
+        onset = real(drive)
+        calls.append(onset)
+        if len(calls) in plays:
+            raise XrunError(onset, "the audio stream reported output underflow while playing (injected)")
+        return onset
+
+    monkeypatch.setattr(rig, "_play", play)
+    return calls
+
+
+def test_an_xrun_presents_the_trial_again_and_every_answer_is_stored_once(store, rig, renderer, monkeypatch,
+                                                                          tmp_path):
+    from vibrofocus.studies.export import read_trials_csv
+    from vibrofocus.studies.markers import sending_markers
+
+    _xrun_on(rig, monkeypatch, {2})  # trial 1's stimulus loses samples
+    sid = _small(store)
+    markers = []
+    with sending_markers(lambda m, t: markers.append(m) if m["event"] == "stimulus_onset" else None):
+        summary = StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([4, 6]))
+    assert (summary.status, summary.n_answered, rig.n_played) == ("completed", 2, 3)
+    assert [(a.trial_index, a.response) for a in store.answers(sid)] == [(0, (4,)), (1, (6,))]
+    (xrun,) = store.events(sid, kind="xrun")
+    assert xrun.payload["trial_index"] == 1 and xrun.payload["represented"] is True
+    assert "underflow" in xrun.payload["message"]
+    # The lost stimulus is marked (as lost), its presentation again says replay.
+    assert [(m["trial_index"], m.get("xrun", False), m["replay"]) for m in markers] == [
+        (0, False, False), (1, True, False), (1, False, True)]
+    store.export_trials_csv(tmp_path / "t.csv")
+    assert [r["xrun_represented"] for r in read_trials_csv(tmp_path / "t.csv")] == [0, 1]
+    from vibrofocus.studies.bids import export_bids
+
+    export_bids(store.path, tmp_path / "bids")
+    (events,) = (tmp_path / "bids").rglob("*_events.tsv")
+    lines = [line.split("\t") for line in events.read_text().splitlines()]
+    assert [row[lines[0].index("xrun_represented")] for row in lines[1:]] == ["0", "1"]
+
+
+def test_xruns_past_the_sessions_count_end_the_run_which_resumes(store, rig, renderer, monkeypatch):
+    from vibrofocus.rigs import XrunError
+
+    _xrun_on(rig, monkeypatch, {1, 2, 3})  # trial 0 loses samples three times running
+    sid = store.create_session("p1", 1, seed=5, config={"repetitions": 1, "n_training": 0, "methods": ["inverse"],
+                                                        "locations": [4, 6], "represent_after_xrun": 2})
+    with pytest.raises(XrunError, match="underflow"):
+        StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([4, 6]))
+    assert [e.payload["represented"] for e in store.events(sid, kind="xrun")] == [True, True, False]
+    assert store.answers(sid) == [] and store.events(sid, kind="error")
+    # The count is per trial over every run: the resumed run plays it, it keeps its two.
+    summary = StudyEngine(store, sid, rig, renderer=renderer).run(Scripted([4, 6]))
+    assert (summary.status, summary.n_answered) == ("completed", 2)
+
+
+def test_a_bad_represent_after_xrun_is_refused(store):
+    for value in (-1, 11, 1.5, True, "1"):
+        sid = store.create_session("p1", 1, seed=5, config={"repetitions": 1, "represent_after_xrun": value})
+        with pytest.raises(StudyError, match="represent_after_xrun must be an integer from 0 to 10"):
+            StudyEngine(store, sid, None, dry_run=True)

@@ -108,7 +108,7 @@ def test_the_export_has_the_point_columns_and_the_analysis_an_error_in_mm(store,
     store.export_trials_csv(out)
     rows = list(csv.DictReader(open(out)))
     header = next(csv.reader(open(out)))
-    assert header[-2:] == ["response_x_mm", "response_y_mm"]
+    assert header[-3:] == ["response_x_mm", "response_y_mm", "xrun_represented"]
     by_session = {}
     for r in rows:
         by_session.setdefault(int(r["session"]), []).append(r)

@@ -67,6 +67,14 @@ def test_block_seed_is_stored_and_plans_the_same_order_for_everyone(tmp_path):
         assert store.planned_trials(sid) == plan_trials(protocol.design(0), 7, session_id=sid)
 
 
+def test_a_blocks_represent_after_xrun_reaches_its_session_config():
+    assert parse_protocol(SMALL, "small.toml").session_config(0)["represent_after_xrun"] == 1
+    three = parse_protocol(SMALL + "represent_after_xrun = 3\n", "small.toml")
+    assert three.session_config(0)["represent_after_xrun"] == 3
+    with pytest.raises(StudyError, match=r"line 12, blocks\[0\].represent_after_xrun"):
+        parse_protocol(SMALL + "represent_after_xrun = 11\n", "small.toml")
+
+
 def test_an_old_database_reads_as_the_papers_protocol(tmp_path):
     db = tmp_path / "old.db"
     with StudyStore(db) as store:

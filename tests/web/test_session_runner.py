@@ -219,3 +219,67 @@ def test_the_web_writes_the_engines_payloads_and_a_paused_session_stays_paused(s
     wait_for(lambda: again.snapshot()["state"] == "respond")
     assert len(rig.played) == 2 and len(store.events(sid, kind="cue")) == 2
     again.stop()
+
+
+class TroubledRig(CountingRig):
+    """A stand-in rig whose first play is refused for 0.3 s to cool, and whose third loses samples."""
+
+    _stop_epoch = 0  # read by the pacing of plays (rigs.safety.play_paced)
+
+    def __init__(self):
+        super().__init__()
+        self.tries = 0
+
+    def play(self, drive):
+        from vibrofocus.errors import CoolingError
+        from vibrofocus.rigs import XrunError
+
+        self.tries += 1
+        if self.tries == 1:
+            raise CoolingError("drive refused: together with the plays before it, ... wait 0.3 s", wait_s=0.3)
+        super().play(drive)
+        if self.tries == 3:
+            raise XrunError(None, "the audio stream reported output underflow while playing (injected)")
+
+
+def test_the_web_and_the_terminal_wait_to_cool_and_present_an_xrun_trial_again_alike(store, tmp_path):
+    # Issue 56, part C: one implementation (the engine) under both front-ends.
+    import io
+
+    from rich.console import Console
+
+    from vibrofocus.studies import StudyEngine
+    from vibrofocus.studies.terminal import TerminalResponder
+    from vibrofocus.workflows import run_session
+
+    config = {"n_training": 0, "repetitions": 1, "methods": ["inverse"], "locations": [2, 5]}
+    renderer = lambda method, target: np.full((4, 8), float(target))  # noqa: E731
+    web, terminal = (store.create_session("P01", 1, seed=3, config=config) for _ in range(2))
+    rig = TroubledRig()
+    runner = SessionRunner(store, web, renderer=renderer, rig=rig, pace=QUICK, require_page=False)
+    runner.start()
+    wait_for(lambda: runner.snapshot().get("cooling_s", 0) > 0, timeout=2)  # the experimenter's "cooling: N s"
+    for trial in store.planned_trials(web):  # answered as the answer route does
+        wait_for(lambda: runner.snapshot()["state"] == "respond" and runner.snapshot()["trial_index"] == trial.trial_index)
+        store.record_answer(web, trial.trial_index, trial.target, 0.3, answer_id=f"id-{trial.trial_index}",
+                            drive_sha256=runner.drive_sha_for(trial.trial_index))
+        runner.notify_answer(trial.trial_index)
+    wait_for(lambda: runner.snapshot()["state"] == "done")
+    targets = [t.target for t in store.planned_trials(web)]
+    out, keys = io.StringIO(), iter(str(t) for t in targets)
+    rig = TroubledRig()
+    summary = run_session(StudyEngine(store, terminal, rig, renderer=renderer),
+                          TerminalResponder(console=Console(file=out, width=200), input_fn=lambda _: next(keys)))
+    assert summary.status == "completed"
+    printed = out.getvalue()
+    assert "waiting 0.3 s for the actuators to cool" in printed and "presenting it again (1 of at most 1)" in printed
+
+    def log(sid):
+        return [(e.kind, e.payload.get("trial_index")) for e in store.events(sid)
+                if e.kind in ("cue", "cooling", "stimulus_onset", "xrun", "answer")]
+
+    assert log(web) == log(terminal) == [
+        ("cue", 0), ("stimulus_onset", 0), ("cooling", 0), ("answer", 0),
+        ("cue", 1), ("stimulus_onset", 1), ("xrun", 1), ("cue", 1), ("stimulus_onset", 1), ("answer", 1)]
+    for sid in (web, terminal):  # every answer stored once
+        assert [(a.trial_index, a.response) for a in store.answers(sid)] == [(0, (targets[0],)), (1, (targets[1],))]

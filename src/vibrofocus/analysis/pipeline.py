@@ -175,6 +175,9 @@ class AnalysisResult:
         Each method's peak drive and predicted peak at the target per location
         (:func:`~vibrofocus.analysis.levels.stimulus_levels`); None when the trials do
         not record them.
+    xrun_represented : int or None
+        Answered trials presented again because the audio stream lost samples during their
+        stimulus (the trials' ``xrun_represented`` column); None when the trials do not say.
     """
 
     source: str
@@ -189,6 +192,7 @@ class AnalysisResult:
     simulated_participants: list[str] = field(default_factory=list)
     stimulus_levels: pd.DataFrame | None = None
     simulated_models: list[str] = field(default_factory=list)
+    xrun_represented: int | None = None
 
 
 def _cell_means(df: pd.DataFrame, dv: str) -> pd.DataFrame:
@@ -396,6 +400,10 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
             )
     if not results:
         raise ValidationError("no usable data in either study: " + "; ".join(unavailable.values()))
+    represented = trials.attrs.get("xrun_represented")
+    if represented:
+        warnings.append(f"{represented} answered trial(s) were presented again because the audio stream lost "
+                        "samples (an xrun) during their stimulus; each answer is to the trial's last presentation")
     excl_df = pd.DataFrame.from_records(exclusions, columns=["participant", "study", "reason"])
     excl_df["study"] = excl_df["study"].astype("Int64")  # <NA>: excluded from the whole file
     return AnalysisResult(
@@ -411,4 +419,5 @@ def analyze(trials: pd.DataFrame, *, layout: ArrayLayout | None = None, alpha: f
         simulated_participants=list(trials.attrs.get("simulated_participants", [])),
         stimulus_levels=stimulus_levels(trials),
         simulated_models=list(trials.attrs.get("simulated_models", [])),
+        xrun_represented=represented,
     )

@@ -92,6 +92,8 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
     ``study1.shapiro_unavailable``, ``study2.friedman_unavailable``,
     ``study2.wilcoxon_unavailable`` (and the same in ``study2.contains_target``);
     these keys are always present and null when the statistic was computed.
+    ``xrun_represented`` counts the answered trials presented again because the audio
+    stream lost samples during their stimulus (null when the trials do not say).
     ``stimulus_levels`` lists each method's median peak drive (V) and predicted peak at
     the target (µm) per location with the level rule (null when the trials do not record
     them).
@@ -120,6 +122,7 @@ def report_dict(result: AnalysisResult, *, figures: dict[str, str] | None = None
         "warnings": result.warnings,
         "unavailable": result.unavailable,
         "simulated": _simulated(result),
+        "xrun_represented": result.xrun_represented,
     }
     s1 = result.study1
     if s1 is None:

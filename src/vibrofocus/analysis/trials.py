@@ -405,7 +405,16 @@ def load_trials(
     trials.attrs["source"] = name
     trials.attrs["simulated_participants"] = simulated_participants(raw)
     trials.attrs["simulated_models"] = simulated_models(raw)
+    trials.attrs["xrun_represented"] = xrun_represented(raw[raw["participant"].isin(trials["participant"])])
     return trials
+
+
+def xrun_represented(raw: pd.DataFrame) -> int | None:
+    """Answered trials presented again because their stimulus lost samples (an xrun): rows whose
+    ``xrun_represented`` (a study database's export) is above 0; None when the trials do not say."""
+    if "xrun_represented" not in raw.columns:
+        return None
+    return int((pd.to_numeric(raw["xrun_represented"], errors="coerce").fillna(0) > 0).sum())
 
 
 def simulated_models(raw: pd.DataFrame) -> list[str]:

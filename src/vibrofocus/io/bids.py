@@ -57,7 +57,7 @@ TASKS = {1: "localization1", 2: "localization2"}
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
                  "trial", "session_status", "dry_run", "device_onset", "device_clock",
                  "levels", "drive_peak_v", "target_peak_um", "protocol", "block", "level_db",
-                 "response_x_mm", "response_y_mm")
+                 "response_x_mm", "response_y_mm", "xrun_represented")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
 _REQUIRED_COLUMNS = EVENT_COLUMNS[:11]
 #: What each task asks (the events sidecar's ``TaskDescription`` and ``Instructions``, as
@@ -166,6 +166,10 @@ EVENT_COLUMN_DESCRIPTIONS.update({
     "response_y_mm": {"LongName": "answered point, y",
                       "Description": "A point answer's y in the layout frame, toward the wrist (n/a for a location "
                                      "answer).", "Units": "mm"},
+    "xrun_represented": {"LongName": "presentations again after lost samples",
+                         "Description": "How many times the trial was presented again because the audio stream "
+                                        "lost samples (an xrun) during its stimulus; the answer is to the last "
+                                        "presentation (docs/protocols.md). n/a where the source does not say."},
 })
 
 #: Task label of threshold blocks (docs/protocols.md, "Threshold blocks"): their trials are
@@ -541,7 +545,7 @@ def read_bids_trials_table(root: str | os.PathLike):
         ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
         ``dry_run``, ``rig``: the sidecar's ``Sessions`` ``Rig``, empty where it names none or
         several), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
-        ``drive_peak_v``, ``target_peak_um``) and, for a simulated participant, ``model``
+        ``drive_peak_v``, ``target_peak_um``), ``xrun_represented`` and, for a simulated participant, ``model``
         (the sidecar's ``SimulatedModel``) where the events files have them, and ``line``
         (row number over all events files, from 2), as
         :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
@@ -592,8 +596,8 @@ def read_bids_trials_table(root: str | os.PathLike):
         rigs = {str(i["Rig"]) for i in sessions if isinstance(i, dict) and i.get("Rig")}
         rig = rigs.pop() if len(rigs) == 1 else ""  # one file, one session: one rig
         for ev in events:
-            stimulus = {c: ("" if ev[c] == _NA else ev[c]) for c in ("levels", "drive_peak_v", "target_peak_um")
-                        if c in ev}
+            stimulus = {c: ("" if ev[c] == _NA else ev[c])
+                        for c in ("levels", "drive_peak_v", "target_peak_um", "xrun_represented") if c in ev}
             if model:
                 stimulus["model"] = str(model)
             rows.append({

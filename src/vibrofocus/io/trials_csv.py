@@ -27,7 +27,7 @@ from .responses import format_response, parse_response_text
 
 __all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS",
            "POINT_COLUMNS",
-           "LEGACY_SESSION_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
+           "XRUN_COLUMNS", "LEGACY_SESSION_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
            "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
 
@@ -63,6 +63,10 @@ PROTOCOL_COLUMNS = ("protocol",)
 #: place in the layout frame, mm (``response`` is then its nearest location); empty cells
 #: for a location answer (docs/protocols.md, point responses).
 POINT_COLUMNS = ("response_x_mm", "response_y_mm")
+#: Column a study database's export adds after :data:`POINT_COLUMNS`: ``xrun_represented``,
+#: how many times the trial was presented again because its stimulus lost samples (an
+#: xrun; docs/protocols.md); 0 for nearly every trial.
+XRUN_COLUMNS = ("xrun_represented",)
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
@@ -74,7 +78,7 @@ MODEL_COLUMN = "model"
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
                      onsets: bool = False, stimuli: bool = False, protocols: bool = False,
-                     points: bool = False) -> int:
+                     points: bool = False, xruns: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -107,6 +111,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     points : bool
         Also write :data:`POINT_COLUMNS` (after the protocol column; a missing key or None
         is an empty cell).
+    xruns : bool
+        Also write :data:`XRUN_COLUMNS` (after the point columns; a missing key or None is 0).
 
     Returns
     -------
@@ -120,7 +126,7 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     with_model = with_flag and any(row.get(MODEL_COLUMN) for row in rows)
     header = (TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
               + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())
-              + (POINT_COLUMNS if points else ())
+              + (POINT_COLUMNS if points else ()) + (XRUN_COLUMNS if xruns else ())
               + ((SIMULATED_COLUMN,) if with_flag else ())
               + ((MODEL_COLUMN,) if with_model else ()))
 
@@ -145,6 +151,8 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
             values.append(row.get("protocol") or "")
         if points:
             values += [_seconds_cell(row.get("response_x_mm")), _seconds_cell(row.get("response_y_mm"))]
+        if xruns:
+            values.append(int(row.get("xrun_represented") or 0))
         if with_flag:
             values.append(int(bool(row.get(SIMULATED_COLUMN))))
         if with_model:
@@ -175,7 +183,8 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         ``session`` (int), ``session_status`` (str), ``dry_run`` (bool) and ``rig`` (str;
         ``""`` where not stored, and for an export written before sessions named their rig); one with
         :data:`SIMULATED_COLUMN` gives ``simulated`` (bool); the onset and stimulus
-        columns' numbers, and the point columns', are floats (None for an empty cell).
+        columns' numbers, and the point columns', are floats (None for an empty cell);
+        ``xrun_represented`` is an int.
     """
     from .._atomic import protect
 
@@ -185,7 +194,7 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            later = (ONSET_COLUMNS, STIMULUS_COLUMNS, PROTOCOL_COLUMNS, POINT_COLUMNS)
+            later = (ONSET_COLUMNS, STIMULUS_COLUMNS, PROTOCOL_COLUMNS, POINT_COLUMNS, XRUN_COLUMNS)
             middles = [()] + [s + sum(later[:k], ()) for s in (SESSION_COLUMNS, LEGACY_SESSION_COLUMNS)
                               for k in range(len(later) + 1)]
             headers = [TRIALS_COLUMNS + m + f for m in middles
@@ -219,6 +228,8 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                     if "response_x_mm" in row:
                         for key in POINT_COLUMNS:
                             row[key] = float(row[key]) if row[key] else None
+                    if "xrun_represented" in row:
+                        row["xrun_represented"] = int(row["xrun_represented"])
                     row["study"] = int(row["study"])
                     row["trial"] = int(row["trial"])
                     row["target"] = int(row["target"])

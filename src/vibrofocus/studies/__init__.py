@@ -65,6 +65,7 @@ from .engine import (
     StudyEngine,
     calibration_renderer,
     drive_sha256,
+    represent_after_xrun,
     terminal_beep,
     headphone_beep,
 )
@@ -115,6 +116,7 @@ __all__ = [
     "write_trials_csv",
     "read_trials_csv",
     "StudyEngine",
+    "represent_after_xrun",
     "Stimulus",
     "Presentation",
     "Response",

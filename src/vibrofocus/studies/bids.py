@@ -290,7 +290,7 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
             "levels": t.get("levels") or None, "drive_peak_v": t.get("drive_peak_v"),
             "target_peak_um": t.get("target_peak_um"), "protocol": t.get("protocol"), "block": t.get("block"),
             "level_db": t.get("level_db"), "response_x_mm": t.get("response_x_mm"),
-            "response_y_mm": t.get("response_y_mm"),
+            "response_y_mm": t.get("response_y_mm"), "xrun_represented": t.get("xrun_represented"),
         } for t, onset in zip(trials, onsets, strict=True)]
         sim = simulated.get(pid, False)
         infos = [s for s in sessions.get((pid, study), []) if session is None or s["Session"] == session]

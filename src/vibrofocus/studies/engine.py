@@ -29,6 +29,7 @@ import numpy as np
 
 from ..defaults import DRIVE_LIMIT_V, N_SAMPLES
 from ..errors import StudyError, ValidationError
+from ..rigs.devices import XrunError
 from ..rigs.safety import play_paced
 from .markers import send_marker
 from .protocol import DEFAULT_LEVELS, PlannedTrial, StudyDesign, level_options
@@ -36,6 +37,8 @@ from .storage import AnswerReceipt, StudyStore, session_protocol
 
 __all__ = [
     "check_drive_levels",
+    "represent_after_xrun",
+    "REPRESENT_AFTER_XRUN",
     "PAUSE",
     "ABORT",
     "STOP",
@@ -62,6 +65,34 @@ ABORT = "abort"
 #: What a responder returns to end the run and leave the session's status as it is (a
 #: server shutting down, or an experimenter whose stop is already stored).
 STOP = "stop"
+
+
+#: Times a trial whose stimulus lost samples (an xrun) is presented again by default.
+REPRESENT_AFTER_XRUN = 1
+#: Most a session may ask for.
+MAX_REPRESENT_AFTER_XRUN = 10
+
+
+def represent_after_xrun(config: Any) -> int:
+    """A session's ``represent_after_xrun``: how many times a trial whose stimulus lost samples
+    (an xrun) is presented again before the run ends (docs/protocols.md).
+
+    Parameters
+    ----------
+    config : mapping or None
+        The session's config; without the key, :data:`REPRESENT_AFTER_XRUN`.
+
+    Raises
+    ------
+    StudyError
+        Not an integer from 0 to :data:`MAX_REPRESENT_AFTER_XRUN`.
+    """
+    value = (config or {}).get("represent_after_xrun", REPRESENT_AFTER_XRUN)
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or not (
+            0 <= value <= MAX_REPRESENT_AFTER_XRUN):
+        raise StudyError(f"represent_after_xrun must be an integer from 0 to {MAX_REPRESENT_AFTER_XRUN}, "
+                         f"got {value!r}")
+    return int(value)
 
 
 @dataclass(frozen=True)
@@ -578,6 +609,12 @@ class Responder(Protocol):
     #     After the cue is logged and beeped, until the stimulus moment: e.g. wait until
     #     the screens show the cue. Again("cue_cancelled", reason): nobody saw the cue,
     #     nothing is played, the trial is presented again.
+    # cooling(trial, wait_s) -> None
+    #     Before the stimulus waits wait_s seconds for the actuators to cool (the rig's
+    #     limit over time): e.g. show the wait.
+    # xrun(trial, n, limit) -> None
+    #     The stimulus lost samples and the trial is presented again, the n-th time of
+    #     at most limit: e.g. say so.
     # answered(presentation, receipt) -> None
     #     After the answer is committed: e.g. show "taken".
 
@@ -651,7 +688,11 @@ class StudyEngine:
     Events written for each presentation (payload keys): ``cue`` (``trial_index``,
     ``beep``), ``stimulus_onset`` (``trial_index``, ``method``, ``target``, ``played``,
     ``drive_sha256``, ``levels``, ``drive_peak_v``, ``target_peak_um``), and when a responder asks for a trial again ``cue_cancelled`` or
-    ``trial_restarted`` (``trial_index``, ``reason``); ``error`` (``message``) when the
+    ``trial_restarted`` (``trial_index``, ``reason``); ``xrun`` (``trial_index``, ``message``,
+    ``represented``, ``onset_device_s``) when the stream lost samples during a stimulus
+    (the trial is then presented again, up to the session's ``represent_after_xrun`` times;
+    ``represented`` false: the run ended there); ``cooling`` (``trial_index``, ``wait_s``,
+    ``reason``) before a wait for the actuators to cool; ``error`` (``message``) when the
     run fails. The ``answer`` event (the store's) carries the onset: ``onset_s`` (host),
     ``onset_device_s`` and ``onset_clock`` (the rig's device clock). An answer committed
     before the engine had the onset (the web page's, by its answer route) gets an
@@ -681,6 +722,9 @@ class StudyEngine:
         self.design = info.design
         self.rig = rig
         self._marked = _protocol_fields(info)
+        #: Times a trial whose stimulus lost samples (an xrun) is presented again
+        #: (the session's ``represent_after_xrun``; default :data:`REPRESENT_AFTER_XRUN`).
+        self.represent_after_xrun = represent_after_xrun(info.config)
         if renderer is None and not dry_run:
             if calibration is None:
                 raise StudyError("a study engine needs the participant's calibration (or a renderer)")
@@ -820,17 +864,12 @@ class StudyEngine:
         )
         onset = time.monotonic()
         # A limit over time pauses the trial for the wait it names (not the run's end).
-        played = play_paced(self.rig, stim.drives, lambda wait_s, why: self._cooling(trial, responder, wait_s, why)
-                            ) if stim is not None else None
-        # Rig.play's DeviceOnset; a rig of the caller's own may return nothing. Its host
-        # time is when the device took the first sample (the audio rig's first callback,
-        # tens of ms after the call): reaction times count from there.
-        host_s = getattr(played, "host_s", None)
-        if isinstance(host_s, (int, float)) and np.isfinite(host_s):
-            onset = float(host_s)
-        device_s, clock = getattr(played, "device_s", None), getattr(played, "clock", None)
-        latency = getattr(played, "latency_s", None)
-        latency = float(latency) if isinstance(latency, (int, float)) and np.isfinite(latency) else None
+        try:
+            played = play_paced(self.rig, stim.drives, lambda wait_s, why: self._cooling(trial, responder, wait_s, why)
+                                ) if stim is not None else None
+        except XrunError as exc:  # samples lost: the trial again, not the run's end
+            return self._xrun(trial, responder, exc, onset, level_db)
+        onset, device_s, clock, latency = _device_onset(played, onset)
         # The marker at the drive's first sample leaving the device: the hand-over plus the
         # output latency where the rig knows it. A trial presented before (a resumed run,
         # a pause) says so, so that a recording keeps one onset per answer.
@@ -839,6 +878,30 @@ class StudyEngine:
                      replay=self._presented_before(trial))
         return Presentation(self.session_id, self.study, trial, stim, onset, self.design, device_s, clock, latency,
                             block=int(self._marked["block"]))
+
+    def _xrun(self, trial: PlannedTrial, responder: Any, exc: Exception, onset: float, level_db: float) -> Again:
+        """A stimulus whose stream lost samples: logged (event ``xrun``), and the trial presented again.
+
+        Up to :attr:`represent_after_xrun` times per trial (the session's
+        ``represent_after_xrun``, counted over every run of the session); one more xrun
+        ends the run with the :class:`~vibrofocus.rigs.XrunError`, as before.
+        """
+        earlier = sum(1 for e in self.store.events(self.session_id, kind="xrun")
+                      if isinstance(e.payload, dict) and e.payload.get("trial_index") == trial.trial_index
+                      and e.payload.get("represented"))
+        again = earlier < self.represent_after_xrun
+        # What the participant felt is marked too, as lost (a recording keeps one onset per answer).
+        onset, device_s, clock, latency = _device_onset(getattr(exc, "onset", None), onset)
+        self._marker("stimulus_onset", onset + (latency or 0.0), trial, played=True, level_db=level_db,
+                     onset_device_s=device_s, onset_clock=clock, onset_latency_s=latency,
+                     replay=self._presented_before(trial), xrun=True)
+        self._log("xrun", trial, message=str(exc), represented=again, onset_device_s=device_s)
+        if not again:
+            raise exc
+        hook = getattr(responder, "xrun", None)
+        if hook is not None:
+            hook(trial, earlier + 1, self.represent_after_xrun)
+        return Again(None, "the audio stream lost samples during the stimulus")
 
     def submit(self, presentation: Presentation, response: Response, *, answer_id: str | None = None) -> AnswerReceipt:
         """Commit the answer to a presented trial (with the drive hash and the onset) before returning.
@@ -955,6 +1018,23 @@ class StudyEngine:
             if pace_s > 0:
                 time.sleep(pace_s)
         return n_run
+
+
+def _device_onset(played: Any, onset: float) -> tuple[float, Any, Any, float | None]:
+    """(host onset, device onset, its clock, output latency) of a play's DeviceOnset, s.
+
+    Rig.play's DeviceOnset; a rig of the caller's own may return nothing (then ``onset``,
+    the host time before the play, and None). Its host time is when the device took the
+    first sample (the audio rig's first callback, tens of ms after the call): reaction
+    times count from there.
+    """
+    host_s = getattr(played, "host_s", None)
+    if isinstance(host_s, (int, float)) and np.isfinite(host_s):
+        onset = float(host_s)
+    device_s, clock = getattr(played, "device_s", None), getattr(played, "clock", None)
+    latency = getattr(played, "latency_s", None)
+    latency = float(latency) if isinstance(latency, (int, float)) and np.isfinite(latency) else None
+    return onset, device_s, clock, latency
 
 
 def _protocol_fields(info: Any) -> dict[str, Any]:

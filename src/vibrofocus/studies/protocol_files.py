@@ -112,6 +112,9 @@ class ProtocolBlock:
         A threshold block's staircase steps, dB (None: the staircase's default).
     max_db : float or None
         A threshold block's highest level, dB re the level rule (None: 0 dB).
+    represent_after_xrun : int
+        Times a trial whose stimulus lost samples (an xrun) is presented again, 0-10
+        (:func:`~vibrofocus.studies.engine.represent_after_xrun`).
     """
 
     index: int
@@ -129,6 +132,7 @@ class ProtocolBlock:
     seed: int | None
     steps_db: tuple[float, ...] | None = None
     max_db: float | None = None
+    represent_after_xrun: int = 1
 
     @property
     def study(self) -> int | None:
@@ -254,7 +258,8 @@ class StudyProtocol:
         was planned on, dB re the level rule; see :meth:`design`)."""
         b = self.blocks[index]
         config = {**self.design(index, threshold_db).to_dict(), "protocol": self.name, "block": b.index,
-                  "block_name": b.name, "level_unit": b.level_unit, "pace_s": b.pacing_s}
+                  "block_name": b.name, "level_unit": b.level_unit, "pace_s": b.pacing_s,
+                  "represent_after_xrun": b.represent_after_xrun}
         if b.level_unit == "dB SL":
             config.update(level_sl_db=b.levels[0], threshold_db=float(threshold_db))  # type: ignore[arg-type]
         return config
@@ -285,6 +290,7 @@ def _models() -> tuple[type, type]:
         seed: Any = "session"
         steps_db: list[float] | None = Field(default=None, min_length=1, max_length=16)
         max_db: float | None = Field(default=None, ge=-120.0, le=120.0)
+        represent_after_xrun: int = Field(default=1, ge=0, le=10)
 
         @field_validator("methods")
         @classmethod
@@ -490,6 +496,7 @@ def parse_protocol(text: str, source: str = "<text>") -> StudyProtocol:
             seed=None if b.seed == "session" else int(b.seed),
             steps_db=None if b.steps_db is None else tuple(float(x) for x in b.steps_db),
             max_db=None if b.max_db is None else float(b.max_db),
+            represent_after_xrun=int(b.represent_after_xrun),
         )
         for i, b in enumerate(parsed.blocks)
     )

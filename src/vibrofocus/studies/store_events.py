@@ -96,7 +96,9 @@ class EventRows(StudyDatabase):
         participant ``model`` (the label of the model and hypothesis that answered, from the
         session), and ``protocol`` (the name of the protocol the session was planned from:
         :func:`session_protocol`), and ``response_x_mm``, ``response_y_mm`` (a point answer's
-        place in the layout frame, mm; None for a location answer). Ordered by participant (as added), study, session and trial index.
+        place in the layout frame, mm; None for a location answer), and ``xrun_represented`` (how many times
+        the trial was presented again because its stimulus lost samples: its ``xrun`` events that
+        re-presented it). Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -130,6 +132,7 @@ class EventRows(StudyDatabase):
             row.update(stimuli.get((row["session_id"], row["trial_index"]), _NO_STIMULUS))
             row["levels"], model = stimuli.get(row["session_id"], (LEGACY_LEVELS, None))
             row["protocol"] = stimuli.get(("protocol", row["session_id"]))
+            row["xrun_represented"] = stimuli.get(("xrun", row["session_id"], row["trial_index"]), 0)
             # A simulated participant's session stored before sessions named their rig ran on the simulated one.
             row["rig"] = stimuli.get(("rig", row["session_id"])) or ("simulated" if row["simulated"] else None)
             if row["simulated"]:
@@ -157,6 +160,12 @@ class EventRows(StudyDatabase):
         for sid, text in conn.execute(sql + "ORDER BY event_id", args):
             payload = json.loads(text)
             out[(sid, payload.get("trial_index"))] = {key: payload.get(key) for key in _NO_STIMULUS}
+        # How many times each trial was presented again after an xrun (the engine's ``xrun`` events).
+        sql = ("SELECT session_id, json_extract(payload, '$.trial_index'), COUNT(*) FROM events WHERE kind = 'xrun' "
+               "AND json_extract(payload, '$.represented') "
+               + ("AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) " if args else ""))
+        for sid, index, count in conn.execute(sql + "GROUP BY 1, 2", args):
+            out[("xrun", sid, index)] = int(count)
         return out
 
     @staticmethod
@@ -185,12 +194,13 @@ class EventRows(StudyDatabase):
         out aborted sessions and dry runs, then the onset columns
         (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`) and the stimulus columns
         (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`), the protocol column and the point
-        columns (:data:`~vibrofocus.io.trials_csv.POINT_COLUMNS`).
+        columns (:data:`~vibrofocus.io.trials_csv.POINT_COLUMNS`) and the xrun column
+        (:data:`~vibrofocus.io.trials_csv.XRUN_COLUMNS`).
         """
         from ..io.trials_csv import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True,
-                                stimuli=True, protocols=True, points=True)
+                                stimuli=True, protocols=True, points=True, xruns=True)
 
 
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.

@@ -88,6 +88,11 @@ class TerminalResponder:
         self.console.print(f"trial {trial.trial}: waiting {wait_s:.1f} s for the actuators to cool "
                            "(the rig's RMS limit over time)")
 
+    def xrun(self, trial: Any, n: int, limit: int) -> None:
+        """Say that the trial's stimulus lost samples and is presented again."""
+        self.console.print(f"trial {trial.trial}: the audio stream lost samples during the stimulus; presenting it "
+                           f"again ({n} of at most {limit})")
+
     def wait_resume(self) -> bool:
         line = self._read("[yellow]paused[/] — Enter to resume (the trial is played again), q to abort: ")
         return line.strip().lower() != "q"

@@ -133,6 +133,7 @@ class SessionRunner:
         self.model = model
         self.require_page = bool(require_page) and model is None
         self._polls: dict[int, int] = {}  # open state requests of ready pages: token -> seq they have seen
+        self._cooling_until: float | None = None  # monotonic end of a wait for the actuators to cool
         self._next_poll = 0
 
     # ------------------------------------------------------------------ control
@@ -229,10 +230,14 @@ class SessionRunner:
             return self._drive_sha.get(int(trial_index))
 
     def snapshot(self) -> dict[str, Any]:
-        """A copy of the current state (``state``, ``trial_index``, ``phase``, ``seq``, ...)."""
+        """A copy of the current state (``state``, ``trial_index``, ``phase``, ``seq``, ...; ``cooling_s``,
+        the seconds left of a wait for the actuators to cool, while one lasts)."""
         with self._cond:
             snap = dict(self._state)
             snap["paused"] = self._paused
+            left = None if self._cooling_until is None else self._cooling_until - time.monotonic()
+            if left is not None and left > 0:
+                snap["cooling_s"] = round(left, 1)  # the experimenter page's "cooling: 9 s"
             return snap
 
     # ------------------------------------------------------------------ engine hooks
@@ -294,6 +299,11 @@ class SessionRunner:
         if self._stopping:
             return STOP
         return Again("trial_restarted", "the participant page did not see the stimulus onset (reloaded)")
+
+    def cooling(self, trial: Any, wait_s: float) -> None:
+        """The stimulus waits ``wait_s`` s for the actuators to cool: the snapshot's ``cooling_s`` counts it down."""
+        with self._cond:
+            self._cooling_until = time.monotonic() + float(wait_s)
 
     def answered(self, presentation: Presentation, receipt: Any) -> None:
         """Show "taken" for a while before the next trial."""

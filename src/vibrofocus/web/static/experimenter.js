@@ -374,7 +374,9 @@
   function trialText(live) {
     // The one numbering of trials: the phase and the trial's number within it, as in
     // the trials file and on the participant page.
-    return live && live.trial ? `${live.phase} trial ${live.trial} of ${live.n_in_phase}` : "";
+    const trial = live && live.trial ? `${live.phase} trial ${live.trial} of ${live.n_in_phase}` : "";
+    // A limit over time holds the trial's stimulus until the actuators have cooled.
+    return live && live.cooling_s > 0 ? [trial, `cooling: ${Math.ceil(live.cooling_s)} s`].filter(Boolean).join(" · ") : trial;
   }
 
   // What a session is doing now. A paused session says where it paused, never the state
