@@ -73,6 +73,9 @@ sphinx_gallery_conf = {
     "abort_on_example_error": True,
     "show_memory": False,
     "min_reported_time": 1000,
+    # The examples run two at a time, each in a process of its own (joblib): the docs phase
+    # has the machine's two cores to itself.
+    "parallel": 2,
 }
 
 # ---------------------------------------------------------------------------------------

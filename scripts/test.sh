@@ -9,7 +9,9 @@
 #   browser  the browser tests, in one process (their pages keep real time)
 #   docs     the Sphinx site with its executed gallery, built outside pytest, then checked
 #            (scripts/build_docs.sh)
-#   lowest   the smoke test at the lowest versions pyproject.toml allows (scripts/test_lowest.sh)
+#   lowest   the smoke test at the lowest versions pyproject.toml allows (scripts/test_lowest.sh);
+#            asked with browser, it runs beside the browser phase (both mostly wait: on
+#            installs, on the pages' real time), and its output follows when it ends
 #
 #   bash scripts/test.sh                  unit, slow, browser and docs: every test
 #   bash scripts/test.sh unit browser -x  only those phases; other arguments go to pytest
@@ -37,7 +39,8 @@ status=0
 # phase NAME COMMAND...: runs the command, prints "phase NAME: N s" and keeps the first failure.
 phase() {
     local name=$1; shift
-    local start=$SECONDS rc=0
+    local start=${phase_start:-$SECONDS} rc=0
+    phase_start=""
     echo "=== phase $name"
     "$@" || rc=$?
     if [ "$rc" = 5 ] && [ "$1" = "$python" ]; then
@@ -91,7 +94,32 @@ pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
 # The unit phase hands out whole modules (--dist loadscope), so a module's shared fixture (a
 # calibration, a served app) is made by one worker, not by each; the slow phase's tests take
 # seconds to minutes each, so an idle worker takes tests from a busy one (--dist worksteal).
+# The lowest-versions smoke test spends most of its time installing, and the browser phase
+# waiting on its pages: asked together, the smoke test starts beside the browser phase in a
+# background process of its own (its own virtual environment and temporary folder), and its
+# phase, where it comes, waits for it and shows its output. Its time counts from its start.
+lowest_pid="" lowest_log="" lowest_started=""
+start_lowest() {
+    lowest_log=$(mktemp)
+    lowest_started=$SECONDS
+    echo "=== phase lowest: started beside the next phase; its output follows when it ends"
+    bash scripts/test_lowest.sh >"$lowest_log" 2>&1 &
+    lowest_pid=$!
+}
+finish_lowest() {
+    local rc=0
+    wait "$lowest_pid" || rc=$?
+    lowest_pid=""
+    cat "$lowest_log"
+    rm -f "$lowest_log"
+    return "$rc"
+}
+trap '[ -z "$lowest_pid" ] || kill "$lowest_pid" 2>/dev/null; [ -z "$lowest_log" ] || rm -f "$lowest_log"' EXIT
+wants_lowest=0
+for p in "${phases[@]}"; do [ "$p" != lowest ] || wants_lowest=1; done
+suite_start=$SECONDS
 for p in "${phases[@]}"; do
+    if [ "$p" = browser ] && ((wants_lowest)) && [ -z "$lowest_started" ]; then start_lowest; fi
     case "$p" in
         unit) phase unit "${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs" \
             ${pytest_args[@]+"${pytest_args[@]}"} ;;
@@ -101,7 +129,12 @@ for p in "${phases[@]}"; do
         # a loaded machine would stretch.
         browser) phase browser "${pytest[@]}" -m "browser and not docs" ${pytest_args[@]+"${pytest_args[@]}"} ;;
         docs) phase docs env PYTHON="$python" bash scripts/build_docs.sh ${pytest_args[@]+"${pytest_args[@]}"} ;;
-        lowest) phase lowest bash scripts/test_lowest.sh ;;
+        lowest)
+            if [ -n "$lowest_started" ]; then
+                phase_start=$lowest_started phase lowest finish_lowest
+            else
+                phase lowest bash scripts/test_lowest.sh
+            fi ;;
     esac
 done
 
@@ -112,4 +145,5 @@ for name in "${order[@]}"; do
     total=$((total + took[$name]))
 done
 printf 'total          %5d s\n' "$total"
+[ -z "$lowest_started" ] || printf 'wall clock     %5d s (lowest beside browser)\n' "$((SECONDS - suite_start))"
 exit "$status"
