@@ -12,6 +12,7 @@ docs/fitting-hypotheses.md. Simulated participants: a model, not data.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -24,7 +25,7 @@ from .elpd import compare_hypotheses
 from .lab_trials import LabTrials
 from .likelihood_fit import FitSettings, fit_hypothesis, model_at
 
-__all__ = ["simulate_trials", "model_recovery", "parameter_recovery"]
+__all__ = ["simulate_trials", "recovery_study", "confusion", "model_recovery", "parameter_recovery"]
 
 
 def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generator, *,
@@ -75,13 +76,70 @@ def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generat
                      levels=b.levels)
 
 
+def recovery_study(hypotheses: Sequence[Any], truth: int, study: int, *, n_participants: int = 12, seed: int = 0,
+                   bank: FeatureBank | None = None, settings: FitSettings | None = None, study1_only: bool = False,
+                   refit: bool = True, **cluster: Any) -> dict[str, Any]:
+    """One study of a model recovery: simulate it under ``hypotheses[truth]``, score every hypothesis.
+
+    The study draws from ``numpy.random.default_rng([seed, truth, study])``.
+
+    Parameters
+    ----------
+    hypotheses : sequence of str or Hypothesis
+    truth : int
+        Index of the hypothesis that answers.
+    study : int
+        The study's number under that hypothesis.
+    n_participants, seed, bank, settings, study1_only
+        As :func:`model_recovery`.
+    refit : bool
+        True: every hypothesis' free parameters are fitted to the study and scored by
+        leave-one-participant-out ELPD (:func:`compare_hypotheses`). False: every
+        hypothesis is scored at its shipped parameters (its fit to the paper), nothing
+        fitted to the study, so the score is each participant's marginal log-likelihood
+        there; the true hypothesis then answers with exactly the parameters it is scored
+        at, so this bounds recovery from above (a refit lets every hypothesis move
+        toward the data, the true one's advantage can only shrink).
+    **cluster
+        As :func:`compare_hypotheses`.
+
+    Returns
+    -------
+    dict
+        ``true``, ``study``, ``chosen``, ``elpd`` (per name), ``difference`` (chosen minus
+        runner-up) and ``difference_se``.
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    hs = [find_hypothesis(h) for h in hypotheses]
+    b = bank if bank is not None else default_bank()
+    data = simulate_trials(hs[truth], n_participants, np.random.default_rng([seed, truth, study]), bank=b)
+    if study1_only:
+        data = data.subset(np.arange(n_participants), studies=(1,))
+    scored = hs if refit else [dataclasses.replace(h, free_parameters=()) for h in hs]
+    if not refit:
+        cluster = {"local": True}  # one likelihood per hypothesis: no folds to spread
+    res = compare_hypotheses(data, scored, bank=b, settings=settings, **cluster)
+    return {"true": hs[truth].name, "study": study, "chosen": res["chosen"],
+            "elpd": {n: r["elpd"] for n, r in res["hypotheses"].items()},
+            "difference": res["difference"], "difference_se": res["difference_se"]}
+
+
+def confusion(names: Sequence[str], studies: Sequence[Mapping[str, Any]]) -> list[list[int]]:
+    """Counts of (true, chosen) over ``studies`` (rows: true, in the order of ``names``)."""
+    out = np.zeros((len(names), len(names)), dtype=int)
+    for st in studies:
+        out[list(names).index(st["true"]), list(names).index(st["chosen"])] += 1
+    return out.tolist()
+
+
 def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants: int = 12, seed: int = 0,
                    bank: FeatureBank | None = None, settings: FitSettings | None = None, study1_only: bool = False,
-                   **cluster: Any) -> dict[str, Any]:
+                   refit: bool = True, **cluster: Any) -> dict[str, Any]:
     """Simulate studies under each hypothesis, score every hypothesis on each, count the choices.
 
     Study ``j`` under hypothesis ``t`` (index in ``hypotheses``) draws from
-    ``numpy.random.default_rng([seed, t, j])``.
+    ``numpy.random.default_rng([seed, t, j])`` (:func:`recovery_study`).
 
     Parameters
     ----------
@@ -96,6 +154,9 @@ def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants:
     settings : FitSettings, optional
     study1_only : bool
         Fit Study 1's answers only (fast; the selections are simulated and dropped).
+    refit : bool
+        Fit every hypothesis to each study and score by leave-one-participant-out ELPD
+        (True), or score each at its shipped parameters (False; see :func:`recovery_study`).
     **cluster
         ``scheduler``, ``n_workers``, ``local``: as :func:`compare_hypotheses`.
 
@@ -112,19 +173,11 @@ def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants:
         raise ValidationError("model recovery needs at least two hypotheses")
     names = [h.name for h in hs]
     b = bank if bank is not None else default_bank()
-    confusion = np.zeros((len(hs), len(hs)), dtype=int)
-    studies = []
-    for t, truth in enumerate(hs):
-        for j in range(n_studies):
-            data = simulate_trials(truth, n_participants, np.random.default_rng([seed, t, j]), bank=b)
-            if study1_only:
-                data = data.subset(np.arange(n_participants), studies=(1,))
-            res = compare_hypotheses(data, hs, bank=b, settings=settings, **cluster)
-            confusion[t, names.index(res["chosen"])] += 1
-            studies.append({"true": truth.name, "study": j, "chosen": res["chosen"],
-                            "elpd": {n: r["elpd"] for n, r in res["hypotheses"].items()},
-                            "difference": res["difference"], "difference_se": res["difference_se"]})
-    return {"names": names, "confusion": confusion.tolist(), "studies": studies, "n_participants": n_participants}
+    studies = [recovery_study(hs, t, j, n_participants=n_participants, seed=seed, bank=b, settings=settings,
+                              study1_only=study1_only, refit=refit, **cluster)
+               for t in range(len(hs)) for j in range(n_studies)]
+    return {"names": names, "confusion": confusion(names, studies), "studies": studies,
+            "n_participants": n_participants}
 
 
 def parameter_recovery(hypothesis: Any, *, n_studies: int, n_participants: int = 12, seed: int = 0,
