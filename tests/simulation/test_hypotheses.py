@@ -293,7 +293,7 @@ def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(tmp_p
         fit.adopt(a + [write("c.json", "v3-centroid", (2023, 2024), {"s2_reduction": 4.0})], [], out=out)
     # The paths are compared on the seeds they were judged on: all the same, and no others.
     b = [write("b1.json", "v3-centroid", (2023, 2024)), write("b2.json", "v3-centroid", (2025, 2026))]
-    others = [write(f"d{i}.json", n, s) for n in available_hypotheses()[2:] for i, s in enumerate(((2023, 2024),
+    others = [write(f"{n}-{i}.json", n, s) for n in available_hypotheses()[2:] for i, s in enumerate(((2023, 2024),
                                                                                                  (2025, 2026)))]
     with pytest.raises(ValidationError, match="judged on fit seeds"):
         fit.adopt(a + b[:1] + [write("b3.json", "v3-centroid", (2025, 2026), fit_seeds=(1000, 1016))] + others,
