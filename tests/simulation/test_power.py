@@ -11,7 +11,8 @@ from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 from vibrofocus.simulation.bank import StudyArrays
 from vibrofocus.simulation.power import (TESTS, PowerDesign, direction_sentences, directional_shares,
-                                         effect_directions, paper_implied_power, power_table, robust_conclusions,
+                                         effect_directions, paper_implied_power,
+                                         paper_implied_wilcoxon_power, power_table, robust_conclusions,
                                          run_power, study_statistics)
 
 
@@ -198,3 +199,22 @@ def test_study_statistics_reports_the_reverse():
     s = study_statistics(StudyArrays(err, count, count.copy()), methods=("funneling", "inverse", "combination"))
     assert s["s1_inverse_above_p"] < 0.05 and s["s1_inverse_below_p"] == 1.0
     assert s["s2_inverse_more_p"] < 0.05 and s["s2_inverse_fewer_p"] == 1.0
+
+
+def test_paper_implied_wilcoxon_power_is_that_of_the_papers_study2_effect():
+    # The paper: Bonferroni Wilcoxon p = 0.013 over 3 method pairs, 20 participants (Sec.
+    # III.C) -> z = 2.85, a shift of 0.80 SD of normal paired differences; a Bonferroni
+    # Wilcoxon replication has power about 0.37 / 0.80 / 0.95 at N = 10 / 20 / 30.
+    imp = paper_implied_wilcoxon_power((10, 20, 30), n_studies=2000)
+    assert imp["z"] == pytest.approx(2.853, abs=0.001) and imp["theta"] == pytest.approx(0.802, abs=0.002)
+    for n, full in ((10, 0.37), (20, 0.80), (30, 0.95)):
+        assert imp["power"][str(n)] == pytest.approx(full, abs=0.04)
+        assert imp["power_half"][str(n)] < imp["power"][str(n)] / 2
+    # Independently: at that shift, 20 participants' signed-rank z (W+ standardized under
+    # the null) is the paper's on average.
+    rng = np.random.default_rng(7)
+    d = rng.normal(imp["theta"], 1.0, (4000, 20))
+    ranks = stats.rankdata(np.abs(d), axis=1)
+    w = np.sum(ranks * (d > 0), axis=1)
+    z = (w - 20 * 21 / 4) / np.sqrt(20 * 21 * 41 / 24)
+    assert abs(z.mean() - imp["z"]) < 4 * z.std() / np.sqrt(z.size), z.mean()
