@@ -47,7 +47,8 @@ from .lab_fit import fit_trials
 from .lab_trials import LabTrials, lab_trials, trials_source
 from .likelihood_fit import Fit, FitSettings, fit_hypothesis, participant_loglik
 from .predictive import predictive_check
-from .recovery import confusion, model_recovery, parameter_recovery, recovery_study, simulate_trials
+from .recovery import (confusion, model_recovery, parameter_recovery, profile_recovery_study, profile_summary,
+                       recovery_study, simulate_trials)
 
 __all__ = [
     "FIT_SEEDS",
@@ -79,6 +80,8 @@ __all__ = [
     "simulate_trials",
     "model_recovery",
     "recovery_study",
+    "profile_recovery_study",
+    "profile_summary",
     "confusion",
     "parameter_recovery",
 ]
