@@ -628,12 +628,12 @@ def paper_implied_wilcoxon_power(
     theta = float(optimize.brentq(lambda t: expected_z(t, n_paper) - z, 0.0, 10.0))
     out: dict[str, Any] = {"z": z, "theta": theta, "p_bonferroni": p_bonferroni, "n_pairs": n_pairs,
                            "n_paper": n_paper, "alpha": alpha, "n_studies": n_studies, "power": {}, "power_half": {}}
-    rng = np.random.default_rng(seed)
     for n in n_participants:
         n = int(n)
         if n < 2:
             raise ValidationError(f"a signed-rank test needs at least 2 participants, got {n}")
-        for key, eff in (("power", theta), ("power_half", theta / 2.0)):
+        for k, (key, eff) in enumerate((("power", theta), ("power_half", theta / 2.0))):
+            rng = np.random.default_rng([seed, n, k])  # the same numbers whichever N are asked for
             p = stats.wilcoxon(rng.normal(eff, 1.0, (n_studies, n)), axis=1).pvalue
             out[key][str(n)] = float(np.mean(np.minimum(p * n_pairs, 1.0) < alpha))
     return out
