@@ -33,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus.simulation import available_hypotheses, hypothesis
+from vibrofocus.simulation.fitting.recovery import STUDY2_ONLY
 from vibrofocus.simulation.fitting import (FitSettings, confusion, parameter_recovery, profile_recovery_study,
                                           profile_summary, recovery_study)
 from vibrofocus_tools.markers import ROOT, write_between_markers
@@ -89,20 +90,23 @@ def one_at_a_time(args: argparse.Namespace, names: list[str], settings: FitSetti
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")
     have = {(d["hypothesis"], d["key"], d["study"]) for d in done}
-    for j in range(0 if args.table_only else args.one_at_a_time):
-        for name in names:
-            for r in hypothesis(name).free_parameters:
-                if (name, r.key, j) in have:
-                    continue
-                t0 = time.perf_counter()
-                row = profile_recovery_study(name, r.key, j, args.one_at_a_time, n_participants=args.participants,
-                                             seed=args.seed, settings=settings)
-                row["elapsed_s"] = round(time.perf_counter() - t0, 1)
-                with path.open("a", encoding="utf-8") as f:
-                    f.write(json.dumps(row) + "\n")
-                done.append(row)
-                print(f"{name} {r.key} study {j}: true {row['true']:.4g}, fitted {row['fitted']:.4g} "
-                      f"({row['elapsed_s']} s)", flush=True)
+    # Each parameter's K studies together (a partial run has whole rows): Study 1's
+    # parameters first (cheap), hypotheses in turn.
+    items = sorted(((r.name in STUDY2_ONLY, i, n, r.key) for n in names
+                    for i, r in enumerate(hypothesis(n).free_parameters)), key=lambda x: x[:2])
+    for _, _, name, pkey in ([] if args.table_only else items):
+        for j in range(args.one_at_a_time):
+            if (name, pkey, j) in have:
+                continue
+            t0 = time.perf_counter()
+            row = profile_recovery_study(name, pkey, j, args.one_at_a_time, n_participants=args.participants,
+                                         seed=args.seed, settings=settings)
+            row["elapsed_s"] = round(time.perf_counter() - t0, 1)
+            with path.open("a", encoding="utf-8") as f:
+                f.write(json.dumps(row) + "\n")
+            done.append(row)
+            print(f"{name} {pkey} study {j}: true {row['true']:.4g}, fitted {row['fitted']:.4g} "
+                  f"({row['elapsed_s']} s)", flush=True)
     summary = profile_summary(done)
     note = (f"One at a time (a MODEL, not data): each free parameter moved within its range (for one end of a "
             f"population range, up to the other end's shipped value), every other at the hypothesis' shipped value; "

@@ -136,3 +136,16 @@ def test_analyze_hypotheses_writes_the_fit_and_its_section(tmp_path):
     html = (out / "report.html").read_text()
     assert "Hypotheses fitted to these trials (model output)" in html and "MODEL OUTPUT" in html
     assert (out / "hypotheses_check.png").stat().st_size > 0
+
+
+def test_profile_summary_calls_a_parameter_recovered_only_when_the_refits_track_it():
+    from vibrofocus.simulation.fitting import profile_recovery_study, profile_summary
+
+    rows = [{"hypothesis": "h", "key": k, "study": j, "lo": 0.0, "hi": 1.0, "true": t, "fitted": f, "data": "study 1"}
+            for k, fits in (("tracked", (0.2, 0.5, 0.8)), ("stuck", (0.0, 0.0, 0.01)), ("flat", (0.5, 0.5, 0.5)))
+            for j, (t, f) in enumerate(zip((0.15, 0.5, 0.85), fits))]
+    got = profile_summary(rows)["h"]
+    assert got["tracked"]["recovered"] and got["tracked"]["n"] == 3
+    assert not got["stuck"]["recovered"] and not got["flat"]["recovered"]  # at a bound; no correlation
+    with pytest.raises(ValidationError, match="not a free parameter of 'grid-peak'"):
+        profile_recovery_study("grid-peak", "central_weight", 0, 3)
