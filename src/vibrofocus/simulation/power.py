@@ -595,16 +595,8 @@ def paper_implied_wilcoxon_power(
 
     Parameters
     ----------
-    n_participants : sequence of int
-        Sample sizes N of the replication (each >= 2).
-    alpha : float
-        Family-wise significance level.
-    p_bonferroni : float
-        The paper's reported (corrected) p.
-    n_pairs : int
-        Comparisons the correction covered.
-    n_paper : int
-        The paper's participants.
+    n_participants, alpha, p_bonferroni, n_pairs, n_paper
+        As :func:`paper_implied_power` (here the paper's Study 2 p, Sec. III.C).
     n_studies : int
         Simulated replications per N and effect.
     seed : int
