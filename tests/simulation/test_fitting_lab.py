@@ -149,3 +149,24 @@ def test_profile_summary_calls_a_parameter_recovered_only_when_the_refits_track_
     assert not got["stuck"]["recovered"] and not got["flat"]["recovered"]  # at a bound; no correlation
     with pytest.raises(ValidationError, match="not a free parameter of 'grid-peak'"):
         profile_recovery_study("grid-peak", "central_weight", 0, 3)
+
+
+def test_parameters_not_recovered_are_assumed_and_not_free():
+    # The committed one-at-a-time parameter recovery (scripts/model_recovery.py
+    # --one-at-a-time): a parameter it did not recover is no free parameter of its
+    # hypothesis but an assumption, and one it recovered stays free.
+    from pathlib import Path
+
+    from vibrofocus.simulation.fitting import profile_summary
+
+    path = Path(__file__).resolve().parents[2] / "scripts" / "fits" / "recovery" / "one-at-a-time-n20-d8-seed0.jsonl"
+    rows = [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines()[1:] if line.strip()]
+    checked = 0
+    for name, params in profile_summary(rows).items():
+        h = hypothesis(name)
+        free = {r.key for r in h.free_parameters}
+        for key, r in params.items():
+            if r["n"] == 3:
+                assert (key in h.assumed, key in free) == (not r["recovered"], r["recovered"]), (name, key, r)
+                checked += 1
+    assert checked >= 40

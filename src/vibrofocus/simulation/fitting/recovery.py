@@ -17,13 +17,14 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from scipy import optimize
 
 from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
 from ..perception import Traits, draw_answers
 from .elpd import compare_hypotheses
 from .lab_trials import LabTrials
-from .likelihood_fit import FitSettings, fit_hypothesis, model_at
+from .likelihood_fit import FitSettings, fit_hypothesis, model_at, participant_loglik
 
 __all__ = ["simulate_trials", "recovery_study", "confusion", "model_recovery", "parameter_recovery",
            "profile_recovery_study", "profile_summary"]
@@ -245,7 +246,10 @@ def profile_recovery_study(hypothesis: Any, key: str, study: int, n_studies: int
     Every other parameter stays at the hypothesis' shipped value, in the simulation and in
     the fit, so this is a necessary condition of recovery, not a sufficient one: a
     parameter that fails it cannot be recovered from the design even when everything else
-    is known; one that passes may still trade off with others in a joint fit. Study
+    is known; one that passes may still trade off with others in a joint fit. The fit:
+    the summed marginal log-likelihood on a grid of 9 values across the range, then
+    Brent's bounded search (``settings.maxiter`` steps) between the best one's neighbours.
+    Study
     ``study`` of ``n_studies`` puts the parameter at the fraction ``0.15 + 0.7 j / (n - 1)``
     of its range (for one end of a population range: of the part that keeps the pair in
     order, up to the other end's shipped value) and simulates ``n_participants`` on the
@@ -290,9 +294,23 @@ def profile_recovery_study(hypothesis: Any, key: str, study: int, n_studies: int
                            values={key: value})
     which = 2 if r.name in STUDY2_ONLY else 1
     data = data.subset(np.arange(n_participants), studies=(which,))
-    fit = fit_hypothesis(one, data, bank=b, settings=settings)
+    s = settings or FitSettings()
+
+    def neg(x: float) -> float:
+        v = float(participant_loglik(one, data, [x], bank=b, settings=s).sum())
+        return -v if np.isfinite(v) else 1e300
+
+    # A grid, then Brent's bounded search around its best point: no gradient, as a
+    # parameter that acts through a threshold (detection) is piecewise flat at a
+    # finite-difference step.
+    grid = np.linspace(lo, hi, 9)
+    k = int(np.argmin([neg(x) for x in grid]))
+    a, c = grid[max(k - 1, 0)], grid[min(k + 1, 8)]
+    res = optimize.minimize_scalar(neg, bounds=(a, c), method="bounded",
+                                   options={"xatol": 0.01 * (hi - lo), "maxiter": s.maxiter})
+    fitted = float(res.x) if res.fun <= neg(grid[k]) else float(grid[k])
     return {"hypothesis": h.name, "key": key, "study": study, "lo": lo, "hi": hi, "true": value,
-            "fitted": fit.params[key], "data": f"study {which}"}
+            "fitted": fitted, "data": f"study {which}"}
 
 
 def profile_summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
