@@ -129,8 +129,12 @@ def test_every_free_parameter_moves_the_answers_and_every_inert_one_does_not():
             a, b = (_answers(h, base.replace(**{inert: v})) for v in (0.0, 1.0))
             assert all(np.array_equal(x, y) for x, y in zip(a, b)), (name, inert)  # bit-identical
     assert "central_weight" in hypothesis("grid-peak").inert_parameters()
+    from vibrofocus.simulation.hypotheses import CENTRAL_RANGE, SL_REF_RANGE
+
     with pytest.raises(ValidationError, match="does nothing"):
-        dataclasses.replace(hypothesis("grid-peak"), free_parameters=hypothesis("v3-centroid").free_parameters)
+        dataclasses.replace(hypothesis("grid-peak"), free_parameters=(CENTRAL_RANGE,), assumed={})
+    with pytest.raises(ValidationError, match="sl_ref_db cannot be both free and assumed"):
+        dataclasses.replace(hypothesis("grid-peak"), free_parameters=(SL_REF_RANGE,), assumed={"sl_ref_db": "x"})
 
 
 def test_the_shipped_fits_lie_inside_their_sourced_ranges():
