@@ -94,8 +94,8 @@ def main() -> int:
                    help="fit files written by search, one or more random paths per hypothesis (the same for each)")
     a.add_argument("--version", action="append", default=[], metavar="NAME=V",
                    help="version of a hypothesis' fitted model (bump it when its answers change); repeatable")
-    a.add_argument("--fit-studies", type=int, default=len(FIT_SEEDS),
-                   help="the fit seeds the paths were judged on: the first N (as given to search)")
+    a.add_argument("--fit-studies", type=int, default=None,
+                   help="the fit seeds the paths were judged on: the first N (default: those the fit files record)")
     a.add_argument("--out", type=Path, default=FITS_FILE,
                    help="where to write the fits (default: the shipped simulation/data/hypotheses_fit.json)")
     r = sub.add_parser("report", help="the paper beside the model, with residuals")
@@ -134,7 +134,8 @@ def run(ap: argparse.ArgumentParser, args: argparse.Namespace) -> int:
             print(f"\n{title}:\n" + residuals(seed_statistics(best, seeds, bank=bank, hypothesis=args.hypothesis)))
         return 0
     if args.cmd == "adopt":
-        adopt(args.fits, args.version, out=args.out, report=report, fit_seeds=FIT_SEEDS[:args.fit_studies])
+        adopt(args.fits, args.version, out=args.out, report=report,
+              fit_seeds=None if args.fit_studies is None else FIT_SEEDS[:args.fit_studies])
         return 0
     if args.cmd == "report":
         model = fit_model(read_fit(args.fit)) if args.fit is not None else hypothesis(args.hypothesis).model()

@@ -50,6 +50,8 @@ def test_power_writes_table_plot_and_json(tmp_path):
     flat = " ".join(res.output.split())
     assert "the reverse" in flat and "d_z = 0.79" in flat
     assert report["paper_implied"]["d_z"] == pytest.approx(0.785, abs=0.001)
+    assert report["paper_implied_study2"]["z"] == pytest.approx(2.853, abs=0.001)
+    assert "z = 2.85" in flat  # the Study 2 row of the paper's own effect
     ran = table["n_studies"] > 0  # a test that never ran (too few participants kept) has no power
     assert table.loc[ran, "power"].between(0, 1).all() and table.loc[~ran, "power"].isna().all()
     assert ran[table["test"].str.startswith("s1_")].all()

@@ -129,8 +129,12 @@ def test_every_free_parameter_moves_the_answers_and_every_inert_one_does_not():
             a, b = (_answers(h, base.replace(**{inert: v})) for v in (0.0, 1.0))
             assert all(np.array_equal(x, y) for x, y in zip(a, b)), (name, inert)  # bit-identical
     assert "central_weight" in hypothesis("grid-peak").inert_parameters()
+    from vibrofocus.simulation.hypotheses import CENTRAL_RANGE, SL_REF_RANGE
+
     with pytest.raises(ValidationError, match="does nothing"):
-        dataclasses.replace(hypothesis("grid-peak"), free_parameters=hypothesis("v3-centroid").free_parameters)
+        dataclasses.replace(hypothesis("grid-peak"), free_parameters=(CENTRAL_RANGE,), assumed={})
+    with pytest.raises(ValidationError, match="sl_ref_db cannot be both free and assumed"):
+        dataclasses.replace(hypothesis("grid-peak"), free_parameters=(SL_REF_RANGE,), assumed={"sl_ref_db": "x"})
 
 
 def test_the_shipped_fits_lie_inside_their_sourced_ranges():
@@ -274,12 +278,12 @@ def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(tmp_p
     out = tmp_path / "hypotheses_fit.json"
     weights = {"s2_reduction": 8.0}
 
-    def write(name, hyp, seeds, w=weights):
+    def write(name, hyp, seeds, w=weights, fit_seeds=(1000, 1064)):
         budget = {"n_eval": 0, "n_refine": 300, "rng_seed": seeds[1],
                   "start": {"n_eval": 200, "n_refine": 300, "rng_seed": seeds[0], "start": None}}
         path = tmp_path / name
         path.write_text(json.dumps({"hypothesis": hyp, "levels": "paper", "budget": budget, "weights": w,
-                                    "fit_seeds": [1000, 1064], "loss": 1.0, "model": {}}))
+                                    "fit_seeds": list(fit_seeds), "loss": 1.0, "model": {}}))
         return path
 
     a = [write("a1.json", "grid-peak", (2023, 2024)), write("a2.json", "grid-peak", (2025, 2026))]
@@ -291,13 +295,19 @@ def test_adopt_refuses_hypotheses_fitted_along_other_paths_before_any_work(tmp_p
         fit.adopt(a + b, [], out=out)
     with pytest.raises(ValidationError, match="other weights"):
         fit.adopt(a + [write("c.json", "v3-centroid", (2023, 2024), {"s2_reduction": 4.0})], [], out=out)
+    # The paths are compared on the seeds they were judged on: all the same, and no others.
+    b = [write("b1.json", "v3-centroid", (2023, 2024)), write("b2.json", "v3-centroid", (2025, 2026))]
+    others = [write(f"{n}-{i}.json", n, s) for n in available_hypotheses()[2:] for i, s in enumerate(((2023, 2024),
+                                                                                                 (2025, 2026)))]
+    with pytest.raises(ValidationError, match="judged on fit seeds"):
+        fit.adopt(a + b[:1] + [write("b3.json", "v3-centroid", (2025, 2026), fit_seeds=(1000, 1016))] + others,
+                  [], out=out)
+    with pytest.raises(ValidationError, match="judged on fit seeds 1000-1063, not 1000-1015"):
+        fit.adopt(a + b + others, [], out=out, fit_seeds=range(1000, 1016))
     assert not out.exists()
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="open finding (issue 51): adopt recomputes grid-peak's shipped fit at a loss "
-                   "of 19.23 on the fit seeds, where hypotheses_fit.json records 17.14 (v3-centroid's matches); the "
-                   "record or the recomputation is wrong and must be found")
 def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_file(tmp_path):
     # Two paths per hypothesis: the shipped fit, and a participant who selects almost
     # every location (kappa near 0) and feels little (a high threshold), which no fit of
@@ -318,7 +328,7 @@ def test_adopt_keeps_each_hypothesis_best_path_and_never_touches_the_shipped_fil
                       "start": {"n_eval": 1, "n_refine": 1, "rng_seed": seeds[0], "start": None}}
             path = tmp_path / f"{name}-{seeds[0]}.json"
             path.write_text(json.dumps({"hypothesis": name, "levels": "paper", "budget": budget,
-                                        "weights": fits[name]["weights"], "fit_seeds": [1000, 1064],
+                                        "weights": fits[name]["weights"], "fit_seeds": fits[name]["fit_seeds"],
                                         "loss": 0.0, "model": model}))
             paths.append(path)
     assert fit.adopt(paths, [], out=out) == json.loads(out.read_text())

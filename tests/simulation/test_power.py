@@ -11,7 +11,8 @@ from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 from vibrofocus.simulation.bank import StudyArrays
 from vibrofocus.simulation.power import (TESTS, PowerDesign, direction_sentences, directional_shares,
-                                         effect_directions, paper_implied_power, power_table, robust_conclusions,
+                                         effect_directions, paper_implied_power,
+                                         paper_implied_wilcoxon_power, power_table, robust_conclusions,
                                          run_power, study_statistics)
 
 
@@ -218,3 +219,23 @@ def test_wilcoxon_p_is_scipys_bit_for_bit():
         assert np.count_nonzero(x - y) >= 2
         assert _wilcoxon_p(x, y) == float(stats.wilcoxon(x, y).pvalue), (x, y)
     assert _wilcoxon_p(np.ones(5), np.ones(5)) == 1.0
+
+
+def test_paper_implied_wilcoxon_power_is_that_of_the_papers_study2_effect():
+    # The paper: Bonferroni Wilcoxon p = 0.013 over 3 method pairs, 20 participants (Sec.
+    # III.C) -> z = 2.85, a shift of 0.80 SD of normal paired differences; a Bonferroni
+    # Wilcoxon replication has power about 0.35 / 0.80 / 0.96 at N = 10 / 20 / 30.
+    imp = paper_implied_wilcoxon_power((10, 20, 30), n_studies=2000)
+    assert imp["z"] == pytest.approx(2.853, abs=0.001) and imp["theta"] == pytest.approx(0.802, abs=0.002)
+    for n, full in ((10, 0.35), (20, 0.80), (30, 0.96)):
+        assert imp["power"][str(n)] == pytest.approx(full, abs=0.04)
+        assert imp["power_half"][str(n)] < imp["power"][str(n)] / 2
+    assert paper_implied_wilcoxon_power((30,), n_studies=2000)["power"]["30"] == imp["power"]["30"]  # per-N seeds
+    # Independently: at that shift, 20 participants' signed-rank z (W+ standardized under
+    # the null) is the paper's on average.
+    rng = np.random.default_rng(7)
+    d = rng.normal(imp["theta"], 1.0, (4000, 20))
+    ranks = stats.rankdata(np.abs(d), axis=1)
+    w = np.sum(ranks * (d > 0), axis=1)
+    z = (w - 20 * 21 / 4) / np.sqrt(20 * 21 * 41 / 24)
+    assert abs(z.mean() - imp["z"]) < 4 * z.std() / np.sqrt(z.size), z.mean()

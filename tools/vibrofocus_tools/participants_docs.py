@@ -30,11 +30,17 @@ def _cell(h, model, name: str) -> str:
     value = getattr(model, name)
     if name in h.inert_parameters():
         return f"{_value(value)} (inert)"
-    if not free:
-        return _value(value)
+
+    def one(v, key):
+        return f"**{_value(v)}**" if key in free else (f"{_value(v)} (assumed)" if _key(name, key) in h.assumed
+                                                        else _value(v))
     if isinstance(value, tuple):
-        return "(" + ", ".join(f"**{_value(v)}**" if i in free else _value(v) for i, v in enumerate(value)) + ")"
-    return f"**{_value(value)}**"
+        return "(" + ", ".join(one(v, i) for i, v in enumerate(value)) + ")"
+    return one(value, None)
+
+
+def _key(name: str, index) -> str:
+    return name if index is None else f"{name}[{index}]"
 
 
 def parameters_markdown() -> str:
@@ -46,7 +52,9 @@ def parameters_markdown() -> str:
     models = {n: hs[n].model() for n in names}
     lines = [f"*{MODEL_LABEL}.* Each hypothesis' model (`hypothesis(name).model()`; SI units: m, s, dB, Hz). "
              "**Bold**: free under that hypothesis, fitted within its range (below); *inert*: the hypothesis never "
-             "reads it (switching it changes no answer, tested), so it is not fitted; others fixed. A pair (lo, hi) "
+             "reads it (switching it changes no answer, tested), so it is not fitted; *assumed*: fitted to the paper's "
+             "statistics but not recovered from the paper's design (docs/fitting-hypotheses.md, \"Parameter "
+             "recovery\"), so fixed there as an assumption and not fitted to a lab's trials; others fixed. A pair (lo, hi) "
              "is the uniform range of a trait across simulated participants, except `bias_mean_m`, the population's "
              "mean bias (x across the arm, y along it).", "",
              "| parameter | " + " | ".join(f"`{n}`" for n in names) + " | kind | note |",

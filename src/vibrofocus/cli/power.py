@@ -126,6 +126,14 @@ def power_table(done):
         for k, (key, what) in enumerate((("power", "as published"), ("power_half", "half of it"))):
             table.add_row(label if k == 0 else "", what,
                           *[f"{imp[key][str(n)]:.2f}" for n in design.n_participants])
+    if "s2_inverse_vs_funneling" in result["directional"] and "paper_implied_study2" in result:
+        imp = result["paper_implied_study2"]
+        label = (f"Study 2 inverse vs funneling, the paper's own effect (Bonferroni Wilcoxon p = "
+                 f"{imp['p_bonferroni']:g} -> z = {imp['z']:.2f}, a shift of {imp['theta']:.2f} SD; "
+                 f"{imp['n_studies']} simulated replications)")
+        for k, (key, what) in enumerate((("power", "as published"), ("power_half", "half of it"))):
+            table.add_row(label if k == 0 else "", what,
+                          *[f"{imp[key][str(n)]:.2f}" for n in design.n_participants])
     return table
 
 

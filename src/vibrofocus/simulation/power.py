@@ -28,7 +28,8 @@ from .bank import FeatureBank, StudyArrays, default_bank, simulate_cell_means
 from .perception import PerceptualModel
 
 __all__ = ["TESTS", "DIRECTIONAL_TESTS", "REVERSE_TESTS", "CONTRASTS", "ROBUST_POWER", "robust_conclusions",
-           "directional_shares", "effect_directions", "direction_sentences", "paper_implied_power", "PowerDesign",
+           "directional_shares", "effect_directions", "direction_sentences", "paper_implied_power",
+           "paper_implied_wilcoxon_power", "PowerDesign",
            "study_statistics", "simulate_statistics", "power_table", "run_power", "dask_client"]
 
 #: The tests of docs/method.md (Analysis) whose power is reported: (key, description).
@@ -71,6 +72,10 @@ CONTRASTS: dict[str, dict[str, str]] = {
 #: 3 method pairs, with 20 participants.
 PAPER_S1_PAIR_P = 0.007
 PAPER_S1_PAIRS = 3
+#: The paper's Bonferroni-corrected p of funneling vs inverse in Study 2 (Sec. III.C:
+#: fewer points selected with the inverse filter, Wilcoxon signed-rank), of 3 method pairs.
+PAPER_S2_PAIR_P = 0.013
+PAPER_S2_PAIRS = 3
 PAPER_N = 20
 
 
@@ -587,6 +592,67 @@ def paper_implied_power(
         for key, eff in (("power", d), ("power_half", d / 2.0)):
             nc = eff * np.sqrt(n)
             out[key][str(n)] = float(stats.nct.sf(crit, n - 1, nc) + stats.nct.cdf(-crit, n - 1, nc))
+    return out
+
+
+def paper_implied_wilcoxon_power(
+    n_participants: Sequence[int],
+    alpha: float = 0.05,
+    p_bonferroni: float = PAPER_S2_PAIR_P,
+    n_pairs: int = PAPER_S2_PAIRS,
+    n_paper: int = PAPER_N,
+    n_studies: int = 4000,
+    seed: int = 2023,
+) -> dict[str, Any]:
+    """Power of a replication implied by the paper's own Study 2 statistic, funneling vs inverse.
+
+    The paper's Bonferroni-corrected p of the Wilcoxon signed-rank test (``p_bonferroni``
+    over ``n_pairs`` pairs, ``n_paper`` participants) gives its standard normal statistic
+    ``z``. The effect it implies is the shift ``theta`` of normally distributed paired
+    differences (SD 1, the paired t-test's model of Study 1) at which the signed-rank
+    statistic's expected ``z`` at ``n_paper`` participants is the paper's (the mean of
+    ``W+``, ``N p1 + N (N - 1) p2 / 2`` with ``p1 = Phi(theta)``, ``p2 = Phi(theta sqrt 2)``;
+    Lehmann, Nonparametrics, 1975, Sec. 4.2). A replication of ``N`` testing the same
+    pair with the same correction is simulated ``n_studies`` times
+    (:func:`scipy.stats.wilcoxon`, as the power simulation tests it), at ``theta`` and at
+    half of it (published effects are often inflated); the binomial SE of each power is at
+    most ``0.5 / sqrt(n_studies)``.
+
+    Parameters
+    ----------
+    n_participants, alpha, p_bonferroni, n_pairs, n_paper
+        As :func:`paper_implied_power` (here the paper's Study 2 p, Sec. III.C).
+    n_studies : int
+        Simulated replications per N and effect.
+    seed : int
+        Seed of the simulation.
+
+    Returns
+    -------
+    dict
+        ``z``, ``theta`` (the implied shift in SDs of the differences), ``p_bonferroni``,
+        ``n_pairs``, ``n_paper``, ``alpha``, ``n_studies``, and ``power`` and
+        ``power_half`` ({str(N): power}).
+    """
+    from scipy import optimize
+
+    z = float(stats.norm.isf(p_bonferroni / n_pairs / 2.0))
+
+    def expected_z(theta: float, n: int) -> float:
+        mean = n * stats.norm.cdf(theta) + n * (n - 1) / 2.0 * stats.norm.cdf(theta * np.sqrt(2.0))
+        return (mean - n * (n + 1) / 4.0) / np.sqrt(n * (n + 1) * (2 * n + 1) / 24.0)
+
+    theta = float(optimize.brentq(lambda t: expected_z(t, n_paper) - z, 0.0, 10.0))
+    out: dict[str, Any] = {"z": z, "theta": theta, "p_bonferroni": p_bonferroni, "n_pairs": n_pairs,
+                           "n_paper": n_paper, "alpha": alpha, "n_studies": n_studies, "power": {}, "power_half": {}}
+    for n in n_participants:
+        n = int(n)
+        if n < 2:
+            raise ValidationError(f"a signed-rank test needs at least 2 participants, got {n}")
+        for k, (key, eff) in enumerate((("power", theta), ("power_half", theta / 2.0))):
+            rng = np.random.default_rng([seed, n, k])  # the same numbers whichever N are asked for
+            p = stats.wilcoxon(rng.normal(eff, 1.0, (n_studies, n)), axis=1).pvalue
+            out[key][str(n)] = float(np.mean(np.minimum(p * n_pairs, 1.0) < alpha))
     return out
 
 

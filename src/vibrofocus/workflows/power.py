@@ -99,7 +99,8 @@ def study_power(
     from ..simulation.hypotheses import available_hypotheses, hypothesis as find_hypothesis
     from ..simulation.perception import MODEL_LABEL, STUDY_SKIN
     from ..simulation.power import (CONTRASTS, PowerDesign, dask_client, direction_sentences, effect_directions,
-                                    paper_implied_power, robust_conclusions, run_power)
+                                    paper_implied_power, paper_implied_wilcoxon_power,
+                                    robust_conclusions, run_power)
     from ..skin import skin_preset
 
     progress = progress if progress is not None else QuietProgress()
@@ -152,6 +153,7 @@ def study_power(
     result["directions"] = directions
     result["direction_sentences"] = direction_sentences(directions)
     result["paper_implied"] = paper_implied_power(design.n_participants, alpha)
+    result["paper_implied_study2"] = paper_implied_wilcoxon_power(design.n_participants, alpha)
     result["elapsed_s"] = sum(r["elapsed_s"] for r in per.values())
     return PowerOutcome(result, per, design, write_power(result, out) if out is not None else [])
 
@@ -183,7 +185,7 @@ def write_power(result: dict, out: Path) -> list[Path]:
     table["robust"] = [robust.get((t, n)) for t, n in zip(table["test"], table["n_participants"])]
     csv = write_text(out / "power.csv", table.to_csv(index=False), what="power table")
     keys = ("label", "levels", "hypothesis", "design", "table", "hypotheses", "robust", "directional", "directions",
-            "direction_sentences", "paper_implied", "elapsed_s")
+            "direction_sentences", "paper_implied", "paper_implied_study2", "elapsed_s")
     js = write_text(out / "power.json", json.dumps({k: result[k] for k in keys if k in result}, indent=1),
                     what="power results")
     first = next(iter(hyps))

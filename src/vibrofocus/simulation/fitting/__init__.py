@@ -32,7 +32,8 @@ Fitting to a lab's trials (docs/fitting-hypotheses.md):
 :mod:`.lab_fit`
     :func:`fit_trials`: all of it, the content of ``hypotheses.json``.
 :mod:`.recovery`
-    :func:`simulate_trials`, :func:`model_recovery`, :func:`parameter_recovery`.
+    :func:`simulate_trials`, :func:`recovery_study`, :func:`model_recovery`, :func:`confusion`,
+    :func:`parameter_recovery`.
 """
 
 from .adoption import FITS_FILE, adopt, check_fit_set
@@ -46,7 +47,8 @@ from .lab_fit import fit_trials
 from .lab_trials import LabTrials, lab_trials, trials_source
 from .likelihood_fit import Fit, FitSettings, fit_hypothesis, participant_loglik
 from .predictive import predictive_check
-from .recovery import model_recovery, parameter_recovery, simulate_trials
+from .recovery import (confusion, model_recovery, parameter_recovery, profile_recovery_study, profile_summary,
+                       recovery_study, simulate_trials)
 
 __all__ = [
     "FIT_SEEDS",
@@ -77,5 +79,9 @@ __all__ = [
     "fit_trials",
     "simulate_trials",
     "model_recovery",
+    "recovery_study",
+    "profile_recovery_study",
+    "profile_summary",
+    "confusion",
     "parameter_recovery",
 ]

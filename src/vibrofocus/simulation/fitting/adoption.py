@@ -21,7 +21,7 @@ from ..paper import N_PARTICIPANTS, seed_statistics
 from ..perception import PerceptualModel
 from .fitfile import read_fit
 from .objective import loss
-from .seeds import FIT_SEEDS, HELD_OUT_SEEDS
+from .seeds import HELD_OUT_SEEDS
 
 __all__ = ["FITS_FILE", "adopt", "check_fit_set"]
 
@@ -78,8 +78,8 @@ def check_fit_set(paths: Sequence[str | os.PathLike], levels: str) -> dict[str, 
     ------
     ValidationError
         A file is not a fit (:func:`~.fitfile.read_fit`), or the set is not one
-        adoption: other weights, another level rule, a hypothesis fitted along other
-        paths (budgets) than another, or a registered hypothesis with no fit.
+        adoption: other weights, another level rule, other fit seeds, a hypothesis
+        fitted along other paths (budgets) than another, or a registered hypothesis with no fit.
     """
     if not paths:
         raise ValidationError("no fit files given")
@@ -91,6 +91,9 @@ def check_fit_set(paths: Sequence[str | os.PathLike], levels: str) -> dict[str, 
             raise ValidationError(f"{path}: fitted with other weights than {first_path}; fit all alike")
         if fit["levels"] != levels:
             raise ValidationError(f"{path}: fitted at {fit['levels']} levels, the shipped bank is at {levels} levels")
+        if list(fit["fit_seeds"]) != list(first["fit_seeds"]):
+            raise ValidationError(f"{path}: judged on fit seeds {fit['fit_seeds']}, {first_path} on "
+                                  f"{first['fit_seeds']}; fit all alike")
         by_name.setdefault(hypothesis(fit["hypothesis"]).name, []).append((path, fit))
     budgets = {name: sorted(_budget_key(fit["budget"]) for _, fit in group) for name, group in by_name.items()}
     one = next(iter(budgets))
@@ -107,7 +110,7 @@ def check_fit_set(paths: Sequence[str | os.PathLike], levels: str) -> dict[str, 
 
 def adopt(paths: Sequence[str | os.PathLike], versions: Iterable[str] = (), *, out: str | os.PathLike,
           bank: FeatureBank | None = None, report: Callable[[str], Any] | None = None,
-          fit_seeds: range = FIT_SEEDS, held_out_seeds: range = HELD_OUT_SEEDS,
+          fit_seeds: range | None = None, held_out_seeds: range = HELD_OUT_SEEDS,
           n_participants: int = N_PARTICIPANTS) -> dict[str, Any]:
     """Keep each hypothesis' best path, score it on the held-out seeds, write the fits; return them.
 
@@ -132,9 +135,12 @@ def adopt(paths: Sequence[str | os.PathLike], versions: Iterable[str] = (), *, o
         The feature bank (default the shipped one).
     report : callable, optional
         Called with a line of text per path scored, per hypothesis kept and at the end.
-    fit_seeds, held_out_seeds : range
-        The studies the paths are compared on and the default is chosen on (defaults
-        :data:`~.seeds.FIT_SEEDS`, :data:`~.seeds.HELD_OUT_SEEDS`).
+    fit_seeds : range, optional
+        The studies the paths are compared on: those the fit files record (their
+        ``fit_seeds``, the seeds the search judged them on), which is the default; a
+        range given must be the same.
+    held_out_seeds : range
+        The studies the default is chosen on (default :data:`~.seeds.HELD_OUT_SEEDS`).
     n_participants : int
         Participants per study (default the paper's 20).
 
@@ -146,13 +152,20 @@ def adopt(paths: Sequence[str | os.PathLike], versions: Iterable[str] = (), *, o
     Raises
     ------
     ValidationError
-        See :func:`check_fit_set`; or a version item that is not ``NAME=VERSION`` of a
+        See :func:`check_fit_set`; ``fit_seeds`` other than the files'; or a version item that is not ``NAME=VERSION`` of a
         registered hypothesis.
     """
     say = report or (lambda line: None)
     bank = bank if bank is not None else default_bank()
     wanted = _versions(versions)
     by_name = check_fit_set(paths, bank.levels)
+    recorded = range(*next(iter(by_name.values()))[0][1]["fit_seeds"])
+    if fit_seeds is None:
+        fit_seeds = recorded
+    elif fit_seeds != recorded:
+        raise ValidationError(f"the paths were judged on fit seeds {recorded.start}-{recorded.stop - 1}, not "
+                              f"{fit_seeds.start}-{fit_seeds.stop - 1}: adopt compares them on the seeds they were "
+                              "fitted on")
     defaults = PerceptualModel().to_dict()
     fits, scores = {}, {}
     for name, group in by_name.items():

@@ -12,19 +12,22 @@ docs/fitting-hypotheses.md. Simulated participants: a model, not data.
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from scipy import optimize
 
 from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
 from ..perception import Traits, draw_answers
 from .elpd import compare_hypotheses
 from .lab_trials import LabTrials
-from .likelihood_fit import FitSettings, fit_hypothesis, model_at
+from .likelihood_fit import FitSettings, fit_hypothesis, model_at, participant_loglik
 
-__all__ = ["simulate_trials", "model_recovery", "parameter_recovery"]
+__all__ = ["simulate_trials", "recovery_study", "confusion", "model_recovery", "parameter_recovery",
+           "profile_recovery_study", "profile_summary"]
 
 
 def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generator, *,
@@ -75,13 +78,70 @@ def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generat
                      levels=b.levels)
 
 
+def recovery_study(hypotheses: Sequence[Any], truth: int, study: int, *, n_participants: int = 12, seed: int = 0,
+                   bank: FeatureBank | None = None, settings: FitSettings | None = None, study1_only: bool = False,
+                   refit: bool = True, **cluster: Any) -> dict[str, Any]:
+    """One study of a model recovery: simulate it under ``hypotheses[truth]``, score every hypothesis.
+
+    The study draws from ``numpy.random.default_rng([seed, truth, study])``.
+
+    Parameters
+    ----------
+    hypotheses : sequence of str or Hypothesis
+    truth : int
+        Index of the hypothesis that answers.
+    study : int
+        The study's number under that hypothesis.
+    n_participants, seed, bank, settings, study1_only
+        As :func:`model_recovery`.
+    refit : bool
+        True: every hypothesis' free parameters are fitted to the study and scored by
+        leave-one-participant-out ELPD (:func:`compare_hypotheses`). False: every
+        hypothesis is scored at its shipped parameters (its fit to the paper), nothing
+        fitted to the study, so the score is each participant's marginal log-likelihood
+        there; the true hypothesis then answers with exactly the parameters it is scored
+        at, so this bounds recovery from above (a refit lets every hypothesis move
+        toward the data, the true one's advantage can only shrink).
+    **cluster
+        As :func:`compare_hypotheses`.
+
+    Returns
+    -------
+    dict
+        ``true``, ``study``, ``chosen``, ``elpd`` (per name), ``difference`` (chosen minus
+        runner-up) and ``difference_se``.
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    hs = [find_hypothesis(h) for h in hypotheses]
+    b = bank if bank is not None else default_bank()
+    data = simulate_trials(hs[truth], n_participants, np.random.default_rng([seed, truth, study]), bank=b)
+    if study1_only:
+        data = data.subset(np.arange(n_participants), studies=(1,))
+    scored = hs if refit else [dataclasses.replace(h, free_parameters=()) for h in hs]
+    if not refit:
+        cluster = {"local": True}  # one likelihood per hypothesis: no folds to spread
+    res = compare_hypotheses(data, scored, bank=b, settings=settings, **cluster)
+    return {"true": hs[truth].name, "study": study, "chosen": res["chosen"],
+            "elpd": {n: r["elpd"] for n, r in res["hypotheses"].items()},
+            "difference": res["difference"], "difference_se": res["difference_se"]}
+
+
+def confusion(names: Sequence[str], studies: Sequence[Mapping[str, Any]]) -> list[list[int]]:
+    """Counts of (true, chosen) over ``studies`` (rows: true, in the order of ``names``)."""
+    out = np.zeros((len(names), len(names)), dtype=int)
+    for st in studies:
+        out[list(names).index(st["true"]), list(names).index(st["chosen"])] += 1
+    return out.tolist()
+
+
 def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants: int = 12, seed: int = 0,
                    bank: FeatureBank | None = None, settings: FitSettings | None = None, study1_only: bool = False,
-                   **cluster: Any) -> dict[str, Any]:
+                   refit: bool = True, **cluster: Any) -> dict[str, Any]:
     """Simulate studies under each hypothesis, score every hypothesis on each, count the choices.
 
     Study ``j`` under hypothesis ``t`` (index in ``hypotheses``) draws from
-    ``numpy.random.default_rng([seed, t, j])``.
+    ``numpy.random.default_rng([seed, t, j])`` (:func:`recovery_study`).
 
     Parameters
     ----------
@@ -96,6 +156,9 @@ def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants:
     settings : FitSettings, optional
     study1_only : bool
         Fit Study 1's answers only (fast; the selections are simulated and dropped).
+    refit : bool
+        Fit every hypothesis to each study and score by leave-one-participant-out ELPD
+        (True), or score each at its shipped parameters (False; see :func:`recovery_study`).
     **cluster
         ``scheduler``, ``n_workers``, ``local``: as :func:`compare_hypotheses`.
 
@@ -112,19 +175,11 @@ def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants:
         raise ValidationError("model recovery needs at least two hypotheses")
     names = [h.name for h in hs]
     b = bank if bank is not None else default_bank()
-    confusion = np.zeros((len(hs), len(hs)), dtype=int)
-    studies = []
-    for t, truth in enumerate(hs):
-        for j in range(n_studies):
-            data = simulate_trials(truth, n_participants, np.random.default_rng([seed, t, j]), bank=b)
-            if study1_only:
-                data = data.subset(np.arange(n_participants), studies=(1,))
-            res = compare_hypotheses(data, hs, bank=b, settings=settings, **cluster)
-            confusion[t, names.index(res["chosen"])] += 1
-            studies.append({"true": truth.name, "study": j, "chosen": res["chosen"],
-                            "elpd": {n: r["elpd"] for n, r in res["hypotheses"].items()},
-                            "difference": res["difference"], "difference_se": res["difference_se"]})
-    return {"names": names, "confusion": confusion.tolist(), "studies": studies, "n_participants": n_participants}
+    studies = [recovery_study(hs, t, j, n_participants=n_participants, seed=seed, bank=b, settings=settings,
+                              study1_only=study1_only, refit=refit, **cluster)
+               for t in range(len(hs)) for j in range(n_studies)]
+    return {"names": names, "confusion": confusion(names, studies), "studies": studies,
+            "n_participants": n_participants}
 
 
 def parameter_recovery(hypothesis: Any, *, n_studies: int, n_participants: int = 12, seed: int = 0,
@@ -176,4 +231,106 @@ def parameter_recovery(hypothesis: Any, *, n_studies: int, n_participants: int =
                       "rmse": float(np.sqrt(np.mean((f[:, i] - t[:, i]) ** 2))), "correlation": corr,
                       "range": [r.lo, r.hi],
                       "recovered": bool(corr >= 0.7 and abs(bias) <= 0.1 * (r.hi - r.lo))}
+    return out
+
+
+#: Parameters only Study 2's selections read (Study 1's answers do not depend on them).
+STUDY2_ONLY = ("select_kappa", "select_log_sd")
+
+
+def profile_recovery_study(hypothesis: Any, key: str, study: int, n_studies: int, *, n_participants: int = 12,
+                           seed: int = 0, bank: FeatureBank | None = None,
+                           settings: FitSettings | None = None) -> dict[str, Any]:
+    """One study of a one-at-a-time parameter recovery: one free parameter moved, simulated, refitted alone.
+
+    Every other parameter stays at the hypothesis' shipped value, in the simulation and in
+    the fit, so this is a necessary condition of recovery, not a sufficient one: a
+    parameter that fails it cannot be recovered from the design even when everything else
+    is known; one that passes may still trade off with others in a joint fit. The fit:
+    the summed marginal log-likelihood on a grid of 9 values across the range, then
+    Brent's bounded search (``settings.maxiter`` steps) between the best one's neighbours.
+    Study
+    ``study`` of ``n_studies`` puts the parameter at the fraction ``0.15 + 0.7 j / (n - 1)``
+    of its range (for one end of a population range: of the part that keeps the pair in
+    order, up to the other end's shipped value) and simulates ``n_participants`` on the
+    paper's design (``default_rng([seed, 0x9A5, study])``), Study 2 only for the selection's
+    parameters (:data:`STUDY2_ONLY`), Study 1 only for the others.
+
+    Parameters
+    ----------
+    hypothesis : str or Hypothesis
+    key : str
+        The free parameter (:attr:`ParameterRange.key`).
+    study, n_studies : int
+    n_participants, seed, bank, settings
+        As :func:`parameter_recovery`.
+
+    Returns
+    -------
+    dict
+        ``hypothesis``, ``key``, ``study``, ``lo``, ``hi`` (the range moved within),
+        ``true``, ``fitted``, ``data`` ("study 1" or "study 2").
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+    from ..parameters import read_parameters
+
+    h = find_hypothesis(hypothesis)
+    ranges = {r.key: r for r in h.free_parameters}
+    if key not in ranges:
+        raise ValidationError(f"{key!r} is not a free parameter of {h.name!r} ({', '.join(ranges)})")
+    r = ranges[key]
+    shipped = dict(zip(ranges, read_parameters(h.model(), h.free_parameters)))
+    lo, hi = r.lo, r.hi
+    if r.index is not None:
+        other = shipped.get(f"{r.name}[{1 - r.index}]")
+        if other is not None:
+            lo, hi = (lo, other) if r.index == 0 else (other, hi)
+    if not hi > lo:
+        raise ValidationError(f"{h.name} {key}: no room to move it ({lo} to {hi})")
+    one = dataclasses.replace(h, free_parameters=(dataclasses.replace(r, lo=lo, hi=hi),))
+    value = lo + (hi - lo) * (0.15 + 0.7 * study / max(n_studies - 1, 1))
+    b = bank if bank is not None else default_bank()
+    data = simulate_trials(one, n_participants, np.random.default_rng([seed, 0x9A5, study]), bank=b,
+                           values={key: value})
+    which = 2 if r.name in STUDY2_ONLY else 1
+    data = data.subset(np.arange(n_participants), studies=(which,))
+    s = settings or FitSettings()
+
+    def neg(x: float) -> float:
+        v = float(participant_loglik(one, data, [x], bank=b, settings=s).sum())
+        return -v if np.isfinite(v) else 1e300
+
+    # A grid, then Brent's bounded search around its best point: no gradient, as a
+    # parameter that acts through a threshold (detection) is piecewise flat at a
+    # finite-difference step.
+    grid = np.linspace(lo, hi, 9)
+    k = int(np.argmin([neg(x) for x in grid]))
+    a, c = grid[max(k - 1, 0)], grid[min(k + 1, 8)]
+    res = optimize.minimize_scalar(neg, bounds=(a, c), method="bounded",
+                                   options={"xatol": 0.01 * (hi - lo), "maxiter": s.maxiter})
+    fitted = float(res.x) if res.fun <= neg(grid[k]) else float(grid[k])
+    return {"hypothesis": h.name, "key": key, "study": study, "lo": lo, "hi": hi, "true": value,
+            "fitted": fitted, "data": f"study {which}"}
+
+
+def profile_summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, dict[str, Any]]]:
+    """Per hypothesis and parameter: bias, RMSE, correlation, recovered (from :func:`profile_recovery_study` rows).
+
+    Recovered: the refits track the truth (correlation at least 0.7) and their RMSE is at
+    most 15 % of the range moved within.
+    """
+    out: dict[str, dict[str, dict[str, Any]]] = {}
+    groups: dict[tuple[str, str], list[Mapping[str, Any]]] = {}
+    for row in rows:
+        groups.setdefault((row["hypothesis"], row["key"]), []).append(row)
+    for (name, key), rs in groups.items():
+        t = np.array([x["true"] for x in rs])
+        f = np.array([x["fitted"] for x in rs])
+        span = rs[0]["hi"] - rs[0]["lo"]
+        corr = float(np.corrcoef(t, f)[0, 1]) if len(rs) > 2 and np.std(f) > 0 else float("nan")
+        rmse = float(np.sqrt(np.mean((f - t) ** 2)))
+        out.setdefault(name, {})[key] = {
+            "n": len(rs), "range": [rs[0]["lo"], rs[0]["hi"]], "bias": float(np.mean(f - t)), "rmse": rmse,
+            "correlation": corr, "data": rs[0]["data"],
+            "recovered": bool(np.isfinite(corr) and corr >= 0.7 and rmse <= 0.15 * span)}
     return out
