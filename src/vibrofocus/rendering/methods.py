@@ -400,8 +400,11 @@ class Minimax(Method):
         ``H``, shape of ``tm.H``): ``robust`` standard errors from the coherence and the
         calibration's averages (``tm.provenance["averages"]``, else 1); ``None`` with no
         ``robust`` or no coherence (none, or not assessable: a single repeat)."""
-        if self.robust is None or tm.coherence is None or not np.isfinite(tm.coherence).any():
-            return None  # no uncertainty known (a model, or one repeat): the nominal program
+        if self.robust is None:
+            return None
+        if tm.coherence is None or not np.isfinite(tm.coherence).any():
+            # A fitted model's standard error; none known (a true H, one repeat): nominal.
+            return None if tm.h_std is None else self.robust * tm.h_std
         return self.robust * coherence_radius(tm.H, tm.coherence, averages=int(tm.provenance.get("averages", 1)))
 
     def pinv(self, p: Problem) -> tuple[float, float]:
