@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus.calibration import calibrate, fit_model, load_calibration, save_calibration
-from vibrofocus.rendering import Minimax, TransferMatrix, focus_metrics, predict_response, render
+from vibrofocus.rendering import Minimax, TransferMatrix, focus_metrics, predict_response, render_fitted
 from vibrofocus.rigs import SimulatedForearm
 
 #: Off-grid targets, m: the midpoints between the reference grid's locations (10 mm pitch).
@@ -70,7 +70,7 @@ def main() -> None:
             t0 = time.perf_counter()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                d = render(method, model, cal.fs, cal.layout, target_xy=xy, n_samples=n)
+                d = render_fitted(method, model, cal.fs, cal.layout, target_xy=xy, n_samples=n)
             cells[label] = (*played(d, arm, n), time.perf_counter() - t0)
         ref = cells["true H"][1]
         for k in methods:

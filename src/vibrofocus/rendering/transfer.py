@@ -176,8 +176,13 @@ class TransferMatrix(ValidatedTransfer):
         ----------
         model : object with ``transfer(points_xy, freqs)``
             A fitted :class:`~vibrofocus.calibration.FittedSkin` or a simulated arm (its
-            true H). A model with ``band`` is tapered outside it like
-            ``Calibration.transfer_for`` and gives the calibrated band.
+            true H). A model with ``band`` gives the calibrated band; its ``H`` is its own
+            prediction over the band and the ``taper_octaves`` past each edge (where a
+            design's drives still reach, :func:`~vibrofocus.signals.band_taper`), and rolls
+            off over ``taper_octaves`` beyond. (Tapered from the band's edges, as
+            ``Calibration.transfer_for`` tapers a measurement, a model's ``H`` would
+            under-state what the drives' roll-off does: from a layered fit, minimax taps
+            lost 0.5-0.7 dB of peak contrast to it, ``scripts/robust_fit_minimax.py``.)
         %(layout)s
         %(fs)s
         n_samples : int, optional
@@ -192,8 +197,10 @@ class TransferMatrix(ValidatedTransfer):
         H = np.asarray(model.transfer(layout.points_xy, freqs))
         band = getattr(model, "band", None)
         if band is not None:
+            octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
+            reach = (float(band[0]) / 2 ** octaves, float(band[1]) * 2 ** octaves)
             with np.errstate(over="ignore", divide="ignore"):  # band_taper at 0 Hz
-                taper = band_taper(freqs, band, check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+                taper = band_taper(freqs, reach, octaves)
             H = H * taper[:, None, None]
         provenance = {"model": type(model).__name__, "skin": getattr(model, "skin", None),
                       "participant": getattr(model, "seed", None)}
