@@ -270,10 +270,8 @@ class FittedSkin:
 
         Parameters
         ----------
-        points_xy : ndarray, shape (n_points, 2)
-            Skin points in the layout frame, m.
-        freqs : ndarray, shape (n_freqs,)
-            Frequencies, Hz, >= 0.
+        points_xy, freqs
+            As :meth:`transfer` (m, Hz).
 
         Returns
         -------
