@@ -265,8 +265,9 @@ class FittedSkin:
         (:meth:`~vibrofocus.skin.SimulatedArm.mode_transfer`, some 20 times faster than the
         causal transfer; the precursor, 0.1-0.4 % of ``|H|``, changes by as little again of
         ``dH``): one evaluation per parameter (4 + 4 ``n_actuators`` for the layered law),
-        a few seconds at the reference layout's 14 points. This is what the robust minimax design bounds its quiet peaks over
-        when it designs from the fit (:meth:`~vibrofocus.rendering.Minimax.h_radius`).
+        a few seconds at the reference layout's 14 points. The robust minimax design
+        bounds its quiet peaks over it when it designs from the fit
+        (:meth:`~vibrofocus.rendering.Minimax.h_radius`).
 
         Parameters
         ----------

@@ -359,9 +359,10 @@ class Minimax(Method):
         Designing from a measured ``H`` (one with a coherence): the quiet peak is bounded
         over every ``H`` within ``robust`` standard errors of the measurement (default 1;
         :func:`~vibrofocus.rendering.coherence_radius` with the calibration's averages;
-        ``h_radius`` of :func:`~vibrofocus.rendering.minimax_filter`). ``None``, or a
-        transfer matrix with no assessable coherence (a model, the true ``H``, a single repeat): the
-        nominal program.
+        ``h_radius`` of :func:`~vibrofocus.rendering.minimax_filter`); designing from a
+        fitted skin model, over every ``H`` within ``robust`` of its standard errors
+        (``TransferMatrix.h_std``). ``None``, or a transfer matrix with no known
+        uncertainty (the true ``H``, a single repeat): the nominal program.
     **common
         The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
         design's contrast and fidelity do not depend on its level).
@@ -398,8 +399,10 @@ class Minimax(Method):
     def h_radius(self, tm: TransferMatrix) -> np.ndarray | None:
         """The uncertainty radius of ``tm.H`` the design bounds its quiet peak over (unit of
         ``H``, shape of ``tm.H``): ``robust`` standard errors from the coherence and the
-        calibration's averages (``tm.provenance["averages"]``, else 1); ``None`` with no
-        ``robust`` or no coherence (none, or not assessable: a single repeat)."""
+        calibration's averages (``tm.provenance["averages"]``, else 1); without a
+        coherence, ``robust`` times a fitted model's standard error (``tm.h_std``,
+        :meth:`~vibrofocus.calibration.FittedSkin.transfer_std`); ``None`` with no
+        ``robust`` or no uncertainty known (a true ``H``, a single repeat)."""
         if self.robust is None:
             return None
         if tm.coherence is None or not np.isfinite(tm.coherence).any():
