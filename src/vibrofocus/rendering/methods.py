@@ -348,8 +348,9 @@ class Minimax(Method):
         The drive's peak is at most this times the pseudo-inverse's for the same tap (a
         constraint of the program). It keeps the design off the directions where ``H`` is
         small and a measured one is mostly noise; ``None``: unconstrained. ``"auto"``
-        (default): 1 (no more drive than the pseudo-inverse) for the nominal program, none
-        for the robust one (its norm term already keeps the drive off those directions).
+        (default): 1 (no more drive than the pseudo-inverse) for the nominal program and the
+        robust one from a fitted model, none for the robust one from a measurement (its
+        norm term already keeps the drive off those directions).
         One solve: where no drive within the budget reaches the fidelity at this tap, the
         design takes twice the least drive that does and warns (``UserWarning``) with the
         cost at ``limit_v``: the tap's peak at the target (um) and the peak contrast,
@@ -449,7 +450,10 @@ class Minimax(Method):
     def solve(self, p: Problem) -> Solution:
         control = p.control(self.control)
         h_radius = self.h_radius(p.tm)
-        budget = self.drive_budget if self.drive_budget != "auto" else (1.0 if h_radius is None else None)
+        # "auto": the norm term of a measurement's radius keeps the drive down by itself; a
+        # fitted model's standard error is too small to (it needed 8x the true-H design's drive).
+        measured = h_radius is not None and p.tm.h_std is None
+        budget = self.drive_budget if self.drive_budget != "auto" else (None if measured else 1.0)
         fid, peak = self.pinv(p) if (self.min_fidelity is None or budget is not None) else (0.0, 0.0)
         fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
         max_drive = None if budget is None else budget * peak
