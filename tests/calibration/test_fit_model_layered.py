@@ -112,7 +112,7 @@ def test_robust_minimax_from_the_fit_is_within_0_2_db_of_the_true_h_design(nomin
     # Issue 57 D: at 8 targets between the grid's locations, the minimax tap designed from
     # the layered fit (robust over its standard errors, the default) and played on the
     # arm has the peak contrast of the one designed from the arm's true H, within 0.2 dB.
-    # Before (the model tapered from its band's edges, no uncertainty): 0.5-0.7 dB lost.
+    # Before (the model tapered from its band's edges, no uncertainty): 0.4-0.8 dB lost.
     import warnings
 
     from vibrofocus.rendering import Minimax, TransferMatrix, focus_metrics, predict_response, render_fitted

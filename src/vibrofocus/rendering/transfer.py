@@ -182,7 +182,7 @@ class TransferMatrix(ValidatedTransfer):
             off over ``taper_octaves`` beyond. (Tapered from the band's edges, as
             ``Calibration.transfer_for`` tapers a measurement, a model's ``H`` would
             under-state what the drives' roll-off does: from a layered fit, minimax taps
-            lost 0.5-0.7 dB of peak contrast to it, ``scripts/robust_fit_minimax.py``.)
+            lost 0.4-0.8 dB of peak contrast to it, ``scripts/robust_fit_minimax.py``.)
         %(layout)s
         %(fs)s
         n_samples : int, optional
