@@ -149,3 +149,56 @@ def test_bad_input_is_refused(forearm_calibration, fitted):
         render("inverse", cal, cal.fs, lay, target_xy=(0.0, 0.0))
     with pytest.raises(ValidationError, match="outside the modelled skin"):
         fitted.transfer(np.array([[0.0, 0.3]]), np.array([100.0]))
+
+
+def test_the_standard_error_of_the_fitted_h_is_the_size_of_its_error(forearm_calibration, fitted):
+    # Off the grid, the fit's H misses the true H by about its propagated standard error.
+    exact_arm = SimulatedForearm(seed=0, noise_m=0.0, dropout_rate=0.0, skin="voigt-fit")
+    pts, f = np.array([[4e-3, -6e-3], [-12e-3, 3e-3]]), np.linspace(50.0, 500.0, 46)
+    std = fitted.transfer_std(pts, f)
+    assert std.shape == (46, 2, 4) and np.all(std > 0)
+    err = np.abs(fitted.transfer(pts, f) - exact_arm.transfer(pts, f))
+    ratio = np.sqrt(np.sum(err ** 2) / np.sum(std ** 2))
+    assert 0.3 < ratio < 3, ratio
+    with pytest.raises(ValidationError, match="outside the modelled skin"):
+        fitted.transfer_std(np.array([[0.0, 0.3]]), f)
+
+
+def test_a_design_from_the_fit_knows_its_uncertainty(forearm_calibration, fitted):
+    from vibrofocus.rendering import Minimax, TransferMatrix
+
+    _, cal = forearm_calibration
+    tm = TransferMatrix.from_model(fitted, cal.layout, cal.fs, 4096)
+    # The model's own H where the design's drives reach (half an octave past the band's
+    # top, 1000 Hz), and its standard error there: the robust minimax bounds its quiet
+    # peaks over it.
+    f = tm.freqs
+    reach = (f >= 10.0) & (f <= 1000.0 * 2 ** 0.5)
+    assert_allclose(tm.H[reach][::40], fitted.transfer(cal.layout.points_xy, f[reach][::40]), rtol=1e-12)
+    assert np.all(tm.H[f > 2000.0] == 0)
+    relative = np.sqrt(np.sum(tm.h_std[reach] ** 2) / np.sum(np.abs(tm.H[reach]) ** 2))
+    assert 1e-6 < relative < 1e-2, relative
+    assert np.all(tm.h_std[f > 2000.0] == 0)
+    assert_allclose(Minimax(robust=2.0).h_radius(tm), 2 * tm.h_std)
+    assert Minimax(robust=None).h_radius(tm) is None
+    assert TransferMatrix.from_model(SimulatedForearm(seed=0, noise_m=0.0), cal.layout, cal.fs, 4096).h_std is None
+
+
+def test_a_fit_that_misses_gets_a_verdict_and_render_warns(forearm_calibration, fitted):
+    import warnings
+
+    _, cal = forearm_calibration
+    assert fitted.verdict is None  # the model's family: residuals at the noise level
+    res = fitted.residual.copy()
+    res[2] = 0.3
+    poor = replace(fitted, residual=res)
+    assert "misses the measured H by up to 30.0% (point 3; 1 point(s) over 5%)" in poor.verdict
+    with pytest.warns(UserWarning, match="designing from a fitted skin model that does not describe the skin"):
+        render("inverse", poor, cal.fs, cal.layout, target_xy=(4e-3, -6e-3))
+    with pytest.warns(UserWarning, match="does not describe the skin"):
+        render("inverse", replace(cal, fit=poor), cal.fs, cal.layout, target_xy=(4e-3, -6e-3))
+    with warnings.catch_warnings():
+        warnings.filterwarnings("error", message=".*does not describe the skin")
+        render("inverse", fitted, cal.fs, cal.layout, target_xy=(4e-3, -6e-3))
+        # A measured calibration is designed from its measurement: its fit is not used.
+        render("inverse", replace(cal, fit=poor), cal.fs, cal.layout, 5)

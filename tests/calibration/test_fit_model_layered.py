@@ -106,3 +106,27 @@ def test_bad_law_is_refused(nominal_calibration):
     cal, _ = nominal_calibration
     with pytest.raises(ValidationError, match="law"):
         fit_model(cal, law="voigt")
+
+
+def test_robust_minimax_from_the_fit_is_within_0_2_db_of_the_true_h_design(nominal_calibration, held_out):
+    # Issue 57 D: at 8 targets between the grid's locations, the minimax tap designed from
+    # the layered fit (robust over its standard errors, the default) and played on the
+    # arm has the peak contrast of the one designed from the arm's true H, within 0.2 dB.
+    # Before (the model tapered from its band's edges, no uncertainty): 0.4-0.8 dB lost.
+    import warnings
+
+    from vibrofocus.rendering import Minimax, TransferMatrix, focus_metrics, predict_response, render_fitted
+
+    cal, arm = nominal_calibration
+    n = arm.design_window()
+    targets = np.array([(-5, 5), (5, 5), (-5, -5), (5, -5), (0, 5), (0, -5), (-5, 0), (5, 0)]) * 1e-3
+
+    def played(model, xy):
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # the true H's design over its drive budget says so
+            d = render_fitted(Minimax(), model, cal.fs, cal.layout, target_xy=xy, n_samples=n)
+        y = predict_response(TransferMatrix.from_model(arm, d.layout, cal.fs, n).H, d.drives)
+        return focus_metrics(y, d.target_index, d.reference, d.fs, sigma=d.sigma)["contrast_all_db"]
+
+    loss = np.array([played(arm, xy) - played(held_out, xy) for xy in targets])
+    assert np.all(loss < 0.2), np.round(loss, 2)

@@ -47,8 +47,8 @@ from .._validation import as_array, check_band
 from ..errors import ValidationError
 from ..layout import ArrayLayout
 
-__all__ = ["FittedSkin", "fit_model", "FIT_LAWS", "FIT_LAW_PARAMETERS", "FIT_ACTUATOR_PARAMETERS",
-           "parameter_names", "true_parameters"]
+__all__ = ["FittedSkin", "fit_model", "FIT_LAWS", "FIT_RESIDUAL_MAX", "FIT_LAW_PARAMETERS",
+           "FIT_ACTUATOR_PARAMETERS", "parameter_names", "true_parameters"]
 
 #: The wave laws :func:`fit_model` fits; the first is the default.
 FIT_LAWS = ("layered", "homogeneous")
@@ -72,6 +72,12 @@ MIN_RELATIVE_ERROR = 1e-3
 #: 1e-6 of that peak above 100 Hz). Bins where the wave has died out below it carry no
 #: information about the law, whatever their coherence.
 DYNAMIC_RANGE = 1e-5
+#: Largest relative fit residual at a measured point (:attr:`FittedSkin.residual`) of a
+#: model that describes the skin (an assumption: the simulated arms give about 0.005 with
+#: the default noise, in the model's family; a layered fit of the ``voigt-fit`` arm
+#: misses by more). Over it, :attr:`FittedSkin.verdict` says so, and so does the
+#: calibration's quality (``fit_residual_max``).
+FIT_RESIDUAL_MAX = 0.05
 #: Lowest frequency fitted by default, Hz. Noise-free simulated calibrations (window
 #: ``n_fft / fs`` = 0.41 s, a few cycles at 10-30 Hz) differ from the model's spectrum by
 #: 0.3-1 % of ``|H|`` at 10-30 Hz but about 1e-4 from 30 Hz up (measured with
@@ -248,6 +254,64 @@ class FittedSkin:
             raise ValidationError(f"points_xy {points[bad][0].tolist()} m lies outside the modelled skin "
                                   f"({self.skin_area_description()})")
         return self.forearm().transfer(points, freqs)
+
+    def transfer_std(self, points_xy, freqs) -> np.ndarray:
+        """Standard error of :meth:`transfer` from the fit's parameter uncertainty.
+
+        First order: along each principal direction of :attr:`log_covariance` (eigenvector
+        ``v_k``, variance ``l_k``), the change of the prediction over one standard error,
+        ``dH_k = H(log values + sqrt(l_k) v_k) - H``; the variance of ``H`` is
+        ``sum_k |dH_k|^2``. The changes are those of the surface mode
+        (:meth:`~vibrofocus.skin.SimulatedArm.mode_transfer`, some 20 times faster than the
+        causal transfer; the precursor, 0.1-0.4 % of ``|H|``, changes by as little again of
+        ``dH``): one evaluation per parameter (4 + 4 ``n_actuators`` for the layered law),
+        a few seconds at the reference layout's 14 points. The robust minimax design
+        bounds its quiet peaks over it when it designs from the fit
+        (:meth:`~vibrofocus.rendering.Minimax.h_radius`).
+
+        Parameters
+        ----------
+        points_xy, freqs
+            As :meth:`transfer` (m, Hz).
+
+        Returns
+        -------
+        ndarray, real, shape (n_freqs, n_points, n_actuators)
+            m/V, the rms size of the complex error of :meth:`transfer`.
+        """
+        points = as_array(points_xy, "points_xy", ndim=2, shape=(None, 2))
+        if not self.on_skin(points).all():
+            self.transfer(points, freqs[:1])  # the same refusal
+        freqs = np.asarray(freqs, float)
+
+        def mode(log_values):
+            rig = _forearm(_participant(log_values, self.layout.n_actuators, self.fixed), self.layout, self.fs,
+                           self.fixed)
+            return rig.mode_transfer(points, freqs)
+
+        lam, vec = np.linalg.eigh(self.log_covariance)
+        x0 = np.log(self.values)
+        base = mode(x0)
+        var = np.zeros(base.shape)
+        for k in np.flatnonzero(lam > 0):
+            var += np.abs(mode(x0 + np.sqrt(lam[k]) * vec[:, k]) - base) ** 2
+        return np.sqrt(var)
+
+    @property
+    def verdict(self) -> str | None:
+        """None when the model describes every measured point; else one line saying where
+        it misses: the largest relative residual (:attr:`residual`) over
+        :data:`FIT_RESIDUAL_MAX`. A design from such a model is not to be trusted
+        (``render`` warns): the skin is likely outside the model's family (another law)."""
+        res = np.where(np.isfinite(self.residual), self.residual, -np.inf)
+        worst = int(np.argmax(res))
+        if not res[worst] > FIT_RESIDUAL_MAX:
+            return None
+        bad = int(np.sum(res > FIT_RESIDUAL_MAX))
+        return (f"the {self.law} skin model misses the measured H by up to {res[worst]:.1%} (point "
+                f"{self.layout.point_labels[worst]}; {bad} point(s) over {FIT_RESIDUAL_MAX:.0%}): the skin is "
+                "likely outside the model's family, so its predictions (taps anywhere) are not to be trusted; "
+                "fit the other law (law=...) or design from the measured points")
 
     def on_skin(self, points_xy) -> np.ndarray:
         """Whether points lie on the modelled forearm surface.

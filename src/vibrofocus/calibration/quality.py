@@ -74,6 +74,7 @@ import numpy as np
 from .._docs import fill_doc
 from ..errors import ValidationError
 from ..layout import ArrayLayout
+from .fitmodel import FIT_RESIDUAL_MAX
 
 __all__ = ["TRUSTED_COHERENCE", "QualityThresholds", "QualityIssue", "QualityReport", "assess_quality",
            "detect_clipping"]
@@ -125,7 +126,7 @@ class QualityThresholds:
     clip_samples: int = 4
     condition_max: float = 10.0
     input_correlation_max: float = 0.5
-    fit_residual_max: float = 0.05
+    fit_residual_max: float = FIT_RESIDUAL_MAX
 
     def to_dict(self) -> dict:
         return asdict(self)

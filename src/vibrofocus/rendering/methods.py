@@ -348,8 +348,9 @@ class Minimax(Method):
         The drive's peak is at most this times the pseudo-inverse's for the same tap (a
         constraint of the program). It keeps the design off the directions where ``H`` is
         small and a measured one is mostly noise; ``None``: unconstrained. ``"auto"``
-        (default): 1 (no more drive than the pseudo-inverse) for the nominal program, none
-        for the robust one (its norm term already keeps the drive off those directions).
+        (default): 1 (no more drive than the pseudo-inverse) for the nominal program and the
+        robust one from a fitted model, none for the robust one from a measurement (its
+        norm term already keeps the drive off those directions).
         One solve: where no drive within the budget reaches the fidelity at this tap, the
         design takes twice the least drive that does and warns (``UserWarning``) with the
         cost at ``limit_v``: the tap's peak at the target (um) and the peak contrast,
@@ -359,9 +360,10 @@ class Minimax(Method):
         Designing from a measured ``H`` (one with a coherence): the quiet peak is bounded
         over every ``H`` within ``robust`` standard errors of the measurement (default 1;
         :func:`~vibrofocus.rendering.coherence_radius` with the calibration's averages;
-        ``h_radius`` of :func:`~vibrofocus.rendering.minimax_filter`). ``None``, or a
-        transfer matrix with no assessable coherence (a model, the true ``H``, a single repeat): the
-        nominal program.
+        ``h_radius`` of :func:`~vibrofocus.rendering.minimax_filter`); designing from a
+        fitted skin model, over every ``H`` within ``robust`` of its standard errors
+        (``TransferMatrix.h_std``). ``None``, or a transfer matrix with no known
+        uncertainty (the true ``H``, a single repeat): the nominal program.
     **common
         The options of :class:`Method`; the drives are then scaled to ``limit_v`` (the
         design's contrast and fidelity do not depend on its level).
@@ -398,10 +400,15 @@ class Minimax(Method):
     def h_radius(self, tm: TransferMatrix) -> np.ndarray | None:
         """The uncertainty radius of ``tm.H`` the design bounds its quiet peak over (unit of
         ``H``, shape of ``tm.H``): ``robust`` standard errors from the coherence and the
-        calibration's averages (``tm.provenance["averages"]``, else 1); ``None`` with no
-        ``robust`` or no coherence (none, or not assessable: a single repeat)."""
-        if self.robust is None or tm.coherence is None or not np.isfinite(tm.coherence).any():
-            return None  # no uncertainty known (a model, or one repeat): the nominal program
+        calibration's averages (``tm.provenance["averages"]``, else 1); without a
+        coherence, ``robust`` times a fitted model's standard error (``tm.h_std``,
+        :meth:`~vibrofocus.calibration.FittedSkin.transfer_std`); ``None`` with no
+        ``robust`` or no uncertainty known (a true ``H``, a single repeat)."""
+        if self.robust is None:
+            return None
+        if tm.coherence is None or not np.isfinite(tm.coherence).any():
+            # A fitted model's standard error; none known (a true H, one repeat): nominal.
+            return None if tm.h_std is None else self.robust * tm.h_std
         return self.robust * coherence_radius(tm.H, tm.coherence, averages=int(tm.provenance.get("averages", 1)))
 
     def pinv(self, p: Problem) -> tuple[float, float]:
@@ -443,7 +450,10 @@ class Minimax(Method):
     def solve(self, p: Problem) -> Solution:
         control = p.control(self.control)
         h_radius = self.h_radius(p.tm)
-        budget = self.drive_budget if self.drive_budget != "auto" else (1.0 if h_radius is None else None)
+        # "auto": the norm term of a measurement's radius keeps the drive down by itself; a
+        # fitted model's standard error is too small to (it needed 8x the true-H design's drive).
+        measured = h_radius is not None and p.tm.h_std is None
+        budget = self.drive_budget if self.drive_budget != "auto" else (None if measured else 1.0)
         fid, peak = self.pinv(p) if (self.min_fidelity is None or budget is not None) else (0.0, 0.0)
         fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)
         max_drive = None if budget is None else budget * peak

@@ -13,8 +13,10 @@ second way (docs/usage.md, "Designing a tap").
 from __future__ import annotations
 
 import dataclasses
-
+import warnings
 from typing import Any
+
+import numpy as np
 
 from .._docs import fill_doc
 from ..errors import CausalityError, ValidationError
@@ -86,6 +88,13 @@ def render(method: Method | str, H: Any, fs: float, layout: ArrayLayout, locatio
     ValidationError
         An unknown option (the message lists the valid ones), options beside a method
         object, a method that is neither a ``Method`` nor a registered name.
+
+    Warns
+    -----
+    UserWarning
+        ``H`` comes from a fitted skin model with a verdict
+        (:attr:`~vibrofocus.calibration.FittedSkin.verdict`: it misses its measured
+        points), as the model itself or through a calibration's predicted points.
     """
     chosen = _method_of(method, options)
     if not isinstance(layout, ArrayLayout):
@@ -95,9 +104,24 @@ def render(method: Method | str, H: Any, fs: float, layout: ArrayLayout, locatio
                               "position, m), " + ("not both" if location is not None else "one of them"))
     if target_xy is not None:
         H, layout, location = target_on_model(H, layout, target_xy)
+    _warn_of_a_poor_fit(H)
     tm = as_transfer_matrix(H, fs, layout, n_samples=n_samples, calibrated_band=calibrated_band,
                             taper_octaves=options.get("taper_octaves", getattr(chosen, "taper_octaves", 0.5)))
     return chosen.design(tm, location)
+
+
+def _warn_of_a_poor_fit(H: Any) -> None:
+    """Warn (``UserWarning``) when the design's ``H`` comes from a fitted skin model that
+    misses its measured points (:attr:`~vibrofocus.calibration.FittedSkin.verdict`): the
+    model as ``H``, or a calibration whose unmeasured rows it predicted."""
+    fit = H
+    if hasattr(H, "transfer_for"):  # a calibration: its fit made the rows not measured
+        measured = getattr(H, "measured", None)
+        fit = getattr(H, "fit", None) if measured is not None and not np.all(measured) else None
+    verdict = getattr(fit, "verdict", None)
+    if isinstance(verdict, str):
+        warnings.warn(f"designing from a fitted skin model that does not describe the skin: {verdict}",
+                      UserWarning, stacklevel=3)
 
 
 def _method_of(method: Method | str, options: dict[str, Any]) -> Method:

@@ -120,6 +120,8 @@ class TransferMatrix(ValidatedTransfer):
         self.band, self.coherence, self.provenance = band, coherence, provenance
         self._check: WraparoundCheck | None = None
         self._operators: dict[tuple, InverseOperator] = {}
+        self._std_of: Any = None  # a fitted model's standard error, made on first use (h_std)
+        self._h_std: np.ndarray | None = None
 
     @classmethod
     def _trusted(cls, H: np.ndarray, fs: float, layout: ArrayLayout, n: int, band: tuple[float, float] | None = None,
@@ -174,8 +176,13 @@ class TransferMatrix(ValidatedTransfer):
         ----------
         model : object with ``transfer(points_xy, freqs)``
             A fitted :class:`~vibrofocus.calibration.FittedSkin` or a simulated arm (its
-            true H). A model with ``band`` is tapered outside it like
-            ``Calibration.transfer_for`` and gives the calibrated band.
+            true H). A model with ``band`` gives the calibrated band; its ``H`` is its own
+            prediction over the band and the ``taper_octaves`` past each edge (where a
+            design's drives still reach, :func:`~vibrofocus.signals.band_taper`), and rolls
+            off over ``taper_octaves`` beyond. (Tapered from the band's edges, as
+            ``Calibration.transfer_for`` tapers a measurement, a model's ``H`` would
+            under-state what the drives' roll-off does: from a layered fit, minimax taps
+            lost 0.4-0.8 dB of peak contrast to it, ``scripts/robust_fit_minimax.py``.)
         %(layout)s
         %(fs)s
         n_samples : int, optional
@@ -190,12 +197,17 @@ class TransferMatrix(ValidatedTransfer):
         H = np.asarray(model.transfer(layout.points_xy, freqs))
         band = getattr(model, "band", None)
         if band is not None:
+            octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
+            reach = (float(band[0]) / 2 ** octaves, float(band[1]) * 2 ** octaves)
             with np.errstate(over="ignore", divide="ignore"):  # band_taper at 0 Hz
-                taper = band_taper(freqs, band, check_positive(taper_octaves, "taper_octaves", allow_zero=True))
+                taper = band_taper(freqs, reach, octaves)
             H = H * taper[:, None, None]
         provenance = {"model": type(model).__name__, "skin": getattr(model, "skin", None),
                       "participant": getattr(model, "seed", None)}
-        return cls(H, fs, layout, n_samples=int(n), band=None if band is None else tuple(band), provenance=provenance)
+        tm = cls(H, fs, layout, n_samples=int(n), band=None if band is None else tuple(band), provenance=provenance)
+        if hasattr(model, "transfer_std"):  # a fitted model knows its uncertainty: made when asked
+            tm._std_of = (model, layout.points_xy, freqs, np.ones(freqs.size) if band is None else taper)
+        return tm
 
     # -- what it is -----------------------------------------------------------------------
     @property
@@ -207,6 +219,21 @@ class TransferMatrix(ValidatedTransfer):
     def shape(self) -> tuple[int, int, int]:
         """``(n_freqs, n_points, n_actuators)``."""
         return self.H.shape
+
+    @property
+    def h_std(self) -> np.ndarray | None:
+        """ndarray, real, shape of ``H``, or None: the standard error of a fitted model's
+        ``H`` (:meth:`~vibrofocus.calibration.FittedSkin.transfer_std`, tapered as ``H``,
+        computed on first use and kept); None for a measurement (its uncertainty is its
+        ``coherence``) or a model that knows none (a simulated arm's true ``H``)."""
+        if self._h_std is None and self._std_of is not None:
+            model, points, freqs, taper = self._std_of
+            std = np.zeros(self.H.shape)
+            live = taper > 0
+            std[live] = model.transfer_std(points, freqs[live]) * taper[live, None, None]
+            std.flags.writeable = False
+            self._h_std = std
+        return self._h_std
 
     @property
     def n_points(self) -> int:
@@ -297,9 +324,9 @@ def as_transfer_matrix(H: Any, fs: float, layout: ArrayLayout, *, n_samples: int
         samples_for(tm.H.shape[0], n_samples)
     band = tm.band if calibrated_band is None else check_band(calibrated_band, tm.fs, name="calibrated_band")
     if band != tm.band or layout != tm.layout:  # the caller's band and layout, the same kept check
-        kept = tm._check
+        kept = tm
         tm = TransferMatrix._trusted(tm.H, tm.fs, layout, tm.n_samples, band, tm.coherence, tm.provenance)
-        tm._check = kept
+        tm._check, tm._std_of, tm._h_std = kept._check, kept._std_of, kept._h_std
     return tm
 
 
