@@ -155,10 +155,8 @@ def level_draws(h: Any, model: PerceptualModel, bank: FeatureBank, settings: Fit
 
     Parameters
     ----------
-    h : Hypothesis
-    model : PerceptualModel
-    bank : FeatureBank
-    settings : FitSettings
+    h, model, bank, settings
+        As :func:`population_draws`.
     levels : sequence of float
         dB re the bank's level rule (:meth:`~vibrofocus.simulation.bank.FeatureBank.at_level`).
 
