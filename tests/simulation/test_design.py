@@ -250,6 +250,28 @@ def test_simulate_study_on_a_protocol_then_model_choice_picks_the_hypothesis(tmp
     assert len(trials) == 12 + 16 and sum(isinstance(t[2], tuple) for t in trials) == 16
     np.testing.assert_allclose(participant_loglik("intensity", default_bank(), 0, trials, n_draws=8),
                                r["total"]["intensity"], rtol=1e-12)
+    # The fit of analyze --hypotheses reads the same trials (levels, allowed answers, points)
+    # from the database: on the participant's forearm alone and without lapses it gives the
+    # same numbers; over the bank's forearms, with its lapse, it chooses the same hypothesis.
+    from dataclasses import replace
+
+    from vibrofocus.analysis import load_trials
+    from vibrofocus.simulation.design import SCORE_SEED
+    from vibrofocus.simulation.fitting import FitSettings, lab_trials, trials_source
+    from vibrofocus.simulation.fitting import participant_loglik as fit_loglik
+
+    b = default_bank()
+    one = replace(b, energy=b.energy[:1], actuator_energy=b.actuator_energy[:1], forearm_seeds=b.forearm_seeds[:1],
+                  drive_peak_v=None if b.drive_peak_v is None else b.drive_peak_v[:1],
+                  target_peak_m=None if b.target_peak_m is None else b.target_peak_m[:1])
+    table = load_trials(trials_source(tmp_path / "s.db"), kind="simulated")
+    exact = FitSettings(n_draws=8, seed=SCORE_SEED, lapse=0.0)
+    for h in r["total"]:
+        np.testing.assert_allclose(fit_loglik(h, lab_trials(table, one), bank=one, settings=exact),
+                                   [r["total"][h]], rtol=1e-9)
+    fitted = {h: float(fit_loglik(h, lab_trials(table, b), bank=b, settings=FitSettings(n_draws=8))[0])
+              for h in r["total"]}
+    assert max(fitted, key=fitted.get) == "intensity", fitted
 
 
 @pytest.mark.slow

@@ -157,6 +157,11 @@ def _suspect_methods(
     return reasons
 
 
+#: Columns kept as text where a table has them: a study database's protocol, block level
+#: and allowed answers, and point answers (:func:`vibrofocus.simulation.fitting.lab_trials`).
+_BLOCK_COLUMNS = ("protocol", "level_db", "allowed", "response_x_mm", "response_y_mm")
+
+
 def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Type the columns of a raw trials table and list every row that breaks the contract.
 
@@ -271,6 +276,8 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
     if {"levels", "drive_peak_v", "target_peak_um"} <= set(df.columns):
         stimulus = {"levels": df["levels"][good].astype(str).str.strip(),
                     **{c: pd.to_numeric(df[c][good], errors="coerce") for c in ("drive_peak_v", "target_peak_um")}}
+    # The block and point columns of a study database's trials (the fit of hypotheses reads them), as text.
+    block = {c: df[c][good].astype(str).str.strip() for c in _BLOCK_COLUMNS if c in df.columns}
     trials = pd.DataFrame(
         {
             "participant": df["participant"][good],
@@ -286,6 +293,7 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
             "line": df["line"][good],
             **by_session,
             **stimulus,
+            **block,
         }
     ).reset_index(drop=True)
     if len(trials):

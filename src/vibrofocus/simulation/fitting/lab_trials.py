@@ -1,9 +1,11 @@
 """A lab's trials as the arrays the likelihood reads: stimulus and answer of every main trial.
 
 :func:`trials_source` turns a study database into the table :func:`vibrofocus.analysis.load_trials`
-reads (a trials CSV and a BIDS folder are read by it directly), and :func:`lab_trials`
-maps the loaded trials onto a feature bank's stimuli (method x location), refusing
-trials the bank cannot present. How the fit uses them: docs/fitting-hypotheses.md.
+reads (a trials CSV and a BIDS folder are read by it directly), with each trial's block
+level and allowed answers (columns :data:`BLOCK_COLUMNS`), and :func:`lab_trials` maps the
+loaded trials onto a feature bank's stimuli (method x location), with each trial's level,
+the locations it could be answered with and its point answer, refusing trials the bank
+or the likelihood cannot represent. How the fit uses them: docs/fitting-hypotheses.md.
 """
 
 from __future__ import annotations
@@ -17,7 +19,15 @@ import numpy as np
 from ...errors import ValidationError
 from ..bank import FeatureBank
 
-__all__ = ["LabTrials", "trials_source", "lab_trials"]
+__all__ = ["LabTrials", "BLOCK_COLUMNS", "PAPER_PROTOCOLS", "trials_source", "lab_trials"]
+
+#: Columns :func:`trials_source` adds to a study database's trials: ``level_db``, the
+#: block's level in dB re the session's level rule (a level in dB SL already turned into
+#: it), and ``allowed``, the location numbers the block could be answered with.
+BLOCK_COLUMNS = ("level_db", "allowed")
+#: Protocols whose every trial is at 0 dB with every location allowed: the paper's two
+#: studies (also the protocol of a session stored before protocol files).
+PAPER_PROTOCOLS = ("paper-study1", "paper-study2")
 
 
 @dataclass(frozen=True)
@@ -44,6 +54,13 @@ class LabTrials:
         The trials' source (file name, or ``<DataFrame>``).
     levels : str or None
         The level rule the trials name (column ``levels``), or None where they name none.
+    level1, level2 : ndarray of float, shape (n1,) and (n2,), or None
+        Each trial's level, dB re the level rule (None: all at 0 dB).
+    allowed1, allowed2 : ndarray of bool, shape (n1, n_locations) and (n2, n_locations), or None
+        The locations each trial could be answered with (None: every location).
+    point1 : ndarray of float, shape (n1, 2), or None
+        Study 1 point answers in the layout frame, m; NaN rows for location answers (None:
+        no point answer). A point trial's ``answer1`` is the allowed location nearest it.
     """
 
     participants: tuple[str, ...]
@@ -57,10 +74,28 @@ class LabTrials:
     selected2: np.ndarray
     source: str = "<DataFrame>"
     levels: str | None = None
+    level1: np.ndarray | None = None
+    level2: np.ndarray | None = None
+    allowed1: np.ndarray | None = None
+    allowed2: np.ndarray | None = None
+    point1: np.ndarray | None = None
 
     @property
     def n_participants(self) -> int:
         return len(self.participants)
+
+    def study1_conditions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Study 1 trials' level (dB), allowed locations (bool, (n1, n_locations)) and point (m, NaN: none)."""
+        n = self.stim1.size
+        return (np.zeros(n) if self.level1 is None else self.level1,
+                np.ones((n, self.n_locations), dtype=bool) if self.allowed1 is None else self.allowed1,
+                np.full((n, 2), np.nan) if self.point1 is None else self.point1)
+
+    def study2_conditions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Study 2 trials' level (dB) and allowed locations (bool, (n2, n_locations))."""
+        n = self.stim2.size
+        return (np.zeros(n) if self.level2 is None else self.level2,
+                np.ones((n, self.n_locations), dtype=bool) if self.allowed2 is None else self.allowed2)
 
     def table(self) -> Any:
         """The trials as a trials-file table (docs/file-formats.md, trials file), every cell text.
@@ -105,9 +140,14 @@ class LabTrials:
         new[keep] = np.arange(keep.size)
         r1 = (new[self.part1] >= 0) & (1 in studies)
         r2 = (new[self.part2] >= 0) & (2 in studies)
+
+        def rows(a: np.ndarray | None, r: np.ndarray) -> np.ndarray | None:
+            return None if a is None else a[r]
+
         return LabTrials(tuple(self.participants[i] for i in keep), self.methods, self.n_locations,
                          new[self.part1][r1], self.stim1[r1], self.answer1[r1], new[self.part2][r2], self.stim2[r2],
-                         self.selected2[r2], self.source, self.levels)
+                         self.selected2[r2], self.source, self.levels, rows(self.level1, r1), rows(self.level2, r2),
+                         rows(self.allowed1, r1), rows(self.allowed2, r2), rows(self.point1, r1))
 
 
 def _is_database(path: str) -> bool:
@@ -131,8 +171,9 @@ def trials_source(source: str | os.PathLike) -> Any:
     -------
     path or DataFrame
         The path as it is for a CSV or a folder; for a database, its answered trials as a
-        table of text cells (:meth:`~vibrofocus.studies.storage.StudyStore.trial_rows`),
-        with ``attrs["source"]`` the database's path.
+        table of text cells (:meth:`~vibrofocus.studies.storage.StudyStore.trial_rows`)
+        with each session's block level and allowed answers (:data:`BLOCK_COLUMNS`), and
+        ``attrs["source"]`` the database's path.
     """
     name = os.fspath(source)
     if os.path.isdir(name) or not _is_database(name):
@@ -145,6 +186,10 @@ def trials_source(source: str | os.PathLike) -> Any:
     protect(name, "study database")
     with StudyStore(name, create=False) as store:
         rows = store.trial_rows()
+        block = {info.session_id: (info.design.level_db, " ".join(str(x) for x in info.design.locations))
+                 for info in store.sessions()}
+    for row in rows:
+        row["level_db"], row["allowed"] = block[row["session_id"]]
     if not rows:
         raise ValidationError(f"study database {name!r} holds no answered trials")
     table = pd.DataFrame(rows).astype(object)
@@ -153,8 +198,68 @@ def trials_source(source: str | os.PathLike) -> Any:
     return table
 
 
+def _cells(p: Any, column: str) -> list[str]:
+    """The column's cells as stripped text ('' for an empty cell or a missing column)."""
+    if column not in p.columns:
+        return [""] * len(p)
+    return ["" if str(v).strip() in ("", "None", "nan", "NaN") else str(v).strip() for v in p[column]]
+
+
+def _block_conditions(p: Any, study: int, n_loc: int, source: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each row's level (dB), allowed locations (bool) and point answer (m, NaN: none).
+
+    Refuses rows of a protocol other than the paper's whose level or allowed answers the
+    table does not hold, and values it cannot read."""
+    where = f"study {study} of {source!r}"
+    protocols = sorted({v for v in _cells(p, "protocol") if v} - set(PAPER_PROTOCOLS))
+    missing = [c for c in BLOCK_COLUMNS if c not in p.columns]
+    if protocols and missing:
+        raise ValidationError(f"{where} comes from protocol {protocols[0]!r}, and the trials do not say each "
+                              f"block's {' and '.join(missing)}: fit the study database itself "
+                              "(vibrofocus analyze STUDY.db --hypotheses)")
+    level = np.zeros(len(p))
+    for i, v in enumerate(_cells(p, "level_db")):
+        try:
+            level[i] = float(v) if v else 0.0
+        except ValueError:
+            raise ValidationError(f"{where} has a level_db that is not a number: {v[:40]!r}") from None
+    if not np.all(np.isfinite(level)):
+        raise ValidationError(f"{where} has a level_db that is not finite")
+    allowed = np.ones((len(p), n_loc), dtype=bool)
+    for i, v in enumerate(_cells(p, "allowed")):
+        if v:
+            try:
+                numbers = np.array([int(x) for x in v.split()], dtype=int) - 1
+            except ValueError:
+                raise ValidationError(f"{where} has allowed locations that are not numbers: {v[:40]!r}") from None
+            if numbers.size == 0 or np.any((numbers < 0) | (numbers >= n_loc)):
+                raise ValidationError(f"{where} allows locations beyond the bank's {n_loc}: {v[:40]!r}")
+            allowed[i] = False
+            allowed[i, numbers] = True
+    x, y = _cells(p, "response_x_mm"), _cells(p, "response_y_mm")
+    point = np.full((len(p), 2), np.nan)
+    for i, (a, b) in enumerate(zip(x, y)):
+        if a or b:
+            try:
+                point[i] = float(a) * 1e-3, float(b) * 1e-3
+            except ValueError:
+                raise ValidationError(f"{where} has a point answer that is not two numbers: ({a[:20]!r}, "
+                                      f"{b[:20]!r})") from None
+            if not np.all(np.isfinite(point[i])):
+                raise ValidationError(f"{where} has a point answer that is not finite")
+    if study == 2 and np.isfinite(point).any():
+        raise ValidationError(f"{where} has point answers: a Study 2 trial's answer is a selection of locations")
+    return level, allowed, point
+
+
 def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
     """The main-phase trials of ``trials`` on the stimuli of ``bank``.
+
+    Each trial is read with its block's level (column ``level_db``, dB re the level rule;
+    default 0), the locations it could be answered with (column ``allowed``, location
+    numbers; default every location) and, in Study 1, its point answer (columns
+    ``response_x_mm``, ``response_y_mm``, layout frame; default none): the columns of a
+    study database's trials (:func:`trials_source`, :data:`BLOCK_COLUMNS`).
 
     Parameters
     ----------
@@ -172,7 +277,10 @@ def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
     ValidationError
         No main-phase trial of either study; a method the bank has no stimuli of; a
         target or answer beyond the bank's locations; a Study 1 answer of more than one
-        location; trials that name a level rule other than the bank's.
+        location; an answer outside its block's allowed locations; a point answer in
+        Study 2; trials of a protocol other than the paper's without their blocks' levels
+        and allowed answers (a trials file of a designed study: fit its database); trials
+        that name a level rule other than the bank's.
     """
     from ...analysis.trials import main_trials
 
@@ -199,6 +307,7 @@ def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
     number = {p: i for i, p in enumerate(participants)}
     method = {m: i for i, m in enumerate(bank.methods)}
     out: list[np.ndarray] = []
+    block: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
     for study, p in zip((1, 2), parts):
         target = p["target"].to_numpy(dtype=int) - 1
         if np.any((target < 0) | (target >= n_loc)):
@@ -209,6 +318,10 @@ def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
             if chosen.size == 0 or np.any((chosen < 0) | (chosen >= n_loc)):
                 raise ValidationError(f"study {study} of {source!r} has an answer beyond the bank's {n_loc} locations")
             sel[row, chosen] = True
+        block[study] = _block_conditions(p, study, n_loc, source)
+        located = ~np.isfinite(block[study][2][:, 0])  # a point answer's stored location may lie outside
+        if np.any(sel[located] & ~block[study][1][located]):
+            raise ValidationError(f"study {study} of {source!r} has an answer outside its block's allowed locations")
         stim = np.array([method[m] for m in p["method"]], dtype=int) * n_loc + target
         who = np.array([number[str(x)] for x in p["participant"]], dtype=int)
         if study == 1:
@@ -217,4 +330,8 @@ def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
             out += [who, stim, np.argmax(sel, axis=1)]
         else:
             out += [who, stim, sel]
-    return LabTrials(participants, tuple(bank.methods), n_loc, *out, source=source, levels=levels)
+    (level1, allowed1, point1), (level2, allowed2, _) = block[1], block[2]
+    return LabTrials(participants, tuple(bank.methods), n_loc, *out, source=source, levels=levels,
+                     level1=level1 if level1.any() else None, level2=level2 if level2.any() else None,
+                     allowed1=None if allowed1.all() else allowed1, allowed2=None if allowed2.all() else allowed2,
+                     point1=point1 if np.isfinite(point1).any() else None)

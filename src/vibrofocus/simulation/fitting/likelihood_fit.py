@@ -1,8 +1,10 @@
 """Maximum marginal likelihood of a hypothesis' free parameters, from a lab's trials.
 
-Each participant's answers (Study 1 locations and Study 2 selections) are scored by the
-likelihood of :mod:`vibrofocus.simulation.likelihood`, integrated over the hypothesis'
-population of participants as :func:`~vibrofocus.simulation.likelihood.marginal_loglik`
+Each participant's answers (Study 1 locations or points and Study 2 selections, each trial
+at its block's level and among its block's allowed locations) are scored by the likelihood
+of :mod:`vibrofocus.simulation.likelihood` (Study 1 locations by
+:func:`~vibrofocus.simulation.design.study1_probabilities`, the design's own), integrated
+over the hypothesis' population of participants as :func:`~vibrofocus.simulation.likelihood.marginal_loglik`
 does (the same trait draws, common to every parameter set), and over the simulated
 forearms of a feature bank (draw ``k`` feels with forearm ``k mod n_forearms``). The
 draws are shared by all participants: one pass over them scores everyone.
@@ -22,12 +24,13 @@ from scipy import optimize, special
 
 from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
-from ..likelihood import Quadrature, Stimuli, answer_law, answer_probabilities, selection_probability
+from ..likelihood import Quadrature, Stimuli, answer_law, point_loglik, selection_probability
 from ..parameters import apply_parameters, ordered_pairs, read_parameters
 from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
-__all__ = ["FitSettings", "Fit", "model_at", "population_draws", "participant_loglik", "fit_hypothesis"]
+__all__ = ["FitSettings", "Fit", "model_at", "population_draws", "level_draws", "study1_probabilities_of",
+           "participant_loglik", "fit_hypothesis"]
 
 
 @dataclass(frozen=True)
@@ -46,8 +49,9 @@ class FitSettings:
         Starts of the bounded optimizer: the hypothesis' own values, then points drawn
         uniformly within the ranges.
     lapse : float
-        Share of answers given at random (uniform over the locations in Study 1, over the
-        non-empty selections in Study 2), mixed into every answer's probability so that
+        Share of answers given at random (uniform over the trial's allowed locations in
+        Study 1, over the picture of the arm area for a point answer, over the non-empty
+        selections of the allowed locations in Study 2), mixed into every answer's probability so that
         an answer the model cannot give costs a finite amount (Wichmann & Hill 2001,
         Percept. Psychophys. 63(8)). An assumption of the fit, the same for every hypothesis.
     quadrature : Quadrature
@@ -141,11 +145,80 @@ def population_draws(h: Any, model: PerceptualModel, bank: FeatureBank,
     percepts : Percepts
         Its noise-free percepts of every stimulus of the bank.
     """
+    for traits, at in level_draws(h, model, bank, settings, (0.0,)):
+        yield traits, *at[0.0]
+
+
+def level_draws(h: Any, model: PerceptualModel, bank: FeatureBank, settings: FitSettings,
+                levels: Sequence[float]) -> Iterator[tuple[Traits, dict[float, tuple[Stimuli, Percepts]]]]:
+    """:func:`population_draws` with the bank's stimuli at each of ``levels``.
+
+    Parameters
+    ----------
+    h, model, bank, settings
+        As :func:`population_draws`.
+    levels : sequence of float
+        dB re the bank's level rule (:meth:`~vibrofocus.simulation.bank.FeatureBank.at_level`).
+
+    Yields
+    ------
+    traits : Traits
+    at : dict
+        Per level, the :class:`Stimuli` of draw ``k``'s forearm (``k mod n_forearms``) and
+        the percepts of every stimulus there.
+    """
+    banks = {float(v): bank if float(v) == 0.0 else bank.at_level(float(v)) for v in levels}
     rng = np.random.default_rng([int(settings.seed), 0x11C])
     for k in range(settings.n_draws):
         traits = Traits.draw(model, rng)
-        st = Stimuli.from_bank(bank, k % bank.n_forearms)
-        yield traits, st, st.percepts(h, model, traits)
+        at = {}
+        for v, b in banks.items():
+            st = Stimuli.from_bank(b, k % bank.n_forearms)
+            at[v] = (st, st.percepts(h, model, traits))
+        yield traits, at
+
+
+def _groups(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct rows of the columns side by side, and each row's group."""
+    keys = np.column_stack([np.asarray(c, dtype=float).reshape(np.shape(c)[0], -1 if np.size(c) else 1)
+                            for c in columns])
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    return uniq, inverse.reshape(-1)
+
+
+def study1_probabilities_of(data: LabTrials, at: Mapping[float, tuple[Stimuli, Percepts]], model: PerceptualModel,
+                            traits: Traits, quadrature: Quadrature) -> np.ndarray:
+    """Probability of each location answer of each Study 1 trial, at its level and among its allowed locations.
+
+    Parameters
+    ----------
+    data : LabTrials
+    at : mapping
+        Per level of the trials, the stimuli and percepts of one draw (:func:`level_draws`).
+    model : PerceptualModel
+    traits : Traits
+    quadrature : Quadrature
+
+    Returns
+    -------
+    ndarray, shape (n1, n_locations)
+        :func:`~vibrofocus.simulation.design.study1_probabilities` of the trial's stimulus
+        (0 at locations not allowed).
+    """
+    from ..design import study1_probabilities
+
+    level, allowed, _ = data.study1_conditions()
+    out = np.zeros((data.stim1.size, data.n_locations))
+    uniq, group = _groups(level, allowed)
+    for g, key in enumerate(uniq):
+        rows = group == g
+        st, per = at[float(key[0])]
+        ok = np.flatnonzero(key[1:])
+        stim, which = np.unique(data.stim1[rows], return_inverse=True)
+        law = answer_law(per, stim, st.centre_xy, model, traits, quadrature, study=1)
+        p = study1_probabilities(law, st.locations_xy, None if ok.size == data.n_locations else ok, quadrature)
+        out[rows] = p[which.reshape(-1)]
+    return out
 
 
 def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float] | Mapping[str, float] | None = None,
@@ -154,6 +227,10 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
 
     ``log mean_k prod_trials p(answer | traits_k, forearm_k)``, the product over the
     participant's Study 1 and Study 2 trials together (one person, one set of traits).
+    Each trial is scored at its level, among its allowed locations; a point answer by the
+    density of the perceived place (:func:`~vibrofocus.simulation.likelihood.point_loglik`,
+    per m^2), its lapse uniform over the picture of the arm area
+    (:func:`~vibrofocus.simulation.design.point_area_m`).
 
     Parameters
     ----------
@@ -171,6 +248,7 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
     ndarray, shape (n_participants,)
         Natural log.
     """
+    from ..design import point_area_m
     from ..hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(hypothesis)
@@ -179,23 +257,43 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
     m = model_at(h, values)
     if tuple(b.methods) != data.methods or len(b.locations_xy) != data.n_locations:
         raise ValidationError("the trials were mapped onto another feature bank's stimuli")
-    n_stim, n_loc, q = len(b.methods) * data.n_locations, data.n_locations, s.quadrature
-    # Study 2: distinct (stimulus, selection) pairs, scored once per draw for everyone.
-    uniq = np.unique(np.column_stack([data.stim2, data.selected2]).astype(np.int64), axis=0)
-    _, inverse = np.unique(np.column_stack([data.stim2, data.selected2]).astype(np.int64), axis=0, return_inverse=True)
-    inverse = inverse.reshape(-1)
-    floor1, floor2 = s.lapse / n_loc, s.lapse / (2.0**n_loc - 1.0)
+    q = s.quadrature
+    level1, allowed1, point1 = data.study1_conditions()
+    level2, allowed2 = data.study2_conditions()
+    is_point = np.isfinite(point1[:, 0])
+    loc = ~is_point
+    floor1 = s.lapse / np.maximum(allowed1.sum(axis=1), 1)
+    lo, hi = point_area_m(b)
+    log_floor_point = np.log(s.lapse / float(np.prod(hi - lo))) if s.lapse else -np.inf
+    # Study 2: distinct (level, allowed, stimulus, selection) rows, scored once per draw for everyone.
+    uniq, inverse = _groups(level2, allowed2, data.stim2, data.selected2)
+    n_loc = data.n_locations
+    floor2 = s.lapse / (2.0 ** allowed2.sum(axis=1) - 1.0)
+    levels = sorted(set(level1.tolist()) | set(level2.tolist()))
     total = np.zeros((s.n_draws, data.n_participants))
-    for k, (traits, st, per) in enumerate(population_draws(h, m, b, s)):
+    for k, (traits, at) in enumerate(level_draws(h, m, b, s, levels)):
         with np.errstate(divide="ignore"):
-            if data.stim1.size:
-                law = answer_law(per, np.arange(n_stim), st.centre_xy, m, traits, q, study=1)
-                p1 = answer_probabilities(law, st.locations_xy, None, q)[data.stim1, data.answer1]
-                total[k] += np.bincount(data.part1, np.log((1.0 - s.lapse) * p1 + floor1), data.n_participants)
+            if loc.any():
+                p1 = study1_probabilities_of(data, at, m, traits, q)[np.flatnonzero(loc), data.answer1[loc]]
+                total[k] += np.bincount(data.part1[loc], np.log((1.0 - s.lapse) * p1 + floor1[loc]),
+                                        data.n_participants)
+            for v in np.unique(level1[is_point]):
+                rows = is_point & (level1 == v)
+                st, per = at[float(v)]
+                law = answer_law(per, data.stim1[rows], st.centre_xy, m, traits, q, study=1)
+                ll = np.logaddexp(np.log1p(-s.lapse) + point_loglik(law, point1[rows]), log_floor_point)
+                total[k] += np.bincount(data.part1[rows], ll, data.n_participants)
             if data.stim2.size:
-                law = answer_law(per, uniq[:, 0], st.centre_xy, m, traits, q, study=2)
-                p2 = selection_probability(law, st.locations_xy, uniq[:, 1:].astype(bool), None, q)[inverse]
-                total[k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2 + floor2), data.n_participants)
+                p2 = np.zeros(len(uniq))
+                for key in np.unique(uniq[:, :1 + n_loc], axis=0):
+                    rows = np.all(uniq[:, :1 + n_loc] == key, axis=1)
+                    st, per = at[float(key[0])]
+                    ok = np.flatnonzero(key[1:])
+                    law = answer_law(per, uniq[rows, 1 + n_loc].astype(int), st.centre_xy, m, traits, q, study=2)
+                    p2[rows] = selection_probability(law, st.locations_xy, uniq[rows, 2 + n_loc:].astype(bool),
+                                                     None if ok.size == n_loc else ok, q)
+                total[k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2[inverse] + floor2),
+                                        data.n_participants)
     with np.errstate(divide="ignore"):
         return special.logsumexp(total, axis=0) - np.log(s.n_draws)
 

@@ -2,9 +2,10 @@
 
 For the lab's own stimuli (method x target, as many trials as it ran), the population's
 predicted share of answers at each location beside the observed share, per method:
-Study 1 exactly (the answer probabilities of :mod:`~vibrofocus.simulation.likelihood`,
-averaged over the population's draws), Study 2 by the sampler (one set of selections per
-draw; a location's share is how often it is selected). The predictions are MODEL
+Study 1 exactly (the answer probabilities of each trial at its level among its allowed
+locations, :func:`~.likelihood_fit.study1_probabilities_of`, averaged over the
+population's draws; a point answer counts at its stored location), Study 2 by the sampler
+(one set of selections per draw; a location's share is how often it is selected). The predictions are MODEL
 output; the observations are the lab's data. docs/fitting-hypotheses.md, "Predictive check".
 """
 
@@ -15,11 +16,11 @@ from typing import Any
 
 import numpy as np
 
+from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
-from ..likelihood import answer_law, answer_probabilities
 from ..perception import draw_answers
 from .lab_trials import LabTrials
-from .likelihood_fit import FitSettings, model_at, population_draws
+from .likelihood_fit import FitSettings, level_draws, model_at, study1_probabilities_of
 
 __all__ = ["predictive_check"]
 
@@ -64,19 +65,24 @@ def predictive_check(hypothesis: Any, data: LabTrials, params: Mapping[str, floa
     b = bank if bank is not None else default_bank()
     s = settings or FitSettings()
     m = model_at(h, params)
-    n_loc, n_stim = data.n_locations, len(b.methods) * data.n_locations
+    n_loc = data.n_locations
     p1 = np.zeros((data.stim1.size, n_loc))
     sel2 = np.zeros((data.stim2.size, n_loc))
     rng = np.random.default_rng([int(s.seed), 0x99C])
-    for traits, st, per in population_draws(h, m, b, s):
+    level1, allowed1, _ = data.study1_conditions()
+    level2, allowed2 = data.study2_conditions()
+    if data.stim2.size and (np.any(level2 != 0.0) or not allowed2.all()):
+        raise ValidationError("the predictive check draws Study 2 answers at 0 dB among every location; these "
+                              "trials have other levels or allowed locations")
+    for traits, at in level_draws(h, m, b, s, sorted(set(level1.tolist()) | {0.0})):
         if data.stim1.size:
-            law = answer_law(per, np.arange(n_stim), st.centre_xy, m, traits, s.quadrature, study=1)
-            p1 += answer_probabilities(law, st.locations_xy, None, s.quadrature)[data.stim1]
+            p1 += study1_probabilities_of(data, at, m, traits, s.quadrature)
         if data.stim2.size:
+            st, per = at[0.0]
             sel2 += draw_answers(per, data.stim2, st.locations_xy, st.centre_xy, m, traits, rng)[1]
     out: dict[str, Any] = {"study1": None, "study2": None}
     if data.stim1.size:
-        p1 = (1.0 - s.lapse) * p1 / s.n_draws + s.lapse / n_loc
+        p1 = (1.0 - s.lapse) * p1 / s.n_draws + s.lapse * allowed1 / allowed1.sum(axis=1, keepdims=True)
         obs1 = np.eye(n_loc)[data.answer1]
         study1 = {name: {"observed": o, "predicted": p}
                   for (name, o), p in zip(_by_method(obs1, data.stim1, n_loc, data.methods).items(),
