@@ -13,7 +13,7 @@ import pytest
 from vibrofocus.cli.commands import COMMAND_MODULES
 
 ORDER = ["demo", "calibrate", "render", "serve", "stop", "serve-osc", "analyze", "simulate-study", "export", "power",
-         "design-experiment", "play", "latency", "devices", "straps", "study", "psychopy"]
+         "design-experiment", "design-layout", "play", "latency", "devices", "straps", "study", "psychopy"]
 
 PROBE = """
 import json, sys

@@ -114,11 +114,15 @@ def budget_markdown() -> str:
     from vibrofocus.simulation.hypotheses import hypothesis_fits
 
     fits = hypothesis_fits()["hypotheses"]
-    lines = ["| hypothesis | version | free parameters | random / refinement candidates (path seed) | fit seeds | "
+    # The shipped fits moved every sourced parameter; those parameter recovery did not
+    # recover are fixed since (assumed), so "free now" is fewer than "fitted".
+    lines = ["| hypothesis | version | fitted parameters (free now) | random / refinement candidates (path seed) | fit seeds | "
              "loss on the fit seeds | held-out seeds | loss on them |", "|---|---|---:|---|---|---:|---|---:|"]
     for name, f in fits.items():
         b = f["budget"]
-        lines.append(f"| `{name}` | {f['version']} | {len(hypothesis(name).free_parameters)} | {b['n_eval']} / "
+        h = hypothesis(name)
+        lines.append(f"| `{name}` | {f['version']} | {len(h.free_parameters) + len(h.assumed)} "
+                     f"({len(h.free_parameters)}) | {b['n_eval']} / "
                      f"{b['n_refine']} ({b['rng_seed']}) | {f['fit_seeds'][0]}–{f['fit_seeds'][1] - 1} | "
                      f"{f['loss_fit']:.2f} | {f['held_out_seeds'][0]}–{f['held_out_seeds'][1] - 1} | "
                      f"{f['loss_held_out']:.2f} |")

@@ -46,6 +46,7 @@ import numpy as np
 from .._validation import as_array, check_band
 from ..errors import ValidationError
 from ..layout import ArrayLayout
+from .quality import FIT_RESIDUAL_MAX
 
 __all__ = ["FittedSkin", "fit_model", "FIT_LAWS", "FIT_RESIDUAL_MAX", "FIT_LAW_PARAMETERS",
            "FIT_ACTUATOR_PARAMETERS", "parameter_names", "true_parameters"]
@@ -72,12 +73,6 @@ MIN_RELATIVE_ERROR = 1e-3
 #: 1e-6 of that peak above 100 Hz). Bins where the wave has died out below it carry no
 #: information about the law, whatever their coherence.
 DYNAMIC_RANGE = 1e-5
-#: Largest relative fit residual at a measured point (:attr:`FittedSkin.residual`) of a
-#: model that describes the skin (an assumption: the simulated arms give about 0.005 with
-#: the default noise, in the model's family; a layered fit of the ``voigt-fit`` arm
-#: misses by more). Over it, :attr:`FittedSkin.verdict` says so, and so does the
-#: calibration's quality (``fit_residual_max``).
-FIT_RESIDUAL_MAX = 0.05
 #: Lowest frequency fitted by default, Hz. Noise-free simulated calibrations (window
 #: ``n_fft / fs`` = 0.41 s, a few cycles at 10-30 Hz) differ from the model's spectrum by
 #: 0.3-1 % of ``|H|`` at 10-30 Hz but about 1e-4 from 30 Hz up (measured with

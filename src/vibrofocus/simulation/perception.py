@@ -270,6 +270,12 @@ PARAMETER_SOURCES: dict[str, tuple[str, str]] = {
 }
 
 
+def _between(rng: np.random.Generator, ends: tuple[float, float]) -> float:
+    # A population range is the interval between its two ends, in either order: a fit
+    # that frees one end may move it past the fixed other (same draw as uniform(lo, hi)).
+    return float(rng.uniform(min(ends), max(ends)))
+
+
 @dataclass(frozen=True)
 class Traits:
     """One simulated participant's traits, drawn once from the participant seed.
@@ -304,12 +310,12 @@ class Traits:
         rng = seed if isinstance(seed, np.random.Generator) else np.random.default_rng([int(seed), 0x7A17])
         return cls(
             threshold_offset_db=float(rng.normal(0.0, model.threshold_sd_db)),
-            acuity_sd_m=float(rng.uniform(*model.acuity_sd_m)),
-            prior_sd_m=float(rng.uniform(*model.prior_sd_m)),
+            acuity_sd_m=_between(rng, model.acuity_sd_m),
+            prior_sd_m=_between(rng, model.prior_sd_m),
             bias_m=np.asarray(model.bias_mean_m, dtype=float) + rng.normal(0.0, model.bias_sd_m, size=2),
-            kappa=float(rng.uniform(*model.select_kappa)),
-            rt_median_s=float(rng.uniform(*model.rt_median_s)),
-            spread_gain=float(rng.uniform(*model.spread_gain)),
+            kappa=_between(rng, model.select_kappa),
+            rt_median_s=_between(rng, model.rt_median_s),
+            spread_gain=_between(rng, model.spread_gain),
         )
 
     def to_dict(self) -> dict[str, Any]:
