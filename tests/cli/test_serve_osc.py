@@ -15,15 +15,9 @@ pytest.importorskip("pythonosc")
 from pythonosc.osc_message import OscMessage  # noqa: E402
 from pythonosc.udp_client import SimpleUDPClient  # noqa: E402
 
+from .serve_osc_lines import problems  # noqa: E402
+
 pytestmark = pytest.mark.slow
-
-#: What serve-osc says on stderr while it starts (about a minute on the simulated rig).
-STARTING = re.compile(r"(serve-osc: (starting|opening|computing|evaluating)|\d+/\d+ rows of the /tap_xy grid)")
-
-
-def _problems(err: str) -> list[str]:
-    """stderr's lines but those of the start."""
-    return [line for line in err.strip().splitlines() if not STARTING.match(line)]
 
 
 def _start(tmp_path, *extra):
@@ -59,7 +53,7 @@ def test_stop_message_ends_it_with_one_line(tmp_path):
     assert proc.returncode == 0, err
     assert out.strip().splitlines() == [re.search(r"serve-osc stopped by /stop from 127\.0\.0\.1:\d+; all outputs at "
                                                   r"zero", out).group(0)]
-    assert _problems(err) == []
+    assert problems(err) == []
     # Issue 54, item 9: the start (a minute here) was silent when not at a terminal. Each
     # stage is said as it begins, the first before the imports, the grid with its rows.
     said = err.strip().splitlines()
@@ -84,7 +78,7 @@ def test_taps_from_a_calibration_without_a_skin_model(tmp_path):
         out, err = proc.communicate(timeout=60)
     finally:
         proc.kill()
-    assert proc.returncode == 0 and _problems(err) == []
+    assert proc.returncode == 0 and problems(err) == []
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -98,7 +92,7 @@ def test_signal_ends_it_with_one_line(tmp_path, sig):
         proc.kill()
     assert proc.returncode == 130
     assert out == ""
-    assert _problems(err) == ["interrupted: serve-osc stopped; all outputs at zero"]
+    assert problems(err) == ["interrupted: serve-osc stopped; all outputs at zero"]
 
 
 @pytest.mark.parametrize("args, needle", [
@@ -120,7 +114,7 @@ def test_bad_options_are_one_error_line(tmp_path, args, needle):
     finally:
         busy.close()
     assert done.returncode == 2, done.stderr
-    lines = _problems(done.stderr)
+    lines = problems(done.stderr)
     assert len(lines) == 1 and lines[0].startswith("error:") and needle in lines[0], lines
 
 
