@@ -421,3 +421,31 @@ def test_silent_peers_delay_no_stop(tmp_path):
             s.close()
         listener.close()
     assert web.stopped == [1]
+
+
+def test_a_page_polling_while_an_abort_waits_does_not_start_the_session_again(client, monkeypatch):
+    # An abort stops the session's runner before it stores "aborted". A participant page
+    # that polled in that window found a session stored as running with no runner and
+    # built one: the aborted session went on presenting trials.
+    from vibrofocus.web.session_runner import SessionRunner
+
+    entered, release = _held(monkeypatch, SessionRunner, "stop")
+    assert client.post("/api/participants", json={"participant_id": "P03"}).status_code == 201
+    session = client.post("/api/sessions", json={"participant_id": "P03", "study": 1, "seed": 3,
+                                                 "n_training": 1, "repetitions": 1}).json()
+    sid, key = session["session_id"], session["participant_url"].split("key=")[1]
+    assert client.post(f"/api/sessions/{sid}/start").status_code == 200
+    abort = threading.Thread(target=lambda: client.post(f"/api/sessions/{sid}/stop"))
+    abort.start()
+    try:
+        assert entered.wait(30), "the abort never reached the runner's stop"
+        polled = client.get(f"/api/participant/{sid}/state", headers={"X-Participant-Key": key})
+        assert polled.status_code == 200, polled.text
+    finally:
+        release.set()
+        abort.join(30)
+    web = client.app.state.web
+    assert client.get(f"/api/sessions/{sid}").json()["status"] == "aborted"
+    assert sid not in web.runners, "a runner was built for the session being aborted"
+    page = client.get(f"/api/participant/{sid}/state", headers={"X-Participant-Key": key}).json()
+    assert page["state"] == "stopped"

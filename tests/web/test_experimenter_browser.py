@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import pytest
 
 from .conftest import login
@@ -12,6 +14,14 @@ pytestmark = pytest.mark.browser
 
 def session_status(server, sid: int) -> str:
     return server.rows("SELECT status FROM sessions WHERE session_id = ?", sid)[0][0]
+
+
+def wait_status(server, sid: int, status: str, timeout: float = 30.0) -> str:
+    """The session's stored status once it is ``status``, or the last one seen at ``timeout`` (s)."""
+    deadline = time.monotonic() + timeout
+    while (seen := session_status(server, sid)) != status and time.monotonic() < deadline:
+        time.sleep(0.1)
+    return seen
 
 
 def test_experimenter_runs_a_session_from_the_page(server, chromium):
@@ -71,6 +81,11 @@ def test_experimenter_runs_a_session_from_the_page(server, chromium):
         wait_respond(part, 3)
         exp.click("#sessions button[data-action=stop]")
         exp.click("#sessions button[data-action=stop-confirm]")
+        # The server's word first, then the page's: a failure says which of them lagged.
+        stored = wait_status(server, sid, "aborted")
+        assert stored == "aborted", (
+            f"the stop was confirmed but the session is {stored!r}; the page said "
+            f"{exp.inner_text('#flash')!r}; server log:\n{server.log.read_text()[-3000:]}")
         exp.locator("#sessions td.status.aborted").wait_for()
         part.wait_for_function("document.body.dataset.state === 'stopped'")
         assert session_status(server, sid) == "aborted"

@@ -639,11 +639,14 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
                                        bool((info.get("config") or {}).get("calibration_errors_accepted")))
         if status == "aborted":
             with web.lock:
+                web.aborted.add(session_id)  # before the pop: nothing builds it a runner again
                 runner = web.runners.pop(session_id, None)
             if runner is not None:
                 runner.stop()
         elif status == "running":
             runner = web.runner(session_id, create=True)
+            if runner is None:
+                raise HTTPException(409, detail=f"Session {session_id} is being aborted; an abort is final.")
             if runner.rig is not None and not runner.running:
                 _refuse_if_busy(runner.rig)  # before the status is stored
         with web.db:

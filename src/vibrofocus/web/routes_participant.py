@@ -43,6 +43,8 @@ def _live_runner(web: WebState, session_id: int, status: str):
     runner = web.runner(session_id)
     if runner is None and status in LIVE_STATUSES:
         runner = web.runner(session_id, create=True)
+        if runner is None:  # being aborted
+            return None
         if status == "paused":
             runner.pause()
         runner.start()

@@ -64,6 +64,9 @@ class WebState(AccessState, RigState, SessionState, JobState):
         Guard the database and the shared dictionaries below.
     runners : dict
         Session id to its running :class:`SessionRunner`.
+    aborted : set
+        Sessions aborted here: none of them gets a runner again (a page polling
+        while the abort waits for the old runner must not build a new one).
     calibrations : dict
         Loaded calibrations, by calibration id.
     banks : dict
@@ -96,6 +99,7 @@ class WebState(AccessState, RigState, SessionState, JobState):
     rig_config: Any = None
     db: threading.RLock = field(default_factory=threading.RLock)
     runners: dict[int, SessionRunner] = field(default_factory=dict)
+    aborted: set[int] = field(default_factory=set)
     calibrations: dict[int, Any] = field(default_factory=dict)
     banks: dict[tuple[int, float], Any] = field(default_factory=dict)
     jobs: dict[str, CalibrationJob] = field(default_factory=dict)

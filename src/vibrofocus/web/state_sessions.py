@@ -33,10 +33,13 @@ class SessionState:
         return _as_dict(info)
 
     def runner(self, session_id: int, *, create: bool = False) -> SessionRunner | None:
-        """The runner of a session; with ``create``, build it from the stored session."""
+        """The runner of a session; with ``create``, build it from the stored session.
+
+        None for a session aborted here, even with ``create``: an abort is final.
+        """
         with self.lock:
             runner = self.runners.get(session_id)
-            if runner is not None or not create:
+            if runner is not None or not create or session_id in self.aborted:
                 return runner
         from ..studies.protocol import LEGACY_LEVELS
 
@@ -52,6 +55,8 @@ class SessionState:
             model = self.simulated_participant(info, rig)
         runner = SessionRunner(self.store, session_id, renderer=renderer, rig=rig, pace=self.pace, model=model)
         with self.lock:
+            if session_id in self.aborted:  # aborted while this one was built
+                return None
             return self.runners.setdefault(session_id, runner)
 
     def is_simulated(self, participant_id: str) -> bool:
