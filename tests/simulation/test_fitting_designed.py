@@ -55,8 +55,11 @@ def test_the_fit_scores_designed_trials_as_the_design_does(name):
 
 def test_a_designed_trials_file_without_its_blocks_is_refused():
     table = _table(TRIALS).drop(columns=["level_db", "allowed"])
-    with pytest.raises(ValidationError, match="protocol 'designed-study1'.*level_db and allowed: fit the study"):
+    with pytest.raises(ValidationError, match="protocol 'designed-study1'.*level_db and allowed: export them again"):
         lab_trials(load_trials(table), default_bank())
+    # An export that has the columns but left a designed row's cells empty says no more.
+    with pytest.raises(ValidationError, match="protocol 'designed-study1'.* block's allowed: export them again"):
+        lab_trials(load_trials(_table(TRIALS).assign(allowed="")), default_bank())
     # The paper's own protocol needs neither: every trial at 0 dB among every location.
     paper = _table([t[:3] + (0.0, tuple(range(1, 10))) for t in TRIALS[:4]], protocol="paper-study1")
     data = lab_trials(load_trials(paper.drop(columns=["level_db", "allowed"])), default_bank())
@@ -65,9 +68,12 @@ def test_a_designed_trials_file_without_its_blocks_is_refused():
 
 @pytest.mark.parametrize("column, value, match", [
     ("allowed", "1 3", "answer outside its block's allowed locations"),
-    ("allowed", "0 12", "allows locations beyond"),
-    ("level_db", "loud", "level_db that is not a number"),
-    ("response_x_mm", "far", "point answer that is not two numbers"),
+    ("allowed", "0 12", "line 5: allowed '0 12' names location 0, outside 1..9"),
+    ("level_db", "loud", "line 5: level_db must be a finite number of dB within"),
+    ("level_db", "NaN", "line 5: level_db must be a finite number of dB within .*'NaN'"),
+    ("level_db", "1e300", "line 5: level_db must be a finite number of dB within .*'1e300'"),
+    ("response_x_mm", "far", "line 5: response_x_mm and response_y_mm must both be finite numbers"),
+    ("response_x_mm", "1e9", "line 5: response_x_mm and response_y_mm must both be finite numbers .*'1e9'"),
 ])
 def test_block_values_the_fit_cannot_read_are_refused(column, value, match):
     table = _table(TRIALS[:4])

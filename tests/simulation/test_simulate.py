@@ -36,10 +36,12 @@ def test_export_has_the_contract_columns_and_every_trial(simulated):
         header = next(reader)
         rows = [dict(zip(header, r)) for r in reader]
     # A database export: the contract's columns, the session columns, the onset columns, the
-    # stimulus columns, the protocol and the point columns (docs/file-formats.md), then the
-    # flag that these participants are simulated (a model, not data) and the model's label.
+    # stimulus columns, the protocol and the point columns, the xrun and the block columns
+    # (docs/file-formats.md), then the flag that these participants are simulated (a model,
+    # not data) and the model's label.
     assert tuple(header) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS
-                             + PROTOCOL_COLUMNS + POINT_COLUMNS + ("xrun_represented", "simulated", "model"))
+                             + PROTOCOL_COLUMNS + POINT_COLUMNS + ("xrun_represented", "level_db", "allowed",
+                                                                   "simulated", "model"))
     assert {r["response_x_mm"] for r in rows} == {""}  # the paper's studies answer with location keys
     assert {r["levels"] for r in rows} == {"paper"}
     # Every row names the model and the hypothesis that answered.

@@ -150,7 +150,9 @@ def test_a_dataset_written_before_the_device_columns_and_sessions_is_still_read(
         path.with_suffix(".json").rename(old_path.with_suffix(".json"))
         path.unlink()
     old = read_bids_trials_table(out)
-    assert set(new.columns) - set(old.columns) == {"levels", "drive_peak_v", "target_peak_um", "xrun_represented"}
+    assert set(new.columns) - set(old.columns) == {"levels", "drive_peak_v", "target_peak_um", "xrun_represented",
+                                                   "protocol", "level_db", "allowed", "response_x_mm",
+                                                   "response_y_mm"}
     key = ["participant", "study", "phase", "trial"]
     assert old.drop(columns="line").sort_values(key).reset_index(drop=True).equals(
         new[list(old.columns)].drop(columns="line").sort_values(key).reset_index(drop=True))

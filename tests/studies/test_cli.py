@@ -171,11 +171,11 @@ def test_export_of_a_study_database_keeps_the_csv_contract(tmp_path, calibration
     assert rows[0][:8] == ["participant", "study", "phase", "trial", "method", "target", "response", "rt_s"]
     assert rows[0][8:] == ["session", "session_status", "dry_run", "rig", "onset_host_s", "onset_device_s", "onset_clock",
                            "levels", "drive_peak_v", "target_peak_um", "protocol", "response_x_mm", "response_y_mm",
-                           "xrun_represented"]
+                           "xrun_represented", "level_db", "allowed"]
     # No calibration: a dry run, whose answers (given here without onsets) have empty onset and peak cells;
     # the session stored no rig: an empty rig cell.
     assert {tuple(r[8:]) for r in rows[1:]} == {(str(sid), "running", "1", "", "", "", "", "paper", "", "",
-                                                 "paper-study2", "", "", "0")}
+                                                 "paper-study2", "", "", "0", "0.0", "1 2 3 4 5 6 7 8 9")}
     assert [r[2:4] for r in rows[1:]] == [["training", "1"], ["training", "2"], ["main", "1"], ["main", "2"]]
     assert [r[6] for r in rows[1:]] == ["5", "4 5", "1", "2 3 9"]
     assert [float(r[7]) for r in rows[1:]] == [0.25, 0.5, 0.75, 1.0]

@@ -108,7 +108,7 @@ def test_the_export_has_the_point_columns_and_the_analysis_an_error_in_mm(store,
     store.export_trials_csv(out)
     rows = list(csv.DictReader(open(out)))
     header = next(csv.reader(open(out)))
-    assert header[-3:] == ["response_x_mm", "response_y_mm", "xrun_represented"]
+    assert header[-5:] == ["response_x_mm", "response_y_mm", "xrun_represented", "level_db", "allowed"]
     by_session = {}
     for r in rows:
         by_session.setdefault(int(r["session"]), []).append(r)
@@ -117,6 +117,9 @@ def test_the_export_has_the_point_columns_and_the_analysis_an_error_in_mm(store,
         assert (float(r["response_x_mm"]), float(r["response_y_mm"])) == points[i]
         assert r["response"] == r["target"]  # a point 3-4 mm from its target: the target is the nearest
     assert {(r["response_x_mm"], r["response_y_mm"]) for r in by_session[loc]} == {("", "")}
+    # Each row says its block: the level and the answers it allowed (what the fit of hypotheses reads).
+    assert {(r["level_db"], r["allowed"]) for r in by_session[sid]} == {("0.0", "1 9")}
+    assert {(r["level_db"], r["allowed"]) for r in by_session[loc]} == {("0.0", "5")}
     summary = point_errors(pd.read_csv(out, dtype=str, keep_default_na=False))
     assert list(summary["method"]) == ["funneling", "inverse"]
     assert list(summary["n"]) == [2, 2]  # main trials only: 2 locations x 1 repetition each

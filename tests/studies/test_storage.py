@@ -231,10 +231,10 @@ def test_export_writes_only_answered_trials_in_order(store, session, tmp_path):
     # The contract's columns first, in order, then the session's (id, status, dry run, rig), then the onset's,
     # then the stimulus's (level rule, peak drive, predicted peak at the target), then the protocol's name,
     # then a point answer's place (mm; empty for a location answer), then the count of presentations again
-    # after an xrun.
+    # after an xrun, then the block's level (dB re the level rule) and allowed answers.
     assert lines[0] == ("participant,study,phase,trial,method,target,response,rt_s,session,session_status,dry_run,rig,"
                         "onset_host_s,onset_device_s,onset_clock,levels,drive_peak_v,target_peak_um,protocol,"
-                        "response_x_mm,response_y_mm,xrun_represented")
+                        "response_x_mm,response_y_mm,xrun_represented,level_db,allowed")
     plan = store.planned_trials(session)
     fields = [line.split(",") for line in lines[1:]]
     assert [f[2] for f in fields] == ["training"] * 5 + ["main"] * 2

@@ -58,7 +58,7 @@ def test_analysis_with_an_aborted_session_a_new_one_and_a_dry_run(server):
     text = server.api("GET", "/api/export/trials.csv").text
     rows = list(csv.DictReader(io.StringIO(text)))
     assert tuple(rows[0]) == (TRIALS_COLUMNS + SESSION_COLUMNS + ONSET_COLUMNS + STIMULUS_COLUMNS + PROTOCOL_COLUMNS
-                              + POINT_COLUMNS + ("xrun_represented",))  # docs/file-formats.md
+                              + POINT_COLUMNS + ("xrun_represented", "level_db", "allowed"))  # docs/file-formats.md
     assert {r["onset_clock"] for r in rows if r["dry_run"] == "1"} == {""}  # nothing played, no device time
     by_session = {(int(r["session"]), r["session_status"], r["dry_run"]) for r in rows}
     assert by_session == {(aborted["session_id"], "aborted", "0"), (fresh["session_id"], "completed", "0"),

@@ -21,7 +21,7 @@ from .._validation import check_choice, integer_text
 from ..errors import ValidationError
 from ..io.responses import parse_response_text
 from ..io.bids import read_bids_trials_table
-from ..io.trials_csv import TRIALS_COLUMNS, read_trials_table
+from ..io.trials_csv import TRIALS_COLUMNS, read_block_cells, read_trials_table
 from ..layout import ArrayLayout
 
 __all__ = [
@@ -162,6 +162,29 @@ def _suspect_methods(
 _BLOCK_COLUMNS = ("protocol", "level_db", "allowed", "response_x_mm", "response_y_mm")
 
 
+def _block_reasons(df: pd.DataFrame, n_locations: int) -> dict[str, pd.Series]:
+    """Per block or point column the table has, each row's reason (or None) to refuse its cell
+    (:func:`~vibrofocus.io.trials_csv.read_block_cells`: a level, allowed answers, a point)."""
+    blank = pd.Series("", index=df.index)
+    out: dict[str, pd.Series] = {}
+    for k, column in enumerate(("level_db", "allowed", "response_x_mm")):
+        if column not in df.columns:
+            continue
+        args = [blank] * 4
+        args[k] = df[column].astype(str)
+        if column == "response_x_mm":
+            args[3] = df["response_y_mm"].astype(str) if "response_y_mm" in df.columns else blank
+        reasons = []
+        for cells in zip(*args):
+            try:
+                read_block_cells(*cells, n_locations=n_locations)
+                reasons.append(None)
+            except ValidationError as exc:
+                reasons.append(str(exc))
+        out[column] = pd.Series(reasons, index=df.index, dtype=object)
+    return out
+
+
 def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Type the columns of a raw trials table and list every row that breaks the contract.
 
@@ -250,6 +273,9 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
         ~rt_empty & ~(np.isfinite(rt) & (rt >= 0)),
         "rt_s must be a time >= 0 in seconds (or empty), got " + rt_text.map(_short),
     )
+
+    for column, reason in _block_reasons(df, n_locations).items():
+        add(column, reason.notna(), reason.fillna(""))
 
     problems: list[dict] = []
     any_bad = pd.Series(False, index=df.index)
@@ -374,6 +400,9 @@ def load_trials(
     check_choice(on_invalid, "on_invalid", ("raise", "exclude"))
     if isinstance(source, pd.DataFrame):
         raw = source.astype(str).reset_index(drop=True)
+        for c in _BLOCK_COLUMNS[1:]:  # a missing value is an empty cell, not the text 'nan'
+            if c in raw.columns:
+                raw[c] = source[c].where(source[c].notna(), "").astype(str).to_numpy()
         name = "<DataFrame>"
         if "line" not in raw.columns:
             raw["line"] = np.arange(2, len(raw) + 2)

@@ -52,11 +52,13 @@ TASKS = {1: "localization1", 2: "localization2"}
 #: ``phase``), then where it sits in the study (``trial``, ``session_status``, ``dry_run``;
 #: the session itself is the file's ``ses-`` entity, so no column is named like one), then
 #: the stimulus onset on the rig's own clock (``device_onset``, ``device_clock``), then the
-#: stimulus played (``levels``, ``drive_peak_v``, ``target_peak_um``); a dataset written
+#: stimulus played (``levels``, ``drive_peak_v``, ``target_peak_um``), then the protocol's
+#: block (``protocol``, ``block``, ``level_db``, ``allowed``), the point answer
+#: (``response_x_mm``, ``response_y_mm``) and ``xrun_represented``; a dataset written
 #: before those existed (with a ``session_id`` column and no ``ses-``) is read too.
 EVENT_COLUMNS = ("onset", "duration", "trial_type", "method", "target", "response", "response_time", "phase",
                  "trial", "session_status", "dry_run", "device_onset", "device_clock",
-                 "levels", "drive_peak_v", "target_peak_um", "protocol", "block", "level_db",
+                 "levels", "drive_peak_v", "target_peak_um", "protocol", "block", "level_db", "allowed",
                  "response_x_mm", "response_y_mm", "xrun_represented")
 #: The columns :func:`read_bids_trials_table` needs (every events file has had them).
 _REQUIRED_COLUMNS = EVENT_COLUMNS[:11]
@@ -160,6 +162,10 @@ EVENT_COLUMN_DESCRIPTIONS.update({
                  "Description": "The stimulus level re the level rule (levels): 0 is the rule's own level; a block "
                                 "in dB SL is at the participant's threshold (the sidecar's Sessions: ThresholdDb) "
                                 "plus its level (LevelSlDb).", "Units": "dB"},
+    "allowed": {"LongName": "allowed answers",
+                "Description": "The locations the trial could be answered with (the protocol block's locations), "
+                               "ascending, separated by spaces; every location for the source paper's studies. n/a "
+                               "where the source does not say (a trials CSV written before the column)."},
     "response_x_mm": {"LongName": "answered point, x",
                       "Description": "A point answer's x in the layout frame (n/a for a location answer); its "
                                      "nearest location is the response.", "Units": "mm"},
@@ -524,6 +530,13 @@ def write_bids_dataset(
     return {**counts, "merged": True, "kept": kept}
 
 
+#: Events columns :func:`read_bids_trials_table` passes on as they are (``n/a``: empty):
+#: the stimulus played, and the protocol's block and the point answer the fit of
+#: hypotheses reads.
+_PASSED_COLUMNS = ("levels", "drive_peak_v", "target_peak_um", "xrun_represented", "protocol", "level_db", "allowed",
+                   "response_x_mm", "response_y_mm")
+
+
 def _read_tsv(path: Path) -> list[dict[str, str]]:
     with open(path, newline="", encoding="utf-8") as fh:
         return list(csv.DictReader(fh, delimiter="\t"))
@@ -545,7 +558,9 @@ def read_bids_trials_table(root: str | os.PathLike):
         ``response``, ``rt_s``), the session columns (``session``, ``session_status``,
         ``dry_run``, ``rig``: the sidecar's ``Sessions`` ``Rig``, empty where it names none or
         several), ``simulated`` (``1``/``0``), the stimulus columns (``levels``,
-        ``drive_peak_v``, ``target_peak_um``), ``xrun_represented`` and, for a simulated participant, ``model``
+        ``drive_peak_v``, ``target_peak_um``), ``xrun_represented``, the protocol's block
+        (``protocol``, ``level_db``, ``allowed``), the point answer (``response_x_mm``,
+        ``response_y_mm``) and, for a simulated participant, ``model``
         (the sidecar's ``SimulatedModel``) where the events files have them, and ``line``
         (row number over all events files, from 2), as
         :func:`~vibrofocus.io.trials_csv.read_trials_table` gives.
@@ -596,8 +611,7 @@ def read_bids_trials_table(root: str | os.PathLike):
         rigs = {str(i["Rig"]) for i in sessions if isinstance(i, dict) and i.get("Rig")}
         rig = rigs.pop() if len(rigs) == 1 else ""  # one file, one session: one rig
         for ev in events:
-            stimulus = {c: ("" if ev[c] == _NA else ev[c])
-                        for c in ("levels", "drive_peak_v", "target_peak_um", "xrun_represented") if c in ev}
+            stimulus = {c: ("" if ev[c] == _NA else ev[c]) for c in _PASSED_COLUMNS if c in ev}
             if model:
                 stimulus["model"] = str(model)
             rows.append({

@@ -31,8 +31,11 @@ def format_response(locations: Iterable[int]) -> str:
     return " ".join(str(int(x)) for x in sorted(locations))
 
 
-def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[int, ...]:
+def parse_response_text(text: str, *, n_locations: int | None = None, name: str = "response") -> tuple[int, ...]:
     """Read a stored response (``"4 5"``; commas are accepted as separators too).
+
+    The same text names a block's allowed answers (the trials file's ``allowed`` column:
+    ``name="allowed"``).
 
     Parameters
     ----------
@@ -40,6 +43,8 @@ def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[i
         The ``response`` field of a trials file or study database row.
     n_locations : int, optional
         Number of locations; when given, every location must be in ``1..n_locations``.
+    name : str
+        The column, for messages (default ``"response"``).
 
     Returns
     -------
@@ -50,19 +55,19 @@ def parse_response_text(text: str, *, n_locations: int | None = None) -> tuple[i
     ------
     ValidationError
         Empty, not a list of integers, a location out of range, or one named twice;
-        the message starts with ``"response"`` and quotes ``text``.
+        the message starts with ``name`` and quotes ``text``.
     """
     tokens = text.replace(",", " ").split()
     if not tokens:
-        raise ValidationError("response is empty: no location was chosen")
+        raise ValidationError(f"{name} is empty: no location was " + ("chosen" if name == "response" else "named"))
     numbers = []
     for token in tokens:
         value = integer_text(token)
         if value is None:
-            raise ValidationError(f"response {shorten(text)} is not a list of location numbers separated by spaces")
+            raise ValidationError(f"{name} {shorten(text)} is not a list of location numbers separated by spaces")
         if n_locations is not None and not 1 <= value <= n_locations:
-            raise ValidationError(f"response {shorten(text)} names location {value}, outside 1..{n_locations}")
+            raise ValidationError(f"{name} {shorten(text)} names location {value}, outside 1..{n_locations}")
         numbers.append(value)
     if len(set(numbers)) != len(numbers):
-        raise ValidationError(f"response {shorten(text)} names the same location more than once")
+        raise ValidationError(f"{name} {shorten(text)} names the same location more than once")
     return tuple(sorted(numbers))

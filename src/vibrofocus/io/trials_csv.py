@@ -8,13 +8,16 @@ When some participant is simulated (key ``simulated`` of the rows, as the study
 database's rows have), a last column ``simulated`` (``1`` / ``0``) follows: answers of
 simulated participants come from a perceptual model, not from people, and the analysis
 flags them. A file of real participants only has exactly the columns above.
-A study database's export has :data:`SESSION_COLUMNS`, :data:`ONSET_COLUMNS` and
-:data:`STIMULUS_COLUMNS` between the contract's columns and ``simulated``.
+A study database's export has :data:`SESSION_COLUMNS`, :data:`ONSET_COLUMNS`,
+:data:`STIMULUS_COLUMNS`, :data:`PROTOCOL_COLUMNS`, :data:`POINT_COLUMNS`,
+:data:`XRUN_COLUMNS` and :data:`BLOCK_COLUMNS` between the contract's columns and
+``simulated``; :func:`read_block_cells` is the one reader of a row's block and point cells.
 """
 
 from __future__ import annotations
 
 import csv
+import math
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -26,7 +29,7 @@ from ._csv_rows import number_cell, write_rows_csv
 from .responses import format_response, parse_response_text
 
 __all__ = ["TRIALS_COLUMNS", "SESSION_COLUMNS", "ONSET_COLUMNS", "STIMULUS_COLUMNS", "PROTOCOL_COLUMNS",
-           "POINT_COLUMNS",
+           "POINT_COLUMNS", "BLOCK_COLUMNS", "LEVEL_LIMIT_DB", "POINT_LIMIT_MM", "read_block_cells",
            "XRUN_COLUMNS", "LEGACY_SESSION_COLUMNS", "SIMULATED_COLUMN", "MODEL_COLUMN",
            "write_trials_csv",
            "read_trials_csv", "read_trials_table"]
@@ -67,6 +70,19 @@ POINT_COLUMNS = ("response_x_mm", "response_y_mm")
 #: how many times the trial was presented again because its stimulus lost samples (an
 #: xrun; docs/protocols.md); 0 for nearly every trial.
 XRUN_COLUMNS = ("xrun_represented",)
+#: Columns a study database's export adds after :data:`XRUN_COLUMNS`: the trial's block as
+#: the fit of hypotheses reads it (docs/fitting-hypotheses.md): ``level_db``, the block's
+#: level in dB re the level rule (``levels``; a block in dB SL is already the participant's
+#: threshold plus its level), and ``allowed``, the location numbers the block could be
+#: answered with, ascending, separated by spaces (``1 3 7 9``; all of them for the paper's
+#: studies). Last in the chain so that every older export's header is still one the reader
+#: takes.
+BLOCK_COLUMNS = ("level_db", "allowed")
+#: Largest magnitude of a ``level_db`` cell, dB (the protocol files' bound on a level).
+LEVEL_LIMIT_DB = 120.0
+#: Largest magnitude of a point answer's coordinate, mm: a point a metre off the array is
+#: on no arm (the picture a participant points on spans a few centimetres).
+POINT_LIMIT_MM = 1000.0
 #: Last column when some participant is simulated: 1 where the participant is simulated
 #: (answers from the perceptual model, not data), else 0.
 SIMULATED_COLUMN = "simulated"
@@ -78,7 +94,7 @@ MODEL_COLUMN = "model"
 
 def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike, *, sessions: bool = False,
                      onsets: bool = False, stimuli: bool = False, protocols: bool = False,
-                     points: bool = False, xruns: bool = False) -> int:
+                     points: bool = False, xruns: bool = False, blocks: bool = False) -> int:
     """Write trial rows to ``path`` atomically (:func:`vibrofocus._atomic.atomic_write`).
 
     A reader never sees half a file; after a failure (a full disk, a read-only folder,
@@ -113,6 +129,9 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
         is an empty cell).
     xruns : bool
         Also write :data:`XRUN_COLUMNS` (after the point columns; a missing key or None is 0).
+    blocks : bool
+        Also write :data:`BLOCK_COLUMNS` (after the xrun column; ``allowed`` a string or a
+        sequence of location numbers; a missing key or None is an empty cell).
 
     Returns
     -------
@@ -127,6 +146,7 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
     header = (TRIALS_COLUMNS + (SESSION_COLUMNS if sessions else ()) + (ONSET_COLUMNS if onsets else ())
               + (STIMULUS_COLUMNS if stimuli else ()) + (PROTOCOL_COLUMNS if protocols else ())
               + (POINT_COLUMNS if points else ()) + (XRUN_COLUMNS if xruns else ())
+              + (BLOCK_COLUMNS if blocks else ())
               + ((SIMULATED_COLUMN,) if with_flag else ())
               + ((MODEL_COLUMN,) if with_model else ()))
 
@@ -153,6 +173,10 @@ def write_trials_csv(rows: Iterable[Mapping[str, Any]], path: str | os.PathLike,
             values += [_seconds_cell(row.get("response_x_mm")), _seconds_cell(row.get("response_y_mm"))]
         if xruns:
             values.append(int(row.get("xrun_represented") or 0))
+        if blocks:
+            allowed = row.get("allowed")
+            values += [_seconds_cell(row.get("level_db")),
+                       "" if allowed is None else allowed if isinstance(allowed, str) else format_response(allowed)]
         if with_flag:
             values.append(int(bool(row.get(SIMULATED_COLUMN))))
         if with_model:
@@ -184,7 +208,9 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         ``""`` where not stored, and for an export written before sessions named their rig); one with
         :data:`SIMULATED_COLUMN` gives ``simulated`` (bool); the onset and stimulus
         columns' numbers, and the point columns', are floats (None for an empty cell);
-        ``xrun_represented`` is an int.
+        ``xrun_represented`` is an int; ``level_db`` a float and ``allowed`` a tuple of
+        int (None for an empty cell). A block or point cell that is not a finite number
+        within its bound (:func:`read_block_cells`) is refused.
     """
     from .._atomic import protect
 
@@ -194,7 +220,7 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         with open(path, newline="", encoding="utf-8") as fh:
             reader = csv.reader(fh)
             header = next(reader, None)
-            later = (ONSET_COLUMNS, STIMULUS_COLUMNS, PROTOCOL_COLUMNS, POINT_COLUMNS, XRUN_COLUMNS)
+            later = (ONSET_COLUMNS, STIMULUS_COLUMNS, PROTOCOL_COLUMNS, POINT_COLUMNS, XRUN_COLUMNS, BLOCK_COLUMNS)
             middles = [()] + [s + sum(later[:k], ()) for s in (SESSION_COLUMNS, LEGACY_SESSION_COLUMNS)
                               for k in range(len(later) + 1)]
             headers = [TRIALS_COLUMNS + m + f for m in middles
@@ -225,9 +251,14 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
                     if "levels" in row:
                         for key in ("drive_peak_v", "target_peak_um"):
                             row[key] = float(row[key]) if row[key] else None
-                    if "response_x_mm" in row:
-                        for key in POINT_COLUMNS:
-                            row[key] = float(row[key]) if row[key] else None
+                    if "response_x_mm" in row or "level_db" in row:
+                        level, allowed, point = read_block_cells(row.get("level_db", ""), row.get("allowed", ""),
+                                                                 row.get("response_x_mm", ""),
+                                                                 row.get("response_y_mm", ""))
+                        if "response_x_mm" in row:
+                            row["response_x_mm"], row["response_y_mm"] = point if point is not None else (None, None)
+                        if "level_db" in row:
+                            row["level_db"], row["allowed"] = level, allowed
                     if "xrun_represented" in row:
                         row["xrun_represented"] = int(row["xrun_represented"])
                     row["study"] = int(row["study"])
@@ -241,6 +272,66 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
             return out
     except OSError as exc:
         raise StudyError(f"cannot read the trials file {path}: {exc.strerror or exc}") from exc
+
+
+def _number(text: str) -> float | None:
+    """A finite number written in ASCII (``"-10"``, ``"2.5e-3"``); None for anything else."""
+    try:
+        value = float(text) if text.isascii() else math.nan
+    except ValueError:
+        return None
+    return value if math.isfinite(value) else None
+
+
+def read_block_cells(level_db: str, allowed: str, x_mm: str, y_mm: str, *, n_locations: int | None = None
+                     ) -> tuple[float | None, tuple[int, ...] | None, tuple[float, float] | None]:
+    """A trial's block cells (:data:`BLOCK_COLUMNS`) and point cells (:data:`POINT_COLUMNS`), read and checked.
+
+    The one reader of these cells, for the trials file, a BIDS events file and the fit of
+    hypotheses (:func:`vibrofocus.simulation.fitting.lab_trials`).
+
+    Parameters
+    ----------
+    level_db, allowed, x_mm, y_mm : str
+        The cells as text; an empty cell (or BIDS's ``n/a``) says nothing.
+    n_locations : int, optional
+        When given, every allowed location must be in ``1..n_locations``.
+
+    Returns
+    -------
+    level_db : float or None
+        The level, dB re the level rule.
+    allowed : tuple of int or None
+        The allowed locations, ascending.
+    point : (float, float) or None
+        The point answer in the layout frame, mm.
+
+    Raises
+    ------
+    ValidationError
+        A level that is not a finite number within :data:`LEVEL_LIMIT_DB`; allowed
+        locations that are not distinct location numbers; a point that is not two finite
+        numbers within :data:`POINT_LIMIT_MM` (or has one coordinate only). The message
+        names the column and quotes the cell.
+    """
+    cells = ["" if str(c).strip() in ("", "n/a") else str(c).strip()
+             for c in (level_db, allowed, x_mm, y_mm)]
+    level = None
+    if cells[0]:
+        level = _number(cells[0])
+        if level is None or abs(level) > LEVEL_LIMIT_DB:
+            raise ValidationError(f"level_db must be a finite number of dB within +-{LEVEL_LIMIT_DB:g} (re the level "
+                                  f"rule), got {shorten(cells[0])}")
+    places = parse_response_text(cells[1], n_locations=n_locations, name="allowed") if cells[1] else None
+    point = None
+    if cells[2] or cells[3]:
+        x, y = _number(cells[2]), _number(cells[3])
+        if x is None or y is None or max(abs(x), abs(y)) > POINT_LIMIT_MM:
+            raise ValidationError(f"response_x_mm and response_y_mm must both be finite numbers of mm within "
+                                  f"+-{POINT_LIMIT_MM:g} (a point answer), got {shorten(cells[2])} and "
+                                  f"{shorten(cells[3])}")
+        point = (x, y)
+    return level, places, point
 
 
 def read_trials_table(path: str | os.PathLike):

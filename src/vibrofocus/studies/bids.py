@@ -63,11 +63,10 @@ def _from_database(db: Path) -> tuple[list[dict[str, Any]], dict[str, bool], dic
                 "SoftwareVersion": info.software_version,
                 **_protocol_keys(info),
             })
-        level_block = {info.session_id: (info.design.level_db, session_protocol(info.study, info.config)[1])
-                       for info in store.sessions()}
-    for row in rows:
+        block = {info.session_id: session_protocol(info.study, info.config)[1] for info in store.sessions()}
+    for row in rows:  # with their level and allowed answers (StudyStore.trial_rows)
         row["onset_time"] = onsets.get(row["session_id"], {}).get(row["trial_index"])
-        row["level_db"], row["block"] = level_block.get(row["session_id"], (None, None))
+        row["block"] = block.get(row["session_id"])
     return rows, simulated, sessions
 
 
@@ -176,6 +175,13 @@ _ONSET_NOTE = {
             "clock of the stored stimulus_onset event (the database holds no monotonic onset): within some ms.",
     None: "n/a: the source stores no onset times.",
 }
+
+
+def _allowed_cell(allowed: Any) -> str | None:
+    """The ``allowed`` cell: the text of a database's row, the locations of a trials CSV's (None: n/a)."""
+    if allowed is None or isinstance(allowed, str):
+        return allowed or None
+    return format_response(allowed)
 
 
 def _session_key(row: dict[str, Any]) -> int | None:
@@ -289,7 +295,8 @@ def export_bids(source: str | os.PathLike, out_dir: str | os.PathLike, *, force:
             "device_onset": t.get("onset_device_s"), "device_clock": t.get("onset_clock"),
             "levels": t.get("levels") or None, "drive_peak_v": t.get("drive_peak_v"),
             "target_peak_um": t.get("target_peak_um"), "protocol": t.get("protocol"), "block": t.get("block"),
-            "level_db": t.get("level_db"), "response_x_mm": t.get("response_x_mm"),
+            "level_db": t.get("level_db"), "allowed": _allowed_cell(t.get("allowed")),
+            "response_x_mm": t.get("response_x_mm"),
             "response_y_mm": t.get("response_y_mm"), "xrun_represented": t.get("xrun_represented"),
         } for t, onset in zip(trials, onsets, strict=True)]
         sim = simulated.get(pid, False)

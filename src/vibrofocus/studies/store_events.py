@@ -13,7 +13,7 @@ from typing import Any
 
 from ..errors import StudyError
 from .database import StudyDatabase, now_utc
-from .protocol import LEGACY_LEVELS
+from .protocol import LEGACY_LEVELS, StudyDesign
 from .records import Event, event_from_row
 from .store_sessions import session_protocol
 
@@ -98,7 +98,10 @@ class EventRows(StudyDatabase):
         :func:`session_protocol`), and ``response_x_mm``, ``response_y_mm`` (a point answer's
         place in the layout frame, mm; None for a location answer), and ``xrun_represented`` (how many times
         the trial was presented again because its stimulus lost samples: its ``xrun`` events that
-        re-presented it). Ordered by participant (as added), study, session and trial index.
+        re-presented it), and the block columns ``level_db`` (the session's level re its level
+        rule, dB: a block in dB SL already at the participant's threshold plus its level) and
+        ``allowed`` (the locations the session could be answered with, ``"1 3 7 9"``), what
+        the fit of hypotheses reads. Ordered by participant (as added), study, session and trial index.
         """
         with self._read("read the trials") as conn:
             sql = (
@@ -132,6 +135,7 @@ class EventRows(StudyDatabase):
             row.update(stimuli.get((row["session_id"], row["trial_index"]), _NO_STIMULUS))
             row["levels"], model = stimuli.get(row["session_id"], (LEGACY_LEVELS, None))
             row["protocol"] = stimuli.get(("protocol", row["session_id"]))
+            row["level_db"], row["allowed"] = stimuli[("block", row["session_id"])]
             row["xrun_represented"] = stimuli.get(("xrun", row["session_id"], row["trial_index"]), 0)
             # A simulated participant's session stored before sessions named their rig ran on the simulated one.
             row["rig"] = stimuli.get(("rig", row["session_id"])) or ("simulated" if row["simulated"] else None)
@@ -143,8 +147,9 @@ class EventRows(StudyDatabase):
     @staticmethod
     def _played_stimuli(conn: sqlite3.Connection, participant_id: str | None = None) -> dict[Any, Any]:
         """The level rule and the simulated participants' model label (None: not stored) of
-        each session (by session id), and the stimulus columns of each trial's last
-        ``stimulus_onset`` event (by (session id, trial index))."""
+        each session (by session id), its protocol, rig and block (level, allowed answers),
+        and the stimulus columns of each trial's last ``stimulus_onset`` event (by
+        (session id, trial index))."""
         where, args = "", ()
         if participant_id is not None:
             where, args = "WHERE participant_id = ? ", (participant_id,)
@@ -155,6 +160,8 @@ class EventRows(StudyDatabase):
             out[sid] = (str(config.get("levels", LEGACY_LEVELS)), config.get("model"))
             out[("protocol", sid)] = session_protocol(study, config)[0]
             out[("rig", sid)] = config.get("rig")
+            design = StudyDesign.from_config(study, config, stored=True)
+            out[("block", sid)] = (design.level_db, " ".join(str(x) for x in sorted(design.locations)))
         sql = ("SELECT session_id, payload FROM events WHERE kind = 'stimulus_onset' "
                + ("AND session_id IN (SELECT session_id FROM sessions WHERE participant_id = ?) " if args else ""))
         for sid, text in conn.execute(sql + "ORDER BY event_id", args):
@@ -195,12 +202,13 @@ class EventRows(StudyDatabase):
         (:data:`~vibrofocus.io.trials_csv.ONSET_COLUMNS`) and the stimulus columns
         (:data:`~vibrofocus.io.trials_csv.STIMULUS_COLUMNS`), the protocol column and the point
         columns (:data:`~vibrofocus.io.trials_csv.POINT_COLUMNS`) and the xrun column
-        (:data:`~vibrofocus.io.trials_csv.XRUN_COLUMNS`).
+        (:data:`~vibrofocus.io.trials_csv.XRUN_COLUMNS`) and the block columns
+        (:data:`~vibrofocus.io.trials_csv.BLOCK_COLUMNS`: level and allowed answers).
         """
         from ..io.trials_csv import write_trials_csv
 
         return write_trials_csv(self.trial_rows(participant_id=participant_id), path, sessions=True, onsets=True,
-                                stimuli=True, protocols=True, points=True, xruns=True)
+                                stimuli=True, protocols=True, points=True, xruns=True, blocks=True)
 
 
 #: Payload key of the ``answer`` / ``answer_onset`` events -> column of :meth:`StudyStore.trial_rows`.

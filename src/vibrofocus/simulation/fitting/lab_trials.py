@@ -1,8 +1,8 @@
 """A lab's trials as the arrays the likelihood reads: stimulus and answer of every main trial.
 
 :func:`trials_source` turns a study database into the table :func:`vibrofocus.analysis.load_trials`
-reads (a trials CSV and a BIDS folder are read by it directly), with each trial's block
-level and allowed answers (columns :data:`BLOCK_COLUMNS`), and :func:`lab_trials` maps the
+reads (a trials CSV and a BIDS folder are read by it directly; all three carry each
+trial's block level and allowed answers, columns :data:`BLOCK_COLUMNS`), and :func:`lab_trials` maps the
 loaded trials onto a feature bank's stimuli (method x location), with each trial's level,
 the locations it could be answered with and its point answer, refusing trials the bank
 or the likelihood cannot represent. How the fit uses them: docs/fitting-hypotheses.md.
@@ -17,14 +17,14 @@ from typing import Any
 import numpy as np
 
 from ...errors import ValidationError
+from ...io.trials_csv import BLOCK_COLUMNS, read_block_cells
 from ..bank import FeatureBank
 
 __all__ = ["LabTrials", "BLOCK_COLUMNS", "PAPER_PROTOCOLS", "trials_source", "lab_trials"]
 
-#: Columns :func:`trials_source` adds to a study database's trials: ``level_db``, the
-#: block's level in dB re the session's level rule (a level in dB SL already turned into
-#: it), and ``allowed``, the location numbers the block could be answered with.
-BLOCK_COLUMNS = ("level_db", "allowed")
+# BLOCK_COLUMNS: what a study database's trials, its trials file and its BIDS events say of
+# each trial's block (io.trials_csv): level_db, the level in dB re the session's level rule
+# (a level in dB SL already turned into it), and allowed, the locations it could be answered with.
 #: Protocols whose every trial is at 0 dB with every location allowed: the paper's two
 #: studies (also the protocol of a session stored before protocol files).
 PAPER_PROTOCOLS = ("paper-study1", "paper-study2")
@@ -185,11 +185,7 @@ def trials_source(source: str | os.PathLike) -> Any:
 
     protect(name, "study database")
     with StudyStore(name, create=False) as store:
-        rows = store.trial_rows()
-        block = {info.session_id: (info.design.level_db, " ".join(str(x) for x in info.design.locations))
-                 for info in store.sessions()}
-    for row in rows:
-        row["level_db"], row["allowed"] = block[row["session_id"]]
+        rows = store.trial_rows()  # with each session's block: BLOCK_COLUMNS
     if not rows:
         raise ValidationError(f"study database {name!r} holds no answered trials")
     table = pd.DataFrame(rows).astype(object)
@@ -209,44 +205,31 @@ def _block_conditions(p: Any, study: int, n_loc: int, source: str) -> tuple[np.n
     """Each row's level (dB), allowed locations (bool) and point answer (m, NaN: none).
 
     Refuses rows of a protocol other than the paper's whose level or allowed answers the
-    table does not hold, and values it cannot read."""
+    table does not hold (a trials file or BIDS dataset exported before they were), and
+    values :func:`~vibrofocus.io.trials_csv.read_block_cells` cannot read."""
     where = f"study {study} of {source!r}"
-    protocols = sorted({v for v in _cells(p, "protocol") if v} - set(PAPER_PROTOCOLS))
-    missing = [c for c in BLOCK_COLUMNS if c not in p.columns]
-    if protocols and missing:
-        raise ValidationError(f"{where} comes from protocol {protocols[0]!r}, and the trials do not say each "
-                              f"block's {' and '.join(missing)}: fit the study database itself "
-                              "(vibrofocus analyze STUDY.db --hypotheses)")
     level = np.zeros(len(p))
-    for i, v in enumerate(_cells(p, "level_db")):
-        try:
-            level[i] = float(v) if v else 0.0
-        except ValueError:
-            raise ValidationError(f"{where} has a level_db that is not a number: {v[:40]!r}") from None
-    if not np.all(np.isfinite(level)):
-        raise ValidationError(f"{where} has a level_db that is not finite")
     allowed = np.ones((len(p), n_loc), dtype=bool)
-    for i, v in enumerate(_cells(p, "allowed")):
-        if v:
-            try:
-                numbers = np.array([int(x) for x in v.split()], dtype=int) - 1
-            except ValueError:
-                raise ValidationError(f"{where} has allowed locations that are not numbers: {v[:40]!r}") from None
-            if numbers.size == 0 or np.any((numbers < 0) | (numbers >= n_loc)):
-                raise ValidationError(f"{where} allows locations beyond the bank's {n_loc}: {v[:40]!r}")
-            allowed[i] = False
-            allowed[i, numbers] = True
-    x, y = _cells(p, "response_x_mm"), _cells(p, "response_y_mm")
     point = np.full((len(p), 2), np.nan)
-    for i, (a, b) in enumerate(zip(x, y)):
-        if a or b:
-            try:
-                point[i] = float(a) * 1e-3, float(b) * 1e-3
-            except ValueError:
-                raise ValidationError(f"{where} has a point answer that is not two numbers: ({a[:20]!r}, "
-                                      f"{b[:20]!r})") from None
-            if not np.all(np.isfinite(point[i])):
-                raise ValidationError(f"{where} has a point answer that is not finite")
+    columns = [_cells(p, c) for c in (*BLOCK_COLUMNS, "response_x_mm", "response_y_mm")]
+    for i, (protocol, *cells) in enumerate(zip(_cells(p, "protocol"), *columns)):
+        try:
+            lvl, places, pt = read_block_cells(*cells, n_locations=n_loc)
+        except ValidationError as exc:
+            raise ValidationError(f"{where}: {exc}") from None
+        if protocol and protocol not in PAPER_PROTOCOLS and (lvl is None or places is None):
+            missing = " and ".join(c for c, v in zip(BLOCK_COLUMNS, (lvl, places)) if v is None)
+            raise ValidationError(f"{where} comes from protocol {protocol!r}, and the trials do not say each block's "
+                                  f"{missing}: export them again with this vibrofocus (vibrofocus study export, "
+                                  "vibrofocus export --bids) or fit the study database itself (vibrofocus analyze "
+                                  "STUDY.db --hypotheses)")
+        if lvl is not None:
+            level[i] = lvl
+        if places is not None:
+            allowed[i] = False
+            allowed[i, np.asarray(places, dtype=int) - 1] = True
+        if pt is not None:
+            point[i] = pt[0] * 1e-3, pt[1] * 1e-3
     if study == 2 and np.isfinite(point).any():
         raise ValidationError(f"{where} has point answers: a Study 2 trial's answer is a selection of locations")
     return level, allowed, point
@@ -279,8 +262,10 @@ def lab_trials(trials: Any, bank: FeatureBank) -> LabTrials:
         target or answer beyond the bank's locations; a Study 1 answer of more than one
         location; an answer outside its block's allowed locations; a point answer in
         Study 2; trials of a protocol other than the paper's without their blocks' levels
-        and allowed answers (a trials file of a designed study: fit its database); trials
-        that name a level rule other than the bank's.
+        and allowed answers (a designed study's trials file or BIDS dataset exported
+        before they carried them: export it again, or fit its database); a level, allowed
+        answer or point cell that is not readable (:func:`~vibrofocus.io.trials_csv.read_block_cells`);
+        trials that name a level rule other than the bank's.
     """
     from ...analysis.trials import main_trials
 
