@@ -83,3 +83,77 @@ def test_block_values_the_fit_cannot_read_are_refused(column, value, match):
     with pytest.raises(ValidationError, match=match):
         lab_trials(load_trials(table), default_bank())
 
+
+
+def _designed_database(path):
+    """A real study database of a designed study: Study 1 at -10 dB among the corners, a point
+    block at -20 dB, and the paper's Study 2, two participants (answers chosen by hand)."""
+    from vibrofocus.studies import StudyStore
+
+    rng = np.random.default_rng(3)
+    with StudyStore(path) as store:
+        for pid in ("p-01", "p-02"):
+            store.add_participant(pid)
+            blocks = [(1, {"methods": ["inverse", "combination"], "locations": [1, 3, 7, 9], "level_db": -10.0}),
+                      (1, {"methods": ["funneling", "inverse"], "locations": [1, 3, 7, 9], "level_db": -20.0,
+                           "point": True}),
+                      (2, {"protocol": "paper-study2", "methods": ["funneling", "inverse"], "locations": [2, 5]})]
+            for k, (study, config) in enumerate(blocks):
+                sid = store.create_session(pid, study, seed=k, config={
+                    "protocol": "designed-check", "block": k, "repetitions": 1, "n_training": 1, **config})
+                for t in store.planned_trials(sid):
+                    if config.get("point"):
+                        point = tuple(float(v) for v in rng.uniform(-25.0, 25.0, 2))
+                        store.record_answer(sid, t.trial_index, None, 0.5, answer_id=f"{pid}-{k}-{t.trial_index}",
+                                            point_mm=point)
+                    else:
+                        answer = [int(rng.choice(config["locations"]))] if study == 1 else config["locations"]
+                        store.record_answer(sid, t.trial_index, answer, 0.5, answer_id=f"{pid}-{k}-{t.trial_index}")
+    return path
+
+
+def test_a_designed_study_fits_the_same_from_its_database_csv_and_bids(tmp_path):
+    # The fit of analyze --hypotheses reads a designed study's levels, allowed answers and
+    # point answers from its database, its trials CSV, its BIDS export and the BIDS export of
+    # that CSV alike: the same trials, so the same likelihood.
+    from vibrofocus.studies import StudyStore, export_bids
+    from vibrofocus.simulation.fitting import trials_source
+
+    db = _designed_database(tmp_path / "s.db")
+    with StudyStore(db) as store:
+        store.export_trials_csv(tmp_path / "trials.csv")
+    export_bids(db, tmp_path / "bids")
+    export_bids(tmp_path / "trials.csv", tmp_path / "bids-of-csv")
+    one = _one_forearm()
+    sources = {"database": trials_source(db), "csv": tmp_path / "trials.csv", "bids": tmp_path / "bids",
+               "bids of the csv": tmp_path / "bids-of-csv"}
+    # Sessions without a calibration (dry runs) are what this database holds: kept.
+    read = {name: lab_trials(load_trials(source, keep_dry_runs=True), one) for name, source in sources.items()}
+    want = read.pop("database")
+    assert set(want.level1) == {-10.0, -20.0} and want.allowed1[:, [0, 2, 6, 8]].all()
+    assert np.isfinite(want.point1[:, 0]).sum() == 16 and not want.allowed1[:, [1, 3, 4, 5, 7]].any()
+    settings = FitSettings(n_draws=2, lapse=0.0, seed=1)
+    loglik = participant_loglik("v3-centroid", want, bank=one, settings=settings)
+    for name, got in read.items():
+        assert got.participants == want.participants, name
+        for field in ("part1", "stim1", "answer1", "level1", "allowed1", "point1", "part2", "stim2", "selected2",
+                      "level2", "allowed2"):
+            np.testing.assert_array_equal(getattr(got, field), getattr(want, field), err_msg=f"{name}: {field}")
+        np.testing.assert_allclose(participant_loglik("v3-centroid", got, bank=one, settings=settings), loglik,
+                                   rtol=1e-12, err_msg=name)
+    # An export without the block columns (an older vibrofocus) is refused in one line, for
+    # the CSV and for BIDS alike; the paper's protocol needs none of them.
+    old = pd.read_csv(tmp_path / "trials.csv", dtype=str, keep_default_na=False).drop(columns=["level_db", "allowed"])
+    old.to_csv(tmp_path / "old.csv", index=False)
+    with pytest.raises(ValidationError, match=r"^study 1 of .*old.csv' comes from protocol 'designed-check', and the "
+                                              r"trials do not say each block's level_db and allowed: export them again"):
+        lab_trials(load_trials(tmp_path / "old.csv", keep_dry_runs=True), one)
+    for events in (tmp_path / "bids").glob("sub-*/ses-*/beh/*_events.tsv"):
+        table = pd.read_csv(events, sep="\t", dtype=str, keep_default_na=False)
+        table.drop(columns="allowed").to_csv(events, sep="\t", index=False)
+    with pytest.raises(ValidationError, match="protocol 'designed-check', and the trials do not say each block's "
+                                              "allowed: export them again"):
+        lab_trials(load_trials(tmp_path / "bids", keep_dry_runs=True), one)
+    old.assign(protocol="paper-study1").to_csv(tmp_path / "paper.csv", index=False)
+    paper = lab_trials(load_trials(tmp_path / "paper.csv", keep_dry_runs=True), one)  # read at 0 dB among every location
+    assert paper.level1 is None and paper.allowed1 is None and np.isfinite(paper.point1[:, 0]).sum() == 16
