@@ -5,6 +5,8 @@ answer, at 1024 x 768 and on a 390 px phone."""
 
 from __future__ import annotations
 
+import csv
+import io
 import time
 
 import httpx
@@ -53,6 +55,10 @@ def test_a_point_answer_over_http_and_its_refusals(server):
     assert r.status_code == 200, r.text
     assert r.json()["response"] == [1] and r.json()["point_mm"] == [-9.0, 7.5]
     assert server.rows("SELECT response, response_x_mm, response_y_mm FROM answers") == [("1", -9.0, 7.5)]
+    # The web app's export carries the point and the block's level and allowed answers (the fit reads them).
+    rows = list(csv.DictReader(io.StringIO(server.api("GET", "/api/export/trials.csv").text)))
+    assert [(r["response"], r["response_x_mm"], r["response_y_mm"], r["level_db"], r["allowed"]) for r in rows] == [
+        ("1", "-9.0", "7.5", "0.0", "1 2 3 4 5 6 7 8 9")]
     # The session goes on: the trial loop commits the same answer, point and all (nothing new).
     deadline, seq = time.monotonic() + 20, -1
     while time.monotonic() < deadline:
