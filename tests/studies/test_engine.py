@@ -251,8 +251,9 @@ def test_a_dry_run_and_an_older_answer_have_no_onsets(store, tmp_path):
     store.export_trials_csv(tmp_path / "t.csv")
     line = (tmp_path / "t.csv").read_text().splitlines()[-1]
     # The old answer: three empty onset cells; its session's level rule, and no peaks (nothing was played);
-    # the paper's protocol, no point (a location answer), and never presented again after an xrun.
-    assert line.endswith(",,,,paper,,,paper-study1,,,0")
+    # the paper's protocol, no point (a location answer), never presented again after an xrun, and its
+    # block's level (0 dB re the rule) and allowed answers (the session's locations).
+    assert line.endswith(",,,,paper,,,paper-study1,,,0,0.0,4 6")
     assert read_trials_csv(tmp_path / "t.csv")[-1]["onset_clock"] is None
 
 
