@@ -203,7 +203,10 @@ def trial_problems(raw: pd.DataFrame, *, layout: ArrayLayout | None = None) -> t
         The rows that passed, typed: ``participant`` (str), ``study`` (int), ``phase``
         (str), ``trial`` (int), ``method`` (str), ``target`` (int), ``response`` (str),
         ``selection`` (tuple of int, sorted), ``n_selected`` (int), ``rt_s`` (float, s;
-        NaN when empty), ``line`` (int).
+        NaN when empty), ``line`` (int); where the table has them, the protocol, block
+        and point columns as text (``protocol``, ``level_db``, ``allowed``,
+        ``response_x_mm``, ``response_y_mm``), each cell checked by
+        :func:`~vibrofocus.io.trials_csv.read_block_cells`.
     problems : DataFrame
         One row per problem: ``line``, ``participant``, ``study``, ``column``, ``value``,
         ``reason``.
