@@ -90,6 +90,13 @@ fi
 # No bytecode or pytest cache in the checkout: the suite writes only to temporary folders
 # (tests/conftest.py checks it). The 25 slowest tests of each phase are listed at its end.
 export PYTHONDONTWRITEBYTECODE=1
+# One BLAS thread per process: the parallel phases run a process per core already, and a
+# BLAS call that hands off to a second thread waits for a core the other worker holds (a
+# dot product of 16384 samples took 24 ms with two threads on a busy 2-core machine, 45 us
+# with one). Subprocesses (the served apps, simulate-study) inherit it. A caller's own
+# setting is kept.
+export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} \
+    MKL_NUM_THREADS=${MKL_NUM_THREADS:-1}
 pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
 # The unit phase hands out whole modules (--dist loadscope), so a module's shared fixture (a
 # calibration, a served app) is made by one worker, not by each; the slow phase's tests take

@@ -18,11 +18,22 @@ def _documented_rows() -> list[list[str]]:
     return [[cell.strip() for cell in line.strip("|").split("|")] for line in lines]
 
 
-@pytest.mark.slow
-def test_documented_sensitivity_table_is_recomputed_by_the_code():
+SKINS = ("low", "nominal", "high", "voigt-fit")
+
+
+def test_the_documented_table_has_every_skin_and_method_in_order():
     documented = _documented_rows()
-    computed = attenuation_sensitivity()
-    assert len(documented) == len(computed) == 4 * len(METHODS)
+    assert [(doc[0], doc[3]) for doc in documented] == [(skin, method) for skin in SKINS for method in METHODS]
+
+
+# A skin at a time (its rows do not depend on the others'): four tests of 15-45 s that two
+# workers share, not one of three minutes at the end of the slow phase.
+@pytest.mark.slow
+@pytest.mark.parametrize("skin", SKINS)
+def test_documented_sensitivity_table_is_recomputed_by_the_code(skin):
+    documented = [doc for doc in _documented_rows() if doc[0] == skin]
+    computed = attenuation_sensitivity(skins=[skin])
+    assert len(documented) == len(computed) == len(METHODS)
     for doc, row in zip(documented, computed):
         assert doc[0] == row["law"] and doc[3] == row["method"]
         # each printed number equals the computed one to its printed precision
@@ -36,8 +47,14 @@ def test_documented_sensitivity_table_is_recomputed_by_the_code():
             assert abs(float(cell) - value) <= half_unit * 1.001 + 1e-12, (doc, row)
 
 
-def test_attenuation_ends_bracket_the_nominal_law():
-    rows = attenuation_sensitivity(methods=("inverse",), peak_bounds=False)
+@pytest.fixture(scope="module")
+def two_methods():
+    """The inverse and contrast rows of every skin, without peak bounds (made once: a run per skin)."""
+    return attenuation_sensitivity(methods=("inverse", "contrast"), peak_bounds=False)
+
+
+def test_attenuation_ends_bracket_the_nominal_law(two_methods):
+    rows = [r for r in two_methods if r["method"] == "inverse"]
     alpha = [r["alpha250_np_m"] for r in rows]
     assert [r["law"] for r in rows] == ["low", "nominal", "high", "voigt-fit"]
     assert alpha[0] < alpha[1] < alpha[2] < alpha[3]
@@ -46,7 +63,17 @@ def test_attenuation_ends_bracket_the_nominal_law():
     assert fidelity[0] > fidelity[2] > fidelity[3]
 
 
-def test_no_method_beats_the_bound_for_its_own_waveform():
-    rows = attenuation_sensitivity(methods=("inverse", "contrast"), peak_bounds=False)
-    for r in rows:
+def test_no_method_beats_the_bound_for_its_own_waveform(two_methods):
+    assert [r["method"] for r in two_methods] == ["inverse", "contrast"] * 4
+    for r in two_methods:
         assert r["predicted_energy_contrast_db"] <= r["bound_own_db"] + 1e-6, r
+
+
+def test_skins_are_presets_chosen_without_laws():
+    from vibrofocus.errors import ValidationError
+    from vibrofocus.skin.parameters import NOMINAL_LAW
+
+    with pytest.raises(ValidationError, match="skins must be among low, nominal, high, voigt-fit, got rubber"):
+        attenuation_sensitivity(skins=["rubber"])
+    with pytest.raises(ValidationError, match="without laws"):
+        attenuation_sensitivity({"n": NOMINAL_LAW}, skins=["low"])

@@ -163,3 +163,35 @@ def test_the_program_on_the_rows_span_has_the_full_programs_optimum(limit):
         assert np.max(np.abs(D @ u)) <= dcap * (1 + 1e-6)
         _, whole, status, _ = _solve_cone(rows, p.b, p.Lt, cap, blocks, dcap)  # the structured KKT
         assert status == "optimal" and whole == pytest.approx(reference, rel=1e-5)
+
+
+def test_a_structured_solve_that_breaks_down_goes_to_cvxopts_cholesky_not_the_ldl(monkeypatch):
+    """The structured KKT's normal equations can break down ("domain error": 13 of the OSC
+    tests' 140 solves); CVXOPT's own Cholesky then solves the same program in a fraction of
+    the regularized LDL's time (0.15 s against 5-11 s a solve there)."""
+    from cvxopt import solvers
+
+    H, targets = medium(seed=2), tap()
+    p = _Program(H, targets, FS, band=BAND, quiet=None, taper_octaves=0.5, support_s=SUPPORT, stride=32,
+                 ir_energy_tol=1e-4, decimation=None)
+    p._add_pairs([(j, t) for j in range(len(p.quiet)) for t in range(0, N, 8)])
+    p._add_drive_rows(np.arange(N))
+    blocks, cap = p._per_actuator(p.D), 1 / 0.9
+    assert blocks.shape[0] > p.A.shape[0]  # the structured KKT's case
+    free = _solve_cone(p.A, p.b, p.Lt, cap, None, None)[0]
+    dcap = 0.9 * float(np.max(np.abs(blocks.toarray() @ free)))
+    _, expected, status, _ = _solve_cone(p.A, p.b, p.Lt, cap, blocks, dcap)
+    assert status == "optimal"
+
+    def broken(*args):
+        def factor(W):
+            raise ValueError("domain error")
+        return factor
+
+    used, conelp = [], solvers.conelp
+    monkeypatch.setattr(minimax, "_structured_kkt", broken)
+    monkeypatch.setattr(solvers, "conelp", lambda *a, kktsolver=None, **k: used.append(
+        kktsolver if isinstance(kktsolver, str) else "structured") or conelp(*a, kktsolver=kktsolver, **k))
+    _, value, status, _ = _solve_cone(p.A, p.b, p.Lt, cap, blocks, dcap)
+    assert used == ["structured", "chol"]
+    assert status == "optimal" and value == pytest.approx(expected, rel=1e-5)

@@ -107,3 +107,20 @@ def test_distance_table_matches_exact_evaluation(rng):
     np.testing.assert_allclose(table, exact, rtol=0, atol=1e-5 * np.abs(exact).max())
     big = np.abs(exact) > 1e-3 * np.abs(exact).max()
     np.testing.assert_allclose(table[big], exact[big], rtol=1e-5)
+
+
+def test_distance_table_evaluates_only_the_nodes_it_uses_bit_for_bit(rng):
+    # The table's nodes next to some path only (the complex Hankel function is the costly
+    # part): every value is the one the whole table gives, to the bit.
+    from vibrofocus.skin.propagation import _tabulated_hankel0
+
+    k = wavenumber(np.linspace(5, 1500, 50), NOMINAL_LAW)
+    d = np.concatenate([[3e-3, 0.2], rng.uniform(3e-3, 0.2, 40)])  # fewer paths than nodes
+    step = 5e-3
+    ratio = np.log1p(step)
+    n_nodes = int(np.ceil(np.log(d.max() / d.min()) / ratio)) + 2
+    table = special.hankel1e(0, k[:, None] * (d.min() * np.exp(ratio * np.arange(n_nodes)))[None, :])
+    u = np.log(d / d.min()) / ratio
+    i = np.clip(np.floor(u).astype(int), 0, n_nodes - 2)
+    whole = (table[:, i] * (1 - (u - i)) + table[:, i + 1] * (u - i)) * np.exp(1j * k[:, None] * d[None, :])
+    np.testing.assert_array_equal(_tabulated_hankel0(k, d, step), whole)

@@ -418,9 +418,18 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
         if factor == "chol" and args[1].size[0] + 1 < nx:
             raise ArithmeticError("fewer rows than coefficients")
         sol = solvers.conelp(*args, kktsolver=factor, options=options)
-    except (ArithmeticError, ValueError):  # rank-deficient (few rows)
+    except (ArithmeticError, ValueError):  # rank-deficient (few rows), or a numerical breakdown
         sol = None
-        if not robust and norm_cap is not None:  # an inactive norm bound gives it full rank
+        if factor != "chol" and args[1].size[0] + 1 >= nx:
+            # The structured solver's normal equations broke down ("domain error"):
+            # CVXOPT's own Cholesky (QR on the equality first) usually does not, at a
+            # fraction of the regularized LDL's cost (0.15 s against 5-11 s a solve on the
+            # OSC tests' arm, whose drive limit binds).
+            try:
+                sol = solvers.conelp(*args, kktsolver="chol", options=options)
+            except (ArithmeticError, ValueError):
+                sol = None
+        if sol is None and not robust and norm_cap is not None:  # an inactive norm bound gives it full rank
             norm = np.zeros((1 + nv, nx))
             norm[1:, :nv] = -np.eye(nv)
             try:

@@ -75,17 +75,21 @@ def _tabulated_hankel0(k: np.ndarray, d: np.ndarray, step: float) -> np.ndarray:
 
     ``H0(z) exp(-i z)`` (scipy's ``hankel1e``) is smooth and slowly varying in ``log d``
     (about ``d^-1/2``), so it is tabulated on nodes ``d_min (1 + step)^j`` and
-    interpolated linearly; the fast phase ``exp(i k d)`` is applied exactly.
+    interpolated linearly; the fast phase ``exp(i k d)`` is applied exactly. Only the nodes
+    next to some path are evaluated (a third of them for the simulated forearm's playback
+    responses, whose table has more nodes than paths): the complex Hankel function is the
+    costly part, and each value is the one the whole table would hold.
     """
     lo, hi = float(d.min()), float(d.max())
     ratio = np.log1p(step)
     n_nodes = max(int(np.ceil(np.log(hi / lo) / ratio)) + 2, 2)
     nodes = lo * np.exp(ratio * np.arange(n_nodes))
-    table = special.hankel1e(0, k[:, None] * nodes[None, :])  # (n_freqs, n_nodes)
     u = np.log(d / lo) / ratio
     i = np.clip(np.floor(u).astype(int), 0, n_nodes - 2)
     w = u - i
-    g = table[:, i] * (1 - w) + table[:, i + 1] * w
+    used, at = np.unique(np.concatenate([i, i + 1]), return_inverse=True)
+    table = special.hankel1e(0, k[:, None] * nodes[None, used])  # (n_freqs, n_used)
+    g = table[:, at[:d.size]] * (1 - w) + table[:, at[d.size:]] * w
     return g * np.exp(1j * k[:, None] * d[None, :])
 
 
