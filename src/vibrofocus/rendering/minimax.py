@@ -358,6 +358,11 @@ def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray)
     nx = eq.size
     offsets = np.cumsum([0] + [2 * len(E) for _, E in pairs])
     grams = [q.T @ q for q in cones]
+    # Householder reflection of the equality row: P = I - beta_h hh hh', P eq = a_e1 e1.
+    a_e1 = -np.copysign(np.linalg.norm(eq), eq[0])
+    hh = eq.copy()
+    hh[0] -= a_e1
+    beta_h = 2.0 / float(hh @ hh)
 
     def factor(W: dict) -> Any:
         w = 1.0 / np.asarray(W["d"]).ravel() ** 2
@@ -382,28 +387,30 @@ def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray)
             jv[1:] *= -1
             pq, pv = q.T @ jv, q.T @ v
             S += (P + 4 * (v @ v) * np.outer(pq, pq) - 2 * np.outer(pq, pv) - 2 * np.outer(pv, pq)) / beta**2
-        added = False
+        # The equality row eliminated as CVXOPT's own Cholesky solver does (a Householder
+        # reflection P with P a = sigma |a| e1; Cholesky of the rest of P S P): S's
+        # inverse is never applied to the equality's direction, along which a limit binding
+        # over most samples leaves S ill-conditioned (the Schur complement ended short of
+        # its tolerances on those programs, "unknown" after 25-30 steps).
+        ps = S - beta_h * np.outer(hh, S @ hh)
+        ps = ps - beta_h * np.outer(ps @ hh, hh)
         try:
-            chol = sla.cho_factor(S, lower=True, check_finite=False)
+            chol = sla.cho_factor(ps[1:, 1:], lower=True, check_finite=False)
         except np.linalg.LinAlgError:
-            try:  # rank-deficient rows: S + a a' (the equality holds at the solution)
-                chol, added = sla.cho_factor(S + np.outer(eq, eq), lower=True, check_finite=False), True
-            except np.linalg.LinAlgError:
-                raise ArithmeticError("singular KKT system") from None
-        Sa = sla.cho_solve(chol, eq, check_finite=False)
-        denom = float(eq @ Sa)
+            raise ArithmeticError("singular KKT system") from None
 
         def solve(x: Any, y: Any, z: Any) -> None:
             g = matrix(z)
             scale(g, W, trans="T", inverse="I")
             scale(g, W, inverse="I")
-            by = float(y[0])
-            rhs = np.asarray(x).ravel() + G.tdot(np.asarray(g).ravel()) + (eq * by if added else 0.0)
-            Sr = sla.cho_solve(chol, rhs, check_finite=False)
-            uy = (eq @ Sr - by) / denom
-            ux = Sr - uy * Sa
+            r = np.asarray(x).ravel() + G.tdot(np.asarray(g).ravel())
+            pr = r - beta_h * hh * (hh @ r)
+            xt = np.empty(nx)
+            xt[0] = float(y[0]) / a_e1
+            xt[1:] = sla.cho_solve(chol, pr[1:] - ps[1:, 0] * xt[0], check_finite=False)
+            ux = xt - beta_h * hh * (hh @ xt)
             x[:] = matrix(ux)
-            y[0] = uy
+            y[0] = (pr[0] - ps[0] @ xt) / a_e1
             z[:] = matrix(G.dot(ux) - np.asarray(z).ravel())
             scale(z, W, trans="T", inverse="I")
 
