@@ -23,6 +23,9 @@ Structure used for speed:
 * **Drive limit in one solve.** With ``max_drive``, a small program on the drive samples
   alone first finds the least peak drive that reaches the fidelity; a limit below it is
   refused naming that drive (or, ``on_max_drive="least"``, the design runs at twice it).
+  Every drive sample the pulses reach is listed from the first round (a limit that binds
+  does so over most of them), and a KKT solver that uses the rows' structure (a drive row
+  touches one actuator's coefficients) solves those programs.
 * **A cone solver called directly.** A few hundred coefficients and rows: CVXOPT's
   primal-dual cone solver takes the dense rows as they are (BLAS on one thread), about 20
   iterations per round, with no modelling layer to compile each round.
