@@ -20,11 +20,14 @@ peak constraints and any size limit the design named (``MinimaxReport.size_limit
 ``--layouts``: issue 57's layouts on the simulated ``nominal`` arm (seed 41; the far layout
 seeds 5 and 17 at 1.3 kHz, n = 1024), ``render("minimax", ...)`` and ``render("inverse", ...)``
 with their defaults at n = 16384, each minimax time (CPU seconds of this process: the machine
-may be shared) printed as a ratio to the reference setup's minimax design in the same run.
+may be shared) printed as a ratio to the reference setup's minimax design in the same run;
+32 actuators as a 4 x 8 grid at 45 mm over the 3 x 3 locations (the default support is then
+shortened by ``MAX_VARIABLES``: the notes say so, and when a design is over its drive budget).
 
 Usage: python benchmarks/bench_minimax.py [n_samples]   (needs the test extra: cvxpy, Clarabel)
        python benchmarks/bench_minimax.py --arrays      (the synthetic array cases only)
-       python benchmarks/bench_minimax.py --layouts [NAME ...]   (the simulated arm's layouts only)
+       python benchmarks/bench_minimax.py --layouts [--write] [NAME ...]   (the simulated arm's layouts only;
+                                        --write: the table into docs/performance.md, between its markers)
 """
 
 from __future__ import annotations
@@ -116,21 +119,24 @@ LAYOUTS = {
     "2x3 sleeve": (ArrayLayout.grid((2, 3), 0.045, (3, 3), 0.01, guard_offset_m=9e-3), 41, FS, 16384, (5, 1)),
     "2x2 at 45 mm, targets outside the hull": (ArrayLayout.grid((2, 2), 0.045, (3, 3), 0.03, guard_offset_m=9e-3),
                                                41, FS, 16384, (5, 1)),
+    "32 actuators, 4x8 at 45 mm": (ArrayLayout.grid((4, 8), 0.045, (3, 3), 0.01), 41, FS, 16384, (5,)),
     "far layout, seed 5": (ArrayLayout.grid((2, 2), (0.14, 0.20), (3, 3), 0.02), 5, 1300.0, 1024, (5,)),
     "far layout, seed 17": (ArrayLayout.grid((2, 2), (0.14, 0.20), (3, 3), 0.02), 17, 1300.0, 1024, (5,)),
 }
 
 
-def layouts(only: list[str] | None = None) -> None:
+def layouts(only: list[str] | None = None, write: bool = False) -> None:
     """Issue 57's layouts: minimax and inverse CPU seconds per design, minimax as a ratio to
-    the reference setup's in the same run."""
+    the reference setup's in the same run; ``write``: the table also goes between the
+    ``minimax-layouts`` markers of docs/performance.md."""
     from vibrofocus.rendering import render
-    from vibrofocus.skin import SimulatedForearm
+    from vibrofocus.rigs import SimulatedForearm
 
     warnings.simplefilter("ignore", UserWarning)
+    lines = ["| layout, location | minimax s | ratio to reference | inverse s | minimax peak contrast dB | notes |",
+             "|---|---|---|---|---|---|"]
+    print(*lines, sep="\n")
     ref_s = None
-    print("| layout, location | minimax s | ratio to reference | inverse s | minimax peak contrast dB |")
-    print("|---|---|---|---|---|")
     for name, (layout, seed, fs, n, locations) in LAYOUTS.items():
         if only and name not in only and name != next(iter(LAYOUTS)):
             continue
@@ -141,13 +147,27 @@ def layouts(only: list[str] | None = None) -> None:
             render("inverse", tm, fs, layout, loc, **band)
             inv_s = time.process_time() - t
             t = time.process_time()
-            d = render("minimax", tm, fs, layout, loc, **band)
+            with warnings.catch_warnings(record=True) as said:
+                warnings.simplefilter("always", UserWarning)
+                d = render("minimax", tm, fs, layout, loc, **band)
             mm_s = time.process_time() - t
             ref_s = mm_s if ref_s is None else ref_s
             y = d.predicted
             quiet = np.delete(np.arange(y.shape[0]), d.target_index)
             db = 20 * np.log10(np.abs(y[d.target_index]).max() / np.abs(y[quiet]).max())
-            print(f"| {name}, {loc} | {mm_s:.1f} | {mm_s / ref_s:.2f}x | {inv_s:.2f} | {db:.1f} |", flush=True)
+            text = " ".join(str(w.message) for w in said)
+            notes = "; ".join(what for key, what in (("MAX_VARIABLES", "support shortened by MAX_VARIABLES"),
+                                                     ("drive budget", "over the drive budget"))
+                              if key in text) or "—"
+            lines.append(f"| {name}, {loc} | {mm_s:.1f} | {mm_s / ref_s:.2f}x | {inv_s:.2f} | {db:.1f} | {notes} |")
+            print(lines[-1], flush=True)
+    if write:
+        from pathlib import Path
+
+        from vibrofocus_tools.markers import write_between_markers
+
+        write_between_markers(Path(__file__).resolve().parents[1] / "docs" / "performance.md", "minimax-layouts",
+                              "\n".join("  " + line for line in lines))  # inside the page's list item
 
 
 def main() -> None:
@@ -155,7 +175,8 @@ def main() -> None:
         arrays()
         return
     if sys.argv[1:2] == ["--layouts"]:
-        layouts(sys.argv[2:])
+        names = [a for a in sys.argv[2:] if a != "--write"]
+        layouts(names, write="--write" in sys.argv[2:])
         return
     n = int(sys.argv[1]) if len(sys.argv) > 1 else 1024
     layout = ArrayLayout.reference()

@@ -203,3 +203,24 @@ def test_a_single_spot_rig_is_aimed_at_the_measured_points_by_their_own_labels(m
     assert "aiming the vibrometer 5 times" in messages[0] and "8 aiming(s)" in messages[0]
     assert any("point G3" in m for m in messages) and not any("point 6," in m or m.endswith("point 6") for m in messages)
     assert_array_equal(np.flatnonzero(cal.measured), [4, 9, 10, 11, 12])
+
+
+@pytest.mark.slow
+def test_robust_minimax_takes_the_fits_standard_error_at_the_predicted_points(subset):
+    """The points the fit predicted have no coherence, so the robust design took no
+    uncertainty there; it takes the fit's standard error (``FittedSkin.transfer_std``),
+    and the coherence's radius at the measured points as before."""
+    from vibrofocus.rendering import Minimax, coherence_radius
+
+    tm = subset.transfer_matrix()
+    radius = Minimax().h_radius(tm)
+    pred, measured = subset.predicted_points, subset.measured
+    assert np.all(np.max(radius[:, pred], axis=0) > 0)
+    live = np.abs(tm.H[:, pred[0], 0]) > 0
+    std = subset.fit.transfer_std(subset.layout.points_xy[pred[:1]], tm.freqs[live])[:, 0]
+    taper = np.abs(tm.H[live, pred[0]]) / np.abs(subset.fit.transfer(subset.layout.points_xy[pred[:1]],
+                                                                      tm.freqs[live])[:, 0])
+    np.testing.assert_allclose(radius[live, pred[0]], std * taper, rtol=1e-6)
+    averages = int(tm.provenance.get("averages", 1))
+    np.testing.assert_allclose(radius[:, measured],
+                               coherence_radius(tm.H, tm.coherence, averages=averages)[:, measured], rtol=1e-12)

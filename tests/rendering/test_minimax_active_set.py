@@ -144,6 +144,7 @@ def test_the_program_on_the_rows_span_has_the_full_programs_optimum(limit):
     D = dcap = None
     if limit is not None:  # a drive limit that binds: 0.9 of the free design's peak drive
         u, _, _, _ = _solve_cone(rows, p.b, p.Lt, cap, None, None)
+        p.D, p.drive_rows = p.D[:0], p.drive_rows[:0]  # a few drive rows of its own
         p._add_drive_rows(np.arange(0, N, 16))
         D = np.kron(np.eye(p.n_act), p.D)
         dcap = limit * float(np.max(np.abs(D @ u)))
@@ -195,3 +196,40 @@ def test_a_structured_solve_that_breaks_down_goes_to_cvxopts_cholesky_not_the_ld
     _, value, status, _ = _solve_cone(p.A, p.b, p.Lt, cap, blocks, dcap)
     assert used == ["structured", "chol"]
     assert status == "optimal" and value == pytest.approx(expected, rel=1e-5)
+
+
+def test_the_least_drive_program_lists_every_binding_drive_sample_at_once(monkeypatch):
+    """The least peak drive binds at most drive samples: the first program lists every sample
+    the pulses reach, so it is solved once (it added some 20 samples a round, six to eight
+    rounds on the 2x3 sleeve), with the optimum of the program over every sample of the window."""
+    H, targets = medium(seed=3), tap()
+    p = _Program(H, targets, FS, band=BAND, quiet=None, taper_octaves=0.5, support_s=SUPPORT, stride=32,
+                 ir_energy_tol=1e-4, decimation=None)
+    rows = np.stack([np.roll(p.pulse, k) for k in p.delays], axis=1) @ p.basis  # every sample, (N, m)
+    whole = minimax._PerActuator(rows, p.n_act)
+    cap = 1 / (0.9 + 1e-3)
+    _, value, status, _ = _solve_cone(whole, p.b, p.Lt, cap, None, None)
+    assert status == "optimal"
+    solves = []
+    counted = minimax._solve_cone
+    monkeypatch.setattr(minimax, "_solve_cone", lambda *a, **k: solves.append(1) or counted(*a, **k))
+    least = p.least_drive(0.9, tol=TOL, fidelity_margin=1e-3, max_iter=30)
+    assert len(solves) == 1
+    assert least == pytest.approx(value * p.u_scale, rel=TOL)
+
+
+def test_the_row_operator_is_the_dense_programs_g():
+    """The structured solver's G (products by blocks: a drive row touches one actuator) gives
+    the dense G's products, both ways."""
+    rng = np.random.default_rng(5)
+    n_act, m, nv = 3, 4, 12
+    peak, E = rng.standard_normal((7, nv)), rng.standard_normal((7, 2))
+    drive = minimax._PerActuator(rng.standard_normal((5, m)), n_act)
+    cones = [rng.standard_normal((6, nv + 2))]
+    pairs = [(peak, E), (drive, np.zeros((drive.shape[0], 2)))]
+    G = np.vstack([np.hstack([(M.toarray() if hasattr(M, "toarray") else M) * s, Ep])
+                   for M, Ep in pairs for s in (1.0, -1.0)] + cones)
+    op = minimax._RowOperator(pairs, cones, nv)
+    x, z = rng.standard_normal(nv + 2), rng.standard_normal(G.shape[0])
+    np.testing.assert_allclose(op.dot(x), G @ x, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(op.tdot(z), G.T @ z, rtol=1e-12, atol=1e-12)

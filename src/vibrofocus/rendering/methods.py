@@ -326,6 +326,11 @@ class Constrained(Contrast):
                                   min_contrast_db=self.min_contrast_db, **options)
 
 
+def _measured(tm: TransferMatrix) -> bool:
+    """Whether ``tm`` is a measurement: a coherence with any finite value."""
+    return tm.coherence is not None and bool(np.isfinite(tm.coherence).any())
+
+
 @dataclass(frozen=True, kw_only=True)
 class Minimax(Method):
     """Peak-contrast (minimax) design (:func:`~vibrofocus.rendering.minimax_filter`): the
@@ -402,14 +407,19 @@ class Minimax(Method):
         ``H``, shape of ``tm.H``): ``robust`` standard errors from the coherence and the
         calibration's averages (``tm.provenance["averages"]``, else 1); without a
         coherence, ``robust`` times a fitted model's standard error (``tm.h_std``,
-        :meth:`~vibrofocus.calibration.FittedSkin.transfer_std`); ``None`` with no
+        :meth:`~vibrofocus.calibration.FittedSkin.transfer_std`); both for a calibration
+        that measured a subset of its points: the coherence's radius at the measured ones,
+        the fit's standard error at those its fit predicted; ``None`` with no
         ``robust`` or no uncertainty known (a true ``H``, a single repeat)."""
         if self.robust is None:
             return None
-        if tm.coherence is None or not np.isfinite(tm.coherence).any():
+        if not _measured(tm):
             # A fitted model's standard error; none known (a true H, one repeat): nominal.
             return None if tm.h_std is None else self.robust * tm.h_std
-        return self.robust * coherence_radius(tm.H, tm.coherence, averages=int(tm.provenance.get("averages", 1)))
+        radius = coherence_radius(tm.H, tm.coherence, averages=int(tm.provenance.get("averages", 1)))
+        if tm.h_std is not None:  # points a subset calibration's fit predicted (no coherence there)
+            radius = np.hypot(radius, tm.h_std)
+        return self.robust * radius
 
     def pinv(self, p: Problem) -> tuple[float, float]:
         """Fidelity and peak drive (V) of the paper's pseudo-inverse (:class:`Inverse` with
@@ -452,7 +462,7 @@ class Minimax(Method):
         h_radius = self.h_radius(p.tm)
         # "auto": the norm term of a measurement's radius keeps the drive down by itself; a
         # fitted model's standard error is too small to (it needed 8x the true-H design's drive).
-        measured = h_radius is not None and p.tm.h_std is None
+        measured = h_radius is not None and _measured(p.tm)
         budget = self.drive_budget if self.drive_budget != "auto" else (None if measured else 1.0)
         fid, peak = self.pinv(p) if (self.min_fidelity is None or budget is not None) else (0.0, 0.0)
         fidelity = self.min_fidelity if self.min_fidelity is not None else min(fid, 0.999)

@@ -23,6 +23,9 @@ Structure used for speed:
 * **Drive limit in one solve.** With ``max_drive``, a small program on the drive samples
   alone first finds the least peak drive that reaches the fidelity; a limit below it is
   refused naming that drive (or, ``on_max_drive="least"``, the design runs at twice it).
+  Every drive sample the pulses reach is listed from the first round (a limit that binds
+  does so over most of them), and a KKT solver that uses the rows' structure (a drive row
+  touches one actuator's coefficients) solves those programs.
 * **A cone solver called directly.** A few hundred coefficients and rows: CVXOPT's
   primal-dual cone solver takes the dense rows as they are (BLAS on one thread), about 20
   iterations per round, with no modelling layer to compile each round.
@@ -85,6 +88,11 @@ _NORM_CAP = 1e6
 _ADD_MARGIN = 0.7
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
 _GRID_ROWS = 64
+#: The first drive-limit rows cover the support widened by this many times the pulse's 1 %
+#: half-width on each side (where the 2x3 sleeve's and the outside-hull designs' binding
+#: samples lay: up to 2.3 times it), so that a limit binding over most of the support is
+#: listed whole in the first round instead of some 20 samples a round.
+_DRIVE_REACH = 3
 #: With ``on_max_drive="least"``, the design's drive limit over the least drive that reaches
 #: the fidelity: at the least drive itself the drives are pinned by the fidelity and the
 #: quiet peak cannot fall (1.3 dB against 5.3 dB at 1.02x on the reference medium).
@@ -281,14 +289,66 @@ class _PerActuator:
     def toarray(self) -> np.ndarray:
         return np.kron(np.eye(self.n_act), self.D)
 
+    def __matmul__(self, u: np.ndarray) -> np.ndarray:
+        return (u.reshape(self.n_act, -1) @ self.D.T).reshape(-1)
 
-def _structured_kkt(G: np.ndarray, pairs: list, cones: list, eq: np.ndarray) -> Any:
+    def rmatvec(self, w: np.ndarray) -> np.ndarray:
+        """``M' w``, without the dense ``M``."""
+        return (w.reshape(self.n_act, -1) @ self.D).reshape(-1)
+
+
+class _RowOperator:
+    """The cone program's ``G`` (as in ``h - G x``) as products that use its structure, for
+    CVXOPT (``G(x, y, trans, alpha, beta)``) and the KKT solver: each pair ``(M, E)`` gives
+    the rows ``[+M, E]`` then ``[-M, E]``, and the cones' dense blocks follow. Its products
+    cost the pairs' rows once (not twice) and a drive row one actuator's coefficients (the
+    dense ``G`` of a 2x3 sleeve's design, 2 x 2718 drive rows by 492 coefficients, made
+    half of each design's time)."""
+
+    def __init__(self, pairs: list, cones: list, nv: int) -> None:
+        self.pairs, self.cones, self.nv = pairs, cones, nv
+        self.nx = cones[0].shape[1]
+
+    def dot(self, x: np.ndarray) -> np.ndarray:
+        """``G x``."""
+        xu, xe = x[:self.nv], x[self.nv:]
+        out = []
+        for M, E in self.pairs:
+            mu, e = M @ xu, E @ xe
+            out += [e + mu, e - mu]
+        return np.concatenate(out + [q @ x for q in self.cones])
+
+    def tdot(self, z: np.ndarray) -> np.ndarray:
+        """``G' z``."""
+        res, o = np.zeros(self.nx), 0
+        for M, E in self.pairs:
+            k = M.shape[0]
+            zp, zm = z[o:o + k], z[o + k:o + 2 * k]
+            res[:self.nv] += M.rmatvec(zp - zm) if isinstance(M, _PerActuator) else (zp - zm) @ M
+            res[self.nv:] += (zp + zm) @ E
+            o += 2 * k
+        for q in self.cones:
+            res += z[o:o + len(q)] @ q
+            o += len(q)
+        return res
+
+    def __call__(self, x: Any, y: Any, trans: str = "N", alpha: float = 1.0, beta: float = 0.0) -> None:
+        from cvxopt import matrix
+
+        xv = np.asarray(x).ravel()
+        r = alpha * (self.dot(xv) if trans == "N" else self.tdot(xv))
+        if beta != 0.0:
+            r += beta * np.asarray(y).ravel()
+        y[:] = matrix(r)
+
+
+def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray) -> Any:
     """A KKT solver for CVXOPT's ``conelp`` that uses the program's structure: each peak
     or drive row comes as a pair ``[+m, e]``, ``[-m, e]`` (one Gram term per pair, and a
     drive row touches one actuator's coefficients: a sparse ``m``), and each cone's Gram
     ``G_q' G_q`` is formed once, so each step adds only a rank-two term per cone.
 
-    ``G``: the whole dense ``G`` (rows in the order of ``pairs``, then ``cones``);
+    ``G``: the whole ``G`` as a :class:`_RowOperator` (rows in the order of ``pairs``, then ``cones``);
     ``pairs``: ``(M, E)`` with ``M`` (n, nv) dense or sparse and ``E`` (n, nx - nv) dense;
     ``cones``: dense ``G_q`` blocks (as in ``h - G x``); ``eq``: the one equality row (nx,).
     It solves ``[0 A' G'; A 0 0; G 0 -W'W] [ux; uy; uz] = [bx; by; bz]`` and returns ``ux``,
@@ -301,6 +361,11 @@ def _structured_kkt(G: np.ndarray, pairs: list, cones: list, eq: np.ndarray) -> 
     nx = eq.size
     offsets = np.cumsum([0] + [2 * len(E) for _, E in pairs])
     grams = [q.T @ q for q in cones]
+    # Householder reflection of the equality row: P = I - beta_h hh hh', P eq = a_e1 e1.
+    a_e1 = -np.copysign(np.linalg.norm(eq), eq[0])
+    hh = eq.copy()
+    hh[0] -= a_e1
+    beta_h = 2.0 / float(hh @ hh)
 
     def factor(W: dict) -> Any:
         w = 1.0 / np.asarray(W["d"]).ravel() ** 2
@@ -325,29 +390,31 @@ def _structured_kkt(G: np.ndarray, pairs: list, cones: list, eq: np.ndarray) -> 
             jv[1:] *= -1
             pq, pv = q.T @ jv, q.T @ v
             S += (P + 4 * (v @ v) * np.outer(pq, pq) - 2 * np.outer(pq, pv) - 2 * np.outer(pv, pq)) / beta**2
-        added = False
+        # The equality row eliminated as CVXOPT's own Cholesky solver does (a Householder
+        # reflection P with P a = sigma |a| e1; Cholesky of the rest of P S P): S's
+        # inverse is never applied to the equality's direction, along which a limit binding
+        # over most samples leaves S ill-conditioned (the Schur complement ended short of
+        # its tolerances on those programs, "unknown" after 25-30 steps).
+        ps = S - beta_h * np.outer(hh, S @ hh)
+        ps = ps - beta_h * np.outer(ps @ hh, hh)
         try:
-            chol = sla.cho_factor(S, lower=True, check_finite=False)
+            chol = sla.cho_factor(ps[1:, 1:], lower=True, check_finite=False)
         except np.linalg.LinAlgError:
-            try:  # rank-deficient rows: S + a a' (the equality holds at the solution)
-                chol, added = sla.cho_factor(S + np.outer(eq, eq), lower=True, check_finite=False), True
-            except np.linalg.LinAlgError:
-                raise ArithmeticError("singular KKT system") from None
-        Sa = sla.cho_solve(chol, eq, check_finite=False)
-        denom = float(eq @ Sa)
+            raise ArithmeticError("singular KKT system") from None
 
         def solve(x: Any, y: Any, z: Any) -> None:
             g = matrix(z)
             scale(g, W, trans="T", inverse="I")
             scale(g, W, inverse="I")
-            by = float(y[0])
-            rhs = np.asarray(x).ravel() + G.T @ np.asarray(g).ravel() + (eq * by if added else 0.0)
-            Sr = sla.cho_solve(chol, rhs, check_finite=False)
-            uy = (eq @ Sr - by) / denom
-            ux = Sr - uy * Sa
+            r = np.asarray(x).ravel() + G.tdot(np.asarray(g).ravel())
+            pr = r - beta_h * hh * (hh @ r)
+            xt = np.empty(nx)
+            xt[0] = float(y[0]) / a_e1
+            xt[1:] = sla.cho_solve(chol, pr[1:] - ps[1:, 0] * xt[0], check_finite=False)
+            ux = xt - beta_h * hh * (hh @ xt)
             x[:] = matrix(ux)
-            y[0] = uy
-            z[:] = matrix(G @ ux - np.asarray(z).ravel())
+            y[0] = (pr[0] - ps[0] @ xt) / a_e1
+            z[:] = matrix(G.dot(ux) - np.asarray(z).ravel())
             scale(z, W, trans="T", inverse="I")
 
         return solve
@@ -401,34 +468,41 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
     eq[:nv] = b
     options = {"show_progress": False, "maxiters": 100}
 
-    def program(cones: list, h_cone: list) -> tuple:
+    def program(cones: list, h_cone: list, dense: bool = False) -> tuple:
         h = np.concatenate(h_lin + h_cone)
         dims = {"l": sum(len(x) for x in h_lin), "q": [len(x) for x in h_cone], "s": []}
+        # The structured solver pays off where the per-actuator drive rows outnumber the
+        # peak rows (a drive limit listed over the support, or the least-drive program:
+        # 37 s against 24 s for the 2x3 sleeve's location 1 with the dense G, less with its
+        # products); elsewhere CVXOPT's own Cholesky is faster.
+        drive_rows = sum(M.shape[0] for M, _ in pairs if isinstance(M, _PerActuator))
+        peak_rows = sum(M.shape[0] for M, _ in pairs if not isinstance(M, _PerActuator))
+        if drive_rows > peak_rows and not dense:
+            G = _RowOperator(pairs, cones, nv)
+            return (matrix(c), G, matrix(h), dims, matrix(eq[None, :]), matrix([1.0])), \
+                _structured_kkt(G, pairs, cones, eq)
         G = np.vstack([np.hstack([(M.toarray() if hasattr(M, "toarray") else M) * sign, Ep])
                        for M, Ep in pairs for sign in (1.0, -1.0)] + cones)
-        # The structured solver pays off where the per-actuator drive rows outnumber the
-        # peak rows (a drive limit that binds over most of the support: 37 s against 24 s
-        # for the 2x3 sleeve's location 1); elsewhere CVXOPT's own Cholesky is faster.
-        drive_rows = sum(M.shape[0] for M, _ in pairs if isinstance(M, _PerActuator))
-        factor = _structured_kkt(G, pairs, cones, eq) if drive_rows > A.shape[0] else "chol"
-        return (matrix(c), matrix(G), matrix(h), dims, matrix(eq[None, :]), matrix([1.0])), factor
+        return (matrix(c), matrix(G), matrix(h), dims, matrix(eq[None, :]), matrix([1.0])), "chol"
 
     args, factor = program(cones, h_cone)
     try:  # Cholesky on the reduced system: fast, but it needs [G; A] of full column rank
-        if factor == "chol" and args[1].size[0] + 1 < nx:
+        if factor == "chol" and args[2].size[0] + 1 < nx:
             raise ArithmeticError("fewer rows than coefficients")
         sol = solvers.conelp(*args, kktsolver=factor, options=options)
     except (ArithmeticError, ValueError):  # rank-deficient (few rows), or a numerical breakdown
         sol = None
-        if factor != "chol" and args[1].size[0] + 1 >= nx:
+        if factor != "chol":
             # The structured solver's normal equations broke down ("domain error"):
-            # CVXOPT's own Cholesky (QR on the equality first) usually does not, at a
-            # fraction of the regularized LDL's cost (0.15 s against 5-11 s a solve on the
-            # OSC tests' arm, whose drive limit binds).
-            try:
-                sol = solvers.conelp(*args, kktsolver="chol", options=options)
-            except (ArithmeticError, ValueError):
-                sol = None
+            # CVXOPT's own Cholesky (QR on the equality first; it needs the dense G)
+            # usually does not, at a fraction of the regularized LDL's cost (0.15 s
+            # against 5-11 s a solve on the OSC tests' arm, whose drive limit binds).
+            dense = program(cones, h_cone, dense=True)[0]
+            if dense[1].size[0] + 1 >= nx:
+                try:
+                    sol = solvers.conelp(*dense, kktsolver="chol", options=options)
+                except (ArithmeticError, ValueError):
+                    sol = None
         if sol is None and not robust and norm_cap is not None:  # an inactive norm bound gives it full rank
             norm = np.zeros((1 + nv, nx))
             norm[1:, :nv] = -np.eye(nv)
@@ -439,8 +513,9 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
                     sol = None  # the bound binds: not the program asked; solve without it
             except (ArithmeticError, ValueError):
                 sol = None
-        if sol is None:  # a regularized LDL
-            sol = solvers.conelp(*args, kktsolver="ldl", options={**options, "kktreg": 1e-9})
+        if sol is None:  # a regularized LDL, on the dense G
+            sol = solvers.conelp(*program(cones, h_cone, dense=True)[0], kktsolver="ldl",
+                                 options={**options, "kktreg": 1e-9})
     x = None if sol["x"] is None else np.asarray(sol["x"]).ravel()
     return (None if x is None else x[:nv]), (np.nan if x is None else float(x[-1])), sol["status"], sol["iterations"]
 
@@ -784,7 +859,12 @@ class _Program:
         self._add_pairs(pairs)
         self.drive_rows = np.zeros(0, int)
         self.D = np.zeros((0, m))
-        self._add_drive_rows(np.arange(first, last + 1, 32))
+        # Every drive sample the pulses reach (their sum, not one pulse: three times the
+        # pulse's 1 % half-width past the support): a drive limit that binds does so over
+        # most of them, and the per-actuator rows cost the structured KKT solver little.
+        pulse = np.abs(self.pulse[: n // 2])
+        reach = _DRIVE_REACH * int(np.flatnonzero(pulse >= 0.01 * pulse[0])[-1])
+        self._add_drive_rows(np.arange(max(0, first - reach), min(n, last + reach + 1)))
 
     @staticmethod
     def _fit_support(support: tuple[float, float], n_act: int, r: int, fs: float) -> tuple[float, float]:

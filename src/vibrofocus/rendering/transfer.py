@@ -164,6 +164,12 @@ class TransferMatrix(ValidatedTransfer):
                            "calibration_created": calibration.created,
                            "averages": _averages(calibration)})
         tm._check = check
+        fit, predicted = getattr(calibration, "fit", None), getattr(calibration, "predicted_points", np.zeros(0))
+        if predicted.size and hasattr(fit, "transfer_std"):  # rows the fit predicted: its standard error
+            freqs = np.fft.rfftfreq(n, 1 / calibration.fs)
+            with np.errstate(over="ignore", divide="ignore"):  # band_taper at 0 Hz
+                taper = band_taper(freqs, calibration.band, taper_octaves)
+            tm._std_of = (fit, lay.points_xy, freqs, taper, predicted)
         return tm
 
     @classmethod
@@ -206,7 +212,8 @@ class TransferMatrix(ValidatedTransfer):
                       "participant": getattr(model, "seed", None)}
         tm = cls(H, fs, layout, n_samples=int(n), band=None if band is None else tuple(band), provenance=provenance)
         if hasattr(model, "transfer_std"):  # a fitted model knows its uncertainty: made when asked
-            tm._std_of = (model, layout.points_xy, freqs, np.ones(freqs.size) if band is None else taper)
+            tm._std_of = (model, layout.points_xy, freqs, np.ones(freqs.size) if band is None else taper,
+                          np.arange(layout.n_points))
         return tm
 
     # -- what it is -----------------------------------------------------------------------
@@ -224,13 +231,15 @@ class TransferMatrix(ValidatedTransfer):
     def h_std(self) -> np.ndarray | None:
         """ndarray, real, shape of ``H``, or None: the standard error of a fitted model's
         ``H`` (:meth:`~vibrofocus.calibration.FittedSkin.transfer_std`, tapered as ``H``,
-        computed on first use and kept); None for a measurement (its uncertainty is its
-        ``coherence``) or a model that knows none (a simulated arm's true ``H``)."""
+        computed on first use and kept); for a calibration that measured a subset of its
+        points (``calibrate(..., measure=K)``), the same at the points its fit predicted,
+        zero at the measured ones; None for a measurement of every point (its uncertainty
+        is its ``coherence``) or a model that knows none (a simulated arm's true ``H``)."""
         if self._h_std is None and self._std_of is not None:
-            model, points, freqs, taper = self._std_of
+            model, points, freqs, taper, rows = self._std_of
             std = np.zeros(self.H.shape)
             live = taper > 0
-            std[live] = model.transfer_std(points, freqs[live]) * taper[live, None, None]
+            std[np.ix_(live, rows)] = model.transfer_std(points[rows], freqs[live]) * taper[live, None, None]
             std.flags.writeable = False
             self._h_std = std
         return self._h_std
