@@ -77,8 +77,9 @@ def test_idle_connections_up_to_the_cap_do_not_stop_a_participant(capped):
     assert srv.api("POST", f"/api/sessions/{sid}/start").status_code == 200
     baseline_fds = _fd_count(srv.proc.pid)
     held: list[socket.socket] = _open_idle(srv.port, 3 * CAP)
-    # The connections beyond the cap are closed as the server reaches them.
-    deadline = time.monotonic() + 10
+    # The connections beyond the cap are closed as the server reaches them (on a loaded
+    # machine that takes longer than 10 s: the wait ends as soon as they are).
+    deadline = time.monotonic() + 30
     while _fd_count(srv.proc.pid) > baseline_fds + CAP and time.monotonic() < deadline:
         time.sleep(0.1)
     assert _fd_count(srv.proc.pid) <= baseline_fds + CAP, "idle connections beyond the cap hold descriptors"
