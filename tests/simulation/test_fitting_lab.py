@@ -56,6 +56,31 @@ def test_fit_recovers_a_free_parameter():
     assert again.params == fit.params  # deterministic
 
 
+def test_the_fit_moves_a_parameter_that_acts_through_the_threshold():
+    # intensity's sensation level of the reference tap, alone free: it moves the felt
+    # field's points across the detection threshold, so the likelihood is jagged at a
+    # finite-difference step (the old L-BFGS-B, eps 1e-4 of the range, stayed at the
+    # start, 16.3 dB, 70 below the truth's log-likelihood). The fit must climb at least
+    # as high as the true value and leave the start.
+    h = hypothesis("intensity")
+    one = dataclasses.replace(h, name="intensity-sl",
+                              free_parameters=tuple(r for r in h.free_parameters if r.key == "sl_ref_db"))
+    s = FitSettings(n_draws=8, n_starts=1, maxiter=30)
+    data = _study1_only(simulate_trials(one, 8, np.random.default_rng([5, 5]), values={"sl_ref_db": 12.0}))
+    fit = fit_hypothesis(one, data, settings=s)
+    at_truth = participant_loglik(one, data, [12.0], settings=s).sum()
+    assert fit.loglik >= at_truth - 1e-9, (fit.params, fit.loglik, at_truth)
+    assert abs(fit.params["sl_ref_db"] - 16.3) > 2.0, fit.params
+
+
+def test_the_first_simplex_steps_a_tenth_of_every_range_inward():
+    from vibrofocus.simulation.fitting.likelihood_fit import initial_simplex
+
+    got = initial_simplex(np.array([0.0, 0.7, 1.0]))
+    np.testing.assert_allclose(got, [[0.0, 0.7, 1.0], [0.1, 0.7, 1.0], [0.0, 0.6, 1.0], [0.0, 0.7, 0.9]],
+                               atol=1e-15)
+
+
 def test_model_recovery_chooses_the_true_hypothesis():
     # Two hypotheses that differ clearly, Study 1 only, few small studies: the true one wins.
     # Scored at their shipped parameters (refit=False): a refit of their 14-15 free

@@ -29,7 +29,7 @@ from ..parameters import apply_parameters, ordered_pairs, read_parameters
 from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
-__all__ = ["FitSettings", "Fit", "model_at", "population_draws", "level_draws", "study1_probabilities_of",
+__all__ = ["FitSettings", "Fit", "model_at", "initial_simplex", "population_draws", "level_draws", "study1_probabilities_of",
            "participant_loglik", "fit_hypothesis"]
 
 
@@ -58,7 +58,8 @@ class FitSettings:
         Nodes of the likelihood's integrals (coarser than the likelihood's defaults:
         about 1e-3 in log-likelihood per Study 2 trial).
     maxiter : int
-        Iterations of L-BFGS-B per start.
+        Iterations of the Nelder-Mead search per start (each one or two likelihoods; the
+        first simplex adds one per free parameter).
     """
 
     n_draws: int = 32
@@ -66,7 +67,7 @@ class FitSettings:
     n_starts: int = 3
     lapse: float = 0.01
     quadrature: Quadrature = field(default_factory=lambda: Quadrature(n_place=6, n_segment=3))
-    maxiter: int = 30
+    maxiter: int = 60
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("n_draws", 1, 100_000), ("n_starts", 1, 1000), ("maxiter", 1, 10_000),
@@ -298,13 +299,47 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
         return special.logsumexp(total, axis=0) - np.log(s.n_draws)
 
 
+#: Side of the Nelder-Mead start simplex, as a share of each free parameter's range.
+SIMPLEX_STEP = 0.1
+
+
+def initial_simplex(u0: np.ndarray, step: float = SIMPLEX_STEP) -> np.ndarray:
+    """Nelder-Mead's first simplex around ``u0`` in the unit cube: ``u0`` and one vertex per axis.
+
+    Vertex ``i`` moves parameter ``i`` by ``step`` of its range (toward the range's
+    middle, so that it stays inside): a step on the parameter's own scale, which sees a
+    parameter that acts through a threshold (piecewise flat or jagged at a
+    finite-difference step) move the likelihood.
+
+    Parameters
+    ----------
+    u0 : ndarray, shape (n,)
+        The start, each parameter scaled to [0, 1] over its range.
+    step : float
+        Share of the range, in (0, 0.5].
+
+    Returns
+    -------
+    ndarray, shape (n + 1, n)
+    """
+    u0 = np.clip(np.asarray(u0, dtype=float), 0.0, 1.0)
+    moves = np.where(u0 <= 0.5, step, -step)
+    return np.vstack([u0, u0 + np.diag(moves)])
+
+
 def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None = None,
                    settings: FitSettings | None = None, start: Mapping[str, float] | None = None) -> Fit:
     """Fit a hypothesis' free parameters to trials by maximum marginal likelihood.
 
-    L-BFGS-B within the parameters' ranges (scaled to [0, 1]), from ``settings.n_starts``
+    Nelder-Mead within the parameters' ranges (scaled to [0, 1]), from ``settings.n_starts``
     starts: ``start`` (or the hypothesis' own values, clipped into the ranges), then
-    points drawn uniformly with ``settings.seed``. Deterministic for a seed. A hypothesis
+    points drawn uniformly with ``settings.seed``; each start's first simplex steps every
+    parameter by a tenth of its range (:func:`initial_simplex`). No gradient: a parameter
+    that acts through a threshold (e.g. ``sl_ref_db``: the felt field's points cross the
+    detection threshold) makes the likelihood jagged at a finite-difference step, and a
+    gradient there points anywhere (docs/fitting-hypotheses.md, "The fit and the score").
+    Stops when the simplex is within 0.1 % of every range and 0.001 in log-likelihood,
+    or after ``settings.maxiter`` iterations. Deterministic for a seed. A hypothesis
     without free parameters is scored as it is.
 
     Parameters
@@ -350,8 +385,9 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
     starts += list(rng.random((s.n_starts - 1, len(ranges))))
     best = None
     for u0 in starts:
-        res = optimize.minimize(objective, u0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(ranges),
-                                options={"maxiter": s.maxiter, "eps": 1e-4})
+        res = optimize.minimize(objective, u0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * len(ranges),
+                                options={"maxiter": s.maxiter, "initial_simplex": initial_simplex(u0),
+                                         "xatol": 1e-3, "fatol": 1e-3})
         if best is None or res.fun < best.fun:
             best = res
     u = np.clip(best.x, 0.0, 1.0)
