@@ -15,6 +15,7 @@ from vibrofocus.simulation import Hypothesis, ParameterRange, default_bank, hypo
 from vibrofocus.simulation.fitting import (FitSettings, compare_hypotheses, fit_hypothesis, lab_trials,
                                            model_recovery, participant_loglik, simulate_trials)
 from vibrofocus.simulation.likelihood import Quadrature, Stimuli
+from vibrofocus.simulation.parameters import read_parameters
 
 #: A hypothesis with one free parameter: v3's readout, the prior's centre free along x.
 SHIFT = Hypothesis(name="test-shift", version="1", title="v3 with the prior's x shift free", sources="test",
@@ -79,6 +80,16 @@ def test_the_first_simplex_steps_a_tenth_of_every_range_inward():
     got = initial_simplex(np.array([0.0, 0.7, 1.0]))
     np.testing.assert_allclose(got, [[0.0, 0.7, 1.0], [0.1, 0.7, 1.0], [0.0, 0.6, 1.0], [0.0, 0.7, 0.9]],
                                atol=1e-15)
+
+
+def test_without_study2_the_selection_parameters_stay_where_they_start():
+    data = _study1_only(simulate_trials("grid-peak", 2, np.random.default_rng(8), repetitions=1))
+    h = hypothesis("grid-peak")
+    fit = fit_hypothesis(h, data, settings=FitSettings(n_draws=2, n_starts=2, maxiter=6))
+    shipped = dict(zip([r.key for r in h.free_parameters], read_parameters(h.model(), h.free_parameters)))
+    assert [k for k in shipped if k.startswith("select_")] == ["select_kappa[1]", "select_log_sd"]
+    for k in ("select_kappa[1]", "select_log_sd"):
+        assert fit.params[k] == pytest.approx(shipped[k], abs=1e-12), (k, fit.params)
 
 
 def test_model_recovery_chooses_the_true_hypothesis():

@@ -299,6 +299,9 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
         return special.logsumexp(total, axis=0) - np.log(s.n_draws)
 
 
+#: Parameters read by the Study 2 selection only: not fitted to trials without Study 2.
+STUDY2_ONLY = ("select_kappa", "select_log_sd")
+
 #: Side of the Nelder-Mead start simplex, as a share of each free parameter's range.
 SIMPLEX_STEP = 0.1
 
@@ -339,8 +342,9 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
     detection threshold) makes the likelihood jagged at a finite-difference step, and a
     gradient there points anywhere (docs/fitting-hypotheses.md, "The fit and the score").
     Stops when the simplex is within 0.1 % of every range and 0.001 in log-likelihood,
-    or after ``settings.maxiter`` iterations. Deterministic for a seed. A hypothesis
-    without free parameters is scored as it is.
+    or after ``settings.maxiter`` iterations. Trials without Study 2 leave the selection's
+    parameters (:data:`STUDY2_ONLY`) at their start: no answer reads them. Deterministic
+    for a seed. A hypothesis without free parameters is scored as it is.
 
     Parameters
     ----------
@@ -367,10 +371,19 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
         return Fit(h.name, {}, float(ll.sum()), ll, 1)
     lo = np.array([r.lo for r in ranges])
     span = np.array([r.hi for r in ranges]) - lo
+    first = [start[r.key] for r in ranges] if start is not None else read_parameters(h.model(), ranges)
+    full = np.clip((np.asarray(first, dtype=float) - lo) / span, 0.0, 1.0)
+    # Without Study 2 trials the selection's parameters touch no answer: kept where they start.
+    active = np.array([i for i, r in enumerate(ranges) if data.stim2.size or r.name not in STUDY2_ONLY], dtype=int)
     cache: dict[tuple[float, ...], np.ndarray] = {}
 
+    def at(u: np.ndarray) -> np.ndarray:
+        out = full.copy()
+        out[active] = u
+        return np.clip(out, 0.0, 1.0)
+
     def per_participant(u: np.ndarray) -> np.ndarray:
-        key = tuple(np.round(np.clip(u, 0.0, 1.0), 12))
+        key = tuple(np.round(at(u), 12))
         if key not in cache:
             cache[key] = participant_loglik(h, data, list(lo + span * np.array(key)), bank=b, settings=s)
         return cache[key]
@@ -379,18 +392,20 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
         value = float(per_participant(u).sum())
         return -value if np.isfinite(value) else 1e300
 
-    first = [start[r.key] for r in ranges] if start is not None else read_parameters(h.model(), ranges)
-    starts = [np.clip((np.asarray(first, dtype=float) - lo) / span, 0.0, 1.0)]
+    if not active.size:
+        ll = per_participant(full[active])
+        return Fit(h.name, {r.key: float(v) for r, v in zip(ranges, lo + span * full)}, float(ll.sum()), ll, 1)
+    starts = [full[active]]
     rng = np.random.default_rng([int(s.seed), 0xF17])
-    starts += list(rng.random((s.n_starts - 1, len(ranges))))
+    starts += list(rng.random((s.n_starts - 1, len(ranges)))[:, active])
     best = None
     for u0 in starts:
-        res = optimize.minimize(objective, u0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * len(ranges),
+        res = optimize.minimize(objective, u0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * active.size,
                                 options={"maxiter": s.maxiter, "initial_simplex": initial_simplex(u0),
                                          "xatol": 1e-3, "fatol": 1e-3})
         if best is None or res.fun < best.fun:
             best = res
-    u = np.clip(best.x, 0.0, 1.0)
-    ll = per_participant(u)
+    u = at(best.x)
+    ll = per_participant(best.x)
     params = {r.key: float(v) for r, v in zip(ranges, lo + span * u)}
     return Fit(h.name, params, float(ll.sum()), ll, len(cache))

@@ -24,7 +24,7 @@ from ..bank import FeatureBank, default_bank
 from ..perception import Traits, draw_answers
 from .elpd import compare_hypotheses
 from .lab_trials import LabTrials
-from .likelihood_fit import FitSettings, fit_hypothesis, model_at, participant_loglik
+from .likelihood_fit import STUDY2_ONLY, FitSettings, fit_hypothesis, model_at, participant_loglik
 
 __all__ = ["simulate_trials", "recovery_study", "confusion", "model_recovery", "parameter_recovery",
            "profile_recovery_study", "profile_summary"]
@@ -232,10 +232,6 @@ def parameter_recovery(hypothesis: Any, *, n_studies: int, n_participants: int =
                       "range": [r.lo, r.hi],
                       "recovered": bool(corr >= 0.7 and abs(bias) <= 0.1 * (r.hi - r.lo))}
     return out
-
-
-#: Parameters only Study 2's selections read (Study 1's answers do not depend on them).
-STUDY2_ONLY = ("select_kappa", "select_log_sd")
 
 
 def profile_recovery_study(hypothesis: Any, key: str, study: int, n_studies: int, *, n_participants: int = 12,
