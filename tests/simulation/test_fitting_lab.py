@@ -115,6 +115,21 @@ def test_elpd_names_the_best_with_its_difference():
     np.testing.assert_allclose(h["grid-peak"]["elpd"], np.sum(h["grid-peak"]["pointwise"]), rtol=1e-12)
 
 
+def test_a_left_out_participant_is_scored_on_draws_the_fit_did_not_tune():
+    # The ELPD's score integrates over score_draws draws of another stream: a fit tunes
+    # the population to its own few draws, and a score on them favours the hypothesis with
+    # the most free parameters (docs/fitting-hypotheses.md, "Model recovery").
+    data = _study1_only(simulate_trials(SHIFT, 3, np.random.default_rng(2), repetitions=1))
+    s = FitSettings(n_draws=3, n_starts=1, maxiter=4, score_draws=20)
+    assert s.scoring().n_draws == 20 and s.scoring().seed != s.seed
+    res = compare_hypotheses(data, [SHIFT], settings=s, local=True)["hypotheses"]["test-shift"]
+    for i, params in enumerate(res["fold_params"]):
+        one = data.subset(np.array([i]))
+        np.testing.assert_allclose(res["pointwise"][i], participant_loglik(SHIFT, one, params, settings=s.scoring()),
+                                   rtol=1e-12)
+        assert res["pointwise"][i] != participant_loglik(SHIFT, one, params, settings=s)[0]
+
+
 @pytest.mark.slow
 def test_folds_on_dask_give_the_numbers_of_one_process():
     data = _study1_only(simulate_trials(SHIFT, 3, np.random.default_rng(2), repetitions=1))

@@ -16,6 +16,7 @@ method and its settings: docs/fitting-hypotheses.md.
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -31,6 +32,10 @@ from .lab_trials import LabTrials
 
 __all__ = ["FitSettings", "Fit", "model_at", "initial_simplex", "population_draws", "level_draws", "study1_probabilities_of",
            "participant_loglik", "fit_hypothesis"]
+
+
+#: Draws that score a hypothesis per draw that fits it, by default (FitSettings.score_draws).
+SCORE_DRAWS_PER_FIT_DRAW = 8
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,12 @@ class FitSettings:
     quadrature : Quadrature
         Nodes of the likelihood's integrals (coarser than the likelihood's defaults:
         about 1e-3 in log-likelihood per Study 2 trial).
+    score_draws : int or None
+        Draws that score each hypothesis (the ELPD's left-out participants), from a stream
+        independent of the fit's (:meth:`scoring`): a fit tunes the population to its own
+        ``n_draws`` draws, and a likelihood on those same few draws favours the hypothesis
+        with the most free parameters (docs/fitting-hypotheses.md, "Model recovery").
+        None: ``SCORE_DRAWS_PER_FIT_DRAW * n_draws``; 0: scored on the fit's own draws.
     maxiter : int
         Iterations of the Nelder-Mead search per start (each one or two likelihoods; the
         first simplex adds one per free parameter).
@@ -68,15 +79,26 @@ class FitSettings:
     lapse: float = 0.01
     quadrature: Quadrature = field(default_factory=lambda: Quadrature(n_place=6, n_segment=3))
     maxiter: int = 60
+    score_draws: int | None = None
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("n_draws", 1, 100_000), ("n_starts", 1, 1000), ("maxiter", 1, 10_000),
-                             ("seed", 0, 2**63 - 1)):
+                             ("seed", 0, 2**63 - 1), ("score_draws", 0, 1_000_000)):
             v = getattr(self, name)
+            if name == "score_draws" and v is None:
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
                 raise ValidationError(f"{name} must be an integer from {lo} to {hi}, got {v!r}")
         if not (isinstance(self.lapse, (int, float)) and 0.0 <= self.lapse < 1.0):
             raise ValidationError(f"lapse must be in [0, 1), got {self.lapse!r}")
+
+
+    def scoring(self) -> FitSettings:
+        """The settings that score: ``score_draws`` draws of another stream (the seed XOR 0x5C0E)."""
+        if self.score_draws == 0:
+            return self
+        n = SCORE_DRAWS_PER_FIT_DRAW * self.n_draws if self.score_draws is None else self.score_draws
+        return dataclasses.replace(self, n_draws=n, seed=int(self.seed) ^ 0x5C0E, score_draws=0)
 
 
 @dataclass(frozen=True)

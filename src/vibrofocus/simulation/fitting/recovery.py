@@ -121,6 +121,8 @@ def recovery_study(hypotheses: Sequence[Any], truth: int, study: int, *, n_parti
     scored = hs if refit else [dataclasses.replace(h, free_parameters=()) for h in hs]
     if not refit:
         cluster = {"local": True}  # one likelihood per hypothesis: no folds to spread
+        # nothing is tuned to the draws: scored on them (settings.n_draws)
+        settings = dataclasses.replace(settings or FitSettings(), score_draws=0)
     res = compare_hypotheses(data, scored, bank=b, settings=settings, **cluster)
     return {"true": hs[truth].name, "study": study, "chosen": res["chosen"],
             "elpd": {n: r["elpd"] for n, r in res["hypotheses"].items()},
