@@ -15,6 +15,7 @@ from vibrofocus.simulation import Hypothesis, ParameterRange, default_bank, hypo
 from vibrofocus.simulation.fitting import (FitSettings, compare_hypotheses, fit_hypothesis, lab_trials,
                                            model_recovery, participant_loglik, simulate_trials)
 from vibrofocus.simulation.likelihood import Quadrature, Stimuli
+from vibrofocus.simulation.parameters import read_parameters
 
 #: A hypothesis with one free parameter: v3's readout, the prior's centre free along x.
 SHIFT = Hypothesis(name="test-shift", version="1", title="v3 with the prior's x shift free", sources="test",
@@ -56,6 +57,41 @@ def test_fit_recovers_a_free_parameter():
     assert again.params == fit.params  # deterministic
 
 
+def test_the_fit_moves_a_parameter_that_acts_through_the_threshold():
+    # intensity's sensation level of the reference tap, alone free: it moves the felt
+    # field's points across the detection threshold, so the likelihood is jagged at a
+    # finite-difference step (the old L-BFGS-B, eps 1e-4 of the range, stayed at the
+    # start, 16.3 dB, 70 below the truth's log-likelihood). The fit must climb at least
+    # as high as the true value and leave the start.
+    h = hypothesis("intensity")
+    one = dataclasses.replace(h, name="intensity-sl",
+                              free_parameters=tuple(r for r in h.free_parameters if r.key == "sl_ref_db"))
+    s = FitSettings(n_draws=8, n_starts=1, maxiter=30)
+    data = _study1_only(simulate_trials(one, 8, np.random.default_rng([5, 5]), values={"sl_ref_db": 12.0}))
+    fit = fit_hypothesis(one, data, settings=s)
+    at_truth = participant_loglik(one, data, [12.0], settings=s).sum()
+    assert fit.loglik >= at_truth - 1e-9, (fit.params, fit.loglik, at_truth)
+    assert abs(fit.params["sl_ref_db"] - 16.3) > 2.0, fit.params
+
+
+def test_the_first_simplex_steps_a_tenth_of_every_range_inward():
+    from vibrofocus.simulation.fitting.likelihood_fit import initial_simplex
+
+    got = initial_simplex(np.array([0.0, 0.7, 1.0]))
+    np.testing.assert_allclose(got, [[0.0, 0.7, 1.0], [0.1, 0.7, 1.0], [0.0, 0.6, 1.0], [0.0, 0.7, 0.9]],
+                               atol=1e-15)
+
+
+def test_without_study2_the_selection_parameters_stay_where_they_start():
+    data = _study1_only(simulate_trials("grid-peak", 2, np.random.default_rng(8), repetitions=1))
+    h = hypothesis("grid-peak")
+    fit = fit_hypothesis(h, data, settings=FitSettings(n_draws=2, n_starts=2, maxiter=6))
+    shipped = dict(zip([r.key for r in h.free_parameters], read_parameters(h.model(), h.free_parameters)))
+    assert [k for k in shipped if k.startswith("select_")] == ["select_kappa[1]", "select_log_sd"]
+    for k in ("select_kappa[1]", "select_log_sd"):
+        assert fit.params[k] == pytest.approx(shipped[k], abs=1e-12), (k, fit.params)
+
+
 def test_model_recovery_chooses_the_true_hypothesis():
     # Two hypotheses that differ clearly, Study 1 only, few small studies: the true one wins.
     # Scored at their shipped parameters (refit=False): a refit of their 14-15 free
@@ -77,6 +113,21 @@ def test_elpd_names_the_best_with_its_difference():
     d = np.subtract(h["grid-peak"]["pointwise"], h["v3-centroid"]["pointwise"])
     np.testing.assert_allclose(res["difference_se"], np.sqrt(d.size * d.var(ddof=1)), rtol=1e-12)
     np.testing.assert_allclose(h["grid-peak"]["elpd"], np.sum(h["grid-peak"]["pointwise"]), rtol=1e-12)
+
+
+def test_a_left_out_participant_is_scored_on_draws_the_fit_did_not_tune():
+    # The ELPD's score integrates over score_draws draws of another stream: a fit tunes
+    # the population to its own few draws, and a score on them favours the hypothesis with
+    # the most free parameters (docs/fitting-hypotheses.md, "Model recovery").
+    data = _study1_only(simulate_trials(SHIFT, 3, np.random.default_rng(2), repetitions=1))
+    s = FitSettings(n_draws=3, n_starts=1, maxiter=4, score_draws=20)
+    assert s.scoring().n_draws == 20 and s.scoring().seed != s.seed
+    res = compare_hypotheses(data, [SHIFT], settings=s, local=True)["hypotheses"]["test-shift"]
+    for i, params in enumerate(res["fold_params"]):
+        one = data.subset(np.array([i]))
+        np.testing.assert_allclose(res["pointwise"][i], participant_loglik(SHIFT, one, params, settings=s.scoring()),
+                                   rtol=1e-12)
+        assert res["pointwise"][i] != participant_loglik(SHIFT, one, params, settings=s)[0]
 
 
 @pytest.mark.slow

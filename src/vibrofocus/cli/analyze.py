@@ -90,7 +90,8 @@ def analyze_command(
     no_dask: bool = typer.Option(False, "--no-dask", help="With --hypotheses: fit in this process (same numbers)."),
     draws: int = typer.Option(32, "--draws", min=1, max=100_000,
                               help="With --hypotheses: participants drawn from each hypothesis' population to "
-                                   "integrate every participant's likelihood over."),
+                                   "integrate every participant's likelihood over (8 times as many, drawn apart, "
+                                   "score the left-out participants)."),
 ) -> None:
     """Analyse localization studies 1 and 2 from a trials file.
 

@@ -12,6 +12,7 @@ as Dask tasks with the cluster options of ``vibrofocus power``
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from typing import Any
 
@@ -28,6 +29,9 @@ __all__ = ["fold_loglik", "elpd_summary", "compare_hypotheses"]
 def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str, float], bank: FeatureBank,
                 settings: FitSettings) -> tuple[float, dict[str, float]]:
     """One fold: refit without participant ``left_out``, score that participant there.
+
+    The score integrates over :meth:`FitSettings.scoring`'s draws, not the fit's: held out
+    from the Monte Carlo draws the refit tuned the population to, as from the participant.
 
     Parameters
     ----------
@@ -48,9 +52,10 @@ def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str
         The refitted parameters.
     """
     keep = np.delete(np.arange(data.n_participants), left_out)
-    one = FitSettings(settings.n_draws, settings.seed, 1, settings.lapse, settings.quadrature, settings.maxiter)
+    one = dataclasses.replace(settings, n_starts=1)
     fit = fit_hypothesis(hypothesis, data.subset(keep), bank=bank, settings=one, start=start)
-    ll = participant_loglik(hypothesis, data.subset(np.array([left_out])), fit.params, bank=bank, settings=settings)
+    ll = participant_loglik(hypothesis, data.subset(np.array([left_out])), fit.params, bank=bank,
+                            settings=settings.scoring())
     return float(ll[0]), fit.params
 
 
@@ -145,7 +150,8 @@ def compare_hypotheses(data: LabTrials, hypotheses: Sequence[Any] | None = None,
             pointwise[h.name] = np.array([ll for ll, _ in folds[h.name]])
             fold_params = [p for _, p in folds[h.name]]
         else:  # nothing fitted: leaving a participant out changes nothing
-            pointwise[h.name] = fit.participant_loglik
+            pointwise[h.name] = (fit.participant_loglik if s.score_draws == 0 else
+                                 participant_loglik(h, data, None, bank=b, settings=s.scoring()))
             fold_params = []
         elpd, se = elpd_summary(pointwise[h.name])
         out[h.name] = {"elpd": elpd, "se": se, "params": fit.params, "loglik": fit.loglik,
@@ -166,5 +172,6 @@ def compare_hypotheses(data: LabTrials, hypotheses: Sequence[Any] | None = None,
 def _settings_dict(s: FitSettings) -> dict[str, Any]:
     q = s.quadrature
     return {"n_draws": s.n_draws, "seed": s.seed, "n_starts": s.n_starts, "lapse": s.lapse, "maxiter": s.maxiter,
+            "score_draws": s.score_draws,
             "quadrature": {"n_place": q.n_place, "n_segment": q.n_segment, "n_angle": q.n_angle,
                            "n_conflict": q.n_conflict}}

@@ -16,6 +16,7 @@ method and its settings: docs/fitting-hypotheses.md.
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping, Sequence
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,8 +30,12 @@ from ..parameters import apply_parameters, ordered_pairs, read_parameters
 from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
-__all__ = ["FitSettings", "Fit", "model_at", "population_draws", "level_draws", "study1_probabilities_of",
+__all__ = ["FitSettings", "Fit", "model_at", "initial_simplex", "population_draws", "level_draws", "study1_probabilities_of",
            "participant_loglik", "fit_hypothesis"]
+
+
+#: Draws that score a hypothesis per draw that fits it, by default (FitSettings.score_draws).
+SCORE_DRAWS_PER_FIT_DRAW = 8
 
 
 @dataclass(frozen=True)
@@ -57,8 +62,15 @@ class FitSettings:
     quadrature : Quadrature
         Nodes of the likelihood's integrals (coarser than the likelihood's defaults:
         about 1e-3 in log-likelihood per Study 2 trial).
+    score_draws : int or None
+        Draws that score each hypothesis (the ELPD's left-out participants), from a stream
+        independent of the fit's (:meth:`scoring`): a fit tunes the population to its own
+        ``n_draws`` draws, and a likelihood on those same few draws favours the hypothesis
+        with the most free parameters (docs/fitting-hypotheses.md, "Model recovery").
+        None: ``SCORE_DRAWS_PER_FIT_DRAW * n_draws``; 0: scored on the fit's own draws.
     maxiter : int
-        Iterations of L-BFGS-B per start.
+        Iterations of the Nelder-Mead search per start (each one or two likelihoods; the
+        first simplex adds one per free parameter).
     """
 
     n_draws: int = 32
@@ -66,16 +78,27 @@ class FitSettings:
     n_starts: int = 3
     lapse: float = 0.01
     quadrature: Quadrature = field(default_factory=lambda: Quadrature(n_place=6, n_segment=3))
-    maxiter: int = 30
+    maxiter: int = 60
+    score_draws: int | None = None
 
     def __post_init__(self) -> None:
         for name, lo, hi in (("n_draws", 1, 100_000), ("n_starts", 1, 1000), ("maxiter", 1, 10_000),
-                             ("seed", 0, 2**63 - 1)):
+                             ("seed", 0, 2**63 - 1), ("score_draws", 0, 1_000_000)):
             v = getattr(self, name)
+            if name == "score_draws" and v is None:
+                continue
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
                 raise ValidationError(f"{name} must be an integer from {lo} to {hi}, got {v!r}")
         if not (isinstance(self.lapse, (int, float)) and 0.0 <= self.lapse < 1.0):
             raise ValidationError(f"lapse must be in [0, 1), got {self.lapse!r}")
+
+
+    def scoring(self) -> FitSettings:
+        """The settings that score: ``score_draws`` draws of another stream (the seed XOR 0x5C0E)."""
+        if self.score_draws == 0:
+            return self
+        n = SCORE_DRAWS_PER_FIT_DRAW * self.n_draws if self.score_draws is None else self.score_draws
+        return dataclasses.replace(self, n_draws=n, seed=int(self.seed) ^ 0x5C0E, score_draws=0)
 
 
 @dataclass(frozen=True)
@@ -298,14 +321,52 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
         return special.logsumexp(total, axis=0) - np.log(s.n_draws)
 
 
+#: Parameters read by the Study 2 selection only: not fitted to trials without Study 2.
+STUDY2_ONLY = ("select_kappa", "select_log_sd")
+
+#: Side of the Nelder-Mead start simplex, as a share of each free parameter's range.
+SIMPLEX_STEP = 0.1
+
+
+def initial_simplex(u0: np.ndarray, step: float = SIMPLEX_STEP) -> np.ndarray:
+    """Nelder-Mead's first simplex around ``u0`` in the unit cube: ``u0`` and one vertex per axis.
+
+    Vertex ``i`` moves parameter ``i`` by ``step`` of its range (toward the range's
+    middle, so that it stays inside): a step on the parameter's own scale, which sees a
+    parameter that acts through a threshold (piecewise flat or jagged at a
+    finite-difference step) move the likelihood.
+
+    Parameters
+    ----------
+    u0 : ndarray, shape (n,)
+        The start, each parameter scaled to [0, 1] over its range.
+    step : float
+        Share of the range, in (0, 0.5].
+
+    Returns
+    -------
+    ndarray, shape (n + 1, n)
+    """
+    u0 = np.clip(np.asarray(u0, dtype=float), 0.0, 1.0)
+    moves = np.where(u0 <= 0.5, step, -step)
+    return np.vstack([u0, u0 + np.diag(moves)])
+
+
 def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None = None,
                    settings: FitSettings | None = None, start: Mapping[str, float] | None = None) -> Fit:
     """Fit a hypothesis' free parameters to trials by maximum marginal likelihood.
 
-    L-BFGS-B within the parameters' ranges (scaled to [0, 1]), from ``settings.n_starts``
+    Nelder-Mead within the parameters' ranges (scaled to [0, 1]), from ``settings.n_starts``
     starts: ``start`` (or the hypothesis' own values, clipped into the ranges), then
-    points drawn uniformly with ``settings.seed``. Deterministic for a seed. A hypothesis
-    without free parameters is scored as it is.
+    points drawn uniformly with ``settings.seed``; each start's first simplex steps every
+    parameter by a tenth of its range (:func:`initial_simplex`). No gradient: a parameter
+    that acts through a threshold (e.g. ``sl_ref_db``: the felt field's points cross the
+    detection threshold) makes the likelihood jagged at a finite-difference step, and a
+    gradient there points anywhere (docs/fitting-hypotheses.md, "The fit and the score").
+    Stops when the simplex is within 0.1 % of every range and 0.001 in log-likelihood,
+    or after ``settings.maxiter`` iterations. Trials without Study 2 leave the selection's
+    parameters (:data:`STUDY2_ONLY`) at their start: no answer reads them. Deterministic
+    for a seed. A hypothesis without free parameters is scored as it is.
 
     Parameters
     ----------
@@ -332,10 +393,19 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
         return Fit(h.name, {}, float(ll.sum()), ll, 1)
     lo = np.array([r.lo for r in ranges])
     span = np.array([r.hi for r in ranges]) - lo
+    first = [start[r.key] for r in ranges] if start is not None else read_parameters(h.model(), ranges)
+    full = np.clip((np.asarray(first, dtype=float) - lo) / span, 0.0, 1.0)
+    # Without Study 2 trials the selection's parameters touch no answer: kept where they start.
+    active = np.array([i for i, r in enumerate(ranges) if data.stim2.size or r.name not in STUDY2_ONLY], dtype=int)
     cache: dict[tuple[float, ...], np.ndarray] = {}
 
+    def at(u: np.ndarray) -> np.ndarray:
+        out = full.copy()
+        out[active] = u
+        return np.clip(out, 0.0, 1.0)
+
     def per_participant(u: np.ndarray) -> np.ndarray:
-        key = tuple(np.round(np.clip(u, 0.0, 1.0), 12))
+        key = tuple(np.round(at(u), 12))
         if key not in cache:
             cache[key] = participant_loglik(h, data, list(lo + span * np.array(key)), bank=b, settings=s)
         return cache[key]
@@ -344,17 +414,20 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
         value = float(per_participant(u).sum())
         return -value if np.isfinite(value) else 1e300
 
-    first = [start[r.key] for r in ranges] if start is not None else read_parameters(h.model(), ranges)
-    starts = [np.clip((np.asarray(first, dtype=float) - lo) / span, 0.0, 1.0)]
+    if not active.size:
+        ll = per_participant(full[active])
+        return Fit(h.name, {r.key: float(v) for r, v in zip(ranges, lo + span * full)}, float(ll.sum()), ll, 1)
+    starts = [full[active]]
     rng = np.random.default_rng([int(s.seed), 0xF17])
-    starts += list(rng.random((s.n_starts - 1, len(ranges))))
+    starts += list(rng.random((s.n_starts - 1, len(ranges)))[:, active])
     best = None
     for u0 in starts:
-        res = optimize.minimize(objective, u0, method="L-BFGS-B", bounds=[(0.0, 1.0)] * len(ranges),
-                                options={"maxiter": s.maxiter, "eps": 1e-4})
+        res = optimize.minimize(objective, u0, method="Nelder-Mead", bounds=[(0.0, 1.0)] * active.size,
+                                options={"maxiter": s.maxiter, "initial_simplex": initial_simplex(u0),
+                                         "xatol": 1e-3, "fatol": 1e-3})
         if best is None or res.fun < best.fun:
             best = res
-    u = np.clip(best.x, 0.0, 1.0)
-    ll = per_participant(u)
+    u = at(best.x)
+    ll = per_participant(best.x)
     params = {r.key: float(v) for r, v in zip(ranges, lo + span * u)}
     return Fit(h.name, params, float(ll.sum()), ll, len(cache))

@@ -24,7 +24,7 @@ from ..bank import FeatureBank, default_bank
 from ..perception import Traits, draw_answers
 from .elpd import compare_hypotheses
 from .lab_trials import LabTrials
-from .likelihood_fit import FitSettings, fit_hypothesis, model_at, participant_loglik
+from .likelihood_fit import STUDY2_ONLY, FitSettings, fit_hypothesis, model_at, participant_loglik
 
 __all__ = ["simulate_trials", "recovery_study", "confusion", "model_recovery", "parameter_recovery",
            "profile_recovery_study", "profile_summary"]
@@ -121,6 +121,8 @@ def recovery_study(hypotheses: Sequence[Any], truth: int, study: int, *, n_parti
     scored = hs if refit else [dataclasses.replace(h, free_parameters=()) for h in hs]
     if not refit:
         cluster = {"local": True}  # one likelihood per hypothesis: no folds to spread
+        # nothing is tuned to the draws: scored on them (settings.n_draws)
+        settings = dataclasses.replace(settings or FitSettings(), score_draws=0)
     res = compare_hypotheses(data, scored, bank=b, settings=settings, **cluster)
     return {"true": hs[truth].name, "study": study, "chosen": res["chosen"],
             "elpd": {n: r["elpd"] for n, r in res["hypotheses"].items()},
@@ -232,10 +234,6 @@ def parameter_recovery(hypothesis: Any, *, n_studies: int, n_participants: int =
                       "range": [r.lo, r.hi],
                       "recovered": bool(corr >= 0.7 and abs(bias) <= 0.1 * (r.hi - r.lo))}
     return out
-
-
-#: Parameters only Study 2's selections read (Study 1's answers do not depend on them).
-STUDY2_ONLY = ("select_kappa", "select_log_sd")
 
 
 def profile_recovery_study(hypothesis: Any, key: str, study: int, n_studies: int, *, n_participants: int = 12,
