@@ -121,6 +121,9 @@ def test_pause_and_abort_are_said_in_the_words_of_the_status_column(served, cont
     assert exp.inner_text("#flash").startswith(f"Session {sid} paused"), exp.inner_text("#flash")
     exp.wait_for_function("document.querySelector('#sessions td.live').textContent.startsWith('paused')")
     assert exp.inner_text("#sessions td.live") == "paused at main trial 1 of 27"
+    # The title comes from its own request, issued after the table's: it follows within a
+    # poll, and must not stay on the state before the pause.
+    exp.wait_for_function("document.getElementById('live-title').textContent.includes('paused')")
     assert "respond" not in exp.inner_text("#live-title")
 
     exp.click("#sessions button[data-action=stop]")
