@@ -24,6 +24,7 @@ __all__ = [
     "check_band",
     "check_index",
     "integer_text",
+    "number_text",
     "shorten",
     "available_memory_bytes",
     "check_memory",
@@ -189,15 +190,25 @@ def integer_text(text: str) -> int | None:
     digits count: ``float`` also reads other scripts' digits (``"٣"``), which no file
     of the contract holds.
     """
+    value = number_text(text)
+    if value is None or value != int(value):
+        return None
+    return int(value)
+
+
+def number_text(text: str) -> float | None:
+    """``text`` as a float if it writes a finite number in ASCII (``"-10"``, ``"2.5e-3"``), else None.
+
+    The reading :func:`integer_text` builds on: NaN, infinities and other scripts' digits
+    are None, for the caller to report with its line.
+    """
     if not text.isascii():
         return None
     try:
         value = float(text)
     except ValueError:
         return None
-    if not np.isfinite(value) or value != int(value):
-        return None
-    return int(value)
+    return value if np.isfinite(value) else None
 
 
 def shorten(value: Any, limit: int = SHORTEN_CHARS, *, as_text: bool = False) -> str:

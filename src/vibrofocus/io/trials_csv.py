@@ -17,13 +17,12 @@ A study database's export has :data:`SESSION_COLUMNS`, :data:`ONSET_COLUMNS`,
 from __future__ import annotations
 
 import csv
-import math
 import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
-from .._validation import shorten
+from .._validation import number_text, shorten
 from ..errors import StudyError, ValidationError
 from ._csv_rows import number_cell, write_rows_csv
 from .responses import format_response, parse_response_text
@@ -274,15 +273,6 @@ def read_trials_csv(path: str | os.PathLike) -> list[dict[str, Any]]:
         raise StudyError(f"cannot read the trials file {path}: {exc.strerror or exc}") from exc
 
 
-def _number(text: str) -> float | None:
-    """A finite number written in ASCII (``"-10"``, ``"2.5e-3"``); None for anything else."""
-    try:
-        value = float(text) if text.isascii() else math.nan
-    except ValueError:
-        return None
-    return value if math.isfinite(value) else None
-
-
 def read_block_cells(level_db: str, allowed: str, x_mm: str, y_mm: str, *, n_locations: int | None = None
                      ) -> tuple[float | None, tuple[int, ...] | None, tuple[float, float] | None]:
     """A trial's block cells (:data:`BLOCK_COLUMNS`) and point cells (:data:`POINT_COLUMNS`), read and checked.
@@ -318,14 +308,14 @@ def read_block_cells(level_db: str, allowed: str, x_mm: str, y_mm: str, *, n_loc
              for c in (level_db, allowed, x_mm, y_mm)]
     level = None
     if cells[0]:
-        level = _number(cells[0])
+        level = number_text(cells[0])
         if level is None or abs(level) > LEVEL_LIMIT_DB:
             raise ValidationError(f"level_db must be a finite number of dB within +-{LEVEL_LIMIT_DB:g} (re the level "
                                   f"rule), got {shorten(cells[0])}")
     places = parse_response_text(cells[1], n_locations=n_locations, name="allowed") if cells[1] else None
     point = None
     if cells[2] or cells[3]:
-        x, y = _number(cells[2]), _number(cells[3])
+        x, y = number_text(cells[2]), number_text(cells[3])
         if x is None or y is None or max(abs(x), abs(y)) > POINT_LIMIT_MM:
             raise ValidationError(f"response_x_mm and response_y_mm must both be finite numbers of mm within "
                                   f"+-{POINT_LIMIT_MM:g} (a point answer), got {shorten(cells[2])} and "

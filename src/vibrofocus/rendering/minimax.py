@@ -492,12 +492,13 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
         sol = solvers.conelp(*args, kktsolver=factor, options=options)
     except (ArithmeticError, ValueError):  # rank-deficient (few rows), or a numerical breakdown
         sol = None
+        # The fallbacks below need the dense G: built once, here, if the first try had not.
+        dense = args if factor == "chol" else program(cones, h_cone, dense=True)[0]
         if factor != "chol":
             # The structured solver's normal equations broke down ("domain error"):
-            # CVXOPT's own Cholesky (QR on the equality first; it needs the dense G)
-            # usually does not, at a fraction of the regularized LDL's cost (0.15 s
-            # against 5-11 s a solve on the OSC tests' arm, whose drive limit binds).
-            dense = program(cones, h_cone, dense=True)[0]
+            # CVXOPT's own Cholesky (QR on the equality first) usually does not, at a
+            # fraction of the regularized LDL's cost (0.15 s against 5-11 s a solve on the
+            # OSC tests' arm, whose drive limit binds).
             if dense[1].size[0] + 1 >= nx:
                 try:
                     sol = solvers.conelp(*dense, kktsolver="chol", options=options)
@@ -514,8 +515,7 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
             except (ArithmeticError, ValueError):
                 sol = None
         if sol is None:  # a regularized LDL, on the dense G
-            sol = solvers.conelp(*program(cones, h_cone, dense=True)[0], kktsolver="ldl",
-                                 options={**options, "kktreg": 1e-9})
+            sol = solvers.conelp(*dense, kktsolver="ldl", options={**options, "kktreg": 1e-9})
     x = None if sol["x"] is None else np.asarray(sol["x"]).ravel()
     return (None if x is None else x[:nv]), (np.nan if x is None else float(x[-1])), sol["status"], sol["iterations"]
 
