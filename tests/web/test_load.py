@@ -4,6 +4,8 @@ a participant who still completes trials, and a log that cannot flood.
 
 from __future__ import annotations
 
+import collections
+import contextlib
 import io
 import logging
 import os
@@ -67,7 +69,19 @@ def _open_idle(port: int, n: int) -> list[socket.socket]:
 
 
 def _fd_count(pid: int) -> int:
-    return len(os.listdir(f"/proc/{pid}/fd"))
+    """The process's sockets: connections and listeners (not its files: each thread that
+    serves a request opens its own database connection, three files with its journal)."""
+    return _fd_kinds(pid)["socket"]
+
+
+def _fd_kinds(pid: int) -> collections.Counter:
+    """The process's descriptors by kind (``socket``, ``pipe``, ``anon_inode``, or a file's suffix)."""
+    kinds = collections.Counter()
+    for fd in os.listdir(f"/proc/{pid}/fd"):
+        with contextlib.suppress(FileNotFoundError):  # closed meanwhile
+            target = os.readlink(f"/proc/{pid}/fd/{fd}")
+            kinds[target.split(":")[0] if ":" in target else os.path.splitext(target)[1] or target] += 1
+    return kinds
 
 
 def test_idle_connections_up_to_the_cap_do_not_stop_a_participant(capped):
@@ -82,7 +96,8 @@ def test_idle_connections_up_to_the_cap_do_not_stop_a_participant(capped):
     deadline = time.monotonic() + 30
     while _fd_count(srv.proc.pid) > baseline_fds + CAP and time.monotonic() < deadline:
         time.sleep(0.1)
-    assert _fd_count(srv.proc.pid) <= baseline_fds + CAP, "idle connections beyond the cap hold descriptors"
+    assert _fd_count(srv.proc.pid) <= baseline_fds + CAP, (
+        f"idle connections beyond the cap hold descriptors: {dict(_fd_kinds(srv.proc.pid))}")
     stop = threading.Event()
 
     def keep_full() -> None:
