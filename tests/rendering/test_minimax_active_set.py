@@ -42,7 +42,7 @@ def full_program(H, targets, min_fidelity, max_drive=None, margin=1e-3):
     D = dcap = None
     if max_drive is not None:
         p._add_drive_rows(np.arange(N))
-        D, dcap = np.kron(np.eye(p.n_act), p.D), max_drive / p.u_scale
+        D, dcap = p._per_actuator(p.D).toarray(), max_drive / p.u_scale
     u, value, status, _ = _solve_cone(p.A, p.b, p.Lt, cap, D, dcap)
     assert status == "optimal"
     return value * p.d_norm
@@ -146,7 +146,7 @@ def test_the_program_on_the_rows_span_has_the_full_programs_optimum(limit):
         u, _, _, _ = _solve_cone(rows, p.b, p.Lt, cap, None, None)
         p.D, p.drive_rows = p.D[:0], p.drive_rows[:0]  # a few drive rows of its own
         p._add_drive_rows(np.arange(0, N, 16))
-        D = np.kron(np.eye(p.n_act), p.D)
+        D = p._per_actuator(p.D).toarray()
         dcap = limit * float(np.max(np.abs(D @ u)))
     n_rows = len(rows) + (0 if D is None else len(D))
     assert n_rows + 1 < p.Lt.shape[0] and p.N0.shape[1] == 0  # the span is smaller
@@ -205,8 +205,7 @@ def test_the_least_drive_program_lists_every_binding_drive_sample_at_once(monkey
     H, targets = medium(seed=3), tap()
     p = _Program(H, targets, FS, band=BAND, quiet=None, taper_octaves=0.5, support_s=SUPPORT, stride=32,
                  ir_energy_tol=1e-4, decimation=None)
-    rows = np.stack([np.roll(p.pulse, k) for k in p.delays], axis=1) @ p.basis  # every sample, (N, m)
-    whole = minimax._PerActuator(rows, p.n_act)
+    whole = p._per_actuator(np.stack([np.roll(p.pulse, k) for k in p.delays], axis=1))  # every sample
     cap = 1 / (0.9 + 1e-3)
     _, value, status, _ = _solve_cone(whole, p.b, p.Lt, cap, None, None)
     assert status == "optimal"
@@ -219,12 +218,15 @@ def test_the_least_drive_program_lists_every_binding_drive_sample_at_once(monkey
 
 
 def test_the_row_operator_is_the_dense_programs_g():
-    """The structured solver's G (products by blocks: a drive row touches one actuator) gives
-    the dense G's products, both ways."""
+    """The structured solver's G (products by blocks: a drive row touches one actuator, in its
+    own basis: actuators 0 and 2 with 4 coefficients, 1 with 2) gives the dense G's products,
+    both ways."""
     rng = np.random.default_rng(5)
-    n_act, m, nv = 3, 4, 12
+    K, nv = 6, 10
     peak, E = rng.standard_normal((7, nv)), rng.standard_normal((7, 2))
-    drive = minimax._PerActuator(rng.standard_normal((5, m)), n_act)
+    groups = [(np.array([0, 2]), rng.standard_normal((K, 4)), np.array([0, 6])),
+              (np.array([1]), rng.standard_normal((K, 2)), np.array([4]))]
+    drive = minimax._PerActuator(rng.standard_normal((5, K)), groups, nv)
     cones = [rng.standard_normal((6, nv + 2))]
     pairs = [(peak, E), (drive, np.zeros((drive.shape[0], 2)))]
     G = np.vstack([np.hstack([(M.toarray() if hasattr(M, "toarray") else M) * s, Ep])
