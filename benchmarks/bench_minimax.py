@@ -21,8 +21,10 @@ peak constraints and any size limit the design named (``MinimaxReport.size_limit
 seeds 5 and 17 at 1.3 kHz, n = 1024), ``render("minimax", ...)`` and ``render("inverse", ...)``
 with their defaults at n = 16384, each minimax time (CPU seconds of this process: the machine
 may be shared) printed as a ratio to the reference setup's minimax design in the same run;
-32 actuators as a 4 x 8 grid at 45 mm over the 3 x 3 locations (the default support is then
-shortened by ``MAX_VARIABLES``: the notes say so, and when a design is over its drive budget).
+32 actuators as a 4 x 8 grid at 45 mm over the 3 x 3 locations (one default support from the
+latest arrival would exceed ``MAX_VARIABLES``: per-actuator supports, the weak actuators' pulses
+spaced wider within ``SPREAD_VARIABLES``; the notes say so, and when a design is over its drive
+budget).
 
 Usage: python benchmarks/bench_minimax.py [n_samples]   (needs the test extra: cvxpy, Clarabel)
        python benchmarks/bench_minimax.py --arrays      (the synthetic array cases only)
@@ -156,7 +158,9 @@ def layouts(only: list[str] | None = None, write: bool = False) -> None:
             quiet = np.delete(np.arange(y.shape[0]), d.target_index)
             db = 20 * np.log10(np.abs(y[d.target_index]).max() / np.abs(y[quiet]).max())
             text = " ".join(str(w.message) for w in said)
-            notes = "; ".join(what for key, what in (("MAX_VARIABLES", "support shortened by MAX_VARIABLES"),
+            notes = "; ".join(what for key, what in (("was shortened", "support shortened by MAX_VARIABLES"),
+                                                     ("per-actuator supports", "per-actuator supports"),
+                                                     ("SPREAD_VARIABLES", "weak actuators' pulses spaced wider"),
                                                      ("drive budget", "over the drive budget"))
                               if key in text) or "—"
             lines.append(f"| {name}, {loc} | {mm_s:.1f} | {mm_s / ref_s:.2f}x | {inv_s:.2f} | {db:.1f} | {notes} |")
