@@ -241,11 +241,22 @@ class MinimaxFrontier:
     seconds: float
 
 
-def _weak_actuators(h: np.ndarray) -> np.ndarray:
-    """Which actuators are weak at the target: band-limited energy (``h`` (n_freqs, n_act),
-    ``T H`` at the target) under :data:`_WEAK_SHARE` of the strongest's."""
+def _weak_actuators(h: np.ndarray, K: int) -> tuple[np.ndarray, int | None, float]:
+    """Which actuators space their pulses wider, by how many pulses, and the largest share of
+    the strongest's energy among them. ``h`` (n_freqs, n_act): ``T H`` at the target; ``K``:
+    pulses per actuator. The weak are those under :data:`_WEAK_SHARE` of the strongest's
+    band-limited energy at the target; where the others' supports alone do not fit
+    :data:`SPREAD_VARIABLES`, the next weakest join them until they do. ``None``: not even
+    one pulse each fits."""
     energy = np.sum(np.abs(h) ** 2, axis=0)
-    return energy < _WEAK_SHARE * np.max(energy)
+    order = np.argsort(energy)[::-1]
+    for n_strong in range(int(np.sum(energy >= _WEAK_SHARE * np.max(energy))), -1, -1):
+        k = _spacing_for(K, n_strong, energy.size - n_strong)
+        if k is not None:
+            weak = np.ones(energy.size, bool)
+            weak[order[:n_strong]] = False
+            return weak, k, float(np.max(energy[weak], initial=0.0) / np.max(energy))
+    return np.zeros(energy.size, bool), None, 0.0
 
 
 def _spacing_for(K: int, n_strong: int, n_weak: int) -> int | None:
@@ -876,16 +887,15 @@ class _Program:
             own = (max(DEFAULT_SUPPORT_S[0], float(np.round(2.0 * np.min(arrival), 3))), DEFAULT_SUPPORT_S[1])
             K = np.arange(max(0, t_peak - int(round(own[0] * fs))), min(n - 1, t_peak + int(round(own[1] * fs))) + 1,
                           r).size  # pulses per actuator
-            weak = _weak_actuators(H[:, ti] * taper[:, None])
-            k = _spacing_for(K, int(np.sum(~weak)), int(np.sum(weak)))
-            if k is None:  # even the strong ones' own supports do not fit: one support, shortened
+            weak, k, share = _weak_actuators(H[:, ti] * taper[:, None], K)
+            if k is None or own[0] >= wanted[0]:  # no fit, or no shorter than one support: one, shortened
                 self.suggested = self._fit_support(own, n_act, r, fs)
             else:
                 self.every[weak], spread = k, True
                 self.suggested = own
                 if k > 1:
-                    thinned = (f"; the {int(np.sum(weak))} actuators whose energy at the target is under "
-                               f"{_WEAK_SHARE:.0%} of the strongest's place a drive pulse every {k * r} samples instead "
+                    thinned = (f"; the {int(np.sum(weak))} actuators weakest at the target (energy at most "
+                               f"{share:.0%} of the strongest's) place a drive pulse every {k * r} samples instead "
                                f"of {r} (SPREAD_VARIABLES={SPREAD_VARIABLES} design variables)")
             wanted = own
         # No silent cap: a default support cut to the program's size is named in the
