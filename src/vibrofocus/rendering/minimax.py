@@ -764,9 +764,13 @@ def minimax_filter(
         Default: from ``H`` (:meth:`ResponseTiming.support_s
         <vibrofocus.rendering.ResponseTiming.support_s>`): twice the latest arrival of an
         actuator's wave at the target before the tap, 5 ms after it, and at least the
-        reference setup's (10 ms, 5 ms); shortened to :data:`MAX_VARIABLES` pulses if
-        needed. A support too short for ``min_fidelity`` is refused naming ``support_s``
-        and a support that reaches it.
+        reference setup's (10 ms, 5 ms). Where that one support over every actuator would
+        exceed :data:`MAX_VARIABLES` pulses and the arrivals differ: per-actuator supports
+        (the earliest arrival's support, each actuator's pulses its arrival less the earliest
+        one's earlier; the weakest actuators' pulses spaced wider within
+        :data:`SPREAD_VARIABLES`: ``size_limit``, ``support_shift``, ``pulse_spacing`` of the
+        report); else shortened to :data:`MAX_VARIABLES` pulses. A support too short for
+        ``min_fidelity`` is refused naming ``support_s`` and a support that reaches it.
     decimation : int, optional
         Spacing of the drive pulses, samples; default the largest that keeps the taper's
         upper edge below the pulses' Nyquist frequency.
@@ -1054,7 +1058,7 @@ class _Program:
         if new.size:
             p, t = self.quiet[new[:, 0]], new[:, 1]
             # Actuator a's pulses sit at delays - shifts[a].
-            lags = (t[:, None, None] - self.delays[None, None, :] + self.shifts[None, :, None]) % self.n  # (N, n_act, K)
+            lags = (t[:, None, None] - self.delays[None, None, :] + self.shifts[None, :, None]) % self.n  # N, n_act, K
             rows = self.g[p[:, None, None], np.arange(self.n_act)[None, :, None], lags]  # (N, n_act, K)
             rows = (rows @ self.basis).reshape(len(p), -1) if self.uniform else rows.reshape(len(p), -1) @ self.big
             self.A = np.vstack([self.A, rows])
