@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("cvxopt")
 
 from vibrofocus.errors import InfeasibleDesignError  # noqa: E402
-from vibrofocus.rendering import minimax, minimax_filter  # noqa: E402
+from vibrofocus.rendering import minimax, minimax_filter, response_timing  # noqa: E402
 from vibrofocus.rendering.minimax import _Program, _solve_cone  # noqa: E402
 
 FS, N, BAND = 2000.0, 256, (20.0, 300.0)
@@ -42,7 +42,7 @@ def full_program(H, targets, min_fidelity, max_drive=None, margin=1e-3):
     D = dcap = None
     if max_drive is not None:
         p._add_drive_rows(np.arange(N))
-        D, dcap = np.kron(np.eye(p.n_act), p.D), max_drive / p.u_scale
+        D, dcap = p._per_actuator(p.D).toarray(), max_drive / p.u_scale
     u, value, status, _ = _solve_cone(p.A, p.b, p.Lt, cap, D, dcap)
     assert status == "optimal"
     return value * p.d_norm
@@ -146,7 +146,7 @@ def test_the_program_on_the_rows_span_has_the_full_programs_optimum(limit):
         u, _, _, _ = _solve_cone(rows, p.b, p.Lt, cap, None, None)
         p.D, p.drive_rows = p.D[:0], p.drive_rows[:0]  # a few drive rows of its own
         p._add_drive_rows(np.arange(0, N, 16))
-        D = np.kron(np.eye(p.n_act), p.D)
+        D = p._per_actuator(p.D).toarray()
         dcap = limit * float(np.max(np.abs(D @ u)))
     n_rows = len(rows) + (0 if D is None else len(D))
     assert n_rows + 1 < p.Lt.shape[0] and p.N0.shape[1] == 0  # the span is smaller
@@ -205,8 +205,7 @@ def test_the_least_drive_program_lists_every_binding_drive_sample_at_once(monkey
     H, targets = medium(seed=3), tap()
     p = _Program(H, targets, FS, band=BAND, quiet=None, taper_octaves=0.5, support_s=SUPPORT, stride=32,
                  ir_energy_tol=1e-4, decimation=None)
-    rows = np.stack([np.roll(p.pulse, k) for k in p.delays], axis=1) @ p.basis  # every sample, (N, m)
-    whole = minimax._PerActuator(rows, p.n_act)
+    whole = p._per_actuator(np.stack([np.roll(p.pulse, k) for k in p.delays], axis=1))  # every sample
     cap = 1 / (0.9 + 1e-3)
     _, value, status, _ = _solve_cone(whole, p.b, p.Lt, cap, None, None)
     assert status == "optimal"
@@ -219,12 +218,15 @@ def test_the_least_drive_program_lists_every_binding_drive_sample_at_once(monkey
 
 
 def test_the_row_operator_is_the_dense_programs_g():
-    """The structured solver's G (products by blocks: a drive row touches one actuator) gives
-    the dense G's products, both ways."""
+    """The structured solver's G (products by blocks: a drive row touches one actuator, in its
+    own basis: actuators 0 and 2 with 4 coefficients, 1 with 2) gives the dense G's products,
+    both ways."""
     rng = np.random.default_rng(5)
-    n_act, m, nv = 3, 4, 12
+    K, nv = 6, 10
     peak, E = rng.standard_normal((7, nv)), rng.standard_normal((7, 2))
-    drive = minimax._PerActuator(rng.standard_normal((5, m)), n_act)
+    groups = [(np.array([0, 2]), rng.standard_normal((K, 4)), np.array([0, 6])),
+              (np.array([1]), rng.standard_normal((K, 2)), np.array([4]))]
+    drive = minimax._PerActuator(rng.standard_normal((5, K)), groups, nv)
     cones = [rng.standard_normal((6, nv + 2))]
     pairs = [(peak, E), (drive, np.zeros((drive.shape[0], 2)))]
     G = np.vstack([np.hstack([(M.toarray() if hasattr(M, "toarray") else M) * s, Ep])
@@ -233,3 +235,47 @@ def test_the_row_operator_is_the_dense_programs_g():
     x, z = rng.standard_normal(nv + 2), rng.standard_normal(G.shape[0])
     np.testing.assert_allclose(op.dot(x), G @ x, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(op.tdot(z), G.T @ z, rtol=1e-12, atol=1e-12)
+
+
+def far_medium(delays_s=(0.001, 0.001, 0.010, 0.014, 0.018, 0.022), n_points=10, seed=6):
+    """A medium whose actuators' waves reach the points after their own delay (s, and up to
+    1.5 ms more by point): decaying 150 Hz wavelets of random amplitude and phase."""
+    rng = np.random.default_rng(seed)
+    lag = np.arange(N)[None, None] - np.round((np.asarray(delays_s)[None, :, None]
+                                                + rng.uniform(0, 1.5e-3, (n_points, len(delays_s), 1))) * FS)
+    amp, phase = rng.uniform(0.5, 1.5, (2, n_points, len(delays_s), 1)) * np.array([1, np.pi])[:, None, None, None]
+    h = np.where(lag >= 0, amp * np.exp(-np.clip(lag, 0, None) / 8.0) * np.cos(2 * np.pi * 150 * lag / FS + phase), 0)
+    return np.fft.rfft(h, N, axis=-1).transpose(2, 0, 1)
+
+
+def test_per_actuator_supports_reach_the_far_actuators_that_a_cut_support_leaves_out(monkeypatch):
+    """Where one default support from the latest arrival exceeds MAX_VARIABLES, each actuator's
+    pulses sit its own arrival earlier (named in the report) instead of one support cut short
+    of the far actuators' arrival: the design's peak contrast beats the cut support's."""
+    H, targets = far_medium(), tap(n_points=10)
+    monkeypatch.setattr(minimax, "MAX_VARIABLES", 120)  # 20 pulses per actuator: a 19 ms common support
+    _, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, full_output=True)
+    assert "per-actuator supports" in rep.size_limit and "MAX_VARIABLES=120" in rep.size_limit
+    arrival = response_timing(H, FS, band=BAND).arrival_s[0]
+    np.testing.assert_array_equal(rep.support_shift, np.round((arrival - arrival.min()) * FS))  # its arrival earlier
+    assert rep.support_shift[-1] > rep.support_shift[0]
+    assert rep.n_variables <= 120 and np.all(rep.pulse_spacing == rep.decimation)
+    cut = minimax._Program._fit_support((0.044, 0.005), 6, rep.decimation, FS)  # the old default
+    assert cut[0] < 0.014  # shorter than the far actuators' arrival
+    _, old = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, support_s=cut, full_output=True)
+    assert rep.fidelity >= 0.9 - 1e-3
+    assert rep.peak_contrast_db > old.peak_contrast_db + 1.0
+
+
+def test_weak_actuators_pulses_spaced_wider_are_named(monkeypatch):
+    """Over SPREAD_VARIABLES the weak actuators (under 10 % of the strongest's energy at the
+    target) space their pulses wider: in the report's size limit and pulse spacing."""
+    H, targets = far_medium(), tap(n_points=10)
+    H[:, :, 2:] *= 0.1  # the four far actuators weak
+    monkeypatch.setattr(minimax, "MAX_VARIABLES", 120)
+    monkeypatch.setattr(minimax, "SPREAD_VARIABLES", 64)
+    _, rep = minimax_filter(H, targets, FS, band=BAND, min_fidelity=0.9, full_output=True)
+    assert rep.n_variables <= 64
+    assert np.all(rep.pulse_spacing[:2] == rep.decimation) and np.all(rep.pulse_spacing[2:] > rep.decimation)
+    assert "SPREAD_VARIABLES=64" in rep.size_limit and "4 actuators" in rep.size_limit
+    assert rep.fidelity >= 0.9 - 1e-3

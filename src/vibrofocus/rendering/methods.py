@@ -359,8 +359,8 @@ class Minimax(Method):
         One solve: where no drive within the budget reaches the fidelity at this tap, the
         design takes twice the least drive that does and warns (``UserWarning``) with the
         cost at ``limit_v``: the tap's peak at the target (um) and the peak contrast,
-        beside the inverse filter's. A default support cut by the program's size limit
-        also warns.
+        beside the inverse filter's. A default support that the program's size limit cut,
+        or made per-actuator supports, also warns.
     robust : float, optional
         Designing from a measured ``H`` (one with a coherence): the quiet peak is bounded
         over every ``H`` within ``robust`` standard errors of the measurement (default 1;

@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 from scipy.interpolate import interp1d
+from scipy.linalg import block_diag
 
 from .._validation import as_array, check_in_range, check_positive
 from ..defaults import BAND_HZ
@@ -51,7 +52,7 @@ from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 from .inverse import _prepare_design, predict_response, scale_to_peak
 from .metrics import zero_lag_fidelity
-from .timing import response_timing
+from .timing import DEFAULT_SUPPORT_S, response_timing
 
 __all__ = ["minimax_filter", "minimax_frontier", "coherence_radius", "MinimaxReport", "MinimaxFrontier", "MINIMAX_EXTRA"]
 
@@ -93,6 +94,13 @@ _GRID_ROWS = 64
 #: samples lay: up to 2.3 times it), so that a limit binding over most of the support is
 #: listed whole in the first round instead of some 20 samples a round.
 _DRIVE_REACH = 3
+#: Most design variables of a program with per-actuator supports (a default support that
+#: one common support from the latest arrival would not fit in :data:`MAX_VARIABLES`): the
+#: weak actuators (:data:`_WEAK_SHARE`) place their pulses further apart to stay within it.
+SPREAD_VARIABLES = 384
+#: An actuator whose band-limited energy at the target is under this share of the
+#: strongest's is weak: with per-actuator supports, its pulses may be spaced further apart.
+_WEAK_SHARE = 0.1
 #: With ``on_max_drive="least"``, the design's drive limit over the least drive that reaches
 #: the fidelity: at the least drive itself the drives are pinned by the fidelity and the
 #: quiet peak cannot fall (1.3 dB against 5.3 dB at 1.02x on the reference medium).
@@ -169,7 +177,16 @@ class MinimaxReport:
         ``max_drive`` could not reach the fidelity at this tap amplitude.
     size_limit : str or None
         A size limit that changed the program, in words (the default support shortened
-        to :data:`MAX_VARIABLES` design variables); ``None`` when none did.
+        to :data:`MAX_VARIABLES` design variables, or the weak actuators' pulses spaced
+        further apart to stay within :data:`SPREAD_VARIABLES`); ``None`` when none did.
+    support_shift : ndarray of int, shape (n_actuators,)
+        How many samples earlier than ``support`` each actuator's pulses sit: all zero with
+        one common support; with per-actuator supports (a default support from the latest
+        arrival that would not fit :data:`MAX_VARIABLES`), each actuator's arrival at the
+        target less the earliest one's.
+    pulse_spacing : ndarray of int, shape (n_actuators,)
+        Spacing of each actuator's pulses, samples (``decimation``, or a multiple of it for
+        the weak actuators of a program with per-actuator supports).
     """
 
     predicted: np.ndarray
@@ -194,6 +211,8 @@ class MinimaxReport:
     least_drive: float | None = None
     drive_limited: bool = False
     size_limit: str | None = None
+    support_shift: np.ndarray | None = None
+    pulse_spacing: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -220,6 +239,34 @@ class MinimaxFrontier:
     peak_contrast_db: np.ndarray
     quiet_peak: np.ndarray
     seconds: float
+
+
+def _weak_actuators(h: np.ndarray, K: int) -> tuple[np.ndarray, int | None, float]:
+    """Which actuators space their pulses wider, by how many pulses, and the largest share of
+    the strongest's energy among them. ``h`` (n_freqs, n_act): ``T H`` at the target; ``K``:
+    pulses per actuator. The weak are those under :data:`_WEAK_SHARE` of the strongest's
+    band-limited energy at the target; where the others' supports alone do not fit
+    :data:`SPREAD_VARIABLES`, the next weakest join them until they do. ``None``: not even
+    one pulse each fits."""
+    energy = np.sum(np.abs(h) ** 2, axis=0)
+    order = np.argsort(energy)[::-1]
+    for n_strong in range(int(np.sum(energy >= _WEAK_SHARE * np.max(energy))), -1, -1):
+        k = _spacing_for(K, n_strong, energy.size - n_strong)
+        if k is not None:
+            weak = np.ones(energy.size, bool)
+            weak[order[:n_strong]] = False
+            return weak, k, float(np.max(energy[weak], initial=0.0) / np.max(energy))
+    return np.zeros(energy.size, bool), None, 0.0
+
+
+def _spacing_for(K: int, n_strong: int, n_weak: int) -> int | None:
+    """The least spacing ``k`` (in pulses) of the weak actuators' pulses that keeps ``n_strong``
+    actuators of ``K`` pulses and ``n_weak`` of ``ceil(K / k)`` within :data:`SPREAD_VARIABLES` (and
+    :data:`MAX_VARIABLES`; 1: every pulse); ``None`` when not even one pulse each fits."""
+    for k in range(1, K + 1):
+        if n_strong * K + n_weak * -(-K // k) <= min(SPREAD_VARIABLES, MAX_VARIABLES):
+            return k
+    return None
 
 
 def _local_peaks(y: np.ndarray, floor: float, limit: int) -> np.ndarray:
@@ -279,22 +326,37 @@ def _row_radius(h_radius: Any, shape: tuple[int, ...], taper: np.ndarray) -> np.
 
 
 class _PerActuator:
-    """The drive rows of every actuator, ``kron(eye(n_act), D)``, kept as its one block
-    ``D`` (samples x pulses): each row touches one actuator's coefficients."""
+    """The drive rows of every actuator, block-diagonal: actuator ``a``'s rows are ``D B_a``
+    (``D`` the listed samples' pulse amplitudes, samples x pulses; ``B_a`` its pulses'
+    basis), so each row touches one actuator's coefficients. Actuators with one pulse
+    spacing share one block: ``groups`` lists (actuators, ``B``, each one's first
+    coefficient)."""
 
-    def __init__(self, D: np.ndarray, n_act: int) -> None:
-        self.D, self.n_act = D, n_act
-        self.shape = (n_act * D.shape[0], n_act * D.shape[1])
+    def __init__(self, D: np.ndarray, groups: list, nv: int) -> None:
+        self.rows = D.shape[0]
+        self.blocks = [(acts, D @ B, starts) for acts, B, starts in groups]
+        self.n_act = sum(len(acts) for acts, _, _ in groups)
+        self.shape = (self.n_act * self.rows, nv)
 
     def toarray(self) -> np.ndarray:
-        return np.kron(np.eye(self.n_act), self.D)
+        out = np.zeros(self.shape)
+        for acts, Dg, starts in self.blocks:
+            for a, st in zip(acts, starts):
+                out[a * self.rows:(a + 1) * self.rows, st:st + Dg.shape[1]] = Dg
+        return out
 
     def __matmul__(self, u: np.ndarray) -> np.ndarray:
-        return (u.reshape(self.n_act, -1) @ self.D.T).reshape(-1)
+        out = np.zeros((self.n_act, self.rows))
+        for acts, Dg, starts in self.blocks:
+            out[acts] = u[starts[:, None] + np.arange(Dg.shape[1])] @ Dg.T
+        return out.reshape(-1)
 
     def rmatvec(self, w: np.ndarray) -> np.ndarray:
         """``M' w``, without the dense ``M``."""
-        return (w.reshape(self.n_act, -1) @ self.D).reshape(-1)
+        W, res = w.reshape(self.n_act, self.rows), np.zeros(self.shape[1])
+        for acts, Dg, starts in self.blocks:
+            res[starts[:, None] + np.arange(Dg.shape[1])] = W[acts] @ Dg
+        return res
 
 
 class _RowOperator:
@@ -373,12 +435,15 @@ def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray)
         for (M, E), o in zip(pairs, offsets):
             wp, wm = w[o:o + len(E)], w[o + len(E):o + 2 * len(E)]
             ws, wd = wp + wm, wp - wm
-            if isinstance(M, _PerActuator):  # block-diagonal: one (m, m) block per actuator
-                n_act, m = M.n_act, M.D.shape[1]
-                blocks = (M.D.T[None] * ws.reshape(n_act, 1, -1)) @ M.D
-                for a in range(n_act):
-                    S[a * m:(a + 1) * m, a * m:(a + 1) * m] += blocks[a]
-                S[:nv, nv:] += (M.D.T[None] @ (wd[:, None] * E).reshape(n_act, -1, E.shape[1])).reshape(nv, -1)
+            if isinstance(M, _PerActuator):  # block-diagonal: one (m_a, m_a) block per actuator
+                wsr, ew = ws.reshape(M.n_act, 1, -1), (wd[:, None] * E).reshape(M.n_act, -1, E.shape[1])
+                for acts, Dg, starts in M.blocks:
+                    m = Dg.shape[1]
+                    blocks = (Dg.T[None] * wsr[acts]) @ Dg
+                    cross = Dg.T[None] @ ew[acts]
+                    for i, st in enumerate(starts):
+                        S[st:st + m, st:st + m] += blocks[i]
+                        S[st:st + m, nv:] += cross[i]
             else:
                 S[:nv, :nv] += (M.T * ws) @ M
                 S[:nv, nv:] += M.T @ (wd[:, None] * E)
@@ -555,26 +620,56 @@ def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarra
     return u, value, status, iterations
 
 
-def _target_norm(xc: np.ndarray, C: np.ndarray, taper: np.ndarray, delays: np.ndarray,
-                 n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
-    """The target's part of the program on pulses at ``delays``: the basis (K, m), ``b``
-    (projection on the waveform), ``Lt`` (``||Lt u||`` = the target's norm), the best
-    fidelity's coefficients and that fidelity (what the support can reach).
-
-    ``xc`` (n_act, n): cross-correlations of the target's responses with the waveform;
-    ``C`` (n_act, n_act, n): their auto- and cross-correlations."""
-    n_act = xc.shape[0]
-    lag = (delays[:, None] - delays[None, :]) % n  # t_k - t_l
-    # Reduced basis: the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
-    # 2 x bandwidth x support well-conditioned directions (the discrete prolate sequences
-    # of the band); the drives are combinations of those, with unit energy each.
+def _pulse_basis(taper: np.ndarray, delays: np.ndarray, n: int, every: int = 1) -> np.ndarray:
+    """The basis (K, m) of the drives made of the pulses at every ``every``-th of ``delays``
+    (K): the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
+    2 x bandwidth x support well-conditioned directions (the discrete prolate sequences of
+    the band); the drives are combinations of those, with unit energy each. Rows of the
+    pulses left out are zero."""
+    sub = np.arange(0, delays.size, int(every))
+    lag = (delays[sub, None] - delays[None, sub]) % n
     wp, Vp = np.linalg.eigh(np.fft.irfft(taper**2, n)[lag])
     kept = wp > wp[-1] * 1e-12
-    basis = Vp[:, kept] / np.sqrt(wp[kept])  # (K, m)
-    m = basis.shape[1]
-    b = (xc[:, delays % n] @ basis).reshape(-1)
-    # Q[(a,k),(b,l)] = C_ab(t_k - t_l), in the basis.
-    Q = np.einsum("km,abkl,ln->ambn", basis, C[:, :, lag], basis, optimize=True).reshape(n_act * m, n_act * m)
+    basis = np.zeros((delays.size, int(np.sum(kept))))
+    basis[sub] = Vp[:, kept] / np.sqrt(wp[kept])
+    return basis
+
+
+def _target_norm(xc: np.ndarray, C: np.ndarray, taper: np.ndarray, delays: np.ndarray,
+                 n: int, shifts: np.ndarray | None = None, every: np.ndarray | None = None
+                 ) -> tuple[list, np.ndarray, np.ndarray, np.ndarray, float, np.ndarray, np.ndarray]:
+    """The target's part of the program on pulses at ``delays``: each actuator's basis
+    (K, m_a), ``b`` (projection on the waveform), ``Lt`` (``||Lt u||`` = the target's norm),
+    the best fidelity's coefficients and that fidelity (what the support can reach), and
+    the target's coordinates ``Linv``, ``N0`` (``u = Linv v + N0 z``).
+
+    ``xc`` (n_act, n): cross-correlations of the target's responses with the waveform;
+    ``C`` (n_act, n_act, n): their auto- and cross-correlations; ``shifts`` (n_act,): actuator
+    ``a``'s pulses sit at ``delays - shifts[a]`` (default none: one support for all); ``every``
+    (n_act,): actuator ``a`` uses every ``every[a]``-th pulse (default all). The pulses' Gram
+    depends only on the lags inside one actuator's support, so actuators with one spacing
+    share one basis."""
+    n_act, K = xc.shape[0], delays.size
+    s = np.zeros(n_act, int) if shifts is None else np.asarray(shifts, int)
+    e = np.ones(n_act, int) if every is None else np.asarray(every, int)
+    lag = (delays[:, None] - delays[None, :]) % n  # t_k - t_l
+    by_spacing = {int(k): _pulse_basis(taper, delays, n, int(k)) for k in np.unique(e)}
+    bases = [by_spacing[int(k)] for k in e]
+    # Q[(a,k),(b,l)] = C_ab(t_k - s_a - t_l + s_b), in the bases.
+    lags = (lag[None, None] - (s[:, None] - s[None, :])[:, :, None, None]) % n  # (n_act, n_act, K, K)
+    Cl = np.take_along_axis(C, lags.reshape(n_act, n_act, -1), axis=-1).reshape(lags.shape)
+    xk = xc[np.arange(n_act)[:, None], (delays[None, :] - s[:, None]) % n]  # (n_act, K)
+    if len(by_spacing) == 1:  # one basis for all
+        basis = bases[0]
+        m = basis.shape[1]
+        b = (xk @ basis).reshape(-1)
+        Q = np.einsum("km,abkl,ln->ambn", basis, Cl, basis, optimize=True).reshape(n_act * m, n_act * m)
+    else:
+        import scipy.linalg as sla
+
+        big = sla.block_diag(*bases)  # (n_act K, nv)
+        b = big.T @ xk.reshape(-1)
+        Q = big.T @ (Cl.transpose(0, 2, 1, 3).reshape(n_act * K, n_act * K) @ big)
     w, V = np.linalg.eigh(0.5 * (Q + Q.T))
     keep = w > w[-1] * 1e-12
     Lt = np.sqrt(w[keep])[:, None] * V[:, keep].T  # |y_target|^2 = ||Lt u||^2
@@ -584,7 +679,7 @@ def _target_norm(xc: np.ndarray, C: np.ndarray, taper: np.ndarray, delays: np.nd
     # u = Linv v + N0 z: v the target's coordinates (||v|| = ||Lt u||), z the directions the
     # target does not see (none unless its Gram is rank-deficient).
     Linv = V[:, keep] / np.sqrt(w[keep])
-    return basis, b, Lt, u_best, 1 / float(np.linalg.norm(Lt @ u_best)), Linv, V[:, ~keep]
+    return bases, b, Lt, u_best, 1 / float(np.linalg.norm(Lt @ u_best)), Linv, V[:, ~keep]
 
 
 def _check_support(support_s: Any) -> tuple[float, float]:
@@ -669,9 +764,13 @@ def minimax_filter(
         Default: from ``H`` (:meth:`ResponseTiming.support_s
         <vibrofocus.rendering.ResponseTiming.support_s>`): twice the latest arrival of an
         actuator's wave at the target before the tap, 5 ms after it, and at least the
-        reference setup's (10 ms, 5 ms); shortened to :data:`MAX_VARIABLES` pulses if
-        needed. A support too short for ``min_fidelity`` is refused naming ``support_s``
-        and a support that reaches it.
+        reference setup's (10 ms, 5 ms). Where that one support over every actuator would
+        exceed :data:`MAX_VARIABLES` pulses and the arrivals differ: per-actuator supports
+        (the earliest arrival's support, each actuator's pulses its arrival less the earliest
+        one's earlier; the weakest actuators' pulses spaced wider within
+        :data:`SPREAD_VARIABLES`: ``size_limit``, ``support_shift``, ``pulse_spacing`` of the
+        report); else shortened to :data:`MAX_VARIABLES` pulses. A support too short for
+        ``min_fidelity`` is refused naming ``support_s`` and a support that reaches it.
     decimation : int, optional
         Spacing of the drive pulses, samples; default the largest that keeps the taper's
         upper edge below the pulses' Nyquist frequency.
@@ -778,21 +877,53 @@ class _Program:
         wanted = tuple(float(x) for x in self.timing.support_s(ti))
         self.suggested = self._fit_support(wanted, n_act, r, fs)
         self.given = support_s is not None
+        # Per-actuator supports: where one common support from the latest arrival would not
+        # fit the program (many actuators, far ones), each actuator's pulses sit its own
+        # arrival earlier than the nearest's, on a support from the earliest arrival: every
+        # wave reaches the target around the tap, and the program grows with the actuators
+        # times one such support, not the latest arrival. Elsewhere: one support, as before.
+        arrival = self.timing.arrival_s[ti]
+        self.shifts, self.every, thinned, spread = np.zeros(n_act, int), np.ones(n_act, int), "", False
+        common = wanted
+        if not self.given and self.suggested[0] < wanted[0] - 1e-12:
+            self.shifts = np.round((arrival - np.min(arrival)) * fs).astype(int)
+            # The rule of ResponseTiming.support_s, from the earliest arrival.
+            own = (max(DEFAULT_SUPPORT_S[0], float(np.round(2.0 * np.min(arrival), 3))), DEFAULT_SUPPORT_S[1])
+            K = np.arange(max(0, t_peak - int(round(own[0] * fs))), min(n - 1, t_peak + int(round(own[1] * fs))) + 1,
+                          r).size  # pulses per actuator
+            weak, k, share = _weak_actuators(H[:, ti] * taper[:, None], K)
+            if k is None or own[0] >= wanted[0]:  # no fit, or no shorter than one support: one, shortened
+                self.suggested = self._fit_support(own, n_act, r, fs)
+            else:
+                self.every[weak], spread = k, True
+                self.suggested = own
+                if k > 1:
+                    thinned = (f"; the {int(np.sum(weak))} actuators weakest at the target (energy at most "
+                               f"{share:.0%} of the strongest's) place a drive pulse every {k * r} samples instead "
+                               f"of {r} (SPREAD_VARIABLES={SPREAD_VARIABLES} design variables)")
+            wanted = own
         # No silent cap: a default support cut to the program's size is named in the
         # report and in every refusal.
         self.size_limit = None
         if not self.given and self.suggested[0] < wanted[0] - 1e-12:
             self.size_limit = (
-                f"the default support_s=({wanted[0]:.4g}, {wanted[1]:.4g}) s (from H's arrival times) was shortened "
+                f"the default support_s=({wanted[0]:.4g}, {wanted[1]:.4g}) s (from H's arrival times"
+                f"{', per actuator' if self.shifts.any() else ''}) was shortened "
                 f"to ({self.suggested[0]:g}, {self.suggested[1]:g}) s by MAX_VARIABLES={MAX_VARIABLES} design "
                 f"variables over {n_act} actuators")
+        elif spread:
+            self.size_limit = (
+                f"one default support_s=({common[0]:.4g}, {common[1]:.4g}) s for all {n_act} actuators would exceed "
+                f"MAX_VARIABLES={MAX_VARIABLES} design variables: per-actuator supports of ({own[0]:g}, {own[1]:g}) s "
+                f"instead, each actuator's pulses its arrival at the target earlier than the nearest's (up to "
+                f"{np.max(self.shifts) / fs * 1e3:.3g} ms){thinned}")
         asked_support = support_s
         support_s = self.suggested if support_s is None else _check_support(support_s)
         pre, post = (int(round(s * fs)) for s in support_s)
         first, last = max(0, t_peak - pre), min(n - 1, t_peak + post)
         delays = np.arange(first, last + 1, r)
         K = delays.size
-        if K * n_act > MAX_VARIABLES:
+        if not spread and K * n_act > MAX_VARIABLES:
             longest = MAX_VARIABLES // n_act * r / fs
             shown = tuple(support_s if asked_support is None else asked_support)
             raise ValidationError(
@@ -819,9 +950,17 @@ class _Program:
         xc = np.fft.irfft(np.conj(Gt) * np.fft.rfft(dn)[None], n, axis=-1)  # sum_t g_a(t) d(t + tau)
         C = np.fft.irfft(np.conj(Gt)[:, None] * Gt[None, :], n, axis=-1)  # C_ab(tau)
         self._xc, self._C, self._t_peak = xc, C, t_peak
-        basis, self.b, self.Lt, self.u_best, self.best_fidelity, self.Linv, self.N0 = _target_norm(
-            xc, C, taper, delays, n)
-        m = basis.shape[1]
+        bases, self.b, self.Lt, self.u_best, self.best_fidelity, self.Linv, self.N0 = _target_norm(
+            xc, C, taper, delays, n, self.shifts, self.every)
+        sizes = np.array([B.shape[1] for B in bases])
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        # Actuators with one pulse spacing share one basis (and one block of drive rows).
+        self.groups = [(np.flatnonzero(self.every == k), bases[int(np.flatnonzero(self.every == k)[0])],
+                        starts[self.every == k]) for k in np.unique(self.every)]
+        self.uniform = len(self.groups) == 1
+        basis, m = bases[0], int(sizes[0])
+        self.big = None if self.uniform else block_diag(*bases)
+        nv = int(np.sum(sizes))
         self.support_s = (float(support_s[0]), float(support_s[1]))
         self.H, self.n, self.fs, self.taper, self.g, self.gscale = H, n, fs, taper, g, gscale
         self.ti, self.quiet, self.n_act, self.m, self.basis, self.delays = ti, quiet_idx, n_act, m, basis, delays
@@ -841,24 +980,28 @@ class _Program:
                 "give the radius in the unit of H (m/V), e.g. coherence_radius(H, coherence)")
         self.u_scale = d_norm / gscale  # drives = (u * u_scale) pulses
 
-        # Warm start: the samples where the pseudo-inverse's quiet response peaks, and a coarse grid.
+        # Warm start: the samples where the pseudo-inverse's quiet response peaks, and a coarse grid
+        # (with per-actuator supports, a many-actuator program, not the pseudo-inverse: its
+        # factorization over every bin cost as much as the design).
         from .inverse import inverse_filter
 
-        pinv = inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves, check_wraparound=False)
-        y0 = predict_response(H[:, quiet_idx], pinv)
+        y0 = np.zeros((len(quiet_idx), n)) if self.shifts.any() else predict_response(
+            H[:, quiet_idx], inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves,
+                                            check_wraparound=False))
         # The coarse grid has at most _GRID_ROWS samples per point, whatever the window (the
         # rounds add what it misses), and the best-fidelity drives' quiet peaks join it.
-        span = min(n, last + ir_taps) - first
-        grid = np.arange(first, first + span, max(stride, -(-span // _GRID_ROWS)))
+        start = first - int(np.max(self.shifts))
+        span = min(n, last + ir_taps) - start
+        grid = np.arange(start, start + span, max(stride, -(-span // _GRID_ROWS))) % n
         y1 = predict_response(H[:, quiet_idx], self.drives_of(self.u_best))
         pairs = [(j, int(t)) for y in (y0, y1) for j in range(len(quiet_idx))
                  for t in _local_peaks(y[j], 0.3 * np.max(np.abs(y[j])), 10)]
         pairs += [(j, int(t)) for j in range(len(quiet_idx)) for t in grid]
         self.listed = np.zeros((0, 2), int)
-        self.A = np.zeros((0, n_act * m))
+        self.A = np.zeros((0, nv))
         self._add_pairs(pairs)
         self.drive_rows = np.zeros(0, int)
-        self.D = np.zeros((0, m))
+        self.D = np.zeros((0, K))
         # Every drive sample the pulses reach (their sum, not one pulse: three times the
         # pulse's 1 % half-width past the support): a drive limit that binds does so over
         # most of them, and the per-actuator rows cost the structured KKT solver little.
@@ -881,7 +1024,7 @@ class _Program:
         pre, post = (int(round(s * self.fs)) for s in support_s)
         first, last = max(0, self._t_peak - pre), min(self.n - 1, self._t_peak + post)
         delays = np.arange(first, last + 1, self.decimation)
-        return _target_norm(self._xc, self._C, self.taper, delays, self.n)[4]
+        return _target_norm(self._xc, self._C, self.taper, delays, self.n, self.shifts, self.every)[4]
 
     def _support_advice(self, min_fidelity: float, asked: float) -> str:
         """Why the asked fidelity is out of reach, naming the parameter to change and a
@@ -914,27 +1057,39 @@ class _Program:
         new = np.array(sorted(set(map(tuple, pairs)) - set(map(tuple, self.listed.tolist()))), int).reshape(-1, 2)
         if new.size:
             p, t = self.quiet[new[:, 0]], new[:, 1]
-            lags = (t[:, None] - self.delays[None, :]) % self.n  # (N, K)
-            rows = self.g[p[:, None, None], np.arange(self.n_act)[None, :, None], lags[:, None, :]]  # (N, n_act, K)
-            self.A = np.vstack([self.A, (rows @ self.basis).reshape(len(p), -1)])
+            # Actuator a's pulses sit at delays - shifts[a].
+            lags = (t[:, None, None] - self.delays[None, None, :] + self.shifts[None, :, None]) % self.n  # N, n_act, K
+            rows = self.g[p[:, None, None], np.arange(self.n_act)[None, :, None], lags]  # (N, n_act, K)
+            rows = (rows @ self.basis).reshape(len(p), -1) if self.uniform else rows.reshape(len(p), -1) @ self.big
+            self.A = np.vstack([self.A, rows])
             self.listed = np.vstack([self.listed, new])
         return len(new)
 
+    def _drive_samples(self, x: np.ndarray, floor: float, limit: int) -> list:
+        """The local peaks of each actuator's drive ``x`` (n_act, n) above ``floor`` (at most
+        ``limit`` each), as the samples of the common support the drive rows list (actuator
+        ``a``'s sample ``t`` is the common ``t + shifts[a]``)."""
+        return [(int(t) + int(self.shifts[a])) % self.n for a in range(self.n_act)
+                for t in _local_peaks(x[a], floor, limit)]
+
     def _add_drive_rows(self, samples: Any) -> int:
-        """Add the drive-limit constraints at these samples not listed yet; how many."""
+        """Add the drive-limit constraints at these samples (of the common support: actuator
+        ``a``'s drive ``shifts[a]`` earlier) not listed yet; how many."""
         new = np.setdiff1d(np.asarray(samples, int), self.drive_rows)
         if new.size:
-            self.D = np.vstack([self.D, self.pulse[(new[:, None] - self.delays[None, :]) % self.n] @ self.basis])
+            self.D = np.vstack([self.D, self.pulse[(new[:, None] - self.delays[None, :]) % self.n]])
             self.drive_rows = np.concatenate([self.drive_rows, new])
         return len(new)
 
     def _per_actuator(self, D: np.ndarray) -> "_PerActuator":
-        """Drive rows (samples x pulses) for every actuator: ``kron(I, D)``, kept as blocks."""
-        return _PerActuator(D, self.n_act)
+        """Drive rows (samples x pulses) for every actuator, in each one's basis, kept as blocks."""
+        return _PerActuator(D, self.groups, self.A.shape[1])
 
     def drives_of(self, u: np.ndarray) -> np.ndarray:
         train = np.zeros((self.n_act, self.n))
-        train[:, self.delays] = u.reshape(self.n_act, self.m) @ self.basis.T
+        amplitudes = u.reshape(self.n_act, self.m) @ self.basis.T if self.uniform else \
+            (self.big @ u).reshape(self.n_act, -1)
+        train[np.arange(self.n_act)[:, None], (self.delays[None, :] - self.shifts[:, None]) % self.n] = amplitudes
         return np.fft.irfft(np.fft.rfft(train, axis=-1) * self.taper, self.n, axis=-1) * self.u_scale
 
     def least_drive(self, min_fidelity: float, *, tol: float, fidelity_margin: float, max_iter: int) -> float:
@@ -954,7 +1109,7 @@ class _Program:
 
     def _least_drive(self, cap: float, min_fidelity: float, *, tol: float, max_iter: int) -> float:
         x0 = self.drives_of(self.u_best) / self.u_scale
-        self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x0[a], 0.3 * np.max(np.abs(x0)), 10)])
+        self._add_drive_rows(self._drive_samples(x0, 0.3 * np.max(np.abs(x0)), 10))
         value = np.nan
         for _ in range(max_iter):
             found, value, status, _ = _solve_in_span(self._per_actuator(self.D), self.b, self.Lt, self.Linv,
@@ -965,7 +1120,7 @@ class _Program:
                                             f"{self._asked(min_fidelity, None)}")
             x = self.drives_of(found) / self.u_scale
             floor = value * (1 + tol)
-            if self._add_drive_rows([t for a in range(self.n_act) for t in _local_peaks(x[a], floor, 20)]) == 0:
+            if self._add_drive_rows(self._drive_samples(x, floor, 20)) == 0:
                 break
         return float(value * self.u_scale)
 
@@ -1016,8 +1171,8 @@ class _Program:
             if dcap is not None:
                 over = np.abs(x) > max_drive * (1 + tol)
                 violated = violated or bool(over.any())
-                added += self._add_drive_rows([t for a in np.flatnonzero(over.any(axis=1))
-                                               for t in _local_peaks(x[a], max_drive * (1 + tol), 20)])
+                added += self._add_drive_rows(self._drive_samples(np.where(over.any(axis=1)[:, None], x, 0.0),
+                                                                  max_drive * (1 + tol), 20))
             if added == 0 or not violated:
                 break
             # Rows far below the peak leave the program only when its optimum sets a record
@@ -1105,7 +1260,8 @@ class _Program:
             status=str(status), solver="cvxopt.conelp", iterations=it, n_constraints=len(self.listed),
             n_variables=self.A.shape[1], ir_taps=self.ir_taps, ir_energy_left_out=self.left_out,
             ir_tail_energy=self.tail, support=(int(self.delays[0]), int(self.delays[-1])),
-            decimation=self.decimation, least_drive=least, drive_limited=limited, size_limit=self.size_limit)
+            decimation=self.decimation, least_drive=least, drive_limited=limited, size_limit=self.size_limit,
+            support_shift=self.shifts.copy(), pulse_spacing=self.every * self.decimation)
         return drives, report
 
 
