@@ -33,6 +33,9 @@ the same map over the same draws, calling the same functions:
   of the answer's, so it is the ``m`` nearest locations for a ``log J`` in an interval:
   its probability given the place is a difference of normal CDFs of ``log J``, integrated
   along each stretch of constant distance order by Gauss-Legendre (``n_segment`` nodes).
+  On a stretch the ``m`` nearest are one set for each ``m``, so one pass over a law's
+  stretches gives the probability of every selection at once: it is taken once per
+  distinct law (every trial of a stimulus), not per trial.
 
 The test ``tests/simulation/test_likelihood.py`` checks, for every registered hypothesis
 and with unfused and conflict-aware percepts, that the sampler's answer frequencies
@@ -351,49 +354,75 @@ def selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np
     sel = sel[:, ok]
     locs = locs_all[ok]
     n_j = locs.shape[0]
+    if n_j > _MAX_SELECTABLE:
+        raise ValidationError(f"a Study 2 selection among more than {_MAX_SELECTABLE} locations is not covered, "
+                              f"got {n_j}")
     mean, sd, width = _as_queries(law)
-    sel_q = np.repeat(sel, k, axis=0)
-    m = sel_q.sum(axis=1)
-    xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
-    tg, wg = (xg + 1.0) / 2.0, wg / 2.0
-    log_k = np.log(law.kappa)
-    out = np.zeros(mean.shape[0])
-    for s in range(0, mean.shape[0], _CHUNK):
-        sl = slice(s, s + _CHUNK)
-        wu, A, B, edges = _lines(mean[sl], sd[sl], locs, q)
-        dt = np.diff(edges, axis=2)
-        mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
-        inside = sel_q[sl][:, None, None, :]
-        f_mid = A[:, :, None, :] + B[:, None, None, :] * mid[..., None]  # (M, I, S, J)
-        # The selection is the m nearest on this stretch: every selected location nearer
-        # than every other one (the order is constant along a stretch).
-        match = (np.max(np.where(inside, f_mid, -np.inf), axis=3) < np.min(np.where(inside, np.inf, f_mid), axis=3))
-        match &= dt > 0
-        qi, ii, si = np.nonzero(match)
-        if qi.size == 0:
-            continue
-        t = edges[qi, ii, si][:, None] + dt[qi, ii, si][:, None] * tg  # (P, G)
-        v = special.ndtri(np.clip(t, 1e-300, 1.0 - 1e-16))
-        f = A[qi, ii][:, None, :] + B[qi][:, None, :] * v[..., None]  # (P, G, J)
-        ins = sel_q[sl][qi][:, None, :]
-        near = np.min(np.where(ins, f, np.inf), axis=2)
-        two_w2 = 2.0 * width[sl][qi][:, None] ** 2
-        d_m = (np.max(np.where(ins, f, -np.inf), axis=2) - near) / two_w2  # delta of the m-th nearest
-        d_next = (np.min(np.where(ins, np.inf, f), axis=2) - near) / two_w2  # of the (m+1)-th (inf: none)
-        first = (m[sl][qi] == 1)[:, None]
-        hi_x = -log_k - d_m  # the selection is these m when log J is at most hi_x ...
-        lo_x = -log_k - d_next  # ... and above lo_x
-        if law.log_sd > 0:
-            hi = np.where(first, 1.0, special.ndtr(hi_x / law.log_sd))
-            lo = special.ndtr(lo_x / law.log_sd)
-        else:
-            hi = np.where(first | (hi_x >= 0), 1.0, 0.0)
-            lo = np.where(lo_x >= 0, 1.0, 0.0)
-        p_place = np.clip(hi - lo, 0.0, 1.0)
-        contrib = np.sum(p_place * wg, axis=1) * dt[qi, ii, si] * wu[qi, ii]
-        out[s:s + _CHUNK] += np.bincount(qi, contrib, minlength=A.shape[0])
+    # Every trial of one stimulus has the same law: the integral is taken once per distinct
+    # law (place and width), for every selection at once, and each trial reads its own.
+    laws, law_of = np.unique(np.column_stack([mean, sd, width]), axis=0, return_inverse=True)
+    law_of = law_of.reshape(-1)
+    bits = np.int64(1) << np.arange(n_j, dtype=np.int64)
+    sel_key = law_of.astype(np.int64) * (np.int64(1) << n_j) + np.repeat(sel.astype(np.int64) @ bits, k)
+    keys, mass = [], []
+    for s in range(0, laws.shape[0], _CHUNK):
+        key, p = _selection_masses(laws[s:s + _CHUNK], locs, law.kappa, law.log_sd, q)
+        keys.append(key + np.int64(s) * (np.int64(1) << n_j))
+        mass.append(p)
+    uniq, where = np.unique(np.concatenate(keys), return_inverse=True)
+    total = np.bincount(where.reshape(-1), np.concatenate(mass), minlength=uniq.size)
+    pos = np.minimum(np.searchsorted(uniq, sel_key), uniq.size - 1)
+    out = np.where(uniq[pos] == sel_key, total[pos], 0.0)
     probs = np.sum(law.weight * out.reshape(n, k), axis=1)
     return np.where(outside, 0.0, probs)
+
+
+#: Most locations a Study 2 selection is made among (a selection is a bit mask of one int64).
+_MAX_SELECTABLE = 48
+
+
+def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: float,
+                      q: Quadrature) -> tuple[np.ndarray, np.ndarray]:
+    """Probability mass of every selection, per stretch of constant distance order, for each law.
+
+    ``laws``: rows (mean x, mean y, SD, width), m. Along every line of the place's first
+    axis (:func:`_lines`) the distance order is constant on each stretch, so on a stretch
+    the ``m`` nearest locations are one set for each ``m``, and the selection is that set
+    when ``log J`` lies between ``-log kappa - delta_(m+1)`` and ``-log kappa - delta_(m)``
+    (``delta`` the log density ratios to the nearest, from the posterior of SD ``width``);
+    that probability is integrated over the stretch by Gauss-Legendre (``q.n_segment``
+    nodes). Returns, per (law, line, stretch, m), the selection as a bit mask plus the
+    law's row number times ``2**n_locations``, and its mass, both flat.
+    """
+    n_j = locs.shape[0]
+    xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
+    tg, wg = (xg + 1.0) / 2.0, wg / 2.0
+    wu, A, B, edges = _lines(laws[:, :2], laws[:, 2], locs, q)
+    # Locations on one row cross nowhere along a line (edge 1): those stretches are empty.
+    j, k = np.triu_indices(n_j, 1)
+    edges = edges[:, :, :edges.shape[2] - int(np.sum(locs[j, 1] == locs[k, 1]))]
+    dt = np.diff(edges, axis=2)  # (M, I, S)
+    mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
+    order = np.argsort(A[:, :, None, :] + B[:, None, None, :] * mid[..., None], axis=3, kind="stable")  # (M, I, S, J)
+    # Squared distances, nearest first (the order is constant on the stretch), re the nearest's,
+    # as log density ratios: delta = a + b v at the stretch's nodes v.
+    a = np.take_along_axis(np.broadcast_to(A[:, :, None, :], order.shape), order, axis=3)
+    b = np.take_along_axis(np.broadcast_to(B[:, None, None, :], order.shape), order, axis=3)
+    two_w2 = 2.0 * laws[:, 3, None, None, None] ** 2
+    a = (a - a[..., :1]) / two_w2
+    b = (b - b[..., :1]) / two_w2
+    v = special.ndtri(np.clip(edges[:, :, :-1, None] + dt[..., None] * tg, 1e-300, 1.0 - 1e-16))  # (M, I, S, G)
+    # The m nearest are selected when log J is at most x_m = -log kappa - delta_m, and the
+    # (m + 1)-th is not: above x_(m+1) (none beyond the last location).
+    x = (-np.log(kappa) - a[..., None, 1:]) - b[..., None, 1:] * v[..., None]  # (M, I, S, G, J - 1)
+    below = special.ndtr(x / log_sd) if log_sd > 0 else np.where(x >= 0, 1.0, 0.0)
+    below = np.concatenate([np.ones(below.shape[:-1] + (1,)), below, np.zeros(below.shape[:-1] + (1,))], axis=-1)
+    p = np.maximum(below[..., :-1] - below[..., 1:], 0.0)  # (M, I, S, G, J): the m nearest, at [..., m - 1]
+    mass = np.einsum("misgj,g->misj", p, wg) * np.where(dt > 0, dt * wu[:, :, None], 0.0)[..., None]
+    prefix = np.cumsum(np.int64(1) << order.astype(np.int64), axis=3)  # the m nearest as a bit mask
+    key = prefix + (np.arange(laws.shape[0], dtype=np.int64) * (np.int64(1) << n_j))[:, None, None, None]
+    keep = mass > 0
+    return key[keep], mass[keep]
 
 
 def point_loglik(law: AnswerLaw, perceived_m: np.ndarray) -> np.ndarray:
