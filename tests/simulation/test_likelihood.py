@@ -9,8 +9,9 @@ from scipy import stats
 from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank
 from vibrofocus.simulation.hypotheses import available_hypotheses, hypothesis
-from vibrofocus.simulation.likelihood import (Quadrature, Stimuli, answer_law, answer_probabilities, loglik,
-                                              marginal_loglik, point_loglik, selection_probability, trial_loglik)
+from vibrofocus.simulation.likelihood import (Quadrature, Stimuli, _per_trial_selection_probability, answer_law,
+                                              answer_probabilities, loglik, marginal_loglik, point_loglik,
+                                              selection_probability, trial_loglik)
 from vibrofocus.simulation.perception import Traits, draw_answers, trial_posteriors
 
 #: A cell fails when its count is this improbable under the likelihood (two-sided binomial tail).
@@ -189,48 +190,6 @@ def test_loglik_under_a_registered_name_matches_the_percepts_path():
         marginal_loglik("grid-peak", st)
 
 
-def _selection_probability_per_trial(law, locations_xy, selected, allowed=None, quadrature=None):
-    """The Study 2 probability as it was computed before it was taken once per law: trial by trial.
-
-    For each trial, every stretch of constant distance order where the selection is the m
-    nearest, integrated by Gauss-Legendre: the reference the per-law integral must equal.
-    """
-    from scipy import special
-
-    from vibrofocus.simulation.likelihood import _allowed, _as_queries, _lines
-
-    q = quadrature or Quadrature()
-    locs_all = np.asarray(locations_xy, dtype=float)
-    ok = _allowed(locs_all, allowed)
-    sel = np.asarray(selected)
-    n, k = law.weight.shape
-    outside = np.any(np.delete(sel, ok, axis=1), axis=1) | ~np.any(sel, axis=1)
-    sel, locs = sel[:, ok], locs_all[ok]
-    mean, sd, width = _as_queries(law)
-    sel_q = np.repeat(sel, k, axis=0)
-    m = sel_q.sum(axis=1)
-    xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
-    tg, wg = (xg + 1.0) / 2.0, wg / 2.0
-    wu, A, B, edges = _lines(mean, sd, locs, q)
-    dt = np.diff(edges, axis=2)
-    mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
-    inside = sel_q[:, None, None, :]
-    f_mid = A[:, :, None, :] + B[:, None, None, :] * mid[..., None]
-    match = np.max(np.where(inside, f_mid, -np.inf), axis=3) < np.min(np.where(inside, np.inf, f_mid), axis=3)
-    qi, ii, si = np.nonzero(match & (dt > 0))
-    v = special.ndtri(np.clip(edges[qi, ii, si][:, None] + dt[qi, ii, si][:, None] * tg, 1e-300, 1.0 - 1e-16))
-    f = A[qi, ii][:, None, :] + B[qi][:, None, :] * v[..., None]
-    ins = sel_q[qi][:, None, :]
-    near = np.min(np.where(ins, f, np.inf), axis=2)
-    two_w2 = 2.0 * width[qi][:, None] ** 2
-    hi_x = -np.log(law.kappa) - (np.max(np.where(ins, f, -np.inf), axis=2) - near) / two_w2
-    lo_x = -np.log(law.kappa) - (np.min(np.where(ins, np.inf, f), axis=2) - near) / two_w2
-    hi = np.where((m[qi] == 1)[:, None], 1.0, special.ndtr(hi_x / law.log_sd))
-    p_place = np.clip(hi - special.ndtr(lo_x / law.log_sd), 0.0, 1.0)
-    out = np.bincount(qi, np.sum(p_place * wg, axis=1) * dt[qi, ii, si] * wu[qi, ii], minlength=mean.shape[0])
-    return np.where(outside, 0.0, np.sum(law.weight * out.reshape(n, k), axis=1))
-
-
 @pytest.mark.parametrize("name, variant", [("grid-peak", "shipped"), ("level-reliability", "shipped"),
                                            ("v3-centroid", "unfused"), ("intensity", "aware")])
 def test_selection_probability_per_law_equals_the_per_trial_integral(name, variant):
@@ -248,6 +207,6 @@ def test_selection_probability_per_law_equals_the_per_trial_integral(name, varia
     law = answer_law(per, idx, b.centre_xy, m, traits, q)
     for allowed in (None, np.array([0, 2, 3, 4, 8])):
         new = selection_probability(law, b.locations_xy, sel, allowed, q)
-        ref = _selection_probability_per_trial(law, b.locations_xy, sel, allowed, q)
+        ref = _per_trial_selection_probability(law, b.locations_xy, sel, allowed, q)
         assert np.count_nonzero(ref > 1e-3) >= (5 if allowed is None else 1)  # not only zeros
         np.testing.assert_allclose(new, ref, rtol=1e-9, atol=1e-15)

@@ -363,27 +363,34 @@ def selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np
     laws, law_of = np.unique(np.column_stack([mean, sd, width]), axis=0, return_inverse=True)
     law_of = law_of.reshape(-1)
     bits = np.int64(1) << np.arange(n_j, dtype=np.int64)
-    sel_key = law_of.astype(np.int64) * (np.int64(1) << n_j) + np.repeat(sel.astype(np.int64) @ bits, k)
-    keys, mass = [], []
+    sel_mask = np.repeat(sel.astype(np.int64) @ bits, k)
+    size = np.repeat(sel.sum(axis=1), k)
+    out = np.zeros(mean.shape[0])
     for s in range(0, laws.shape[0], _CHUNK):
-        key, p = _selection_masses(laws[s:s + _CHUNK], locs, law.kappa, law.log_sd, q)
-        keys.append(key + np.int64(s) * (np.int64(1) << n_j))
-        mass.append(p)
-    uniq, where = np.unique(np.concatenate(keys), return_inverse=True)
-    total = np.bincount(where.reshape(-1), np.concatenate(mass), minlength=uniq.size)
-    pos = np.minimum(np.searchsorted(uniq, sel_key), uniq.size - 1)
-    out = np.where(uniq[pos] == sel_key, total[pos], 0.0)
+        rows = np.flatnonzero((law_of >= s) & (law_of < s + _CHUNK))
+        row_key = (law_of[rows] - s).astype(np.int64) * (np.int64(1) << n_j) + sel_mask[rows]
+        m_max = int(size[rows].max())
+        if m_max == 0:  # only selections outside the allowed locations
+            continue
+        key, p = _selection_masses(laws[s:s + _CHUNK], locs, law.kappa, law.log_sd, q, m_max)
+        uniq, where = np.unique(key, return_inverse=True)
+        if uniq.size == 0:
+            continue
+        total = np.bincount(where.reshape(-1), p, minlength=uniq.size)
+        pos = np.minimum(np.searchsorted(uniq, row_key), uniq.size - 1)
+        out[rows] = np.where(uniq[pos] == row_key, total[pos], 0.0)
     probs = np.sum(law.weight * out.reshape(n, k), axis=1)
     return np.where(outside, 0.0, probs)
 
 
-#: Most locations a Study 2 selection is made among (a selection is a bit mask of one int64).
-_MAX_SELECTABLE = 48
+#: Most locations a Study 2 selection is made among (a selection and its law's number in a chunk:
+#: one int64).
+_MAX_SELECTABLE = 56
 
 
-def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: float,
-                      q: Quadrature) -> tuple[np.ndarray, np.ndarray]:
-    """Probability mass of every selection, per stretch of constant distance order, for each law.
+def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: float, q: Quadrature,
+                      m_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """Probability mass of every selection of at most ``m_max`` locations, per stretch of constant distance order.
 
     ``laws``: rows (mean x, mean y, SD, width), m. Along every line of the place's first
     axis (:func:`_lines`) the distance order is constant on each stretch, so on a stretch
@@ -414,15 +421,59 @@ def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: 
     v = special.ndtri(np.clip(edges[:, :, :-1, None] + dt[..., None] * tg, 1e-300, 1.0 - 1e-16))  # (M, I, S, G)
     # The m nearest are selected when log J is at most x_m = -log kappa - delta_m, and the
     # (m + 1)-th is not: above x_(m+1) (none beyond the last location).
-    x = (-np.log(kappa) - a[..., None, 1:]) - b[..., None, 1:] * v[..., None]  # (M, I, S, G, J - 1)
+    top = min(m_max + 1, n_j)  # the (m_max + 1)-th nearest bounds the largest selection asked for
+    x = (-np.log(kappa) - a[..., None, 1:top]) - b[..., None, 1:top] * v[..., None]  # (M, I, S, G, top - 1)
     below = special.ndtr(x / log_sd) if log_sd > 0 else np.where(x >= 0, 1.0, 0.0)
-    below = np.concatenate([np.ones(below.shape[:-1] + (1,)), below, np.zeros(below.shape[:-1] + (1,))], axis=-1)
-    p = np.maximum(below[..., :-1] - below[..., 1:], 0.0)  # (M, I, S, G, J): the m nearest, at [..., m - 1]
+    below = np.concatenate([np.ones(below.shape[:-1] + (1,)), below]
+                           + ([np.zeros(below.shape[:-1] + (1,))] if top == m_max else []), axis=-1)
+    p = np.maximum(below[..., :-1] - below[..., 1:], 0.0)  # (M, I, S, G, m_max): the m nearest, at [..., m - 1]
     mass = np.einsum("misgj,g->misj", p, wg) * np.where(dt > 0, dt * wu[:, :, None], 0.0)[..., None]
-    prefix = np.cumsum(np.int64(1) << order.astype(np.int64), axis=3)  # the m nearest as a bit mask
+    prefix = np.cumsum(np.int64(1) << order[..., :m_max].astype(np.int64), axis=3)  # the m nearest as a bit mask
     key = prefix + (np.arange(laws.shape[0], dtype=np.int64) * (np.int64(1) << n_j))[:, None, None, None]
     keep = mass > 0
     return key[keep], mass[keep]
+
+
+def _per_trial_selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np.ndarray,
+                                     allowed: np.ndarray | None = None,
+                                     quadrature: Quadrature | None = None) -> np.ndarray:
+    """:func:`selection_probability` trial by trial, as it was computed before (a reference, slower).
+
+    For each trial, every stretch of constant distance order where its selection is the
+    ``m`` nearest, integrated by Gauss-Legendre: the per-law integral must give the same
+    numbers (tests/simulation/test_likelihood.py; benchmarks/bench_fit_likelihood.py times
+    both). Not chunked: memory grows with trials x lines x stretches x locations.
+    """
+    q = quadrature or Quadrature()
+    locs_all = np.asarray(locations_xy, dtype=float)
+    ok = _allowed(locs_all, allowed)
+    sel = np.asarray(selected)
+    n, k = law.weight.shape
+    outside = np.any(np.delete(sel, ok, axis=1), axis=1) | ~np.any(sel, axis=1)
+    sel, locs = sel[:, ok], locs_all[ok]
+    mean, sd, width = _as_queries(law)
+    sel_q = np.repeat(sel, k, axis=0)
+    m = sel_q.sum(axis=1)
+    xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
+    tg, wg = (xg + 1.0) / 2.0, wg / 2.0
+    wu, A, B, edges = _lines(mean, sd, locs, q)
+    dt = np.diff(edges, axis=2)
+    mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
+    inside = sel_q[:, None, None, :]
+    f_mid = A[:, :, None, :] + B[:, None, None, :] * mid[..., None]
+    match = np.max(np.where(inside, f_mid, -np.inf), axis=3) < np.min(np.where(inside, np.inf, f_mid), axis=3)
+    qi, ii, si = np.nonzero(match & (dt > 0))
+    v = special.ndtri(np.clip(edges[qi, ii, si][:, None] + dt[qi, ii, si][:, None] * tg, 1e-300, 1.0 - 1e-16))
+    f = A[qi, ii][:, None, :] + B[qi][:, None, :] * v[..., None]
+    ins = sel_q[qi][:, None, :]
+    near = np.min(np.where(ins, f, np.inf), axis=2)
+    two_w2 = 2.0 * width[qi][:, None] ** 2
+    hi_x = -np.log(law.kappa) - (np.max(np.where(ins, f, -np.inf), axis=2) - near) / two_w2
+    lo_x = -np.log(law.kappa) - (np.min(np.where(ins, np.inf, f), axis=2) - near) / two_w2
+    hi = np.where((m[qi] == 1)[:, None], 1.0, special.ndtr(hi_x / law.log_sd))
+    p_place = np.clip(hi - special.ndtr(lo_x / law.log_sd), 0.0, 1.0)
+    out = np.bincount(qi, np.sum(p_place * wg, axis=1) * dt[qi, ii, si] * wu[qi, ii], minlength=mean.shape[0])
+    return np.where(outside, 0.0, np.sum(law.weight * out.reshape(n, k), axis=1))
 
 
 def point_loglik(law: AnswerLaw, perceived_m: np.ndarray) -> np.ndarray:
