@@ -373,12 +373,11 @@ def selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np
         if m_max == 0:  # only selections outside the allowed locations
             continue
         key, p = _selection_masses(laws[s:s + _CHUNK], locs, law.kappa, law.log_sd, q, m_max)
-        uniq, where = np.unique(key, return_inverse=True)
-        if uniq.size == 0:
-            continue
-        total = np.bincount(where.reshape(-1), p, minlength=uniq.size)
-        pos = np.minimum(np.searchsorted(uniq, row_key), uniq.size - 1)
-        out[rows] = np.where(uniq[pos] == row_key, total[pos], 0.0)
+        # Summed per selection the trials made (not per every set that is the m nearest somewhere).
+        asked, row_of = np.unique(row_key, return_inverse=True)
+        pos = np.minimum(np.searchsorted(asked, key), asked.size - 1)
+        hit = asked[pos] == key
+        out[rows] = np.bincount(pos[hit], p[hit], minlength=asked.size)[row_of.reshape(-1)]
     probs = np.sum(law.weight * out.reshape(n, k), axis=1)
     return np.where(outside, 0.0, probs)
 
@@ -399,7 +398,7 @@ def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: 
     (``delta`` the log density ratios to the nearest, from the posterior of SD ``width``);
     that probability is integrated over the stretch by Gauss-Legendre (``q.n_segment``
     nodes). Returns, per (law, line, stretch, m), the selection as a bit mask plus the
-    law's row number times ``2**n_locations``, and its mass, both flat.
+    law's row number times ``2**n_locations``, and its mass (0 on empty stretches), both flat.
     """
     n_j = locs.shape[0]
     xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
@@ -413,25 +412,31 @@ def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: 
     order = np.argsort(A[:, :, None, :] + B[:, None, None, :] * mid[..., None], axis=3, kind="stable")  # (M, I, S, J)
     # Squared distances, nearest first (the order is constant on the stretch), re the nearest's,
     # as log density ratios: delta = a + b v at the stretch's nodes v.
-    a = np.take_along_axis(np.broadcast_to(A[:, :, None, :], order.shape), order, axis=3)
-    b = np.take_along_axis(np.broadcast_to(B[:, None, None, :], order.shape), order, axis=3)
+    a = np.take_along_axis(A[:, :, None, :], order, axis=3)
+    b = np.take_along_axis(B[:, None, None, :], order, axis=3)
     two_w2 = 2.0 * laws[:, 3, None, None, None] ** 2
     a = (a - a[..., :1]) / two_w2
     b = (b - b[..., :1]) / two_w2
     v = special.ndtri(np.clip(edges[:, :, :-1, None] + dt[..., None] * tg, 1e-300, 1.0 - 1e-16))  # (M, I, S, G)
     # The m nearest are selected when log J is at most x_m = -log kappa - delta_m, and the
-    # (m + 1)-th is not: above x_(m+1) (none beyond the last location).
+    # (m + 1)-th is not: above x_(m+1) (none beyond the last location). below[..., m - 1]:
+    # the probability that log J is at most x_m (1 for the nearest, always selected).
     top = min(m_max + 1, n_j)  # the (m_max + 1)-th nearest bounds the largest selection asked for
-    x = (-np.log(kappa) - a[..., None, 1:top]) - b[..., None, 1:top] * v[..., None]  # (M, I, S, G, top - 1)
-    below = special.ndtr(x / log_sd) if log_sd > 0 else np.where(x >= 0, 1.0, 0.0)
-    below = np.concatenate([np.ones(below.shape[:-1] + (1,)), below]
-                           + ([np.zeros(below.shape[:-1] + (1,))] if top == m_max else []), axis=-1)
-    p = np.maximum(below[..., :-1] - below[..., 1:], 0.0)  # (M, I, S, G, m_max): the m nearest, at [..., m - 1]
+    below = np.zeros(v.shape + (m_max + 1,))
+    below[..., 0] = 1.0
+    x = below[..., 1:top]
+    if log_sd > 0:
+        np.multiply(b[..., None, 1:top] / -log_sd, v[..., None], out=x)
+        x += (-np.log(kappa) - a[..., None, 1:top]) / log_sd
+        special.ndtr(x, out=x)
+    else:
+        x[...] = (-np.log(kappa) - a[..., None, 1:top]) - b[..., None, 1:top] * v[..., None] >= 0
+    p = below[..., :-1] - below[..., 1:]
+    np.maximum(p, 0.0, out=p)  # (M, I, S, G, m_max): the m nearest, at [..., m - 1]
     mass = np.einsum("misgj,g->misj", p, wg) * np.where(dt > 0, dt * wu[:, :, None], 0.0)[..., None]
     prefix = np.cumsum(np.int64(1) << order[..., :m_max].astype(np.int64), axis=3)  # the m nearest as a bit mask
     key = prefix + (np.arange(laws.shape[0], dtype=np.int64) * (np.int64(1) << n_j))[:, None, None, None]
-    keep = mass > 0
-    return key[keep], mass[keep]
+    return key.reshape(-1), mass.reshape(-1)
 
 
 def _per_trial_selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np.ndarray,
