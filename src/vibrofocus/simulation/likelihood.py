@@ -398,26 +398,29 @@ def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: 
     (``delta`` the log density ratios to the nearest, from the posterior of SD ``width``);
     that probability is integrated over the stretch by Gauss-Legendre (``q.n_segment``
     nodes). Returns, per (law, line, stretch, m), the selection as a bit mask plus the
-    law's row number times ``2**n_locations``, and its mass (0 on empty stretches), both flat.
+    law's row number times ``2**n_locations``, and its mass, both flat.
     """
     n_j = locs.shape[0]
     xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
     tg, wg = (xg + 1.0) / 2.0, wg / 2.0
     wu, A, B, edges = _lines(laws[:, :2], laws[:, 2], locs, q)
-    # Locations on one row cross nowhere along a line (edge 1): those stretches are empty.
-    j, k = np.triu_indices(n_j, 1)
-    edges = edges[:, :, :edges.shape[2] - int(np.sum(locs[j, 1] == locs[k, 1]))]
     dt = np.diff(edges, axis=2)  # (M, I, S)
-    mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
-    order = np.argsort(A[:, :, None, :] + B[:, None, None, :] * mid[..., None], axis=3, kind="stable")  # (M, I, S, J)
+    # Stretches of no mass are left out (e.g. past the crossings of locations on one row, which
+    # never cross along a line: edges at 1): P of them stay.
+    li, ii, si = np.nonzero(dt * wu[:, :, None] > 0)
+    dt, w = dt[li, ii, si], dt[li, ii, si] * wu[li, ii]
+    lo = edges[li, ii, si]
+    mid = special.ndtri(np.clip(lo + dt / 2.0, 1e-300, 1.0 - 1e-16))
+    A, B = A[li, ii], B[li]  # (P, J)
+    order = np.argsort(A + B * mid[:, None], axis=1, kind="stable")  # (P, J)
     # Squared distances, nearest first (the order is constant on the stretch), re the nearest's,
     # as log density ratios: delta = a + b v at the stretch's nodes v.
-    a = np.take_along_axis(A[:, :, None, :], order, axis=3)
-    b = np.take_along_axis(B[:, None, None, :], order, axis=3)
-    two_w2 = 2.0 * laws[:, 3, None, None, None] ** 2
-    a = (a - a[..., :1]) / two_w2
-    b = (b - b[..., :1]) / two_w2
-    v = special.ndtri(np.clip(edges[:, :, :-1, None] + dt[..., None] * tg, 1e-300, 1.0 - 1e-16))  # (M, I, S, G)
+    a = np.take_along_axis(A, order, axis=1)
+    b = np.take_along_axis(B, order, axis=1)
+    two_w2 = 2.0 * laws[li, 3, None] ** 2
+    a = (a - a[:, :1]) / two_w2
+    b = (b - b[:, :1]) / two_w2
+    v = special.ndtri(np.clip(lo[:, None] + dt[:, None] * tg, 1e-300, 1.0 - 1e-16))  # (P, G)
     # The m nearest are selected when log J is at most x_m = -log kappa - delta_m, and the
     # (m + 1)-th is not: above x_(m+1) (none beyond the last location). below[..., m - 1]:
     # the probability that log J is at most x_m (1 for the nearest, always selected).
@@ -426,16 +429,16 @@ def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: 
     below[..., 0] = 1.0
     x = below[..., 1:top]
     if log_sd > 0:
-        np.multiply(b[..., None, 1:top] / -log_sd, v[..., None], out=x)
-        x += (-np.log(kappa) - a[..., None, 1:top]) / log_sd
+        np.multiply(b[:, None, 1:top] / -log_sd, v[..., None], out=x)
+        x += (-np.log(kappa) - a[:, None, 1:top]) / log_sd
         special.ndtr(x, out=x)
     else:
-        x[...] = (-np.log(kappa) - a[..., None, 1:top]) - b[..., None, 1:top] * v[..., None] >= 0
+        x[...] = (-np.log(kappa) - a[:, None, 1:top]) - b[:, None, 1:top] * v[..., None] >= 0
     p = below[..., :-1] - below[..., 1:]
-    np.maximum(p, 0.0, out=p)  # (M, I, S, G, m_max): the m nearest, at [..., m - 1]
-    mass = np.einsum("misgj,g->misj", p, wg) * np.where(dt > 0, dt * wu[:, :, None], 0.0)[..., None]
-    prefix = np.cumsum(np.int64(1) << order[..., :m_max].astype(np.int64), axis=3)  # the m nearest as a bit mask
-    key = prefix + (np.arange(laws.shape[0], dtype=np.int64) * (np.int64(1) << n_j))[:, None, None, None]
+    np.maximum(p, 0.0, out=p)  # (P, G, m_max): the m nearest, at [..., m - 1]
+    mass = np.einsum("pgj,g->pj", p, wg) * w[:, None]
+    prefix = np.cumsum(np.int64(1) << order[:, :m_max].astype(np.int64), axis=1)  # the m nearest as a bit mask
+    key = prefix + (li.astype(np.int64) * (np.int64(1) << n_j))[:, None]
     return key.reshape(-1), mass.reshape(-1)
 
 
