@@ -190,8 +190,8 @@ def test_loglik_under_a_registered_name_matches_the_percepts_path():
         marginal_loglik("grid-peak", st)
 
 
-@pytest.mark.parametrize("name, variant", [("grid-peak", "shipped"), ("level-reliability", "shipped"),
-                                           ("v3-centroid", "unfused"), ("intensity", "aware")])
+@pytest.mark.parametrize("name, variant", [("grid-peak", "shipped"), ("v3-centroid", "unfused"),
+                                           ("intensity", "aware")])
 def test_selection_probability_per_law_equals_the_per_trial_integral(name, variant):
     # The selection's probability is integrated once per distinct law for every selection
     # (each trial then reads its own): the same quadrature as trial by trial, so the same
@@ -210,3 +210,10 @@ def test_selection_probability_per_law_equals_the_per_trial_integral(name, varia
         ref = _per_trial_selection_probability(law, b.locations_xy, sel, allowed, q)
         assert np.count_nonzero(ref > 1e-3) >= (5 if allowed is None else 1)  # not only zeros
         np.testing.assert_allclose(new, ref, rtol=1e-9, atol=1e-15)
+    # Selections of at most two locations only: integrated only up to the third nearest.
+    few = np.flatnonzero(sel.sum(axis=1) <= 2)
+    law = answer_law(per, idx[few], b.centre_xy, m, traits, q)
+    ref = _per_trial_selection_probability(law, b.locations_xy, sel[few], quadrature=q)
+    assert np.count_nonzero(ref > 1e-3) >= 3
+    np.testing.assert_allclose(selection_probability(law, b.locations_xy, sel[few], quadrature=q), ref,
+                               rtol=1e-9, atol=1e-15)
