@@ -9,8 +9,9 @@ from scipy import stats
 from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank
 from vibrofocus.simulation.hypotheses import available_hypotheses, hypothesis
-from vibrofocus.simulation.likelihood import (Quadrature, Stimuli, answer_law, answer_probabilities, loglik,
-                                              marginal_loglik, point_loglik, selection_probability, trial_loglik)
+from vibrofocus.simulation.likelihood import (Quadrature, Stimuli, _per_trial_selection_probability, answer_law,
+                                              answer_probabilities, loglik, marginal_loglik, point_loglik,
+                                              selection_probability, trial_loglik)
 from vibrofocus.simulation.perception import Traits, draw_answers, trial_posteriors
 
 #: A cell fails when its count is this improbable under the likelihood (two-sided binomial tail).
@@ -187,3 +188,32 @@ def test_loglik_under_a_registered_name_matches_the_percepts_path():
         marginal_loglik("grid-peak", st, study1=(idx, a), n_draws=0)
     with pytest.raises(ValidationError, match="study 1, study 2 or both"):
         marginal_loglik("grid-peak", st)
+
+
+@pytest.mark.parametrize("name, variant", [("grid-peak", "shipped"), ("v3-centroid", "unfused"),
+                                           ("intensity", "aware")])
+def test_selection_probability_per_law_equals_the_per_trial_integral(name, variant):
+    # The selection's probability is integrated once per distinct law for every selection
+    # (each trial then reads its own): the same quadrature as trial by trial, so the same
+    # numbers to rounding, for selections of every size, among all and among some locations.
+    b, h, m, st, traits, per = _setup(name, variant)
+    q = Quadrature(n_place=6, n_segment=3, n_angle=4, n_conflict=3)
+    rng = np.random.default_rng(5)
+    idx = np.repeat(np.arange(27) if variant == "shipped" else np.arange(0, 27, 3), 4)
+    drawn = draw_answers(per, idx, b.locations_xy, b.centre_xy, m, traits, rng)[1]  # selections the model gives
+    sel = rng.random((idx.size, 9)) < rng.choice([0.1, 0.3, 0.6, 0.95], size=(idx.size, 1))
+    sel[np.arange(idx.size), rng.integers(0, 9, idx.size)] = True
+    sel[::2] = drawn[::2]
+    law = answer_law(per, idx, b.centre_xy, m, traits, q)
+    for allowed in (None, np.array([0, 2, 3, 4, 8])):
+        new = selection_probability(law, b.locations_xy, sel, allowed, q)
+        ref = _per_trial_selection_probability(law, b.locations_xy, sel, allowed, q)
+        assert np.count_nonzero(ref > 1e-3) >= (5 if allowed is None else 1)  # not only zeros
+        np.testing.assert_allclose(new, ref, rtol=1e-9, atol=1e-15)
+    # Selections of at most two locations only: integrated only up to the third nearest.
+    few = np.flatnonzero(sel.sum(axis=1) <= 2)
+    law = answer_law(per, idx[few], b.centre_xy, m, traits, q)
+    ref = _per_trial_selection_probability(law, b.locations_xy, sel[few], quadrature=q)
+    assert np.count_nonzero(ref > 1e-3) >= 3
+    np.testing.assert_allclose(selection_probability(law, b.locations_xy, sel[few], quadrature=q), ref,
+                               rtol=1e-9, atol=1e-15)

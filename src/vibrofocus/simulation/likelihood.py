@@ -33,6 +33,9 @@ the same map over the same draws, calling the same functions:
   of the answer's, so it is the ``m`` nearest locations for a ``log J`` in an interval:
   its probability given the place is a difference of normal CDFs of ``log J``, integrated
   along each stretch of constant distance order by Gauss-Legendre (``n_segment`` nodes).
+  On a stretch the ``m`` nearest are one set for each ``m``, so one pass over a law's
+  stretches gives the probability of every selection at once: it is taken once per
+  distinct law (every trial of a stimulus), not per trial.
 
 The test ``tests/simulation/test_likelihood.py`` checks, for every registered hypothesis
 and with unfused and conflict-aware percepts, that the sampler's answer frequencies
@@ -351,49 +354,134 @@ def selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np
     sel = sel[:, ok]
     locs = locs_all[ok]
     n_j = locs.shape[0]
+    if n_j > _MAX_SELECTABLE:
+        raise ValidationError(f"a Study 2 selection among more than {_MAX_SELECTABLE} locations is not covered, "
+                              f"got {n_j}")
+    mean, sd, width = _as_queries(law)
+    # Every trial of one stimulus has the same law: the integral is taken once per distinct
+    # law (place and width), for every selection at once, and each trial reads its own.
+    laws, law_of = np.unique(np.column_stack([mean, sd, width]), axis=0, return_inverse=True)
+    law_of = law_of.reshape(-1)
+    bits = np.int64(1) << np.arange(n_j, dtype=np.int64)
+    sel_mask = np.repeat(sel.astype(np.int64) @ bits, k)
+    size = np.repeat(sel.sum(axis=1), k)
+    out = np.zeros(mean.shape[0])
+    for s in range(0, laws.shape[0], _CHUNK):
+        rows = np.flatnonzero((law_of >= s) & (law_of < s + _CHUNK))
+        row_key = (law_of[rows] - s).astype(np.int64) * (np.int64(1) << n_j) + sel_mask[rows]
+        m_max = int(size[rows].max())
+        if m_max == 0:  # only selections outside the allowed locations
+            continue
+        key, p = _selection_masses(laws[s:s + _CHUNK], locs, law.kappa, law.log_sd, q, m_max)
+        # Summed per selection the trials made (not per every set that is the m nearest somewhere).
+        asked, row_of = np.unique(row_key, return_inverse=True)
+        pos = np.minimum(np.searchsorted(asked, key), asked.size - 1)
+        hit = asked[pos] == key
+        out[rows] = np.bincount(pos[hit], p[hit], minlength=asked.size)[row_of.reshape(-1)]
+    probs = np.sum(law.weight * out.reshape(n, k), axis=1)
+    return np.where(outside, 0.0, probs)
+
+
+#: Most locations a Study 2 selection is made among (a selection and its law's number in a chunk:
+#: one int64).
+_MAX_SELECTABLE = 56
+
+
+def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: float, q: Quadrature,
+                      m_max: int) -> tuple[np.ndarray, np.ndarray]:
+    """Probability mass of every selection of at most ``m_max`` locations, per stretch of constant distance order.
+
+    ``laws``: rows (mean x, mean y, SD, width), m. Along every line of the place's first
+    axis (:func:`_lines`) the distance order is constant on each stretch, so on a stretch
+    the ``m`` nearest locations are one set for each ``m``, and the selection is that set
+    when ``log J`` lies between ``-log kappa - delta_(m+1)`` and ``-log kappa - delta_(m)``
+    (``delta`` the log density ratios to the nearest, from the posterior of SD ``width``);
+    that probability is integrated over the stretch by Gauss-Legendre (``q.n_segment``
+    nodes). Returns, per (law, line, stretch, m), the selection as a bit mask plus the
+    law's row number times ``2**n_locations``, and its mass, both flat.
+    """
+    n_j = locs.shape[0]
+    xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
+    tg, wg = (xg + 1.0) / 2.0, wg / 2.0
+    wu, A, B, edges = _lines(laws[:, :2], laws[:, 2], locs, q)
+    dt = np.diff(edges, axis=2)  # (M, I, S)
+    # Stretches of no mass are left out (e.g. past the crossings of locations on one row, which
+    # never cross along a line: edges at 1): P of them stay.
+    li, ii, si = np.nonzero(dt * wu[:, :, None] > 0)
+    dt, w = dt[li, ii, si], dt[li, ii, si] * wu[li, ii]
+    lo = edges[li, ii, si]
+    mid = special.ndtri(np.clip(lo + dt / 2.0, 1e-300, 1.0 - 1e-16))
+    A, B = A[li, ii], B[li]  # (P, J)
+    order = np.argsort(A + B * mid[:, None], axis=1, kind="stable")  # (P, J)
+    # Squared distances, nearest first (the order is constant on the stretch), re the nearest's,
+    # as log density ratios: delta = a + b v at the stretch's nodes v.
+    a = np.take_along_axis(A, order, axis=1)
+    b = np.take_along_axis(B, order, axis=1)
+    two_w2 = 2.0 * laws[li, 3, None] ** 2
+    a = (a - a[:, :1]) / two_w2
+    b = (b - b[:, :1]) / two_w2
+    v = special.ndtri(np.clip(lo[:, None] + dt[:, None] * tg, 1e-300, 1.0 - 1e-16))  # (P, G)
+    # The m nearest are selected when log J is at most x_m = -log kappa - delta_m, and the
+    # (m + 1)-th is not: above x_(m+1) (none beyond the last location). below[..., m - 1]:
+    # the probability that log J is at most x_m (1 for the nearest, always selected).
+    top = min(m_max + 1, n_j)  # the (m_max + 1)-th nearest bounds the largest selection asked for
+    below = np.zeros(v.shape + (m_max + 1,))
+    below[..., 0] = 1.0
+    x = below[..., 1:top]
+    if log_sd > 0:
+        np.multiply(b[:, None, 1:top] / -log_sd, v[..., None], out=x)
+        x += (-np.log(kappa) - a[:, None, 1:top]) / log_sd
+        special.ndtr(x, out=x)
+    else:
+        x[...] = (-np.log(kappa) - a[:, None, 1:top]) - b[:, None, 1:top] * v[..., None] >= 0
+    p = below[..., :-1] - below[..., 1:]
+    np.maximum(p, 0.0, out=p)  # (P, G, m_max): the m nearest, at [..., m - 1]
+    mass = np.einsum("pgj,g->pj", p, wg) * w[:, None]
+    prefix = np.cumsum(np.int64(1) << order[:, :m_max].astype(np.int64), axis=1)  # the m nearest as a bit mask
+    key = prefix + (li.astype(np.int64) * (np.int64(1) << n_j))[:, None]
+    return key.reshape(-1), mass.reshape(-1)
+
+
+def _per_trial_selection_probability(law: AnswerLaw, locations_xy: np.ndarray, selected: np.ndarray,
+                                     allowed: np.ndarray | None = None,
+                                     quadrature: Quadrature | None = None) -> np.ndarray:
+    """:func:`selection_probability` trial by trial, as it was computed before (a reference, slower).
+
+    For each trial, every stretch of constant distance order where its selection is the
+    ``m`` nearest, integrated by Gauss-Legendre: the per-law integral must give the same
+    numbers (tests/simulation/test_likelihood.py; benchmarks/bench_fit_likelihood.py times
+    both). Not chunked: memory grows with trials x lines x stretches x locations.
+    """
+    q = quadrature or Quadrature()
+    locs_all = np.asarray(locations_xy, dtype=float)
+    ok = _allowed(locs_all, allowed)
+    sel = np.asarray(selected)
+    n, k = law.weight.shape
+    outside = np.any(np.delete(sel, ok, axis=1), axis=1) | ~np.any(sel, axis=1)
+    sel, locs = sel[:, ok], locs_all[ok]
     mean, sd, width = _as_queries(law)
     sel_q = np.repeat(sel, k, axis=0)
     m = sel_q.sum(axis=1)
     xg, wg = np.polynomial.legendre.leggauss(q.n_segment)
     tg, wg = (xg + 1.0) / 2.0, wg / 2.0
-    log_k = np.log(law.kappa)
-    out = np.zeros(mean.shape[0])
-    for s in range(0, mean.shape[0], _CHUNK):
-        sl = slice(s, s + _CHUNK)
-        wu, A, B, edges = _lines(mean[sl], sd[sl], locs, q)
-        dt = np.diff(edges, axis=2)
-        mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
-        inside = sel_q[sl][:, None, None, :]
-        f_mid = A[:, :, None, :] + B[:, None, None, :] * mid[..., None]  # (M, I, S, J)
-        # The selection is the m nearest on this stretch: every selected location nearer
-        # than every other one (the order is constant along a stretch).
-        match = (np.max(np.where(inside, f_mid, -np.inf), axis=3) < np.min(np.where(inside, np.inf, f_mid), axis=3))
-        match &= dt > 0
-        qi, ii, si = np.nonzero(match)
-        if qi.size == 0:
-            continue
-        t = edges[qi, ii, si][:, None] + dt[qi, ii, si][:, None] * tg  # (P, G)
-        v = special.ndtri(np.clip(t, 1e-300, 1.0 - 1e-16))
-        f = A[qi, ii][:, None, :] + B[qi][:, None, :] * v[..., None]  # (P, G, J)
-        ins = sel_q[sl][qi][:, None, :]
-        near = np.min(np.where(ins, f, np.inf), axis=2)
-        two_w2 = 2.0 * width[sl][qi][:, None] ** 2
-        d_m = (np.max(np.where(ins, f, -np.inf), axis=2) - near) / two_w2  # delta of the m-th nearest
-        d_next = (np.min(np.where(ins, np.inf, f), axis=2) - near) / two_w2  # of the (m+1)-th (inf: none)
-        first = (m[sl][qi] == 1)[:, None]
-        hi_x = -log_k - d_m  # the selection is these m when log J is at most hi_x ...
-        lo_x = -log_k - d_next  # ... and above lo_x
-        if law.log_sd > 0:
-            hi = np.where(first, 1.0, special.ndtr(hi_x / law.log_sd))
-            lo = special.ndtr(lo_x / law.log_sd)
-        else:
-            hi = np.where(first | (hi_x >= 0), 1.0, 0.0)
-            lo = np.where(lo_x >= 0, 1.0, 0.0)
-        p_place = np.clip(hi - lo, 0.0, 1.0)
-        contrib = np.sum(p_place * wg, axis=1) * dt[qi, ii, si] * wu[qi, ii]
-        out[s:s + _CHUNK] += np.bincount(qi, contrib, minlength=A.shape[0])
-    probs = np.sum(law.weight * out.reshape(n, k), axis=1)
-    return np.where(outside, 0.0, probs)
+    wu, A, B, edges = _lines(mean, sd, locs, q)
+    dt = np.diff(edges, axis=2)
+    mid = special.ndtri(np.clip((edges[:, :, 1:] + edges[:, :, :-1]) / 2.0, 1e-300, 1.0 - 1e-16))
+    inside = sel_q[:, None, None, :]
+    f_mid = A[:, :, None, :] + B[:, None, None, :] * mid[..., None]
+    match = np.max(np.where(inside, f_mid, -np.inf), axis=3) < np.min(np.where(inside, np.inf, f_mid), axis=3)
+    qi, ii, si = np.nonzero(match & (dt > 0))
+    v = special.ndtri(np.clip(edges[qi, ii, si][:, None] + dt[qi, ii, si][:, None] * tg, 1e-300, 1.0 - 1e-16))
+    f = A[qi, ii][:, None, :] + B[qi][:, None, :] * v[..., None]
+    ins = sel_q[qi][:, None, :]
+    near = np.min(np.where(ins, f, np.inf), axis=2)
+    two_w2 = 2.0 * width[qi][:, None] ** 2
+    hi_x = -np.log(law.kappa) - (np.max(np.where(ins, f, -np.inf), axis=2) - near) / two_w2
+    lo_x = -np.log(law.kappa) - (np.min(np.where(ins, np.inf, f), axis=2) - near) / two_w2
+    hi = np.where((m[qi] == 1)[:, None], 1.0, special.ndtr(hi_x / law.log_sd))
+    p_place = np.clip(hi - special.ndtr(lo_x / law.log_sd), 0.0, 1.0)
+    out = np.bincount(qi, np.sum(p_place * wg, axis=1) * dt[qi, ii, si] * wu[qi, ii], minlength=mean.shape[0])
+    return np.where(outside, 0.0, np.sum(law.weight * out.reshape(n, k), axis=1))
 
 
 def point_loglik(law: AnswerLaw, perceived_m: np.ndarray) -> np.ndarray:

@@ -1,0 +1,91 @@
+"""Speed of the free fit of a hypothesis (``vibrofocus analyze --hypotheses``): old vs new likelihood.
+
+Prints, from one run, for a simulated study of N participants on the paper's design (Study 1
+and Study 2 both, ``simulate_trials``):
+
+- one likelihood evaluation (``participant_loglik``, every participant, the fit's
+  ``FitSettings``): CPU seconds with the Study 2 selection probability taken trial by trial
+  (``likelihood._per_trial_selection_probability``, the previous code path) and once per
+  law (``selection_probability``), their ratio, and the largest difference of a
+  participant's log-likelihood (asserted below 1e-6 nats);
+- one hypothesis' free fit to every participant (``fit_hypothesis``, ``--starts`` starts of
+  ``--maxiter`` Nelder-Mead iterations): CPU seconds both ways, the ratio, the number of
+  likelihood evaluations, and whether both reach the same parameters (asserted);
+- the CPU cost of that hypothesis' whole leave-one-participant-out score at the shipped
+  settings, extrapolated from the cost per evaluation at about a thousand evaluations,
+  plus the scoring of the left-out participants on their own draws.
+
+Run: ``python benchmarks/bench_fit_likelihood.py [--hypothesis grid-peak] [--participants 12]
+[--starts 1] [--maxiter 4]``. One BLAS thread. CPU time (``time.process_time``), so a busy
+machine inflates wall time, not these numbers.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from unittest import mock
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+
+#: Likelihood evaluations of one hypothesis' refit and folds on a study of N = 12 (docs/fitting-hypotheses.md).
+EVALUATIONS_PER_REFIT = 1000
+
+
+def _cpu(fn):
+    t = time.process_time()
+    out = fn()
+    return time.process_time() - t, out
+
+
+def main() -> None:
+    from vibrofocus.participant_models import likelihood
+    from vibrofocus.participant_models.bank import default_bank
+    from vibrofocus.participant_models.fitting import likelihood_fit
+    from vibrofocus.participant_models.fitting.likelihood_fit import FitSettings, fit_hypothesis, participant_loglik
+    from vibrofocus.participant_models.fitting.recovery import simulate_trials
+
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--hypothesis", default="grid-peak")
+    ap.add_argument("--participants", type=int, default=12)
+    ap.add_argument("--seed", type=int, default=7300)
+    ap.add_argument("--starts", type=int, default=1)
+    ap.add_argument("--maxiter", type=int, default=4)
+    args = ap.parse_args()
+    bank = default_bank()
+    data = simulate_trials(args.hypothesis, args.participants, np.random.default_rng([args.seed, 51]), bank=bank)
+    settings = FitSettings()
+    old = mock.patch.object(likelihood_fit, "selection_probability", likelihood._per_trial_selection_probability)
+    print(f"{args.hypothesis}, N = {args.participants}, Study 1 + Study 2 ({data.stim1.size} + {data.stim2.size} "
+          f"trials), {settings.n_draws} draws")
+    with threadpool_limits(1):
+        participant_loglik(args.hypothesis, data, bank=bank, settings=settings)  # warm caches
+        t_new, ll_new = _cpu(lambda: participant_loglik(args.hypothesis, data, bank=bank, settings=settings))
+        with old:
+            t_old, ll_old = _cpu(lambda: participant_loglik(args.hypothesis, data, bank=bank, settings=settings))
+        diff = float(np.max(np.abs(ll_new - ll_old)))
+        assert diff < 1e-6, diff
+        print(f"one likelihood evaluation: old {t_old:.2f} s, new {t_new:.2f} s CPU, ratio {t_old / t_new:.1f}; "
+              f"largest |difference| of a participant's log-likelihood {diff:.1e} nats")
+        fit_settings = FitSettings(n_starts=args.starts, maxiter=args.maxiter)
+        t_fit_new, fit_new = _cpu(lambda: fit_hypothesis(args.hypothesis, data, bank=bank, settings=fit_settings))
+        with old:
+            t_fit_old, fit_old = _cpu(lambda: fit_hypothesis(args.hypothesis, data, bank=bank, settings=fit_settings))
+        same = all(abs(fit_new.params[k] - fit_old.params[k]) <= 1e-9 * max(1.0, abs(fit_old.params[k]))
+                   for k in fit_new.params)
+        assert same, (fit_new.params, fit_old.params)
+        print(f"free fit ({args.starts} start(s) x {args.maxiter} iterations, {fit_new.n_evaluations} evaluations): "
+              f"old {t_fit_old:.1f} s, new {t_fit_new:.1f} s CPU, ratio {t_fit_old / t_fit_new:.1f}; same parameters")
+        per_eval, per_eval_old = t_fit_new / fit_new.n_evaluations, t_fit_old / fit_new.n_evaluations
+        t_score, _ = _cpu(lambda: participant_loglik(args.hypothesis, data.subset(np.array([0])), bank=bank,
+                                                     settings=settings.scoring()))
+        print(f"a refit of this hypothesis at about {EVALUATIONS_PER_REFIT} evaluations (the full fit and "
+              f"{args.participants} folds): about {EVALUATIONS_PER_REFIT * per_eval / 60:.0f} CPU-min new, "
+              f"{EVALUATIONS_PER_REFIT * per_eval_old / 60:.0f} old, plus "
+              f"{args.participants * t_score / 60:.1f} CPU-min new to score the left-out participants")
+
+
+if __name__ == "__main__":
+    main()
