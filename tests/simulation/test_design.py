@@ -178,6 +178,25 @@ def test_the_point_area_is_the_pictures():
     np.testing.assert_allclose(np.c_[lo, hi] * 1e3, [area["x_mm"], area["y_mm"]], atol=1e-9)
 
 
+def test_parameter_uncertainty_takes_the_information_out_of_taps_below_threshold():
+    """At point parameters, taps 30 dB below the paper's level tell level-reliability from
+    intensity by their shipped sensation levels (a difference the free fit removes); with
+    the default draws over the free parameters' whole ranges, they carry next to nothing
+    and the design spends its trials on felt taps (docs/designing-a-study.md)."""
+    names = ("level-reliability", "intensity")
+    small = dict(hypotheses=names, levels_db=(0.0, -30.0), n_forearms=2, n_traits=4, n_parameter_draws=4,
+                 n_replicates=1, budget=4)
+
+    def ratio(**kw: float) -> float:
+        d = design_experiment(DesignSettings(**small, **kw))
+        g = {lvl: np.mean([c["gain_nats"] for c in d.conditions if c["level_db"] == lvl]) for lvl in (0.0, -30.0)}
+        return g[-30.0] / g[0.0]
+
+    assert DesignSettings().parameter_spread == 1.0
+    assert ratio() < 0.15  # 0.05 measured
+    assert ratio(parameter_spread=0.0) > 0.3  # 0.57 measured: the shipped parameters' difference
+
+
 def test_designed_protocol_identifies_one_population_better_than_the_papers():
     """The readouts under one population: the designed protocol tells them apart more often than the paper's."""
     names = ["v3-centroid", "level-reliability"]
