@@ -412,7 +412,7 @@ def shipped_model(name: str, population: str | None = None) -> PerceptualModel:
     return find_hypothesis(population or name).model()
 
 
-def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
+def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 1.0,
                     base: PerceptualModel | None = None) -> tuple[list[PerceptualModel], dict[str, Any]]:
     """The shipped parameters of a hypothesis and ``n - 1`` sets drawn around them.
 
@@ -432,7 +432,8 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
         Parameter sets, the shipped one first.
     seed : int
     spread : float
-        Fraction of each range, 0-1.
+        Fraction of each range, 0-1 (1: uniform over the whole range, what the free fit
+        searches).
     base : PerceptualModel, optional
         The parameters drawn around (default the hypothesis' shipped ones).
 
