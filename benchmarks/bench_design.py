@@ -5,9 +5,9 @@ Prints, from one run:
 - the cost of one Study 1 answer law on a grid of locations: the exact product-of-CDFs
   path of ``design.study1_probabilities`` against the general quadrature of
   ``likelihood.answer_probabilities`` (the same numbers to 2e-3, asserted), and the ratio;
-- the time of a whole design with the defaults (3 methods x 9 locations x 4 levels = 108
-  candidate conditions, every registered hypothesis), split into its answer laws, its
-  tables and its greedy choice, and with the candidates cut to one level (27) for the
+- the time of a whole design with the defaults (3 methods x 9 locations x 6 levels = 162
+  candidate conditions, every registered hypothesis, 6 parameter sets each), split into its
+  answer laws, its tables and its greedy choice, and with the candidates cut to one level (27) for the
   ratio of the greedy part to the candidates' number, and with point answers too
   (``responses=("location", "point")``: twice the candidate blocks);
 - the time of the identification check (P(correct) against N) in one process.
@@ -53,13 +53,14 @@ def main() -> None:
         print(f"answer law of {law.weight.shape[0]} trials, 9 locations: quadrature {t_slow * 1e3:.1f} ms, "
               f"grid {t_fast * 1e3:.2f} ms, ratio {t_slow / t_fast:.0f}x")
         full = design_experiment(DesignSettings())
-        n_cand = len(bank.methods) * len(bank.locations_xy) * 4
+        n_lev = len(full.settings.levels_db)
+        n_cand = len(bank.methods) * len(bank.locations_xy) * n_lev
         print(f"design, {n_cand} candidate conditions, {len(names)} hypotheses: {full.elapsed_s:.1f} s "
               f"(answer laws {full.timings['answer_laws_s']:.1f} s, tables {full.timings['tables_s']:.2f} s, "
               f"greedy {full.timings['greedy_s']:.1f} s)")
         one = design_experiment(DesignSettings(levels_db=(-10.0,)))
-        print(f"design, {n_cand // 4} candidate conditions (one level): {one.elapsed_s:.1f} s (greedy "
-              f"{one.timings['greedy_s']:.1f} s); 4x the candidates cost {full.elapsed_s / one.elapsed_s:.1f}x the "
+        print(f"design, {n_cand // n_lev} candidate conditions (one level): {one.elapsed_s:.1f} s (greedy "
+              f"{one.timings['greedy_s']:.1f} s); {n_lev}x the candidates cost {full.elapsed_s / one.elapsed_s:.1f}x the "
               f"time, greedy {full.timings['greedy_s'] / max(one.timings['greedy_s'], 1e-9):.1f}x")
         pts = design_experiment(DesignSettings(responses=("location", "point")))
         print(f"design with point answers too (twice the candidate blocks): {pts.elapsed_s:.1f} s "

@@ -32,7 +32,8 @@ def test_design_experiment_writes_a_protocol_and_its_report(tmp_path):
 def test_design_experiment_refuses_bad_input_in_one_line():
     for args, words in ((["--levels", "loud"], "--levels must be numbers"),
                         (["--levels", "6"], "drive limit"),
-                        (["--hypotheses", "telepathy"], "telepathy")):
+                        (["--hypotheses", "telepathy"], "telepathy"),
+                        (["--parameter-spread", "2"], "--parameter-spread")):
         res = runner.invoke(app, ["design-experiment", *SMALL[:-4], *args, "--studies", "0"])
         assert res.exit_code != 0
         assert words in res.output and "Traceback" not in res.output, res.output

@@ -77,7 +77,10 @@ def test_study1_probabilities_match_the_likelihood_module(allowed):
 
 # ------------------------------------------------------------------------- design
 def test_design_fits_the_budget_and_writes_a_valid_protocol():
-    d = design_experiment(DesignSettings(**SMALL, responses=("location", "point")))
+    # Draws near the shipped parameters: with 3 traits on one forearm, the nested Monte Carlo
+    # of draws over the whole ranges rates points below locations (1.02 against 1.06 nats).
+    local = dict(SMALL, parameter_spread=0.1)
+    d = design_experiment(DesignSettings(**local, responses=("location", "point")))
     assert 20 < d.trials <= 24 and d.trials == sum(b.n_trials for b in d.blocks)
     assert 0.0 < d.information_nats <= np.log(len(available_hypotheses())) + 1e-9
     assert all(b.level_db in (0.0, -20.0) and set(b.methods) <= {"funneling", "inverse"} for b in d.blocks)
@@ -87,7 +90,7 @@ def test_design_fits_the_budget_and_writes_a_valid_protocol():
         (b.methods, b.locations, b.level_db, b.repetitions, b.response) for b in d.blocks]
     assert {b.response for b in d.blocks} == {"location", "point"}  # both answers inform here
     proto.check_runnable()
-    only = design_experiment(DesignSettings(**SMALL))  # location answers only: the default
+    only = design_experiment(DesignSettings(**local))  # location answers only: the default
     assert {b.response for b in only.blocks} == {"location"} and only.information_nats < d.information_nats
 
 
@@ -176,6 +179,25 @@ def test_the_point_area_is_the_pictures():
     area = point_area()
     lo, hi = point_area_m(default_bank())
     np.testing.assert_allclose(np.c_[lo, hi] * 1e3, [area["x_mm"], area["y_mm"]], atol=1e-9)
+
+
+def test_parameter_uncertainty_takes_the_information_out_of_taps_below_threshold():
+    """At point parameters, taps 30 dB below the paper's level tell level-reliability from
+    intensity by their shipped sensation levels (a difference the free fit removes); with
+    the default draws over the free parameters' whole ranges, they carry next to nothing
+    and the design spends its trials on felt taps (docs/designing-a-study.md)."""
+    names = ("level-reliability", "intensity")
+    small = dict(hypotheses=names, levels_db=(0.0, -30.0), n_forearms=2, n_traits=4, n_parameter_draws=4,
+                 n_replicates=1, budget=4)
+
+    def ratio(**kw: float) -> float:
+        d = design_experiment(DesignSettings(**small, **kw))
+        g = {lvl: np.mean([c["gain_nats"] for c in d.conditions if c["level_db"] == lvl]) for lvl in (0.0, -30.0)}
+        return g[-30.0] / g[0.0]
+
+    assert DesignSettings().parameter_spread == 1.0
+    assert ratio() < 0.15  # 0.05 measured
+    assert ratio(parameter_spread=0.0) > 0.3  # 0.57 measured: the shipped parameters' difference
 
 
 def test_designed_protocol_identifies_one_population_better_than_the_papers():

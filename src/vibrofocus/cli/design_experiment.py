@@ -22,7 +22,7 @@ def design_experiment_command(
                                     "from the skin model fitted to it (instead of --bank; one forearm)."),
     methods: str | None = typer.Option(None, "--methods", help="Candidate methods (default the bank's)."),
     locations: str | None = typer.Option(None, "--locations", help="Candidate location numbers (default all)."),
-    levels: str = typer.Option("0,-10,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
+    levels: str = typer.Option("0,-5,-10,-15,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
     responses: str = typer.Option("location", "--responses",
                                   help="Answers a block may take: location (a key), point (on the arm's picture)."),
     information: str = typer.Option("population", "--information",
@@ -30,8 +30,11 @@ def design_experiment_command(
     threshold: int = typer.Option(0, "--threshold-trials", min=0, max=200,
                                   help="Put a threshold block of this many trials first in protocol.toml (0: none)."),
     budget: int = typer.Option(81, "--budget", min=4, max=20_000, help="Study 1 trials per participant."),
-    draws: int = typer.Option(3, "--parameter-draws", min=1, max=64,
+    draws: int = typer.Option(6, "--parameter-draws", min=1, max=64,
                               help="Parameter sets per hypothesis: the shipped one and draws around it."),
+    spread: float = typer.Option(1.0, "--parameter-spread", min=0.0, max=1.0,
+                                 help="Half-width of the draws, a fraction of each free parameter's range "
+                                      "(1: the whole range the free fit searches)."),
     forearms: int = typer.Option(6, "--forearms", min=1, max=1000, help="Bank forearms the design integrates over."),
     traits: int = typer.Option(8, "--traits", min=1, max=1000, help="Participants' trait draws per sample."),
     population: str | None = typer.Option(
@@ -74,6 +77,7 @@ def design_experiment_command(
             methods=comma_list(methods, "--methods", str) if methods else None,
             locations=comma_list(locations, "--locations") if locations else None,
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
+            parameter_spread=spread,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population,
             responses=comma_list(responses, "--responses", str), information=information)
         console = Console(stderr=True)

@@ -41,7 +41,7 @@ __all__ = ["DesignSettings", "CandidateBlock", "PlanBlock", "ExperimentDesign", 
            "RESPONSES", "SCORE_SEED", "THRESHOLD_BLOCK"]
 
 #: Candidate levels, dB re the level rule (the paper's): 0 down to -30 dB.
-DEFAULT_LEVELS_DB = (0.0, -10.0, -20.0, -30.0)
+DEFAULT_LEVELS_DB = (0.0, -5.0, -10.0, -15.0, -20.0, -30.0)
 #: Answers a designed block may take: one location of the block's (a key), or a point on
 #: the picture of the arm area (docs/protocols.md, "Point responses").
 RESPONSES = ("location", "point")
@@ -75,7 +75,10 @@ class DesignSettings:
         (:func:`parameter_draws`).
     parameter_spread : float
         Half-width of the draws around the shipped value, as a fraction of each free
-        parameter's range.
+        parameter's range. 1 (the default): uniform over the whole range, the ranges the
+        free fit of ``analyze --hypotheses`` searches, so that the design does not rely
+        on a difference of parameters that the fit can remove (docs/designing-a-study.md,
+        "Parameter uncertainty"); 0.1 was the default before.
     n_forearms : int
         Forearms of the bank the design integrates over.
     n_traits : int
@@ -108,8 +111,8 @@ class DesignSettings:
     locations: tuple[int, ...] | None = None
     levels_db: tuple[float, ...] = DEFAULT_LEVELS_DB
     budget: int = 81
-    n_parameter_draws: int = 3
-    parameter_spread: float = 0.1
+    n_parameter_draws: int = 6
+    parameter_spread: float = 1.0
     n_forearms: int = 6
     n_traits: int = 8
     n_replicates: int = 2
@@ -409,7 +412,7 @@ def shipped_model(name: str, population: str | None = None) -> PerceptualModel:
     return find_hypothesis(population or name).model()
 
 
-def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
+def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 1.0,
                     base: PerceptualModel | None = None) -> tuple[list[PerceptualModel], dict[str, Any]]:
     """The shipped parameters of a hypothesis and ``n - 1`` sets drawn around them.
 
@@ -429,7 +432,8 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 0.1,
         Parameter sets, the shipped one first.
     seed : int
     spread : float
-        Fraction of each range, 0-1.
+        Fraction of each range, 0-1 (1: uniform over the whole range, what the free fit
+        searches).
     base : PerceptualModel, optional
         The parameters drawn around (default the hypothesis' shipped ones).
 
