@@ -13,7 +13,8 @@
 #
 # Asked with browser, the docs and lowest phases run beside it (at a lower CPU priority: the
 # browser phase mostly waits on its pages' real time, the smoke test on installs); the output
-# of each follows, in its place, when it ends.
+# of each follows, in its place, when it ends. BESIDE_BROWSER names the phases that do
+# (default "docs lowest"; "slow docs lowest" starts the slow phase there too, "" none).
 #
 #   bash scripts/test.sh                  unit, slow, browser and docs: every test
 #   bash scripts/test.sh unit browser -x  only those phases; other arguments go to pytest
@@ -111,17 +112,20 @@ pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
 # calibration, a served app) is made by one worker, not by each; the slow phase's tests take
 # seconds to minutes each, so an idle worker takes tests from a busy one (--dist worksteal).
 # The lowest-versions smoke test spends most of its time installing, and the browser phase
-# waiting on its pages: asked with browser, the smoke test and the docs build start beside the
-# browser phase, each in a background process of its own (its own temporary folders) at nice 10,
-# so that the pages' real time comes first; the phase, where it comes, waits for its process and
-# shows its output. Its time counts from its start.
-declare -A bg_pid=() bg_log=() bg_started=()
+# waiting on its pages: asked with browser, the phases of BESIDE_BROWSER (the smoke test and
+# the docs build) start beside the browser phase, each in a background process of its own (its
+# own temporary folders) at nice 10, so that the pages' real time comes first; the phase, where
+# it comes (or right after browser, for one asked before it), waits for its process and shows
+# its output. Its time counts from its start.
+declare -A bg_pid=() bg_log=() bg_started=() bg_pytest=()
 # start_beside NAME COMMAND...: starts a phase's command in the background.
 start_beside() {
     local name=$1; shift
     bg_log[$name]=$(mktemp)
     bg_started[$name]=$SECONDS
     echo "=== phase $name: started beside the next phase; its output follows when it ends"
+    bg_pytest[$name]=0
+    [ "$1" != "$python" ] || bg_pytest[$name]=1
     nice -n 10 "$@" >"${bg_log[$name]}" 2>&1 &
     bg_pid[$name]=$!
 }
@@ -132,6 +136,10 @@ finish_beside() {
     unset "bg_pid[$name]"
     cat "${bg_log[$name]}"
     rm -f "${bg_log[$name]}"
+    if [ "$rc" = 5 ] && [ "${bg_pytest[$name]}" = 1 ]; then
+        echo "phase $name: no test selected"
+        rc=0
+    fi
     return "$rc"
 }
 cleanup() {
@@ -141,35 +149,48 @@ cleanup() {
     rm -rf "$cache_dir"
 }
 trap cleanup EXIT
-docs_cmd=(env PYTHON="$python" bash scripts/build_docs.sh ${pytest_args[@]+"${pytest_args[@]}"})
-lowest_cmd=(bash scripts/test_lowest.sh)
-suite_start=$SECONDS
-for p in "${phases[@]}"; do
-    if [ "$p" = browser ]; then
-        for q in "${phases[@]}"; do
-            case "$q" in
-                docs) [ -n "${bg_started[docs]:-}" ] || start_beside docs "${docs_cmd[@]}" ;;
-                lowest) [ -n "${bg_started[lowest]:-}" ] || start_beside lowest "${lowest_cmd[@]}" ;;
-            esac
-        done
-    fi
-    case "$p" in
-        unit) phase unit "${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs" \
-            ${pytest_args[@]+"${pytest_args[@]}"} ;;
-        slow) phase slow "${pytest[@]}" -n auto --dist worksteal -m "slow and not browser and not docs" \
-            ${pytest_args[@]+"${pytest_args[@]}"} ;;
+# phase_cmd NAME: the command of a phase, in the array run_cmd.
+phase_cmd() {
+    case "$1" in
+        unit) run_cmd=("${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs") ;;
+        slow) run_cmd=("${pytest[@]}" -n auto --dist worksteal -m "slow and not browser and not docs") ;;
         # One process: the pages keep real time (timeouts, pauses), which two chromiums beside
         # a loaded machine would stretch.
-        browser) phase browser "${pytest[@]}" -m "browser and not docs" ${pytest_args[@]+"${pytest_args[@]}"} ;;
-        docs|lowest)
-            if [ -n "${bg_started[$p]:-}" ]; then
-                phase_start=${bg_started[$p]} phase "$p" finish_beside "$p"
-            elif [ "$p" = docs ]; then
-                phase docs "${docs_cmd[@]}"
-            else
-                phase lowest "${lowest_cmd[@]}"
-            fi ;;
+        browser) run_cmd=("${pytest[@]}" -m "browser and not docs") ;;
+        docs) run_cmd=(env PYTHON="$python" bash scripts/build_docs.sh) ;;
+        lowest) run_cmd=(bash scripts/test_lowest.sh); return ;;
     esac
+    run_cmd+=(${pytest_args[@]+"${pytest_args[@]}"})
+}
+beside=" ${BESIDE_BROWSER-docs lowest} "
+wants_browser=0
+for p in "${phases[@]}"; do [ "$p" != browser ] || wants_browser=1; done
+suite_start=$SECONDS
+for p in "${phases[@]}"; do
+    if ((wants_browser)) && [ "$p" != browser ] && [[ $beside == *" $p "* ]]; then
+        # Runs beside the browser phase: started with it, finished after it, in its place.
+        if [ -n "${bg_pid[$p]:-}" ]; then
+            phase_start=${bg_started[$p]} phase "$p" finish_beside "$p"
+        fi
+        continue
+    fi
+    if [ "$p" = browser ]; then
+        for q in "${phases[@]}"; do
+            if [ "$q" != browser ] && [[ $beside == *" $q "* ]] && [ -z "${bg_started[$q]:-}" ]; then
+                phase_cmd "$q"
+                start_beside "$q" "${run_cmd[@]}"
+            fi
+        done
+    fi
+    phase_cmd "$p"
+    phase "$p" "${run_cmd[@]}"
+    if [ "$p" = browser ]; then
+        # Those asked before browser (slow, in .ci/run's order) end here.
+        for q in "${phases[@]}"; do
+            [ "$q" != browser ] || break
+            if [ -n "${bg_pid[$q]:-}" ]; then phase_start=${bg_started[$q]} phase "$q" finish_beside "$q"; fi
+        done
+    fi
 done
 
 echo "=== phase times"
