@@ -114,9 +114,11 @@ pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
 # The lowest-versions smoke test spends most of its time installing, and the browser phase
 # waiting on its pages: asked with browser, the phases of BESIDE_BROWSER (the smoke test and
 # the docs build) start beside the browser phase, each in a background process of its own (its
-# own temporary folders) at nice 10, so that the pages' real time comes first; the phase, where
-# it comes (or right after browser, for one asked before it), waits for its process and shows
-# its output. Its time counts from its start.
+# own temporary folders) at nice 19, so that the pages' real time comes first (the scheduler
+# gives a nice-19 process about 1.5 % of a core that a nice-0 one wants: the background phases
+# take what the browser phase leaves idle). The phase, where it comes (or right after browser,
+# for one asked before it), waits for its process and shows its output. Its time counts from
+# its start.
 declare -A bg_pid=() bg_log=() bg_started=() bg_pytest=()
 # start_beside NAME COMMAND...: starts a phase's command in the background.
 start_beside() {
@@ -126,7 +128,7 @@ start_beside() {
     echo "=== phase $name: started beside the next phase; its output follows when it ends"
     bg_pytest[$name]=0
     [ "$1" != "$python" ] || bg_pytest[$name]=1
-    nice -n 10 "$@" >"${bg_log[$name]}" 2>&1 &
+    nice -n 19 "$@" >"${bg_log[$name]}" 2>&1 &
     bg_pid[$name]=$!
 }
 # finish_beside NAME: waits for a phase started beside, shows its output, returns its status.
