@@ -36,7 +36,10 @@ rm -rf "$work/source/docs/_build" "$work/source/docs/api" "$work/source/docs/aut
 cp -r "$root/examples" "$work/source/examples"
 cp "$root/CHANGELOG.md" "$work/source/CHANGELOG.md"
 
-export PYTHONDONTWRITEBYTECODE=1 MPLBACKEND=Agg
+# No bytecode in the checkout: none at all, unless the caller keeps it elsewhere
+# (PYTHONPYCACHEPREFIX, as scripts/test.sh does).
+[ -n "${PYTHONPYCACHEPREFIX:-}" ] || export PYTHONDONTWRITEBYTECODE=1
+export MPLBACKEND=Agg
 # liblsl (the LSL examples) logs every reconnection to stderr; as in the tests, only fatal
 # errors (an example that fails still fails the build). A configuration of the caller's wins.
 if [ -z "${LSLAPICFG:-}" ]; then

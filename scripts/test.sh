@@ -9,9 +9,12 @@
 #   browser  the browser tests, in one process (their pages keep real time)
 #   docs     the Sphinx site with its executed gallery, built outside pytest, then checked
 #            (scripts/build_docs.sh)
-#   lowest   the smoke test at the lowest versions pyproject.toml allows (scripts/test_lowest.sh);
-#            asked with browser, it runs beside the browser phase (both mostly wait: on
-#            installs, on the pages' real time), and its output follows when it ends
+#   lowest   the smoke test at the lowest versions pyproject.toml allows (scripts/test_lowest.sh)
+#
+# Asked with browser, the docs and lowest phases run beside it (at a lower CPU priority: the
+# browser phase mostly waits on its pages' real time, the smoke test on installs); the output
+# of each follows, in its place, when it ends. BESIDE_BROWSER names the phases that do
+# (default "docs lowest"; "slow docs lowest" starts the slow phase there too, "" none).
 #
 #   bash scripts/test.sh                  unit, slow, browser and docs: every test
 #   bash scripts/test.sh unit browser -x  only those phases; other arguments go to pytest
@@ -88,8 +91,15 @@ else
 fi
 
 # No bytecode or pytest cache in the checkout: the suite writes only to temporary folders
-# (tests/conftest.py checks it). The 25 slowest tests of each phase are listed at its end.
-export PYTHONDONTWRITEBYTECODE=1
+# (tests/conftest.py checks it). Python's bytecode (with pytest's rewritten test modules) and
+# hypothesis' constants go to one temporary folder of this run instead, so that each of the
+# suite's processes (every phase, every xdist worker, every command a test runs) compiles and
+# parses nothing that an earlier one did: without it, collecting the suite took 24 s of CPU per
+# process, and each command a test ran compiled the package again. The 25 slowest tests of
+# each phase are listed at its end.
+cache_dir=$(mktemp -d "${TMPDIR:-/tmp}/vibrofocus-test-cache.XXXXXX")
+unset PYTHONDONTWRITEBYTECODE
+export PYTHONPYCACHEPREFIX="$cache_dir/pycache" HYPOTHESIS_STORAGE_DIRECTORY="$cache_dir/hypothesis"
 # One BLAS thread per process: the parallel phases run a process per core already, and a
 # BLAS call that hands off to a second thread waits for a core the other worker holds (a
 # dot product of 16384 samples took 24 ms with two threads on a busy 2-core machine, 45 us
@@ -102,47 +112,87 @@ pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
 # calibration, a served app) is made by one worker, not by each; the slow phase's tests take
 # seconds to minutes each, so an idle worker takes tests from a busy one (--dist worksteal).
 # The lowest-versions smoke test spends most of its time installing, and the browser phase
-# waiting on its pages: asked together, the smoke test starts beside the browser phase in a
-# background process of its own (its own virtual environment and temporary folder), and its
-# phase, where it comes, waits for it and shows its output. Its time counts from its start.
-lowest_pid="" lowest_log="" lowest_started=""
-start_lowest() {
-    lowest_log=$(mktemp)
-    lowest_started=$SECONDS
-    echo "=== phase lowest: started beside the next phase; its output follows when it ends"
-    bash scripts/test_lowest.sh >"$lowest_log" 2>&1 &
-    lowest_pid=$!
+# waiting on its pages: asked with browser, the phases of BESIDE_BROWSER (the smoke test and
+# the docs build) start beside the browser phase, each in a background process of its own (its
+# own temporary folders) at nice 19, so that the pages' real time comes first (the scheduler
+# gives a nice-19 process about 1.5 % of a core that a nice-0 one wants: the background phases
+# take what the browser phase leaves idle). The phase, where it comes (or right after browser,
+# for one asked before it), waits for its process and shows its output. Its time counts from
+# its start.
+declare -A bg_pid=() bg_log=() bg_started=() bg_pytest=()
+# start_beside NAME COMMAND...: starts a phase's command in the background.
+start_beside() {
+    local name=$1; shift
+    bg_log[$name]=$(mktemp)
+    bg_started[$name]=$SECONDS
+    echo "=== phase $name: started beside the next phase; its output follows when it ends"
+    bg_pytest[$name]=0
+    [ "$1" != "$python" ] || bg_pytest[$name]=1
+    nice -n 19 "$@" >"${bg_log[$name]}" 2>&1 &
+    bg_pid[$name]=$!
 }
-finish_lowest() {
-    local rc=0
-    wait "$lowest_pid" || rc=$?
-    lowest_pid=""
-    cat "$lowest_log"
-    rm -f "$lowest_log"
+# finish_beside NAME: waits for a phase started beside, shows its output, returns its status.
+finish_beside() {
+    local name=$1 rc=0
+    wait "${bg_pid[$name]}" || rc=$?
+    unset "bg_pid[$name]"
+    cat "${bg_log[$name]}"
+    rm -f "${bg_log[$name]}"
+    if [ "$rc" = 5 ] && [ "${bg_pytest[$name]}" = 1 ]; then
+        echo "phase $name: no test selected"
+        rc=0
+    fi
     return "$rc"
 }
-trap '[ -z "$lowest_pid" ] || kill "$lowest_pid" 2>/dev/null; [ -z "$lowest_log" ] || rm -f "$lowest_log"' EXIT
-wants_lowest=0
-for p in "${phases[@]}"; do [ "$p" != lowest ] || wants_lowest=1; done
-suite_start=$SECONDS
-for p in "${phases[@]}"; do
-    if [ "$p" = browser ] && ((wants_lowest)) && [ -z "$lowest_started" ]; then start_lowest; fi
-    case "$p" in
-        unit) phase unit "${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs" \
-            ${pytest_args[@]+"${pytest_args[@]}"} ;;
-        slow) phase slow "${pytest[@]}" -n auto --dist worksteal -m "slow and not browser and not docs" \
-            ${pytest_args[@]+"${pytest_args[@]}"} ;;
+cleanup() {
+    local name
+    for name in "${!bg_pid[@]}"; do kill "${bg_pid[$name]}" 2>/dev/null || true; done
+    for name in "${!bg_log[@]}"; do rm -f "${bg_log[$name]}"; done
+    rm -rf "$cache_dir"
+}
+trap cleanup EXIT
+# phase_cmd NAME: the command of a phase, in the array run_cmd.
+phase_cmd() {
+    case "$1" in
+        unit) run_cmd=("${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs") ;;
+        slow) run_cmd=("${pytest[@]}" -n auto --dist worksteal -m "slow and not browser and not docs") ;;
         # One process: the pages keep real time (timeouts, pauses), which two chromiums beside
         # a loaded machine would stretch.
-        browser) phase browser "${pytest[@]}" -m "browser and not docs" ${pytest_args[@]+"${pytest_args[@]}"} ;;
-        docs) phase docs env PYTHON="$python" bash scripts/build_docs.sh ${pytest_args[@]+"${pytest_args[@]}"} ;;
-        lowest)
-            if [ -n "$lowest_started" ]; then
-                phase_start=$lowest_started phase lowest finish_lowest
-            else
-                phase lowest bash scripts/test_lowest.sh
-            fi ;;
+        browser) run_cmd=("${pytest[@]}" -m "browser and not docs") ;;
+        docs) run_cmd=(env PYTHON="$python" bash scripts/build_docs.sh) ;;
+        lowest) run_cmd=(bash scripts/test_lowest.sh); return ;;
     esac
+    run_cmd+=(${pytest_args[@]+"${pytest_args[@]}"})
+}
+beside=" ${BESIDE_BROWSER-docs lowest} "
+wants_browser=0
+for p in "${phases[@]}"; do [ "$p" != browser ] || wants_browser=1; done
+suite_start=$SECONDS
+for p in "${phases[@]}"; do
+    if ((wants_browser)) && [ "$p" != browser ] && [[ $beside == *" $p "* ]]; then
+        # Runs beside the browser phase: started with it, finished after it, in its place.
+        if [ -n "${bg_pid[$p]:-}" ]; then
+            phase_start=${bg_started[$p]} phase "$p" finish_beside "$p"
+        fi
+        continue
+    fi
+    if [ "$p" = browser ]; then
+        for q in "${phases[@]}"; do
+            if [ "$q" != browser ] && [[ $beside == *" $q "* ]] && [ -z "${bg_started[$q]:-}" ]; then
+                phase_cmd "$q"
+                start_beside "$q" "${run_cmd[@]}"
+            fi
+        done
+    fi
+    phase_cmd "$p"
+    phase "$p" "${run_cmd[@]}"
+    if [ "$p" = browser ]; then
+        # Those asked before browser (slow, in .ci/run's order) end here.
+        for q in "${phases[@]}"; do
+            [ "$q" != browser ] || break
+            if [ -n "${bg_pid[$q]:-}" ]; then phase_start=${bg_started[$q]} phase "$q" finish_beside "$q"; fi
+        done
+    fi
 done
 
 echo "=== phase times"
@@ -152,5 +202,5 @@ for name in "${order[@]}"; do
     total=$((total + took[$name]))
 done
 printf 'total          %5d s\n' "$total"
-[ -z "$lowest_started" ] || printf 'wall clock     %5d s (lowest beside browser)\n' "$((SECONDS - suite_start))"
+((${#bg_started[@]} == 0)) || printf 'wall clock     %5d s (%s beside browser)\n' "$((SECONDS - suite_start))" "${!bg_started[*]}"
 exit "$status"
