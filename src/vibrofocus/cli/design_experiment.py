@@ -10,16 +10,24 @@ from ._command import command
 from ._errors import user_errors
 from ._options import SEED_MAX, comma_list, force_option
 
+#: The longer option helps, kept here so that each option is one line of the command.
+_HELP = {
+    "out": "Folder for protocol.toml, design.json, design.md, identification.png and design-map.png.",
+    "calibration": "A participant's calibration (.nc): the design for that arm, its felt fields from the skin "
+                   "model fitted to it (instead of --bank; one forearm).",
+    "spread": "Half-width of the draws, a fraction of each free parameter's range (1: the whole range the free "
+              "fit searches).",
+    "population": "A hypothesis whose fitted parameters every hypothesis takes, so that they differ in their "
+                  "readout only (default: each its own shipped parameters).",
+}
+
 
 @command("design-experiment", epilog="Example: vibrofocus design-experiment --out design/")
 def design_experiment_command(
-    out: Path | None = typer.Option(None, "--out", "-o", help="Folder for protocol.toml, design.json, design.md, "
-                                                              "identification.png and design-map.png."),
+    out: Path | None = typer.Option(None, "--out", "-o", help=_HELP["out"]),
     hypotheses: str = typer.Option("all", "--hypotheses", help="Hypotheses to tell apart, comma separated, or all."),
     bank: Path | None = typer.Option(None, "--bank", help="Feature bank (.npz; default the shipped simulated one)."),
-    calibration: Path | None = typer.Option(
-        None, "--calibration", help="A participant's calibration (.nc): the design for that arm, its felt fields "
-                                    "from the skin model fitted to it (instead of --bank; one forearm)."),
+    calibration: Path | None = typer.Option(None, "--calibration", help=_HELP["calibration"]),
     methods: str | None = typer.Option(None, "--methods", help="Candidate methods (default the bank's)."),
     locations: str | None = typer.Option(None, "--locations", help="Candidate location numbers (default all)."),
     levels: str = typer.Option("0,-5,-10,-15,-20,-30", "--levels", help="Candidate levels, dB re the paper's level."),
@@ -32,14 +40,10 @@ def design_experiment_command(
     budget: int = typer.Option(81, "--budget", min=4, max=20_000, help="Study 1 trials per participant."),
     draws: int = typer.Option(6, "--parameter-draws", min=1, max=64,
                               help="Parameter sets per hypothesis: the shipped one and draws around it."),
-    spread: float = typer.Option(1.0, "--parameter-spread", min=0.0, max=1.0,
-                                 help="Half-width of the draws, a fraction of each free parameter's range "
-                                      "(1: the whole range the free fit searches)."),
+    spread: float = typer.Option(1.0, "--parameter-spread", min=0.0, max=1.0, help=_HELP["spread"]),
     forearms: int = typer.Option(6, "--forearms", min=1, max=1000, help="Bank forearms the design integrates over."),
     traits: int = typer.Option(8, "--traits", min=1, max=1000, help="Participants' trait draws per sample."),
-    population: str | None = typer.Option(
-        None, "--population", help="A hypothesis whose fitted parameters every hypothesis takes, so that they "
-                                   "differ in their readout only (default: each its own shipped parameters)."),
+    population: str | None = typer.Option(None, "--population", help=_HELP["population"]),
     participants: str = typer.Option("1,2,3,4,6,8", "--participants", "-n", help="Sample sizes N of the check."),
     studies: int = typer.Option(200, "--studies", min=0, max=100_000,
                                 help="Simulated studies per N and hypothesis (0: no check)."),
