@@ -620,6 +620,12 @@ def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarra
     return u, value, status, iterations
 
 
+def _support_span(t_peak: int, support_s: tuple[float, float], fs: float, n: int) -> tuple[int, int]:
+    """The first and last sample of ``support_s`` (s before, after the tap at ``t_peak``), within the window."""
+    pre, post = (int(round(s * fs)) for s in support_s)
+    return max(0, t_peak - pre), min(n - 1, t_peak + post)
+
+
 def _pulse_basis(taper: np.ndarray, delays: np.ndarray, n: int, every: int = 1) -> np.ndarray:
     """The basis (K, m) of the drives made of the pulses at every ``every``-th of ``delays``
     (K): the pulses' Gram (Toeplitz, from the taper's autocorrelation) has about
@@ -665,9 +671,7 @@ def _target_norm(xc: np.ndarray, C: np.ndarray, taper: np.ndarray, delays: np.nd
         b = (xk @ basis).reshape(-1)
         Q = np.einsum("km,abkl,ln->ambn", basis, Cl, basis, optimize=True).reshape(n_act * m, n_act * m)
     else:
-        import scipy.linalg as sla
-
-        big = sla.block_diag(*bases)  # (n_act K, nv)
+        big = block_diag(*bases)  # (n_act K, nv)
         b = big.T @ xk.reshape(-1)
         Q = big.T @ (Cl.transpose(0, 2, 1, 3).reshape(n_act * K, n_act * K) @ big)
     w, V = np.linalg.eigh(0.5 * (Q + Q.T))
@@ -889,8 +893,8 @@ class _Program:
             self.shifts = np.round((arrival - np.min(arrival)) * fs).astype(int)
             # The rule of ResponseTiming.support_s, from the earliest arrival.
             own = (max(DEFAULT_SUPPORT_S[0], float(np.round(2.0 * np.min(arrival), 3))), DEFAULT_SUPPORT_S[1])
-            K = np.arange(max(0, t_peak - int(round(own[0] * fs))), min(n - 1, t_peak + int(round(own[1] * fs))) + 1,
-                          r).size  # pulses per actuator
+            lo, hi = _support_span(t_peak, own, fs, n)
+            K = np.arange(lo, hi + 1, r).size  # pulses per actuator
             weak, k, share = _weak_actuators(H[:, ti] * taper[:, None], K)
             if k is None or own[0] >= wanted[0]:  # no fit, or no shorter than one support: one, shortened
                 self.suggested = self._fit_support(own, n_act, r, fs)
@@ -919,8 +923,7 @@ class _Program:
                 f"{np.max(self.shifts) / fs * 1e3:.3g} ms){thinned}")
         asked_support = support_s
         support_s = self.suggested if support_s is None else _check_support(support_s)
-        pre, post = (int(round(s * fs)) for s in support_s)
-        first, last = max(0, t_peak - pre), min(n - 1, t_peak + post)
+        first, last = _support_span(t_peak, support_s, fs, n)
         delays = np.arange(first, last + 1, r)
         K = delays.size
         if not spread and K * n_act > MAX_VARIABLES:
@@ -985,16 +988,16 @@ class _Program:
         # factorization over every bin cost as much as the design).
         from .inverse import inverse_filter
 
-        y0 = np.zeros((len(quiet_idx), n)) if self.shifts.any() else predict_response(
+        warm = [] if self.shifts.any() else [predict_response(
             H[:, quiet_idx], inverse_filter(H, targets, fs, band=band, taper_octaves=taper_octaves,
-                                            check_wraparound=False))
+                                            check_wraparound=False))]
         # The coarse grid has at most _GRID_ROWS samples per point, whatever the window (the
         # rounds add what it misses), and the best-fidelity drives' quiet peaks join it.
         start = first - int(np.max(self.shifts))
         span = min(n, last + ir_taps) - start
         grid = np.arange(start, start + span, max(stride, -(-span // _GRID_ROWS))) % n
         y1 = predict_response(H[:, quiet_idx], self.drives_of(self.u_best))
-        pairs = [(j, int(t)) for y in (y0, y1) for j in range(len(quiet_idx))
+        pairs = [(j, int(t)) for y in (*warm, y1) for j in range(len(quiet_idx))
                  for t in _local_peaks(y[j], 0.3 * np.max(np.abs(y[j])), 10)]
         pairs += [(j, int(t)) for j in range(len(quiet_idx)) for t in grid]
         self.listed = np.zeros((0, 2), int)
@@ -1021,8 +1024,7 @@ class _Program:
 
     def best_fidelity_for(self, support_s: tuple[float, float]) -> float:
         """The best fidelity drives on another support reach (same taper, pulses and target)."""
-        pre, post = (int(round(s * self.fs)) for s in support_s)
-        first, last = max(0, self._t_peak - pre), min(self.n - 1, self._t_peak + post)
+        first, last = _support_span(self._t_peak, support_s, self.fs, self.n)
         delays = np.arange(first, last + 1, self.decimation)
         return _target_norm(self._xc, self._C, self.taper, delays, self.n, self.shifts, self.every)[4]
 
