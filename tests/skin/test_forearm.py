@@ -357,12 +357,12 @@ def test_skin_under_a_contact_is_passive():
     from vibrofocus.skin.propagation import exciter_response
 
     # The power a uniform pressure on the contact disc puts in is set by the disc's
-    # average displacement: midpoint quadrature over rings and sectors.
+    # average displacement: midpoint quadrature over rings (the plane under a centred
+    # contact is axisymmetric, so one point per ring, on a slant, stands for its ring).
     a = params.contact_radius_m
     r = (np.arange(40) + 0.5) * a / 40
-    th = (np.arange(16) + 0.5) * 2 * np.pi / 16
-    pts = np.stack(np.broadcast_arrays(r[:, None] * np.cos(th), r[:, None] * np.sin(th)), -1).reshape(-1, 2)
-    weights = np.repeat(r, th.size) / np.repeat(r, th.size).sum()
+    pts = r[:, None] * np.array([[np.cos(0.3), np.sin(0.3)]])
+    weights = r / r.sum()
     h = rig.transfer(pts, f)[:, :, 0] @ weights
     skin = h / exciter_response(f, params.f0_hz, params.q)[:, 0]
     assert np.all(skin.imag < 0)
