@@ -203,7 +203,9 @@ def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
             vals = _tabulated_hankel0(k[rows, 0, 0], d[pairs], table_step)
             vals *= factor[rows, 0][:, cols]
             vals *= 0.25j
-            if pairs.all():
+            if pairs.all() and rows.size == out.shape[0]:
+                out = vals.reshape(out.shape)  # every value set: no copy
+            elif pairs.all():
                 out[rows] = vals.reshape((rows.size,) + d.shape)
             else:
                 sub = out[rows]
@@ -224,7 +226,7 @@ def surface_green(k: np.ndarray, distance: np.ndarray, radius: np.ndarray, *,
         aa = np.broadcast_to(a[None, None, :], out.shape)[inside]
         bracket = 2j / (np.pi * kk) + aa * special.jv(0, kk * dd) * special.hankel1(1, kk * aa)
         out[inside] = 0.25j * (2 / (kk * aa**2)) * bracket
-    return np.conj(out)
+    return np.conjugate(out, out=out)
 
 
 def exciter_response(freqs: np.ndarray, f0_hz: np.ndarray, q: np.ndarray) -> np.ndarray:
