@@ -119,6 +119,26 @@ def test_no_drive_beats_the_bound(seed):
     assert energy_contrast_db(respond(H, designs[1]), target, quiet) <= bound.bound_db + 1e-9
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_bound_with_fewer_quiet_points_than_actuators_is_the_pseudo_inverse_one(seed):
+    # Fewer quiet rows than actuators: lambda_max from the rows' small Gram, against
+    # a^H G^+ a with numpy's pseudo-inverse of the actuators' Gram G, at every bin.
+    rng = np.random.default_rng(seed)
+    n_quiet, n_act = 3, 7
+    Hq = random_medium(rng, n_quiet, n_act)
+    inside = np.einsum("q,fqa->fa", rng.standard_normal(n_quiet), Hq)  # in the quiet rows' span: finite
+    outside = inside + 1e-3 * random_medium(rng, 1, n_act)[:, 0]  # leaves it: infinite
+    for h, finite in ((inside, True), (outside, False)):
+        H = np.concatenate([h[:, None], Hq], axis=1)
+        lam = contrast_bound(H, 0, [1, 2, 3], fs=FS).lambda_max
+        G = np.conj(np.swapaxes(Hq, 1, 2)) @ Hq
+        ref = np.einsum("fa,fab,fb->f", h, np.linalg.pinv(G, rcond=1e-10, hermitian=True), np.conj(h)).real
+        if finite:
+            assert_allclose(lam, ref, rtol=1e-7)
+        else:
+            assert np.all(np.isinf(lam))
+
+
 @pytest.mark.parametrize(("seed", "goal_above_db"), [(0, 0.5), (1, 2.0), (2, 0.3)])
 def test_constrained_meets_contrast_and_peak_limit(seed, goal_above_db):
     # A random medium whose contrast varies with frequency (room for the trade-off).

@@ -279,3 +279,20 @@ def test_weak_actuators_pulses_spaced_wider_are_named(monkeypatch):
     assert np.all(rep.pulse_spacing[:2] == rep.decimation) and np.all(rep.pulse_spacing[2:] > rep.decimation)
     assert "SPREAD_VARIABLES=64" in rep.size_limit and "4 actuators" in rep.size_limit
     assert rep.fidelity >= 0.9 - 1e-3
+
+
+def test_the_structured_solvers_step_limit_keeps_the_optimum(monkeypatch):
+    """A drive limit binding over the support (twice the least drive) goes to the structured
+    KKT solver, whose steps end at _STRUCTURED_MAXITERS: the same design as without the limit."""
+    H, targets = medium(seed=3), tap()
+
+    def design():
+        return minimax_filter(H, targets, FS, band=BAND, support_s=SUPPORT, min_fidelity=0.9, max_drive=1e-9,
+                              on_max_drive="least", full_output=True)[1]
+
+    capped = design()
+    monkeypatch.setattr(minimax, "_STRUCTURED_MAXITERS", 100)
+    free = design()
+    assert capped.drive_limited and free.drive_limited
+    assert capped.model_quiet_peak == pytest.approx(free.model_quiet_peak, rel=TOL)
+    assert capped.peak_contrast_db == pytest.approx(free.peak_contrast_db, abs=0.01)

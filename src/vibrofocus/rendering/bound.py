@@ -12,7 +12,7 @@ from .._docs import fill_doc
 from .._validation import as_array, check_band, check_index, check_positive
 from ..defaults import BAND_HZ, SIGMA_S
 from ._acc import _parseval_weights, _quiet_gram, _tap
-from ._checks import as_transfer, check_grid
+from ._checks import as_indices, as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 
 __all__ = ["ContrastBound", "contrast_bound", "energy_contrast_db"]
@@ -78,18 +78,44 @@ def _bound_db(U: np.ndarray, lam: np.ndarray, n: int) -> float:
     return float("inf") if quiet == 0 else float(10 * np.log10(target / quiet))
 
 
+def _null_tol(mu: np.ndarray, n_act: int) -> np.ndarray:
+    """Eigenvalues of ``G`` (F, k) at or below this are its null space (relative to the largest)."""
+    mu_max = mu[:, -1:]
+    return n_act * 1e3 * np.finfo(float).eps * np.where(mu_max > 0, mu_max, 1.0)
+
+
 def _exact_lambda(h: np.ndarray, G: np.ndarray) -> np.ndarray:
     """Unregularized ``lambda_max = a^H G^+ a`` (inf where ``a`` leaves ``G``'s range)."""
     with _single_threaded_blas():
         mu, V = np.linalg.eigh(G)
     proj = np.abs(np.einsum("fqk,fq->fk", np.conj(V), np.conj(h))) ** 2  # |v_k^H a|^2
-    mu_max = mu[:, -1:]
-    tol = G.shape[-1] * 1e3 * np.finfo(float).eps * np.where(mu_max > 0, mu_max, 1.0)
-    null = mu <= tol
+    null = mu <= _null_tol(mu, G.shape[-1])
     a2 = np.sum(np.abs(h) ** 2, axis=1, keepdims=True)
     escapes = np.any(null & (proj > 1e-12 * np.maximum(a2, 1e-300)), axis=1)
     with np.errstate(divide="ignore", invalid="ignore"):
         lam = np.sum(np.where(null, 0.0, proj / np.where(null, 1.0, mu)), axis=1)
+    return np.where(escapes, np.inf, lam)
+
+
+def _exact_lambda_rows(h: np.ndarray, Hq: np.ndarray) -> np.ndarray:
+    """:func:`_exact_lambda` of ``G = Hq^H Hq`` from the quiet rows ``Hq`` (F, q, n_act), for
+    fewer quiet rows than actuators: ``G``'s non-zero eigenpairs from the small Gram
+    ``Hq Hq^H`` (q x q; same eigenvalues ``mu_k``, ``G``'s eigenvectors ``Hq^H u_k / sqrt(mu_k)``),
+    so ``|v_k^H a|^2 = |u_k^H Hq a|^2 / mu_k``; ``a`` leaves ``G``'s range where the part of its
+    energy outside those eigenvectors exceeds ``1e-12`` of it (the whole null space's share,
+    where :func:`_exact_lambda` tests each null direction's)."""
+    with _single_threaded_blas():
+        K = Hq @ np.conj(np.swapaxes(Hq, -1, -2))
+        mu, U = np.linalg.eigh(0.5 * (K + np.conj(np.swapaxes(K, -1, -2))))
+        c = (Hq @ np.conj(h)[:, :, None])[:, :, 0]  # Hq a, a = conj(h)
+    num = np.abs(np.einsum("fqk,fq->fk", np.conj(U), c)) ** 2  # |u_k^H Hq a|^2 = mu_k |v_k^H a|^2
+    null = mu <= _null_tol(mu, h.shape[-1])
+    a2 = np.sum(np.abs(h) ** 2, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        safe = np.where(null, 1.0, mu)
+        inside = np.sum(np.where(null, 0.0, num / safe), axis=1)
+        lam = np.sum(np.where(null, 0.0, num / safe**2), axis=1)
+    escapes = a2 - inside > 1e-12 * np.maximum(a2, 1e-300)
     return np.where(escapes, np.inf, lam)
 
 
@@ -143,11 +169,13 @@ def contrast_bound(
     band = check_band(band, fs)
     taper_octaves = check_positive(taper_octaves, "taper_octaves", allow_zero=True)
     sigma = check_positive(sigma, "sigma")
-    G = _quiet_gram(H, target_index, quiet_indices, quiet_H)
+    rows = _quiet_rows(H, target_index, quiet_indices, quiet_H)
     taper, U = _tap(n, fs, sigma, t0, band, taper_octaves, waveform)
     active = taper > 0
-    # Over every bin (not only the band's), so that bound_db_for can weigh any waveform.
-    lam = _exact_lambda(H[:, target_index, :], G)
+    # Over every bin (not only the band's), so that bound_db_for can weigh any waveform;
+    # with fewer quiet rows than actuators, from the rows' small Gram (q x q, not n_act x n_act).
+    lam = (_exact_lambda_rows(H[:, target_index, :], rows) if rows is not None else
+           _exact_lambda(H[:, target_index, :], _quiet_gram(H, target_index, quiet_indices, quiet_H)))
     with np.errstate(divide="ignore", invalid="ignore"):
         quiet_min = np.where(active & (lam > 0), np.abs(U) ** 2 / np.where(lam > 0, lam, 1.0), 0.0)
     quiet_min = np.where(active & (lam <= 0) & (np.abs(U) > 0), np.inf, quiet_min)
@@ -161,6 +189,18 @@ def contrast_bound(
         best_db=float(10 * np.log10(best)) if best > 0 else float("-inf"),
         n_samples=n,
     )
+
+
+def _quiet_rows(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any) -> np.ndarray | None:
+    """The quiet points' rows of ``H`` (and of ``quiet_H``), (F, q, n_act), when they are fewer
+    than the actuators; ``None`` otherwise (the Gram, n_act x n_act, is then the smaller)."""
+    if quiet_H is not None:
+        return None  # a field grid: many rows (and checked where its Gram is formed)
+    q = np.delete(np.arange(H.shape[1]), target_index) if quiet_indices is None else \
+        as_indices(quiet_indices, "quiet_indices", H.shape[1])
+    if q.size >= H.shape[2] or q.size == 0 or np.any(q == target_index):
+        return None  # the Gram path (and its errors)
+    return H[:, q, :]
 
 
 def energy_contrast_db(response: Any, target_index: int, compare_indices: Any = None) -> float:
