@@ -574,12 +574,6 @@ class TrialPosteriors:
     felt: np.ndarray
 
 
-def _nan_to(x: np.ndarray, nan: float = 0.0) -> np.ndarray:
-    """``np.nan_to_num(x, nan=nan)`` without its overhead on small arrays (called per draw in a fit)."""
-    y = np.where(np.isnan(x), nan, x)
-    return y if np.isfinite(y).all() else np.nan_to_num(y, nan=nan)
-
-
 def trial_posteriors(
     percepts: Percepts,
     index: np.ndarray,
@@ -616,11 +610,11 @@ def trial_posteriors(
     spread = percepts.spread_m[idx]
     felt = percepts.felt[idx]
     conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
-    other2 = traits.acuity_sd_m**2 + (traits.spread_gain * _nan_to(spread)) ** 2
-    conflict2 = (model.conflict_gain * _nan_to(conflict)) ** 2
+    other2 = traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
+    conflict2 = (model.conflict_gain * np.nan_to_num(conflict)) ** 2
     reliability = 1.0
     if percepts.reliability is not None:
-        reliability = np.clip(_nan_to(percepts.reliability[idx], 1.0), 1e-6, 1.0)
+        reliability = np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
     sig_s2 = (other2 + conflict2) / reliability
     sp2 = traits.prior_sd_m**2
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
@@ -634,7 +628,7 @@ def trial_posteriors(
         displacement = noise * np.sqrt(other2 / reliability)[:, None] + by_conflict
         width2 = other2 / reliability + model.conflict_awareness**2 * np.sum(by_conflict**2, axis=1) / 2.0
         g_width = np.where(felt, sp2 / (sp2 + width2), 0.0)
-    sensed = np.where(felt[:, None], _nan_to(pos) + displacement, c)
+    sensed = np.where(felt[:, None], np.nan_to_num(pos) + displacement, c)
     perceived = c + g[:, None] * (sensed - c)
     post_sd = np.where(felt, np.sqrt(g_width * width2), traits.prior_sd_m)
     perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
