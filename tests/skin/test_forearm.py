@@ -357,14 +357,36 @@ def test_skin_under_a_contact_is_passive():
     from vibrofocus.skin.propagation import exciter_response
 
     # The power a uniform pressure on the contact disc puts in is set by the disc's
-    # average displacement: midpoint quadrature over rings and sectors.
+    # average displacement: midpoint quadrature over rings (the plane under a centred
+    # contact is axisymmetric, so one point per ring, on a slant, stands for its ring).
     a = params.contact_radius_m
     r = (np.arange(40) + 0.5) * a / 40
-    th = (np.arange(16) + 0.5) * 2 * np.pi / 16
-    pts = np.stack(np.broadcast_arrays(r[:, None] * np.cos(th), r[:, None] * np.sin(th)), -1).reshape(-1, 2)
-    weights = np.repeat(r, th.size) / np.repeat(r, th.size).sum()
+    pts = r[:, None] * np.array([[np.cos(0.3), np.sin(0.3)]])
+    weights = r / r.sum()
     h = rig.transfer(pts, f)[:, :, 0] @ weights
     skin = h / exciter_response(f, params.f0_hz, params.q)[:, 0]
     assert np.all(skin.imag < 0)
     # An active term would show: flipping the sign of the loss would break it.
     assert not np.all(np.conj(skin).imag < 0)
+
+
+def test_a_second_arm_of_the_same_participant_reuses_its_playback_responses(monkeypatch):
+    # Playback responses are shared in the process, keyed by what they are computed from:
+    # a second rig of the same seed computes none, another seed or latency does.
+    from vibrofocus.skin import forearm
+
+    pts = ArrayLayout.reference().points_xy[:2]
+    first = _quiet(seed=5).impulse_responses(pts)
+    computed = []
+    real = forearm.SimulatedArm._compute_responses
+    monkeypatch.setattr(forearm.SimulatedArm, "_compute_responses",
+                        lambda self, *a: computed.append(self.seed) or real(self, *a))
+    assert _quiet(seed=5).impulse_responses(pts) is first
+    assert computed == []
+    other = _quiet(seed=6).impulse_responses(pts)
+    late = _quiet(seed=5, latency_s=1e-3).impulse_responses(pts)
+    assert computed == [6, 5]
+    assert not np.allclose(other, first, rtol=1e-3, atol=0) and not np.allclose(late, first, rtol=1e-3, atol=0)
+    monkeypatch.setattr(forearm, "_shared_ir", type(forearm._shared_ir)())  # an empty cache
+    np.testing.assert_array_equal(_quiet(seed=5).impulse_responses(pts), first)
+    assert computed == [6, 5, 5]

@@ -493,9 +493,18 @@ def felt_threshold(model: PerceptualModel, traits: Traits) -> float:
     return 10.0 ** ((traits.threshold_offset_db - model.sl_ref_db) / 10.0)
 
 
+def _nan_to(x: np.ndarray, value: float = 0.0) -> np.ndarray:
+    """``numpy.nan_to_num(x, nan=value)`` of a float array, the same values at a fraction of its
+    overhead (these run once per simulated participant and trial set)."""
+    x = np.asarray(x, dtype=float)
+    if np.isinf(x).any():
+        return np.nan_to_num(x, nan=value)
+    return np.where(np.isnan(x), value, x)
+
+
 def funneling_weights(e: np.ndarray, e_thr: float, exponent: float) -> np.ndarray:
     """Central integration weights ``(E / E_thr - 1)^gamma`` of felt energies, 0 below threshold."""
-    w = np.clip(e / e_thr - 1.0, 0.0, None)
+    w = np.maximum(e / e_thr - 1.0, 0.0)
     return w**exponent if exponent != 1.0 else w
 
 
@@ -504,7 +513,7 @@ def weighted_centre(w: np.ndarray, xy: np.ndarray) -> tuple[np.ndarray, np.ndarr
     total = w.sum(axis=1)
     safe = np.where(total > 0, total, 1.0)[:, None]
     pos = (w @ xy) / safe
-    d2 = np.sum((xy[None, :, :] - pos[:, None, :]) ** 2, axis=2)
+    d2 = (xy[None, :, 0] - pos[:, 0, None]) ** 2 + (xy[None, :, 1] - pos[:, 1, None]) ** 2
     return pos, np.sqrt(np.sum(w * d2, axis=1) / safe[:, 0]), total
 
 
@@ -610,11 +619,11 @@ def trial_posteriors(
     spread = percepts.spread_m[idx]
     felt = percepts.felt[idx]
     conflict = percepts.conflict_m[idx] if percepts.conflict_m is not None else np.zeros(n)
-    other2 = traits.acuity_sd_m**2 + (traits.spread_gain * np.nan_to_num(spread)) ** 2
-    conflict2 = (model.conflict_gain * np.nan_to_num(conflict)) ** 2
+    other2 = traits.acuity_sd_m**2 + (traits.spread_gain * _nan_to(spread)) ** 2
+    conflict2 = (model.conflict_gain * _nan_to(conflict)) ** 2
     reliability = 1.0
     if percepts.reliability is not None:
-        reliability = np.clip(np.nan_to_num(percepts.reliability[idx], nan=1.0), 1e-6, 1.0)
+        reliability = np.clip(_nan_to(percepts.reliability[idx], 1.0), 1e-6, 1.0)
     sig_s2 = (other2 + conflict2) / reliability
     sp2 = traits.prior_sd_m**2
     g = np.where(felt, sp2 / (sp2 + sig_s2), 0.0)
@@ -628,7 +637,7 @@ def trial_posteriors(
         displacement = noise * np.sqrt(other2 / reliability)[:, None] + by_conflict
         width2 = other2 / reliability + model.conflict_awareness**2 * np.sum(by_conflict**2, axis=1) / 2.0
         g_width = np.where(felt, sp2 / (sp2 + width2), 0.0)
-    sensed = np.where(felt[:, None], np.nan_to_num(pos) + displacement, c)
+    sensed = np.where(felt[:, None], _nan_to(pos) + displacement, c)
     perceived = c + g[:, None] * (sensed - c)
     post_sd = np.where(felt, np.sqrt(g_width * width2), traits.prior_sd_m)
     perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)

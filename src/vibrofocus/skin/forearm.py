@@ -18,6 +18,7 @@ surface path lengths on the tapered cylinder, the short way and ``m`` times arou
 
 from __future__ import annotations
 
+import hashlib
 import threading
 from collections import OrderedDict
 from functools import lru_cache
@@ -46,6 +47,13 @@ _REFERENCE_DRIVE_V = 10.0
 # Impulse responses kept per point set by play_and_record (calibration aims at a few
 # points at a time, so a small cache avoids recomputing the model for every repeat).
 _IR_CACHE_SIZE = 32
+# Playback responses shared by every arm of the process, keyed by what they are computed
+# from (path lengths, frequency factors, sensitivity, grid): a participant simulated again
+# (a second rig of the same seed, another run in the same process) reuses them. At most
+# this many bytes of responses are kept (the 11 x 11 skin grid's are about 24 MB).
+_SHARED_IR_BYTES = 256 * 2**20
+_shared_ir: OrderedDict[bytes, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
+_shared_ir_lock = threading.Lock()
 # Playback responses sample the continuous-time response from a grid this many times
 # finer (see SimulatedForearm.impulse_responses), with the Hankel function interpolated
 # from a distance table of this relative step (about 1e-6 relative error).
@@ -56,6 +64,17 @@ _IR_TABLE_STEP = 5e-3
 _PRECURSOR_S = 0.05
 # Unit of the modulus in the compliance factor (any constant: K absorbs it).
 _MODULUS_UNIT_PA = 1e3
+
+
+def _share_responses(key: bytes, value: tuple[np.ndarray, np.ndarray | None]) -> None:
+    """Keep playback responses in the process's shared cache, the oldest out beyond its budget."""
+    with _shared_ir_lock:
+        _shared_ir[key] = value
+        _shared_ir.move_to_end(key)
+        total = sum(ir.nbytes + (0 if pre is None else pre.nbytes) for ir, pre in _shared_ir.values())
+        while total > _SHARED_IR_BYTES and len(_shared_ir) > 1:
+            ir, pre = _shared_ir.popitem(last=False)[1]
+            total -= ir.nbytes + (0 if pre is None else pre.nbytes)
 
 
 def _frequency_factors(freqs: np.ndarray, params: ForearmParameters) -> tuple[np.ndarray, ...]:
@@ -310,7 +329,8 @@ class SimulatedArm:
     def _responses(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """Playback impulse responses and, on a layered preset, the precursor samples
         (the last ``_PRECURSOR_S`` of the fine grid's circular response, shape
-        (n_pre, n_points, n_actuators)); cached per point set."""
+        (n_pre, n_points, n_actuators)); cached per point set, and shared with every arm
+        of the process that computes the same ones (a second rig of the same participant)."""
         key = points.tobytes()
         with self._ir_lock:
             if key in self._ir_cache:
@@ -323,6 +343,38 @@ class SimulatedArm:
             if self._ir_factors is None:  # the same grid for every point set
                 self._ir_factors = _frequency_factors(freqs[1:], self.participant)
             factors = self._ir_factors
+        shared_key = self._shared_key(points, factors)
+        with _shared_ir_lock:
+            found = _shared_ir.get(shared_key)
+            if found is not None:
+                _shared_ir.move_to_end(shared_key)
+        if found is None:
+            found = self._compute_responses(points, freqs, factors)
+            _share_responses(shared_key, found)
+        ir, pre = found
+        with self._ir_lock:  # a web server may record from several threads
+            self._ir_cache[key] = (ir, pre)
+            if len(self._ir_cache) > _IR_CACHE_SIZE:
+                self._ir_cache.popitem(last=False)
+        return ir, pre
+
+    def _shared_key(self, points: np.ndarray, factors: tuple[np.ndarray, ...]) -> bytes:
+        """What the playback responses of ``points`` are computed from, hashed: two arms
+        with equal keys have equal responses (the shared cache's key)."""
+        d = self.geometry.path_lengths(points, self.layout.actuators_xy)
+        radius = self.participant.contact_radius_m * np.sqrt(self.participant.contact)
+        digest = hashlib.sha256(repr((d.shape, self.n_ir, self.fs, self.latency_s, self.sensitivity,
+                                      self.participant.layered is None, _IR_OVERSAMPLING, _IR_TABLE_STEP,
+                                      [a.shape for a in factors])).encode())
+        for a in (d, np.asarray(radius, dtype=float), *factors):
+            digest.update(np.ascontiguousarray(a).tobytes())
+        return digest.digest()
+
+    def _compute_responses(self, points: np.ndarray, freqs: np.ndarray,
+                           factors: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray | None]:
+        """Playback impulse responses and precursor of ``points`` (see :meth:`_responses`)."""
+        r = _IR_OVERSAMPLING
+        n_fft = 2 * self.n_ir * r
         h = self._transfer(points, freqs, table_step=_IR_TABLE_STEP, factors=factors)
         fine = np.fft.irfft(h, n_fft, axis=0)
         ir = r * fine[: r * self.n_ir: r]
@@ -334,10 +386,6 @@ class SimulatedArm:
         if self.participant.layered is not None:
             pre = fine[-min(int(round(_PRECURSOR_S * r * self.fs)), n_fft // 4):].copy()
             pre.setflags(write=False)
-        with self._ir_lock:  # a web server may record from several threads
-            self._ir_cache[key] = (ir, pre)
-            if len(self._ir_cache) > _IR_CACHE_SIZE:
-                self._ir_cache.popitem(last=False)
         return ir, pre
 
     def response_length(self, points_xy: np.ndarray | None = None, tol: float = 1e-4) -> int:
