@@ -13,10 +13,14 @@ and Study 2 both, ``simulate_trials``):
   likelihood evaluations, and whether both reach the same parameters (asserted);
 - the CPU cost of that hypothesis' whole leave-one-participant-out score at the shipped
   settings, extrapolated from the cost per evaluation at about a thousand evaluations,
-  plus the scoring of the left-out participants on their own draws.
+  plus the scoring of the left-out participants on their own draws;
+- ``--folds``: the leave-one-participant-out folds of that hypothesis on the study's Study 1
+  trials, each fitted alone on its participants' trials (as before) and all of them sharing
+  their evaluations (``fold_logliks``): likelihood evaluations, CPU seconds and their ratio,
+  and whether both give the same folds (asserted).
 
 Run: ``python benchmarks/bench_fit_likelihood.py [--hypothesis grid-peak] [--participants 12]
-[--starts 1] [--maxiter 4]``. One BLAS thread. CPU time (``time.process_time``), so a busy
+[--starts 1] [--maxiter 4] [--folds]``. One BLAS thread. CPU time (``time.process_time``), so a busy
 machine inflates wall time, not these numbers.
 """
 
@@ -53,6 +57,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=7300)
     ap.add_argument("--starts", type=int, default=1)
     ap.add_argument("--maxiter", type=int, default=4)
+    ap.add_argument("--folds", action="store_true", help="also time the folds alone against sharing evaluations")
     args = ap.parse_args()
     bank = default_bank()
     data = simulate_trials(args.hypothesis, args.participants, np.random.default_rng([args.seed, 51]), bank=bank)
@@ -85,6 +90,28 @@ def main() -> None:
               f"{args.participants} folds): about {EVALUATIONS_PER_REFIT * per_eval / 60:.0f} CPU-min new, "
               f"{EVALUATIONS_PER_REFIT * per_eval_old / 60:.0f} old, plus "
               f"{args.participants * t_score / 60:.1f} CPU-min new to score the left-out participants")
+        if args.folds:
+            _folds(args, data.subset(np.arange(args.participants), studies=(1,)), bank)
+
+
+def _folds(args, data, bank) -> None:
+    """The folds of one hypothesis on Study 1 trials: each alone, then sharing their evaluations."""
+    from vibrofocus.participant_models.fitting.likelihood_fit import Evaluations, FitSettings, fit_hypothesis
+    from vibrofocus.participant_models.hypotheses import hypothesis
+
+    h = hypothesis(args.hypothesis)
+    settings = FitSettings(n_draws=16, n_starts=1, maxiter=20 * args.maxiter)
+    start = fit_hypothesis(h, data, bank=bank, settings=settings).params
+    keeps = [np.delete(np.arange(args.participants), i) for i in range(args.participants)]
+    t_alone, alone = _cpu(lambda: [fit_hypothesis(h, data.subset(k), bank=bank, settings=settings, start=start)
+                                   for k in keeps])
+    shared = Evaluations(h, data, bank, settings)
+    t_shared, together = _cpu(lambda: [fit_hypothesis(h, data, bank=bank, settings=settings, start=start,
+                                                      participants=k, evaluations=shared) for k in keeps])
+    assert all(a.params == b.params for a, b in zip(alone, together))
+    print(f"{args.participants} folds on Study 1 ({settings.maxiter} iterations, {settings.n_draws} draws): each "
+          f"alone {sum(f.n_evaluations for f in alone)} evaluations, {t_alone:.1f} s CPU; sharing {len(shared)}, "
+          f"{t_shared:.1f} s CPU; ratio {t_alone / t_shared:.1f}; same folds")
 
 
 if __name__ == "__main__":

@@ -14,6 +14,7 @@ from vibrofocus.errors import ValidationError
 from vibrofocus.simulation import Hypothesis, ParameterRange, default_bank, hypothesis, marginal_loglik
 from vibrofocus.simulation.fitting import (FitSettings, compare_hypotheses, fit_hypothesis, lab_trials,
                                            model_recovery, participant_loglik, simulate_trials)
+from vibrofocus.simulation.fitting.elpd import fold_logliks
 from vibrofocus.simulation.likelihood import Quadrature, Stimuli
 from vibrofocus.simulation.parameters import read_parameters
 
@@ -128,6 +129,51 @@ def test_a_left_out_participant_is_scored_on_draws_the_fit_did_not_tune():
         np.testing.assert_allclose(res["pointwise"][i], participant_loglik(SHIFT, one, params, settings=s.scoring()),
                                    rtol=1e-12)
         assert res["pointwise"][i] != participant_loglik(SHIFT, one, params, settings=s)[0]
+
+
+def test_folds_sharing_evaluations_give_the_numbers_of_folds_fitted_alone():
+    # A fold refits on the other participants' own trials (data.subset), from the fit to
+    # everyone; folds run together read each parameter set's likelihoods from one pass
+    # over every participant. The numbers must not depend on which way.
+    data = simulate_trials(SHIFT, 3, np.random.default_rng(4), repetitions=1)
+    s = FitSettings(n_draws=2, n_starts=1, maxiter=4, score_draws=4)
+    start = {"bias_mean_m[0]": 0.002}
+    shared = fold_logliks(SHIFT, data, [0, 1, 2], start, default_bank(), s)
+    evaluations = 0
+    for i, (ll, params) in enumerate(shared):
+        keep = np.delete(np.arange(3), i)
+        alone = fit_hypothesis(SHIFT, data.subset(keep), settings=s, start=start)
+        evaluations += alone.n_evaluations
+        assert params == pytest.approx(alone.params, rel=1e-12, abs=0.0)
+        want = participant_loglik(SHIFT, data.subset(np.array([i])), alone.params, settings=s.scoring())[0]
+        np.testing.assert_allclose(ll, want, rtol=1e-12)
+    assert evaluations >= 3 * 3  # each fold's first simplex and a step: the folds did search
+
+
+def test_trial_groups_cover_every_trial_once_with_its_own_stimulus():
+    data = simulate_trials("v3-centroid", 3, np.random.default_rng(8), repetitions=1)
+    rng = np.random.default_rng(9)
+    allowed1 = np.ones((data.stim1.size, data.n_locations), dtype=bool)
+    allowed1[::3, :4] = False
+    level2 = np.where(rng.random(data.stim2.size) < 0.5, 0.0, -10.0)
+    data = dataclasses.replace(data, level1=np.where(np.arange(data.stim1.size) % 2, -5.0, 0.0), allowed1=allowed1,
+                               level2=level2)
+    level1, allowed, _ = data.study1_conditions()
+    seen = np.zeros(data.stim1.size, dtype=int)
+    for g in data.study1_groups:
+        seen[g.rows] += 1
+        np.testing.assert_array_equal(g.stimuli[g.which], data.stim1[g.rows])
+        assert np.all(level1[g.rows] == g.level_db)
+        want = np.arange(data.n_locations) if g.allowed is None else g.allowed
+        assert np.all(allowed[g.rows] == np.isin(np.arange(data.n_locations), want))
+    assert np.all(seen == 1) and len(data.study1_groups) == 4
+    seen = np.zeros(data.stim2.size, dtype=int)
+    for g in data.study2_groups:
+        seen[g.rows] += 1
+        np.testing.assert_array_equal(g.stimuli[g.which], data.stim2[g.rows])
+        np.testing.assert_array_equal(g.selections[g.which], data.selected2[g.rows])
+        assert np.all(level2[g.rows] == g.level_db) and g.allowed is None
+    assert np.all(seen == 1) and {g.level_db for g in data.study2_groups} == {0.0, -10.0}
 
 
 @pytest.mark.slow

@@ -425,18 +425,20 @@ def _selection_masses(laws: np.ndarray, locs: np.ndarray, kappa: float, log_sd: 
     # (m + 1)-th is not: above x_(m+1) (none beyond the last location). below[..., m - 1]:
     # the probability that log J is at most x_m (1 for the nearest, always selected).
     top = min(m_max + 1, n_j)  # the (m_max + 1)-th nearest bounds the largest selection asked for
-    below = np.zeros(v.shape + (m_max + 1,))
-    below[..., 0] = 1.0
-    x = below[..., 1:top]
+    # x[p, g, m - 1] = (x_m - b v) / log_sd for m = 1 .. top - 1, laid out contiguously.
+    x = np.multiply(b[:, None, 1:top], v[..., None])
+    np.subtract(-np.log(kappa) - a[:, None, 1:top], x, out=x)
     if log_sd > 0:
-        np.multiply(b[:, None, 1:top] / -log_sd, v[..., None], out=x)
-        x += (-np.log(kappa) - a[:, None, 1:top]) / log_sd
+        x /= log_sd
         special.ndtr(x, out=x)
     else:
-        x[...] = (-np.log(kappa) - a[:, None, 1:top]) - b[:, None, 1:top] * v[..., None] >= 0
-    p = below[..., :-1] - below[..., 1:]
-    np.maximum(p, 0.0, out=p)  # (P, G, m_max): the m nearest, at [..., m - 1]
-    mass = np.einsum("pgj,g->pj", p, wg) * w[:, None]
+        x = (x >= 0).astype(float)
+    # The mass is linear in "below": average over the stretch's nodes first, then take the
+    # differences between successive m (the m nearest, at [:, m - 1]).
+    below = np.zeros((x.shape[0], m_max + 1))
+    below[:, 0] = wg.sum()
+    below[:, 1:top] = np.einsum("pgt,g->pt", x, wg)
+    mass = np.maximum(below[:, :-1] - below[:, 1:], 0.0) * w[:, None]
     prefix = np.cumsum(np.int64(1) << order[:, :m_max].astype(np.int64), axis=1)  # the m nearest as a bit mask
     key = prefix + (li.astype(np.int64) * (np.int64(1) << n_j))[:, None]
     return key.reshape(-1), mass.reshape(-1)

@@ -1,7 +1,8 @@
 """Leave-one-participant-out predictive log-likelihood (ELPD) of each hypothesis, on Dask.
 
 For each hypothesis and each participant ``i``, the free parameters are refitted
-without ``i`` (from the fit to everyone) and ``i``'s marginal log-likelihood is taken
+without ``i`` (from the fit to everyone; folds run together share their likelihood
+evaluations, :func:`fold_logliks`) and ``i``'s marginal log-likelihood is taken
 there; the ELPD is their sum, its standard error ``sqrt(N var_i)`` (Vehtari, Gelman &
 Gabry 2017, Stat. Comput. 27(5), eq. 22-23). A hypothesis without free parameters is
 not fitted, so its leave-one-out score is its likelihood. :func:`compare_hypotheses`
@@ -21,13 +22,13 @@ import numpy as np
 from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
 from .lab_trials import LabTrials
-from .likelihood_fit import Fit, FitSettings, fit_hypothesis, participant_loglik
+from .likelihood_fit import Evaluations, Fit, FitSettings, fit_hypothesis, participant_loglik
 
-__all__ = ["fold_loglik", "elpd_summary", "compare_hypotheses"]
+__all__ = ["fold_loglik", "fold_logliks", "elpd_summary", "compare_hypotheses"]
 
 
 def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str, float], bank: FeatureBank,
-                settings: FitSettings) -> tuple[float, dict[str, float]]:
+                settings: FitSettings, evaluations: Evaluations | None = None) -> tuple[float, dict[str, float]]:
     """One fold: refit without participant ``left_out``, score that participant there.
 
     The score integrates over :meth:`FitSettings.scoring`'s draws, not the fit's: held out
@@ -43,6 +44,8 @@ def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str
         The fit to every participant (the refit's first start).
     bank : FeatureBank
     settings : FitSettings
+    evaluations : Evaluations, optional
+        Likelihoods of every participant of ``data`` to reuse (:func:`fold_logliks`).
 
     Returns
     -------
@@ -51,12 +54,43 @@ def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str
     params : dict of str to float
         The refitted parameters.
     """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
     keep = np.delete(np.arange(data.n_participants), left_out)
     one = dataclasses.replace(settings, n_starts=1)
-    fit = fit_hypothesis(hypothesis, data.subset(keep), bank=bank, settings=one, start=start)
-    ll = participant_loglik(hypothesis, data.subset(np.array([left_out])), fit.params, bank=bank,
+    fit = fit_hypothesis(h, data, bank=bank, settings=one, start=start, participants=keep,
+                         evaluations=evaluations if evaluations is not None else Evaluations(h, data, bank, one))
+    ll = participant_loglik(h, data.subset(np.array([left_out])), fit.params, bank=bank,
                             settings=settings.scoring())
     return float(ll[0]), fit.params
+
+
+def fold_logliks(hypothesis: Any, data: LabTrials, left_out: Sequence[int], start: dict[str, float],
+                 bank: FeatureBank, settings: FitSettings) -> list[tuple[float, dict[str, float]]]:
+    """:func:`fold_loglik` for several folds, sharing their likelihood evaluations.
+
+    The folds start at the same place with the same first simplex and their searches
+    agree for many steps: each parameter set is scored once for all of them
+    (:class:`~.likelihood_fit.Evaluations`); the results are those of separate folds.
+
+    Parameters
+    ----------
+    hypothesis, data, start, bank, settings
+        As :func:`fold_loglik`.
+    left_out : sequence of int
+        The participants left out, one fold each.
+
+    Returns
+    -------
+    list of (float, dict)
+        Per fold, as :func:`fold_loglik`.
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    h = find_hypothesis(hypothesis)
+    shared = Evaluations(h, data, bank, dataclasses.replace(settings, n_starts=1))
+    return [fold_loglik(h, data, int(i), start, bank, settings, shared) for i in left_out]
 
 
 def elpd_summary(pointwise: np.ndarray) -> tuple[float, float]:
@@ -128,20 +162,24 @@ def compare_hypotheses(data: LabTrials, hypotheses: Sequence[Any] | None = None,
         for h in hs:
             fits[h.name] = fit_hypothesis(h, data, bank=b, settings=s)
             if h.free_parameters:
-                folds[h.name] = [fold_loglik(h, data, i, fits[h.name].params, b, s) for i in range(data.n_participants)]
+                folds[h.name] = fold_logliks(h, data, range(data.n_participants), fits[h.name].params, b, s)
     else:
         from ..power import dask_client
 
         with dask_client(scheduler=scheduler, n_workers=n_workers, client=client) as dask:
             bank_f = dask.scatter(b, broadcast=True)
             full = {h.name: dask.submit(fit_hypothesis, h, data, bank=bank_f, settings=s, pure=False) for h in hs}
+            # As few tasks per hypothesis as keep every worker thread busy: a task's folds
+            # share their evaluations (fold_logliks).
+            threads = sum(dask.nthreads().values()) or 1
+            chunks = np.array_split(np.arange(data.n_participants), min(data.n_participants, -(-threads // len(hs))))
             pending = {}
             for h in hs:
                 fits[h.name] = full[h.name].result()
                 if h.free_parameters:
-                    pending[h.name] = [dask.submit(fold_loglik, h, data, i, fits[h.name].params, bank_f, s, pure=False)
-                                       for i in range(data.n_participants)]
-            folds = {name: [f.result() for f in futs] for name, futs in pending.items()}
+                    pending[h.name] = [dask.submit(fold_logliks, h, data, c.tolist(), fits[h.name].params, bank_f, s,
+                                                   pure=False) for c in chunks]
+            folds = {name: [r for f in futs for r in f.result()] for name, futs in pending.items()}
     out: dict[str, Any] = {}
     pointwise: dict[str, np.ndarray] = {}
     for h in hs:

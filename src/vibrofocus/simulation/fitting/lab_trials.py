@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Any
+from functools import cached_property
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from ...errors import ValidationError
 from ...io.trials_csv import BLOCK_COLUMNS, read_block_cells
 from ..bank import FeatureBank
 
-__all__ = ["LabTrials", "BLOCK_COLUMNS", "PAPER_PROTOCOLS", "trials_source", "lab_trials"]
+__all__ = ["LabTrials", "TrialGroup", "BLOCK_COLUMNS", "PAPER_PROTOCOLS", "trials_source", "lab_trials"]
 
 # BLOCK_COLUMNS: what a study database's trials, its trials file and its BIDS events say of
 # each trial's block (io.trials_csv): level_db, the level in dB re the session's level rule
@@ -28,6 +29,41 @@ __all__ = ["LabTrials", "BLOCK_COLUMNS", "PAPER_PROTOCOLS", "trials_source", "la
 #: Protocols whose every trial is at 0 dB with every location allowed: the paper's two
 #: studies (also the protocol of a session stored before protocol files).
 PAPER_PROTOCOLS = ("paper-study1", "paper-study2")
+
+
+class TrialGroup(NamedTuple):
+    """Trials that share a level and allowed locations, with their distinct stimuli.
+
+    Attributes
+    ----------
+    level_db : float
+    allowed : ndarray of int or None
+        The allowed locations (0-based); None: every location.
+    rows : ndarray of int
+        The group's trials (indices into the study's arrays).
+    stimuli : ndarray of int
+        The distinct stimuli (sorted), or for Study 2 the stimulus of each distinct
+        (stimulus, selection) pair.
+    which : ndarray of int, shape (rows.size,)
+        Each trial's entry in ``stimuli`` (Study 2: in ``selections`` too).
+    selections : ndarray of bool, shape (stimuli.size, n_locations), or None
+        Study 2: each distinct pair's selection.
+    """
+
+    level_db: float
+    allowed: np.ndarray | None
+    rows: np.ndarray
+    stimuli: np.ndarray
+    which: np.ndarray
+    selections: np.ndarray | None = None
+
+
+def _distinct_rows(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Distinct rows of the columns side by side (sorted), and each row's index among them."""
+    keys = np.column_stack([np.asarray(c, dtype=float).reshape(np.shape(c)[0], -1 if np.size(c) else 1)
+                            for c in columns])
+    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
+    return uniq, inverse.reshape(-1)
 
 
 @dataclass(frozen=True)
@@ -96,6 +132,42 @@ class LabTrials:
         n = self.stim2.size
         return (np.zeros(n) if self.level2 is None else self.level2,
                 np.ones((n, self.n_locations), dtype=bool) if self.allowed2 is None else self.allowed2)
+
+    def _groups(self, level: np.ndarray, allowed: np.ndarray, stim: np.ndarray,
+                selected: np.ndarray | None) -> tuple[TrialGroup, ...]:
+        """Trials grouped by (level, allowed locations), in sorted order of those keys."""
+        if not stim.size:
+            return ()
+        keys, group = _distinct_rows(level, allowed)
+        out = []
+        for g, key in enumerate(keys):
+            rows = np.flatnonzero(group == g)
+            ok = np.flatnonzero(key[1:])
+            if selected is None:
+                stimuli, which = np.unique(stim[rows], return_inverse=True)
+                picks = None
+            else:
+                pairs, which = _distinct_rows(stim[rows], selected[rows])
+                stimuli, picks = pairs[:, 0].astype(int), pairs[:, 1:].astype(bool)
+            out.append(TrialGroup(float(key[0]), None if ok.size == self.n_locations else ok, rows,
+                                  stimuli, which.reshape(-1), picks))
+        return tuple(out)
+
+    @cached_property
+    def study1_groups(self) -> tuple[TrialGroup, ...]:
+        """Study 1 trials by (level, allowed locations): what every likelihood evaluation scores alike.
+
+        Computed once per trials object (the likelihood reads it at every parameter set
+        and population draw).
+        """
+        level, allowed, _ = self.study1_conditions()
+        return self._groups(level, allowed, self.stim1, None)
+
+    @cached_property
+    def study2_groups(self) -> tuple[TrialGroup, ...]:
+        """Study 2 trials by (level, allowed locations), each group's distinct (stimulus, selection) pairs."""
+        level, allowed = self.study2_conditions()
+        return self._groups(level, allowed, self.stim2, self.selected2)
 
     def table(self) -> Any:
         """The trials as a trials-file table (docs/file-formats.md, trials file), every cell text.

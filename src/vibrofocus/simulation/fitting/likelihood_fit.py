@@ -31,7 +31,7 @@ from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
 __all__ = ["FitSettings", "Fit", "model_at", "initial_simplex", "population_draws", "level_draws", "study1_probabilities_of",
-           "participant_loglik", "fit_hypothesis"]
+           "participant_loglik", "Evaluations", "fit_hypothesis"]
 
 
 #: Draws that score a hypothesis per draw that fits it, by default (FitSettings.score_draws).
@@ -201,14 +201,6 @@ def level_draws(h: Any, model: PerceptualModel, bank: FeatureBank, settings: Fit
         yield traits, at
 
 
-def _groups(*columns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Distinct rows of the columns side by side, and each row's group."""
-    keys = np.column_stack([np.asarray(c, dtype=float).reshape(np.shape(c)[0], -1 if np.size(c) else 1)
-                            for c in columns])
-    uniq, inverse = np.unique(keys, axis=0, return_inverse=True)
-    return uniq, inverse.reshape(-1)
-
-
 def study1_probabilities_of(data: LabTrials, at: Mapping[float, tuple[Stimuli, Percepts]], model: PerceptualModel,
                             traits: Traits, quadrature: Quadrature) -> np.ndarray:
     """Probability of each location answer of each Study 1 trial, at its level and among its allowed locations.
@@ -230,17 +222,11 @@ def study1_probabilities_of(data: LabTrials, at: Mapping[float, tuple[Stimuli, P
     """
     from ..design import study1_probabilities
 
-    level, allowed, _ = data.study1_conditions()
     out = np.zeros((data.stim1.size, data.n_locations))
-    uniq, group = _groups(level, allowed)
-    for g, key in enumerate(uniq):
-        rows = group == g
-        st, per = at[float(key[0])]
-        ok = np.flatnonzero(key[1:])
-        stim, which = np.unique(data.stim1[rows], return_inverse=True)
-        law = answer_law(per, stim, st.centre_xy, model, traits, quadrature, study=1)
-        p = study1_probabilities(law, st.locations_xy, None if ok.size == data.n_locations else ok, quadrature)
-        out[rows] = p[which.reshape(-1)]
+    for g in data.study1_groups:
+        st, per = at[g.level_db]
+        law = answer_law(per, g.stimuli, st.centre_xy, model, traits, quadrature, study=1)
+        out[g.rows] = study1_probabilities(law, st.locations_xy, g.allowed, quadrature)[g.which]
     return out
 
 
@@ -288,9 +274,6 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
     floor1 = s.lapse / np.maximum(allowed1.sum(axis=1), 1)
     lo, hi = point_area_m(b)
     log_floor_point = np.log(s.lapse / float(np.prod(hi - lo))) if s.lapse else -np.inf
-    # Study 2: distinct (level, allowed, stimulus, selection) rows, scored once per draw for everyone.
-    uniq, inverse = _groups(level2, allowed2, data.stim2, data.selected2)
-    n_loc = data.n_locations
     floor2 = s.lapse / (2.0 ** allowed2.sum(axis=1) - 1.0)
     levels = sorted(set(level1.tolist()) | set(level2.tolist()))
     total = np.zeros((s.n_draws, data.n_participants))
@@ -307,16 +290,13 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
                 ll = np.logaddexp(np.log1p(-s.lapse) + point_loglik(law, point1[rows]), log_floor_point)
                 total[k] += np.bincount(data.part1[rows], ll, data.n_participants)
             if data.stim2.size:
-                p2 = np.zeros(len(uniq))
-                for key in np.unique(uniq[:, :1 + n_loc], axis=0):
-                    rows = np.all(uniq[:, :1 + n_loc] == key, axis=1)
-                    st, per = at[float(key[0])]
-                    ok = np.flatnonzero(key[1:])
-                    law = answer_law(per, uniq[rows, 1 + n_loc].astype(int), st.centre_xy, m, traits, q, study=2)
-                    p2[rows] = selection_probability(law, st.locations_xy, uniq[rows, 2 + n_loc:].astype(bool),
-                                                     None if ok.size == n_loc else ok, q)
-                total[k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2[inverse] + floor2),
-                                        data.n_participants)
+                # Each distinct (stimulus, selection) of a group is scored once per draw for everyone.
+                p2 = np.zeros(data.stim2.size)
+                for g in data.study2_groups:
+                    st, per = at[g.level_db]
+                    law = answer_law(per, g.stimuli, st.centre_xy, m, traits, q, study=2)
+                    p2[g.rows] = selection_probability(law, st.locations_xy, g.selections, g.allowed, q)[g.which]
+                total[k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2 + floor2), data.n_participants)
     with np.errstate(divide="ignore"):
         return special.logsumexp(total, axis=0) - np.log(s.n_draws)
 
@@ -352,8 +332,47 @@ def initial_simplex(u0: np.ndarray, step: float = SIMPLEX_STEP) -> np.ndarray:
     return np.vstack([u0, u0 + np.diag(moves)])
 
 
+class Evaluations:
+    """Every participant's log-likelihood at each parameter set evaluated, kept for reuse.
+
+    For one hypothesis, set of trials, bank and settings. A fit to some of the
+    participants (a leave-one-participant-out fold) reads the sum of theirs; the folds
+    of one study start at the same place with the same first simplex, and their searches
+    agree for many steps, so folds that share one :class:`Evaluations` compute each
+    parameter set once. Scoring every participant costs about what scoring all but one
+    does: the population's draws, not the participants, dominate the cost.
+
+    Parameters
+    ----------
+    hypothesis : Hypothesis
+    data : LabTrials
+    bank : FeatureBank
+    settings : FitSettings
+    """
+
+    def __init__(self, hypothesis: Any, data: LabTrials, bank: FeatureBank, settings: FitSettings) -> None:
+        self.hypothesis, self.data, self.bank, self.settings = hypothesis, data, bank, settings
+        self._values: dict[tuple[float, ...], np.ndarray] = {}
+
+    def __len__(self) -> int:
+        return len(self._values)
+
+    def __call__(self, values: np.ndarray) -> np.ndarray:
+        """Each participant's log-likelihood (shape (n_participants,)) at the free parameters ``values``.
+
+        ``values`` in the order of ``free_parameters``, SI units; a set is reused only
+        where it is exactly the same numbers (callers round their search's coordinates).
+        """
+        key = tuple(np.asarray(values, dtype=float).tolist())
+        if key not in self._values:
+            self._values[key] = participant_loglik(self.hypothesis, self.data, list(key), bank=self.bank,
+                                                   settings=self.settings)
+        return self._values[key]
+
+
 def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None = None,
-                   settings: FitSettings | None = None, start: Mapping[str, float] | None = None) -> Fit:
+                   settings: FitSettings | None = None, start: Mapping[str, float] | None = None,
+                   participants: np.ndarray | None = None, evaluations: Evaluations | None = None) -> Fit:
     """Fit a hypothesis' free parameters to trials by maximum marginal likelihood.
 
     Nelder-Mead within the parameters' ranges (scaled to [0, 1]), from ``settings.n_starts``
@@ -377,10 +396,18 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
     start : mapping of str to float, optional
         First start (by parameter key), e.g. a fit to all participants when refitting
         without one.
+    participants : ndarray of int, optional
+        Fit to these participants only (indices into ``data.participants``; default all).
+        Whether the Study 2 selection's parameters are fitted depends on ``data`` as a whole.
+    evaluations : Evaluations, optional
+        Evaluations of the same hypothesis, ``data``, bank and settings to reuse and add
+        to (e.g. shared by the folds of :func:`~.elpd.fold_logliks`); the result is the
+        same with or without.
 
     Returns
     -------
     Fit
+        ``participant_loglik`` of the participants fitted, in the order of ``participants``.
     """
     from ..hypotheses import hypothesis as find_hypothesis
 
@@ -388,8 +415,9 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
     b = bank if bank is not None else default_bank()
     s = settings or FitSettings()
     ranges = h.free_parameters
+    who = np.arange(data.n_participants) if participants is None else np.asarray(participants, dtype=int)
     if not ranges:
-        ll = participant_loglik(h, data, None, bank=b, settings=s)
+        ll = participant_loglik(h, data, None, bank=b, settings=s)[who]
         return Fit(h.name, {}, float(ll.sum()), ll, 1)
     lo = np.array([r.lo for r in ranges])
     span = np.array([r.hi for r in ranges]) - lo
@@ -397,7 +425,8 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
     full = np.clip((np.asarray(first, dtype=float) - lo) / span, 0.0, 1.0)
     # Without Study 2 trials the selection's parameters touch no answer: kept where they start.
     active = np.array([i for i, r in enumerate(ranges) if data.stim2.size or r.name not in STUDY2_ONLY], dtype=int)
-    cache: dict[tuple[float, ...], np.ndarray] = {}
+    evaluate = evaluations if evaluations is not None else Evaluations(h, data, b, s)
+    seen: set[tuple[float, ...]] = set()
 
     def at(u: np.ndarray) -> np.ndarray:
         out = full.copy()
@@ -405,10 +434,9 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
         return np.clip(out, 0.0, 1.0)
 
     def per_participant(u: np.ndarray) -> np.ndarray:
-        key = tuple(np.round(at(u), 12))
-        if key not in cache:
-            cache[key] = participant_loglik(h, data, list(lo + span * np.array(key)), bank=b, settings=s)
-        return cache[key]
+        values = lo + span * np.round(at(u), 12)
+        seen.add(tuple(values))
+        return evaluate(values)[who]
 
     def objective(u: np.ndarray) -> float:
         value = float(per_participant(u).sum())
@@ -430,4 +458,4 @@ def fit_hypothesis(hypothesis: Any, data: LabTrials, *, bank: FeatureBank | None
     u = at(best.x)
     ll = per_participant(best.x)
     params = {r.key: float(v) for r, v in zip(ranges, lo + span * u)}
-    return Fit(h.name, params, float(ll.sum()), ll, len(cache))
+    return Fit(h.name, params, float(ll.sum()), ll, len(seen))
