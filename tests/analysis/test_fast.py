@@ -99,3 +99,15 @@ def test_survival_functions_are_scipys_bit_for_bit():
     assert fast.chi2_sf(3.0, 2) == stats.chi2.sf(3.0, 2) and np.ndim(fast.chi2_sf(3.0, 2)) == 0
     np.testing.assert_array_equal(fast.f_sf(x[:12, None], np.array([1.0, 2.0, 4.5]), 17.0),
                                   stats.f.sf(x[:12, None], np.array([1.0, 2.0, 4.5]), 17.0))
+
+
+def test_average_ranks_are_scipys_bit_for_bit():
+    from scipy import stats
+
+    rng = np.random.default_rng(8)
+    X = rng.integers(0, 4, (50, 12, 9)).astype(float)  # many ties
+    X[3, 2, 4] = np.nan
+    X[7, :, :] = 1.0  # all tied
+    X[9] = rng.normal(size=(12, 9))  # none tied
+    eq = (X[:, :, :, None] == X[:, :, None, :]).sum(axis=3)
+    np.testing.assert_array_equal(fast._average_ranks(X, eq), stats.rankdata(X, axis=2))

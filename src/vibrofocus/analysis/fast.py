@@ -164,6 +164,17 @@ def _denoise(values: np.ndarray) -> np.ndarray:
     return out
 
 
+def _average_ranks(X: np.ndarray, eq: np.ndarray) -> np.ndarray:
+    """``scipy.stats.rankdata(X, axis=-1)`` (average ranks of ties; a row with a NaN is all
+    NaN), bit for bit (the ranks are integers and halves: exact), given ``eq``, the size of
+    each value's tie group; for the few levels of a study, without rankdata's per-call
+    overhead."""
+    less = (X[..., None, :] < X[..., :, None]).sum(axis=-1)
+    ranked = less + (eq + 1) / 2.0
+    ranked[np.isnan(X).any(axis=-1)] = np.nan
+    return ranked
+
+
 def friedman_batch(X: np.ndarray, *, denoise: bool = True) -> dict[str, np.ndarray]:
     """Friedman test (chi-square, corrected for ties) of many studies at once.
 
@@ -188,9 +199,9 @@ def friedman_batch(X: np.ndarray, *, denoise: bool = True) -> dict[str, np.ndarr
     if denoise:
         X = _denoise(X)
     _, n, k = X.shape
-    ranked = stats.rankdata(X, axis=2)
-    ssbn = np.sum(ranked.sum(axis=1) ** 2, axis=1)
     eq = (X[:, :, :, None] == X[:, :, None, :]).sum(axis=3)  # (S, n, k): size of each value's tie group
+    ranked = _average_ranks(X, eq)
+    ssbn = np.sum(ranked.sum(axis=1) ** 2, axis=1)
     ties = np.sum(eq**2 - 1, axis=(1, 2)).astype(float)
     with np.errstate(invalid="ignore", divide="ignore"):
         W = (12 * ssbn - 3 * n**2 * k * (k + 1) ** 2) / (n**2 * k * (k - 1) * (k + 1) - n * ties)
