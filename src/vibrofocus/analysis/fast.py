@@ -13,11 +13,11 @@ equality with pingouin to 1e-8.
 from __future__ import annotations
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 from ..errors import ValidationError
 
-__all__ = ["rm_anova2_batch", "friedman_batch", "orthonormal_contrasts", "chi2_sf", "f_sf", "t_sf"]
+__all__ = ["rm_anova2_batch", "friedman_batch", "orthonormal_contrasts"]
 
 
 def _sf(function, lower: float, x, *df) -> np.ndarray | float:
