@@ -77,3 +77,37 @@ def test_bad_shapes_are_refused():
         fast.rm_anova2_batch(np.full((1, 5, 3, 3), np.nan))
     with pytest.raises(ValidationError):
         fast.friedman_batch(np.ones((1, 1, 3)))
+
+
+def test_survival_functions_are_scipys_bit_for_bit():
+    # Values inside, at and outside the support, NaN and infinities; degrees of freedom
+    # integer, fractional (the Greenhouse-Geisser ones), zero, negative and NaN.
+    from scipy import stats
+
+    rng = np.random.default_rng(5)
+    x = np.concatenate([rng.exponential(3.0, 400), -rng.exponential(1.0, 20), [0.0, -0.0, np.nan, np.inf, -np.inf,
+                                                                                   1e-300, 1e300, 4.5]])
+    df = np.concatenate([rng.integers(1, 40, 200).astype(float), rng.uniform(0.2, 30.0, 220), [0.0, -1.0, np.nan,
+                                                                                                np.inf, 2.0, 3.0, 5.0,
+                                                                                                1.0]])
+    dfd = rng.permutation(df)
+    for ours, theirs in ((fast.chi2_sf(x, df), stats.chi2.sf(x, df)), (fast.t_sf(x, df), stats.t.sf(x, df)),
+                         (fast.t_sf(-x, df), stats.t.sf(-x, df)), (fast.f_sf(x, df, dfd), stats.f.sf(x, df, dfd))):
+        np.testing.assert_array_equal(ours, theirs)
+        assert ours.dtype == theirs.dtype
+    # Scalars and broadcasting, as the callers pass them.
+    assert fast.chi2_sf(3.0, 2) == stats.chi2.sf(3.0, 2) and np.ndim(fast.chi2_sf(3.0, 2)) == 0
+    np.testing.assert_array_equal(fast.f_sf(x[:12, None], np.array([1.0, 2.0, 4.5]), 17.0),
+                                  stats.f.sf(x[:12, None], np.array([1.0, 2.0, 4.5]), 17.0))
+
+
+def test_average_ranks_are_scipys_bit_for_bit():
+    from scipy import stats
+
+    rng = np.random.default_rng(8)
+    X = rng.integers(0, 4, (50, 12, 9)).astype(float)  # many ties
+    X[3, 2, 4] = np.nan
+    X[7, :, :] = 1.0  # all tied
+    X[9] = rng.normal(size=(12, 9))  # none tied
+    eq = (X[:, :, :, None] == X[:, :, None, :]).sum(axis=3)
+    np.testing.assert_array_equal(fast._average_ranks(X, eq), stats.rankdata(X, axis=2))

@@ -175,12 +175,14 @@ class PowerDesign:
 
 
 def _paired_t_p(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    from ..analysis.fast import t_sf  # not at import: vibrofocus.analysis draws (matplotlib)
+
     d = x - y
     n = d.shape[0]
     sd = d.std(axis=0, ddof=1)
     with np.errstate(invalid="ignore", divide="ignore"):
         t = d.mean(axis=0) / (sd / np.sqrt(n))
-    p = 2 * stats.t.sf(np.abs(t), n - 1)
+    p = 2 * t_sf(np.abs(t), n - 1)
     return np.where(sd > 0, p, 1.0)
 
 
