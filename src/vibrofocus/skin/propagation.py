@@ -50,7 +50,17 @@ for _j in range(1, 15):
     _c *= -((2 * _j - 1) ** 2) / (_j * 8.0)
     _SERIES_COEFFS.append(_c * 1j**_j)
 del _c, _j
-_ASYMPTOTIC_COEFFS = _SERIES_COEFFS[:7]
+
+
+def _asymptotic_sum(inv: np.ndarray, n_terms: int) -> np.ndarray:
+    """``1 + sum_{j<=n_terms} i^j a_j / z^j`` from ``inv = 1 / z``, by Horner in ``1/z`` (in place)."""
+    series = np.full_like(inv, _SERIES_COEFFS[n_terms - 1])
+    series *= inv
+    for coeff in reversed(_SERIES_COEFFS[: n_terms - 1]):
+        series += coeff
+        series *= inv
+    series += 1.0
+    return series
 
 
 def hankel0(z: np.ndarray) -> np.ndarray:
@@ -64,11 +74,7 @@ def hankel0(z: np.ndarray) -> np.ndarray:
         out[near] = special.hankel1(0, z[near])
     if far.any():
         zf = z[far]
-        inv = 1.0 / zf
-        series = np.zeros_like(zf)
-        for coeff in reversed(_ASYMPTOTIC_COEFFS):  # Horner in 1/z
-            series = (series + coeff) * inv
-        out[far] = np.sqrt(2 / (np.pi * zf)) * np.exp(1j * (zf - np.pi / 4)) * (1 + series)
+        out[far] = np.sqrt(2 / (np.pi * zf)) * np.exp(1j * (zf - np.pi / 4)) * _asymptotic_sum(1.0 / zf, 7)
     return out
 
 
@@ -93,12 +99,7 @@ def _hankel0_scaled(z: np.ndarray) -> np.ndarray:
         if not sel.any():
             continue
         inv = 1.0 / z[sel]
-        series = np.full_like(inv, _SERIES_COEFFS[n_terms - 1])
-        series *= inv
-        for coeff in reversed(_SERIES_COEFFS[: n_terms - 1]):  # Horner in 1/z, in place
-            series += coeff
-            series *= inv
-        series += 1.0
+        series = _asymptotic_sum(inv, n_terms)
         series *= np.sqrt(inv * (2 / np.pi))
         series *= np.exp(-0.25j * np.pi)
         out[sel] = series
