@@ -59,8 +59,7 @@ def fold_loglik(hypothesis: Any, data: LabTrials, left_out: int, start: dict[str
     h = find_hypothesis(hypothesis)
     keep = np.delete(np.arange(data.n_participants), left_out)
     one = dataclasses.replace(settings, n_starts=1)
-    fit = fit_hypothesis(h, data, bank=bank, settings=one, start=start, participants=keep,
-                         evaluations=evaluations if evaluations is not None else Evaluations(h, data, bank, one))
+    fit = fit_hypothesis(h, data, bank=bank, settings=one, start=start, participants=keep, evaluations=evaluations)
     ll = participant_loglik(h, data.subset(np.array([left_out])), fit.params, bank=bank,
                             settings=settings.scoring())
     return float(ll[0]), fit.params
