@@ -71,10 +71,15 @@ def _share_responses(key: bytes, value: tuple[np.ndarray, np.ndarray | None]) ->
     with _shared_ir_lock:
         _shared_ir[key] = value
         _shared_ir.move_to_end(key)
-        total = sum(ir.nbytes + (0 if pre is None else pre.nbytes) for ir, pre in _shared_ir.values())
+        total = sum(_nbytes(v) for v in _shared_ir.values())
         while total > _SHARED_IR_BYTES and len(_shared_ir) > 1:
-            ir, pre = _shared_ir.popitem(last=False)[1]
-            total -= ir.nbytes + (0 if pre is None else pre.nbytes)
+            total -= _nbytes(_shared_ir.popitem(last=False)[1])
+
+
+def _nbytes(value: tuple[np.ndarray, np.ndarray | None]) -> int:
+    """Bytes of a cached pair of responses and precursor."""
+    ir, pre = value
+    return ir.nbytes + (0 if pre is None else pre.nbytes)
 
 
 def _frequency_factors(freqs: np.ndarray, params: ForearmParameters) -> tuple[np.ndarray, ...]:
