@@ -366,11 +366,14 @@ def test_every_play_returns_its_onset_on_the_portaudio_dac_clock(rig):
     for onset in onsets:
         assert onset.clock == "portaudio_dac"
         assert np.isfinite(onset.device_s) and onset.device_s >= 0.0
-        # The first sample reaches the converter PortAudio's output latency after the first
-        # callback: the stream's latency (JACK's playback latency, here one 4096-frame period),
-        # and at most one more period of PortAudio's own buffer.
+        # How far ahead of its callback the first sample reaches the converter, by PortAudio's
+        # JACK host: the playback latency of the port it feeds, read at every JACK cycle (two
+        # periods: JACK2 runs asynchronously by default), plus where the callback's piece lies in
+        # the cycle (PortAudio hands a 4096-frame cycle on in 1024-frame pieces, and a play may
+        # start in any of them). The stream's latency, as PortAudio reports it at opening, is one
+        # period. So from that to under three periods, whatever the load.
         period = JACK_PERIOD / JACK_RATE
-        assert period <= rig.output_latency_s <= onset.latency_s <= rig.output_latency_s + period + 1e-9
+        assert period <= rig.output_latency_s <= onset.latency_s < 3 * period
         assert onset.output_host_s == onset.host_s + onset.latency_s
     assert onsets[1].host_s > onsets[0].host_s
     # Back to back on one clock: the second begins after the first's 0.2 s, within a period or two.
