@@ -18,7 +18,7 @@ import time
 import pytest
 
 from .conftest import end_private_jackd, start_private_jackd
-from .test_audio import jack_config
+from .test_audio import JACK_PERIOD, JACK_RATE, jack_config
 
 pytestmark = [pytest.mark.jack, pytest.mark.slow]
 
@@ -42,6 +42,16 @@ if how == "sigstop":
     except DeviceError as exc:
         out["first"] = str(exc)
     out["first_s"] = time.monotonic() - t0
+elif how == "pause":  # the server stops for 0.4 s between plays: its dummy driver drops the time
+    os.kill(server_pid, signal.SIGSTOP)
+    time.sleep(0.4)
+    os.kill(server_pid, signal.SIGCONT)
+    time.sleep(0.3)
+    admitted, real = [], rig.budget.admit
+    rig.budget.admit = lambda d, start_s: (admitted.append(start_s), real(d, start_s))[1]
+    onset = rig.play(drive[:, :2000])
+    out["placed_s"] = onset.output_host_s - admitted[0]
+    out["xruns"] = rig._stream.xruns
 else:  # the test restarts the server, then says so on stdin
     print("ready", flush=True)
     sys.stdin.readline()
@@ -89,6 +99,23 @@ def test_a_stopped_jack_server_ends_the_play_refuses_the_next_and_the_process_ex
     assert result["first_s"] < 0.5 + 2.0 + 1.5  # SIGSTOP, no callback for STALL_S, slack
     assert "restart vibrofocus" in result["second"] and result["second_s"] < 0.5
     assert result["close_s"] < 1.0
+
+
+def test_a_paused_jack_server_moves_the_budget_axis_on_to_its_late_frames(jack_server):
+    # JACK's dummy driver, late by the pause, starts its frame count again from the late cycle
+    # (an xrun): the frames fall 0.4 s behind the host's clock for good. A play after it is
+    # still admitted at its time at the outputs, within a period or two (the host's time of a
+    # callback jitters), not 0.4 s before it.
+    name = f"vibrofocus-pause-{os.getpid()}"
+    server = start_private_jackd(name)
+    try:
+        result = _result(_child(name, server.pid, "pause"), timeout=40)
+    finally:
+        end_private_jackd(server, name)
+    print(result)
+    period = JACK_PERIOD / JACK_RATE
+    assert result["xruns"] >= 1
+    assert -0.01 <= result["placed_s"] <= 2 * period + 0.01
 
 
 def test_a_restarted_jack_server_refuses_plays_with_what_to_do_and_the_process_exits(jack_server):

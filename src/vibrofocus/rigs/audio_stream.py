@@ -257,9 +257,12 @@ class RunningStream:
         self.frame = first + frames
         current, dac = float(time_info.currentTime), float(time_info.outputBufferDacTime)
         self.last = (now, first, frames, current, dac)
-        if self.anchor_s is None:
+        if self.anchor_s is None or status:
+            # A lost buffer (the device or its server fell behind) leaves the frame count behind
+            # the host's clock for good: the axis moves on to the late frames, never back.
             ahead = dac - current if math.isfinite(dac - current) and 0 <= dac - current < 2.0 else 0.0
-            self.anchor_s = now + ahead - first / self.fs
+            anchor = now + ahead - first / self.fs
+            self.anchor_s = anchor if self.anchor_s is None else max(self.anchor_s, anchor)
         self.callbacks += 1
         if status:
             self.xruns += 1
