@@ -820,3 +820,53 @@ def test_an_xrun_in_a_play_is_flagged_on_its_onset(rig):
     assert err.value.onset is not None and err.value.onset.xrun
     assert err.value.onset.clock == "portaudio_dac"
     assert not rig.play(pulse_drive()).xrun  # the next play, with no loss, is not flagged
+
+
+def test_closing_waits_out_the_latency_round_of_its_abort_before_unregistering(jack_server):
+    """The rig's close lets the server's latency round after its abort pass before unregistering its ports.
+
+    Aborting the stream disconnects its ports; at the next cycle the server has every client
+    recompute its port latencies in libjack's notification thread, which walks the
+    client's port list unguarded against a port being unregistered (jackaudio/jack2#216).
+    An observer client sees the server's events in the order and at the time it sends
+    them: the rig's first port goes at least two periods after its last disconnection.
+    """
+    import threading
+
+    import jack
+
+    events: list[tuple] = []
+    lock = threading.Lock()
+    observer = jack.Client("close-observer", no_start_server=True)
+
+    @observer.set_port_connect_callback
+    def connected(a, b, connect):
+        with lock:
+            events.append(("connect", connect, a.name, b.name, time.monotonic()))
+
+    @observer.set_port_registration_callback(only_available=False)
+    def registered(port, register):
+        with lock:
+            events.append(("register", register, port.name if port is not None else None, time.monotonic()))
+
+    observer.activate()
+    try:
+        rig = make_rig("audio", config=jack_config())
+        try:
+            rig.play(pulse_drive())
+            own = set(rig._own_ports.values())
+            time.sleep(4 * JACK_PERIOD / JACK_RATE)  # the rounds of the opening are over
+            with lock:
+                events.clear()
+        finally:
+            rig.close()
+        time.sleep(2 * JACK_PERIOD / JACK_RATE)
+    finally:
+        observer.deactivate()
+        observer.close()
+    with lock:
+        seen = list(events)
+    disconnected = [e[-1] for e in seen if e[0] == "connect" and not e[1] and (e[2] in own or e[3] in own)]
+    unregistered = [e[-1] for e in seen if e[0] == "register" and not e[1]]
+    assert disconnected and unregistered, seen
+    assert min(unregistered) - max(disconnected) >= 2 * JACK_PERIOD / JACK_RATE, seen

@@ -409,7 +409,7 @@ class AudioRig(HardwareRig):
             self.stop()
             stream, self._stream = self._stream, None
             if stream is not None:
-                stream.close()
+                stream.close(settle_s=self._close_settle_s(stream))
         finally:
             try:
                 super().close()
@@ -579,10 +579,21 @@ class AudioRig(HardwareRig):
             if guard is not None:  # PortAudio connected each channel where the guard watches
                 guard.check_routing(self._own_ports)
         except BaseException:
-            stream.close()
+            stream.close(settle_s=self._close_settle_s(stream))
             raise
         self._output_latency_s = stream.output_latency_s
         self._stream = stream
+
+    def _close_settle_s(self, stream) -> float:
+        """How long a closing stream waits after its abort, s: on JACK, the graph round it causes.
+
+        The server recomputes latencies at the end of the cycle after a connection changes,
+        so three periods (PortAudio reports one as the JACK stream's output latency) and a
+        margin for its notification thread; nothing on other host APIs.
+        """
+        if self._jack_guard is None:
+            return 0.0
+        return min(3.0 * stream.output_latency_s + 0.05, 1.0)
 
     def _running_stream(self, what: str):
         """The running stream, opened again if it died (a callback that stopped coming, a failed start)."""

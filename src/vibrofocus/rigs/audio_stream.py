@@ -376,8 +376,20 @@ class RunningStream:
             return False
         return active and not self.stalled()
 
-    def close(self) -> None:
-        """Abort and close the stream within :data:`CLOSE_DEADLINE_S` (nothing once the server is lost)."""
+    def close(self, settle_s: float = 0.0) -> None:
+        """Abort and close the stream within :data:`CLOSE_DEADLINE_S` (nothing once the server is lost).
+
+        Parameters
+        ----------
+        settle_s : float
+            Time to wait between aborting the stream and closing it, s. On JACK, aborting
+            disconnects the stream's ports, and the server answers a changed graph a cycle
+            or two later by having every client recompute its ports' latencies in libjack's
+            notification thread; closing unregisters the ports, and libjack (1.9.21 and
+            later alike) removes a port from the list that thread walks without a lock
+            (jackaudio/jack2#216), which can crash the process. Waiting out that round
+            keeps the rig's own abort from racing its close.
+        """
         self.job = None
         _OPEN.discard(self)
         if self.stalled():
@@ -390,6 +402,7 @@ class RunningStream:
             try:
                 if self.stream.active:
                     self.stream.abort()
+                    time.sleep(settle_s)
             finally:
                 self.stream.close()
 
