@@ -4,6 +4,7 @@ no cell marked before the answer, refusals said as such, and no endless "Sending
 from __future__ import annotations
 
 import contextlib
+import time
 
 import pytest
 
@@ -109,6 +110,13 @@ def watched_context(chromium, script: str = ""):
         context.close()
 
 
+def answerable(page, trial_index: int) -> bool:
+    """Whether the page offers trial ``trial_index`` for an answer now."""
+    return page.evaluate(
+        "i => document.body.dataset.state === 'respond' && document.body.dataset.trial === String(i)"
+        " && document.body.classList.contains('answerable')", trial_index)
+
+
 def shown(page) -> list[str]:
     """Every message the page has shown, in order."""
     return page.evaluate("window.vfMessages")
@@ -121,25 +129,36 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
         first, second = context.new_page(), context.new_page()
         try:
             freeze = {"on": False}
+            given: dict[str, int] = {}  # the seq of the last state each screen was given
 
-            def states(route):
-                # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
-                # connection drops whenever there is news), so it still offers trial 0.
-                try:
-                    reply = route.fetch()
-                except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
-                    return
-                news = reply.json()
-                if freeze["on"] and (news.get("state"), news.get("trial_index")) != ("respond", 0):
-                    route.abort()
-                else:
-                    route.fulfill(response=reply)
+            def relay(screen):
+                def states(route):
+                    # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
+                    # connection drops whenever there is news), so it still offers trial 0.
+                    try:
+                        reply = route.fetch()
+                    except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
+                        return
+                    news = reply.json()
+                    if (screen == "second" and freeze["on"]
+                            and (news.get("state"), news.get("trial_index")) != ("respond", 0)):
+                        route.abort()
+                    else:
+                        given[screen] = news.get("seq")
+                        route.fulfill(response=reply)
+                return states
 
-            second.route("**/state*", states)
+            first.route("**/state*", relay("first"))
+            second.route("**/state*", relay("second"))
             open_page(first, server, s)
             open_page(second, server, s)
-            wait_respond(first, 0)
-            wait_respond(second, 0)
+            # The second screen, opened after trial 0's onset, has it presented again: the
+            # first answers only once it too holds that presentation.
+            deadline = time.monotonic() + 15
+            while not (given.get("first") is not None and given.get("first") == given.get("second")
+                       and answerable(first, 0) and answerable(second, 0)):
+                assert time.monotonic() < deadline, (given, shown(first), shown(second))
+                first.wait_for_timeout(50)
             freeze["on"] = True
             first.keyboard.press("3")
             assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
@@ -153,6 +172,7 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
             assert pending(second, sid) == []
             assert server.rows("SELECT trial_index, response FROM answers") == [(0, "3")]
         finally:
+            first.unroute_all(behavior="ignoreErrors")
             second.unroute_all(behavior="ignoreErrors")
 
 
