@@ -117,6 +117,37 @@ def answerable(page, trial_index: int) -> bool:
         " && document.body.classList.contains('answerable')", trial_index)
 
 
+def relay_states(page, screen: str, given: dict, drop=lambda news: False) -> None:
+    """Pass the page's state polls through, noting in ``given[screen]`` the seq of the last state
+    it was given; a state for which ``drop(news)`` holds is not given (its connection drops)."""
+    def states(route):
+        try:
+            reply = route.fetch()
+        except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
+            return
+        news = reply.json()
+        if drop(news):
+            route.abort()
+        else:
+            given[screen] = news.get("seq")
+            route.fulfill(response=reply)
+
+    page.route("**/state*", states)
+
+
+def wait_both_offer(first, second, given: dict, trial_index: int, timeout_s: float = 15.0) -> None:
+    """Wait until both screens were given the same state and offer ``trial_index``.
+
+    A screen opened after the trial's onset has the trial presented again; the other screen
+    answers only once it too holds that presentation.
+    """
+    deadline = time.monotonic() + timeout_s
+    while not (given.get("first") is not None and given.get("first") == given.get("second")
+               and answerable(first, trial_index) and answerable(second, trial_index)):
+        assert time.monotonic() < deadline, (given, shown(first), shown(second))
+        first.wait_for_timeout(50)
+
+
 def shown(page) -> list[str]:
     """Every message the page has shown, in order."""
     return page.evaluate("window.vfMessages")
@@ -129,36 +160,15 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
         first, second = context.new_page(), context.new_page()
         try:
             freeze = {"on": False}
-            given: dict[str, int] = {}  # the seq of the last state each screen was given
-
-            def relay(screen):
-                def states(route):
-                    # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
-                    # connection drops whenever there is news), so it still offers trial 0.
-                    try:
-                        reply = route.fetch()
-                    except Exception:  # noqa: BLE001 - the page gave this request up (a new poll, or closed)
-                        return
-                    news = reply.json()
-                    if (screen == "second" and freeze["on"]
-                            and (news.get("state"), news.get("trial_index")) != ("respond", 0)):
-                        route.abort()
-                    else:
-                        given[screen] = news.get("seq")
-                        route.fulfill(response=reply)
-                return states
-
-            first.route("**/state*", relay("first"))
-            second.route("**/state*", relay("second"))
+            given: dict[str, int] = {}
+            relay_states(first, "first", given)
+            # Once frozen, the second screen hears of nothing but trial 0's "respond" (its
+            # connection drops whenever there is news), so it still offers trial 0.
+            relay_states(second, "second", given, lambda news: freeze["on"] and (
+                news.get("state"), news.get("trial_index")) != ("respond", 0))
             open_page(first, server, s)
             open_page(second, server, s)
-            # The second screen, opened after trial 0's onset, has it presented again: the
-            # first answers only once it too holds that presentation.
-            deadline = time.monotonic() + 15
-            while not (given.get("first") is not None and given.get("first") == given.get("second")
-                       and answerable(first, 0) and answerable(second, 0)):
-                assert time.monotonic() < deadline, (given, shown(first), shown(second))
-                first.wait_for_timeout(50)
+            wait_both_offer(first, second, given, 0)
             freeze["on"] = True
             first.keyboard.press("3")
             assert [(r[0], r[1]) for r in wait_answers(server, sid, 1)] == [(0, "3")]
@@ -211,26 +221,32 @@ def test_two_tabs_each_report_only_their_own_answer(server, chromium):
     stored = f"JSON.parse(localStorage.getItem('vibrofocus.pending.{sid}') || '[]')"
     with watched_context(chromium, SENT_ANSWERS) as context:
         first, second = context.new_page(), context.new_page()
-        open_page(first, server, s)
-        open_page(second, server, s)
-        wait_respond(first, 0)
-        wait_respond(second, 0)
-        first.evaluate("window.vfHoldAnswers = 'fail'")  # the first tab's sends fail for now
-        first.keyboard.press("3")
-        first.wait_for_function("window.vfSentAnswers.length >= 2")  # sent, failed, and tried again
-        answer_id = first.evaluate(f"{stored}[0].answer_id")
-        assert second.evaluate(f"{stored}.map(a => a.answer_id)") == [answer_id], "the answer is stored, shared"
-        second.evaluate("window.dispatchEvent(new Event('online'))")  # wakes the second tab's sender
-        second.wait_for_timeout(1000)
-        assert second.evaluate("window.vfSentAnswers") == [], "the second tab sent the first tab's answer"
-        assert server.rows("SELECT trial_index FROM answers") == []
-        first.evaluate("window.vfHoldAnswers = false")
-        first.wait_for_function(f"{stored}.length === 0")
-        assert [(r[0], r[1], r[3]) for r in wait_answers(server, sid, 1)] == [(0, "3", answer_id)]
-        wait_respond(second, 1)
-        first.wait_for_function("window.vfMessages.some(m => m.includes('Answer taken'))")
-        assert not any("Answer taken" in m for m in shown(second)), shown(second)
-        assert second.evaluate("window.vfSentAnswers") == []
+        given: dict[str, int] = {}
+        try:
+            relay_states(first, "first", given)
+            relay_states(second, "second", given)
+            open_page(first, server, s)
+            open_page(second, server, s)
+            wait_both_offer(first, second, given, 0)
+            first.evaluate("window.vfHoldAnswers = 'fail'")  # the first tab's sends fail for now
+            first.keyboard.press("3")
+            first.wait_for_function("window.vfSentAnswers.length >= 2")  # sent, failed, and tried again
+            answer_id = first.evaluate(f"{stored}[0].answer_id")
+            assert second.evaluate(f"{stored}.map(a => a.answer_id)") == [answer_id], "the answer is stored, shared"
+            second.evaluate("window.dispatchEvent(new Event('online'))")  # wakes the second tab's sender
+            second.wait_for_timeout(1000)
+            assert second.evaluate("window.vfSentAnswers") == [], "the second tab sent the first tab's answer"
+            assert server.rows("SELECT trial_index FROM answers") == []
+            first.evaluate("window.vfHoldAnswers = false")
+            first.wait_for_function(f"{stored}.length === 0")
+            assert [(r[0], r[1], r[3]) for r in wait_answers(server, sid, 1)] == [(0, "3", answer_id)]
+            wait_respond(second, 1)
+            first.wait_for_function("window.vfMessages.some(m => m.includes('Answer taken'))")
+            assert not any("Answer taken" in m for m in shown(second)), shown(second)
+            assert second.evaluate("window.vfSentAnswers") == []
+        finally:
+            first.unroute_all(behavior="ignoreErrors")
+            second.unroute_all(behavior="ignoreErrors")
 
 
 def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromium):
