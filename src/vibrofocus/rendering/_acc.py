@@ -114,6 +114,16 @@ def _runs(indices: np.ndarray) -> list[tuple[int, int]]:
     return [(int(indices[s]), int(indices[e - 1]) + 1) for s, e in zip(starts, ends)]
 
 
+def _quiet_indices(n_points: int, target_index: int, quiet_indices: Any) -> np.ndarray:
+    """The quiet points: ``quiet_indices`` checked (never the target), or every point but the target."""
+    if quiet_indices is None:
+        return np.delete(np.arange(n_points), target_index)
+    q = as_indices(quiet_indices, "quiet_indices", n_points)
+    if np.any(q == target_index):
+        raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
+    return q
+
+
 def _quiet_gram(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any,
                 bins: slice = slice(None)) -> np.ndarray:
     """Gram matrix ``H_q^H H_q`` of the quiet points at ``bins``, (F_bins, n_act, n_act),
@@ -122,9 +132,7 @@ def _quiet_gram(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: A
     copy of the quiet points' transfer."""
     parts = []
     if quiet_indices is not None:
-        q = as_indices(quiet_indices, "quiet_indices", H.shape[1])
-        if np.any(q == target_index):
-            raise ValidationError(f"quiet_indices holds the target point {target_index}; a quiet point cannot be the target")
+        q = _quiet_indices(H.shape[1], target_index, quiet_indices)
         runs = _runs(q)
         parts += [H[bins, start:stop] for start, stop in runs] if len(runs) <= 8 else [H[bins][:, q, :]]
     if quiet_H is not None:

@@ -11,8 +11,8 @@ import numpy as np
 from .._docs import fill_doc
 from .._validation import as_array, check_band, check_index, check_positive
 from ..defaults import BAND_HZ, SIGMA_S
-from ._acc import _parseval_weights, _quiet_gram, _tap
-from ._checks import as_indices, as_transfer, check_grid
+from ._acc import _parseval_weights, _quiet_gram, _quiet_indices, _tap
+from ._checks import as_transfer, check_grid
 from ._pinv import _single_threaded_blas
 
 __all__ = ["ContrastBound", "contrast_bound", "energy_contrast_db"]
@@ -194,12 +194,11 @@ def contrast_bound(
 def _quiet_rows(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any) -> np.ndarray | None:
     """The quiet points' rows of ``H`` (and of ``quiet_H``), (F, q, n_act), when they are fewer
     than the actuators; ``None`` otherwise (the Gram, n_act x n_act, is then the smaller)."""
-    if quiet_H is not None:
-        return None  # a field grid: many rows (and checked where its Gram is formed)
-    q = np.delete(np.arange(H.shape[1]), target_index) if quiet_indices is None else \
-        as_indices(quiet_indices, "quiet_indices", H.shape[1])
-    if q.size >= H.shape[2] or q.size == 0 or np.any(q == target_index):
-        return None  # the Gram path (and its errors)
+    if quiet_H is not None or (quiet_indices is None and H.shape[1] == 1):
+        return None  # a field grid (many rows), or no quiet point: the Gram path (and its errors)
+    q = _quiet_indices(H.shape[1], target_index, quiet_indices)
+    if q.size >= H.shape[2] or q.size == 0:
+        return None
     return H[:, q, :]
 
 
