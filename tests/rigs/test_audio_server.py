@@ -87,14 +87,20 @@ def _result(child: subprocess.Popen, timeout: float) -> dict:
     return json.loads(out.strip().splitlines()[-1])
 
 
-def test_a_stopped_jack_server_ends_the_play_refuses_the_next_and_the_process_exits(jack_server):
-    name = f"vibrofocus-sigstop-{os.getpid()}"
+def _on_a_private_server(how: str) -> dict:
+    """What the child process reports for ``how``, run on a private JACK server (stopped after)."""
+    name = f"vibrofocus-{how}-{os.getpid()}"
     server = start_private_jackd(name)
     try:
-        result = _result(_child(name, server.pid, "sigstop"), timeout=40)
+        result = _result(_child(name, server.pid, how), timeout=40)
     finally:
         end_private_jackd(server, name)
     print(result)
+    return result
+
+
+def test_a_stopped_jack_server_ends_the_play_refuses_the_next_and_the_process_exits(jack_server):
+    result = _on_a_private_server("sigstop")
     assert result["first"].startswith("the audio") and "restart vibrofocus" in result["first"]
     assert result["first_s"] < 0.5 + 2.0 + 1.5  # SIGSTOP, no callback for STALL_S, slack
     assert "restart vibrofocus" in result["second"] and result["second_s"] < 0.5
@@ -106,13 +112,7 @@ def test_a_paused_jack_server_moves_the_budget_axis_on_to_its_late_frames(jack_s
     # (an xrun): the frames fall 0.4 s behind the host's clock for good. A play after it is
     # still admitted at its time at the outputs, within a period or two (the host's time of a
     # callback jitters), not 0.4 s before it.
-    name = f"vibrofocus-pause-{os.getpid()}"
-    server = start_private_jackd(name)
-    try:
-        result = _result(_child(name, server.pid, "pause"), timeout=40)
-    finally:
-        end_private_jackd(server, name)
-    print(result)
+    result = _on_a_private_server("pause")
     period = JACK_PERIOD / JACK_RATE
     assert result["xruns"] >= 1
     assert -0.01 <= result["placed_s"] <= 2 * period + 0.01
