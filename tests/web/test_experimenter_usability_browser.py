@@ -177,3 +177,32 @@ def test_the_calibration_card_says_one_thing_at_a_time_and_shows_the_verdicts(se
     assert verdicts.strip(), "no quality verdicts shown"
     assert exp.is_hidden("#cal-override-label"), "no override is offered for a calibration without errors"
     exp.wait_for_function("document.getElementById('cal-figure').naturalWidth > 0")
+
+
+def test_a_participant_added_before_the_first_list_arrives_stays_chosen(server, exp):
+    """The page's first list of participants, answered late (a busy server), never shows over the
+    list fetched after an add: the new participant stays chosen."""
+    held = []
+
+    def hold_the_first_list(route):
+        if route.request.method != "GET" or held:
+            route.continue_()
+            return
+        held.append((route, route.fetch()))  # the list before the add, answered later
+
+    exp.route("**/api/participants", hold_the_first_list)
+    login(exp, server)
+    for _ in range(300):
+        if held:
+            break
+        exp.wait_for_timeout(50)
+    assert held, "the page never asked for its list of participants"
+    with exp.expect_response(lambda r: r.request.method == "POST" and r.url.endswith("/api/participants")):
+        exp.fill("#new-participant-id", "P42")
+        exp.click("#new-participant button")
+    exp.wait_for_timeout(500)  # a list asked after the add would have arrived by now
+    route, reply = held[0]
+    route.fulfill(response=reply)
+    exp.wait_for_function("document.getElementById('participant').value === 'P42'")
+    exp.wait_for_timeout(500)
+    assert exp.evaluate("document.getElementById('participant').value") == "P42"

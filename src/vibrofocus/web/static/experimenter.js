@@ -114,7 +114,15 @@
   // ---------------------------------------------------------------- participants
   let participants = [];
   let participantsShown = false;
-  async function loadParticipants(select = null) {
+  let participantsQueue = Promise.resolve();
+  function loadParticipants(select = null) {
+    // One load at a time, in the order asked: a slow answer fetched before an add (the
+    // page's first load, on a busy server) never shows its older list over the newer one.
+    const run = participantsQueue.then(() => showParticipants(select));
+    participantsQueue = run.catch(() => {});
+    return run;
+  }
+  async function showParticipants(select) {
     participants = await api("/api/participants");
     const sel = $("participant");
     // The page opens on the newest participant who is a person; with none (a new database,
