@@ -194,11 +194,11 @@ def contrast_bound(
 def _quiet_rows(H: np.ndarray, target_index: int, quiet_indices: Any, quiet_H: Any) -> np.ndarray | None:
     """The quiet points' rows of ``H`` (and of ``quiet_H``), (F, q, n_act), when they are fewer
     than the actuators; ``None`` otherwise (the Gram, n_act x n_act, is then the smaller)."""
-    if quiet_H is not None or (quiet_indices is None and H.shape[1] == 1):
-        return None  # a field grid (many rows), or no quiet point: the Gram path (and its errors)
+    if quiet_H is not None:
+        return None  # a field grid: many rows (and checked where its Gram is formed)
     q = _quiet_indices(H.shape[1], target_index, quiet_indices)
     if q.size >= H.shape[2] or q.size == 0:
-        return None
+        return None  # the Gram path (and, with no quiet point, its error)
     return H[:, q, :]
 
 
