@@ -22,12 +22,13 @@ def open_page(page, server, session) -> None:
     page.click("#begin")
 
 
+#: Whether the page offers trial ``i`` for an answer now (a JavaScript function of ``i``).
+OFFERS_TRIAL = ("i => document.body.dataset.state === 'respond' && document.body.dataset.trial === String(i)"
+                " && document.body.classList.contains('answerable')")
+
+
 def wait_respond(page, trial_index: int) -> None:
-    page.wait_for_function(
-        "i => document.body.dataset.state === 'respond' && document.body.dataset.trial === String(i)"
-        " && document.body.classList.contains('answerable')",
-        arg=trial_index,
-    )
+    page.wait_for_function(OFFERS_TRIAL, arg=trial_index)
 
 
 def wait_answers(server, sid: int, n: int, timeout: float = 20.0) -> list[tuple]:

@@ -8,7 +8,7 @@ import time
 
 import pytest
 
-from .test_participant_browser import open_page, pending, start, trial_events, wait_answers, wait_respond
+from .test_participant_browser import OFFERS_TRIAL, open_page, pending, start, trial_events, wait_answers, wait_respond
 
 pytestmark = pytest.mark.browser
 
@@ -110,13 +110,6 @@ def watched_context(chromium, script: str = ""):
         context.close()
 
 
-def answerable(page, trial_index: int) -> bool:
-    """Whether the page offers trial ``trial_index`` for an answer now."""
-    return page.evaluate(
-        "i => document.body.dataset.state === 'respond' && document.body.dataset.trial === String(i)"
-        " && document.body.classList.contains('answerable')", trial_index)
-
-
 def relay_states(page, screen: str, given: dict, drop=lambda news: False) -> None:
     """Pass the page's state polls through, noting in ``given[screen]`` the seq of the last state
     it was given; a state for which ``drop(news)`` holds is not given (its connection drops)."""
@@ -143,7 +136,7 @@ def wait_both_offer(first, second, given: dict, trial_index: int, timeout_s: flo
     """
     deadline = time.monotonic() + timeout_s
     while not (given.get("first") is not None and given.get("first") == given.get("second")
-               and answerable(first, trial_index) and answerable(second, trial_index)):
+               and first.evaluate(OFFERS_TRIAL, trial_index) and second.evaluate(OFFERS_TRIAL, trial_index)):
         assert time.monotonic() < deadline, (given, shown(first), shown(second))
         first.wait_for_timeout(50)
 
