@@ -46,6 +46,13 @@ OPEN_DEADLINE_S = 5.0
 CLOSE_DEADLINE_S = 5.0
 #: A running stream whose callback has not come for this long: the server stopped answering, s.
 STALL_S = 2.0
+#: How long each of the budget axis's two windows of callbacks lasts, s: the axis is the
+#: earliest of the last two windows' estimates (a callback runs late, never early), which
+#: follows a drift between the device's and the host's clocks within two windows.
+ANCHOR_WINDOW_S = 1.0
+#: How long a new stream's callbacks run before its first play is placed, s: a few cycles,
+#: so that the budget's axis has seen a callback that came on time.
+AXIS_SETTLE_S = 0.2
 
 # Why the audio server is lost for this process (None while it answers): process-wide,
 # as PortAudio's state is.
@@ -188,6 +195,59 @@ class Job:
         self.halted = threading.Event()
 
 
+class FrameAxis:
+    """When a stream's frame 0 was at its outputs, in host time: the energy budget's time axis.
+
+    Each callback gives an estimate: its host time, plus how far ahead of it its buffer
+    reaches the converter, less its first frame's time on the stream. A callback can only
+    run late (a loaded machine delays it by milliseconds), never early, so the axis is the
+    earliest estimate of the last two windows of :data:`ANCHOR_WINDOW_S`; it follows a drift
+    between the device's and the host's clocks within two windows. A lost buffer (the device
+    or its server fell behind) leaves the frame count behind the host's clock for good: the
+    axis starts over at that callback's estimate, never earlier than it was.
+
+    Parameters
+    ----------
+    fs : float
+        The stream's rate, Hz.
+    """
+
+    def __init__(self, fs: float):
+        self.fs = float(fs)
+        #: Host time of frame 0 at the outputs (None before the first callback), s.
+        self.anchor_s: float | None = None
+        # The earliest estimate in the window before and in the current one, and when the
+        # current one began.
+        self._mins = [math.inf, math.inf]
+        self._window_s = 0.0
+
+    def update(self, now: float, first: int, current: float, dac: float, lost: bool = False) -> None:
+        """Take one callback's times.
+
+        Parameters
+        ----------
+        now : float
+            Host time (``time.monotonic()``) in the callback, s.
+        first : int
+            The stream frame its buffer begins at.
+        current, dac : float
+            Its ``currentTime`` and ``outputBufferDacTime``, s on the stream's clock (NaN or
+            anything outside 0-2 s apart: the buffer is taken to be at the outputs now).
+        lost : bool
+            Whether it reported lost samples.
+        """
+        ahead = dac - current if math.isfinite(dac - current) and 0 <= dac - current < 2.0 else 0.0
+        estimate = now + ahead - first / self.fs
+        if self.anchor_s is None or lost:
+            start = estimate if self.anchor_s is None else max(self.anchor_s, estimate)
+            self._mins, self._window_s = [start, start], now
+        elif now - self._window_s >= ANCHOR_WINDOW_S:
+            self._mins, self._window_s = [self._mins[1], estimate], now
+        else:
+            self._mins[1] = min(self._mins[1], estimate)
+        self.anchor_s = min(self._mins)
+
+
 class RunningStream:
     """A full-duplex PortAudio stream that runs from the rig's opening to its closing.
 
@@ -226,8 +286,9 @@ class RunningStream:
         self.opened_s = time.monotonic()
         # (host time, first frame, frames, currentTime, outputBufferDacTime) of the last callback.
         self.last: tuple[float, int, int, float, float] | None = None
-        # Host time of frame 0 at the outputs: the budget's time axis (frames / fs from it).
-        self.anchor_s: float | None = None
+        # The budget's time axis: when frame 0 was at the outputs, in host time.
+        self.axis = FrameAxis(self.fs)
+        self._first_callback_s: float | None = None
 
         def make():
             return sd.Stream(samplerate=self.fs, device=device, channels=(n_in, n_out), dtype="float32",
@@ -249,6 +310,17 @@ class RunningStream:
         except self._sd.PortAudioError as exc:
             raise DeviceError(f"the audio interface could not start a stream: {exc}") from None
         self.opened_s = time.monotonic()
+        self._settle_axis()
+
+    def _settle_axis(self) -> None:
+        # The first callbacks of a stream on a loaded machine may all come late: wait until they
+        # have run AXIS_SETTLE_S. Callbacks that do not come are the stall check's to report.
+        deadline = self.opened_s + STALL_S
+        while time.monotonic() < deadline:
+            first, last = self._first_callback_s, self.last
+            if first is not None and last is not None and last[0] - first >= AXIS_SETTLE_S:
+                return
+            time.sleep(0.005)
 
     # ------------------------------------------------------------------ the callback
     def _callback(self, indata, outdata, frames, time_info, status) -> None:
@@ -257,12 +329,9 @@ class RunningStream:
         self.frame = first + frames
         current, dac = float(time_info.currentTime), float(time_info.outputBufferDacTime)
         self.last = (now, first, frames, current, dac)
-        if self.anchor_s is None or status:
-            # A lost buffer (the device or its server fell behind) leaves the frame count behind
-            # the host's clock for good: the axis moves on to the late frames, never back.
-            ahead = dac - current if math.isfinite(dac - current) and 0 <= dac - current < 2.0 else 0.0
-            anchor = now + ahead - first / self.fs
-            self.anchor_s = anchor if self.anchor_s is None else max(self.anchor_s, anchor)
+        if self._first_callback_s is None:
+            self._first_callback_s = now
+        self.axis.update(now, first, current, dac, lost=bool(status))
         self.callbacks += 1
         if status:
             self.xruns += 1
@@ -306,6 +375,11 @@ class RunningStream:
             job.done.set()
 
     # ------------------------------------------------------------------ the play's side
+    @property
+    def anchor_s(self) -> float | None:
+        """Host time of frame 0 at the outputs (None before the first callback), s."""
+        return self.axis.anchor_s
+
     @property
     def period_s(self) -> float:
         """The length of the last buffer, s (a guess before the first)."""
