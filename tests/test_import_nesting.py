@@ -57,6 +57,29 @@ def test_importing_the_package_loads_almost_nothing():
     assert _loaded("errors") <= {"errors"}
 
 
+# Libraries that take most of an interpreter's start when imported (scipy.signal and
+# pandas alone took 1.1 s of the 3.3 s `vibrofocus serve` needed to answer): the web
+# server, the command line, the rigs and the arm load them when a job needs them, not to start.
+HEAVY = ("pandas", "scipy.signal", "scipy.optimize", "scipy.stats", "matplotlib", "xarray", "cvxopt", "cvxpy")
+HEAVY_PROBE = """
+import json, sys
+{statement}
+print(json.dumps(sorted(h for h in {heavy!r} if h in sys.modules)))
+"""
+
+
+@pytest.mark.parametrize("statement", [
+    "import vibrofocus.web.app", "import vibrofocus.cli.main", "import vibrofocus.skin",
+    # What `vibrofocus serve` makes before it answers: the simulated rig.
+    "from vibrofocus.rigs import SimulatedForearm; SimulatedForearm()",
+])
+def test_starting_a_server_or_a_command_loads_no_heavy_library(statement):
+    out = subprocess.run([sys.executable, "-c", HEAVY_PROBE.format(statement=statement, heavy=HEAVY)],
+                         capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert json.loads(out.stdout.strip().splitlines()[-1]) == [], f"{statement!r} loads them"
+
+
 def test_the_web_app_does_not_shell_out_to_the_cli():
     # The analysis calls vibrofocus.analysis.report_trials_file (in a spawned worker, so
     # that it cannot hold the GIL of the thread that times stimuli), never the command

@@ -12,13 +12,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from importlib import resources
+from typing import TYPE_CHECKING
 
 import numpy as np
-import pandas as pd
-from scipy import optimize
 
 from ..errors import ValidationError
 from .viscoelastic import RAYLEIGH_FACTOR_INCOMPRESSIBLE, ViscoelasticLaw
+
+if TYPE_CHECKING:  # pandas and scipy.optimize load with a fit, not with the arm (a second of start-up)
+    import pandas as pd
 
 __all__ = ["load_forearm_data", "points_from_published_fits", "fit_wave_law", "WaveLawFit", "FITTED_QUANTITIES"]
 
@@ -84,6 +86,8 @@ def points_from_published_fits(data: pd.DataFrame) -> pd.DataFrame:
                              f"rho = {_VOIGT_DENSITY_KG_M3:g} kg/m^3 and xi = {base.rayleigh_factor} assumed",
                     "how_read": "derived from the published Voigt fit", "use": True,
                 })
+    import pandas as pd
+
     return pd.DataFrame(rows, columns=list(data.columns))
 
 
@@ -97,6 +101,8 @@ def load_forearm_data() -> pd.DataFrame:
         ``spread`` (SD or half-range, NaN if none was given), ``distance_m``,
         ``body_site``, ``source_key``, ``where``, ``how_read`` and ``use``.
     """
+    import pandas as pd
+
     path = resources.files("vibrofocus.skin") / "data" / "forearm_waves.csv"
     with resources.as_file(path) as p:
         return pd.read_csv(p, comment="#")
@@ -171,6 +177,9 @@ def fit_wave_law(
     -------
     WaveLawFit
     """
+    import pandas as pd
+    from scipy import optimize
+
     if data is None:
         published = load_forearm_data()
         data = pd.concat([published, points_from_published_fits(published)], ignore_index=True)

@@ -25,7 +25,6 @@ from functools import lru_cache
 
 import numpy as np
 from scipy import fft as sp_fft
-from scipy import signal as sp_signal
 
 from .._docs import fill_doc
 from .._validation import as_array, check_positive
@@ -564,6 +563,8 @@ class SimulatedArm:
         -------
         ndarray, shape (n_points, n + n_tail)
         """
+        from scipy.signal import fftconvolve  # here: scipy.signal takes most of the arm's import time
+
         points = self.layout.points_xy if points_xy is None else points_xy
         ir = self.impulse_responses(points)  # (n_points, n_act, n_ir)
         n_out = drive.shape[1] + n_tail
@@ -572,7 +573,7 @@ class SimulatedArm:
         out = np.zeros((len(points), n_out))
         if active.size:
             # shape (n_points, n_active, n + n_ir - 1)
-            conv = sp_signal.fftconvolve(ir[:, active], drive[None, active, :], axes=2)
+            conv = fftconvolve(ir[:, active], drive[None, active, :], axes=2)
             rec = conv.sum(axis=1)
             m = min(n_out, rec.shape[1])
             out[:, :m] = rec[:, :m]
