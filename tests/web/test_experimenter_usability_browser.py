@@ -179,24 +179,49 @@ def test_the_calibration_card_says_one_thing_at_a_time_and_shows_the_verdicts(se
     exp.wait_for_function("document.getElementById('cal-figure').naturalWidth > 0")
 
 
-def test_a_participant_added_before_the_first_list_arrives_stays_chosen(server, exp):
-    """The page's first list of participants, answered late (a busy server), never shows over the
-    list fetched after an add: the new participant stays chosen."""
+def hold_the_first_list_of_participants(page, server) -> list:
+    """Log in with the page's first list of participants held back (as a busy server answers
+    it late); returns ``[(route, reply)]`` once the page has asked for it."""
     held = []
 
-    def hold_the_first_list(route):
+    def hold(route):
         if route.request.method != "GET" or held:
             route.continue_()
             return
-        held.append((route, route.fetch()))  # the list before the add, answered later
+        held.append((route, route.fetch()))
 
-    exp.route("**/api/participants", hold_the_first_list)
-    login(exp, server)
+    page.route("**/api/participants", hold)
+    login(page, server)
     for _ in range(300):
         if held:
             break
-        exp.wait_for_timeout(50)
+        page.wait_for_timeout(50)
     assert held, "the page never asked for its list of participants"
+    return held
+
+
+def test_a_first_list_answered_late_leaves_the_focus_where_the_experimenter_put_it(server, exp):
+    """A new database's page puts the focus on "add a participant", but not once the
+    experimenter has moved it: a late first list (a busy server) does not take it away."""
+    held = hold_the_first_list_of_participants(exp, server)
+    name = tab_to_a_button(exp)
+    route, reply = held[0]
+    route.fulfill(response=reply)
+    exp.wait_for_function("document.getElementById('participant').options.length > 0")
+    exp.wait_for_timeout(300)
+    focused = exp.evaluate("document.activeElement.id || document.activeElement.textContent")
+    assert focused == name, f"the focus went from {name!r} to {focused!r}"
+
+
+def test_a_new_database_opens_on_add_a_participant(server, exp):
+    login(exp, server)
+    exp.wait_for_function("document.activeElement?.id === 'new-participant-id'")
+
+
+def test_a_participant_added_before_the_first_list_arrives_stays_chosen(server, exp):
+    """The page's first list of participants, answered late (a busy server), never shows over the
+    list fetched after an add: the new participant stays chosen."""
+    held = hold_the_first_list_of_participants(exp, server)
     with exp.expect_response(lambda r: r.request.method == "POST" and r.url.endswith("/api/participants")):
         exp.fill("#new-participant-id", "P42")
         exp.click("#new-participant button")

@@ -132,7 +132,10 @@
     sel.replaceChildren(el("option", { value: "" }, participants.length ? "— choose, or add one —" : "— none yet: add one —"),
       ...participants.map((p) => el("option", { value: p.participant_id }, p.participant_id + (p.simulated ? " (simulated)" : ""))));
     sel.value = keep && participants.some((p) => p.participant_id === keep) ? keep : "";
-    if (!participantsShown && !sel.value) $("new-participant-id").focus();
+    // A new database opens on "add a participant", unless the experimenter has already put
+    // the focus somewhere (a first list answered late must not take it from them).
+    const untouched = !document.activeElement || document.activeElement === document.body;
+    if (!participantsShown && !sel.value && untouched) $("new-participant-id").focus();
     participantsShown = true;
     onParticipant();
   }
