@@ -36,15 +36,24 @@ FORBIDDEN = {
 
 PROBE = """
 import json, sys
-import vibrofocus.{name}
-print(json.dumps(sorted({{m.split('.')[1] for m in sys.modules if m.startswith('vibrofocus.')}})))
+{statement}
+print(json.dumps(sorted({modules})))
 """
 
 
-def _loaded(name: str) -> set[str]:
-    out = subprocess.run([sys.executable, "-c", PROBE.format(name=name)], capture_output=True, text=True, timeout=120)
+def _probe(statement: str, modules: str) -> list:
+    """Run ``statement`` in a fresh interpreter; the sorted ``modules`` (an expression over
+    ``sys.modules``) it leaves loaded."""
+    out = subprocess.run([sys.executable, "-c", PROBE.format(statement=statement, modules=modules)],
+                         capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
-    return set(json.loads(out.stdout.strip().splitlines()[-1]))
+    return json.loads(out.stdout.strip().splitlines()[-1])
+
+
+def _loaded(name: str) -> set[str]:
+    """The vibrofocus subpackages that importing ``vibrofocus.name`` loads."""
+    return set(_probe(f"import vibrofocus.{name}",
+                      "{m.split('.')[1] for m in sys.modules if m.startswith('vibrofocus.')}"))
 
 
 @pytest.mark.parametrize("name", sorted(FORBIDDEN))
@@ -61,11 +70,6 @@ def test_importing_the_package_loads_almost_nothing():
 # pandas alone took 1.1 s of the 3.3 s `vibrofocus serve` needed to answer): the web
 # server, the command line, the rigs and the arm load them when a job needs them, not to start.
 HEAVY = ("pandas", "scipy.signal", "scipy.optimize", "scipy.stats", "matplotlib", "xarray", "cvxopt", "cvxpy")
-HEAVY_PROBE = """
-import json, sys
-{statement}
-print(json.dumps(sorted(h for h in {heavy!r} if h in sys.modules)))
-"""
 
 
 @pytest.mark.parametrize("statement", [
@@ -74,10 +78,7 @@ print(json.dumps(sorted(h for h in {heavy!r} if h in sys.modules)))
     "from vibrofocus.rigs import SimulatedForearm; SimulatedForearm()",
 ])
 def test_starting_a_server_or_a_command_loads_no_heavy_library(statement):
-    out = subprocess.run([sys.executable, "-c", HEAVY_PROBE.format(statement=statement, heavy=HEAVY)],
-                         capture_output=True, text=True, timeout=120)
-    assert out.returncode == 0, out.stderr
-    assert json.loads(out.stdout.strip().splitlines()[-1]) == [], f"{statement!r} loads them"
+    assert _probe(statement, f"h for h in {HEAVY!r} if h in sys.modules") == [], f"{statement!r} loads them"
 
 
 def test_the_web_app_does_not_shell_out_to_the_cli():

@@ -124,12 +124,16 @@ def test_one_trial_numbering_on_both_pages(server, chromium):
         context.close()
 
 
+#: The focused element's name: its id, else its text.
+FOCUSED = "document.activeElement.id || document.activeElement.textContent"
+
+
 def tab_to_a_button(page) -> str:
     page.locator("body").click(position={"x": 5, "y": 5})
     for _ in range(30):
         page.keyboard.press("Tab")
         if page.evaluate("document.activeElement.tagName") == "BUTTON":
-            return page.evaluate("document.activeElement.id || document.activeElement.textContent")
+            return page.evaluate(FOCUSED)
     raise AssertionError("no button took the focus")
 
 
@@ -209,7 +213,7 @@ def test_a_first_list_answered_late_leaves_the_focus_where_the_experimenter_put_
     route.fulfill(response=reply)
     exp.wait_for_function("document.getElementById('participant').options.length > 0")
     exp.wait_for_timeout(300)
-    focused = exp.evaluate("document.activeElement.id || document.activeElement.textContent")
+    focused = exp.evaluate(FOCUSED)
     assert focused == name, f"the focus went from {name!r} to {focused!r}"
 
 

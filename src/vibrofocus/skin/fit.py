@@ -62,6 +62,8 @@ def points_from_published_fits(data: pd.DataFrame) -> pd.DataFrame:
     pandas.DataFrame
         Rows in the same columns, ``use`` true.
     """
+    import pandas as pd
+
     rows = []
     for key, freqs in _VOIGT_BANDS_HZ.items():
         src = data[data["source_key"] == key].set_index("quantity")
@@ -86,8 +88,6 @@ def points_from_published_fits(data: pd.DataFrame) -> pd.DataFrame:
                              f"rho = {_VOIGT_DENSITY_KG_M3:g} kg/m^3 and xi = {base.rayleigh_factor} assumed",
                     "how_read": "derived from the published Voigt fit", "use": True,
                 })
-    import pandas as pd
-
     return pd.DataFrame(rows, columns=list(data.columns))
 
 
