@@ -37,17 +37,7 @@ from vibrofocus.simulation.fitting.recovery import STUDY2_ONLY
 from vibrofocus.simulation.fitting import (FitSettings, confusion, parameter_recovery, profile_recovery_study,
                                           profile_summary, recovery_study)
 from vibrofocus_tools.markers import ROOT, write_between_markers
-
-RESULTS = ROOT / "scripts" / "fits" / "recovery"
-
-
-def confusion_markdown(names: list[str], counts: list[list[int]], note: str) -> str:
-    rows = ["| true \\ chosen | " + " | ".join(names) + " | correct |", "|---" * (len(names) + 2) + "|"]
-    for name, row in zip(names, counts):
-        total = sum(row)
-        share = f"{row[names.index(name)] / total:.0%}" if total else "-"
-        rows.append(f"| {name} | " + " | ".join(str(c) for c in row) + f" | {share} |")
-    return "\n".join(rows) + f"\n\n{note}"
+from vibrofocus_tools.recovery_tables import RESULTS, confusion_markdown
 
 
 def parameters_markdown(results: dict) -> str:

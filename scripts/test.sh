@@ -15,6 +15,10 @@
 # browser phase mostly waits on its pages' real time, the smoke test on installs); the output
 # of each follows, in its place, when it ends. BESIDE_BROWSER names the phases that do
 # (default "docs lowest"; "slow docs lowest" starts the slow phase there too, "" none).
+# The slow phase is not beside it by default: the browser phase keeps both cores busy
+# (its servers and chromium), so on 2 cores slow, browser and docs took 857 s beside
+# against 883 s one after the other, and a JACK test of the slow phase lost samples at
+# nice 19 (measured 2026-12-03).
 #
 #   bash scripts/test.sh                  unit, slow, browser and docs: every test
 #   bash scripts/test.sh unit browser -x  only those phases; other arguments go to pytest

@@ -13,7 +13,8 @@ from vibrofocus.analysis import load_trials
 from vibrofocus.errors import ValidationError
 from vibrofocus.simulation import Hypothesis, ParameterRange, default_bank, hypothesis, marginal_loglik
 from vibrofocus.simulation.fitting import (FitSettings, compare_hypotheses, fit_hypothesis, lab_trials,
-                                           model_recovery, participant_loglik, simulate_trials)
+                                           model_recovery, participant_loglik, recovery_rates, simulate_plan_trials,
+                                           simulate_trials)
 from vibrofocus.simulation.fitting.elpd import fold_logliks
 from vibrofocus.simulation.likelihood import Quadrature, Stimuli
 from vibrofocus.simulation.parameters import read_parameters
@@ -100,6 +101,45 @@ def test_model_recovery_chooses_the_true_hypothesis():
     rec = model_recovery(["v3-centroid", "grid-peak"], n_studies=2, n_participants=5, seed=51,
                          settings=FitSettings(n_draws=6), local=True, study1_only=True, refit=False)
     assert np.array_equal(np.diag(rec["confusion"]), [2, 2]), rec["confusion"]
+
+
+def test_recovery_rates_give_the_exact_interval_the_decisive_choices_and_the_lead():
+    names = ["a", "b"]
+    # a: chosen in 30 of 30; b: in 0 of 30, always lost to a, by 1 +- 0.4 (decisive) or 1 +- 1.
+    studies = ([{"true": "a", "chosen": "a", "elpd": {"a": -10.0, "b": -13.0}, "difference": 3.0,
+                 "difference_se": 1.0}] * 30
+               + [{"true": "b", "chosen": "a", "elpd": {"a": -10.0, "b": -11.0}, "difference": 1.0,
+                   "difference_se": 0.4 if j % 3 == 0 else 1.0} for j in range(30)])
+    rates = recovery_rates(names, studies)
+    # Clopper-Pearson at 0 or n of n successes: the open end is (alpha/2) ** (1/n) from the other.
+    tail = 0.025 ** (1.0 / 30.0)
+    assert (rates["a"]["correct"], rates["a"]["studies"], rates["a"]["rate"]) == (30, 30, 1.0)
+    np.testing.assert_allclose([rates["a"]["low"], rates["a"]["high"]], [tail, 1.0], rtol=1e-9)
+    np.testing.assert_allclose([rates["b"]["low"], rates["b"]["high"]], [0.0, 1.0 - tail], rtol=1e-9, atol=1e-12)
+    assert rates["a"]["decisive"] == (30, 0) and rates["b"]["decisive"] == (0, 10)
+    assert rates["a"]["rival"] is None and rates["b"]["rival"] == "a"
+    np.testing.assert_allclose([rates["a"]["lead"], rates["b"]["lead"]], [3.0, -1.0], rtol=1e-12)
+    assert recovery_rates(names, [{"true": "a", "chosen": "b"}])["a"]["decisive"] == (0, 0)
+
+
+def test_a_plan_s_simulated_answers_stay_within_each_block():
+    from vibrofocus.participant_models.design import PlanBlock
+
+    plan = (PlanBlock(("inverse",), 0.0, (1, 3, 7, 9), 2, "corners", "location"),
+            PlanBlock(("funneling", "combination"), -10.0, tuple(range(1, 10)), 1, "all", "location"))
+    data = simulate_plan_trials("v3-centroid", plan, 3, np.random.default_rng(8))
+    per_participant = 4 * 2 + 2 * 9
+    assert data.stim1.size == 3 * per_participant and data.stim2.size == 0
+    assert np.array_equal(np.bincount(data.part1), [per_participant] * 3)
+    corners = data.level1 == 0.0
+    assert corners.sum() == 3 * 8 and np.isin(data.answer1[corners] + 1, (1, 3, 7, 9)).all()
+    assert data.allowed1[np.arange(data.answer1.size), data.answer1].all()
+    assert np.array_equal(data.allowed1[corners].sum(axis=1), np.full(24, 4))
+    again = simulate_plan_trials("v3-centroid", plan, 3, np.random.default_rng(8))
+    assert np.array_equal(again.answer1, data.answer1)
+    with pytest.raises(ValidationError, match="location blocks only"):
+        simulate_plan_trials("v3-centroid", (PlanBlock(("inverse",), 0.0, (1, 9), 1, "", "point"),), 1,
+                             np.random.default_rng(8))
 
 
 def test_elpd_names_the_best_with_its_difference():

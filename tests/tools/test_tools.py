@@ -96,3 +96,19 @@ def test_markers_replace_only_the_block_and_refuse_a_page_without_them(tmp_path)
     page.write_text(text)
     markers.write_between_markers(page, "t", "new")
     assert "new" in page.read_text() and "old" not in page.read_text()
+
+
+def test_the_documented_free_fit_recovery_tables_are_those_of_their_results():
+    # scripts/free_fit_recovery.py --write puts each run's table between markers named after
+    # its results file; the page must show what the file holds (a run resumed since, or a
+    # table edited by hand, fails here).
+    from vibrofocus_tools.recovery_tables import RESULTS, free_fit_block
+
+    page = ROOT / "docs" / "fitting-hypotheses.md"
+    text = page.read_text(encoding="utf-8")
+    checked = 0
+    for path in sorted(RESULTS.glob("free-*.jsonl")):
+        if f"<!-- {path.stem}:start -->" in text:
+            assert markers.replace_between_markers(text, path.stem, free_fit_block(path), page) == text, path.name
+            checked += 1
+    assert checked >= 2

@@ -32,8 +32,8 @@ Fitting to a lab's trials (docs/fitting-hypotheses.md):
 :mod:`.lab_fit`
     :func:`fit_trials`: all of it, the content of ``hypotheses.json``.
 :mod:`.recovery`
-    :func:`simulate_trials`, :func:`recovery_study`, :func:`model_recovery`, :func:`confusion`,
-    :func:`parameter_recovery`.
+    :func:`simulate_trials`, :func:`simulate_plan_trials`, :func:`recovery_study`,
+    :func:`model_recovery`, :func:`confusion`, :func:`recovery_rates`, :func:`parameter_recovery`.
 """
 
 from .adoption import FITS_FILE, adopt, check_fit_set
@@ -48,7 +48,7 @@ from .lab_trials import LabTrials, lab_trials, trials_source
 from .likelihood_fit import Fit, FitSettings, fit_hypothesis, participant_loglik
 from .predictive import predictive_check
 from .recovery import (confusion, model_recovery, parameter_recovery, profile_recovery_study, profile_summary,
-                       recovery_study, simulate_trials)
+                       recovery_rates, recovery_study, simulate_plan_trials, simulate_trials)
 
 __all__ = [
     "FIT_SEEDS",
@@ -78,10 +78,12 @@ __all__ = [
     "predictive_check",
     "fit_trials",
     "simulate_trials",
+    "simulate_plan_trials",
     "model_recovery",
     "recovery_study",
     "profile_recovery_study",
     "profile_summary",
     "confusion",
+    "recovery_rates",
     "parameter_recovery",
 ]

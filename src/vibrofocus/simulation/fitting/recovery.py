@@ -26,8 +26,8 @@ from .elpd import compare_hypotheses
 from .lab_trials import LabTrials
 from .likelihood_fit import STUDY2_ONLY, FitSettings, fit_hypothesis, model_at, participant_loglik
 
-__all__ = ["simulate_trials", "recovery_study", "confusion", "model_recovery", "parameter_recovery",
-           "profile_recovery_study", "profile_summary"]
+__all__ = ["simulate_trials", "simulate_plan_trials", "recovery_study", "confusion", "recovery_rates",
+           "model_recovery", "parameter_recovery", "profile_recovery_study", "profile_summary"]
 
 
 def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generator, *,
@@ -76,6 +76,74 @@ def simulate_trials(hypothesis: Any, n_participants: int, rng: np.random.Generat
     return LabTrials(tuple(f"sim-{i + 1:03d}" for i in range(n_participants)), tuple(b.methods), n_loc,
                      part, stims, np.concatenate(a1), part, stims, np.concatenate(s2), source="<simulated>",
                      levels=b.levels)
+
+
+def simulate_plan_trials(hypothesis: Any, plan: Sequence[Any], n_participants: int, rng: np.random.Generator, *,
+                         bank: FeatureBank | None = None) -> LabTrials:
+    """One simulated study of a plan's Study 1 blocks, as trials (a MODEL, not data).
+
+    Each participant is a forearm of the bank and traits from the hypothesis' population
+    (at its shipped parameters); every block's trials are answered by
+    :func:`~vibrofocus.simulation.perception.draw_answers`, the sampler of
+    ``simulate-study``, among the block's locations and at its level. The study engine
+    (the simulated forearm playing every trial) is not run.
+
+    Parameters
+    ----------
+    hypothesis : str or Hypothesis
+    plan : sequence of PlanBlock
+        Blocks with ``methods``, ``level_db`` (dB re the bank's level rule),
+        ``locations`` (numbers from 1) and ``repetitions``; location answers
+        (:func:`~vibrofocus.simulation.design.paper_plan`, a designed protocol's blocks).
+    n_participants : int
+    rng : numpy.random.Generator
+        The stream of the study: forearms, traits and answers, in that order.
+    bank : FeatureBank, optional
+        Default :func:`~vibrofocus.simulation.bank.default_bank`.
+
+    Returns
+    -------
+    LabTrials
+        Study 1 trials with their levels and allowed answers; no Study 2.
+    """
+    from ..hypotheses import hypothesis as find_hypothesis
+
+    if any(getattr(blk, "response", "location") != "location" for blk in plan):
+        raise ValidationError("simulate_plan_trials answers location blocks only")
+    h = find_hypothesis(hypothesis)
+    b = bank if bank is not None else default_bank()
+    m = h.model()
+    n_loc = len(b.locations_xy)
+    levels = sorted({blk.level_db for blk in plan})
+    part, stim, ans, lev, allowed = [], [], [], [], []
+    forearms = rng.choice(b.n_forearms, size=n_participants, replace=n_participants > b.n_forearms)
+    for i in range(n_participants):
+        traits = Traits.draw(m, rng)
+        per = {}
+        for v in levels:
+            g = 10.0 ** (v / 10.0)
+            e = b.energy[forearms[i]].reshape(len(b.methods) * n_loc, -1) * g
+            a = b.actuator_energy[forearms[i]].reshape(len(b.methods) * n_loc, -1) * g
+            per[v] = h.percepts(e, b.points_xy, m, traits, a, b.actuators_xy, b.locations_xy)
+        for blk in plan:
+            ok = np.asarray(blk.locations) - 1
+            mask = np.zeros(n_loc, dtype=bool)
+            mask[ok] = True
+            for meth in blk.methods:
+                idx = np.tile(b.methods.index(meth) * n_loc + ok, blk.repetitions)
+                answers, _, _ = draw_answers(per[blk.level_db], idx, b.locations_xy, b.centre_xy, m, traits, rng,
+                                             allowed=ok)
+                part.append(np.full(idx.size, i))
+                stim.append(idx)
+                ans.append(answers)
+                lev.append(np.full(idx.size, blk.level_db))
+                allowed.append(np.tile(mask, (idx.size, 1)))
+    empty = np.zeros(0, dtype=int)
+    return LabTrials(tuple(f"sim-{i + 1:03d}" for i in range(n_participants)), tuple(b.methods), n_loc,
+                     np.concatenate(part), np.concatenate(stim), np.concatenate(ans), empty, empty,
+                     np.zeros((0, n_loc), dtype=bool), source="<simulated plan>", levels=b.levels,
+                     level1=np.concatenate(lev), level2=np.zeros(0), allowed1=np.concatenate(allowed),
+                     allowed2=np.zeros((0, n_loc), dtype=bool))
 
 
 def recovery_study(hypotheses: Sequence[Any], truth: int, study: int, *, n_participants: int = 12, seed: int = 0,
@@ -135,6 +203,53 @@ def confusion(names: Sequence[str], studies: Sequence[Mapping[str, Any]]) -> lis
     for st in studies:
         out[list(names).index(st["true"]), list(names).index(st["chosen"])] += 1
     return out.tolist()
+
+
+def recovery_rates(names: Sequence[str], studies: Sequence[Mapping[str, Any]], *,
+                   confidence: float = 0.95) -> dict[str, dict[str, Any]]:
+    """How often each true hypothesis was chosen, with an exact interval, and by what margin.
+
+    Parameters
+    ----------
+    names : sequence of str
+        The hypotheses, in the order of :func:`confusion`.
+    studies : sequence of mapping
+        Scored studies: ``true`` and ``chosen`` (names); optionally ``elpd`` (per name, the
+        ELPD or summed log-likelihood, natural log), ``difference`` and ``difference_se``
+        (the chosen minus the runner-up, :func:`~.elpd.compare_hypotheses`).
+    confidence : float
+        Of the Clopper-Pearson interval of each rate (exact binomial,
+        :meth:`scipy.stats.binomtest`'s ``proportion_ci``).
+
+    Returns
+    -------
+    dict
+        Per true hypothesis that has studies: ``studies``, ``correct`` (count), ``rate``,
+        ``low`` and ``high`` (the interval), ``decisive`` (studies whose choice leads the
+        runner-up by more than two standard errors: right, wrong), ``rival`` (the other
+        hypothesis chosen most often, or None) and ``lead`` (the mean, over the studies, of
+        the true hypothesis' score minus the best other's; NaN without ``elpd``).
+    """
+    from scipy import stats
+
+    out: dict[str, dict[str, Any]] = {}
+    for name in names:
+        rows = [st for st in studies if st["true"] == name]
+        if not rows:
+            continue
+        correct = sum(st["chosen"] == name for st in rows)
+        ci = stats.binomtest(correct, len(rows)).proportion_ci(confidence_level=confidence, method="exact")
+        decisive = [st["chosen"] == name for st in rows
+                    if "difference" in st and st["difference"] > 2.0 * st.get("difference_se", np.inf)]
+        others = [st["chosen"] for st in rows if st["chosen"] != name]
+        leads = [st["elpd"][name] - max(v for k, v in st["elpd"].items() if k != name)
+                 for st in rows if "elpd" in st]
+        out[name] = {"studies": len(rows), "correct": int(correct), "rate": correct / len(rows),
+                     "low": float(ci.low), "high": float(ci.high),
+                     "decisive": (int(sum(decisive)), int(len(decisive) - sum(decisive))),
+                     "rival": max(set(others), key=others.count) if others else None,
+                     "lead": float(np.mean(leads)) if leads else float("nan")}
+    return out
 
 
 def model_recovery(hypotheses: Sequence[Any], *, n_studies: int, n_participants: int = 12, seed: int = 0,
