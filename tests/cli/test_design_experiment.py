@@ -37,3 +37,29 @@ def test_design_experiment_refuses_bad_input_in_one_line():
         res = runner.invoke(app, ["design-experiment", *SMALL[:-4], *args, "--studies", "0"])
         assert res.exit_code != 0
         assert words in res.output and "Traceback" not in res.output, res.output
+
+
+def test_rival_fits_from_a_recovery_file_join_the_design_and_a_bad_file_is_one_line(tmp_path):
+    from vibrofocus.simulation.hypotheses import hypothesis
+
+    mid = {r.key: 0.5 * (r.lo + r.hi) for r in hypothesis("level-reliability").free_parameters}
+    good = tmp_path / "fits.jsonl"
+    good.write_text(json.dumps({"settings": {}}) + "\n"
+                    + json.dumps({"true": "v3-centroid", "params": {"level-reliability": mid}}) + "\n")
+    out = tmp_path / "design"
+    res = runner.invoke(app, ["design-experiment", *SMALL, "--hypotheses", "v3-centroid,level-reliability",
+                              "--rival-fits", str(good), "--studies", "0", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    draws = json.loads((out / "design.json").read_text())["parameter_draws"]
+    assert draws["level-reliability"]["rival_fits"] == [mid] and "rival_fits" not in draws["v3-centroid"]
+    bad = tmp_path / "bad.jsonl"
+    for text, words in (('{"settings": {}}\n{"true": "v3-centroid", "params": {"level-reliability": 3}}\n',
+                         "line 2 of the rival fits file"),
+                        ('{"settings": {}}\nnot json\n', "line 2 of the rival fits file"),
+                        (json.dumps({"true": "v3-centroid", "params": {"level-reliability": {**mid, "nope": 1.0}}}),
+                         "rival_fits: a parameter set of level-reliability: 'nope' not among its free parameters")):
+        bad.write_text(text)
+        res = runner.invoke(app, ["design-experiment", *SMALL, "--hypotheses", "v3-centroid,level-reliability",
+                                  "--rival-fits", str(bad), "--studies", "0", "--out", str(tmp_path / "no")])
+        assert res.exit_code != 0 and words in res.output and "Traceback" not in res.output, res.output
+        assert not (tmp_path / "no").exists()

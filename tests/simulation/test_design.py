@@ -9,7 +9,8 @@ from vibrofocus.errors import ValidationError
 from vibrofocus.simulation.bank import default_bank, simulate_cell_means
 from vibrofocus.simulation.design import (DesignSettings, PlanBlock, _simulate_scores, design_experiment,
                                           design_protocol_text, identification, location_sets, paper_plan,
-                                          participant_loglik, point_area_m, score_tables, study1_probabilities)
+                                          participant_loglik, point_area_m, rival_fits_from, score_tables,
+                                          study1_probabilities)
 from vibrofocus.simulation.hypotheses import available_hypotheses, hypothesis
 from vibrofocus.simulation.likelihood import Stimuli, answer_law, answer_probabilities, marginal_loglik
 from vibrofocus.simulation.perception import Traits, draw_answers, posterior_ratio_rule
@@ -198,6 +199,38 @@ def test_parameter_uncertainty_takes_the_information_out_of_taps_below_threshold
     assert DesignSettings().parameter_spread == 1.0
     assert ratio() < 0.15  # 0.05 measured
     assert ratio(parameter_spread=0.0) > 0.3  # 0.57 measured: the shipped parameters' difference
+
+
+def test_rival_fits_are_taken_per_fitted_and_true_hypothesis_never_from_its_own_studies():
+    rows = [{"true": t, "params": {"a": {"x": float(10 * i + j)}, "b": {"y": float(-10 * i - j)}}}
+            for i, t in enumerate(("a", "b", "c")) for j in range(3)]
+    got = rival_fits_from(rows, ["a", "b"], per_pair=2)
+    assert got["a"] == [{"x": 10.0}, {"x": 11.0}, {"x": 20.0}, {"x": 21.0}]  # from b's and c's studies
+    assert got["b"] == [{"y": 0.0}, {"y": -1.0}, {"y": -20.0}, {"y": -21.0}]  # from a's and c's
+    assert rival_fits_from(rows, ["a"], per_pair=0) == {"a": []}
+
+
+def test_rival_fits_join_the_draws_of_their_hypothesis():
+    names = ("v3-centroid", "level-reliability")
+    h = hypothesis("level-reliability")
+    mid = {r.key: 0.5 * (r.lo + r.hi) for r in h.free_parameters}
+    small = dict(hypotheses=names, n_forearms=1, n_traits=8, n_parameter_draws=2, n_replicates=1, budget=8,
+                 levels_db=(0.0,), methods=("inverse",))
+    seen = []
+    d = design_experiment(DesignSettings(**small, rival_fits={"level-reliability": [mid]}),
+                          progress=lambda stage, done, total: seen.append((stage, total)))
+    assert d.parameter_draws["level-reliability"]["rival_fits"] == [mid]
+    assert "rival_fits" not in d.parameter_draws["v3-centroid"]
+    assert ("answer laws", 1 * (2 + 3) * 8) in seen  # v3: 2 draws; level-reliability: 2 + 1 rival fit
+    with pytest.raises(ValidationError, match=r"a parameter set of level-reliability: no value for prior_sd_m"):
+        DesignSettings(**small, rival_fits={"level-reliability": [{k: v for k, v in mid.items()
+                                                                   if not k.startswith("prior_sd_m")}]})
+    with pytest.raises(ValidationError, match="'tempo' not among its free parameters"):
+        DesignSettings(**small, rival_fits={"level-reliability": [{**mid, "tempo": 1.0}]})
+    with pytest.raises(ValidationError, match="not among the hypotheses"):
+        DesignSettings(**small, rival_fits={"grid-peak": []})
+    with pytest.raises(ValidationError, match="as many sets for every hypothesis"):
+        DesignSettings(**small, information="person", rival_fits={"level-reliability": [mid]})
 
 
 def test_designed_protocol_identifies_one_population_better_than_the_papers():

@@ -19,6 +19,8 @@ _HELP = {
               "fit searches).",
     "population": "A hypothesis whose fitted parameters every hypothesis takes, so that they differ in their "
                   "readout only (default: each its own shipped parameters).",
+    "rivals": "A free-fit model recovery's results (scripts/free_fit_recovery.py, .jsonl): each hypothesis' fits "
+              "to the others' simulated studies join its draws, so the design seeks trials a rival cannot fit.",
 }
 
 
@@ -44,6 +46,9 @@ def design_experiment_command(
     forearms: int = typer.Option(6, "--forearms", min=1, max=1000, help="Bank forearms the design integrates over."),
     traits: int = typer.Option(8, "--traits", min=1, max=1000, help="Participants' trait draws per sample."),
     population: str | None = typer.Option(None, "--population", help=_HELP["population"]),
+    rivals: Path | None = typer.Option(None, "--rival-fits", help=_HELP["rivals"]),
+    per_pair: int = typer.Option(2, "--rival-fits-per-pair", min=1, max=100,
+                                 help="Fits of --rival-fits kept per fitted and true hypothesis."),
     participants: str = typer.Option("1,2,3,4,6,8", "--participants", "-n", help="Sample sizes N of the check."),
     studies: int = typer.Option(200, "--studies", min=0, max=100_000,
                                 help="Simulated studies per N and hypothesis (0: no check)."),
@@ -71,19 +76,24 @@ def design_experiment_command(
     with user_errors():
         from rich.console import Console
 
-        from .._atomic import allow_overwrite
-        from ..simulation.design import DesignSettings
+        from .._atomic import allow_overwrite, protect
+        from ..simulation.design import DesignSettings, read_rival_fits
+        from ..simulation.hypotheses import available_hypotheses
         from ..workflows import design_study
 
         allow_overwrite(force)
+        names = None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str)
+        if rivals is not None:
+            protect(rivals, "rival fits file")  # an input: no output of this command may replace it
         settings = DesignSettings(
-            hypotheses=None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str),
+            hypotheses=names,
             methods=comma_list(methods, "--methods", str) if methods else None,
             locations=comma_list(locations, "--locations") if locations else None,
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
             parameter_spread=spread,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population,
-            responses=comma_list(responses, "--responses", str), information=information)
+            responses=comma_list(responses, "--responses", str), information=information,
+            rival_fits=read_rival_fits(rivals, names or available_hypotheses(), per_pair) if rivals else None)
         console = Console(stderr=True)
         done = design_study(settings, participants=comma_list(participants, "--participants"), studies=studies,
                             bank=bank, calibration=calibration, pool=pool, score_forearms=score_forearms,

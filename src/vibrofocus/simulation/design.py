@@ -21,7 +21,7 @@ of participants. :func:`design_protocol_text` writes the design as a protocol fi
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -34,8 +34,8 @@ from .likelihood import AnswerLaw, Quadrature, answer_law, answer_probabilities
 from .perception import PerceptualModel, Traits, draw_answers
 
 __all__ = ["DesignSettings", "CandidateBlock", "PlanBlock", "ExperimentDesign", "location_sets",
-           "study1_probabilities", "shipped_model", "parameter_draws", "condition_gains", "design_experiment",
-           "paper_plan",
+           "study1_probabilities", "shipped_model", "parameter_draws", "rival_fits_from", "read_rival_fits",
+           "condition_gains", "design_experiment", "paper_plan",
            "design_protocol_text", "score_tables", "ScoreTable", "design_report", "write_design",
            "participant_loglik", "choose_hypothesis", "identification", "point_area_m", "DEFAULT_LEVELS_DB",
            "RESPONSES", "SCORE_SEED", "THRESHOLD_BLOCK"]
@@ -104,6 +104,12 @@ class DesignSettings:
         ``person``, given the person too (the same traits and parameter draw under every
         hypothesis), which saturates at log(number of hypotheses) once a participant's
         answers decide.
+    rival_fits : mapping of str to sequence of mapping, optional
+        More parameter sets per hypothesis, by key of its free parameters, added to its
+        draws: its free fits to studies simulated under the other hypotheses (the places
+        the free fit of ``analyze --hypotheses`` moves a rival to, where it mimics the true
+        one; :func:`rival_fits_from`). Draws over the ranges seldom come near them; with
+        them, the design looks for trials that a rival cannot fit its way around.
     """
 
     hypotheses: tuple[str, ...] | None = None
@@ -120,10 +126,12 @@ class DesignSettings:
     population: str | None = None
     responses: tuple[str, ...] = ("location",)
     information: str = "population"
+    rival_fits: Mapping[str, Sequence[Mapping[str, float]]] | None = None
 
     def __post_init__(self) -> None:
         from .._validation import check_in_range
         from .hypotheses import available_hypotheses, hypothesis as find_hypothesis
+        from .parameters import apply_parameters
 
         names = available_hypotheses() if self.hypotheses is None else tuple(
             dict.fromkeys(find_hypothesis(h).name for h in self.hypotheses))
@@ -148,6 +156,27 @@ class DesignSettings:
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not lo <= v <= hi:
                 raise ValidationError(f"{name} must be an integer from {lo} to {hi}, got {v!r}")
         check_in_range(self.parameter_spread, "parameter_spread", 0.0, 1.0)
+        if self.rival_fits:
+            fits = {}
+            for name, sets in self.rival_fits.items():
+                h = find_hypothesis(name)
+                if h.name not in names:
+                    raise ValidationError(f"rival_fits: {h.name} is not among the hypotheses to tell apart")
+                sets = tuple(dict(v) for v in sets)
+                keys = {r.key for r in h.free_parameters}
+                for v in sets:
+                    unknown = sorted(set(v) - keys)
+                    try:
+                        if unknown:
+                            raise ValidationError(f"{', '.join(map(repr, unknown))} not among its free parameters")
+                        apply_parameters(h.model(), h.free_parameters, v)  # a missing key, a value out of range
+                    except ValidationError as exc:
+                        raise ValidationError(f"rival_fits: a parameter set of {h.name}: {exc}") from None
+                fits[h.name] = sets
+            if self.information == "person" and len({len(fits.get(n, ())) for n in names}) > 1:
+                raise ValidationError("rival_fits: the information given the person needs as many sets for every "
+                                      "hypothesis")
+            object.__setattr__(self, "rival_fits", fits)
 
 
 @dataclass(frozen=True)
@@ -469,6 +498,78 @@ def parameter_draws(h: Any, n: int, seed: int = 0, spread: float = 1.0,
     return models, about
 
 
+def rival_fits_from(studies: Sequence[Mapping[str, Any]], hypotheses: Sequence[str],
+                    per_pair: int = 2) -> dict[str, list[dict[str, float]]]:
+    """Each hypothesis' free fits to studies simulated under another one (for :attr:`DesignSettings.rival_fits`).
+
+    Parameters
+    ----------
+    studies : sequence of mapping
+        Scored studies of a model recovery with the free fit (``true``, and ``params``:
+        per hypothesis, its fitted parameters by key), as ``scripts/free_fit_recovery.py``
+        writes them.
+    hypotheses : sequence of str
+        The hypotheses to collect fits of.
+    per_pair : int
+        Fits kept per (fitted hypothesis, true hypothesis), the first in the order given.
+
+    Returns
+    -------
+    dict
+        Per hypothesis, its parameter sets (up to ``per_pair`` x the other hypotheses).
+    """
+    out: dict[str, list[dict[str, float]]] = {name: [] for name in hypotheses}
+    taken: dict[tuple[str, str], int] = {}
+    for st in studies:
+        for name in hypotheses:
+            if st["true"] == name or name not in st.get("params", {}):
+                continue
+            key = (name, st["true"])
+            if taken.get(key, 0) < per_pair:
+                out[name].append({k: float(v) for k, v in st["params"][name].items()})
+                taken[key] = taken.get(key, 0) + 1
+    return out
+
+
+def read_rival_fits(path: Any, hypotheses: Sequence[str], per_pair: int = 2) -> dict[str, list[dict[str, float]]]:
+    """:func:`rival_fits_from` a free-fit model recovery's results file (JSON lines).
+
+    Parameters
+    ----------
+    path : path-like
+        A file of ``scripts/free_fit_recovery.py`` (a settings line, then one scored study
+        per line: ``true`` and ``params``); lines without ``true`` are skipped.
+    hypotheses : sequence of str
+    per_pair : int
+
+    Returns
+    -------
+    dict
+        As :func:`rival_fits_from`.
+
+    Raises
+    ------
+    ValidationError
+        Unreadable, over 16 MB, a line that is not JSON, or a study without its
+        hypotheses' parameters as numbers (the message names the line).
+    """
+    from ..io._capped import read_capped_json_lines
+
+    rows = []
+    for number, row in enumerate(read_capped_json_lines(path, max_bytes=16 * 2**20, what="rival fits file"), 1):
+        if not isinstance(row, dict) or "true" not in row:
+            continue
+        params = row.get("params")
+        ok = isinstance(row["true"], str) and isinstance(params, dict) and all(
+            isinstance(v, dict) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in v.values())
+            for v in params.values())
+        if not ok:
+            raise ValidationError(f"line {number} of the rival fits file {path} has no parameters per hypothesis "
+                                  "('params': {name: {key: number}})")
+        rows.append(row)
+    return rival_fits_from(rows, hypotheses, per_pair)
+
+
 def _stimulus_index(bank: FeatureBank, levels: Sequence[float], method: str, level: float,
                     locations: Sequence[int]) -> np.ndarray:
     """Rows of the stacked stimuli (level, method, location) of a block's targets."""
@@ -635,7 +736,13 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
     for hi, name in enumerate(names):
         models[name], draws_about[name] = parameter_draws(find_hypothesis(name), s.n_parameter_draws, s.seed,
                                                           s.parameter_spread, shipped_model(name, s.population))
-    total = s.n_forearms * len(names) * s.n_parameter_draws * s.n_traits
+        rivals = (s.rival_fits or {}).get(name, ())
+        if rivals:
+            from .fitting.likelihood_fit import model_at
+
+            models[name] = models[name] + [model_at(find_hypothesis(name), v) for v in rivals]
+            draws_about[name]["rival_fits"] = [dict(v) for v in rivals]
+    total = s.n_forearms * sum(len(models[n]) for n in names) * s.n_traits
     done = 0
     for fi, f in enumerate(forearms):
         for hi, name in enumerate(names):
