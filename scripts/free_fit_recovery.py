@@ -18,6 +18,9 @@ is printed; ``--write`` puts it into docs/fitting-hypotheses.md between the mark
 named after the results file.
 
     vibrofocus design-experiment --out design/ --studies 0
+    # studies 25-29 in a second process, their lines then appended to the first file's:
+    python scripts/free_fit_recovery.py --plan paper -n 12 --studies 30 --first-study 25 --seed 7301 \
+        --results part.jsonl
     python scripts/free_fit_recovery.py --plan design/design.json -n 6 --studies 3 --seed 5501
     python scripts/free_fit_recovery.py --plan paper -n 12 --studies 3 --seed 5102
 """
@@ -56,6 +59,9 @@ def main() -> int:
     ap.add_argument("--plan", required=True, help="paper, or a design-experiment design.json")
     ap.add_argument("-n", type=int, default=6, help="participants per study")
     ap.add_argument("--studies", type=int, default=3, help="studies per true hypothesis")
+    ap.add_argument("--first-study", type=int, default=0,
+                    help="run studies from this index on only (a share of a run for another process or machine; "
+                         "its results file's lines after the first join the main one's)")
     ap.add_argument("--seed", type=int, required=True, help="a seed the design did not use")
     ap.add_argument("--draws", type=int, default=16, help="population draws per likelihood (analyze: 32)")
     ap.add_argument("--maxiter", type=int, default=FitSettings().maxiter)
@@ -89,7 +95,7 @@ def main() -> int:
     have = {(d["true"], d["study"]) for d in done}
     settings = FitSettings(n_draws=args.draws, maxiter=args.maxiter, score_draws=args.score_draws)
     truths = names if args.truths == "all" else args.truths.split(",")
-    for j in range(args.studies):
+    for j in range(args.first_study, args.studies):
         for t, truth in enumerate(names):
             if (truth, j) in have or truth not in truths:
                 continue

@@ -26,10 +26,17 @@ def read_results(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     return json.loads(lines[0])["settings"], [json.loads(x) for x in lines[1:] if x.strip()]
 
 
-def confusion_markdown(names: list[str], counts: list[list[int]], note: str) -> str:
-    """Counts of (true, chosen) as a markdown table with each row's share correct, then ``note``."""
+def confusion_markdown(names: list[str], counts: list[list[int]], note: str, *,
+                       only: list[str] | None = None) -> str:
+    """Counts of (true, chosen) as a markdown table with each row's share correct, then ``note``.
+
+    ``only``: the true hypotheses to show a row of (default every one); the columns are
+    always every hypothesis, the choices.
+    """
     rows = ["| true \\ chosen | " + " | ".join(names) + " | correct |", "|---" * (len(names) + 2) + "|"]
     for name, row in zip(names, counts):
+        if only is not None and name not in only:
+            continue
         total = sum(row)
         share = f"{row[names.index(name)] / total:.0%}" if total else "-"
         rows.append(f"| {name} | " + " | ".join(str(c) for c in row) + f" | {share} |")
@@ -45,7 +52,8 @@ def rates_markdown(names: list[str], studies: list[dict[str, Any]], n_participan
             "true minus best other, nats per participant |", "|---" * 6 + "|"]
     for name, r in rates.items():
         rows.append(f"| {name} | {r['correct']} of {r['studies']} ({r['rate']:.0%}) | {r['low']:.2f}-{r['high']:.2f} | "
-                    f"{r['decisive'][0]} / {r['decisive'][1]} | {r['rival'] or '-'} | {r['lead'] / n_participants:+.2f} |")
+                    f"{r['decisive'][0]} / {r['decisive'][1]} | {r['rival'] or '-'} | "
+                    f"{r['lead'] / n_participants:+.2f} |")
     return "\n".join(rows)
 
 
@@ -56,18 +64,23 @@ def free_fit_block(path: Path) -> str:
     settings, studies = read_results(path)
     names = list(settings["hypotheses"])
     n = int(settings["n"])
-    per_row = sorted({sum(r["true"] == name for r in studies) for name in names})
+    run = [name for name in names if any(r["true"] == name for r in studies)]
+    per_row = sorted({sum(r["true"] == name for r in studies) for name in run})
+    shown = f" ({' and '.join(run)} only)" if run != names else ""
     trials = sum(len(b["methods"]) * len(b["locations"]) * b["repetitions"] for b in settings["plan"])
     plan = ("the paper's Study 1 (every method x location three times, 0 dB)" if settings["plan"] == _paper_plan()
             else f"a designed protocol ({trials} trials per participant)")
     minutes = sum(r.get("elapsed_s", 0.0) for r in studies) / 60.0
-    note = (f"{'/'.join(map(str, per_row))} simulated studies of N = {n} per true hypothesis (a MODEL, not data), "
+    note = (f"{'/'.join(map(str, per_row))} simulated studies of N = {n} per true hypothesis{shown}, "
+            "a MODEL, not data; "
             f"{plan}, seed {settings['seed']}; every hypothesis' free parameters fitted to each study "
             f"({settings['draws']} population draws, Nelder-Mead with {settings['maxiter']} iterations per start) and "
             f"scored by leave-one-participant-out ELPD on {settings['score_draws']} other draws "
-            f"(`compare_hypotheses`, the fit of `analyze --hypotheses`); {minutes:.0f} min of wall clock on a shared 2-core machine. "
+            f"(`compare_hypotheses`, the fit of `analyze --hypotheses`); {minutes:.0f} min of wall clock on a "
+            "shared 2-core machine. "
             f"Results: `{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}`.")
-    return (confusion_markdown(names, confusion(names, studies), note) + "\n\n"
+    table = confusion_markdown(names, confusion(names, studies), note, only=run)
+    return (table + "\n\n"
             + rates_markdown(names, studies, n))
 
 

@@ -738,9 +738,14 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
                                                           s.parameter_spread, shipped_model(name, s.population))
         rivals = (s.rival_fits or {}).get(name, ())
         if rivals:
-            from .fitting.likelihood_fit import model_at
+            from .parameters import apply_parameters, ordered_pairs
 
-            models[name] = models[name] + [model_at(find_hypothesis(name), v) for v in rivals]
+            h = find_hypothesis(name)
+            ranges = h.free_parameters
+            # As the free fit applies its values (fitting.likelihood_fit.model_at): on the
+            # hypothesis' own model, the two ends of a population range in order.
+            models[name] = models[name] + [apply_parameters(h.model(), ranges, ordered_pairs(
+                ranges, [v[r.key] for r in ranges])) for v in rivals]
             draws_about[name]["rival_fits"] = [dict(v) for v in rivals]
     total = s.n_forearms * sum(len(models[n]) for n in names) * s.n_traits
     done = 0
