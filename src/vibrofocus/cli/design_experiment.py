@@ -76,29 +76,25 @@ def design_experiment_command(
     with user_errors():
         from rich.console import Console
 
-        from .._atomic import allow_overwrite, protect
-        from ..simulation.design import DesignSettings, read_rival_fits
-        from ..simulation.hypotheses import available_hypotheses
+        from .._atomic import allow_overwrite
+        from ..simulation.design import DesignSettings
         from ..workflows import design_study
 
         allow_overwrite(force)
-        names = None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str)
-        if rivals is not None:
-            protect(rivals, "rival fits file")  # an input: no output of this command may replace it
         settings = DesignSettings(
-            hypotheses=names,
+            hypotheses=None if hypotheses.strip() == "all" else comma_list(hypotheses, "--hypotheses", str),
             methods=comma_list(methods, "--methods", str) if methods else None,
             locations=comma_list(locations, "--locations") if locations else None,
             levels_db=comma_list(levels, "--levels", float), budget=budget, n_parameter_draws=draws,
             parameter_spread=spread,
             n_forearms=forearms, n_traits=traits, seed=seed, population=population,
-            responses=comma_list(responses, "--responses", str), information=information,
-            rival_fits=read_rival_fits(rivals, names or available_hypotheses(), per_pair) if rivals else None)
+            responses=comma_list(responses, "--responses", str), information=information)
         console = Console(stderr=True)
         done = design_study(settings, participants=comma_list(participants, "--participants"), studies=studies,
                             bank=bank, calibration=calibration, pool=pool, score_forearms=score_forearms,
                             score_draws=score_draws, scheduler=scheduler, workers=workers, local=local, out=out,
-                            threshold_trials=threshold, progress=_Notes(console))
+                            threshold_trials=threshold, rival_fits=rivals, rival_fits_per_pair=per_pair,
+                            progress=_Notes(console))
         _print_design(done, comma_list(participants, "--participants"), console)
 
 

@@ -36,8 +36,8 @@ class DesignOutcome:
 def design_study(settings: Any, *, participants: list[int], studies: int, bank: Path | None = None,
                  calibration: Path | None = None, pool: int = 8, score_forearms: int = 8, score_draws: int = 32,
                  scheduler: str | None = None, workers: int | None = None, local: bool = False,
-                 out: Path | None = None, threshold_trials: int = 0,
-                 progress: Progress | None = None) -> DesignOutcome:
+                 out: Path | None = None, threshold_trials: int = 0, rival_fits: Path | None = None,
+                 rival_fits_per_pair: int = 2, progress: Progress | None = None) -> DesignOutcome:
     """Design the Study 1 blocks of ``settings``, check them by simulation, and write them.
 
     Parameters
@@ -60,6 +60,12 @@ def design_study(settings: Any, *, participants: list[int], studies: int, bank: 
     threshold_trials : int
         Trials of a threshold block put first in protocol.toml (0: none;
         :func:`~vibrofocus.simulation.design.design_protocol_text`).
+    rival_fits : Path, optional
+        A free-fit model recovery's results file: ``rival_fits_per_pair`` fits of each
+        hypothesis per other true hypothesis join its draws
+        (:func:`~vibrofocus.simulation.design.read_rival_fits`; replaces
+        ``settings.rival_fits``).
+    rival_fits_per_pair : int
     progress : Progress, optional
         Notes of the design's and the check's times.
 
@@ -71,11 +77,18 @@ def design_study(settings: Any, *, participants: list[int], studies: int, bank: 
 
     from ..errors import ValidationError
     from ..simulation.bank import FeatureBank, default_bank
-    from ..simulation.design import design_experiment, design_report, identification, paper_plan, write_design
+    from ..simulation.design import (design_experiment, design_report, identification, paper_plan, read_rival_fits,
+                                     write_design)
 
     progress = progress if progress is not None else QuietProgress()
     if calibration is not None and bank is not None:
         raise ValidationError("give --calibration or --bank, not both")
+    if rival_fits is not None:
+        from .._atomic import protect
+
+        protect(rival_fits, "rival fits file")  # an input: no output of this command may replace it
+        settings = dataclasses.replace(settings, rival_fits=read_rival_fits(rival_fits, settings.hypotheses,
+                                                                            rival_fits_per_pair))
     if calibration is not None:
         from .._atomic import protect
         from ..calibration import load_calibration
