@@ -131,7 +131,7 @@ class DesignSettings:
     def __post_init__(self) -> None:
         from .._validation import check_in_range
         from .hypotheses import available_hypotheses, hypothesis as find_hypothesis
-        from .parameters import apply_parameters
+        from .parameters import model_at
 
         names = available_hypotheses() if self.hypotheses is None else tuple(
             dict.fromkeys(find_hypothesis(h).name for h in self.hypotheses))
@@ -169,7 +169,7 @@ class DesignSettings:
                     try:
                         if unknown:
                             raise ValidationError(f"{', '.join(map(repr, unknown))} not among its free parameters")
-                        apply_parameters(h.model(), h.free_parameters, v)  # a missing key, a value out of range
+                        model_at(h, v)  # a missing key, a value out of range
                     except ValidationError as exc:
                         raise ValidationError(f"rival_fits: a parameter set of {h.name}: {exc}") from None
                 fits[h.name] = sets
@@ -738,14 +738,10 @@ def design_experiment(settings: DesignSettings | None = None, *, bank: FeatureBa
                                                           s.parameter_spread, shipped_model(name, s.population))
         rivals = (s.rival_fits or {}).get(name, ())
         if rivals:
-            from .parameters import apply_parameters, ordered_pairs
+            from .parameters import model_at
 
-            h = find_hypothesis(name)
-            ranges = h.free_parameters
-            # As the free fit applies its values (fitting.likelihood_fit.model_at): on the
-            # hypothesis' own model, the two ends of a population range in order.
-            models[name] = models[name] + [apply_parameters(h.model(), ranges, ordered_pairs(
-                ranges, [v[r.key] for r in ranges])) for v in rivals]
+            # As the free fit applies its values: on the hypothesis' own model.
+            models[name] = models[name] + [model_at(find_hypothesis(name), v) for v in rivals]
             draws_about[name]["rival_fits"] = [dict(v) for v in rivals]
     total = s.n_forearms * sum(len(models[n]) for n in names) * s.n_traits
     done = 0

@@ -17,7 +17,7 @@ from .._validation import check_in_range
 from ..errors import ValidationError
 from .perception import PerceptualModel
 
-__all__ = ["ParameterRange", "apply_parameters", "read_parameters", "ordered_pairs"]
+__all__ = ["ParameterRange", "apply_parameters", "read_parameters", "ordered_pairs", "model_at"]
 
 
 @dataclass(frozen=True)
@@ -113,3 +113,27 @@ def ordered_pairs(ranges: Sequence[ParameterRange], values: Sequence[float]) -> 
             a, b = sorted(out[k] for k in pair)
             out[pair[0]], out[pair[1]] = (a, b) if ranges[pair[0]].index == 0 else (b, a)
     return out
+
+
+def model_at(h: Any, values: Sequence[float] | Mapping[str, float] | None) -> PerceptualModel:
+    """The hypothesis' model with its free parameters at ``values``.
+
+    Parameters
+    ----------
+    h : Hypothesis
+    values : sequence or mapping of float, or None
+        In the order of ``h.free_parameters`` or by key; None: as the hypothesis has them.
+
+    Returns
+    -------
+    PerceptualModel
+    """
+    m = h.model()
+    if values is None or not h.free_parameters:
+        return m
+    if isinstance(values, Mapping):
+        if any(r.key not in values for r in h.free_parameters):
+            return apply_parameters(m, h.free_parameters, values)  # names what is missing
+        values = [values[r.key] for r in h.free_parameters]
+    # The optimizer moves the two ends of a population range apart: kept in order.
+    return apply_parameters(m, h.free_parameters, ordered_pairs(h.free_parameters, values))

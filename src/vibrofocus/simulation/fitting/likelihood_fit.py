@@ -26,7 +26,7 @@ from scipy import optimize, special
 from ...errors import ValidationError
 from ..bank import FeatureBank, default_bank
 from ..likelihood import Quadrature, Stimuli, answer_law, point_loglik, selection_probability
-from ..parameters import apply_parameters, ordered_pairs, read_parameters
+from ..parameters import model_at, read_parameters
 from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
@@ -123,30 +123,6 @@ class Fit:
     loglik: float
     participant_loglik: np.ndarray
     n_evaluations: int
-
-
-def model_at(h: Any, values: Sequence[float] | Mapping[str, float] | None) -> PerceptualModel:
-    """The hypothesis' model with its free parameters at ``values``.
-
-    Parameters
-    ----------
-    h : Hypothesis
-    values : sequence or mapping of float, or None
-        In the order of ``h.free_parameters`` or by key; None: as the hypothesis has them.
-
-    Returns
-    -------
-    PerceptualModel
-    """
-    m = h.model()
-    if values is None or not h.free_parameters:
-        return m
-    if isinstance(values, Mapping):
-        if any(r.key not in values for r in h.free_parameters):
-            return apply_parameters(m, h.free_parameters, values)  # names what is missing
-        values = [values[r.key] for r in h.free_parameters]
-    # The optimizer moves the two ends of a population range apart: kept in order.
-    return apply_parameters(m, h.free_parameters, ordered_pairs(h.free_parameters, values))
 
 
 def population_draws(h: Any, model: PerceptualModel, bank: FeatureBank,
