@@ -39,7 +39,7 @@ from vibrofocus.participant_models.design import PlanBlock, paper_plan
 from vibrofocus.participant_models.fitting import FitSettings, compare_hypotheses, simulate_plan_trials
 from vibrofocus.participant_models.fitting.likelihood_fit import SCORE_DRAWS_PER_FIT_DRAW
 from vibrofocus_tools.markers import ROOT, write_between_markers
-from vibrofocus_tools.recovery_tables import RESULTS, free_fit_block
+from vibrofocus_tools.recovery_tables import RESULTS, free_fit_block, resumed_studies
 
 DOCS = ROOT / "docs" / "fitting-hypotheses.md"
 
@@ -83,16 +83,10 @@ def main() -> int:
            "seed": args.seed, "draws": args.draws, "score_draws": args.score_draws, "maxiter": args.maxiter,
            "hypotheses": names}
     key = json.loads(json.dumps(key, default=str))
-    done = []
-    if path.exists():
-        lines = path.read_text(encoding="utf-8").splitlines()
-        if json.loads(lines[0]).get("settings") != key:
-            raise SystemExit(f"{path} holds a run with other settings; give another --results")
-        done = [json.loads(x) for x in lines[1:] if x.strip()]
-    else:
+    have = {(d["true"], d["study"]) for d in resumed_studies(path, key)}
+    if not path.exists():
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")
-    have = {(d["true"], d["study"]) for d in done}
     settings = FitSettings(n_draws=args.draws, maxiter=args.maxiter, score_draws=args.score_draws)
     truths = names if args.truths == "all" else args.truths.split(",")
     for j in range(args.first_study, args.studies):
@@ -109,7 +103,6 @@ def main() -> int:
                    "elapsed_s": round(time.perf_counter() - t0, 1)}
             with path.open("a", encoding="utf-8") as f:
                 f.write(json.dumps(row) + "\n")
-            done.append(row)
             print(f"{truth} study {j}: chosen {row['chosen']} (ELPD difference {row['difference']:.1f} "
                   f"+- {row['difference_se']:.1f}; {row['elapsed_s']} s)", flush=True)
     block = free_fit_block(path)

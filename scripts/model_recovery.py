@@ -37,7 +37,7 @@ from vibrofocus.simulation.fitting.recovery import STUDY2_ONLY
 from vibrofocus.simulation.fitting import (FitSettings, confusion, parameter_recovery, profile_recovery_study,
                                           profile_summary, recovery_study)
 from vibrofocus_tools.markers import ROOT, write_between_markers
-from vibrofocus_tools.recovery_tables import RESULTS, confusion_markdown
+from vibrofocus_tools.recovery_tables import RESULTS, confusion_markdown, resumed_studies
 
 
 def parameters_markdown(results: dict) -> str:
@@ -47,16 +47,6 @@ def parameters_markdown(results: dict) -> str:
             rows.append(f"| {name} | {key} | {r['range'][0]:.4g} to {r['range'][1]:.4g} | {r['bias']:.3g} | "
                         f"{r['rmse']:.3g} | {r['correlation']:.2f} | {'yes' if r['recovered'] else 'NO'} |")
     return "\n".join(rows)
-
-
-def read_results(path: Path, settings: dict) -> list[dict]:
-    """The studies already scored with these settings (the file's first line holds them)."""
-    if not path.exists():
-        return []
-    lines = path.read_text(encoding="utf-8").splitlines()
-    if not lines or json.loads(lines[0]).get("settings") != settings:
-        raise SystemExit(f"{path} holds a run with other settings; give another --results")
-    return [json.loads(line) for line in lines[1:] if line.strip()]
 
 
 def profile_markdown(summary: dict, note: str) -> str:
@@ -75,7 +65,7 @@ def one_at_a_time(args: argparse.Namespace, names: list[str], settings: FitSetti
     key = {"hypotheses": names, "participants": args.participants, "seed": args.seed, "draws": args.draws,
            "studies": args.one_at_a_time, "maxiter": args.maxiter}
     path = args.results or RESULTS / f"one-at-a-time-n{args.participants}-d{args.draws}-seed{args.seed}.jsonl"
-    done = read_results(path, key)
+    done = resumed_studies(path, key)
     if not path.exists() and not args.table_only:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")
@@ -152,7 +142,7 @@ def main() -> int:
            "study1_only": args.study1_only, "refit": args.refit}
     stem = f"{'refit' if args.refit else 'shipped'}-{'s1' if args.study1_only else 's12'}-n{args.participants}-d{args.draws}"
     path = args.results or RESULTS / f"{stem}-seed{args.seed}.jsonl"
-    done = read_results(path, key)
+    done = resumed_studies(path, key)
     if not path.exists() and not args.table_only:
         path.parent.mkdir(parents=True, exist_ok=True)
         path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")

@@ -26,6 +26,20 @@ def read_results(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     return json.loads(lines[0])["settings"], [json.loads(x) for x in lines[1:] if x.strip()]
 
 
+def resumed_studies(path: Path, settings: dict[str, Any]) -> list[dict[str, Any]]:
+    """The studies a results file already holds for a run of ``settings`` (none if it does not exist).
+
+    A file whose first line holds other settings is another run's: refused, so that a
+    resumed run never mixes studies of two.
+    """
+    if not path.exists():
+        return []
+    held, studies = read_results(path)
+    if held != settings:
+        raise SystemExit(f"{path} holds a run with other settings; give another --results")
+    return studies
+
+
 def confusion_markdown(names: list[str], counts: list[list[int]], note: str, *,
                        only: list[str] | None = None) -> str:
     """Counts of (true, chosen) as a markdown table with each row's share correct, then ``note``.
