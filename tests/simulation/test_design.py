@@ -188,7 +188,7 @@ def test_parameter_uncertainty_takes_the_information_out_of_taps_below_threshold
     the default draws over the free parameters' whole ranges, they carry next to nothing
     and the design spends its trials on felt taps (docs/designing-a-study.md)."""
     names = ("level-reliability", "intensity")
-    small = dict(hypotheses=names, levels_db=(0.0, -30.0), n_forearms=2, n_traits=4, n_parameter_draws=4,
+    small = dict(hypotheses=names, levels_db=(0.0, -30.0), n_forearms=2, n_traits=4, n_parameter_draws=16,
                  n_replicates=1, budget=4)
 
     def ratio(**kw: float) -> float:
@@ -197,8 +197,9 @@ def test_parameter_uncertainty_takes_the_information_out_of_taps_below_threshold
         return g[-30.0] / g[0.0]
 
     assert DesignSettings().parameter_spread == 1.0
-    assert ratio() < 0.15  # 0.05 measured
-    assert ratio(parameter_spread=0.0) > 0.3  # 0.57 measured: the shipped parameters' difference
+    # 16 draws: with 4 the ratio moved from 0.05 to 0.21 when the free set changed.
+    assert ratio() < 0.15  # 0.034 measured
+    assert ratio(parameter_spread=0.0) > 0.3  # 0.81 measured: the shipped parameters' difference
 
 
 def test_rival_fits_are_taken_per_fitted_and_true_hypothesis_never_from_its_own_studies():

@@ -409,12 +409,13 @@ _COMMON = (SL_REF_RANGE, FUNNELING_RANGE, CONFLICT_RANGE, *ACUITY_RANGES, *SPREA
 #: assumptions, not fitted to a lab's trials.
 NOT_RECOVERED: dict[str, tuple[str, ...]] = {
     "v3-centroid": ("central_weight", "sl_ref_db", "funneling_exponent", "conflict_gain", "acuity_sd_m[0]", "acuity_sd_m[1]", "spread_gain[0]", "spread_gain[1]",
-                    "prior_sd_m[0]", "bias_sd_m", "select_kappa[0]"),
+                    "prior_sd_m[0]", "bias_sd_m", "select_kappa[0]", "select_kappa[1]"),
     "grid-peak": ("sl_ref_db", "funneling_exponent", "acuity_sd_m[0]", "acuity_sd_m[1]", "spread_gain[0]", "spread_gain[1]", "prior_sd_m[0]",
-                  "prior_sd_m[1]", "bias_mean_m[1]", "bias_sd_m", "select_kappa[0]"),
+                  "prior_sd_m[1]", "bias_mean_m[1]", "bias_sd_m", "select_kappa[0]", "select_log_sd"),
     "level-reliability": ("central_weight", "sl_ref_db", "funneling_exponent", "conflict_gain", "acuity_sd_m[0]", "acuity_sd_m[1]", "spread_gain[0]", "spread_gain[1]",
-                          "bias_mean_m[1]", "bias_sd_m", "select_kappa[0]"),
-    "intensity": ("central_weight", "conflict_gain", "acuity_sd_m[0]", "acuity_sd_m[1]", "spread_gain[0]", "spread_gain[1]"),
+                          "bias_mean_m[1]", "bias_sd_m", "select_kappa[0]", "select_kappa[1]"),
+    "intensity": ("central_weight", "conflict_gain", "acuity_sd_m[0]", "acuity_sd_m[1]", "spread_gain[0]", "spread_gain[1]",
+                  "select_kappa[0]", "select_kappa[1]", "select_log_sd"),
 }
 _WHY_ASSUMED = ("not recovered from the paper's design (moved alone across its range in simulated studies of "
                 "N = 20, the refit did not follow: docs/fitting-hypotheses.md, 'Parameter recovery'); fixed at "
