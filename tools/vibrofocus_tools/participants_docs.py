@@ -83,11 +83,22 @@ def parameters_markdown() -> str:
 POWER_SIZES, POWER_STUDIES = (10, 20, 30), 200
 
 
+def _direction(conclusion: dict, test: str, contrasts: dict) -> str:
+    """`` (funneling < inverse)``: the one direction a robust method conclusion has, or nothing."""
+    if not conclusion["direction"]:
+        return ""
+    c = next(c for c in contrasts.values() if test in (c["paper"], c["reverse"], c["omnibus"]))
+    d = next(iter(conclusion["direction"].values()))
+    return f" ({c.get(d + '_reads', 'neither direction')})"
+
+
 def power_markdown() -> str:
     """Power of each test against N under every hypothesis (``vibrofocus power``'s numbers), as markdown."""
     from vibrofocus.simulation.bank import default_bank
     from vibrofocus.simulation.hypotheses import available_hypotheses
-    from vibrofocus.simulation.power import DIRECTIONAL_TESTS, ROBUST_POWER, TESTS, PowerDesign, robust_conclusions, run_power
+    from vibrofocus.simulation.power import (CONTRASTS, DIRECTIONAL_TESTS, REVERSE_TESTS, ROBUST_POWER, TESTS,
+                                             PowerDesign, direction_sentences, effect_directions, robust_conclusions,
+                                             run_power)
 
     names = available_hypotheses()
     tables = {h: run_power(PowerDesign(n_participants=POWER_SIZES, n_studies=POWER_STUDIES, hypothesis=h),
@@ -101,11 +112,14 @@ def power_markdown() -> str:
              "hypothesis agrees; the last column gives them.", "",
              "| test | " + " | ".join(f"`{h}`, N = {sizes}" for h in names) + " | robust conclusions |",
              "|---|" + "---:|" * len(names) + "---|"]
-    for key, label in TESTS + DIRECTIONAL_TESTS:
+    for key, label in TESTS + DIRECTIONAL_TESTS + REVERSE_TESTS:
         powers = {h: {r["n_participants"]: r["power"] for r in tables[h] if r["test"] == key} for h in names}
-        verdicts = [f"N = {n}: {robust[(key, n)]['conclusion']}" for n in POWER_SIZES if robust[(key, n)]["robust"]]
+        verdicts = [f"N = {n}: {robust[(key, n)]['conclusion']}{_direction(robust[(key, n)], key, CONTRASTS)}"
+                    for n in POWER_SIZES if robust[(key, n)]["robust"]]
         lines.append(f"| {label} | " + " | ".join(" / ".join(f"{powers[h][n]:.2f}" for n in POWER_SIZES) for h in names)
                      + f" | {'; '.join(verdicts) or 'none: the hypotheses disagree'} |")
+    # The omnibus method tests are robust only with one post hoc direction: say which.
+    lines += [""] + [f"- {s[0].upper()}{s[1:]}." for s in direction_sentences(effect_directions(tables)).values()]
     return "\n".join(lines)
 
 
