@@ -559,8 +559,15 @@ class AudioRig(HardwareRig):
 
     @property
     def output_latency_s(self) -> float:
-        """Buffered output latency of the running stream, s (what a stop cannot recall)."""
-        return self._output_latency_s
+        """Buffered output latency of the running stream, s (what a stop cannot recall).
+
+        The larger of the host API's figure when the stream opened and the most the stream
+        has measured since: how long after a callback the buffer it handed over ends playing
+        (through JACK the host's figure is one period, the measured two to three).
+        """
+        stream = self._stream
+        measured = stream.largest_ahead_s if stream is not None else 0.0
+        return max(self._output_latency_s, measured)
 
     # ------------------------------------------------------------------ the running stream
     def _open_stream(self) -> None:

@@ -288,6 +288,11 @@ class RunningStream:
         self.last: tuple[float, int, int, float, float] | None = None
         # The budget's time axis: when frame 0 was at the outputs, in host time.
         self.axis = FrameAxis(self.fs)
+        #: The latest a buffer handed over in a callback finished playing, after that
+        #: callback, s (its ``outputBufferDacTime - currentTime`` plus its own length): what a
+        #: stop cannot recall. PortAudio's figure for a JACK stream is one period; JACK2 plays
+        #: two to three periods behind (measured), so this is the one to state.
+        self.largest_ahead_s = 0.0
         self._first_callback_s: float | None = None
 
         def make():
@@ -332,6 +337,9 @@ class RunningStream:
         if self._first_callback_s is None:
             self._first_callback_s = now
         self.axis.update(now, first, current, dac, lost=bool(status))
+        ahead = dac - current
+        if math.isfinite(ahead) and 0.0 <= ahead < 2.0:
+            self.largest_ahead_s = max(self.largest_ahead_s, ahead + frames / self.fs)
         self.callbacks += 1
         if status:
             self.xruns += 1
