@@ -195,6 +195,14 @@ class Job:
         self.halted = threading.Event()
 
 
+def buffer_lead_s(current: float, dac: float) -> float:
+    """How far ahead of its callback a buffer reaches the outputs, s: ``dac - current``,
+    or 0 (at the outputs now) where the host API gives no such times or they lie 2 s or
+    more apart."""
+    lead = dac - current
+    return lead if math.isfinite(lead) and 0.0 <= lead < 2.0 else 0.0
+
+
 class FrameAxis:
     """When a stream's frame 0 was at its outputs, in host time: the energy budget's time axis.
 
@@ -236,8 +244,7 @@ class FrameAxis:
         lost : bool
             Whether it reported lost samples.
         """
-        ahead = dac - current if math.isfinite(dac - current) and 0 <= dac - current < 2.0 else 0.0
-        estimate = now + ahead - first / self.fs
+        estimate = now + buffer_lead_s(current, dac) - first / self.fs
         if self.anchor_s is None or lost:
             start = estimate if self.anchor_s is None else max(self.anchor_s, estimate)
             self._mins, self._window_s = [start, start], now
@@ -337,9 +344,7 @@ class RunningStream:
         if self._first_callback_s is None:
             self._first_callback_s = now
         self.axis.update(now, first, current, dac, lost=bool(status))
-        ahead = dac - current
-        if math.isfinite(ahead) and 0.0 <= ahead < 2.0:
-            self.largest_ahead_s = max(self.largest_ahead_s, ahead + frames / self.fs)
+        self.largest_ahead_s = max(self.largest_ahead_s, buffer_lead_s(current, dac) + frames / self.fs)
         self.callbacks += 1
         if status:
             self.xruns += 1

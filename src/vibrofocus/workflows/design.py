@@ -75,6 +75,7 @@ def design_study(settings: Any, *, participants: list[int], studies: int, bank: 
     """
     import dataclasses
 
+    from .._atomic import protect
     from ..errors import ValidationError
     from ..simulation.bank import FeatureBank, default_bank
     from ..simulation.design import (design_experiment, design_report, identification, paper_plan, read_rival_fits,
@@ -84,13 +85,10 @@ def design_study(settings: Any, *, participants: list[int], studies: int, bank: 
     if calibration is not None and bank is not None:
         raise ValidationError("give --calibration or --bank, not both")
     if rival_fits is not None:
-        from .._atomic import protect
-
         protect(rival_fits, "rival fits file")  # an input: no output of this command may replace it
         settings = dataclasses.replace(settings, rival_fits=read_rival_fits(rival_fits, settings.hypotheses,
                                                                             rival_fits_per_pair))
     if calibration is not None:
-        from .._atomic import protect
         from ..calibration import load_calibration
         from ..simulation.bank import bank_from_calibration
 
