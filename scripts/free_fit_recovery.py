@@ -83,10 +83,7 @@ def main() -> int:
            "seed": args.seed, "draws": args.draws, "score_draws": args.score_draws, "maxiter": args.maxiter,
            "hypotheses": names}
     key = json.loads(json.dumps(key, default=str))
-    have = {(d["true"], d["study"]) for d in resumed_studies(path, key)}
-    if not path.exists():
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")
+    have = {(d["true"], d["study"]) for d in resumed_studies(path, key, create=True)}
     settings = FitSettings(n_draws=args.draws, maxiter=args.maxiter, score_draws=args.score_draws)
     truths = names if args.truths == "all" else args.truths.split(",")
     for j in range(args.first_study, args.studies):

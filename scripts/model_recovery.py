@@ -65,10 +65,7 @@ def one_at_a_time(args: argparse.Namespace, names: list[str], settings: FitSetti
     key = {"hypotheses": names, "participants": args.participants, "seed": args.seed, "draws": args.draws,
            "studies": args.one_at_a_time, "maxiter": args.maxiter}
     path = args.results or RESULTS / f"one-at-a-time-n{args.participants}-d{args.draws}-seed{args.seed}.jsonl"
-    done = resumed_studies(path, key)
-    if not path.exists() and not args.table_only:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")
+    done = resumed_studies(path, key, create=not args.table_only)
     have = {(d["hypothesis"], d["key"], d["study"]) for d in done}
     # Each parameter's K studies together (a partial run has whole rows): Study 1's
     # parameters first (cheap), hypotheses in turn.
@@ -142,10 +139,7 @@ def main() -> int:
            "study1_only": args.study1_only, "refit": args.refit}
     stem = f"{'refit' if args.refit else 'shipped'}-{'s1' if args.study1_only else 's12'}-n{args.participants}-d{args.draws}"
     path = args.results or RESULTS / f"{stem}-seed{args.seed}.jsonl"
-    done = resumed_studies(path, key)
-    if not path.exists() and not args.table_only:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        path.write_text(json.dumps({"settings": key}) + "\n", encoding="utf-8")
+    done = resumed_studies(path, key, create=not args.table_only)
     have = {(d["true"], d["study"]) for d in done}
     cluster = {"local": args.no_dask, "scheduler": args.scheduler, "n_workers": args.workers}
     for j in range(0 if args.table_only else args.studies):

@@ -26,13 +26,17 @@ def read_results(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     return json.loads(lines[0])["settings"], [json.loads(x) for x in lines[1:] if x.strip()]
 
 
-def resumed_studies(path: Path, settings: dict[str, Any]) -> list[dict[str, Any]]:
+def resumed_studies(path: Path, settings: dict[str, Any], *, create: bool = False) -> list[dict[str, Any]]:
     """The studies a results file already holds for a run of ``settings`` (none if it does not exist).
 
     A file whose first line holds other settings is another run's: refused, so that a
-    resumed run never mixes studies of two.
+    resumed run never mixes studies of two. ``create``: a file that does not exist is
+    started, its first line the settings (a run about to append its studies).
     """
     if not path.exists():
+        if create:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            path.write_text(json.dumps({"settings": settings}) + "\n", encoding="utf-8")
         return []
     held, studies = read_results(path)
     if held != settings:
