@@ -183,11 +183,14 @@ def test_a_refused_answer_is_not_called_taken(server, chromium):
 #: page's answer sends can be held: with ``window.vfHoldAnswers = "fail"`` they fail as a
 #: lost connection does; with ``"lose-reply"`` the first reaches the server (and is
 #: committed) but its reply never reaches the page, and the later ones get no reply at
-#: all (each ends only when the page gives it up). Both happen inside the page, so which
+#: all (each ends only when the page gives it up); with ``"until-retry"`` none gets a reply
+#: until "Try again now" has been clicked. All happen inside the page, so which
 #: tab sent what is known exactly, whatever the browser's and the test driver's timing.
 SENT_ANSWERS = """
 window.vfSentAnswers = [];
 window.vfHoldAnswers = false;
+window.vfRetryClicked = false;
+document.addEventListener('click', (e) => { if (e.target.id === 'retry') window.vfRetryClicked = true; }, true);
 const vfFetch = window.fetch.bind(window);
 const vfNoReply = (options) => new Promise((_, reject) => {
   if (options.signal) options.signal.addEventListener('abort', () => reject(new DOMException('aborted', 'AbortError')));
@@ -200,6 +203,9 @@ window.fetch = (url, options = {}) => {
       if (window.vfSentAnswers.length === 1) vfFetch(url, {...options, signal: undefined});
       return vfNoReply(options);
     }
+    // 'until-retry': no reply until "Try again now" is clicked, so that the page's own
+    // timed resends cannot take the answer (and hide the button) before the click.
+    if (window.vfHoldAnswers === 'until-retry' && !window.vfRetryClicked) return vfNoReply(options);
   }
   return vfFetch(url, options);
 };
@@ -259,7 +265,7 @@ def test_sending_times_out_and_can_be_retried_without_a_duplicate(server, chromi
         kept = pending(page, sid)
         assert [(a["trial_index"], a["response"], a["answer_id"]) for a in kept] == [(0, [4], rows[0][3])], \
             "the answer stays stored on the page until the server confirms it"
-        page.evaluate("window.vfHoldAnswers = false")
+        page.evaluate("window.vfHoldAnswers = 'until-retry'")
         page.click("#retry")
         page.wait_for_function("document.getElementById('message').textContent.includes('Answer taken')")
         assert page.is_hidden("#retry")
