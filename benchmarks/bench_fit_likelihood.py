@@ -14,6 +14,11 @@ and Study 2 both, ``simulate_trials``):
 - the CPU cost of that hypothesis' whole leave-one-participant-out score at the shipped
   settings, extrapolated from the cost per evaluation at about a thousand evaluations,
   plus the scoring of the left-out participants on their own draws;
+- the designed protocol's Study 1 trials (every hypothesis, ``--designed-draws`` draws): the
+  population's draws scored in batches (``draw_batches``: one answer law per trial group for
+  64 draws at once, each draw's levels in one call of the hypothesis) against draw by draw
+  (``level_draws`` and ``study1_probabilities_of``, the previous code path), milliseconds per
+  draw, their ratio, and the largest difference (asserted below 1e-9 nats);
 - ``--folds``: the leave-one-participant-out folds of that hypothesis on the study's Study 1
   trials, each fitted alone on its participants' trials (as before) and all of them sharing
   their evaluations (``fold_logliks``): likelihood evaluations, CPU seconds and their ratio,
@@ -58,6 +63,7 @@ def main() -> None:
     ap.add_argument("--starts", type=int, default=1)
     ap.add_argument("--maxiter", type=int, default=4)
     ap.add_argument("--folds", action="store_true", help="also time the folds alone against sharing evaluations")
+    ap.add_argument("--designed-draws", type=int, default=256, help="draws of the designed-protocol timing")
     args = ap.parse_args()
     bank = default_bank()
     data = simulate_trials(args.hypothesis, args.participants, np.random.default_rng([args.seed, 51]), bank=bank)
@@ -90,8 +96,54 @@ def main() -> None:
               f"{args.participants} folds): about {EVALUATIONS_PER_REFIT * per_eval / 60:.0f} CPU-min new, "
               f"{EVALUATIONS_PER_REFIT * per_eval_old / 60:.0f} old, plus "
               f"{args.participants * t_score / 60:.1f} CPU-min new to score the left-out participants")
+        _designed(args, bank)
         if args.folds:
             _folds(args, data.subset(np.arange(args.participants), studies=(1,)), bank)
+
+
+def _per_draw_study1(name, data, bank, settings):
+    """Study 1 location answers' marginal log-likelihood, draw by draw (the previous code path, lapse included)."""
+    from scipy import special
+
+    from vibrofocus.participant_models.fitting.likelihood_fit import level_draws, study1_probabilities_of
+    from vibrofocus.participant_models.hypotheses import hypothesis
+
+    h = hypothesis(name)
+    m = h.model()
+    level1, allowed1, _ = data.study1_conditions()
+    floor = settings.lapse / allowed1.sum(axis=1)
+    total = np.zeros((settings.n_draws, data.n_participants))
+    for k, (traits, at) in enumerate(level_draws(h, m, bank, settings, sorted(set(level1.tolist())))):
+        p = study1_probabilities_of(data, at, m, traits, settings.quadrature)[np.arange(data.stim1.size), data.answer1]
+        total[k] = np.bincount(data.part1, np.log((1.0 - settings.lapse) * p + floor), data.n_participants)
+    return special.logsumexp(total, axis=0) - np.log(settings.n_draws)
+
+
+def _designed(args, bank) -> None:
+    """The designed protocol's Study 1 (the docs' default design): batched draws against draw by draw."""
+    from vibrofocus.participant_models import available_hypotheses
+    from vibrofocus.participant_models.design import PlanBlock
+    from vibrofocus.participant_models.fitting import simulate_plan_trials
+    from vibrofocus.participant_models.fitting.likelihood_fit import FitSettings, participant_loglik
+
+    def block(methods, level, locations, repetitions):
+        return PlanBlock(methods, level, locations, repetitions, "", "location")
+
+    corners, outer = (1, 3, 7, 9), (1, 2, 3, 7, 8, 9)
+    plan = (block(("funneling", "combination"), 0.0, corners, 1), block(("inverse",), 0.0, corners, 6),
+            block(("inverse",), 0.0, outer, 2), block(("combination",), 0.0, outer, 1),
+            block(("funneling",), -5.0, corners, 2), block(("inverse", "combination"), -20.0, corners, 1),
+            block(("funneling",), -20.0, outer, 2))
+    settings = FitSettings(n_draws=args.designed_draws)
+    print(f"designed protocol, Study 1 only, N = 6, {settings.n_draws} draws:")
+    for name in available_hypotheses():
+        data = simulate_plan_trials(name, plan, 6, np.random.default_rng([args.seed, 55]))
+        t_new, new = _cpu(lambda: participant_loglik(name, data, bank=bank, settings=settings))
+        t_old, old = _cpu(lambda: _per_draw_study1(name, data, bank, settings))
+        diff = float(np.max(np.abs(new - old)))
+        assert diff < 1e-9, diff
+        print(f"  {name}: draw by draw {1e3 * t_old / settings.n_draws:.2f} ms per draw, batched "
+              f"{1e3 * t_new / settings.n_draws:.2f}, ratio {t_old / t_new:.1f}; largest |difference| {diff:.1e} nats")
 
 
 def _folds(args, data, bank) -> None:

@@ -47,6 +47,54 @@ def test_participant_loglik_is_marginal_loglik_per_participant():
         np.testing.assert_allclose(got[i], want, rtol=1e-12)
 
 
+def test_draw_batches_are_the_population_draws_level_by_level():
+    # Batches of 2 of 5 draws at three levels (the levels' stimuli stacked in one call of the
+    # hypothesis): each draw's traits and percepts are those of level_draws, one at a time.
+    from vibrofocus.simulation.fitting.likelihood_fit import draw_batches, level_draws
+
+    b = default_bank()
+    levels = (-20.0, -5.0, 0.0)
+    for name in ("grid-peak", "level-reliability", "intensity"):
+        h = hypothesis(name)
+        m = h.model()
+        s = FitSettings(n_draws=5, seed=4)
+        batches = list(draw_batches(h, m, b, s, levels, size=2))
+        assert [len(x.traits) for x in batches] == [2, 2, 1]
+        for k, (traits, at) in enumerate(level_draws(h, m, b, s, levels)):
+            batch = batches[k // 2]
+            assert batch.traits[k % 2].to_dict() == traits.to_dict()
+            for v in levels:
+                want, got = at[v][1], batch.draw_percepts(v, k % 2)
+                for f in dataclasses.fields(want):
+                    a, c = getattr(want, f.name), getattr(got, f.name)
+                    assert (a is None) == (c is None), f.name
+                    if a is not None:  # the same to rounding (a stacked call's sums may round apart)
+                        np.testing.assert_allclose(np.asarray(c, float), np.asarray(a, float), rtol=1e-12, atol=1e-15,
+                                                   err_msg=f"{name} {v} dB {f.name}")
+
+
+def test_traits_per_row_give_each_row_its_own_posterior():
+    from vibrofocus.simulation.perception import Traits, trial_posteriors
+
+    b = default_bank()
+    h = hypothesis("level-reliability")
+    m = h.model()
+    rng = np.random.default_rng(8)
+    drawn = [Traits.draw(m, rng) for _ in range(3)]
+    per = Stimuli.from_bank(b.at_level(-20.0), 2).percepts(h, m, drawn[0])
+    idx = np.array([0, 5, 26, 13, 0])
+    who = np.array([0, 1, 2, 1, 2])
+    noise = rng.standard_normal((idx.size, 2))
+    rows = Traits(0.0, np.array([t.acuity_sd_m for t in drawn])[who], np.array([t.prior_sd_m for t in drawn])[who],
+                  np.array([t.bias_m for t in drawn])[who], 0.5, 1.0, np.array([t.spread_gain for t in drawn])[who])
+    got = trial_posteriors(per, idx, b.centre_xy, m, rows, noise)
+    assert not got.felt.all()  # both branches: felt and not felt
+    for i in range(idx.size):
+        want = trial_posteriors(per, idx[i:i + 1], b.centre_xy, m, drawn[who[i]], noise[i:i + 1])
+        np.testing.assert_allclose(got.perceived_m[i], want.perceived_m[0], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(got.sd_m[i], want.sd_m[0], rtol=1e-12, atol=0)
+
+
 @pytest.mark.slow
 def test_fit_recovers_a_free_parameter():
     truth = 0.006

@@ -602,6 +602,11 @@ def trial_posteriors(
         Which stimulus each trial presents.
     centre_xy : ndarray, shape (2,)
         Array centre, m (the prior's centre before the participant's bias).
+    traits : Traits
+        One participant's; or, to take many participants' trials in one call, one value
+        per trial: ``acuity_sd_m``, ``prior_sd_m`` and ``spread_gain`` of shape
+        (n_trials,), ``bias_m`` (n_trials, 2) (the likelihood's batches of population
+        draws, :mod:`vibrofocus.simulation.fitting.likelihood_fit`).
     noise : ndarray, shape (n_trials, 2)
         Standard-normal draws of the sensed position's noise (without ``conflict_noise``:
         all of it; with it: the part not due to the cue conflict).
@@ -640,7 +645,7 @@ def trial_posteriors(
     sensed = np.where(felt[:, None], _nan_to(pos) + displacement, c)
     perceived = c + g[:, None] * (sensed - c)
     post_sd = np.where(felt, np.sqrt(g_width * width2), traits.prior_sd_m)
-    perceived = np.where(felt[:, None], perceived, c + noise * traits.prior_sd_m)
+    perceived = np.where(felt[:, None], perceived, c + noise * np.reshape(traits.prior_sd_m, (-1, 1)))
     return TrialPosteriors(perceived, post_sd, felt)
 
 

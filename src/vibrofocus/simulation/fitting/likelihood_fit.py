@@ -177,6 +177,103 @@ def level_draws(h: Any, model: PerceptualModel, bank: FeatureBank, settings: Fit
         yield traits, at
 
 
+#: Population draws scored together: their Study 1 answer laws are taken in one call per
+#: trial group (rows: draws x the group's stimuli x the law's components).
+DRAW_BATCH = 64
+
+
+@dataclass(frozen=True)
+class DrawBatch:
+    """Consecutive population draws, their percepts stacked draw by draw.
+
+    Attributes
+    ----------
+    first : int
+        Number of the batch's first draw.
+    traits : list of Traits
+        Each draw's traits.
+    percepts : dict of float to Percepts
+        Per level, the percepts of every stimulus of the bank for each draw: row
+        ``k * n_stimuli + stimulus`` for the batch's ``k``-th draw.
+    n_stimuli : int
+    centre_xy, locations_xy : ndarray
+        Of the bank (the same for every forearm), m.
+    """
+
+    first: int
+    traits: list[Traits]
+    percepts: dict[float, Percepts]
+    n_stimuli: int
+    centre_xy: np.ndarray
+    locations_xy: np.ndarray
+
+    def row_traits(self, rows: np.ndarray) -> Traits:
+        """Traits with one value per row of ``percepts`` in ``rows`` (what ``trial_posteriors`` reads).
+
+        The Study 2 criterion ``kappa`` is the first draw's: a law built from these traits
+        serves Study 1 only.
+        """
+        draw = np.asarray(rows) // self.n_stimuli
+        t = self.traits
+        pick = lambda name: np.array([getattr(x, name) for x in t], dtype=float)[draw]  # noqa: E731
+        return Traits(0.0, pick("acuity_sd_m"), pick("prior_sd_m"), np.array([x.bias_m for x in t], dtype=float)[draw],
+                      float(t[0].kappa), float(t[0].rt_median_s), pick("spread_gain"))
+
+    def draw_percepts(self, level_db: float, k: int) -> Percepts:
+        """The percepts of the batch's ``k``-th draw at ``level_db`` (every stimulus)."""
+        return _take(self.percepts[level_db], slice(k * self.n_stimuli, (k + 1) * self.n_stimuli))
+
+
+def _take(per: Percepts, rows: slice) -> Percepts:
+    return Percepts(*(None if getattr(per, f.name) is None else getattr(per, f.name)[rows]
+                      for f in dataclasses.fields(Percepts)))
+
+
+def _stack(parts: Sequence[Percepts]) -> Percepts:
+    first = parts[0]
+    return Percepts(*(None if getattr(first, f.name) is None else np.concatenate([getattr(p, f.name) for p in parts])
+                      for f in dataclasses.fields(Percepts)))
+
+
+def draw_batches(h: Any, model: PerceptualModel, bank: FeatureBank, settings: FitSettings, levels: Sequence[float],
+                 size: int = DRAW_BATCH) -> Iterator[DrawBatch]:
+    """:func:`level_draws` in batches of ``size`` draws (the same draws, in the same order).
+
+    Each draw's percepts at every level come from one call of the hypothesis (the levels'
+    stimuli stacked: a stimulus' percept reads its own row only).
+
+    Parameters
+    ----------
+    h, model, bank, settings, levels
+        As :func:`level_draws`.
+    size : int
+        Draws per batch.
+
+    Yields
+    ------
+    DrawBatch
+    """
+    levels = [float(v) for v in levels]
+    banks = [bank if v == 0.0 else bank.at_level(v) for v in levels]
+    n_stim = bank.energy.shape[1] * bank.energy.shape[2]
+    rng = np.random.default_rng([int(settings.seed), 0x11C])
+    for first in range(0, settings.n_draws, size):
+        traits, parts = [], {v: [] for v in levels}
+        for k in range(first, min(first + size, settings.n_draws)):
+            t = Traits.draw(model, rng)
+            f = k % bank.n_forearms
+            both = Stimuli(np.concatenate([b.energy[f].reshape(n_stim, -1) for b in banks]), bank.points_xy,
+                           bank.locations_xy, bank.centre_xy,
+                           np.concatenate([b.actuator_energy[f].reshape(n_stim, -1) for b in banks]),
+                           bank.actuators_xy)
+            per = both.percepts(h, model, t)
+            for i, v in enumerate(levels):
+                parts[v].append(_take(per, slice(i * n_stim, (i + 1) * n_stim)))
+            traits.append(t)
+        yield DrawBatch(first, traits, {v: _stack(p) for v, p in parts.items()}, n_stim,
+                        np.asarray(bank.centre_xy, dtype=float), np.asarray(bank.locations_xy, dtype=float))
+
+
 def study1_probabilities_of(data: LabTrials, at: Mapping[float, tuple[Stimuli, Percepts]], model: PerceptualModel,
                             traits: Traits, quadrature: Quadrature) -> np.ndarray:
     """Probability of each location answer of each Study 1 trial, at its level and among its allowed locations.
@@ -233,7 +330,7 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
     ndarray, shape (n_participants,)
         Natural log.
     """
-    from ..design import point_area_m
+    from ..design import point_area_m, study1_probabilities
     from ..hypotheses import hypothesis as find_hypothesis
 
     h = find_hypothesis(hypothesis)
@@ -253,26 +350,45 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
     floor2 = s.lapse / (2.0 ** allowed2.sum(axis=1) - 1.0)
     levels = sorted(set(level1.tolist()) | set(level2.tolist()))
     total = np.zeros((s.n_draws, data.n_participants))
-    for k, (traits, at) in enumerate(level_draws(h, m, b, s, levels)):
+    # Each trial's participant as columns to sum over (a trial's log-probability may be -inf
+    # without a lapse, so no matrix product).
+    owners1 = [np.flatnonzero(data.part1 == i) for i in range(data.n_participants)]
+    for batch in draw_batches(h, m, b, s, levels):
+        n_b = len(batch.traits)
+        ll1 = np.zeros((n_b, data.stim1.size))
         with np.errstate(divide="ignore"):
-            if loc.any():
-                p1 = study1_probabilities_of(data, at, m, traits, q)[np.flatnonzero(loc), data.answer1[loc]]
-                total[k] += np.bincount(data.part1[loc], np.log((1.0 - s.lapse) * p1 + floor1[loc]),
-                                        data.n_participants)
-            for v in np.unique(level1[is_point]):
-                rows = is_point & (level1 == v)
-                st, per = at[float(v)]
-                law = answer_law(per, data.stim1[rows], st.centre_xy, m, traits, q, study=1)
-                ll = np.logaddexp(np.log1p(-s.lapse) + point_loglik(law, point1[rows]), log_floor_point)
-                total[k] += np.bincount(data.part1[rows], ll, data.n_participants)
+            for g in data.study1_groups:
+                rows = (np.arange(n_b)[:, None] * batch.n_stimuli + g.stimuli[None, :]).ravel()
+                law = answer_law(batch.percepts[g.level_db], rows, batch.centre_xy, m, batch.row_traits(rows), q,
+                                 study=1)
+                at_loc = loc[g.rows]
+                if at_loc.any():
+                    p = study1_probabilities(law, batch.locations_xy, g.allowed, q).reshape(n_b, g.stimuli.size, -1)
+                    r = g.rows[at_loc]
+                    p1 = p[:, g.which[at_loc], data.answer1[r]]
+                    ll1[:, r] = np.log((1.0 - s.lapse) * p1 + floor1[r])
+                if not at_loc.all():
+                    # A point answer: the density of the perceived place, per trial and draw.
+                    r = g.rows[~at_loc]
+                    trial_rows = (np.arange(n_b)[:, None] * batch.n_stimuli + data.stim1[r][None, :]).ravel()
+                    law_t = answer_law(batch.percepts[g.level_db], trial_rows, batch.centre_xy, m,
+                                       batch.row_traits(trial_rows), q, study=1)
+                    dens = point_loglik(law_t, np.tile(point1[r], (n_b, 1))).reshape(n_b, -1)
+                    ll1[:, r] = np.logaddexp(np.log1p(-s.lapse) + dens, log_floor_point)
+            block = slice(batch.first, batch.first + n_b)
+            for i, own in enumerate(owners1):
+                total[block, i] += ll1[:, own].sum(axis=1)
             if data.stim2.size:
-                # Each distinct (stimulus, selection) of a group is scored once per draw for everyone.
-                p2 = np.zeros(data.stim2.size)
-                for g in data.study2_groups:
-                    st, per = at[g.level_db]
-                    law = answer_law(per, g.stimuli, st.centre_xy, m, traits, q, study=2)
-                    p2[g.rows] = selection_probability(law, st.locations_xy, g.selections, g.allowed, q)[g.which]
-                total[k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2 + floor2), data.n_participants)
+                for k, traits in enumerate(batch.traits):
+                    # Each distinct (stimulus, selection) of a group is scored once per draw for everyone.
+                    p2 = np.zeros(data.stim2.size)
+                    for g in data.study2_groups:
+                        per = batch.draw_percepts(g.level_db, k)
+                        law = answer_law(per, g.stimuli, batch.centre_xy, m, traits, q, study=2)
+                        p2[g.rows] = selection_probability(law, batch.locations_xy, g.selections, g.allowed,
+                                                           q)[g.which]
+                    total[batch.first + k] += np.bincount(data.part2, np.log((1.0 - s.lapse) * p2 + floor2),
+                                                          data.n_participants)
     with np.errstate(divide="ignore"):
         return special.logsumexp(total, axis=0) - np.log(s.n_draws)
 
