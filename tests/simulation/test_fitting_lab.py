@@ -308,9 +308,10 @@ def test_analyze_hypotheses_writes_the_fit_and_its_section(tmp_path):
     data.table().to_csv(csv, index=False)
     out = tmp_path / "report"
     res = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out), "--hypotheses", "--no-dask",
-                                   "--draws", "3", "-q"])
+                                   "--draws", "3", "--score-draws", "5", "-q"])
     assert res.exit_code == 0, res.output
     fit = json.loads((out / "hypotheses.json").read_text())
+    assert (fit["settings"]["n_draws"], fit["settings"]["score_draws"]) == (3, 5)
     assert fit["chosen"] in fit["hypotheses"] and fit["about"].startswith("MODEL OUTPUT")
     for name, h in fit["hypotheses"].items():
         assert {"elpd", "se", "params", "check"} <= set(h)
