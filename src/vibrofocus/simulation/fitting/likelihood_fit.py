@@ -7,7 +7,8 @@ of :mod:`vibrofocus.simulation.likelihood` (Study 1 locations by
 over the hypothesis' population of participants as :func:`~vibrofocus.simulation.likelihood.marginal_loglik`
 does (the same trait draws, common to every parameter set), and over the simulated
 forearms of a feature bank (draw ``k`` feels with forearm ``k mod n_forearms``). The
-draws are shared by all participants: one pass over them scores everyone.
+draws are shared by all participants: one pass over them scores everyone, 64 draws at a
+time (:func:`draw_batches`: each Study 1 trial group's answer law is taken once per batch).
 :func:`fit_hypothesis` maximizes the sum over participants within the free parameters'
 ranges (:attr:`~vibrofocus.simulation.hypotheses.Hypothesis.free_parameters`). The
 method and its settings: docs/fitting-hypotheses.md.
@@ -30,7 +31,8 @@ from ..parameters import model_at, read_parameters
 from ..perception import PerceptualModel, Percepts, Traits
 from .lab_trials import LabTrials
 
-__all__ = ["FitSettings", "Fit", "model_at", "initial_simplex", "population_draws", "level_draws", "study1_probabilities_of",
+__all__ = ["FitSettings", "Fit", "model_at", "initial_simplex", "population_draws", "level_draws", "DrawBatch",
+           "draw_batches", "study1_probabilities_of",
            "participant_loglik", "Evaluations", "fit_hypothesis"]
 
 
