@@ -26,7 +26,11 @@ def test_design_experiment_writes_a_protocol_and_its_report(tmp_path):
     assert sum(b["trials"] for b in report["blocks"]) == report["trials"] <= 12
     assert set(report["identification"]["rates"]) == {"designed", "paper"}
     assert (out / "identification.png").stat().st_size > 0 and (out / "design-map.png").stat().st_size > 0
-    assert "not data" in (out / "design.md").read_text()
+    md = (out / "design.md").read_text()
+    assert "not data" in md
+    # The rates assume known parameters; the report and the terminal say the free fit's are lower.
+    assert "with the free fit of `analyze --hypotheses`" in md
+    assert "with the free fit of `analyze" in " ".join(res.output.split())
 
 
 def test_design_experiment_refuses_bad_input_in_one_line():

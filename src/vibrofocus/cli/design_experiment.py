@@ -122,6 +122,8 @@ def _print_design(done, ns: list[int], console) -> None:
     from rich.console import Console
     from rich.table import Table
 
+    from ..simulation.design import FREE_FIT_CAVEAT
+
     report = done.report
     table = Table(title=f"Designed Study 1 blocks ({report['label']})")
     for col in ("methods", "level (dB)", "locations", "answer", "repetitions", "trials"):
@@ -140,6 +142,7 @@ def _print_design(done, ns: list[int], console) -> None:
             for h, r in by.items():
                 t2.add_row(p, h, *[f"{r[n]:.2f}" for n in ns])
         Console().print(t2)
+        console.print(FREE_FIT_CAVEAT, markup=False)
     if done.paths:
         console.print("wrote " + ", ".join(str(p) for p in done.paths))
     console.print(f"[yellow]{report['label']}[/]")

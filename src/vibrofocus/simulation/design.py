@@ -1422,6 +1422,12 @@ def design_report(design: ExperimentDesign, ident: dict[str, Any] | None = None)
     return out
 
 
+#: What the rates at the shipped parameters do not say (the report and the command's table).
+FREE_FIT_CAVEAT = ("These rates assume each hypothesis' parameters known; with the free fit of `analyze "
+                   "--hypotheses` (every hypothesis' parameters fitted to the study) they are lower, and measured "
+                   "in docs/fitting-hypotheses.md, \"With the free fit\".")
+
+
 def _markdown(report: dict[str, Any]) -> str:
     lines = [f"# Designed study ({report['label']})", "",
              f"Hypotheses: {', '.join(report['hypotheses'])}. {report['trials']} Study 1 trials per participant; "
@@ -1437,7 +1443,8 @@ def _markdown(report: dict[str, Any]) -> str:
         ns = ident["settings"]["n_participants"]
         lines += ["", "## P(the true hypothesis is chosen) against N", "",
                   "Model choice by marginal likelihood at the hypotheses' shipped parameters; "
-                  f"{ident['settings']['n_studies']} simulated studies per N and hypothesis.", "",
+                  f"{ident['settings']['n_studies']} simulated studies per N and hypothesis. "
+                  f"{FREE_FIT_CAVEAT}", "",
                   "| protocol | true hypothesis | " + " | ".join(f"N={n}" for n in ns) + " |",
                   "|---|---|" + "---|" * len(ns)]
         for p, by in ident["rates"].items():
