@@ -66,11 +66,8 @@ def analyze_command(
         help="Output folder for report.json, report.html and the PNG figures (created; its parent must exist).",
         show_default=False,
     ),
-    exclude_invalid: bool = typer.Option(
-        False,
-        "--exclude-invalid",
-        help="Exclude (and report) participants with invalid rows instead of refusing the file.",
-    ),
+    exclude_invalid: bool = typer.Option(False, "--exclude-invalid", help="Exclude (and report) participants with "
+                                                                           "invalid rows instead of refusing the file."),
     keep_aborted: bool = typer.Option(False, "--keep-aborted", help="Analyse the answers of aborted sessions too (left out and listed by default)."),
     keep_dry_runs: bool = typer.Option(False, "--keep-dry-runs", help="Analyse dry-run sessions too (no calibration, nothing played; left out and listed by default)."),
     simulated: bool = typer.Option(False, "--simulated", help="Analyse the simulated participants alone (answers from the perceptual model, not data) instead of the people on hardware."),
