@@ -168,15 +168,25 @@ def level_draws(h: Any, model: PerceptualModel, bank: FeatureBank, settings: Fit
         Per level, the :class:`Stimuli` of draw ``k``'s forearm (``k mod n_forearms``) and
         the percepts of every stimulus there.
     """
-    banks = {float(v): bank if float(v) == 0.0 else bank.at_level(float(v)) for v in levels}
-    rng = np.random.default_rng([int(settings.seed), 0x11C])
-    for k in range(settings.n_draws):
-        traits = Traits.draw(model, rng)
+    banks = _level_banks(bank, levels)
+    for _, traits, forearm in _draw_stream(model, bank, settings):
         at = {}
         for v, b in banks.items():
-            st = Stimuli.from_bank(b, k % bank.n_forearms)
+            st = Stimuli.from_bank(b, forearm)
             at[v] = (st, st.percepts(h, model, traits))
         yield traits, at
+
+
+def _level_banks(bank: FeatureBank, levels: Sequence[float]) -> dict[float, FeatureBank]:
+    """The bank at each level, dB re its level rule (the bank itself at 0 dB)."""
+    return {float(v): bank if float(v) == 0.0 else bank.at_level(float(v)) for v in levels}
+
+
+def _draw_stream(model: PerceptualModel, bank: FeatureBank, settings: FitSettings) -> Iterator[tuple[int, Traits, int]]:
+    """The population's draws: number ``k``, traits (the stream of ``marginal_loglik``) and forearm ``k mod n``."""
+    rng = np.random.default_rng([int(settings.seed), 0x11C])
+    for k in range(settings.n_draws):
+        yield k, Traits.draw(model, rng), k % bank.n_forearms
 
 
 #: Population draws scored together: their Study 1 answer laws are taken in one call per
@@ -208,6 +218,10 @@ class DrawBatch:
     n_stimuli: int
     centre_xy: np.ndarray
     locations_xy: np.ndarray
+
+    def rows(self, stimuli: np.ndarray) -> np.ndarray:
+        """Rows of ``percepts`` of ``stimuli`` (per trial or per distinct stimulus) for every draw, draw by draw."""
+        return (np.arange(len(self.traits))[:, None] * self.n_stimuli + np.asarray(stimuli)[None, :]).ravel()
 
     def row_traits(self, rows: np.ndarray) -> Traits:
         """Traits with one value per row of ``percepts`` in ``rows`` (what ``trial_posteriors`` reads).
@@ -255,25 +269,28 @@ def draw_batches(h: Any, model: PerceptualModel, bank: FeatureBank, settings: Fi
     ------
     DrawBatch
     """
-    levels = [float(v) for v in levels]
-    banks = [bank if v == 0.0 else bank.at_level(v) for v in levels]
+    banks = _level_banks(bank, levels)
     n_stim = bank.energy.shape[1] * bank.energy.shape[2]
-    rng = np.random.default_rng([int(settings.seed), 0x11C])
-    for first in range(0, settings.n_draws, size):
-        traits, parts = [], {v: [] for v in levels}
-        for k in range(first, min(first + size, settings.n_draws)):
-            t = Traits.draw(model, rng)
-            f = k % bank.n_forearms
-            both = Stimuli(np.concatenate([b.energy[f].reshape(n_stim, -1) for b in banks]), bank.points_xy,
-                           bank.locations_xy, bank.centre_xy,
-                           np.concatenate([b.actuator_energy[f].reshape(n_stim, -1) for b in banks]),
+
+    def batch(first: int, drawn: list[tuple[Traits, int]]) -> DrawBatch:
+        parts: dict[float, list[Percepts]] = {v: [] for v in banks}
+        for t, f in drawn:
+            both = Stimuli(np.concatenate([b.energy[f].reshape(n_stim, -1) for b in banks.values()]),
+                           bank.points_xy, bank.locations_xy, bank.centre_xy,
+                           np.concatenate([b.actuator_energy[f].reshape(n_stim, -1) for b in banks.values()]),
                            bank.actuators_xy)
             per = both.percepts(h, model, t)
-            for i, v in enumerate(levels):
+            for i, v in enumerate(banks):
                 parts[v].append(_take(per, slice(i * n_stim, (i + 1) * n_stim)))
-            traits.append(t)
-        yield DrawBatch(first, traits, {v: _stack(p) for v, p in parts.items()}, n_stim,
-                        np.asarray(bank.centre_xy, dtype=float), np.asarray(bank.locations_xy, dtype=float))
+        return DrawBatch(first, [t for t, _ in drawn], {v: _stack(p) for v, p in parts.items()}, n_stim,
+                         np.asarray(bank.centre_xy, dtype=float), np.asarray(bank.locations_xy, dtype=float))
+
+    drawn: list[tuple[Traits, int]] = []
+    for k, traits, forearm in _draw_stream(model, bank, settings):
+        drawn.append((traits, forearm))
+        if len(drawn) == size or k == settings.n_draws - 1:
+            yield batch(k + 1 - len(drawn), drawn)
+            drawn = []
 
 
 def study1_probabilities_of(data: LabTrials, at: Mapping[float, tuple[Stimuli, Percepts]], model: PerceptualModel,
@@ -360,7 +377,7 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
         ll1 = np.zeros((n_b, data.stim1.size))
         with np.errstate(divide="ignore"):
             for g in data.study1_groups:
-                rows = (np.arange(n_b)[:, None] * batch.n_stimuli + g.stimuli[None, :]).ravel()
+                rows = batch.rows(g.stimuli)
                 law = answer_law(batch.percepts[g.level_db], rows, batch.centre_xy, m, batch.row_traits(rows), q,
                                  study=1)
                 at_loc = loc[g.rows]
@@ -372,7 +389,7 @@ def participant_loglik(hypothesis: Any, data: LabTrials, values: Sequence[float]
                 if not at_loc.all():
                     # A point answer: the density of the perceived place, per trial and draw.
                     r = g.rows[~at_loc]
-                    trial_rows = (np.arange(n_b)[:, None] * batch.n_stimuli + data.stim1[r][None, :]).ravel()
+                    trial_rows = batch.rows(data.stim1[r])
                     law_t = answer_law(batch.percepts[g.level_db], trial_rows, batch.centre_xy, m,
                                        batch.row_traits(trial_rows), q, study=1)
                     dens = point_loglik(law_t, np.tile(point1[r], (n_b, 1))).reshape(n_b, -1)
