@@ -4,9 +4,10 @@
 # server on its dummy driver), a virtual environment with vibrofocus and its test extras,
 # then runs the suite in phases, each timed ("phase unit: 312 s"):
 #
-#   unit     the tests that are neither slow, browser nor docs, in parallel (pytest-xdist)
+#   unit     the tests that are neither slow, browser nor docs, in parallel (pytest-xdist,
+#            two workers per core)
 #   slow     the slow (> ~10 s) and integration tests, in parallel
-#   browser  the browser tests, in one process (their pages keep real time)
+#   browser  the browser tests, in two processes (their pages keep real time)
 #   docs     the Sphinx site with its executed gallery, built outside pytest, then checked
 #            (scripts/build_docs.sh)
 #   lowest   the smoke test at the lowest versions pyproject.toml allows (scripts/test_lowest.sh)
@@ -15,10 +16,9 @@
 # browser phase mostly waits on its pages' real time, the smoke test on installs); the output
 # of each follows, in its place, when it ends. BESIDE_BROWSER names the phases that do
 # (default "docs lowest"; "slow docs lowest" starts the slow phase there too, "" none).
-# The slow phase is not beside it by default: the browser phase keeps both cores busy
-# (its servers and chromium), so on 2 cores slow, browser and docs took 857 s beside
-# against 883 s one after the other, and a JACK test of the slow phase lost samples at
-# nice 19 (measured 2026-12-03).
+# The slow phase is not beside it by default: with one browser process, on 2 cores slow,
+# browser and docs took 857 s beside against 883 s one after the other, and a JACK test of
+# the slow phase lost samples at nice 19 (measured 2026-12-03).
 #
 #   bash scripts/test.sh                  unit, slow, browser and docs: every test
 #   bash scripts/test.sh unit browser -x  only those phases; other arguments go to pytest
@@ -112,6 +112,13 @@ export PYTHONPYCACHEPREFIX="$cache_dir/pycache" HYPOTHESIS_STORAGE_DIRECTORY="$c
 export OPENBLAS_NUM_THREADS=${OPENBLAS_NUM_THREADS:-1} OMP_NUM_THREADS=${OMP_NUM_THREADS:-1} \
     MKL_NUM_THREADS=${MKL_NUM_THREADS:-1}
 pytest=("$python" -m pytest -p no:cacheprovider --durations=25)
+# The unit phase runs two workers per core: its tests wait on real time as much as they
+# compute (a served app's start, a JACK play, a rig's close waiting out its graph round, a
+# command's subprocess), and a second worker computes while the first waits. On 2 cores:
+# 316 s against 412 s with one worker per core, CPU 187 % against about 145 % (2026-12-04).
+# The slow phase keeps one per core: its tests compute, and four workers took as long
+# (316 s against 322 s) and lost an LSL marker under the load.
+unit_workers=$((2 * $(nproc)))
 # The unit phase hands out whole modules (--dist loadscope), so a module's shared fixture (a
 # calibration, a served app) is made by one worker, not by each; the slow phase's tests take
 # seconds to minutes each, so an idle worker takes tests from a busy one (--dist worksteal).
@@ -158,11 +165,12 @@ trap cleanup EXIT
 # phase_cmd NAME: the command of a phase, in the array run_cmd.
 phase_cmd() {
     case "$1" in
-        unit) run_cmd=("${pytest[@]}" -n auto --dist loadscope -m "not slow and not browser and not docs") ;;
+        unit) run_cmd=("${pytest[@]}" -n "$unit_workers" --dist loadscope -m "not slow and not browser and not docs") ;;
         slow) run_cmd=("${pytest[@]}" -n auto --dist worksteal -m "slow and not browser and not docs") ;;
-        # One process: the pages keep real time (timeouts, pauses), which two chromiums beside
-        # a loaded machine would stretch.
-        browser) run_cmd=("${pytest[@]}" -m "browser and not docs") ;;
+        # Two processes, whole modules each: the pages keep real time (timeouts, pauses), and
+        # one process left a core idle (CPU 98 % of 200 %, docs beside); two took 250 s
+        # against 329 s, CPU 136 % (2026-12-04).
+        browser) run_cmd=("${pytest[@]}" -n 2 --dist loadscope -m "browser and not docs") ;;
         docs) run_cmd=(env PYTHON="$python" bash scripts/build_docs.sh) ;;
         lowest) run_cmd=(bash scripts/test_lowest.sh); return ;;
     esac
