@@ -99,11 +99,8 @@ def test_markers_sent_just_before_a_process_closes_its_outlet_all_arrive(lsl_con
     try:
         inlet, _ = _inlet(source_id, recover=True)  # a recorder's inlet, as LabRecorder opens it
         got = []
-        while len(got) < n:
-            try:
-                sample, _ = inlet.pull_sample(timeout=10.0)
-            except pylsl.util.LostError:
-                break
+        while len(got) < n:  # recover=True: a stream gone is a timeout, not an error
+            sample, _ = inlet.pull_sample(timeout=10.0)
             if sample is None:
                 break
             got.append(sample[0])
@@ -111,6 +108,22 @@ def test_markers_sent_just_before_a_process_closes_its_outlet_all_arrive(lsl_con
     finally:
         sender.kill()
     assert got == ["answer"] * n
+
+
+def test_an_inlet_that_never_reads_holds_the_close_no_longer_than_the_linger(lsl_config, monkeypatch):
+    # Another local program may connect an inlet and never pull: the close waits once, at
+    # most CLOSE_LINGER_S after the last marker, whatever that inlet does.
+    import vibrofocus.io.lsl as lsl
+
+    slept = []
+    monkeypatch.setattr(lsl.time, "sleep", slept.append)
+    source_id = f"vibrofocus-test-{uuid.uuid4().hex}"
+    with MarkerOutlet(source_id=source_id) as outlet:
+        idle, _ = _inlet(source_id)
+        assert outlet.wait_for_consumers(30.0)
+        outlet.push({"event": "answer", "trial": 0, "response": [5]}, 0.0)
+    assert len(slept) == 1 and 0.0 < slept[0] <= lsl.CLOSE_LINGER_S
+    del idle
 
 
 def test_closing_with_no_inlet_does_not_wait(lsl_config, monkeypatch):
