@@ -96,6 +96,13 @@ _ADD_MARGIN = 0.7
 #: rounds take 20-25 steps. At 36: 263 steps in all instead of 390 on the 32-actuator
 #: layout, its peak contrast within 0.001 dB.
 _STRUCTURED_MAXITERS = 36
+#: Each round's cone program is solved to a relative duality gap of this share of ``tol``
+#: (the rounds' own tolerance on the quiet peak), not to CVXOPT's default 1e-6: the last
+#: steps to 1e-6 bought nothing the rounds use, and there the structured solver broke down
+#: ("domain error": CVXOPT's own Cholesky then solved the round again) in 7 of 27 designs
+#: on the reference, 60 mm and sleeve layouts, against none of 9 breakdown-prone ones at
+#: 0.1 (2026-12-04).
+_ROUND_GAP = 0.1
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
 _GRID_ROWS = 64
 #: The first drive-limit rows cover the support widened by this many times the pulse's 1 %
@@ -513,7 +520,7 @@ def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray)
 
 def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
                 dcap: float | None, *, r: np.ndarray | None = None,
-                norm_cap: float | None = None) -> tuple[np.ndarray | None, float, str, int]:
+                norm_cap: float | None = None, reltol: float = 1e-6) -> tuple[np.ndarray | None, float, str, int]:
     """min t s.t. ``|A u| + r s <= t``, ``||u|| <= s``, ``b.u = 1``, ``||Lt u|| <= cap``,
     ``|D u| <= dcap``, by CVXOPT's primal-dual cone solver with a KKT solver that uses the
     program's structure (:func:`_structured_kkt`; no modelling layer: this program is
@@ -526,6 +533,8 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
     Cholesky step cannot factor (few rows, a target norm of less than full rank) is tried
     again with ``||u|| <= norm_cap`` added (inactive when the cap is far above the
     optimum's norm; it gives the system full rank) before CVXOPT's regularized LDL.
+    ``reltol``: the solver's relative duality gap at which it stops (CVXOPT's own default,
+    1e-6, unless a caller needs less).
     Returns ``u`` (``None`` if the solver gave no point), ``t``, the solver's status and
     its iterations.
     """
@@ -555,7 +564,7 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
     c[-1] = 1.0
     eq = np.zeros(nx)
     eq[:nv] = b
-    options = {"show_progress": False, "maxiters": 100}
+    options = {"show_progress": False, "maxiters": 100, "reltol": float(reltol)}
 
     def steps(factor: Any) -> dict:
         """The options for a KKT solver: the structured one's steps end at its stalls."""
@@ -614,8 +623,8 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
 
 
 def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarray, N0: np.ndarray, cap: float,
-                   D: np.ndarray | None, dcap: float | None, *,
-                   norm_cap: float | None = None) -> tuple[np.ndarray | None, float, str, int]:
+                   D: np.ndarray | None, dcap: float | None, *, norm_cap: float | None = None,
+                   reltol: float = 1e-6) -> tuple[np.ndarray | None, float, str, int]:
     """:func:`_solve_cone` (nominal: no row radii) on the span of the listed rows: the same
     optimum in fewer variables when the rows are fewer than the coefficients.
 
@@ -631,7 +640,7 @@ def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarra
     n_rows = A.shape[0] + (0 if D is None else D.shape[0])
     rank, n0 = Linv.shape[1], N0.shape[1]
     if min(rank, n_rows + 1) + min(n0, n_rows + 1) >= 0.8 * Linv.shape[0]:  # no smaller: as it is
-        return _solve_cone(A, b, Lt, cap, D, dcap, norm_cap=norm_cap)
+        return _solve_cone(A, b, Lt, cap, D, dcap, norm_cap=norm_cap, reltol=reltol)
     dense = np.vstack([M.toarray() if hasattr(M, "toarray") else M for M in (A, D) if M is not None])
     Av, Az = dense @ Linv, dense @ N0  # (n_rows, rank), (n_rows, n0)
     c, cz = Linv.T @ b, N0.T @ b
@@ -643,7 +652,8 @@ def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarra
     Lt_k = np.hstack([np.eye(k), np.zeros((k, Zs.shape[1]))])
     b_k = np.concatenate([Vs.T @ c, Zs.T @ cz])
     D_k = None if D is None or not D.shape[0] else reduced[A.shape[0]:]
-    y, value, status, iterations = _solve_cone(reduced[:A.shape[0]], b_k, Lt_k, cap, D_k, dcap, norm_cap=norm_cap)
+    y, value, status, iterations = _solve_cone(reduced[:A.shape[0]], b_k, Lt_k, cap, D_k, dcap, norm_cap=norm_cap,
+                                               reltol=reltol)
     u = None if y is None else Linv @ (Vs @ y[:k]) + N0 @ (Zs @ y[k:])
     return u, value, status, iterations
 
@@ -1143,8 +1153,8 @@ class _Program:
         value = np.nan
         for _ in range(max_iter):
             found, value, status, _ = _solve_in_span(self._per_actuator(self.D), self.b, self.Lt, self.Linv,
-                                                     self.N0, cap, None, None,
-                                                  norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
+                                                     self.N0, cap, None, None, reltol=_ROUND_GAP * tol,
+                                                     norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
             if found is None or not np.isfinite(value) or "infeasible" in status:
                 raise InfeasibleDesignError(f"the least-drive program failed ({status}): "
                                             f"{self._asked(min_fidelity, None)}")
@@ -1172,10 +1182,10 @@ class _Program:
                 norm_cap = _NORM_CAP * float(np.linalg.norm(self.u_best))
                 if r is None:
                     found, value, status, _ = _solve_in_span(self.A, self.b, self.Lt, self.Linv, self.N0, cap, D, dcap,
-                                                             norm_cap=norm_cap)
+                                                             norm_cap=norm_cap, reltol=_ROUND_GAP * tol)
                 else:
                     found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r,
-                                                          norm_cap=norm_cap)
+                                                          norm_cap=norm_cap, reltol=_ROUND_GAP * tol)
             except (ValueError, ArithmeticError) as exc:  # cvxopt: "domain error", "Rank(A) < p", singular KKT
                 raise InfeasibleDesignError(f"the minimax solver failed numerically at round {it} ({exc}): "
                                             f"{self._asked(min_fidelity, max_drive)}") from None
@@ -1196,8 +1206,16 @@ class _Program:
             violated = bool(np.any(peaks > floors))
             # With any sample over, the rows about to bind join too (margin _ADD_MARGIN).
             near = _ADD_MARGIN * floors if violated else floors
-            added = new_rows = self._add_pairs([(int(j), int(t)) for j in np.flatnonzero(peaks > near)
-                                                for t in _local_peaks(yq[j], near[j], 50)])
+            rows = [(int(j), int(t)) for j in np.flatnonzero(peaks > near) for t in _local_peaks(yq[j], near[j], 50)]
+            if violated and value > 0:
+                # Each new peak's neighbouring samples, and each binding row's, join too: the
+                # next optimum slides a peak to the sample beside a bound one (most rows added
+                # after the second round lay within a sample of a listed one), and each slide
+                # cost a round.
+                level = np.abs(self.A @ u) + (0.0 if r is None else r * np.linalg.norm(u))
+                rows += [(int(j), int(t)) for j, t in self.listed[level >= (1 - tol) * value]]
+                rows = [(j, (t + step) % self.n) for j, t in rows for step in (-1, 0, 1)]
+            added = new_rows = self._add_pairs(rows)
             if dcap is not None:
                 over = np.abs(x) > max_drive * (1 + tol)
                 violated = violated or bool(over.any())
