@@ -121,7 +121,9 @@ def login(page, server: Server) -> None:
     page.goto(server.base_url + "/")
     page.fill("#token", server.token)
     page.click("main.login button[type=submit]")
-    page.wait_for_selector("#participant-card")
+    # Not the card alone: the card is on the page before its script has run, and a click
+    # on "Add" then submitted the form natively (the page reloaded to "/?", under load).
+    page.wait_for_selector("body[data-ready='true'] #participant-card")
 
 
 @contextlib.contextmanager

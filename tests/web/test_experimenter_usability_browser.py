@@ -34,6 +34,29 @@ def add_participant(exp, server, participant: str) -> None:
     exp.wait_for_function(f"document.getElementById('participant').value === '{participant}'")
 
 
+def test_the_page_says_ready_only_once_its_script_has_run(server, exp):
+    """The cards are on the page before its script has run: a click on "Add" then submitted
+    the form natively (the page reloaded to "/?" and the participant was never added; seen
+    once under load). The script marks the page ready once every handler is on, and the
+    tests' login waits for that mark."""
+    held = []
+    exp.route("**/static/experimenter.js", lambda route: held.append(route))  # held, not answered
+    exp.goto(server.base_url + "/")
+    exp.fill("#token", server.token)
+    exp.click("main.login button[type=submit]")
+    exp.wait_for_selector("#participant-card")
+    exp.wait_for_timeout(300)
+    assert held, "the page asked for its script"
+    assert exp.get_attribute("body", "data-ready") is None
+    for route in held:
+        route.continue_()
+    exp.wait_for_selector("body[data-ready='true']")
+    exp.fill("#new-participant-id", "P43")
+    exp.click("#new-participant button")
+    exp.wait_for_function("document.getElementById('participant').value === 'P43'")
+    assert exp.url == server.base_url + "/"
+
+
 @pytest.mark.slow
 def test_session_controls_on_screen_with_a_calibration_figure_and_no_broken_images(server, exp):
     assert server.api("POST", "/api/participants", json={"participant_id": "P40"}).status_code == 201

@@ -573,6 +573,10 @@
   });
 
   // ---------------------------------------------------------------- start
+  // Every control has its handler from here on: until then a click on "Add" would submit
+  // the form to the page itself (a reload that drops what was typed). A test, or a
+  // script driving the page, waits for this mark.
+  document.body.dataset.ready = "true";
   (async () => {
     try { await loadRigs(); await loadParticipants(); await loadProtocols(); }
     catch (e) { flash(e.message, true); }
