@@ -100,8 +100,8 @@ _STRUCTURED_MAXITERS = 36
 #: (the rounds' own tolerance on the quiet peak), not to CVXOPT's default 1e-6: the last
 #: steps to 1e-6 bought nothing the rounds use, and there the structured solver broke down
 #: ("domain error": CVXOPT's own Cholesky then solved the round again) in 7 of 27 designs
-#: on the reference, 60 mm and sleeve layouts, against none of 9 breakdown-prone ones at
-#: 0.1 (2026-12-04).
+#: on the reference, 60 mm and sleeve layouts, every location; with this and the
+#: neighbouring rows of each round, in 1 of the 27 (2026-12-04).
 _ROUND_GAP = 0.1
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
 _GRID_ROWS = 64
@@ -448,9 +448,9 @@ def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray)
 
     def factor(W: dict) -> Any:
         # S is built in its lower triangle only, in Fortran order, by BLAS's symmetric
-        # updates in place: the peak rows' Gram by syrk (half of gemm's work) and the
-        # cones' and the equality's rank-two terms by syr/syr2, with no n x n temporaries
-        # (a 2x3 sleeve's design, 492 coefficients: 2.9 s against 2.2 s).
+        # updates in place: the peak rows' Gram by syrk, and the cones' and the equality's
+        # rank-two terms by syr/syr2 with no n x n temporaries (a 2x3 sleeve's design, 492
+        # coefficients: 3.0 s against 2.2 s; syrk itself took as long as gemm there).
         w = 1.0 / np.asarray(W["d"]).ravel() ** 2
         S = np.zeros((nx, nx), order="F")
         for P, beta in zip(grams, W["beta"]):
