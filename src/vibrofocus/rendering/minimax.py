@@ -1175,6 +1175,7 @@ class _Program:
                                         + self._support_advice(min_fidelity, asked))
         dcap = None if max_drive is None else max_drive / self.u_scale
         u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
+        reltol = _ROUND_GAP * tol
         for it in range(1, max_iter + 1):
             D = None if dcap is None else self._per_actuator(self.D)
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
@@ -1182,10 +1183,10 @@ class _Program:
                 norm_cap = _NORM_CAP * float(np.linalg.norm(self.u_best))
                 if r is None:
                     found, value, status, _ = _solve_in_span(self.A, self.b, self.Lt, self.Linv, self.N0, cap, D, dcap,
-                                                             norm_cap=norm_cap, reltol=_ROUND_GAP * tol)
+                                                             norm_cap=norm_cap, reltol=reltol)
                 else:
                     found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r,
-                                                          norm_cap=norm_cap, reltol=_ROUND_GAP * tol)
+                                                          norm_cap=norm_cap, reltol=reltol)
             except (ValueError, ArithmeticError) as exc:  # cvxopt: "domain error", "Rank(A) < p", singular KKT
                 raise InfeasibleDesignError(f"the minimax solver failed numerically at round {it} ({exc}): "
                                             f"{self._asked(min_fidelity, max_drive)}") from None
@@ -1197,6 +1198,8 @@ class _Program:
                                             f"{self._asked(min_fidelity, max_drive)}")
             u = found
             x = self.drives_of(u)
+            # The listed rows' (robust) level at this optimum: which rows bind, which are slack.
+            level = np.abs(self.A @ u) + (0.0 if r is None else r * np.linalg.norm(u))
             yq = predict_response(self.H[:, self.quiet], x) / self.d_norm
             floor = max(value, 0.0) * (1 + tol) + 1e-9 * np.max(np.abs(self.desired)) / self.d_norm
             # Per quiet point, the nominal level over which a sample breaks the (robust) bound.
@@ -1212,7 +1215,6 @@ class _Program:
                 # next optimum slides a peak to the sample beside a bound one (most rows added
                 # after the second round lay within a sample of a listed one), and each slide
                 # cost a round.
-                level = np.abs(self.A @ u) + (0.0 if r is None else r * np.linalg.norm(u))
                 rows += [(int(j), int(t)) for j, t in self.listed[level >= (1 - tol) * value]]
                 rows = [(j, (t + step) % self.n) for j, t in rows for step in (-1, 0, 1)]
             added = new_rows = self._add_pairs(rows)
@@ -1226,9 +1228,7 @@ class _Program:
             # Rows far below the peak leave the program only when its optimum sets a record
             # (by more than tol: finitely often, so no set of rows comes back for ever); the
             # full response is checked every round.
-            old = len(self.A) - new_rows
-            level = np.abs(self.A[:old] @ u) + (0.0 if r is None else r * np.linalg.norm(u))
-            slack = level < _DROP * max(value, 0.0)
+            slack = level < _DROP * max(value, 0.0)  # the rows listed before this round's
             record, best_value = value > best_value * (1 + tol), max(best_value, value)
             if record and slack.any():
                 keep = np.concatenate([~slack, np.ones(new_rows, bool)])
