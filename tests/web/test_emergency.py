@@ -260,12 +260,15 @@ def test_the_stop_names_what_was_running_each_rig_once(client):
         assert time.monotonic() < deadline
         time.sleep(0.2)
     assert client.post("/api/emergency-stop").json() == {"stopped": []}, "nothing was running"
+    # The button's plain form (no script yet): a browser asks for a page, and reads what stopped.
+    page = client.post("/api/emergency-stop", headers={"accept": "text/html,application/xhtml+xml"})
+    assert page.headers["content-type"].startswith("text/html") and "Nothing was running." in page.text
     assert client.get(f"/api/sessions/{first}").json()["status"] == "completed"
 
     second = client.post("/api/sessions", json=plan).json()["session_id"]
     assert client.post(f"/api/sessions/{second}/start").status_code == 200
-    stopped = client.post("/api/emergency-stop").json()["stopped"]
-    assert stopped == ["simulated rig (seed 5): outputs at 0 V", f"session {second} paused"]
+    page = client.post("/api/emergency-stop", headers={"accept": "text/html"})
+    assert f"Stopped: simulated rig (seed 5): outputs at 0 V; session {second} paused." in page.text
     assert client.get(f"/api/sessions/{second}").json()["status"] == "paused"
     assert client.get(f"/api/sessions/{first}").json()["status"] == "completed"
 

@@ -34,13 +34,10 @@ def add_participant(exp, server, participant: str) -> None:
     exp.wait_for_function(f"document.getElementById('participant').value === '{participant}'")
 
 
-def test_the_page_says_ready_only_once_its_script_has_run(server, exp):
-    """The cards are on the page before its script has run: a click on "Add" then submitted
-    the form natively (the page reloaded to "/?" and the participant was never added; seen
-    once under load). The script marks the page ready once every handler is on, and the
-    tests' login waits for that mark."""
+def _held_script(exp, server) -> list:
+    """Log in with the page's script held (never answered); the held requests."""
     held = []
-    exp.route("**/static/experimenter.js", lambda route: held.append(route))  # held, not answered
+    exp.route("**/static/experimenter.js", lambda route: held.append(route))
     exp.goto(server.base_url + "/")
     exp.fill("#token", server.token)
     exp.click("main.login button[type=submit]")
@@ -50,6 +47,15 @@ def test_the_page_says_ready_only_once_its_script_has_run(server, exp):
             break
         exp.wait_for_timeout(50)
     assert held, "the page asked for its script"
+    return held
+
+
+def test_the_page_says_ready_only_once_its_script_has_run(server, exp):
+    """The cards are on the page before its script has run: a click on "Add" then submitted
+    the form natively (the page reloaded to "/?" and the participant was never added; seen
+    once under load). The script marks the page ready once every handler is on, and the
+    tests' login waits for that mark."""
+    held = _held_script(exp, server)
     assert exp.get_attribute("body", "data-ready") is None
     for route in held:
         route.continue_()
@@ -58,6 +64,22 @@ def test_the_page_says_ready_only_once_its_script_has_run(server, exp):
     exp.click("#new-participant button")
     exp.wait_for_function("document.getElementById('participant').value === 'P43'")
     assert exp.url == server.base_url + "/"
+
+
+def test_the_emergency_stop_works_before_the_pages_script_has_run(server, exp):
+    """The button was a script's only: until experimenter.js had loaded (a slow network, a
+    blocked script) a click did nothing. It is now a plain form's, and the server answers
+    a browser's form with a page that says what stopped."""
+    held = _held_script(exp, server)
+    assert exp.get_attribute("body", "data-ready") is None, "the script has not run"
+    exp.click("#emergency-stop")
+    exp.wait_for_selector("#stopped")
+    assert exp.inner_text("#stopped") == "Nothing was running."
+    assert exp.url == server.base_url + "/api/emergency-stop"
+    assert "emergency stop: nothing was running" in server.log.read_text()
+    assert held  # still held: no script ran
+    exp.click("text=Back to the experimenter page")
+    exp.wait_for_selector("#participant-card")
 
 
 @pytest.mark.slow

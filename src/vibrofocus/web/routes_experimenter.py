@@ -664,11 +664,18 @@ def session_action(session_id: SessionId, action: str, web: WebState = Depends(r
 
 
 @router.post("/api/emergency-stop")
-def emergency_stop(web: WebState = Depends(require_token)) -> dict[str, Any]:
-    """Every output to 0 V now; calibrations cancelled, running sessions paused (resume them later)."""
+def emergency_stop(request: Request, web: WebState = Depends(require_token)) -> Any:
+    """Every output to 0 V now; calibrations cancelled, running sessions paused (resume them later).
+
+    JSON for the page's script; a page saying what stopped for the button's plain form
+    (a browser navigating asks for HTML), which works before the script has run.
+    """
     from .emergency import stop_all
 
-    return {"stopped": stop_all(web)}
+    stopped = stop_all(web)
+    if "text/html" in request.headers.get("accept", ""):
+        return HTMLResponse(render_template("stopped.html", stopped=stopped))
+    return {"stopped": stopped}
 
 
 # ---------------------------------------------------------------------- export and analysis

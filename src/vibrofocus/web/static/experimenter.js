@@ -99,7 +99,9 @@
       flash("The emergency stop did not reach the server (" + err.message + "): switch the amplifier off.", true);
     }
   }
-  $("emergency-stop").addEventListener("click", emergencyStop);
+  // The button is a form's (it works without this script); with the script, the stop
+  // is sent in the background and the page stays.
+  $("emergency-form").addEventListener("submit", (ev) => { ev.preventDefault(); emergencyStop(); });
   let lastEscape = 0;
   document.addEventListener("keydown", (ev) => {
     if (ev.key !== "Escape") return;
