@@ -23,6 +23,9 @@ named after the results file.
         --results part.jsonl
     python scripts/free_fit_recovery.py --plan design/design.json -n 6 --studies 3 --seed 5501
     python scripts/free_fit_recovery.py --plan paper -n 12 --studies 3 --seed 5102
+    # intensity fitted with the parameters level-reliability keeps fixed fixed too:
+    python scripts/free_fit_recovery.py --plan design/design.json -n 6 --studies 10 --seed 5501 \
+        --fix intensity:sl_ref_db,funneling_exponent,bias_mean_m[1],bias_sd_m
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from vibrofocus.participant_models import available_hypotheses
+from vibrofocus.participant_models import available_hypotheses, hypothesis
 from vibrofocus.participant_models.design import PlanBlock, paper_plan
 from vibrofocus.participant_models.fitting import FitSettings, compare_hypotheses, simulate_plan_trials
 from vibrofocus.participant_models.fitting.likelihood_fit import SCORE_DRAWS_PER_FIT_DRAW
@@ -54,6 +57,21 @@ def read_plan(which: str) -> tuple[PlanBlock, ...]:
                            b.get("grid", ""), b["response"]) for b in blocks)
 
 
+def parse_fixes(given: list[str], names: list[str]) -> dict[str, list[str]]:
+    """``--fix NAME:KEY,...`` options as {name: [keys]} (``Hypothesis.with_fixed`` checks the keys)."""
+    fixed: dict[str, list[str]] = {}
+    for item in given:
+        name, _, keys = item.partition(":")
+        if name not in names or not keys:
+            raise SystemExit(f"--fix {item!r}: give NAME:KEY[,KEY...] with NAME one of {', '.join(names)}")
+        fixed.setdefault(name, []).extend(keys.split(","))
+        hypothesis(name).with_fixed(fixed[name], FIXED_WHY)  # an unknown key fails here, before any study
+    return fixed
+
+
+FIXED_WHY = "fixed at the shipped value for this recovery (scripts/free_fit_recovery.py --fix)"
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--plan", required=True, help="paper, or a design-experiment design.json")
@@ -68,20 +86,24 @@ def main() -> int:
     ap.add_argument("--score-draws", type=int, default=None,
                     help="draws that score the left-out participants (default 8 x --draws; 0: the fit's own draws)")
     ap.add_argument("--truths", default="all", help="true hypotheses to simulate, comma separated (default all)")
+    ap.add_argument("--fix", action="append", default=[], metavar="NAME:KEY[,KEY...]",
+                    help="fit hypothesis NAME with these free parameters fixed at its shipped values (switching "
+                         "part of a hypothesis' freedom off, to see what it does; repeatable)")
     ap.add_argument("--results", type=Path)
     ap.add_argument("--write", action="store_true",
                     help="put the table into docs/fitting-hypotheses.md (between markers named after the results file)")
     args = ap.parse_args()
     names = list(available_hypotheses())
+    fixed = parse_fixes(args.fix, names)
     plan = read_plan(args.plan)
     label = "paper" if args.plan == "paper" else "designed"
     if args.score_draws is None:
         args.score_draws = SCORE_DRAWS_PER_FIT_DRAW * args.draws
     path = args.results or RESULTS / (
-        f"free-{label}-n{args.n}-d{args.draws}-s{args.score_draws}-seed{args.seed}.jsonl")
+        f"free-{label}{'-fixed' if fixed else ''}-n{args.n}-d{args.draws}-s{args.score_draws}-seed{args.seed}.jsonl")
     key = {"plan": [vars(b) if hasattr(b, "__dict__") else b.__repr__() for b in plan], "n": args.n,
            "seed": args.seed, "draws": args.draws, "score_draws": args.score_draws, "maxiter": args.maxiter,
-           "hypotheses": names}
+           "hypotheses": names, **({"fixed": fixed} if fixed else {})}
     key = json.loads(json.dumps(key, default=str))
     have = {(d["true"], d["study"]) for d in resumed_studies(path, key, create=True)}
     settings = FitSettings(n_draws=args.draws, maxiter=args.maxiter, score_draws=args.score_draws)
@@ -92,7 +114,8 @@ def main() -> int:
                 continue
             t0 = time.perf_counter()
             data = simulate_plan_trials(truth, plan, args.n, np.random.default_rng([args.seed, t, j]))
-            res = compare_hypotheses(data, names, settings=settings, local=True)
+            hs = [hypothesis(n).with_fixed(fixed.get(n, ()), FIXED_WHY) for n in names]
+            res = compare_hypotheses(data, hs, settings=settings, local=True)
             row = {"true": truth, "study": j, "chosen": res["chosen"],
                    "elpd": {k: v["elpd"] for k, v in res["hypotheses"].items()},
                    "params": {k: v["params"] for k, v in res["hypotheses"].items()},

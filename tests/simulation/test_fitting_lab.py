@@ -124,6 +124,19 @@ def test_the_fit_moves_a_parameter_that_acts_through_the_threshold():
     assert abs(fit.params["sl_ref_db"] - 16.3) > 2.0, fit.params
 
 
+def test_a_parameter_fixed_out_of_the_fit_stays_at_the_hypothesis_value():
+    # Hypothesis.with_fixed: the fit neither returns nor moves it; the likelihood reads
+    # the hypothesis' own value (the same as passing that value to the full hypothesis).
+    h = hypothesis("intensity")
+    f = h.with_fixed(("sl_ref_db",), "a test")
+    data = _study1_only(simulate_trials("intensity", 2, np.random.default_rng(9), repetitions=1))
+    s = FitSettings(n_draws=4, n_starts=1, maxiter=4)
+    fit = fit_hypothesis(f, data, settings=s)
+    assert "sl_ref_db" not in fit.params and set(fit.params) == {r.key for r in f.free_parameters}
+    full = {**fit.params, "sl_ref_db": h.model().sl_ref_db}
+    np.testing.assert_allclose(fit.participant_loglik, participant_loglik(h, data, full, settings=s), rtol=1e-12)
+
+
 def test_the_first_simplex_steps_a_tenth_of_every_range_inward():
     from vibrofocus.simulation.fitting.likelihood_fit import initial_simplex
 

@@ -366,3 +366,15 @@ def test_the_readout_sets_most_of_the_study1_direction_as_the_docs_say():
     assert reverse_peak <= reverse - 0.3 and paper_peak == 0.0, (paper_peak, reverse_peak)
     page = (Path(__file__).resolve().parents[2] / "docs" / "simulated-participants.md").read_text(encoding="utf-8")
     assert "the readout sets most of the direction" in " ".join(page.split())
+
+
+def test_with_fixed_takes_parameters_out_of_the_fit_and_keeps_the_model():
+    h = hypothesis("intensity")
+    keys = ("sl_ref_db", "bias_sd_m")
+    f = h.with_fixed(keys, "a test")
+    assert [r.key for r in f.free_parameters] == [r.key for r in h.free_parameters if r.key not in keys]
+    assert {k: f.assumed[k] for k in keys} == {"sl_ref_db": "a test", "bias_sd_m": "a test"}
+    assert (f.name, f.model()) == (h.name, h.model())
+    assert h.with_fixed((), "nothing") == h
+    with pytest.raises(ValidationError, match="'central_weight' is not a free parameter"):
+        h.with_fixed(["sl_ref_db", "central_weight"], "assumed already")

@@ -91,7 +91,7 @@ def free_fit_block(path: Path) -> str:
     minutes = sum(r.get("elapsed_s", 0.0) for r in studies) / 60.0
     note = (f"{'/'.join(map(str, per_row))} simulated studies of N = {n} per true hypothesis{shown}, "
             "a MODEL, not data; "
-            f"{plan}, seed {settings['seed']}; every hypothesis' free parameters fitted to each study "
+            f"{plan}, seed {settings['seed']}; every hypothesis' free parameters{_fixed(settings)} fitted to each study "
             f"({settings['draws']} population draws, Nelder-Mead with {settings['maxiter']} iterations per start) and "
             f"scored by leave-one-participant-out ELPD on {settings['score_draws']} other draws "
             f"(`compare_hypotheses`, the fit of `analyze --hypotheses`); {minutes:.0f} min of wall clock on a "
@@ -100,6 +100,12 @@ def free_fit_block(path: Path) -> str:
     table = confusion_markdown(names, confusion(names, studies), note, only=run)
     return (table + "\n\n"
             + rates_markdown(names, studies, n))
+
+
+def _fixed(settings: dict[str, Any]) -> str:
+    """What a run's ``--fix`` kept out of the fit, as words (nothing without it)."""
+    fixed = settings.get("fixed") or {}
+    return "".join(f" ({name} with {', '.join(keys)} fixed at its shipped values)" for name, keys in fixed.items())
 
 
 def _paper_plan() -> list[dict[str, Any]]:

@@ -17,11 +17,12 @@ and model version (:meth:`Hypothesis.label`).
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from dataclasses import dataclass, field
 from functools import lru_cache
 from importlib import resources
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
@@ -115,6 +116,37 @@ class Hypothesis:
         both = sorted({r.key for r in self.free_parameters} & set(self.assumed))
         if both:
             raise ValidationError(f"hypothesis {self.name!r}: {', '.join(both)} cannot be both free and assumed")
+
+    def with_fixed(self, keys: Sequence[str], why: str) -> "Hypothesis":
+        """This hypothesis with some free parameters fixed at its own values (its fit's).
+
+        What a fit then does without a part of its freedom (a rival fitted alike, or a
+        parameter switched off to see what it does): the same name, readout and
+        parameters, ``keys`` moved from :attr:`free_parameters` to :attr:`assumed`.
+
+        Parameters
+        ----------
+        keys : sequence of str
+            :attr:`ParameterRange.key` of free parameters, e.g. ``"sl_ref_db"``, ``"bias_mean_m[1]"``.
+        why : str
+            Recorded in :attr:`assumed` for each.
+
+        Returns
+        -------
+        Hypothesis
+
+        Raises
+        ------
+        ValidationError
+            A key that is not one of :attr:`free_parameters`.
+        """
+        free = [r.key for r in self.free_parameters]
+        unknown = [k for k in keys if k not in free]
+        if unknown:
+            raise ValidationError(f"hypothesis {self.name!r}: {', '.join(map(repr, unknown))} is not a free "
+                                  f"parameter (those are: {', '.join(free) or 'none'})")
+        return dataclasses.replace(self, free_parameters=tuple(r for r in self.free_parameters if r.key not in keys),
+                                   assumed={**self.assumed, **{k: str(why) for k in keys}})
 
     def inert_parameters(self) -> tuple[str, ...]:
         """Parameters of the model this hypothesis never reads (switching them changes no answer; tested).
