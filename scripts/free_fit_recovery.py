@@ -37,7 +37,8 @@ from pathlib import Path
 
 import numpy as np
 
-from vibrofocus.participant_models import available_hypotheses, hypothesis
+from vibrofocus.errors import ValidationError
+from vibrofocus.participant_models import available_hypotheses, hypotheses_with_fixed
 from vibrofocus.participant_models.design import PlanBlock, paper_plan
 from vibrofocus.participant_models.fitting import FitSettings, compare_hypotheses, simulate_plan_trials
 from vibrofocus.participant_models.fitting.likelihood_fit import SCORE_DRAWS_PER_FIT_DRAW
@@ -55,18 +56,6 @@ def read_plan(which: str) -> tuple[PlanBlock, ...]:
         raise SystemExit("this script simulates location answers only")
     return tuple(PlanBlock(tuple(b["methods"]), float(b["level_db"]), tuple(b["locations"]), int(b["repetitions"]),
                            b.get("grid", ""), b["response"]) for b in blocks)
-
-
-def parse_fixes(given: list[str], names: list[str]) -> dict[str, list[str]]:
-    """``--fix NAME:KEY,...`` options as {name: [keys]} (``Hypothesis.with_fixed`` checks the keys)."""
-    fixed: dict[str, list[str]] = {}
-    for item in given:
-        name, _, keys = item.partition(":")
-        if name not in names or not keys:
-            raise SystemExit(f"--fix {item!r}: give NAME:KEY[,KEY...] with NAME one of {', '.join(names)}")
-        fixed.setdefault(name, []).extend(keys.split(","))
-        hypothesis(name).with_fixed(fixed[name], FIXED_WHY)  # an unknown key fails here, before any study
-    return fixed
 
 
 FIXED_WHY = "fixed at the shipped value for this recovery (scripts/free_fit_recovery.py --fix)"
@@ -94,7 +83,12 @@ def main() -> int:
                     help="put the table into docs/fitting-hypotheses.md (between markers named after the results file)")
     args = ap.parse_args()
     names = list(available_hypotheses())
-    fixed = parse_fixes(args.fix, names)
+    try:  # a bad --fix fails here, before any study
+        hs = hypotheses_with_fixed(args.fix, FIXED_WHY)
+    except ValidationError as exc:
+        raise SystemExit(str(exc)) from None
+    fixed = {h.name: [k for k in h.assumed if h.assumed[k] == FIXED_WHY] for h in hs}
+    fixed = {name: keys for name, keys in fixed.items() if keys}
     plan = read_plan(args.plan)
     label = "paper" if args.plan == "paper" else "designed"
     if args.score_draws is None:
@@ -114,7 +108,6 @@ def main() -> int:
                 continue
             t0 = time.perf_counter()
             data = simulate_plan_trials(truth, plan, args.n, np.random.default_rng([args.seed, t, j]))
-            hs = [hypothesis(n).with_fixed(fixed.get(n, ()), FIXED_WHY) for n in names]
             res = compare_hypotheses(data, hs, settings=settings, local=True)
             row = {"true": truth, "study": j, "chosen": res["chosen"],
                    "elpd": {k: v["elpd"] for k, v in res["hypotheses"].items()},

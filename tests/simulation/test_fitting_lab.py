@@ -310,6 +310,22 @@ def test_trials_at_another_level_rule_are_refused():
         lab_trials(trials, default_bank())
 
 
+@pytest.mark.parametrize("spec, named", [("intensity", "NAME:KEY"), ("telepathy:sl_ref_db", "NAME:KEY"),
+                                          ("intensity:central_weight", "'central_weight' is not a free parameter")])
+def test_analyze_refuses_a_bad_fix_before_any_work(tmp_path, spec, named):
+    from typer.testing import CliRunner
+
+    from vibrofocus.cli.main import app
+
+    data = _study1_only(simulate_trials("grid-peak", 2, np.random.default_rng(9), repetitions=1))
+    csv = tmp_path / "trials.csv"
+    data.table().to_csv(csv, index=False)
+    res = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(tmp_path / "report"), "--hypotheses",
+                                   "--no-dask", "--fix", spec])
+    assert res.exit_code == 2 and named in res.output, res.output
+    assert not (tmp_path / "report").exists()
+
+
 @pytest.mark.slow
 def test_analyze_hypotheses_writes_the_fit_and_its_section(tmp_path):
     from typer.testing import CliRunner
@@ -321,10 +337,16 @@ def test_analyze_hypotheses_writes_the_fit_and_its_section(tmp_path):
     data.table().to_csv(csv, index=False)
     out = tmp_path / "report"
     res = CliRunner().invoke(app, ["analyze", str(csv), "--out", str(out), "--hypotheses", "--no-dask",
-                                   "--draws", "3", "--score-draws", "5", "-q"])
+                                   "--draws", "3", "--score-draws", "5", "--fix", "intensity:sl_ref_db,bias_sd_m", "-q"])
     assert res.exit_code == 0, res.output
     fit = json.loads((out / "hypotheses.json").read_text())
     assert (fit["settings"]["n_draws"], fit["settings"]["score_draws"]) == (3, 5)
+    # --fix: intensity fitted without those two; the others as they are.
+    free = {name: [r["key"] for r in h["free_parameters"]] for name, h in fit["hypotheses"].items()}
+    assert free["intensity"] == [r.key for r in hypothesis("intensity").free_parameters
+                                 if r.key not in ("sl_ref_db", "bias_sd_m")]
+    assert not {"sl_ref_db", "bias_sd_m"} & set(fit["hypotheses"]["intensity"]["params"])
+    assert free["grid-peak"] == [r.key for r in hypothesis("grid-peak").free_parameters]
     assert fit["chosen"] in fit["hypotheses"] and fit["about"].startswith("MODEL OUTPUT")
     for name, h in fit["hypotheses"].items():
         assert {"elpd", "se", "params", "check"} <= set(h)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.console import Console
@@ -10,6 +11,11 @@ from rich.table import Table
 
 from ._errors import user_errors
 from ._command import command
+
+#: ``analyze --fix``: a hypothesis fitted with part of its freedom switched off.
+FIX_HELP = ("With --hypotheses: fit hypothesis NAME with these free parameters fixed at its own fitted values, e.g. "
+            "intensity:sl_ref_db,funneling_exponent,bias_mean_m[1],bias_sd_m to fit it alike level-reliability "
+            "(repeatable; docs: fitting hypotheses, \"Why: intensity's freedom, switched off\").")
 
 console = Console()
 
@@ -85,6 +91,7 @@ def analyze_command(
     workers: int | None = typer.Option(None, "--workers", min=1, max=256,
                                        help="With --hypotheses: LocalCluster worker processes (default: CPUs)."),
     no_dask: bool = typer.Option(False, "--no-dask", help="With --hypotheses: fit in this process (same numbers)."),
+    fix: list[str] = typer.Option([], "--fix", metavar="NAME:KEY[,KEY...]", help=FIX_HELP),
     draws: int = typer.Option(32, "--draws", min=1, max=100_000,
                               help="With --hypotheses: participants drawn from each hypothesis' population to "
                                    "integrate every participant's likelihood over (8 times as many, drawn apart, "
@@ -107,19 +114,17 @@ def analyze_command(
     One kind of participant per analysis: people on hardware by default; simulated participants with --simulated; people's rehearsals on the simulated rig with --rehearsals. The others are listed as left out.
     """  # noqa: E501
     with user_errors():
-        from functools import partial
-
         from .._validation import check_in_range
         from ..analysis import report_trials_file
         from ..errors import ValidationError
-        from ..simulation.fitting import FitSettings, fit_trials, trials_source
+        from ..simulation.fitting import trials_source
 
         check_in_range(alpha, "--alpha", 0.0, 1.0, inclusive=False)
         if simulated and rehearsals:
             raise ValidationError("--simulated and --rehearsals are two analyses: run one at a time")
         kind = "simulated" if simulated else "rehearsals" if rehearsals else "people"
-        fit = partial(fit_trials, settings=FitSettings(n_draws=draws, score_draws=score_draws), scheduler=scheduler,
-                      n_workers=workers, local=no_dask) if hypotheses else None
+        fit = _hypothesis_fit(draws, score_draws, fix, scheduler=scheduler, n_workers=workers,
+                              local=no_dask) if hypotheses else None
         result, paths = report_trials_file(trials_source(trials), out, on_invalid="exclude" if exclude_invalid else "raise",
                                            keep_aborted=keep_aborted, keep_dry_runs=keep_dry_runs, alpha=alpha,
                                            hypotheses=fit, kind=kind)
@@ -196,6 +201,17 @@ def _print_summary(result, paths: dict, trials: Path, out: Path, *, keep_aborted
     figures = len([k for k in paths if k not in ("json", "html", "hypotheses_json")])
     written = f", {paths['hypotheses_json']}" if "hypotheses_json" in paths else ""
     console.print(f"wrote {paths['json']}, {paths['html']}{written} and {figures} figure(s) in {out}")
+
+
+def _hypothesis_fit(draws: int, score_draws: int | None, fix: list[str], **cluster: Any) -> Any:
+    """The hypotheses' fit of ``--hypotheses`` (``fit_trials`` with its settings), for the report."""
+    from functools import partial
+
+    from ..simulation import hypotheses_with_fixed
+    from ..simulation.fitting import FitSettings, fit_trials
+
+    return partial(fit_trials, hypotheses=hypotheses_with_fixed(fix) if fix else None,
+                   settings=FitSettings(n_draws=draws, score_draws=score_draws), **cluster)
 
 
 def _print_hypotheses(path: Path) -> None:

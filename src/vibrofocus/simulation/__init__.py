@@ -35,7 +35,8 @@ Free parameters (:mod:`.parameters`)
 
 from .bank import FeatureBank, build_feature_bank, default_bank, simulate_cell_means
 from .design import DesignSettings, ExperimentDesign, choose_hypothesis, design_experiment, identification
-from .hypotheses import DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypothesis, register_hypothesis
+from .hypotheses import (DEFAULT_HYPOTHESIS, Hypothesis, available_hypotheses, hypotheses_with_fixed, hypothesis,
+                         register_hypothesis)
 from .paper import compare, seed_statistics
 from .likelihood import Stimuli, loglik, marginal_loglik
 from .parameters import ParameterRange
@@ -50,6 +51,7 @@ __all__ = [
     "Hypothesis",
     "hypothesis",
     "available_hypotheses",
+    "hypotheses_with_fixed",
     "register_hypothesis",
     "DEFAULT_HYPOTHESIS",
     "robust_conclusions",

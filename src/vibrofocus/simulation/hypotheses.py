@@ -32,7 +32,8 @@ from .parameters import ParameterRange, apply_parameters, read_parameters
 from .perception import (MODEL_VERSION, Percepts, PerceptualModel, Traits, central_percepts, felt_threshold,
                          funneling_weights, weighted_centre)
 
-__all__ = ["Hypothesis", "register_hypothesis", "hypothesis", "available_hypotheses", "DEFAULT_HYPOTHESIS",
+__all__ = ["Hypothesis", "register_hypothesis", "hypothesis", "available_hypotheses", "hypotheses_with_fixed",
+           "DEFAULT_HYPOTHESIS",
            "GRID_MARGIN_M", "PEAK_SOFTNESS_DB", "hypothesis_fits", "intensity_reliability"]
 
 #: Margin of the grid area beyond the outer locations, m (half the 10 mm pitch): the
@@ -314,6 +315,39 @@ def register_hypothesis(h: Hypothesis, *, replace: bool = False) -> Hypothesis:
         raise ValidationError(f"a hypothesis named {h.name!r} is registered already; pass replace=True to replace it")
     _REGISTRY[h.name] = h
     return h
+
+
+def hypotheses_with_fixed(specs: Sequence[str], why: str = "fixed at its own fitted value for this fit (--fix)",
+                          ) -> tuple[Hypothesis, ...]:
+    """Every registered hypothesis, those named in ``specs`` with some free parameters fixed.
+
+    Parameters
+    ----------
+    specs : sequence of str
+        ``"NAME:KEY[,KEY...]"`` each (``--fix``), e.g.
+        ``"intensity:sl_ref_db,funneling_exponent"``: :meth:`Hypothesis.with_fixed`.
+    why : str
+        Recorded in each fixed parameter's :attr:`Hypothesis.assumed`.
+
+    Returns
+    -------
+    tuple of Hypothesis
+        In :func:`available_hypotheses` order.
+
+    Raises
+    ------
+    ValidationError
+        A spec without ``:`` and keys, an unknown hypothesis, or a key that is not one of
+        its free parameters.
+    """
+    fixed: dict[str, list[str]] = {}
+    for spec in specs:
+        name, _, keys = str(spec).partition(":")
+        if name not in _REGISTRY or not keys.strip():
+            raise ValidationError(f"--fix {spec!r}: give NAME:KEY[,KEY...] with NAME one of "
+                                  f"{', '.join(available_hypotheses())}")
+        fixed.setdefault(name, []).extend(k.strip() for k in keys.split(","))
+    return tuple(hypothesis(n).with_fixed(fixed.get(n, ()), why) for n in available_hypotheses())
 
 
 def available_hypotheses() -> tuple[str, ...]:
