@@ -126,6 +126,16 @@ def login(page, server: Server) -> None:
     page.wait_for_selector("body[data-ready='true'] #participant-card")
 
 
+def wait_for_held(page, held: list, what: str) -> None:
+    """Let ``page`` run until a route handler has put a request into ``held`` (15 s at most:
+    a loaded machine asks later)."""
+    for _ in range(300):
+        if held:
+            return
+        page.wait_for_timeout(50)
+    assert held, f"the page never asked for {what}"
+
+
 @contextlib.contextmanager
 def serving(folder: Path) -> Iterator[Server]:
     """A started :class:`Server` with its database and log in ``folder``, always stopped."""

@@ -10,7 +10,7 @@ from pathlib import Path
 import httpx
 import pytest
 
-from .conftest import login
+from .conftest import login, wait_for_held
 from .test_api import answer, wait_state
 from .test_participant_browser import open_page, start, wait_answers, wait_respond
 
@@ -51,8 +51,7 @@ def test_a_slow_reply_for_another_session_never_reaches_the_panel(server, page):
     # Every reply about session 1 is held back until the panel shows session 2 again.
     page.route("**/api/sessions/1", lambda route: held.append(route))
     page.click("#sessions tr[data-session='1'] td:first-child")
-    while not held:
-        page.wait_for_timeout(50)
+    wait_for_held(page, held, "session 1")
     page.click("#sessions tr[data-session='2'] td:first-child")
     page.wait_for_function("document.getElementById('live-title').textContent.startsWith('session 2 ')")
     assert held, "no request for session 1 was held"

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from .conftest import calibrate, contrast, login
+from .conftest import calibrate, contrast, login, wait_for_held
 from .test_participant_browser import open_page, start, wait_answers, wait_respond
 
 pytestmark = pytest.mark.browser
@@ -42,11 +42,7 @@ def _held_script(exp, server) -> list:
     exp.fill("#token", server.token)
     exp.click("main.login button[type=submit]")
     exp.wait_for_selector("#participant-card")
-    for _ in range(300):  # the page asks for its script once it has parsed up to it (a loaded machine: later)
-        if held:
-            break
-        exp.wait_for_timeout(50)
-    assert held, "the page asked for its script"
+    wait_for_held(exp, held, "its script")  # once it has parsed up to it
     return held
 
 
@@ -244,11 +240,7 @@ def hold_the_first_list_of_participants(page, server) -> list:
 
     page.route("**/api/participants", hold)
     login(page, server)
-    for _ in range(300):
-        if held:
-            break
-        page.wait_for_timeout(50)
-    assert held, "the page never asked for its list of participants"
+    wait_for_held(page, held, "its list of participants")
     return held
 
 
