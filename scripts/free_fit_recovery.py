@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from vibrofocus.errors import ValidationError
-from vibrofocus.participant_models import available_hypotheses, hypotheses_with_fixed
+from vibrofocus.participant_models import available_hypotheses, hypotheses_with_fixed, hypothesis
 from vibrofocus.participant_models.design import PlanBlock, paper_plan
 from vibrofocus.participant_models.fitting import FitSettings, compare_hypotheses, simulate_plan_trials
 from vibrofocus.participant_models.fitting.likelihood_fit import SCORE_DRAWS_PER_FIT_DRAW
@@ -87,8 +87,9 @@ def main() -> int:
         hs = hypotheses_with_fixed(args.fix, FIXED_WHY)
     except ValidationError as exc:
         raise SystemExit(str(exc)) from None
-    fixed = {h.name: [k for k in h.assumed if h.assumed[k] == FIXED_WHY] for h in hs}
-    fixed = {name: keys for name, keys in fixed.items() if keys}
+    # What --fix took out of each fit: the registered free parameters the fitted one lacks.
+    fixed = {h.name: keys for h in hs if (keys := [r.key for r in hypothesis(h.name).free_parameters
+                                                   if r not in h.free_parameters])}
     plan = read_plan(args.plan)
     label = "paper" if args.plan == "paper" else "designed"
     if args.score_draws is None:
