@@ -101,7 +101,11 @@ _STRUCTURED_MAXITERS = 36
 #: steps to 1e-6 bought nothing the rounds use, and there the structured solver broke down
 #: ("domain error": CVXOPT's own Cholesky then solved the round again) in 7 of 27 designs
 #: on the reference, 60 mm and sleeve layouts, every location; with this and the
-#: neighbouring rows of each round, in 1 of the 27 (2026-12-04).
+#: neighbouring rows of each round, in 1 of the 27 (2026-12-04). Its primal and dual
+#: residuals too (not CVXOPT's 1e-7): the dual residual lagged the gap, so 11 of issue 57's
+#: 12 layout designs ran on until the KKT system turned singular and reported "inaccurate
+#: (unknown)" at their optimum; now they stop "optimal", in 20-30 % fewer steps, the quiet
+#: peak within 2e-5 of the program's and the peak contrast within 0.001 dB of before.
 _ROUND_GAP = 0.1
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
 _GRID_ROWS = 64
@@ -520,7 +524,8 @@ def _structured_kkt(G: "_RowOperator", pairs: list, cones: list, eq: np.ndarray)
 
 def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
                 dcap: float | None, *, r: np.ndarray | None = None,
-                norm_cap: float | None = None, reltol: float = 1e-6) -> tuple[np.ndarray | None, float, str, int]:
+                norm_cap: float | None = None, accuracy: float | None = None
+                ) -> tuple[np.ndarray | None, float, str, int]:
     """min t s.t. ``|A u| + r s <= t``, ``||u|| <= s``, ``b.u = 1``, ``||Lt u|| <= cap``,
     ``|D u| <= dcap``, by CVXOPT's primal-dual cone solver with a KKT solver that uses the
     program's structure (:func:`_structured_kkt`; no modelling layer: this program is
@@ -533,8 +538,8 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
     Cholesky step cannot factor (few rows, a target norm of less than full rank) is tried
     again with ``||u|| <= norm_cap`` added (inactive when the cap is far above the
     optimum's norm; it gives the system full rank) before CVXOPT's regularized LDL.
-    ``reltol``: the solver's relative duality gap at which it stops (CVXOPT's own default,
-    1e-6, unless a caller needs less).
+    ``accuracy``: the solver stops when its relative duality gap and its primal and dual
+    residuals are below it (``None``: CVXOPT's own defaults, 1e-6 and 1e-7).
     Returns ``u`` (``None`` if the solver gave no point), ``t``, the solver's status and
     its iterations.
     """
@@ -564,7 +569,8 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
     c[-1] = 1.0
     eq = np.zeros(nx)
     eq[:nv] = b
-    options = {"show_progress": False, "maxiters": 100, "reltol": float(reltol)}
+    options = {"show_progress": False, "maxiters": 100,
+               **({} if accuracy is None else {"reltol": float(accuracy), "feastol": float(accuracy)})}
 
     def steps(factor: Any) -> dict:
         """The options for a KKT solver: the structured one's steps end at its stalls."""
@@ -624,7 +630,7 @@ def _solve_cone(A: Any, b: np.ndarray, Lt: np.ndarray, cap: float, D: Any,
 
 def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarray, N0: np.ndarray, cap: float,
                    D: np.ndarray | None, dcap: float | None, *, norm_cap: float | None = None,
-                   reltol: float = 1e-6) -> tuple[np.ndarray | None, float, str, int]:
+                   accuracy: float | None = None) -> tuple[np.ndarray | None, float, str, int]:
     """:func:`_solve_cone` (nominal: no row radii) on the span of the listed rows: the same
     optimum in fewer variables when the rows are fewer than the coefficients.
 
@@ -640,7 +646,7 @@ def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarra
     n_rows = A.shape[0] + (0 if D is None else D.shape[0])
     rank, n0 = Linv.shape[1], N0.shape[1]
     if min(rank, n_rows + 1) + min(n0, n_rows + 1) >= 0.8 * Linv.shape[0]:  # no smaller: as it is
-        return _solve_cone(A, b, Lt, cap, D, dcap, norm_cap=norm_cap, reltol=reltol)
+        return _solve_cone(A, b, Lt, cap, D, dcap, norm_cap=norm_cap, accuracy=accuracy)
     dense = np.vstack([M.toarray() if hasattr(M, "toarray") else M for M in (A, D) if M is not None])
     Av, Az = dense @ Linv, dense @ N0  # (n_rows, rank), (n_rows, n0)
     c, cz = Linv.T @ b, N0.T @ b
@@ -653,7 +659,7 @@ def _solve_in_span(A: np.ndarray, b: np.ndarray, Lt: np.ndarray, Linv: np.ndarra
     b_k = np.concatenate([Vs.T @ c, Zs.T @ cz])
     D_k = None if D is None or not D.shape[0] else reduced[A.shape[0]:]
     y, value, status, iterations = _solve_cone(reduced[:A.shape[0]], b_k, Lt_k, cap, D_k, dcap, norm_cap=norm_cap,
-                                               reltol=reltol)
+                                               accuracy=accuracy)
     u = None if y is None else Linv @ (Vs @ y[:k]) + N0 @ (Zs @ y[k:])
     return u, value, status, iterations
 
@@ -1153,7 +1159,7 @@ class _Program:
         value = np.nan
         for _ in range(max_iter):
             found, value, status, _ = _solve_in_span(self._per_actuator(self.D), self.b, self.Lt, self.Linv,
-                                                     self.N0, cap, None, None, reltol=_ROUND_GAP * tol,
+                                                     self.N0, cap, None, None, accuracy=_ROUND_GAP * tol,
                                                      norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
             if found is None or not np.isfinite(value) or "infeasible" in status:
                 raise InfeasibleDesignError(f"the least-drive program failed ({status}): "
@@ -1175,7 +1181,7 @@ class _Program:
                                         + self._support_advice(min_fidelity, asked))
         dcap = None if max_drive is None else max_drive / self.u_scale
         u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
-        reltol = _ROUND_GAP * tol
+        accuracy = _ROUND_GAP * tol
         for it in range(1, max_iter + 1):
             D = None if dcap is None else self._per_actuator(self.D)
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
@@ -1183,10 +1189,10 @@ class _Program:
                 norm_cap = _NORM_CAP * float(np.linalg.norm(self.u_best))
                 if r is None:
                     found, value, status, _ = _solve_in_span(self.A, self.b, self.Lt, self.Linv, self.N0, cap, D, dcap,
-                                                             norm_cap=norm_cap, reltol=reltol)
+                                                             norm_cap=norm_cap, accuracy=accuracy)
                 else:
                     found, value, status, _ = _solve_cone(self.A, self.b, self.Lt, cap, D, dcap, r=r,
-                                                          norm_cap=norm_cap, reltol=reltol)
+                                                          norm_cap=norm_cap, accuracy=accuracy)
             except (ValueError, ArithmeticError) as exc:  # cvxopt: "domain error", "Rank(A) < p", singular KKT
                 raise InfeasibleDesignError(f"the minimax solver failed numerically at round {it} ({exc}): "
                                             f"{self._asked(min_fidelity, max_drive)}") from None
