@@ -102,10 +102,11 @@ _STRUCTURED_MAXITERS = 36
 #: ("domain error": CVXOPT's own Cholesky then solved the round again) in 7 of 27 designs
 #: on the reference, 60 mm and sleeve layouts, every location; with this and the
 #: neighbouring rows of each round, in 1 of the 27 (2026-12-04). Its primal and dual
-#: residuals too (not CVXOPT's 1e-7): the dual residual lagged the gap, so 11 of issue 57's
-#: 12 layout designs ran on until the KKT system turned singular and reported "inaccurate
-#: (unknown)" at their optimum; now they stop "optimal", in 20-30 % fewer steps, the quiet
-#: peak within 2e-5 of the program's and the peak contrast within 0.001 dB of before.
+#: residuals too (not CVXOPT's 1e-7): the dual residual lagged the gap, so 11 of the 12
+#: designs of ``bench_minimax.py --layouts`` ran on until the KKT system turned singular
+#: and reported "inaccurate (unknown)" at their optimum; now they stop "optimal", as fast
+#: or faster, the quiet peak within 2e-5 of the program's and the peak contrast within
+#: 0.001 dB of before.
 _ROUND_GAP = 0.1
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
 _GRID_ROWS = 64
