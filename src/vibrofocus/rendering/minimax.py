@@ -107,7 +107,7 @@ _STRUCTURED_MAXITERS = 36
 #: and reported "inaccurate (unknown)" at their optimum; now they stop "optimal", as fast
 #: or faster, the quiet peak within 2e-5 of the program's and the peak contrast within
 #: 0.001 dB of before.
-_ROUND_GAP = 0.1
+_ROUND_ACCURACY = 0.1
 #: Most samples per quiet point on the first rounds' coarse grid (``stride`` apart, or wider).
 _GRID_ROWS = 64
 #: The first drive-limit rows cover the support widened by this many times the pulse's 1 %
@@ -1160,7 +1160,7 @@ class _Program:
         value = np.nan
         for _ in range(max_iter):
             found, value, status, _ = _solve_in_span(self._per_actuator(self.D), self.b, self.Lt, self.Linv,
-                                                     self.N0, cap, None, None, accuracy=_ROUND_GAP * tol,
+                                                     self.N0, cap, None, None, accuracy=_ROUND_ACCURACY * tol,
                                                      norm_cap=_NORM_CAP * float(np.linalg.norm(self.u_best)))
             if found is None or not np.isfinite(value) or "infeasible" in status:
                 raise InfeasibleDesignError(f"the least-drive program failed ({status}): "
@@ -1182,12 +1182,11 @@ class _Program:
                                         + self._support_advice(min_fidelity, asked))
         dcap = None if max_drive is None else max_drive / self.u_scale
         u, value, it, inside, best_value, status = self.u_best.copy(), np.nan, 0, True, 0.0, "optimal"
-        accuracy = _ROUND_GAP * tol
+        accuracy, norm_cap = _ROUND_ACCURACY * tol, _NORM_CAP * float(np.linalg.norm(self.u_best))
         for it in range(1, max_iter + 1):
             D = None if dcap is None else self._per_actuator(self.D)
             r = None if self.rq is None else self.rq[self.listed[:, 0]]
             try:
-                norm_cap = _NORM_CAP * float(np.linalg.norm(self.u_best))
                 if r is None:
                     found, value, status, _ = _solve_in_span(self.A, self.b, self.Lt, self.Linv, self.N0, cap, D, dcap,
                                                              norm_cap=norm_cap, accuracy=accuracy)
